@@ -1,0 +1,1 @@
+"""Estimators: point-set registration, closed-form CPC identification, hand-eye, refinement."""

@@ -1,0 +1,243 @@
+"""The ``kinfw`` command line: the one place that wires kinfw, identification and
+verification together.
+
+Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and where,
+never a traceback for a user error), 1 on an unexpected internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from kinfw.measurements import DatasetError, read_measurements, write_measurements
+from kinfw.robot import Robot, RobotModelError, load_robot
+
+__all__ = ["main"]
+
+log = logging.getLogger("kinfw")
+
+#: Errors that are the user's input, not a bug: reported on one line, exit code 2.
+USER_ERRORS = (DatasetError, RobotModelError, ValueError, OSError)
+
+
+def builtin_head_urdf() -> Path:
+    """Path of the built-in IIS-head URDF: ``urdf/iis_head.urdf`` of the source tree, or
+    the copy a regular (non-editable) install puts in ``kinfw/urdf/``."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "urdf" / "iis_head.urdf", here / "urdf" / "iis_head.urdf"):
+        if candidate.is_file():
+            return candidate
+    raise OSError("the built-in IIS-head URDF is missing from this installation")
+
+
+def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: Robot
+                ) -> tuple[str, ...]:
+    if value:
+        return tuple(v for v in value.replace(",", " ").split() if v)
+    if default:
+        return default
+    raise ValueError(
+        f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
+        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}')
+
+
+# -- kinfw simulate ----------------------------------------------------------------------
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from kinfw.measurements import concatenate_measurements
+    from verification.simulate import (
+        default_target_pose,
+        one_joint_at_a_time,
+        perturb_robot,
+        random_configurations,
+        simulate,
+    )
+
+    nominal = load_robot(args.urdf)
+    rng = np.random.default_rng(args.seed)
+    stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
+    frames = _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) \
+        if 1 in stages else ()
+    cameras = _frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal) \
+        if 2 in stages else ()
+    truth_xml = perturb_robot(nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg,
+                              axis_deg=args.error_deg)
+    truth = load_robot(truth_xml)
+    names = nominal.topology((*frames, *cameras)).joint_names
+    lower, upper = nominal.joint_limits(names)
+    noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
+    if args.stereo_mm is not None:
+        noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
+    parts = []
+    if frames:
+        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint,
+                                    fraction=args.fraction)
+        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
+    if cameras:
+        qs = random_configurations(lower, upper, args.stage2_samples, rng,
+                                   fraction=args.fraction)
+        w_T_target = default_target_pose(truth, qs, names, cameras)
+        parts.append(simulate(truth, qs, names, cameras=cameras, rng=rng,
+                              w_T_target=w_T_target, **noise))
+    data = concatenate_measurements(*parts)
+    write_measurements(args.out, data)
+    Path(args.truth_out).write_text(truth_xml, encoding="utf-8")
+    print(f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
+          f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
+          + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
+          + ")")
+    print(f"wrote {args.truth_out}: the true robot (nominal with errors of "
+          f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})")
+    return 0
+
+
+# -- kinfw verify ------------------------------------------------------------------------
+def _format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
+    widths = [max(len(str(r[k])) for r in (header, *rows)) for k in range(len(header))]
+    lines = ["  ".join(str(h).rjust(w) for h, w in zip(header, widths, strict=True))]
+    lines += ["  ".join(str(c).rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    return "\n".join(lines)
+
+
+def accuracy_table(report_dict: dict) -> str:
+    """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
+    rows = []
+    for g in report_dict["groups"]:
+        mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
+        rows.append([
+            g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""), g["kind"], g["n"],
+            f"{g['position_mean_mm']:.3f}", f"{g['position_rms_mm']:.3f}",
+            f"{g['position_max_mm']:.3f}", f"{g['rotation_rms_deg']:.4f}",
+            f"{g['rotation_max_deg']:.4f}",
+            " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+        ])
+    header = ["frame", "kind", "n", "pos mean mm", "pos RMS mm", "pos max mm",
+              "rot RMS deg", "rot max deg", "|e| x y z mean/std mm (Table 4)"]
+    return _format_table(rows, header)
+
+
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from verification.accuracy import evaluate_model
+
+    robot = load_robot(args.model)
+    data = read_measurements(args.data)
+    report = evaluate_model(robot, data)
+    if args.json:
+        print(json.dumps({"model": str(args.model), "data": str(args.data),
+                          **report.to_dict()}, indent=2))
+        return 0
+    print(f"errors of {args.model} against {args.data} ({data.n_samples} samples; "
+          "measured minus predicted)")
+    print(accuracy_table(report.to_dict()))
+    for note in report.fitted:
+        print(f"note: fitted from the data: {note}")
+    return 0
+
+
+# -- kinfw crosscheck --------------------------------------------------------------------
+def _cmd_crosscheck(args: argparse.Namespace) -> int:
+    from verification.crosscheck import crosscheck_cpc
+
+    robot = load_robot(args.urdf)
+    frames = _frames_arg(args.frames, (*robot.default_frames, *robot.default_cameras),
+                         "--frames", robot)
+    result = crosscheck_cpc(robot, frames, n=args.n, rng=np.random.default_rng(args.seed))
+    if args.json:
+        print(json.dumps({"urdf": str(args.urdf), "frames": list(result.frames),
+                          "n_configurations": result.n_configurations,
+                          "numpy_position_m": result.numpy_position_m,
+                          "numpy_rotation_rad": result.numpy_rotation_rad,
+                          "casadi_position_m": result.casadi_position_m,
+                          "casadi_rotation_rad": result.casadi_rotation_rad,
+                          "passed": result.passed()}, indent=2))
+    else:
+        print(f"CPC vs Pinocchio FK of {args.urdf}, {result.n_configurations} random "
+              f"configurations, frames {', '.join(result.frames)}")
+        print(f"  numpy : max position {result.numpy_position_m:.2e} m, "
+              f"rotation {result.numpy_rotation_rad:.2e} rad")
+        print(f"  CasADi: max position {result.casadi_position_m:.2e} m, "
+              f"rotation {result.casadi_rotation_rad:.2e} rad")
+        print("  passed (< 1e-12)" if result.passed() else "  FAILED (>= 1e-12)")
+    return 0 if result.passed() else 1
+
+
+# -- parser ------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="kinfw", description="Calibrate robot kinematics from measurements.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="simulate measurements of a perturbed robot",
+                       description="Perturb the nominal URDF into a 'true' robot and simulate "
+                       "its measurements: stage 1 poses of --frames, one joint at a time "
+                       "(Shih et al. section 4.1); stage 2 camera observations of a fixed "
+                       "target at random configurations.")
+    p.add_argument("--urdf", type=Path, default=None,
+                   help="nominal URDF (default: the built-in IIS-head)")
+    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.add_argument("--truth-out", type=Path, required=True, help="true robot URDF to write")
+    p.add_argument("--per-joint", type=int, default=9,
+                   help="stage 1 measurements per joint (default 9, as the paper)")
+    p.add_argument("--noise-mm", type=float, default=0.5,
+                   help="position noise sigma per axis, mm (default 0.5)")
+    p.add_argument("--noise-deg", type=float, default=0.05,
+                   help="rotation noise angle sigma, deg (default 0.05)")
+    p.add_argument("--stereo-mm", type=float, default=None,
+                   help="simulate the stereo rig: point noise sigma on the nine-circle "
+                   "plate, mm (replaces --noise-mm/--noise-deg for stage 1 poses)")
+    p.add_argument("--error-mm", type=float, default=2.0,
+                   help="true robot: joint origin error sigma, mm (default 2)")
+    p.add_argument("--error-deg", type=float, default=0.5,
+                   help="true robot: joint origin and axis error sigma, deg (default 0.5)")
+    p.add_argument("--fraction", type=float, default=0.8,
+                   help="fraction of each joint range used (default 0.8)")
+    p.add_argument("--stage", choices=("1", "2", "both"), default="1")
+    p.add_argument("--stage2-samples", type=int, default=30,
+                   help="stage 2 random configurations (default 30)")
+    p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
+    p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_simulate)
+
+    p = sub.add_parser("verify", help="errors of a URDF model against measurements")
+    p.add_argument("model", type=Path, help="URDF to evaluate")
+    p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=_cmd_verify)
+
+    p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")
+    p.add_argument("urdf", type=Path)
+    p.add_argument("--frames", help="end frames, comma-separated (default: URDF hint)")
+    p.add_argument("-n", type=int, default=200, help="random configurations (default 200)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=_cmd_crosscheck)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``kinfw`` command; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    if getattr(args, "urdf", "") is None:
+        args.urdf = builtin_head_urdf()
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except USER_ERRORS as exc:
+        message = " ".join(str(exc).split())
+        print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

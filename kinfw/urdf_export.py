@@ -1,0 +1,506 @@
+"""Write a calibrated kinematic model back into the robot's own URDF.
+
+:func:`export_urdf` takes the nominal robot and a calibrated screw geometry
+(:class:`kinfw.cpc.ZeroGeometry`, the joint lines and end-frame poses at ``q = 0`` in the
+measurement frame ``w``) and returns the URDF text with new joint origins and axes only;
+:func:`edit_urdf` is the text editor underneath, which changes exactly the elements it is
+asked to and keeps everything else (comments, ``<transmission>``, ``<gazebo>``,
+``<calibration>``, meshes, attribute order, whitespace) as lxml parsed it.
+
+Why changing origins and axes is enough (product of exponentials): the forward kinematics
+of a tree is ``w_T_e(q) = prod_j exp(S_j q_j) w_T_e(0)`` over the joints on ``e``'s
+chain, so two models whose joint lines ``S_j`` and end-frame poses ``w_T_e(0)`` agree at
+``q = 0`` agree at every configuration. The exporter therefore places, at ``q = 0``,
+each measured joint's child link frame on the calibrated line and each end frame at its
+calibrated pose, and keeps every other link frame where the nominal URDF has it.
+
+Frames: ``w`` is the measurement frame, ``C_L`` (``w_T_L`` in code) the calibrated pose
+of link ``L`` at ``q = 0``, and ``old_T_new`` the shift of a link frame that had to move
+so that it lies on its calibrated joint axis (its visuals, collisions and inertials are
+re-expressed so they stay where they were).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+from types import MappingProxyType
+
+import numpy as np
+import pinocchio as pin
+from lxml import etree
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.cpc import ZeroGeometry
+from kinfw.robot import JointInfo, Robot
+from kinfw.transforms import check_transform, inverse_transform
+
+__all__ = ["ExportError", "ExportResult", "edit_urdf", "export_urdf", "write_urdf"]
+
+SAME_TOL = 1e-12
+"""An origin or axis within this of the file's value (max abs entry) keeps its text."""
+
+ON_AXIS_TOL = 1e-9
+"""Largest distance (m) of a revolute end frame's origin from its calibrated axis."""
+
+_MIN_LEVER_M = 0.1
+_EMPTY: Mapping[str, ArrayLike] = MappingProxyType({})
+_GEOMETRY_TAGS = ("visual", "collision", "inertial")
+# Text around the root element that lxml would not reproduce byte for byte.
+_PROLOG = re.compile(
+    r"(?:\s|<\?(?:(?!\?>).)*\?>|<!--(?:(?!-->).)*-->|<!DOCTYPE(?:[^\[>]|\[.*?\])*>)*", re.S
+)
+_EPILOG = re.compile(r"(?:\s|<\?(?:(?!\?>).)*\?>|<!--(?:(?!-->).)*-->)*\Z", re.S)
+
+
+class ExportError(ValueError):
+    """The URDF cannot be edited or cannot represent the calibrated model as asked."""
+
+
+@dataclass(frozen=True, slots=True)
+class ExportResult:
+    """A calibrated URDF and what the export decided.
+
+    Attributes
+    ----------
+    urdf_xml : str
+        The calibrated URDF text.
+    w_T_root : ndarray, shape (4, 4)
+        Pose of the URDF root link in the measurement frame ``w`` (metres). Identity when
+        the root link is the measurement frame; otherwise the estimated placement, which
+        is reported here and not written into the URDF.
+    link_shifts : tuple of (str, ndarray of shape (4, 4))
+        Links whose frame had to move onto a calibrated axis (or onto a measured end
+        frame), as ``old_T_new``: the new frame in the nominal one. Their visuals,
+        collisions, inertials and other child joints were re-expressed so they did not move.
+    """
+
+    urdf_xml: str
+    w_T_root: NDArray[np.float64]
+    link_shifts: tuple[tuple[str, NDArray[np.float64]], ...]
+
+
+# -- editing the XML ---------------------------------------------------------------------
+
+
+def edit_urdf(
+    urdf_xml: str,
+    *,
+    joint_origins: Mapping[str, ArrayLike] = _EMPTY,
+    joint_axes: Mapping[str, ArrayLike] = _EMPTY,
+    link_shifts: Mapping[str, ArrayLike] = _EMPTY,
+) -> str:
+    """Return ``urdf_xml`` with new joint origins, joint axes and re-expressed links.
+
+    Parameters
+    ----------
+    urdf_xml : str
+        URDF text.
+    joint_origins : mapping of str to array_like, shape (4, 4)
+        New ``<origin>`` of each named joint: ``parent_T_child`` at q = 0, metres.
+    joint_axes : mapping of str to array_like, shape (3,)
+        New unit ``<axis>`` of each named joint, in its child link frame.
+    link_shifts : mapping of str to array_like, shape (4, 4)
+        Per link, ``old_T_new``: the link frame moves to ``old_T_new`` (in the old link
+        frame). Every ``<visual>``, ``<collision>`` and ``<inertial>`` origin of the link
+        becomes ``new_T_x = inv(old_T_new) @ old_T_x`` (the geometry stays put), and so
+        does the origin of each joint whose parent is the link, unless that joint is in
+        ``joint_origins``.
+
+    Returns
+    -------
+    str
+        The edited URDF. Only the changed ``xyz`` / ``rpy`` attributes differ (written with
+        ``repr(float(x))``, so they read back exactly); an origin or axis whose new value
+        is within ``SAME_TOL`` of the current one keeps its text, and when nothing changes
+        ``urdf_xml`` itself is returned. Text before and after the root element (XML
+        declaration, comments) is kept verbatim; inside it, lxml keeps comments, unknown
+        tags and attribute order. Missing ``<origin>`` / ``<axis>`` elements are created.
+
+    Raises
+    ------
+    ExportError
+        For XML that is not a URDF, unknown joint or link names (all are named), a
+        transform that is not rigid, an axis that is not unit, or a rotation whose rpy
+        does not reproduce it to ``SAME_TOL``.
+    """
+    robot_elem = _parse(urdf_xml)
+    joints = _named_children(robot_elem, "joint")
+    links = _named_children(robot_elem, "link")
+    _check_known("joint", [*joint_origins, *joint_axes], joints)
+    _check_known("link", list(link_shifts), links)
+    changed = False
+    for name, parent_T_child in joint_origins.items():
+        parent_T_child = check_transform(parent_T_child, name=f"joint_origins[{name!r}]")
+        changed |= _set_origin(joints[name], parent_T_child, f"joint {name!r}")
+    for name, axis in joint_axes.items():
+        changed |= _set_axis(joints[name], _check_unit(axis, f"joint_axes[{name!r}]"))
+    for name, old_T_new in link_shifts.items():
+        new_T_old = inverse_transform(check_transform(old_T_new, name=f"link_shifts[{name!r}]"))
+        for elem in _shifted_elements(links[name], joints, name, skip=joint_origins):
+            changed |= _set_origin(elem, new_T_old @ _origin_transform(elem), _describe(elem))
+    return _serialize(robot_elem, urdf_xml) if changed else urdf_xml
+
+
+def _parse(urdf_xml: str) -> etree._Element:
+    parser = etree.XMLParser(remove_comments=False, strip_cdata=False, encoding="utf-8")
+    try:
+        robot_elem = etree.fromstring(urdf_xml.encode("utf-8"), parser)
+    except etree.XMLSyntaxError as exc:
+        raise ExportError(f"urdf_xml: not well-formed XML ({exc})") from None
+    if robot_elem.tag != "robot":
+        raise ExportError(f"urdf_xml: root element is <{robot_elem.tag}>, expected <robot>")
+    return robot_elem
+
+
+def _serialize(robot_elem: etree._Element, original: str) -> str:
+    """The edited root element between the original's untouched prolog and epilog."""
+    prolog = _PROLOG.match(original).group(0)
+    epilog = _EPILOG.search(original, len(prolog)).group(0)
+    return prolog + etree.tostring(robot_elem, encoding="unicode", with_tail=False) + epilog
+
+
+def _named_children(robot_elem: etree._Element, tag: str) -> dict[str, etree._Element]:
+    # Direct children only: <transmission> and <gazebo> hold <joint> tags of their own.
+    return {e.get("name"): e for e in robot_elem.findall(tag)}
+
+
+def _check_known(kind: str, names: list[str], known: Mapping[str, object]) -> None:
+    unknown = sorted({n for n in names if n not in known})
+    if unknown:
+        raise ExportError(f"unknown {kind} name(s) {unknown}; the URDF has {list(known)}")
+
+
+def _check_unit(axis: ArrayLike, name: str) -> NDArray[np.float64]:
+    axis = np.asarray(axis, dtype=float)
+    norm = np.linalg.norm(axis) if axis.shape == (3,) else np.nan
+    if not abs(norm - 1.0) <= 1e-6:
+        raise ExportError(f"{name}: expected a unit 3-vector, got {axis.tolist()}")
+    return axis / norm
+
+
+def _shifted_elements(link: etree._Element, joints: Mapping[str, etree._Element],
+                      link_name: str, skip: Mapping[str, object]) -> Iterator[etree._Element]:
+    """The link's visuals, collisions, inertials and its child joints not in ``skip``."""
+    yield from (e for e in link if e.tag in _GEOMETRY_TAGS)
+    for name, joint in joints.items():
+        parent = joint.find("parent")
+        if name not in skip and parent is not None and parent.get("link") == link_name:
+            yield joint
+
+
+def _describe(elem: etree._Element) -> str:
+    owner = elem if elem.tag == "joint" else elem.getparent()
+    return f"{owner.tag} {owner.get('name')!r}" + ("" if owner is elem else f" <{elem.tag}>")
+
+
+def _floats(elem: etree._Element | None, attr: str, default: tuple[float, ...]
+            ) -> NDArray[np.float64]:
+    text = None if elem is None else elem.get(attr)
+    if text is None:
+        return np.array(default)
+    try:
+        values = np.array([float(v) for v in text.split()])
+    except ValueError:
+        values = np.array([])
+    if values.shape != (3,):
+        raise ExportError(f"{_describe(elem.getparent())}: <{elem.tag} {attr}={text!r}> "
+                          "is not three numbers")
+    return values
+
+
+def _origin_transform(elem: etree._Element) -> NDArray[np.float64]:
+    """``parent_T_elem`` of an element's ``<origin>`` (identity when it has none)."""
+    origin = elem.find("origin")
+    out = np.eye(4)
+    out[:3, :3] = pin.rpy.rpyToMatrix(_floats(origin, "rpy", (0.0, 0.0, 0.0)))
+    out[:3, 3] = _floats(origin, "xyz", (0.0, 0.0, 0.0))
+    return out
+
+
+def _format(values: ArrayLike) -> str:
+    return " ".join(repr(float(v)) for v in np.asarray(values))
+
+
+def _rpy_from_matrix(a_R_b: NDArray[np.float64], what: str) -> NDArray[np.float64]:
+    """URDF roll, pitch, yaw (rad) of ``a_R_b``, checked to reproduce it to ``SAME_TOL``.
+
+    ``pin.rpy.matrixToRpy`` stays exact at pitch = +-pi/2, where roll and yaw are not
+    unique (it returns one valid pair); the check is what guarantees the round trip.
+    """
+    rpy = pin.rpy.matrixToRpy(a_R_b)
+    error = np.abs(pin.rpy.rpyToMatrix(rpy) - a_R_b).max()
+    if not error <= SAME_TOL:
+        raise ExportError(f"{what}: rpy {rpy.tolist()} reproduce the rotation only to "
+                          f"{error:.3g} (> {SAME_TOL:g}); is the matrix orthonormal?")
+    return rpy
+
+
+def _child(elem: etree._Element, tag: str) -> etree._Element:
+    """``elem``'s ``<tag>`` child, created first in ``elem`` with its indentation if missing."""
+    found = elem.find(tag)
+    if found is not None:
+        return found
+    new = etree.Element(tag)
+    elem.insert(0, new)
+    if elem.text is not None and not elem.text.strip():
+        new.tail = elem.text
+    return new
+
+
+def _set_origin(elem: etree._Element, a_T_b: NDArray[np.float64], what: str) -> bool:
+    """Write ``a_T_b`` into ``elem``'s ``<origin>``; True if the text changed."""
+    current = _origin_transform(elem)
+    new_xyz = np.abs(a_T_b[:3, 3] - current[:3, 3]).max() > SAME_TOL
+    new_rpy = np.abs(a_T_b[:3, :3] - current[:3, :3]).max() > SAME_TOL
+    if new_xyz:
+        _child(elem, "origin").set("xyz", _format(a_T_b[:3, 3]))
+    if new_rpy:
+        _child(elem, "origin").set("rpy", _format(_rpy_from_matrix(a_T_b[:3, :3], what)))
+    return bool(new_xyz or new_rpy)
+
+
+def _set_axis(joint: etree._Element, axis: NDArray[np.float64]) -> bool:
+    """Write a unit ``axis`` into the joint's ``<axis>``; True if the text changed."""
+    current = _floats(joint.find("axis"), "xyz", (1.0, 0.0, 0.0))
+    norm = np.linalg.norm(current)
+    if norm > 0.0 and np.abs(axis - current / norm).max() <= SAME_TOL:
+        return False
+    _child(joint, "axis").set("xyz", _format(axis))
+    return True
+
+
+# -- the calibrated export ----------------------------------------------------------------
+
+
+def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
+                root_is_measurement_frame: bool = True) -> ExportResult:
+    """A URDF whose Pinocchio FK reproduces a calibrated screw geometry exactly.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot; its URDF text is edited.
+    geometry : ZeroGeometry
+        Calibrated joint lines and end-frame poses at q = 0 in the measurement frame
+        ``w`` (metres), with ``geometry.topology == robot.topology(frames)``.
+    root_is_measurement_frame : bool, keyword-only
+        True when ``w`` is the URDF root link (a dataset without ``measured_in``). Then a
+        fixed root-to-base joint (the root's only child joint, when it is fixed) takes the
+        registered world-to-base placement. False when ``w`` is external: the root's
+        placement in ``w`` is estimated and returned, not written.
+
+    Returns
+    -------
+    ExportResult
+        The URDF: loaded with :func:`kinfw.robot.load_robot`, its
+        ``frame_poses(qs, e, topology.joint_names)`` equals
+        ``inv(w_T_root) @ w_T_e(q)`` of the geometry for every end frame ``e``.
+
+    Raises
+    ------
+    ExportError
+        If the geometry does not belong to this robot, or an end frame is the child link
+        of a revolute joint but its calibrated origin is more than ``ON_AXIS_TOL`` off the
+        calibrated axis (a link frame must lie on its joint axis), or the root link is an
+        end frame that is not at the anchor pose.
+
+    Notes
+    -----
+    Walk from the root, parents first. With ``C_P`` the new pose of the parent link in
+    ``w``, ``D_P`` its shift ``old_T_new`` and ``O_k`` the nominal origin of joint k, the
+    child's candidate pose is ``A_C = C_P inv(D_P) O_k`` (where the nominal URDF puts it).
+    A measured revolute joint's child is moved from ``A_C`` to the closest point of the
+    calibrated line (orientation kept), a measured prismatic joint's child stays at
+    ``A_C``, and its axis becomes ``R_C^T d``. An end frame takes its calibrated pose;
+    below a fixed joint its body really moved (no shift), below a movable joint the link
+    shifts. Everything else stays at ``A_C``. The anchor (base or root) is placed by
+    :func:`_register_frames` so that the measured frames move as little as possible.
+    """
+    topology = robot.topology(geometry.topology.frames)
+    if topology != geometry.topology:
+        raise ExportError(f"geometry.topology {geometry.topology} does not match the robot's "
+                          f"topology for its frames: {topology}")
+    w_T_root, w_T_placed = _anchor(robot, geometry, root_is_measurement_frame)
+    lines = {name: j for j, name in enumerate(topology.joint_names)}
+    w_T_links = {robot.root_link: w_T_root}
+    old_T_news: dict[str, NDArray[np.float64]] = {}
+    joint_origins: dict[str, NDArray[np.float64]] = {}
+    joint_axes: dict[str, NDArray[np.float64]] = {}
+    for joint in _joints_from_root(robot):
+        w_T_parent = w_T_links[joint.parent]
+        new_T_old = inverse_transform(old_T_news.get(joint.parent, np.eye(4)))
+        w_T_candidate = w_T_parent @ new_T_old @ joint.parent_T_child
+        w_T_child = w_T_placed.get(joint.child)
+        if joint.name in lines:
+            j = lines[joint.name]
+            w_T_child = _place_on_line(joint, w_T_candidate, geometry.axes[j],
+                                       geometry.points[j], w_T_child)
+            old_T_new = inverse_transform(w_T_candidate) @ w_T_child
+            if _close(old_T_new, np.eye(4), SAME_TOL):  # rounding only: keep the nominal frame
+                w_T_child = w_T_candidate
+            else:
+                old_T_news[joint.child] = old_T_new
+            joint_axes[joint.name] = w_T_child[:3, :3].T @ _unit(geometry.axes[j])
+        elif w_T_child is None:  # stays on its parent's old frame (link_shifts re-express it)
+            w_T_links[joint.child] = w_T_candidate
+            continue
+        joint_origins[joint.name] = inverse_transform(w_T_parent) @ w_T_child
+        w_T_links[joint.child] = w_T_child
+    xml = edit_urdf(robot.urdf_xml, joint_origins=joint_origins, joint_axes=joint_axes,
+                    link_shifts=old_T_news)
+    return ExportResult(urdf_xml=xml, w_T_root=w_T_root, link_shifts=tuple(old_T_news.items()))
+
+
+def _unit(v: ArrayLike) -> NDArray[np.float64]:
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def _close(a: NDArray[np.float64], b: NDArray[np.float64], tol: float) -> bool:
+    return bool(np.abs(a - b).max() <= tol)
+
+
+def _joints_from_root(robot: Robot) -> list[JointInfo]:
+    """Every URDF joint, parents first (breadth first, document order among siblings)."""
+    by_parent: dict[str, list[JointInfo]] = {}
+    for joint in robot.joints:
+        by_parent.setdefault(joint.parent, []).append(joint)
+    order: list[JointInfo] = []
+    links = [robot.root_link]
+    for link in links:  # grows while iterating: a breadth-first queue
+        for joint in by_parent.get(link, []):
+            order.append(joint)
+            links.append(joint.child)
+    return order
+
+
+def _place_on_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: ArrayLike,
+                   point: ArrayLike, w_T_end: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    """``w_T_child`` at q = 0 of a measured joint with calibrated line ``(axis, point)``.
+
+    Parameters
+    ----------
+    joint : JointInfo
+    w_T_candidate : ndarray, shape (4, 4)
+        Where the nominal URDF puts the child link, in ``w``.
+    axis, point : array_like, shape (3,)
+        Direction and a point (m) of the calibrated joint line in ``w``.
+    w_T_end : ndarray, shape (4, 4), or None
+        Calibrated pose of the child link when it is an end frame.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+        The end frame's pose, else the candidate, for a revolute joint with its origin
+        moved to the closest point of the line.
+    """
+    w_T_child = np.array(w_T_candidate if w_T_end is None else w_T_end, dtype=float)
+    if not joint.is_revolute:
+        return w_T_child
+    direction = _unit(axis)
+    offset = w_T_child[:3, 3] - np.asarray(point, dtype=float)
+    off_axis = offset - (offset @ direction) * direction
+    distance = np.linalg.norm(off_axis)
+    if w_T_end is not None and distance > ON_AXIS_TOL:
+        raise ExportError(
+            f"end frame {joint.child!r} is the child link of revolute joint {joint.name!r}, "
+            f"so its origin must lie on the joint axis, but the calibrated origin is "
+            f"{distance:.3g} m off the calibrated axis; measure a frame attached to "
+            f"{joint.child!r} by a fixed joint instead (add a fixed child link such as a "
+            "tool or plate frame to the URDF)"
+        )
+    if w_T_end is None:
+        w_T_child[:3, 3] -= off_axis
+    return w_T_child
+
+
+def _anchor(robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: bool
+            ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]]]:
+    """``w_T_root`` and the links placed outright: ``{link: w_T_link}`` at q = 0.
+
+    The placed links are the end-frame links (a joint frame is its child link's frame at
+    q = 0) and, under a fixed root-to-base joint, the base. The anchor (that base, or the
+    root when ``w`` is external) is registered so that the nominal end frames land on the
+    calibrated ones.
+    """
+    model, data = robot.model, robot.model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    frames = geometry.topology.frames
+    root_T_ends = np.stack([data.oMf[robot.frame_id(f)].homogeneous for f in frames])
+    w_T_placed: dict[str, NDArray[np.float64]] = {}
+    for frame, w_T_e in zip(frames, geometry.w_T_frames, strict=True):
+        link = frame if frame in robot.link_names else robot.joint(frame).child
+        if link in w_T_placed and not _close(w_T_placed[link], w_T_e, ON_AXIS_TOL):
+            raise ExportError(f"end frames {frames} name link {link!r} twice with different "
+                              "calibrated poses")
+        w_T_placed[link] = np.asarray(w_T_e, dtype=float)
+    w_T_root = np.eye(4)
+    root_joints = [j for j in robot.joints if j.parent == robot.root_link]
+    if not root_is_measurement_frame:
+        w_T_root = _register_frames(root_T_ends, geometry.w_T_frames)
+    elif len(root_joints) == 1 and root_joints[0].type == "fixed":
+        base = root_joints[0].child
+        root_T_base = data.oMf[robot.frame_id(base)].homogeneous
+        w_T_base = _register_frames(inverse_transform(root_T_base) @ root_T_ends,
+                                    geometry.w_T_frames)
+        w_T_placed.setdefault(base, w_T_base)
+    root = robot.root_link
+    if root in w_T_placed and not _close(w_T_placed[root], w_T_root, ON_AXIS_TOL):
+        raise ExportError(f"end frame {root!r} is the root link, whose pose in the measurement "
+                          "frame is fixed by the anchor; it cannot take its calibrated pose")
+    return w_T_root, w_T_placed
+
+
+def _register_frames(a_T_frames: NDArray[np.float64], w_T_frames: NDArray[np.float64]
+                     ) -> NDArray[np.float64]:
+    """Least-squares rigid ``w_T_a`` with ``w_T_a @ a_T_frames ~ w_T_frames``.
+
+    Parameters
+    ----------
+    a_T_frames : ndarray, shape (E, 4, 4)
+        Nominal end-frame poses in the anchor frame ``a``, metres.
+    w_T_frames : ndarray, shape (E, 4, 4)
+        Calibrated end-frame poses in ``w``, metres.
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+
+    Notes
+    -----
+    Arun, Huang & Blostein (1987) SVD registration (Shih et al. eqs. 16–22) of four
+    points per frame, its origin and origin + L x / y / z with ``L = max(0.1 m, largest
+    distance between the frame origins)``, with the det = -1 reflection fix. A single
+    frame gives the exact ``w_T_e @ inv(a_T_e)``.
+    """
+    if len(a_T_frames) == 1:
+        return w_T_frames[0] @ inverse_transform(a_T_frames[0])
+    origins = a_T_frames[:, :3, 3]
+    lever = max(_MIN_LEVER_M, np.linalg.norm(origins[:, None] - origins[None], axis=-1).max())
+
+    def points(T: NDArray[np.float64]) -> NDArray[np.float64]:
+        axes = np.swapaxes(T[:, :3, :3], 1, 2) * lever  # rows: L x, L y, L z
+        return np.concatenate([T[:, :3, 3], (T[:, None, :3, 3] + axes).reshape(-1, 3)])
+
+    a_ps, w_ps = points(a_T_frames), points(w_T_frames)
+    a_mean, w_mean = a_ps.mean(axis=0), w_ps.mean(axis=0)
+    U, _, Vt = np.linalg.svd((a_ps - a_mean).T @ (w_ps - w_mean))
+    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    w_R_a = Vt.T @ fix @ U.T
+    out = np.eye(4)
+    out[:3, :3], out[:3, 3] = w_R_a, w_mean - w_R_a @ a_mean
+    return out
+
+
+def write_urdf(path: str | PathLike[str], result_or_xml: ExportResult | str) -> None:
+    """Write an exported URDF (or URDF text) to ``path`` as UTF-8, exactly as given.
+
+    The text keeps the XML declaration of the input URDF when it had one; newlines are
+    not translated.
+    """
+    xml = result_or_xml.urdf_xml if isinstance(result_or_xml, ExportResult) else result_or_xml
+    Path(path).write_text(xml, encoding="utf-8", newline="")

@@ -1,0 +1,113 @@
+"""URDF strings of test robots, shared by the tests (not fixtures: plain data).
+
+- ``ARM_6R``: a serial 6R arm with tilted axes, a ``0 0 -1`` axis, an axis exactly
+  anti-parallel to the previous one, a continuous joint and a pitch = pi/2 origin.
+- ``PRISMATIC_TREE``: two prismatic joints (one tilted) under a pan joint that carries
+  three branches (R-R, a fixed camera, P-R).
+"""
+
+ARM_6R = """<?xml version="1.0"?>
+<robot name="arm6">
+  <link name="world"/>
+  <joint name="j1" type="revolute">
+    <parent link="world"/><child link="l1"/>
+    <origin xyz="0.1 -0.2 0.3" rpy="0.2 -0.1 0.4"/><axis xyz="0 0 -1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l1"/>
+  <joint name="j2" type="revolute">
+    <parent link="l1"/><child link="l2"/>
+    <origin xyz="0.05 0 0.2" rpy="1.5707963267948966 0 0"/>
+    <axis xyz="0.3 0.1 0.9486832980505138"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l2"/>
+  <joint name="j3" type="revolute">
+    <parent link="l2"/><child link="l3"/>
+    <origin xyz="0.4 0 0" rpy="0 0 0"/><axis xyz="-0.3 -0.1 -0.9486832980505138"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l3"/>
+  <joint name="j4" type="continuous">
+    <parent link="l3"/><child link="l4"/>
+    <origin xyz="0.3 0.02 0" rpy="0 1.5707963267948966 0"/><axis xyz="0 1 0"/>
+  </joint>
+  <link name="l4"/>
+  <joint name="j5" type="revolute">
+    <parent link="l4"/><child link="l5"/>
+    <origin xyz="0 0 0.1" rpy="0 3.141592653589793 0"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l5"/>
+  <joint name="j6" type="revolute">
+    <parent link="l5"/><child link="l6"/>
+    <origin xyz="0 0.08 0" rpy="-1.2 0 0.3"/><axis xyz="-1 0 0"/>
+    <limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l6"/>
+  <joint name="flange_joint" type="fixed">
+    <parent link="l6"/><child link="flange"/><origin xyz="0 0 0.05" rpy="0 0 0.7"/>
+  </joint>
+  <link name="flange"/>
+</robot>
+"""
+
+PRISMATIC_TREE = """<?xml version="1.0"?>
+<robot name="ptree">
+  <link name="world"/>
+  <joint name="base_joint" type="fixed">
+    <parent link="world"/><child link="base"/><origin xyz="0.5 0.2 1.2" rpy="3.0 0.1 -0.5"/>
+  </joint>
+  <link name="base"/>
+  <joint name="px" type="prismatic">
+    <parent link="base"/><child link="cx"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.8" effort="1" velocity="1"/>
+  </joint>
+  <link name="cx"/>
+  <joint name="py" type="prismatic">
+    <parent link="cx"/><child link="cy"/><origin xyz="0.1 0 0.05" rpy="0 0 0.02"/>
+    <axis xyz="0.05 1 0"/><limit lower="0" upper="0.4" effort="1" velocity="1"/>
+  </joint>
+  <link name="cy"/>
+  <joint name="pan" type="revolute">
+    <parent link="cy"/><child link="pan_link"/><origin xyz="0.02 0.03 0.3" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/>
+  </joint>
+  <link name="pan_link"/>
+  <joint name="a1" type="revolute">
+    <parent link="pan_link"/><child link="a1_link"/>
+    <origin xyz="0.1 0 0.1" rpy="1.5707963267948966 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+  <link name="a1_link"/>
+  <joint name="a2" type="revolute">
+    <parent link="a1_link"/><child link="a2_link"/><origin xyz="0.2 0 0" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+  <link name="a2_link"/>
+  <joint name="tool_a_joint" type="fixed">
+    <parent link="a2_link"/><child link="tool_a"/>
+    <origin xyz="0.1 0 0" rpy="0 1.5707963267948966 0"/>
+  </joint>
+  <link name="tool_a"/>
+  <joint name="cam_joint" type="fixed">
+    <parent link="pan_link"/><child link="cam"/>
+    <origin xyz="0 0.05 0.2" rpy="-1.5707963267948966 0 0"/>
+  </joint>
+  <link name="cam"/>
+  <joint name="slide" type="prismatic">
+    <parent link="pan_link"/><child link="slide_link"/><origin xyz="-0.1 0 0.1" rpy="0 0.3 0"/>
+    <axis xyz="0 0 -1"/><limit lower="0" upper="0.2" effort="1" velocity="1"/>
+  </joint>
+  <link name="slide_link"/>
+  <joint name="wrist" type="revolute">
+    <parent link="slide_link"/><child link="wrist_link"/><origin xyz="0 0 0.05" rpy="0 0 0"/>
+    <axis xyz="0 0 -1"/><limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="wrist_link"/>
+  <joint name="tool_b_joint" type="fixed">
+    <parent link="wrist_link"/><child link="tool_b"/><origin xyz="0.03 0 0.04" rpy="0.1 0.2 0.3"/>
+  </joint>
+  <link name="tool_b"/>
+</robot>
+"""

@@ -1,0 +1,129 @@
+"""The kinfw command line: simulate -> verify round trip, and user errors (exit 2)."""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from kinfw.cli import main
+from kinfw.measurements import read_measurements
+from tests.robots import ARM_6R
+
+HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
+
+
+def _run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def noise_free(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sim")
+    code = main(["simulate", "--urdf", str(HEAD), "--out", str(d / "data.json"),
+                 "--truth-out", str(d / "true.urdf"), "--noise-mm", "0", "--noise-deg", "0",
+                 "--stage", "both", "--seed", "3"])
+    assert code == 0
+    return d
+
+
+def test_simulate_without_noise_writes_pinocchio_fk_of_the_written_truth(noise_free):
+    data = read_measurements(noise_free / "data.json")
+    model = pin.buildModelFromXML((noise_free / "true.urdf").read_text())
+    pdata = model.createData()
+    assert {g.frame for g in data.poses} == {"left_plate", "right_plate"}
+    assert {g.camera for g in data.targets} == {"left_camera", "right_camera"}
+    checked = 0
+    for k, q_urdf in enumerate(data.qs):
+        q = pin.neutral(model)
+        for name, value in zip(data.joint_names, q_urdf, strict=True):
+            q[model.joints[model.getJointId(name)].idx_q] = value
+        pin.framesForwardKinematics(model, pdata, q)
+        for g in data.poses:
+            rows = np.flatnonzero(g.sample == k)
+            for r in rows:
+                expected = pdata.oMf[model.getFrameId(g.frame)].homogeneous
+                np.testing.assert_allclose(g.meas_T_frame[r], expected, atol=1e-12)
+                checked += 1
+    assert checked == 2 * (6 * 9 + 1)
+
+
+def test_verify_of_the_truth_reports_zero(noise_free, capsys):
+    code, out, _ = _run(["verify", noise_free / "true.urdf", noise_free / "data.json",
+                         "--json"], capsys)
+    assert code == 0
+    report = json.loads(out)
+    assert len(report["groups"]) == 4
+    for g in report["groups"]:
+        assert g["position_max_mm"] < 1e-9
+        assert g["rotation_max_deg"] < 1e-9
+    assert any("target" in f for f in report["fitted"])
+
+
+def test_verify_of_the_nominal_shows_the_simulated_errors(noise_free, capsys):
+    code, out, _ = _run(["verify", HEAD, noise_free / "data.json", "--json"], capsys)
+    assert code == 0
+    plates = [g for g in json.loads(out)["groups"] if g["kind"] == "pose"]
+    # 2 mm / 0.5 deg errors on ~11 joints over ~0.5 m lever arms: several mm, not metres
+    for g in plates:
+        assert 1.0 < g["position_rms_mm"] < 100.0
+
+
+def test_verify_prints_a_table_in_mm_and_degrees(noise_free, capsys):
+    code, out, _ = _run(["verify", noise_free / "true.urdf", noise_free / "data.json"], capsys)
+    assert code == 0
+    assert "pos RMS mm" in out and "rot RMS deg" in out and "left_plate" in out
+
+
+def test_crosscheck_of_the_head_passes(capsys):
+    code, out, _ = _run(["crosscheck", HEAD, "-n", "50"], capsys)
+    assert code == 0
+    assert "passed" in out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["verify", "missing.urdf", "x.json"], r"missing\.urdf: cannot read URDF"),
+        (["verify", HEAD, "missing.json"], r"missing\.json"),
+        (["simulate", "--urdf", "ARM", "--out", "d.json", "--truth-out", "t.urdf"],
+         r"give --frames"),
+        (["simulate", "--urdf", "ARM", "--out", "d.json", "--truth-out", "t.urdf",
+          "--frames", "flang"], r"no frame 'flang'"),
+        (["crosscheck", HEAD, "--frames", "left_plate,nose"], r"no frame 'nose'"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(argv, message, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "ARM").write_text(ARM_6R, encoding="utf-8")
+    code, _, err = _run(argv, capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("kinfw ")
+    assert re.search(message, err), err
+
+
+def test_bad_measurement_file_names_sample_and_key(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({
+        "format": "kinfw-measurements", "version": 1,
+        "units": {"length": "m", "angle": "rad"}, "joint_names": ["pan"],
+        "samples": [{"q": [0.1], "observations": [
+            {"frame": "left_plate", "kind": "pose", "xyz": [0, 0, 1],
+             "quat_xyzw": [0, 0, 0, 2]}]}]}), encoding="utf-8")
+    code, _, err = _run(["verify", HEAD, bad], capsys)
+    assert code == 2
+    assert "samples[0].observations[0].quat_xyzw" in err
+
+
+def test_installed_entry_point_runs():
+    result = subprocess.run([sys.executable, "-m", "kinfw.cli", "--help"], capture_output=True,
+                            text=True, check=False)
+    assert result.returncode == 0
+    assert "simulate" in result.stdout and "verify" in result.stdout

@@ -1,0 +1,1 @@
+"""Checks of an estimate: cross-checks, simulation studies, accuracy reports, plots."""

@@ -1,0 +1,555 @@
+"""Simulated calibration data: the experiments of Shih et al. (1992), section 6.
+
+The pieces of the paper's Fig. 10 simulation, over any URDF robot:
+
+- a "true" robot: the nominal URDF with random geometric errors
+  (:func:`perturb_robot`);
+- measurement protocols: one joint at a time, as section 4.1 requires
+  (:func:`one_joint_at_a_time`), and random configurations for held-out tests
+  (:func:`random_configurations`);
+- measurement noise: a translation error per axis plus a rotation about a random axis
+  (:func:`perturb_poses`), or the stereo rig itself, noisy 3D circle centres of the
+  nine-circle plate registered with Arun's method (:func:`stereo_measure`);
+- a measurement dataset built from the true robot's forward kinematics (Pinocchio)
+  (:func:`simulate`).
+
+Every random draw comes from a ``numpy.random.Generator`` passed in by the caller; no
+global random state is used, so a seed reproduces a study exactly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from identification.registration import register_points
+from kinfw.measurements import (
+    Measurements,
+    PointObservations,
+    PoseObservations,
+    TargetObservations,
+)
+from kinfw.robot import JointInfo, Robot
+from kinfw.transforms import (
+    check_transform,
+    inverse_transform,
+    matrix_from_rotation_vector,
+    transform_from_rotation_translation,
+)
+from kinfw.urdf_export import edit_urdf
+
+__all__ = [
+    "default_target_pose",
+    "nine_circle_plate",
+    "one_joint_at_a_time",
+    "perturb_poses",
+    "perturb_robot",
+    "random_configurations",
+    "simulate",
+    "stereo_measure",
+]
+
+_UNBOUNDED = np.pi
+"""Half range (rad, or m for a prismatic joint) used in place of an infinite limit."""
+
+
+# -- random helpers --------------------------------------------------------------------
+
+
+def _check_sigma(value: float, name: str) -> float:
+    value = float(value)
+    if not (np.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{name}: expected a finite standard deviation >= 0, got {value}")
+    return value
+
+
+def _random_unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
+    """``n`` unit vectors uniformly distributed on the sphere, shape (n, 3)."""
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _random_small_rotations(rng: np.random.Generator, n: int, sigma_rad: float
+                            ) -> NDArray[np.float64]:
+    """``n`` rotations about uniformly random axes by angles N(0, sigma_rad), (n, 3, 3)."""
+    axes = _random_unit_vectors(rng, n)
+    angles = rng.normal(0.0, sigma_rad, size=n)
+    return matrix_from_rotation_vector(axes * angles[:, None])
+
+
+# -- the true robot --------------------------------------------------------------------
+
+
+def _default_perturbed_joints(robot: Robot) -> tuple[str, ...]:
+    """Movable joints, fixed joints off the root link and fixed joints at branch ends.
+
+    A fixed joint is at a branch end when no movable joint lies below it (the rigid
+    chain from the last movable joint to a leaf link: plate, camera, flange, tool).
+    """
+    children: dict[str, list[JointInfo]] = {}
+    for j in robot.joints:
+        children.setdefault(j.parent, []).append(j)
+
+    def moves_below(link: str) -> bool:
+        return any(j.is_movable or moves_below(j.child) for j in children.get(link, ()))
+
+    return tuple(
+        j.name for j in robot.joints
+        if j.is_movable or (j.type == "fixed" and (j.parent == robot.root_link
+                                                   or not moves_below(j.child)))
+    )
+
+
+def perturb_robot(robot: Robot, rng: np.random.Generator, *, origin_mm: float = 2.0,
+                  origin_deg: float = 0.5, axis_deg: float = 0.5,
+                  joints: Sequence[str] | None = None) -> str:
+    """URDF text of a "true" robot: the nominal one with random geometric errors.
+
+    For each perturbed joint, the ``<origin>`` ``parent_T_child`` becomes
+    ``[R dR, p + dp]``: ``dp`` has independent N(0, ``origin_mm``) components (in the
+    parent link), ``dR`` is a rotation about a uniformly random axis by an angle
+    N(0, ``origin_deg``) (applied on the child side, so the joint axis turns with the
+    origin). The ``<axis>`` ``a`` of a movable joint is then tilted by an angle
+    N(0, ``axis_deg``) about a uniformly random direction perpendicular to it, and stays
+    a unit vector. Everything else in the file is kept (written by
+    :func:`kinfw.urdf_export.edit_urdf`).
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot.
+    rng : numpy.random.Generator
+        Source of every random draw.
+    origin_mm : float, optional
+        Standard deviation of each origin translation component, millimetres.
+    origin_deg : float, optional
+        Standard deviation of the origin rotation angle, degrees.
+    axis_deg : float, optional
+        Standard deviation of the axis tilt angle, degrees.
+    joints : sequence of str, optional
+        Joints to perturb. Default: every movable joint, every fixed joint whose parent
+        is the root link (the root-to-base joint, e.g. the world-to-base transform) and
+        every fixed joint leading to leaf links with no movable joint below it (the rigid
+        ends of the branches: plates, cameras mounted on them, flanges, tools). Fixed
+        joints between two movable ones are kept nominal.
+
+    Returns
+    -------
+    str
+        The true robot's URDF text; load it with :func:`kinfw.robot.load_robot`.
+
+    Notes
+    -----
+    The paper's simulation (Fig. 10) uses the DH model of its Table 3 as the truth;
+    perturbing the nominal model gives a truth that differs from the model an
+    identification starts from, as a real robot does.
+    """
+    origin_m = _check_sigma(origin_mm, "origin_mm") * 1e-3
+    origin_rad = np.deg2rad(_check_sigma(origin_deg, "origin_deg"))
+    axis_rad = np.deg2rad(_check_sigma(axis_deg, "axis_deg"))
+    if isinstance(joints, str):
+        raise TypeError("perturb_robot: joints must be a sequence of joint names, not a string")
+    names = _default_perturbed_joints(robot) if joints is None else tuple(joints)
+    joint_origins: dict[str, NDArray[np.float64]] = {}
+    joint_axes: dict[str, NDArray[np.float64]] = {}
+    for name in names:
+        j = robot.joint(name)  # raises UnknownFrameError naming the joint
+        parent_T_child = j.parent_T_child
+        dp = rng.normal(0.0, origin_m, size=3)
+        dR = _random_small_rotations(rng, 1, origin_rad)[0]
+        joint_origins[name] = transform_from_rotation_translation(
+            parent_T_child[:3, :3] @ dR, parent_T_child[:3, 3] + dp)
+        if j.is_movable:
+            joint_axes[name] = _tilted_axis(j.axis, rng, axis_rad)
+    return edit_urdf(robot.urdf_xml, joint_origins=joint_origins, joint_axes=joint_axes)
+
+
+def _tilted_axis(axis: NDArray[np.float64], rng: np.random.Generator, sigma_rad: float
+                 ) -> NDArray[np.float64]:
+    """Unit ``axis`` turned by N(0, sigma_rad) about a random direction perpendicular to it."""
+    u = rng.normal(size=3)
+    u -= (u @ axis) * axis
+    u /= np.linalg.norm(u)
+    angle = rng.normal(0.0, sigma_rad)
+    # Rotation about u ⟂ axis: axis -> cos(angle) axis + sin(angle) u x axis.
+    tilted = np.cos(angle) * axis + np.sin(angle) * np.cross(u, axis)
+    return tilted / np.linalg.norm(tilted)
+
+
+# -- measurement protocols -------------------------------------------------------------
+
+
+def _finite_limits(lower: ArrayLike, upper: ArrayLike
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    lower = np.array(lower, dtype=float, ndmin=1)
+    upper = np.array(upper, dtype=float, ndmin=1)
+    if lower.ndim != 1 or lower.shape != upper.shape:
+        raise ValueError(f"lower, upper: expected two arrays of shape (k,), got {lower.shape} "
+                         f"and {upper.shape}")
+    if np.isnan(lower).any() or np.isnan(upper).any():
+        raise ValueError("lower, upper: limits must not be NaN")
+    lower = np.where(np.isneginf(lower), -_UNBOUNDED, lower)
+    upper = np.where(np.isposinf(upper), _UNBOUNDED, upper)
+    if not (np.isfinite(lower).all() and np.isfinite(upper).all()):
+        raise ValueError("lower, upper: lower limits must not be +inf nor upper limits -inf")
+    bad = np.flatnonzero(lower > upper)
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(f"lower, upper: joint {i} has lower {lower[i]:.6g} > upper "
+                         f"{upper[i]:.6g}")
+    return lower, upper
+
+
+def _check_fraction(fraction: float) -> float:
+    fraction = float(fraction)
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"fraction: expected 0 < fraction <= 1, got {fraction}")
+    return fraction
+
+
+def one_joint_at_a_time(lower: ArrayLike, upper: ArrayLike, *, per_joint: int = 9,
+                        fraction: float = 0.8, q0: ArrayLike | None = None
+                        ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """The measurement protocol of Shih et al. (1992), section 4.1 (their Fig. 8).
+
+    Sample 0 is the initial configuration ``q0``; then each joint ``i`` in turn takes
+    ``per_joint`` values ``q_ik`` (k = 1..M) while every other joint stays at ``q0``:
+    ``M * N + 1`` configurations for ``N`` joints and ``M = per_joint``.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (N,)
+        Joint limits (rad or m) in ``joint_names`` order; an infinite limit (continuous
+        joint) is replaced by -pi or +pi.
+    per_joint : int, optional
+        Values per joint, ``M`` (the paper uses nine).
+    fraction : float, optional
+        Part of each range used, centred on the middle of the range (0 < fraction <= 1).
+    q0 : array_like, shape (N,), optional
+        Initial configuration; default the middle of each range.
+
+    Returns
+    -------
+    qs : ndarray, shape (M * N + 1, N)
+        Joint values (rad or m).
+    moved : ndarray of int64, shape (M * N + 1,)
+        Index of the joint moved in each sample; -1 for sample 0 (``q0``).
+
+    Notes
+    -----
+    The values of joint ``i`` are ``M + 1`` evenly spaced points spanning the centred
+    ``fraction`` of its range, less the one nearest ``q0_i`` — so none equals ``q0_i``
+    (such a sample would add nothing) and, unless ``q0_i`` is nearest an end point, they
+    span the whole ``fraction``.
+    """
+    lower, upper = _finite_limits(lower, upper)
+    per_joint = int(per_joint)
+    if per_joint < 1:
+        raise ValueError(f"per_joint: expected at least 1 value per joint, got {per_joint}")
+    fraction = _check_fraction(fraction)
+    mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower) * fraction
+    n_joints = len(lower)
+    if q0 is None:
+        q0 = mid
+    q0 = np.array(q0, dtype=float, ndmin=1)
+    if q0.shape != (n_joints,) or not np.isfinite(q0).all():
+        raise ValueError(f"q0: expected {n_joints} finite values, got shape {q0.shape}")
+    flat = np.flatnonzero(half <= 0.0)
+    if flat.size:
+        raise ValueError(f"lower, upper: joint {int(flat[0])} has an empty range "
+                         f"[{lower[flat[0]]:.6g}, {upper[flat[0]]:.6g}]; it cannot be moved")
+    t = np.linspace(-1.0, 1.0, per_joint + 1)
+    candidates = mid[:, None] + half[:, None] * t  # (N, M + 1)
+    drop = np.argmin(np.abs(candidates - q0[:, None]), axis=1)
+    keep = np.ones_like(candidates, dtype=bool)
+    keep[np.arange(n_joints), drop] = False
+    values = candidates[keep].reshape(n_joints, per_joint)  # (N, M)
+
+    qs = np.tile(q0, (n_joints * per_joint + 1, 1))
+    moved = np.full(n_joints * per_joint + 1, -1, dtype=np.int64)
+    rows = 1 + np.arange(n_joints * per_joint)
+    moved[1:] = np.repeat(np.arange(n_joints), per_joint)
+    qs[rows, moved[1:]] = values.ravel()
+    return qs, moved
+
+
+def random_configurations(lower: ArrayLike, upper: ArrayLike, n: int,
+                          rng: np.random.Generator, *, fraction: float = 1.0
+                          ) -> NDArray[np.float64]:
+    """Configurations drawn uniformly in the centred ``fraction`` of each joint's range.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (k,)
+        Joint limits (rad or m); an infinite limit is replaced by -pi or +pi.
+    n : int
+        Number of configurations.
+    rng : numpy.random.Generator
+    fraction : float, optional
+        Part of each range used, centred on its middle (0 < fraction <= 1).
+
+    Returns
+    -------
+    ndarray, shape (n, k)
+        Joint values (rad or m).
+    """
+    lower, upper = _finite_limits(lower, upper)
+    fraction = _check_fraction(fraction)
+    if int(n) < 0:
+        raise ValueError(f"n: expected a number of configurations >= 0, got {n}")
+    mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower) * fraction
+    return mid + half * rng.uniform(-1.0, 1.0, size=(int(n), len(lower)))
+
+
+# -- measurement noise and the stereo rig ----------------------------------------------
+
+
+def perturb_poses(a_T_bs: ArrayLike, rng: np.random.Generator, sigma_m: float,
+                  sigma_rad: float) -> NDArray[np.float64]:
+    """Noisy copies of poses, as the simulation of Shih et al. (1992), Fig. 10.
+
+    Parameters
+    ----------
+    a_T_bs : array_like, shape (n, 4, 4) or (4, 4)
+        True poses of frame b in frame a, metres.
+    rng : numpy.random.Generator
+    sigma_m : float
+        Standard deviation of each translation component, metres.
+    sigma_rad : float
+        Standard deviation of the rotation error angle, radians.
+
+    Returns
+    -------
+    ndarray, same shape as ``a_T_bs``
+        ``[a_R_b dR, a_p_b + dp]`` with ``dp ~ N(0, sigma_m^2 I)`` in frame a and ``dR``
+        a rotation by an angle ``N(0, sigma_rad)`` about a uniformly random axis (in
+        frame b, the measured frame).
+
+    Notes
+    -----
+    Because the axis is isotropic, ``a_R_b dR`` has the same distribution as
+    ``dR' a_R_b`` (noise in frame a); the rotation error angle ``|N(0, sigma_rad)|`` has
+    RMS ``sigma_rad`` whichever side it is applied on.
+    """
+    a_T_bs = check_transform(a_T_bs, name="a_T_bs")
+    sigma_m = _check_sigma(sigma_m, "sigma_m")
+    sigma_rad = _check_sigma(sigma_rad, "sigma_rad")
+    single = a_T_bs.ndim == 2
+    T = a_T_bs.reshape(-1, 4, 4)
+    dp = rng.normal(0.0, sigma_m, size=(len(T), 3))
+    dR = _random_small_rotations(rng, len(T), sigma_rad)
+    out = transform_from_rotation_translation(T[:, :3, :3] @ dR, T[:, :3, 3] + dp)
+    return out[0] if single else out
+
+
+def nine_circle_plate(spacing: float = 0.02) -> NDArray[np.float64]:
+    """Centres of the nine circles of the end-effector calibration plate (paper's Fig. 7).
+
+    Parameters
+    ----------
+    spacing : float, optional
+        Distance between neighbouring circle centres, metres.
+
+    Returns
+    -------
+    plate_p_circles : ndarray, shape (9, 3)
+        A 3 x 3 grid in the plate's xy plane (z = 0), row by row; the plate frame's
+        origin is the central circle (row 4), as in the paper.
+    """
+    spacing = float(spacing)
+    if not (np.isfinite(spacing) and spacing > 0.0):
+        raise ValueError(f"spacing: expected a positive distance, got {spacing}")
+    y, x = np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], indexing="ij")
+    return spacing * np.stack([x.ravel(), y.ravel(), np.zeros(9)], axis=-1)
+
+
+def stereo_measure(meas_T_plates: ArrayLike, rng: np.random.Generator, sigma_point_m: float,
+                   plate: ArrayLike | None = None) -> NDArray[np.float64]:
+    """Plate poses as the stereo rig of stage 1 measures them (Shih et al. section 3).
+
+    The rig triangulates each circle centre with an error ``N(0, sigma_point_m^2 I)``;
+    the pose follows by registering the measured centres with their positions on the
+    plate (:func:`identification.registration.register_points`, eqs. (16)-(22)).
+
+    Parameters
+    ----------
+    meas_T_plates : array_like, shape (n, 4, 4) or (4, 4)
+        True poses of the plates in the rig frame, metres.
+    rng : numpy.random.Generator
+    sigma_point_m : float
+        Standard deviation of each coordinate of each measured circle centre, metres.
+    plate : array_like, shape (N, 3), optional
+        Circle centres in the plate frame (metres); default :func:`nine_circle_plate`.
+
+    Returns
+    -------
+    ndarray, same shape as ``meas_T_plates``
+        Measured plate poses in the rig frame.
+    """
+    meas_T_plates = check_transform(meas_T_plates, name="meas_T_plates")
+    sigma_point_m = _check_sigma(sigma_point_m, "sigma_point_m")
+    plate_p = nine_circle_plate() if plate is None else np.asarray(plate, dtype=float)
+    meas_p = (np.einsum("...ij,kj->...ki", meas_T_plates[..., :3, :3], plate_p)
+              + meas_T_plates[..., None, :3, 3])
+    meas_p = meas_p + rng.normal(0.0, sigma_point_m, size=meas_p.shape)
+    return register_points(plate_p, meas_p)
+
+
+# -- datasets --------------------------------------------------------------------------
+
+
+def default_target_pose(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None,
+                        cameras: Sequence[str], distance: float = 0.8) -> NDArray[np.float64]:
+    """A plausible fixed target pose in front of the cameras, ``w_T_target``.
+
+    The target's origin is the mean camera position (over all samples and cameras) plus
+    ``distance`` along the mean optical axis (camera z); its z axis points back at the
+    cameras (minus that mean axis), its x axis is the mean camera x axis made
+    perpendicular to it. ``w`` is the robot's root link.
+
+    Parameters
+    ----------
+    robot : Robot
+    qs : array_like, shape (n, k)
+        Joint values (rad, m), columns in ``joint_names`` order.
+    joint_names : sequence of str or None
+        Column order of ``qs``; None for :attr:`Robot.joint_names`.
+    cameras : sequence of str
+        Camera frames (URDF links; optical axis = z).
+    distance : float, optional
+        Metres in front of the cameras.
+
+    Returns
+    -------
+    w_T_target : ndarray, shape (4, 4)
+    """
+    if isinstance(cameras, str) or not len(cameras):
+        raise ValueError("default_target_pose: give a sequence of at least one camera frame")
+    names = None if joint_names is None else tuple(joint_names)
+    qs2 = np.atleast_2d(np.asarray(qs, dtype=float))
+    w_T_cams = np.concatenate([robot.frame_poses(qs2, c, names) for c in cameras])
+    mean_z = w_T_cams[:, :3, 2].mean(axis=0)
+    if np.linalg.norm(mean_z) < 1e-6:
+        raise ValueError("default_target_pose: the cameras' optical axes average to zero; "
+                         "give w_T_target")
+    mean_z /= np.linalg.norm(mean_z)
+    z = -mean_z
+    x = w_T_cams[:, :3, 0].mean(axis=0)
+    x -= (x @ z) * z
+    if np.linalg.norm(x) < 1e-6:  # any direction perpendicular to z
+        x = np.cross(z, np.eye(3)[np.argmin(np.abs(z))])
+    x /= np.linalg.norm(x)
+    w_R_target = np.stack([x, np.cross(z, x), z], axis=-1)
+    w_p_target = w_T_cams[:, :3, 3].mean(axis=0) + float(distance) * mean_z
+    return transform_from_rotation_translation(w_R_target, w_p_target)
+
+
+def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
+             frames: Iterable[str] = (), cameras: Iterable[str] = (),
+             markers: Iterable[tuple[Any, ...]] = (), rng: np.random.Generator,
+             noise_m: float = 0.0, noise_rad: float = 0.0,
+             stereo_sigma_m: float | None = None,
+             w_T_target: ArrayLike | None = None) -> Measurements:
+    """A measurement dataset of ``robot`` (the truth) in configurations ``qs``.
+
+    Forward kinematics is Pinocchio's (:meth:`Robot.frame_poses`), in the robot's root
+    link ``w``, the default measurement frame.
+
+    Parameters
+    ----------
+    robot : Robot
+        The true robot (e.g. ``load_robot(perturb_robot(nominal, rng))``).
+    qs : array_like, shape (n, k)
+        Joint values (rad, m), columns in ``joint_names`` order.
+    joint_names : sequence of str or None
+        Column order of ``qs``; None for :attr:`Robot.joint_names`. Unlisted joints are
+        held at zero.
+    frames : iterable of str
+        Frames whose pose ``w_T_frame`` is measured (``pose`` observations).
+    cameras : iterable of str
+        Camera frames that observe the fixed target (``target`` observations,
+        ``camera_T_target = inv(w_T_camera) @ w_T_target``).
+    markers : iterable of tuples
+        Points on the robot (``point`` observations of ``w_p_point``): ``(frame,
+        offset)`` with the point's position ``offset`` (3,) in ``frame`` (metres), given
+        in the dataset as known; or ``(frame, offset, name)``, a named marker whose
+        offset is left out of the dataset (unknown, to be estimated).
+    rng : numpy.random.Generator
+        Source of all noise.
+    noise_m : float, optional
+        Standard deviation of each position component of poses, targets and points,
+        metres.
+    noise_rad : float, optional
+        Standard deviation of the rotation error angle of poses and targets, radians
+        (see :func:`perturb_poses`).
+    stereo_sigma_m : float, optional
+        If given, poses are measured by the simulated stereo rig instead
+        (:func:`stereo_measure` with this point noise, metres); ``noise_m`` and
+        ``noise_rad`` then apply to targets and points only.
+    w_T_target : array_like, shape (4, 4), optional
+        Pose of the target in ``w``; default :func:`default_target_pose`.
+
+    Returns
+    -------
+    Measurements
+        One pose group per frame, one target group per camera and one point group per
+        marker, each with every sample; ``source`` is ``"<simulated>"``.
+    """
+    frames, cameras, markers = tuple(frames), tuple(cameras), tuple(markers)
+    for name, value in (("frames", frames), ("cameras", cameras)):
+        if any(not isinstance(v, str) for v in value):
+            raise TypeError(f"simulate: {name} must be a sequence of frame names")
+    if not (frames or cameras or markers):
+        raise ValueError("simulate: nothing to observe; give frames, cameras or markers")
+    names = tuple(robot.joint_names if joint_names is None else joint_names)
+    qs = np.atleast_2d(np.asarray(qs, dtype=float))
+    noise_m = _check_sigma(noise_m, "noise_m")
+    noise_rad = _check_sigma(noise_rad, "noise_rad")
+    sample = np.arange(len(qs))
+
+    poses = []
+    for frame in frames:
+        w_T_frames = robot.frame_poses(qs, frame, names)
+        if stereo_sigma_m is None:
+            meas = perturb_poses(w_T_frames, rng, noise_m, noise_rad)
+        else:
+            meas = stereo_measure(w_T_frames, rng, stereo_sigma_m)
+        poses.append(PoseObservations(frame=frame, sample=sample, meas_T_frame=meas))
+
+    targets = []
+    if cameras:
+        w_T_target = (default_target_pose(robot, qs, names, cameras) if w_T_target is None
+                      else check_transform(w_T_target, name="w_T_target"))
+        for camera in cameras:
+            camera_T_targets = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_target
+            meas = perturb_poses(camera_T_targets, rng, noise_m, noise_rad)
+            targets.append(TargetObservations(camera=camera, sample=sample,
+                                              camera_T_target=meas))
+
+    points = []
+    for marker in markers:
+        frame, offset, name = _marker_spec(marker)
+        w_T_frames = robot.frame_poses(qs, frame, names)
+        w_p_points = w_T_frames[:, :3, :3] @ offset + w_T_frames[:, :3, 3]
+        meas = w_p_points + rng.normal(0.0, noise_m, size=w_p_points.shape)
+        points.append(PointObservations(frame=frame, sample=sample, meas_p_point=meas,
+                                        offset=offset if name is None else None,
+                                        marker=name))
+    return Measurements(joint_names=names, qs=qs, poses=tuple(poses), targets=tuple(targets),
+                        points=tuple(points), source="<simulated>")
+
+
+def _marker_spec(marker: Sequence[Any]) -> tuple[str, NDArray[np.float64], str | None]:
+    """``(frame, offset (3,), name or None)`` of a marker given as a 2- or 3-tuple."""
+    if isinstance(marker, str) or len(marker) not in (2, 3):
+        raise ValueError(f"markers: expected (frame, offset) or (frame, offset, name), "
+                         f"got {marker!r}")
+    frame, offset = marker[0], np.asarray(marker[1], dtype=float)
+    name = marker[2] if len(marker) == 3 else None
+    if offset.shape != (3,) or not np.isfinite(offset).all():
+        raise ValueError(f"markers: offset of a marker on {frame!r}: expected 3 finite "
+                         f"numbers, got {marker[1]!r}")
+    return str(frame), offset, name
