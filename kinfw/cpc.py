@@ -51,6 +51,7 @@ __all__ = [
     "cpc_from_robot",
     "geometry_from_cpc",
     "geometry_from_robot",
+    "perpendicular_basis",
     "rotation_from_axis",
 ]
 
@@ -93,7 +94,7 @@ def _cayley(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.eye(3) + (2.0 / (1.0 + np.sum(a * a, axis=-1)))[..., None, None] * (K + K @ K)
 
 
-def _perpendicular_basis(b: NDArray[np.float64]) -> NDArray[np.float64]:
+def perpendicular_basis(b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Two unit vectors (2, 3) orthogonal to unit ``b`` (3,) and to each other."""
     helper = np.eye(3)[np.argmin(np.abs(b))]
     e1 = np.cross(b, helper)
@@ -186,7 +187,7 @@ class CPCModel:
     # -- the chart of identifiable parameters --------------------------------------------
     def axis_bases(self) -> NDArray[np.float64]:
         """Per joint, two unit vectors orthogonal to ``b`` (J, 2, 3): the axis-tilt chart."""
-        return np.stack([_perpendicular_basis(b) for b in self.b])
+        return np.stack([perpendicular_basis(b) for b in self.b])
 
     def perturbed(self, delta: ArrayLike) -> CPCModel:
         """The model moved by ``delta`` in the chart of :attr:`parameter_names`.

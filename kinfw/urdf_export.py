@@ -337,13 +337,13 @@ def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
         w_T_child = w_T_placed.get(joint.child)
         if joint.name in lines:
             j = lines[joint.name]
-            w_T_child = _place_on_line(joint, w_T_candidate, geometry.axes[j],
-                                       geometry.points[j], w_T_child)
-            old_T_new = inverse_transform(w_T_candidate) @ w_T_child
+            old_T_new = _shift_onto_line(joint, w_T_candidate, geometry.axes[j],
+                                         geometry.points[j], w_T_child)
             if _close(old_T_new, np.eye(4), SAME_TOL):  # rounding only: keep the nominal frame
-                w_T_child = w_T_candidate
+                old_T_new = np.eye(4)
             else:
                 old_T_news[joint.child] = old_T_new
+            w_T_child = w_T_candidate @ old_T_new
             joint_axes[joint.name] = w_T_child[:3, :3].T @ _unit(geometry.axes[j])
         elif w_T_child is None:  # stays on its parent's old frame (link_shifts re-express it)
             w_T_links[joint.child] = w_T_candidate
@@ -378,15 +378,16 @@ def _joints_from_root(robot: Robot) -> list[JointInfo]:
     return order
 
 
-def _place_on_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: ArrayLike,
-                   point: ArrayLike, w_T_end: NDArray[np.float64] | None) -> NDArray[np.float64]:
-    """``w_T_child`` at q = 0 of a measured joint with calibrated line ``(axis, point)``.
+def _shift_onto_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: ArrayLike,
+                     point: ArrayLike, w_T_end: NDArray[np.float64] | None
+                     ) -> NDArray[np.float64]:
+    """Shift ``old_T_new`` of a measured joint's child link from its candidate pose.
 
     Parameters
     ----------
     joint : JointInfo
     w_T_candidate : ndarray, shape (4, 4)
-        Where the nominal URDF puts the child link, in ``w``.
+        Where the nominal URDF puts the child link (the "old" frame), in ``w``.
     axis, point : array_like, shape (3,)
         Direction and a point (m) of the calibrated joint line in ``w``.
     w_T_end : ndarray, shape (4, 4), or None
@@ -395,17 +396,33 @@ def _place_on_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: A
     Returns
     -------
     ndarray, shape (4, 4)
-        The end frame's pose, else the candidate, for a revolute joint with its origin
-        moved to the closest point of the line.
+        To the end frame when the child is one; else, for a revolute joint, the pure
+        translation onto the closest point of the line (rotation exactly identity, so
+        rounding does not build up along a chain); else identity.
     """
-    w_T_child = np.array(w_T_candidate if w_T_end is None else w_T_end, dtype=float)
-    if not joint.is_revolute:
-        return w_T_child
-    direction = _unit(axis)
-    offset = w_T_child[:3, 3] - np.asarray(point, dtype=float)
-    off_axis = offset - (offset @ direction) * direction
-    distance = np.linalg.norm(off_axis)
-    if w_T_end is not None and distance > ON_AXIS_TOL:
+    if w_T_end is not None:
+        old_T_end = inverse_transform(w_T_candidate) @ w_T_end
+        if joint.is_revolute:
+            _check_on_line(joint, w_T_end[:3, 3], axis, point)
+        return old_T_end
+    old_T_new = np.eye(4)
+    if joint.is_revolute:
+        w_p_foot = _closest_point(w_T_candidate[:3, 3], axis, point)
+        old_T_new[:3, 3] = w_T_candidate[:3, :3].T @ (w_p_foot - w_T_candidate[:3, 3])
+    return old_T_new
+
+
+def _closest_point(w_p: NDArray[np.float64], axis: ArrayLike, point: ArrayLike
+                   ) -> NDArray[np.float64]:
+    """The point of the line ``(axis, point)`` closest to ``w_p`` (all in ``w``, metres)."""
+    direction, point = _unit(axis), np.asarray(point, dtype=float)
+    return point + ((w_p - point) @ direction) * direction
+
+
+def _check_on_line(joint: JointInfo, w_p_end: NDArray[np.float64], axis: ArrayLike,
+                   point: ArrayLike) -> None:
+    distance = np.linalg.norm(w_p_end - _closest_point(w_p_end, axis, point))
+    if distance > ON_AXIS_TOL:
         raise ExportError(
             f"end frame {joint.child!r} is the child link of revolute joint {joint.name!r}, "
             f"so its origin must lie on the joint axis, but the calibrated origin is "
@@ -413,9 +430,6 @@ def _place_on_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: A
             f"{joint.child!r} by a fixed joint instead (add a fixed child link such as a "
             "tool or plate frame to the URDF)"
         )
-    if w_T_end is None:
-        w_T_child[:3, 3] -= off_axis
-    return w_T_child
 
 
 def _anchor(robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: bool

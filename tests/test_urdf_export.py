@@ -442,6 +442,13 @@ def _moved(m_T_w, geometry):
                         points=geometry.points @ R.T + t, w_T_frames=m_T_w @ geometry.w_T_frames)
 
 
+def _transform(rpy, xyz=(0.1, -0.2, 0.3)):
+    a_T_b = np.eye(4)
+    a_T_b[:3, :3] = pin.rpy.rpyToMatrix(np.asarray(rpy, dtype=float))
+    a_T_b[:3, 3] = xyz
+    return a_T_b
+
+
 def _links_at_zero(robot):
     """``root_T_link`` at q = 0 of every link, by Pinocchio."""
     zero = np.zeros(len(robot.joint_names))
@@ -523,9 +530,7 @@ def test_calibrated_export_reproduces_the_calibrated_fk(name, seed):
 def test_external_measurement_frame_is_reported_not_written(name):
     robot, frames = _case(name)
     model = _perturbed(robot, frames, seed=4)
-    mocap_T_root = np.eye(4)
-    mocap_T_root[:3, :3] = pin.rpy.rpyToMatrix(0.4, -1.1, 2.0)
-    mocap_T_root[:3, 3] = [3.0, -1.5, 0.8]
+    mocap_T_root = _transform((0.4, -1.1, 2.0), xyz=(3.0, -1.5, 0.8))
     result = export_urdf(robot, _moved(mocap_T_root, geometry_from_cpc(model)),
                          root_is_measurement_frame=False)
     dp, dr = _fk_errors(result, model, n=100, seed=5, m_T_w=mocap_T_root)
@@ -546,14 +551,33 @@ def test_external_measurement_frame_of_the_nominal_robot_is_found_exactly():
         assert result.urdf_xml == robot.urdf_xml
 
 
+def test_a_rigidly_moved_head_only_changes_the_root_to_base_joint():
+    robot, frames = _case("head")
+    w_T_moved = _transform((0.02, -0.01, 0.03), xyz=(0.01, -0.02, 0.015))
+    result = export_urdf(robot, _moved(w_T_moved, geometry_from_robot(robot, frames)))
+    assert result.link_shifts == ()
+    exported = load_robot(result.urdf_xml)
+    for nominal, written in zip(robot.joints, exported.joints, strict=True):
+        expected = nominal.parent_T_child
+        if nominal.name == "world_to_base":
+            expected = w_T_moved @ expected
+        np.testing.assert_allclose(written.parent_T_child, expected, rtol=0, atol=1e-12)
+
+
 def test_root_to_base_joint_takes_the_registered_base_placement():
     robot, frames = _case("head")
     result = export_urdf(robot, geometry_from_cpc(_perturbed(robot, frames, seed=6)))
-    exported = load_robot(result.urdf_xml)
     assert "base" not in dict(result.link_shifts)  # the base moved as a body, visuals with it
-    moved = exported.joint("world_to_base").parent_T_child
+    moved = load_robot(result.urdf_xml).joint("world_to_base").parent_T_child
     dp, dr = _pose_errors(moved, robot.joint("world_to_base").parent_T_child)
     assert 0.0 < dp < 0.2 and 0.0 < dr < 0.2
+
+
+def test_end_frames_named_by_joints_are_their_child_links():
+    robot = load_robot(TREE_URDF)
+    model = _perturbed(robot, ("a_tool_joint", "b_tool_joint", "c_tool"), seed=11)
+    dp, dr = _fk_errors(export_urdf(robot, geometry_from_cpc(model)), model, n=100)
+    assert dp < FK_TOL and dr < FK_TOL, (dp, dr)
 
 
 @settings(max_examples=25, deadline=None)
@@ -672,6 +696,21 @@ def test_end_frame_off_its_revolute_axis_is_refused_with_the_fix():
         export_urdf(robot, geometry_from_cpc(calibrated))
 
 
+@pytest.mark.parametrize(
+    ("frames", "entries", "match"),
+    [
+        (("world", "a_tool"), {"world__x": 1e-3}, "'world' is the root link"),
+        (("a2", "a2_link", "b_tool"), {"a2_link__rot_z": 1e-3}, "name link 'a2_link' twice"),
+    ],
+)
+def test_end_frames_that_cannot_take_their_calibrated_pose_are_refused(frames, entries, match):
+    robot = load_robot(TREE_URDF)
+    model = cpc_from_robot(robot, frames)
+    export_urdf(robot, geometry_from_cpc(model))  # consistent as long as nothing moves them
+    with pytest.raises(ExportError, match=match):
+        export_urdf(robot, geometry_from_cpc(model.perturbed(_delta(model, **entries))))
+
+
 def test_geometry_of_another_tree_is_refused():
     robot, frames = _case("tree")
     geometry = geometry_from_robot(robot, frames)
@@ -696,13 +735,6 @@ ONE_JOINT = """<robot name="one">
 """
 
 
-def _transform(rpy, xyz=(0.1, -0.2, 0.3)):
-    a_T_b = np.eye(4)
-    a_T_b[:3, :3] = pin.rpy.rpyToMatrix(np.asarray(rpy, dtype=float))
-    a_T_b[:3, 3] = xyz
-    return a_T_b
-
-
 @pytest.mark.parametrize("pitch", [PI_2, -PI_2, PI_2 - 1e-13, -PI_2 + 1e-9, PI_2 - 1e-6, 3.0])
 @pytest.mark.parametrize(("roll", "yaw"), [(0.3, -0.2), (2.9, 3.1), (-3.1, -2.0), (0.0, 0.0)])
 def test_origin_round_trips_through_rpy_at_and_near_gimbal_lock(pitch, roll, yaw):
@@ -717,10 +749,10 @@ def test_origin_round_trips_through_rpy_at_and_near_gimbal_lock(pitch, roll, yaw
 
 @settings(max_examples=200, deadline=None)
 @given(st.floats(-np.pi, np.pi), st.floats(-np.pi, np.pi), st.sampled_from([PI_2, -PI_2]),
-       st.floats(-1e-6, 1e-6))
-def test_rpy_near_gimbal_lock_reproduces_the_matrix(roll, yaw, pitch, tiny):
+       st.floats(-1e-6, 1e-6), arrays(np.float64, 3, elements=st.floats(-1e-8, 1e-8)))
+def test_rpy_near_gimbal_lock_reproduces_the_matrix(roll, yaw, pitch, tiny, rotvec):
     a_T_b = _transform((roll, pitch + tiny, yaw))
-    a_T_b[:3, :3] = a_T_b[:3, :3] @ pin.exp3(np.array([1e-9, -2e-9, 3e-9]) * tiny * 1e6)
+    a_T_b[:3, :3] = a_T_b[:3, :3] @ pin.exp3(rotvec)  # also off the rpy grid
     xml = edit_urdf(ONE_JOINT, joint_origins={"j": a_T_b})
     np.testing.assert_allclose(load_robot(xml).joint("j").parent_T_child, a_T_b, rtol=0,
                                atol=1e-12)
@@ -790,11 +822,22 @@ def test_unknown_joint_and_link_names_are_all_named():
         edit_urdf(ONE_JOINT, link_shifts={"c": np.eye(4)})
 
 
-def test_joint_of_a_transmission_is_not_a_urdf_joint():
+def test_joints_inside_a_transmission_are_not_edited():
     robot, _ = _case("arm")
-    assert "joint1_motor" not in robot.urdf_xml.split("<transmission")[0]
-    with pytest.raises(ExportError, match="unknown joint"):
-        edit_urdf(robot.urdf_xml, joint_origins={"joint1_transmission": np.eye(4)})
+    xml = edit_urdf(robot.urdf_xml, joint_origins={"joint1": _transform((0.0, 0.0, 0.1))},
+                    joint_axes={"joint1": [0.0, 0.0, -1.0]})
+    tree = etree.fromstring(xml.encode())
+    assert tree.find("transmission/joint").getchildren()[0].tag == "hardwareInterface"
+    assert len(tree.find("transmission/joint")) == 1
+    np.testing.assert_allclose(load_robot(xml).joint("joint1").parent_T_child,
+                               _transform((0.0, 0.0, 0.1)), atol=1e-12)
+
+
+def test_attribute_order_is_kept_when_an_origin_changes():
+    urdf = ONE_JOINT.replace('<parent link="a"/>', '<origin rpy="0 0 0" xyz="0 0 0"/>'
+                             '<parent link="a"/>')
+    xml = edit_urdf(urdf, joint_origins={"j": _transform((0.0, 0.5, 0.0), xyz=(0, 0, 0))})
+    assert '<origin rpy="0.0 0.5 0.0" xyz="0 0 0"/><parent link="a"/>' in xml
 
 
 @pytest.mark.parametrize(
