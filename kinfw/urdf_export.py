@@ -35,6 +35,7 @@ from lxml import etree
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.cpc import ZeroGeometry
+from kinfw.registration import register_points
 from kinfw.robot import JointInfo, Robot
 from kinfw.transforms import check_transform, inverse_transform
 
@@ -500,14 +501,7 @@ def _register_frames(a_T_frames: NDArray[np.float64], w_T_frames: NDArray[np.flo
         axes = np.swapaxes(T[:, :3, :3], 1, 2) * lever  # rows: L x, L y, L z
         return np.concatenate([T[:, :3, 3], (T[:, None, :3, 3] + axes).reshape(-1, 3)])
 
-    a_ps, w_ps = points(a_T_frames), points(w_T_frames)
-    a_mean, w_mean = a_ps.mean(axis=0), w_ps.mean(axis=0)
-    U, _, Vt = np.linalg.svd((a_ps - a_mean).T @ (w_ps - w_mean))
-    fix = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    w_R_a = Vt.T @ fix @ U.T
-    out = np.eye(4)
-    out[:3, :3], out[:3, 3] = w_R_a, w_mean - w_R_a @ a_mean
-    return out
+    return register_points(points(a_T_frames), points(w_T_frames))
 
 
 def write_urdf(path: str | PathLike[str], result_or_xml: ExportResult | str) -> None:

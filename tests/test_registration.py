@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from identification.registration import register_points
+from kinfw.registration import register_points
 from kinfw.transforms import (
     matrix_from_rotation_vector,
     rotation_angle,

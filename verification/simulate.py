@@ -25,13 +25,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.registration import register_points
 from kinfw.measurements import (
     Measurements,
     PointObservations,
     PoseObservations,
     TargetObservations,
 )
+from kinfw.registration import register_points
 from kinfw.robot import JointInfo, Robot
 from kinfw.transforms import (
     check_transform,
