@@ -13,6 +13,7 @@ Joints a caller does not list are held at zero.
 from __future__ import annotations
 
 import io
+import logging
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -156,7 +157,21 @@ def _as_xml_text(urdf: str | Path) -> tuple[str, str]:
     return str(urdf), "<urdf string>"
 
 
+def _check_xml(xml: str, source: str) -> ET.Element:
+    try:
+        root = ET.fromstring(xml)
+    except ET.ParseError as exc:
+        raise RobotModelError(f"{source}: not well-formed XML ({exc})") from None
+    if root.tag != "robot":
+        raise RobotModelError(f"{source}: not a URDF (the root element is <{root.tag}>, "
+                              "expected <robot>)")
+    return root
+
+
 def _parse_joints(xml: str, source: str) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
+    yourdfpy_log = logging.getLogger("yourdfpy")
+    level = yourdfpy_log.level
+    yourdfpy_log.setLevel(logging.CRITICAL)  # it logs, then we raise with the file name
     try:
         urdf = yourdfpy.URDF.load(
             io.BytesIO(xml.encode("utf-8")),
@@ -167,6 +182,8 @@ def _parse_joints(xml: str, source: str) -> tuple[tuple[JointInfo, ...], tuple[s
         )
     except Exception as exc:  # yourdfpy/lxml raise many types for bad XML
         raise RobotModelError(f"{source}: not a readable URDF ({exc})") from None
+    finally:
+        yourdfpy_log.setLevel(level)
     joints = []
     for j in urdf.robot.joints:
         axis = np.array([1.0, 0.0, 0.0] if j.axis is None else j.axis, dtype=float)
@@ -229,6 +246,7 @@ class Robot:
     def __init__(self, urdf_xml: str, source: str = "<urdf string>") -> None:
         self.urdf_xml = urdf_xml
         self.source = source
+        hint = _check_xml(urdf_xml, source).find("kinfw")
         self.joints, self.link_names, self.root_link = _parse_joints(urdf_xml, source)
         try:
             self.model = pin.buildModelFromXML(urdf_xml)
@@ -238,7 +256,6 @@ class Robot:
         self._joint_by_name = {j.name: j for j in self.joints}
         self._joint_by_child = {j.child: j for j in self.joints}
         self.joint_names = tuple(j.name for j in self.joints if j.is_movable)
-        hint = ET.fromstring(urdf_xml).find("kinfw")
         hint = {} if hint is None else hint.attrib
         self.default_frames = tuple(hint.get("frames", "").split())
         self.default_cameras = tuple(hint.get("cameras", "").split())

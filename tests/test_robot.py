@@ -91,7 +91,7 @@ def test_bad_urdf_inputs_name_the_source(tmp_path):
         load_robot(tmp_path / "missing.urdf")
     bad = tmp_path / "bad.urdf"
     bad.write_text("<robot name='x'><link name='a'/><joint name='j'", encoding="utf-8")
-    with pytest.raises(RobotModelError, match=r"bad\.urdf: not a readable URDF"):
+    with pytest.raises(RobotModelError, match=r"bad\.urdf: not well-formed XML"):
         load_robot(bad)
     two_roots = "<robot name='x'><link name='a'/><link name='b'/></robot>"
     with pytest.raises(RobotModelError, match="expected one root link"):
@@ -104,3 +104,8 @@ def test_wrong_number_of_joint_values_is_an_error():
         robot.frame_poses(np.zeros(5), "flange")
     with pytest.raises(UnknownFrameError, match="no joint 'j9'"):
         robot.frame_poses([0.0], "flange", joint_names=("j9",))
+
+
+def test_xml_that_is_not_a_urdf_is_refused():
+    with pytest.raises(RobotModelError, match=r"root element is <html>, expected <robot>"):
+        load_robot("<html><body/></html>")
