@@ -184,14 +184,16 @@ def _step1_axis(R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, sour
     C = R[b] @ np.swapaxes(R[a], 1, 2)  # rotation from pose a to pose b, in w
     D = C - np.eye(3)
     axis, lam = _smallest_eigenvector(np.einsum("kji,kjl->il", D, D))  # eq. (35)
-    # Sense and scale from the pairs whose rotation angle does not wrap around pi.
-    short = np.abs(dq) < np.pi - 0.2
-    if not np.any(short):
-        raise ProtocolError(f"{source}: joint {name!r}: every pair of its values is at least "
-                            "pi - 0.2 rad apart, so the sense of rotation is ambiguous; add "
-                            "values closer together")
-    along = rotation_vector_from_matrix(C[short]) @ axis
-    scale = float(along @ dq[short] / (dq[short] @ dq[short]))  # slope of angle vs dq
+    rotvec = rotation_vector_from_matrix(C)
+    theta = np.linalg.norm(rotvec, axis=1)
+    # Sense and scale from the pairs whose rotation cannot wrap around pi.
+    short = (theta < np.pi - 0.2) & (np.abs(dq) < np.pi - 0.2)
+    if np.any(short):
+        scale = float((rotvec[short] @ axis) @ dq[short] / (dq[short] @ dq[short]))
+    else:  # no unambiguous pair: still tell degrees-read-as-radians apart
+        clear = theta < np.pi - 0.2
+        scale = float(theta[clear] @ np.abs(dq[clear]) / (dq[clear] @ dq[clear])) \
+            if np.any(clear) else float("nan")
     if scale < 0.0:
         axis, scale = -axis, -scale
     if abs(scale - 1.0) > SCALE_TOLERANCE:
@@ -199,6 +201,10 @@ def _step1_axis(R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, sour
             f"{source}: joint {name!r} turns {scale:.4g} rad per unit of its joint value "
             "(expected 1): are its values in another unit (degrees read as radians, or "
             "a gear ratio)? Fix the file's units / joint_units")
+    if not np.any(short):
+        raise ProtocolError(f"{source}: joint {name!r}: every pair of its values is at least "
+                            "pi - 0.2 rad apart, so the sense of rotation is ambiguous; add "
+                            "values closer together")
     return axis, float(np.sqrt(lam / len(C))), scale
 
 
