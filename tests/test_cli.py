@@ -127,3 +127,62 @@ def test_installed_entry_point_runs():
                             text=True, check=False)
     assert result.returncode == 0
     assert "simulate" in result.stdout and "verify" in result.stdout
+
+
+def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, capsys):
+    code, _, _ = _run(["simulate", "--out", tmp_path / "d.json", "--truth-out",
+                       tmp_path / "t.urdf", "--noise-mm", "0", "--noise-deg", "0",
+                       "--error-mm", "20", "--error-deg", "3", "--seed", "4"], capsys)
+    assert code == 0
+    code, out, _ = _run(["calibrate", tmp_path / "d.json", "--urdf", HEAD, "--out",
+                         tmp_path / "cal.urdf", "--report", tmp_path / "r.json"], capsys)
+    assert code == 0, out
+    truth = pin.buildModelFromXML((tmp_path / "t.urdf").read_text())
+    cal = pin.buildModelFromXML((tmp_path / "cal.urdf").read_text())
+    rng = np.random.default_rng(0)
+    worst, nominal_err = 0.0, 0.0
+    nominal = pin.buildModelFromUrdf(str(HEAD))
+    for _ in range(100):
+        q = pin.neutral(truth)
+        for name in ("x_table", "y_table", "pan", "tilt", "vergence_left", "vergence_right"):
+            j = truth.joints[truth.getJointId(name)]
+            q[j.idx_q] = rng.uniform(truth.lowerPositionLimit[j.idx_q],
+                                     truth.upperPositionLimit[j.idx_q])
+        poses = []
+        for model in (truth, cal, nominal):
+            data = model.createData()
+            pin.framesForwardKinematics(model, data, q)
+            poses.append(data.oMf[model.getFrameId("right_plate")])
+        worst = max(worst, np.linalg.norm(pin.log6(poses[0].inverse() * poses[1]).vector))
+        nominal_err = max(nominal_err, np.linalg.norm(poses[0].translation
+                                                      - poses[2].translation))
+    assert worst < 1e-9  # 1e-6 mm and 1e-9 rad
+    assert nominal_err > 0.02  # the nominal was centimetres off
+    report = json.loads((tmp_path / "r.json").read_text())
+    for row in report["errors_in_sample"]:
+        assert row["before_position_rms_mm"] > 10.0
+        assert row["after_position_rms_mm"] < 1e-6
+    assert report["parameters"]["n_identifiable"] == 32
+    assert len(report["data"]["sha256"]) == 64
+
+
+def test_calibrate_refuses_data_that_is_not_one_joint_at_a_time(tmp_path, capsys):
+    code, _, _ = _run(["simulate", "--out", tmp_path / "d.json", "--truth-out",
+                       tmp_path / "t.urdf", "--stage", "2"], capsys)
+    assert code == 0
+    code, _, err = _run(["calibrate", tmp_path / "d.json", "--urdf", HEAD, "--out",
+                         tmp_path / "cal.urdf"], capsys)
+    assert code == 2
+    assert "needs 'pose' observations" in err
+    assert not (tmp_path / "cal.urdf").exists()
+
+
+def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
+    code, out, _ = _run(["demo", "--out", tmp_path / "demo", "--json"], capsys)
+    assert code == 0
+    report = json.loads(out)
+    for row in report["errors_vs_truth_held_out"]:
+        assert row["before_position_rms_mm"] > 5.0
+        assert row["after_position_rms_mm"] < 1.0
+    for name in ("calibrated.urdf", "report.json", "data.json", "held_out.json", "true.urdf"):
+        assert (tmp_path / "demo" / name).is_file()

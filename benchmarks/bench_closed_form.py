@@ -1,0 +1,421 @@
+"""Speed of the closed-form CPC identification on the IIS-head, with its accuracy alongside.
+
+Run from the repository root::
+
+    python benchmarks/bench_closed_form.py              # full run, under ~2 minutes
+    python benchmarks/bench_closed_form.py --quick      # reduced set, a few seconds
+    python benchmarks/bench_closed_form.py --repeats 50 --seed 3
+
+Prints plain-text tables:
+
+1. :func:`identification.closed_form.identify_closed_form` on the paper's protocol (Shih
+   et al. 1992, section 4.1: nine values per joint, 6 x 9 + 1 = 55 configurations, both
+   plates): median and IQR over the repeats, and a per-step breakdown obtained by calling
+   the module's private step functions in the order ``identify_closed_form`` calls them
+   (the module is not edited; the step-wise model is checked against the whole call).
+2. Growth with the values per joint ``M``: samples, Step 1 pairs, median time, time per
+   sample, Step 1 / Step 2 times, local log-log slopes, and the held-out position error of
+   the identified model (so speed and accuracy are read together).
+3. Ratios measured back to back in the same repeat on the same data: closed form over one
+   vectorised CPC forward-kinematics evaluation of the dataset, and over Pinocchio FK of
+   the dataset (a Python loop over samples). Absolute times depend on the machine; the
+   ratios are the portable numbers.
+
+Timing: ``time.perf_counter`` around each call, warm-up calls first, garbage collection
+disabled while timing (as :mod:`timeit` does).
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
+    sys.path.insert(0, str(REPO))
+
+import pinocchio as pin  # noqa: E402
+
+import identification.closed_form as cf  # noqa: E402
+from identification.closed_form import one_joint_groups  # noqa: E402
+from kinfw.cpc import CPCModel, cpc_from_geometry, cpc_from_robot  # noqa: E402
+from kinfw.measurements import Measurements, check_against_robot  # noqa: E402
+from kinfw.robot import Robot, load_robot  # noqa: E402
+from verification.simulate import (  # noqa: E402
+    one_joint_at_a_time,
+    perturb_robot,
+    random_configurations,
+    simulate,
+)
+
+HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+FRAMES = ("left_plate", "right_plate")
+PAPER_PER_JOINT = 9
+NOISE_M = 0.5e-3
+NOISE_RAD = 0.01
+N_TEST = 200
+WARMUP = 3
+
+FULL_PER_JOINT = (2, 3, 5, 9, 15, 25, 50, 100, 200)
+QUICK_PER_JOINT = (2, 9, 50)
+FULL_RATIO_PER_JOINT = (9, 50, 200)
+QUICK_RATIO_PER_JOINT = (9,)
+FULL_TRIALS = 10
+QUICK_TRIALS = 2
+
+STEP_NAMES = (
+    "check_against_robot",
+    "_collect",
+    "_step1 (axes, eqs. 33-35, 52)",
+    "_step2 (translations, eqs. 58-64)",
+    "_geometry_at_zero",
+    "cpc_from_geometry (Step 3)",
+)
+
+
+# -- timing ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Timings:
+    """Repeated wall-clock times of one operation, seconds, shape (repeats,)."""
+
+    seconds: NDArray[np.float64]
+
+    @property
+    def median_ms(self) -> float:
+        return 1e3 * float(np.median(self.seconds))
+
+    @property
+    def iqr_ms(self) -> float:
+        q25, q75 = np.percentile(self.seconds, [25.0, 75.0])
+        return 1e3 * float(q75 - q25)
+
+
+def time_interleaved(calls: Sequence[Callable[[], object]], repeats: int
+                     ) -> list[Timings]:
+    """Time each call ``repeats`` times, round robin, after ``WARMUP`` untimed rounds.
+
+    Round robin puts the calls of one repeat next to each other in time, so a ratio of
+    two calls within a repeat sees the same machine state.
+    """
+    for _ in range(WARMUP):
+        for call in calls:
+            call()
+    seconds = np.empty((len(calls), repeats))
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for r in range(repeats):
+            for k, call in enumerate(calls):
+                start = time.perf_counter()
+                call()
+                seconds[k, r] = time.perf_counter() - start
+    finally:
+        if enabled:
+            gc.enable()
+    return [Timings(s) for s in seconds]
+
+
+def closed_form_by_steps(robot: Robot, measurements: Measurements
+                         ) -> tuple[CPCModel, NDArray[np.float64]]:
+    """``identify_closed_form(robot, measurements).model``, timing each step.
+
+    Calls the private functions of :mod:`identification.closed_form` in the order
+    ``identify_closed_form`` does. Returns the model and the seconds per step, shape
+    ``(len(STEP_NAMES),)``.
+    """
+    ticks = [time.perf_counter()]
+    measurements = check_against_robot(measurements, robot)
+    ticks.append(time.perf_counter())
+    topo, q0, data, _sizes = cf._collect(robot, measurements, None)
+    ticks.append(time.perf_counter())
+    axes, _residual, scale = cf._step1(topo, data, measurements.source)
+    ticks.append(time.perf_counter())
+    w_T_e_q0, points, directions, p_scale, _rms = cf._step2(topo, data, q0, axes,
+                                                            measurements.source)
+    prismatic = ~np.array(topo.revolute)
+    axes[prismatic] = directions[prismatic]
+    scale[prismatic] = p_scale[prismatic]
+    ticks.append(time.perf_counter())
+    geometry = cf._geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
+    ticks.append(time.perf_counter())
+    model = cpc_from_geometry(geometry)
+    ticks.append(time.perf_counter())
+    return model, np.diff(ticks)
+
+
+def time_steps(robot: Robot, measurements: Measurements, repeats: int
+               ) -> NDArray[np.float64] | None:
+    """Seconds per step of :func:`closed_form_by_steps`, shape (len(STEP_NAMES), repeats).
+
+    None, with a note printed, when the private functions no longer match the calls above
+    (the module's internals are free to change; the whole-call timings still hold).
+    """
+    try:
+        closed_form_by_steps(robot, measurements)
+    except (AttributeError, TypeError, ValueError) as exc:
+        print(f"[per-step breakdown unavailable: identification.closed_form internals "
+              f"changed ({type(exc).__name__}: {exc})]")
+        return None
+    for _ in range(WARMUP - 1):
+        closed_form_by_steps(robot, measurements)
+    seconds = np.empty((len(STEP_NAMES), repeats))
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for r in range(repeats):
+            seconds[:, r] = closed_form_by_steps(robot, measurements)[1]
+    finally:
+        if enabled:
+            gc.enable()
+    return seconds
+
+
+# -- data --------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Case:
+    """One simulated experiment: true robot, one-joint-at-a-time data, held-out configs."""
+
+    truth: Robot
+    joint_names: tuple[str, ...]
+    qs: NDArray[np.float64]  # (n, J) training configurations, rad / m
+    measurements: Measurements
+    test_qs: NDArray[np.float64]  # (N_TEST, J)
+    w_T_test_frames: NDArray[np.float64]  # (N_TEST, E, 4, 4) true poses, metres
+
+
+def make_case(nominal: Robot, per_joint: int, rng: np.random.Generator) -> Case:
+    """A perturbed true head, its noisy protocol data and noise-free held-out poses."""
+    truth = load_robot(perturb_robot(nominal, rng))
+    names = truth.topology(FRAMES).joint_names
+    lower, upper = truth.joint_limits(names)
+    qs, _moved = one_joint_at_a_time(lower, upper, per_joint=per_joint)
+    measurements = simulate(truth, qs, names, frames=FRAMES, rng=rng, noise_m=NOISE_M,
+                            noise_rad=NOISE_RAD)
+    test_qs = random_configurations(lower, upper, N_TEST, rng)
+    w_T_test = np.stack([truth.frame_poses(test_qs, f, names) for f in FRAMES], axis=1)
+    return Case(truth, names, qs, measurements, test_qs, w_T_test)
+
+
+def held_out_error_mm(model: CPCModel, case: Case) -> float:
+    """Mean position error norm (mm) of ``model`` over the held-out configs and frames.
+
+    Against the true robot's Pinocchio FK without noise: the error of the identified
+    model itself, not of a noisy measurement of it.
+    """
+    if model.topology.joint_names != case.joint_names or model.topology.frames != FRAMES:
+        raise ValueError(f"model topology {model.topology.joint_names} / "
+                         f"{model.topology.frames} does not match the case's")
+    w_T_frames = model.frame_poses(case.test_qs)
+    dp = w_T_frames[..., :3, 3] - case.w_T_test_frames[..., :3, 3]
+    return 1e3 * float(np.linalg.norm(dp, axis=-1).mean())
+
+
+def step1_pairs(nominal: Robot, case: Case) -> int:
+    """Rotation pairs Step 1 stacks: per revolute joint and end frame below it, every pair
+    of the samples where only that joint moved or none did (its group)."""
+    topo = nominal.topology(FRAMES)
+    _q0, moved = one_joint_groups(case.qs, case.joint_names, "<benchmark>")
+    total = 0
+    for j in np.flatnonzero(topo.revolute):
+        rows = int(np.sum((moved == j) | (moved == -1)))
+        total += sum(rows * (rows - 1) // 2 for f in topo.frames if j in topo.chain(f))
+    return total
+
+
+# -- output ------------------------------------------------------------------------------
+
+
+def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """Right-aligned plain-text table (first column left-aligned)."""
+    widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(headers)]
+
+    def line(cells: Sequence[str]) -> str:
+        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
+                         for k, (c, w) in enumerate(zip(cells, widths, strict=True)))
+
+    return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
+
+
+def machine_info() -> str:
+    affinity = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
+                else "n/a")
+    threads = ", ".join(f"{v}={os.environ[v]}" for v in
+                        ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+                        if v in os.environ) or "not set"
+    return "\n".join([
+        f"python     {platform.python_version()} ({platform.python_implementation()})",
+        f"numpy      {np.__version__}",
+        f"pinocchio  {pin.__version__}",
+        f"platform   {platform.platform()}",
+        f"processor  {platform.processor() or platform.machine()}",
+        f"CPUs       {os.cpu_count()} (usable by this process: {affinity})",
+        f"BLAS env   {threads}",
+        f"kinfw      {REPO}",
+    ])
+
+
+def slope(x: Sequence[float], y: Sequence[float]) -> float:
+    """Least-squares slope of log y against log x."""
+    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+# -- sections ----------------------------------------------------------------------------
+
+
+def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
+    print(f"\n1. Closed form on the paper's protocol: {PAPER_PER_JOINT} values per joint, "
+          f"{len(case.qs)} configurations x {len(FRAMES)} plates, {repeats} repeats")
+    whole, = time_interleaved([lambda: cf.identify_closed_form(nominal, case.measurements)],
+                              repeats)
+    model_whole = cf.identify_closed_form(nominal, case.measurements).model
+    rows = []
+    steps = time_steps(nominal, case.measurements, repeats)
+    if steps is not None:
+        total = Timings(steps.sum(axis=0))
+        rows = [[name, f"{Timings(s).median_ms:.3f}", f"{Timings(s).iqr_ms:.3f}",
+                 f"{100 * np.median(s) / np.median(total.seconds):.1f}"]
+                for name, s in zip(STEP_NAMES, steps, strict=True)]
+        rows.append(["sum of steps", f"{total.median_ms:.3f}", f"{total.iqr_ms:.3f}", "100.0"])
+    rows.append(["identify_closed_form (whole call)", f"{whole.median_ms:.3f}",
+                 f"{whole.iqr_ms:.3f}", ""])
+    print(format_table(["step", "median ms", "IQR ms", "% of sum"], rows))
+    if steps is not None:
+        model_steps, _ = closed_form_by_steps(nominal, case.measurements)
+        same = all(np.allclose(getattr(model_steps, a), getattr(model_whole, a), rtol=0.0,
+                               atol=1e-12) for a in ("b", "beta", "l", "sign", "tool_T"))
+        print("Per-step times: identification.closed_form's private _collect, _step1, _step2,\n"
+              "_geometry_at_zero and kinfw.cpc.cpc_from_geometry called in "
+              "identify_closed_form's order\n(module not edited; _step2 row includes the "
+              "prismatic fix-up). Step-wise model == whole-call\nmodel (atol 1e-12): "
+              f"{same}.")
+    print(f"Held-out position error of this estimate: {held_out_error_mm(model_whole, case):.3f}"
+          f" mm (mean over {N_TEST} random configurations x {len(FRAMES)} plates).")
+
+
+def section_growth(nominal: Robot, per_joints: Sequence[int], repeats: int, trials: int,
+                   seed: int) -> None:
+    print(f"\n2. Growth with values per joint M ({repeats} repeats; held-out error: mean "
+          f"over {trials} true robots,\n   each {N_TEST} random test configurations x "
+          f"{len(FRAMES)} plates vs noise-free truth;\n   training noise sigma "
+          f"{1e3 * NOISE_M:g} mm per axis, {NOISE_RAD:g} rad rotation)")
+    rows, n_samples, medians, step1, step2, nominal_mm = [], [], [], [], [], []
+    for m in per_joints:
+        rng = np.random.default_rng([seed, m])
+        cases = [make_case(nominal, m, rng) for _ in range(trials)]
+        case = cases[0]
+        whole, = time_interleaved(
+            [lambda c=case: cf.identify_closed_form(nominal, c.measurements)], repeats)
+        steps = time_steps(nominal, case.measurements, repeats)
+        steps_ms = (np.full(len(STEP_NAMES), np.nan) if steps is None
+                    else 1e3 * np.median(steps, axis=1))
+        errors = [held_out_error_mm(cf.identify_closed_form(nominal, c.measurements).model, c)
+                  for c in cases]
+        nominal_mm += [held_out_error_mm(cpc_from_robot(nominal, FRAMES), c) for c in cases]
+        n = len(case.qs)
+        n_samples.append(n)
+        medians.append(whole.median_ms)
+        step1.append(steps_ms[2])
+        step2.append(steps_ms[3])
+        local = "" if len(rows) == 0 else f"{slope(n_samples[-2:], medians[-2:]):.2f}"
+        sd = np.std(errors, ddof=1) if trials > 1 else np.nan
+        rows.append([f"{m}", f"{n}", f"{step1_pairs(nominal, case)}",
+                     f"{whole.median_ms:.2f}", f"{whole.iqr_ms:.2f}",
+                     f"{1e3 * whole.median_ms / n:.1f}", f"{step1[-1]:.2f}", f"{step2[-1]:.2f}",
+                     local, f"{np.mean(errors):.3f}", f"{sd:.3f}"])
+    print(format_table(["M", "samples", "S1 pairs", "median ms", "IQR ms", "us/sample",
+                        "step1 ms", "step2 ms", "slope", "held-out mm", "sd mm"], rows))
+    print("samples = 6 M + 1 configurations, each measuring both plates. S1 pairs = rotation "
+          "pairs Step 1\nstacks: per revolute joint and per frame below it, every pair of "
+          "its M + 1 group samples\n(its M values and q0), C(M+1, 2): O(M^2) per joint. "
+          "step1/step2 ms = medians of the\nper-step timing. slope = local "
+          "d log(time) / d log(samples). sd mm = across true robots.")
+    large = [k for k, m in enumerate(per_joints) if m >= 25]
+    if len(large) >= 2:
+        pick = [n_samples[k] for k in large]
+        fits = [f"{label} ~ samples^{slope(pick, [ys[k] for k in large]):.2f}"
+                for label, ys in (("total", medians), ("step1", step1), ("step2", step2))]
+        print(f"Observed log-log fit over M >= 25: {', '.join(fits)}.")
+    print(f"Nominal (uncalibrated) URDF on the same test sets: {np.mean(nominal_mm):.3f} mm.")
+
+
+def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed: int) -> None:
+    print(f"\n3. Ratios on the same data in the same run ({repeats} repeats, the four calls "
+          "timed back to back\n   in each repeat; ratio = median over repeats of the "
+          "per-repeat ratio)")
+    rows = []
+    for m in per_joints:
+        case = make_case(nominal, m, np.random.default_rng([seed, m]))
+        names = case.joint_names
+        truth_model = cpc_from_robot(case.truth, FRAMES)
+        calls = [
+            lambda c=case: cf.identify_closed_form(nominal, c.measurements),
+            lambda c=case, t=truth_model: t.frame_poses(c.qs),
+            lambda c=case: cpc_from_robot(c.truth, FRAMES).frame_poses(c.qs),
+            lambda c=case, n=names: [c.truth.frame_poses(c.qs, f, n) for f in FRAMES],
+        ]
+        closed, cpc_fk, cpc_build_fk, pin_fk = time_interleaved(calls, repeats)
+
+        def ratio(other: Timings, closed: Timings = closed) -> str:
+            return f"{np.median(closed.seconds / other.seconds):.1f}"
+
+        rows.append([f"{m}", f"{len(case.qs)}", f"{closed.median_ms:.3f}",
+                     f"{cpc_fk.median_ms:.3f}", f"{cpc_build_fk.median_ms:.3f}",
+                     f"{pin_fk.median_ms:.3f}", ratio(cpc_fk), ratio(cpc_build_fk),
+                     ratio(pin_fk)])
+    print(format_table(["M", "samples", "CF ms", "CPC FK ms", "CPC+build ms", "Pin FK ms",
+                        "CF/CPC FK", "CF/CPC+build", "CF/Pin FK"], rows))
+    print("CF = identify_closed_form(nominal, data).\n"
+          "CPC FK = model.frame_poses(qs), model = cpc_from_robot(truth, frames) built "
+          "beforehand\n  (numpy, vectorised over samples, both frames in one call).\n"
+          "CPC+build = cpc_from_robot(truth, frames).frame_poses(qs), construction included.\n"
+          "Pin FK = truth.frame_poses(qs, frame, names) per frame (Pinocchio, a Python loop "
+          "over samples).")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=None,
+                        help="timed repeats per measurement (default 30, or 5 with --quick)")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"M in {QUICK_PER_JOINT}, ratios at M = {QUICK_RATIO_PER_JOINT}, "
+                             f"{QUICK_TRIALS} accuracy trials")
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
+    args = parser.parse_args(argv)
+    repeats = args.repeats if args.repeats is not None else (5 if args.quick else 30)
+    if repeats < 1:
+        parser.error("--repeats: expected at least 1")
+    per_joints = QUICK_PER_JOINT if args.quick else FULL_PER_JOINT
+    ratio_per_joints = QUICK_RATIO_PER_JOINT if args.quick else FULL_RATIO_PER_JOINT
+    trials = QUICK_TRIALS if args.quick else FULL_TRIALS
+
+    started = time.perf_counter()
+    print("kinfw closed-form benchmark (IIS-head, frames " + ", ".join(FRAMES) + ")")
+    print(machine_info())
+    print(f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
+          f"warm-up {WARMUP}, seed {args.seed}, gc disabled while timing")
+    nominal = load_robot(HEAD_URDF)
+    paper = make_case(nominal, PAPER_PER_JOINT, np.random.default_rng([args.seed,
+                                                                      PAPER_PER_JOINT]))
+    section_paper_protocol(nominal, paper, repeats)
+    section_growth(nominal, per_joints, repeats, trials, args.seed)
+    section_ratios(nominal, ratio_per_joints, repeats, args.seed)
+    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
