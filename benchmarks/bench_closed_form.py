@@ -155,27 +155,30 @@ def closed_form_by_steps(robot: Robot, measurements: Measurements
     return model, np.diff(ticks)
 
 
-def time_steps(robot: Robot, measurements: Measurements, repeats: int
+def time_steps(robot: Robot, datasets: Sequence[Measurements], repeats: int
                ) -> NDArray[np.float64] | None:
-    """Seconds per step of :func:`closed_form_by_steps`, shape (len(STEP_NAMES), repeats).
+    """Seconds per step of :func:`closed_form_by_steps`, round robin over ``datasets``.
 
-    None, with a note printed, when the private functions no longer match the calls above
-    (the module's internals are free to change; the whole-call timings still hold).
+    Returns an array of shape (len(datasets), len(STEP_NAMES), repeats), or None with a
+    note printed when the private functions no longer match the calls above (the
+    module's internals are free to change; the whole-call timings still hold).
     """
     try:
-        closed_form_by_steps(robot, measurements)
+        closed_form_by_steps(robot, datasets[0])
     except (AttributeError, TypeError, ValueError) as exc:
         print(f"[per-step breakdown unavailable: identification.closed_form internals "
               f"changed ({type(exc).__name__}: {exc})]")
         return None
-    for _ in range(WARMUP - 1):
-        closed_form_by_steps(robot, measurements)
-    seconds = np.empty((len(STEP_NAMES), repeats))
+    for _ in range(WARMUP):
+        for measurements in datasets:
+            closed_form_by_steps(robot, measurements)
+    seconds = np.empty((len(datasets), len(STEP_NAMES), repeats))
     enabled = gc.isenabled()
     gc.disable()
     try:
         for r in range(repeats):
-            seconds[:, r] = closed_form_by_steps(robot, measurements)[1]
+            for k, measurements in enumerate(datasets):
+                seconds[k, :, r] = closed_form_by_steps(robot, measurements)[1]
     finally:
         if enabled:
             gc.enable()
@@ -264,8 +267,14 @@ def machine_info() -> str:
         f"processor  {platform.processor() or platform.machine()}",
         f"CPUs       {os.cpu_count()} (usable by this process: {affinity})",
         f"BLAS env   {threads}",
+        f"load avg   {load_average()} (1, 5, 15 min; other load skews absolute times)",
         f"kinfw      {REPO}",
     ])
+
+
+def load_average() -> str:
+    return ("n/a" if not hasattr(os, "getloadavg")
+            else " ".join(f"{x:.2f}" for x in os.getloadavg()))
 
 
 def slope(x: Sequence[float], y: Sequence[float]) -> float:
@@ -283,8 +292,9 @@ def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
                               repeats)
     model_whole = cf.identify_closed_form(nominal, case.measurements).model
     rows = []
-    steps = time_steps(nominal, case.measurements, repeats)
+    steps = time_steps(nominal, [case.measurements], repeats)
     if steps is not None:
+        steps = steps[0]
         total = Timings(steps.sum(axis=0))
         rows = [[name, f"{Timings(s).median_ms:.3f}", f"{Timings(s).iqr_ms:.3f}",
                  f"{100 * np.median(s) / np.median(total.seconds):.1f}"]
@@ -312,37 +322,41 @@ def section_growth(nominal: Robot, per_joints: Sequence[int], repeats: int, tria
           f"over {trials} true robots,\n   each {N_TEST} random test configurations x "
           f"{len(FRAMES)} plates vs noise-free truth;\n   training noise sigma "
           f"{1e3 * NOISE_M:g} mm per axis, {NOISE_RAD:g} rad rotation)")
-    rows, n_samples, medians, step1, step2, nominal_mm = [], [], [], [], [], []
+    cases = []
     for m in per_joints:
         rng = np.random.default_rng([seed, m])
-        cases = [make_case(nominal, m, rng) for _ in range(trials)]
-        case = cases[0]
-        whole, = time_interleaved(
-            [lambda c=case: cf.identify_closed_form(nominal, c.measurements)], repeats)
-        steps = time_steps(nominal, case.measurements, repeats)
-        steps_ms = (np.full(len(STEP_NAMES), np.nan) if steps is None
-                    else 1e3 * np.median(steps, axis=1))
+        cases.append([make_case(nominal, m, rng) for _ in range(trials)])
+    first = [c[0] for c in cases]  # the timed dataset of each M
+    wholes = time_interleaved(
+        [lambda c=c: cf.identify_closed_form(nominal, c.measurements) for c in first], repeats)
+    steps = time_steps(nominal, [c.measurements for c in first], repeats)
+    steps_ms = (np.full((len(first), len(STEP_NAMES)), np.nan) if steps is None
+                else 1e3 * np.median(steps, axis=2))
+    n_samples = [len(c.qs) for c in first]
+    medians = [w.median_ms for w in wholes]
+    step1, step2 = steps_ms[:, 2], steps_ms[:, 3]
+    rows, nominal_mm = [], []
+    for k, (m, trial_cases, whole) in enumerate(zip(per_joints, cases, wholes, strict=True)):
         errors = [held_out_error_mm(cf.identify_closed_form(nominal, c.measurements).model, c)
-                  for c in cases]
-        nominal_mm += [held_out_error_mm(cpc_from_robot(nominal, FRAMES), c) for c in cases]
-        n = len(case.qs)
-        n_samples.append(n)
-        medians.append(whole.median_ms)
-        step1.append(steps_ms[2])
-        step2.append(steps_ms[3])
-        local = "" if len(rows) == 0 else f"{slope(n_samples[-2:], medians[-2:]):.2f}"
+                  for c in trial_cases]
+        nominal_mm += [held_out_error_mm(cpc_from_robot(nominal, FRAMES), c)
+                       for c in trial_cases]
+        local = "" if k == 0 else f"{slope(n_samples[k - 1 : k + 1], medians[k - 1 : k + 1]):.2f}"
         sd = np.std(errors, ddof=1) if trials > 1 else np.nan
-        rows.append([f"{m}", f"{n}", f"{step1_pairs(nominal, case)}",
-                     f"{whole.median_ms:.2f}", f"{whole.iqr_ms:.2f}",
-                     f"{1e3 * whole.median_ms / n:.1f}", f"{step1[-1]:.2f}", f"{step2[-1]:.2f}",
+        pairs = step1_pairs(nominal, first[k])
+        rows.append([f"{m}", f"{n_samples[k]}", f"{pairs}", f"{whole.median_ms:.2f}",
+                     f"{whole.iqr_ms:.2f}", f"{1e3 * whole.median_ms / n_samples[k]:.1f}",
+                     f"{step1[k]:.2f}", f"{1e3 * step1[k] / pairs:.2f}", f"{step2[k]:.2f}",
                      local, f"{np.mean(errors):.3f}", f"{sd:.3f}"])
     print(format_table(["M", "samples", "S1 pairs", "median ms", "IQR ms", "us/sample",
-                        "step1 ms", "step2 ms", "slope", "held-out mm", "sd mm"], rows))
-    print("samples = 6 M + 1 configurations, each measuring both plates. S1 pairs = rotation "
-          "pairs Step 1\nstacks: per revolute joint and per frame below it, every pair of "
-          "its M + 1 group samples\n(its M values and q0), C(M+1, 2): O(M^2) per joint. "
-          "step1/step2 ms = medians of the\nper-step timing. slope = local "
-          "d log(time) / d log(samples). sd mm = across true robots.")
+                        "step1 ms", "us/pair", "step2 ms", "slope", "held-out mm", "sd mm"],
+                       rows))
+    print(f"samples = {len(first[0].joint_names)} M + 1 configurations, each measuring both "
+          "plates.\nS1 pairs = rotation pairs Step 1 stacks: per revolute joint and per frame "
+          "below it, every\npair of its M + 1 group samples (its M values and q0), C(M+1, 2): "
+          "O(M^2) per joint.\nstep1/step2 ms = medians of the per-step timing; us/pair = step1 "
+          "time per S1 pair.\nslope = local d log(time) / d log(samples); sd mm = across true "
+          "robots.")
     large = [k for k, m in enumerate(per_joints) if m >= 25]
     if len(large) >= 2:
         pick = [n_samples[k] for k in large]
@@ -353,21 +367,23 @@ def section_growth(nominal: Robot, per_joints: Sequence[int], repeats: int, tria
 
 
 def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed: int) -> None:
-    print(f"\n3. Ratios on the same data in the same run ({repeats} repeats, the four calls "
-          "timed back to back\n   in each repeat; ratio = median over repeats of the "
-          "per-repeat ratio)")
-    rows = []
-    for m in per_joints:
-        case = make_case(nominal, m, np.random.default_rng([seed, m]))
-        names = case.joint_names
+    print(f"\n3. Ratios on the same data in the same run ({repeats} repeats; in each repeat "
+          "the four calls\n   of every M are timed back to back; ratio = median over repeats "
+          "of the per-repeat ratio)")
+    cases = [make_case(nominal, m, np.random.default_rng([seed, m])) for m in per_joints]
+    calls: list[Callable[[], object]] = []
+    for case in cases:
         truth_model = cpc_from_robot(case.truth, FRAMES)
-        calls = [
+        calls += [
             lambda c=case: cf.identify_closed_form(nominal, c.measurements),
             lambda c=case, t=truth_model: t.frame_poses(c.qs),
             lambda c=case: cpc_from_robot(c.truth, FRAMES).frame_poses(c.qs),
-            lambda c=case, n=names: [c.truth.frame_poses(c.qs, f, n) for f in FRAMES],
+            lambda c=case: [c.truth.frame_poses(c.qs, f, c.joint_names) for f in FRAMES],
         ]
-        closed, cpc_fk, cpc_build_fk, pin_fk = time_interleaved(calls, repeats)
+    timings = time_interleaved(calls, repeats)
+    rows = []
+    for k, (m, case) in enumerate(zip(per_joints, cases, strict=True)):
+        closed, cpc_fk, cpc_build_fk, pin_fk = timings[4 * k : 4 * k + 4]
 
         def ratio(other: Timings, closed: Timings = closed) -> str:
             return f"{np.median(closed.seconds / other.seconds):.1f}"
@@ -413,7 +429,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     section_paper_protocol(nominal, paper, repeats)
     section_growth(nominal, per_joints, repeats, trials, args.seed)
     section_ratios(nominal, ratio_per_joints, repeats, args.seed)
-    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s")
+    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
+          f"load avg now {load_average()}")
     return 0
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfw.measurements import DatasetError, read_measurements, write_measurements
-from kinfw.robot import Robot, RobotModelError, load_robot
+from kinfw.robot import Robot, RobotModelError, builtin_head_urdf, load_robot
 
 __all__ = ["main"]
 
@@ -25,16 +25,6 @@ log = logging.getLogger("kinfw")
 
 #: Errors that are the user's input, not a bug: reported on one line, exit code 2.
 USER_ERRORS = (DatasetError, RobotModelError, ValueError, OSError)
-
-
-def builtin_head_urdf() -> Path:
-    """Path of the built-in IIS-head URDF: ``urdf/iis_head.urdf`` of the source tree, or
-    the copy a regular (non-editable) install puts in ``kinfw/urdf/``."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "urdf" / "iis_head.urdf", here / "urdf" / "iis_head.urdf"):
-        if candidate.is_file():
-            return candidate
-    raise OSError("the built-in IIS-head URDF is missing from this installation")
 
 
 def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: Robot
@@ -235,6 +225,16 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- kinfw reproduce ---------------------------------------------------------------------
+def _cmd_reproduce(args: argparse.Namespace) -> int:
+    from verification import shih_experiments
+
+    argv = [args.study, "--out", str(args.out), "--seed", str(args.seed)]
+    if args.trials is not None:
+        argv += ["--trials", str(args.trials)]
+    return shih_experiments.main(argv)
+
+
 # -- kinfw crosscheck --------------------------------------------------------------------
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
     from verification.crosscheck import crosscheck_cpc
@@ -323,6 +323,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
+                       description="fig11: Shih et al. Fig. 11 (positioning error vs "
+                       "measurements per joint and noise); table4: their Table 4 protocol.")
+    p.add_argument("study", choices=("fig11", "table4"))
+    p.add_argument("--out", type=Path, default=Path("reproduce_out"),
+                   help="output directory (default reproduce_out)")
+    p.add_argument("--trials", type=int, default=None, help="random trials per point")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")
     p.add_argument("urdf", type=Path)

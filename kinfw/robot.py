@@ -29,6 +29,7 @@ __all__ = [
     "RobotModelError",
     "Topology",
     "UnknownFrameError",
+    "builtin_head_urdf",
     "load_robot",
 ]
 
@@ -428,6 +429,16 @@ class Robot:
             pin.forwardKinematics(self.model, self._data, q)
             out[k] = pin.updateFramePlacement(self.model, self._data, fid).homogeneous
         return out[0] if single else out
+
+
+def builtin_head_urdf() -> Path:
+    """Path of the built-in IIS-head URDF: ``urdf/iis_head.urdf`` of the source tree, or
+    the copy a regular (non-editable) install puts in ``kinfw/urdf/``."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "urdf" / "iis_head.urdf", here / "urdf" / "iis_head.urdf"):
+        if candidate.is_file():
+            return candidate
+    raise OSError("the built-in IIS-head URDF is missing from this installation")
 
 
 def load_robot(urdf: str | Path) -> Robot:

@@ -186,3 +186,11 @@ def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
         assert row["after_position_rms_mm"] < 1.0
     for name in ("calibrated.urdf", "report.json", "data.json", "held_out.json", "true.urdf"):
         assert (tmp_path / "demo" / name).is_file()
+
+
+def test_reproduce_table4_writes_png_and_json(tmp_path, capsys):
+    code, out, _ = _run(["reproduce", "table4", "--out", tmp_path, "--trials", "2"], capsys)
+    assert code == 0
+    assert (tmp_path / "table4.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "table4.json").read_text())
+    assert "0.65" in out  # the paper's left-branch mu_x printed beside ours
