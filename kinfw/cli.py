@@ -144,16 +144,17 @@ def _before_after_table(rows: list[dict]) -> str:
 
 def _calibrate(nominal: Robot, data, out: Path, *, method: str, data_path=None,
                held_out=None) -> dict:
-    """Identify, export ``out`` and return the report (shared by calibrate and demo)."""
-    from identification.closed_form import identify_closed_form
-    from kinfw.urdf_export import export_urdf, write_urdf
+    """Calibrate (:func:`identification.pipeline.calibrate`), write ``out``, return the
+    report."""
+    from identification.pipeline import calibrate
+    from kinfw.urdf_export import write_urdf
     from verification.report import calibration_report
 
-    result = identify_closed_form(nominal, data)
-    export = export_urdf(nominal, result.geometry)
-    write_urdf(out, export)
-    return calibration_report(nominal, load_robot(out), data, result, export, method=method,
-                              data_path=data_path, held_out=held_out)
+    result = calibrate(nominal, data)
+    write_urdf(out, result.urdf_xml)
+    return calibration_report(nominal, load_robot(out), data, method=method,
+                              closed_form=result.closed_form, export=result.export,
+                              cameras=result.cameras, data_path=data_path, held_out=held_out)
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
@@ -176,7 +177,10 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 # -- kinfw demo --------------------------------------------------------------------------
 def _cmd_demo(args: argparse.Namespace) -> int:
+    from kinfw.measurements import concatenate_measurements
+    from verification.report import before_after_rows, errors_by_group
     from verification.simulate import (
+        default_target_pose,
         one_joint_at_a_time,
         perturb_robot,
         random_configurations,
@@ -189,22 +193,27 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed)
     truth_xml = perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
     truth = load_robot(truth_xml)
-    frames = nominal.default_frames
-    names = nominal.topology(frames).joint_names
+    plates, cameras = nominal.default_frames, nominal.default_cameras
+    names = nominal.topology((*plates, *cameras)).joint_names
     lower, upper = nominal.joint_limits(names)
     noise = {"noise_m": 0.5e-3, "noise_rad": np.radians(0.5)}
-    qs, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=0.8)
-    data = simulate(truth, qs, names, frames=frames, rng=rng, **noise)
+    # stage 1: plates seen by the stereo rig, one joint at a time; stage 2: the cameras
+    # see a fixed target at random configurations.
+    qs1, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=0.8)
+    qs2 = random_configurations(lower, upper, 30, rng, fraction=0.8)
+    w_T_target = default_target_pose(truth, qs2, names, cameras)
+    data = concatenate_measurements(
+        simulate(truth, qs1, names, frames=plates, rng=rng, **noise),
+        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise))
     q_test = random_configurations(lower, upper, 100, rng, fraction=0.8)
-    held_out = simulate(truth, q_test, names, frames=frames, rng=rng, **noise)
-    exact = simulate(truth, q_test, names, frames=frames, rng=rng)
+    observed = {"frames": plates, "cameras": cameras, "w_T_target": w_T_target}
+    held_out = simulate(truth, q_test, names, rng=rng, **observed, **noise)
+    exact = simulate(truth, q_test, names, rng=rng, **observed)
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     (out / "true.urdf").write_text(truth_xml, encoding="utf-8")
     report = _calibrate(nominal, data, out / "calibrated.urdf", method="closed-form",
                         data_path=out / "data.json", held_out=held_out)
-    from verification.report import before_after_rows, errors_by_group
-
     report["errors_vs_truth_held_out"] = before_after_rows(
         errors_by_group(nominal, exact),
         errors_by_group(load_robot(out / "calibrated.urdf"), exact))
@@ -213,10 +222,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=2))
         return 0
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
-    print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); "
-          f"{data.n_samples} one-joint-at-a-time configurations (9 per joint), plate poses "
-          "with sigma 0.5 mm / 0.5 deg; CPC closed form; 100 held-out configurations")
-    print("\nheld-out errors against noisy measurements:")
+    print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
+          f"{len(qs1)} one-joint-at-a-time configurations (9 per joint), plate poses from the "
+          "stereo rig; stage 2: both cameras see a fixed target in 30 random configurations; "
+          "noise sigma 0.5 mm / 0.5 deg; closed form + A = X B Y; 100 held-out configurations")
+    print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
     print(_before_after_table(report["errors_held_out"]))
     print("\nheld-out errors against the true robot (noise-free):")
     print(_before_after_table(report["errors_vs_truth_held_out"]))

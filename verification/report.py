@@ -8,7 +8,9 @@ import hashlib
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
+from identification.cameras import CamerasResult
 from identification.closed_form import ClosedFormResult
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
@@ -42,30 +44,81 @@ def before_after_rows(before: dict[str, dict], after: dict[str, dict]) -> list[d
     ]
 
 
-def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
-                       result: ClosedFormResult, export: ExportResult, *,
-                       method: str, data_path: str | Path | None = None,
+def _closed_form_section(result: ClosedFormResult) -> dict:
+    model = result.model
+    return {
+        "method": "CPC closed form, Shih et al. (1992) section 4",
+        "joint_names": list(model.topology.joint_names),
+        "frames": list(model.topology.frames),
+        "q0": result.q0.tolist(),
+        "samples_per_joint": result.group_sizes.tolist(),
+        "axis_residual_rad": [None if np.isnan(v) else float(v)
+                              for v in result.axis_residual_rad],
+        "motion_per_unit_joint_value": result.motion_scale.tolist(),
+        "position_rms_mm": 1e3 * result.position_rms_m,
+        "parameters": {
+            "note": "canonical CPC parameters (Shih et al. eqs. 3-4, Table 1 gauge): per joint "
+                    "the axis b of its frame in its parent's moved frame, beta, l (m) and the "
+                    "motion sense; per end frame its pose in the moved frame of its last "
+                    "joint (m, URDF rpy in rad)",
+            "values": [{"owner": o, "name": n, "value": v} for o, n, v in model.describe()],
+            "n_identifiable": model.n_parameters,
+        },
+    }
+
+
+def _xyz_rpy(T: np.ndarray) -> dict:
+    return {"xyz_m": T[:3, 3].tolist(), "rpy_rad": pin.rpy.matrixToRpy(T[:3, :3]).tolist(),
+            "matrix": T.tolist()}
+
+
+def _hand_eye_section(result: CamerasResult) -> dict:
+    return {
+        "method": "iterative A = X B Y, Hirsh, DeSouza & Kak (2001), per camera",
+        "cameras": [
+            {"camera": c.camera, "target": c.target, "joint": c.joint, "hand": c.hand,
+             "hand_T_camera": _xyz_rpy(c.hand_T_camera), "n_views": c.n_views,
+             "iterations": c.solver.iterations, "restarts": c.solver.restarts,
+             "converged": c.solver.converged,
+             "rms_rotation_deg": float(np.degrees(c.solver.rms_rotation_rad)),
+             "rms_translation_mm": 1e3 * c.solver.rms_translation}
+            for c in result.cameras],
+        "targets": [
+            {"target": t, "root_T_target": _xyz_rpy(T), "camera_disagreement_mm": 1e3 * dp,
+             "camera_disagreement_deg": float(np.degrees(dr))}
+            for (t, T), (_, dp, dr) in zip(result.root_T_targets, result.target_spread,
+                                           strict=True)],
+    }
+
+
+def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements, *,
+                       method: str, closed_form: ClosedFormResult | None = None,
+                       export: ExportResult | None = None,
+                       cameras: CamerasResult | None = None,
+                       data_path: str | Path | None = None,
                        held_out: Measurements | None = None) -> dict:
     """Everything a user needs to trust (or not) a calibration, as a dictionary.
 
     Parameters
     ----------
     nominal, calibrated : Robot
-        The URDF before and after (the exported file, re-loaded).
+        The URDF before and after (the written file, re-loaded).
     data : Measurements
         The calibration data; the errors on it are in-sample.
-    result : ClosedFormResult
-        The identification, for its parameters and diagnostics.
-    export : ExportResult
-        The export, for the measurement frame pose and moved link frames.
     method : str
+    closed_form : ClosedFormResult, optional
+        Stage 1 (kinematics), for its parameters and diagnostics.
+    export : ExportResult, optional
+        Stage 1's export, for the measurement frame pose and moved link frames.
+    cameras : CamerasResult, optional
+        Stage 2 (hand-eye and target poses).
     data_path : path, optional
         Recorded with its SHA-256.
     held_out : Measurements, optional
         Samples not used for calibration; their errors are the honest accuracy.
     """
-    model = result.model
-    before, after = errors_by_group(nominal, data), errors_by_group(calibrated, data)
+    before = errors_by_group(nominal, data)
+    after = errors_by_group(calibrated, data)
     report = {
         "format": "kinfw-calibration-report", "version": 1,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -76,30 +129,18 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
         "errors_in_sample": before_after_rows(before, after),
         "errors_before": before,
         "errors_after": after,
-        "closed_form": {
-            "joint_names": list(model.topology.joint_names),
-            "q0": result.q0.tolist(),
-            "samples_per_joint": result.group_sizes.tolist(),
-            "axis_residual_rad": [None if np.isnan(v) else float(v)
-                                  for v in result.axis_residual_rad],
-            "motion_per_unit_joint_value": result.motion_scale.tolist(),
-            "position_rms_mm": 1e3 * result.position_rms_m,
-        },
-        "parameters": {
-            "note": "canonical CPC parameters (Shih et al. eqs. 3-4, Table 1 gauge): per joint "
-                    "the axis b of its frame in its parent's moved frame, beta, l (m) and the "
-                    "motion sense; per end frame its pose in the moved frame of its last "
-                    "joint (m, URDF rpy in rad)",
-            "values": [{"owner": o, "name": n, "value": v} for o, n, v in model.describe()],
-            "n_identifiable": model.n_parameters,
-        },
-        "export": {
+    }
+    if closed_form is not None:
+        report["kinematics"] = _closed_form_section(closed_form)
+    if export is not None:
+        report["export"] = {
             "w_T_root": export.w_T_root.tolist(),
             "moved_link_frames": [
                 {"link": link, "shift_mm": 1e3 * float(np.linalg.norm(T[:3, 3]))}
                 for link, T in export.link_shifts],
-        },
-    }
+        }
+    if cameras is not None:
+        report["hand_eye"] = _hand_eye_section(cameras)
     if held_out is not None:
         report["errors_held_out"] = before_after_rows(errors_by_group(nominal, held_out),
                                                       errors_by_group(calibrated, held_out))

@@ -1,0 +1,391 @@
+"""Hand-eye calibration ``A X = X B`` by Tsai & Lenz (1989), as in stage 2 of Shih et al.
+
+The problem (Shih et al. 1992, section 5, eqs. 68-71)
+------------------------------------------------------
+A camera (the *eye*) is rigidly mounted on the robot's end effector (the *hand*) and
+looks at a target fixed in the world. At pose ``i`` the robot's forward kinematics gives
+``A[i] = base_T_hand`` and the camera's extrinsic calibration gives
+``B[i] = eye_T_target``. The target does not move, so (eqs. 68-69)::
+
+    base_T_target = A[i] @ X @ B[i]          for every i,   X = hand_T_eye.
+
+For two poses ``i, j`` this becomes (eqs. 70-71; the paper's ``k, j`` are our ``i, j``)::
+
+    A_ij X = X B_ij,   A_ij = inv(A[j]) @ A[i],   B_ij = B[j] @ inv(B[i]).
+
+``A_ij`` is the hand's motion expressed in the hand frame, ``B_ij`` the same motion seen
+in the eye frame. Both are conjugate, so their rotation angles agree; their axes are
+related by ``a = X_R b``.
+
+The solver uses every pair of poses, in both orders (``A_ji = inv(A_ij)``), so the result
+does not depend on the order of the samples; pairs whose hand rotation is below
+``min_angle_rad`` carry no information on the rotation and are left out.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.transforms import (
+    check_transform,
+    inverse_transform,
+    matrix_from_rotation_vector,
+    project_to_rotation,
+    rotation_angle,
+    rotation_vector_from_matrix,
+    skew,
+    transform_from_rotation_translation,
+)
+
+__all__ = ["HandEyeError", "HandEyeResult", "solve_axxb"]
+
+log = logging.getLogger(__name__)
+
+#: Accepted orthonormality error of input rotations. Real data printed with six significant
+#: digits is off by ~1e-6 (Tabb DS1: 1.2e-6); accepted rotations are re-orthonormalised.
+ORTHONORMAL_TOL = 1e-5
+#: Motions whose rotation axes all lie within this angle of each other are "about one axis".
+PARALLEL_AXES_RAD = np.radians(1.0)
+#: An RMS difference between the rotation angles of A_ij and B_ij, or an RMS rotation
+#: residual of A_ij X = X B_ij, beyond this means the poses do not describe one rigid
+#: hand-eye setup.
+INCONSISTENT_RAD = np.radians(5.0)
+#: Above this rotation angle of X, Tsai's parameter tan(theta/2) u is re-solved in a
+#: pre-rotated frame (it is infinite at pi).
+PRE_ROTATE_ABOVE_RAD = np.radians(150.0)
+#: Relative motions this close to a half turn have a quaternion sign that noise can flip.
+HALF_TURN_BAND_RAD = np.radians(3.0)
+#: Relative singular value below which Tsai's rotation system is taken as rank-deficient.
+_RANK_TOL = 1e-10
+#: The axis spread is reported exactly unless it is within this of pi/2 (its maximum).
+_SPREAD_ATOL = 1e-3
+
+
+class HandEyeError(ValueError):
+    """The poses cannot determine the hand-eye transform; the message says why."""
+
+
+@dataclass(frozen=True, slots=True)
+class HandEyeResult:
+    """Hand-eye transform and the quality of its fit.
+
+    Attributes
+    ----------
+    X : ndarray, shape (4, 4)
+        ``hand_T_eye``: pose of the eye (camera) in the hand frame, input length unit.
+    n_pairs : int
+        Relative motions (unordered pose pairs) used.
+    rms_rotation_rad : float
+        RMS over the motions used of the angle of ``(A_ij X)^-1 X B_ij``, radians.
+    rms_translation : float
+        RMS over the motions used (both orders) of the translation residual of
+        ``A_ij X = X B_ij``, in the input length unit.
+    rotation_condition : float
+        Smallest over largest singular value of Tsai's stacked rotation system as finally
+        solved: 1 is ideal, towards 0 the rotation of X is poorly determined. It reflects
+        the spread of the motion axes, and also drops as X's own rotation grows towards
+        150 deg, beyond which the system is re-solved about the first estimate.
+    min_axis_spread_rad : float
+        Largest angle between the rotation axes (as lines) of the motions used, radians:
+        0 means all about one axis.
+    """
+
+    X: NDArray[np.float64]
+    n_pairs: int
+    rms_rotation_rad: float
+    rms_translation: float
+    rotation_condition: float
+    min_axis_spread_rad: float
+
+
+def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
+               ) -> HandEyeResult:
+    """Hand-eye transform ``X = hand_T_eye`` from absolute poses, by Tsai & Lenz.
+
+    Parameters
+    ----------
+    A : array_like, shape (n, 4, 4)
+        ``base_T_hand`` at each pose: the robot's forward kinematics (OpenCV's
+        ``gripper2base``). Any length unit, the same as ``B``'s.
+    B : array_like, shape (n, 4, 4)
+        ``eye_T_target`` at each pose: the camera's extrinsics (OpenCV's
+        ``target2cam``), so that ``A[i] @ X @ B[i]`` is the same for all ``i``.
+    min_angle_rad : float, keyword-only
+        Relative motions whose hand rotation is smaller than this are not used.
+
+    Returns
+    -------
+    HandEyeResult
+        ``X`` in the input length unit, and the fit's quality.
+
+    Raises
+    ------
+    HandEyeError
+        Fewer than 3 poses, shapes that differ, a matrix that is not a rigid transform
+        (names the argument and index), no motion with a rotation of at least
+        ``min_angle_rad``, all motions about one axis (then the rotation of X about it and
+        its translation along it are not determined), or motions of A and B that no
+        single X relates (mispaired samples, one of A and B inverted, eye-to-hand data
+        given as eye-in-hand, a camera that is not rigid on the hand).
+
+    Warnings
+    --------
+    Two mistakes cannot be detected, because the data stay consistent: the loop
+    ``base -> hand -> eye -> target -> base`` is merely walked the other way. With A and B
+    swapped the answer is ``target_T_base``; with both inverted it is ``base_T_target``.
+
+    Notes
+    -----
+    Pairs ``i < j`` give ``A_ij X = X B_ij`` (Shih et al. eqs. 70-71); both orders of
+    each pair are stacked (the second is the inverse motion), which leaves the rotation
+    system unchanged and makes the translation system exactly invariant to sample order.
+
+    Rotation (Tsai & Lenz 1989, eqs. 12 and 14): with the modified Rodrigues
+    vector ``P = 2 sin(theta/2) u`` of a rotation by ``theta`` about the unit axis ``u``
+    (twice the vector part of its quaternion with non-negative scalar part), every motion
+    gives ``skew(P_A + P_B) P'_X = P_B - P_A`` with ``P'_X = tan(theta_X/2) u_X``, solved by
+    linear least squares over all motions. Tsai's ``P_X = 2 P'_X / sqrt(1 + |P'_X|^2)`` is
+    the rotation by ``theta_X = 2 atan(|P'_X|)`` about ``P'_X``, computed in that form
+    (accurate up to theta_X = pi).
+
+    ``P'_X`` is infinite when X turns by pi; near there the system is ill-conditioned,
+    and exactly there every ``P_A + P_B`` is parallel to X's axis, so the stacked matrix
+    loses rank with X's axis as its null vector. When the first estimate ``R0`` turns by
+    more than ``PRE_ROTATE_ABOVE_RAD`` (150 deg), or the system has lost rank (then
+    ``R0`` is the half turn about the null vector), the rotation is re-solved for
+    ``X_R' = X_R R0^T``, which is close to the identity::
+
+        A_R X_R = X_R B_R,  X_R = X_R' R0   =>   A_R X_R' = X_R' (R0 B_R R0^T),
+
+    i.e. Tsai's equations with ``P_B`` replaced by ``R0 P_B`` (conjugation rotates the
+    axis and keeps the angle); then ``X_R = X_R' R0``.
+
+    A motion within ``HALF_TURN_BAND_RAD`` of a half turn has a quaternion sign that
+    rounding or noise can flip, which breaks ``P_A = X_R P_B``: such motions are left
+    out of the first estimate (when the others determine it) and their ``P_B`` takes the
+    sign that agrees with it.
+
+    Translation (Tsai & Lenz 1989, eq. 15): ``(A_R - I) t_X = X_R t_B - t_A``, stacked
+    over all motions, linear least squares. It is linear in the lengths, so the result
+    scales with the input unit, and the rotation does not use lengths at all.
+
+    References
+    ----------
+    R. Y. Tsai and R. K. Lenz, "A new technique for fully autonomous and efficient 3D
+    robotics hand/eye calibration", IEEE Trans. Robotics and Automation 5(3), 345-358,
+    1989 (equation numbers as OpenCV's implementation cites them).
+    S.-W. Shih, J.-S. Jin, K.-H. Wei and Y.-P. Hung, "Kinematic Identification of an Active
+    Binocular System Using Stereo Vision", TR-92-007, Academia Sinica, 1992, section 5,
+    eqs. (68)-(71).
+    """
+    base_T_hands, eye_T_targets = _check_poses(A, B)
+    n = len(base_T_hands)
+    if not 0.0 <= min_angle_rad < np.pi:
+        raise HandEyeError(f"min_angle_rad must be in [0, pi), got {min_angle_rad!r}")
+
+    # Relative motions of every unordered pair i < j (Shih et al. eq. 71).
+    i, j = np.triu_indices(n, 1)
+    A_ijs = inverse_transform(base_T_hands[j]) @ base_T_hands[i]
+    B_ijs = eye_T_targets[j] @ inverse_transform(eye_T_targets[i])
+    angles_A = rotation_angle(A_ijs[:, :3, :3])
+    angles_B = rotation_angle(B_ijs[:, :3, :3])
+
+    used = angles_A >= min_angle_rad
+    if not np.any(used):
+        raise HandEyeError(
+            f"no informative motion: every relative rotation of the hand is below "
+            f"min_angle_rad = {np.degrees(min_angle_rad):.3g} deg (largest "
+            f"{np.degrees(angles_A.max()):.3g} deg over {len(angles_A)} pose pairs); "
+            f"rotate the hand between poses, about at least two different axes"
+        )
+    _check_angles_agree(angles_A, angles_B, i, j)
+
+    i, j = i[used], j[used]
+    A_ijs, B_ijs = A_ijs[used], B_ijs[used]
+    rotvecs_A = rotation_vector_from_matrix(A_ijs[:, :3, :3])
+    rotvecs_B = rotation_vector_from_matrix(B_ijs[:, :3, :3])
+    axes_A = rotvecs_A / angles_A[used, None]
+    spread = _largest_line_angle(axes_A)
+    if spread < PARALLEL_AXES_RAD:
+        axis = np.linalg.eigh(np.einsum("ki,kj->ij", axes_A, axes_A))[1][:, -1]
+        raise HandEyeError(
+            f"all relative rotations are about one axis ({np.array2string(axis, precision=4)} "
+            f"in the hand frame, spread {np.degrees(spread):.3g} deg < "
+            f"{np.degrees(PARALLEL_AXES_RAD):.3g} deg over {len(axes_A)} motions); the rotation "
+            f"of X about it and the translation of X along it are not determined: add motions "
+            f"about another axis"
+        )
+
+    hand_R_eye, singular_values = _rotation(rotvecs_A, rotvecs_B)
+
+    # Both orders of every pair: the inverse motions make the result order-invariant.
+    A_ijs = np.concatenate([A_ijs, inverse_transform(A_ijs)])
+    B_ijs = np.concatenate([B_ijs, inverse_transform(B_ijs)])
+    R_As, t_As = A_ijs[:, :3, :3], A_ijs[:, :3, 3]
+    t_Bs = B_ijs[:, :3, 3]
+    lhs = (R_As - np.eye(3)).reshape(-1, 3)
+    rhs = (np.einsum("ij,kj->ki", hand_R_eye, t_Bs) - t_As).reshape(-1)
+    hand_p_eye = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+    hand_T_eye = transform_from_rotation_translation(hand_R_eye, hand_p_eye)
+
+    # Residuals of A_ij X = X B_ij.
+    left = A_ijs @ hand_T_eye
+    right = hand_T_eye @ B_ijs
+    rot_res = rotation_angle(np.swapaxes(left[:, :3, :3], 1, 2) @ right[:, :3, :3])
+    trans_res = np.linalg.norm(left[:, :3, 3] - right[:, :3, 3], axis=1)
+    rms_rotation = float(np.sqrt(np.mean(rot_res**2)))
+    if rms_rotation > INCONSISTENT_RAD:
+        k = int(np.argmax(rot_res[: len(i)]))
+        raise HandEyeError(
+            f"no single X relates the motions of A and B: RMS rotation residual of "
+            f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {i[k]} and "
+            f"{j[k]}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg. "
+            f"A or B may be inverted: A must be base_T_hand (robot forward kinematics, OpenCV "
+            f"gripper2base) and B eye_T_target (camera extrinsics, OpenCV target2cam); for a "
+            f"camera fixed in the world looking at a target on the hand (eye-to-hand) pass "
+            f"A = inverse(base_T_hand), and X is then base_T_eye"
+        )
+    return HandEyeResult(
+        X=hand_T_eye,
+        n_pairs=len(i),
+        rms_rotation_rad=rms_rotation,
+        rms_translation=float(np.sqrt(np.mean(trans_res**2))),
+        rotation_condition=float(singular_values[-1] / singular_values[0]),
+        min_axis_spread_rad=float(spread),
+    )
+
+
+def _check_poses(A: ArrayLike, B: ArrayLike
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Validate both pose batches; return them with re-orthonormalised rotations."""
+    out = []
+    for name, T in (("A", A), ("B", B)):
+        T = np.asarray(T, dtype=float)
+        if T.ndim != 3 or T.shape[1:] != (4, 4):
+            raise HandEyeError(f"{name}: expected shape (n, 4, 4), got {T.shape}")
+        try:
+            T = check_transform(T, name=name, tol=ORTHONORMAL_TOL)
+        except ValueError as err:
+            raise HandEyeError(str(err)) from err
+        out.append(transform_from_rotation_translation(project_to_rotation(T[:, :3, :3]),
+                                                       T[:, :3, 3]))
+    base_T_hands, eye_T_targets = out
+    if base_T_hands.shape != eye_T_targets.shape:
+        raise HandEyeError(f"A and B must hold the same number of poses, got A "
+                           f"{base_T_hands.shape} and B {eye_T_targets.shape}")
+    if len(base_T_hands) < 3:
+        raise HandEyeError(f"at least 3 poses are needed (two motions about different axes), "
+                           f"got {len(base_T_hands)}")
+    return base_T_hands, eye_T_targets
+
+
+def _check_angles_agree(angles_A: NDArray[np.float64], angles_B: NDArray[np.float64],
+                        i: NDArray[np.intp], j: NDArray[np.intp]) -> None:
+    """A motion and its view from the eye are conjugate: their rotation angles agree.
+
+    The RMS difference is tested, so that a single pair in the tail of the measurement
+    noise does not reject the data; the worst pair is named.
+    """
+    diff = np.abs(angles_A - angles_B)
+    rms = float(np.sqrt(np.mean(diff**2)))
+    n_bad = int(np.count_nonzero(diff > INCONSISTENT_RAD))
+    if rms > INCONSISTENT_RAD:
+        k = int(np.argmax(diff))
+        raise HandEyeError(
+            f"A and B motions are inconsistent: the rotation angles of the hand's and the "
+            f"eye's relative motions differ by {np.degrees(rms):.3g} deg RMS (> "
+            f"{np.degrees(INCONSISTENT_RAD):.3g} deg; {n_bad} of {len(diff)} pose pairs differ "
+            f"by more); worst: between poses {i[k]} and "
+            f"{j[k]} the hand turns {np.degrees(angles_A[k]):.3g} deg but the eye "
+            f"{np.degrees(angles_B[k]):.3g} deg. A[k] and B[k] must be taken at the same pose "
+            f"k, with the camera rigid on the hand: check the pairing and order of the samples "
+            f"(inverting or swapping A and B does not change these angles)"
+        )
+
+
+def _largest_line_angle(axes: NDArray[np.float64]) -> float:
+    """Largest angle between the lines spanned by unit vectors (m, 3), radians.
+
+    Exact (to ~1e-8 rad, the precision of ``arccos`` near 1), except that a value within
+    ``_SPREAD_ATOL`` of pi/2, the largest possible, is returned as found. With ``d`` the
+    angle between lines (a metric) and ``r`` the axes' principal direction, a lower bound
+    ``L`` comes from two farthest-point sweeps; a pair farther apart than ``L`` has
+    ``d(a, r) + d(b, r) > L``, so only axes with ``d(a, r) > L - max d(., r)`` are
+    compared pairwise (in blocks of rows). That keeps the O(m^2) part small both for
+    nearly parallel axes and for widely spread ones.
+    """
+    r = np.linalg.eigh(axes.T @ axes)[1][:, -1]
+    to_r = _line_angles(axes, r)
+    lower = 0.0
+    k = int(np.argmax(to_r))
+    for _ in range(2):
+        sweep = _line_angles(axes, axes[k])
+        k = int(np.argmax(sweep))
+        lower = max(lower, float(sweep[k]))
+    if lower >= np.pi / 2 - _SPREAD_ATOL:
+        return lower
+    candidates = axes[to_r >= lower - to_r.max() - 1e-7]
+    rows = max(1, (1 << 22) // len(candidates))
+    smallest = min(float(np.abs(candidates[k:k + rows] @ candidates.T).min())
+                   for k in range(0, len(candidates), rows))
+    return max(lower, float(np.arccos(min(smallest, 1.0))))
+
+
+def _line_angles(axes: NDArray[np.float64], axis: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Angles in [0, pi/2] between the lines of unit vectors (m, 3) and of ``axis``."""
+    return np.arccos(np.minimum(np.abs(axes @ axis), 1.0))
+
+
+def _rotation(rotvecs_A: NDArray[np.float64], rotvecs_B: NDArray[np.float64]
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``hand_R_eye`` by Tsai & Lenz with the half-turn safeguards; and the final system's
+    singular values (see :func:`solve_axxb`, Notes)."""
+    P_As, P_Bs = _modified_rodrigues(rotvecs_A), _modified_rodrigues(rotvecs_B)
+    half_turn = np.linalg.norm(rotvecs_A, axis=1) > np.pi - HALF_TURN_BAND_RAD
+    first = ~half_turn
+    if np.any(half_turn) and (not np.any(first) or _largest_line_angle(
+            rotvecs_A[first] / np.linalg.norm(rotvecs_A[first], axis=1, keepdims=True)
+    ) < PARALLEL_AXES_RAD):
+        first = np.ones_like(half_turn)
+    R0, singular_values = _tsai_rotation(P_As[first], P_Bs[first])
+    if not np.any(half_turn) and rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
+        return R0, singular_values  # the first estimate is final
+    # Signs of the half-turn motions: the ones that agree with the first estimate.
+    flip = half_turn & (np.einsum("ki,ij,kj->k", P_As, R0, P_Bs) < 0.0)
+    P_Bs = np.where(flip[:, None], -P_Bs, P_Bs)
+    if rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
+        R0 = np.eye(3)
+    else:
+        log.debug("X turns by %.1f deg: re-solving about the first estimate",
+                  np.degrees(rotation_angle(R0)))
+    R_prime, singular_values = _tsai_rotation(P_As, P_Bs @ R0.T)
+    return R_prime @ R0, singular_values
+
+
+def _modified_rodrigues(rotvecs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Tsai's ``P = 2 sin(theta/2) u`` from rotation vectors ``theta u`` (m, 3)."""
+    theta = np.linalg.norm(rotvecs, axis=1, keepdims=True)
+    return np.sinc(theta / (2.0 * np.pi)) * rotvecs  # sinc(x) = sin(pi x) / (pi x)
+
+
+def _tsai_rotation(P_As: NDArray[np.float64], P_Bs: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Solve ``skew(P_A + P_B) P'_X = P_B - P_A`` (Tsai & Lenz eq. 12) by least squares.
+
+    Returns the rotation by ``2 atan(|P'_X|)`` about ``P'_X`` (eq. 14), or the half turn
+    about the null vector when the stacked system has lost rank (X turns by pi), and the
+    stacked system's singular values.
+    """
+    M = skew(P_As + P_Bs).reshape(-1, 3)
+    U, s, Vt = np.linalg.svd(M, full_matrices=False)
+    if s[-1] <= _RANK_TOL * s[0]:
+        return matrix_from_rotation_vector(np.pi * Vt[-1]), s
+    P_prime = Vt.T @ ((U.T @ (P_Bs - P_As).reshape(-1)) / s)
+    tan_half = np.linalg.norm(P_prime)
+    if tan_half == 0.0:
+        return np.eye(3), s
+    return matrix_from_rotation_vector(2.0 * np.arctan(tan_half) * P_prime / tan_half), s
