@@ -89,7 +89,7 @@ class HandEyeResult:
         solved: 1 is ideal, towards 0 the rotation of X is poorly determined. It reflects
         the spread of the motion axes, and also drops as X's own rotation grows towards
         150 deg, beyond which the system is re-solved about the first estimate.
-    min_axis_spread_rad : float
+    axis_spread_rad : float
         Largest angle between the rotation axes (as lines) of the motions used, radians:
         0 means all about one axis.
     """
@@ -99,7 +99,7 @@ class HandEyeResult:
     rms_rotation_rad: float
     rms_translation: float
     rotation_condition: float
-    min_axis_spread_rad: float
+    axis_spread_rad: float
 
 
 def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
@@ -255,7 +255,7 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
         rms_rotation_rad=rms_rotation,
         rms_translation=float(np.sqrt(np.mean(trans_res**2))),
         rotation_condition=float(singular_values[-1] / singular_values[0]),
-        min_axis_spread_rad=float(spread),
+        axis_spread_rad=float(spread),
     )
 
 

@@ -91,8 +91,9 @@ def test_quaternion_angle_is_the_rotation_angle_and_accurate_near_zero():
     Rs = rotations_about_random_axes(rng, 200, 1.0) @ rotations_about_random_axes(rng, 200, 2.5)
     R_true = pin.exp3(np.array([0.3, -1.2, 0.4]))
     expected = [_angle_deg(R_true, R) for R in Rs]
+    # (both lose ~1e-10 deg close to 180 deg)
     np.testing.assert_allclose(np.degrees(quaternion_angle(Rs, R_true)), expected,
-                               rtol=0, atol=1e-10)
+                               rtol=0, atol=1e-9)
     # the paper's form: 2 acos(|<q, q_true>|), quaternions from Pinocchio
     q_true = pin.Quaternion(R_true).coeffs()
     dots = np.abs([pin.Quaternion(R).coeffs() @ q_true for R in Rs])
@@ -234,7 +235,7 @@ def test_plot_writes_a_png(noise_free, noisy, tmp_path):
 
 
 def test_run_and_main_write_png_and_json(tmp_path, capsys):
-    noise_free, noisy = run_hirsh(tmp_path / "a", trials=2, iterations=15, views=(3, 6))
+    _, noisy = run_hirsh(tmp_path / "a", trials=2, iterations=15, views=(3, 6))
     assert (tmp_path / "a" / "hirsh_fig3_fig4.png").stat().st_size > 30_000
     back_free, back_noisy = load_hirsh(tmp_path / "a" / "hirsh.json")
     np.testing.assert_array_equal(back_noisy.y_error_deg, noisy.y_error_deg)
