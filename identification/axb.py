@@ -93,7 +93,12 @@ from kinfw.transforms import (
     transform_from_xyz_quat_xyzw,
 )
 
-__all__ = ["AXYBError", "AXYBResult", "solve_axyb"]
+__all__ = [
+    "AXYBError",
+    "AXYBResult",
+    "convergence_factor",
+    "solve_axyb",
+]
 
 log = logging.getLogger(__name__)
 
@@ -218,6 +223,24 @@ def _iteration_matrix(q_As: NDArray, q_Bs: NDArray) -> NDArray[np.float64]:
     M = np.mean(_left_product_matrix_xyzw(q_As)
                 @ _right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0)
     return M * _CONJUGATE  # right-multiplied by diag(-1, -1, -1, 1): q_Y -> q_Y^-1
+
+
+def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
+    """Error shrink factor per iteration of the paper's rotation alternation.
+
+    The alternation is a power iteration on the 4x4 matrix ``N`` (module docstring), so
+    the rotation error shrinks by ``(sigma_2 / sigma_1)^2`` of ``N`` per iteration: near
+    1 for weakly spread rotations (slow), near 0 for well spread ones.
+
+    Parameters
+    ----------
+    A, B : array_like, shape (n, 4, 4)
+        As for :func:`solve_axyb`.
+    """
+    As, Bs = _check_inputs(A, B)
+    q_As, q_Bs = _consistent_quats_xyzw(As[:, :3, :3], Bs[:, :3, :3])
+    s = np.linalg.svd(_iteration_matrix(q_As, q_Bs), compute_uv=False)
+    return float((s[1] / s[0]) ** 2)
 
 
 def _normalise(total: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:

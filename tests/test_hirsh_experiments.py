@@ -173,6 +173,23 @@ def test_runs_that_stop_early_repeat_their_last_value(noise_free):
     assert np.all(tail == tail[-1])
 
 
+def test_shrink_factor_is_the_observed_ratio_of_successive_errors(noise_free):
+    # Independent of N: the solver's own iterates. The paper's error s-component grows as
+    # tan(error / 2) shrinks by (sigma_2 / sigma_1)^2 once the slower modes have died out.
+    tan_half = np.tan(np.radians(noise_free.y_error_deg) / 2.0)
+    rel = []
+    for v, t in np.ndindex(tan_half.shape[:2]):
+        deg = noise_free.y_error_deg[v, t, :-1]
+        mid = np.flatnonzero((deg < 1e-3) & (deg > 1e-8))
+        if mid.size:
+            k = mid[len(mid) // 2]
+            ratio = tan_half[v, t, k + 1] / tan_half[v, t, k]
+            rel.append(abs(ratio / noise_free.convergence_factors[v, t] - 1.0))
+    assert len(rel) > 30
+    assert np.median(rel) < 1e-3
+    assert max(rel) < 0.15
+
+
 def test_more_views_converge_faster(noise_free):
     its = noise_free.median_iterations_to_reach(CONVERGED_DEG)  # views 3, 5, 10
     assert its[0] > its[1] > its[2]
@@ -200,7 +217,7 @@ def test_a_failing_solve_is_recorded_not_raised(monkeypatch):
     assert result.failed.tolist() == [[False, True, False]]
     assert np.isnan(result.y_error_deg[0, 1]).all()
     assert np.isfinite(result.y_median_deg).all()
-    assert "failed in 1 trials" in format_hirsh(result, result)
+    assert "failed in 1 of 3 trials" in format_hirsh(result, result)
 
 
 # -- outputs -----------------------------------------------------------------------------
