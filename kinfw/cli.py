@@ -237,12 +237,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw reproduce ---------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from verification import shih_experiments
+    from verification import hirsh_experiments, shih_experiments
 
-    argv = [args.study, "--out", str(args.out), "--seed", str(args.seed)]
+    argv = ["--out", str(args.out), "--seed", str(args.seed)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
-    return shih_experiments.main(argv)
+    if args.study == "hirsh":
+        return hirsh_experiments.main(argv)
+    return shih_experiments.main([args.study, *argv])
 
 
 # -- kinfw crosscheck --------------------------------------------------------------------
@@ -336,8 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
                        description="fig11: Shih et al. Fig. 11 (positioning error vs "
-                       "measurements per joint and noise); table4: their Table 4 protocol.")
-    p.add_argument("study", choices=("fig11", "table4"))
+                       "measurements per joint and noise); table4: their Table 4 protocol; "
+                       "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration).")
+    p.add_argument("study", choices=("fig11", "table4", "hirsh"))
     p.add_argument("--out", type=Path, default=Path("reproduce_out"),
                    help="output directory (default reproduce_out)")
     p.add_argument("--trials", type=int, default=None, help="random trials per point")

@@ -214,3 +214,11 @@ def test_reproduce_table4_writes_png_and_json(tmp_path, capsys):
     assert (tmp_path / "table4.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "table4.json").read_text())
     assert "0.65" in out  # the paper's left-branch mu_x printed beside ours
+
+
+def test_reproduce_hirsh_writes_png_and_json(tmp_path, capsys):
+    code, out, _ = _run(["reproduce", "hirsh", "--out", tmp_path, "--trials", "2"], capsys)
+    assert code == 0
+    assert (tmp_path / "hirsh_fig3_fig4.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "hirsh.json").read_text())
+    assert "below the line" in out
