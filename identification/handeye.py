@@ -240,14 +240,18 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
     rms_rotation = float(np.sqrt(np.mean(rot_res**2)))
     if rms_rotation > INCONSISTENT_RAD:
         k = int(np.argmax(rot_res[: len(i)]))
+        motion = float(np.degrees(np.median(rotation_angle(A_ijs[:, :3, :3]))))
+        small = (f" The motions are small (median relative rotation {motion:.3g} deg), so "
+                 "camera noise may also be the cause: move the robot through larger "
+                 "rotations (tens of degrees about different axes).") if motion < 30.0 else ""
         raise HandEyeError(
             f"no single X relates the motions of A and B: RMS rotation residual of "
             f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {i[k]} and "
-            f"{j[k]}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg. "
-            f"A or B may be inverted: A must be base_T_hand (robot forward kinematics, OpenCV "
-            f"gripper2base) and B eye_T_target (camera extrinsics, OpenCV target2cam); for a "
-            f"camera fixed in the world looking at a target on the hand (eye-to-hand) pass "
-            f"A = inverse(base_T_hand), and X is then base_T_eye"
+            f"{j[k]}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg."
+            f"{small} A or B may be inverted: A must be base_T_hand (robot forward kinematics, "
+            f"OpenCV gripper2base) and B eye_T_target (camera extrinsics, OpenCV target2cam); "
+            f"for a camera fixed in the world looking at a target on the hand (eye-to-hand) "
+            f"pass A = inverse(base_T_hand), and X is then base_T_eye"
         )
     return HandEyeResult(
         X=hand_T_eye,

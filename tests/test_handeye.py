@@ -387,3 +387,15 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     in_m = solve_axxb(base_T_grippers, cam_T_worlds)
     np.testing.assert_allclose(in_m.X[:3, :3], result.X[:3, :3], rtol=0, atol=1e-12)
     np.testing.assert_allclose(1000.0 * in_m.X[:3, 3], result.X[:3, 3], rtol=1e-9)
+
+
+def test_an_inconsistency_with_small_motions_names_both_causes():
+    rng = np.random.default_rng(0)
+    X = _transform(_random_rotation(rng), [0.05, 0.02, 0.1])
+    base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
+    A = np.stack([_transform(_random_rotation(rng, np.radians(12.0)),
+                             rng.uniform(-0.25, 0.25, 3)) for _ in range(10)])
+    B = np.stack([_inv(a @ X) @ base_T_target for a in A])
+    with pytest.raises(HandEyeError, match=r"motions are small \(median relative rotation "
+                                           r"[\d.]+ deg\).*A or B may be inverted"):
+        solve_axxb(A, np.stack([_inv(b) for b in B]))
