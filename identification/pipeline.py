@@ -1,4 +1,4 @@
-"""The calibration pipeline: stage 1 (kinematics) then stage 2 (cameras), as the data allows.
+"""The calibration pipeline: closed form, hand-eye, joint refinement, as the data allows.
 
 This is the Python API behind ``kinfw calibrate``::
 
@@ -11,18 +11,28 @@ This is the Python API behind ``kinfw calibrate``::
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from identification.cameras import CamerasResult, calibrate_cameras
-from identification.closed_form import ClosedFormResult, identify_closed_form
-from kinfw.measurements import DatasetError, Measurements
+from identification.closed_form import ClosedFormResult, ProtocolError, identify_closed_form
+from identification.refine import NoiseModel, RefineResult, refine
+from kinfw.cpc import geometry_from_cpc
+from kinfw.measurements import DatasetError, Measurements, check_joint_motion
 from kinfw.robot import Robot
 from kinfw.transforms import average_transform
 from kinfw.urdf_export import ExportResult, edit_urdf, export_urdf
 
-__all__ = ["Calibration", "calibrate"]
+__all__ = ["METHODS", "Calibration", "calibrate"]
+
+log = logging.getLogger(__name__)
+
+#: ``closed-form``: Shih et al.'s closed form and the hand-eye step only;
+#: ``refine``: then the joint nonlinear least squares over everything (default).
+METHODS = ("refine", "closed-form")
 
 
 @dataclass(frozen=True, slots=True)
@@ -33,49 +43,102 @@ class Calibration:
     ----------
     urdf_xml : str
         The calibrated URDF: the nominal one with only joint origins and axes changed.
+    stages : tuple of (str, str)
+        ``(stage name, URDF text after it)`` for every stage that ran, in order
+        (``"closed form"``, ``"hand-eye"``, ``"refine"``), for before/after reports.
     closed_form : ClosedFormResult or None
-        Stage 1, when the data has ``pose`` observations in the root frame.
+        Stage 1, when the data has one-joint-at-a-time ``pose`` observations.
     export : ExportResult or None
-        Stage 1's export (measurement-frame pose, moved link frames).
+        The last export (measurement-frame pose ``w_T_root``, moved link frames).
     cameras : CamerasResult or None
-        Stage 2, when the data has ``target`` observations.
+        The hand-eye step, when the data has ``target`` observations.
+    refined : RefineResult or None
+        The joint refinement (method ``refine``).
+    notes : tuple of str
+        Stages skipped and why.
     """
 
     urdf_xml: str
+    stages: tuple[tuple[str, str], ...]
     closed_form: ClosedFormResult | None
     export: ExportResult | None
     cameras: CamerasResult | None
+    refined: RefineResult | None
+    notes: tuple[str, ...]
+
+    @property
+    def w_T_root(self) -> NDArray[np.float64]:
+        """Pose of the URDF root in the measurement frame (identity when the root is it)."""
+        return np.eye(4) if self.export is None else self.export.w_T_root
 
 
-def calibrate(nominal: Robot, data: Measurements) -> Calibration:
-    """Run the stages the data supports on the nominal robot.
+def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
+              noise: NoiseModel | None = None, loss: str = "linear") -> Calibration:
+    """Calibrate ``nominal`` from ``data``.
 
-    Stage 1 (Shih et al. section 4, :func:`identify_closed_form`) runs when the data has
-    ``pose`` observations in the root frame and rewrites the joints on their paths;
-    stage 2 (section 5, :func:`calibrate_cameras`) runs when it has ``target``
-    observations, on the stage-1 kinematics or, without stage-1 data, on the nominal
-    URDF's (trusted), and rewrites each camera's fixed mount.
+    1. Closed form (Shih et al. section 4) when the data has one-joint-at-a-time
+       ``pose`` observations in the root frame; it rewrites the joints on their paths.
+    2. Hand-eye (section 5; Hirsh et al.) when it has ``target`` observations: each
+       camera's fixed mount and the target pose, on the kinematics so far.
+    3. With ``method="refine"``: the joint nonlinear least squares over every unknown and
+       every observation (:func:`identification.refine.refine`), started from 1-2 (or
+       from the nominal URDF when they could not run), then exported.
+
+    Parameters
+    ----------
+    nominal : Robot
+    data : Measurements
+    method : {"refine", "closed-form"}
+    noise : NoiseModel, optional
+        Measurement noise for the refinement; default estimated.
+    loss : {"linear", "huber", "cauchy"}
+        Robust loss of the refinement.
 
     Raises
     ------
     DatasetError
-        When the data supports neither stage, or a stage refuses it (with the reason).
+        When no stage can use the data, or a stage refuses it (with the reason).
     """
-    closed_form = export = cameras = None
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    closed_form = export = cameras = refined = None
+    stages: list[tuple[str, str]] = []
+    notes: list[str] = []
     xml = nominal.urdf_xml
     if any(g.marker is None and g.measured_in is None for g in data.poses):
-        closed_form = identify_closed_form(nominal, data)
-        export = export_urdf(nominal, closed_form.geometry)
-        xml = export.urdf_xml
+        try:
+            closed_form = identify_closed_form(nominal, data)
+        except ProtocolError as exc:
+            if method == "closed-form":
+                raise
+            notes.append(f"closed form skipped: {exc}")
+        else:
+            export = export_urdf(nominal, closed_form.geometry)
+            xml = export.urdf_xml
+            stages.append(("closed form", xml))
     if data.targets:
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
-        mounts: dict[str, list[np.ndarray]] = {}
+        mounts: dict[str, list[NDArray]] = {}
         for c in cameras.cameras:  # a camera that saw several targets: average its mounts
             mounts.setdefault(c.joint, []).append(c.hand_T_camera)
         xml = edit_urdf(xml, joint_origins={joint: average_transform(np.stack(poses))
                                             for joint, poses in mounts.items()})
-    if closed_form is None and cameras is None:
+        stages.append(("hand-eye", xml))
+    if method == "refine":
+        # every joint on a measured path must move, or its geometry is not observed
+        check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
+        targets = dict(cameras.root_T_targets) if cameras is not None else None
+        refined = refine(nominal, data, start=Robot(xml, nominal.source), targets=targets,
+                         noise=noise, loss=loss)
+        export = export_urdf(nominal, geometry_from_cpc(refined.model),
+                             root_is_measurement_frame=refined.model_frame is None)
+        xml = export.urdf_xml
+        stages.append(("refine", xml))
+    if not stages:
         raise DatasetError(
-            f"{data.source}: nothing to calibrate: the closed form needs 'pose' observations "
-            "in the root frame (stage 1) and the hand-eye step 'target' observations (stage 2)")
-    return Calibration(xml, closed_form, export, cameras)
+            f"{data.source}: nothing to calibrate: the closed form needs one-joint-at-a-time "
+            "'pose' observations in the root frame and the hand-eye step 'target' "
+            "observations; use the default method 'refine' for any other data")
+    for note in notes:
+        log.info(note)
+    return Calibration(xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes))

@@ -131,9 +131,6 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 # -- kinfw calibrate ---------------------------------------------------------------------
-METHODS = ("closed-form",)
-
-
 def _before_after_table(rows: list[dict]) -> str:
     return _format_table(
         [[r["group"], r["n"], f"{r['before_position_rms_mm']:.3f}",
@@ -142,34 +139,78 @@ def _before_after_table(rows: list[dict]) -> str:
         ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"])
 
 
-def _calibrate(nominal: Robot, data, out: Path, *, method: str, data_path=None,
-               held_out=None) -> dict:
-    """Calibrate (:func:`identification.pipeline.calibrate`), write ``out``, return the
-    report."""
+def _stage_table(stage_rms: dict[str, dict[str, float]]) -> str:
+    stages = list(stage_rms)
+    groups = list(stage_rms["nominal"])
+    return _format_table([[g, *(f"{stage_rms[s][g]:.3f}" for s in stages)] for g in groups],
+                         ["position RMS mm", *stages])
+
+
+def _noise_arg(args: argparse.Namespace):
+    from identification.refine import NoiseModel
+
+    if args.sigma_mm is None and args.sigma_deg is None:
+        return None
+    if args.sigma_mm is None or args.sigma_deg is None:
+        raise ValueError("give both --sigma-mm and --sigma-deg, or neither (then the noise "
+                         "is estimated from the residuals)")
+    # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
+    return NoiseModel(args.sigma_mm * 1e-3, np.radians(args.sigma_deg) / np.sqrt(3.0))
+
+
+def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
+               loss: str = "linear", data_path=None, held_out=None):
+    """Calibrate (:func:`identification.pipeline.calibrate`), write ``out`` and its
+    sidecar ``<stem>.kinfw.json``; return the report and the calibration."""
     from identification.pipeline import calibrate
     from kinfw.urdf_export import write_urdf
-    from verification.report import calibration_report
+    from verification.report import calibration_report, sidecar
 
-    result = calibrate(nominal, data)
+    result = calibrate(nominal, data, method=method, noise=noise, loss=loss)
     write_urdf(out, result.urdf_xml)
-    return calibration_report(nominal, load_robot(out), data, method=method,
-                              closed_form=result.closed_form, export=result.export,
-                              cameras=result.cameras, data_path=data_path, held_out=held_out)
+    report = calibration_report(nominal, load_robot(out), data, result, method=method,
+                                loss=loss, data_path=data_path, held_out=held_out)
+    nominal_path = None if nominal.source.startswith("<") else nominal.source
+    sidecar_path = Path(out).with_suffix(".kinfw.json")
+    sidecar_path.write_text(json.dumps(sidecar(report, result, nominal_path=nominal_path,
+                                               calibrated_path=out), indent=2) + "\n",
+                            encoding="utf-8")
+    report["sidecar"] = str(sidecar_path)
+    return report, result
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
-    report = _calibrate(nominal, data, args.out, method=args.method, data_path=args.data)
+    held_out = read_measurements(args.holdout) if args.holdout else None
+    report, _ = _calibrate(nominal, data, args.out, method=args.method,
+                           noise=_noise_arg(args), loss=args.loss, data_path=args.data,
+                           held_out=held_out)
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
     print(f"calibrated {args.urdf} with {args.method} from {args.data} "
-          f"({data.n_samples} samples) -> {args.out}")
-    print("errors on the calibration data (in-sample):")
-    print(_before_after_table(report["errors_in_sample"]))
+          f"({data.n_samples} samples) -> {args.out} (+ {report['sidecar']})")
+    for note in report["notes"]:
+        print(f"note: {note}")
+    print("position RMS on the calibration data after each stage (in-sample):")
+    print(_stage_table(report["position_rms_mm_by_stage"]))
+    if "refine" in report:
+        ref = report["refine"]
+        ident = ref["identifiability"]
+        print(f"refine: noise sigma {ref['noise']['position_sigma_mm']:.3g} mm, "
+              f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
+              f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
+              f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
+              f"condition {ident['condition']:.3g}; {len(ref['downweighted'])} observations "
+              "down-weighted")
+        for item in ident["not_identifiable"]:
+            print(f"  not identifiable: {', '.join(item['parameters'])}: {item['why']}")
+    if held_out is not None:
+        print("held-out errors:")
+        print(_before_after_table(report["errors_held_out"]))
     if args.report:
         print(f"report: {args.report}")
     return 0
@@ -212,11 +253,17 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     (out / "true.urdf").write_text(truth_xml, encoding="utf-8")
-    report = _calibrate(nominal, data, out / "calibrated.urdf", method="closed-form",
-                        data_path=out / "data.json", held_out=held_out)
+    report, result = _calibrate(nominal, data, out / "calibrated.urdf", method="refine",
+                                data_path=out / "data.json", held_out=held_out)
     report["errors_vs_truth_held_out"] = before_after_rows(
         errors_by_group(nominal, exact),
         errors_by_group(load_robot(out / "calibrated.urdf"), exact))
+    truth_rms = {"nominal": errors_by_group(nominal, exact)}
+    for name, xml in result.stages:
+        truth_rms[name] = errors_by_group(Robot(xml, name), exact)
+    report["position_rms_mm_vs_truth_held_out_by_stage"] = {
+        stage: {k: v["position_rms_mm"] for k, v in errors.items()}
+        for stage, errors in truth_rms.items()}
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     if args.json:
         print(json.dumps(report, indent=2))
@@ -225,13 +272,18 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
           f"{len(qs1)} one-joint-at-a-time configurations (9 per joint), plate poses from the "
           "stereo rig; stage 2: both cameras see a fixed target in 30 random configurations; "
-          "noise sigma 0.5 mm / 0.5 deg; closed form + A = X B Y; 100 held-out configurations")
+          "noise sigma 0.5 mm / 0.5 deg; closed form, A = X B Y, then the joint least "
+          "squares; 100 held-out configurations")
+    print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
+    print(_stage_table(report["position_rms_mm_vs_truth_held_out_by_stage"]))
     print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
     print(_before_after_table(report["errors_held_out"]))
-    print("\nheld-out errors against the true robot (noise-free):")
-    print(_before_after_table(report["errors_vs_truth_held_out"]))
-    print(f"\nwrote {out / 'calibrated.urdf'}, {out / 'report.json'} and the data "
-          f"({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
+    ref = report["refine"]
+    print(f"\nestimated noise: {ref['noise']['position_sigma_mm']:.3f} mm per axis, "
+          f"{ref['noise']['rotation_sigma_deg_per_component']:.3f} deg per orientation "
+          f"component (true: 0.5 mm, {0.5 / np.sqrt(3.0):.3f} deg)")
+    print(f"wrote {out / 'calibrated.urdf'} (+ {report['sidecar']}), {out / 'report.json'} "
+          f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
     return 0
 
 
@@ -324,8 +376,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
     p.add_argument("--out", type=Path, required=True, help="calibrated URDF to write")
     p.add_argument("--report", type=Path, help="write the report (JSON) here")
-    p.add_argument("--method", choices=METHODS, default="closed-form",
-                   help="closed-form: Shih et al. section 4 (one joint at a time)")
+    p.add_argument("--method", choices=("refine", "closed-form"), default="refine",
+                   help="refine (default): closed form and hand-eye, then the joint "
+                   "nonlinear least squares; closed-form: stop after closed form and hand-eye")
+    p.add_argument("--sigma-mm", type=float, help="position noise sigma per axis, mm "
+                   "(default: estimated from the residuals)")
+    p.add_argument("--sigma-deg", type=float, help="orientation noise: angle sigma about a "
+                   "random axis, deg (default: estimated)")
+    p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
+                   help="robust loss of the refinement (default linear)")
+    p.add_argument("--holdout", type=Path, help="measurement file not used for calibration; "
+                   "its errors go to the report and sidecar")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_calibrate)
 

@@ -218,6 +218,30 @@ class CPCModel:
             k += 6
         return replace(self, b=b, l=l, tool_T=tool_T)
 
+    def chart_coordinates(self, other: CPCModel) -> NDArray[np.float64]:
+        """The chart coordinates ``delta`` with ``self.perturbed(delta) == other``.
+
+        ``other`` must be canonical with the same topology and motion senses (e.g.
+        ``cpc_from_geometry(geometry, sign=self.sign)``); the inverse of :meth:`perturbed`:
+        axes ``d_i = e_i . b / (b0 . b)``, offsets by difference, tool rotations
+        ``2 vee(dR - dR^T) / (1 + tr dR)`` (the inverse Cayley map), positions by
+        difference.
+        """
+        if other.topology != self.topology or np.any(other.sign != self.sign):
+            raise ValueError("chart_coordinates: models differ in topology or motion senses")
+        bases = self.axis_bases()
+        out = []
+        for j, rev in enumerate(self.topology.revolute):
+            out += list(bases[j] @ other.b[j] / (self.b[j] @ other.b[j]))
+            if rev:
+                out += list(other.l[j, :2] - self.l[j, :2])
+        for e in range(len(self.topology.frames)):
+            dR = self.tool_T[e, :3, :3].T @ other.tool_T[e, :3, :3]
+            a = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+            out += list(2.0 * a / (1.0 + np.trace(dR)))
+            out += list(other.tool_T[e, :3, 3] - self.tool_T[e, :3, 3])
+        return np.array(out)
+
     # -- forward kinematics ----------------------------------------------------------------
     def link_transforms(self) -> NDArray[np.float64]:
         """Constant ``F_p'_T_F_j = R(b_j) Rot(z, beta_j) Trans(l_j)``, shape (J, 4, 4)."""

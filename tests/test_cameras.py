@@ -95,6 +95,8 @@ def test_nothing_to_calibrate_is_explained():
     data = simulate(nominal, np.zeros((3, 3)), nominal.joint_names, markers=(
         ("flange", np.zeros(3)),), rng=np.random.default_rng(0))
     with pytest.raises(DatasetError, match="nothing to calibrate"):
+        calibrate(nominal, data, method="closed-form")
+    with pytest.raises(DatasetError, match="joint 'j1' moves through 1 distinct value"):
         calibrate(nominal, data)
 
 

@@ -166,15 +166,24 @@ def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, 
     assert len(report["data"]["sha256"]) == 64
 
 
-def test_calibrate_refuses_plate_poses_that_are_not_one_joint_at_a_time(tmp_path, capsys):
+def test_random_configurations_need_the_refinement(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
-    # the demo's held-out data: plate poses at random configurations
+    # the demo's held-out data: plate poses and targets at random configurations
     code, _, err = _run(["calibrate", tmp_path / "held_out.json", "--urdf", HEAD, "--out",
-                         tmp_path / "cal.urdf"], capsys)
+                         tmp_path / "cal.urdf", "--method", "closed-form"], capsys)
     assert code == 2
     assert "differs from the common configuration q0 in joints" in err
     assert not (tmp_path / "cal.urdf").exists()
+    code, out, _ = _run(["calibrate", tmp_path / "held_out.json", "--urdf", HEAD, "--out",
+                         tmp_path / "cal.urdf", "--json"], capsys)
+    assert code == 0
+    report = json.loads(out)
+    assert report["notes"][0].startswith("closed form skipped")
+    truth = report["position_rms_mm_by_stage"]
+    assert list(truth) == ["nominal", "hand-eye", "refine"]
+    for group, rms in truth["refine"].items():
+        assert rms < truth["nominal"][group] / 10
 
 
 def test_calibrate_target_only_data_on_trusted_kinematics(tmp_path, capsys):

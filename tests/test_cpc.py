@@ -176,3 +176,10 @@ def test_fk_is_invariant_to_configuration_order(seed):
     qs = rng.uniform(-3, 3, size=(20, 6))
     perm = rng.permutation(20)
     np.testing.assert_array_equal(model.frame_poses(qs)[perm], model.frame_poses(qs[perm]))
+
+
+def test_chart_coordinates_invert_the_chart():
+    model = cpc_from_robot(load_robot(HEAD), (*HEAD_FRAMES, "left_camera"))
+    delta = np.random.default_rng(6).normal(size=model.n_parameters) * 0.05
+    moved = model.perturbed(delta)
+    np.testing.assert_allclose(model.chart_coordinates(moved), delta, atol=1e-12)

@@ -12,12 +12,14 @@ import pinocchio as pin
 
 from identification.cameras import CamerasResult
 from identification.closed_form import ClosedFormResult
+from identification.pipeline import Calibration
+from identification.refine import RefineResult
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
-from kinfw.urdf_export import ExportResult
 from verification.accuracy import evaluate_model
 
-__all__ = ["before_after_rows", "calibration_report", "errors_by_group", "file_sha256"]
+__all__ = [
+    "before_after_rows", "calibration_report", "errors_by_group", "file_sha256", "sidecar"]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -91,10 +93,46 @@ def _hand_eye_section(result: CamerasResult) -> dict:
     }
 
 
-def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements, *,
-                       method: str, closed_form: ClosedFormResult | None = None,
-                       export: ExportResult | None = None,
-                       cameras: CamerasResult | None = None,
+def _refine_section(result: RefineResult, loss: str) -> dict:
+    ident = result.identifiability
+    return {
+        "method": "joint nonlinear least squares (CasADi residuals and Jacobians, "
+                  "Levenberg-Marquardt), residuals whitened by the noise below",
+        "loss": loss,
+        "noise": {"position_sigma_mm": 1e3 * result.noise.position_m,
+                  "rotation_sigma_deg_per_component": float(np.degrees(
+                      result.noise.rotation_rad)),
+                  "estimated": result.noise.estimated,
+                  "note": "weights: 1/sigma^2 per position component (mm) and per "
+                          "small-angle orientation component (an angle sigma of s about a "
+                          "random axis is s/sqrt(3) per component)"},
+        "reduced_chi_square": result.sigma_hat2,
+        "iterations": result.iterations, "converged": result.converged,
+        "seconds": result.seconds,
+        "model_frame": result.model_frame,
+        "parameters": [
+            {"owner": o, "field": f, "delta_from_start": float(d), "std": float(sd),
+             "unit": "rad" if f.startswith(("rot", "b_tilt")) else "m"}
+            for (o, f), d, sd in zip(result.parameter_names, result.estimate, result.std,
+                                     strict=True)],
+        "kinematics": [{"owner": o, "name": n, "value": v}
+                       for o, n, v in result.model.describe()],
+        "unknowns": [{"kind": u.kind, "name": u.name, "value": u.value.tolist()}
+                     for u in result.unknowns],
+        "identifiability": {
+            "rank": ident.rank, "n_parameters": ident.n_parameters,
+            "condition": ident.condition, "observability_O1": ident.observability_o1,
+            "not_identifiable": [{"parameters": [":".join(p) for p in params], "why": why}
+                                 for params, why in ident.unidentifiable],
+            "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
+                                       for a, b, r in ident.correlations]},
+        "downweighted": [{"kind": k, "frame": f, "sample": smp, "weight": w}
+                         for k, f, smp, w in result.downweighted],
+    }
+
+
+def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
+                       calibration: Calibration, *, method: str, loss: str = "linear",
                        data_path: str | Path | None = None,
                        held_out: Measurements | None = None) -> dict:
     """Everything a user needs to trust (or not) a calibration, as a dictionary.
@@ -105,13 +143,9 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements, *,
         The URDF before and after (the written file, re-loaded).
     data : Measurements
         The calibration data; the errors on it are in-sample.
-    method : str
-    closed_form : ClosedFormResult, optional
-        Stage 1 (kinematics), for its parameters and diagnostics.
-    export : ExportResult, optional
-        Stage 1's export, for the measurement frame pose and moved link frames.
-    cameras : CamerasResult, optional
-        Stage 2 (hand-eye and target poses).
+    calibration : Calibration
+        The pipeline's result (stages, their URDFs and diagnostics).
+    method, loss : str
     data_path : path, optional
         Recorded with its SHA-256.
     held_out : Measurements, optional
@@ -119,6 +153,10 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements, *,
     """
     before = errors_by_group(nominal, data)
     after = errors_by_group(calibrated, data)
+    stage_rms = {"nominal": {k: v["position_rms_mm"] for k, v in before.items()}}
+    for name, xml in calibration.stages:
+        errors = errors_by_group(Robot(xml, name), data)
+        stage_rms[name] = {k: v["position_rms_mm"] for k, v in errors.items()}
     report = {
         "format": "kinfw-calibration-report", "version": 1,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -126,22 +164,61 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements, *,
         "nominal_urdf": nominal.source,
         "data": {"source": data.source, "n_samples": data.n_samples,
                  "sha256": file_sha256(data_path) if data_path else None},
+        "notes": list(calibration.notes),
         "errors_in_sample": before_after_rows(before, after),
+        "position_rms_mm_by_stage": stage_rms,
         "errors_before": before,
         "errors_after": after,
     }
-    if closed_form is not None:
-        report["kinematics"] = _closed_form_section(closed_form)
-    if export is not None:
+    if calibration.closed_form is not None:
+        report["kinematics"] = _closed_form_section(calibration.closed_form)
+    if calibration.cameras is not None:
+        report["hand_eye"] = _hand_eye_section(calibration.cameras)
+    if calibration.refined is not None:
+        report["refine"] = _refine_section(calibration.refined, loss)
+    if calibration.export is not None:
         report["export"] = {
-            "w_T_root": export.w_T_root.tolist(),
+            "w_T_root": calibration.export.w_T_root.tolist(),
             "moved_link_frames": [
                 {"link": link, "shift_mm": 1e3 * float(np.linalg.norm(T[:3, 3]))}
-                for link, T in export.link_shifts],
+                for link, T in calibration.export.link_shifts],
         }
-    if cameras is not None:
-        report["hand_eye"] = _hand_eye_section(cameras)
     if held_out is not None:
         report["errors_held_out"] = before_after_rows(errors_by_group(nominal, held_out),
                                                       errors_by_group(calibrated, held_out))
     return report
+
+
+def sidecar(report: dict, calibration: Calibration, *, nominal_path: str | Path | None,
+            calibrated_path: str | Path) -> dict:
+    """The provenance written beside a calibrated URDF: what produced it and what is
+    needed to predict measurements that is not in the URDF (the root's pose in the
+    measurement frame, target poses, markers, noise)."""
+    refined = calibration.refined
+    return {
+        "format": "kinfw-calibration", "version": 1,
+        "created": report["created"],
+        "kinfw_version": _kinfw_version(),
+        "method": report["method"],
+        "calibrated_urdf": Path(calibrated_path).name,
+        "nominal_urdf": {"path": str(nominal_path) if nominal_path else None,
+                         "sha256": file_sha256(nominal_path) if nominal_path else None},
+        "data": report["data"],
+        "w_T_root": calibration.w_T_root.tolist(),
+        "measurement_frame": None if refined is None else refined.model_frame,
+        "noise": None if refined is None else report["refine"]["noise"],
+        "unknowns": [] if refined is None else report["refine"]["unknowns"],
+        "targets": [] if calibration.cameras is None else [
+            {"target": t, "root_T_target": T.tolist()}
+            for t, T in calibration.cameras.root_T_targets],
+        "errors_held_out": report.get("errors_held_out"),
+    }
+
+
+def _kinfw_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("kinfw")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
