@@ -178,7 +178,8 @@ class RefineResult:
         Reduced chi-square of the whitened residuals (1 when the noise model fits).
     residuals : tuple of GroupResiduals
     downweighted : tuple of (kind, frame, sample, weight)
-        Observations the robust loss gave a weight below 0.5.
+        Observations beyond the robust loss's threshold (empty for least squares), with
+        the weight they got.
     identifiability : Identifiability
     iterations : int
     converged : bool
@@ -497,7 +498,7 @@ def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArr
 
 def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
            targets: dict[str, NDArray] | None = None, noise: NoiseModel | None = None,
-           loss: str = "linear", loss_scale: float = 3.0, max_iterations: int = 100,
+           loss: str = "linear", loss_scale: float = 2.33, max_iterations: int = 100,
            noise_rounds: int = 3) -> RefineResult:
     """Refine every unknown jointly by whitened nonlinear least squares.
 
@@ -518,7 +519,10 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     loss : {"linear", "huber", "cauchy"}
         Robust loss on each observation's whitened residual norm.
     loss_scale : float
-        Where the robust loss departs from least squares, in sigmas.
+        Where the robust loss departs from least squares, as a standard-normal quantile
+        ``z``: an observation's whitened residual norm is compared with the same quantile
+        of its clean distribution (chi with 6 degrees of freedom for poses and targets, 3
+        for points; Wilson-Hilferty), so 2.33 flags 1 % of clean observations.
     max_iterations : int
         Levenberg-Marquardt iterations per noise round.
     noise_rounds : int
@@ -536,33 +540,34 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     if loss not in LOSSES:
         raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
     t0 = time.perf_counter()
-    if loss not in LOSSES:
-        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
-    t0 = time.perf_counter()
     problem = build_problem(robot, measurements, start=start, targets=targets)
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
     sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
+    k = _thresholds(obs_sizes, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False
     for _ in range(1 if given else noise_rounds):
         x, its, converged = _levenberg_marquardt(
             lambda v, jac, s=sigma: problem.evaluate(v, s, jac), x, free, obs_sizes, loss,
-            loss_scale, max_iterations)
+            k, max_iterations)
         iterations += its
         if given:
             break
         sigma = _estimate_noise(problem.evaluate(x, sigma, False)[0], problem.groups, sigma,
-                                int(free.sum()))
+                                int(free.sum()), robust=loss != "linear")
     r, J = problem.evaluate(x, sigma, True)
-    w_rows = _row_weights(r, obs_sizes, loss, loss_scale)
+    w_rows = _row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
-    covariance, ident = _covariance_and_identifiability(Jw, free, list(problem.names),
-                                                        sigma_hat2, measurements,
-                                                        problem.model0)
-    residuals, downweighted = _group_residuals(list(problem.groups), r, w_rows, sigma)
+    # a given noise model is trusted; an estimated one is rescaled by the fit
+    covariance, ident = _covariance_and_identifiability(
+        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements,
+        problem.model0)
+    flagged = _obs_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
+    residuals, downweighted = _group_residuals(list(problem.groups), r, w_rows, sigma,
+                                               flagged)
     result = RefineResult(
         model=problem.model_at(x), model_frame=problem.model_frame,
         unknowns=problem.unknowns_at(x), parameter_names=problem.names, estimate=x,
@@ -623,7 +628,17 @@ def _repeat_rows(per_obs: NDArray, obs_sizes: list[tuple[int, int]]) -> NDArray:
     return np.concatenate(out)
 
 
-def _robust(s: NDArray, loss: str, k: float) -> tuple[NDArray, NDArray]:
+def _thresholds(obs_sizes: list[tuple[int, int]], z: float) -> NDArray:
+    """Per observation, the z-quantile of the norm of its clean whitened residual:
+    ``sqrt(chi2_ppf)`` by Wilson-Hilferty, ``rows (1 - 2/(9 rows) + z sqrt(2/(9 rows)))^3``."""
+    per_obs = []
+    for m, rows in obs_sizes:
+        c = 2.0 / (9.0 * rows)
+        per_obs.append(np.full(m, np.sqrt(rows * (1.0 - c + z * np.sqrt(c)) ** 3)))
+    return np.concatenate(per_obs)
+
+
+def _robust(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
     """Loss rho(s) and IRLS weight rho'(s)/s of whitened residual norms ``s``."""
     if loss == "huber":
         return np.where(s <= k, 0.5 * s**2, k * s - 0.5 * k**2), np.where(s <= k, 1.0, k / s)
@@ -632,12 +647,12 @@ def _robust(s: NDArray, loss: str, k: float) -> tuple[NDArray, NDArray]:
     return 0.5 * s**2, np.ones_like(s)
 
 
-def _row_weights(r: NDArray, obs_sizes, loss: str, k: float) -> NDArray:
+def _row_weights(r: NDArray, obs_sizes, loss: str, k: NDArray) -> NDArray:
     return _repeat_rows(_robust(_obs_norms(r, obs_sizes), loss, k)[1], obs_sizes)
 
 
 def _levenberg_marquardt(evaluate, x: NDArray, free: NDArray, obs_sizes, loss: str,
-                         k: float, max_iterations: int) -> tuple[NDArray, int, bool]:
+                         k: NDArray, max_iterations: int) -> tuple[NDArray, int, bool]:
     """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
 
     Steps solve ``(Js^T Js + lam I) y = -Js^T r`` with unit-norm columns ``Js``: no
@@ -680,25 +695,39 @@ def _levenberg_marquardt(evaluate, x: NDArray, free: NDArray, obs_sizes, loss: s
     return x, it, converged
 
 
-def _estimate_noise(r: NDArray, groups: list[_Group], sigma: NoiseModel, n_free: int
-                    ) -> NoiseModel:
-    """Variance components: each kind's whitened sum of squares over its share of the
-    degrees of freedom rescales its sigma."""
+#: Median of the chi-square distribution with 3 degrees of freedom.
+_CHI2_3_MEDIAN = 2.365973884375338
+
+
+def _estimate_noise(r: NDArray, groups: list[_Group], sigma: NoiseModel, n_free: int, *,
+                    robust: bool = False) -> NoiseModel:
+    """Rescale each kind's sigma from the whitened residuals.
+
+    Least squares: variance components (each kind's sum of squares over its share of the
+    degrees of freedom). With a robust loss: the median of the per-observation squared
+    norms over the chi-square(3) median, which gross outliers do not inflate.
+    """
     pos, rot, k = [], [], 0
     for grp in groups:
         m = len(grp.sample)
         block = r[k : k + m * grp.rows].reshape(m, grp.rows)
-        pos.append(block[:, :3].ravel())
+        pos.append(block[:, :3])
         if grp.rows == 6:
-            rot.append(block[:, 3:].ravel())
+            rot.append(block[:, 3:])
         k += m * grp.rows
     pos = np.concatenate(pos)
-    rot = np.concatenate(rot) if rot else np.zeros(0)
-    share = 1.0 - n_free / max(len(r), n_free + 1)
-    sp = sigma.position_m * np.sqrt(pos @ pos / max(len(pos) * share, 1.0))
-    sr = sigma.rotation_rad * np.sqrt(rot @ rot / max(len(rot) * share, 1.0)) if len(rot) \
-        else sigma.rotation_rad
-    return NoiseModel(float(max(sp, 1e-12)), float(max(sr, 1e-15)), estimated=True)
+    rot = np.concatenate(rot) if rot else np.zeros((0, 3))
+
+    def factor(block: NDArray) -> float:
+        if not len(block):
+            return 1.0
+        if robust:
+            return float(np.sqrt(np.median(np.sum(block**2, axis=1)) / _CHI2_3_MEDIAN))
+        share = 1.0 - n_free / max(len(r), n_free + 1)
+        return float(np.sqrt(np.sum(block**2) / max(block.size * share, 1.0)))
+
+    return NoiseModel(float(max(sigma.position_m * factor(pos), 1e-12)),
+                      float(max(sigma.rotation_rad * factor(rot), 1e-15)), estimated=True)
 
 
 def _covariance_and_identifiability(Jw: NDArray, free: NDArray, names: list,
@@ -749,9 +778,10 @@ def _covariance_and_identifiability(Jw: NDArray, free: NDArray, names: list,
         observability_o1=o1, unidentifiable=tuple(unidentifiable), correlations=correlations)
 
 
-def _group_residuals(groups: list[_Group], r: NDArray, w_rows: NDArray, sigma: NoiseModel
-                     ) -> tuple[tuple[GroupResiduals, ...], tuple]:
-    out, down, k = [], [], 0
+def _group_residuals(groups: list[_Group], r: NDArray, w_rows: NDArray, sigma: NoiseModel,
+                     flagged: NDArray) -> tuple[tuple[GroupResiduals, ...], tuple]:
+    """Per-group residuals in SI, and the observations beyond the robust threshold."""
+    out, down, k, o = [], [], 0, 0
     for grp in groups:
         m = len(grp.sample)
         block = r[k : k + m * grp.rows].reshape(m, grp.rows)
@@ -760,6 +790,8 @@ def _group_residuals(groups: list[_Group], r: NDArray, w_rows: NDArray, sigma: N
             grp.kind, grp.frame, grp.marker, grp.sample, block[:, :3] * sigma.position_m,
             block[:, 3:] * sigma.rotation_rad if grp.rows == 6 else None, weight))
         down += [(grp.kind, grp.frame, int(sm), float(wt))
-                 for sm, wt in zip(grp.sample, weight, strict=True) if wt < 0.5]
+                 for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
+                 if bad]
         k += m * grp.rows
+        o += m
     return tuple(out), tuple(down)

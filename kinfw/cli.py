@@ -289,13 +289,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw reproduce ---------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
-    from verification import hirsh_experiments, shih_experiments
+    from verification import crlb, hirsh_experiments, shih_experiments
 
     argv = ["--out", str(args.out), "--seed", str(args.seed)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":
         return hirsh_experiments.main(argv)
+    if args.study in ("crlb", "robust"):
+        return crlb.main([args.study, *argv])
     return shih_experiments.main([args.study, *argv])
 
 
@@ -400,8 +402,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
                        description="fig11: Shih et al. Fig. 11 (positioning error vs "
                        "measurements per joint and noise); table4: their Table 4 protocol; "
-                       "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration).")
-    p.add_argument("study", choices=("fig11", "table4", "hirsh"))
+                       "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
+                       "the joint refinement against the Cramer-Rao bound; robust: with 5 %% "
+                       "gross outliers, per robust loss.")
+    p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust"))
     p.add_argument("--out", type=Path, default=Path("reproduce_out"),
                    help="output directory (default reproduce_out)")
     p.add_argument("--trials", type=int, default=None, help="random trials per point")
