@@ -403,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="fig11: Shih et al. Fig. 11 (positioning error vs "
                        "measurements per joint and noise); table4: their Table 4 protocol; "
                        "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
-                       "the joint refinement against the Cramer-Rao bound; robust: with 5 %% "
+                       "the joint refinement against the Cramer-Rao bound; robust: with 5 % "
                        "gross outliers, per robust loss.")
     p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust"))
     p.add_argument("--out", type=Path, default=Path("reproduce_out"),
