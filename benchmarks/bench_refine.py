@@ -235,10 +235,13 @@ def camera_mounts(cameras: CamerasResult) -> dict[str, NDArray[np.float64]]:
 
 def lm_only(problem, noise: NoiseModel, max_iterations: int = 100
             ) -> tuple[NDArray[np.float64], int, bool]:
-    """refine()'s Levenberg-Marquardt loop on a prebuilt problem (private function)."""
+    """refine()'s Levenberg-Marquardt loop on a prebuilt problem (private function), least
+    squares (the robust-loss thresholds are not used by the linear loss)."""
+    thresholds = (rf._thresholds(problem.obs_sizes, 2.33) if hasattr(rf, "_thresholds")
+                  else 3.0)
     return rf._levenberg_marquardt(
         lambda v, jac: problem.evaluate(v, noise, jac), np.zeros(problem.n_parameters),
-        problem.free, problem.obs_sizes, "linear", 3.0, max_iterations)
+        problem.free, problem.obs_sizes, "linear", thresholds, max_iterations)
 
 
 def cost_at(problem, x: NDArray[np.float64], noise: NoiseModel) -> float:

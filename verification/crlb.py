@@ -1297,7 +1297,8 @@ def format_robustness(study: RobustStudy) -> str:
         sp = 1e3 * s.noise_used[:, estimated, 0]
         lines += ["", f"Noise estimated with outliers: position {np.median(sp):.2f} mm per "
                   f"component (median; true {s.setup.sigma_mm:g} mm)."]
-    lines += ["", "Down-weighted: refine's `downweighted` (robust weight below 0.5).",
+    lines += ["", "Down-weighted: refine's `downweighted` (observations beyond the robust "
+              "loss's threshold: the 99 % quantile of a clean residual norm).",
               "", f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial)."]
     return "\n".join(lines)
 
