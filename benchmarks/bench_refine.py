@@ -2,8 +2,8 @@
 
 Run from the repository root::
 
-    python benchmarks/bench_refine.py              # full run, ~3-4 minutes
-    python benchmarks/bench_refine.py --quick      # reduced set, ~30 seconds
+    python benchmarks/bench_refine.py              # full run, ~2.5-3.5 minutes
+    python benchmarks/bench_refine.py --quick      # reduced set, under a minute
     python benchmarks/bench_refine.py --repeats 20 --seed 3
 
 Prints plain-text tables:

@@ -663,7 +663,7 @@ def _levenberg_marquardt(evaluate, x: NDArray, free: NDArray, obs_sizes, loss: s
 
     r, J = evaluate(x, True)
     cost = cost_of(r)
-    lam = 1e-3
+    lam = 1e-6  # column-scaled: start close to Gauss-Newton
     converged = False
     it = 0
     for it in range(1, max_iterations + 1):
