@@ -109,3 +109,14 @@ def test_wrong_number_of_joint_values_is_an_error():
 def test_xml_that_is_not_a_urdf_is_refused():
     with pytest.raises(RobotModelError, match=r"root element is <html>, expected <robot>"):
         load_robot("<html><body/></html>")
+
+
+def test_import_kinfw_loads_neither_casadi_nor_meshcat():
+    import subprocess
+    import sys
+
+    code = ("import sys, kinfw; "
+            "print(int('casadi' in sys.modules), int('meshcat' in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["0", "0"]
