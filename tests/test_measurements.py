@@ -817,3 +817,18 @@ def test_concatenate_shifts_samples_unites_joints_and_merges_groups():
     np.testing.assert_array_equal(c.points[0].sample, [2])
     with pytest.raises(ValueError, match="at least one"):
         concatenate_measurements()
+
+
+def test_the_documentation_examples_parse():
+    """Every JSON example in docs/measurements.md is a valid file or observation."""
+    import re
+
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "measurements.md").read_text()
+    blocks = [json.loads(b) for b in re.findall(r"```json\n(.*?)```", doc, re.S)]
+    assert len(blocks) >= 5
+    for block in blocks:
+        if "samples" not in block:  # a single observation: wrap it
+            block = {"format": "kinfw-measurements", "version": 1,
+                     "units": {"length": "m", "angle": "rad"}, "joint_names": ["a"],
+                     "samples": [{"q": [0.0], "observations": [block]}]}
+        assert measurements_from_dict(block, "docs").n_samples >= 1
