@@ -12,6 +12,8 @@ This is the Python API behind ``kinfw calibrate``::
 from __future__ import annotations
 
 import logging
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -73,7 +75,8 @@ class Calibration:
 
 
 def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
-              noise: NoiseModel | None = None, loss: str = "linear") -> Calibration:
+              noise: NoiseModel | None = None, loss: str = "linear",
+              progress: Callable[[str], None] | None = None) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
     1. Closed form (Shih et al. section 4) when the data has one-joint-at-a-time
@@ -93,6 +96,9 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         Measurement noise for the refinement; default estimated.
     loss : {"linear", "huber", "cauchy"}
         Robust loss of the refinement.
+    progress : callable, optional
+        Called with a one-line message after each stage (the command line prints them);
+        the library itself stays quiet.
 
     Raises
     ------
@@ -101,6 +107,14 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    say = progress or (lambda message: None)
+    clock = time.perf_counter()
+
+    def done(message: str) -> None:
+        nonlocal clock
+        say(f"{message} ({time.perf_counter() - clock:.2f} s)")
+        clock = time.perf_counter()
+
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
@@ -116,6 +130,8 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
             export = export_urdf(nominal, closed_form.geometry)
             xml = export.urdf_xml
             stages.append(("closed form", xml))
+            done(f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
+                 f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm")
     if data.targets:
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
         mounts: dict[str, list[NDArray]] = {}
@@ -124,6 +140,7 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         xml = edit_urdf(xml, joint_origins={joint: average_transform(np.stack(poses))
                                             for joint, poses in mounts.items()})
         stages.append(("hand-eye", xml))
+        done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
         # every joint on a measured path must move, or its geometry is not observed
         check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
@@ -134,6 +151,8 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
                              root_is_measurement_frame=refined.model_frame is None)
         xml = export.urdf_xml
         stages.append(("refine", xml))
+        done(f"refine: {refined.identifiability.n_parameters} parameters, "
+             f"{refined.iterations} iterations, reduced chi-square {refined.sigma_hat2:.3g}")
     if not stages:
         raise DatasetError(
             f"{data.source}: nothing to calibrate: the closed form needs one-joint-at-a-time "

@@ -27,6 +27,13 @@ log = logging.getLogger("kinfw")
 USER_ERRORS = (DatasetError, RobotModelError, ValueError, OSError)
 
 
+def _progress_printer():
+    """Progress lines on stderr when a person is watching (a terminal, or --verbose)."""
+    if sys.stderr.isatty() or log.isEnabledFor(logging.INFO):
+        return lambda message: print(f"  {message}", file=sys.stderr, flush=True)
+    return None
+
+
 def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: Robot
                 ) -> tuple[str, ...]:
     if value:
@@ -78,6 +85,13 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     data = concatenate_measurements(*parts)
     write_measurements(args.out, data)
     Path(args.truth_out).write_text(truth_xml, encoding="utf-8")
+    if args.json:
+        print(json.dumps({"data": str(args.out), "truth": str(args.truth_out),
+                          "n_samples": data.n_samples, "frames": list(data.observed_frames),
+                          "noise_mm": args.noise_mm, "noise_deg": args.noise_deg,
+                          "stereo_mm": args.stereo_mm, "error_mm": args.error_mm,
+                          "error_deg": args.error_deg, "seed": args.seed}, indent=2))
+        return 0
     print(f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
           f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
           + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
@@ -166,7 +180,8 @@ def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
     from kinfw.urdf_export import write_urdf
     from verification.report import calibration_report, sidecar
 
-    result = calibrate(nominal, data, method=method, noise=noise, loss=loss)
+    result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
+                       progress=_progress_printer())
     write_urdf(out, result.urdf_xml)
     report = calibration_report(nominal, load_robot(out), data, result, method=method,
                                 loss=loss, data_path=data_path, held_out=held_out)
@@ -289,16 +304,27 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw reproduce ---------------------------------------------------------------------
 def _cmd_reproduce(args: argparse.Namespace) -> int:
+    import contextlib
+    import io
+
     from verification import crlb, hirsh_experiments, shih_experiments
 
     argv = ["--out", str(args.out), "--seed", str(args.seed)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":
-        return hirsh_experiments.main(argv)
-    if args.study in ("crlb", "robust"):
-        return crlb.main([args.study, *argv])
-    return shih_experiments.main([args.study, *argv])
+        run, written = (lambda: hirsh_experiments.main(argv)), "hirsh.json"
+    elif args.study in ("crlb", "robust"):
+        run, written = (lambda: crlb.main([args.study, *argv])), f"{args.study}.json"
+    else:
+        run, written = (lambda: shih_experiments.main([args.study, *argv])), \
+            f"{args.study}.json"
+    if not args.json:
+        return run()
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = run()
+    print((Path(args.out) / written).read_text(encoding="utf-8"))
+    return code
 
 
 # -- kinfw crosscheck --------------------------------------------------------------------
@@ -365,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=_cmd_simulate)
 
     p = sub.add_parser("verify", help="errors of a URDF model against measurements")
@@ -410,6 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output directory (default reproduce_out)")
     p.add_argument("--trials", type=int, default=None, help="random trials per point")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")

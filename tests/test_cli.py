@@ -231,3 +231,14 @@ def test_reproduce_hirsh_writes_png_and_json(tmp_path, capsys):
     assert (tmp_path / "hirsh_fig3_fig4.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "hirsh.json").read_text())
     assert "below the line" in out
+
+
+@pytest.mark.parametrize("command", ["simulate", "reproduce"])
+def test_json_output_is_valid_json(command, tmp_path, capsys):
+    argv = {"simulate": ["simulate", "--out", tmp_path / "d.json", "--truth-out",
+                         tmp_path / "t.urdf", "--json"],
+            "reproduce": ["reproduce", "table4", "--out", tmp_path, "--trials", "1",
+                          "--json"]}[command]
+    code, out, _ = _run(argv, capsys)
+    assert code == 0
+    assert isinstance(json.loads(out), dict)
