@@ -8,6 +8,7 @@ never a traceback for a user error), 1 on an unexpected internal error.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import sys
@@ -234,7 +235,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 # -- kinfw demo --------------------------------------------------------------------------
 def _cmd_demo(args: argparse.Namespace) -> int:
     from kinfw.measurements import concatenate_measurements
-    from verification.report import before_after_rows, errors_by_group
+    from verification.report import before_after_rows, errors_by_group, plot_stage_errors
     from verification.simulate import (
         default_target_pose,
         one_joint_at_a_time,
@@ -280,6 +281,13 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         stage: {k: v["position_rms_mm"] for k, v in errors.items()}
         for stage, errors in truth_rms.items()}
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    plot_stage_errors(report["position_rms_mm_vs_truth_held_out_by_stage"], out / "errors.png",
+                      title="IIS-head demo: held-out error against the true robot")
+    from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
+
+    write_html(scene(nominal, load_robot(out / "calibrated.urdf"), data,
+                     targets=targets_from_sidecar(out / "calibrated.kinfw.json"),
+                     residual_scale=30.0, window=OfflineWindow()), out / "scene.html")
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
@@ -299,6 +307,39 @@ def _cmd_demo(args: argparse.Namespace) -> int:
           f"component (true: 0.5 mm, {0.5 / np.sqrt(3.0):.3f} deg)")
     print(f"wrote {out / 'calibrated.urdf'} (+ {report['sidecar']}), {out / 'report.json'} "
           f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
+    print(f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
+          f"{out / 'scene.html'} (open in any browser, no network needed)")
+    return 0
+
+
+# -- kinfw view --------------------------------------------------------------------------
+def _cmd_view(args: argparse.Namespace) -> int:
+    from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
+
+    nominal = load_robot(args.nominal)
+    calibrated = load_robot(args.calibrated) if args.calibrated else None
+    data = read_measurements(args.data) if args.data else None
+    sidecar_path = args.sidecar
+    if sidecar_path is None and args.calibrated:
+        guess = Path(args.calibrated).with_suffix(".kinfw.json")
+        sidecar_path = guess if guess.is_file() else None
+    extra = {}
+    if sidecar_path is not None:
+        doc = json.loads(Path(sidecar_path).read_text(encoding="utf-8"))
+        extra = {"targets": targets_from_sidecar(doc),
+                 "meas_T_root": np.array(doc["w_T_root"])}
+    up = None if args.up is None else [float(v) for v in args.up.replace(",", " ").split()]
+    vis = scene(nominal, calibrated, data, sample=args.sample, residual_scale=args.residual_scale,
+                up=up, package_dirs=tuple(args.package_dir),
+                window=OfflineWindow() if args.html else None, **extra)
+    if args.html:
+        path = write_html(vis, args.html)
+        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
+              "any browser, no network needed)")
+        return 0
+    print(f"meshcat is serving the scene at {vis.url()} (127.0.0.1); press Enter to stop")
+    with contextlib.suppress(EOFError, KeyboardInterrupt):
+        input()
     return 0
 
 
@@ -425,6 +466,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("view", help="nominal and calibrated robots and measurements in 3D",
+                       description="Meshcat view: the nominal robot as a grey ghost, the "
+                       "calibrated one in colour, a sample's measured poses as triads and "
+                       "lines from prediction to measurement (scaled), targets and cameras. "
+                       "Live on 127.0.0.1, or one self-contained HTML file with --html.")
+    p.add_argument("nominal", type=Path, help="nominal URDF")
+    p.add_argument("--calibrated", type=Path, help="calibrated URDF")
+    p.add_argument("--data", type=Path, help="measurement file: draw one sample's observations")
+    p.add_argument("--sidecar", type=Path, help="calibration sidecar (default: "
+                   "CALIBRATED.kinfw.json beside --calibrated, if present)")
+    p.add_argument("--sample", type=int, default=None, help="sample to draw (default 0)")
+    p.add_argument("--residual-scale", type=float, default=10.0,
+                   help="lengthen prediction-to-measurement lines by this factor (default 10)")
+    p.add_argument("--up", help='"x y z": up direction of the root frame (default: the '
+                   "URDF's <kinfw up> hint, else z)")
+    p.add_argument("--package-dir", action="append", default=[],
+                   help="where package:// meshes live (repeatable)")
+    p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of "
+                   "serving")
+    p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
                        description="fig11: Shih et al. Fig. 11 (positioning error vs "

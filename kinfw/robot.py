@@ -169,6 +169,19 @@ def _check_xml(xml: str, source: str) -> ET.Element:
     return root
 
 
+def _up_vector(text: str | None, source: str) -> NDArray[np.float64] | None:
+    if text is None:
+        return None
+    try:
+        up = np.array([float(v) for v in text.split()])
+    except ValueError:
+        up = np.zeros(0)
+    if up.shape != (3,) or not np.linalg.norm(up) > 0:
+        raise RobotModelError(f"{source}: <kinfw up={text!r}>: expected three numbers, "
+                              "not all zero")
+    return up / np.linalg.norm(up)
+
+
 def _parse_joints(xml: str, source: str) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
     yourdfpy_log = logging.getLogger("yourdfpy")
     level = yourdfpy_log.level
@@ -242,6 +255,8 @@ class Robot:
         ``<kinfw frames="left_plate right_plate" cameras="left_camera right_camera"/>``
         under ``<robot>`` (URDF parsers ignore unknown elements, as they do
         ``<gazebo>``); empty when absent. The command line uses them as defaults.
+    default_up : ndarray, shape (3,), or None
+        The root frame's "up" direction for viewers, from ``<kinfw up="x y z"/>``.
     """
 
     def __init__(self, urdf_xml: str, source: str = "<urdf string>") -> None:
@@ -260,6 +275,7 @@ class Robot:
         hint = {} if hint is None else hint.attrib
         self.default_frames = tuple(hint.get("frames", "").split())
         self.default_cameras = tuple(hint.get("cameras", "").split())
+        self.default_up = _up_vector(hint.get("up"), source)
         for name in (*self.default_frames, *self.default_cameras):
             if not self.model.existFrame(name):
                 raise RobotModelError(f"{source}: <kinfw> names frame {name!r}, which the "

@@ -213,7 +213,8 @@ def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
         else:  # camera_T_target of a target ~0.8 m away: 0.2 deg is ~3 mm there
             assert row["after_position_rms_mm"] < row["before_position_rms_mm"] / 3
             assert row["after_rotation_rms_deg"] < 0.3
-    for name in ("calibrated.urdf", "report.json", "data.json", "held_out.json", "true.urdf"):
+    for name in ("calibrated.urdf", "calibrated.kinfw.json", "report.json", "data.json",
+                 "held_out.json", "true.urdf", "errors.png", "scene.html"):
         assert (tmp_path / "demo" / name).is_file()
 
 
@@ -242,3 +243,16 @@ def test_json_output_is_valid_json(command, tmp_path, capsys):
     code, out, _ = _run(argv, capsys)
     assert code == 0
     assert isinstance(json.loads(out), dict)
+
+
+def test_view_writes_a_self_contained_html(tmp_path, capsys):
+    code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
+    assert code == 0
+    code, out, _ = _run(["view", HEAD, "--calibrated", tmp_path / "calibrated.urdf", "--data",
+                         tmp_path / "data.json", "--sample", "60", "--html",
+                         tmp_path / "v.html"], capsys)
+    assert code == 0, out
+    html = (tmp_path / "v.html").read_text(encoding="utf-8")
+    assert "no network needed" in out
+    assert "https://" not in html
+    assert len(html) > 900_000  # the viewer (~0.85 MB) plus both robots' geometry

@@ -19,7 +19,13 @@ from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
 
 __all__ = [
-    "before_after_rows", "calibration_report", "errors_by_group", "file_sha256", "sidecar"]
+    "before_after_rows",
+    "calibration_report",
+    "errors_by_group",
+    "file_sha256",
+    "plot_stage_errors",
+    "sidecar",
+]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -222,3 +228,39 @@ def _kinfw_version() -> str:
         return metadata.version("kinfw")
     except metadata.PackageNotFoundError:
         return "unknown (not installed)"
+
+
+def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, *,
+                      title: str = "") -> Path:
+    """Grouped bars: position RMS (mm, log scale) per observation group after each stage.
+
+    ``stage_rms`` maps a stage name ("nominal", "closed form", ...) to
+    ``{"frame (kind)": rms_mm}``, as in the reports' ``*_by_stage`` entries.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    stages = list(stage_rms)
+    groups = list(stage_rms[stages[0]])
+    fig = Figure(figsize=(8.5, 4.2), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    width = 0.8 / len(stages)
+    colours = ["0.6", "tab:orange", "tab:green", "tab:blue", "tab:purple"]
+    x = np.arange(len(groups))
+    for k, stage in enumerate(stages):
+        values = [stage_rms[stage][g] for g in groups]
+        bars = ax.bar(x + (k - (len(stages) - 1) / 2) * width, values, width, label=stage,
+                      color=colours[k % len(colours)])
+        ax.bar_label(bars, labels=[f"{v:.2g}" for v in values], fontsize=7, padding=1)
+    ax.set_yscale("log")
+    ax.set_xticks(x, groups)
+    ax.set_ylabel("held-out position RMS (mm, log scale)")
+    ax.grid(axis="y", which="both", alpha=0.3)
+    ax.legend(title="after stage", ncols=len(stages), loc="upper center",
+              bbox_to_anchor=(0.5, -0.12), frameon=False)
+    if title:
+        ax.set_title(title, fontsize=10)
+    path = Path(path)
+    fig.savefig(path, dpi=120)
+    return path

@@ -1,0 +1,771 @@
+"""Visual check of a calibration in meshcat: nominal ghost, calibrated robot, data, residuals.
+
+:func:`scene` draws, in one meshcat scene,
+
+- the nominal robot as a translucent grey ghost and the calibrated robot in colour,
+  overlaid at one configuration (Pinocchio's ``MeshcatVisualizer``: URDF boxes,
+  cylinders, spheres and the meshes that can be found; missing meshes are skipped with a
+  logged warning);
+- the observations of one sample of a dataset: a triad (x red, y green, z blue, 3 cm, a
+  dark ball at the origin) per measured ``pose``, a ball per measured ``point``, a triad
+  per ``target`` where a camera saw it;
+- a residual line per observation, from the model's prediction towards the measurement,
+  ``residual_scale`` times as long as the error so that millimetres show, coloured by
+  the error (:data:`RESIDUAL_COLOR_STOPS_MM`);
+- fixed targets (e.g. from the calibration sidecar, :func:`targets_from_sidecar`) as a
+  flat board with a triad, and the cameras' frames as smaller triads.
+
+Triads and residual lines are thin cylinders drawn over everything (WebGL draws lines one
+pixel wide whatever their ``linewidth``). Everything is placed under the node
+``/meshcat/kinfw`` in root-link coordinates; that node's transform ``display_T_root``
+puts the centre of the framed points at the display origin, which meshcat 0.3.2's orbit
+camera always looks at, with ``up`` along the display's z axis. Paths below
+``/meshcat/kinfw``::
+
+    nominal/visuals/<link>_<i>               the ghost (the solid model when alone)
+    calibrated/visuals/<link>_<i>            the calibrated robot
+    measured/poses/<frame>[@<marker>]        triad of a measured pose: x, y, z, origin
+    measured/points/<frame>[@<marker>]       ball of a measured point
+    measured/targets/<camera>/<target>       triad of a target where the camera saw it
+    residuals/poses/<frame>[@<marker>]       residual line; also residuals/points/...
+    residuals/targets/<camera>/<target>        and residuals/targets/...
+    targets/<target>                         a fixed target: board and triad
+    cameras/<camera>                         triad of a camera frame
+
+A residual line's node has the transform ``[R | root_p_predicted]`` with R's y axis along
+the error; its child ``stick`` is a cylinder of height ``residual_scale * |measured -
+predicted|`` reaching from the node's origin along y, its child ``tip`` a ball at the end.
+
+:func:`write_html` saves the scene as one self-contained HTML file (meshcat's viewer
+script inlined, no network access). Without a server, draw into an
+:class:`OfflineWindow`. meshcat is imported inside the functions: ``import kinfw`` does not
+load it.
+"""
+
+from __future__ import annotations
+
+import base64
+import itertools
+import json
+import logging
+import math
+import os
+import re
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.measurements import Measurements, check_against_robot
+from kinfw.robot import Robot, load_robot
+from kinfw.transforms import check_transform, inverse_transform
+
+if TYPE_CHECKING:
+    import meshcat
+
+__all__ = [
+    "GHOST_RGBA",
+    "RESIDUAL_COLOR_STOPS_MM",
+    "SOLID_RGBA",
+    "OfflineWindow",
+    "external_urls",
+    "residual_color",
+    "scene",
+    "targets_from_sidecar",
+    "write_html",
+]
+
+logger = logging.getLogger(__name__)
+
+GHOST_RGBA = (0.25, 0.25, 0.28, 0.35)
+"""Colour of the nominal robot's ghost: translucent grey (RGBA in [0, 1])."""
+SOLID_RGBA = (0.1, 0.45, 0.85, 1.0)
+"""Colour of the calibrated robot (of the nominal one when it is drawn alone)."""
+TARGET_RGBA = (0.95, 0.8, 0.25, 0.8)
+"""Colour of a fixed target's flat box."""
+RESIDUAL_COLOR_STOPS_MM = ((0.0, (0.0, 0.7, 0.2)), (2.0, (1.0, 0.6, 0.0)),
+                           (10.0, (0.85, 0.0, 0.85)))
+"""Residual line colour against the error (before scaling), mm: green at 0 mm, orange at
+2 mm, magenta at 10 mm and more, linear in between."""
+TRIAD_LENGTH = 0.03
+"""Length of a measured pose's triad, metres (a fixed target's is twice as long)."""
+TARGET_SIZE = (0.16, 0.12, 0.004)
+"""Size of a fixed target's box along its x, y, z axes, metres (z: the target normal)."""
+POINT_RADIUS = 0.004
+"""Radius of a measured point's sphere, metres."""
+POINT_RGB = (0.45, 0.1, 0.6)
+"""Colour of a measured point's sphere."""
+STICK_RADIUS = 0.0012
+"""Radius of the cylinders that draw triad axes, metres."""
+RESIDUAL_RADIUS = 0.0015
+"""Radius of a residual line's cylinder, metres (its tip is a ball 1.6 times wider)."""
+CAMERA_TRIAD_LENGTH = 0.02
+"""Length of a camera frame's triad, metres (thinner and shorter than a measurement's)."""
+MEASURED_RGB = (0.1, 0.1, 0.1)
+"""Colour of the ball at the origin of a measured pose's triad."""
+OVERLAY_RENDER_ORDER = 10
+"""three.js renderOrder of triads and residual lines (drawn after the robots)."""
+CAMERA_FOV_DEG = 30.0
+"""Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
+BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
+"""Background gradient (top, bottom)."""
+
+# URLs that a browser never fetches: XML namespaces in meshcat's viewer script.
+_NAMESPACE_URLS = ("http://www.w3.org/",)
+_URL = re.compile(r"https?://[^\s\"'<>)]*", re.IGNORECASE)
+
+
+# -- offline window ----------------------------------------------------------------------
+
+
+class OfflineWindow:
+    """A meshcat window without a server: records commands, serves the static HTML.
+
+    ``meshcat.Visualizer(window=OfflineWindow())`` draws into it like into a server:
+    the scene tree is kept with the server's rules (a ``set_object`` replaces the node's
+    object and properties, ``delete`` removes a subtree), and :meth:`get_scene` returns
+    the same self-contained HTML as ``meshcat-server`` (the viewer script inlined).
+
+    Attributes
+    ----------
+    commands : list of dict
+        Every command sent, as ``command.lower()`` (keys ``type``, ``path`` and the
+        command's fields), in order.
+    """
+
+    def __init__(self) -> None:
+        from meshcat.servers.tree import SceneTree
+
+        self.commands: list[dict[str, Any]] = []
+        self._tree = SceneTree()
+
+    def send(self, command: Any) -> None:
+        """Record one meshcat command (``SetObject``, ``SetTransform``, ...)."""
+        import umsgpack
+        from meshcat.servers.tree import SceneTree, find_node
+
+        data = command.lower()
+        self.commands.append(data)
+        kind = data["type"]
+        path = [p for p in data.get("path", "").split("/") if p]
+        packed = umsgpack.packb(data)
+        if kind == "set_object":
+            node = find_node(self._tree, path)
+            node.object, node.properties = packed, []
+        elif kind == "set_transform":
+            find_node(self._tree, path).transform = packed
+        elif kind == "set_property":
+            find_node(self._tree, path).properties.append(packed)
+        elif kind == "set_animation":
+            find_node(self._tree, path).animation = packed
+        elif kind == "delete":
+            if path:
+                parent = find_node(self._tree, path[:-1])
+                parent.pop(path[-1], None)
+            else:
+                self._tree = SceneTree()
+        else:
+            raise ValueError(f"OfflineWindow: cannot record a {kind!r} command without a "
+                             "browser (get_image needs meshcat.Visualizer())")
+
+    def get_scene(self) -> str:
+        """The scene as one self-contained HTML page (what ``meshcat-server`` returns)."""
+        import meshcat
+        from meshcat.servers.tree import walk
+
+        def command(packed: bytes) -> str:  # as meshcat.servers.zmqserver.create_command
+            return ('\nfetch("data:application/octet-binary;base64,'
+                    f'{base64.b64encode(packed).decode("utf-8")}")\n'
+                    "    .then(res => res.arrayBuffer())\n"
+                    "    .then(buffer => viewer.handle_command_bytearray("
+                    "new Uint8Array(buffer)));\n    ")
+
+        parts = []
+        for node in walk(self._tree):
+            if node.object is not None:
+                parts.append(command(node.object))
+            parts.extend(command(p) for p in node.properties)
+            if node.transform is not None:
+                parts.append(command(node.transform))
+            if node.animation is not None:
+                parts.append(command(node.animation))
+        viewer = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
+        return _HTML.format(mainminjs=viewer.read_text(encoding="utf-8"),
+                            commands="".join(parts))
+
+    def open(self) -> OfflineWindow:  # meshcat.Visualizer.open() calls this
+        raise RuntimeError("OfflineWindow has no server to open; use write_html()")
+
+
+_HTML = """<!DOCTYPE html>
+<html>
+    <head> <meta charset=utf-8> <title>kinfw - MeshCat</title> </head>
+    <body>
+        <div id="meshcat-pane">
+        </div>
+        <script>
+            {mainminjs}
+        </script>
+        <script>
+            var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+            {commands}
+        </script>
+         <style>
+            body {{margin: 0; }}
+            #meshcat-pane {{
+                width: 100vw;
+                height: 100vh;
+                overflow: hidden;
+            }}
+        </style>
+        <script id="embedded-json"></script>
+    </body>
+</html>
+"""
+
+
+# -- small helpers -----------------------------------------------------------------------
+
+
+def _as_robot(robot: Robot | str | Path, name: str) -> Robot:
+    if isinstance(robot, Robot):
+        return robot
+    if isinstance(robot, (str, Path)):
+        return load_robot(robot)
+    raise TypeError(f"{name}: expected a kinfw.Robot or a URDF path, got {type(robot).__name__}")
+
+
+def _rgb_int(rgb: Sequence[float]) -> int:
+    r, g, b = (round(255 * min(max(float(c), 0.0), 1.0)) for c in rgb[:3])
+    return (r << 16) | (g << 8) | b
+
+
+def residual_color(error_m: float) -> tuple[float, float, float]:
+    """RGB of a residual line for an error of ``error_m`` metres (see
+    :data:`RESIDUAL_COLOR_STOPS_MM`)."""
+    e = 1e3 * float(error_m)
+    stops = RESIDUAL_COLOR_STOPS_MM
+    if e <= stops[0][0]:
+        return stops[0][1]
+    for (e0, c0), (e1, c1) in itertools.pairwise(stops):
+        if e <= e1:
+            t = (e - e0) / (e1 - e0)
+            return tuple(float(a + t * (b - a)) for a, b in zip(c0, c1, strict=True))
+    return stops[-1][1]
+
+
+def _overlay_material(rgb: Sequence[float]) -> Any:
+    """Unlit colour drawn over everything (no depth test, rendered last), so that
+    triads inside a link's visual and residuals behind the ghost stay visible."""
+    import meshcat.geometry as mg
+
+    return mg.MeshBasicMaterial(color=_rgb_int(rgb), transparent=True, opacity=1.0,
+                                depthTest=False, depthWrite=False)
+
+
+def _overlay_object(geometry: Any, rgb: Sequence[float]) -> Any:
+    import meshcat.geometry as mg
+
+    class OverlayMesh(mg.Mesh):
+        def lower(self) -> dict[str, Any]:
+            data = super().lower()
+            data["object"]["renderOrder"] = OVERLAY_RENDER_ORDER
+            return data
+
+    return OverlayMesh(geometry, _overlay_material(rgb))
+
+
+def _rotation_y_onto(direction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A rotation whose y axis (meshcat's cylinder axis) is the unit ``direction``."""
+    norm = np.linalg.norm(direction)
+    if norm == 0.0:
+        return np.eye(3)
+    y = direction / norm
+    x = np.cross(y, np.eye(3)[np.argmin(np.abs(y))])
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def _stick(node: meshcat.Visualizer, origin: ArrayLike, vector: ArrayLike, radius: float,
+           rgb: Sequence[float]) -> None:
+    """A thin cylinder from ``origin`` to ``origin + vector`` (coordinates of the node's
+    parent). ``node`` gets the transform ``[R | origin]``, R taking y onto ``vector``;
+    its child ``stick`` holds the cylinder of height ``|vector|``."""
+    import meshcat.geometry as mg
+
+    vector = np.asarray(vector, dtype=float)
+    length = float(np.linalg.norm(vector))
+    parent_T_node = np.eye(4)
+    parent_T_node[:3, :3] = _rotation_y_onto(vector)
+    parent_T_node[:3, 3] = origin
+    node.set_transform(parent_T_node)
+    node["stick"].set_object(_overlay_object(mg.Cylinder(length, radius), rgb))
+    node["stick"].set_transform(_translation([0.0, 0.5 * length, 0.0]))
+
+
+def _triad(node: meshcat.Visualizer, parent_T_frame: NDArray[np.float64], *,
+           length: float = TRIAD_LENGTH, radius: float = STICK_RADIUS,
+           origin_rgb: Sequence[float] | None = None) -> None:
+    """Axes x (red), y (green), z (blue) of a frame: children ``x``, ``y``, ``z`` (and
+    ``origin``, a small ball, when ``origin_rgb`` is given)."""
+    import meshcat.geometry as mg
+
+    node.set_transform(parent_T_frame)
+    for axis, name in enumerate("xyz"):
+        _stick(node[name], np.zeros(3), length * np.eye(3)[axis], radius, np.eye(3)[axis])
+    if origin_rgb is not None:
+        node["origin"].set_object(_overlay_object(mg.Sphere(2.0 * radius), origin_rgb))
+
+
+def _translation(p: ArrayLike) -> NDArray[np.float64]:
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
+def _node_name(frame: str, marker: str | None) -> str:
+    name = frame if marker is None else f"{frame}@{marker}"
+    return name.replace("/", "_")
+
+
+# -- robot geometry ----------------------------------------------------------------------
+
+
+def _resolve_mesh(filename: str, base_dir: Path | None,
+                  package_dirs: Sequence[Path]) -> Path | None:
+    """The existing file a URDF mesh ``filename`` names, or None."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://"):].partition("/")
+        candidates = []
+        for d in package_dirs:
+            candidates += [d / package / rest, d / rest]
+        if base_dir is not None:  # .../<package>/urdf/robot.urdf: look up the tree
+            candidates += [a / rest for a in (base_dir, *base_dir.parents) if a.name == package]
+    elif filename.startswith("file://"):
+        candidates = [Path(filename[len("file://"):])]
+    else:
+        path = Path(filename)
+        candidates = [path if path.is_absolute() or base_dir is None else base_dir / path]
+    return next((c.resolve() for c in candidates if c.is_file()), None)
+
+
+def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
+    """The robot's URDF with mesh paths made absolute and visuals whose mesh is missing
+    removed (each with a logged warning)."""
+    root = ET.fromstring(robot.urdf_xml)
+    source = Path(robot.source)
+    base_dir = source.resolve().parent if source.is_file() else None
+    changed = False
+    for link in root.iter("link"):
+        for visual in list(link.findall("visual")):
+            mesh = visual.find("geometry/mesh")
+            if mesh is None:
+                continue
+            filename = mesh.get("filename", "")
+            found = _resolve_mesh(filename, base_dir, package_dirs)
+            if found is None:
+                logger.warning("%s: mesh %r of link %r not found (searched %s); that visual "
+                               "is not drawn", robot.source, filename, link.get("name"),
+                               [str(d) for d in package_dirs] or "no package_dirs")
+                link.remove(visual)
+            else:
+                mesh.set("filename", str(found))
+            changed = True
+    return ET.tostring(root, encoding="unicode") if changed else robot.urdf_xml
+
+
+def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryModel:
+    xml = _visual_urdf(robot, package_dirs)
+    try:
+        return pin.buildGeomFromUrdfString(robot.model, xml, pin.GeometryType.VISUAL)
+    except Exception as exc:  # a mesh that exists but cannot be read
+        logger.warning("%s: cannot load the visual geometry (%s); drawing primitives only",
+                       robot.source, exc)
+        root = ET.fromstring(xml)
+        for link in root.iter("link"):
+            for visual in list(link.findall("visual")):
+                if visual.find("geometry/mesh") is not None:
+                    link.remove(visual)
+        return pin.buildGeomFromUrdfString(robot.model, ET.tostring(root, encoding="unicode"),
+                                           pin.GeometryType.VISUAL)
+
+
+def _draw_robot(vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray,
+                rgba: Sequence[float] | None, package_dirs: Sequence[Path]
+                ) -> NDArray[np.float64]:
+    """Draw ``robot`` at ``pin_q`` under ``node``; return the points to frame, (m, 3):
+    the centres of the visuals of its moving links (of all links if none moves; the link
+    frames' origins if it has no visuals)."""
+    from pinocchio.visualize import MeshcatVisualizer
+
+    visual_model = _visual_model(robot, package_dirs)
+    viz = MeshcatVisualizer(robot.model, None, visual_model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        viz.initViewer(viewer=vis)
+        viz.loadViewerModel(rootNodeName=node,
+                            visual_color=None if rgba is None else list(rgba))
+        viz.display(pin_q)
+    for w in caught:
+        logger.warning("%s: %s", robot.source, w.message)
+    # Frame the moving part: the centres of the visuals behind a movable joint (Pinocchio
+    # merges fixed joints, so parentJoint 0 means rigidly attached to the root link).
+    placements = [(g.parentJoint, oMg.translation) for g, oMg in
+                  zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)]
+    if not placements:
+        pin.updateFramePlacements(viz.model, viz.data)
+        placements = [(f.parentJoint, oMf.translation) for f, oMf in
+                      zip(viz.model.frames, viz.data.oMf, strict=True)
+                      if f.type == pin.FrameType.BODY]
+    moving = [p for joint, p in placements if joint > 0]
+    return np.array(moving or [p for _, p in placements]).reshape(-1, 3)
+
+
+# -- camera ------------------------------------------------------------------------------
+
+
+def _display_frame(points: NDArray[np.float64], up: NDArray[np.float64], *,
+                   fov_deg: float, aspect: float = 4.0 / 3.0, pad: float = 0.08
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``display_T_root`` and the camera position in display coordinates.
+
+    The display frame has its origin at the centre of the points' bounding box and
+    ``up`` along z; its x axis points horizontally towards the root origin (the
+    measurement system when the root is the measurement frame), or along the points'
+    longest horizontal extent when the root origin is above or below the centre. The
+    camera looks at the origin from 35 deg to the side of x and 15 deg above the
+    horizon, just far enough that a ball of radius ``pad`` (metres) about every point
+    is inside 85 % of the field of view (``fov_deg`` vertically) of a window of
+    width / height ``aspect`` or wider.
+    """
+    up = up / np.linalg.norm(up)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    x = -centre - (-centre @ up) * up
+    if np.linalg.norm(x) < 1e-3 and len(points) > 1:
+        flat = (points - centre) - np.outer((points - centre) @ up, up)
+        x = np.linalg.svd(flat, full_matrices=False)[2][0]
+        x = x - (x @ up) * up
+    if np.linalg.norm(x) < 1e-9:  # nothing horizontal: any horizontal axis
+        x = np.cross(up, np.eye(3)[np.argmin(np.abs(up))])
+    x /= np.linalg.norm(x)
+    root_R_display = np.column_stack([x, np.cross(up, x), up])
+    display_T_root = np.eye(4)
+    display_T_root[:3, :3] = root_R_display.T
+    display_T_root[:3, 3] = -root_R_display.T @ centre
+    display_ps = (points - centre) @ root_R_display
+
+    azimuth, elevation = math.radians(35.0), math.radians(15.0)
+    back = np.array([math.cos(elevation) * math.cos(azimuth),
+                     math.cos(elevation) * math.sin(azimuth), math.sin(elevation)])
+    right = np.cross([0.0, 0.0, 1.0], back)
+    right /= np.linalg.norm(right)
+    screen_up = np.cross(back, right)
+    tan_v = 0.85 * math.tan(math.radians(fov_deg / 2))
+    tan_h = aspect * tan_v
+    # A point p is in view from distance D when |p.right| <= (D - p.back) tan_h and
+    # |p.screen_up| <= (D - p.back) tan_v.
+    depth = display_ps @ back
+    need = np.maximum((np.abs(display_ps @ right) + pad) / tan_h,
+                      (np.abs(display_ps @ screen_up) + pad) / tan_v)
+    distance = max(float(np.max(depth + need)), 0.3)
+    return display_T_root, distance * back
+
+
+def _set_camera(vis: meshcat.Visualizer, display_offset: NDArray[np.float64],
+                fov_deg: float) -> None:
+    """Put meshcat's orbit camera at ``display_offset`` (it looks at the origin)."""
+    # The camera lives in /Cameras/default/rotated, which turns three.js' y-up frame
+    # into meshcat's z-up one: display (x, y, z) is three.js (x, z, -y).
+    x, y, z = (float(v) for v in display_offset)
+    vis["/Cameras/default"].set_transform(np.eye(4))
+    camera = vis["/Cameras/default/rotated/<object>"]
+    camera.set_property("position", [x, z, -y])
+    camera.set_property("fov", fov_deg)
+
+
+# -- the scene ---------------------------------------------------------------------------
+
+
+def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = None,
+          data: Measurements | None = None, *, q: ArrayLike | None = None,
+          joint_names: Sequence[str] | None = None, sample: int | None = None,
+          targets: Iterable[tuple[str, ArrayLike]] = (), window: Any = None,
+          residual_scale: float = 10.0, meas_T_root: ArrayLike | None = None,
+          up: ArrayLike | None = None, package_dirs: Sequence[str | Path] = (),
+          ghost_rgba: Sequence[float] = GHOST_RGBA,
+          solid_rgba: Sequence[float] | None = SOLID_RGBA) -> meshcat.Visualizer:
+    """Draw a calibration for a visual check: nominal ghost, calibrated robot, data.
+
+    Parameters
+    ----------
+    nominal : Robot or path
+        The nominal robot, drawn as a translucent ghost (``ghost_rgba``); drawn solid
+        (``solid_rgba``) when there is no ``calibrated`` robot.
+    calibrated : Robot or path, optional
+        The calibrated robot, drawn solid. Residuals are its errors (the nominal's when
+        it is None).
+    data : Measurements, optional
+        Measurements; the observations of one sample are drawn.
+    q : array_like, shape (k,), optional
+        Joint values (rad, m) at which both robots are drawn, in the order of
+        ``joint_names``. Default: the configuration of sample ``sample`` of ``data``
+        (sample 0), else all zeros.
+    joint_names : sequence of str, optional
+        Order of ``q``; default ``data.joint_names`` with data, else the nominal robot's
+        movable joints.
+    sample : int, optional
+        Sample of ``data`` whose observations are drawn. Default 0 when ``q`` is not
+        given; when ``q`` is given, observations are drawn only if ``sample`` is (the
+        caller vouches that it was measured at ``q``).
+    targets : iterable of (str, array_like (4, 4))
+        Fixed targets ``(name, root_T_target)`` (e.g. :func:`targets_from_sidecar`):
+        drawn as a flat box and a triad; ``target`` observations of a known target get
+        a residual line from the target towards where the camera saw it.
+    window : object, optional
+        A meshcat window (``send(command)`` and ``get_scene()``), e.g.
+        :class:`OfflineWindow`. None starts a meshcat server on 127.0.0.1.
+    residual_scale : float
+        Residual lines are ``residual_scale`` times the error (default 10: 1 mm -> 1 cm).
+    meas_T_root : array_like, shape (4, 4), optional
+        Pose of the root link in the data's ``measured_in`` frame (the sidecar's
+        ``w_T_root``); observations made in such a frame are skipped without it.
+    up : array_like, shape (3,), optional
+        The direction, in the root frame, to show upwards. Default: the ``up`` attribute
+        of the URDF's ``<kinfw>`` element (``<kinfw up="0 -1 0"/>``), else ``+z``.
+    package_dirs : sequence of path
+        Folders searched for ``package://`` meshes. Meshes that are not found are
+        skipped with a logged warning.
+    ghost_rgba, solid_rgba : sequence of 4 floats
+        Colours of the ghost and of the solid robot; ``solid_rgba=None`` keeps the
+        URDF's materials.
+
+    Returns
+    -------
+    meshcat.Visualizer
+        The visualizer (its ``window`` is ``window``); see :func:`write_html`.
+
+    Notes
+    -----
+    Framing: the camera looks at the centre of the bounding box of the moving links'
+    visuals (links behind a movable joint), the observations, their predictions and the
+    cameras, from the side of the root origin (where the measurement system is when the
+    root link is the measurement frame), 15 deg above the horizon, close enough that
+    all of them fill most of the view; fixed links and targets are drawn but not
+    framed. ``/Axes`` and ``/Grid`` are hidden. ``get_image`` is never called.
+    """
+    import meshcat
+
+    nominal = _as_robot(nominal, "nominal")
+    calibrated = None if calibrated is None else _as_robot(calibrated, "calibrated")
+    model = calibrated if calibrated is not None else nominal
+    if not residual_scale > 0:
+        raise ValueError(f"residual_scale: expected a positive number, got {residual_scale}")
+    if data is not None:
+        data = check_against_robot(data, model)
+    if joint_names is None:
+        joint_names = data.joint_names if data is not None else nominal.joint_names
+    joint_names = tuple(joint_names)
+    if sample is not None and (data is None or not 0 <= sample < data.n_samples):
+        n = 0 if data is None else data.n_samples
+        raise IndexError(f"sample {sample} is out of range for {n} samples")
+    if q is None:
+        if data is not None and data.n_samples:
+            sample = 0 if sample is None else int(sample)
+            q = data.qs[sample]
+        else:
+            q = np.zeros(len(joint_names))
+    q = np.asarray(q, dtype=float)
+    if q.shape != (len(joint_names),):
+        raise ValueError(f"q: expected shape ({len(joint_names)},) for joints "
+                         f"{list(joint_names)}, got {q.shape}")
+    targets = tuple((str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
+                    for name, T in targets)
+    up = _up_hint(model) if up is None else np.asarray(up, dtype=float)
+    if up.shape != (3,) or not np.linalg.norm(up) > 0:
+        raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
+    dirs = tuple(Path(d) for d in package_dirs) + tuple(
+        Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d)
+
+    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
+    root = vis["kinfw"]
+    robot_ps = []
+    if calibrated is not None:
+        robot_ps.append(_draw_robot(vis, nominal, "kinfw/nominal",
+                                    nominal.pin_configurations(q, joint_names)[0],
+                                    ghost_rgba, dirs))
+    robot_ps.append(_draw_robot(vis, model, "kinfw/calibrated" if calibrated is not None
+                                else "kinfw/nominal",
+                                model.pin_configurations(q, joint_names)[0], solid_rgba, dirs))
+    focus_ps = []
+    if data is not None and sample is not None:
+        focus_ps.append(_draw_observations(root, model, data, sample, q, joint_names,
+                                           dict(targets), residual_scale, meas_T_root))
+    focus_ps.append(_draw_cameras(root, model, data, q, joint_names))
+    _draw_targets(root, targets)
+    focus = np.concatenate([*robot_ps, *focus_ps])
+
+    display_T_root, camera_offset = _display_frame(focus, up,
+                                                   fov_deg=CAMERA_FOV_DEG)
+    root.set_transform(display_T_root)
+    _set_camera(vis, camera_offset, CAMERA_FOV_DEG)
+    vis["/Axes"].set_property("visible", False)
+    vis["/Grid"].set_property("visible", False)
+    vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
+    vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))
+    return vis
+
+
+def _up_hint(robot: Robot) -> NDArray[np.float64]:
+    return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
+
+
+def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurements,
+                       sample: int, q: NDArray, joint_names: tuple[str, ...],
+                       targets: dict[str, NDArray], residual_scale: float,
+                       meas_T_root: ArrayLike | None) -> NDArray[np.float64]:
+    """Measured poses, points and seen targets of one sample and their residual lines;
+    return the points to frame: measured and predicted poses and points (not targets)."""
+    import meshcat.geometry as mg
+
+    root_T_meas = None if meas_T_root is None else inverse_transform(
+        check_transform(np.asarray(meas_T_root, float), name="meas_T_root"))
+    drawn = []
+
+    def in_root(measured_in: str | None, what: str) -> NDArray | None:
+        if measured_in is None:
+            return np.eye(4)
+        if root_T_meas is None:
+            logger.warning("%s: sample %d: %s is measured in %r; pass meas_T_root (the "
+                           "sidecar's w_T_root) to draw it", data.source, sample, what,
+                           measured_in)
+        return root_T_meas
+
+    def residual(path: str, root_p_pred: NDArray, root_p_meas: NDArray) -> None:
+        error = root_p_meas - root_p_pred
+        rgb = residual_color(float(np.linalg.norm(error)))
+        node = root[path]
+        _stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
+        node["tip"].set_object(_overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
+        node["tip"].set_transform(
+            _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0]))
+        return root_p_pred
+
+    for g in data.poses:
+        for row in np.flatnonzero(g.sample == sample):
+            name = _node_name(g.frame, g.marker)
+            to_root = in_root(g.measured_in, f"pose of {name!r}")
+            if to_root is None:
+                continue
+            root_T_measured = to_root @ g.meas_T_frame[row]
+            _triad(root["measured/poses/" + name], root_T_measured, origin_rgb=MEASURED_RGB)
+            drawn.append(root_T_measured[:3, 3])
+            if g.marker is not None:
+                logger.info("%s: no residual for marker %r (its pose on %r is unknown)",
+                            data.source, g.marker, g.frame)
+                continue
+            root_p_pred = model.frame_poses(q, g.frame, joint_names)[:3, 3]
+            drawn.append(residual("residuals/poses/" + name, root_p_pred,
+                                  root_T_measured[:3, 3]))
+
+    for g in data.points:
+        for row in np.flatnonzero(g.sample == sample):
+            name = _node_name(g.frame, g.marker)
+            to_root = in_root(g.measured_in, f"point on {name!r}")
+            if to_root is None:
+                continue
+            root_p_measured = to_root[:3, :3] @ g.meas_p_point[row] + to_root[:3, 3]
+            node = root["measured/points/" + name]
+            node.set_object(_overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
+            node.set_transform(_translation(root_p_measured))
+            drawn.append(root_p_measured)
+            if g.offset is None:
+                continue
+            root_T_frame = model.frame_poses(q, g.frame, joint_names)
+            root_p_pred = root_T_frame[:3, :3] @ g.offset + root_T_frame[:3, 3]
+            drawn.append(residual("residuals/points/" + name, root_p_pred, root_p_measured))
+
+    for g in data.targets:
+        for row in np.flatnonzero(g.sample == sample):
+            root_T_seen = model.frame_poses(q, g.camera, joint_names) @ g.camera_T_target[row]
+            name = f"{_node_name(g.camera, None)}/{_node_name(g.target, None)}"
+            _triad(root["measured/targets/" + name], root_T_seen, origin_rgb=MEASURED_RGB)
+            if g.target in targets:
+                residual("residuals/targets/" + name, targets[g.target][:3, 3],
+                         root_T_seen[:3, 3])
+    return np.array(drawn).reshape(-1, 3)
+
+
+def _draw_targets(root: meshcat.Visualizer, targets: tuple[tuple[str, NDArray], ...]
+                  ) -> NDArray[np.float64]:
+    import meshcat.geometry as mg
+
+    for name, root_T_target in targets:
+        node = root["targets/" + _node_name(name, None)]
+        material = mg.MeshLambertMaterial(color=_rgb_int(TARGET_RGBA),
+                                          opacity=TARGET_RGBA[3], transparent=True)
+        node["board"].set_object(mg.Box(TARGET_SIZE), material)
+        node["board"].set_transform(_translation([0.0, 0.0, -0.5 * TARGET_SIZE[2]]))
+        _triad(node["triad"], np.eye(4), length=2 * TRIAD_LENGTH)
+        node.set_transform(root_T_target)
+    return np.array([T[:3, 3] for _, T in targets]).reshape(-1, 3)
+
+
+def _draw_cameras(root: meshcat.Visualizer, model: Robot, data: Measurements | None,
+                  q: NDArray, joint_names: tuple[str, ...]) -> NDArray[np.float64]:
+    cameras = dict.fromkeys(model.default_cameras)
+    if data is not None:
+        cameras.update(dict.fromkeys(g.camera for g in data.targets))
+    drawn = []
+    for camera in cameras:
+        root_T_camera = model.frame_poses(q, camera, joint_names)
+        _triad(root["cameras/" + _node_name(camera, None)], root_T_camera,
+               length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
+        drawn.append(root_T_camera[:3, 3])
+    return np.array(drawn).reshape(-1, 3)
+
+
+# -- files -------------------------------------------------------------------------------
+
+
+def targets_from_sidecar(sidecar: str | Path | dict[str, Any]
+                         ) -> tuple[tuple[str, NDArray[np.float64]], ...]:
+    """``(name, root_T_target)`` of every target in a calibration sidecar
+    (``*.kinfw.json`` written by ``kinfw calibrate``), for :func:`scene`'s ``targets``."""
+    doc = sidecar if isinstance(sidecar, dict) else json.loads(
+        Path(sidecar).read_text(encoding="utf-8"))
+    return tuple((str(t["target"]), check_transform(np.asarray(t["root_T_target"], float),
+                                                    name=f"targets[{t['target']!r}]"))
+                 for t in doc.get("targets", ()))
+
+
+def external_urls(html: str) -> list[str]:
+    """The http(s) URLs in ``html`` that a browser could fetch (XML namespace URIs of
+    the viewer script are not counted)."""
+    return [u for u in _URL.findall(html) if not u.lower().startswith(_NAMESPACE_URLS)]
+
+
+def write_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
+    """Save the scene as one self-contained HTML file and return its path.
+
+    The file holds meshcat's viewer script and the scene's commands; it opens in a
+    browser without network access or a server.
+
+    Raises
+    ------
+    ValueError
+        If the HTML would load something from the network (a URL to a CDN).
+    """
+    html = vis.static_html()
+    urls = external_urls(html)
+    if urls:
+        raise ValueError(f"the meshcat HTML refers to the network ({urls[:3]}); it would "
+                         "not be self-contained")
+    path = Path(path)
+    path.write_text(html, encoding="utf-8")
+    logger.debug("wrote %s (%d bytes)", path, path.stat().st_size)
+    return path
