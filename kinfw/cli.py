@@ -132,13 +132,23 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
     robot = load_robot(args.model)
     data = read_measurements(args.data)
-    report = evaluate_model(robot, data)
+    sidecar_path = args.sidecar or Path(args.model).with_suffix(".kinfw.json")
+    sidecar_doc = None
+    if Path(sidecar_path).is_file() and not args.no_sidecar:
+        sidecar_doc = json.loads(Path(sidecar_path).read_text(encoding="utf-8"))
+    elif args.sidecar:
+        raise OSError(f"{args.sidecar}: sidecar not found")
+    report = evaluate_model(robot, data, sidecar=sidecar_doc)
+    used = str(sidecar_path) if sidecar_doc else None
     if args.json:
-        print(json.dumps({"model": str(args.model), "data": str(args.data),
-                          **report.to_dict()}, indent=2))
+        print(json.dumps({"model": str(args.model), "data": str(args.data), "sidecar": used,
+                          **report.to_dict(per_sample=True)}, indent=2))
         return 0
     print(f"errors of {args.model} against {args.data} ({data.n_samples} samples; "
           "measured minus predicted)")
+    if used:
+        print(f"using the calibration sidecar {used} (measurement frame, targets, markers "
+              "as calibrated, not refitted)")
     print(accuracy_table(report.to_dict()))
     for note in report.fitted:
         print(f"note: fitted from the data: {note}")
@@ -438,7 +448,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("verify", help="errors of a URDF model against measurements")
     p.add_argument("model", type=Path, help="URDF to evaluate")
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--sidecar", type=Path, help="calibration sidecar (default: "
+                   "MODEL.kinfw.json beside the model, used when present)")
+    p.add_argument("--no-sidecar", action="store_true",
+                   help="ignore the sidecar: fit nuisance frames to these data")
+    p.add_argument("--json", action="store_true",
+                   help="print the report as JSON, with per-sample errors")
     p.set_defaults(func=_cmd_verify)
 
     p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")

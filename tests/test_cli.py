@@ -256,3 +256,22 @@ def test_view_writes_a_self_contained_html(tmp_path, capsys):
     assert "no network needed" in out
     assert "https://" not in html
     assert len(html) > 900_000  # the viewer (~0.85 MB) plus both robots' geometry
+
+
+def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
+    code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
+    assert code == 0
+    code, out, _ = _run(["verify", tmp_path / "calibrated.urdf", tmp_path / "held_out.json",
+                         "--json"], capsys)
+    assert code == 0
+    report = json.loads(out)
+    assert report["sidecar"].endswith("calibrated.kinfw.json")
+    assert report["fitted"] == []  # the target pose comes from the calibration
+    camera = next(g for g in report["groups"] if g["kind"] == "target")
+    assert len(camera["samples"]) == camera["n"] == 100
+    rms = np.sqrt(np.mean([s["position_mm"] ** 2 for s in camera["samples"]]))
+    assert rms == pytest.approx(camera["position_rms_mm"], rel=1e-9)
+    code, out, _ = _run(["verify", tmp_path / "calibrated.urdf", tmp_path / "held_out.json",
+                         "--json", "--no-sidecar"], capsys)
+    assert json.loads(out)["sidecar"] is None
+    assert len(json.loads(out)["fitted"]) == 2

@@ -27,7 +27,7 @@ from kinfw.measurements import DatasetError, Measurements, check_against_robot
 from kinfw.robot import Robot
 from kinfw.transforms import average_transform, inverse_transform, rotation_angle
 
-__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model"]
+__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "known_frames"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,15 +103,22 @@ class AccuracyReport:
     groups: tuple[GroupErrors, ...]
     fitted: tuple[str, ...]
 
-    def to_dict(self) -> dict:
-        """JSON-ready summary (SI inside, mm and degrees in the field names)."""
-        return {
-            "fitted": list(self.fitted),
-            "groups": [
-                {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
-                for g in self.groups
-            ],
-        }
+    def to_dict(self, *, per_sample: bool = False) -> dict:
+        """JSON-ready summary (SI inside, mm and degrees in the field names); with
+        ``per_sample`` each group also lists every sample's position error (mm, norm and
+        x, y, z) and rotation error (deg)."""
+        groups = []
+        for g in self.groups:
+            entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
+            if per_sample:
+                entry["samples"] = [
+                    {"sample": int(k), "position_mm": float(p),
+                     "position_xyz_mm": (1e3 * e).tolist(),
+                     "rotation_deg": None if np.isnan(r) else float(r)}
+                    for k, p, e, r in zip(g.sample, g.position_norm_mm, g.position_error_m,
+                                          g.rotation_deg, strict=True)]
+            groups.append(entry)
+        return {"fitted": list(self.fitted), "groups": groups}
 
 
 def _pose_errors(meas_T: NDArray, pred_T: NDArray) -> tuple[NDArray, NDArray]:
@@ -120,11 +127,32 @@ def _pose_errors(meas_T: NDArray, pred_T: NDArray) -> tuple[NDArray, NDArray]:
     return dp, dr
 
 
-def evaluate_model(robot: Robot, measurements: Measurements) -> AccuracyReport:
+def known_frames(sidecar: dict | None) -> dict[tuple[str, str], NDArray]:
+    """The rigid frames and offsets a calibration sidecar (``*.kinfw.json``) provides:
+    ``{("frame", name): meas_T_root, ("target", name): root_T_target,
+    ("marker", name): frame_T_marker, ("offset", "frame:marker"): frame_p_point}``."""
+    if not sidecar:
+        return {}
+    known: dict[tuple[str, str], NDArray] = {}
+    for t in sidecar.get("targets", []):
+        known[("target", t["target"])] = np.array(t["root_T_target"])
+    for u in sidecar.get("unknowns", []):
+        known[(u["kind"], u["name"])] = np.array(u["value"])
+    if sidecar.get("measurement_frame"):
+        known[("frame", sidecar["measurement_frame"])] = np.array(sidecar["w_T_root"])
+    return known
+
+
+def evaluate_model(robot: Robot, measurements: Measurements, *,
+                   sidecar: dict | None = None) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
     The prediction uses the CPC model converted from the URDF (equal to Pinocchio FK to
-    1e-12, see :mod:`verification.crosscheck`), vectorised over samples.
+    1e-12, see :mod:`verification.crosscheck`), vectorised over samples. With the
+    calibration's ``sidecar`` (the ``*.kinfw.json`` written beside a calibrated URDF), the
+    frames it provides (the root's pose in the measurement frame, target poses, markers,
+    point offsets) are used as calibrated instead of being fitted to these data, so the
+    errors are honest predictions.
 
     Raises
     ------
@@ -135,6 +163,7 @@ def evaluate_model(robot: Robot, measurements: Measurements) -> AccuracyReport:
         for ``kinfw calibrate``, not a closed-form fit.
     """
     measurements = check_against_robot(measurements, robot)
+    known = known_frames(sidecar)
     frames = measurements.observed_frames
     model = cpc_from_robot(robot, frames)
     root_T = model.frame_poses(measurements.q_of(model.topology.joint_names))
@@ -148,6 +177,9 @@ def evaluate_model(robot: Robot, measurements: Measurements) -> AccuracyReport:
     meas_T_root: dict[str, NDArray] = {}
     for name in sorted({g.measured_in for g in (*measurements.poses, *measurements.points)
                         if g.measured_in is not None}):
+        if ("frame", name) in known:
+            meas_T_root[name] = known[("frame", name)]
+            continue
         estimates = [g.meas_T_frame @ inverse_transform(root_T[g.sample, index[g.frame]])
                      for g in measurements.poses if g.measured_in == name and g.marker is None]
         if not estimates:
@@ -168,16 +200,20 @@ def evaluate_model(robot: Robot, measurements: Measurements) -> AccuracyReport:
                 raise DatasetError(
                     f"{measurements.source}: marker {g.marker!r} measured in "
                     f"{g.measured_in!r} has two unknown frames; use 'kinfw calibrate'")
-            frame_T_marker = average_transform(inverse_transform(pred) @ g.meas_T_frame)
+            frame_T_marker = known.get(("marker", g.marker))
+            if frame_T_marker is None:
+                frame_T_marker = average_transform(inverse_transform(pred) @ g.meas_T_frame)
+                fitted.append(f"pose of marker {g.marker!r} on {g.frame!r}")
             pred = pred @ frame_T_marker
-            fitted.append(f"pose of marker {g.marker!r} on {g.frame!r}")
         dp, dr = _pose_errors(g.meas_T_frame, pred)
         groups.append(GroupErrors(g.frame, "pose", g.marker, g.sample, dp, dr))
 
     for g in measurements.targets:
         root_T_camera = root_T[g.sample, index[g.camera]]
-        root_T_target = average_transform(root_T_camera @ g.camera_T_target)
-        fitted.append(f"pose of target {g.target!r} (seen by {g.camera!r})")
+        root_T_target = known.get(("target", g.target))
+        if root_T_target is None:
+            root_T_target = average_transform(root_T_camera @ g.camera_T_target)
+            fitted.append(f"pose of target {g.target!r} (seen by {g.camera!r})")
         pred = inverse_transform(root_T_camera) @ root_T_target
         dp, dr = _pose_errors(g.camera_T_target, pred)
         groups.append(GroupErrors(g.camera, "target", None, g.sample, dp, dr))
@@ -185,8 +221,11 @@ def evaluate_model(robot: Robot, measurements: Measurements) -> AccuracyReport:
     for g in measurements.points:
         pred_T = to_meas(g, root_T[g.sample, index[g.frame]])
         R, p = pred_T[:, :3, :3], pred_T[:, :3, 3]
+        key = ("offset", f"{g.frame}:{g.marker or 'point'}")
         if g.offset is not None:
             offset = g.offset
+        elif key in known:
+            offset = known[key]
         else:
             # least squares offset: mean of R_i^T (m_i - p_i)
             offset = np.einsum("nji,nj->ni", R, g.meas_p_point - p).mean(axis=0)
