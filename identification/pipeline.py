@@ -75,7 +75,9 @@ class Calibration:
 
 
 def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
-              noise: NoiseModel | None = None, loss: str = "linear",
+              noise: NoiseModel | None = None, loss: str = "huber",
+              parameters: str | tuple[str, ...] = "full",
+              prior: tuple[float, float] | None = None,
               progress: Callable[[str], None] | None = None) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
@@ -94,8 +96,15 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
     method : {"refine", "closed-form"}
     noise : NoiseModel, optional
         Measurement noise for the refinement; default estimated.
-    loss : {"linear", "huber", "cauchy"}
-        Robust loss of the refinement.
+    loss : {"huber", "linear", "cauchy"}
+        Robust loss of the refinement (default Huber: a gross outlier is down-weighted
+        whatever the parameter set; on clean data it costs little, its threshold being the
+        99 % quantile of a clean residual).
+    parameters : str or tuple of joint names
+        Parameter set of the refinement (:func:`identification.refine.refine`):
+        ``"full"``, ``"offsets"``, ``"frames"``, ``"none"`` or joint names.
+    prior : (sigma_m, sigma_rad), optional
+        Gaussian prior on deviations from the nominal geometry.
     progress : callable, optional
         Called with a one-line message after each stage (the command line prints them);
         the library itself stays quiet.
@@ -119,7 +128,8 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
     xml = nominal.urdf_xml
-    if any(g.marker is None and g.measured_in is None for g in data.poses):
+    if parameters == "full" and any(g.marker is None and g.measured_in is None
+                                    for g in data.poses):
         try:
             closed_form = identify_closed_form(nominal, data)
         except ProtocolError as exc:
@@ -132,7 +142,7 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
             stages.append(("closed form", xml))
             done(f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
                  f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm")
-    if data.targets:
+    if data.targets and parameters != "none":
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
         mounts: dict[str, list[NDArray]] = {}
         for c in cameras.cameras:  # a camera that saw several targets: average its mounts
@@ -143,10 +153,11 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
         # every joint on a measured path must move, or its geometry is not observed
-        check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
+        if parameters in ("full", "offsets"):
+            check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
         targets = dict(cameras.root_T_targets) if cameras is not None else None
         refined = refine(nominal, data, start=Robot(xml, nominal.source), targets=targets,
-                         noise=noise, loss=loss)
+                         noise=noise, loss=loss, parameters=parameters, prior=prior)
         export = export_urdf(nominal, geometry_from_cpc(refined.model),
                              root_is_measurement_frame=refined.model_frame is None)
         xml = export.urdf_xml

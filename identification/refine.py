@@ -342,6 +342,15 @@ class LeastSquaresProblem:
     extra_slice: dict[tuple[str, str], slice]
     offset_slice: dict[str, slice]
     groups: tuple[_Group, ...]
+    base_slice: slice
+    zero_slice: slice
+    prior_mean: NDArray[np.float64]
+    prior_sigma: NDArray[np.float64]
+
+    @property
+    def prior_rows(self) -> NDArray[np.int64]:
+        """Parameters with a prior (free, finite sigma): one residual row each."""
+        return np.flatnonzero(self.free & np.isfinite(self.prior_sigma))
 
     @property
     def n_parameters(self) -> int:
@@ -349,8 +358,9 @@ class LeastSquaresProblem:
 
     @property
     def obs_sizes(self) -> list[tuple[int, int]]:
-        """(observations, rows per observation) of each group."""
-        return [(len(g.sample), g.rows) for g in self.groups]
+        """(observations, rows per observation) of each group, then one row per prior."""
+        sizes = [(len(g.sample), g.rows) for g in self.groups]
+        return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
 
     def evaluate(self, x: NDArray, sigma: NoiseModel, with_jacobian: bool = True
                  ) -> tuple[NDArray, NDArray | None]:
@@ -365,6 +375,13 @@ class LeastSquaresProblem:
                 Jg = np.array(grp.jacobian(grp.qs, grp.data, x, sigma.position_m,
                                            sigma.rotation_rad))
                 Js.append(Jg.reshape(grp.rows, m, P).transpose(1, 0, 2).reshape(-1, P))
+        k = self.prior_rows
+        if len(k):  # Gaussian prior: (x - mean) / sigma
+            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
+            if with_jacobian:
+                Jp = np.zeros((len(k), P))
+                Jp[np.arange(len(k)), k] = 1.0 / self.prior_sigma[k]
+                Js.append(Jp)
         return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
 
     def casadi_residual(self, sigma: NoiseModel):
@@ -386,8 +403,23 @@ class LeastSquaresProblem:
         return x_free, r
 
     def model_at(self, x: NDArray) -> CPCModel:
-        """The kinematics at ``x``."""
-        return self.model0.perturbed(x[: self.model0.n_parameters])
+        """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
+        from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
+
+        model = self.model0.perturbed(x[: self.model0.n_parameters])
+        base = _cayley_pose_np(np.eye(4), x[self.base_slice])
+        zero = x[self.zero_slice]
+        if not np.any(base != np.eye(4)) and not np.any(zero):
+            return model
+        # FK(q + zero) = FK with every joint pre-moved by its offset: the geometry at q = 0
+        # of the offset model is the original geometry at q = zero.
+        moved = model.joint_frames(zero)[0]
+        geo = geometry_from_cpc(model)
+        axes = moved[:, :3, 2] * model.sign[:, None]
+        shifted = ZeroGeometry(geo.topology, axes @ base[:3, :3].T,
+                               moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
+                               base @ model.frame_poses(zero))
+        return cpc_from_geometry(shifted, sign=model.sign)
 
     def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
         """Target poses, external frames, markers and offsets at ``x``."""
@@ -399,8 +431,15 @@ class LeastSquaresProblem:
 
 
 def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
-                  targets: dict[str, NDArray] | None = None) -> LeastSquaresProblem:
-    """Assemble the least-squares problem (see :func:`refine` for the arguments)."""
+                  targets: dict[str, NDArray] | None = None,
+                  parameters: str | tuple[str, ...] = "full",
+                  prior: tuple[float, float] | None = None,
+                  known: tuple[Unknown, ...] = ()) -> LeastSquaresProblem:
+    """Assemble the least-squares problem (see :func:`refine` for the arguments).
+
+    ``known`` gives start values for extra unknowns (e.g. a previous calibration's target
+    pose and markers) instead of estimating them from these data.
+    """
     measurements = check_against_robot(measurements, robot)
     ca = _ca()
     start = robot if start is None else start
@@ -411,9 +450,13 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
         model_frame = next(iter(in_frames))  # everything in one external frame
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
+    given = {(u.kind, u.name): u.value for u in known}
     if model_frame is not None:
-        model0 = _express_in(model0, measurements, q_all, model_frame)
+        model0 = _express_in(model0, measurements, q_all, model_frame,
+                             given.get(("frame", model_frame)))
     frames, offsets = _start_extras(measurements, model0, q_all, model_frame, targets or {})
+    frames = [(k, n, given.get((k, n), v)) for k, n, v in frames]
+    offsets = [(key, given.get(("offset", key), v)) for key, v in offsets]
 
     # -- parameter vector: CPC chart, then 6 per extra frame, then 3 per offset ----------
     names = list(model0.parameter_names)
@@ -425,6 +468,39 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
                                  for g in measurements.points)]
     for f in only_indirect:  # its markers carry the freedom: keep the nominal tool
         free[[k for k, (o, _) in enumerate(names) if o == f]] = False
+    n_cpc = len(names)
+    tools = np.array([o in model0.topology.frames for o, _ in names])
+    joints_of = np.array([o for o, _ in names])
+    if parameters == "full":
+        pass
+    elif parameters in ("offsets", "frames", "none"):
+        free &= tools if parameters != "none" else np.zeros(n_cpc, bool)
+    else:
+        unknown_joints = set(parameters) - set(model0.topology.joint_names)
+        if isinstance(parameters, str) or unknown_joints:
+            raise ValueError(
+                f"parameters: expected 'full', 'offsets', 'frames', 'none' or joint names of "
+                f"{list(model0.topology.joint_names)}; got {parameters!r}")
+        free &= tools | np.isin(joints_of, list(parameters))
+    # the base (a rigid transform of the whole model) and joint zero offsets: redundant
+    # with the full chart, used by the smaller parameter sets
+    base_slice = slice(len(names), len(names) + 6)
+    names += [("base", c) for c in ("rot_x", "rot_y", "rot_z", "x", "y", "z")]
+    zero_slice = slice(len(names), len(names) + model0.n_joints)
+    names += [(j, "zero_offset") for j in model0.topology.joint_names]
+    in_model_frame = any((g.measured_in or None) == model_frame
+                         for g in (*measurements.poses, *measurements.points))
+    base_free = parameters != "full" and parameters != "none" and in_model_frame
+    topo = model0.topology
+    # a zero offset is redundant with a tool when the joint carries only end frames, and
+    # with the base when only prismatic joints lie above it (a constant translation)
+    useful_offset = np.array([
+        (topo.revolute[j] and bool(topo.children(j)))
+        or (not topo.revolute[j] and any(topo.revolute[a] for a in _ancestors(topo, j)))
+        for j in range(model0.n_joints)])
+    extra_free = np.concatenate([np.full(6, base_free),
+                                 useful_offset & (parameters == "offsets")])
+    free = np.concatenate([free, extra_free])
     extra_slice: dict[tuple[str, str], slice] = {}
     for kind, name, _ in frames:
         extra_slice[(kind, name)] = slice(len(names), len(names) + 6)
@@ -439,9 +515,10 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     fk = cpc_fk_function(model0)
     theta = ca.SX.sym("theta", P)
     q = ca.SX.sym("q", model0.n_joints)
-    T_frames = fk(q, theta[: model0.n_parameters])
+    T_frames = fk(q + theta[zero_slice], theta[: model0.n_parameters])
     T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    frame_T = {f: T_frames[k] for k, f in enumerate(model0.topology.frames)}
+    base = _cayley_pose(ca, np.eye(4), theta[base_slice])
+    frame_T = {f: base @ T_frames[k] for k, f in enumerate(model0.topology.frames)}
     extra_T = {key: _cayley_pose(ca, value, theta[extra_slice[(kind, name)]])
                for kind, name, value in frames for key in [(kind, name)]}
     offset_p = {key: ca.DM(value) + theta[offset_slice[key]] for key, value in offsets}
@@ -481,8 +558,22 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
         add("point", g.frame, g.marker, g.sample, g.meas_p_point.T, m,
             (m - (T[0:3, 0:3] @ o + T[0:3, 3])) / sp, rows=3)
 
+    prior_sigma = np.full(P, np.inf)
+    prior_mean = np.zeros(P)
+    if prior is not None:
+        sigma_m, sigma_rad = prior[0], prior[1]
+        angular = np.array([f.startswith(("rot", "b_tilt")) or
+                            (f == "zero_offset" and robot.joint(o).is_revolute)
+                            for o, f in names])
+        prior_sigma[: zero_slice.stop] = np.where(angular, sigma_rad, sigma_m)[: zero_slice.stop]
+        if model_frame is None:  # deviations from the nominal, in the start's chart
+            from kinfw.cpc import cpc_from_geometry, geometry_from_robot
+
+            nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
+            prior_mean[:n_cpc] = model0.chart_coordinates(nominal)
     return LeastSquaresProblem(model0, model_frame, tuple(names), free, tuple(frames),
-                               tuple(offsets), extra_slice, offset_slice, tuple(groups))
+                               tuple(offsets), extra_slice, offset_slice, tuple(groups),
+                               base_slice, zero_slice, prior_mean, prior_sigma)
 
 
 def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArray[np.float64]:
@@ -499,7 +590,9 @@ def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArr
 def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
            targets: dict[str, NDArray] | None = None, noise: NoiseModel | None = None,
            loss: str = "linear", loss_scale: float = 2.33, max_iterations: int = 100,
-           noise_rounds: int = 3) -> RefineResult:
+           noise_rounds: int = 3, parameters: str | tuple[str, ...] = "full",
+           prior: tuple[float, float] | None = None,
+           known: tuple[Unknown, ...] = ()) -> RefineResult:
     """Refine every unknown jointly by whitened nonlinear least squares.
 
     Parameters
@@ -527,6 +620,18 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
         Levenberg-Marquardt iterations per noise round.
     noise_rounds : int
         Re-estimations of the noise when it is not given.
+    parameters : {"full", "offsets", "frames", "none"} or tuple of joint names
+        What to estimate besides the targets, external frames, markers and offsets:
+        ``"full"`` every identifiable CPC parameter; ``"offsets"`` joint zero offsets,
+        the base frame and the end frames' tool transforms; ``"frames"`` the base and tool
+        frames only (nominal joints); ``"none"`` nothing of the robot (the nominal
+        baseline); joint names: ``"frames"`` plus every CPC parameter of those joints.
+    prior : (sigma_m, sigma_rad), optional
+        Gaussian prior on the robot parameters' deviations from the nominal URDF (from
+        the start when the model lives in an external frame), for small datasets.
+    known : tuple of Unknown
+        Start values of extra unknowns (targets, frames, markers, offsets) instead of
+        estimating them from these data.
 
     Returns
     -------
@@ -540,7 +645,8 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     if loss not in LOSSES:
         raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
     t0 = time.perf_counter()
-    problem = build_problem(robot, measurements, start=start, targets=targets)
+    problem = build_problem(robot, measurements, start=start, targets=targets,
+                            parameters=parameters, prior=prior, known=known)
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
     sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
@@ -580,10 +686,18 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
 
 
 # -- helpers ---------------------------------------------------------------------------
-def _express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str
-                ) -> CPCModel:
-    """The model moved into the external frame ``name`` by a closed-form estimate of
-    ``name_T_root`` (pose observations averaged, or points registered)."""
+def _ancestors(topo, j: int) -> list[int]:
+    out, p = [], topo.parent[j]
+    while p >= 0:
+        out.append(p)
+        p = topo.parent[p]
+    return out
+
+
+def _express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str,
+                meas_T_root: NDArray | None = None) -> CPCModel:
+    """The model moved into the external frame ``name`` by ``name_T_root``: given, or a
+    closed-form estimate (pose observations averaged, or points registered)."""
     from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
     from kinfw.registration import register_points
 
@@ -592,7 +706,9 @@ def _express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, nam
     w_T = w_T[None] if w_T.ndim == 3 else w_T
     est = [g.meas_T_frame @ inverse_transform(w_T[g.sample, index[g.frame]])
            for g in measurements.poses if g.marker is None]
-    if est:
+    if meas_T_root is not None:
+        pass
+    elif est:
         meas_T_root = average_transform(np.concatenate(est))
     else:
         known = [g for g in measurements.points if g.offset is not None]

@@ -184,7 +184,7 @@ def _noise_arg(args: argparse.Namespace):
 
 
 def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
-               loss: str = "linear", data_path=None, held_out=None):
+               loss: str = "huber", data_path=None, held_out=None):
     """Calibrate (:func:`identification.pipeline.calibrate`), write ``out`` and its
     sidecar ``<stem>.kinfw.json``; return the report and the calibration."""
     from identification.pipeline import calibrate
@@ -468,8 +468,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: estimated from the residuals)")
     p.add_argument("--sigma-deg", type=float, help="orientation noise: angle sigma about a "
                    "random axis, deg (default: estimated)")
-    p.add_argument("--loss", choices=("linear", "huber", "cauchy"), default="linear",
-                   help="robust loss of the refinement (default linear)")
+    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber",
+                   help="robust loss of the refinement (default huber: gross outliers are "
+                   "down-weighted and listed)")
     p.add_argument("--holdout", type=Path, help="measurement file not used for calibration; "
                    "its errors go to the report and sidecar")
     p.add_argument("--json", action="store_true", help="print the report as JSON")

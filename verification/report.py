@@ -101,6 +101,9 @@ def _hand_eye_section(result: CamerasResult) -> dict:
 
 def _refine_section(result: RefineResult, loss: str) -> dict:
     ident = result.identifiability
+    residual_mm = {(g.kind, g.frame, int(smp)): 1e3 * float(np.linalg.norm(e))
+                   for g in result.residuals for smp, e in zip(g.sample, g.position_m,
+                                                               strict=True)}
     return {
         "method": "joint nonlinear least squares (CasADi residuals and Jacobians, "
                   "Levenberg-Marquardt), residuals whitened by the noise below",
@@ -132,13 +135,14 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                                  for params, why in ident.unidentifiable],
             "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
                                        for a, b, r in ident.correlations]},
-        "downweighted": [{"kind": k, "frame": f, "sample": smp, "weight": w}
+        "downweighted": [{"kind": k, "frame": f, "sample": smp, "weight": w,
+                          "position_residual_mm": residual_mm.get((k, f, smp))}
                          for k, f, smp, w in result.downweighted],
     }
 
 
 def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
-                       calibration: Calibration, *, method: str, loss: str = "linear",
+                       calibration: Calibration, *, method: str, loss: str = "huber",
                        data_path: str | Path | None = None,
                        held_out: Measurements | None = None) -> dict:
     """Everything a user needs to trust (or not) a calibration, as a dictionary.

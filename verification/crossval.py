@@ -1,0 +1,222 @@
+"""k-fold cross-validation of the whole calibration pipeline, with baselines.
+
+The honest answer to "how accurate is it really?": every sample is predicted by a model
+that never saw it. Folds are drawn by sample; on each fold the pipeline is trained on the
+other folds with several parameter sets and scored on the held-out one:
+
+- ``"none"``: the nominal geometry (only the frames the URDF cannot know are fitted: the
+  measurement frame, targets, markers, point offsets);
+- ``"frames"``: nominal joints; base and tool (hand-eye) frames fitted;
+- ``"offsets"``: frames plus joint zero offsets;
+- ``"full"``: closed form, hand-eye and the joint refinement of every identifiable CPC
+  parameter (kinfw's default).
+
+Held-out errors are predictions with the trained frames (targets, markers, the root's pose
+in an external frame) held fixed: nothing is refitted to the test fold. Position errors are
+per-sample error vector norms (mm); orientation errors the small-angle rotation (deg).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from identification.pipeline import calibrate
+from identification.refine import NoiseModel, Unknown, build_problem
+from kinfw.measurements import Measurements
+from kinfw.robot import Robot
+
+__all__ = ["BASELINES", "CrossValidation", "FoldScore", "crossvalidate", "held_out_errors"]
+
+#: Parameter sets compared by default: the nominal baseline, frames only, and full.
+BASELINES = ("none", "frames", "full")
+
+
+@dataclass(frozen=True, slots=True)
+class FoldScore:
+    """One parameter set on one fold.
+
+    Attributes
+    ----------
+    fold : int
+    parameters : str
+    n_train, n_test : int
+        Samples.
+    position_rms_mm, rotation_rms_deg : float
+        Held-out RMS (rotation NaN when only points are observed).
+    worst_sample : int
+        The held-out sample with the largest position error, and that error (mm).
+    worst_mm : float
+    condition : float
+        Condition number of the trained fit (poor excitation when large).
+    n_parameters, n_residuals : int
+        Estimated parameters and training residuals.
+    """
+
+    fold: int
+    parameters: str
+    n_train: int
+    n_test: int
+    position_rms_mm: float
+    rotation_rms_deg: float
+    worst_sample: int
+    worst_mm: float
+    condition: float
+    n_parameters: int
+    n_residuals: int
+
+
+@dataclass(frozen=True, slots=True)
+class CrossValidation:
+    """Scores of every parameter set on every fold, and what they mean.
+
+    Attributes
+    ----------
+    k, seed : int
+    sets : tuple of str
+    scores : tuple of FoldScore
+    warnings : tuple of str
+        E.g. the full calibration is worse held-out than frames only, with the likely
+        cause.
+    selected : str or None
+        With selection, the set with the lowest mean held-out position RMS.
+    """
+
+    k: int
+    seed: int
+    sets: tuple[str, ...]
+    scores: tuple[FoldScore, ...]
+    warnings: tuple[str, ...]
+    selected: str | None
+
+    def mean(self, parameters: str, field: str = "position_rms_mm") -> float:
+        """Mean over folds of a score field for one parameter set."""
+        return float(np.mean([getattr(s, field) for s in self.scores
+                              if s.parameters == parameters]))
+
+    def to_dict(self) -> dict:
+        return {
+            "k": self.k, "seed": self.seed, "sets": list(self.sets),
+            "folds": [{f: getattr(s, f) for f in FoldScore.__slots__} for s in self.scores],
+            "mean_position_rms_mm": {p: self.mean(p) for p in self.sets},
+            "mean_rotation_rms_deg": {p: self.mean(p, "rotation_rms_deg") for p in self.sets},
+            "warnings": list(self.warnings), "selected": self.selected,
+        }
+
+
+def held_out_errors(nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...],
+                    test: Measurements) -> tuple[NDArray, NDArray, NDArray]:
+    """Per-observation held-out position errors (m), rotation errors (rad, NaN for
+    points) and sample indices of ``test``, predicted by a calibrated URDF and its frames.
+    """
+    problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"),
+                            known=unknowns)
+    r, _ = problem.evaluate(np.zeros(problem.n_parameters), NoiseModel(1.0, 1.0), False)
+    pos, rot, samples, k = [], [], [], 0
+    for g in problem.groups:
+        block = r[k : k + len(g.sample) * g.rows].reshape(len(g.sample), g.rows)
+        pos.append(np.linalg.norm(block[:, :3], axis=1))
+        rot.append(np.arcsin(np.clip(np.linalg.norm(block[:, 3:], axis=1), 0.0, 1.0))
+                   if g.rows == 6 else np.full(len(g.sample), np.nan))
+        samples.append(g.sample)
+        k += len(g.sample) * g.rows
+    return np.concatenate(pos), np.concatenate(rot), np.concatenate(samples)
+
+
+def _score(nominal: Robot, train: Measurements, test: Measurements, test_ids: NDArray,
+           parameters: str, fold: int, *, noise, loss, prior) -> FoldScore:
+    """Train with one parameter set, score on the held-out fold (``test_ids``: the
+    original indices of the test samples)."""
+    result = calibrate(nominal, train, parameters=parameters, noise=noise, loss=loss,
+                       prior=prior)
+    unknowns = result.refined.unknowns
+    if result.refined.model_frame is not None:  # the root's pose in the external frame
+        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
+    pos, rot, samples = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    worst = int(np.argmax(pos))
+    ident = result.refined.identifiability
+    return FoldScore(
+        fold=fold, parameters=parameters, n_train=train.n_samples, n_test=test.n_samples,
+        position_rms_mm=1e3 * float(np.sqrt(np.mean(pos**2))),
+        rotation_rms_deg=float(np.degrees(np.sqrt(np.nanmean(rot**2))))
+        if np.any(np.isfinite(rot)) else float("nan"),
+        worst_sample=int(test_ids[samples[worst]]), worst_mm=1e3 * float(pos[worst]),
+        condition=ident.condition, n_parameters=ident.n_parameters,
+        n_residuals=sum(len(g.sample) * (3 if g.rotation_rad is None else 6)
+                        for g in result.refined.residuals))
+
+
+def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:
+    def mean(p, f="position_rms_mm"):
+        return float(np.mean([getattr(s, f) for s in cv_scores if s.parameters == p]))
+
+    out = []
+    if "full" in sets and "frames" in sets and mean("full") > mean("frames"):
+        full = [s for s in cv_scores if s.parameters == "full"]
+        causes = []
+        ratio = np.mean([s.n_residuals / max(s.n_parameters, 1) for s in full])
+        if ratio < 10:
+            causes.append(f"too many parameters for the data ({ratio:.1f} training "
+                          "residuals per parameter)")
+        worst = max(full, key=lambda s: s.worst_mm)
+        if worst.worst_mm > 5 * np.median([s.position_rms_mm for s in full]):
+            causes.append(f"an outlier (sample {worst.worst_sample}: {worst.worst_mm:.1f} mm "
+                          "held out; try --loss huber)")
+        cond = max(s.condition for s in full)
+        if cond > 1e4:
+            causes.append(f"poor excitation (condition number {cond:.3g}: move the joints "
+                          "through more of their ranges)")
+        out.append(
+            f"the full calibration is worse held-out than frames only ({mean('full'):.3f} mm "
+            f"vs {mean('frames'):.3f} mm); likely cause: "
+            + ("; ".join(causes) if causes else "too many parameters for the data"))
+    return out
+
+
+def crossvalidate(nominal: Robot, data: Measurements, *, k: int = 5, seed: int = 0,
+                  sets: tuple[str, ...] = BASELINES, select: bool = False,
+                  noise: NoiseModel | None = None, loss: str = "huber",
+                  prior: tuple[float, float] | None = None,
+                  progress: Callable[[int, int], None] | None = None) -> CrossValidation:
+    """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
+
+    Parameters
+    ----------
+    nominal : Robot
+    data : Measurements
+    k : int
+        Folds (2 <= k <= samples); folds are a random partition of the samples (seeded).
+    seed : int
+    sets : tuple of str
+        Parameter sets (see :func:`identification.refine.refine`).
+    select : bool
+        Pick the set with the lowest mean held-out position RMS (``selected``).
+    noise, loss, prior
+        As for :func:`identification.pipeline.calibrate`.
+    progress : callable(done, total), optional
+    """
+    if not 2 <= k <= data.n_samples:
+        raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
+    order = np.random.default_rng(seed).permutation(data.n_samples)
+    folds = np.array_split(order, k)
+    scores: list[FoldScore] = []
+    total, done = k * len(sets), 0
+    for f, test_idx in enumerate(folds):
+        train_idx = np.sort(np.setdiff1d(order, test_idx))
+        test_ids = np.sort(test_idx)
+        train, test = data.subset(train_idx), data.subset(test_ids)
+        for parameters in sets:
+            scores.append(_score(nominal, train, test, test_ids, parameters, f, noise=noise,
+                                 loss=loss, prior=prior))
+            done += 1
+            if progress is not None:
+                progress(done, total)
+    selected = None
+    if select:
+        selected = min(sets, key=lambda p: np.mean([s.position_rms_mm for s in scores
+                                                    if s.parameters == p]))
+    return CrossValidation(k, seed, tuple(sets), tuple(scores), tuple(_warnings(scores, sets)),
+                           selected)
