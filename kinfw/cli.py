@@ -322,6 +322,47 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+# -- kinfw crossval ----------------------------------------------------------------------
+def _cmd_crossval(args: argparse.Namespace) -> int:
+    from verification.crossval import BASELINES, crossvalidate
+
+    nominal = load_robot(args.urdf)
+    data = read_measurements(args.data)
+    sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
+    prior = None
+    if args.prior_mm is not None or args.prior_deg is not None:
+        if args.prior_mm is None or args.prior_deg is None:
+            raise ValueError("give both --prior-mm and --prior-deg")
+        prior = (args.prior_mm * 1e-3, float(np.radians(args.prior_deg)))
+    watch = _progress_printer()
+    cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets, select=args.select,
+                       noise=_noise_arg(args), loss=args.loss, prior=prior,
+                       progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None)
+    if args.json:
+        print(json.dumps(cv.to_dict(), indent=2))
+        return 0
+    label = {"none": "nominal", "frames": "frames only", "offsets": "offsets+frames",
+             "full": "calibrated"}
+    print(f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
+          f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg")
+    rows = []
+    for fold in range(args.k):
+        row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
+        for p in sets:
+            sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
+            row.append(f"{sc.position_rms_mm:.3f} / {sc.rotation_rms_deg:.3f}")
+        rows.append(row)
+    rows.append(["mean", "", *(f"{cv.mean(p):.3f} / {cv.mean(p, 'rotation_rms_deg'):.3f}"
+                               for p in sets)])
+    print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
+    for warning in cv.warnings:
+        print(f"warning: {warning}")
+    if cv.selected:
+        print(f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
+              f"position error ({cv.mean(cv.selected):.3f} mm)")
+    return 0
+
+
 # -- kinfw view --------------------------------------------------------------------------
 def _cmd_view(args: argparse.Namespace) -> int:
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
@@ -482,6 +523,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("crossval", help="k-fold cross-validation against baselines",
+                       description="Held-out error of the calibration (folds by sample) next "
+                       "to two baselines on the same folds: the nominal geometry and 'frames "
+                       "only' (nominal joints; measurement frame, markers, target and tool / "
+                       "hand-eye frames fitted). Warns when the calibration is worse than "
+                       "frames only, with the likely cause.")
+    p.add_argument("data", type=Path, help="measurement file")
+    p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
+    p.add_argument("--k", type=int, default=5, help="folds (default 5)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--select", action="store_true", help="also try 'offsets' and pick the "
+                   "parameter set with the lowest held-out error")
+    p.add_argument("--sigma-mm", type=float, help="position noise sigma, mm (default estimated)")
+    p.add_argument("--sigma-deg", type=float, help="orientation noise angle sigma, deg")
+    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber")
+    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
+                   "nominal: sigma of lengths, mm")
+    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.set_defaults(func=_cmd_crossval)
 
     p = sub.add_parser("view", help="nominal and calibrated robots and measurements in 3D",
                        description="Meshcat view: the nominal robot as a grey ghost, the "
