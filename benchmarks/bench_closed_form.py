@@ -28,9 +28,6 @@ disabled while timing (as :mod:`timeit` does).
 from __future__ import annotations
 
 import argparse
-import gc
-import os
-import platform
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -47,6 +44,15 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
 import pinocchio as pin  # noqa: E402
 
 import identification.closed_form as cf  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    Timings,
+    format_table,
+    gc_disabled,
+    machine_info,
+    slope,
+    time_interleaved,
+    wall_time_line,
+)
 from identification.closed_form import one_joint_groups  # noqa: E402
 from kinfw.cpc import CPCModel, cpc_from_geometry, cpc_from_robot  # noqa: E402
 from kinfw.measurements import Measurements, check_against_robot  # noqa: E402
@@ -84,47 +90,6 @@ STEP_NAMES = (
 
 
 # -- timing ------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Timings:
-    """Repeated wall-clock times of one operation, seconds, shape (repeats,)."""
-
-    seconds: NDArray[np.float64]
-
-    @property
-    def median_ms(self) -> float:
-        return 1e3 * float(np.median(self.seconds))
-
-    @property
-    def iqr_ms(self) -> float:
-        q25, q75 = np.percentile(self.seconds, [25.0, 75.0])
-        return 1e3 * float(q75 - q25)
-
-
-def time_interleaved(calls: Sequence[Callable[[], object]], repeats: int
-                     ) -> list[Timings]:
-    """Time each call ``repeats`` times, round robin, after ``WARMUP`` untimed rounds.
-
-    Round robin puts the calls of one repeat next to each other in time, so a ratio of
-    two calls within a repeat sees the same machine state.
-    """
-    for _ in range(WARMUP):
-        for call in calls:
-            call()
-    seconds = np.empty((len(calls), repeats))
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        for r in range(repeats):
-            for k, call in enumerate(calls):
-                start = time.perf_counter()
-                call()
-                seconds[k, r] = time.perf_counter() - start
-    finally:
-        if enabled:
-            gc.enable()
-    return [Timings(s) for s in seconds]
 
 
 def closed_form_by_steps(robot: Robot, measurements: Measurements
@@ -173,15 +138,10 @@ def time_steps(robot: Robot, datasets: Sequence[Measurements], repeats: int
         for measurements in datasets:
             closed_form_by_steps(robot, measurements)
     seconds = np.empty((len(datasets), len(STEP_NAMES), repeats))
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    with gc_disabled():
         for r in range(repeats):
             for k, measurements in enumerate(datasets):
                 seconds[k, :, r] = closed_form_by_steps(robot, measurements)[1]
-    finally:
-        if enabled:
-            gc.enable()
     return seconds
 
 
@@ -239,49 +199,6 @@ def step1_pairs(nominal: Robot, case: Case) -> int:
     return total
 
 
-# -- output ------------------------------------------------------------------------------
-
-
-def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """Right-aligned plain-text table (first column left-aligned)."""
-    widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(headers)]
-
-    def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                         for k, (c, w) in enumerate(zip(cells, widths, strict=True)))
-
-    return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
-
-
-def machine_info() -> str:
-    affinity = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else "n/a")
-    threads = ", ".join(f"{v}={os.environ[v]}" for v in
-                        ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-                        if v in os.environ) or "not set"
-    return "\n".join([
-        f"python     {platform.python_version()} ({platform.python_implementation()})",
-        f"numpy      {np.__version__}",
-        f"pinocchio  {pin.__version__}",
-        f"platform   {platform.platform()}",
-        f"processor  {platform.processor() or platform.machine()}",
-        f"CPUs       {os.cpu_count()} (usable by this process: {affinity})",
-        f"BLAS env   {threads}",
-        f"load avg   {load_average()} (1, 5, 15 min; other load skews absolute times)",
-        f"kinfw      {REPO}",
-    ])
-
-
-def load_average() -> str:
-    return ("n/a" if not hasattr(os, "getloadavg")
-            else " ".join(f"{x:.2f}" for x in os.getloadavg()))
-
-
-def slope(x: Sequence[float], y: Sequence[float]) -> float:
-    """Least-squares slope of log y against log x."""
-    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
-
-
 # -- sections ----------------------------------------------------------------------------
 
 
@@ -289,7 +206,7 @@ def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
     print(f"\n1. Closed form on the paper's protocol: {PAPER_PER_JOINT} values per joint, "
           f"{len(case.qs)} configurations x {len(FRAMES)} plates, {repeats} repeats")
     whole, = time_interleaved([lambda: cf.identify_closed_form(nominal, case.measurements)],
-                              repeats)
+                              repeats, warmup=WARMUP)
     model_whole = cf.identify_closed_form(nominal, case.measurements).model
     rows = []
     steps = time_steps(nominal, [case.measurements], repeats)
@@ -328,7 +245,8 @@ def section_growth(nominal: Robot, per_joints: Sequence[int], repeats: int, tria
         cases.append([make_case(nominal, m, rng) for _ in range(trials)])
     first = [c[0] for c in cases]  # the timed dataset of each M
     wholes = time_interleaved(
-        [lambda c=c: cf.identify_closed_form(nominal, c.measurements) for c in first], repeats)
+        [lambda c=c: cf.identify_closed_form(nominal, c.measurements) for c in first], repeats,
+        warmup=WARMUP)
     steps = time_steps(nominal, [c.measurements for c in first], repeats)
     steps_ms = (np.full((len(first), len(STEP_NAMES)), np.nan) if steps is None
                 else 1e3 * np.median(steps, axis=2))
@@ -380,7 +298,7 @@ def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed
             lambda c=case: cpc_from_robot(c.truth, FRAMES).frame_poses(c.qs),
             lambda c=case: [c.truth.frame_poses(c.qs, f, c.joint_names) for f in FRAMES],
         ]
-    timings = time_interleaved(calls, repeats)
+    timings = time_interleaved(calls, repeats, warmup=WARMUP)
     rows = []
     for k, (m, case) in enumerate(zip(per_joints, cases, strict=True)):
         closed, cpc_fk, cpc_build_fk, pin_fk = timings[4 * k : 4 * k + 4]
@@ -420,7 +338,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     started = time.perf_counter()
     print("kinfw closed-form benchmark (IIS-head, frames " + ", ".join(FRAMES) + ")")
-    print(machine_info())
+    print(machine_info([("pinocchio", pin.__version__)]))
     print(f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
           f"warm-up {WARMUP}, seed {args.seed}, gc disabled while timing")
     nominal = load_robot(HEAD_URDF)
@@ -429,8 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     section_paper_protocol(nominal, paper, repeats)
     section_growth(nominal, per_joints, repeats, trials, args.seed)
     section_ratios(nominal, ratio_per_joints, repeats, args.seed)
-    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
-          f"load avg now {load_average()}")
+    print(wall_time_line(started))
     return 0
 
 

@@ -53,12 +53,9 @@ R/t stacks for OpenCV). OpenCV's log is silenced; identity answers are counted i
 from __future__ import annotations
 
 import argparse
-import gc
 import hashlib
 import json
 import logging
-import os
-import platform
 import re
 import subprocess
 import sys
@@ -80,6 +77,12 @@ except ImportError:  # pragma: no cover - the message is the point
     sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.8,<5" '
              "(the 'bench' extra of kinfw)")
 
+from benchmarks.common import (  # noqa: E402
+    format_table,
+    gc_disabled,
+    machine_info,
+    wall_time_line,
+)
 from identification.axb import solve_axyb  # noqa: E402
 from identification.handeye import solve_axxb  # noqa: E402
 from kinfw.transforms import (  # noqa: E402
@@ -366,9 +369,7 @@ def run_setting(methods: Sequence[Method], trials: Sequence[Views],
         if timed(call)[0] < SLOW_S:
             for _ in range(WARMUP - 1):
                 timed(call)
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    with gc_disabled():
         for t, (calls, truth) in enumerate(zip(prepared, truths, strict=True)):
             active = [j for j, m in enumerate(methods) if not m.subset or t < subset_trials]
             seconds: list[list[float]] = [[] for _ in methods]
@@ -392,49 +393,10 @@ def run_setting(methods: Sequence[Method], trials: Sequence[Views],
                 out.identity += int(is_identity(estimates[0]))
                 out.unconverged += int(not getattr(result, "converged", True))
                 out.errors[t] = errors_deg_mm(estimates, truth, metres_per_unit)
-    finally:
-        if enabled:
-            gc.enable()
     return outcomes
 
 
 # -- output ------------------------------------------------------------------------------
-
-
-def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """Right-aligned plain-text table (first column left-aligned)."""
-    widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(headers)]
-
-    def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                         for k, (c, w) in enumerate(zip(cells, widths, strict=True)))
-
-    return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
-
-
-def load_average() -> str:
-    return ("n/a" if not hasattr(os, "getloadavg")
-            else " ".join(f"{x:.2f}" for x in os.getloadavg()))
-
-
-def machine_info() -> str:
-    affinity = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else "n/a")
-    threads = ", ".join(f"{v}={os.environ[v]}" for v in
-                        ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-                        if v in os.environ) or "not set"
-    return "\n".join([
-        f"python     {platform.python_version()} ({platform.python_implementation()})",
-        f"numpy      {np.__version__}",
-        f"opencv     {cv2.__version__} (threads {cv2.getNumThreads()})",
-        f"platform   {platform.platform()}",
-        f"processor  {platform.processor() or platform.machine()}",
-        f"CPUs       {os.cpu_count()} (usable by this process: {affinity})",
-        f"BLAS env   {threads}",
-        f"load avg   {load_average()} (1, 5, 15 min; other load skews absolute times)",
-        f"kinfw      {REPO} (git {git_head()})",
-        *(f"solver     {path} sha256 {digest}" for path, digest in solver_digests()),
-    ])
 
 
 def git_head() -> str:
@@ -838,7 +800,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     started = time.perf_counter()
     print("kinfw hand-eye benchmark: identification.handeye / identification.axb vs OpenCV")
-    print(machine_info())
+    print(machine_info(
+        [("opencv", f"{cv2.__version__} (threads {cv2.getNumThreads()})")],
+        code=[("kinfw", f"{REPO} (git {git_head()})"),
+              *(("solver", f"{path} sha256 {digest}") for path, digest in solver_digests())]))
     print(f"mode       {'quick' if args.quick else 'full'}, trials {trials} (refine=False: "
           f"{subset_trials}), views {views_list}, seed {args.seed}")
     print(f"timing     per trial median of {TIMED_CALLS} calls (1 call if slower than "
@@ -865,8 +830,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         subset_trials)
     tabb = section_tabb()
     print_summary(summaries, tabb)
-    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
-          f"load avg now {load_average()}")
+    print(wall_time_line(started))
     return 0
 
 

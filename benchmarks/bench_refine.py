@@ -38,10 +38,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import gc
 import inspect
-import os
-import platform
 import pstats
 import sys
 import time
@@ -60,6 +57,14 @@ import casadi as ca  # noqa: E402
 import pinocchio as pin  # noqa: E402
 
 import identification.refine as rf  # noqa: E402
+from benchmarks.common import (  # noqa: E402
+    format_table,
+    gc_disabled,
+    machine_info,
+    slope,
+    time_interleaved,
+    wall_time_line,
+)
 from identification.cameras import CamerasResult, calibrate_cameras  # noqa: E402
 from identification.closed_form import identify_closed_form  # noqa: E402
 from identification.pipeline import calibrate  # noqa: E402
@@ -104,54 +109,12 @@ ONCE_FROM = 3000  # sizes from here on: timed once, no warm-up (each call takes 
 # -- timing ------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True, slots=True)
-class Timings:
-    """Repeated wall-clock times of one operation, seconds, shape (repeats,)."""
-
-    seconds: NDArray[np.float64]
-
-    @property
-    def median_ms(self) -> float:
-        return 1e3 * float(np.median(self.seconds))
-
-    @property
-    def iqr_ms(self) -> float:
-        q25, q75 = np.percentile(self.seconds, [25.0, 75.0])
-        return 1e3 * float(q75 - q25)
-
-
-def time_interleaved(calls: Sequence[Callable[[], object]], repeats: int,
-                     warmup: int = WARMUP) -> list[Timings]:
-    """Time each call ``repeats`` times, round robin, after ``warmup`` untimed rounds."""
-    for _ in range(warmup):
-        for call in calls:
-            call()
-    seconds = np.empty((len(calls), repeats))
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        for r in range(repeats):
-            for k, call in enumerate(calls):
-                start = time.perf_counter()
-                call()
-                seconds[k, r] = time.perf_counter() - start
-    finally:
-        if enabled:
-            gc.enable()
-    return [Timings(s) for s in seconds]
-
-
 def time_once(call: Callable[[], object]) -> tuple[float, object]:
     """Seconds of one call (gc disabled) and its result."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
+    with gc_disabled():
         start = time.perf_counter()
         out = call()
         return time.perf_counter() - start, out
-    finally:
-        if enabled:
-            gc.enable()
 
 
 # -- the head case -----------------------------------------------------------------------
@@ -194,6 +157,15 @@ def held_out_rms_mm(model, case: Case, frames: Sequence[str] = PLATES + CAMERAS)
           - case.truth.frame_poses(case.test_qs, f, case.joint_names)[:, :3, 3]
           for f in frames]
     return 1e3 * float(np.sqrt(np.mean(np.concatenate(dp) ** 2) * 3.0))
+
+
+def truth_and_start(nominal: Robot, rng: np.random.Generator) -> tuple[Robot, Robot]:
+    """A true head (nominal perturbed, :func:`perturb_robot`'s defaults) and a start near
+    the nominal (perturbed by 0.5 mm, 0.1 deg), drawn from ``rng`` in that order."""
+    truth = load_robot(perturb_robot(nominal, rng))
+    start = load_robot(perturb_robot(nominal, rng, origin_mm=0.5, origin_deg=0.1,
+                                     axis_deg=0.1))
+    return truth, start
 
 
 def robot_rms_mm(robot: Robot, case: Case, frames: Sequence[str]) -> float:
@@ -323,54 +295,11 @@ class Solver:
 # -- output ------------------------------------------------------------------------------
 
 
-def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """Right-aligned plain-text table (first column left-aligned)."""
-    widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(headers)]
-
-    def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                         for k, (c, w) in enumerate(zip(cells, widths, strict=True)))
-
-    return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
-
-
-def load_average() -> str:
-    return ("n/a" if not hasattr(os, "getloadavg")
-            else " ".join(f"{x:.2f}" for x in os.getloadavg()))
-
-
-def machine_info() -> str:
-    affinity = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else "n/a")
-    threads = ", ".join(f"{v}={os.environ[v]}" for v in
-                        ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-                        if v in os.environ) or "not set"
-    return "\n".join([
-        f"python     {platform.python_version()} ({platform.python_implementation()})",
-        f"numpy      {np.__version__}",
-        f"pinocchio  {pin.__version__}",
-        f"casadi     {ca.__version__}",
-        f"platform   {platform.platform()}",
-        f"processor  {platform.processor() or platform.machine()}",
-        f"CPUs       {os.cpu_count()} (usable by this process: {affinity})",
-        f"BLAS env   {threads}",
-        f"load avg   {load_average()} (1, 5, 15 min; other load skews absolute times)",
-        f"BLAS probe {blas_probe_ms():.2f} ms median for np.linalg.svd of a 1020 x 50 matrix "
-        "(~1.5 ms on one\n           core here; far more = BLAS threads fighting other load: "
-        "OPENBLAS_NUM_THREADS=1)",
-        f"kinfw      {REPO}",
-    ])
-
-
 def blas_probe_ms() -> float:
     """Median time of the SVD refine() does for its covariance, on the section-1 size."""
     a = np.random.default_rng(0).normal(size=(1020, 50))
-    return time_interleaved([lambda: np.linalg.svd(a, full_matrices=False)], 15)[0].median_ms
-
-
-def slope(x: Sequence[float], y: Sequence[float]) -> float:
-    """Least-squares slope of log y against log x."""
-    return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+    return time_interleaved([lambda: np.linalg.svd(a, full_matrices=False)], 15,
+                            warmup=WARMUP)[0].median_ms
 
 
 def ms(seconds: float) -> str:
@@ -386,7 +315,8 @@ def section_solvers(nominal: Robot, case: Case, stages: Stages, repeats: int,
     start = Robot(stages.start_xml, nominal.source)
     targets = stages.targets
     build_times = time_interleaved(
-        [lambda: build_problem(nominal, data, start=start, targets=targets)], repeats)[0]
+        [lambda: build_problem(nominal, data, start=start, targets=targets)], repeats,
+        warmup=WARMUP)[0]
     problem = build_problem(nominal, data, start=start, targets=targets)
     n_rows = sum(m * rows for m, rows in problem.obs_sizes)
     n_free = int(problem.free.sum())
@@ -428,7 +358,7 @@ def section_solvers(nominal: Robot, case: Case, stages: Stages, repeats: int,
         lambda: refine(nominal, data, start=start, targets=targets, noise=noise),
         *[lambda nlp=nlp: nlp(x0=x_free0) for nlp in built],
     ]
-    timings = time_interleaved(calls, repeats)
+    timings = time_interleaved(calls, repeats, warmup=WARMUP)
     lm_times = timings[0]
 
     x_lm, lm_its, lm_ok = lm_only(problem, noise)
@@ -497,9 +427,7 @@ def section_solvers(nominal: Robot, case: Case, stages: Stages, repeats: int,
 def section_rank_deficient(nominal: Robot, seed: int) -> None:
     """The same solvers when the data leaves directions undetermined (a joint held still)."""
     rng = np.random.default_rng([seed, 2])
-    truth = load_robot(perturb_robot(nominal, rng))
-    start = load_robot(perturb_robot(nominal, rng, origin_mm=0.5, origin_deg=0.1,
-                                     axis_deg=0.1))
+    truth, start = truth_and_start(nominal, rng)
     names = nominal.topology(PLATES + CAMERAS).joint_names
     lower, upper = nominal.joint_limits(names)
     still = "vergence_left"
@@ -593,7 +521,8 @@ def section_pipeline(nominal: Robot, case: Case, stages: Stages, repeats: int) -
                              root_is_measurement_frame=result.model_frame is None)),
     ]
     timings = dict(zip([label for label, _, _ in steps],
-                       time_interleaved([call for _, _, call in steps], repeats), strict=True))
+                       time_interleaved([call for _, _, call in steps], repeats,
+                                        warmup=WARMUP), strict=True))
     med = {label: t.median_ms for label, t in timings.items()}
     iqr = {label: t.iqr_ms for label, t in timings.items()}
     # derived rows: differences of medians
@@ -685,9 +614,7 @@ def short_name(func: tuple[str, int, str]) -> str:
 
 def section_scaling(nominal: Robot, sizes: Sequence[int], repeats: int, seed: int) -> None:
     rng = np.random.default_rng([seed, 3])
-    truth = load_robot(perturb_robot(nominal, rng))
-    start = load_robot(perturb_robot(nominal, rng, origin_mm=0.5, origin_deg=0.1,
-                                     axis_deg=0.1))
+    truth, start = truth_and_start(nominal, rng)
     names = nominal.topology(PLATES + CAMERAS).joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, max(sizes), rng, fraction=0.8)
@@ -837,7 +764,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     started = time.perf_counter()
     print("kinfw refine benchmark (IIS-head: plates " + ", ".join(PLATES) + "; cameras "
           + ", ".join(CAMERAS) + ")")
-    print(machine_info())
+    print(machine_info(
+        [("pinocchio", pin.__version__), ("casadi", ca.__version__)],
+        probes=[("BLAS probe", f"{blas_probe_ms():.2f} ms median for np.linalg.svd of a 1020 x 50 "
+                 "matrix (~1.5 ms on one\n           core here; far more = BLAS threads "
+                 "fighting other load: OPENBLAS_NUM_THREADS=1)")]))
     print(f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
           f"warm-up {WARMUP}, seed {args.seed}, gc disabled while timing")
     nominal = load_robot(HEAD_URDF)
@@ -847,8 +778,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     section_rank_deficient(nominal, args.seed)
     section_pipeline(nominal, case, stages, repeats)
     section_scaling(nominal, sizes, repeats, args.seed)
-    print(f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
-          f"load avg now {load_average()}")
+    print(wall_time_line(started))
     return 0
 
 

@@ -590,7 +590,7 @@ def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArr
 def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
            targets: dict[str, NDArray] | None = None, noise: NoiseModel | None = None,
            loss: str = "linear", loss_scale: float = 2.33, max_iterations: int = 100,
-           noise_rounds: int = 3, parameters: str | tuple[str, ...] = "full",
+           noise_rounds: int = 5, parameters: str | tuple[str, ...] = "full",
            prior: tuple[float, float] | None = None,
            known: tuple[Unknown, ...] = ()) -> RefineResult:
     """Refine every unknown jointly by whitened nonlinear least squares.
@@ -653,15 +653,17 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     k = _thresholds(obs_sizes, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False
-    for _ in range(1 if given else noise_rounds):
+    for round_ in range(1 if given else noise_rounds):
         x, its, converged = _levenberg_marquardt(
             lambda v, jac, s=sigma: problem.evaluate(v, s, jac), x, free, obs_sizes, loss,
             k, max_iterations)
         iterations += its
         if given:
             break
-        sigma = _estimate_noise(problem.evaluate(x, sigma, False)[0], problem.groups, sigma,
-                                int(free.sum()), robust=loss != "linear")
+        r, J = problem.evaluate(x, sigma, True)
+        Q, _ = np.linalg.qr(J[:, free] * np.sqrt(_row_weights(r, obs_sizes, loss, k))[:, None])
+        sigma = _estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
+                                robust=loss != "linear", first=round_ == 0)
     r, J = problem.evaluate(x, sigma, True)
     w_rows = _row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
@@ -813,37 +815,55 @@ def _levenberg_marquardt(evaluate, x: NDArray, free: NDArray, obs_sizes, loss: s
 
 #: Median of the chi-square distribution with 3 degrees of freedom.
 _CHI2_3_MEDIAN = 2.365973884375338
+#: Its 99.9 % quantile, and the mean below it divided by 3 (the trimmed second moment).
+_CHI2_3_Q99 = 16.26623619623813  # 99.9 %
+_CHI2_3_TRIMMED = 0.99496
 
 
-def _estimate_noise(r: NDArray, groups: list[_Group], sigma: NoiseModel, n_free: int, *,
-                    robust: bool = False) -> NoiseModel:
+def _estimate_noise(r: NDArray, groups: list[_Group], sigma: NoiseModel,
+                    leverage: NDArray, *, robust: bool = False, first: bool = True
+                    ) -> NoiseModel:
     """Rescale each kind's sigma from the whitened residuals.
 
-    Least squares: variance components (each kind's sum of squares over its share of the
-    degrees of freedom). With a robust loss: the median of the per-observation squared
-    norms over the chi-square(3) median, which gross outliers do not inflate.
+    ``leverage`` is the diagonal of the hat matrix ``J (J^T J)^+ J^T`` (one per row): a
+    kind's residual degrees of freedom are its rows minus its leverages, so a kind that
+    the fit follows closely (orientations, here) is not underestimated.
+
+    Least squares: variance components (each kind's sum of squares over its degrees of
+    freedom). With a robust loss: first the median of the per-observation
+    squared norms over the chi-square(3) median, which gross outliers do not inflate;
+    then (``first=False``) the second moment of the observations inside the 99 %
+    quantile, which depends on the noise's shape only through that 1 % tail (an angle
+    about a random axis and an isotropic 3-D error have different medians).
     """
-    pos, rot, k = [], [], 0
+    pos, rot, hp, hr, k = [], [], [], [], 0
     for grp in groups:
         m = len(grp.sample)
         block = r[k : k + m * grp.rows].reshape(m, grp.rows)
+        h = leverage[k : k + m * grp.rows].reshape(m, grp.rows)
         pos.append(block[:, :3])
+        hp.append(h[:, :3])
         if grp.rows == 6:
             rot.append(block[:, 3:])
+            hr.append(h[:, 3:])
         k += m * grp.rows
-    pos = np.concatenate(pos)
-    rot = np.concatenate(rot) if rot else np.zeros((0, 3))
 
-    def factor(block: NDArray) -> float:
-        if not len(block):
+    def factor(blocks: list[NDArray], hats: list[NDArray]) -> float:
+        if not blocks:
             return 1.0
+        block, hat = np.concatenate(blocks), np.concatenate(hats)
+        share = max(1.0 - hat.sum() / block.size, 1e-3)
+        s2 = np.sum(block**2, axis=1)
+        if robust and first:
+            return float(np.sqrt(np.median(s2) / (_CHI2_3_MEDIAN * share)))
         if robust:
-            return float(np.sqrt(np.median(np.sum(block**2, axis=1)) / _CHI2_3_MEDIAN))
-        share = 1.0 - n_free / max(len(r), n_free + 1)
-        return float(np.sqrt(np.sum(block**2) / max(block.size * share, 1.0)))
+            inside = s2[s2 < _CHI2_3_Q99]
+            return float(np.sqrt(np.mean(inside) / (3.0 * _CHI2_3_TRIMMED * share))) \
+                if len(inside) else 1.0
+        return float(np.sqrt(np.sum(s2) / (block.size * share)))
 
-    return NoiseModel(float(max(sigma.position_m * factor(pos), 1e-12)),
-                      float(max(sigma.rotation_rad * factor(rot), 1e-15)), estimated=True)
+    return NoiseModel(float(max(sigma.position_m * factor(pos, hp), 1e-12)),
+                      float(max(sigma.rotation_rad * factor(rot, hr), 1e-15)), estimated=True)
 
 
 def _covariance_and_identifiability(Jw: NDArray, free: NDArray, names: list,

@@ -47,6 +47,7 @@ from kinfw.transforms import inverse_transform, rot_z, skew, transform_from_rota
 __all__ = [
     "CPCModel",
     "ZeroGeometry",
+    "cayley_coordinates",
     "cpc_from_geometry",
     "cpc_from_robot",
     "geometry_from_cpc",
@@ -92,6 +93,19 @@ def _cayley(a: NDArray[np.float64]) -> NDArray[np.float64]:
     """
     K = skew(a)
     return np.eye(3) + (2.0 / (1.0 + np.sum(a * a, axis=-1)))[..., None, None] * (K + K @ K)
+
+
+def cayley_coordinates(dR: ArrayLike) -> NDArray[np.float64]:
+    """Cayley chart coordinates ``d`` (3,) of a rotation ``dR`` (3, 3): ``dR = cayley(d / 2)``.
+
+    The inverse of the chart :meth:`CPCModel.perturbed` uses for tool orientations (and
+    ``identification.refine`` for rigid frames): ``d = 2 vee(dR - dR^T) / (1 + tr dR)``,
+    twice the Gibbs vector ``tan(theta / 2) u``, equal to the rotation vector ``theta u``
+    to first order; undefined at ``theta = pi``.
+    """
+    dR = np.asarray(dR, dtype=float)
+    a = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+    return 2.0 * a / (1.0 + np.trace(dR))
 
 
 def perpendicular_basis(b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -224,8 +238,8 @@ class CPCModel:
         ``other`` must be canonical with the same topology and motion senses (e.g.
         ``cpc_from_geometry(geometry, sign=self.sign)``); the inverse of :meth:`perturbed`:
         axes ``d_i = e_i . b / (b0 . b)``, offsets by difference, tool rotations
-        ``2 vee(dR - dR^T) / (1 + tr dR)`` (the inverse Cayley map), positions by
-        difference.
+        ``2 vee(dR - dR^T) / (1 + tr dR)`` (the inverse Cayley map,
+        :func:`cayley_coordinates`), positions by difference.
         """
         if other.topology != self.topology or np.any(other.sign != self.sign):
             raise ValueError("chart_coordinates: models differ in topology or motion senses")
@@ -236,9 +250,7 @@ class CPCModel:
             if rev:
                 out += list(other.l[j, :2] - self.l[j, :2])
         for e in range(len(self.topology.frames)):
-            dR = self.tool_T[e, :3, :3].T @ other.tool_T[e, :3, :3]
-            a = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-            out += list(2.0 * a / (1.0 + np.trace(dR)))
+            out += list(cayley_coordinates(self.tool_T[e, :3, :3].T @ other.tool_T[e, :3, :3]))
             out += list(other.tool_T[e, :3, 3] - self.tool_T[e, :3, 3])
         return np.array(out)
 

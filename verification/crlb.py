@@ -51,12 +51,10 @@ P. J. Huber, "Robust estimation of a location parameter", 1964 (the Huber loss).
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -72,9 +70,15 @@ from identification.refine import (
     information_matrix,
     refine,
 )
-from kinfw.cpc import CPCModel, cpc_from_geometry, cpc_from_robot, geometry_from_robot
+from kinfw.cpc import (
+    CPCModel,
+    cayley_coordinates,
+    cpc_from_geometry,
+    cpc_from_robot,
+    geometry_from_robot,
+)
 from kinfw.measurements import Measurements, concatenate_measurements
-from kinfw.robot import Robot, builtin_head_urdf, load_robot
+from kinfw.robot import Robot, load_robot
 from kinfw.transforms import matrix_from_rotation_vector
 from verification.simulate import (
     default_target_pose,
@@ -82,6 +86,21 @@ from verification.simulate import (
     perturb_robot,
     random_configurations,
     simulate,
+)
+from verification.studies import (
+    Progress,
+    arrays_from,
+    check_count,
+    choice_main,
+    fields_from_dict,
+    fields_to_dict,
+    freeze,
+    json_lists,
+    log_axes,
+    new_figure,
+    run_on_head,
+    sample_std,
+    save_figure,
 )
 
 __all__ = [
@@ -116,8 +135,6 @@ _EXPERIMENT_TAG = 7  # seeds (module docstring)
 _OUTLIER_TAG = 8
 _BAND_TAG = 9
 _RANK_TOL = 1e-12  # eigenvalues of the scaled information below this (relative) are null
-
-Progress = Callable[[int, int], Any]
 
 
 # -- the bound -------------------------------------------------------------------------
@@ -463,28 +480,13 @@ class ExperimentSetup:
                 f"{self.n_test} held-out configurations")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"urdf": self.urdf, "plates": list(self.plates), "cameras": list(self.cameras),
-                "joint_names": list(self.joint_names), "error_mm": self.error_mm,
-                "error_deg": self.error_deg, "sigma_mm": self.sigma_mm,
-                "sigma_deg": self.sigma_deg, "per_joint": self.per_joint,
-                "stage2_views": self.stage2_views, "n_test": self.n_test,
-                "fraction": self.fraction, "seed": self.seed}
+        """JSON-ready: every attribute, tuples as lists."""
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> ExperimentSetup:
-        return cls(urdf=str(doc["urdf"]), plates=tuple(doc["plates"]),
-                   cameras=tuple(doc["cameras"]), joint_names=tuple(doc["joint_names"]),
-                   error_mm=float(doc["error_mm"]), error_deg=float(doc["error_deg"]),
-                   sigma_mm=float(doc["sigma_mm"]), sigma_deg=float(doc["sigma_deg"]),
-                   per_joint=int(doc["per_joint"]), stage2_views=int(doc["stage2_views"]),
-                   n_test=int(doc["n_test"]), fraction=float(doc["fraction"]),
-                   seed=int(doc["seed"]))
-
-
-def _check_count(value: int, name: str, least: int) -> int:
-    if int(value) != value or int(value) < least:
-        raise ValueError(f"{name}: expected an integer >= {least}, got {value}")
-    return int(value)
+        """The set-up written by :meth:`to_dict`."""
+        return fields_from_dict(cls, doc)
 
 
 def _check_positive(value: float, name: str) -> float:
@@ -510,9 +512,9 @@ def _setup(nominal: Robot, *, sigma_mm: float, sigma_deg: float, per_joint: int,
         error_deg=_check_positive(error_deg, "error_deg"),
         sigma_mm=_check_positive(sigma_mm, "sigma_mm"),
         sigma_deg=_check_positive(sigma_deg, "sigma_deg"),
-        per_joint=_check_count(per_joint, "per_joint", 2),
-        stage2_views=_check_count(stage2_views, "stage2_views", 3),
-        n_test=_check_count(n_test, "n_test", 1), fraction=float(fraction), seed=int(seed))
+        per_joint=check_count(per_joint, "per_joint", 2),
+        stage2_views=check_count(stage2_views, "stage2_views", 3),
+        n_test=check_count(n_test, "n_test", 1), fraction=float(fraction), seed=int(seed))
 
 
 @dataclass(frozen=True, slots=True)
@@ -572,10 +574,9 @@ def _position_ms(model: CPCModel, truth: CPCModel, qs: NDArray[np.float64],
 def _cayley_chart_coordinates(T0: NDArray[np.float64], T: NDArray[np.float64]
                               ) -> NDArray[np.float64]:
     """``d`` with ``T = T0 [cayley(d[:3] / 2), d[3:]]``: the inverse of ``refine``'s chart
-    of a rigid frame (rotation on the right, position added in the outer frame)."""
-    dR = T0[:3, :3].T @ T[:3, :3]
-    a = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-    return np.concatenate([2.0 * a / (1.0 + np.trace(dR)), T[:3, 3] - T0[:3, 3]])
+    of a rigid frame (rotation on the right, :func:`kinfw.cpc.cayley_coordinates`; position
+    added in the outer frame)."""
+    return np.concatenate([cayley_coordinates(T0[:3, :3].T @ T[:3, :3]), T[:3, 3] - T0[:3, 3]])
 
 
 def true_chart_coordinates(problem: LeastSquaresProblem, truth_robot: Robot,
@@ -625,17 +626,20 @@ def _nees(error: NDArray[np.float64], covariance: NDArray[np.float64]) -> float:
     return float(error @ np.linalg.pinv(covariance, rcond=1e-12, hermitian=True) @ error)
 
 
-def _std(values: NDArray[np.float64], axis: int = 0) -> NDArray[np.float64]:
-    n = values.shape[axis]
-    return np.std(values, axis=axis, ddof=1 if n > 1 else 0)
-
-
 def _rms_over(values_mm: NDArray[np.float64], axis: int | tuple[int, ...]) -> Any:
     """RMS of RMS values (equal counts): sqrt of the mean of their squares."""
     return np.sqrt(np.mean(np.square(values_mm), axis=axis))
 
 
 # -- the CRLB study --------------------------------------------------------------------
+
+
+#: The per-trial arrays of :class:`CRLBStudy`, in the order its JSON lists them, and their
+#: dtypes.
+_CRLB_ARRAYS = dict.fromkeys(
+    ("start_rms_mm", "refined_rms_mm", "estimated_noise_rms_mm", "crlb_rms_mm", "z",
+     "z_estimated_noise", "nees", "ratio_band", "noise_estimates", "sigma_hat2", "seconds"),
+    float)
 
 
 @dataclass(frozen=True, slots=True)
@@ -765,17 +769,7 @@ class CRLBStudy:
             "setup": self.setup.to_dict(),
             "frames": list(self.setup.frames),
             "parameter_names": [list(n) for n in self.parameter_names],
-            "start_rms_mm": self.start_rms_mm.tolist(),
-            "refined_rms_mm": self.refined_rms_mm.tolist(),
-            "estimated_noise_rms_mm": self.estimated_noise_rms_mm.tolist(),
-            "crlb_rms_mm": self.crlb_rms_mm.tolist(),
-            "z": self.z.tolist(),
-            "z_estimated_noise": self.z_estimated_noise.tolist(),
-            "nees": self.nees.tolist(),
-            "ratio_band": self.ratio_band.tolist(),
-            "noise_estimates": self.noise_estimates.tolist(),
-            "sigma_hat2": self.sigma_hat2.tolist(),
-            "seconds": self.seconds.tolist(),
+            **json_lists(self, _CRLB_ARRAYS),
             "summary": {
                 "trials": self.trials,
                 "ratio": self.ratio.tolist(),
@@ -798,13 +792,9 @@ class CRLBStudy:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> CRLBStudy:
         """The study written by :meth:`to_dict` (the summary is recomputed)."""
-        arrays = {key: np.array(doc[key], dtype=float) for key in (
-            "start_rms_mm", "refined_rms_mm", "estimated_noise_rms_mm", "crlb_rms_mm", "z",
-            "z_estimated_noise", "nees", "ratio_band", "noise_estimates", "sigma_hat2",
-            "seconds")}
         return cls(setup=ExperimentSetup.from_dict(doc["setup"]),
                    parameter_names=tuple((str(o), str(f)) for o, f in doc["parameter_names"]),
-                   **arrays)
+                   **arrays_from(doc, _CRLB_ARRAYS))
 
 
 def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
@@ -845,7 +835,7 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
     """
     setup = _setup(nominal, sigma_mm=sigma_mm, sigma_deg=sigma_deg, per_joint=per_joint,
                    stage2_views=stage2_views, n_test=n_test, seed=seed)
-    trials = _check_count(trials, "trials", 1)
+    trials = check_count(trials, "trials", 1)
     E = len(setup.frames)
     start_ms, refined_ms, estimated_ms, crlb_ms = (np.empty((trials, E)) for _ in range(4))
     zs, zs_est, noise_est = [], [], np.empty((trials, 2))
@@ -902,10 +892,7 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
         z=np.array(zs), z_estimated_noise=np.array(zs_est), nees=nees, ratio_band=band,
         noise_estimates=noise_est,
         sigma_hat2=sigma_hat2, seconds=seconds)
-    for name in ("start_rms_mm", "refined_rms_mm", "estimated_noise_rms_mm", "crlb_rms_mm",
-                 "z", "z_estimated_noise", "nees", "ratio_band", "noise_estimates",
-                 "sigma_hat2", "seconds"):
-        getattr(result, name).flags.writeable = False
+    freeze(*(getattr(result, name) for name in _CRLB_ARRAYS))
     return result
 
 
@@ -914,6 +901,15 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
 #: Default variants of the robustness study: (loss, "given" | "estimated" noise).
 ROBUST_VARIANTS = (("linear", "given"), ("huber", "given"), ("cauchy", "given"),
                    ("huber", "estimated"), ("cauchy", "estimated"))
+
+
+#: The per-trial arrays of :class:`RobustStudy`, in the order its JSON lists them, and
+#: their dtypes.
+_ROBUST_ARRAYS = {
+    "clean_rms_mm": float, "start_rms_mm": float, "rms_mm": float, "n_observations": np.int64,
+    "n_planted": np.int64, "flagged_planted": np.int64, "flagged_clean": np.int64,
+    "noise_used": float, "seconds": float,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -1003,15 +999,7 @@ class RobustStudy:
             "outlier_fraction": self.outlier_fraction, "outlier_mm": self.outlier_mm,
             "outlier_deg": self.outlier_deg,
             "variants": [list(v) for v in self.variants],
-            "clean_rms_mm": self.clean_rms_mm.tolist(),
-            "start_rms_mm": self.start_rms_mm.tolist(),
-            "rms_mm": self.rms_mm.tolist(),
-            "n_observations": self.n_observations.tolist(),
-            "n_planted": self.n_planted.tolist(),
-            "flagged_planted": self.flagged_planted.tolist(),
-            "flagged_clean": self.flagged_clean.tolist(),
-            "noise_used": self.noise_used.tolist(),
-            "seconds": self.seconds.tolist(),
+            **json_lists(self, _ROBUST_ARRAYS),
             "summary": {label: {"median_ratio_to_clean": float(np.median(ratio)),
                                 "max_ratio_to_clean": float(np.max(ratio)),
                                 "recall": float(rec), "false_alarm_rate": float(fa)}
@@ -1023,15 +1011,11 @@ class RobustStudy:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> RobustStudy:
         """The study written by :meth:`to_dict` (the summary is recomputed)."""
-        ints = {k: np.array(doc[k], dtype=np.int64) for k in (
-            "n_observations", "n_planted", "flagged_planted", "flagged_clean")}
-        floats = {k: np.array(doc[k], dtype=float) for k in (
-            "clean_rms_mm", "start_rms_mm", "rms_mm", "noise_used", "seconds")}
         return cls(setup=ExperimentSetup.from_dict(doc["setup"]),
                    outlier_fraction=float(doc["outlier_fraction"]),
                    outlier_mm=float(doc["outlier_mm"]), outlier_deg=float(doc["outlier_deg"]),
                    variants=tuple((str(a), str(b)) for a, b in doc["variants"]),
-                   **ints, **floats)
+                   **arrays_from(doc, _ROBUST_ARRAYS))
 
 
 def _unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
@@ -1126,7 +1110,7 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
     """
     setup = _setup(nominal, sigma_mm=sigma_mm, sigma_deg=sigma_deg, per_joint=per_joint,
                    stage2_views=stage2_views, n_test=n_test, seed=seed)
-    trials = _check_count(trials, "trials", 1)
+    trials = check_count(trials, "trials", 1)
     variants = tuple((str(loss), str(noise)) for loss, noise in variants)
     for loss, noise in variants:
         if loss not in ("linear", "huber", "cauchy") or noise not in ("given", "estimated"):
@@ -1190,9 +1174,7 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
         start_rms_mm=1e3 * np.sqrt(start_ms), rms_mm=1e3 * np.sqrt(rms_ms),
         n_observations=n_obs, n_planted=n_planted, flagged_planted=flagged_planted,
         flagged_clean=flagged_clean, noise_used=noise_used, seconds=seconds)
-    for name in ("clean_rms_mm", "start_rms_mm", "rms_mm", "n_observations", "n_planted",
-                 "flagged_planted", "flagged_clean", "noise_used", "seconds"):
-        getattr(result, name).flags.writeable = False
+    freeze(*(getattr(result, name) for name in _ROBUST_ARRAYS))
     return result
 
 
@@ -1256,10 +1238,10 @@ def format_crlb(study: CRLBStudy) -> str:
         "mean, min, max |",
         "|---|---:|---:|---:|",
         f"| position (mm) | {1e3 * true[0]:.4f} | {1e3 * est[:, 0].mean():.4f} ± "
-        f"{1e3 * _std(est[:, 0]):.4f} | {ratio_n[:, 0].mean():.3f}, {ratio_n[:, 0].min():.3f}, "
-        f"{ratio_n[:, 0].max():.3f} |",
+        f"{1e3 * sample_std(est[:, 0]):.4f} | {ratio_n[:, 0].mean():.3f}, "
+        f"{ratio_n[:, 0].min():.3f}, {ratio_n[:, 0].max():.3f} |",
         f"| orientation (deg) | {np.degrees(true[1]):.4f} | {np.degrees(est[:, 1].mean()):.4f}"
-        f" ± {np.degrees(_std(est[:, 1])):.4f} | {ratio_n[:, 1].mean():.3f}, "
+        f" ± {np.degrees(sample_std(est[:, 1])):.4f} | {ratio_n[:, 1].mean():.3f}, "
         f"{ratio_n[:, 1].min():.3f}, {ratio_n[:, 1].max():.3f} |",
         "",
         f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial).",
@@ -1306,29 +1288,6 @@ def format_robustness(study: RobustStudy) -> str:
 # -- plots -----------------------------------------------------------------------------
 
 
-def _new_figure(size: tuple[float, float]) -> Any:
-    """A matplotlib Figure rendered by the Agg canvas, without pyplot's global state."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
-def _log_axes(ax: Any, which: str) -> None:
-    """Log scale with plain-number ticks at 1, 2, 5 x 10^k."""
-    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
-
-    if which == "both":
-        ax.set_xscale("log")
-    ax.set_yscale("log")
-    for axis in (ax.xaxis, ax.yaxis) if which == "both" else (ax.yaxis,):
-        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        axis.set_major_formatter(FormatStrFormatter("%g"))
-        axis.set_minor_formatter(NullFormatter())
-
-
 def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     """Write the CRLB study as a PNG: error vs bound, ratio per trial, coverage.
 
@@ -1346,7 +1305,7 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
         ``path``.
     """
     s = study
-    fig = _new_figure((16.0, 5.6))
+    fig = new_figure((16.0, 5.6))
     ax, mx, bx = fig.subplots(1, 3, width_ratios=(1.1, 1.0, 0.9))
     colors = ("tab:blue", "tab:green", "tab:red", "tab:purple", "tab:orange", "tab:brown")
     for e, frame in enumerate(s.setup.frames):
@@ -1365,7 +1324,7 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     ax.scatter([], [], marker="^", color="0.4", alpha=0.4,
                label="closed form + hand-eye start")
     ax.scatter([], [], marker="D", color="0.4", edgecolor="k", label="pooled over trials")
-    _log_axes(ax, "both")
+    log_axes(ax, "both")
     ax.set_xlim(*line)
     ax.set_ylim(*line)
     ax.set_aspect("equal")
@@ -1415,9 +1374,7 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
         f"noise {s.setup.sigma_mm:g} mm, {s.setup.sigma_deg:g}°; {s.setup.per_joint} values "
         f"per joint + {s.setup.stage2_views} target views; {s.setup.n_test} held-out "
         "configurations", fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_robustness(study: RobustStudy, path: str | Path) -> Path:
@@ -1433,7 +1390,7 @@ def plot_robustness(study: RobustStudy, path: str | Path) -> Path:
         ``path``.
     """
     s = study
-    fig = _new_figure((12.0, 5.4))
+    fig = new_figure((12.0, 5.4))
     ax, bx = fig.subplots(1, 2, width_ratios=(1.4, 1.0))
     labels = ["clean data,\nlinear", "start,\ncorrupted", *[lb.replace(", ", ",\n")
                                                           for lb in s.labels]]
@@ -1444,7 +1401,7 @@ def plot_robustness(study: RobustStudy, path: str | Path) -> Path:
                    color="tab:green" if i == 0 else ("0.55" if i == 1 else "tab:blue"))
         ax.hlines(np.median(values), i - 0.3, i + 0.3, color="0.1", linewidth=2)
     ax.axhline(np.median(s.clean_rms_mm), color="tab:green", linestyle=":", linewidth=1)
-    _log_axes(ax, "y")
+    log_axes(ax, "y")
     ax.set_xticks(range(len(columns)), labels, fontsize=8)
     ax.set_ylabel("held-out RMS position error vs truth (mm); bar = median")
     ax.grid(True, axis="y", which="both", alpha=0.3)
@@ -1466,77 +1423,36 @@ def plot_robustness(study: RobustStudy, path: str | Path) -> Path:
         f"Robust refinement: {100 * s.outlier_fraction:g} % of observations corrupted by "
         f"{s.outlier_mm:g} mm and {s.outlier_deg:g}° ({s.trials} trials); noise "
         f"{s.setup.sigma_mm:g} mm, {s.setup.sigma_deg:g}°", fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    return path
+    return save_figure(fig, path)
 
 
 # -- runs on the built-in head ---------------------------------------------------------
-
-
-def _write(result: CRLBStudy | RobustStudy, out_dir: str | Path, name: str,
-           plot: Callable[[Any, Path], Path]) -> None:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    plot(result, out / f"{name}.png")
-    (out / f"{name}.json").write_text(json.dumps(result.to_dict(), indent=1) + "\n")
 
 
 def run_crlb(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
              ) -> CRLBStudy:
     """Run :func:`crlb_study` (on the built-in IIS-head unless ``urdf``) and write
     ``crlb.png`` and ``crlb.json`` into ``out_dir``; ``kwargs`` go to the study."""
-    nominal = load_robot(builtin_head_urdf() if urdf is None else urdf)
-    result = crlb_study(nominal, **kwargs)
-    _write(result, out_dir, "crlb", plot_crlb)
-    return result
+    return run_on_head(crlb_study, plot_crlb, out_dir, "crlb", urdf, kwargs)
 
 
 def run_robustness(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
                    ) -> RobustStudy:
     """Run :func:`robustness_study` (on the built-in IIS-head unless ``urdf``) and write
     ``robust.png`` and ``robust.json`` into ``out_dir``; ``kwargs`` go to the study."""
-    nominal = load_robot(builtin_head_urdf() if urdf is None else urdf)
-    result = robustness_study(nominal, **kwargs)
-    _write(result, out_dir, "robust", plot_robustness)
-    return result
-
-
-def _stderr_progress(done: int, total: int) -> None:
-    sys.stderr.write(f"\r{done}/{total} trials")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    return run_on_head(robustness_study, plot_robustness, out_dir, "robust", urdf, kwargs)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m verification.crlb {crlb,robust} --out DIR [--trials N] [--seed S]``: run
     one study on the built-in head, write its PNG and JSON, print the table."""
-    parser = argparse.ArgumentParser(
-        prog="python -m verification.crlb",
+    return choice_main(
+        argv, prog="python -m verification.crlb",
         description="crlb: refined calibration vs its Cramér-Rao bound; robust: refinement "
-                    "with planted outliers (linear, Huber, Cauchy losses).")
-    parser.add_argument("study", choices=("crlb", "robust"))
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--trials", type=int, default=None,
-                        help="random trials (default: 30 for crlb, 20 for robust)")
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args(argv)
-    kwargs: dict[str, Any] = {"seed": args.seed}
-    if args.trials is not None:
-        kwargs["trials"] = args.trials
-    if sys.stderr.isatty():
-        kwargs["progress"] = _stderr_progress
-    start = time.perf_counter()
-    if args.study == "crlb":
-        text = format_crlb(run_crlb(args.out, **kwargs))
-    else:
-        text = format_robustness(run_robustness(args.out, **kwargs))
-    print(text)
-    print(f"\n{args.study}: {time.perf_counter() - start:.1f} s; wrote "
-          f"{args.out / (args.study + '.png')} and {args.out / (args.study + '.json')}")
-    return 0
-
+                    "with planted outliers (linear, Huber, Cauchy losses).",
+        trials_help="random trials (default: 30 for crlb, 20 for robust)",
+        studies={"crlb": (run_crlb, format_crlb),
+                 "robust": (run_robustness, format_robustness)})
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -57,13 +57,11 @@ base-world calibration problem", ICRA 2001, sections 3-5, Figs. 3 and 4.
 
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 import logging
 import sys
-import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -79,6 +77,23 @@ from kinfw.transforms import (
     quat_xyzw_from_matrix,
     transform_from_rotation_translation,
     transform_from_xyz_quat_xyzw,
+)
+from verification.studies import (
+    Progress,
+    arrays_from,
+    check_count,
+    freeze,
+    json_list,
+    json_lists,
+    new_figure,
+    output_dir,
+    plain_log_ticks,
+    readonly,
+    run_and_print,
+    save_figure,
+    shared_legend,
+    study_parser,
+    write_json,
 )
 
 __all__ = [
@@ -120,8 +135,6 @@ SOLVER_MAX_ITERATIONS = 1000
 _X_TRANSLATION_M = 0.1
 _Y_TRANSLATION_M = 1.0
 
-Progress = Callable[[int, int], Any]
-
 
 # -- noise, error measure and the simulated problem -------------------------------------
 
@@ -136,7 +149,7 @@ def rotations_about_random_axes(rng: np.random.Generator, n: int, angle_rad: flo
     angle_rad = float(angle_rad)
     if not (np.isfinite(angle_rad) and 0.0 <= angle_rad <= np.pi):
         raise ValueError(f"angle_rad: expected a finite angle in [0, pi], got {angle_rad}")
-    n = _check_count(n, "n", 0)
+    n = check_count(n, "n", 0)
     axes = rng.normal(size=(n, 3))
     axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
     return matrix_from_rotation_vector(angle_rad * axes)
@@ -240,7 +253,7 @@ def random_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: f
 
 def _draw_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: float,
                   hand_translation_m: float) -> _Problem:
-    views = _check_count(views, "views", 3)
+    views = check_count(views, "views", 3)
     if not (np.isfinite(hand_rotation_deg) and 0.0 < hand_rotation_deg <= 180.0):
         raise ValueError(f"hand_rotation_deg: expected 0 < angle <= 180, got "
                          f"{hand_rotation_deg}")
@@ -265,12 +278,6 @@ def _draw_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: fl
 # -- the study ---------------------------------------------------------------------------
 
 
-def _check_count(value: int, name: str, least: int) -> int:
-    if int(value) != value or int(value) < least:
-        raise ValueError(f"{name}: expected an integer >= {least}, got {value}")
-    return int(value)
-
-
 def _trial_rng(seed: int, noise_deg: float, views: int, trial: int) -> np.random.Generator:
     """The generator of one trial (module docstring: random numbers)."""
     return np.random.default_rng([seed, round(noise_deg * 1e6), views, trial])
@@ -285,17 +292,14 @@ def _nan_quantiles(values: NDArray[np.float64], q: Sequence[float]) -> NDArray[n
     return out
 
 
-def _readonly(values: Any, dtype: Any = float) -> NDArray:
-    out = np.array(values, dtype=dtype)
-    out.flags.writeable = False
-    return out
-
-
-def _json_list(values: NDArray) -> Any:
-    """``values.tolist()`` with NaN and infinities as ``None`` (strict JSON)."""
-    if values.dtype.kind == "f":
-        return np.where(np.isfinite(values), values, None).tolist()
-    return values.tolist()
+#: The per-trial arrays of :class:`HirshResult`, in the order its JSON lists them, and
+#: their dtypes.
+_TRIAL_ARRAYS = {
+    "initial_y_error_deg": float, "y_error_deg": float, "x_error_deg": float,
+    "solved_y_error_deg": float, "solved_x_error_deg": float,
+    "solved_y_translation_error_m": float, "solver_iterations": np.int64, "converged": bool,
+    "restarts": np.int64, "convergence_factors": float, "failed": bool,
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -415,23 +419,12 @@ class HirshResult:
             "hand_translation_m": self.hand_translation_m,
             "trials": self.trials,
             "iterations": self.iterations,
-            "initial_y_error_deg": _json_list(self.initial_y_error_deg),
-            "y_error_deg": _json_list(self.y_error_deg),
-            "x_error_deg": _json_list(self.x_error_deg),
-            "solved_y_error_deg": _json_list(self.solved_y_error_deg),
-            "solved_x_error_deg": _json_list(self.solved_x_error_deg),
-            "solved_y_translation_error_m": _json_list(self.solved_y_translation_error_m),
-            "solver_iterations": self.solver_iterations.tolist(),
-            "converged": self.converged.tolist(),
-            "restarts": self.restarts.tolist(),
-            "convergence_factors": _json_list(self.convergence_factors),
-            "failed": self.failed.tolist(),
+            **json_lists(self, _TRIAL_ARRAYS, strict=True),
             "summary": {
-                "y_median_deg": _json_list(self.y_median_deg),
-                "y_quartiles_deg": _json_list(self.y_quartiles_deg),
-                "x_median_deg": _json_list(self.x_median_deg),
+                **json_lists(self, ("y_median_deg", "y_quartiles_deg", "x_median_deg"),
+                             strict=True),
                 # null: not reached within the recorded iterations
-                "median_iterations_to_1e-6_deg": _json_list(
+                "median_iterations_to_1e-6_deg": json_list(
                     self.median_iterations_to_reach(CONVERGED_DEG)),
             },
         }
@@ -439,26 +432,10 @@ class HirshResult:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> HirshResult:
         """The result written by :meth:`to_dict` (the summary is recomputed)."""
-        def floats(key: str) -> NDArray[np.float64]:
-            return _readonly(doc[key], float)
-
-        def ints(key: str) -> NDArray[np.int64]:
-            return _readonly(doc[key], np.int64)
-
-        def bools(key: str) -> NDArray[np.bool_]:
-            return _readonly(doc[key], bool)
-
-        return cls(views=ints("views"), noise_deg=float(doc["noise_deg"]),
+        return cls(views=readonly(doc["views"], np.int64), noise_deg=float(doc["noise_deg"]),
                    seed=int(doc["seed"]), hand_rotation_deg=float(doc["hand_rotation_deg"]),
                    hand_translation_m=float(doc["hand_translation_m"]),
-                   initial_y_error_deg=floats("initial_y_error_deg"),
-                   y_error_deg=floats("y_error_deg"), x_error_deg=floats("x_error_deg"),
-                   solved_y_error_deg=floats("solved_y_error_deg"),
-                   solved_x_error_deg=floats("solved_x_error_deg"),
-                   solved_y_translation_error_m=floats("solved_y_translation_error_m"),
-                   solver_iterations=ints("solver_iterations"), converged=bools("converged"),
-                   restarts=ints("restarts"), convergence_factors=floats("convergence_factors"),
-                   failed=bools("failed"))
+                   **arrays_from(doc, _TRIAL_ARRAYS, writeable=False))
 
 
 def _padded(values: NDArray[np.float64], k: int) -> NDArray[np.float64]:
@@ -504,14 +481,14 @@ def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
     -------
     HirshResult
     """
-    vs = np.array([_check_count(v, "views", 3) for v in views], dtype=np.int64)
+    vs = np.array([check_count(v, "views", 3) for v in views], dtype=np.int64)
     if not vs.size:
         raise ValueError("views: expected at least one number of views")
     noise_deg = float(noise_deg)
     if not (np.isfinite(noise_deg) and 0.0 <= noise_deg <= 180.0):
         raise ValueError(f"noise_deg: expected an angle in [0, 180] degrees, got {noise_deg}")
-    trials = _check_count(trials, "trials", 1)
-    k = _check_count(iterations, "iterations", 1)
+    trials = check_count(trials, "trials", 1)
+    k = check_count(iterations, "iterations", 1)
     shape = (len(vs), trials)
     initial = np.full(shape, np.nan)
     y_err, x_err = np.full((*shape, k), np.nan), np.full((*shape, k), np.nan)
@@ -555,10 +532,8 @@ def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
                 progress(done, len(vs) * trials)
         log.info("hirsh: noise %g deg, %d views: median Y error after %d iterations %.3g deg",
                  noise_deg, n, k, np.nanmedian(y_err[v, :, -1]))
-    arrays = (vs, initial, y_err, x_err, solved_y, solved_x, solved_t, solver_its,
-              converged, restarts, factors, failed)
-    for a in arrays:
-        a.flags.writeable = False
+    freeze(vs, initial, y_err, x_err, solved_y, solved_x, solved_t, solver_its, converged,
+           restarts, factors, failed)
     return HirshResult(views=vs, noise_deg=noise_deg, seed=int(seed),
                        hand_rotation_deg=float(hand_rotation_deg),
                        hand_translation_m=float(hand_translation_m),
@@ -711,16 +686,6 @@ def format_hirsh(noise_free: HirshResult, noisy: HirshResult) -> str:
 # -- plot --------------------------------------------------------------------------------
 
 
-def _new_figure(size: tuple[float, float]) -> Any:
-    """A matplotlib Figure rendered by the Agg canvas, without pyplot's global state."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def _draw_curves(ax: Any, result: HirshResult) -> None:
     """Median (line) and interquartile band per number of views, iterations 0..K, on a
     log axis (errors below ``DISPLAY_FLOOR_DEG`` drawn at it)."""
@@ -753,9 +718,9 @@ def plot_hirsh(noise_free: HirshResult, noisy: HirshResult, path: str | Path) ->
     Path
         ``path``.
     """
-    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+    from matplotlib.ticker import LogLocator, NullFormatter
 
-    fig = _new_figure((12.5, 5.8))
+    fig = new_figure((12.5, 5.8))
     ax3, ax4 = fig.subplots(1, 2)
     _draw_curves(ax3, noise_free)
     ax3.axhline(CONVERGED_DEG, color="0.35", linestyle=":", linewidth=1.2,
@@ -774,17 +739,11 @@ def plot_hirsh(noise_free: HirshResult, noisy: HirshResult, path: str | Path) ->
                 label=f"noise line: {noisy.noise_deg:g}°, the rotation noise on each A[i]")
     low = np.nanmin(noisy.y_quartiles_deg[0])
     ax4.set_ylim(bottom=0.7 * min(low, noisy.noise_deg), top=300.0)
-    ax4.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-    ax4.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-    ax4.yaxis.set_minor_formatter(NullFormatter())
+    plain_log_ticks(ax4.yaxis)
     ax4.set_title(f"Fig. 4 (Hirsh et al. 2001): 3, 5, 10 views, each A[i] turned "
                   f"{noisy.noise_deg:g}° about a random axis", fontsize=10)
 
-    legend: dict[str, Any] = {}  # one entry per label over both panels
-    for ax in (ax3, ax4):
-        legend.update(zip(*reversed(ax.get_legend_handles_labels()), strict=True))
-    fig.legend(legend.values(), legend.keys(), fontsize=8.5, loc="outside lower center",
-               ncols=4)
+    shared_legend(fig, (ax3, ax4))
     fig.suptitle(
         "Reproduction of Hirsh, DeSouza & Kak (2001), section 5: the paper's iteration "
         "(refine=False) from Y = identity; median and interquartile range over "
@@ -792,9 +751,7 @@ def plot_hirsh(noise_free: HirshResult, noisy: HirshResult, path: str | Path) ->
         f"hand poses: rotations up to {noise_free.hand_rotation_deg:g}° about random axes; "
         "X, Y uniformly random; error = angle between the quaternions of estimate and "
         "truth", fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    return path
+    return save_figure(fig, path)
 
 
 # -- run ---------------------------------------------------------------------------------
@@ -809,13 +766,12 @@ def run_hirsh(out_dir: str | Path, *, noise_deg: float = PAPER_NOISE_DEG, **kwar
     ``hand_rotation_deg``, ``hand_translation_m``, ``progress``). Returns the noise-free
     and the noisy result.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = output_dir(out_dir)
     noise_free = hirsh_study(noise_deg=0.0, **kwargs)
     noisy = hirsh_study(noise_deg=noise_deg, **kwargs)
     plot_hirsh(noise_free, noisy, out / "hirsh_fig3_fig4.png")
-    doc = {"noise_free": noise_free.to_dict(), "noisy": noisy.to_dict()}
-    (out / "hirsh.json").write_text(json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    write_json(out / "hirsh.json", {"noise_free": noise_free.to_dict(), "noisy": noisy.to_dict()},
+               allow_nan=False)
     return noise_free, noisy
 
 
@@ -825,40 +781,26 @@ def load_hirsh(path: str | Path) -> tuple[HirshResult, HirshResult]:
     return HirshResult.from_dict(doc["noise_free"]), HirshResult.from_dict(doc["noisy"])
 
 
-def _stderr_progress(done: int, total: int) -> None:
-    sys.stderr.write(f"\r{done}/{total} trials")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m verification.hirsh_experiments --out DIR [--trials N] [--seed S]
     [--iterations K]``: run Figs. 3 and 4, write the PNG and the JSON, print the table."""
-    parser = argparse.ArgumentParser(
-        prog="python -m verification.hirsh_experiments",
-        description="Hirsh, DeSouza & Kak (2001) Figs. 3 and 4 in simulation.")
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--trials", type=int, default=50,
-                        help="random problems per number of views (default 50)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser = study_parser(
+        "python -m verification.hirsh_experiments",
+        "Hirsh, DeSouza & Kak (2001) Figs. 3 and 4 in simulation.", trials_default=50,
+        trials_help="random problems per number of views (default 50)")
     parser.add_argument("--iterations", type=int, default=100,
                         help="iterations recorded and plotted (default 100)")
     args = parser.parse_args(argv)
     # Slow trials end unconverged at the solver's cap by design (the study records them);
     # its per-trial warning about that is noise here.
     logging.getLogger("identification.axb").setLevel(logging.ERROR)
-    kwargs: dict[str, Any] = {"trials": args.trials, "seed": args.seed,
-                              "iterations": args.iterations}
-    if sys.stderr.isatty():
-        kwargs["progress"] = _stderr_progress
-    start = time.perf_counter()
-    noise_free, noisy = run_hirsh(args.out, **kwargs)
-    print(format_hirsh(noise_free, noisy))
-    print(f"\nhirsh: {time.perf_counter() - start:.1f} s; wrote "
-          f"{args.out / 'hirsh_fig3_fig4.png'} and {args.out / 'hirsh.json'}")
-    return 0
 
+    def run(**kwargs: Any) -> str:
+        return format_hirsh(*run_hirsh(args.out, **kwargs))
+
+    return run_and_print("hirsh", run, {"trials": args.trials, "seed": args.seed,
+                                        "iterations": args.iterations},
+                         (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"))
 
 if __name__ == "__main__":
     sys.exit(main())

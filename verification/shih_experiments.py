@@ -39,12 +39,9 @@ binocular head", 1992, section 6, Fig. 10, Fig. 11 and Table 4.
 
 from __future__ import annotations
 
-import argparse
-import json
 import logging
 import sys
-import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -55,12 +52,27 @@ from numpy.typing import NDArray
 from identification.closed_form import identify_closed_form
 from kinfw.cpc import CPCModel, cpc_from_robot
 from kinfw.measurements import Measurements, PoseObservations
-from kinfw.robot import Robot, builtin_head_urdf, load_robot
+from kinfw.robot import Robot, load_robot
 from verification.simulate import (
     one_joint_at_a_time,
     perturb_poses,
     perturb_robot,
     random_configurations,
+)
+from verification.studies import (
+    Progress,
+    check_count,
+    choice_main,
+    fields_from_dict,
+    fields_to_dict,
+    freeze,
+    log_axes,
+    new_figure,
+    readonly,
+    run_on_head,
+    sample_std,
+    save_figure,
+    shared_legend,
 )
 
 __all__ = [
@@ -84,13 +96,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-
-def _readonly(values: Any) -> NDArray[np.float64]:
-    out = np.array(values, dtype=float)
-    out.flags.writeable = False
-    return out
-
-
 #: The paper's accuracy requirement on the positioning error, mm (section 6).
 PAPER_ACCURACY_MM = 1.0
 #: Measurements per joint the paper chose from its Fig. 11 (section 6).
@@ -99,14 +104,12 @@ PAPER_PER_JOINT = 9
 PAPER_TABLE4_FRAMES = ("left_plate", "right_plate")
 #: Table 4 of the paper (real data, nine test configurations): mean of ``|error|`` in
 #: x, y, z, mm; rows ``PAPER_TABLE4_FRAMES``.
-PAPER_TABLE4_MU_MM = _readonly([[0.65, 0.23, 0.35], [0.28, 0.13, 0.11]])
+PAPER_TABLE4_MU_MM = readonly([[0.65, 0.23, 0.35], [0.28, 0.13, 0.11]])
 #: Table 4 of the paper: standard deviation of ``|error|`` in x, y, z, mm.
-PAPER_TABLE4_SIGMA_MM = _readonly([[0.24, 0.12, 0.30], [0.31, 0.21, 0.35]])
+PAPER_TABLE4_SIGMA_MM = readonly([[0.24, 0.12, 0.30], [0.31, 0.21, 0.35]])
 
 _FIG11_TAG = 11  # study tags in the seeds, so the two studies draw different numbers
 _TABLE4_TAG = 4
-
-Progress = Callable[[int, int], Any]
 
 
 # -- set-up shared by both studies -------------------------------------------------------
@@ -159,18 +162,13 @@ class StudySetup:
                 f"axis; central {100 * self.fraction:g} % of each joint range")
 
     def to_dict(self) -> dict[str, Any]:
-        return {"urdf": self.urdf, "frames": list(self.frames),
-                "joint_names": list(self.joint_names), "error_mm": self.error_mm,
-                "error_deg": self.error_deg, "rot_per_mm_rad": self.rot_per_mm_rad,
-                "fraction": self.fraction, "seed": self.seed}
+        """JSON-ready: every attribute, tuples as lists."""
+        return fields_to_dict(self)
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> StudySetup:
-        return cls(urdf=str(doc["urdf"]), frames=tuple(doc["frames"]),
-                   joint_names=tuple(doc["joint_names"]), error_mm=float(doc["error_mm"]),
-                   error_deg=float(doc["error_deg"]),
-                   rot_per_mm_rad=float(doc["rot_per_mm_rad"]),
-                   fraction=float(doc["fraction"]), seed=int(doc["seed"]))
+        """The set-up written by :meth:`to_dict`."""
+        return fields_from_dict(cls, doc)
 
 
 def _setup(nominal: Robot, frames: Sequence[str] | None, *, error_mm: float, error_deg: float,
@@ -203,23 +201,11 @@ def _check_sigmas_mm(values: Iterable[float], name: str) -> NDArray[np.float64]:
     return out
 
 
-def _check_count(value: int, name: str, least: int) -> int:
-    if int(value) != value or int(value) < least:
-        raise ValueError(f"{name}: expected an integer >= {least}, got {value}")
-    return int(value)
-
-
 def _trial_rng(setup: StudySetup, study: int, sigma_mm: float, per_joint: int, trial: int
                ) -> np.random.Generator:
     """The generator of one trial (module docstring: seeds)."""
     sigma_nm = round(float(sigma_mm) * 1e6)
     return np.random.default_rng([setup.seed, study, sigma_nm, per_joint, trial])
-
-
-def _std(values: NDArray[np.float64], axis: int | tuple[int, ...]) -> NDArray[np.float64]:
-    """Sample standard deviation along ``axis`` (0 for a single value)."""
-    n = np.prod([values.shape[a] for a in np.atleast_1d(axis)])
-    return np.std(values, axis=axis, ddof=1 if n > 1 else 0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -307,7 +293,7 @@ class Fig11Result:
     @property
     def std_mm(self) -> NDArray[np.float64]:
         """Standard deviation over trials of :attr:`trial_mean_mm`, shape (S, K), mm."""
-        return _std(self.trial_mean_mm, axis=2)
+        return sample_std(self.trial_mean_mm, axis=2)
 
     def smallest_per_joint(self, requirement_mm: float = PAPER_ACCURACY_MM
                            ) -> NDArray[np.float64]:
@@ -401,12 +387,12 @@ def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
     """
     setup = _setup(nominal, frames, error_mm=error_mm, error_deg=error_deg,
                    rot_per_mm_rad=rot_per_mm_rad, fraction=fraction, seed=seed)
-    ms = np.array([_check_count(m, "per_joint", 1) for m in per_joint], dtype=np.int64)
+    ms = np.array([check_count(m, "per_joint", 1) for m in per_joint], dtype=np.int64)
     if not ms.size:
         raise ValueError("per_joint: expected at least one number of measurements per joint")
     sigmas = _check_sigmas_mm(sigmas_mm, "sigmas_mm")
-    trials = _check_count(trials, "trials", 1)
-    n_test = _check_count(n_test, "n_test", 1)
+    trials = check_count(trials, "trials", 1)
+    n_test = check_count(n_test, "n_test", 1)
     lower, upper = nominal.joint_limits(setup.joint_names)
     errors = np.empty((len(sigmas), len(ms), trials, len(setup.frames)))
     total, done = errors[..., 0].size, 0
@@ -426,8 +412,7 @@ def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
                     progress(done, total)
             log.info("fig11: sigma %.3g mm, M = %d: mean error %.3g mm", sigma, m,
                      errors[s, k].mean())
-    for a in (ms, sigmas, errors):
-        a.flags.writeable = False
+    freeze(ms, sigmas, errors)
     return Fig11Result(setup=setup, per_joint=ms, sigmas_mm=sigmas, n_test=n_test,
                        errors_mm=errors)
 
@@ -482,7 +467,7 @@ class Table4Result:
     def measured_sigma_mm(self) -> NDArray[np.float64]:
         """Standard deviation of ``|error|`` vs the noisy measurements, (E, 3), mm
         (Table 4's sigma)."""
-        return _std(np.abs(self.error_vs_measured_mm), axis=(0, 1))
+        return sample_std(np.abs(self.error_vs_measured_mm), axis=(0, 1))
 
     @property
     def truth_mu_mm(self) -> NDArray[np.float64]:
@@ -492,7 +477,7 @@ class Table4Result:
     @property
     def truth_sigma_mm(self) -> NDArray[np.float64]:
         """Standard deviation of ``|error|`` vs the truth, (E, 3), mm."""
-        return _std(np.abs(self.error_vs_truth_mm), axis=(0, 1))
+        return sample_std(np.abs(self.error_vs_truth_mm), axis=(0, 1))
 
     def paper_rows(self) -> list[int | None]:
         """Per frame, its row in the paper's Table 4 (``PAPER_TABLE4_FRAMES``), or None."""
@@ -577,10 +562,10 @@ def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: 
     """
     setup = _setup(nominal, frames, error_mm=error_mm, error_deg=error_deg,
                    rot_per_mm_rad=rot_per_mm_rad, fraction=fraction, seed=seed)
-    per_joint = _check_count(per_joint, "per_joint", 1)
+    per_joint = check_count(per_joint, "per_joint", 1)
     sigma = float(_check_sigmas_mm([sigma_mm], "sigma_mm")[0])
-    trials = _check_count(trials, "trials", 1)
-    n_test = _check_count(n_test, "n_test", 1)
+    trials = check_count(trials, "trials", 1)
+    n_test = check_count(n_test, "n_test", 1)
     lower, upper = nominal.joint_limits(setup.joint_names)
     shape = (trials, n_test, len(setup.frames), 3)
     vs_measured, vs_truth = np.empty(shape), np.empty(shape)
@@ -596,8 +581,7 @@ def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: 
         vs_truth[t] = 1e3 * (true_p - predicted_p)
         if progress is not None:
             progress(t + 1, trials)
-    for a in (vs_measured, vs_truth):
-        a.flags.writeable = False
+    freeze(vs_measured, vs_truth)
     return Table4Result(setup=setup, per_joint=per_joint, sigma_mm=sigma, n_test=n_test,
                         error_vs_measured_mm=vs_measured, error_vs_truth_mm=vs_truth)
 
@@ -680,16 +664,6 @@ def format_table4(result: Table4Result) -> str:
 # -- plots -------------------------------------------------------------------------------
 
 
-def _new_figure(size: tuple[float, float]) -> Any:
-    """A matplotlib Figure rendered by the Agg canvas, without pyplot's global state."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=size, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig
-
-
 def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
     """Write Fig. 11 as a PNG: mean positioning error vs measurements per joint.
 
@@ -702,7 +676,7 @@ def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
         ``path``.
     """
     r = result
-    fig = _new_figure((8.0, 6.2))
+    fig = new_figure((8.0, 6.2))
     ax = fig.add_subplot()
     mean, std = r.mean_mm, r.std_mm
     for s, (sigma, sigma_rad) in enumerate(zip(r.sigmas_mm, r.sigmas_rad, strict=True)):
@@ -718,12 +692,7 @@ def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
                    label=f"paper's choice: M = {PAPER_PER_JOINT}")
     positive = mean[mean > 0]
     if positive.size and positive.max() / positive.min() > 8.0:
-        from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
-
-        ax.set_yscale("log")
-        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-        ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
-        ax.yaxis.set_minor_formatter(NullFormatter())
+        log_axes(ax, "y")
     ax.set_xticks(r.per_joint)
     ax.set_xlabel("measurements per joint, M")
     ax.set_ylabel("mean positioning error (mm), ± std over trials")
@@ -733,9 +702,7 @@ def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
         f"{r.trials} random trials per point (new true robot each), {r.n_test} held-out "
         f"test configurations, {' + '.join(r.setup.frames)}", fontsize=10)
     fig.legend(fontsize=8.5, loc="outside lower center", ncols=3)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    return path
+    return save_figure(fig, path)
 
 
 def plot_table4(result: Table4Result, path: str | Path) -> Path:
@@ -749,7 +716,7 @@ def plot_table4(result: Table4Result, path: str | Path) -> Path:
     """
     r = result
     frames = r.setup.frames
-    fig = _new_figure((4.2 * len(frames) + 1.0, 5.0))
+    fig = new_figure((4.2 * len(frames) + 1.0, 5.0))
     axes = fig.subplots(1, len(frames), sharey=True, squeeze=False)[0]
     x = np.arange(3)
     series = [
@@ -777,91 +744,41 @@ def plot_table4(result: Table4Result, path: str | Path) -> Path:
         ax.set_ylim(bottom=0.0)
         ax.grid(True, axis="y", alpha=0.3)
     axes[0].set_ylabel("|error| (mm): bar = mean, whisker = ± std")
-    legend = {}  # one entry per label over every panel
-    for ax in axes:
-        legend.update(zip(*reversed(ax.get_legend_handles_labels()), strict=True))
-    fig.legend(legend.values(), legend.keys(), fontsize=8.5, loc="outside lower center",
-               ncols=4)
+    shared_legend(fig, axes)
     fig.suptitle(
         f"Reproduction of Shih et al. (1992) Table 4: {r.per_joint} measurements per joint, "
         f"{_sigma_label(r.sigma_mm, r.sigma_rad)}\n"
         f"{r.n_test} held-out test configurations × {r.trials} trials (new true robot each); "
         "paper: real data", fontsize=10)
-    path = Path(path)
-    fig.savefig(path, dpi=130)
-    return path
+    return save_figure(fig, path)
 
 
 # -- runs on the built-in head -----------------------------------------------------------
-
-
-def _builtin_head() -> Robot:
-    return load_robot(builtin_head_urdf())
-
-
-def _write(result: Fig11Result | Table4Result, out_dir: str | Path, name: str,
-           plot: Callable[[Any, Path], Path]) -> None:
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    plot(result, out / f"{name}.png")
-    (out / f"{name}.json").write_text(json.dumps(result.to_dict(), indent=1) + "\n")
 
 
 def run_fig11(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
               ) -> Fig11Result:
     """Run :func:`fig11_study` (on the built-in IIS-head unless ``urdf``) and write
     ``fig11.png`` and ``fig11.json`` into ``out_dir``; ``kwargs`` go to the study."""
-    nominal = _builtin_head() if urdf is None else load_robot(urdf)
-    result = fig11_study(nominal, **kwargs)
-    _write(result, out_dir, "fig11", plot_fig11)
-    return result
+    return run_on_head(fig11_study, plot_fig11, out_dir, "fig11", urdf, kwargs)
 
 
 def run_table4(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
                ) -> Table4Result:
     """Run :func:`table4_study` (on the built-in IIS-head unless ``urdf``) and write
     ``table4.png`` and ``table4.json`` into ``out_dir``; ``kwargs`` go to the study."""
-    nominal = _builtin_head() if urdf is None else load_robot(urdf)
-    result = table4_study(nominal, **kwargs)
-    _write(result, out_dir, "table4", plot_table4)
-    return result
-
-
-def _stderr_progress(done: int, total: int) -> None:
-    sys.stderr.write(f"\r{done}/{total} trials")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
+    return run_on_head(table4_study, plot_table4, out_dir, "table4", urdf, kwargs)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m verification.shih_experiments {fig11,table4} --out DIR [--trials N]
     [--seed S]``: run one study on the built-in head, write its PNG and JSON, print the
     table."""
-    parser = argparse.ArgumentParser(
-        prog="python -m verification.shih_experiments",
-        description="Shih et al. (1992) section 6 in simulation: Fig. 11 or Table 4.")
-    parser.add_argument("study", choices=("fig11", "table4"))
-    parser.add_argument("--out", type=Path, required=True, help="output directory")
-    parser.add_argument("--trials", type=int, default=None,
-                        help="random trials (default: 10 per Fig. 11 point, 20 for Table 4)")
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args(argv)
-    kwargs: dict[str, Any] = {"seed": args.seed}
-    if args.trials is not None:
-        kwargs["trials"] = args.trials
-    if sys.stderr.isatty():
-        kwargs["progress"] = _stderr_progress
-    start = time.perf_counter()
-    if args.study == "fig11":
-        text = format_fig11(run_fig11(args.out, **kwargs))
-    else:
-        text = format_table4(run_table4(args.out, **kwargs))
-    print(text)
-    print(f"\n{args.study}: {time.perf_counter() - start:.1f} s; wrote "
-          f"{args.out / (args.study + '.png')} and {args.out / (args.study + '.json')}")
-    return 0
-
+    return choice_main(
+        argv, prog="python -m verification.shih_experiments",
+        description="Shih et al. (1992) section 6 in simulation: Fig. 11 or Table 4.",
+        trials_help="random trials (default: 10 per Fig. 11 point, 20 for Table 4)",
+        studies={"fig11": (run_fig11, format_fig11), "table4": (run_table4, format_table4)})
 
 if __name__ == "__main__":
     sys.exit(main())
