@@ -468,6 +468,10 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
                                  for g in measurements.points)]
     for f in only_indirect:  # its markers carry the freedom: keep the nominal tool
         free[[k for k, (o, _) in enumerate(names) if o == f]] = False
+    for f in observed:  # a revolute joint's child link has its origin on the joint axis
+        last = robot.path_joints(f)[-1] if robot.path_joints(f) else None
+        if last is not None and last.is_revolute and last.child == f:
+            free[[k for k, (o, c) in enumerate(names) if o == f and c in ("x", "y")]] = False
     n_cpc = len(names)
     tools = np.array([o in model0.topology.frames for o, _ in names])
     joints_of = np.array([o for o, _ in names])

@@ -34,7 +34,7 @@ from kinfw.cpc import geometry_from_cpc
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import matrix_from_rotation_vector, transform_from_rotation_translation
-from kinfw.urdf_export import ExportError, export_urdf
+from kinfw.urdf_export import export_urdf
 from tests.erd import robots_dir, urdf_path
 from verification.crosscheck import pose_discrepancy, random_joint_values
 from verification.simulate import perturb_robot, random_configurations, simulate
@@ -111,9 +111,14 @@ def _path_joints(robot: Robot, frames: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def _identifiable_count(robot: Robot, frames: tuple[str, ...]) -> int:
-    """4 per revolute joint, 2 per prismatic joint, 6 per end frame (DESIGN.md)."""
+    """4 per revolute joint, 2 per prismatic joint, 6 per end frame (DESIGN.md) — 4 for
+    an end frame that is itself a revolute joint's child link, whose origin a URDF keeps
+    on the joint axis."""
     revolute = robot.topology(frames).revolute
-    return 4 * sum(revolute) + 2 * (len(revolute) - sum(revolute)) + 6 * len(frames)
+    on_axis = sum(1 for f in frames if robot.path_joints(f)[-1].child == f
+                  and robot.path_joints(f)[-1].is_revolute)
+    return (4 * sum(revolute) + 2 * (len(revolute) - sum(revolute)) + 6 * len(frames)
+            - 2 * on_axis)
 
 
 def _setup(spec: RealRobot, frames: tuple[str, ...], seed: int, n: int | None = None):
@@ -229,11 +234,9 @@ def test_noisy_mocap_markers_give_a_consistent_fit_and_sub_noise_predictions():
     assert np.linalg.norm(d[:, :3, :3] @ offset + d[:, :3, 3], axis=-1).max() > 2e-3
 
 
-@pytest.mark.xfail(raises=ExportError, strict=True, reason=(
-    "known bug: a known-offset point leaves the frame's rotation about that point "
-    "unidentifiable; refine leaves it where the minimum-norm step puts it, off the axis "
-    "of the revolute joint whose child link the frame is, and export_urdf refuses"))
 def test_a_known_marker_on_the_child_link_of_a_revolute_joint_exports():
+    """A known point leaves the frame's rotation about it unidentifiable; refine keeps a
+    revolute joint's child-link origin on the joint axis, so the export accepts it."""
     spec = replace(BY_NAME["icub"], known_frame="head")
     nominal, truth, names, qs, q_test, rng = _setup(spec, spec.frames, seed=20)
     data, offsets, known = _mocap_data(truth, qs, names, spec, rng)

@@ -88,12 +88,11 @@ from verification.simulate import (
     simulate,
 )
 from verification.studies import (
+    FieldsJSON,
     Progress,
     arrays_from,
     check_count,
     choice_main,
-    fields_from_dict,
-    fields_to_dict,
     freeze,
     json_lists,
     log_axes,
@@ -415,7 +414,7 @@ def predicted_position_rms(bound: CRLB, model: CPCModel, qs: ArrayLike, frames: 
 
 
 @dataclass(frozen=True, slots=True)
-class ExperimentSetup:
+class ExperimentSetup(FieldsJSON):
     """The two-stage head experiment every trial of a study repeats.
 
     Attributes
@@ -479,14 +478,6 @@ class ExperimentSetup:
                 f"{self.sigma_mm:g} mm per axis, {self.sigma_deg:g} deg about a random axis; "
                 f"{self.n_test} held-out configurations")
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: every attribute, tuples as lists."""
-        return fields_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> ExperimentSetup:
-        """The set-up written by :meth:`to_dict`."""
-        return fields_from_dict(cls, doc)
 
 
 def _check_positive(value: float, name: str) -> float:

@@ -60,11 +60,10 @@ from verification.simulate import (
     random_configurations,
 )
 from verification.studies import (
+    FieldsJSON,
     Progress,
     check_count,
     choice_main,
-    fields_from_dict,
-    fields_to_dict,
     freeze,
     log_axes,
     new_figure,
@@ -116,7 +115,7 @@ _TABLE4_TAG = 4
 
 
 @dataclass(frozen=True, slots=True)
-class StudySetup:
+class StudySetup(FieldsJSON):
     """What every trial of a study shares: robot, frames, truth errors, noise, range.
 
     Attributes
@@ -161,14 +160,6 @@ class StudySetup:
                 f"axis, rotation N(0, sigma x {self.rot_per_mm_rad:.4g} rad/mm) about a random "
                 f"axis; central {100 * self.fraction:g} % of each joint range")
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: every attribute, tuples as lists."""
-        return fields_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, doc: dict[str, Any]) -> StudySetup:
-        """The set-up written by :meth:`to_dict`."""
-        return fields_from_dict(cls, doc)
 
 
 def _setup(nominal: Robot, frames: Sequence[str] | None, *, error_mm: float, error_deg: float,

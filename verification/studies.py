@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, TypeVar, get_origin, get_type_hints
+from typing import Any, Self, TypeVar, get_origin, get_type_hints
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,12 +26,11 @@ from numpy.typing import NDArray
 from kinfw.robot import builtin_head_urdf, load_robot
 
 __all__ = [
+    "FieldsJSON",
     "Progress",
     "arrays_from",
     "check_count",
     "choice_main",
-    "fields_from_dict",
-    "fields_to_dict",
     "freeze",
     "json_list",
     "json_lists",
@@ -55,7 +54,6 @@ __all__ = [
 Progress = Callable[[int, int], Any]
 
 R = TypeVar("R")
-D = TypeVar("D")
 
 
 # -- checks and statistics -----------------------------------------------------------------
@@ -116,30 +114,35 @@ def arrays_from(doc: Mapping[str, Any], dtypes: Mapping[str, Any], *, writeable:
     return out
 
 
-def fields_to_dict(obj: Any) -> dict[str, Any]:
-    """A dataclass of scalars and tuples as JSON-ready values, in field order (tuples as
-    lists)."""
-    out = {}
-    for f in fields(obj):
-        value = getattr(obj, f.name)
-        out[f.name] = list(value) if isinstance(value, tuple) else value
-    return out
+class FieldsJSON:
+    """Mixin for a dataclass of scalars and tuples of strings (a study's set-up): its
+    ``to_dict`` and ``from_dict``, field by field."""
 
+    __slots__ = ()
 
-def fields_from_dict(cls: type[D], doc: Mapping[str, Any]) -> D:
-    """The dataclass ``cls`` from a dict written by :func:`fields_to_dict`, each field
-    converted by its annotation (``str``, ``int``, ``float`` or a ``tuple``)."""
-    hints = get_type_hints(cls)
-    values = {}
-    for f in fields(cls):  # type: ignore[arg-type]
-        hint = hints[f.name]
-        if get_origin(hint) is tuple:
-            values[f.name] = tuple(doc[f.name])
-        elif hint in (str, int, float):
-            values[f.name] = hint(doc[f.name])
-        else:
-            raise TypeError(f"{cls.__name__}.{f.name}: cannot read a {hint} from JSON")
-    return cls(**values)
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: every field, in order, tuples as lists."""
+        out = {}
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            out[f.name] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, doc: Mapping[str, Any]) -> Self:
+        """The instance written by :meth:`to_dict`, each field converted by its annotation
+        (``str``, ``int``, ``float`` or a ``tuple``)."""
+        hints = get_type_hints(cls)
+        values = {}
+        for f in fields(cls):  # type: ignore[arg-type]
+            hint = hints[f.name]
+            if get_origin(hint) is tuple:
+                values[f.name] = tuple(doc[f.name])
+            elif hint in (str, int, float):
+                values[f.name] = hint(doc[f.name])
+            else:
+                raise TypeError(f"{cls.__name__}.{f.name}: cannot read a {hint} from JSON")
+        return cls(**values)
 
 
 # -- figures -------------------------------------------------------------------------------
