@@ -474,18 +474,26 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
             free[[k for k, (o, c) in enumerate(names) if o == f and c in ("x", "y")]] = False
     n_cpc = len(names)
     tools = np.array([o in model0.topology.frames for o, _ in names])
-    joints_of = np.array([o for o, _ in names])
     if parameters == "full":
         pass
     elif parameters in ("offsets", "frames", "none"):
         free &= tools if parameters != "none" else np.zeros(n_cpc, bool)
-    else:
-        unknown_joints = set(parameters) - set(model0.topology.joint_names)
-        if isinstance(parameters, str) or unknown_joints:
-            raise ValueError(
-                f"parameters: expected 'full', 'offsets', 'frames', 'none' or joint names of "
-                f"{list(model0.topology.joint_names)}; got {parameters!r}")
-        free &= tools | np.isin(joints_of, list(parameters))
+    else:  # a mask: joint names (all their parameters) or "joint:field" entries
+        wanted = set()
+        for token in ([] if isinstance(parameters, str) else parameters):
+            owner, _, field_ = token.partition(":")
+            matches = [k for k, (o, f) in enumerate(names) if o == owner
+                       and (not field_ or f == field_)]
+            if owner not in model0.topology.joint_names or not matches:
+                raise ValueError(
+                    f"parameters: expected 'full', 'offsets', 'frames', 'none', joint names "
+                    f"or 'joint:field' of {list(model0.topology.joint_names)} (fields "
+                    f"b_tilt_1, b_tilt_2, l_x, l_y); got {token!r}")
+            wanted.update(matches)
+        if isinstance(parameters, str) or not wanted:
+            raise ValueError(f"parameters: expected 'full', 'offsets', 'frames', 'none' or a "
+                             f"mask of joints; got {parameters!r}")
+        free &= tools | np.isin(np.arange(n_cpc), sorted(wanted))
     # the base (a rigid transform of the whole model) and joint zero offsets: redundant
     # with the full chart, used by the smaller parameter sets
     base_slice = slice(len(names), len(names) + 6)
@@ -629,7 +637,9 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
         ``"full"`` every identifiable CPC parameter; ``"offsets"`` joint zero offsets,
         the base frame and the end frames' tool transforms; ``"frames"`` the base and tool
         frames only (nominal joints); ``"none"`` nothing of the robot (the nominal
-        baseline); joint names: ``"frames"`` plus every CPC parameter of those joints.
+        baseline); a mask: ``"frames"`` plus the CPC parameters named by joint (all of
+        its parameters) or ``"joint:field"`` (``b_tilt_1``, ``b_tilt_2``, ``l_x``,
+        ``l_y``).
     prior : (sigma_m, sigma_rad), optional
         Gaussian prior on the robot parameters' deviations from the nominal URDF (from
         the start when the model lives in an external frame), for small datasets.

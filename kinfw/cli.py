@@ -171,6 +171,21 @@ def _stage_table(stage_rms: dict[str, dict[str, float]]) -> str:
                          ["position RMS mm", *stages])
 
 
+def _params_arg(text: str) -> str | tuple[str, ...]:
+    """``full``, ``offsets``, ``frames``, ``none``, or a comma-separated mask."""
+    if text in ("full", "offsets", "frames", "none"):
+        return text
+    return tuple(t for t in text.replace(" ", "").split(",") if t)
+
+
+def _prior_arg(args: argparse.Namespace):
+    if args.prior_mm is None and args.prior_deg is None:
+        return None
+    if args.prior_mm is None or args.prior_deg is None:
+        raise ValueError("give both --prior-mm and --prior-deg")
+    return args.prior_mm * 1e-3, float(np.radians(args.prior_deg))
+
+
 def _noise_arg(args: argparse.Namespace):
     from identification.refine import NoiseModel
 
@@ -184,7 +199,8 @@ def _noise_arg(args: argparse.Namespace):
 
 
 def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
-               loss: str = "huber", data_path=None, held_out=None):
+               loss: str = "huber", parameters="full", prior=None, data_path=None,
+               held_out=None):
     """Calibrate (:func:`identification.pipeline.calibrate`), write ``out`` and its
     sidecar ``<stem>.kinfw.json``; return the report and the calibration."""
     from identification.pipeline import calibrate
@@ -192,7 +208,7 @@ def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
     from verification.report import calibration_report, sidecar
 
     result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
-                       progress=_progress_printer())
+                       parameters=parameters, prior=prior, progress=_progress_printer())
     write_urdf(out, result.urdf_xml)
     report = calibration_report(nominal, load_robot(out), data, result, method=method,
                                 loss=loss, data_path=data_path, held_out=held_out)
@@ -210,8 +226,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     data = read_measurements(args.data)
     held_out = read_measurements(args.holdout) if args.holdout else None
     report, _ = _calibrate(nominal, data, args.out, method=args.method,
-                           noise=_noise_arg(args), loss=args.loss, data_path=args.data,
-                           held_out=held_out)
+                           noise=_noise_arg(args), loss=args.loss,
+                           parameters=_params_arg(args.params), prior=_prior_arg(args),
+                           data_path=args.data, held_out=held_out)
     if args.report:
         Path(args.report).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
     if args.json:
@@ -329,11 +346,7 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
-    prior = None
-    if args.prior_mm is not None or args.prior_deg is not None:
-        if args.prior_mm is None or args.prior_deg is None:
-            raise ValueError("give both --prior-mm and --prior-deg")
-        prior = (args.prior_mm * 1e-3, float(np.radians(args.prior_deg)))
+    prior = _prior_arg(args)
     watch = _progress_printer()
     cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets, select=args.select,
                        noise=_noise_arg(args), loss=args.loss, prior=prior,
@@ -514,6 +527,13 @@ def build_parser() -> argparse.ArgumentParser:
                    "down-weighted and listed)")
     p.add_argument("--holdout", type=Path, help="measurement file not used for calibration; "
                    "its errors go to the report and sidecar")
+    p.add_argument("--params", default="full", help="what to estimate: full (default), "
+                   "offsets (joint zero offsets + base and tool frames), frames (base and "
+                   "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
+                   "those joints' CPC parameters)")
+    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
+                   "nominal: sigma of lengths, mm (for small datasets)")
+    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_calibrate)
 

@@ -80,3 +80,23 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model():
     entry = flagged[(pose.frame, int(pose.sample[17]))]
     assert 60.0 < entry["position_residual_mm"] < 80.0
     assert entry["weight"] < 0.2
+
+
+def test_parameter_masks_by_joint_and_field():
+    nominal = load_robot(HEAD)
+    truth = load_robot(perturb_robot(nominal, np.random.default_rng(7), origin_mm=3.0,
+                                     origin_deg=0.5, axis_deg=0.5))
+    data = _data(truth, 40, 8)
+    from identification.refine import refine
+
+    masked = refine(nominal, data, parameters=("pan", "tilt:l_x"))
+    free = {name for name, f in zip(masked.parameter_names,
+                                    np.abs(np.diag(masked.covariance)) > 0, strict=True) if f}
+    assert ("pan", "b_tilt_1") in free and ("tilt", "l_x") in free
+    assert ("tilt", "l_y") not in free and ("vergence_left", "l_x") not in free
+    import pytest
+
+    with pytest.raises(ValueError, match="got 'nose'"):
+        refine(nominal, data, parameters=("pan", "nose"))
+    with pytest.raises(ValueError, match="got 'tilt:l_z'"):
+        refine(nominal, data, parameters=("tilt:l_z",))
