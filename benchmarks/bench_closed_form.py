@@ -27,7 +27,6 @@ disabled while timing (as :mod:`timeit` does).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -49,6 +48,8 @@ from benchmarks.common import (  # noqa: E402
     format_table,
     gc_disabled,
     machine_info,
+    mode_line,
+    parse_repeats,
     slope,
     time_interleaved,
     wall_time_line,
@@ -321,17 +322,10 @@ def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=None,
-                        help="timed repeats per measurement (default 30, or 5 with --quick)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"M in {QUICK_PER_JOINT}, ratios at M = {QUICK_RATIO_PER_JOINT}, "
-                             f"{QUICK_TRIALS} accuracy trials")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
-    args = parser.parse_args(argv)
-    repeats = args.repeats if args.repeats is not None else (5 if args.quick else 30)
-    if repeats < 1:
-        parser.error("--repeats: expected at least 1")
+    args, repeats = parse_repeats(
+        argv, __doc__.splitlines()[0], full=30, quick=5,
+        quick_help=f"M in {QUICK_PER_JOINT}, ratios at M = {QUICK_RATIO_PER_JOINT}, "
+                   f"{QUICK_TRIALS} accuracy trials")
     per_joints = QUICK_PER_JOINT if args.quick else FULL_PER_JOINT
     ratio_per_joints = QUICK_RATIO_PER_JOINT if args.quick else FULL_RATIO_PER_JOINT
     trials = QUICK_TRIALS if args.quick else FULL_TRIALS
@@ -339,8 +333,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     started = time.perf_counter()
     print("kinfw closed-form benchmark (IIS-head, frames " + ", ".join(FRAMES) + ")")
     print(machine_info([("pinocchio", pin.__version__)]))
-    print(f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
-          f"warm-up {WARMUP}, seed {args.seed}, gc disabled while timing")
+    print(mode_line(args, repeats, WARMUP))
     nominal = load_robot(HEAD_URDF)
     paper = make_case(nominal, PAPER_PER_JOINT, np.random.default_rng([args.seed,
                                                                       PAPER_PER_JOINT]))

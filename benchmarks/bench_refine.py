@@ -36,7 +36,6 @@ largest sizes of section 3, the SX builds) are timed once and say so.
 
 from __future__ import annotations
 
-import argparse
 import cProfile
 import inspect
 import pstats
@@ -61,6 +60,8 @@ from benchmarks.common import (  # noqa: E402
     format_table,
     gc_disabled,
     machine_info,
+    mode_line,
+    parse_repeats,
     slope,
     time_interleaved,
     wall_time_line,
@@ -749,16 +750,9 @@ def report_profile(n: int, stats: pstats.Stats, total_s: float, small_n: int,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=None,
-                        help="timed repeats per measurement (default 9, or 3 with --quick)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"samples {QUICK_SIZES}, no SX-expanded CasADi solvers")
-    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
-    args = parser.parse_args(argv)
-    repeats = args.repeats if args.repeats is not None else (3 if args.quick else 9)
-    if repeats < 1:
-        parser.error("--repeats: expected at least 1")
+    args, repeats = parse_repeats(
+        argv, __doc__.splitlines()[0], full=9, quick=3,
+        quick_help=f"samples {QUICK_SIZES}, no SX-expanded CasADi solvers")
     sizes = QUICK_SIZES if args.quick else FULL_SIZES
 
     started = time.perf_counter()
@@ -769,8 +763,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         probes=[("BLAS probe", f"{blas_probe_ms():.2f} ms median for np.linalg.svd of a 1020 x 50 "
                  "matrix (~1.5 ms on one\n           core here; far more = BLAS threads "
                  "fighting other load: OPENBLAS_NUM_THREADS=1)")]))
-    print(f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
-          f"warm-up {WARMUP}, seed {args.seed}, gc disabled while timing")
+    print(mode_line(args, repeats, WARMUP))
     nominal = load_robot(HEAD_URDF)
     case = make_head_case(nominal, args.seed)
     stages = run_stages(nominal, case.data)

@@ -9,6 +9,7 @@ interpreter, the libraries, the machine, the BLAS thread variables and the load 
 
 from __future__ import annotations
 
+import argparse
 import gc
 import os
 import platform
@@ -28,6 +29,8 @@ __all__ = [
     "gc_disabled",
     "load_average",
     "machine_info",
+    "mode_line",
+    "parse_repeats",
     "slope",
     "time_interleaved",
     "wall_time_line",
@@ -91,6 +94,33 @@ def time_interleaved(calls: Sequence[Callable[[], object]], repeats: int, *, war
 def slope(x: Sequence[float], y: Sequence[float]) -> float:
     """Least-squares slope of log y against log x."""
     return float(np.polyfit(np.log(x), np.log(y), 1)[0])
+
+
+# -- command line ------------------------------------------------------------------------
+
+
+def parse_repeats(argv: Sequence[str] | None, description: str, *, quick_help: str,
+                  full: int, quick: int) -> tuple[argparse.Namespace, int]:
+    """The command line of a benchmark timed in repeats, ``[--repeats R] [--quick]
+    [--seed S]``: the arguments and the repeats, ``R`` or by default ``full`` (``quick``
+    with ``--quick``); exits with a usage error when they are below 1."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--repeats", type=int, default=None,
+                        help=f"timed repeats per measurement (default {full}, or {quick} "
+                             "with --quick)")
+    parser.add_argument("--quick", action="store_true", help=quick_help)
+    parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
+    args = parser.parse_args(argv)
+    repeats = args.repeats if args.repeats is not None else (quick if args.quick else full)
+    if repeats < 1:
+        parser.error("--repeats: expected at least 1")
+    return args, repeats
+
+
+def mode_line(args: argparse.Namespace, repeats: int, warmup: int) -> str:
+    """The header line after :func:`machine_info` of a :func:`parse_repeats` benchmark."""
+    return (f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
+            f"warm-up {warmup}, seed {args.seed}, gc disabled while timing")
 
 
 # -- output ------------------------------------------------------------------------------

@@ -358,14 +358,18 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
              "full": "calibrated"}
     print(f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
           f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg")
+    def cell(position_mm: float, rotation_deg: float) -> str:
+        rot = "-" if np.isnan(rotation_deg) else f"{rotation_deg:.3f}"
+        return f"{position_mm:.3f} / {rot}"
+
     rows = []
     for fold in range(args.k):
         row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
         for p in sets:
             sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
-            row.append(f"{sc.position_rms_mm:.3f} / {sc.rotation_rms_deg:.3f}")
+            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg))
         rows.append(row)
-    rows.append(["mean", "", *(f"{cv.mean(p):.3f} / {cv.mean(p, 'rotation_rms_deg'):.3f}"
+    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg"))
                                for p in sets)])
     print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
     for warning in cv.warnings:

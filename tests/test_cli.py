@@ -275,3 +275,18 @@ def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
                          "--json", "--no-sidecar"], capsys)
     assert json.loads(out)["sidecar"] is None
     assert len(json.loads(out)["fitted"]) == 2
+
+
+def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
+    code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
+    assert code == 0
+    code, out, _ = _run(["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3",
+                         "--json"], capsys)
+    assert code == 0
+    cv = json.loads(out)
+    means = cv["mean_position_rms_mm"]
+    assert means["full"] < means["frames"] < means["none"]
+    assert len(cv["folds"]) == 3 * 3
+    code, out, _ = _run(["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3",
+                         "--select"], capsys)
+    assert code == 0 and "selected: calibrated ('full')" in out
