@@ -45,6 +45,9 @@ __all__ = ["HandEyeError", "HandEyeResult", "solve_axxb"]
 
 log = logging.getLogger(__name__)
 
+#: Below this rotation condition (smallest / largest singular value) a warning is logged.
+POOR_CONDITION = 0.05
+
 #: Accepted orthonormality error of input rotations. Real data printed with six significant
 #: digits is off by ~1e-6 (Tabb DS1: 1.2e-6); accepted rotations are re-orthonormalised.
 ORTHONORMAL_TOL = 1e-5
@@ -253,12 +256,17 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
             f"for a camera fixed in the world looking at a target on the hand (eye-to-hand) "
             f"pass A = inverse(base_T_hand), and X is then base_T_eye"
         )
+    condition = float(singular_values[-1] / singular_values[0])
+    if condition < POOR_CONDITION:
+        log.warning("solve_axxb: the motions turn mostly about one axis (rotation condition "
+                    "%.3g); X's rotation about it and its translation along it are poorly "
+                    "determined: add motions about other axes", condition)
     return HandEyeResult(
         X=hand_T_eye,
         n_pairs=len(i),
         rms_rotation_rad=rms_rotation,
         rms_translation=float(np.sqrt(np.mean(trans_res**2))),
-        rotation_condition=float(singular_values[-1] / singular_values[0]),
+        rotation_condition=condition,
         axis_spread_rad=float(spread),
     )
 

@@ -399,3 +399,18 @@ def test_an_inconsistency_with_small_motions_names_both_causes():
     with pytest.raises(HandEyeError, match=r"motions are small \(median relative rotation "
                                            r"[\d.]+ deg\).*A or B may be inverted"):
         solve_axxb(A, np.stack([_inv(b) for b in B]))
+
+
+def test_motions_mostly_about_one_axis_are_warned_about(caplog):
+    rng = np.random.default_rng(3)
+    X = _transform(_random_rotation(rng), [0.01, -0.02, 0.05])
+    base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
+    A = np.stack([_transform(_rotation([rng.uniform(-1.0, 1.0), rng.uniform(-0.02, 0.02),
+                                        rng.uniform(-0.02, 0.02)]), rng.uniform(-0.2, 0.2, 3))
+                  for _ in range(20)])
+    B = np.stack([_inv(a @ X) @ base_T_target for a in A])
+    with caplog.at_level("WARNING", logger="identification.handeye"):
+        result = solve_axxb(A, B)
+    assert result.rotation_condition < 0.05
+    assert "mostly about one axis" in caplog.text
+    np.testing.assert_allclose(result.X, X, atol=1e-9)  # noise-free: still exact
