@@ -464,6 +464,20 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
 
 
 # -- parser ------------------------------------------------------------------------------
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    """Noise, robust loss and prior of the refinement (calibrate and crossval)."""
+    p.add_argument("--sigma-mm", type=float, help="position noise sigma per axis, mm "
+                   "(default: estimated from the residuals)")
+    p.add_argument("--sigma-deg", type=float, help="orientation noise: angle sigma about a "
+                   "random axis, deg (default: estimated)")
+    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber",
+                   help="robust loss of the refinement (default huber: gross outliers are "
+                   "down-weighted and listed)")
+    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
+                   "nominal: sigma of lengths, mm (for small datasets)")
+    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kinfw", description="Calibrate robot kinematics from measurements.")
@@ -522,22 +536,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=("refine", "closed-form"), default="refine",
                    help="refine (default): closed form and hand-eye, then the joint "
                    "nonlinear least squares; closed-form: stop after closed form and hand-eye")
-    p.add_argument("--sigma-mm", type=float, help="position noise sigma per axis, mm "
-                   "(default: estimated from the residuals)")
-    p.add_argument("--sigma-deg", type=float, help="orientation noise: angle sigma about a "
-                   "random axis, deg (default: estimated)")
-    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber",
-                   help="robust loss of the refinement (default huber: gross outliers are "
-                   "down-weighted and listed)")
     p.add_argument("--holdout", type=Path, help="measurement file not used for calibration; "
                    "its errors go to the report and sidecar")
     p.add_argument("--params", default="full", help="what to estimate: full (default), "
                    "offsets (joint zero offsets + base and tool frames), frames (base and "
                    "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
                    "those joints' CPC parameters)")
-    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
-                   "nominal: sigma of lengths, mm (for small datasets)")
-    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
+    _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_calibrate)
 
@@ -560,12 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--select", action="store_true", help="also try 'offsets' and pick the "
                    "parameter set with the lowest held-out error")
-    p.add_argument("--sigma-mm", type=float, help="position noise sigma, mm (default estimated)")
-    p.add_argument("--sigma-deg", type=float, help="orientation noise angle sigma, deg")
-    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber")
-    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
-                   "nominal: sigma of lengths, mm")
-    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
+    _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=_cmd_crossval)
 
