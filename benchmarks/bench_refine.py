@@ -225,18 +225,6 @@ def cost_at(problem, x: NDArray[np.float64], noise: NoiseModel) -> float:
 # -- CasADi solvers ----------------------------------------------------------------------
 
 
-def full_x(problem, x_free):
-    """The chart vector (MX) with the fixed entries at zero, as casadi_residual builds it."""
-    parts, k = [], 0
-    for i in range(problem.n_parameters):
-        if problem.free[i]:
-            parts.append(x_free[k])
-            k += 1
-        else:
-            parts.append(ca.MX(0.0))
-    return ca.vertcat(*parts)
-
-
 def gn_hessian_ad(problem, noise: NoiseModel, x_free, r, lam_f):
     """``lam_f J^T J`` with J = CasADi AD of the MX residual."""
     J = ca.jacobian(r, x_free)
@@ -250,7 +238,7 @@ def gn_hessian_maps(problem, noise: NoiseModel, x_free, r, lam_f):
     ``reshape(Jg^T, P, m rows)`` lists every residual row's gradient as a column, so the
     group's ``J^T J`` is ``A A^T``.
     """
-    x = full_x(problem, x_free)
+    x = problem.full_x(x_free)
     P, free = problem.n_parameters, np.flatnonzero(problem.free).tolist()
     H = 0
     for g in problem.groups:

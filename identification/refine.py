@@ -389,18 +389,22 @@ class LeastSquaresProblem:
         residual vector as an MX expression of it (data embedded), for CasADi solvers."""
         ca = _ca()
         x_free = ca.MX.sym("x", int(self.free.sum()))
-        parts = []
-        k = 0
+        x = self.full_x(x_free)
+        r = ca.vertcat(*[ca.vec(g.residual(ca.DM(g.qs), ca.DM(g.data), x, sigma.position_m,
+                                           sigma.rotation_rad)) for g in self.groups])
+        return x_free, r
+
+    def full_x(self, x_free):
+        """The whole chart vector (CasADi MX) from its free entries, fixed ones at zero."""
+        ca = _ca()
+        parts, k = [], 0
         for i in range(self.n_parameters):
             if self.free[i]:
                 parts.append(x_free[k])
                 k += 1
             else:
                 parts.append(ca.MX(0.0))
-        x = ca.vertcat(*parts)
-        r = ca.vertcat(*[ca.vec(g.residual(ca.DM(g.qs), ca.DM(g.data), x, sigma.position_m,
-                                           sigma.rotation_rad)) for g in self.groups])
-        return x_free, r
+        return ca.vertcat(*parts)
 
     def model_at(self, x: NDArray) -> CPCModel:
         """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
