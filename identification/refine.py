@@ -36,17 +36,29 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.cpc_casadi import cpc_fk_function
-from kinfw.measurements import DatasetError, Measurements, check_against_robot
-from kinfw.robot import Robot
-from kinfw.transforms import (
-    average_transform,
-    inverse_transform,
-    transform_from_rotation_translation,
+from identification.problem import (
+    LOSSES,
+    GroupResiduals,
+    Identifiability,
+    LeastSquaresProblem,
+    NoiseModel,
+    Unknown,
+    build_problem,
+    covariance_and_identifiability,
+    estimate_noise,
+    group_residuals,
+    levenberg_marquardt,
+    observation_norms,
+    row_weights,
+    thresholds,
 )
+from kinfw.cpc import CPCModel
+from kinfw.measurements import Measurements
+from kinfw.robot import Robot
 
 __all__ = [
+    "LOSSES",
+    "GroupResiduals",
     "Identifiability",
     "LeastSquaresProblem",
     "NoiseModel",
@@ -58,98 +70,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-LOSSES = ("linear", "huber", "cauchy")
-
-
-@dataclass(frozen=True, slots=True)
-class NoiseModel:
-    """Measurement noise used to whiten the residuals.
-
-    Attributes
-    ----------
-    position_m : float
-        Standard deviation of each position component, metres.
-    rotation_rad : float
-        Standard deviation of each orientation component (small-angle), radians.
-    estimated : bool
-        True when estimated from the residuals rather than given.
-    """
-
-    position_m: float
-    rotation_rad: float
-    estimated: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class Unknown:
-    """A rigid frame or point estimated besides the kinematics.
-
-    Attributes
-    ----------
-    kind : str
-        ``"target"`` (root_T_target), ``"frame"`` (meas_T_root of an external
-        measurement frame), ``"marker"`` (frame_T_marker) or ``"offset"``
-        (frame_p_point, 3 numbers).
-    name : str
-        Target, measurement frame, marker or ``frame:marker`` name.
-    value : ndarray
-        The estimate: (4, 4) pose or (3,) point, metres.
-    """
-
-    kind: str
-    name: str
-    value: NDArray[np.float64]
-
-
-@dataclass(frozen=True, slots=True)
-class Identifiability:
-    """What the data determines, from the SVD of the whitened, column-scaled Jacobian.
-
-    Attributes
-    ----------
-    rank, n_parameters : int
-    condition : float
-        Largest over smallest singular value among the identifiable directions.
-    observability_o1 : float
-        Borm & Menq's O1: geometric mean of the singular values over sqrt(rows).
-    unidentifiable : tuple of (tuple of (owner, field), str)
-        Per null direction, the parameters involved and why they are not determined.
-    correlations : tuple of (str, str, float)
-        Parameter pairs with |rho| > 0.9.
-    """
-
-    rank: int
-    n_parameters: int
-    condition: float
-    observability_o1: float
-    unidentifiable: tuple[tuple[tuple[tuple[str, str], ...], str], ...]
-    correlations: tuple[tuple[str, str, float], ...]
-
-
-@dataclass(frozen=True, slots=True)
-class GroupResiduals:
-    """Residuals of one observation group after the fit (measured minus predicted).
-
-    Attributes
-    ----------
-    kind, frame : str
-    marker : str or None
-    sample : ndarray of int, shape (m,)
-    position_m : ndarray, shape (m, 3)
-    rotation_rad : ndarray, shape (m, 3) or None
-        Small-angle orientation error (sine of the angle about its axis), None for points.
-    weight : ndarray, shape (m,)
-        Robust-loss weight of each observation (1 = full weight).
-    """
-
-    kind: str
-    frame: str
-    marker: str | None
-    sample: NDArray[np.int64]
-    position_m: NDArray[np.float64]
-    rotation_rad: NDArray[np.float64] | None
-    weight: NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,8 +86,11 @@ class RefineResult:
         None for the URDF root, else the external measurement frame's name.
     unknowns : tuple of Unknown
         Target poses, external frames, markers, point offsets.
-    parameter_names : tuple of (owner, field)
-        Every estimated parameter, in the order of ``estimate`` and ``covariance``.
+    parameter_names : tuple of ParameterName
+        Every estimated parameter ``(owner, field)``, in the order of ``estimate`` and
+        ``covariance``.
+    parameter_units : tuple of str
+        SI unit of each parameter (``"rad"`` or ``"m"``), from its parameter block.
     estimate : ndarray, shape (P,)
         Chart coordinates from the start (rad, m).
     covariance : ndarray, shape (P, P)
@@ -192,6 +115,7 @@ class RefineResult:
     model_frame: str | None
     unknowns: tuple[Unknown, ...]
     parameter_names: tuple[tuple[str, str], ...]
+    parameter_units: tuple[str, ...]
     estimate: NDArray[np.float64]
     covariance: NDArray[np.float64]
     noise: NoiseModel
@@ -208,388 +132,6 @@ class RefineResult:
     def std(self) -> NDArray[np.float64]:
         """Standard deviation of each parameter (rad, m)."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
-
-
-# -- CasADi pieces ---------------------------------------------------------------------
-def _ca():
-    import casadi
-
-    return casadi
-
-
-def _cayley_pose(ca, T0: NDArray, d):
-    """``T0 @ [cayley(d[:3]/2), d[3:]]`` as a CasADi 4x4 (chart of a rigid frame)."""
-    a = 0.5 * d[0:3]
-    K = ca.vertcat(ca.horzcat(0, -a[2], a[1]), ca.horzcat(a[2], 0, -a[0]),
-                   ca.horzcat(-a[1], a[0], 0))
-    dR = ca.DM.eye(3) + (2.0 / (1.0 + ca.dot(a, a))) * (K + K @ K)
-    R = ca.DM(T0[:3, :3]) @ dR
-    p = ca.DM(T0[:3, 3]) + d[3:6]
-    return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))
-
-
-def _cayley_pose_np(T0: NDArray, d: NDArray) -> NDArray:
-    from kinfw.cpc import _cayley
-
-    return transform_from_rotation_translation(T0[:3, :3] @ _cayley(0.5 * d[:3]),
-                                               T0[:3, 3] + d[3:6])
-
-
-def _inverse_ca(ca, T):
-    R = T[0:3, 0:3]
-    return ca.vertcat(ca.horzcat(R.T, -R.T @ T[0:3, 3]), ca.horzcat(0, 0, 0, 1))
-
-
-def _pose_residual(ca, T_pred, T_meas_vec, sigma_p, sigma_r):
-    """Whitened (position, orientation) residual of a predicted vs measured pose.
-
-    ``T_meas_vec`` is the measured pose as 12 numbers (R column-major, then p).
-    """
-    Rm = ca.reshape(T_meas_vec[0:9], 3, 3)
-    pm = T_meas_vec[9:12]
-    Rp = T_pred[0:3, 0:3]
-    E = Rp.T @ Rm - Rm.T @ Rp  # 2 sin(theta) [u]x in the predicted frame
-    vee = 0.5 * ca.vertcat(E[2, 1], E[0, 2], E[1, 0])
-    return ca.vertcat((pm - T_pred[0:3, 3]) / sigma_p, vee / sigma_r)
-
-
-def _pose_vectors(T: NDArray) -> NDArray:
-    """(m, 4, 4) poses as a (12, m) matrix: rotation column-major, then position."""
-    return np.concatenate([np.swapaxes(T[:, :3, :3], 1, 2).reshape(len(T), 9),
-                           T[:, :3, 3]], axis=1).T
-
-
-# -- problem assembly --------------------------------------------------------------------
-@dataclass
-class _Group:
-    kind: str
-    frame: str
-    marker: str | None
-    sample: NDArray[np.int64]
-    data: NDArray[np.float64]  # (12, m) or (3, m)
-    qs: NDArray[np.float64]  # (J, m)
-    residual: object  # casadi functions mapped over the samples
-    jacobian: object
-    rows: int = 6
-
-
-def _start_extras(measurements: Measurements, model: CPCModel, q_all: NDArray,
-                  model_frame: str | None, targets: dict[str, NDArray]
-                  ) -> tuple[list[tuple[str, str, NDArray]], list[tuple[str, NDArray]]]:
-    """Start values of the extra rigid frames and point offsets, in closed form."""
-    index = {f: k for k, f in enumerate(model.topology.frames)}
-    w_T = model.frame_poses(q_all)
-    if w_T.ndim == 3:
-        w_T = w_T[None]
-    frames: list[tuple[str, str, NDArray]] = []
-    external = sorted({g.measured_in for g in (*measurements.poses, *measurements.points)
-                       if g.measured_in is not None and g.measured_in != model_frame})
-    meas_T_w: dict[str, NDArray] = {}
-    for name in external:
-        est = [g.meas_T_frame @ inverse_transform(w_T[g.sample, index[g.frame]])
-               for g in measurements.poses if g.measured_in == name and g.marker is None]
-        if not est:
-            raise DatasetError(
-                f"{measurements.source}: frame {name!r} is observed only through markers or "
-                "points; give some marker-free pose observations in it, or measure everything "
-                "in it (then the model is expressed in it)")
-        meas_T_w[name] = average_transform(np.concatenate(est))
-        frames.append(("frame", name, meas_T_w[name]))
-
-    def to_meas(g, T):
-        name = g.measured_in if g.measured_in != model_frame else None
-        return T if name is None else meas_T_w[name] @ T
-
-    for name in dict.fromkeys(g.target for g in measurements.targets):
-        if name in targets:
-            frames.append(("target", name, targets[name]))
-            continue
-        est = [w_T[g.sample, index[g.camera]] @ g.camera_T_target
-               for g in measurements.targets if g.target == name]
-        frames.append(("target", name, average_transform(np.concatenate(est))))
-    for g in measurements.poses:
-        if g.marker is not None and all(f[1] != g.marker for f in frames if f[0] == "marker"):
-            pred = to_meas(g, w_T[g.sample, index[g.frame]])
-            frames.append(("marker", g.marker, average_transform(inverse_transform(pred)
-                                                                 @ g.meas_T_frame)))
-    offsets: list[tuple[str, NDArray]] = []
-    for g in measurements.points:
-        if g.offset is not None:
-            continue
-        key = f"{g.frame}:{g.marker or 'point'}"
-        if any(k == key for k, _ in offsets):
-            continue
-        T = to_meas(g, w_T[g.sample, index[g.frame]])
-        offsets.append((key, np.einsum("nji,nj->ni", T[:, :3, :3],
-                                       g.meas_p_point - T[:, :3, 3]).mean(axis=0)))
-    return frames, offsets
-
-
-@dataclass(frozen=True, slots=True)
-class LeastSquaresProblem:
-    """The assembled problem: unknowns, their start values, and the residual groups.
-
-    ``x`` below is the vector of chart coordinates from the start (rad, m), in the
-    order of :attr:`names`; only the :attr:`free` entries are estimated.
-    """
-
-    model0: CPCModel
-    model_frame: str | None
-    names: tuple[tuple[str, str], ...]
-    free: NDArray[np.bool_]
-    frames: tuple[tuple[str, str, NDArray[np.float64]], ...]
-    offsets: tuple[tuple[str, NDArray[np.float64]], ...]
-    extra_slice: dict[tuple[str, str], slice]
-    offset_slice: dict[str, slice]
-    groups: tuple[_Group, ...]
-    base_slice: slice
-    zero_slice: slice
-    prior_mean: NDArray[np.float64]
-    prior_sigma: NDArray[np.float64]
-
-    @property
-    def prior_rows(self) -> NDArray[np.int64]:
-        """Parameters with a prior (free, finite sigma): one residual row each."""
-        return np.flatnonzero(self.free & np.isfinite(self.prior_sigma))
-
-    @property
-    def n_parameters(self) -> int:
-        return len(self.names)
-
-    @property
-    def obs_sizes(self) -> list[tuple[int, int]]:
-        """(observations, rows per observation) of each group, then one row per prior."""
-        sizes = [(len(g.sample), g.rows) for g in self.groups]
-        return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
-
-    def evaluate(self, x: NDArray, sigma: NoiseModel, with_jacobian: bool = True
-                 ) -> tuple[NDArray, NDArray | None]:
-        """Whitened residuals (N,) and their Jacobian (N, P) at ``x``."""
-        P = self.n_parameters
-        rs, Js = [], []
-        for grp in self.groups:
-            m = len(grp.sample)
-            rs.append(np.array(grp.residual(grp.qs, grp.data, x, sigma.position_m,
-                                            sigma.rotation_rad)).T.reshape(-1))
-            if with_jacobian:
-                Jg = np.array(grp.jacobian(grp.qs, grp.data, x, sigma.position_m,
-                                           sigma.rotation_rad))
-                Js.append(Jg.reshape(grp.rows, m, P).transpose(1, 0, 2).reshape(-1, P))
-        k = self.prior_rows
-        if len(k):  # Gaussian prior: (x - mean) / sigma
-            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
-            if with_jacobian:
-                Jp = np.zeros((len(k), P))
-                Jp[np.arange(len(k)), k] = 1.0 / self.prior_sigma[k]
-                Js.append(Jp)
-        return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
-
-    def casadi_residual(self, sigma: NoiseModel):
-        """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened
-        residual vector as an MX expression of it (data embedded), for CasADi solvers."""
-        ca = _ca()
-        x_free = ca.MX.sym("x", int(self.free.sum()))
-        x = self.full_x(x_free)
-        r = ca.vertcat(*[ca.vec(g.residual(ca.DM(g.qs), ca.DM(g.data), x, sigma.position_m,
-                                           sigma.rotation_rad)) for g in self.groups])
-        return x_free, r
-
-    def full_x(self, x_free):
-        """The whole chart vector (CasADi MX) from its free entries, fixed ones at zero."""
-        ca = _ca()
-        parts, k = [], 0
-        for i in range(self.n_parameters):
-            if self.free[i]:
-                parts.append(x_free[k])
-                k += 1
-            else:
-                parts.append(ca.MX(0.0))
-        return ca.vertcat(*parts)
-
-    def model_at(self, x: NDArray) -> CPCModel:
-        """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
-        from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
-
-        model = self.model0.perturbed(x[: self.model0.n_parameters])
-        base = _cayley_pose_np(np.eye(4), x[self.base_slice])
-        zero = x[self.zero_slice]
-        if not np.any(base != np.eye(4)) and not np.any(zero):
-            return model
-        # FK(q + zero) = FK with every joint pre-moved by its offset: the geometry at q = 0
-        # of the offset model is the original geometry at q = zero.
-        moved = model.joint_frames(zero)[0]
-        geo = geometry_from_cpc(model)
-        axes = moved[:, :3, 2] * model.sign[:, None]
-        shifted = ZeroGeometry(geo.topology, axes @ base[:3, :3].T,
-                               moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
-                               base @ model.frame_poses(zero))
-        return cpc_from_geometry(shifted, sign=model.sign)
-
-    def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
-        """Target poses, external frames, markers and offsets at ``x``."""
-        return tuple(
-            [Unknown(kind, name, _cayley_pose_np(value, x[self.extra_slice[(kind, name)]]))
-             for kind, name, value in self.frames]
-            + [Unknown("offset", key, value + x[self.offset_slice[key]])
-               for key, value in self.offsets])
-
-
-def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
-                  targets: dict[str, NDArray] | None = None,
-                  parameters: str | tuple[str, ...] = "full",
-                  prior: tuple[float, float] | None = None,
-                  known: tuple[Unknown, ...] = ()) -> LeastSquaresProblem:
-    """Assemble the least-squares problem (see :func:`refine` for the arguments).
-
-    ``known`` gives start values for extra unknowns (e.g. a previous calibration's target
-    pose and markers) instead of estimating them from these data.
-    """
-    measurements = check_against_robot(measurements, robot)
-    ca = _ca()
-    start = robot if start is None else start
-    observed = measurements.observed_frames
-    in_frames = {g.measured_in for g in (*measurements.poses, *measurements.points)}
-    model_frame = None
-    if not measurements.targets and len(in_frames) == 1 and None not in in_frames:
-        model_frame = next(iter(in_frames))  # everything in one external frame
-    model0 = cpc_from_robot(start, observed)
-    q_all = measurements.q_of(model0.topology.joint_names)
-    given = {(u.kind, u.name): u.value for u in known}
-    if model_frame is not None:
-        model0 = _express_in(model0, measurements, q_all, model_frame,
-                             given.get(("frame", model_frame)))
-    frames, offsets = _start_extras(measurements, model0, q_all, model_frame, targets or {})
-    frames = [(k, n, given.get((k, n), v)) for k, n, v in frames]
-    offsets = [(key, given.get(("offset", key), v)) for key, v in offsets]
-
-    # -- parameter vector: CPC chart, then 6 per extra frame, then 3 per offset ----------
-    names = list(model0.parameter_names)
-    free = np.ones(len(names), bool)
-    only_indirect = [f for f in observed
-                     if not any(g.frame == f and g.marker is None for g in measurements.poses)
-                     and not any(g.camera == f for g in measurements.targets)
-                     and not any(g.frame == f and g.offset is not None
-                                 for g in measurements.points)]
-    for f in only_indirect:  # its markers carry the freedom: keep the nominal tool
-        free[[k for k, (o, _) in enumerate(names) if o == f]] = False
-    for f in observed:  # a revolute joint's child link has its origin on the joint axis
-        last = robot.path_joints(f)[-1] if robot.path_joints(f) else None
-        if last is not None and last.is_revolute and last.child == f:
-            free[[k for k, (o, c) in enumerate(names) if o == f and c in ("x", "y")]] = False
-    n_cpc = len(names)
-    tools = np.array([o in model0.topology.frames for o, _ in names])
-    if parameters == "full":
-        pass
-    elif parameters in ("offsets", "frames", "none"):
-        free &= tools if parameters != "none" else np.zeros(n_cpc, bool)
-    else:  # a mask: joint names (all their parameters) or "joint:field" entries
-        wanted = set()
-        for token in ([] if isinstance(parameters, str) else parameters):
-            owner, _, field_ = token.partition(":")
-            matches = [k for k, (o, f) in enumerate(names) if o == owner
-                       and (not field_ or f == field_)]
-            if owner not in model0.topology.joint_names or not matches:
-                raise ValueError(
-                    f"parameters: expected 'full', 'offsets', 'frames', 'none', joint names "
-                    f"or 'joint:field' of {list(model0.topology.joint_names)} (fields "
-                    f"b_tilt_1, b_tilt_2, l_x, l_y); got {token!r}")
-            wanted.update(matches)
-        if isinstance(parameters, str) or not wanted:
-            raise ValueError(f"parameters: expected 'full', 'offsets', 'frames', 'none' or a "
-                             f"mask of joints; got {parameters!r}")
-        free &= tools | np.isin(np.arange(n_cpc), sorted(wanted))
-    # the base (a rigid transform of the whole model) and joint zero offsets: redundant
-    # with the full chart, used by the smaller parameter sets
-    base_slice = slice(len(names), len(names) + 6)
-    names += [("base", c) for c in ("rot_x", "rot_y", "rot_z", "x", "y", "z")]
-    zero_slice = slice(len(names), len(names) + model0.n_joints)
-    names += [(j, "zero_offset") for j in model0.topology.joint_names]
-    in_model_frame = any((g.measured_in or None) == model_frame
-                         for g in (*measurements.poses, *measurements.points))
-    base_free = parameters != "full" and parameters != "none" and in_model_frame
-    topo = model0.topology
-    # a zero offset is redundant with a tool when the joint carries only end frames, and
-    # with the base when only prismatic joints lie above it (a constant translation)
-    useful_offset = np.array([
-        (topo.revolute[j] and bool(topo.children(j)))
-        or (not topo.revolute[j] and any(topo.revolute[a] for a in _ancestors(topo, j)))
-        for j in range(model0.n_joints)])
-    extra_free = np.concatenate([np.full(6, base_free),
-                                 useful_offset & (parameters == "offsets")])
-    free = np.concatenate([free, extra_free])
-    extra_slice: dict[tuple[str, str], slice] = {}
-    for kind, name, _ in frames:
-        extra_slice[(kind, name)] = slice(len(names), len(names) + 6)
-        names += [(f"{kind}:{name}", c) for c in ("rot_x", "rot_y", "rot_z", "x", "y", "z")]
-    offset_slice: dict[str, slice] = {}
-    for key, _ in offsets:
-        offset_slice[key] = slice(len(names), len(names) + 3)
-        names += [(f"offset:{key}", c) for c in ("x", "y", "z")]
-    free = np.concatenate([free, np.ones(len(names) - len(free), bool)])
-    P = len(names)
-
-    fk = cpc_fk_function(model0)
-    theta = ca.SX.sym("theta", P)
-    q = ca.SX.sym("q", model0.n_joints)
-    T_frames = fk(q + theta[zero_slice], theta[: model0.n_parameters])
-    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    base = _cayley_pose(ca, np.eye(4), theta[base_slice])
-    frame_T = {f: base @ T_frames[k] for k, f in enumerate(model0.topology.frames)}
-    extra_T = {key: _cayley_pose(ca, value, theta[extra_slice[(kind, name)]])
-               for kind, name, value in frames for key in [(kind, name)]}
-    offset_p = {key: ca.DM(value) + theta[offset_slice[key]] for key, value in offsets}
-    sp = ca.SX.sym("sigma_p")
-    sr = ca.SX.sym("sigma_r")
-
-    def meas_frame(g):
-        name = g.measured_in if g.measured_in != model_frame else None
-        return ca.DM.eye(4) if name is None else extra_T[("frame", name)]
-
-    groups: list[_Group] = []
-
-    def add(kind, frame, marker, sample, data, m_sym, r_expr, rows=6):
-        args = [q, m_sym, theta, sp, sr]
-        f = ca.Function("r", args, [r_expr])
-        jf = ca.Function("j", args, [ca.jacobian(r_expr, theta)])
-        groups.append(_Group(kind, frame, marker, sample, data, q_all[sample].T,
-                             f.map(len(sample)), jf.map(len(sample)), rows))
-
-    for g in measurements.poses:
-        T = meas_frame(g) @ frame_T[g.frame]
-        if g.marker is not None:
-            T = T @ extra_T[("marker", g.marker)]
-        m = ca.SX.sym("m", 12)
-        add("pose", g.frame, g.marker, g.sample, _pose_vectors(g.meas_T_frame), m,
-            _pose_residual(ca, T, m, sp, sr))
-    for g in measurements.targets:
-        T = _inverse_ca(ca, frame_T[g.camera]) @ extra_T[("target", g.target)]
-        m = ca.SX.sym("m", 12)
-        add("target", g.camera, None, g.sample, _pose_vectors(g.camera_T_target), m,
-            _pose_residual(ca, T, m, sp, sr))
-    for g in measurements.points:
-        T = meas_frame(g) @ frame_T[g.frame]
-        o = ca.DM(g.offset) if g.offset is not None else \
-            offset_p[f"{g.frame}:{g.marker or 'point'}"]
-        m = ca.SX.sym("m", 3)
-        add("point", g.frame, g.marker, g.sample, g.meas_p_point.T, m,
-            (m - (T[0:3, 0:3] @ o + T[0:3, 3])) / sp, rows=3)
-
-    prior_sigma = np.full(P, np.inf)
-    prior_mean = np.zeros(P)
-    if prior is not None:
-        sigma_m, sigma_rad = prior[0], prior[1]
-        angular = np.array([f.startswith(("rot", "b_tilt")) or
-                            (f == "zero_offset" and robot.joint(o).is_revolute)
-                            for o, f in names])
-        prior_sigma[: zero_slice.stop] = np.where(angular, sigma_rad, sigma_m)[: zero_slice.stop]
-        if model_frame is None:  # deviations from the nominal, in the start's chart
-            from kinfw.cpc import cpc_from_geometry, geometry_from_robot
-
-            nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
-            prior_mean[:n_cpc] = model0.chart_coordinates(nominal)
-    return LeastSquaresProblem(model0, model_frame, tuple(names), free, tuple(frames),
-                               tuple(offsets), extra_slice, offset_slice, tuple(groups),
-                               base_slice, zero_slice, prior_mean, prior_sigma)
 
 
 def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArray[np.float64]:
@@ -668,35 +210,36 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
     sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
-    k = _thresholds(obs_sizes, loss_scale)
+    k = thresholds(obs_sizes, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
-        x, its, converged = _levenberg_marquardt(
+        x, its, converged = levenberg_marquardt(
             lambda v, jac, s=sigma: problem.evaluate(v, s, jac), x, free, obs_sizes, loss,
             k, max_iterations)
         iterations += its
         if given:
             break
         r, J = problem.evaluate(x, sigma, True)
-        Q, _ = np.linalg.qr(J[:, free] * np.sqrt(_row_weights(r, obs_sizes, loss, k))[:, None])
-        sigma = _estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
+        Q, _ = np.linalg.qr(J[:, free] * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None])
+        sigma = estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
                                 robust=loss != "linear", first=round_ == 0)
     r, J = problem.evaluate(x, sigma, True)
-    w_rows = _row_weights(r, obs_sizes, loss, k)
+    w_rows = row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
     # a given noise model is trusted; an estimated one is rescaled by the fit
-    covariance, ident = _covariance_and_identifiability(
+    covariance, ident = covariance_and_identifiability(
         Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements,
         problem.model0)
-    flagged = _obs_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
-    residuals, downweighted = _group_residuals(list(problem.groups), r, w_rows, sigma,
+    flagged = observation_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
+    residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma,
                                                flagged)
     result = RefineResult(
         model=problem.model_at(x), model_frame=problem.model_frame,
-        unknowns=problem.unknowns_at(x), parameter_names=problem.names, estimate=x,
+        unknowns=problem.unknowns_at(x), parameter_names=problem.names,
+        parameter_units=problem.units, estimate=x,
         covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
         downweighted=downweighted, identifiability=ident, iterations=iterations,
         converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)
@@ -705,247 +248,3 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     return result
 
 
-# -- helpers ---------------------------------------------------------------------------
-def _ancestors(topo, j: int) -> list[int]:
-    out, p = [], topo.parent[j]
-    while p >= 0:
-        out.append(p)
-        p = topo.parent[p]
-    return out
-
-
-def _express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str,
-                meas_T_root: NDArray | None = None) -> CPCModel:
-    """The model moved into the external frame ``name`` by ``name_T_root``: given, or a
-    closed-form estimate (pose observations averaged, or points registered)."""
-    from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
-    from kinfw.registration import register_points
-
-    index = {f: k for k, f in enumerate(model.topology.frames)}
-    w_T = model.frame_poses(q_all)
-    w_T = w_T[None] if w_T.ndim == 3 else w_T
-    est = [g.meas_T_frame @ inverse_transform(w_T[g.sample, index[g.frame]])
-           for g in measurements.poses if g.marker is None]
-    if meas_T_root is not None:
-        pass
-    elif est:
-        meas_T_root = average_transform(np.concatenate(est))
-    else:
-        known = [g for g in measurements.points if g.offset is not None]
-        if not known:
-            raise DatasetError(
-                f"{measurements.source}: everything is measured in {name!r} through markers "
-                "or points of unknown offset; give at least one point offset (or a "
-                "marker-free pose) so that the frame can be placed")
-        root_p = np.concatenate([(w_T[g.sample, index[g.frame]] @ np.append(g.offset, 1.0))
-                                 [:, :3] for g in known])
-        meas_p = np.concatenate([g.meas_p_point for g in known])
-        meas_T_root = register_points(root_p, meas_p)
-    geo = geometry_from_cpc(model)
-    R, p = meas_T_root[:3, :3], meas_T_root[:3, 3]
-    moved = ZeroGeometry(geo.topology, geo.axes @ R.T, geo.points @ R.T + p,
-                         meas_T_root @ geo.w_T_frames)
-    return cpc_from_geometry(moved, sign=model.sign)
-
-
-def _obs_norms(r: NDArray, obs_sizes: list[tuple[int, int]]) -> NDArray:
-    out, k = [], 0
-    for m, rows in obs_sizes:
-        out.append(np.linalg.norm(r[k : k + m * rows].reshape(m, rows), axis=1))
-        k += m * rows
-    return np.concatenate(out)
-
-
-def _repeat_rows(per_obs: NDArray, obs_sizes: list[tuple[int, int]]) -> NDArray:
-    out, k = [], 0
-    for m, rows in obs_sizes:
-        out.append(np.repeat(per_obs[k : k + m], rows))
-        k += m
-    return np.concatenate(out)
-
-
-def _thresholds(obs_sizes: list[tuple[int, int]], z: float) -> NDArray:
-    """Per observation, the z-quantile of the norm of its clean whitened residual:
-    ``sqrt(chi2_ppf)`` by Wilson-Hilferty, ``rows (1 - 2/(9 rows) + z sqrt(2/(9 rows)))^3``."""
-    per_obs = []
-    for m, rows in obs_sizes:
-        c = 2.0 / (9.0 * rows)
-        per_obs.append(np.full(m, np.sqrt(rows * (1.0 - c + z * np.sqrt(c)) ** 3)))
-    return np.concatenate(per_obs)
-
-
-def _robust(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
-    """Loss rho(s) and IRLS weight rho'(s)/s of whitened residual norms ``s``."""
-    if loss == "huber":
-        return np.where(s <= k, 0.5 * s**2, k * s - 0.5 * k**2), np.where(s <= k, 1.0, k / s)
-    if loss == "cauchy":
-        return 0.5 * k**2 * np.log1p((s / k) ** 2), 1.0 / (1.0 + (s / k) ** 2)
-    return 0.5 * s**2, np.ones_like(s)
-
-
-def _row_weights(r: NDArray, obs_sizes, loss: str, k: NDArray) -> NDArray:
-    return _repeat_rows(_robust(_obs_norms(r, obs_sizes), loss, k)[1], obs_sizes)
-
-
-def _levenberg_marquardt(evaluate, x: NDArray, free: NDArray, obs_sizes, loss: str,
-                         k: NDArray, max_iterations: int) -> tuple[NDArray, int, bool]:
-    """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
-
-    Steps solve ``(Js^T Js + lam I) y = -Js^T r`` with unit-norm columns ``Js``: no
-    component along directions the Jacobian does not see (they stay at the start).
-    """
-    def cost_of(r):
-        return float(_robust(_obs_norms(r, obs_sizes), loss, k)[0].sum())
-
-    r, J = evaluate(x, True)
-    cost = cost_of(r)
-    lam = 1e-6  # column-scaled: start close to Gauss-Newton
-    converged = False
-    it = 0
-    for it in range(1, max_iterations + 1):
-        w = np.sqrt(_row_weights(r, obs_sizes, loss, k))
-        Jf = J[:, free] * w[:, None]
-        c = np.linalg.norm(Jf, axis=0)
-        c[c == 0.0] = 1.0
-        Js = Jf / c
-        g = Js.T @ (r * w)
-        H = Js.T @ Js
-        while True:
-            y = -np.linalg.solve(H + lam * np.eye(len(H)), g)
-            x_new = x.copy()
-            x_new[free] += y / c
-            r_new, _ = evaluate(x_new, False)
-            cost_new = cost_of(r_new)
-            if cost_new <= cost:
-                break
-            lam *= 4.0
-            if lam > 1e12:
-                return x, it, converged
-        decrease = cost - cost_new
-        x, r, cost = x_new, r_new, cost_new
-        lam = max(lam / 3.0, 1e-12)
-        if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
-            converged = True
-            break
-        _, J = evaluate(x, True)
-    return x, it, converged
-
-
-#: Median of the chi-square distribution with 3 degrees of freedom.
-_CHI2_3_MEDIAN = 2.365973884375338
-#: Its 99.9 % quantile, and the mean below it divided by 3 (the trimmed second moment).
-_CHI2_3_Q99 = 16.26623619623813  # 99.9 %
-_CHI2_3_TRIMMED = 0.99496
-
-
-def _estimate_noise(r: NDArray, groups: list[_Group], sigma: NoiseModel,
-                    leverage: NDArray, *, robust: bool = False, first: bool = True
-                    ) -> NoiseModel:
-    """Rescale each kind's sigma from the whitened residuals.
-
-    ``leverage`` is the diagonal of the hat matrix ``J (J^T J)^+ J^T`` (one per row): a
-    kind's residual degrees of freedom are its rows minus its leverages, so a kind that
-    the fit follows closely (orientations, here) is not underestimated.
-
-    Least squares: variance components (each kind's sum of squares over its degrees of
-    freedom). With a robust loss: first the median of the per-observation
-    squared norms over the chi-square(3) median, which gross outliers do not inflate;
-    then (``first=False``) the second moment of the observations inside the 99 %
-    quantile, which depends on the noise's shape only through that 1 % tail (an angle
-    about a random axis and an isotropic 3-D error have different medians).
-    """
-    pos, rot, hp, hr, k = [], [], [], [], 0
-    for grp in groups:
-        m = len(grp.sample)
-        block = r[k : k + m * grp.rows].reshape(m, grp.rows)
-        h = leverage[k : k + m * grp.rows].reshape(m, grp.rows)
-        pos.append(block[:, :3])
-        hp.append(h[:, :3])
-        if grp.rows == 6:
-            rot.append(block[:, 3:])
-            hr.append(h[:, 3:])
-        k += m * grp.rows
-
-    def factor(blocks: list[NDArray], hats: list[NDArray]) -> float:
-        if not blocks:
-            return 1.0
-        block, hat = np.concatenate(blocks), np.concatenate(hats)
-        share = max(1.0 - hat.sum() / block.size, 1e-3)
-        s2 = np.sum(block**2, axis=1)
-        if robust and first:
-            return float(np.sqrt(np.median(s2) / (_CHI2_3_MEDIAN * share)))
-        if robust:
-            inside = s2[s2 < _CHI2_3_Q99]
-            return float(np.sqrt(np.mean(inside) / (3.0 * _CHI2_3_TRIMMED * share))) \
-                if len(inside) else 1.0
-        return float(np.sqrt(np.sum(s2) / (block.size * share)))
-
-    return NoiseModel(float(max(sigma.position_m * factor(pos, hp), 1e-12)),
-                      float(max(sigma.rotation_rad * factor(rot, hr), 1e-15)), estimated=True)
-
-
-def _covariance_and_identifiability(Jw: NDArray, free: NDArray, names: list,
-                                    sigma_hat2: float, measurements: Measurements,
-                                    model: CPCModel
-                                    ) -> tuple[NDArray, Identifiability]:
-    P = len(names)
-    Jf = Jw[:, free]
-    c = np.linalg.norm(Jf, axis=0)
-    c[c == 0.0] = 1.0
-    _, s, Vt = np.linalg.svd(Jf / c, full_matrices=False)
-    rank = int(np.sum(s > s[0] * 1e-8)) if len(s) else 0
-    V = Vt[:rank].T
-    cov_free = (V / s[:rank] ** 2) @ V.T / np.outer(c, c) * sigma_hat2
-    covariance = np.zeros((P, P))
-    idx = np.flatnonzero(free)
-    covariance[np.ix_(idx, idx)] = cov_free
-    free_names = [names[k] for k in idx]
-    q_range = np.ptp(measurements.q_of(model.topology.joint_names), axis=0) \
-        if measurements.n_samples else np.zeros(model.n_joints)
-    still = {n for n, rng in zip(model.topology.joint_names, q_range, strict=True)
-             if rng < 1e-9}
-    unidentifiable = []
-    for v in Vt[rank:]:
-        involved = tuple(free_names[k] for k in np.flatnonzero(np.abs(v) > 0.2 * np.abs(v).max()))
-        owners = {o for o, _ in involved}
-        if owners & still:
-            why = (f"joint(s) {sorted(owners & still)} never move in the data, so their "
-                   "axes are not observed")
-        elif all(f.startswith("rot") for _, f in involved):
-            why = "only positions of these frames are observed; their orientation is free"
-        else:
-            why = ("these parameters change every prediction in the same way; the data "
-                   "cannot tell them apart (add motion of the joints involved)")
-        unidentifiable.append((involved, why))
-    d = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rho = cov_free / np.outer(d, d)
-    pairs = [(abs(rho[a, b]), a, b) for a in range(len(d)) for b in range(a + 1, len(d))
-             if d[a] > 0 and d[b] > 0 and abs(rho[a, b]) > 0.9]
-    pairs.sort(reverse=True)
-    correlations = tuple((":".join(free_names[a]), ":".join(free_names[b]), float(rho[a, b]))
-                         for _, a, b in pairs[:20])
-    o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) else 0.0
-    return covariance, Identifiability(
-        rank=rank, n_parameters=len(free_names),
-        condition=float(s[0] / s[rank - 1]) if rank else float("inf"),
-        observability_o1=o1, unidentifiable=tuple(unidentifiable), correlations=correlations)
-
-
-def _group_residuals(groups: list[_Group], r: NDArray, w_rows: NDArray, sigma: NoiseModel,
-                     flagged: NDArray) -> tuple[tuple[GroupResiduals, ...], tuple]:
-    """Per-group residuals in SI, and the observations beyond the robust threshold."""
-    out, down, k, o = [], [], 0, 0
-    for grp in groups:
-        m = len(grp.sample)
-        block = r[k : k + m * grp.rows].reshape(m, grp.rows)
-        weight = w_rows[k : k + m * grp.rows : grp.rows]
-        out.append(GroupResiduals(
-            grp.kind, grp.frame, grp.marker, grp.sample, block[:, :3] * sigma.position_m,
-            block[:, 3:] * sigma.rotation_rad if grp.rows == 6 else None, weight))
-        down += [(grp.kind, grp.frame, int(sm), float(wt))
-                 for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
-                 if bad]
-        k += m * grp.rows
-        o += m
-    return tuple(out), tuple(down)

@@ -85,10 +85,6 @@ class Block:
     key: BlockKey
     free: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
 
-    #: whether the block belongs to the robot model (CPC, base, zero offsets) rather
-    #: than to the observed world (targets, markers, offsets, external frames)
-    robot: bool = field(default=False, init=False, repr=False)
-
     def __post_init__(self) -> None:
         object.__setattr__(self, "free", _free_mask(self.free, self.size))
 
@@ -220,7 +216,6 @@ class CPCBlock(Block):
     """
 
     model: CPCModel = None  # type: ignore[assignment]
-    robot: bool = field(default=True, init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.model is None:
@@ -266,7 +261,6 @@ class ZeroOffsetBlock(Block):
 
     joint_names: tuple[str, ...] = ()
     revolute: tuple[bool, ...] = ()
-    robot: bool = field(default=True, init=False, repr=False)
 
     @property
     def fields(self) -> tuple[str, ...]:

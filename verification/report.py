@@ -102,8 +102,8 @@ def _hand_eye_section(result: CamerasResult) -> dict:
 def _refine_section(result: RefineResult, loss: str) -> dict:
     ident = result.identifiability
     residual_mm = {(g.kind, g.frame, int(smp)): 1e3 * float(np.linalg.norm(e))
-                   for g in result.residuals for smp, e in zip(g.sample, g.position_m,
-                                                               strict=True)}
+                   for g in result.residuals if g.position_m is not None
+                   for smp, e in zip(g.sample, g.position_m, strict=True)}
     return {
         "method": "joint nonlinear least squares (CasADi residuals and Jacobians, "
                   "Levenberg-Marquardt), residuals whitened by the noise below",
@@ -112,6 +112,7 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                   "rotation_sigma_deg_per_component": float(np.degrees(
                       result.noise.rotation_rad)),
                   "estimated": result.noise.estimated,
+                  "sigma_per_component": dict(result.noise.sigmas),
                   "note": "weights: 1/sigma^2 per position component (mm) and per "
                           "small-angle orientation component (an angle sigma of s about a "
                           "random axis is s/sqrt(3) per component)"},
@@ -121,9 +122,9 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
         "model_frame": result.model_frame,
         "parameters": [
             {"owner": o, "field": f, "delta_from_start": float(d), "std": float(sd),
-             "unit": "rad" if f.startswith(("rot", "b_tilt")) else "m"}
-            for (o, f), d, sd in zip(result.parameter_names, result.estimate, result.std,
-                                     strict=True)],
+             "unit": unit}
+            for (o, f), unit, d, sd in zip(result.parameter_names, result.parameter_units,
+                                           result.estimate, result.std, strict=True)],
         "kinematics": [{"owner": o, "name": n, "value": v}
                        for o, n, v in result.model.describe()],
         "unknowns": [{"kind": u.kind, "name": u.name, "value": u.value.tolist()}
