@@ -801,9 +801,13 @@ def _warnings_printed_once(command: str, verbose: bool):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``kinfw`` command; returns the exit code."""
+    """Entry point of the ``kinfw`` command; returns the exit code (also for ``--help``,
+    0, and for an argument error, 2, which argparse signals with SystemExit)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     func: Callable[[argparse.Namespace], int] = args.func
     with _warnings_printed_once(args.command, args.verbose):
         try:
