@@ -86,6 +86,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.files import write_text_atomic
 from kinfw.transforms import (
     check_transform,
     transform_from_xyz_quat_xyzw,
@@ -629,6 +630,8 @@ def read_measurements(path: str | Path) -> Measurements:
                            f"{exc.start})") from None
     except OSError as exc:
         raise DatasetError(f"{source}: cannot read measurement file ({exc.strerror})") from None
+    if not text.strip():
+        raise DatasetError(f"{source}: the file is empty; expected a {FORMAT} JSON document")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -922,7 +925,9 @@ def write_measurements(path: str | Path, measurements: Measurements) -> None:
 
     Floats are written with ``repr``, so :func:`read_measurements` gives back ``qs``,
     positions and offsets exactly and transforms to rounding (~1e-16). The file is
-    written to a temporary name and then renamed, so a failed write leaves no half file.
+    written to a temporary file beside it and then renamed
+    (:func:`kinfw.files.write_text_atomic`), so a failed write leaves no half file and
+    the previous file, if any, intact.
 
     Parameters
     ----------
@@ -932,10 +937,7 @@ def write_measurements(path: str | Path, measurements: Measurements) -> None:
         The dataset (see :func:`measurements_to_dict` for what cannot be written).
     """
     path = Path(path)
-    text = _dumps(measurements_to_dict(measurements))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, _dumps(measurements_to_dict(measurements)))
     logger.debug("wrote %d samples to %s", measurements.n_samples, path)
 
 
@@ -1089,6 +1091,14 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:
+    """One UserWarning per joint outside its limits.
+
+    The pipeline checks the same data in every stage (closed form, refinement, each
+    stage's errors), each from its own line. The warning is therefore attributed to one
+    place, the call in :func:`check_against_robot` (``stacklevel=2``), not to the
+    callers: Python's default filter, which shows a warning once per text and place,
+    then shows it once however many stages check the data.
+    """
     lower, upper = robot.joint_limits(m.joint_names)
     outside = (m.qs < lower) | (m.qs > upper)
     for c in np.flatnonzero(outside.any(axis=0)):
@@ -1101,7 +1111,7 @@ def _warn_limits(m: Measurements, robot: Robot) -> None:
             f"{upper[c]:.6g}] {unit} in {len(rows)} of {m.n_samples} samples (first: "
             f"samples[{i}], value {m.qs[i, c]:.6g} {unit})",
             UserWarning,
-            stacklevel=3,
+            stacklevel=2,
         )
 
 

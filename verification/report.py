@@ -14,6 +14,7 @@ from identification.cameras import CamerasResult
 from identification.closed_form import ClosedFormResult
 from identification.pipeline import Calibration
 from identification.refine import RefineResult
+from kinfw.files import atomic_path
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
@@ -266,5 +267,6 @@ def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, 
     if title:
         ax.set_title(title, fontsize=10)
     path = Path(path)
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
     return path
