@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from kinfw.cpc import CPCModel, cpc_from_robot
 from kinfw.cpc_casadi import cpc_fk_function
 from kinfw.measurements import DatasetError, Measurements, check_against_robot
-from kinfw.robot import Robot
+from kinfw.robot import Robot, Topology
 from kinfw.transforms import (
     average_transform,
     inverse_transform,
@@ -54,12 +54,65 @@ __all__ = [
     "Unknown",
     "build_problem",
     "information_matrix",
+    "parameter_unit",
     "refine",
 ]
 
 log = logging.getLogger(__name__)
 
 LOSSES = ("linear", "huber", "cauchy")
+
+#: Fields whose values are angles (rad): chart tilts and rotations, CPC beta, URDF rpy.
+_ANGLE_FIELDS = frozenset({"b_tilt_1", "b_tilt_2", "rot_x", "rot_y", "rot_z", "beta", "roll",
+                           "pitch", "yaw"})
+#: Fields whose values are lengths (m): CPC l, frame and point translations.
+_LENGTH_FIELDS = frozenset({"l_x", "l_y", "l_z", "x", "y", "z"})
+#: Fields without a unit: components of the CPC unit axis b, the motion sense.
+_UNITLESS_FIELDS = frozenset({"b_x", "b_y", "b_z", "sign"})
+
+
+def parameter_unit(owner: str, field: str, topology: Topology) -> str:
+    """SI unit of a parameter or kinematic quantity named ``(owner, field)``.
+
+    Covers the names of :attr:`RefineResult.parameter_names` (the CPC chart of
+    :attr:`kinfw.cpc.CPCModel.parameter_names`, ``("base", ...)``, ``(joint,
+    "zero_offset")``, ``("target:name", ...)``, ``("frame:name", ...)``,
+    ``("marker:name", ...)``, ``("offset:frame:point", ...)``) and the rows of
+    :meth:`kinfw.cpc.CPCModel.describe`.
+
+    Parameters
+    ----------
+    owner, field : str
+        The parameter's name, e.g. ``("pan", "zero_offset")`` or ``("left_plate", "x")``.
+    topology : Topology
+        Joint names and types (``model.topology``): a revolute joint's ``zero_offset``
+        is an angle, a prismatic joint's a length.
+
+    Returns
+    -------
+    str
+        ``"rad"``, ``"m"`` or ``"unitless"``.
+
+    Raises
+    ------
+    ValueError
+        For a field this function does not know, or the ``zero_offset`` of a name that
+        is not a joint of ``topology``.
+    """
+    if field in _ANGLE_FIELDS:
+        return "rad"
+    if field in _LENGTH_FIELDS:
+        return "m"
+    if field in _UNITLESS_FIELDS:
+        return "unitless"
+    if field == "zero_offset":
+        if owner not in topology.joint_names:
+            raise ValueError(f"parameter ({owner!r}, 'zero_offset'): {owner!r} is not a joint "
+                             f"of the model; expected one of {list(topology.joint_names)}")
+        return "rad" if topology.revolute[topology.joint_names.index(owner)] else "m"
+    raise ValueError(f"parameter ({owner!r}, {field!r}): unknown field; expected an angle "
+                     f"{sorted(_ANGLE_FIELDS)}, a length {sorted(_LENGTH_FIELDS)}, unitless "
+                     f"{sorted(_UNITLESS_FIELDS)} or 'zero_offset'")
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,6 +194,8 @@ class GroupResiduals:
         Small-angle orientation error (sine of the angle about its axis), None for points.
     weight : ndarray, shape (m,)
         Robust-loss weight of each observation (1 = full weight).
+    downweighted : ndarray of bool, shape (m,)
+        Observations beyond the robust loss's threshold (all False for least squares).
     """
 
     kind: str
@@ -150,6 +205,7 @@ class GroupResiduals:
     position_m: NDArray[np.float64]
     rotation_rad: NDArray[np.float64] | None
     weight: NDArray[np.float64]
+    downweighted: NDArray[np.bool_]
 
 
 @dataclass(frozen=True, slots=True)
@@ -167,7 +223,11 @@ class RefineResult:
     unknowns : tuple of Unknown
         Target poses, external frames, markers, point offsets.
     parameter_names : tuple of (owner, field)
-        Every estimated parameter, in the order of ``estimate`` and ``covariance``.
+        Every parameter of the problem, in the order of ``estimate`` and ``covariance``;
+        units from :func:`parameter_unit`.
+    free : ndarray of bool, shape (P,)
+        The parameters estimated; the others are fixed at the start (``estimate`` 0,
+        ``std`` 0), e.g. the base and the joint zero offsets with ``parameters="full"``.
     estimate : ndarray, shape (P,)
         Chart coordinates from the start (rad, m).
     covariance : ndarray, shape (P, P)
@@ -192,6 +252,7 @@ class RefineResult:
     model_frame: str | None
     unknowns: tuple[Unknown, ...]
     parameter_names: tuple[tuple[str, str], ...]
+    free: NDArray[np.bool_]
     estimate: NDArray[np.float64]
     covariance: NDArray[np.float64]
     noise: NoiseModel
@@ -578,10 +639,9 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     prior_mean = np.zeros(P)
     if prior is not None:
         sigma_m, sigma_rad = prior[0], prior[1]
-        angular = np.array([f.startswith(("rot", "b_tilt")) or
-                            (f == "zero_offset" and robot.joint(o).is_revolute)
-                            for o, f in names])
-        prior_sigma[: zero_slice.stop] = np.where(angular, sigma_rad, sigma_m)[: zero_slice.stop]
+        angular = np.array([parameter_unit(o, f, model0.topology) == "rad"
+                            for o, f in names[: zero_slice.stop]])
+        prior_sigma[: zero_slice.stop] = np.where(angular, sigma_rad, sigma_m)
         if model_frame is None:  # deviations from the nominal, in the start's chart
             from kinfw.cpc import cpc_from_geometry, geometry_from_robot
 
@@ -696,7 +756,8 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
                                                flagged)
     result = RefineResult(
         model=problem.model_at(x), model_frame=problem.model_frame,
-        unknowns=problem.unknowns_at(x), parameter_names=problem.names, estimate=x,
+        unknowns=problem.unknowns_at(x), parameter_names=problem.names,
+        free=problem.free.copy(), estimate=x,
         covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
         downweighted=downweighted, identifiability=ident, iterations=iterations,
         converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)
@@ -942,7 +1003,8 @@ def _group_residuals(groups: list[_Group], r: NDArray, w_rows: NDArray, sigma: N
         weight = w_rows[k : k + m * grp.rows : grp.rows]
         out.append(GroupResiduals(
             grp.kind, grp.frame, grp.marker, grp.sample, block[:, :3] * sigma.position_m,
-            block[:, 3:] * sigma.rotation_rad if grp.rows == 6 else None, weight))
+            block[:, 3:] * sigma.rotation_rad if grp.rows == 6 else None, weight,
+            flagged[o : o + m].copy()))
         down += [(grp.kind, grp.frame, int(sm), float(wt))
                  for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
                  if bad]

@@ -278,10 +278,25 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
               f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
               f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
               f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
-              f"condition {ident['condition']:.3g}; {len(ref['downweighted'])} observations "
-              "down-weighted")
+              f"condition {ident['condition']:.3g}")
+        n_fixed = sum(row["fixed"] for row in ref["parameters"])
+        print(f"  parameters: {len(ref['parameters']) - n_fixed} estimated, {n_fixed} fixed "
+              "(not estimated; std null in the report)")
         for item in ident["not_identifiable"]:
             print(f"  not identifiable: {', '.join(item['parameters'])}: {item['why']}")
+        down = ref["downweighted"]
+        if down:
+            print(f"  {len(down)} observations down-weighted by the {ref['loss']} loss, "
+                  "worst first:")
+        for row in down[:5]:
+            where = row["frame"] + (f" marker {row['marker']}" if row["marker"] else "")
+            rotation = ("" if row["rotation_residual_deg"] is None
+                        else f", {row['rotation_residual_deg']:.3g} deg")
+            print(f"    samples[{row['sample']}] {where} ({row['kind']}): residual "
+                  f"{row['position_residual_mm']:.3g} mm{rotation}, weight {row['weight']:.2g}")
+        if len(down) > 5:
+            print(f"    ... and {len(down) - 5} more "
+                  f"({'see the report' if args.report else 'write them with --report'})")
     if held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report["errors_held_out"]))

@@ -59,8 +59,10 @@ Rules
 -----
 ``joint_names`` (non-empty, distinct) may list only the joints that moved; the others are
 held at zero (:meth:`Measurements.q_of`). Every sample has ``q`` (one finite number per
-joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-6
-of 1 (they are then renormalised). A marker name belongs to one frame. Extra keys are
+joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-3
+of 1 and are renormalised (a file whose norms are off by more than 1e-6, as when written
+with 4 or 5 decimals, gets one warning saying how many and by how much). A marker name
+belongs to one frame. Extra keys are
 allowed and ignored; ``null`` for an optional key is the same as leaving it out. Every
 problem raises :class:`DatasetError` naming the file, the key path
 (``samples[7].observations[1].quat_xyzw``) and what was expected.
@@ -117,8 +119,12 @@ logger = logging.getLogger(__name__)
 
 FORMAT = "kinfw-measurements"
 SUPPORTED_VERSIONS = (1,)
-QUAT_NORM_TOL = 1e-6
-"""Largest accepted ``| |quat_xyzw| - 1 |`` in a file."""
+QUAT_NORM_TOL = 1e-3
+"""Largest accepted ``| |quat_xyzw| - 1 |`` in a file (quaternions written with 4 or 5
+decimals are off by up to a few 1e-5); accepted quaternions are renormalised."""
+QUAT_ROUNDED_TOL = 1e-6
+"""Beyond this ``| |quat_xyzw| - 1 |`` (and within :data:`QUAT_NORM_TOL`) the reader warns,
+once per file, that it renormalised rounded quaternions."""
 DISTINCT_TOL = 1e-9
 """Joint values closer than this (rad or m) count as one value in :func:`check_joint_motion`."""
 
@@ -747,13 +753,22 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
         xyzs = xyzs / 1000.0
     quats = np.array(quat_rows, dtype=float)
     norms = np.linalg.norm(quats, axis=1)
-    bad = np.array(oriented) & ~(np.abs(norms - 1.0) <= QUAT_NORM_TOL)
+    off = np.abs(norms - 1.0)
+    bad = np.array(oriented, dtype=bool) & ~(off <= QUAT_NORM_TOL)
     if bad.any():
         r = int(np.argmax(bad))
         raise p.error(
             f"samples[{obs_sample[r]}].observations[{obs_index[r]}].quat_xyzw",
             f"quaternion norm is {norms[r]:.9g}; expected a unit quaternion [x, y, z, w] "
             f"(norm within {QUAT_NORM_TOL:g} of 1)",
+        )
+    rounded = np.array(oriented, dtype=bool) & (off > QUAT_ROUNDED_TOL)
+    if rounded.any():
+        warnings.warn(
+            f"{source}: {int(rounded.sum())} of {sum(oriented)} quaternions had norms off "
+            f"by up to {off[rounded].max():.2g} (rounded?); renormalised",
+            UserWarning,
+            stacklevel=2,
         )
     a_T_bs = transform_from_xyz_quat_xyzw(xyzs, quats / norms[:, None])
 
