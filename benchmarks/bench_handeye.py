@@ -1,7 +1,7 @@
 """Hand-eye solvers against OpenCV: accuracy and speed on the same data, side by side.
 
 Run from the repository root (OpenCV is the ``bench`` extra, not a kinfw dependency:
-``pip install -e '.[bench]'`` or ``pip install "opencv-python-headless>=4.8,<5"``)::
+``pip install -e '.[bench]'`` or ``pip install "opencv-python-headless>=4.10,<5"``)::
 
     python benchmarks/bench_handeye.py              # full run, under ~3 minutes
     python benchmarks/bench_handeye.py --quick      # reduced set, a few seconds
@@ -73,9 +73,9 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
 
 try:
     import cv2
-except ImportError:  # pragma: no cover - the message is the point
-    sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.8,<5" '
-             "(the 'bench' extra of kinfw)")
+except ImportError as err:  # pragma: no cover - the message is the point
+    sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
+             f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}")
 
 from benchmarks.common import (  # noqa: E402
     format_table,
