@@ -166,7 +166,7 @@ def check_redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_sampl
            "component")
     message = (f"{source}: too little data to refine: {r.n_rows} residual rows ({rows}) "
                f"for {r.n_parameters} free parameters ({owners}); {r.needed} rows are needed "
-               f"({why}), about {r.samples_needed} samples like these instead of "
+               f"({why}), at least {r.samples_needed} samples like these instead of "
                f"{r.n_samples}")
     if smaller is not None:
         name, small = smaller

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from identification.closed_form import JointScaleError
 from identification.pipeline import calibrate
 from identification.redundancy import InsufficientDataError, redundancy
 from identification.refine import NoiseModel, build_problem, refine
@@ -175,6 +176,32 @@ def test_one_joint_in_degrees_is_named_alone(datasets):
     with pytest.raises(UnitError, match=r"joint\(s\) \['j2'\] look like degrees read as "
                                         r"radians .*multiplied by 0\.01745"):
         calibrate(nominal, wrong)
+
+
+def _scaled_joint(data, joint, factor):
+    doc = measurements_to_dict(data)
+    k = data.joint_names.index(joint)
+    for sample in doc["samples"]:
+        sample["q"][k] *= factor
+    return measurements_from_dict(doc, source="data.json")
+
+
+def test_a_gear_ratio_seen_by_the_closed_form_is_refused_by_refine_too(datasets):
+    """pan values twice its angle: no unit explains it; the closed form measures 0.5 rad
+    per unit, which used to become a note before a refinement that wrote a URDF."""
+    nominal, data = datasets["head-one-at-a-time"]
+    with pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"):
+        calibrate(nominal, _scaled_joint(data, "pan", 2.0), method="refine")
+
+
+def test_values_far_outside_the_limits_with_unexplained_motion_are_refused(datasets):
+    nominal, data = datasets["head-random"]
+    wrong = _scaled_joint(data, "tilt", 1000.0)  # limits 0..1.05 rad, values up to ~900
+    diag = unit_diagnostics(nominal, wrong)
+    assert not diag.refused  # no unit reading explains a factor 1000 ...
+    with pytest.raises(UnitError, match=r"joint 'tilt' values \d+(\.\d+)?\.\.\d{3}(\.\d+)? \(URDF "
+                                        r"limits 0\.\.1\.047 rad\): far outside"):
+        calibrate(nominal, wrong)  # ... but the limits do
 
 
 def test_three_stage_2_samples_are_refused_with_the_parameter_count():
