@@ -17,17 +17,18 @@ the data leaves unknown: the measurement frame (a rigid change of frame keeps di
 and relative angles), a marker's orientation on its frame (it conjugates the relative
 rotation), the target pose of ``target`` observations (``inv(camera_T_target_i)`` is the
 camera's pose in the fixed target frame, so the pairs measure the camera's own motion);
-the nominal's errors (a few mm or degrees) change them by little. Each pair's discrepancy
-is relative, ``e = |a - b| / max(a, b)`` in ``[0, 1]`` (0.5, no evidence, when both are
-below :data:`FLOOR_M` = 5 mm or :data:`FLOOR_RAD` = 0.05 rad), and the *score* of a reading of the data is the mean
-of ``e`` over every pair and both quantities (bounded per pair, so a few gross outliers
-cannot move it much). Readings tried (:class:`UnitHypothesis`): the values as read, and
-every rescaling of revolute joint values (degrees <-> radians), prismatic joint values
-(mm <-> m, and m or mm read as degrees, which a ``"deg"`` file does to every joint
-without ``joint_units``) and measured lengths (mm <-> m), for every joint of a kind at
-once and for one joint alone. The data is refused when the values as read score worse
-than :data:`BAD_SCORE` (0.2) and another reading scores less than :data:`BETTER_FACTOR`
-(0.75) times that: the data then agrees with the nominal only in another unit.
+the nominal's errors (a few mm or degrees) change them by little. Each pair's
+discrepancy is relative, ``e = |a - b| / max(a, b)`` in ``[0, 1]`` (0.5, no evidence,
+when both are below :data:`FLOOR_M` = 5 mm or :data:`FLOOR_RAD` = 0.05 rad), and the
+*score* of a reading of the data is the mean of ``e`` over every pair and both
+quantities (bounded per pair, so a few gross outliers cannot move it much). Readings
+tried (:class:`UnitHypothesis`): the values as read, and every rescaling of revolute
+joint values (degrees <-> radians), prismatic joint values (mm <-> m, and m or mm read
+as degrees, which a ``"deg"`` file does to every joint without ``joint_units``) and
+measured lengths (mm <-> m), for every joint of a kind at once and for one joint alone.
+The data is refused when the values as read score worse than :data:`BAD_SCORE` (0.2) and
+another reading scores less than :data:`BETTER_FACTOR` (0.75) times that: the data then
+agrees with the nominal only in another unit.
 
 The thresholds come from simulations (IIS-head one-joint-at-a-time and stage-2 targets,
 6R arm poses and unknown-offset markers 18 cm off the flange, a prismatic tree; 6
@@ -365,11 +366,12 @@ def _limits_text(j: JointValues) -> str:
             f"{j.lower:.4g}..{j.upper:.4g} {unit})")
 
 
-def _fix(hyp: UnitHypothesis, all_revolute: bool, all_prismatic: bool) -> str:
+def _fix(hyp: UnitHypothesis, all_revolute: bool, any_prismatic: bool) -> str:
     fixes = []
     if hyp.joint_scale:
         looks = hyp.joint_looks.split(" read as ")[0]
-        if all_revolute and looks == "degrees" and not all_prismatic:
+        # "angle": "deg" converts prismatic values too: then only joint_units will do
+        if all_revolute and looks == "degrees" and not any_prismatic:
             fixes.append('declare "units": {"angle": "deg"} (or per joint "joint_units")')
         else:
             fixes.append('declare the unit of each joint in "joint_units" (one of "m", '
@@ -428,7 +430,7 @@ def check_units(nominal: Robot, data: Measurements) -> UnitDiagnostics:
         raise UnitError(
             f"{src}: {'; and '.join(parts)} (mean relative motion discrepancy "
             f"{diag.score_as_read:.2f} as read, {diag.best_score:.2f} rescaled). "
-            f"{_fix(hyp, revolute <= set(hyp.joint_scale), prismatic <= set(hyp.joint_scale))}")
+            f"{_fix(hyp, revolute <= set(hyp.joint_scale), bool(prismatic))}")
     far = [j for j in diag.joints if j.outside_spans > LIMIT_FACTOR]
     if far and diag.score_as_read > LIMIT_SCORE:
         raise UnitError(
