@@ -1,7 +1,7 @@
 """Hand-eye solvers against OpenCV: accuracy and speed on the same data, side by side.
 
 Run from the repository root (OpenCV is the ``bench`` extra, not a kinfw dependency:
-``pip install -e '.[bench]'`` or ``pip install "opencv-python-headless>=4.8,<5"``)::
+``pip install -e '.[bench]'`` or ``pip install "opencv-python-headless>=4.10,<5"``)::
 
     python benchmarks/bench_handeye.py              # full run, under ~3 minutes
     python benchmarks/bench_handeye.py --quick      # reduced set, a few seconds
@@ -73,9 +73,9 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
 
 try:
     import cv2
-except ImportError:  # pragma: no cover - the message is the point
-    sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.8,<5" '
-             "(the 'bench' extra of kinfw)")
+except ImportError as err:  # pragma: no cover - the message is the point
+    sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
+             f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}")
 
 from benchmarks.common import (  # noqa: E402
     format_table,
@@ -94,7 +94,7 @@ from kinfw.transforms import (  # noqa: E402
 )
 from verification.simulate import perturb_poses  # noqa: E402
 
-TABB_JSON = Path("/work/shared/data/handeye/tabb_ds1_opencv_testdata/tabb_ds1_pairs.json")
+TABB_JSON = REPO / "tests" / "data" / "tabb_ds1" / "tabb_ds1_pairs.json"  # README there
 TABB_A_KEY = "T_world2cam (A_i = cTw, from cali.txt)"
 TABB_B_KEY = "T_base2gripper (B_i = gTb, from robot_cali.txt)"
 TABB_REF_KEY = "reference_rwhe_AA_RPI"
@@ -592,6 +592,9 @@ def section_small_motion(trials: int, seed: int) -> list[Summary]:
 def load_tabb() -> tuple[Views, Estimates, Estimates]:
     """Tabb DS1 in our conventions (mm), the A = X B Y reference (cam_T_hand, base_T_world)
     and the AX = XB reference (hand_T_eye,)."""
+    if not TABB_JSON.is_file():
+        sys.exit(f"bench_handeye.py: {TABB_JSON}: Tabb DS1 data missing (it ships with the "
+                 f"repository in tests/data/tabb_ds1/)")
     data = json.loads(TABB_JSON.read_text())
     cam_T_worlds = np.array(data[TABB_A_KEY], dtype=float)
     hand_T_bases = np.array(data[TABB_B_KEY], dtype=float)
@@ -634,6 +637,20 @@ def tabb_runs(methods: Sequence[Method], v_mm: Views, reference_mm: Estimates
             runs.append((m, unit, errors_deg_mm(est_mm, reference_mm, 1e-3), us, est_mm,
                          not getattr(result, "converged", True)))
     return runs
+
+
+def silence_opencv_log() -> None:
+    """Silence OpenCV's own log (identity answers are counted instead).
+
+    The call moved within 4.x: ``cv2.utils.logging.setLogLevel`` in some wheels (4.14),
+    only ``cv2.setLogLevel`` without level constants in others (4.12); 0 is
+    ``LOG_LEVEL_SILENT``. With neither, OpenCV keeps logging.
+    """
+    utils_logging = getattr(getattr(cv2, "utils", None), "logging", None)
+    if hasattr(utils_logging, "setLogLevel"):
+        utils_logging.setLogLevel(getattr(utils_logging, "LOG_LEVEL_SILENT", 0))
+    elif hasattr(cv2, "setLogLevel"):
+        cv2.setLogLevel(getattr(cv2, "LOG_LEVEL_SILENT", 0))
 
 
 TabbRow = tuple[str, Method, str, tuple[str, ...], NDArray[np.float64]]
@@ -795,7 +812,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if subset_trials < 1:
         parser.error("--subset-trials: expected at least 1")
     views_list = QUICK_VIEWS if args.quick else FULL_VIEWS
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_SILENT)
+    silence_opencv_log()
     logging.getLogger("identification").setLevel(logging.ERROR)
 
     started = time.perf_counter()

@@ -59,6 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from identification.units import UnitError, check_joint_scale
 from kinfw.cpc import CPCModel, ZeroGeometry, cpc_from_geometry, perpendicular_basis
 from kinfw.measurements import DatasetError, Measurements, check_against_robot
 from kinfw.robot import Robot, Topology
@@ -72,6 +73,7 @@ from kinfw.transforms import (
 
 __all__ = [
     "ClosedFormResult",
+    "JointScaleError",
     "ProtocolError",
     "collect_frame_data",
     "geometry_at_zero",
@@ -85,12 +87,15 @@ log = logging.getLogger(__name__)
 
 #: Joint values closer than this are the same value (rad or m).
 SAME_VALUE = 1e-9
-#: The measured motion per unit joint value must be within this of 1.
-SCALE_TOLERANCE = 0.1
 
 
 class ProtocolError(DatasetError):
     """The data is not one-joint-at-a-time, or cannot identify a joint."""
+
+
+class JointScaleError(ProtocolError, UnitError):
+    """A joint's measured motion per unit of its value is not 1 (another unit, a gear
+    ratio): a unit error, refused by every method of the pipeline."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -205,11 +210,7 @@ def _step1_axis(R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, sour
             if np.any(clear) else float("nan")
     if scale < 0.0:
         axis, scale = -axis, -scale
-    if abs(scale - 1.0) > SCALE_TOLERANCE:
-        raise ProtocolError(
-            f"{source}: joint {name!r} turns {scale:.4g} rad per unit of its joint value "
-            "(expected 1): are its values in another unit (degrees read as radians, or "
-            "a gear ratio)? Fix the file's units / joint_units")
+    check_joint_scale(name, scale, revolute=True, source=source, error=JointScaleError)
     if not np.any(short):
         raise ProtocolError(f"{source}: joint {name!r}: every pair of its values is at least "
                             "pi - 0.2 rad apart, so the sense of rotation is ambiguous; add "
@@ -369,11 +370,8 @@ def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, a
     scale = np.ones(J)
     for j in prismatic:
         scale[j] = float(np.linalg.norm(x[col[j] : col[j] + 3]))
-        if abs(scale[j] - 1.0) > SCALE_TOLERANCE:
-            raise ProtocolError(
-                f"{source}: joint {topo.joint_names[j]!r} moves {scale[j]:.4g} m per unit of "
-                "its joint value (expected 1): are its values in another unit (mm read as "
-                "m)? Fix the file's units / joint_units")
+        check_joint_scale(topo.joint_names[j], scale[j], revolute=False, source=source,
+                          error=JointScaleError)
     if prismatic:
         x = _unit_sphere_gauss_newton(A, y, x, [slice(col[j], col[j] + 3) for j in prismatic])
     points = np.zeros((J, 3))

@@ -21,7 +21,9 @@ from numpy.typing import NDArray
 
 from identification.cameras import CamerasResult, calibrate_cameras
 from identification.closed_form import ClosedFormResult, ProtocolError, identify_closed_form
-from identification.refine import NoiseModel, RefineResult, refine
+from identification.redundancy import check_redundancy
+from identification.refine import NoiseModel, RefineResult, build_problem, refine
+from identification.units import UnitError, check_fit, check_units
 from kinfw.cpc import geometry_from_cpc
 from kinfw.measurements import DatasetError, Measurements, check_joint_motion
 from kinfw.robot import Robot
@@ -109,10 +111,24 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         Called with a one-line message after each stage (the command line prints them);
         the library itself stays quiet.
 
+    Checks, before any estimation (each raises a :class:`DatasetError` naming the
+    file, the joints or frames and the fix):
+
+    - units (:func:`identification.units.check_units`): joint values or lengths in
+      another unit than the one they were read in (degrees read as radians, mm as m);
+      a closed-form unit refusal (a joint that turns 0.0175 rad per unit of its value)
+      is a refusal too, in every method;
+    - with ``method="refine"``: every joint on a measured path moves, and the residuals
+      determine the free parameters with redundancy
+      (:func:`identification.redundancy.check_redundancy`; with ``parameters="full"``
+      the message says whether ``"frames"`` would be determined);
+    - after the refinement over every parameter, that it fits
+      (:func:`identification.units.check_fit`).
+
     Raises
     ------
     DatasetError
-        When no stage can use the data, or a stage refuses it (with the reason).
+        When no stage can use the data, or a check or stage refuses it (with the reason).
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
@@ -124,6 +140,19 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         say(f"{message} ({time.perf_counter() - clock:.2f} s)")
         clock = time.perf_counter()
 
+    check_units(nominal, data)
+    if method == "refine":
+        # every joint on a measured path must move, or its geometry is not observed
+        if parameters in ("full", "offsets"):
+            check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
+        cameras_seen = {g.camera for g in data.targets}
+        smaller = None
+        if parameters == "full":
+            smaller = ("frames", build_problem(nominal, data, parameters="frames",
+                                               prior=prior))
+        check_redundancy(build_problem(nominal, data, parameters=parameters, prior=prior),
+                         noise_given=noise is not None, n_samples=data.n_samples,
+                         source=data.source, cameras=cameras_seen, smaller=smaller)
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
@@ -133,7 +162,7 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         try:
             closed_form = identify_closed_form(nominal, data)
         except ProtocolError as exc:
-            if method == "closed-form":
+            if method == "closed-form" or isinstance(exc, UnitError):
                 raise
             notes.append(f"closed form skipped: {exc}")
         else:
@@ -152,12 +181,11 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         stages.append(("hand-eye", xml))
         done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
-        # every joint on a measured path must move, or its geometry is not observed
-        if parameters in ("full", "offsets"):
-            check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
         targets = dict(cameras.root_T_targets) if cameras is not None else None
         refined = refine(nominal, data, start=Robot(xml, nominal.source), targets=targets,
                          noise=noise, loss=loss, parameters=parameters, prior=prior)
+        if parameters == "full":
+            check_fit(refined, data.source)
         export = export_urdf(nominal, geometry_from_cpc(refined.model),
                              root_is_measurement_frame=refined.model_frame is None)
         xml = export.urdf_xml

@@ -54,7 +54,7 @@ from identification.problem import (
 )
 from kinfw.cpc import CPCModel
 from kinfw.measurements import Measurements
-from kinfw.robot import Robot
+from kinfw.robot import Robot, Topology
 
 __all__ = [
     "LOSSES",
@@ -66,10 +66,68 @@ __all__ = [
     "Unknown",
     "build_problem",
     "information_matrix",
+    "parameter_unit",
     "refine",
 ]
 
 log = logging.getLogger(__name__)
+
+#: Fields whose values are angles (rad): chart tilts and rotations, CPC beta, URDF rpy.
+_ANGLE_FIELDS = frozenset({"b_tilt_1", "b_tilt_2", "rot_x", "rot_y", "rot_z", "beta", "roll",
+                           "pitch", "yaw"})
+#: Fields whose values are lengths (m): CPC l, frame and point translations.
+_LENGTH_FIELDS = frozenset({"l_x", "l_y", "l_z", "x", "y", "z"})
+#: Fields without a unit: components of the CPC unit axis b, the motion sense.
+_UNITLESS_FIELDS = frozenset({"b_x", "b_y", "b_z", "sign"})
+
+
+def parameter_unit(owner: str, field: str, topology: Topology) -> str:
+    """SI unit of a parameter or kinematic quantity named ``(owner, field)``.
+
+    The parameters of a problem carry their units in their blocks
+    (:attr:`RefineResult.parameter_units`, :attr:`LeastSquaresProblem.units`); this
+    function names the units of the kinematic rows of :meth:`CPCModel.describe` and
+    agrees with the blocks on the parameters (tested).
+
+    Covers the names of :attr:`RefineResult.parameter_names` (the CPC chart of
+    :attr:`kinfw.cpc.CPCModel.parameter_names`, ``("base", ...)``, ``(joint,
+    "zero_offset")``, ``("target:name", ...)``, ``("frame:name", ...)``,
+    ``("marker:name", ...)``, ``("offset:frame:point", ...)``) and the rows of
+    :meth:`kinfw.cpc.CPCModel.describe`.
+
+    Parameters
+    ----------
+    owner, field : str
+        The parameter's name, e.g. ``("pan", "zero_offset")`` or ``("left_plate", "x")``.
+    topology : Topology
+        Joint names and types (``model.topology``): a revolute joint's ``zero_offset``
+        is an angle, a prismatic joint's a length.
+
+    Returns
+    -------
+    str
+        ``"rad"``, ``"m"`` or ``"unitless"``.
+
+    Raises
+    ------
+    ValueError
+        For a field this function does not know, or the ``zero_offset`` of a name that
+        is not a joint of ``topology``.
+    """
+    if field in _ANGLE_FIELDS:
+        return "rad"
+    if field in _LENGTH_FIELDS:
+        return "m"
+    if field in _UNITLESS_FIELDS:
+        return "unitless"
+    if field == "zero_offset":
+        if owner not in topology.joint_names:
+            raise ValueError(f"parameter ({owner!r}, 'zero_offset'): {owner!r} is not a joint "
+                             f"of the model; expected one of {list(topology.joint_names)}")
+        return "rad" if topology.revolute[topology.joint_names.index(owner)] else "m"
+    raise ValueError(f"parameter ({owner!r}, {field!r}): unknown field; expected an angle "
+                     f"{sorted(_ANGLE_FIELDS)}, a length {sorted(_LENGTH_FIELDS)}, unitless "
+                     f"{sorted(_UNITLESS_FIELDS)} or 'zero_offset'")
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +149,9 @@ class RefineResult:
         ``covariance``.
     parameter_units : tuple of str
         SI unit of each parameter (``"rad"`` or ``"m"``), from its parameter block.
+    free : ndarray of bool, shape (P,)
+        The parameters estimated; the others are fixed at the start (``estimate`` 0,
+        ``std`` 0), e.g. the base and the joint zero offsets with ``parameters="full"``.
     estimate : ndarray, shape (P,)
         Chart coordinates from the start (rad, m).
     covariance : ndarray, shape (P, P)
@@ -116,6 +177,7 @@ class RefineResult:
     unknowns: tuple[Unknown, ...]
     parameter_names: tuple[tuple[str, str], ...]
     parameter_units: tuple[str, ...]
+    free: NDArray[np.bool_]
     estimate: NDArray[np.float64]
     covariance: NDArray[np.float64]
     noise: NoiseModel
@@ -239,7 +301,7 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     result = RefineResult(
         model=problem.model_at(x), model_frame=problem.model_frame,
         unknowns=problem.unknowns_at(x), parameter_names=problem.names,
-        parameter_units=problem.units, estimate=x,
+        parameter_units=problem.units, free=problem.free.copy(), estimate=x,
         covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
         downweighted=downweighted, identifiability=ident, iterations=iterations,
         converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)

@@ -2,7 +2,13 @@
 verification together.
 
 Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and where,
-never a traceback for a user error), 1 on an unexpected internal error.
+never a traceback for a user error), 1 on an unexpected internal error. Warnings (Python
+warnings and logged ones) are printed once each, as one line ``kinfw CMD: warning: ...``.
+
+Every output path is checked before any work (:func:`_check_outputs`) and every file is
+written atomically (:mod:`kinfw.files`). This module imports only the standard library at
+start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pinocchio
+(through :mod:`kinfw.robot`), CasADi, matplotlib and meshcat are imported by the commands.
 """
 
 from __future__ import annotations
@@ -11,21 +17,30 @@ import argparse
 import contextlib
 import json
 import logging
+import math
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
 
-import numpy as np
+from kinfw.files import check_output_dir, check_outputs, write_text_atomic
 
-from kinfw.measurements import DatasetError, read_measurements, write_measurements
-from kinfw.robot import Robot, RobotModelError, builtin_head_urdf, load_robot
+if TYPE_CHECKING:
+    from kinfw.robot import Robot
 
 __all__ = ["main"]
 
 log = logging.getLogger("kinfw")
 
 #: Errors that are the user's input, not a bug: reported on one line, exit code 2.
-USER_ERRORS = (DatasetError, RobotModelError, ValueError, OSError)
+#: ``kinfw.measurements.DatasetError``, ``kinfw.robot.RobotModelError`` and
+#: ``kinfw.files.OutputPathError`` are ValueErrors (caught here without importing them).
+USER_ERRORS = (ValueError, OSError)
+
+#: What ``kinfw demo`` writes into its --out directory.
+DEMO_FILES = ("data.json", "held_out.json", "true.urdf", "calibrated.urdf",
+              "calibrated.kinfw.json", "report.json", "errors.png", "scene.html")
 
 
 def _progress_printer():
@@ -48,7 +63,10 @@ def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: R
 
 # -- kinfw simulate ----------------------------------------------------------------------
 def _cmd_simulate(args: argparse.Namespace) -> int:
-    from kinfw.measurements import concatenate_measurements
+    import numpy as np
+
+    from kinfw.measurements import concatenate_measurements, write_measurements
+    from kinfw.robot import load_robot
     from verification.simulate import (
         default_target_pose,
         one_joint_at_a_time,
@@ -85,7 +103,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                               w_T_target=w_T_target, **noise))
     data = concatenate_measurements(*parts)
     write_measurements(args.out, data)
-    Path(args.truth_out).write_text(truth_xml, encoding="utf-8")
+    write_text_atomic(args.truth_out, truth_xml)
     if args.json:
         print(json.dumps({"data": str(args.out), "truth": str(args.truth_out),
                           "n_samples": data.n_samples, "frames": list(data.observed_frames),
@@ -128,6 +146,8 @@ def accuracy_table(report_dict: dict) -> str:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
+    from kinfw.measurements import read_measurements
+    from kinfw.robot import load_robot
     from verification.accuracy import evaluate_model
 
     robot = load_robot(args.model)
@@ -183,7 +203,7 @@ def _prior_arg(args: argparse.Namespace):
         return None
     if args.prior_mm is None or args.prior_deg is None:
         raise ValueError("give both --prior-mm and --prior-deg")
-    return args.prior_mm * 1e-3, float(np.radians(args.prior_deg))
+    return args.prior_mm * 1e-3, math.radians(args.prior_deg)
 
 
 def _noise_arg(args: argparse.Namespace):
@@ -195,33 +215,44 @@ def _noise_arg(args: argparse.Namespace):
         raise ValueError("give both --sigma-mm and --sigma-deg, or neither (then the noise "
                          "is estimated from the residuals)")
     # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
-    return NoiseModel(args.sigma_mm * 1e-3, np.radians(args.sigma_deg) / np.sqrt(3.0))
+    return NoiseModel(args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0))
+
+
+def _sidecar_path(out: Path) -> Path:
+    """Where the calibration sidecar of the calibrated URDF ``out`` goes."""
+    return Path(out).with_suffix(".kinfw.json")
 
 
 def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
                loss: str = "huber", parameters="full", prior=None, data_path=None,
                held_out=None):
-    """Calibrate (:func:`identification.pipeline.calibrate`), write ``out`` and its
-    sidecar ``<stem>.kinfw.json``; return the report and the calibration."""
+    """Calibrate (:func:`identification.pipeline.calibrate`), then write ``out`` and its
+    sidecar ``<stem>.kinfw.json`` (each atomically, once everything is computed);
+    return the report and the calibration."""
     from identification.pipeline import calibrate
+    from kinfw.robot import Robot
     from kinfw.urdf_export import write_urdf
     from verification.report import calibration_report, sidecar
 
     result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
                        parameters=parameters, prior=prior, progress=_progress_printer())
-    write_urdf(out, result.urdf_xml)
-    report = calibration_report(nominal, load_robot(out), data, result, method=method,
-                                loss=loss, data_path=data_path, held_out=held_out)
+    report = calibration_report(nominal, Robot(result.urdf_xml, str(out)), data, result,
+                                method=method, loss=loss, data_path=data_path,
+                                held_out=held_out)
     nominal_path = None if nominal.source.startswith("<") else nominal.source
-    sidecar_path = Path(out).with_suffix(".kinfw.json")
-    sidecar_path.write_text(json.dumps(sidecar(report, result, nominal_path=nominal_path,
-                                               calibrated_path=out), indent=2) + "\n",
-                            encoding="utf-8")
+    sidecar_path = _sidecar_path(out)
+    sidecar_text = json.dumps(sidecar(report, result, nominal_path=nominal_path,
+                                      calibrated_path=out), indent=2) + "\n"
+    write_urdf(out, result.urdf_xml)
+    write_text_atomic(sidecar_path, sidecar_text)
     report["sidecar"] = str(sidecar_path)
     return report, result
 
 
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from kinfw.measurements import read_measurements
+    from kinfw.robot import load_robot
+
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     held_out = read_measurements(args.holdout) if args.holdout else None
@@ -230,7 +261,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
                            parameters=_params_arg(args.params), prior=_prior_arg(args),
                            data_path=args.data, held_out=held_out)
     if args.report:
-        Path(args.report).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+        write_text_atomic(args.report, json.dumps(report, indent=2) + "\n")
     if args.json:
         print(json.dumps(report, indent=2))
         return 0
@@ -247,10 +278,25 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
               f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
               f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
               f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
-              f"condition {ident['condition']:.3g}; {len(ref['downweighted'])} observations "
-              "down-weighted")
+              f"condition {ident['condition']:.3g}")
+        n_fixed = sum(row["fixed"] for row in ref["parameters"])
+        print(f"  parameters: {len(ref['parameters']) - n_fixed} estimated, {n_fixed} fixed "
+              "(not estimated; std null in the report)")
         for item in ident["not_identifiable"]:
             print(f"  not identifiable: {', '.join(item['parameters'])}: {item['why']}")
+        down = ref["downweighted"]
+        if down:
+            print(f"  {len(down)} observations down-weighted by the {ref['loss']} loss, "
+                  "worst first:")
+        for row in down[:5]:
+            where = row["frame"] + (f" marker {row['marker']}" if row["marker"] else "")
+            rotation = ("" if row["rotation_residual_deg"] is None
+                        else f", {row['rotation_residual_deg']:.3g} deg")
+            print(f"    samples[{row['sample']}] {where} ({row['kind']}): residual "
+                  f"{row['position_residual_mm']:.3g} mm{rotation}, weight {row['weight']:.2g}")
+        if len(down) > 5:
+            print(f"    ... and {len(down) - 5} more "
+                  f"({'see the report' if args.report else 'write them with --report'})")
     if held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report["errors_held_out"]))
@@ -261,7 +307,10 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 # -- kinfw demo --------------------------------------------------------------------------
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from kinfw.measurements import concatenate_measurements
+    import numpy as np
+
+    from kinfw.measurements import concatenate_measurements, write_measurements
+    from kinfw.robot import Robot, builtin_head_urdf, load_robot
     from verification.report import before_after_rows, errors_by_group, plot_stage_errors
     from verification.simulate import (
         default_target_pose,
@@ -295,7 +344,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     exact = simulate(truth, q_test, names, rng=rng, **observed)
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
-    (out / "true.urdf").write_text(truth_xml, encoding="utf-8")
+    write_text_atomic(out / "true.urdf", truth_xml)
     report, result = _calibrate(nominal, data, out / "calibrated.urdf", method="refine",
                                 data_path=out / "data.json", held_out=held_out)
     report["errors_vs_truth_held_out"] = before_after_rows(
@@ -307,7 +356,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     report["position_rms_mm_vs_truth_held_out_by_stage"] = {
         stage: {k: v["position_rms_mm"] for k, v in errors.items()}
         for stage, errors in truth_rms.items()}
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    write_text_atomic(out / "report.json", json.dumps(report, indent=2) + "\n")
     plot_stage_errors(report["position_rms_mm_vs_truth_held_out_by_stage"], out / "errors.png",
                       title="IIS-head demo: held-out error against the true robot")
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
@@ -341,6 +390,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw crossval ----------------------------------------------------------------------
 def _cmd_crossval(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinfw.measurements import read_measurements
+    from kinfw.robot import load_robot
     from verification.crossval import BASELINES, crossvalidate
 
     nominal = load_robot(args.urdf)
@@ -382,11 +435,20 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
 
 # -- kinfw view --------------------------------------------------------------------------
 def _cmd_view(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinfw.measurements import read_measurements
+    from kinfw.robot import load_robot
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
 
+    if args.sample is not None and args.data is None:
+        raise ValueError(f"--sample {args.sample}: give --data, the measurements to draw")
     nominal = load_robot(args.nominal)
     calibrated = load_robot(args.calibrated) if args.calibrated else None
     data = read_measurements(args.data) if args.data else None
+    if args.sample is not None and not 0 <= args.sample < data.n_samples:
+        raise ValueError(f"--sample {args.sample}: out of range, {args.data} has "
+                         f"{data.n_samples} samples (give 0 to {data.n_samples - 1})")
     sidecar_path = args.sidecar
     if sidecar_path is None and args.calibrated:
         guess = Path(args.calibrated).with_suffix(".kinfw.json")
@@ -396,7 +458,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
         doc = json.loads(Path(sidecar_path).read_text(encoding="utf-8"))
         extra = {"targets": targets_from_sidecar(doc),
                  "meas_T_root": np.array(doc["w_T_root"])}
-    up = None if args.up is None else [float(v) for v in args.up.replace(",", " ").split()]
+    up = args.up
     vis = scene(nominal, calibrated, data, sample=args.sample, residual_scale=args.residual_scale,
                 up=up, package_dirs=tuple(args.package_dir),
                 window=OfflineWindow() if args.html else None, **extra)
@@ -438,6 +500,9 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
 # -- kinfw crosscheck --------------------------------------------------------------------
 def _cmd_crosscheck(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinfw.robot import load_robot
     from verification.crosscheck import crosscheck_cpc
 
     robot = load_robot(args.urdf)
@@ -463,23 +528,106 @@ def _cmd_crosscheck(args: argparse.Namespace) -> int:
     return 0 if result.passed() else 1
 
 
+# -- outputs -----------------------------------------------------------------------------
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Check every output path of the command before any work: its directory exists and
+    is writable, it is not a directory, no two outputs are one file, and no output is an
+    input (symlinks resolved). Raises :class:`kinfw.files.OutputPathError`."""
+    command = args.command
+    if command == "simulate":
+        check_outputs({"--out": args.out, "--truth-out": args.truth_out},
+                      inputs={"--urdf": args.urdf})
+    elif command == "calibrate":
+        check_outputs({"--out": args.out, "sidecar": _sidecar_path(args.out),
+                       "--report": args.report},
+                      inputs={"--urdf": args.urdf, "data file": args.data,
+                              "--holdout": args.holdout})
+    elif command == "demo":
+        check_output_dir(args.out, label="--out", files=DEMO_FILES)
+    elif command == "view" and args.html is not None:
+        sidecar = args.sidecar or (args.calibrated and _sidecar_path(args.calibrated))
+        check_outputs({"--html": args.html},
+                      inputs={"nominal": args.nominal, "--calibrated": args.calibrated,
+                              "--data": args.data, "sidecar": sidecar})
+    elif command == "reproduce":
+        check_output_dir(args.out, label="--out")
+
+
+# -- numbers on the command line -----------------------------------------------------------
+def _number(kind: type, *, low: float | None = None, high: float | None = None,
+            low_open: bool = False, unit: str = "") -> Callable[[str], float | int]:
+    """An argparse ``type``: ``kind`` (int or float) within ``[low, high]`` (``(low,
+    high]`` with ``low_open``); argparse names the flag in the error."""
+    if low is not None and high is not None:
+        want = f"{'>' if low_open else '>='} {low:g} and <= {high:g}"
+    elif low is not None:
+        want = f"{'>' if low_open else '>='} {low:g}"
+    else:
+        want = ""
+    noun = "an integer" if kind is int else "a number"
+    suffix = f" {unit}" if unit else ""
+
+    def parse(text: str) -> float | int:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if (value is None or not math.isfinite(value)
+                or (low is not None and (value <= low if low_open else value < low))
+                or (high is not None and value > high)):
+            raise argparse.ArgumentTypeError(f"expected {' '.join(filter(None, (noun, want)))}"
+                                             f"{suffix}, got {text!r}")
+        return value
+
+    parse.__name__ = kind.__name__  # argparse's own messages say "invalid int value"
+    return parse
+
+
+_MM = _number(float, low=0.0, unit="(mm)")
+_DEG = _number(float, low=0.0, unit="(deg)")
+_POSITIVE_MM = _number(float, low=0.0, low_open=True, unit="(mm)")
+_POSITIVE_DEG = _number(float, low=0.0, low_open=True, unit="(deg)")
+_COUNT = _number(int, low=1)
+_SEED = _number(int, low=0)
+
+
+def _up_arg(text: str) -> list[float]:
+    """``"x y z"`` (or ``x,y,z``): three finite numbers, not all zero."""
+    try:
+        up = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        up = []
+    if len(up) != 3 or not all(map(math.isfinite, up)) or not any(up):
+        raise argparse.ArgumentTypeError(f'expected three numbers "x y z", not all zero, '
+                                         f"got {text!r}")
+    return up
+
+
+class _Parser(argparse.ArgumentParser):
+    """Errors in one line, ``kinfw CMD: error: ...`` (exit 2), like every other error."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see "
+                     f"'{self.prog} --help')\n")
+
+
 # -- parser ------------------------------------------------------------------------------
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
     """Noise, robust loss and prior of the refinement (calibrate and crossval)."""
-    p.add_argument("--sigma-mm", type=float, help="position noise sigma per axis, mm "
+    p.add_argument("--sigma-mm", type=_POSITIVE_MM, help="position noise sigma per axis, mm "
                    "(default: estimated from the residuals)")
-    p.add_argument("--sigma-deg", type=float, help="orientation noise: angle sigma about a "
-                   "random axis, deg (default: estimated)")
+    p.add_argument("--sigma-deg", type=_POSITIVE_DEG, help="orientation noise: angle sigma "
+                   "about a random axis, deg (default: estimated)")
     p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber",
                    help="robust loss of the refinement (default huber: gross outliers are "
                    "down-weighted and listed)")
-    p.add_argument("--prior-mm", type=float, help="Gaussian prior on deviations from the "
-                   "nominal: sigma of lengths, mm (for small datasets)")
-    p.add_argument("--prior-deg", type=float, help="... and of angles, deg")
+    p.add_argument("--prior-mm", type=_POSITIVE_MM, help="Gaussian prior on deviations from "
+                   "the nominal: sigma of lengths, mm (for small datasets)")
+    p.add_argument("--prior-deg", type=_POSITIVE_DEG, help="... and of angles, deg")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="kinfw", description="Calibrate robot kinematics from measurements.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -493,27 +641,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="nominal URDF (default: the built-in IIS-head)")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
     p.add_argument("--truth-out", type=Path, required=True, help="true robot URDF to write")
-    p.add_argument("--per-joint", type=int, default=9,
+    p.add_argument("--per-joint", type=_COUNT, default=9,
                    help="stage 1 measurements per joint (default 9, as the paper)")
-    p.add_argument("--noise-mm", type=float, default=0.5,
+    p.add_argument("--noise-mm", type=_MM, default=0.5,
                    help="position noise sigma per axis, mm (default 0.5)")
-    p.add_argument("--noise-deg", type=float, default=0.5,
+    p.add_argument("--noise-deg", type=_DEG, default=0.5,
                    help="rotation noise angle sigma, deg (default 0.5)")
-    p.add_argument("--stereo-mm", type=float, default=None,
+    p.add_argument("--stereo-mm", type=_MM, default=None,
                    help="simulate the stereo rig: point noise sigma on the nine-circle "
                    "plate, mm (replaces --noise-mm/--noise-deg for stage 1 poses)")
-    p.add_argument("--error-mm", type=float, default=2.0,
+    p.add_argument("--error-mm", type=_MM, default=2.0,
                    help="true robot: joint origin error sigma, mm (default 2)")
-    p.add_argument("--error-deg", type=float, default=0.5,
+    p.add_argument("--error-deg", type=_DEG, default=0.5,
                    help="true robot: joint origin and axis error sigma, deg (default 0.5)")
-    p.add_argument("--fraction", type=float, default=0.8,
+    p.add_argument("--fraction", type=_number(float, low=0.0, high=1.0, low_open=True),
+                   default=0.8,
                    help="fraction of each joint range used (default 0.8)")
     p.add_argument("--stage", choices=("1", "2", "both"), default="1")
-    p.add_argument("--stage2-samples", type=int, default=30,
+    p.add_argument("--stage2-samples", type=_COUNT, default=30,
                    help="stage 2 random configurations (default 30)")
     p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=_cmd_simulate)
 
@@ -549,7 +698,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
     p.add_argument("--out", type=Path, default=Path("demo_out"),
                    help="output directory (default demo_out)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=_cmd_demo)
 
@@ -561,8 +710,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "frames only, with the likely cause.")
     p.add_argument("data", type=Path, help="measurement file")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
-    p.add_argument("--k", type=int, default=5, help="folds (default 5)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--k", type=_number(int, low=2), default=5, help="folds (default 5)")
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--select", action="store_true", help="also try 'offsets' and pick the "
                    "parameter set with the lowest held-out error")
     _add_fit_options(p)
@@ -579,11 +728,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", type=Path, help="measurement file: draw one sample's observations")
     p.add_argument("--sidecar", type=Path, help="calibration sidecar (default: "
                    "CALIBRATED.kinfw.json beside --calibrated, if present)")
-    p.add_argument("--sample", type=int, default=None, help="sample to draw (default 0)")
-    p.add_argument("--residual-scale", type=float, default=10.0,
+    p.add_argument("--sample", type=_number(int), default=None,
+                   help="sample to draw (default 0)")
+    p.add_argument("--residual-scale", type=_number(float, low=0.0, low_open=True),
+                   default=10.0,
                    help="lengthen prediction-to-measurement lines by this factor (default 10)")
-    p.add_argument("--up", help='"x y z": up direction of the root frame (default: the '
-                   "URDF's <kinfw up> hint, else z)")
+    p.add_argument("--up", type=_up_arg, help='"x y z": up direction of the root frame '
+                   "(default: the URDF's <kinfw up> hint, else z)")
     p.add_argument("--package-dir", action="append", default=[],
                    help="where package:// meshes live (repeatable)")
     p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of "
@@ -599,36 +750,92 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust"))
     p.add_argument("--out", type=Path, default=Path("reproduce_out"),
                    help="output directory (default reproduce_out)")
-    p.add_argument("--trials", type=int, default=None, help="random trials per point")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--trials", type=_COUNT, default=None, help="random trials per point")
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
     p.set_defaults(func=_cmd_reproduce)
 
     p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")
     p.add_argument("urdf", type=Path)
     p.add_argument("--frames", help="end frames, comma-separated (default: URDF hint)")
-    p.add_argument("-n", type=int, default=200, help="random configurations (default 200)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-n", type=_COUNT, default=200, help="random configurations (default 200)")
+    p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=_cmd_crosscheck)
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``kinfw`` command; returns the exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
-    if getattr(args, "urdf", "") is None:
-        args.urdf = builtin_head_urdf()
-    func: Callable[[argparse.Namespace], int] = args.func
+# -- warnings ----------------------------------------------------------------------------
+class _WarningPrinter(logging.Handler):
+    """Prints Python warnings and logged warnings (and, with --verbose, logged info) on
+    stderr, each distinct warning once, as ``kinfw CMD: warning: ...``."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__()
+        self.command = command
+        self.seen: set[str] = set()
+
+    def warn(self, message: object) -> None:
+        text = " ".join(str(message).split())
+        if text not in self.seen:
+            self.seen.add(text)
+            print(f"kinfw {self.command}: warning: {text}", file=sys.stderr, flush=True)
+
+    def showwarning(self, message, category, filename, lineno, file=None, line=None) -> None:
+        """Replacement of :func:`warnings.showwarning` (same signature)."""
+        self.warn(message)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            if record.levelno >= logging.WARNING:
+                self.warn(record.getMessage())
+            else:
+                print(f"{record.levelname} {record.name}: {record.getMessage()}",
+                      file=sys.stderr, flush=True)
+        except Exception:
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def _warnings_printed_once(command: str, verbose: bool):
+    """Route warnings and logging to a :class:`_WarningPrinter` while the command runs."""
+    printer = _WarningPrinter(command)
+    root = logging.getLogger()
+    level = root.level
+    root.addHandler(printer)
+    root.setLevel(logging.INFO if verbose else logging.WARNING)
     try:
-        return func(args)
-    except USER_ERRORS as exc:
-        message = " ".join(str(exc).split())
-        print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
-        return 2
+        with warnings.catch_warnings():
+            if not sys.warnoptions:  # -W / PYTHONWARNINGS win
+                warnings.simplefilter("always")  # the printer keeps one of each
+            warnings.showwarning = printer.showwarning
+            yield printer
+    finally:
+        root.removeHandler(printer)
+        root.setLevel(level)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``kinfw`` command; returns the exit code (also for ``--help``,
+    0, and for an argument error, 2, which argparse signals with SystemExit)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+    func: Callable[[argparse.Namespace], int] = args.func
+    with _warnings_printed_once(args.command, args.verbose):
+        try:
+            if getattr(args, "urdf", "") is None:
+                from kinfw.robot import builtin_head_urdf
+
+                args.urdf = builtin_head_urdf()
+            _check_outputs(args)
+            return func(args)
+        except USER_ERRORS as exc:
+            message = " ".join(str(exc).split())
+            print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
+            return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

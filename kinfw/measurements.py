@@ -59,8 +59,10 @@ Rules
 -----
 ``joint_names`` (non-empty, distinct) may list only the joints that moved; the others are
 held at zero (:meth:`Measurements.q_of`). Every sample has ``q`` (one finite number per
-joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-6
-of 1 (they are then renormalised). A marker name belongs to one frame. Extra keys are
+joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-3
+of 1 and are renormalised (a file whose norms are off by more than 1e-6, as when written
+with 4 or 5 decimals, gets one warning saying how many and by how much). A marker name
+belongs to one frame. Extra keys are
 allowed and ignored; ``null`` for an optional key is the same as leaving it out. Every
 problem raises :class:`DatasetError` naming the file, the key path
 (``samples[7].observations[1].quat_xyzw``) and what was expected.
@@ -85,6 +87,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.files import write_text_atomic
 from kinfw.observations import kind_named, kind_of, kinds
 from kinfw.observations.base import (
     DatasetError,
@@ -93,7 +96,7 @@ from kinfw.observations.base import (
     frozen_array,
 )
 from kinfw.observations.point import PointObservations
-from kinfw.observations.pose import QUAT_NORM_TOL, PoseObservations
+from kinfw.observations.pose import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, PoseObservations
 from kinfw.observations.target import TargetObservations
 
 if TYPE_CHECKING:
@@ -102,6 +105,7 @@ if TYPE_CHECKING:
 __all__ = [
     "FORMAT",
     "QUAT_NORM_TOL",
+    "QUAT_ROUNDED_TOL",
     "SUPPORTED_VERSIONS",
     "DatasetError",
     "Measurements",
@@ -383,6 +387,8 @@ def read_measurements(path: str | Path) -> Measurements:
                            f"{exc.start})") from None
     except OSError as exc:
         raise DatasetError(f"{source}: cannot read measurement file ({exc.strerror})") from None
+    if not text.strip():
+        raise DatasetError(f"{source}: the file is empty; expected a {FORMAT} JSON document")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
@@ -493,6 +499,13 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
             rows.append(row)
 
     qs = _columns_to_si(np.array(q_rows, dtype=float).reshape(len(q_rows), k), joint_units)
+    if reader.rounded:
+        warnings.warn(
+            f"{source}: {len(reader.rounded)} of {reader.quaternions} quaternions had norms "
+            f"off by up to {max(reader.rounded):.2g} (rounded?); renormalised",
+            UserWarning,
+            stacklevel=2,
+        )
     group_ids = np.array(obs_group)
     rows_of_group = np.split(np.argsort(group_ids, kind="stable"),
                              np.cumsum(np.bincount(group_ids))[:-1])
@@ -582,7 +595,9 @@ def write_measurements(path: str | Path, measurements: Measurements) -> None:
 
     Floats are written with ``repr``, so :func:`read_measurements` gives back ``qs``,
     positions and offsets exactly and transforms to rounding (~1e-16). The file is
-    written to a temporary name and then renamed, so a failed write leaves no half file.
+    written to a temporary file beside it and then renamed
+    (:func:`kinfw.files.write_text_atomic`), so a failed write leaves no half file and
+    the previous file, if any, intact.
 
     Parameters
     ----------
@@ -592,10 +607,7 @@ def write_measurements(path: str | Path, measurements: Measurements) -> None:
         The dataset (see :func:`measurements_to_dict` for what cannot be written).
     """
     path = Path(path)
-    text = _dumps(measurements_to_dict(measurements))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, _dumps(measurements_to_dict(measurements)))
     logger.debug("wrote %d samples to %s", measurements.n_samples, path)
 
 
@@ -726,6 +738,14 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:
+    """One UserWarning per joint outside its limits.
+
+    The pipeline checks the same data in every stage (closed form, refinement, each
+    stage's errors), each from its own line. The warning is therefore attributed to one
+    place, the call in :func:`check_against_robot` (``stacklevel=2``), not to the
+    callers: Python's default filter, which shows a warning once per text and place,
+    then shows it once however many stages check the data.
+    """
     lower, upper = robot.joint_limits(m.joint_names)
     outside = (m.qs < lower) | (m.qs > upper)
     for c in np.flatnonzero(outside.any(axis=0)):
@@ -738,7 +758,7 @@ def _warn_limits(m: Measurements, robot: Robot) -> None:
             f"{upper[c]:.6g}] {unit} in {len(rows)} of {m.n_samples} samples (first: "
             f"samples[{i}], value {m.qs[i, c]:.6g} {unit})",
             UserWarning,
-            stacklevel=3,
+            stacklevel=2,
         )
 
 

@@ -12,9 +12,17 @@ Joints a caller does not list are held at zero.
 
 from __future__ import annotations
 
+import contextlib
+import difflib
 import io
 import logging
+import os
+import re
+import sys
+import tempfile
+import threading
 import xml.etree.ElementTree as ET
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +42,11 @@ __all__ = [
 ]
 
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+
+logger = logging.getLogger(__name__)
+_NATIVE_STDERR_LOCK = threading.Lock()
+#: The "at line N in file.cpp" that ends each of urdfdom's stderr messages.
+_URDFDOM_LINE = re.compile(r"\s*at line \d+ in \S+\s*")
 
 
 class RobotModelError(ValueError):
@@ -166,7 +179,76 @@ def _check_xml(xml: str, source: str) -> ET.Element:
     if root.tag != "robot":
         raise RobotModelError(f"{source}: not a URDF (the root element is <{root.tag}>, "
                               "expected <robot>)")
+    _check_links_and_joints(root, source)
     return root
+
+
+def _check_links_and_joints(root: ET.Element, source: str) -> None:
+    """Check what urdfdom would refuse with a message on the C++ stderr: unnamed or
+    repeated links and joints, and joints whose parent or child link is not declared."""
+    links: list[str] = []
+    for k, link in enumerate(root.findall("link")):
+        name = link.get("name")
+        if not name:
+            raise RobotModelError(f"{source}: <link> number {k + 1} has no name")
+        if name in links:
+            raise RobotModelError(f"{source}: link {name!r} is declared twice")
+        links.append(name)
+    known = set(links)
+    joints: set[str] = set()
+    parent_joint: dict[str, str] = {}
+    for k, joint in enumerate(root.findall("joint")):
+        name = joint.get("name")
+        if not name:
+            raise RobotModelError(f"{source}: <joint> number {k + 1} has no name")
+        if name in joints:
+            raise RobotModelError(f"{source}: joint {name!r} is declared twice")
+        joints.add(name)
+        for role in ("parent", "child"):
+            element = joint.find(role)
+            link = None if element is None else element.get("link")
+            if not link:
+                raise RobotModelError(f"{source}: joint {name!r} has no <{role} link=...>")
+            if link not in known:
+                close = difflib.get_close_matches(link, links, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise RobotModelError(
+                    f"{source}: joint {name!r}: its {role} link {link!r} is not a <link> of "
+                    f"the URDF (links: {', '.join(links)}){hint}")
+        child = joint.find("child").get("link")
+        if child in parent_joint:
+            raise RobotModelError(f"{source}: link {child!r} is the child of two joints, "
+                                  f"{parent_joint[child]!r} and {name!r}")
+        parent_joint[child] = name
+
+
+@contextlib.contextmanager
+def _captured_native_stderr() -> Iterator[io.StringIO]:
+    """Redirect file descriptor 2 (where urdfdom's C++ code prints) to a buffer.
+
+    Yields a buffer filled with what was printed once the block ends. Falls back to
+    capturing nothing when descriptor 2 cannot be duplicated.
+    """
+    buffer = io.StringIO()
+    with _NATIVE_STDERR_LOCK:  # one redirection at a time, or threads restore it wrongly
+        try:
+            saved = os.dup(2)
+        except OSError:
+            yield buffer
+            return
+        try:
+            with tempfile.TemporaryFile(mode="w+b") as tmp:
+                with contextlib.suppress(OSError, ValueError):
+                    sys.stderr.flush()
+                os.dup2(tmp.fileno(), 2)
+                try:
+                    yield buffer
+                finally:
+                    os.dup2(saved, 2)
+                    tmp.seek(0)
+                    buffer.write(tmp.read().decode("utf-8", "replace"))
+        finally:
+            os.close(saved)
 
 
 def _up_vector(text: str | None, source: str) -> NDArray[np.float64] | None:
@@ -264,10 +346,21 @@ class Robot:
         self.source = source
         hint = _check_xml(urdf_xml, source).find("kinfw")
         self.joints, self.link_names, self.root_link = _parse_joints(urdf_xml, source)
-        try:
-            self.model = pin.buildModelFromXML(urdf_xml)
-        except Exception as exc:  # Pinocchio raises ValueError/RuntimeError
-            raise RobotModelError(f"{source}: Pinocchio cannot load this URDF ({exc})") from None
+        model, error = None, None
+        with _captured_native_stderr() as native:
+            try:
+                model = pin.buildModelFromXML(urdf_xml)
+            except Exception as exc:  # Pinocchio raises ValueError/RuntimeError
+                error = exc
+        said = " ".join(native.getvalue().split())
+        if model is None:  # urdfdom's own lines say why; Pinocchio's only that it failed
+            lines = [m.strip().removeprefix("Error:").strip()
+                     for m in _URDFDOM_LINE.sub("\n", said).splitlines()]
+            why = "; ".join(m for m in lines if m) or str(error)
+            raise RobotModelError(f"{source}: Pinocchio cannot load this URDF ({why})")
+        if said:
+            logger.debug("%s: urdfdom printed: %s", source, said)
+        self.model = model
         self._data = self.model.createData()
         self._joint_by_name = {j.name: j for j in self.joints}
         self._joint_by_child = {j.child: j for j in self.joints}

@@ -26,7 +26,6 @@ import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from os import PathLike
-from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
@@ -35,6 +34,7 @@ from lxml import etree
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.cpc import ZeroGeometry
+from kinfw.files import write_text_atomic
 from kinfw.registration import register_points
 from kinfw.robot import JointInfo, Robot
 from kinfw.transforms import check_transform, inverse_transform
@@ -508,7 +508,8 @@ def write_urdf(path: str | PathLike[str], result_or_xml: ExportResult | str) -> 
     """Write an exported URDF (or URDF text) to ``path`` as UTF-8, exactly as given.
 
     The text keeps the XML declaration of the input URDF when it had one; newlines are
-    not translated.
+    not translated. The file is written atomically
+    (:func:`kinfw.files.write_text_atomic`): a failure leaves a previous file intact.
     """
     xml = result_or_xml.urdf_xml if isinstance(result_or_xml, ExportResult) else result_or_xml
-    Path(path).write_text(xml, encoding="utf-8", newline="")
+    write_text_atomic(path, xml, newline="")

@@ -61,6 +61,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.files import write_text_atomic
 from kinfw.measurements import Measurements, check_against_robot
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import check_transform, inverse_transform
@@ -572,7 +573,8 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     joint_names = tuple(joint_names)
     if sample is not None and (data is None or not 0 <= sample < data.n_samples):
         n = 0 if data is None else data.n_samples
-        raise IndexError(f"sample {sample} is out of range for {n} samples")
+        valid = f"0 to {n - 1}" if n else "no sample: there is no data"
+        raise IndexError(f"sample {sample} is out of range for {n} samples ({valid})")
     if q is None:
         if data is not None and data.n_samples:
             sample = 0 if sample is None else int(sample)
@@ -755,6 +757,8 @@ def write_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
     The file holds meshcat's viewer script and the scene's commands; it opens in a
     browser without network access or a server.
 
+    The file is written atomically (:func:`kinfw.files.write_text_atomic`).
+
     Raises
     ------
     ValueError
@@ -765,7 +769,6 @@ def write_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
     if urls:
         raise ValueError(f"the meshcat HTML refers to the network ({urls[:3]}); it would "
                          "not be self-contained")
-    path = Path(path)
-    path.write_text(html, encoding="utf-8")
+    path = write_text_atomic(path, html)
     logger.debug("wrote %s (%d bytes)", path, path.stat().st_size)
     return path

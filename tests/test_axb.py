@@ -16,8 +16,7 @@ from hypothesis import strategies as st
 
 from identification.axb import AXYBError, solve_axyb
 
-HANDEYE = Path(__file__).resolve().parents[2] / "shared" / "data" / "handeye"
-TABB = HANDEYE / "tabb_ds1_opencv_testdata" / "tabb_ds1_pairs.json"
+TABB = Path(__file__).resolve().parent / "data" / "tabb_ds1" / "tabb_ds1_pairs.json"
 
 
 def _random_rotation(rng):
@@ -267,9 +266,9 @@ def test_running_out_of_iterations_is_reported_not_raised(caplog):
 # -------------------------------------------------------------------- real data
 
 def _tabb():
-    assert TABB.is_file(), (
-        f"real hand-eye data missing: {TABB} (expected the shared data folder next to the "
-        f"repository, /work/shared/data/handeye)")
+    if not TABB.is_file():
+        pytest.fail(f"{TABB}: Tabb DS1 test data missing (it ships with the repository in "
+                    f"tests/data/tabb_ds1/; restore it: git checkout -- tests/data)")
     data = json.loads(TABB.read_text())
     A = np.array(data["T_world2cam (A_i = cTw, from cali.txt)"])      # cam_T_world, mm
     B = np.array(data["T_base2gripper (B_i = gTb, from robot_cali.txt)"])  # gripper_T_base

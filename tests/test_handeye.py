@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from identification.handeye import HandEyeError, HandEyeResult, solve_axxb
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "handeye"
+DATA = Path(__file__).resolve().parent / "data"
 
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
@@ -72,11 +72,12 @@ def _errors(X, X_true):
             float(np.linalg.norm(X[:3, 3] - X_true[:3, 3])))
 
 
-def _data_dir():
-    if not DATA.is_dir():
-        pytest.fail(f"hand-eye reference data not found at {DATA} (expected the shared/ "
-                    f"folder beside the repository, with shared/data/handeye/)")
-    return DATA
+def _data_file(relative):
+    path = DATA / relative
+    if not path.is_file():
+        pytest.fail(f"{path}: hand-eye test data missing (it ships with the repository in "
+                    f"tests/data/; restore it: git checkout -- tests/data)")
+    return path
 
 
 # -- noise-free simulation: X exact --------------------------------------------------------
@@ -346,8 +347,7 @@ def test_min_angle_out_of_range_is_refused():
 
 def test_opencv_regression_24871_is_exact():
     """OpenCV's exact case (rotations near 180 deg): X to 1e-12, OpenCV's own criterion."""
-    data = json.loads((_data_dir() / "opencv_regression_24871" / "regression_24871.json"
-                       ).read_text())
+    data = json.loads(_data_file("opencv_regression_24871/regression_24871.json").read_text())
     base_T_grippers = np.stack([_transform(R, t) for R, t in zip(
         data["R_gripper2base"], np.reshape(data["t_gripper2base"], (-1, 3)), strict=True)])
     cam_T_targets = np.stack([_transform(R, t) for R, t in zip(
@@ -359,8 +359,7 @@ def test_opencv_regression_24871_is_exact():
 
 
 def _tabb_ds1():
-    data = json.loads((_data_dir() / "tabb_ds1_opencv_testdata" / "tabb_ds1_pairs.json"
-                       ).read_text())
+    data = json.loads(_data_file("tabb_ds1/tabb_ds1_pairs.json").read_text())
     gripper_T_bases = np.array(data["T_base2gripper (B_i = gTb, from robot_cali.txt)"])
     cam_T_worlds = np.array(data["T_world2cam (A_i = cTw, from cali.txt)"])
     cam_T_gripper = np.array(data["reference_rwhe_AA_RPI"]["Z = cTg (gripper2cam)"])

@@ -236,13 +236,52 @@ def test_extra_keys_are_ignored_and_null_optional_keys_are_absent():
     assert_allclose(m.poses[0].meas_T_frame[0, :3, :3], ROT_Z_90, rtol=0, atol=1e-15)
 
 
-def test_quaternion_norm_within_1e6_is_accepted_and_renormalised():
+def test_quaternion_norm_within_1e6_is_accepted_and_renormalised_silently():
     k = 1.0 + 1e-7
     doc = document(sample([0, 0], pose("head", quat=[0, 0, 0, k]),
                           pose("camera", quat=[0, 0, S * k, S * k])))
-    m = measurements_from_dict(doc)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = measurements_from_dict(doc)
     assert_array_equal(m.poses[0].meas_T_frame[0], np.eye(4))
     assert_allclose(m.poses[1].meas_T_frame[0, :3, :3], ROT_Z_90, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("decimals", [4, 5])
+def test_quaternions_rounded_to_few_decimals_are_renormalised_with_one_warning(
+        decimals, tmp_path):
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(decimals)
+    quats = rng.normal(size=(30, 4))
+    quats = np.round(quats / np.linalg.norm(quats, axis=1, keepdims=True), decimals)
+    off = np.abs(np.linalg.norm(quats, axis=1) - 1.0)
+    assert off.max() > 1e-6  # the rounding does break the old 1e-6 rule
+    doc = document(*[sample([0, 0], pose("head", quat=q.tolist()), target("camera"))
+                     for q in quats])
+    path = write_doc(tmp_path, doc)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = read_measurements(path)
+    messages = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
+    n_off = int(np.sum(off > 1e-6))
+    assert messages == [f"{path}: {n_off} of 60 quaternions had norms off by up to "
+                        f"{off.max():.2g} (rounded?); renormalised"]
+    # scipy normalises the quaternion itself: an independent conversion
+    assert_allclose(m.poses[0].meas_T_frame[:, :3, :3], Rotation.from_quat(quats).as_matrix(),
+                    rtol=0, atol=1e-12)
+
+
+def test_quaternion_norm_1_002_is_rejected_naming_sample_and_observation(tmp_path):
+    doc = document(sample([0, 0], pose("head")),
+                   sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0.6 * 1.002,
+                                                                     0.8 * 1.002])))
+    norm = math.hypot(0.6 * 1.002, 0.8 * 1.002)  # 1.002 (a 3-4-5 triangle, scaled)
+    assert norm == pytest.approx(1.002, abs=1e-12)
+    with pytest.raises(DatasetError, match=re.escape(
+            f"data.json: samples[1].observations[1].quat_xyzw: quaternion norm is {norm:.9g}; "
+            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)")):
+        read_measurements(write_doc(tmp_path, doc))
 
 
 def test_quaternion_norm_1_01_is_rejected_with_the_norm(tmp_path):
@@ -250,7 +289,7 @@ def test_quaternion_norm_1_01_is_rejected_with_the_norm(tmp_path):
                    sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0, 1.01])))
     with pytest.raises(DatasetError, match=re.escape(
             "data.json: samples[1].observations[1].quat_xyzw: quaternion norm is 1.01; "
-            "expected a unit quaternion [x, y, z, w] (norm within 1e-06 of 1)")):
+            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)")):
         read_measurements(write_doc(tmp_path, doc))
 
 

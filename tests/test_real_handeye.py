@@ -3,8 +3,10 @@ calibration on ETH ASL's real and simulated robot-arm streams.
 
 Synthetic truth is built with Pinocchio (``pin.exp3``, ``pin.SE3``, ``pin.Quaternion``),
 never with kinfw's own helpers. The ETH data has no ground truth; it is checked against
-the shared README's independent OpenCV (PARK) run: the implied target pose in the base is
+the data README's independent OpenCV (PARK) run: the implied target pose in the base is
 constant to a median of 3.2 mm (real) / 0.8 mm (sim), and the README's hand-eye estimate.
+The streams ship in ``tests/data/eth_asl_robot_arm/`` (camera streams cut to every 8th /
+5th pose, see its README).
 """
 
 import functools
@@ -27,8 +29,7 @@ from verification.streams import (
     read_pose_csv,
 )
 
-HANDEYE = Path(__file__).resolve().parents[2] / "shared" / "data" / "handeye"
-ETH = HANDEYE / "eth_asl_robot_arm"
+ETH = Path(__file__).resolve().parent / "data" / "eth_asl_robot_arm"
 
 
 # -- independent helpers ----------------------------------------------------------------
@@ -292,8 +293,7 @@ def test_best_time_offset_fails_when_no_offset_determines_x():
 @dataclass(frozen=True)
 class EthCase:
     hand_csv: str
-    eye_csv: str
-    step: int  # every step-th camera sample: ~210 pairs
+    eye_csv: str  # already every 8th (real) / 5th (sim) camera pose: ~210 pairs
     readme_offset_s: float  # README's sign: the opposite of ours (see the offset test)
     readme_spread_mm: float  # OpenCV PARK, every 15th camera sample
     readme_t_m: tuple[float, float, float]
@@ -306,19 +306,20 @@ class EthCase:
 
 CASES = {
     "real": EthCase("real/robot_arm_complete_bag_color_and_ir_base_link_sr300_hinge.csv",
-                    "real/robot_arm_complete_bag_color_and_ir_target_ir.csv", 8,
+                    "real/robot_arm_complete_bag_color_and_ir_target_ir.csv",
                     -0.02, 3.2, (0.0011, -0.0176, 0.0043), (0.89, 0.46, -0.01), 6.0, None),
-    "sim": EthCase("sim/robot_arm_sim_hand.csv", "sim/robot_arm_sim_camera.csv", 5,
+    "sim": EthCase("sim/robot_arm_sim_hand.csv", "sim/robot_arm_sim_camera.csv",
                    0.0, 0.8, (-0.0049, -0.0107, 0.0064), (0.85, 0.53, -0.06), 2.0,
                    (1.0, 0.0, 0.0)),
 }
 
 
-def _eth_dir():
-    if not ETH.is_dir():
-        pytest.fail(f"ETH ASL hand-eye data not found at {ETH} (expected the shared/ folder "
-                    f"beside the repository, with shared/data/handeye/eth_asl_robot_arm/)")
-    return ETH
+def _eth_file(relative):
+    path = ETH / relative
+    if not path.is_file():
+        pytest.fail(f"{path}: ETH ASL test data missing (it ships with the repository in "
+                    f"tests/data/eth_asl_robot_arm/; restore it: git checkout -- tests/data)")
+    return path
 
 
 def _split(v, axis):
@@ -332,14 +333,12 @@ def _eth(name):
     """Everything the ETH tests check, computed once per case (inside a test, so that
     missing data fails the test rather than erroring a fixture)."""
     case = CASES[name]
-    folder = _eth_dir()
-    t_hand, base_T_hand = read_pose_csv(folder / case.hand_csv)
-    t_eye, target_T_eye = read_pose_csv(folder / case.eye_csv)
-    best = best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye, step=case.step)
-    A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=best.offset_s,
-                         step=case.step)
+    t_hand, base_T_hand = read_pose_csv(_eth_file(case.hand_csv))
+    t_eye, target_T_eye = read_pose_csv(_eth_file(case.eye_csv))
+    best = best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye)
+    A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=best.offset_s)
     axxb = solve_axxb(A, B)
-    A0, B0 = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, step=case.step)
+    A0, B0 = align_streams(t_hand, base_T_hand, t_eye, target_T_eye)
     X0 = solve_axxb(A0, B0).X
     # A[i] = X B[i] Y with A = eye_T_target, X = eye_T_hand, B = hand_T_base, Y = base_T_target
     axyb = solve_axyb(B, _inv(A))
@@ -387,9 +386,9 @@ def test_eth_hand_eye_matches_the_readmes_estimate(name):
     case, X = eth["case"], eth["axxb"].X
     axis = np.asarray(case.readme_optical_axis) / np.linalg.norm(case.readme_optical_axis)
     assert np.degrees(np.arccos(np.clip(X[:3, 2] @ axis, -1.0, 1.0))) < 3.0
-    # Tolerances cover the subsample: over every phase of steps 7-9 (real) / 4-6 (sim) the
-    # distance to the README's t was 1.0-5.2 mm (real); 0.3-1.6 mm across x and up to
-    # 10.7 mm along it (sim).
+    # Tolerances cover the subsample: on the full streams, over every phase of camera
+    # steps 7-9 (real) / 4-6 (sim), the distance to the README's t was 1.0-5.2 mm (real);
+    # 0.3-1.6 mm across x and up to 10.7 mm along it (sim).
     error = X[:3, 3] - case.readme_t_m
     if case.weak_axis is None:
         assert np.linalg.norm(error) < 0.006
@@ -433,8 +432,8 @@ def test_eth_axyb_agrees_with_axxb(name):
     X = eth["axxb"].X
     weak_axis = eth["case"].weak_axis
     assert np.degrees(_angle(hand_T_eye[:3, :3], X[:3, :3])) < 1.0
-    # Over every subsample phase as above: 0.8-4.7 mm apart (real); 2.2-3.4 mm across x
-    # and 4-11.5 mm along it (sim).
+    # Full streams, every subsample phase as above: 0.8-4.7 mm apart (real); 2.2-3.4 mm
+    # across x and 4-11.5 mm along it (sim).
     difference = hand_T_eye[:3, 3] - X[:3, 3]
     if weak_axis is None:
         assert np.linalg.norm(difference) < 0.005

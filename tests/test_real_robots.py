@@ -39,9 +39,8 @@ from tests.erd import robots_dir, urdf_path
 from verification.crosscheck import pose_discrepancy, random_joint_values
 from verification.simulate import perturb_robot, random_configurations, simulate
 
-pytestmark = pytest.mark.skipif(
-    robots_dir() is None,
-    reason="example-robot-data is not installed (pip install example-robot-data)")
+if robots_dir() is None:  # a test dependency (the "test" extra): fail, never skip
+    raise ImportError("example-robot-data is not installed: pip install -e '.[test]'")
 
 SIGMA = NoiseModel(1e-3, 1e-3)
 TOL = 1e-8  # m and rad
@@ -79,7 +78,7 @@ REAL_ROBOTS = (
               frozenset({"meshes", "sensors", "mimic", "continuous on path",
                          "prismatic on path", "idle joints"})),
     # 'head', 'l_hand', 'r_hand' are child links of revolute joints; the known marker goes
-    # on 'imu_frame' (fixed on the head): see the xfail test at the end.
+    # on 'imu_frame' (fixed on the head); see the export test at the end.
     RealRobot("icub", "icub_description/robots/icub.urdf", ("head", "l_hand", "r_hand"),
               "imu_frame", frozenset({"meshes", "sensors", "idle joints"})),
 )

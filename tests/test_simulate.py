@@ -424,7 +424,6 @@ def test_default_target_pose_faces_the_cameras(arm) -> None:
 # -- the IIS-head -------------------------------------------------------------------------
 
 
-@pytest.mark.skipif(not IIS_HEAD.exists(), reason="urdf/iis_head.urdf not available")
 def test_iis_head_one_joint_at_a_time_zero_noise() -> None:
     head = load_robot(IIS_HEAD)
     xml = IIS_HEAD.read_text(encoding="utf-8")
@@ -446,7 +445,6 @@ def test_iis_head_one_joint_at_a_time_zero_noise() -> None:
         assert np.median(g.camera_T_target[:, 2, 3]) > 0.0  # mostly in front of the camera
 
 
-@pytest.mark.skipif(not IIS_HEAD.exists(), reason="urdf/iis_head.urdf not available")
 def test_iis_head_perturbed_truth() -> None:
     head = load_robot(IIS_HEAD)
     names = head.joint_names

@@ -13,7 +13,8 @@ import pinocchio as pin
 from identification.cameras import CamerasResult
 from identification.closed_form import ClosedFormResult
 from identification.pipeline import Calibration
-from identification.refine import RefineResult
+from identification.refine import RefineResult, parameter_unit
+from kinfw.files import atomic_path
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
@@ -21,6 +22,7 @@ from verification.accuracy import evaluate_model
 __all__ = [
     "before_after_rows",
     "calibration_report",
+    "downweighted_rows",
     "errors_by_group",
     "file_sha256",
     "plot_stage_errors",
@@ -69,7 +71,9 @@ def _closed_form_section(result: ClosedFormResult) -> dict:
                     "the axis b of its frame in its parent's moved frame, beta, l (m) and the "
                     "motion sense; per end frame its pose in the moved frame of its last "
                     "joint (m, URDF rpy in rad)",
-            "values": [{"owner": o, "name": n, "value": v} for o, n, v in model.describe()],
+            "values": [{"owner": o, "name": n, "value": v,
+                        "unit": parameter_unit(o, n, model.topology)}
+                       for o, n, v in model.describe()],
             "n_identifiable": model.n_parameters,
         },
     }
@@ -99,11 +103,42 @@ def _hand_eye_section(result: CamerasResult) -> dict:
     }
 
 
+def downweighted_rows(result: RefineResult) -> list[dict]:
+    """The observations the robust loss down-weighted, the worst (lowest weight) first.
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    list of dict
+        One per down-weighted observation: ``sample`` (index into the data file's
+        ``samples``, from 0), ``kind``, ``frame`` (the camera for ``target``
+        observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
+        measured minus predicted position), ``rotation_residual_deg`` (angle between
+        measured and predicted orientation; None for points) and ``weight`` (the robust
+        loss's weight, 1 = full). Sorted by weight, then sample.
+    """
+    rows = []
+    for g in result.residuals:
+        rows_g = np.flatnonzero(g.downweighted)
+        position_mm = 1e3 * np.linalg.norm(g.position_m[rows_g], axis=1)
+        rotation_deg = (None if g.rotation_rad is None else np.degrees(np.arcsin(np.clip(
+            np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))))
+        rows += [{"sample": int(g.sample[k]), "kind": g.kind, "frame": g.frame,
+                  "marker": g.marker, "position_residual_mm": float(position_mm[c]),
+                  "rotation_residual_deg": None if rotation_deg is None
+                  else float(rotation_deg[c]),
+                  "weight": float(g.weight[k])}
+                 for c, k in enumerate(rows_g)]
+    rows.sort(key=lambda row: (row["weight"], row["sample"]))
+    return rows
+
+
 def _refine_section(result: RefineResult, loss: str) -> dict:
     ident = result.identifiability
-    residual_mm = {(g.kind, g.frame, int(smp)): 1e3 * float(np.linalg.norm(e))
-                   for g in result.residuals if g.position_m is not None
-                   for smp, e in zip(g.sample, g.position_m, strict=True)}
+    topology = result.model.topology
     return {
         "method": "joint nonlinear least squares (CasADi residuals and Jacobians, "
                   "Levenberg-Marquardt), residuals whitened by the noise below",
@@ -120,12 +155,18 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
         "iterations": result.iterations, "converged": result.converged,
         "seconds": result.seconds,
         "model_frame": result.model_frame,
+        "parameters_note": "delta_from_start and std in the parameter's unit (rad, m or "
+                           "unitless); fixed: not estimated (held at the start, "
+                           "delta_from_start 0, std null)",
         "parameters": [
-            {"owner": o, "field": f, "delta_from_start": float(d), "std": float(sd),
-             "unit": unit}
-            for (o, f), unit, d, sd in zip(result.parameter_names, result.parameter_units,
-                                           result.estimate, result.std, strict=True)],
-        "kinematics": [{"owner": o, "name": n, "value": v}
+            {"owner": o, "field": f, "unit": unit,
+             "fixed": not free, "delta_from_start": float(d),
+             "std": float(sd) if free else None}
+            for (o, f), unit, free, d, sd in zip(result.parameter_names,
+                                                 result.parameter_units, result.free,
+                                                 result.estimate, result.std, strict=True)],
+        "kinematics": [{"owner": o, "name": n, "value": v,
+                        "unit": parameter_unit(o, n, topology)}
                        for o, n, v in result.model.describe()],
         "unknowns": [{"kind": u.kind, "name": u.name, "value": u.value.tolist()}
                      for u in result.unknowns],
@@ -136,9 +177,10 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                                  for params, why in ident.unidentifiable],
             "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
                                        for a, b, r in ident.correlations]},
-        "downweighted": [{"kind": k, "frame": f, "sample": smp, "weight": w,
-                          "position_residual_mm": residual_mm.get((k, f, smp))}
-                         for k, f, smp, w in result.downweighted],
+        "downweighted_note": "observations beyond the robust loss's threshold, the worst "
+                             "(lowest weight) first; sample is the index into the data "
+                             "file's samples (from 0)",
+        "downweighted": downweighted_rows(result),
     }
 
 
@@ -267,5 +309,6 @@ def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, 
     if title:
         ax.set_title(title, fontsize=10)
     path = Path(path)
-    fig.savefig(path, dpi=120)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
     return path

@@ -23,6 +23,7 @@ from typing import Any, Self, TypeVar, get_origin, get_type_hints
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw.files import atomic_path, write_text_atomic
 from kinfw.robot import builtin_head_urdf, load_robot
 
 __all__ = [
@@ -159,9 +160,11 @@ def new_figure(size: tuple[float, float]) -> Any:
 
 
 def save_figure(fig: Any, path: str | Path) -> Path:
-    """Write ``fig`` to ``path`` (a PNG at 130 dpi) and return ``path`` as a Path."""
+    """Write ``fig`` to ``path`` (a PNG at 130 dpi, atomically) and return ``path`` as a
+    Path."""
     path = Path(path)
-    fig.savefig(path, dpi=130)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
     return path
 
 
@@ -207,8 +210,8 @@ def output_dir(out_dir: str | Path) -> Path:
 
 def write_json(path: Path, doc: Any, *, allow_nan: bool = True) -> None:
     """Write ``doc`` to ``path`` as JSON (indent 1, a final newline); ``allow_nan=False``
-    refuses NaN and infinities (strict JSON)."""
-    path.write_text(json.dumps(doc, indent=1, allow_nan=allow_nan) + "\n")
+    refuses NaN and infinities (strict JSON). Written atomically."""
+    write_text_atomic(path, json.dumps(doc, indent=1, allow_nan=allow_nan) + "\n")
 
 
 def write_study(result: Any, out_dir: str | Path, name: str,

@@ -61,6 +61,8 @@ class GroupResiduals:
         ``sin(angle) u`` for orientations).
     weight : ndarray, shape (m,)
         Robust-loss weight of each observation (1 = full weight).
+    downweighted : ndarray of bool, shape (m,)
+        Observations beyond the robust loss's threshold (all False for least squares).
     """
 
     kind: str
@@ -69,6 +71,7 @@ class GroupResiduals:
     sample: NDArray[np.int64]
     components: tuple[tuple[str, NDArray[np.float64]], ...]
     weight: NDArray[np.float64]
+    downweighted: NDArray[np.bool_]
 
     def component(self, name: str) -> NDArray[np.float64] | None:
         """The rows of one component, None if the kind has no such component."""
@@ -160,7 +163,7 @@ def group_residuals(groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: A
             comps.append((c.name, block[:, c0 : c0 + c.rows] * noise.sigma(c)))
             c0 += c.rows
         out.append(GroupResiduals(grp.kind.name, grp.frame, grp.marker, grp.sample,
-                                  tuple(comps), weight))
+                                  tuple(comps), weight, flagged[o : o + m].copy()))
         down += [(grp.kind.name, grp.frame, int(sm), float(wt))
                  for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
                  if bad]

@@ -123,6 +123,9 @@ class ObservationReader:
         The file's length unit (:meth:`lengths` converts to metres).
     default_measured_in : str or None
         The file's top-level ``measured_in``.
+    quaternions, rounded : int, list of float
+        Quaternions read, and the norm deviations of the rounded ones (one warning per
+        file, by the reader of the file).
     """
 
     def __init__(self, source: str, length_unit: str = "m",
@@ -130,6 +133,9 @@ class ObservationReader:
         self.source = source
         self.length_unit = length_unit
         self.default_measured_in = default_measured_in
+        #: quaternions read, and the norm deviations of those that were rounded
+        self.quaternions = 0
+        self.rounded: list[float] = []
 
     def error(self, where: str, what: str) -> DatasetError:
         return DatasetError(f"{self.source}: {where}: {what}" if where else

@@ -29,10 +29,15 @@ from kinfw.transforms import (
     xyz_quat_xyzw_from_transform,
 )
 
-__all__ = ["PoseKind", "PoseObservations", "read_quaternion"]
+__all__ = ["QUAT_NORM_TOL", "QUAT_ROUNDED_TOL", "PoseKind", "PoseObservations",
+           "read_quaternion"]
 
-QUAT_NORM_TOL = 1e-6
-"""Largest accepted ``| |quat_xyzw| - 1 |`` in a file."""
+QUAT_NORM_TOL = 1e-3
+"""Largest accepted ``| |quat_xyzw| - 1 |`` in a file (quaternions written with 4 or 5
+decimals are off by up to a few 1e-5); accepted quaternions are renormalised."""
+QUAT_ROUNDED_TOL = 1e-6
+"""Beyond this ``| |quat_xyzw| - 1 |`` (and within :data:`QUAT_NORM_TOL`) the reader warns,
+once per file, that it renormalised rounded quaternions."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -80,7 +85,8 @@ class PoseObservations:
 
 def read_quaternion(reader: ObservationReader, obs: dict[str, Any], at: str) -> list[float]:
     """``quat_xyzw`` of an observation: 4 numbers of unit norm (within QUAT_NORM_TOL),
-    renormalised."""
+    renormalised later; norms off by more than QUAT_ROUNDED_TOL are noted in the reader
+    (``reader.rounded``) for one warning per file."""
     quat = reader.numbers(reader.get(obs, "quat_xyzw", at, "4 numbers [x, y, z, w] (scalar "
                                      "last)"), 4, f"{at}.quat_xyzw", "[x, y, z, w], scalar last")
     norm = float(np.linalg.norm(quat))
@@ -88,6 +94,9 @@ def read_quaternion(reader: ObservationReader, obs: dict[str, Any], at: str) -> 
         raise reader.error(f"{at}.quat_xyzw",
                            f"quaternion norm is {norm:.9g}; expected a unit quaternion "
                            f"[x, y, z, w] (norm within {QUAT_NORM_TOL:g} of 1)")
+    reader.quaternions += 1
+    if abs(norm - 1.0) > QUAT_ROUNDED_TOL:
+        reader.rounded.append(abs(norm - 1.0))
     return quat
 
 

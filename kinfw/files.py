@@ -1,0 +1,186 @@
+"""Output files: check them before the work, write them atomically.
+
+Every file kinfw writes goes through :func:`write_text_atomic` or :func:`atomic_path`:
+the content goes to a temporary file in the destination's directory, which then
+replaces the destination (``os.replace``, atomic on POSIX and Windows). A failure midway
+leaves the previous file, if any, untouched and no temporary file behind.
+
+Commands call :func:`check_outputs` before any computation, so that a missing directory,
+a directory where a file is expected, or an output that is one of the inputs is reported
+at once, not after a minute-long solve that has already overwritten some of the files.
+
+This module uses the standard library only (the command line imports it at start-up).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+
+__all__ = [
+    "OutputPathError",
+    "atomic_path",
+    "check_output_dir",
+    "check_outputs",
+    "check_writable",
+    "write_text_atomic",
+]
+
+PathLike = str | os.PathLike[str]
+
+
+class OutputPathError(ValueError):
+    """An output path that cannot or must not be written (the message names it)."""
+
+
+def _label(path: PathLike, label: str | None) -> str:
+    return f"{label} {os.fspath(path)}" if label else os.fspath(path)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """True when ``a`` and ``b`` name one file: equal resolved paths (symlinks followed),
+    or, when both exist, the same inode (hard links, case-insensitive file systems)."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
+def check_writable(path: PathLike, *, label: str | None = None,
+                   inputs: Mapping[str, PathLike | None] | None = None) -> Path:
+    """Check that ``path`` can be written as a file and is none of ``inputs``.
+
+    Nothing is created or changed.
+
+    Parameters
+    ----------
+    path : str or PathLike
+        The output file.
+    label : str, optional
+        How the user gave it (``"--out"``), for the message.
+    inputs : mapping of str to path, optional
+        Files the command reads, keyed by how the user gave them (``{"--urdf": ...}``);
+        None values are skipped. Paths are compared after resolving symlinks.
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    OutputPathError
+        Naming the output (and the input it would overwrite): its directory is missing
+        or not a directory or not writable, it is a directory, it exists but is not
+        writable, or it is one of the inputs.
+    """
+    path = Path(path)
+    name = _label(path, label)
+    for key, source in (inputs or {}).items():
+        if source is not None and not str(source).lstrip().startswith("<") \
+                and _same_file(path, Path(source)):
+            raise OutputPathError(f"{name} is the same file as {_label(source, key)}: "
+                                  "refusing to overwrite an input; choose another output")
+    parent = path.parent
+    if not parent.exists():
+        raise OutputPathError(f"{name}: directory {os.fspath(parent)!r} does not exist")
+    if not parent.is_dir():
+        raise OutputPathError(f"{name}: {os.fspath(parent)!r} is not a directory")
+    if path.is_dir():
+        raise OutputPathError(f"{name}: is a directory, expected a file name")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{name}: directory {os.fspath(parent)!r} is not writable")
+    if path.exists() and not os.access(path, os.W_OK):
+        raise OutputPathError(f"{name}: the existing file is not writable")
+    return path
+
+
+def check_output_dir(path: PathLike, *, label: str | None = None,
+                     files: tuple[str, ...] = ()) -> Path:
+    """Check that ``path`` is, or can be created as, a writable directory, and that the
+    ``files`` in it can be written (see :func:`check_writable`). Nothing is created.
+
+    Raises
+    ------
+    OutputPathError
+        Naming the directory: a file stands where it or one of its parents should be,
+        or the nearest existing parent is not writable.
+    """
+    path = Path(path)
+    name = _label(path, label)
+    if path.exists():
+        if not path.is_dir():
+            raise OutputPathError(f"{name}: exists and is not a directory")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise OutputPathError(f"{name}: directory is not writable")
+        for file in files:
+            check_writable(path / file, label=label and f"{label} .../{file}")
+        return path
+    ancestor = path.absolute().parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise OutputPathError(f"{name}: cannot create it, {os.fspath(ancestor)!r} is a file")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{name}: cannot create it, {os.fspath(ancestor)!r} is not "
+                              "writable")
+    return path
+
+
+def check_outputs(outputs: Mapping[str, PathLike | None], *,
+                  inputs: Mapping[str, PathLike | None] | None = None) -> None:
+    """:func:`check_writable` for each output, and check that no two outputs are one file.
+
+    ``outputs`` and ``inputs`` map how the user gave a path (``"--out"``) to the path;
+    None values are skipped.
+    """
+    given = {k: Path(v) for k, v in outputs.items() if v is not None}
+    for key, path in given.items():
+        check_writable(path, label=key, inputs=inputs)
+    keys = list(given)
+    for i, a in enumerate(keys):
+        for b in keys[i + 1:]:
+            if _same_file(given[a], given[b]):
+                raise OutputPathError(f"{_label(given[b], b)} is the same file as "
+                                      f"{_label(given[a], a)}: give two different outputs")
+
+
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; on success it replaces ``path``.
+
+    For writers that take a file name (``Figure.savefig``): write to the yielded path.
+    The temporary name keeps ``path``'s suffix (so a writer that infers the format from
+    it still does) and starts with a dot. When the body raises, the temporary file is
+    removed and ``path`` is left as it was. The file gets the permissions of a newly
+    created file (``0o666`` less the umask).
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.urandom(4).hex()}.tmp{path.suffix}")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    os.close(fd)
+    try:
+        yield tmp
+        tmp.replace(path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def write_text_atomic(path: PathLike, text: str, *, encoding: str = "utf-8",
+                      newline: str | None = None) -> Path:
+    """Write ``text`` to ``path`` atomically (see the module docstring).
+
+    ``newline`` is as for :func:`open` (``""``: no translation). Returns ``path``.
+    """
+    path = Path(path)
+    with atomic_path(path) as tmp, tmp.open("w", encoding=encoding, newline=newline) as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+    return path
