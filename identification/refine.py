@@ -8,23 +8,30 @@ identification the paper sets aside (Shih et al. eq. 23), started from the close
 and the hand-eye solution (or from the nominal URDF).
 
 Residuals are whitened by the measurement noise: ``(measured - predicted) / sigma_p`` for
-positions and ``0.5 vee(R_meas^T R_pred - R_pred^T R_meas) / sigma_r`` for orientations
-(the sine of the error angle about its axis: smooth at zero error, unlike a log). With
+positions and ``0.5 vee(R_pred^T R_meas - R_meas^T R_pred) / sigma_r`` for orientations
+(the sine of the error angle about its axis: smooth at zero error, unlike a log), and
+each further observation kind's rows by the sigma of its own noise component. With
 ``sigma`` not given they are estimated from the residuals (variance components: each
-kind's sum of squares over its share of the degrees of freedom, iterated).
+component's sum of squares over its share of the degrees of freedom, iterated).
 
-CasADi builds each observation group's residual and its exact Jacobian from the CPC model
-(:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps them over the samples; the solver is
-Levenberg-Marquardt on those functions (numpy), with an optional Huber or Cauchy loss by
-iteratively reweighted least squares. Directions of the parameter space the data does not
-determine are left at the start (minimum-norm steps) and reported.
+The problem is assembled by :mod:`identification.problem` from parameter blocks
+(:mod:`kinfw.blocks`) and the observation kinds of the registry
+(:mod:`kinfw.observations`): CasADi builds each observation group's residual and its
+exact Jacobian from the CPC model (:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps
+them over the samples; the solver is Levenberg-Marquardt on those functions (numpy,
+:mod:`identification.problem.solver`), with an optional Huber or Cauchy loss by
+iteratively reweighted least squares; the noise is estimated per noise component
+(:mod:`identification.problem.noise`); covariance and identifiability come from
+:mod:`identification.problem.diagnostics`. Directions of the parameter space the data
+does not determine are left at the start (minimum-norm steps) and reported. This module
+orchestrates them.
 
-Gauge. The CPC chart is minimal for poses of end frames in the measurement frame. Two
-more redundancies are fixed here: when every observation is in one external frame
-(``measured_in``), the model is expressed in that frame (the root's pose in it comes from
-the export's registration, not from a separate unknown); and an end frame observed only
-through markers or points of unknown offset keeps its nominal tool transform (the markers
-carry the freedom).
+Gauge (:mod:`identification.problem.gauge`). The CPC chart is minimal for poses of end
+frames in the measurement frame. Two more redundancies are fixed: when every observation
+is in one external frame (``measured_in``), the model is expressed in that frame (the
+root's pose in it comes from the export's registration, not from a separate unknown);
+and an end frame observed only through markers or points of unknown offset keeps its
+nominal tool transform (the markers carry the freedom).
 """
 
 from __future__ import annotations

@@ -68,8 +68,10 @@ problem raises :class:`DatasetError` naming the file, the key path
 (``samples[7].observations[1].quat_xyzw``) and what was expected.
 
 Observations are grouped (:class:`PoseObservations`, :class:`TargetObservations`,
-:class:`PointObservations`) in first-seen order; each group holds arrays with the batch
-axis first and the sample index of every row. :func:`check_against_robot` checks a
+:class:`PointObservations`, or the group of any kind registered in
+:mod:`kinfw.observations`) in first-seen order; each group holds arrays with the batch
+axis first and the sample index of every row. Parsing, writing, subsetting and merging
+go through the registry: each kind's class reads and writes its own observations. :func:`check_against_robot` checks a
 dataset against a URDF, :func:`check_joint_motion` that the joints move enough to be
 identified.
 """
