@@ -71,9 +71,9 @@ Observations are grouped (:class:`PoseObservations`, :class:`TargetObservations`
 :class:`PointObservations`, or the group of any kind registered in
 :mod:`kinfw.observations`) in first-seen order; each group holds arrays with the batch
 axis first and the sample index of every row. Parsing, writing, subsetting and merging
-go through the registry: each kind's class reads and writes its own observations. :func:`check_against_robot` checks a
-dataset against a URDF, :func:`check_joint_motion` that the joints move enough to be
-identified.
+go through the registry: each kind's class reads and writes its own observations.
+:func:`check_against_robot` checks a dataset against a URDF, :func:`check_joint_motion`
+that the joints move enough to be identified.
 """
 
 from __future__ import annotations
