@@ -714,8 +714,9 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
         covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
         downweighted=downweighted, identifiability=ident, iterations=iterations,
         converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)
-    log.info("refine: %d parameters, %d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
-             P, len(r), iterations, sigma_hat2, result.seconds)
+    log.info("refine: %d free parameters (%d before gauge fixing and the parameter set), "
+             "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s", ident.n_parameters, P,
+             len(r), iterations, sigma_hat2, result.seconds)
     return result
 
 
