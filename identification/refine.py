@@ -704,8 +704,9 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     loss_scale : float
         Where the robust loss departs from least squares, as a standard-normal quantile
         ``z``: an observation's whitened residual norm is compared with the same quantile
-        of its clean distribution (chi with 6 degrees of freedom for poses and targets, 3
-        for points; Wilson-Hilferty), so 2.33 flags 1 % of clean observations.
+        of its clean distribution under the noise model of :class:`NoiseModel` (exact:
+        ``chi2(3) + 3 chi2(1)`` for poses and targets, ``chi2(3)`` for points), so 2.33
+        flags 1 % of clean observations.
     max_iterations : int
         Levenberg-Marquardt iterations per noise round.
     noise_rounds : int
@@ -841,13 +842,54 @@ def _repeat_rows(per_obs: NDArray, obs_sizes: list[tuple[int, int]]) -> NDArray:
 
 
 def _thresholds(obs_sizes: list[tuple[int, int]], z: float) -> NDArray:
-    """Per observation, the z-quantile of the norm of its clean whitened residual:
-    ``sqrt(chi2_ppf)`` by Wilson-Hilferty, ``rows (1 - 2/(9 rows) + z sqrt(2/(9 rows)))^3``."""
+    """Per observation, the ``Phi(z)`` quantile of the norm of its clean whitened residual.
+
+    Under the noise model of :class:`NoiseModel` (positions isotropic Gaussian,
+    orientations an angle about a uniformly random axis): a point's squared norm is
+    ``chi2(3)``, a pose's ``chi2(3) + 3 chi2(1)`` (:func:`_pose_norm2_cdf`), a prior row's
+    ``chi2(1)``; exact quantiles, so ``z = 2.33`` flags 1 % of clean observations of every
+    kind. Other row counts fall back to ``chi2(rows)`` by Wilson-Hilferty.
+    """
+    from math import erf, sqrt
+
+    p = 0.5 * (1.0 + erf(z / sqrt(2.0)))
     per_obs = []
     for m, rows in obs_sizes:
-        c = 2.0 / (9.0 * rows)
-        per_obs.append(np.full(m, np.sqrt(rows * (1.0 - c + z * np.sqrt(c)) ** 3)))
-    return np.concatenate(per_obs)
+        if rows == 6:
+            k = sqrt(_quantile(_pose_norm2_cdf, p))
+        elif rows in (1, 3):
+            k = sqrt(_chi2_quantile(p, rows))
+        else:
+            c = 2.0 / (9.0 * rows)
+            k = sqrt(rows * (1.0 - c + z * sqrt(c)) ** 3)
+        per_obs.append(np.full(m, k))
+    return np.concatenate(per_obs) if per_obs else np.zeros(0)
+
+
+def _pose_norm2_cdf(s: float) -> float:
+    """CDF of ``S = X + 3 Y``, ``X ~ chi2(3)``, ``Y ~ chi2(1)``: a pose's whitened squared
+    residual norm (position + angle about a random axis). With ``Y = t^2``,
+    ``P(S <= s) = int_0^sqrt(s/3) 2 phi(t) F_3(s - 3 t^2) dt`` (Gauss-Legendre, 64 nodes)."""
+    from math import pi, sqrt
+
+    if s <= 0.0:
+        return 0.0
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    b = sqrt(s / 3.0)
+    t = 0.5 * b * (nodes + 1.0)
+    f = [_chi2_cdf(s - 3.0 * ti * ti, 3) for ti in t]
+    return float(0.5 * b * np.sum(weights * 2.0 * np.exp(-0.5 * t * t) / sqrt(2.0 * pi) * f))
+
+
+def _quantile(cdf, p: float) -> float:
+    """Quantile of a distribution on [0, inf) from its CDF, by bisection."""
+    lo, hi = 0.0, 1.0
+    while cdf(hi) < p:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) < p else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _robust(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
@@ -925,13 +967,7 @@ def _chi2_cdf(x: float, dof: int) -> float:
 
 def _chi2_quantile(p: float, dof: int) -> float:
     """Quantile of the chi-square distribution (odd ``dof``), by bisection on its CDF."""
-    lo, hi = 0.0, 1.0
-    while _chi2_cdf(hi, dof) < p:
-        hi *= 2.0
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _chi2_cdf(mid, dof) < p else (lo, mid)
-    return 0.5 * (lo + hi)
+    return _quantile(lambda x: _chi2_cdf(x, dof), p)
 
 
 @dataclass(frozen=True, slots=True)

@@ -274,11 +274,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if "refine" in report:
         ref = report["refine"]
         ident = ref["identifiability"]
+        if ident["condition"] is not None:
+            condition = f"condition {ident['condition']:.3g}"
+        else:  # null in the report: no free parameters, or a rank-deficient problem
+            condition = "condition undefined" if not ident["n_parameters"] else "condition inf"
         print(f"refine: noise sigma {ref['noise']['position_sigma_mm']:.3g} mm, "
               f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
               f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
               f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
-              f"condition {ident['condition']:.3g}")
+              + condition)
         n_fixed = sum(row["fixed"] for row in ref["parameters"])
         print(f"  parameters: {len(ref['parameters']) - n_fixed} estimated, {n_fixed} fixed "
               "(not estimated; std null in the report)")

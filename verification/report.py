@@ -170,7 +170,9 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                      for u in result.unknowns],
         "identifiability": {
             "rank": ident.rank, "n_parameters": ident.n_parameters,
-            "condition": ident.condition, "observability_O1": ident.observability_o1,
+            # strict JSON: an undefined (no parameters) or infinite value is null
+            "condition": _finite_or_none(ident.condition),
+            "observability_O1": _finite_or_none(ident.observability_o1),
             "not_identifiable": [{"parameters": [":".join(p) for p in params], "why": why}
                                  for params, why in ident.unidentifiable],
             "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
@@ -180,6 +182,10 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                              "file's samples (from 0)",
         "downweighted": downweighted_rows(result),
     }
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
