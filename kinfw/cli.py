@@ -812,6 +812,9 @@ def _warnings_printed_once(command: str, verbose: bool):
         with warnings.catch_warnings():
             if not sys.warnoptions:  # -W / PYTHONWARNINGS win
                 warnings.simplefilter("always")  # the printer keeps one of each
+                # a library's deprecation notice (pyzmq under meshcat) is not the user's
+                warnings.simplefilter("ignore", DeprecationWarning)
+                warnings.simplefilter("ignore", PendingDeprecationWarning)
             warnings.showwarning = printer.showwarning
             yield printer
     finally:
