@@ -481,14 +481,16 @@ class LeastSquaresProblem:
         computed: what the fit needs, cheaper for the small parameter sets).
         """
         P = self.n_parameters
-        only_free = only_free and bool(self.free.any())
+        no_columns = only_free and not self.free.any()
         rs, Js = [], []
         for grp in self.groups:
-            r, J = grp.evaluate(x, sigma, with_jacobian, self.free if only_free else None)
+            r, J = grp.evaluate(x, sigma, with_jacobian and not no_columns,
+                                self.free if only_free else None)
             rs.append(r)
             if with_jacobian and only_free:
                 full = np.zeros((len(r), P))
-                full[:, self.free] = J
+                if J is not None:
+                    full[:, self.free] = J
                 J = full
             if with_jacobian:
                 Js.append(J)
