@@ -14,7 +14,11 @@ positions and ``0.5 vee(R_meas^T R_pred - R_pred^T R_meas) / sigma_r`` for orien
 kind's sum of squares over its share of the degrees of freedom, iterated).
 
 CasADi builds each observation group's residual and its exact Jacobian from the CPC model
-(:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps them over the samples; the solver is
+(:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps them over the samples. The graphs take
+every number (reference model, start frames, offsets) as an input, so they depend only on
+the problem's structure and are cached by it: cross-validation folds, parameter sets and
+Monte Carlo trials build them once. They are evaluated straight into numpy buffers, the
+fit's Jacobian only for the estimated columns. The solver is
 Levenberg-Marquardt on those functions (numpy), with an optional Huber or Cauchy loss by
 iteratively reweighted least squares. Directions of the parameter space the data does not
 determine are left at the start (minimum-norm steps) and reported.
@@ -55,6 +59,7 @@ __all__ = [
     "RefineResult",
     "Unknown",
     "build_problem",
+    "clear_function_cache",
     "information_matrix",
     "refine",
 ]
