@@ -14,7 +14,11 @@ positions and ``0.5 vee(R_meas^T R_pred - R_pred^T R_meas) / sigma_r`` for orien
 kind's sum of squares over its share of the degrees of freedom, iterated).
 
 CasADi builds each observation group's residual and its exact Jacobian from the CPC model
-(:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps them over the samples; the solver is
+(:func:`kinfw.cpc_casadi.cpc_fk_function`) and maps them over the samples. The graphs take
+every number (reference model, start frames, offsets) as an input, so they depend only on
+the problem's structure and are cached by it: cross-validation folds, parameter sets and
+Monte Carlo trials build them once. They are evaluated straight into numpy buffers, the
+fit's Jacobian only for the estimated columns. The solver is
 Levenberg-Marquardt on those functions (numpy), with an optional Huber or Cauchy loss by
 iteratively reweighted least squares. Directions of the parameter space the data does not
 determine are left at the start (minimum-norm steps) and reported.
@@ -30,14 +34,16 @@ carry the freedom).
 from __future__ import annotations
 
 import logging
+import threading
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.cpc_casadi import cpc_fk_function
+from kinfw.cpc_casadi import cpc_fk_function, cpc_reference_vector
 from kinfw.measurements import DatasetError, Measurements, check_against_robot
 from kinfw.robot import Robot, Topology
 from kinfw.transforms import (
@@ -53,6 +59,7 @@ __all__ = [
     "RefineResult",
     "Unknown",
     "build_problem",
+    "clear_function_cache",
     "information_matrix",
     "parameter_unit",
     "refine",
@@ -292,14 +299,16 @@ def _ca():
     return casadi
 
 
-def _cayley_pose(ca, T0: NDArray, d):
-    """``T0 @ [cayley(d[:3]/2), d[3:]]`` as a CasADi 4x4 (chart of a rigid frame)."""
+def _cayley_pose(ca, T0, d):
+    """``T0 @ [cayley(d[:3]/2), d[3:]]`` as a CasADi 4x4 (chart of a rigid frame); ``T0``
+    a (4, 4) array or a symbolic ``(R, p)`` pair."""
     a = 0.5 * d[0:3]
     K = ca.vertcat(ca.horzcat(0, -a[2], a[1]), ca.horzcat(a[2], 0, -a[0]),
                    ca.horzcat(-a[1], a[0], 0))
     dR = ca.DM.eye(3) + (2.0 / (1.0 + ca.dot(a, a))) * (K + K @ K)
-    R = ca.DM(T0[:3, :3]) @ dR
-    p = ca.DM(T0[:3, 3]) + d[3:6]
+    R0, p0 = (ca.DM(T0[:3, :3]), ca.DM(T0[:3, 3])) if isinstance(T0, np.ndarray) else T0
+    R = R0 @ dR
+    p = p0 + d[3:6]
     return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))
 
 
@@ -337,15 +346,122 @@ def _pose_vectors(T: NDArray) -> NDArray:
 # -- problem assembly --------------------------------------------------------------------
 @dataclass
 class _Group:
+    """One observation group: its samples, data and compiled residual functions.
+
+    ``functions`` are per-observation CasADi functions of ``(q, m, theta, sigma_p,
+    sigma_r, const)`` shared (cached) by every problem of the same structure; ``const``
+    holds this problem's numbers (reference CPC model, start frames, offsets).
+    """
+
     kind: str
     frame: str
     marker: str | None
     sample: NDArray[np.int64]
     data: NDArray[np.float64]  # (12, m) or (3, m)
     qs: NDArray[np.float64]  # (J, m)
-    residual: object  # casadi functions mapped over the samples
-    jacobian: object
+    functions: _GroupFunctions
+    const: NDArray[np.float64]
     rows: int = 6
+    _maps: dict = field(default_factory=dict, repr=False)
+
+    def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
+        """``which`` ("r", "rj" or "j"; "rj" restricted to the ``free`` columns when given)
+        mapped over the samples, the per-problem inputs ``theta, sigma_p, sigma_r, const``
+        shared by every sample."""
+        key = (which, None if free is None else free.tobytes())
+        if key not in self._maps:
+            f = getattr(self.functions, which) if free is None else \
+                self.functions.rj_free(free)
+            self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample),
+                                    [2, 3, 4, 5], [])
+        return self._maps[key]
+
+    @property
+    def residual(self):
+        """Whitened residuals ``(q (J, m), data, x, sigma_p, sigma_r) -> (rows, m)``
+        (CasADi; numeric or symbolic arguments)."""
+        f = self._mapped("r")
+        return lambda qs, data, x, sp, sr: f(qs, data, x, sp, sr, self.const)
+
+    @property
+    def jacobian(self):
+        """Their Jacobian ``(q, data, x, sigma_p, sigma_r) -> (rows, m * P)`` (CasADi)."""
+        f = self._mapped("j")
+        return lambda qs, data, x, sp, sr: f(qs, data, x, sp, sr, self.const)
+
+    def evaluate(self, x: NDArray, sigma: NoiseModel, with_jacobian: bool,
+                 free: NDArray[np.bool_] | None = None) -> tuple[NDArray, NDArray | None]:
+        """Residuals ``(m * rows,)`` (observation-major) and Jacobian ``(m * rows, P)``,
+        or only its ``free`` columns ``(m * rows, n_free)``, written by CasADi straight
+        into numpy arrays (no DM conversion)."""
+        m = len(self.sample)
+        n_cols = len(x) if free is None else int(free.sum())
+        fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
+        buf, call = fn.buffer()
+        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float),
+                np.array([sigma.position_m], float), np.array([sigma.rotation_rad], float),
+                self.const)
+        for i, a in enumerate(args):
+            buf.set_arg(i, memoryview(a))
+        r = np.empty(m * self.rows)
+        buf.set_res(0, memoryview(r))
+        J = np.empty((m * self.rows, n_cols)) if with_jacobian else None
+        if J is not None:
+            buf.set_res(1, memoryview(J))
+        call()
+        return r, J
+
+    def __post_init__(self):
+        # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
+        self._q_rows = np.ascontiguousarray(self.qs.T, dtype=float)
+        self._data_rows = np.ascontiguousarray(self.data.T, dtype=float)
+        self.const = np.ascontiguousarray(self.const, dtype=float)
+
+
+@dataclass(frozen=True)
+class _GroupFunctions:
+    """Per-observation CasADi functions of one group, all of ``(q, m, theta, sigma_p,
+    sigma_r, const)``: residual ``r``; residual and transposed dense Jacobian ``rj`` (one
+    call, shared subexpressions); Jacobian ``j``; and :meth:`rj_free`, the Jacobian's
+    columns of the estimated parameters only (cheaper for the small parameter sets)."""
+
+    r: object
+    rj: object
+    j: object
+    args: list = field(repr=False)
+    residual_expr: object = field(repr=False)
+    _by_free: dict = field(default_factory=dict, repr=False)
+
+    def rj_free(self, free: NDArray[np.bool_]):
+        """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
+        key = free.tobytes()
+        with _FUNCTION_CACHE_LOCK:
+            f = self._by_free.get(key)
+        if f is None:
+            ca = _ca()
+            theta = self.args[2]
+            cols = ca.vertcat(*[theta[int(i)] for i in np.flatnonzero(free)])
+            J = ca.jacobian(self.residual_expr, cols)
+            f = ca.Function("rjf", self.args, [self.residual_expr, ca.densify(J.T)])
+            with _FUNCTION_CACHE_LOCK:
+                if len(self._by_free) >= 8:  # bounded: a few parameter sets per structure
+                    self._by_free.pop(next(iter(self._by_free)))
+                self._by_free[key] = f
+        return f
+
+
+#: Compiled residual functions by problem structure (see :func:`_structure_key`); a
+#: small LRU so that cross-validation folds, parameter sets and Monte Carlo trials on the
+#: same robot and observation layout build the CasADi graph once.
+_FUNCTION_CACHE: OrderedDict[tuple, tuple[_GroupFunctions, ...]] = OrderedDict()
+_FUNCTION_CACHE_SIZE = 16
+_FUNCTION_CACHE_LOCK = threading.Lock()
+
+
+def clear_function_cache() -> None:
+    """Forget every cached CasADi residual function (they are rebuilt on demand)."""
+    with _FUNCTION_CACHE_LOCK:
+        _FUNCTION_CACHE.clear()
 
 
 def _start_extras(measurements: Measurements, model: CPCModel, q_all: NDArray,
@@ -437,19 +553,27 @@ class LeastSquaresProblem:
         sizes = [(len(g.sample), g.rows) for g in self.groups]
         return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
 
-    def evaluate(self, x: NDArray, sigma: NoiseModel, with_jacobian: bool = True
-                 ) -> tuple[NDArray, NDArray | None]:
-        """Whitened residuals (N,) and their Jacobian (N, P) at ``x``."""
+    def evaluate(self, x: NDArray, sigma: NoiseModel, with_jacobian: bool = True, *,
+                 only_free: bool = False) -> tuple[NDArray, NDArray | None]:
+        """Whitened residuals (N,) and their Jacobian (N, P) at ``x``.
+
+        With ``only_free`` the columns of the fixed parameters are left at zero (not
+        computed: what the fit needs, cheaper for the small parameter sets).
+        """
         P = self.n_parameters
+        no_columns = only_free and not self.free.any()
         rs, Js = [], []
         for grp in self.groups:
-            m = len(grp.sample)
-            rs.append(np.array(grp.residual(grp.qs, grp.data, x, sigma.position_m,
-                                            sigma.rotation_rad)).T.reshape(-1))
+            r, J = grp.evaluate(x, sigma, with_jacobian and not no_columns,
+                                self.free if only_free else None)
+            rs.append(r)
+            if with_jacobian and only_free:
+                full = np.zeros((len(r), P))
+                if J is not None:
+                    full[:, self.free] = J
+                J = full
             if with_jacobian:
-                Jg = np.array(grp.jacobian(grp.qs, grp.data, x, sigma.position_m,
-                                           sigma.rotation_rad))
-                Js.append(Jg.reshape(grp.rows, m, P).transpose(1, 0, 2).reshape(-1, P))
+                Js.append(J)
         k = self.prior_rows
         if len(k):  # Gaussian prior: (x - mean) / sigma
             rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
@@ -509,6 +633,76 @@ class LeastSquaresProblem:
                for key, value in self.offsets])
 
 
+def _build_functions(model0: CPCModel, layout: list[tuple], frames, offsets, P: int,
+                     slices: tuple[slice, slice, dict, dict], n_const: int
+                     ) -> tuple[_GroupFunctions, ...]:
+    """The CasADi residual functions of every observation group (see :class:`_Group`).
+
+    ``layout`` describes each group (kind, frame, marker or target, measurement frame,
+    and for points whether the offset is known); every number enters through the
+    ``const`` input, laid out as in :func:`build_problem`: the reference CPC model
+    (:func:`kinfw.cpc_casadi.cpc_reference_vector`), each extra frame's start pose (12),
+    each unknown offset's start (3), each known point offset (3).
+    """
+    ca = _ca()
+    base_slice, zero_slice, extra_slice, offset_slice = slices
+    fk = cpc_fk_function(model0, symbolic_reference=True)
+    theta = ca.SX.sym("theta", P)
+    q = ca.SX.sym("q", model0.n_joints)
+    const = ca.SX.sym("const", n_const)
+    sp = ca.SX.sym("sigma_p")
+    sr = ca.SX.sym("sigma_r")
+    k = len(cpc_reference_vector(model0))
+    T_frames = fk(q + theta[zero_slice], theta[: model0.n_parameters], const[:k])
+    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
+    base = _cayley_pose(ca, np.eye(4), theta[base_slice])
+    frame_T = {f: base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
+    extra_T = {}
+    for kind, name, _ in frames:
+        extra_T[(kind, name)] = _cayley_pose(ca, (ca.reshape(const[k : k + 9], 3, 3),
+                                                  const[k + 9 : k + 12]),
+                                             theta[extra_slice[(kind, name)]])
+        k += 12
+    offset_p = {}
+    for key, _ in offsets:
+        offset_p[key] = const[k : k + 3] + theta[offset_slice[key]]
+        k += 3
+
+    def meas_frame(name):
+        return ca.DM.eye(4) if name is None else extra_T[("frame", name)]
+
+    out = []
+    for lay in layout:
+        if lay[0] == "pose":
+            _, frame, marker, meas = lay
+            T = meas_frame(meas) @ frame_T[frame]
+            if marker is not None:
+                T = T @ extra_T[("marker", marker)]
+            m = ca.SX.sym("m", 12)
+            r = _pose_residual(ca, T, m, sp, sr)
+        elif lay[0] == "target":
+            _, camera, target = lay
+            T = _inverse_ca(ca, frame_T[camera]) @ extra_T[("target", target)]
+            m = ca.SX.sym("m", 12)
+            r = _pose_residual(ca, T, m, sp, sr)
+        else:
+            _, frame, marker, meas, known = lay
+            T = meas_frame(meas) @ frame_T[frame]
+            if known:
+                o = const[k : k + 3]
+                k += 3
+            else:
+                o = offset_p[f"{frame}:{marker or 'point'}"]
+            m = ca.SX.sym("m", 3)
+            r = (m - (T[0:3, 0:3] @ o + T[0:3, 3])) / sp
+        args = [q, m, theta, sp, sr, const]
+        J = ca.jacobian(r, theta)
+        out.append(_GroupFunctions(ca.Function("r", args, [r]),
+                                   ca.Function("rj", args, [r, ca.densify(J.T)]),
+                                   ca.Function("j", args, [J]), args, r))
+    return tuple(out)
+
+
 def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
                   targets: dict[str, NDArray] | None = None,
                   parameters: str | tuple[str, ...] = "full",
@@ -520,7 +714,6 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     pose and markers) instead of estimating them from these data.
     """
     measurements = check_against_robot(measurements, robot)
-    ca = _ca()
     start = robot if start is None else start
     observed = measurements.observed_frames
     in_frames = {g.measured_in for g in (*measurements.poses, *measurements.points)}
@@ -603,51 +796,44 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     free = np.concatenate([free, np.ones(len(names) - len(free), bool)])
     P = len(names)
 
-    fk = cpc_fk_function(model0)
-    theta = ca.SX.sym("theta", P)
-    q = ca.SX.sym("q", model0.n_joints)
-    T_frames = fk(q + theta[zero_slice], theta[: model0.n_parameters])
-    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    base = _cayley_pose(ca, np.eye(4), theta[base_slice])
-    frame_T = {f: base @ T_frames[k] for k, f in enumerate(model0.topology.frames)}
-    extra_T = {key: _cayley_pose(ca, value, theta[extra_slice[(kind, name)]])
-               for kind, name, value in frames for key in [(kind, name)]}
-    offset_p = {key: ca.DM(value) + theta[offset_slice[key]] for key, value in offsets}
-    sp = ca.SX.sym("sigma_p")
-    sr = ca.SX.sym("sigma_r")
+    def meas_name(g):
+        return g.measured_in if g.measured_in != model_frame else None
 
-    def meas_frame(g):
-        name = g.measured_in if g.measured_in != model_frame else None
-        return ca.DM.eye(4) if name is None else extra_T[("frame", name)]
-
-    groups: list[_Group] = []
-
-    def add(kind, frame, marker, sample, data, m_sym, r_expr, rows=6):
-        args = [q, m_sym, theta, sp, sr]
-        f = ca.Function("r", args, [r_expr])
-        jf = ca.Function("j", args, [ca.jacobian(r_expr, theta)])
-        groups.append(_Group(kind, frame, marker, sample, data, q_all[sample].T,
-                             f.map(len(sample)), jf.map(len(sample)), rows))
-
-    for g in measurements.poses:
-        T = meas_frame(g) @ frame_T[g.frame]
-        if g.marker is not None:
-            T = T @ extra_T[("marker", g.marker)]
-        m = ca.SX.sym("m", 12)
-        add("pose", g.frame, g.marker, g.sample, _pose_vectors(g.meas_T_frame), m,
-            _pose_residual(ca, T, m, sp, sr))
-    for g in measurements.targets:
-        T = _inverse_ca(ca, frame_T[g.camera]) @ extra_T[("target", g.target)]
-        m = ca.SX.sym("m", 12)
-        add("target", g.camera, None, g.sample, _pose_vectors(g.camera_T_target), m,
-            _pose_residual(ca, T, m, sp, sr))
-    for g in measurements.points:
-        T = meas_frame(g) @ frame_T[g.frame]
-        o = ca.DM(g.offset) if g.offset is not None else \
-            offset_p[f"{g.frame}:{g.marker or 'point'}"]
-        m = ca.SX.sym("m", 3)
-        add("point", g.frame, g.marker, g.sample, g.meas_p_point.T, m,
-            (m - (T[0:3, 0:3] @ o + T[0:3, 3])) / sp, rows=3)
+    # what the CasADi graph depends on; the numbers (reference model, start frames,
+    # known point offsets) are inputs, so problems of one structure share the functions
+    layout = ([("pose", g.frame, g.marker, meas_name(g)) for g in measurements.poses]
+              + [("target", g.camera, g.target) for g in measurements.targets]
+              + [("point", g.frame, g.marker, meas_name(g), g.offset is not None)
+                 for g in measurements.points])
+    topo = model0.topology
+    key = ((topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
+           tuple(float(v) for v in model0.sign), tuple(names),
+           tuple((k, v.start) for k, v in extra_slice.items()),
+           tuple((k, v.start) for k, v in offset_slice.items()), tuple(layout))
+    const = np.concatenate(
+        [cpc_reference_vector(model0)]
+        + [_pose_vectors(value[None]).ravel() for _, _, value in frames]
+        + [np.asarray(value, float) for _, value in offsets]
+        + [np.asarray(g.offset, float) for g in measurements.points if g.offset is not None])
+    with _FUNCTION_CACHE_LOCK:
+        functions = _FUNCTION_CACHE.get(key)
+        if functions is not None:
+            _FUNCTION_CACHE.move_to_end(key)
+    if functions is None:
+        functions = _build_functions(model0, layout, frames, offsets, P,
+                                     (base_slice, zero_slice, extra_slice, offset_slice),
+                                     len(const))
+        with _FUNCTION_CACHE_LOCK:
+            _FUNCTION_CACHE[key] = functions
+            while len(_FUNCTION_CACHE) > _FUNCTION_CACHE_SIZE:
+                _FUNCTION_CACHE.popitem(last=False)
+    data = ([_pose_vectors(g.meas_T_frame) for g in measurements.poses]
+            + [_pose_vectors(g.camera_T_target) for g in measurements.targets]
+            + [g.meas_p_point.T for g in measurements.points])
+    observations = [*measurements.poses, *measurements.targets, *measurements.points]
+    groups = [_Group(lay[0], lay[1], lay[2] if lay[0] != "target" else None, g.sample, d,
+                     q_all[g.sample].T, fn, const, 3 if lay[0] == "point" else 6)
+              for lay, g, d, fn in zip(layout, observations, data, functions, strict=True)]
 
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
@@ -748,16 +934,16 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         x, its, converged = _levenberg_marquardt(
-            lambda v, jac, s=sigma: problem.evaluate(v, s, jac), x, free, obs_sizes, loss,
-            k, max_iterations)
+            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True), x, free,
+            obs_sizes, loss, k, max_iterations)
         iterations += its
         if given:
             break
-        r, J = problem.evaluate(x, sigma, True)
+        r, J = problem.evaluate(x, sigma, True, only_free=True)
         Q, _ = np.linalg.qr(J[:, free] * np.sqrt(_row_weights(r, obs_sizes, loss, k))[:, None])
         sigma = _estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
                                 robust=loss != "linear", first=round_ == 0)
-    r, J = problem.evaluate(x, sigma, True)
+    r, J = problem.evaluate(x, sigma, True, only_free=True)
     w_rows = _row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)

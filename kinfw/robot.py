@@ -341,6 +341,10 @@ class Robot:
         The root frame's "up" direction for viewers, from ``<kinfw up="x y z"/>``.
     """
 
+    def __reduce__(self) -> tuple:
+        # pickles as its URDF text (worker processes rebuild the Pinocchio model)
+        return (type(self), (self.urdf_xml, self.source))
+
     def __init__(self, urdf_xml: str, source: str = "<urdf string>") -> None:
         self.urdf_xml = urdf_xml
         self.source = source
