@@ -218,7 +218,7 @@ def lm_only(problem, noise: NoiseModel, max_iterations: int = 100
     robust-loss thresholds are not used by the linear loss)."""
     return levenberg_marquardt(
         lambda v, jac: problem.evaluate(v, noise, jac), np.zeros(problem.n_parameters),
-        problem.free, problem.obs_sizes, "linear", thresholds(problem.obs_sizes, 2.33),
+        problem.free, problem.obs_sizes, "linear", thresholds(problem.obs_components, 2.33),
         max_iterations)
 
 

@@ -190,7 +190,7 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
                              root_is_measurement_frame=refined.model_frame is None)
         xml = export.urdf_xml
         stages.append(("refine", xml))
-        done(f"refine: {refined.identifiability.n_parameters} parameters, "
+        done(f"refine: {refined.identifiability.n_parameters} free parameters, "
              f"{refined.iterations} iterations, reduced chi-square {refined.sigma_hat2:.3g}")
     if not stages:
         raise DatasetError(

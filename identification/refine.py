@@ -51,6 +51,7 @@ from identification.problem import (
     NoiseModel,
     Unknown,
     build_problem,
+    clear_function_cache,
     covariance_and_identifiability,
     estimate_noise,
     group_residuals,
@@ -72,6 +73,7 @@ __all__ = [
     "RefineResult",
     "Unknown",
     "build_problem",
+    "clear_function_cache",
     "information_matrix",
     "parameter_unit",
     "refine",
@@ -241,8 +243,9 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     loss_scale : float
         Where the robust loss departs from least squares, as a standard-normal quantile
         ``z``: an observation's whitened residual norm is compared with the same quantile
-        of its clean distribution (chi with 6 degrees of freedom for poses and targets, 3
-        for points; Wilson-Hilferty), so 2.33 flags 1 % of clean observations.
+        of its clean distribution under the noise model of :class:`NoiseModel` (exact:
+        ``chi2(3) + 3 chi2(1)`` for poses and targets, ``chi2(3)`` for points), so 2.33
+        flags 1 % of clean observations.
     max_iterations : int
         Levenberg-Marquardt iterations per noise round.
     noise_rounds : int
@@ -279,21 +282,21 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
     sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
-    k = thresholds(obs_sizes, loss_scale)
+    k = thresholds(problem.obs_components, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         x, its, converged = levenberg_marquardt(
-            lambda v, jac, s=sigma: problem.evaluate(v, s, jac), x, free, obs_sizes, loss,
-            k, max_iterations)
+            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True), x, free,
+            obs_sizes, loss, k, max_iterations)
         iterations += its
         if given:
             break
-        r, J = problem.evaluate(x, sigma, True)
+        r, J = problem.evaluate(x, sigma, True, only_free=True)
         Q, _ = np.linalg.qr(J[:, free] * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None])
         sigma = estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
                                 robust=loss != "linear", first=round_ == 0)
-    r, J = problem.evaluate(x, sigma, True)
+    r, J = problem.evaluate(x, sigma, True, only_free=True)
     w_rows = row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
@@ -312,8 +315,9 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
         covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
         downweighted=downweighted, identifiability=ident, iterations=iterations,
         converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)
-    log.info("refine: %d parameters, %d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
-             P, len(r), iterations, sigma_hat2, result.seconds)
+    log.info("refine: %d free parameters (%d before gauge fixing and the parameter set), "
+             "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s", ident.n_parameters, P,
+             len(r), iterations, sigma_hat2, result.seconds)
     return result
 
 

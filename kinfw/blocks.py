@@ -116,12 +116,18 @@ class Block:
 
         return replace(self, free=np.asarray(free, dtype=bool))
 
+    def constants(self) -> NDArray[np.float64]:
+        """The numbers of the block's start that its CasADi value takes as an input (so
+        that one graph serves every start); empty by default."""
+        return np.zeros(0)
+
     def numpy_value(self, d: NDArray[np.float64]) -> Any:
         """The block's value at chart coordinates ``d`` (size,)."""
         raise NotImplementedError
 
-    def casadi_value(self, d: Any) -> Any:
-        """The same as a CasADi expression of ``d`` (SX or MX, size entries)."""
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        """The same as a CasADi expression of ``d`` (SX or MX, size entries), with the
+        start from ``c`` (symbols of :meth:`constants`) or, when None, embedded."""
         raise NotImplementedError
 
     def describe(self) -> str:
@@ -155,11 +161,19 @@ class RigidFrameBlock(Block):
 
         return RigidFrameBlock(key, start=average_transform(estimates))
 
+    def constants(self) -> NDArray[np.float64]:
+        """The start's rotation (9, column-major) and position (3)."""
+        return np.concatenate([self.start[:3, :3].T.reshape(9), self.start[:3, 3]])
+
     def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
         return rigid_from_chart(self.start, d)
 
-    def casadi_value(self, d: Any) -> Any:
-        return rigid_from_chart_casadi(self.start, d)
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        if c is None:
+            return rigid_from_chart_casadi(self.start, d)
+        import casadi as ca
+
+        return rigid_from_chart_casadi((ca.reshape(c[0:9], 3, 3), c[9:12]), d)
 
     def coordinates(self, T: ArrayLike) -> NDArray[np.float64]:
         """Chart coordinates (6,) of a pose ``T`` (4, 4): the inverse of the value."""
@@ -192,13 +206,17 @@ class PointBlock(Block):
         """The mean of per-sample point estimates (k, 3) as the start."""
         return PointBlock(key, start=np.asarray(estimates, dtype=float).mean(axis=0))
 
+    def constants(self) -> NDArray[np.float64]:
+        return np.asarray(self.start, dtype=float)
+
     def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
         return self.start + d
 
-    def casadi_value(self, d: Any) -> Any:
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
         import casadi as ca
 
-        return ca.DM(self.start) + ca.vertcat(d[0], d[1], d[2])
+        start = ca.DM(self.start) if c is None else c[0:3]
+        return start + ca.vertcat(d[0], d[1], d[2])
 
     def coordinates(self, p: ArrayLike) -> NDArray[np.float64]:
         return np.asarray(p, dtype=float) - self.start
@@ -238,10 +256,18 @@ class CPCBlock(Block):
     def size(self) -> int:
         return self.model.n_parameters
 
+    def constants(self) -> NDArray[np.float64]:
+        """The reference model's numbers (:func:`kinfw.cpc_casadi.cpc_reference_vector`)."""
+        from kinfw.cpc_casadi import cpc_reference_vector
+
+        return cpc_reference_vector(self.model)
+
     def numpy_value(self, d: NDArray[np.float64]) -> CPCModel:
         return self.model.perturbed(d)
 
-    def casadi_value(self, d: Any) -> Any:
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        """The chart coordinates themselves: the forward kinematics
+        (:func:`kinfw.cpc_casadi.cpc_fk_function`) takes them with the constants."""
         return d
 
     def describe(self) -> str:
@@ -281,7 +307,7 @@ class ZeroOffsetBlock(Block):
     def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(d, dtype=float)
 
-    def casadi_value(self, d: Any) -> Any:
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
         return d
 
     def describe(self) -> str:

@@ -98,14 +98,22 @@ def chart_from_rigid(T0: ArrayLike, T: ArrayLike) -> NDArray[np.float64]:
     return np.concatenate([rotation_chart(dR), T[..., :3, 3] - T0[..., :3, 3]], axis=-1)
 
 
-def rigid_from_chart_casadi(T0: ArrayLike, d: Any) -> Any:
-    """``T0 [cayley(d[:3] / 2) | d[3:]]`` as a CasADi 4x4 (``d``: 6 SX or MX entries)."""
+def rigid_from_chart_casadi(T0: Any, d: Any) -> Any:
+    """``T0 [cayley(d[:3] / 2) | d[3:]]`` as a CasADi 4x4 (``d``: 6 SX or MX entries).
+
+    ``T0`` is a (4, 4) array, or a symbolic pair ``(R0 (3x3), p0 (3x1))`` so that the
+    start is an input of the graph (one graph for every start).
+    """
     import casadi as ca
 
-    T0 = np.asarray(T0, dtype=float)
+    if isinstance(T0, tuple):
+        R0, p0 = T0
+    else:
+        T0 = np.asarray(T0, dtype=float)
+        R0, p0 = ca.DM(T0[:3, :3]), ca.DM(T0[:3, 3])
     e = cayley_entries(0.5 * d[0], 0.5 * d[1], 0.5 * d[2])
     dR = ca.vertcat(ca.horzcat(e[0], e[1], e[2]), ca.horzcat(e[3], e[4], e[5]),
                     ca.horzcat(e[6], e[7], e[8]))
-    R = ca.DM(T0[:3, :3]) @ dR
-    p = ca.DM(T0[:3, 3]) + ca.vertcat(d[3], d[4], d[5])
+    R = R0 @ dR
+    p = p0 + ca.vertcat(d[3], d[4], d[5])
     return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))

@@ -274,11 +274,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     if "refine" in report:
         ref = report["refine"]
         ident = ref["identifiability"]
+        if ident["condition"] is not None:
+            condition = f"condition {ident['condition']:.3g}"
+        else:  # null in the report: no free parameters, or a rank-deficient problem
+            condition = "condition undefined" if not ident["n_parameters"] else "condition inf"
         print(f"refine: noise sigma {ref['noise']['position_sigma_mm']:.3g} mm, "
               f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
               f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
               f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
-              f"condition {ident['condition']:.3g}")
+              + condition)
         n_fixed = sum(row["fixed"] for row in ref["parameters"])
         print(f"  parameters: {len(ref['parameters']) - n_fixed} estimated, {n_fixed} fixed "
               "(not estimated; std null in the report)")
@@ -395,15 +399,22 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
     from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.crossval import BASELINES, crossvalidate
+    from verification.studies import executor_for_jobs
 
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
     prior = _prior_arg(args)
     watch = _progress_printer()
-    cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets, select=args.select,
-                       noise=_noise_arg(args), loss=args.loss, prior=prior,
-                       progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None)
+    executor = executor_for_jobs(args.jobs)
+    try:
+        cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets,
+                           select=args.select, noise=_noise_arg(args), loss=args.loss,
+                           prior=prior, executor=executor,
+                           progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None)
+    finally:
+        if executor is not None:
+            executor.shutdown()
     if args.json:
         print(json.dumps(cv.to_dict(), indent=2))
         return 0
@@ -480,7 +491,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
 
     from verification import crlb, hirsh_experiments, shih_experiments
 
-    argv = ["--out", str(args.out), "--seed", str(args.seed)]
+    argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":
@@ -715,6 +726,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--select", action="store_true", help="also try 'offsets' and pick the "
                    "parameter set with the lowest held-out error")
     _add_fit_options(p)
+    p.add_argument("--jobs", type=_COUNT, default=1, help="run the fits in N worker processes "
+                   "(default 1: in this process)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=_cmd_crossval)
 
@@ -752,6 +765,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output directory (default reproduce_out)")
     p.add_argument("--trials", type=_COUNT, default=None, help="random trials per point")
     p.add_argument("--seed", type=_SEED, default=0)
+    p.add_argument("--jobs", type=_COUNT, default=1, help="run the trials in N worker "
+                   "processes (default 1: in this process)")
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
     p.set_defaults(func=_cmd_reproduce)
 
@@ -808,6 +823,9 @@ def _warnings_printed_once(command: str, verbose: bool):
         with warnings.catch_warnings():
             if not sys.warnoptions:  # -W / PYTHONWARNINGS win
                 warnings.simplefilter("always")  # the printer keeps one of each
+                # a library's deprecation notice (pyzmq under meshcat) is not the user's
+                warnings.simplefilter("ignore", DeprecationWarning)
+                warnings.simplefilter("ignore", PendingDeprecationWarning)
             warnings.showwarning = printer.showwarning
             yield printer
     finally:

@@ -17,7 +17,7 @@ import numpy as np
 from kinfw.chart import rigid_from_chart_casadi
 from kinfw.cpc import CPCModel
 
-__all__ = ["cpc_fk_function"]
+__all__ = ["cpc_fk_function", "cpc_reference_vector"]
 
 
 def _casadi():
@@ -43,7 +43,22 @@ def _homogeneous(ca, R, p):
     return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))
 
 
-def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None = None):
+def cpc_reference_vector(model: CPCModel) -> np.ndarray:
+    """The numbers of ``model`` that :func:`cpc_fk_function` embeds, as one vector.
+
+    Per joint ``b`` (3), the two axis-tilt basis vectors (6), ``l`` (3), ``cos beta``,
+    ``sin beta``; then per end frame the tool rotation (9, column-major) and position (3).
+    With ``symbolic_reference=True`` the function takes this vector as its third input.
+    """
+    cs = np.stack([np.cos(model.beta), np.sin(model.beta)], axis=1)
+    joints = np.concatenate([model.b, model.axis_bases().reshape(-1, 6), model.l, cs], axis=1)
+    tools = np.concatenate([np.swapaxes(model.tool_T[:, :3, :3], 1, 2).reshape(-1, 9),
+                            model.tool_T[:, :3, 3]], axis=1)
+    return np.concatenate([joints.reshape(-1), tools.reshape(-1)])
+
+
+def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None = None,
+                    *, symbolic_reference: bool = False):
     """CasADi function ``fk(q, delta) -> (w_T_e1, w_T_e2, ...)``.
 
     Parameters
@@ -59,7 +74,9 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
         Inputs ``q`` (J,) in ``topology.joint_names`` order (rad, m) and ``delta``
         (``model.n_parameters``,) in the chart of ``model.parameter_names``; one 4x4 SX
         output ``w_T_<frame>`` per frame. Use ``.map(n)`` to evaluate over n
-        configurations at once.
+        configurations at once. With ``symbolic_reference``, a third input ``reference``
+        (:func:`cpc_reference_vector`): the graph then depends only on the topology and
+        the joint signs, so one function serves every model of that structure.
     """
     ca = _casadi()
     topo = model.topology
@@ -67,20 +84,34 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
     frame_idx = [model._frame_index(f) for f in frames]
     q = ca.SX.sym("q", model.n_joints)
     delta = ca.SX.sym("delta", model.n_parameters)
-    bases = model.axis_bases()
+    if symbolic_reference:
+        ref = ca.SX.sym("reference", len(cpc_reference_vector(model)))
+        per_joint = [ref[14 * j : 14 * (j + 1)] for j in range(model.n_joints)]
+        t0 = 14 * model.n_joints
+        tools = [(ca.reshape(ref[t0 + 12 * e : t0 + 12 * e + 9], 3, 3),
+                  ref[t0 + 12 * e + 9 : t0 + 12 * (e + 1)]) for e in range(len(topo.frames))]
+    else:
+        ref = None
+        numeric = cpc_reference_vector(model)
+        per_joint = [numeric[14 * j : 14 * (j + 1)] for j in range(model.n_joints)]
+        tools = [(ca.DM(model.tool_T[e, :3, :3]), ca.DM(model.tool_T[e, :3, 3]))
+                 for e in range(len(topo.frames))]
 
     k = 0
     moved = []  # w_T_F_j' per joint
     for j, (rev, p) in enumerate(zip(topo.revolute, topo.parent, strict=True)):
-        v = model.b[j] + delta[k] * bases[j, 0] + delta[k + 1] * bases[j, 1]
+        c_j = per_joint[j]
+        v = c_j[0:3] + delta[k] * c_j[3:6] + delta[k + 1] * c_j[6:9]
+        l = ca.DM(c_j[9:12]) if ref is None else c_j[9:12]
         b = v / ca.norm_2(v)
         k += 2
-        l = ca.DM(model.l[j])
         if rev:
             l = l + ca.vertcat(delta[k], delta[k + 1], 0)
             k += 2
-        c, s = np.cos(model.beta[j]), np.sin(model.beta[j])
-        R = _rotation_from_axis(ca, b) @ ca.DM([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        c, s = c_j[12], c_j[13]
+        Rz = ca.DM([[c, -s, 0], [s, c, 0], [0, 0, 1]]) if ref is None else \
+            ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
+        R = _rotation_from_axis(ca, b) @ Rz
         link = _homogeneous(ca, R, R @ l)
         sq = model.sign[j] * q[j]
         if rev:
@@ -93,14 +124,14 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
 
     outputs = []
     for e in range(len(topo.frames)):
-        tool = rigid_from_chart_casadi(model.tool_T[e], delta[k : k + 6])
+        tool = rigid_from_chart_casadi(tools[e], delta[k : k + 6])
         k += 6
         p = topo.frame_parent[e]
         outputs.append(tool if p < 0 else moved[p] @ tool)
     return ca.Function(
         "cpc_fk",
-        [q, delta],
+        [q, delta] if ref is None else [q, delta, ref],
         [outputs[i] for i in frame_idx],
-        ["q", "delta"],
+        ["q", "delta"] if ref is None else ["q", "delta", "reference"],
         [f"w_T_{topo.frames[i]}" for i in frame_idx],
     )

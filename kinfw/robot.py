@@ -1,4 +1,5 @@
-"""A URDF robot: Pinocchio for forward kinematics, yourdfpy for the URDF's structure.
+"""A URDF robot: Pinocchio for forward kinematics, the standard library's XML parser for
+the URDF's structure.
 
 :class:`Robot` is immutable: it keeps the URDF text it was built from, so a calibrated
 robot is a new ``Robot`` built from new text (Pinocchio cannot change a joint's axis or
@@ -28,7 +29,6 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-import yourdfpy
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -264,46 +264,54 @@ def _up_vector(text: str | None, source: str) -> NDArray[np.float64] | None:
     return up / np.linalg.norm(up)
 
 
-def _parse_joints(xml: str, source: str) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
-    yourdfpy_log = logging.getLogger("yourdfpy")
-    level = yourdfpy_log.level
-    yourdfpy_log.setLevel(logging.CRITICAL)  # it logs, then we raise with the file name
+def _floats(element: ET.Element | None, key: str, n: int, default: list[float],
+            where: str) -> list[float]:
+    """``n`` numbers of attribute ``key`` of ``element`` (``default`` when absent)."""
+    text = None if element is None else element.get(key)
+    if text is None:
+        return default
     try:
-        urdf = yourdfpy.URDF.load(
-            io.BytesIO(xml.encode("utf-8")),
-            load_meshes=False,
-            build_scene_graph=False,
-            build_collision_scene_graph=False,
-            load_collision_meshes=False,
-        )
-    except Exception as exc:  # yourdfpy/lxml raise many types for bad XML
-        raise RobotModelError(f"{source}: not a readable URDF ({exc})") from None
-    finally:
-        yourdfpy_log.setLevel(level)
+        values = [float(v) for v in text.split()]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(np.isfinite(values)):
+        raise RobotModelError(f"{where}: {key}={text!r}: expected {n} finite numbers")
+    return values
+
+
+def _parse_joints(root: ET.Element, source: str
+                  ) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
+    """Joints (document order), links and the root link of a checked ``<robot>`` element
+    (:func:`_check_xml`). Origins follow URDF: ``rpy`` is fixed-axis roll, pitch, yaw,
+    ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`pinocchio.rpy.rpyToMatrix`)."""
     joints = []
-    for j in urdf.robot.joints:
-        axis = np.array([1.0, 0.0, 0.0] if j.axis is None else j.axis, dtype=float)
+    for element in root.findall("joint"):
+        name, kind = element.get("name"), element.get("type")
+        where = f"{source}: joint {name!r}"
+        if kind not in (*MOVABLE_TYPES, "fixed", "floating", "planar"):
+            raise RobotModelError(f"{where}: unknown type {kind!r}")
+        origin = element.find("origin")
+        parent_T_child = np.eye(4)
+        parent_T_child[:3, 3] = _floats(origin, "xyz", 3, [0.0, 0.0, 0.0], f"{where} <origin>")
+        parent_T_child[:3, :3] = pin.rpy.rpyToMatrix(
+            np.array(_floats(origin, "rpy", 3, [0.0, 0.0, 0.0], f"{where} <origin>")))
+        axis = np.array(_floats(element.find("axis"), "xyz", 3, [1.0, 0.0, 0.0],
+                                f"{where} <axis>"))
         norm = np.linalg.norm(axis)
-        if j.type in MOVABLE_TYPES and not norm > 0.0:
-            raise RobotModelError(f"{source}: joint {j.name!r} has a zero axis")
-        lower = -np.inf if j.limit is None or j.limit.lower is None else float(j.limit.lower)
-        upper = np.inf if j.limit is None or j.limit.upper is None else float(j.limit.upper)
-        if j.type == "continuous":
+        if kind in MOVABLE_TYPES and not norm > 0.0:
+            raise RobotModelError(f"{source}: joint {name!r} has a zero axis")
+        limit = element.find("limit")
+        lower = _floats(limit, "lower", 1, [-np.inf], f"{where} <limit>")[0]
+        upper = _floats(limit, "upper", 1, [np.inf], f"{where} <limit>")[0]
+        if kind == "continuous":
             lower, upper = -np.inf, np.inf
-        joints.append(
-            JointInfo(
-                name=j.name,
-                type=j.type,
-                parent=j.parent,
-                child=j.child,
-                parent_T_child=np.eye(4) if j.origin is None else np.array(j.origin, float),
-                axis=axis / norm if norm > 0 else axis,
-                lower=lower,
-                upper=upper,
-                mimic=None if j.mimic is None else j.mimic.joint,
-            )
-        )
-    links = tuple(link.name for link in urdf.robot.links)
+        mimic = element.find("mimic")
+        joints.append(JointInfo(
+            name=name, type=kind, parent=element.find("parent").get("link"),
+            child=element.find("child").get("link"), parent_T_child=parent_T_child,
+            axis=axis / norm if norm > 0 else axis, lower=lower, upper=upper,
+            mimic=None if mimic is None else mimic.get("joint")))
+    links = tuple(link.get("name") for link in root.findall("link"))
     children = {j.child for j in joints}
     roots = [name for name in links if name not in children]
     if len(roots) != 1:
@@ -341,11 +349,16 @@ class Robot:
         The root frame's "up" direction for viewers, from ``<kinfw up="x y z"/>``.
     """
 
+    def __reduce__(self) -> tuple:
+        # pickles as its URDF text (worker processes rebuild the Pinocchio model)
+        return (type(self), (self.urdf_xml, self.source))
+
     def __init__(self, urdf_xml: str, source: str = "<urdf string>") -> None:
         self.urdf_xml = urdf_xml
         self.source = source
-        hint = _check_xml(urdf_xml, source).find("kinfw")
-        self.joints, self.link_names, self.root_link = _parse_joints(urdf_xml, source)
+        element = _check_xml(urdf_xml, source)
+        hint = element.find("kinfw")
+        self.joints, self.link_names, self.root_link = _parse_joints(element, source)
         model, error = None, None
         with _captured_native_stderr() as native:
             try:

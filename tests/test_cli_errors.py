@@ -392,7 +392,8 @@ def test_the_lazy_package_still_exports_every_name():
 
 def test_warnings_and_logged_warnings_are_printed_once_each(capsys):
     """The command line's printer on its own: the same warning from three places, a
-    logged warning twice, and an info line that only --verbose shows."""
+    logged warning twice, an info line that only --verbose shows; a third-party
+    DeprecationWarning (pyzmq under meshcat) is not the user's and is not shown."""
     import logging
 
     from kinfw.cli import _warnings_printed_once
@@ -402,6 +403,7 @@ def test_warnings_and_logged_warnings_are_printed_once_each(capsys):
             warnings.warn("the same\n  text", UserWarning, stacklevel=1)
         warnings.warn("the same text", UserWarning, stacklevel=1)
         warnings.warn("another", RuntimeWarning, stacklevel=1)
+        warnings.warn("a library's deprecation", DeprecationWarning, stacklevel=1)
         logging.getLogger("identification.x").warning("logged %d", 1)
         logging.getLogger("identification.x").warning("logged %d", 1)
         logging.getLogger("identification.x").info("not shown")

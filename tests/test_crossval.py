@@ -100,3 +100,128 @@ def test_parameter_masks_by_joint_and_field():
         refine(nominal, data, parameters=("pan", "nose"))
     with pytest.raises(ValueError, match="got 'tilt:l_z'"):
         refine(nominal, data, parameters=("tilt:l_z",))
+
+
+# -- speed: executors and cached CasADi functions must not change a number ------------------
+
+
+def _fold_numbers(cv):
+    return np.array([[getattr(s, f) for f in ("position_rms_mm", "rotation_rms_deg",
+                                              "worst_mm", "condition", "worst_sample",
+                                              "n_parameters", "n_residuals", "n_train")]
+                     for s in cv.scores], dtype=float)
+
+
+def test_thread_and_process_executors_give_the_serial_scores():
+    from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+
+    nominal = load_robot(HEAD)
+    truth = load_robot(perturb_robot(nominal, np.random.default_rng(11), origin_mm=5.0,
+                                     origin_deg=1.0, axis_deg=1.0))
+    data = _data(truth, 24, 12)
+    kwargs = {"k": 3, "seed": 5, "sets": ("none", "frames", "full")}
+    serial = crossvalidate(nominal, data, **kwargs)
+    assert [(s.fold, s.parameters) for s in serial.scores] == [
+        (f, p) for f in range(3) for p in ("none", "frames", "full")]
+    for pool in (ThreadPoolExecutor(max_workers=2), ProcessPoolExecutor(max_workers=2)):
+        with pool:
+            done: list[tuple[int, int]] = []
+            cv = crossvalidate(nominal, data, executor=pool, progress=lambda d, t, done=done:
+                               done.append((d, t)), **kwargs)
+        assert [(s.fold, s.parameters) for s in cv.scores] == \
+            [(s.fold, s.parameters) for s in serial.scores]
+        np.testing.assert_allclose(_fold_numbers(cv), _fold_numbers(serial), rtol=1e-12,
+                                   atol=1e-12)
+        assert done[-1] == (9, 9) and len(done) == 9
+
+
+def test_robot_pickles_as_its_urdf():
+    import pickle
+
+    nominal = load_robot(HEAD)
+    copy = pickle.loads(pickle.dumps(nominal))
+    assert copy.urdf_xml == nominal.urdf_xml and copy.source == nominal.source
+    q = np.linspace(-0.3, 0.3, len(nominal.joint_names))
+    np.testing.assert_array_equal(copy.frame_poses(q[None], "left_plate"),
+                                  nominal.frame_poses(q[None], "left_plate"))
+
+
+def _noise_free_case():
+    nominal = load_robot(HEAD)
+    truth = load_robot(perturb_robot(nominal, np.random.default_rng(21), origin_mm=5.0,
+                                     origin_deg=1.0, axis_deg=1.0))
+    return nominal, truth, _data(truth, 30, 22, noise_m=0.0, noise_rad=0.0)
+
+
+def _held_out_error_m(model, truth):
+    names = model.topology.joint_names
+    qs = random_configurations(*truth.joint_limits(names), 50, np.random.default_rng(23),
+                               fraction=0.8)
+    expected = cpc_from_robot(truth, PLATES).frame_poses(qs)
+    return float(np.abs(model.frame_poses(qs) - expected).max())
+
+
+def test_cached_functions_fit_like_fresh_ones_and_recover_the_truth():
+    from identification.refine import NoiseModel, clear_function_cache, refine
+
+    nominal, truth, data = _noise_free_case()
+    # a start that is neither the nominal nor the truth: its numbers must reach the
+    # cached graph through the inputs, not stay baked in from the first build
+    start = load_robot(perturb_robot(nominal, np.random.default_rng(24), origin_mm=2.0,
+                                     origin_deg=0.5, axis_deg=0.5))
+    noise = NoiseModel(1e-3, 1e-2)
+    clear_function_cache()
+    fresh = refine(nominal, data, start=start, noise=noise)
+    clear_function_cache()
+    refine(nominal, _data(truth, 12, 25), noise=noise)  # same structure, other numbers
+    cached = refine(nominal, data, start=start, noise=noise)
+    np.testing.assert_allclose(cached.estimate, fresh.estimate, rtol=0, atol=1e-10)
+    # noise-free data: both recover the true geometry (held-out FK, metres)
+    assert _held_out_error_m(cached.model, truth) < 1e-9
+    assert _held_out_error_m(fresh.model, truth) < 1e-9
+
+
+def test_the_function_cache_is_keyed_by_structure_and_bounded(monkeypatch):
+    import identification.problem.problem as refine_module
+    from identification.refine import NoiseModel, build_problem, clear_function_cache
+
+    nominal, _, data = _noise_free_case()
+    noise = NoiseModel(1e-3, 1e-2)
+    one_plate = replace(data, poses=data.poses[:1])  # another structure: one frame
+    clear_function_cache()
+    monkeypatch.setattr(refine_module, "_FUNCTION_CACHE_SIZE", 1)
+    both = build_problem(nominal, data)
+    single = build_problem(nominal, one_plate)  # evicts the first structure
+    assert len(refine_module._FUNCTION_CACHE) == 1
+    again = build_problem(nominal, data)  # rebuilt, not the one-plate functions
+    x = np.random.default_rng(26).normal(size=both.n_parameters) * 1e-3
+    r0, J0 = both.evaluate(x, noise)
+    r1, J1 = again.evaluate(x, noise)
+    np.testing.assert_array_equal(r1, r0)
+    np.testing.assert_array_equal(J1, J0)
+    assert single.n_parameters != both.n_parameters
+    assert len(single.evaluate(np.zeros(single.n_parameters), noise)[0]) == \
+        6 * len(data.poses[0].sample)
+
+
+def test_free_column_jacobian_equals_the_full_one():
+    from identification.refine import NoiseModel, build_problem
+
+    nominal, _, data = _noise_free_case()
+    noise = NoiseModel(1e-3, 1e-2)
+    for parameters in ("none", "frames", "full"):
+        problem = build_problem(nominal, data, parameters=parameters)
+        x = np.where(problem.free, np.random.default_rng(27).normal(
+            size=problem.n_parameters) * 1e-3, 0.0)
+        r, J = problem.evaluate(x, noise, True)
+        r_free, J_free = problem.evaluate(x, noise, True, only_free=True)
+        np.testing.assert_array_equal(r_free, r)
+        np.testing.assert_allclose(J_free[:, problem.free], J[:, problem.free], rtol=0,
+                                   atol=1e-9 * np.abs(J).max())
+        assert not np.any(J_free[:, ~problem.free])
+        # and both equal the CasADi Jacobian in its original (rows, m * P) layout
+        g = problem.groups[0]
+        m, P = len(g.sample), problem.n_parameters
+        legacy = np.array(g.jacobian(g.qs, g.data, x)) / g.row_sigma(noise)[:, None]
+        np.testing.assert_allclose(legacy.reshape(g.rows, m, P).transpose(1, 0, 2)
+                                   .reshape(-1, P), J[: m * g.rows], rtol=0, atol=1e-12)

@@ -1,5 +1,6 @@
 """Joint nonlinear least squares: exactness, the CasADi graph, statistics, robustness."""
 
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -146,6 +147,25 @@ def test_unobserved_orientation_is_reported_not_identifiable():
     rot = frozenset({("flange", "rot_x"), ("flange", "rot_y"), ("flange", "rot_z")})
     assert any(k <= rot and "only positions" in why for k, why in reasons.items())
     assert result.identifiability.rank == result.identifiability.n_parameters - 3
+
+
+@pytest.mark.parametrize(("loss", "noise"), [("linear", SIGMA), ("huber", None)])
+def test_no_free_parameter_gives_the_nominal_and_undefined_conditioning(loss, noise):
+    """Plates in the root frame with ``parameters="none"``: nothing to estimate."""
+    nominal, _, data, _ = _head_data(n=10, noise_m=0.5e-3, noise_rad=0.005)
+    data = replace(data, targets=())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = refine(nominal, data, noise=noise, loss=loss, parameters="none")
+    ident = result.identifiability
+    assert (ident.rank, ident.n_parameters) == (0, 0)
+    assert np.isnan(ident.condition) and np.isnan(ident.observability_o1)
+    assert not np.any(result.estimate) and not np.any(result.covariance)
+    for group, res in zip(data.poses, result.residuals, strict=True):
+        nominal_p = nominal.frame_poses(data.q_of(data.joint_names)[group.sample], group.frame,
+                                        data.joint_names)[:, :3, 3]
+        np.testing.assert_allclose(res.position_m, group.meas_T_frame[:, :3, 3] - nominal_p,
+                                   atol=1e-12)
 
 
 def test_markers_measured_in_an_external_frame_are_recovered():

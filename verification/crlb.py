@@ -55,6 +55,7 @@ import logging
 import sys
 import time
 from collections.abc import Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -97,6 +98,7 @@ from verification.studies import (
     log_axes,
     new_figure,
     run_on_head,
+    run_trials,
     sample_std,
     save_figure,
 )
@@ -778,9 +780,49 @@ class CRLBStudy:
                    **arrays_from(doc, _CRLB_ARRAYS))
 
 
+def _crlb_trial(nominal: Robot, setup: ExperimentSetup, t: int) -> tuple[tuple, tuple]:
+    """Trial ``t`` of :func:`crlb_study` (a task: module level, picklable arguments):
+    its per-trial numbers and the names of the free parameters."""
+    t0 = time.perf_counter()
+    exp = _simulate_experiment(nominal, setup, t)
+    start, start_targets = _pipeline_start(nominal, exp.data)
+    fit = refine(nominal, exp.data, start=start, targets=start_targets, noise=setup.noise)
+    fit_est = refine(nominal, exp.data, start=start, targets=start_targets)
+    truth = cpc_from_robot(exp.truth, setup.frames)
+    qs = exp.test_qs
+    start_ms = _position_ms(cpc_from_robot(start, setup.frames), truth, qs,
+                            setup.joint_names, setup.frames)
+    refined_ms = _position_ms(fit.model, truth, qs, setup.joint_names, setup.frames)
+    estimated_ms = _position_ms(fit_est.model, truth, qs, setup.joint_names, setup.frames)
+    bound = cramer_rao(exp.truth, exp.data, setup.frames, noise=setup.noise,
+                       targets=exp.root_T_targets)
+    G = position_jacobians(bound.model, _reorder(qs, setup.joint_names, bound.model),
+                           setup.frames)
+    crlb_ms = _predicted_ms(bound.model_covariance, G)
+    band = _ratio_band(bound.model_covariance, G,
+                       np.random.default_rng([setup.seed, _BAND_TAG, t]))
+    # The truth in the refinement's chart: the same problem refine built.
+    problem = build_problem(nominal, exp.data, start=start, targets=start_targets)
+    if problem.names != fit.parameter_names:
+        raise RuntimeError("crlb_study: refine's parameters differ from build_problem's")
+    x_true = true_chart_coordinates(problem, exp.truth, exp.root_T_targets)
+    free = problem.free
+    trial_names = tuple(n for n, f in zip(problem.names, free, strict=True) if f)
+    z = ((fit.estimate - x_true) / np.where(fit.std > 0, fit.std, np.nan))[free]
+    nees = _nees((fit.estimate - x_true)[free], fit.covariance[np.ix_(free, free)])
+    z_est = ((fit_est.estimate - x_true) / np.where(fit_est.std > 0, fit_est.std, np.nan))[free]
+    seconds = time.perf_counter() - t0
+    log.info("crlb trial %d: refined %.3g mm, CRLB %.3g mm, %.2f s", t,
+             1e3 * np.sqrt(refined_ms.mean()), 1e3 * np.sqrt(crlb_ms.mean()), seconds)
+    return ((start_ms, refined_ms, estimated_ms, crlb_ms, band, z, nees, z_est,
+             (fit_est.noise.position_m, fit_est.noise.rotation_rad), fit.sigma_hat2, seconds),
+            trial_names)
+
+
 def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
                sigma_deg: float = 0.5, per_joint: int = 9, stage2_views: int = 30,
-               n_test: int = 200, seed: int = 0, progress: Progress | None = None) -> CRLBStudy:
+               n_test: int = 200, seed: int = 0, progress: Progress | None = None,
+               executor: Executor | None = None) -> CRLBStudy:
     """The refined two-stage calibration against its Cramér-Rao bound.
 
     Each trial (module docstring) draws a true head and its data, starts from the
@@ -809,6 +851,9 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
     seed : int
     progress : callable, optional
         ``progress(done, total)`` after each trial.
+    executor : concurrent.futures.Executor, optional
+        Run the trials as its tasks (:func:`verification.studies.run_trials`); default
+        serially here. The numbers do not depend on it (each trial seeds its own).
 
     Returns
     -------
@@ -823,49 +868,17 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
     nees, band = np.empty(trials), np.empty((trials, 2))
     sigma_hat2, seconds = np.empty(trials), np.empty(trials)
     names: tuple[tuple[str, str], ...] | None = None
-    for t in range(trials):
-        t0 = time.perf_counter()
-        exp = _simulate_experiment(nominal, setup, t)
-        start, start_targets = _pipeline_start(nominal, exp.data)
-        fit = refine(nominal, exp.data, start=start, targets=start_targets, noise=setup.noise)
-        fit_est = refine(nominal, exp.data, start=start, targets=start_targets)
-        truth = cpc_from_robot(exp.truth, setup.frames)
-        qs = exp.test_qs
-        start_ms[t] = _position_ms(cpc_from_robot(start, setup.frames), truth, qs,
-                                   setup.joint_names, setup.frames)
-        refined_ms[t] = _position_ms(fit.model, truth, qs, setup.joint_names, setup.frames)
-        estimated_ms[t] = _position_ms(fit_est.model, truth, qs, setup.joint_names,
-                                       setup.frames)
-        bound = cramer_rao(exp.truth, exp.data, setup.frames, noise=setup.noise,
-                           targets=exp.root_T_targets)
-        G = position_jacobians(bound.model, _reorder(qs, setup.joint_names, bound.model),
-                               setup.frames)
-        crlb_ms[t] = _predicted_ms(bound.model_covariance, G)
-        band[t] = _ratio_band(bound.model_covariance, G,
-                              np.random.default_rng([setup.seed, _BAND_TAG, t]))
-        # The truth in the refinement's chart: the same problem refine built.
-        problem = build_problem(nominal, exp.data, start=start, targets=start_targets)
-        if problem.names != fit.parameter_names:
-            raise RuntimeError("crlb_study: refine's parameters differ from build_problem's")
-        x_true = true_chart_coordinates(problem, exp.truth, exp.root_T_targets)
-        free = problem.free
-        trial_names = tuple(n for n, f in zip(problem.names, free, strict=True) if f)
+    trial_results = run_trials(_crlb_trial, [(nominal, setup, t) for t in range(trials)],
+                               executor=executor, progress=progress)
+    for t, (res, trial_names) in enumerate(trial_results):
+        (start_ms[t], refined_ms[t], estimated_ms[t], crlb_ms[t], band[t], z, nees[t], z_est,
+         noise_est[t], sigma_hat2[t], seconds[t]) = res
+        zs.append(z)
+        zs_est.append(z_est)
         if names is None:
             names = trial_names
         elif names != trial_names:
             raise RuntimeError("crlb_study: the free parameters differ between trials")
-        zs.append(((fit.estimate - x_true) / np.where(fit.std > 0, fit.std, np.nan))[free])
-        nees[t] = _nees((fit.estimate - x_true)[free], fit.covariance[np.ix_(free, free)])
-        zs_est.append(((fit_est.estimate - x_true)
-                       / np.where(fit_est.std > 0, fit_est.std, np.nan))[free])
-        noise_est[t] = fit_est.noise.position_m, fit_est.noise.rotation_rad
-        sigma_hat2[t] = fit.sigma_hat2
-        seconds[t] = time.perf_counter() - t0
-        log.info("crlb trial %d: refined %.3g mm, CRLB %.3g mm, %.2f s", t,
-                 1e3 * np.sqrt(refined_ms[t].mean()), 1e3 * np.sqrt(crlb_ms[t].mean()),
-                 seconds[t])
-        if progress is not None:
-            progress(t + 1, trials)
     result = CRLBStudy(
         setup=setup, parameter_names=names or (),
         start_rms_mm=1e3 * np.sqrt(start_ms), refined_rms_mm=1e3 * np.sqrt(refined_ms),
@@ -1047,12 +1060,55 @@ def plant_outliers(data: Measurements, rng: np.random.Generator, *, fraction: fl
     return corrupted, frozenset(planted)
 
 
+def _robust_trial(nominal: Robot, setup: ExperimentSetup, t: int,
+                  variants: tuple[tuple[str, str], ...], outlier_fraction: float,
+                  outlier_mm: float, outlier_deg: float) -> tuple:
+    """Trial ``t`` of :func:`robustness_study` (a task: module level, picklable
+    arguments)."""
+    t0 = time.perf_counter()
+    exp = _simulate_experiment(nominal, setup, t)
+    truth = cpc_from_robot(exp.truth, setup.frames)
+
+    def held_out_ms(model: CPCModel) -> float:
+        return float(_position_ms(model, truth, exp.test_qs, setup.joint_names,
+                                  setup.frames).mean())
+
+    V = len(variants)
+    rms_ms, noise_used = np.empty(V), np.empty((V, 2))
+    flagged_planted, flagged_clean = np.zeros(V, np.int64), np.zeros(V, np.int64)
+    start, start_targets = _pipeline_start(nominal, exp.data)
+    clean_ms = held_out_ms(refine(nominal, exp.data, start=start, targets=start_targets,
+                                  noise=setup.noise).model)
+    rng = np.random.default_rng([setup.seed, _OUTLIER_TAG, t])
+    data, planted = plant_outliers(exp.data, rng, fraction=outlier_fraction,
+                                   distance_m=1e-3 * outlier_mm,
+                                   angle_rad=float(np.radians(outlier_deg)))
+    n_obs = sum(len(g.sample) for g in (*data.poses, *data.targets))
+    start, start_targets = _pipeline_start(nominal, data)
+    start_ms = held_out_ms(cpc_from_robot(start, setup.frames))
+    for v, (loss, noise) in enumerate(variants):
+        fit = refine(nominal, data, start=start, targets=start_targets, loss=loss,
+                     noise=setup.noise if noise == "given" else None)
+        rms_ms[v] = held_out_ms(fit.model)
+        flagged = {(kind, frame, sample) for kind, frame, sample, _ in fit.downweighted}
+        flagged_planted[v] = len(flagged & planted)
+        flagged_clean[v] = len(flagged - planted)
+        noise_used[v] = fit.noise.position_m, fit.noise.rotation_rad
+    seconds = time.perf_counter() - t0
+    log.info("robust trial %d: clean %.3g mm, %s, %.2f s", t, 1e3 * np.sqrt(clean_ms),
+             ", ".join(f"{loss}/{noise} {1e3 * np.sqrt(m):.3g} mm"
+                       for (loss, noise), m in zip(variants, rms_ms, strict=True)), seconds)
+    return (clean_ms, start_ms, rms_ms, n_obs, len(planted), flagged_planted, flagged_clean,
+            noise_used, seconds)
+
+
 def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: float = 0.05,
                      outlier_mm: float = 50.0, outlier_deg: float = 5.0,
                      variants: Sequence[tuple[str, str]] = ROBUST_VARIANTS,
                      sigma_mm: float = 0.5, sigma_deg: float = 0.5, per_joint: int = 9,
                      stage2_views: int = 30, n_test: int = 200, seed: int = 0,
-                     progress: Progress | None = None) -> RobustStudy:
+                     progress: Progress | None = None,
+                     executor: Executor | None = None) -> RobustStudy:
     """Refinement of data with planted gross errors, linear vs robust losses.
 
     Each trial takes the data of the same trial of :func:`crlb_study`, refines the clean
@@ -1074,7 +1130,7 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
     variants : sequence of (loss, noise)
         ``loss`` in ``("linear", "huber", "cauchy")``; ``noise`` ``"given"`` (the true
         noise) or ``"estimated"`` (by ``refine`` from the residuals).
-    sigma_mm, sigma_deg, per_joint, stage2_views, n_test, seed, progress
+    sigma_mm, sigma_deg, per_joint, stage2_views, n_test, seed, progress, executor
         As for :func:`crlb_study`.
 
     Returns
@@ -1113,42 +1169,13 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
     flagged_planted, flagged_clean = np.zeros((trials, V), np.int64), np.zeros((trials, V),
                                                                                 np.int64)
     noise_used = np.empty((trials, V, 2))
-    for t in range(trials):
-        t0 = time.perf_counter()
-        exp = _simulate_experiment(nominal, setup, t)
-        truth = cpc_from_robot(exp.truth, setup.frames)
-
-        def held_out_ms(model: CPCModel, exp: _Experiment = exp, truth: CPCModel = truth
-                        ) -> float:
-            return float(_position_ms(model, truth, exp.test_qs, setup.joint_names,
-                                      setup.frames).mean())
-
-        start, start_targets = _pipeline_start(nominal, exp.data)
-        clean_ms[t] = held_out_ms(refine(nominal, exp.data, start=start,
-                                         targets=start_targets, noise=setup.noise).model)
-        rng = np.random.default_rng([setup.seed, _OUTLIER_TAG, t])
-        data, planted = plant_outliers(exp.data, rng, fraction=float(outlier_fraction),
-                                       distance_m=1e-3 * outlier_mm,
-                                       angle_rad=float(np.radians(outlier_deg)))
-        n_obs[t] = sum(len(g.sample) for g in (*data.poses, *data.targets))
-        n_planted[t] = len(planted)
-        start, start_targets = _pipeline_start(nominal, data)
-        start_ms[t] = held_out_ms(cpc_from_robot(start, setup.frames))
-        for v, (loss, noise) in enumerate(variants):
-            fit = refine(nominal, data, start=start, targets=start_targets, loss=loss,
-                         noise=setup.noise if noise == "given" else None)
-            rms_ms[t, v] = held_out_ms(fit.model)
-            flagged = {(kind, frame, sample) for kind, frame, sample, _ in fit.downweighted}
-            flagged_planted[t, v] = len(flagged & planted)
-            flagged_clean[t, v] = len(flagged - planted)
-            noise_used[t, v] = fit.noise.position_m, fit.noise.rotation_rad
-        seconds[t] = time.perf_counter() - t0
-        log.info("robust trial %d: clean %.3g mm, %s, %.2f s", t, 1e3 * np.sqrt(clean_ms[t]),
-                 ", ".join(f"{loss}/{noise} {1e3 * np.sqrt(m):.3g} mm"
-                           for (loss, noise), m in zip(variants, rms_ms[t], strict=True)),
-                 seconds[t])
-        if progress is not None:
-            progress(t + 1, trials)
+    trial_results = run_trials(
+        _robust_trial, [(nominal, setup, t, variants, float(outlier_fraction), outlier_mm,
+                         outlier_deg) for t in range(trials)],
+        executor=executor, progress=progress)
+    for t, res in enumerate(trial_results):
+        (clean_ms[t], start_ms[t], rms_ms[t], n_obs[t], n_planted[t], flagged_planted[t],
+         flagged_clean[t], noise_used[t], seconds[t]) = res
     result = RobustStudy(
         setup=setup, outlier_fraction=float(outlier_fraction), outlier_mm=outlier_mm,
         outlier_deg=outlier_deg, variants=variants, clean_rms_mm=1e3 * np.sqrt(clean_ms),

@@ -19,6 +19,7 @@ per-sample error vector norms (mm); orientation errors the small-angle rotation 
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,7 @@ from identification.refine import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
 from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import Robot
+from verification.studies import run_trials
 
 __all__ = ["BASELINES", "CrossValidation", "FoldScore", "crossvalidate", "held_out_errors"]
 
@@ -130,9 +132,10 @@ def held_out_errors(nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ..
 
 
 def _score(nominal: Robot, train: Measurements, test: Measurements, test_ids: NDArray,
-           parameters: str, fold: int, *, noise, loss, prior) -> FoldScore:
+           parameters: str, fold: int, noise, loss, prior) -> FoldScore:
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
-    original indices of the test samples)."""
+    original indices of the test samples). One task of :func:`crossvalidate`: module
+    level, picklable arguments."""
     result = calibrate(nominal, train, parameters=parameters, noise=noise, loss=loss,
                        prior=prior)
     unknowns = result.refined.unknowns
@@ -182,7 +185,8 @@ def crossvalidate(nominal: Robot, data: Measurements, *, k: int = 5, seed: int =
                   sets: tuple[str, ...] = BASELINES, select: bool = False,
                   noise: NoiseModel | None = None, loss: str = "huber",
                   prior: tuple[float, float] | None = None,
-                  progress: Callable[[int, int], None] | None = None) -> CrossValidation:
+                  progress: Callable[[int, int], None] | None = None,
+                  executor: Executor | None = None) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
     Parameters
@@ -199,23 +203,20 @@ def crossvalidate(nominal: Robot, data: Measurements, *, k: int = 5, seed: int =
     noise, loss, prior
         As for :func:`identification.pipeline.calibrate`.
     progress : callable(done, total), optional
+    executor : concurrent.futures.Executor, optional
+        Run the fits (folds x sets) as tasks of this executor (a process pool, Dask's or
+        Ray's); default serially in this process. The scores are the same either way.
     """
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
     order = np.random.default_rng(seed).permutation(data.n_samples)
-    folds = np.array_split(order, k)
-    scores: list[FoldScore] = []
-    total, done = k * len(sets), 0
-    for f, test_idx in enumerate(folds):
-        train_idx = np.sort(np.setdiff1d(order, test_idx))
+    tasks = []
+    for f, test_idx in enumerate(np.array_split(order, k)):
         test_ids = np.sort(test_idx)
-        train, test = data.subset(train_idx), data.subset(test_ids)
-        for parameters in sets:
-            scores.append(_score(nominal, train, test, test_ids, parameters, f, noise=noise,
-                                 loss=loss, prior=prior))
-            done += 1
-            if progress is not None:
-                progress(done, total)
+        train, test = data.subset(np.sort(np.setdiff1d(order, test_idx))), data.subset(test_ids)
+        tasks += [(nominal, train, test, test_ids, parameters, f, noise, loss, prior)
+                  for parameters in sets]
+    scores = run_trials(_score, tasks, executor=executor, progress=progress)
     selected = None
     if select:
         selected = min(sets, key=lambda p: np.mean([s.position_rms_mm for s in scores

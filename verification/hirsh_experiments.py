@@ -62,6 +62,7 @@ import json
 import logging
 import sys
 from collections.abc import Iterable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,6 +83,7 @@ from verification.studies import (
     Progress,
     arrays_from,
     check_count,
+    executor_for_jobs,
     freeze,
     json_list,
     json_lists,
@@ -90,6 +92,7 @@ from verification.studies import (
     plain_log_ticks,
     readonly,
     run_and_print,
+    run_trials,
     save_figure,
     shared_legend,
     study_parser,
@@ -444,10 +447,39 @@ def _padded(values: NDArray[np.float64], k: int) -> NDArray[np.float64]:
     return np.concatenate([values, np.full(k - len(values), values[-1])])
 
 
+def _hirsh_trial(seed: int, noise_deg: float, n: int, t: int, k: int,
+                 hand_rotation_deg: float, hand_translation_m: float) -> tuple:
+    """Trial ``t`` with ``n`` views of :func:`hirsh_study` (a task: module level,
+    picklable arguments): the convergence factor, the initial Y error and, unless the
+    solver failed (None), the recorded errors and the solver's outcome."""
+    rng = _trial_rng(seed, noise_deg, n, t)
+    p = _draw_problem(rng, n, hand_rotation_deg=hand_rotation_deg,
+                      hand_translation_m=hand_translation_m)
+    c_T_ws = p.c_T_ws
+    if noise_deg > 0.0:
+        c_T_ws = rotate_about_random_axes(c_T_ws, rng, np.radians(noise_deg))
+    factor = convergence_factor(c_T_ws, p.e_T_bs)
+    initial = np.degrees(quaternion_angle(np.eye(3), p.b_T_w[:3, :3]))
+    try:
+        res = solve_axyb(c_T_ws, p.e_T_bs, Y0=np.eye(4), refine=False, record_history=True,
+                         rng=rng, max_iterations=max(k, SOLVER_MAX_ITERATIONS))
+    except AXYBError as err:
+        log.warning("hirsh: %d views, trial %d: the solver failed: %s", n, t, err)
+        return factor, initial, None
+    return factor, initial, (
+        _padded(np.degrees(quaternion_angle(res.history_Y[:, :3, :3], p.b_T_w[:3, :3])), k),
+        _padded(np.degrees(quaternion_angle(res.history_X[:, :3, :3], p.c_T_e[:3, :3])), k),
+        np.degrees(quaternion_angle(res.Y[:3, :3], p.b_T_w[:3, :3])),
+        np.degrees(quaternion_angle(res.X[:3, :3], p.c_T_e[:3, :3])),
+        np.linalg.norm(res.Y[:3, 3] - p.b_T_w[:3, 3]), res.iterations, res.restarts,
+        res.converged)
+
+
 def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
                 trials: int = 50, iterations: int = 100, seed: int = 0,
                 hand_rotation_deg: float = 180.0, hand_translation_m: float = 0.5,
-                progress: Progress | None = None) -> HirshResult:
+                progress: Progress | None = None,
+                executor: Executor | None = None) -> HirshResult:
     """Hirsh et al. (2001) Fig. 3 (``noise_deg = 0``) or Fig. 4 (``noise_deg = 1``).
 
     For each number of views, ``trials`` random problems (module docstring, steps 1-3);
@@ -476,6 +508,9 @@ def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
         Half-width of the cube of hand positions, metres.
     progress : callable, optional
         Called as ``progress(done, total)`` after each trial.
+    executor : concurrent.futures.Executor, optional
+        Run the trials as its tasks (:func:`verification.studies.run_trials`); default
+        serially here. The numbers do not depend on it (each trial seeds its own).
 
     Returns
     -------
@@ -498,38 +533,19 @@ def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
     converged = np.zeros(shape, dtype=bool)
     failed = np.zeros(shape, dtype=bool)
     factors = np.full(shape, np.nan)
-    done = 0
+    cells = [(v, t) for v in range(len(vs)) for t in range(trials)]
+    results = run_trials(_hirsh_trial, [(seed, noise_deg, int(vs[v]), t, k,
+                                         hand_rotation_deg, hand_translation_m)
+                                        for v, t in cells],
+                         executor=executor, progress=progress)
+    for (v, t), (factor, init, solved) in zip(cells, results, strict=True):
+        factors[v, t], initial[v, t] = factor, init
+        if solved is None:
+            failed[v, t] = True
+            continue
+        (y_err[v, t], x_err[v, t], solved_y[v, t], solved_x[v, t], solved_t[v, t],
+         solver_its[v, t], restarts[v, t], converged[v, t]) = solved
     for v, n in enumerate(vs):
-        for t in range(trials):
-            rng = _trial_rng(seed, noise_deg, int(n), t)
-            p = _draw_problem(rng, int(n), hand_rotation_deg=hand_rotation_deg,
-                              hand_translation_m=hand_translation_m)
-            c_T_ws = p.c_T_ws
-            if noise_deg > 0.0:
-                c_T_ws = rotate_about_random_axes(c_T_ws, rng, np.radians(noise_deg))
-            factors[v, t] = convergence_factor(c_T_ws, p.e_T_bs)
-            initial[v, t] = np.degrees(quaternion_angle(np.eye(3), p.b_T_w[:3, :3]))
-            try:
-                res = solve_axyb(c_T_ws, p.e_T_bs, Y0=np.eye(4), refine=False,
-                                 record_history=True, rng=rng,
-                                 max_iterations=max(k, SOLVER_MAX_ITERATIONS))
-            except AXYBError as err:
-                log.warning("hirsh: %d views, trial %d: the solver failed: %s", n, t, err)
-                failed[v, t] = True
-            else:
-                y_err[v, t] = _padded(np.degrees(quaternion_angle(
-                    res.history_Y[:, :3, :3], p.b_T_w[:3, :3])), k)
-                x_err[v, t] = _padded(np.degrees(quaternion_angle(
-                    res.history_X[:, :3, :3], p.c_T_e[:3, :3])), k)
-                solved_y[v, t] = np.degrees(quaternion_angle(res.Y[:3, :3], p.b_T_w[:3, :3]))
-                solved_x[v, t] = np.degrees(quaternion_angle(res.X[:3, :3], p.c_T_e[:3, :3]))
-                solved_t[v, t] = np.linalg.norm(res.Y[:3, 3] - p.b_T_w[:3, 3])
-                solver_its[v, t] = res.iterations
-                restarts[v, t] = res.restarts
-                converged[v, t] = res.converged
-            done += 1
-            if progress is not None:
-                progress(done, len(vs) * trials)
         log.info("hirsh: noise %g deg, %d views: median Y error after %d iterations %.3g deg",
                  noise_deg, n, k, np.nanmedian(y_err[v, :, -1]))
     freeze(vs, initial, y_err, x_err, solved_y, solved_x, solved_t, solver_its, converged,
@@ -763,8 +779,8 @@ def run_hirsh(out_dir: str | Path, *, noise_deg: float = PAPER_NOISE_DEG, **kwar
     write ``hirsh_fig3_fig4.png`` and ``hirsh.json`` into ``out_dir``.
 
     ``kwargs`` go to both studies (``views``, ``trials``, ``iterations``, ``seed``,
-    ``hand_rotation_deg``, ``hand_translation_m``, ``progress``). Returns the noise-free
-    and the noisy result.
+    ``hand_rotation_deg``, ``hand_translation_m``, ``progress``, ``executor``). Returns
+    the noise-free and the noisy result.
     """
     out = output_dir(out_dir)
     noise_free = hirsh_study(noise_deg=0.0, **kwargs)
@@ -798,9 +814,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     def run(**kwargs: Any) -> str:
         return format_hirsh(*run_hirsh(args.out, **kwargs))
 
-    return run_and_print("hirsh", run, {"trials": args.trials, "seed": args.seed,
-                                        "iterations": args.iterations},
-                         (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"))
+    executor = executor_for_jobs(args.jobs)
+    try:
+        return run_and_print("hirsh", run, {"trials": args.trials, "seed": args.seed,
+                                            "iterations": args.iterations,
+                                            "executor": executor},
+                             (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"))
+    finally:
+        if executor is not None:
+            executor.shutdown()
 
 if __name__ == "__main__":
     sys.exit(main())

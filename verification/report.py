@@ -172,7 +172,9 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                      for u in result.unknowns],
         "identifiability": {
             "rank": ident.rank, "n_parameters": ident.n_parameters,
-            "condition": ident.condition, "observability_O1": ident.observability_o1,
+            # strict JSON: an undefined (no parameters) or infinite value is null
+            "condition": _finite_or_none(ident.condition),
+            "observability_O1": _finite_or_none(ident.observability_o1),
             "not_identifiable": [{"parameters": [":".join(p) for p in params], "why": why}
                                  for params, why in ident.unidentifiable],
             "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
@@ -182,6 +184,10 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                              "file's samples (from 0)",
         "downweighted": downweighted_rows(result),
     }
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
@@ -289,8 +295,10 @@ def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, 
 
     stages = list(stage_rms)
     groups = list(stage_rms[stages[0]])
-    fig = Figure(figsize=(8.5, 4.2), layout="constrained")
+    fig = Figure(figsize=(8.5, 4.2))
     FigureCanvasAgg(fig)
+    # fixed margins: the constrained layout engine costs more than the rest of the plot
+    fig.subplots_adjust(left=0.08, right=0.99, top=0.93, bottom=0.25)
     ax = fig.add_subplot()
     width = 0.8 / len(stages)
     colours = ["0.6", "tab:orange", "tab:green", "tab:blue", "tab:purple"]
@@ -305,7 +313,7 @@ def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, 
     ax.set_ylabel("held-out position RMS (mm, log scale)")
     ax.grid(axis="y", which="both", alpha=0.3)
     ax.legend(title="after stage", ncols=len(stages), loc="upper center",
-              bbox_to_anchor=(0.5, -0.12), frameon=False)
+              bbox_to_anchor=(0.5, -0.11), frameon=False)
     if title:
         ax.set_title(title, fontsize=10)
     path = Path(path)

@@ -42,6 +42,7 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Iterable, Sequence
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,6 +70,7 @@ from verification.studies import (
     new_figure,
     readonly,
     run_on_head,
+    run_trials,
     sample_std,
     save_figure,
     shared_legend,
@@ -324,12 +326,26 @@ class Fig11Result:
                    errors_mm=np.array(doc["errors_mm"], dtype=float))
 
 
+def _fig11_trial(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDArray,
+                 sigma: float, m: int, t: int, n_test: int) -> NDArray[np.float64]:
+    """One trial of :func:`fig11_study` (a task: module level, picklable arguments): the
+    mean held-out position error per frame, mm."""
+    rng = _trial_rng(setup, _FIG11_TAG, sigma, m, t)
+    trial = _calibrate_once(nominal, setup, lower, upper, per_joint=m, sigma_mm=sigma,
+                            rng=rng)
+    qs = random_configurations(lower, upper, n_test, trial.rng, fraction=setup.fraction)
+    d = (_positions_m(trial.truth, qs, setup.frames)
+         - _positions_m(trial.identified, qs, setup.frames))
+    return 1e3 * np.linalg.norm(d, axis=-1).mean(axis=0)
+
+
 def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
                 sigmas_mm: Iterable[float] = (0.1, 0.25, 0.5, 1.0), trials: int = 10,
                 n_test: int = 200, rot_per_mm_rad: float = 1.0 / 50.0, error_mm: float = 5.0,
                 error_deg: float = 1.0, fraction: float = 0.8, seed: int = 0,
                 frames: Sequence[str] | None = None,
-                progress: Progress | None = None) -> Fig11Result:
+                progress: Progress | None = None,
+                executor: Executor | None = None) -> Fig11Result:
     """Shih et al. (1992) Fig. 11: positioning error vs measurements per joint and noise.
 
     For each noise level ``sigma`` and each ``M`` in ``per_joint``, ``trials`` random
@@ -386,21 +402,15 @@ def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
     n_test = check_count(n_test, "n_test", 1)
     lower, upper = nominal.joint_limits(setup.joint_names)
     errors = np.empty((len(sigmas), len(ms), trials, len(setup.frames)))
-    total, done = errors[..., 0].size, 0
+    cells = [(s, k, t) for s in range(len(sigmas)) for k in range(len(ms))
+             for t in range(trials)]
+    results = run_trials(_fig11_trial, [(nominal, setup, lower, upper, float(sigmas[s]),
+                                         int(ms[k]), t, n_test) for s, k, t in cells],
+                         executor=executor, progress=progress)
+    for (s, k, t), error in zip(cells, results, strict=True):
+        errors[s, k, t] = error
     for s, sigma in enumerate(sigmas):
         for k, m in enumerate(ms):
-            for t in range(trials):
-                rng = _trial_rng(setup, _FIG11_TAG, sigma, int(m), t)
-                trial = _calibrate_once(nominal, setup, lower, upper, per_joint=int(m),
-                                        sigma_mm=float(sigma), rng=rng)
-                qs = random_configurations(lower, upper, n_test, trial.rng,
-                                           fraction=setup.fraction)
-                d = (_positions_m(trial.truth, qs, setup.frames)
-                     - _positions_m(trial.identified, qs, setup.frames))
-                errors[s, k, t] = 1e3 * np.linalg.norm(d, axis=-1).mean(axis=0)
-                done += 1
-                if progress is not None:
-                    progress(done, total)
             log.info("fig11: sigma %.3g mm, M = %d: mean error %.3g mm", sigma, m,
                      errors[s, k].mean())
     freeze(ms, sigmas, errors)
@@ -509,11 +519,27 @@ class Table4Result:
                    error_vs_truth_mm=np.array(doc["error_vs_truth_mm"], dtype=float))
 
 
+def _table4_trial(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDArray,
+                  sigma: float, per_joint: int, t: int, n_test: int
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """One trial of :func:`table4_study` (a task): held-out errors against the noisy
+    measurements and against the truth, (n_test, E, 3) mm."""
+    rng = _trial_rng(setup, _TABLE4_TAG, sigma, per_joint, t)
+    trial = _calibrate_once(nominal, setup, lower, upper, per_joint=per_joint,
+                            sigma_mm=sigma, rng=rng)
+    qs = random_configurations(lower, upper, n_test, trial.rng, fraction=setup.fraction)
+    true_p = _positions_m(trial.truth, qs, setup.frames)
+    measured_p = true_p + trial.rng.normal(0.0, 1e-3 * sigma, size=true_p.shape)
+    predicted_p = _positions_m(trial.identified, qs, setup.frames)
+    return 1e3 * (measured_p - predicted_p), 1e3 * (true_p - predicted_p)
+
+
 def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: float = 0.5,
                  trials: int = 20, n_test: int = 9, rot_per_mm_rad: float = 1.0 / 50.0,
                  error_mm: float = 5.0, error_deg: float = 1.0, fraction: float = 0.8,
                  seed: int = 0, frames: Sequence[str] | None = None,
-                 progress: Progress | None = None) -> Table4Result:
+                 progress: Progress | None = None,
+                 executor: Executor | None = None) -> Table4Result:
     """Shih et al. (1992) Table 4's protocol in simulation.
 
     Each trial calibrates a new true robot in closed form from ``per_joint`` one-joint
@@ -560,18 +586,11 @@ def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: 
     lower, upper = nominal.joint_limits(setup.joint_names)
     shape = (trials, n_test, len(setup.frames), 3)
     vs_measured, vs_truth = np.empty(shape), np.empty(shape)
-    for t in range(trials):
-        rng = _trial_rng(setup, _TABLE4_TAG, sigma, per_joint, t)
-        trial = _calibrate_once(nominal, setup, lower, upper, per_joint=per_joint,
-                                sigma_mm=sigma, rng=rng)
-        qs = random_configurations(lower, upper, n_test, trial.rng, fraction=setup.fraction)
-        true_p = _positions_m(trial.truth, qs, setup.frames)
-        measured_p = true_p + trial.rng.normal(0.0, 1e-3 * sigma, size=true_p.shape)
-        predicted_p = _positions_m(trial.identified, qs, setup.frames)
-        vs_measured[t] = 1e3 * (measured_p - predicted_p)
-        vs_truth[t] = 1e3 * (true_p - predicted_p)
-        if progress is not None:
-            progress(t + 1, trials)
+    results = run_trials(_table4_trial, [(nominal, setup, lower, upper, sigma, per_joint, t,
+                                          n_test) for t in range(trials)],
+                         executor=executor, progress=progress)
+    for t, (measured, truth) in enumerate(results):
+        vs_measured[t], vs_truth[t] = measured, truth
     freeze(vs_measured, vs_truth)
     return Table4Result(setup=setup, per_joint=per_joint, sigma_mm=sigma, n_test=n_test,
                         error_vs_measured_mm=vs_measured, error_vs_truth_mm=vs_truth)

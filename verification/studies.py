@@ -16,6 +16,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import fields
 from pathlib import Path
 from typing import Any, Self, TypeVar, get_origin, get_type_hints
@@ -32,6 +33,7 @@ __all__ = [
     "arrays_from",
     "check_count",
     "choice_main",
+    "executor_for_jobs",
     "freeze",
     "json_list",
     "json_lists",
@@ -42,6 +44,7 @@ __all__ = [
     "readonly",
     "run_and_print",
     "run_on_head",
+    "run_trials",
     "sample_std",
     "save_figure",
     "shared_legend",
@@ -73,6 +76,42 @@ def sample_std(values: NDArray[np.float64], axis: int | tuple[int, ...] = 0
     """Sample standard deviation along ``axis`` (``ddof = 1``; 0 for a single value)."""
     n = np.prod([values.shape[a] for a in np.atleast_1d(axis)])
     return np.std(values, axis=axis, ddof=1 if n > 1 else 0)
+
+
+# -- trials, serially or as tasks of an executor ---------------------------------------------
+
+
+def run_trials(trial: Callable[..., R], args: Sequence[tuple], *,
+               executor: Executor | None = None, progress: Progress | None = None
+               ) -> list[R]:
+    """``[trial(*a) for a in args]``: in this process (``executor`` None) or submitted as
+    tasks to any :class:`concurrent.futures.Executor` (a process pool, Dask's or Ray's
+    executor); the results come back in the order of ``args`` either way.
+
+    With an executor, ``trial`` must be a module-level function and ``args`` picklable
+    (a :class:`kinfw.robot.Robot` pickles as its URDF text). ``progress(done, total)`` is
+    called as trials finish.
+    """
+    total = len(args)
+    if executor is None:
+        out = []
+        for i, a in enumerate(args):
+            out.append(trial(*a))
+            if progress is not None:
+                progress(i + 1, total)
+        return out
+    futures = [executor.submit(trial, *a) for a in args]
+    for done, _ in enumerate(as_completed(futures), 1):
+        if progress is not None:
+            progress(done, total)
+    return [f.result() for f in futures]
+
+
+def executor_for_jobs(jobs: int) -> Executor | None:
+    """None (run in this process) for ``jobs <= 1``, else a process pool of ``jobs``
+    workers (``ValueError`` for ``jobs < 1``)."""
+    jobs = check_count(jobs, "--jobs", 1)
+    return None if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
 
 
 # -- arrays and JSON -----------------------------------------------------------------------
@@ -255,6 +294,8 @@ def study_parser(prog: str, description: str, *, trials_help: str,
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--trials", type=int, default=trials_default, help=trials_help)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="run the trials in N worker processes (default 1: here)")
     return parser
 
 
@@ -286,5 +327,13 @@ def choice_main(argv: Sequence[str] | None, *, prog: str, description: str, tria
     if args.trials is not None:
         kwargs["trials"] = args.trials
     run, format_table = studies[args.study]
-    return run_and_print(args.study, lambda **kw: format_table(run(args.out, **kw)), kwargs,
-                         (args.out / f"{args.study}.png", args.out / f"{args.study}.json"))
+    executor = executor_for_jobs(args.jobs)
+    if executor is not None:
+        kwargs["executor"] = executor
+    try:
+        return run_and_print(args.study, lambda **kw: format_table(run(args.out, **kw)),
+                             kwargs, (args.out / f"{args.study}.png",
+                                      args.out / f"{args.study}.json"))
+    finally:
+        if executor is not None:
+            executor.shutdown()

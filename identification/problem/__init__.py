@@ -17,12 +17,15 @@ from .diagnostics import (
     covariance_and_identifiability,
     group_residuals,
 )
-from .noise import NoiseModel, estimate_noise
+from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
 from .problem import (
+    PRIOR,
+    GroupFunctions,
     LeastSquaresProblem,
     ResidualGroup,
     Unknown,
     build_problem,
+    clear_function_cache,
     estimate_unknowns,
     express_in,
 )
@@ -30,19 +33,24 @@ from .solver import LOSSES, levenberg_marquardt, observation_norms, row_weights,
 
 __all__ = [
     "LOSSES",
+    "PRIOR",
+    "GroupFunctions",
     "GroupResiduals",
     "Identifiability",
     "LeastSquaresProblem",
     "NoiseModel",
+    "NoiseShape",
     "ResidualGroup",
     "Unknown",
     "build_problem",
+    "clear_function_cache",
     "covariance_and_identifiability",
     "estimate_noise",
     "estimate_unknowns",
     "express_in",
     "group_residuals",
     "levenberg_marquardt",
+    "noise_shape",
     "observation_norms",
     "row_weights",
     "thresholds",

@@ -29,10 +29,14 @@ class Identifiability:
     Attributes
     ----------
     rank, n_parameters : int
+        Identifiable directions, and free parameters (both 0 with ``parameters="none"``
+        and nothing else to estimate).
     condition : float
-        Largest over smallest singular value among the identifiable directions.
+        Largest over smallest singular value among the identifiable directions; inf when
+        no direction is identifiable, nan (undefined) when there is no free parameter.
     observability_o1 : float
-        Borm & Menq's O1: geometric mean of the singular values over sqrt(rows).
+        Borm & Menq's O1: geometric mean of the singular values over sqrt(rows); 0 when
+        a direction is not identifiable, nan (undefined) when there is no free parameter.
     unidentifiable : tuple of (tuple of (owner, field), str)
         Per null direction, the parameters involved and why they are not determined.
     correlations : tuple of (str, str, float)
@@ -139,10 +143,15 @@ def covariance_and_identifiability(Jw: NDArray, free: NDArray, names: Sequence[t
     pairs.sort(reverse=True)
     correlations = tuple((":".join(free_names[a]), ":".join(free_names[b]), float(rho[a, b]))
                          for _, a, b in pairs[:20])
-    o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) else 0.0
+    # no free parameter: nothing to condition or observe, both undefined (nan)
+    if not len(s):
+        o1 = condition = float("nan")
+    else:
+        o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) \
+            else 0.0
+        condition = float(s[0] / s[rank - 1]) if rank else float("inf")
     return covariance, Identifiability(
-        rank=rank, n_parameters=len(free_names),
-        condition=float(s[0] / s[rank - 1]) if rank else float("inf"),
+        rank=rank, n_parameters=len(free_names), condition=condition,
         observability_o1=o1, unidentifiable=tuple(unidentifiable), correlations=correlations)
 
 

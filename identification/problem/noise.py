@@ -8,7 +8,9 @@ rows in rad, or a kind's own). :class:`NoiseModel` holds one sigma per component
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import functools
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,7 +19,8 @@ from numpy.typing import NDArray
 
 from kinfw.observations.base import NoiseComponent
 
-__all__ = ["NoiseModel", "estimate_noise"]
+__all__ = ["NoiseModel", "NoiseShape", "chi2_cdf", "estimate_noise", "noise_shape", "norm2_cdf",
+           "quantile"]
 
 #: The component whose sigma a noise model uses for a component it does not name, by unit.
 DEFAULT_COMPONENT = {"m": "position", "rad": "rotation"}
@@ -37,6 +40,16 @@ class NoiseModel:
         Standard deviation of each component's rows (SI: m, or rad small-angle).
     estimated : bool
         True when estimated from the residuals rather than given.
+
+    Notes
+    -----
+    The robust estimate (``loss`` huber or cauchy) assumes each component's noise model
+    (:attr:`kinfw.observations.NoiseComponent.distribution`): for the built-in kinds
+    that of Shih et al. (1992, Fig. 10), as :func:`verification.simulate.perturb_poses`
+    draws it: each position component ``N(0, position_m)``; an orientation error is a
+    rotation by an angle ``N(0, sqrt(3) rotation_rad)`` about a uniformly random axis,
+    whose three components have deviation ``rotation_rad`` each without being Gaussian.
+    Least squares' estimate assumes only the variances.
     """
 
     sigmas: tuple[tuple[str, float], ...]
@@ -80,21 +93,106 @@ class NoiseModel:
         return values[fallback]
 
 
-def _chi2_constants(dof: int) -> tuple[float, float, float]:
-    """Chi-square(dof): median, 99.9 % quantile, and the mean below that quantile / dof
-    (the trimmed second moment), from scipy.stats for dof 1..6, else Wilson-Hilferty."""
-    table = {
-        1: (0.454936423119572, 10.827566170662733, 0.9882925078281297),
-        2: (1.386294361119891, 13.815510557964274, 0.9930853300510688),
-        3: (2.3659738843753377, 16.26623619623813, 0.9948712017073625),
-        4: (3.3566939800333224, 18.46682695290317, 0.9958302639735415),
-        5: (4.351460191095526, 20.515005652432873, 0.9964380686811932),
-        6: (5.348120627447118, 22.457744484825323, 0.9968619892255411),
-    }
-    if dof in table:
-        return table[dof]
-    c = 2.0 / (9.0 * dof)
-    return dof * (1.0 - c) ** 3, dof * (1.0 - c + 3.090232 * np.sqrt(c)) ** 3, 1.0
+def chi2_cdf(x: float, dof: int) -> float:
+    """CDF of the chi-square distribution, closed form for any positive integer ``dof``.
+
+    ``F_1(x) = erf(sqrt(x / 2))``, ``F_2(x) = 1 - exp(-x / 2)`` and
+    ``F_{k+2}(x) = F_k(x) - (x / 2)^(k / 2) exp(-x / 2) / Gamma(k / 2 + 1)``.
+    """
+    if dof < 1:
+        raise ValueError(f"dof: expected a positive integer, got {dof}")
+    if x <= 0.0:
+        return 0.0
+    F = math.erf(math.sqrt(x / 2.0)) if dof % 2 else 1.0 - math.exp(-x / 2.0)
+    for k in range(2 - dof % 2, dof, 2):
+        F -= (x / 2.0) ** (k / 2.0) * math.exp(-x / 2.0) / math.gamma(k / 2.0 + 1.0)
+    return F
+
+
+def quantile(cdf: Callable[[float], float], p: float) -> float:
+    """Quantile of a distribution on [0, inf) from its CDF, by bisection."""
+    lo, hi = 0.0, 1.0
+    while cdf(hi) < p:
+        hi *= 2.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if cdf(mid) < p else (lo, mid)
+    return 0.5 * (lo + hi)
+
+
+def norm2_cdf(components: Sequence[NoiseComponent]) -> Callable[[float], float]:
+    """CDF of one observation's whitened squared residual norm under its components'
+    noise models: ``chi2(g)`` for ``g`` Gaussian rows, plus ``3 chi2(1)`` for an
+    ``"angle"`` component. A pose (position + orientation): ``S = X + 3 t^2``,
+    ``P(S <= s) = int_0^sqrt(s/3) 2 phi(t) F_3(s - 3 t^2) dt`` (Gauss-Legendre, 64 nodes).
+    More than one angle component falls back to ``chi2(rows)``.
+    """
+    gaussian = sum(c.rows for c in components if c.distribution == "gaussian")
+    angles = sum(1 for c in components if c.distribution == "angle")
+    if angles == 0:
+        return lambda s: chi2_cdf(s, gaussian)
+    if angles > 1:
+        rows = sum(c.rows for c in components)
+        return lambda s: chi2_cdf(s, rows)
+    if gaussian == 0:
+        return lambda s: chi2_cdf(s / 3.0, 1)
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+
+    def cdf(s: float) -> float:
+        if s <= 0.0:
+            return 0.0
+        b = math.sqrt(s / 3.0)
+        t = 0.5 * b * (nodes + 1.0)
+        f = np.array([chi2_cdf(s - 3.0 * ti * ti, gaussian) for ti in t])
+        return float(0.5 * b * np.sum(weights * 2.0 * np.exp(-0.5 * t * t)
+                                      / math.sqrt(2.0 * math.pi) * f))
+
+    return cdf
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseShape:
+    """Distribution of one component's whitened squared residual norm ``X`` per
+    observation (``rows`` rows of unit variance): the constants of the robust estimate.
+
+    Attributes
+    ----------
+    median : float
+        Median of ``X``.
+    cut : float
+        Its 99.9 % quantile: the trimmed second moment keeps ``X < cut``.
+    trimmed : float
+        ``E[X | X < cut] / rows``: the trimmed second moment per row, relative to the
+        untrimmed one (1).
+    """
+
+    median: float
+    cut: float
+    trimmed: float
+
+
+@functools.cache
+def _shape(rows: int, distribution: str) -> NoiseShape:
+    if distribution == "angle":
+        # X = 3 chi2(1): E[X | X < c] / 3 = E[Y | Y < c/3] = F_3(c/3) / F_1(c/3)
+        cut = 3.0 * quantile(lambda x: chi2_cdf(x, 1), 0.999)
+        return NoiseShape(3.0 * quantile(lambda x: chi2_cdf(x, 1), 0.5), cut,
+                          chi2_cdf(cut / 3.0, 3) / chi2_cdf(cut / 3.0, 1))
+    # X ~ chi2(k): E[X; X < c] = k F_{k+2}(c), so E[X | X < c] / k = F_{k+2}(c) / F_k(c)
+    cut = quantile(lambda x: chi2_cdf(x, rows), 0.999)
+    return NoiseShape(quantile(lambda x: chi2_cdf(x, rows), 0.5), cut,
+                      chi2_cdf(cut, rows + 2) / chi2_cdf(cut, rows))
+
+
+def noise_shape(component: NoiseComponent) -> NoiseShape:
+    """The robust constants of a noise component (closed forms through chi-square CDFs).
+
+    Positions (``"gaussian"``, 3 rows): ``X ~ chi2(3)``. Orientations (``"angle"``): a
+    rotation vector ``theta u``, ``theta ~ N(0, s)``, ``u`` uniform on the sphere,
+    whitened by its per-component deviation ``s / sqrt(3)``: ``X = 3 chi2(1)``, whose
+    median is 1.365 against chi2(3)'s 2.366.
+    """
+    return _shape(component.rows, component.distribution)
 
 
 def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
@@ -102,17 +200,44 @@ def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
                    ) -> NoiseModel:
     """Rescale each noise component's sigma from the whitened residuals.
 
-    ``groups`` are the problem's residual groups (``sample``, ``rows``, ``components``),
-    in the order of the rows of ``r``; ``leverage`` is the diagonal of the hat matrix
-    ``J (J^T J)^+ J^T`` (one per row): a component's residual degrees of freedom are its
-    rows minus its leverages, so a component the fit follows closely (orientations,
-    here) is not underestimated.
+    Parameters
+    ----------
+    r : ndarray, shape (R,)
+        Whitened residuals (by ``sigma``) of every observation, groups in order.
+    groups : sequence
+        The problem's residual groups (``sample``, ``rows``, ``components``), in the
+        order of the rows of ``r``.
+    sigma : NoiseModel
+        The whitening of ``r``.
+    leverage : ndarray, shape (R,)
+        Diagonal of the hat matrix ``J (J^T J)^+ J^T`` (one per row): a component's
+        residual degrees of freedom are its rows minus its leverages, so a component the
+        fit follows closely (orientations, here) is not underestimated.
+    robust : bool
+        False: least squares' variance components. True: the robust estimate below.
+    first : bool
+        Robust only: the first round (median) rather than a later one (trimmed moment).
 
-    Least squares: variance components (each component's sum of squares over its degrees
-    of freedom). With a robust loss: first the median of the per-observation squared
-    norms over the chi-square(rows) median, which gross outliers do not inflate; then
-    (``first=False``) the second moment of the observations inside the 99.9 % quantile,
-    which depends on the noise's shape only through that tail.
+    Returns
+    -------
+    NoiseModel
+        ``estimated=True``; one sigma per component seen, the others kept.
+
+    Notes
+    -----
+    Per observation and component, ``X`` is the squared norm of the whitened rows; its
+    distribution under the component's noise model is :func:`noise_shape` (positions
+    ``chi2(3)``; orientations, an angle about a uniformly random axis, ``3 chi2(1)``).
+
+    Least squares: variance components, ``sigma_new^2 = sigma^2 sum(X) / (rows n share)``,
+    with ``share`` the component's mean ``1 - leverage``; consistent for any shape.
+
+    Robust, first round: ``sigma_new^2 = sigma^2 median(X) / (share median_model)``,
+    which gross outliers do not inflate. Later rounds: the trimmed second moment,
+    ``sigma_new^2 = sigma^2 mean(X | X < cut) / (rows share trimmed)`` with ``cut`` the
+    model's 99.9 % quantile; its fixed point is the true sigma under the model and gross
+    outliers (beyond ``cut``) do not enter it. For orientations whose components are
+    instead independent Gaussians the estimate is 0.6 % high after the trimmed rounds.
     """
     blocks: dict[str, list[NDArray]] = {}
     hats: dict[str, list[NDArray]] = {}
@@ -134,15 +259,14 @@ def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
 
     def factor(name: str) -> float:
         block, hat = np.concatenate(blocks[name]), np.concatenate(hats[name])
-        dof = comps[name].rows
-        median, q999, trimmed = _chi2_constants(dof)
+        shape = noise_shape(comps[name])
         share = max(1.0 - hat.sum() / block.size, 1e-3)
         s2 = np.sum(block**2, axis=1)
         if robust and first:
-            return float(np.sqrt(np.median(s2) / (median * share)))
+            return float(np.sqrt(np.median(s2) / (shape.median * share)))
         if robust:
-            inside = s2[s2 < q999]
-            return float(np.sqrt(np.mean(inside) / (dof * trimmed * share))) \
+            inside = s2[s2 < shape.cut]
+            return float(np.sqrt(np.mean(inside) / (comps[name].rows * shape.trimmed * share))) \
                 if len(inside) else 1.0
         return float(np.sqrt(np.sum(s2) / (block.size * share)))
 

@@ -12,7 +12,9 @@ There is no branch on an observation kind here.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -30,8 +32,11 @@ from kinfw.transforms import average_transform
 
 from .gauge import robot_blocks
 
-__all__ = ["LeastSquaresProblem", "ResidualGroup", "Unknown", "build_problem",
-           "estimate_unknowns", "express_in"]
+__all__ = ["PRIOR", "GroupFunctions", "LeastSquaresProblem", "ResidualGroup", "Unknown",
+           "build_problem", "clear_function_cache", "estimate_unknowns", "express_in"]
+
+PRIOR = NoiseComponent("prior", 1, "m")
+"""The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,9 +60,57 @@ class Unknown:
     value: NDArray[np.float64]
 
 
-@dataclass(frozen=True, slots=True, eq=False)
+@dataclass(frozen=True, eq=False)
+class GroupFunctions:
+    """Per-observation CasADi functions of one group, all of ``(q, m, theta, const)``:
+    residual ``r``; residual and transposed dense Jacobian ``rj`` (one call, shared
+    subexpressions); Jacobian ``j``; and :meth:`rj_free`, the Jacobian's columns of the
+    estimated parameters only (cheaper for the small parameter sets). Unwhitened (SI).
+    """
+
+    r: Any
+    rj: Any
+    j: Any
+    args: list = field(repr=False)
+    residual_expr: Any = field(repr=False)
+    _by_free: dict = field(default_factory=dict, repr=False)
+
+    def rj_free(self, free: NDArray[np.bool_]):
+        """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
+        import casadi as ca
+
+        key = free.tobytes()
+        with _FUNCTION_CACHE_LOCK:
+            f = self._by_free.get(key)
+        if f is None:
+            theta = self.args[2]
+            cols = ca.vertcat(*[theta[int(i)] for i in np.flatnonzero(free)])
+            J = ca.jacobian(self.residual_expr, cols)
+            f = ca.Function("rjf", self.args, [self.residual_expr, ca.densify(J.T)])
+            with _FUNCTION_CACHE_LOCK:
+                if len(self._by_free) >= 8:  # bounded: a few parameter sets per structure
+                    self._by_free.pop(next(iter(self._by_free)))
+                self._by_free[key] = f
+        return f
+
+
+#: Compiled residual functions by problem structure (see :func:`build_problem`): a small
+#: LRU so that cross-validation folds, parameter sets and Monte Carlo trials on the same
+#: robot and observation layout build the CasADi graph once.
+_FUNCTION_CACHE: OrderedDict[tuple, tuple[GroupFunctions, ...]] = OrderedDict()
+_FUNCTION_CACHE_SIZE = 16
+_FUNCTION_CACHE_LOCK = threading.Lock()
+
+
+def clear_function_cache() -> None:
+    """Forget every cached CasADi residual function (they are rebuilt on demand)."""
+    with _FUNCTION_CACHE_LOCK:
+        _FUNCTION_CACHE.clear()
+
+
+@dataclass(frozen=True, eq=False)
 class ResidualGroup:
-    """One observation group in the problem: its data and CasADi residual maps.
+    """One observation group in the problem: its data and CasADi residual functions.
 
     Attributes
     ----------
@@ -68,17 +121,28 @@ class ResidualGroup:
         Joint values of its samples, model joint order.
     data : ndarray, shape (width, m)
         Measured values, one column per observation.
-    residual, jacobian : casadi.Function
-        ``(q, data, x) -> (rows, m)`` unwhitened residuals, and ``(rows, m P)`` their
-        Jacobian with respect to ``x``, mapped over the samples.
+    functions : GroupFunctions
+        Shared (cached) by every problem of the same structure.
+    const : ndarray
+        This problem's numbers (reference CPC model, block starts), an input of the
+        functions.
     """
 
     kind: ObservationKind
     group: Any
     qs: NDArray[np.float64]
     data: NDArray[np.float64]
-    residual: Any
-    jacobian: Any
+    functions: GroupFunctions
+    const: NDArray[np.float64]
+    _maps: dict = field(default_factory=dict, repr=False)
+    _q_rows: NDArray[np.float64] = field(init=False, repr=False)
+    _data_rows: NDArray[np.float64] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
+        object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
+        object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
+        object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
 
     @property
     def sample(self) -> NDArray[np.int64]:
@@ -104,6 +168,48 @@ class ResidualGroup:
     def row_sigma(self, noise: Any) -> NDArray[np.float64]:
         """Per residual row of one observation, its noise sigma (SI)."""
         return np.concatenate([np.full(c.rows, noise.sigma(c)) for c in self.components])
+
+    def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
+        key = (which, None if free is None else free.tobytes())
+        if key not in self._maps:
+            f = getattr(self.functions, which) if free is None else \
+                self.functions.rj_free(free)
+            self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
+        return self._maps[key]
+
+    @property
+    def residual(self):
+        """Unwhitened residuals ``(q (J, m), data (width, m), x) -> (rows, m)`` (CasADi;
+        numeric or symbolic arguments)."""
+        f = self._mapped("r")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    @property
+    def jacobian(self):
+        """Their Jacobian ``(q, data, x) -> (rows, m * P)`` (CasADi)."""
+        f = self._mapped("j")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    def evaluate(self, x: NDArray, with_jacobian: bool,
+                 free: NDArray[np.bool_] | None = None) -> tuple[NDArray, NDArray | None]:
+        """Unwhitened residuals ``(m * rows,)`` (observation-major) and Jacobian
+        ``(m * rows, P)``, or only its ``free`` columns ``(m * rows, n_free)``, written by
+        CasADi straight into numpy arrays."""
+        m = len(self.sample)
+        n_cols = len(x) if free is None else int(free.sum())
+        fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
+        buf, call = fn.buffer()
+        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float),
+                self.const)
+        for i, a in enumerate(args):
+            buf.set_arg(i, memoryview(a))
+        r = np.empty(m * self.rows)
+        buf.set_res(0, memoryview(r))
+        J = np.empty((m * self.rows, n_cols)) if with_jacobian else None
+        if J is not None:
+            buf.set_res(1, memoryview(J))
+        call()
+        return r, J
 
 
 @dataclass(frozen=True, slots=True)
@@ -193,36 +299,52 @@ class LeastSquaresProblem:
         sizes = [(len(g.sample), g.rows) for g in self.groups]
         return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
 
+    @property
+    def obs_components(self) -> list[tuple[int, tuple[NoiseComponent, ...]]]:
+        """(observations, noise components) of each group, then the prior's rows (one
+        Gaussian row each): what :func:`identification.problem.solver.thresholds` needs."""
+        out = [(len(g.sample), g.components) for g in self.groups]
+        return out + ([(len(self.prior_rows), (PRIOR,))] if len(self.prior_rows) else [])
+
     def raw_residuals(self, x: NDArray, with_jacobian: bool = True
                       ) -> list[tuple[NDArray, NDArray | None]]:
         """Per group the unwhitened residuals (m, rows) and Jacobian (m, rows, P) at x."""
-        P = self.n_parameters
         out = []
         for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian)
             m = len(g.sample)
-            r = np.array(g.residual(g.qs, g.data, x)).T
-            J = None
-            if with_jacobian:
-                J = np.array(g.jacobian(g.qs, g.data, x)).reshape(g.rows, m, P) \
-                    .transpose(1, 0, 2)
-            out.append((r, J))
+            out.append((r.reshape(m, g.rows),
+                        None if J is None else J.reshape(m, g.rows, len(x))))
         return out
 
-    def evaluate(self, x: NDArray, noise: Any, with_jacobian: bool = True
-                 ) -> tuple[NDArray, NDArray | None]:
+    def evaluate(self, x: NDArray, noise: Any, with_jacobian: bool = True, *,
+                 only_free: bool = False) -> tuple[NDArray, NDArray | None]:
         """Whitened residuals (N,) and their Jacobian (N, P) at ``x``.
 
         Rows are observation by observation (each observation's rows together), group
         by group, then one row per prior entry; each row divided by its component's
-        sigma in ``noise`` (:class:`identification.refine.NoiseModel`).
+        sigma in ``noise`` (:class:`identification.refine.NoiseModel`). With
+        ``only_free`` the columns of the fixed parameters are left at zero (not
+        computed: what the fit needs, cheaper for the small parameter sets).
         """
         P = self.n_parameters
+        free = self.free
+        no_columns = only_free and not free.any()
         rs, Js = [], []
-        for g, (r, J) in zip(self.groups, self.raw_residuals(x, with_jacobian), strict=True):
-            inv = 1.0 / g.row_sigma(noise)
-            rs.append((r * inv).reshape(-1))
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian and not no_columns,
+                              free if only_free else None)
+            inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
+            rs.append(r * inv)
             if with_jacobian:
-                Js.append((J * inv[None, :, None]).reshape(-1, P))
+                if only_free:
+                    full = np.zeros((len(r), P))
+                    if J is not None:
+                        full[:, free] = J * inv[:, None]
+                    J = full
+                else:
+                    J *= inv[:, None]
+                Js.append(J)
         k = self.prior_rows
         if len(k):  # Gaussian prior: (x - mean) / sigma
             rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
@@ -369,6 +491,46 @@ def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPC
     return blocks, fitted
 
 
+def _build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[Any],
+                     model_frame: str | None, n_const: int) -> tuple[GroupFunctions, ...]:
+    """The CasADi residual functions of every group, of ``(q, m, theta, const)``.
+
+    ``const`` is the blocks' :meth:`~kinfw.blocks.Block.constants` one after the other
+    (the CPC block's: the reference model of :func:`kinfw.cpc_casadi.cpc_reference_vector`).
+    """
+    import casadi as ca
+
+    P = sum(b.size for b in blocks)
+    theta = ca.SX.sym("theta", P)
+    const = ca.SX.sym("const", n_const)
+    q = ca.SX.sym("q", model0.n_joints)
+    slices, consts, k, c = [], [], 0, 0
+    for b in blocks:
+        n = len(b.constants())
+        slices.append(slice(k, k + b.size))
+        consts.append(const[c : c + n])
+        k, c = k + b.size, c + n
+    fk = cpc_fk_function(model0, symbolic_reference=True)
+    T_frames = fk(q + theta[slices[2]], theta[slices[0]], consts[0])
+    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
+    w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
+    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
+    values = {b.key: b.casadi_value(theta[s], cs)
+              for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)}
+    context = SymbolicContext(ca, frames, values, model_frame)
+    out = []
+    for g in groups:
+        kind = kind_of(g)
+        m_sym = ca.SX.sym("m", np.shape(kind.data(g))[1])
+        r = kind.residual(g, context, m_sym)
+        args = [q, m_sym, theta, const]
+        J = ca.jacobian(r, theta)
+        out.append(GroupFunctions(ca.Function("r", args, [r]),
+                                  ca.Function("rj", args, [r, ca.densify(J.T)]),
+                                  ca.Function("j", args, [J]), args, r))
+    return tuple(out)
+
+
 def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
                   targets: dict[str, NDArray] | None = None,
                   parameters: str | tuple[str, ...] = "full",
@@ -380,8 +542,6 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     pose and markers) instead of estimating them from these data; ``targets`` gives
     target poses ``root_T_target`` the same way.
     """
-    import casadi as ca
-
     measurements = check_against_robot(measurements, robot)
     start = robot if start is None else start
     groups = list(measurements.all_groups())
@@ -403,45 +563,40 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
     P = sum(b.size for b in blocks)
 
-    # -- the CasADi graph: FK of the CPC chart, base, zero offsets, block values ---------
-    base = blocks[1]
-    theta = ca.SX.sym("theta", P)
-    slices, k = [], 0
-    for b in blocks:
-        slices.append(slice(k, k + b.size))
-        k += b.size
-    q = ca.SX.sym("q", model0.n_joints)
-    fk = cpc_fk_function(model0)
-    T_frames = fk(q + theta[slices[2]], theta[slices[0]])
-    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    w_T_base = base.casadi_value(theta[slices[1]])
-    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
-    values = {b.key: b.casadi_value(theta[s]) for b, s in zip(blocks[3:], slices[3:],
-                                                              strict=True)}
-    context = SymbolicContext(ca, frames, values, model_frame)
-    residual_groups = []
-    for g in groups:
-        kind = kind_of(g)
-        data = np.asarray(kind.data(g), dtype=float)
-        m_sym = ca.SX.sym("m", data.shape[1])
-        expr = kind.residual(g, context, m_sym)
-        args = [q, m_sym, theta]
-        f = ca.Function("r", args, [expr])
-        jf = ca.Function("j", args, [ca.jacobian(expr, theta)])
-        residual_groups.append(ResidualGroup(kind, g, q_all[g.sample].T, data.T,
-                                             f.map(len(g.sample)), jf.map(len(g.sample))))
+    # -- the CasADi functions: every number (reference model, block starts) is an input,
+    # so problems of one structure (topology, blocks, groups' keys) share them
+    topo = model0.topology
+    key = ((topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
+           tuple(float(v) for v in model0.sign), model_frame,
+           tuple((type(b).__name__, b.key, b.size) for b in blocks),
+           tuple(kind_of(g).key(g) for g in groups))
+    const = np.concatenate([b.constants() for b in blocks])
+    with _FUNCTION_CACHE_LOCK:
+        functions = _FUNCTION_CACHE.get(key)
+        if functions is not None:
+            _FUNCTION_CACHE.move_to_end(key)
+    if functions is None:
+        functions = _build_functions(model0, blocks, groups, model_frame, len(const))
+        with _FUNCTION_CACHE_LOCK:
+            _FUNCTION_CACHE[key] = functions
+            while len(_FUNCTION_CACHE) > _FUNCTION_CACHE_SIZE:
+                _FUNCTION_CACHE.popitem(last=False)
+    residual_groups = [
+        ResidualGroup(kind_of(g), g, q_all[g.sample].T,
+                      np.asarray(kind_of(g).data(g), dtype=float).T, fn, const)
+        for g, fn in zip(groups, functions, strict=True)]
 
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
     if prior is not None:
         sigma_m, sigma_rad = prior
-        stop = slices[2].stop
+        stop = sum(b.size for b in blocks[:3])
         units = np.array([u for b in blocks[:3] for u in b.units])
         prior_sigma[:stop] = np.where(units == "rad", sigma_rad, sigma_m)
         if model_frame is None:  # deviations from the nominal, in the start's chart
             from kinfw.cpc import cpc_from_geometry, geometry_from_robot
 
             nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
-            prior_mean[slices[0]] = model0.chart_coordinates(nominal)
+            prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
     return LeastSquaresProblem(model0, model_frame, tuple(blocks), tuple(residual_groups),
                                prior_mean, prior_sigma, tuple(fitted))

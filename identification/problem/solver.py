@@ -7,10 +7,15 @@ group (a robust loss weighs an observation by the norm of its rows).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+from kinfw.observations.base import NoiseComponent
+
+from .noise import norm2_cdf, quantile
 
 __all__ = ["LOSSES", "levenberg_marquardt", "observation_norms", "robust_loss",
            "row_weights", "thresholds"]
@@ -37,14 +42,24 @@ def _repeat_rows(per_obs: NDArray, obs_sizes: ObsSizes) -> NDArray:
     return np.concatenate(out)
 
 
-def thresholds(obs_sizes: ObsSizes, z: float) -> NDArray:
-    """Per observation, the z-quantile of the norm of its clean whitened residual:
-    ``sqrt(chi2_ppf)`` by Wilson-Hilferty, ``rows (1 - 2/(9 rows) + z sqrt(2/(9 rows)))^3``."""
-    per_obs = []
-    for m, rows in obs_sizes:
-        c = 2.0 / (9.0 * rows)
-        per_obs.append(np.full(m, np.sqrt(rows * (1.0 - c + z * np.sqrt(c)) ** 3)))
-    return np.concatenate(per_obs)
+def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: float
+               ) -> NDArray:
+    """Per observation, the ``Phi(z)`` quantile of the norm of its clean whitened residual.
+
+    ``observations`` lists, per group, its number of observations and its noise
+    components (:attr:`LeastSquaresProblem.obs_components`). Under the components' noise
+    models (:func:`identification.problem.noise.norm2_cdf`): a point's squared norm is
+    ``chi2(3)``, a pose's ``chi2(3) + 3 chi2(1)``, a prior row's ``chi2(1)``; exact
+    quantiles, so ``z = 2.33`` flags 1 % of clean observations of every kind.
+    """
+    p = 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+    per_obs, known = [], {}
+    for m, components in observations:
+        key = tuple(components)
+        if key not in known:
+            known[key] = math.sqrt(quantile(norm2_cdf(key), p))
+        per_obs.append(np.full(m, known[key]))
+    return np.concatenate(per_obs) if per_obs else np.zeros(0)
 
 
 def robust_loss(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:

@@ -233,12 +233,19 @@ class NoiseComponent:
     sine : bool
         The rows are ``sin(angle) u`` (an orientation error): the error angle is
         ``arcsin`` of their norm.
+    distribution : {"gaussian", "angle"}
+        The noise model of the rows, for the robust constants and thresholds:
+        ``"gaussian"``, independent N(0, sigma) rows (whitened squared norm
+        ``chi2(rows)``); ``"angle"``, a rotation by an angle N(0, sqrt(3) sigma) about a
+        uniformly random axis (3 rows; whitened squared norm ``3 chi2(1)``; Shih et al.
+        1992, Fig. 10, as :func:`verification.simulate.perturb_poses` draws it).
     """
 
     name: str
     rows: int
     unit: str
     sine: bool = False
+    distribution: str = "gaussian"
 
     def magnitude(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
         """Per observation, the error size in SI (m, or rad as an angle): rows (m, rows)."""
@@ -247,7 +254,7 @@ class NoiseComponent:
 
 
 POSITION = NoiseComponent("position", 3, "m")
-ROTATION = NoiseComponent("rotation", 3, "rad", sine=True)
+ROTATION = NoiseComponent("rotation", 3, "rad", sine=True, distribution="angle")
 
 
 @dataclass(frozen=True, slots=True)
@@ -492,5 +499,10 @@ class ObservationKind:
 
     def residual(self, group: Any, model: SymbolicContext, m: Any) -> Any:
         """``measured - predicted`` for one observation as an SX column of
-        :attr:`rows` entries (unwhitened, SI), ``m`` the SX of one :meth:`data` row."""
+        :attr:`rows` entries (unwhitened, SI), ``m`` the SX of one :meth:`data` row.
+
+        The graph is cached by the problem's structure, which includes :meth:`key` of
+        each group: a residual may embed numbers of the group's key (a known offset),
+        never of its rows (those enter through ``m``) nor start values (through
+        ``model``)."""
         raise NotImplementedError
