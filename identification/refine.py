@@ -33,6 +33,7 @@ carry the freedom).
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -1036,20 +1037,25 @@ def _thresholds(obs_sizes: list[tuple[int, int]], z: float) -> NDArray:
     ``chi2(1)``; exact quantiles, so ``z = 2.33`` flags 1 % of clean observations of every
     kind. Other row counts fall back to ``chi2(rows)`` by Wilson-Hilferty.
     """
+    per_obs = [np.full(m, _threshold(rows, float(z))) for m, rows in obs_sizes]
+    return np.concatenate(per_obs) if per_obs else np.zeros(0)
+
+
+@functools.lru_cache(maxsize=64)
+def _threshold(rows: int, z: float) -> float:
+    """The threshold of :func:`_thresholds` for one row count (computed once)."""
     from math import erf, sqrt
 
     p = 0.5 * (1.0 + erf(z / sqrt(2.0)))
-    per_obs = []
-    for m, rows in obs_sizes:
-        if rows == 6:
-            k = sqrt(_quantile(_pose_norm2_cdf, p))
-        elif rows in (1, 3):
-            k = sqrt(_chi2_quantile(p, rows))
-        else:
-            c = 2.0 / (9.0 * rows)
-            k = sqrt(rows * (1.0 - c + z * sqrt(c)) ** 3)
-        per_obs.append(np.full(m, k))
-    return np.concatenate(per_obs) if per_obs else np.zeros(0)
+    if rows == 6:
+        return sqrt(_quantile(_pose_norm2_cdf, p))
+    if rows in (1, 3):
+        return sqrt(_chi2_quantile(p, rows))
+    c = 2.0 / (9.0 * rows)
+    return sqrt(rows * (1.0 - c + z * sqrt(c)) ** 3)
+
+
+_GAUSS_LEGENDRE_64 = np.polynomial.legendre.leggauss(64)
 
 
 def _pose_norm2_cdf(s: float) -> float:
@@ -1060,7 +1066,7 @@ def _pose_norm2_cdf(s: float) -> float:
 
     if s <= 0.0:
         return 0.0
-    nodes, weights = np.polynomial.legendre.leggauss(64)
+    nodes, weights = _GAUSS_LEGENDRE_64
     b = sqrt(s / 3.0)
     t = 0.5 * b * (nodes + 1.0)
     f = [_chi2_cdf(s - 3.0 * ti * ti, 3) for ti in t]

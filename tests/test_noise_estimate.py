@@ -90,7 +90,8 @@ def test_the_robust_rounds_converge_to_the_true_sigma(orientation):
         axes /= np.linalg.norm(axes, axis=1, keepdims=True)
         rotation = axes * rng.normal(0.0, np.sqrt(3.0), size=(m, 1))
     position = rng.normal(size=(m, 3))
-    group = _Group("pose", "f", None, np.arange(m), None, None, None, None, 6)
+    group = _Group("pose", "f", None, np.arange(m), np.zeros((12, m)), np.zeros((1, m)),
+                   None, np.zeros(0), 6)
     sigma = NoiseModel(2.0, 0.5)
     for first in (True, False, False, False):
         r = np.concatenate([position / sigma.position_m, rotation / sigma.rotation_rad], axis=1)
