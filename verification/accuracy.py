@@ -12,8 +12,9 @@ measurement and the error is *measured minus predicted*:
 Unknown rigid frames that are not in the URDF (the target's pose, a marker's pose or
 offset, the pose of the root link in a ``measured_in`` frame) are fitted in closed form
 from the same data by the observation kinds' start estimators (the ones the calibration
-starts from), and every such fit is listed in :attr:`AccuracyReport.fitted`: errors are
-then residuals after that fit, slightly optimistic for few samples. Rotation errors are
+starts from): the measurement frames from all the data, the others per group. Every such
+fit is listed in :attr:`AccuracyReport.fitted`: errors are then residuals after that
+fit, slightly optimistic for few samples. Rotation errors are
 ``arcsin`` of the orientation residual's norm (exact below 90 degrees).
 """
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw.blocks import BlockKey
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
 
@@ -159,13 +161,25 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
         unplaceable.
     """
     from identification.problem import Unknown, build_problem
+    from kinfw.measurements import check_against_robot
 
+    measurements = check_against_robot(measurements, robot)
     known = tuple(Unknown(kind, name, value)
                   for (kind, name), value in known_frames(sidecar).items())
+    known_keys = {BlockKey(u.kind, u.name) for u in known}
     problem = build_problem(robot, measurements, parameters="none", known=known)
+    # external measurement frames: fitted once from all the data; every other unknown
+    # (target, marker, offset) per group, by the kind's own closed-form start estimator
+    fitted = [text for key, text in problem.fitted if key.kind == "frame"]
+    start = problem.start_context(measurements)
+    x0 = np.zeros(problem.n_parameters)
     groups: list[GroupErrors] = []
-    for g, (r, _) in zip(problem.groups, problem.raw_residuals(
-            np.zeros(problem.n_parameters), with_jacobian=False), strict=True):
+    for g in problem.groups:
+        requests = [req for req in g.kind.unknowns(g.group, start)
+                    if req.key not in known_keys]
+        fitted += [req.description for req in requests]
+        own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
+        r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
         m = len(g.sample)
         position = np.full((m, 3), np.nan)
         rotation = np.full(m, np.nan)
@@ -179,4 +193,4 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
             c0 += c.rows
         groups.append(GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position,
                                   rotation))
-    return AccuracyReport(tuple(groups), problem.fitted)
+    return AccuracyReport(tuple(groups), tuple(fitted))

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -231,8 +232,8 @@ class LeastSquaresProblem:
     groups : tuple of ResidualGroup
     prior_mean, prior_sigma : ndarray, shape (P,)
         Gaussian prior on ``x`` (sigma inf: none).
-    fitted : tuple of str
-        Descriptions of the unknowns whose start was estimated from these data.
+    fitted : tuple of (BlockKey, str)
+        The unknowns whose start was estimated from these data, with a description.
     """
 
     model0: CPCModel
@@ -241,7 +242,7 @@ class LeastSquaresProblem:
     groups: tuple[ResidualGroup, ...]
     prior_mean: NDArray[np.float64]
     prior_sigma: NDArray[np.float64]
-    fitted: tuple[str, ...] = ()
+    fitted: tuple[tuple[BlockKey, str], ...] = ()
 
     n_robot_blocks = 3
 
@@ -400,6 +401,27 @@ class LeastSquaresProblem:
                                base @ model.frame_poses(zero))
         return cpc_from_geometry(shifted, sign=model.sign)
 
+    def start_context(self, measurements: Measurements) -> StartContext:
+        """The start model's poses at the samples of ``measurements`` (those the problem
+        was built from) and the external frames' starts, for the kinds' estimators."""
+        q_all = measurements.q_of(self.model0.topology.joint_names)
+        meas_T_w = {b.key.name: b.start for b in self.unknown_blocks if b.key.kind == "frame"}
+        return _start_context(self.model0, q_all, meas_T_w, self.model_frame)
+
+    def with_starts(self, group: ResidualGroup, blocks: Sequence[Block]) -> ResidualGroup:
+        """``group`` evaluated with other start values for some of the problem's unknown
+        blocks (same keys; e.g. each group's own closed-form fit): the functions take the
+        starts as inputs, so nothing is rebuilt."""
+        const = group.const.copy()
+        offsets, c = {}, 0
+        for b in self.blocks:
+            n = len(b.constants())
+            offsets[b.key] = slice(c, c + n)
+            c += n
+        for b in blocks:
+            const[offsets[b.key]] = b.constants()
+        return replace(group, const=const)
+
     def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
         """Every unknown block's value at ``x`` (targets, frames, markers, offsets...)."""
         return tuple(Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
@@ -448,7 +470,7 @@ def _start_context(model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray]
 def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPCModel,
                     q_all: NDArray, model_frame: str | None,
                     given: dict[BlockKey, NDArray]
-                    ) -> tuple[list[Block], list[str]]:
+                    ) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
     """Every unknown block with its start value, in closed form (or as ``given``).
 
     External measurement frames first (from the kinds' root-pose estimates), then the
@@ -457,7 +479,7 @@ def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPC
     """
     start = _start_context(model0, q_all, {}, model_frame)
     blocks: list[Block] = []
-    fitted: list[str] = []
+    fitted: list[tuple[BlockKey, str]] = []
     meas_T_w: dict[str, NDArray] = {}
     external = sorted({kind_of(g).measured_in(g) for g in groups} - {None, model_frame})
     for name in external:
@@ -473,8 +495,8 @@ def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPC
                     "or points; give some marker-free pose observations in it, or measure "
                     "everything in it (then the model is expressed in it)")
             meas_T_w[name] = average_transform(np.concatenate(est))
-            fitted.append(f"pose of the root link in {name!r} (from "
-                          f"{sum(map(len, est))} poses)")
+            fitted.append((key, f"pose of the root link in {name!r} (from "
+                                f"{sum(map(len, est))} poses)"))
         blocks.append(RigidFrameBlock(key, start=meas_T_w[name]))
     start = _start_context(model0, q_all, meas_T_w, model_frame)
     requests: dict[BlockKey, list[Any]] = {}
@@ -487,7 +509,7 @@ def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPC
             blocks.append(reqs[0].block(key, value[None]))
         else:
             blocks.append(reqs[0].block(key, np.concatenate([r.estimates for r in reqs])))
-            fitted.append(reqs[0].description)
+            fitted.append((key, reqs[0].description))
     return blocks, fitted
 
 
@@ -555,9 +577,13 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     given = {BlockKey(u.kind, u.name): u.value for u in known}
     given.update({BlockKey("target", n): T for n, T in (targets or {}).items()
                   if BlockKey("target", n) not in given})
+    fitted_frame = []
     if model_frame is not None:
         model0 = express_in(model0, measurements, q_all, model_frame,
                             given.get(BlockKey("frame", model_frame)))
+        if BlockKey("frame", model_frame) not in given:
+            fitted_frame.append((BlockKey("frame", model_frame),
+                                 f"pose of the root link in {model_frame!r}"))
     unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame,
                                       given)
     blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
@@ -599,4 +625,4 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
             nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
             prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
     return LeastSquaresProblem(model0, model_frame, tuple(blocks), tuple(residual_groups),
-                               prior_mean, prior_sigma, tuple(fitted))
+                               prior_mean, prior_sigma, (*fitted_frame, *fitted))

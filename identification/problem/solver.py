@@ -7,6 +7,7 @@ group (a robust loss weighs an observation by the norm of its rows).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -52,14 +53,17 @@ def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: 
     ``chi2(3)``, a pose's ``chi2(3) + 3 chi2(1)``, a prior row's ``chi2(1)``; exact
     quantiles, so ``z = 2.33`` flags 1 % of clean observations of every kind.
     """
-    p = 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
-    per_obs, known = [], {}
-    for m, components in observations:
-        key = tuple(components)
-        if key not in known:
-            known[key] = math.sqrt(quantile(norm2_cdf(key), p))
-        per_obs.append(np.full(m, known[key]))
+    per_obs = [np.full(m, _threshold(tuple(components), float(z)))
+               for m, components in observations]
     return np.concatenate(per_obs) if per_obs else np.zeros(0)
+
+
+@functools.lru_cache(maxsize=64)
+def _threshold(components: tuple[NoiseComponent, ...], z: float) -> float:
+    """The threshold of :func:`thresholds` for one set of components (computed once: the
+    quadrature of a pose's distribution is not free)."""
+    p = 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+    return math.sqrt(quantile(norm2_cdf(components), p))
 
 
 def robust_loss(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
