@@ -11,7 +11,7 @@ Prints plain-text tables:
 1. :func:`identification.closed_form.identify_closed_form` on the paper's protocol (Shih
    et al. 1992, section 4.1: nine values per joint, 6 x 9 + 1 = 55 configurations, both
    plates): median and IQR over the repeats, and a per-step breakdown obtained by calling
-   the module's private step functions in the order ``identify_closed_form`` calls them
+   the module's public step functions in the order ``identify_closed_form`` calls them
    (the module is not edited; the step-wise model is checked against the whole call).
 2. Growth with the values per joint ``M``: samples, Step 1 pairs, median time, time per
    sample, Step 1 / Step 2 times, local log-log slopes, and the held-out position error of
@@ -82,10 +82,10 @@ QUICK_TRIALS = 2
 
 STEP_NAMES = (
     "check_against_robot",
-    "_collect",
-    "_step1 (axes, eqs. 33-35, 52)",
-    "_step2 (translations, eqs. 58-64)",
-    "_geometry_at_zero",
+    "collect_frame_data",
+    "identify_axes (axes, eqs. 33-35, 52)",
+    "identify_translations (translations, eqs. 58-64)",
+    "geometry_at_zero",
     "cpc_from_geometry (Step 3)",
 )
 
@@ -97,24 +97,24 @@ def closed_form_by_steps(robot: Robot, measurements: Measurements
                          ) -> tuple[CPCModel, NDArray[np.float64]]:
     """``identify_closed_form(robot, measurements).model``, timing each step.
 
-    Calls the private functions of :mod:`identification.closed_form` in the order
+    Calls the step functions of :mod:`identification.closed_form` in the order
     ``identify_closed_form`` does. Returns the model and the seconds per step, shape
     ``(len(STEP_NAMES),)``.
     """
     ticks = [time.perf_counter()]
     measurements = check_against_robot(measurements, robot)
     ticks.append(time.perf_counter())
-    topo, q0, data, _sizes = cf._collect(robot, measurements, None)
+    topo, q0, data, _sizes = cf.collect_frame_data(robot, measurements, None)
     ticks.append(time.perf_counter())
-    axes, _residual, scale = cf._step1(topo, data, measurements.source)
+    axes, _residual, scale = cf.identify_axes(topo, data, measurements.source)
     ticks.append(time.perf_counter())
-    w_T_e_q0, points, directions, p_scale, _rms = cf._step2(topo, data, q0, axes,
+    w_T_e_q0, points, directions, p_scale, _rms = cf.identify_translations(topo, data, q0, axes,
                                                             measurements.source)
     prismatic = ~np.array(topo.revolute)
     axes[prismatic] = directions[prismatic]
     scale[prismatic] = p_scale[prismatic]
     ticks.append(time.perf_counter())
-    geometry = cf._geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
+    geometry = cf.geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
     ticks.append(time.perf_counter())
     model = cpc_from_geometry(geometry)
     ticks.append(time.perf_counter())
@@ -126,7 +126,7 @@ def time_steps(robot: Robot, datasets: Sequence[Measurements], repeats: int
     """Seconds per step of :func:`closed_form_by_steps`, round robin over ``datasets``.
 
     Returns an array of shape (len(datasets), len(STEP_NAMES), repeats), or None with a
-    note printed when the private functions no longer match the calls above (the
+    note printed when the step functions no longer match the calls above (the
     module's internals are free to change; the whole-call timings still hold).
     """
     try:
@@ -225,10 +225,11 @@ def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
         model_steps, _ = closed_form_by_steps(nominal, case.measurements)
         same = all(np.allclose(getattr(model_steps, a), getattr(model_whole, a), rtol=0.0,
                                atol=1e-12) for a in ("b", "beta", "l", "sign", "tool_T"))
-        print("Per-step times: identification.closed_form's private _collect, _step1, _step2,\n"
-              "_geometry_at_zero and kinfw.cpc.cpc_from_geometry called in "
-              "identify_closed_form's order\n(module not edited; _step2 row includes the "
-              "prismatic fix-up). Step-wise model == whole-call\nmodel (atol 1e-12): "
+        print("Per-step times: identification.closed_form's steps collect_frame_data, "
+              "identify_axes,\nidentify_translations, geometry_at_zero and "
+              "kinfw.cpc.cpc_from_geometry called in identify_closed_form's order\n"
+              "(identify_translations row includes the prismatic fix-up). Step-wise model == "
+              "whole-call\nmodel (atol 1e-12): "
               f"{same}.")
     print(f"Held-out position error of this estimate: {held_out_error_mm(model_whole, case):.3f}"
           f" mm (mean over {N_TEST} random configurations x {len(FRAMES)} plates).")

@@ -69,7 +69,13 @@ from benchmarks.common import (  # noqa: E402
 from identification.cameras import CamerasResult, calibrate_cameras  # noqa: E402
 from identification.closed_form import identify_closed_form  # noqa: E402
 from identification.pipeline import calibrate  # noqa: E402
+from identification.problem import (  # noqa: E402
+    estimate_unknowns,
+    levenberg_marquardt,
+    thresholds,
+)
 from identification.refine import NoiseModel, build_problem, refine  # noqa: E402
+from kinfw.blocks import BlockKey  # noqa: E402
 from kinfw.cpc import cpc_from_robot, geometry_from_cpc  # noqa: E402
 from kinfw.measurements import (  # noqa: E402
     Measurements,
@@ -208,13 +214,12 @@ def camera_mounts(cameras: CamerasResult) -> dict[str, NDArray[np.float64]]:
 
 def lm_only(problem, noise: NoiseModel, max_iterations: int = 100
             ) -> tuple[NDArray[np.float64], int, bool]:
-    """refine()'s Levenberg-Marquardt loop on a prebuilt problem (private function), least
-    squares (the robust-loss thresholds are not used by the linear loss)."""
-    thresholds = (rf._thresholds(problem.obs_sizes, 2.33) if hasattr(rf, "_thresholds")
-                  else 3.0)
-    return rf._levenberg_marquardt(
+    """refine()'s Levenberg-Marquardt loop on a prebuilt problem, least squares (the
+    robust-loss thresholds are not used by the linear loss)."""
+    return levenberg_marquardt(
         lambda v, jac: problem.evaluate(v, noise, jac), np.zeros(problem.n_parameters),
-        problem.free, problem.obs_sizes, "linear", thresholds, max_iterations)
+        problem.free, problem.obs_sizes, "linear", thresholds(problem.obs_components, 2.33),
+        max_iterations)
 
 
 def cost_at(problem, x: NDArray[np.float64], noise: NoiseModel) -> float:
@@ -243,7 +248,7 @@ def gn_hessian_maps(problem, noise: NoiseModel, x_free, r, lam_f):
     H = 0
     for g in problem.groups:
         m = len(g.sample)
-        Jg = g.jacobian(ca.DM(g.qs), ca.DM(g.data), x, noise.position_m, noise.rotation_rad)
+        Jg = ca.diag(ca.DM(1.0 / g.row_sigma(noise))) @ g.jacobian(ca.DM(g.qs), ca.DM(g.data), x)
         A = ca.reshape(Jg.T, P, m * g.rows)[free, :]
         H = H + A @ A.T
     return lam_f * H
@@ -470,7 +475,8 @@ def section_pipeline(nominal: Robot, case: Case, stages: Stages, repeats: int) -
         m = check_against_robot(data, nominal)
         model0 = cpc_from_robot(start, m.observed_frames)
         q_all = m.q_of(model0.topology.joint_names)
-        return rf._start_extras(m, model0, q_all, None, targets)
+        given = {BlockKey("target", n): T for n, T in targets.items()}
+        return estimate_unknowns(m, list(m.all_groups()), model0, q_all, None, given)
 
     prep: Callable[[], object] | None = numpy_prep
     try:
@@ -580,7 +586,7 @@ def jacobian_breakdown(problem, noise: NoiseModel) -> tuple[float, float, float]
     for g in problem.groups:
         for f in (g.residual, g.jacobian):
             t0 = time.perf_counter()
-            out = f(g.qs, g.data, x, noise.position_m, noise.rotation_rad)
+            out = f(g.qs, g.data, x)
             t1 = time.perf_counter()
             np.array(out)
             t2 = time.perf_counter()
@@ -638,7 +644,7 @@ def section_scaling(nominal: Robot, sizes: Sequence[int], repeats: int, seed: in
         t_call, t_conv, t_rest = jacobian_breakdown(problem, noise)
         if last:  # one profiled refine() call gives the total and the LM share
             stats, total_s, result = profiled_refine(nominal, subset, start, noise)
-            lm_s = sum(v[3] for f, v in stats.stats.items() if f[2] == "_levenberg_marquardt")
+            lm_s = sum(v[3] for f, v in stats.stats.items() if f[2] == "levenberg_marquardt")
             its = result.iterations
             profile = (n, stats, total_s, small_n, small_stats)
         else:
@@ -711,12 +717,12 @@ def report_profile(n: int, stats: pstats.Stats, total_s: float, small_n: int,
         return sum(v[3] for f, v in stats.stats.items() if f[2] == name)
 
     shares = [("build_problem", cum("build_problem")),
-              ("_levenberg_marquardt", cum("_levenberg_marquardt")),
+              ("levenberg_marquardt", cum("levenberg_marquardt")),
               ("  casadi Function calls (all)", sum(
                   v[2] for f, v in stats.stats.items() if "Function_call" in f[2])),
               ("  DM -> numpy conversion (all)", sum(
                   v[3] for f, v in stats.stats.items() if "DM_full" in f[2])),
-              ("_covariance_and_identifiability", cum("_covariance_and_identifiability"))]
+              ("covariance_and_identifiability", cum("covariance_and_identifiability"))]
     print("Where the time goes: " + "; ".join(f"{name.strip()} {s:.2f} s "
                                                 f"({100 * s / total_s:.0f}%)"
                                                 for name, s in shares))

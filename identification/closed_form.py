@@ -71,8 +71,17 @@ from kinfw.transforms import (
     transform_from_rotation_translation,
 )
 
-__all__ = ["ClosedFormResult", "JointScaleError", "ProtocolError", "identify_closed_form",
-           "one_joint_groups"]
+__all__ = [
+    "ClosedFormResult",
+    "JointScaleError",
+    "ProtocolError",
+    "collect_frame_data",
+    "geometry_at_zero",
+    "identify_axes",
+    "identify_closed_form",
+    "identify_translations",
+    "one_joint_groups",
+]
 
 log = logging.getLogger(__name__)
 
@@ -252,7 +261,7 @@ class _FrameData:
     moved: NDArray[np.int64]  # (m,) joint index, -1 at q0
 
 
-def _collect(robot: Robot, measurements: Measurements, frames: tuple[str, ...] | None
+def collect_frame_data(robot: Robot, measurements: Measurements, frames: tuple[str, ...] | None
              ) -> tuple[Topology, NDArray, list[_FrameData], NDArray]:
     """Topology, q0, per-frame data and per-joint group sizes; checks the protocol."""
     source = measurements.source
@@ -288,7 +297,7 @@ def _collect(robot: Robot, measurements: Measurements, frames: tuple[str, ...] |
     return topo, q0, data, sizes
 
 
-def _step1(topo: Topology, data: list[_FrameData], source: str
+def identify_axes(topo: Topology, data: list[_FrameData], source: str
            ) -> tuple[NDArray, NDArray, NDArray]:
     """Revolute axes at q0 in w (eqs. 33-35, 52), their residuals and motion scales."""
     J = len(topo.joint_names)
@@ -319,8 +328,8 @@ def _step1(topo: Topology, data: list[_FrameData], source: str
     return axes, residual, scale
 
 
-def _step2(topo: Topology, data: list[_FrameData], q0: NDArray, axes: NDArray, source: str
-           ) -> tuple[NDArray, NDArray, NDArray, NDArray, float]:
+def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, axes: NDArray,
+                          source: str) -> tuple[NDArray, NDArray, NDArray, NDArray, float]:
     """End-frame poses at q0, axis points, prismatic directions (eqs. 58-64).
 
     Returns ``w_T_e_q0`` (E, 4, 4), revolute axis points (J, 3), prismatic directions
@@ -378,7 +387,7 @@ def _step2(topo: Topology, data: list[_FrameData], q0: NDArray, axes: NDArray, s
     return w_T_e_q0, points, directions, scale, rms
 
 
-def _geometry_at_zero(topo: Topology, axes: NDArray, points: NDArray, w_T_e_q0: NDArray,
+def geometry_at_zero(topo: Topology, axes: NDArray, points: NDArray, w_T_e_q0: NDArray,
                       q0: NDArray) -> ZeroGeometry:
     """Carry screw axes and end-frame poses from configuration ``q0`` back to ``q = 0``.
 
@@ -429,14 +438,14 @@ def identify_closed_form(robot: Robot, measurements: Measurements, *,
         For data that cannot identify the model, naming the sample or joint.
     """
     measurements = check_against_robot(measurements, robot)
-    topo, q0, data, sizes = _collect(robot, measurements, frames)
-    axes, residual, scale = _step1(topo, data, measurements.source)
-    w_T_e_q0, points, directions, p_scale, rms = _step2(topo, data, q0, axes,
+    topo, q0, data, sizes = collect_frame_data(robot, measurements, frames)
+    axes, residual, scale = identify_axes(topo, data, measurements.source)
+    w_T_e_q0, points, directions, p_scale, rms = identify_translations(topo, data, q0, axes,
                                                          measurements.source)
     prismatic = ~np.array(topo.revolute)
     axes[prismatic] = directions[prismatic]
     scale[prismatic] = p_scale[prismatic]
-    geometry = _geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
+    geometry = geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
     log.info("closed form: %d joints, %d frames, position RMS %.3g mm",
              len(topo.joint_names), len(topo.frames), 1e3 * rms)
     return ClosedFormResult(cpc_from_geometry(geometry), geometry, q0, sizes, residual, scale,

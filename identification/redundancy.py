@@ -5,12 +5,14 @@ exactly whatever the noise: zero residuals, an estimated noise of nothing, and a
 estimate that is noise. :func:`check_redundancy` refuses such a problem before it is
 solved.
 
-Rule. With ``N`` residual rows (3 per position, 3 per orientation, 1 per prior term) and
+Rule. With ``N`` residual rows (per observation, the rows of its kind's noise components:
+3 per position, 3 per orientation; 1 per prior term) and
 ``P`` free parameters after gauge fixing (:attr:`LeastSquaresProblem.free`):
 
 - noise given (``--sigma-mm/--sigma-deg``): ``N >= P``;
 - noise estimated: ``N >= P + MIN_DOF_PER_KIND * K`` with ``K`` the noise components
-  estimated (positions, and orientations when poses or targets are observed): each
+  estimated (positions, orientations when poses or targets are observed, a new kind's
+  own): each
   sigma is then estimated from at least :data:`MIN_DOF_PER_KIND` = 10 degrees of freedom
   (a relative precision of about ``sqrt(2 / 10) = 45 %`` at the limit).
 
@@ -24,6 +26,7 @@ import math
 from dataclasses import dataclass
 
 from identification.refine import LeastSquaresProblem
+from kinfw.blocks import BlockKey
 from kinfw.measurements import DatasetError
 
 __all__ = ["MIN_DOF_PER_KIND", "InsufficientDataError", "Redundancy", "check_redundancy",
@@ -73,13 +76,16 @@ class Redundancy:
         return self.n_rows >= self.needed
 
 
-def _owner_label(owner: str, field: str, cameras: set[str], frames: tuple[str, ...]) -> str:
-    kind, _, name = owner.partition(":")
-    if name and kind in ("target", "frame", "marker", "offset"):
-        return {"target": f"target {name!r} pose", "frame": f"measurement frame {name!r} pose",
-                "marker": f"marker {name!r} pose", "offset": f"point {name!r} offset"}[kind]
-    if owner == "base":
+_UNKNOWN_LABELS = {"target": "target {!r} pose", "frame": "measurement frame {!r} pose",
+                   "marker": "marker {!r} pose", "offset": "point {!r} offset"}
+
+
+def _owner_label(key: BlockKey, owner: str, cameras: set[str], frames: tuple[str, ...]
+                 ) -> str:
+    if key.kind == "base":
         return "base frame"
+    if key.kind not in ("cpc", "zero_offset"):  # an unknown of an observation kind
+        return _UNKNOWN_LABELS.get(key.kind, key.kind + " {!r}").format(key.name)
     if owner in cameras:
         return f"camera {owner!r} mount"
     if owner in frames:
@@ -106,22 +112,25 @@ def redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_samples: in
     -------
     Redundancy
     """
-    position = sum(3 * len(g.sample) for g in problem.groups)
-    orientation = sum(3 * len(g.sample) for g in problem.groups if g.rows == 6)
+    per_component: dict[str, int] = {}  # residual rows per noise component
+    for g in problem.groups:
+        for c in g.components:
+            label = "orientation" if c.name == "rotation" else c.name
+            per_component[label] = per_component.get(label, 0) + c.rows * len(g.sample)
     prior = len(problem.prior_rows)
-    rows = tuple((k, n) for k, n in (("position", position), ("orientation", orientation),
-                                     ("prior", prior)) if n)
-    n_rows = position + orientation + prior
+    rows = tuple((k, n) for k, n in (*per_component.items(), ("prior", prior)) if n)
+    data_rows = sum(per_component.values())
+    n_rows = data_rows + prior
     P = int(problem.free.sum())
-    kinds = int(position > 0) + int(orientation > 0)
+    kinds = sum(1 for n in per_component.values() if n > 0)
     needed = P + (0 if noise_given else MIN_DOF_PER_KIND * kinds)
     frames = problem.model0.topology.frames
     by_owner: dict[str, int] = {}
-    for (owner, field), free in zip(problem.names, problem.free, strict=True):
-        if free:
-            label = _owner_label(owner, field, set(cameras), frames)
-            by_owner[label] = by_owner.get(label, 0) + 1
-    data_rows = position + orientation
+    for block in problem.blocks:
+        for (owner, _), free in zip(block.names, block.free, strict=True):
+            if free:
+                label = _owner_label(block.key, owner, set(cameras), frames)
+                by_owner[label] = by_owner.get(label, 0) + 1
     per_sample = data_rows / n_samples if n_samples else 0.0
     samples_needed = math.ceil((needed - prior) / per_sample) if per_sample else 0
     return Redundancy(rows, n_rows, P, tuple(by_owner.items()), needed, n_samples,

@@ -498,14 +498,15 @@ def check_fit(result: RefineResult, source: str) -> None:
         :data:`FIT_LIMIT_M` or the median orientation one :data:`FIT_LIMIT_RAD`, naming
         the worst observation group.
     """
-    pos = [np.linalg.norm(g.position_m, axis=1) for g in result.residuals]
+    with_position = [g for g in result.residuals if g.position_m is not None]
+    pos = [np.linalg.norm(g.position_m, axis=1) for g in with_position]
     rot = [np.linalg.norm(g.rotation_rad, axis=1) for g in result.residuals
            if g.rotation_rad is not None]
     med_p = float(np.median(np.concatenate(pos))) if pos else 0.0
     med_r = float(np.median(np.concatenate(rot))) if rot else 0.0
     if med_p <= FIT_LIMIT_M and med_r <= FIT_LIMIT_RAD:
         return
-    worst = max(result.residuals, key=lambda g: float(np.median(np.linalg.norm(g.position_m,
+    worst = max(with_position, key=lambda g: float(np.median(np.linalg.norm(g.position_m,
                                                                                axis=1))))
     raise UnitError(
         f"{source}: the refinement over every parameter still leaves a median residual of "

@@ -41,8 +41,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.chart import rigid_from_chart, rotation_chart
 from kinfw.robot import Robot, Topology
-from kinfw.transforms import inverse_transform, rot_z, skew, transform_from_rotation_translation
+from kinfw.transforms import inverse_transform, rot_z, transform_from_rotation_translation
 
 __all__ = [
     "CPCModel",
@@ -85,27 +86,15 @@ def rotation_from_axis(b: ArrayLike) -> NDArray[np.float64]:
     )
 
 
-def _cayley(a: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation of the Cayley/Gibbs vector ``a`` (``a = tan(theta/2) u``), (..., 3, 3).
-
-    Smooth everywhere with derivative ``skew(2 a)`` at zero, so ``2 a`` is the small
-    rotation vector; used as the chart for tool orientations.
-    """
-    K = skew(a)
-    return np.eye(3) + (2.0 / (1.0 + np.sum(a * a, axis=-1)))[..., None, None] * (K + K @ K)
-
-
 def cayley_coordinates(dR: ArrayLike) -> NDArray[np.float64]:
     """Cayley chart coordinates ``d`` (3,) of a rotation ``dR`` (3, 3): ``dR = cayley(d / 2)``.
 
-    The inverse of the chart :meth:`CPCModel.perturbed` uses for tool orientations (and
-    ``identification.refine`` for rigid frames): ``d = 2 vee(dR - dR^T) / (1 + tr dR)``,
+    The inverse of the chart :meth:`CPCModel.perturbed` uses for tool orientations (the
+    one rigid-frame chart of :mod:`kinfw.chart`): ``d = 2 vee(dR - dR^T) / (1 + tr dR)``,
     twice the Gibbs vector ``tan(theta / 2) u``, equal to the rotation vector ``theta u``
     to first order; undefined at ``theta = pi``.
     """
-    dR = np.asarray(dR, dtype=float)
-    a = np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-    return 2.0 * a / (1.0 + np.trace(dR))
+    return rotation_chart(dR)
 
 
 def perpendicular_basis(b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -227,8 +216,7 @@ class CPCModel:
                 l[j, :2] += delta[k : k + 2]
                 k += 2
         for e in range(len(self.topology.frames)):
-            tool_T[e, :3, :3] = tool_T[e, :3, :3] @ _cayley(0.5 * delta[k : k + 3])
-            tool_T[e, :3, 3] += delta[k + 3 : k + 6]
+            tool_T[e] = rigid_from_chart(tool_T[e], delta[k : k + 6])
             k += 6
         return replace(self, b=b, l=l, tool_T=tool_T)
 

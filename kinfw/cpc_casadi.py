@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from kinfw.chart import rigid_from_chart_casadi
 from kinfw.cpc import CPCModel
 
 __all__ = ["cpc_fk_function", "cpc_reference_vector"]
@@ -40,11 +41,6 @@ def _rotation_from_axis(ca, b):
 
 def _homogeneous(ca, R, p):
     return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))
-
-
-def _skew(ca, a):
-    return ca.vertcat(ca.horzcat(0, -a[2], a[1]), ca.horzcat(a[2], 0, -a[0]),
-                      ca.horzcat(-a[1], a[0], 0))
 
 
 def cpc_reference_vector(model: CPCModel) -> np.ndarray:
@@ -128,10 +124,7 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
 
     outputs = []
     for e in range(len(topo.frames)):
-        a = 0.5 * delta[k : k + 3]
-        K = _skew(ca, a)
-        dR = ca.DM.eye(3) + (2.0 / (1.0 + ca.dot(a, a))) * (K + K @ K)
-        tool = _homogeneous(ca, tools[e][0] @ dR, tools[e][1] + delta[k + 3 : k + 6])
+        tool = rigid_from_chart_casadi(tools[e], delta[k : k + 6])
         k += 6
         p = topo.frame_parent[e]
         outputs.append(tool if p < 0 else moved[p] @ tool)

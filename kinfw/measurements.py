@@ -68,17 +68,18 @@ problem raises :class:`DatasetError` naming the file, the key path
 (``samples[7].observations[1].quat_xyzw``) and what was expected.
 
 Observations are grouped (:class:`PoseObservations`, :class:`TargetObservations`,
-:class:`PointObservations`) in first-seen order; each group holds arrays with the batch
-axis first and the sample index of every row. :func:`check_against_robot` checks a
-dataset against a URDF, :func:`check_joint_motion` that the joints move enough to be
-identified.
+:class:`PointObservations`, or the group of any kind registered in
+:mod:`kinfw.observations`) in first-seen order; each group holds arrays with the batch
+axis first and the sample index of every row. Parsing, writing, subsetting and merging
+go through the registry: each kind's class reads and writes its own observations.
+:func:`check_against_robot` checks a dataset against a URDF, :func:`check_joint_motion`
+that the joints move enough to be identified.
 """
 
 from __future__ import annotations
 
 import json
 import logging
-import math
 import warnings
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
@@ -89,17 +90,24 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.files import write_text_atomic
-from kinfw.transforms import (
-    check_transform,
-    transform_from_xyz_quat_xyzw,
-    xyz_quat_xyzw_from_transform,
+from kinfw.observations import kind_named, kind_of, kinds
+from kinfw.observations.base import (
+    DatasetError,
+    ObservationReader,
+    describe,
+    frozen_array,
 )
+from kinfw.observations.point import PointObservations
+from kinfw.observations.pose import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, PoseObservations
+from kinfw.observations.target import TargetObservations
 
 if TYPE_CHECKING:
     from kinfw.robot import Robot
 
 __all__ = [
     "FORMAT",
+    "QUAT_NORM_TOL",
+    "QUAT_ROUNDED_TOL",
     "SUPPORTED_VERSIONS",
     "DatasetError",
     "Measurements",
@@ -119,212 +127,12 @@ logger = logging.getLogger(__name__)
 
 FORMAT = "kinfw-measurements"
 SUPPORTED_VERSIONS = (1,)
-QUAT_NORM_TOL = 1e-3
-"""Largest accepted ``| |quat_xyzw| - 1 |`` in a file (quaternions written with 4 or 5
-decimals are off by up to a few 1e-5); accepted quaternions are renormalised."""
-QUAT_ROUNDED_TOL = 1e-6
-"""Beyond this ``| |quat_xyzw| - 1 |`` (and within :data:`QUAT_NORM_TOL`) the reader warns,
-once per file, that it renormalised rounded quaternions."""
 DISTINCT_TOL = 1e-9
 """Joint values closer than this (rad or m) count as one value in :func:`check_joint_motion`."""
 
-_KINDS = ("pose", "target", "point")
 _LENGTH_UNITS = ("m", "mm")
 _ANGLE_UNITS = ("rad", "deg")
 _JOINT_UNITS = ("m", "mm", "rad", "deg")
-_DEFAULT_TARGET = "target"
-
-
-class DatasetError(ValueError):
-    """A measurement file or dataset that cannot be used.
-
-    The message names the file (``Measurements.source``), the sample index and key path
-    when relevant (``samples[7].observations[1].quat_xyzw``) and what was expected.
-    """
-
-
-# -- array helpers ---------------------------------------------------------------------
-
-
-def _frozen(values: ArrayLike, dtype: type) -> NDArray[Any]:
-    """A read-only copy of ``values``: dataset arrays are shared, never mutated."""
-    arr = np.array(values, dtype=dtype, copy=True)
-    arr.flags.writeable = False
-    return arr
-
-
-def _sample_array(values: ArrayLike, name: str) -> NDArray[np.int64]:
-    arr = np.asarray(values)
-    if arr.ndim != 1:
-        raise ValueError(f"{name}: expected shape (m,), got {arr.shape}")
-    if arr.size and not np.issubdtype(arr.dtype, np.integer):
-        raise ValueError(f"{name}: expected integer sample indices, got dtype {arr.dtype}")
-    if arr.size and arr.min() < 0:
-        raise ValueError(f"{name}: sample indices must be >= 0, got {int(arr.min())}")
-    return _frozen(arr, np.int64)
-
-
-def _data_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
-    arr = np.asarray(values, dtype=float)
-    if arr.shape != shape:
-        expected = "(" + ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "") + ")"
-        raise ValueError(f"{name}: expected shape {expected}, got {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError(f"{name}: all values must be finite")
-    return _frozen(arr, np.float64)
-
-
-# -- observation groups ----------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class PoseObservations:
-    """All ``pose`` observations that share ``(frame, marker, measured_in)``.
-
-    Attributes
-    ----------
-    frame : str
-        URDF frame (link or joint) the pose belongs to.
-    sample : ndarray of int64, shape (m,)
-        Index into :attr:`Measurements.qs` of each observation's sample.
-    meas_T_frame : ndarray, shape (m, 4, 4)
-        Pose of ``frame`` (or of its marker) in the measurement frame, metres.
-    marker : str or None
-        Name of a rigid marker on ``frame`` whose pose in ``frame`` is unknown; None when
-        ``frame`` itself is measured.
-    measured_in : str or None
-        Measurement frame; None is the URDF root link.
-    """
-
-    frame: str
-    sample: NDArray[np.int64]
-    meas_T_frame: NDArray[np.float64]
-    marker: str | None = None
-    measured_in: str | None = None
-
-    def __post_init__(self) -> None:
-        name = f"PoseObservations(frame={self.frame!r})"
-        sample = _sample_array(self.sample, f"{name}.sample")
-        T = _data_array(self.meas_T_frame, (len(sample), 4, 4), f"{name}.meas_T_frame")
-        check_transform(T, name=f"{name}.meas_T_frame")
-        object.__setattr__(self, "sample", sample)
-        object.__setattr__(self, "meas_T_frame", T)
-
-    def __repr__(self) -> str:
-        return (f"PoseObservations(frame={self.frame!r}, marker={self.marker!r}, "
-                f"measured_in={self.measured_in!r}, m={len(self.sample)})")
-
-    def _take(self, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> PoseObservations:
-        return replace(self, sample=sample, meas_T_frame=self.meas_T_frame[rows])
-
-    @property
-    def _key(self) -> tuple[Any, ...]:
-        return ("pose", self.frame, self.marker, self.measured_in)
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class TargetObservations:
-    """All ``target`` observations of one fixed target by one camera frame.
-
-    Attributes
-    ----------
-    camera : str
-        URDF camera frame on the robot (the file's ``"frame"``).
-    sample : ndarray of int64, shape (m,)
-        Index into :attr:`Measurements.qs` of each observation's sample.
-    camera_T_target : ndarray, shape (m, 4, 4)
-        Pose of the target in the camera frame (camera extrinsic calibration), metres.
-    target : str
-        Name of the fixed target (file key ``"target"``, default ``"target"``); its pose
-        in the world is unknown.
-    """
-
-    camera: str
-    sample: NDArray[np.int64]
-    camera_T_target: NDArray[np.float64]
-    target: str = _DEFAULT_TARGET
-
-    def __post_init__(self) -> None:
-        name = f"TargetObservations(camera={self.camera!r})"
-        sample = _sample_array(self.sample, f"{name}.sample")
-        T = _data_array(self.camera_T_target, (len(sample), 4, 4), f"{name}.camera_T_target")
-        check_transform(T, name=f"{name}.camera_T_target")
-        object.__setattr__(self, "sample", sample)
-        object.__setattr__(self, "camera_T_target", T)
-
-    def __repr__(self) -> str:
-        return (f"TargetObservations(camera={self.camera!r}, target={self.target!r}, "
-                f"m={len(self.sample)})")
-
-    def _take(self, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> TargetObservations:
-        return replace(self, sample=sample, camera_T_target=self.camera_T_target[rows])
-
-    @property
-    def _key(self) -> tuple[Any, ...]:
-        return ("target", self.camera, self.target)
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class PointObservations:
-    """All ``point`` observations that share ``(frame, marker, measured_in, offset)``.
-
-    Attributes
-    ----------
-    frame : str
-        URDF frame the point is rigidly attached to.
-    sample : ndarray of int64, shape (m,)
-        Index into :attr:`Measurements.qs` of each observation's sample.
-    meas_p_point : ndarray, shape (m, 3)
-        Position of the point in the measurement frame, metres.
-    offset : ndarray, shape (3,), or None
-        ``frame_p_point``, the point in ``frame`` (metres), when the file gives it; None
-        when it is unknown and estimated.
-    marker : str or None
-        Name of the marker (its offset is unknown; excludes ``offset``).
-    measured_in : str or None
-        Measurement frame; None is the URDF root link.
-    """
-
-    frame: str
-    sample: NDArray[np.int64]
-    meas_p_point: NDArray[np.float64]
-    offset: NDArray[np.float64] | None = None
-    marker: str | None = None
-    measured_in: str | None = None
-
-    def __post_init__(self) -> None:
-        name = f"PointObservations(frame={self.frame!r})"
-        sample = _sample_array(self.sample, f"{name}.sample")
-        p = _data_array(self.meas_p_point, (len(sample), 3), f"{name}.meas_p_point")
-        object.__setattr__(self, "sample", sample)
-        object.__setattr__(self, "meas_p_point", p)
-        if self.offset is not None:
-            offset = _data_array(self.offset, (3,), f"{name}.offset")
-            object.__setattr__(self, "offset", offset)
-
-    def __repr__(self) -> str:
-        offset = None if self.offset is None else self.offset.tolist()
-        return (f"PointObservations(frame={self.frame!r}, marker={self.marker!r}, "
-                f"measured_in={self.measured_in!r}, offset={offset}, m={len(self.sample)})")
-
-    def _take(self, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> PointObservations:
-        return replace(self, sample=sample, meas_p_point=self.meas_p_point[rows])
-
-    @property
-    def _key(self) -> tuple[Any, ...]:
-        offset = None if self.offset is None else tuple(self.offset.tolist())
-        return ("point", self.frame, self.marker, self.measured_in, offset)
-
-
-_Group = PoseObservations | TargetObservations | PointObservations
-
-
-def _group_frame(group: _Group) -> str:
-    return group.camera if isinstance(group, TargetObservations) else group.frame
-
-
-def _group_kind(group: _Group) -> str:
-    return group._key[0]
 
 
 # -- the dataset -----------------------------------------------------------------------
@@ -334,7 +142,11 @@ def _group_kind(group: _Group) -> str:
 class Measurements:
     """A calibration dataset: joint values per sample and the observations made.
 
-    Arrays are read-only; methods return new datasets.
+    Arrays are read-only; methods return new datasets. Observation groups are held per
+    kind (:mod:`kinfw.observations`): :meth:`groups` gives those of one kind,
+    :meth:`all_groups` every group. The built-in kinds keep their own fields
+    (``poses``, ``targets``, ``points``: the closed form and the camera steps read poses
+    and targets only); groups of any other registered kind are in ``others``.
 
     Attributes
     ----------
@@ -351,6 +163,8 @@ class Measurements:
         ``point`` observation groups, first-seen order.
     source : str
         File path (or ``"<memory>"``) used in messages.
+    others : tuple
+        Groups of registered kinds other than the three built-in ones, first-seen order.
     """
 
     joint_names: tuple[str, ...]
@@ -359,6 +173,7 @@ class Measurements:
     targets: tuple[TargetObservations, ...] = ()
     points: tuple[PointObservations, ...] = ()
     source: str = "<memory>"
+    others: tuple[Any, ...] = ()
 
     def __post_init__(self) -> None:
         src = self.source
@@ -377,15 +192,23 @@ class Measurements:
         if not np.isfinite(qs).all():
             raise DatasetError(f"{src}: qs: all joint values must be finite")
         object.__setattr__(self, "joint_names", names)
-        object.__setattr__(self, "qs", _frozen(qs, np.float64))
+        object.__setattr__(self, "qs", frozen_array(qs, np.float64))
         n = qs.shape[0]
         for attr, cls in (("poses", PoseObservations), ("targets", TargetObservations),
-                          ("points", PointObservations)):
+                          ("points", PointObservations), ("others", None)):
             groups = tuple(getattr(self, attr))
             for g in groups:
-                if not isinstance(g, cls):
+                if cls is not None and not isinstance(g, cls):
                     raise DatasetError(f"{src}: {attr}: expected {cls.__name__}, got "
                                        f"{type(g).__name__}")
+                if cls is None:
+                    try:
+                        kind = kind_of(g)
+                    except TypeError as exc:
+                        raise DatasetError(f"{src}: others: {exc}") from None
+                    if kind.measurements_field is not None:
+                        raise DatasetError(f"{src}: others: {kind.name!r} groups belong in "
+                                           f"{kind.measurements_field}")
                 if len(g.sample) and g.sample.max() >= n:
                     raise DatasetError(
                         f"{src}: {attr}: {g!r} refers to sample {int(g.sample.max())}, "
@@ -394,14 +217,34 @@ class Measurements:
             object.__setattr__(self, attr, groups)
 
     def __repr__(self) -> str:
+        others = f", others={list(self.others)}" if self.others else ""
         return (f"Measurements(source={self.source!r}, n_samples={self.n_samples}, "
                 f"joint_names={list(self.joint_names)}, poses={list(self.poses)}, "
-                f"targets={list(self.targets)}, points={list(self.points)})")
+                f"targets={list(self.targets)}, points={list(self.points)}{others})")
 
-    def _groups(self) -> Iterator[_Group]:
-        yield from self.poses
-        yield from self.targets
-        yield from self.points
+    def groups(self, kind: str) -> tuple[Any, ...]:
+        """The observation groups of one kind (by its file name, e.g. ``"pose"``)."""
+        field = kind_named(kind).measurements_field
+        if field is not None:
+            return getattr(self, field)
+        return tuple(g for g in self.others if g.kind == kind)
+
+    def all_groups(self) -> Iterator[Any]:
+        """Every observation group, kind by kind in registry order."""
+        for kind in kinds():
+            yield from self.groups(kind.name)
+
+    def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
+        """The dataset with other observation groups (of any registered kinds), and
+        other ``changes`` of its fields (e.g. ``qs``)."""
+        by_field: dict[str, list[Any]] = {"poses": [], "targets": [], "points": [],
+                                          "others": []}
+        for g in groups:
+            by_field[kind_of(g).measurements_field or "others"].append(g)
+        return replace(self, **{k: tuple(v) for k, v in by_field.items()}, **changes)
+
+    def _groups(self) -> Iterator[Any]:
+        return self.all_groups()
 
     @property
     def n_samples(self) -> int:
@@ -453,7 +296,7 @@ class Measurements:
         order = np.argsort(sel, kind="stable")
         sorted_sel = sel[order]
 
-        def select(group: _Group) -> _Group | None:
+        def select(group: Any) -> Any:
             # Each row of the group appears once per occurrence of its sample in `sel`.
             left = np.searchsorted(sorted_sel, group.sample, side="left")
             counts = np.searchsorted(sorted_sel, group.sample, side="right") - left
@@ -463,13 +306,11 @@ class Measurements:
             starts = np.repeat(np.cumsum(counts) - counts, counts)
             new = order[np.repeat(left, counts) + np.arange(len(rows)) - starts]
             by_sample = np.lexsort((rows, new))
-            return group._take(rows[by_sample], new[by_sample].astype(np.int64))
+            return kind_of(group).take(group, rows[by_sample],
+                                       new[by_sample].astype(np.int64))
 
-        def kept(groups: tuple[_Group, ...]) -> tuple[Any, ...]:
-            return tuple(g for g in map(select, groups) if g is not None)
-
-        return replace(self, qs=self.qs[sel], poses=kept(self.poses),
-                       targets=kept(self.targets), points=kept(self.points))
+        kept = [g for g in map(select, self.all_groups()) if g is not None]
+        return self.with_groups(kept, qs=self.qs[sel])
 
     def q_of(self, joint_names: Sequence[str]) -> NDArray[np.float64]:
         """Joint values with columns in another order.
@@ -499,7 +340,7 @@ def _first_uses(measurements: Measurements) -> dict[str, tuple[int, str]]:
     entries = []
     for rank, g in enumerate(measurements._groups()):
         first = int(g.sample.min()) if len(g.sample) else measurements.n_samples
-        entries.append((first, rank, _group_frame(g), _group_kind(g)))
+        entries += [(first, rank, frame, g.kind) for frame in kind_of(g).frames(g)]
     out: dict[str, tuple[int, str]] = {}
     for first, _, frame, kind in sorted(entries):
         out.setdefault(frame, (first, kind))
@@ -507,94 +348,6 @@ def _first_uses(measurements: Measurements) -> dict[str, tuple[int, str]]:
 
 
 # -- reading ---------------------------------------------------------------------------
-
-_MISSING = object()
-
-
-def _describe(value: Any) -> str:
-    """A short description of a JSON value for 'got ...' in messages."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, float)):
-        return repr(value)
-    if isinstance(value, str):
-        return repr(value if len(value) <= 40 else value[:37] + "...")
-    if isinstance(value, list):
-        return f"a list of {len(value)} items"
-    if isinstance(value, dict):
-        return "an object"
-    return type(value).__name__
-
-
-class _Parser:
-    """Validation helpers that raise :class:`DatasetError` naming the file and key path."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def error(self, where: str, what: str) -> DatasetError:
-        return DatasetError(f"{self.source}: {where}: {what}" if where else
-                            f"{self.source}: {what}")
-
-    def get(self, obj: dict[str, Any], key: str, where: str, expected: str) -> Any:
-        """A required key; JSON null is an error too."""
-        value = obj.get(key)
-        if value is None:
-            state = "missing" if key not in obj else "null"
-            raise self.error(_join(where, key), f"{state}; expected {expected}")
-        return value
-
-    def string(self, value: Any, where: str) -> str:
-        if not isinstance(value, str) or not value:
-            raise self.error(where, f"expected a non-empty string, got {_describe(value)}")
-        return value
-
-    def choice(self, value: Any, where: str, choices: tuple[str, ...]) -> str:
-        if not isinstance(value, str) or value not in choices:
-            options = ", ".join(repr(c) for c in choices)
-            raise self.error(where, f"expected one of {options}, got {_describe(value)}")
-        return value
-
-    def numbers(self, value: Any, n: int, where: str, what: str = "") -> list[float]:
-        """A list of ``n`` finite numbers, as floats."""
-        what = f" ({what})" if what else ""
-        if not isinstance(value, list):
-            raise self.error(where, f"expected a list of {n} numbers{what}, "
-                                    f"got {_describe(value)}")
-        if len(value) != n:
-            raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
-        out = []
-        for k, x in enumerate(value):
-            ok = isinstance(x, (int, float)) and not isinstance(x, bool)
-            try:
-                ok = ok and math.isfinite(float(x))
-            except OverflowError:  # an integer too large for a float
-                ok = False
-            if not ok:
-                raise self.error(f"{where}[{k}]", f"expected a finite number, got {_describe(x)}")
-            out.append(float(x))
-        return out
-
-    def list_of(self, value: Any, where: str, what: str) -> list[Any]:
-        if not isinstance(value, list) or not value:
-            raise self.error(where, f"expected a non-empty list of {what}, got {_describe(value)}")
-        return value
-
-    def obj(self, value: Any, where: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.error(where, f"expected an object, got {_describe(value)}")
-        return value
-
-
-def _join(where: str, key: str) -> str:
-    return f"{where}.{key}" if where else key
-
-
-def _length_to_si(value: float, unit: str) -> float:
-    return value / 1000.0 if unit == "mm" else value
-
 
 def _columns_to_si(qs: NDArray[np.float64], units: Sequence[str]) -> NDArray[np.float64]:
     out = qs.copy()
@@ -665,16 +418,16 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     DatasetError
         Naming ``source``, the key path and what was expected.
     """
-    p = _Parser(source)
+    p = ObservationReader(source)
     if not isinstance(doc, dict):
-        raise p.error("", f"expected a JSON object at the top level, got {_describe(doc)}")
+        raise p.error("", f"expected a JSON object at the top level, got {describe(doc)}")
     fmt = p.get(doc, "format", "", f"{FORMAT!r}")
     if fmt != FORMAT:
-        raise p.error("format", f"expected {FORMAT!r}, got {_describe(fmt)}")
+        raise p.error("format", f"expected {FORMAT!r}, got {describe(fmt)}")
     version = p.get(doc, "version", "", "1")
     if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
         supported = ", ".join(map(str, SUPPORTED_VERSIONS))
-        raise p.error("version", f"unsupported version {_describe(version)}; this reader "
+        raise p.error("version", f"unsupported version {describe(version)}; this reader "
                                  f"supports version {supported}")
     units = p.obj(p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'),
                   "units")
@@ -697,7 +450,7 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     if doc.get("joint_units") is not None:
         raw_units = doc["joint_units"]
         if not isinstance(raw_units, list) or len(raw_units) != k:
-            got = f"{len(raw_units)}" if isinstance(raw_units, list) else _describe(raw_units)
+            got = f"{len(raw_units)}" if isinstance(raw_units, list) else describe(raw_units)
             raise p.error("joint_units", f"expected a list of {k} units (one per joint_names "
                                          f"entry), got {got}")
         joint_units = [p.choice(u, f"joint_units[{c}]", _JOINT_UNITS)
@@ -707,17 +460,17 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
         default_measured_in = p.string(doc["measured_in"], "measured_in")
 
     samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
+    reader = ObservationReader(source, length_unit, default_measured_in)
+    names = tuple(k.name for k in kinds())
+    expected_kind = (", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
+                     if len(names) > 1 else repr(names[0]))
     q_rows: list[list[float]] = []
     # One entry per observation, flat; arrays are built once per group at the end.
     obs_group: list[int] = []
     obs_sample: list[int] = []
-    obs_index: list[int] = []
-    xyz_rows: list[list[float]] = []
-    quat_rows: list[list[float]] = []
-    oriented: list[bool] = []
+    rows: list[list[float]] = []
     group_of_key: dict[tuple[Any, ...], int] = {}
     marker_home: dict[str, tuple[str, str]] = {}  # marker -> (frame, where first seen)
-    no_quat = [0.0, 0.0, 0.0, 1.0]
 
     for i, raw_sample in enumerate(samples):
         at = f"samples[{i}]"
@@ -730,119 +483,43 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
         for j, raw_obs in enumerate(observations):
             at_obs = f"{at}.observations[{j}]"
             obs = p.obj(raw_obs, at_obs)
-            key, xyz, quat = _parse_observation(p, obs, at_obs, length_unit,
-                                                default_measured_in)
-            marker = key[2] if key[0] in ("pose", "point") else None
+            frame = p.string(p.get(obs, "frame", at_obs, "the name of a URDF frame"),
+                             f"{at_obs}.frame")
+            kind = kind_named(p.choice(p.get(obs, "kind", at_obs, expected_kind),
+                                       f"{at_obs}.kind", names))
+            key, row = kind.parse(reader, obs, at_obs, frame)
+            marker = kind.marker(key)
             if marker is not None:
-                home = marker_home.setdefault(marker, (key[1], at_obs))
-                if home[0] != key[1]:
+                home = marker_home.setdefault(marker[0], (marker[1], at_obs))
+                if home[0] != marker[1]:
                     raise p.error(f"{at_obs}.marker",
-                                  f"marker {marker!r} is on frame {key[1]!r} here but on "
-                                  f"frame {home[0]!r} in {home[1]}; a marker is rigidly "
+                                  f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
+                                  f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
                                   "attached to one frame")
-            obs_group.append(group_of_key.setdefault(key, len(group_of_key)))
+            obs_group.append(group_of_key.setdefault((kind.name, key), len(group_of_key)))
             obs_sample.append(i)
-            obs_index.append(j)
-            xyz_rows.append(xyz)
-            quat_rows.append(no_quat if quat is None else quat)
-            oriented.append(quat is not None)
+            rows.append(row)
 
     qs = _columns_to_si(np.array(q_rows, dtype=float).reshape(len(q_rows), k), joint_units)
-    xyzs = np.array(xyz_rows, dtype=float)
-    if length_unit == "mm":
-        xyzs = xyzs / 1000.0
-    quats = np.array(quat_rows, dtype=float)
-    norms = np.linalg.norm(quats, axis=1)
-    off = np.abs(norms - 1.0)
-    bad = np.array(oriented, dtype=bool) & ~(off <= QUAT_NORM_TOL)
-    if bad.any():
-        r = int(np.argmax(bad))
-        raise p.error(
-            f"samples[{obs_sample[r]}].observations[{obs_index[r]}].quat_xyzw",
-            f"quaternion norm is {norms[r]:.9g}; expected a unit quaternion [x, y, z, w] "
-            f"(norm within {QUAT_NORM_TOL:g} of 1)",
-        )
-    rounded = np.array(oriented, dtype=bool) & (off > QUAT_ROUNDED_TOL)
-    if rounded.any():
+    if reader.rounded:
         warnings.warn(
-            f"{source}: {int(rounded.sum())} of {sum(oriented)} quaternions had norms off "
-            f"by up to {off[rounded].max():.2g} (rounded?); renormalised",
+            f"{source}: {len(reader.rounded)} of {reader.quaternions} quaternions had norms "
+            f"off by up to {max(reader.rounded):.2g} (rounded?); renormalised",
             UserWarning,
             stacklevel=2,
         )
-    a_T_bs = transform_from_xyz_quat_xyzw(xyzs, quats / norms[:, None])
-
     group_ids = np.array(obs_group)
     rows_of_group = np.split(np.argsort(group_ids, kind="stable"),
                              np.cumsum(np.bincount(group_ids))[:-1])
     sample_ids = np.array(obs_sample, dtype=np.int64)
-    poses, targets, points = [], [], []
-    for key, rows in zip(group_of_key, rows_of_group, strict=True):
-        kind, frame = key[0], key[1]
-        if kind == "pose":
-            poses.append(PoseObservations(frame, sample_ids[rows], a_T_bs[rows],
-                                          marker=key[2], measured_in=key[3]))
-        elif kind == "target":
-            targets.append(TargetObservations(frame, sample_ids[rows], a_T_bs[rows],
-                                              target=key[2]))
-        else:
-            points.append(PointObservations(frame, sample_ids[rows], xyzs[rows],
-                                            offset=key[4],
-                                            marker=key[2], measured_in=key[3]))
-    out = Measurements(joint_names, qs, tuple(poses), tuple(targets), tuple(points),
-                       source=source)
+    groups = []
+    for (kind_name, key), members in zip(group_of_key, rows_of_group, strict=True):
+        data = np.array([rows[r] for r in members], dtype=float)
+        groups.append(kind_named(kind_name).group_from_rows(key, sample_ids[members], data))
+    out = Measurements(joint_names, qs, source=source).with_groups(groups)
     logger.debug("%s: %d samples, %d observations in %d groups", source, out.n_samples,
                  len(obs_group), len(group_of_key))
     return out
-
-
-def _parse_observation(
-    p: _Parser, obs: dict[str, Any], at: str, length_unit: str, default_measured_in: str | None
-) -> tuple[tuple[Any, ...], list[float], list[float] | None]:
-    """Validate one observation; return its group key, xyz (file unit) and quat or None."""
-    frame = p.string(p.get(obs, "frame", at, "the name of a URDF frame"), f"{at}.frame")
-    kind = p.choice(p.get(obs, "kind", at, "'pose', 'target' or 'point'"), f"{at}.kind", _KINDS)
-    xyz = p.numbers(p.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")
-
-    def optional_string(key: str) -> str | None:
-        value = obs.get(key)
-        return None if value is None else p.string(value, f"{at}.{key}")
-
-    def not_allowed(key: str, why: str) -> None:
-        if obs.get(key) is not None:
-            raise p.error(f"{at}.{key}", f"not allowed on a {kind!r} observation ({why})")
-
-    if kind == "target":
-        not_allowed("marker", "the target's pose in the world is the unknown; a camera frame "
-                              "has no marker")
-        not_allowed("measured_in", "the pose is measured in the camera frame")
-        not_allowed("offset", "offset belongs to 'point' observations")
-    else:
-        not_allowed("target", "only 'target' observations name a target")
-
-    if kind == "point":
-        not_allowed("quat_xyzw", "a point has a position only; use kind 'pose' for a pose")
-        offset = None
-        if obs.get("offset") is not None:
-            offset = tuple(_length_to_si(x, length_unit)
-                           for x in p.numbers(obs["offset"], 3, f"{at}.offset"))
-        marker = optional_string("marker")
-        if marker is not None and offset is not None:
-            raise p.error(f"{at}.offset", f"an offset and a marker ({marker!r}) exclude each "
-                                          "other: a marker's offset is unknown and estimated; "
-                                          "drop the marker to use a known offset")
-        measured_in = optional_string("measured_in") or default_measured_in
-        return ("point", frame, marker, measured_in, offset), xyz, None
-
-    quat = p.numbers(p.get(obs, "quat_xyzw", at, "4 numbers [x, y, z, w] (scalar last)"), 4,
-                     f"{at}.quat_xyzw", "[x, y, z, w], scalar last")
-    if kind == "target":
-        target = optional_string("target") or _DEFAULT_TARGET
-        return ("target", frame, target), xyz, quat
-    not_allowed("offset", "offset belongs to 'point' observations")
-    marker = optional_string("marker")
-    measured_in = optional_string("measured_in") or default_measured_in
-    return ("pose", frame, marker, measured_in), xyz, quat
 
 
 # -- writing ---------------------------------------------------------------------------
@@ -874,32 +551,12 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     if m.n_samples == 0:
         raise DatasetError(f"{m.source}: cannot write a dataset with no samples")
     per_sample: list[list[dict[str, Any]]] = [[] for _ in range(m.n_samples)]
-    frames_in = {g.measured_in for g in (*m.poses, *m.points)}
+    frames_in = {kind_of(g).measured_in(g) for g in m.all_groups() if kind_of(g).has_measured_in}
     top_measured_in = next(iter(frames_in)) if len(frames_in) == 1 else None
-
-    def extras(**optional: Any) -> dict[str, Any]:
-        return {key: value for key, value in optional.items() if value is not None}
-
-    def measured_in(group: PoseObservations | PointObservations) -> str | None:
-        return None if group.measured_in == top_measured_in else group.measured_in
-
-    for g in m.poses:
-        more = extras(marker=g.marker, measured_in=measured_in(g))
-        xyzs, quats = xyz_quat_xyzw_from_transform(g.meas_T_frame)
-        for s, xyz, quat in zip(g.sample.tolist(), xyzs.tolist(), quats.tolist(), strict=True):
-            per_sample[s].append({"frame": g.frame, "kind": "pose", "xyz": xyz,
-                                  "quat_xyzw": quat, **more})
-    for g in m.targets:
-        more = extras(target=None if g.target == _DEFAULT_TARGET else g.target)
-        xyzs, quats = xyz_quat_xyzw_from_transform(g.camera_T_target)
-        for s, xyz, quat in zip(g.sample.tolist(), xyzs.tolist(), quats.tolist(), strict=True):
-            per_sample[s].append({"frame": g.camera, "kind": "target", "xyz": xyz,
-                                  "quat_xyzw": quat, **more})
-    for g in m.points:
-        more = extras(offset=None if g.offset is None else g.offset.tolist(), marker=g.marker,
-                      measured_in=measured_in(g))
-        for s, xyz in zip(g.sample.tolist(), g.meas_p_point.tolist(), strict=True):
-            per_sample[s].append({"frame": g.frame, "kind": "point", "xyz": xyz, **more})
+    for g in m.all_groups():
+        for s, obs in zip(g.sample.tolist(), kind_of(g).to_dicts(g, top_measured_in),
+                          strict=True):
+            per_sample[s].append(obs)
 
     empty = [i for i, obs in enumerate(per_sample) if not obs]
     if empty:
@@ -1029,10 +686,11 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
 
     root = robot.root_link
     first_in: dict[str, int] = {}
-    for g in (*m.poses, *m.points):
-        if g.measured_in is not None and len(g.sample):
+    for g in m.all_groups():
+        frame_in = kind_of(g).measured_in(g)
+        if frame_in is not None and len(g.sample):
             first = int(g.sample.min())
-            first_in[g.measured_in] = min(first_in.get(g.measured_in, first), first)
+            first_in[frame_in] = min(first_in.get(frame_in, first), first)
     for frame_in, i in first_in.items():
         if frame_in != root and robot.has_frame(frame_in):
             raise DatasetError(
@@ -1046,35 +704,18 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     _warn_limits(m, robot)
     if root not in first_in:
         return m
-    return replace(m, poses=_merged(m.poses, root), points=_merged(m.points, root))
+    return m.with_groups(_merge_same_key(
+        replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
+        for g in m.all_groups()))
 
 
-_DATA_FIELD = {PoseObservations: "meas_T_frame", TargetObservations: "camera_T_target",
-               PointObservations: "meas_p_point"}
-
-
-def _merge_same_key(groups: Iterable[_Group]) -> tuple[Any, ...]:
-    """Merge groups with equal keys (frame, kind, marker...), rows sorted by sample."""
+def _merge_same_key(groups: Iterable[Any]) -> tuple[Any, ...]:
+    """Merge groups with equal keys (kind, frame, marker...), rows sorted by sample."""
     by_key: dict[tuple[Any, ...], list[Any]] = {}
     for g in groups:
-        by_key.setdefault(g._key, []).append(g)
-    out = []
-    for parts in by_key.values():
-        if len(parts) == 1:
-            out.append(parts[0])
-            continue
-        field = _DATA_FIELD[type(parts[0])]
-        sample = np.concatenate([g.sample for g in parts])
-        order = np.argsort(sample, kind="stable")
-        data = np.concatenate([getattr(g, field) for g in parts])
-        out.append(replace(parts[0], sample=sample[order], **{field: data[order]}))
-    return tuple(out)
-
-
-def _merged(groups: tuple[Any, ...], root: str) -> tuple[Any, ...]:
-    """Groups with ``measured_in == root`` set to None, merging groups that coincide."""
-    return _merge_same_key(
-        replace(g, measured_in=None) if g.measured_in == root else g for g in groups)
+        by_key.setdefault(kind_of(g).key(g), []).append(g)
+    return tuple(parts[0] if len(parts) == 1 else kind_of(parts[0]).concatenate(parts)
+                 for parts in by_key.values())
 
 
 def concatenate_measurements(*parts: Measurements) -> Measurements:
@@ -1090,19 +731,12 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
     names = tuple(dict.fromkeys(n for p in parts for n in p.joint_names))
     offsets = np.cumsum([0, *(p.n_samples for p in parts[:-1])])
 
-    def shifted(attr: str) -> tuple[Any, ...]:
-        return _merge_same_key(replace(g, sample=g.sample + off)
-                               for p, off in zip(parts, offsets, strict=True)
-                               for g in getattr(p, attr))
-
-    return Measurements(
-        joint_names=names,
-        qs=np.concatenate([p.q_of(names) for p in parts]),
-        poses=shifted("poses"),
-        targets=shifted("targets"),
-        points=shifted("points"),
-        source=" + ".join(dict.fromkeys(p.source for p in parts)),
-    )
+    groups = _merge_same_key(replace(g, sample=g.sample + off)
+                             for p, off in zip(parts, offsets, strict=True)
+                             for g in p.all_groups())
+    return Measurements(names, np.zeros((0, len(names)))).with_groups(
+        groups, qs=np.concatenate([p.q_of(names) for p in parts]),
+        source=" + ".join(dict.fromkeys(p.source for p in parts)))
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:

@@ -1,18 +1,14 @@
 """The noise that ``refine`` estimates, against the simulator's known sigma."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from identification.refine import (
-    _POSITION_SHAPE,
-    _ROTATION_SHAPE,
-    NoiseModel,
-    _estimate_noise,
-    _Group,
-    refine,
-)
+from identification.problem import estimate_noise, noise_shape
+from identification.refine import NoiseModel, refine
+from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import load_robot
 from kinfw.transforms import rotation_vector_from_matrix
 from verification.crlb import plant_outliers
@@ -67,14 +63,14 @@ def test_robust_constants_match_the_simulated_noise_model():
     x_position = np.sum((noisy[:, :3, 3] / s_m) ** 2, axis=1)
     x_rotation = np.sum((rotation_vector_from_matrix(noisy[:, :3, :3])
                          / (s_rad / np.sqrt(3.0))) ** 2, axis=1)
-    for x, shape in ((x_position, _POSITION_SHAPE), (x_rotation, _ROTATION_SHAPE)):
+    for x, shape in ((x_position, noise_shape(POSITION)), (x_rotation, noise_shape(ROTATION))):
         assert np.mean(x) == pytest.approx(3.0, rel=0.01)  # whitened: unit variance per row
         assert np.mean(x < shape.median) == pytest.approx(0.5, abs=0.003)
         assert np.mean(x >= shape.cut) == pytest.approx(1e-3, abs=2e-4)
         assert np.mean(x[x < shape.cut]) / 3.0 == pytest.approx(shape.trimmed, rel=0.005)
     # the two shapes differ where a robust estimate looks: a chi2(3) median would be
     # 1.73 times too large for the orientations
-    assert np.median(x_rotation) < 0.6 * _POSITION_SHAPE.median
+    assert np.median(x_rotation) < 0.6 * noise_shape(POSITION).median
 
 
 @pytest.mark.parametrize("orientation", ["angle about a random axis", "gaussian components"])
@@ -90,12 +86,11 @@ def test_the_robust_rounds_converge_to_the_true_sigma(orientation):
         axes /= np.linalg.norm(axes, axis=1, keepdims=True)
         rotation = axes * rng.normal(0.0, np.sqrt(3.0), size=(m, 1))
     position = rng.normal(size=(m, 3))
-    group = _Group("pose", "f", None, np.arange(m), np.zeros((12, m)), np.zeros((1, m)),
-                   None, np.zeros(0), 6)
+    group = SimpleNamespace(sample=np.arange(m), rows=6, components=(POSITION, ROTATION))
     sigma = NoiseModel(2.0, 0.5)
     for first in (True, False, False, False):
         r = np.concatenate([position / sigma.position_m, rotation / sigma.rotation_rad], axis=1)
-        sigma = _estimate_noise(r.ravel(), [group], sigma, np.zeros(6 * m), robust=True,
+        sigma = estimate_noise(r.ravel(), [group], sigma, np.zeros(6 * m), robust=True,
                                 first=first)
     assert sigma.position_m == pytest.approx(1.0, abs=0.01)
     assert sigma.rotation_rad == pytest.approx(1.0, abs=0.01)

@@ -10,9 +10,12 @@ measurement and the error is *measured minus predicted*:
 - ``point``: the position error vector only.
 
 Unknown rigid frames that are not in the URDF (the target's pose, a marker's pose or
-offset, the pose of the root link in a ``measured_in`` frame) are fitted here in closed
-form from the same data, and every such fit is listed in :attr:`AccuracyReport.fitted`:
-errors are then residuals after that fit, slightly optimistic for few samples.
+offset, the pose of the root link in a ``measured_in`` frame) are fitted in closed form
+from the same data by the observation kinds' start estimators (the ones the calibration
+starts from): the measurement frames from all the data, the others per group. Every such
+fit is listed in :attr:`AccuracyReport.fitted`: errors are then residuals after that
+fit, slightly optimistic for few samples. Rotation errors are
+``arcsin`` of the orientation residual's norm (exact below 90 degrees).
 """
 
 from __future__ import annotations
@@ -22,10 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.cpc import cpc_from_robot
-from kinfw.measurements import DatasetError, Measurements, check_against_robot
+from kinfw.blocks import BlockKey
+from kinfw.measurements import Measurements
 from kinfw.robot import Robot
-from kinfw.transforms import average_transform, inverse_transform, rotation_angle
 
 __all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "known_frames"]
 
@@ -121,12 +123,6 @@ class AccuracyReport:
         return {"fitted": list(self.fitted), "groups": groups}
 
 
-def _pose_errors(meas_T: NDArray, pred_T: NDArray) -> tuple[NDArray, NDArray]:
-    dp = meas_T[:, :3, 3] - pred_T[:, :3, 3]
-    dr = rotation_angle(np.swapaxes(pred_T[:, :3, :3], 1, 2) @ meas_T[:, :3, :3])
-    return dp, dr
-
-
 def known_frames(sidecar: dict | None) -> dict[tuple[str, str], NDArray]:
     """The rigid frames and offsets a calibration sidecar (``*.kinfw.json``) provides:
     ``{("frame", name): meas_T_root, ("target", name): root_T_target,
@@ -147,90 +143,54 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
                    sidecar: dict | None = None) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
-    The prediction uses the CPC model converted from the URDF (equal to Pinocchio FK to
-    1e-12, see :mod:`verification.crosscheck`), vectorised over samples. With the
-    calibration's ``sidecar`` (the ``*.kinfw.json`` written beside a calibrated URDF), the
-    frames it provides (the root's pose in the measurement frame, target poses, markers,
-    point offsets) are used as calibrated instead of being fitted to these data, so the
-    errors are honest predictions.
+    The prediction is the estimation problem's at its start
+    (:func:`identification.problem.build_problem` with ``parameters="none"``: the CPC
+    model converted from the URDF, equal to Pinocchio FK to 1e-12, see
+    :mod:`verification.crosscheck`), so every observation kind of the registry is
+    evaluated the way the calibration sees it. With the calibration's ``sidecar`` (the
+    ``*.kinfw.json`` written beside a calibrated URDF), the frames it provides (the
+    root's pose in the measurement frame, target poses, markers, point offsets) are used
+    as calibrated instead of being fitted to these data, so the errors are honest
+    predictions; the others get the kinds' closed-form start values.
 
     Raises
     ------
     DatasetError
         If the data does not fit the robot (see
-        :func:`kinfw.measurements.check_against_robot`), or needs two unknown frames at
-        once (a marker measured in a ``measured_in`` frame), which is a hand-eye problem
-        for ``kinfw calibrate``, not a closed-form fit.
+        :func:`kinfw.measurements.check_against_robot`) or leaves an unknown frame
+        unplaceable.
     """
+    from identification.problem import Unknown, build_problem
+    from kinfw.measurements import check_against_robot
+
     measurements = check_against_robot(measurements, robot)
-    known = known_frames(sidecar)
-    frames = measurements.observed_frames
-    model = cpc_from_robot(robot, frames)
-    root_T = model.frame_poses(measurements.q_of(model.topology.joint_names))
-    if root_T.ndim == 3:  # a single sample
-        root_T = root_T[None]
-    index = {f: k for k, f in enumerate(model.topology.frames)}
+    known = tuple(Unknown(kind, name, value)
+                  for (kind, name), value in known_frames(sidecar).items())
+    known_keys = {BlockKey(u.kind, u.name) for u in known}
+    problem = build_problem(robot, measurements, parameters="none", known=known)
+    # external measurement frames: fitted once from all the data; every other unknown
+    # (target, marker, offset) per group, by the kind's own closed-form start estimator
+    fitted = [text for key, text in problem.fitted if key.kind == "frame"]
+    start = problem.start_context(measurements)
+    x0 = np.zeros(problem.n_parameters)
     groups: list[GroupErrors] = []
-    fitted: list[str] = []
-
-    # measured_in frames: fit meas_T_root from every marker-free pose observed in them.
-    meas_T_root: dict[str, NDArray] = {}
-    for name in sorted({g.measured_in for g in (*measurements.poses, *measurements.points)
-                        if g.measured_in is not None}):
-        if ("frame", name) in known:
-            meas_T_root[name] = known[("frame", name)]
-            continue
-        estimates = [g.meas_T_frame @ inverse_transform(root_T[g.sample, index[g.frame]])
-                     for g in measurements.poses if g.measured_in == name and g.marker is None]
-        if not estimates:
-            raise DatasetError(
-                f"{measurements.source}: verify needs marker-free pose observations in "
-                f"{name!r} to place that frame; run 'kinfw calibrate' to estimate it")
-        meas_T_root[name] = average_transform(np.concatenate(estimates))
-        fitted.append(f"pose of the root link in {name!r} (from {sum(map(len, estimates))} "
-                      "poses)")
-
-    def to_meas(g, T_root):
-        return T_root if g.measured_in is None else meas_T_root[g.measured_in] @ T_root
-
-    for g in measurements.poses:
-        pred = to_meas(g, root_T[g.sample, index[g.frame]])
-        if g.marker is not None:
-            if g.measured_in is not None:
-                raise DatasetError(
-                    f"{measurements.source}: marker {g.marker!r} measured in "
-                    f"{g.measured_in!r} has two unknown frames; use 'kinfw calibrate'")
-            frame_T_marker = known.get(("marker", g.marker))
-            if frame_T_marker is None:
-                frame_T_marker = average_transform(inverse_transform(pred) @ g.meas_T_frame)
-                fitted.append(f"pose of marker {g.marker!r} on {g.frame!r}")
-            pred = pred @ frame_T_marker
-        dp, dr = _pose_errors(g.meas_T_frame, pred)
-        groups.append(GroupErrors(g.frame, "pose", g.marker, g.sample, dp, dr))
-
-    for g in measurements.targets:
-        root_T_camera = root_T[g.sample, index[g.camera]]
-        root_T_target = known.get(("target", g.target))
-        if root_T_target is None:
-            root_T_target = average_transform(root_T_camera @ g.camera_T_target)
-            fitted.append(f"pose of target {g.target!r} (seen by {g.camera!r})")
-        pred = inverse_transform(root_T_camera) @ root_T_target
-        dp, dr = _pose_errors(g.camera_T_target, pred)
-        groups.append(GroupErrors(g.camera, "target", None, g.sample, dp, dr))
-
-    for g in measurements.points:
-        pred_T = to_meas(g, root_T[g.sample, index[g.frame]])
-        R, p = pred_T[:, :3, :3], pred_T[:, :3, 3]
-        key = ("offset", f"{g.frame}:{g.marker or 'point'}")
-        if g.offset is not None:
-            offset = g.offset
-        elif key in known:
-            offset = known[key]
-        else:
-            # least squares offset: mean of R_i^T (m_i - p_i)
-            offset = np.einsum("nji,nj->ni", R, g.meas_p_point - p).mean(axis=0)
-            fitted.append(f"offset of point {g.marker or 'on ' + g.frame!r} on {g.frame!r}")
-        dp = g.meas_p_point - (p + R @ offset)
-        groups.append(GroupErrors(g.frame, "point", g.marker, g.sample, dp,
-                                  np.full(len(g.sample), np.nan)))
+    for g in problem.groups:
+        requests = [req for req in g.kind.unknowns(g.group, start)
+                    if req.key not in known_keys]
+        fitted += [req.description for req in requests]
+        own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
+        r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
+        m = len(g.sample)
+        position = np.full((m, 3), np.nan)
+        rotation = np.full(m, np.nan)
+        c0 = 0
+        for c in g.components:
+            rows = r[:, c0 : c0 + c.rows]
+            if c.name == "position":
+                position = rows
+            elif c.name == "rotation":
+                rotation = c.magnitude(rows)
+            c0 += c.rows
+        groups.append(GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position,
+                                  rotation))
     return AccuracyReport(tuple(groups), tuple(fitted))

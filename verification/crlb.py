@@ -73,7 +73,6 @@ from identification.refine import (
 )
 from kinfw.cpc import (
     CPCModel,
-    cayley_coordinates,
     cpc_from_geometry,
     cpc_from_robot,
     geometry_from_robot,
@@ -264,13 +263,12 @@ def cramer_rao(truth_robot: Robot, measurements: Measurements, frames: Sequence[
     noise = _check_noise(noise)
     true_targets = {str(k): np.asarray(v, dtype=float) for k, v in targets.items()}
     problem = build_problem(truth_robot, measurements, start=truth_robot, targets=true_targets)
-    missing = [name for kind, name, _ in problem.frames
-               if kind == "target" and name not in true_targets]
+    unknown = [b.key for b in problem.unknown_blocks]
+    missing = [k.name for k in unknown if k.kind == "target" and k.name not in true_targets]
     if missing:
         raise ValueError(f"targets: give the true pose of every observed target; missing "
                          f"{missing}")
-    others = ([f"{kind} {name!r}" for kind, name, _ in problem.frames if kind != "target"]
-              + [f"offset {key!r}" for key, _ in problem.offsets])
+    others = [f"{k.kind} {k.name!r}" for k in unknown if k.kind != "target"]
     if others or problem.model_frame is not None:
         raise ValueError(
             "cramer_rao: the data has unknowns whose true value cannot be given "
@@ -564,14 +562,6 @@ def _position_ms(model: CPCModel, truth: CPCModel, qs: NDArray[np.float64],
                      for f in frames])
 
 
-def _cayley_chart_coordinates(T0: NDArray[np.float64], T: NDArray[np.float64]
-                              ) -> NDArray[np.float64]:
-    """``d`` with ``T = T0 [cayley(d[:3] / 2), d[3:]]``: the inverse of ``refine``'s chart
-    of a rigid frame (rotation on the right, :func:`kinfw.cpc.cayley_coordinates`; position
-    added in the outer frame)."""
-    return np.concatenate([cayley_coordinates(T0[:3, :3].T @ T[:3, :3]), T[:3, 3] - T0[:3, 3]])
-
-
 def true_chart_coordinates(problem: LeastSquaresProblem, truth_robot: Robot,
                            root_T_targets: dict[str, ArrayLike]) -> NDArray[np.float64]:
     """The truth in the chart of a least-squares problem (from its start), shape (P,).
@@ -586,19 +576,19 @@ def true_chart_coordinates(problem: LeastSquaresProblem, truth_robot: Robot,
         For unknowns other than targets, or a missing target.
     """
     m0 = problem.model0
-    if problem.model_frame is not None or problem.offsets or any(
-            kind != "target" for kind, _, _ in problem.frames):
+    unknown = problem.unknown_blocks
+    if problem.model_frame is not None or any(b.key.kind != "target" for b in unknown):
         raise ValueError("true_chart_coordinates: only the CPC chart and target poses are "
                          "supported")
     truth = cpc_from_geometry(geometry_from_robot(truth_robot, m0.topology.frames),
                               sign=m0.sign)
     x = np.zeros(problem.n_parameters)
     x[: m0.n_parameters] = m0.chart_coordinates(truth)
-    for kind, name, T0 in problem.frames:
-        if name not in root_T_targets:
-            raise ValueError(f"root_T_targets: missing the true pose of target {name!r}")
-        x[problem.extra_slice[(kind, name)]] = _cayley_chart_coordinates(
-            T0, np.asarray(root_T_targets[name], dtype=float))
+    for block, sl in zip(unknown, problem.slices[problem.n_robot_blocks:], strict=True):
+        if block.key.name not in root_T_targets:
+            raise ValueError(f"root_T_targets: missing the true pose of target "
+                             f"{block.key.name!r}")
+        x[sl] = block.coordinates(np.asarray(root_T_targets[block.key.name], dtype=float))
     return x
 
 

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from identification.pipeline import calibrate
 from identification.refine import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
+from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import Robot
 from verification.studies import run_trials
 
@@ -116,15 +117,17 @@ def held_out_errors(nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ..
     """
     problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"),
                             known=unknowns)
-    r, _ = problem.evaluate(np.zeros(problem.n_parameters), NoiseModel(1.0, 1.0), False)
-    pos, rot, samples, k = [], [], [], 0
-    for g in problem.groups:
-        block = r[k : k + len(g.sample) * g.rows].reshape(len(g.sample), g.rows)
-        pos.append(np.linalg.norm(block[:, :3], axis=1))
-        rot.append(np.arcsin(np.clip(np.linalg.norm(block[:, 3:], axis=1), 0.0, 1.0))
-                   if g.rows == 6 else np.full(len(g.sample), np.nan))
+    pos, rot, samples = [], [], []
+    for g, (r, _) in zip(problem.groups, problem.raw_residuals(
+            np.zeros(problem.n_parameters), with_jacobian=False), strict=True):
+        size = {c.name: np.full(len(g.sample), np.nan) for c in (POSITION, ROTATION)}
+        c0 = 0
+        for c in g.components:  # error sizes per noise component (m, rad)
+            size[c.name] = c.magnitude(r[:, c0 : c0 + c.rows])
+            c0 += c.rows
+        pos.append(size["position"])
+        rot.append(size["rotation"])
         samples.append(g.sample)
-        k += len(g.sample) * g.rows
     return np.concatenate(pos), np.concatenate(rot), np.concatenate(samples)
 
 
@@ -148,8 +151,7 @@ def _score(nominal: Robot, train: Measurements, test: Measurements, test_ids: ND
         if np.any(np.isfinite(rot)) else float("nan"),
         worst_sample=int(test_ids[samples[worst]]), worst_mm=1e3 * float(pos[worst]),
         condition=ident.condition, n_parameters=ident.n_parameters,
-        n_residuals=sum(len(g.sample) * (3 if g.rotation_rad is None else 6)
-                        for g in result.refined.residuals))
+        n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals))
 
 
 def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:

@@ -147,6 +147,7 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                   "rotation_sigma_deg_per_component": float(np.degrees(
                       result.noise.rotation_rad)),
                   "estimated": result.noise.estimated,
+                  "sigma_per_component": dict(result.noise.sigmas),
                   "note": "weights: 1/sigma^2 per position component (mm) and per "
                           "small-angle orientation component (an angle sigma of s about a "
                           "random axis is s/sqrt(3) per component)"},
@@ -158,11 +159,12 @@ def _refine_section(result: RefineResult, loss: str) -> dict:
                            "unitless); fixed: not estimated (held at the start, "
                            "delta_from_start 0, std null)",
         "parameters": [
-            {"owner": o, "field": f, "unit": parameter_unit(o, f, topology),
+            {"owner": o, "field": f, "unit": unit,
              "fixed": not free, "delta_from_start": float(d),
              "std": float(sd) if free else None}
-            for (o, f), free, d, sd in zip(result.parameter_names, result.free,
-                                           result.estimate, result.std, strict=True)],
+            for (o, f), unit, free, d, sd in zip(result.parameter_names,
+                                                 result.parameter_units, result.free,
+                                                 result.estimate, result.std, strict=True)],
         "kinematics": [{"owner": o, "name": n, "value": v,
                         "unit": parameter_unit(o, n, topology)}
                        for o, n, v in result.model.describe()],

@@ -1,0 +1,57 @@
+"""The estimation problem: parameter blocks, residual groups, solver, noise, diagnostics.
+
+- :mod:`.problem`: :func:`build_problem` assembles a :class:`LeastSquaresProblem` from a
+  robot and measurements, looping over the observation kinds of :mod:`kinfw.observations`
+  and the parameter blocks of :mod:`kinfw.blocks`;
+- :mod:`.gauge`: which robot parameters are free;
+- :mod:`.solver`: Levenberg-Marquardt with robust losses (IRLS);
+- :mod:`.noise`: :class:`NoiseModel` and variance-component estimation;
+- :mod:`.diagnostics`: covariance, identifiability, per-group residuals.
+
+:func:`identification.refine.refine` orchestrates them.
+"""
+
+from .diagnostics import (
+    GroupResiduals,
+    Identifiability,
+    covariance_and_identifiability,
+    group_residuals,
+)
+from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
+from .problem import (
+    PRIOR,
+    GroupFunctions,
+    LeastSquaresProblem,
+    ResidualGroup,
+    Unknown,
+    build_problem,
+    clear_function_cache,
+    estimate_unknowns,
+    express_in,
+)
+from .solver import LOSSES, levenberg_marquardt, observation_norms, row_weights, thresholds
+
+__all__ = [
+    "LOSSES",
+    "PRIOR",
+    "GroupFunctions",
+    "GroupResiduals",
+    "Identifiability",
+    "LeastSquaresProblem",
+    "NoiseModel",
+    "NoiseShape",
+    "ResidualGroup",
+    "Unknown",
+    "build_problem",
+    "clear_function_cache",
+    "covariance_and_identifiability",
+    "estimate_noise",
+    "estimate_unknowns",
+    "express_in",
+    "group_residuals",
+    "levenberg_marquardt",
+    "noise_shape",
+    "observation_norms",
+    "row_weights",
+    "thresholds",
+]

@@ -1,0 +1,181 @@
+"""What the fit tells: covariance, identifiability, per-group residuals.
+
+Generic over parameter blocks and observation kinds: the covariance comes from the
+whitened Jacobian, residuals are split by each kind's noise components.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.cpc import CPCModel
+from kinfw.measurements import Measurements
+
+__all__ = ["GroupResiduals", "Identifiability", "covariance_and_identifiability",
+           "group_residuals"]
+
+_ROTATION_FIELDS = ("rot_x", "rot_y", "rot_z")
+
+
+@dataclass(frozen=True, slots=True)
+class Identifiability:
+    """What the data determines, from the SVD of the whitened, column-scaled Jacobian.
+
+    Attributes
+    ----------
+    rank, n_parameters : int
+        Identifiable directions, and free parameters (both 0 with ``parameters="none"``
+        and nothing else to estimate).
+    condition : float
+        Largest over smallest singular value among the identifiable directions; inf when
+        no direction is identifiable, nan (undefined) when there is no free parameter.
+    observability_o1 : float
+        Borm & Menq's O1: geometric mean of the singular values over sqrt(rows); 0 when
+        a direction is not identifiable, nan (undefined) when there is no free parameter.
+    unidentifiable : tuple of (tuple of (owner, field), str)
+        Per null direction, the parameters involved and why they are not determined.
+    correlations : tuple of (str, str, float)
+        Parameter pairs with |rho| > 0.9.
+    """
+
+    rank: int
+    n_parameters: int
+    condition: float
+    observability_o1: float
+    unidentifiable: tuple[tuple[tuple[tuple[str, str], ...], str], ...]
+    correlations: tuple[tuple[str, str, float], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class GroupResiduals:
+    """Residuals of one observation group after the fit (measured minus predicted).
+
+    Attributes
+    ----------
+    kind, frame : str
+    marker : str or None
+    sample : ndarray of int, shape (m,)
+    components : tuple of (str, ndarray (m, rows))
+        Per noise component of the kind, its residual rows in SI (m; rad as
+        ``sin(angle) u`` for orientations).
+    weight : ndarray, shape (m,)
+        Robust-loss weight of each observation (1 = full weight).
+    downweighted : ndarray of bool, shape (m,)
+        Observations beyond the robust loss's threshold (all False for least squares).
+    """
+
+    kind: str
+    frame: str
+    marker: str | None
+    sample: NDArray[np.int64]
+    components: tuple[tuple[str, NDArray[np.float64]], ...]
+    weight: NDArray[np.float64]
+    downweighted: NDArray[np.bool_]
+
+    def component(self, name: str) -> NDArray[np.float64] | None:
+        """The rows of one component, None if the kind has no such component."""
+        return dict(self.components).get(name)
+
+    @property
+    def position_m(self) -> NDArray[np.float64] | None:
+        """Position rows (m, 3), metres (None for a kind without positions)."""
+        return self.component("position")
+
+    @property
+    def rotation_rad(self) -> NDArray[np.float64] | None:
+        """Small-angle orientation error (m, 3), None for a kind without orientation."""
+        return self.component("rotation")
+
+    @property
+    def rows(self) -> int:
+        """Residual rows per observation."""
+        return sum(v.shape[1] for _, v in self.components)
+
+
+def covariance_and_identifiability(Jw: NDArray, free: NDArray, names: Sequence[tuple[str, str]],
+                                   sigma_hat2: float, measurements: Measurements,
+                                   model: CPCModel) -> tuple[NDArray, Identifiability]:
+    """``sigma_hat2 (J^T J)^+`` on the identifiable subspace, and what the data determines.
+
+    ``Jw`` is the whitened (and robust-weighted) Jacobian (N, P); ``names`` the
+    parameters' ``(owner, field)``; ``model`` gives the joints (to explain null
+    directions by joints that never move).
+    """
+    P = len(names)
+    Jf = Jw[:, free]
+    c = np.linalg.norm(Jf, axis=0)
+    c[c == 0.0] = 1.0
+    _, s, Vt = np.linalg.svd(Jf / c, full_matrices=False)
+    rank = int(np.sum(s > s[0] * 1e-8)) if len(s) else 0
+    V = Vt[:rank].T
+    cov_free = (V / s[:rank] ** 2) @ V.T / np.outer(c, c) * sigma_hat2
+    covariance = np.zeros((P, P))
+    idx = np.flatnonzero(free)
+    covariance[np.ix_(idx, idx)] = cov_free
+    free_names = [tuple(names[k]) for k in idx]
+    q_range = np.ptp(measurements.q_of(model.topology.joint_names), axis=0) \
+        if measurements.n_samples else np.zeros(model.n_joints)
+    still = {n for n, rng in zip(model.topology.joint_names, q_range, strict=True)
+             if rng < 1e-9}
+    unidentifiable = []
+    for v in Vt[rank:]:
+        involved = tuple(free_names[k] for k in np.flatnonzero(np.abs(v) > 0.2 * np.abs(v).max()))
+        owners = {o for o, _ in involved}
+        if owners & still:
+            why = (f"joint(s) {sorted(owners & still)} never move in the data, so their "
+                   "axes are not observed")
+        elif all(f in _ROTATION_FIELDS for _, f in involved):
+            why = "only positions of these frames are observed; their orientation is free"
+        else:
+            why = ("these parameters change every prediction in the same way; the data "
+                   "cannot tell them apart (add motion of the joints involved)")
+        unidentifiable.append((involved, why))
+    d = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = cov_free / np.outer(d, d)
+    pairs = [(abs(rho[a, b]), a, b) for a in range(len(d)) for b in range(a + 1, len(d))
+             if d[a] > 0 and d[b] > 0 and abs(rho[a, b]) > 0.9]
+    pairs.sort(reverse=True)
+    correlations = tuple((":".join(free_names[a]), ":".join(free_names[b]), float(rho[a, b]))
+                         for _, a, b in pairs[:20])
+    # no free parameter: nothing to condition or observe, both undefined (nan)
+    if not len(s):
+        o1 = condition = float("nan")
+    else:
+        o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) \
+            else 0.0
+        condition = float(s[0] / s[rank - 1]) if rank else float("inf")
+    return covariance, Identifiability(
+        rank=rank, n_parameters=len(free_names), condition=condition,
+        observability_o1=o1, unidentifiable=tuple(unidentifiable), correlations=correlations)
+
+
+def group_residuals(groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: Any,
+                    flagged: NDArray) -> tuple[tuple[GroupResiduals, ...], tuple]:
+    """Per-group residuals in SI, and the observations beyond the robust threshold.
+
+    ``groups`` are the problem's residual groups, ``r`` the whitened residuals (group
+    rows first), ``w_rows`` the robust weight of each row, ``flagged`` per observation.
+    """
+    out, down, k, o = [], [], 0, 0
+    for grp in groups:
+        m, rows = len(grp.sample), grp.rows
+        block = r[k : k + m * rows].reshape(m, rows)
+        weight = w_rows[k : k + m * rows : rows]
+        comps, c0 = [], 0
+        for c in grp.components:
+            comps.append((c.name, block[:, c0 : c0 + c.rows] * noise.sigma(c)))
+            c0 += c.rows
+        out.append(GroupResiduals(grp.kind.name, grp.frame, grp.marker, grp.sample,
+                                  tuple(comps), weight, flagged[o : o + m].copy()))
+        down += [(grp.kind.name, grp.frame, int(sm), float(wt))
+                 for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
+                 if bad]
+        k += m * rows
+        o += m
+    return tuple(out), tuple(down)

@@ -1,0 +1,628 @@
+"""The least-squares problem: parameter blocks and residual groups, assembled by kind.
+
+:func:`build_problem` lays the parameter vector out block by block (the robot's CPC
+chart, base and zero offsets, :mod:`~identification.problem.gauge`; then every unknown
+the observation kinds ask for: external measurement frames, targets, markers, offsets,
+or a new kind's own), takes start values from the kinds' closed-form estimators, and
+builds per group a CasADi residual and its exact Jacobian mapped over the samples. The
+built functions are unwhitened (SI): :meth:`LeastSquaresProblem.evaluate` whitens each
+row in numpy by the sigma of its noise component, so they do not depend on the noise.
+There is no branch on an observation kind here.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.blocks import Block, BlockKey, ParameterName, RigidFrameBlock
+from kinfw.chart import rigid_from_chart
+from kinfw.cpc import CPCModel, cpc_from_robot
+from kinfw.cpc_casadi import cpc_fk_function
+from kinfw.measurements import DatasetError, Measurements, check_against_robot
+from kinfw.observations import ObservationKind, StartContext, SymbolicContext, kind_of
+from kinfw.observations.base import NoiseComponent
+from kinfw.robot import Robot
+from kinfw.transforms import average_transform
+
+from .gauge import robot_blocks
+
+__all__ = ["PRIOR", "GroupFunctions", "LeastSquaresProblem", "ResidualGroup", "Unknown",
+           "build_problem", "clear_function_cache", "estimate_unknowns", "express_in"]
+
+PRIOR = NoiseComponent("prior", 1, "m")
+"""The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Unknown:
+    """A rigid frame or point estimated besides the kinematics.
+
+    Attributes
+    ----------
+    kind : str
+        ``"target"`` (root_T_target), ``"frame"`` (meas_T_root of an external
+        measurement frame), ``"marker"`` (frame_T_marker), ``"offset"`` (frame_p_point,
+        3 numbers), or a new observation kind's own.
+    name : str
+        Target, measurement frame, marker or ``frame:marker`` name.
+    value : ndarray
+        The estimate: (4, 4) pose or (3,) point, metres.
+    """
+
+    kind: str
+    name: str
+    value: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class GroupFunctions:
+    """Per-observation CasADi functions of one group, all of ``(q, m, theta, const)``:
+    residual ``r``; residual and transposed dense Jacobian ``rj`` (one call, shared
+    subexpressions); Jacobian ``j``; and :meth:`rj_free`, the Jacobian's columns of the
+    estimated parameters only (cheaper for the small parameter sets). Unwhitened (SI).
+    """
+
+    r: Any
+    rj: Any
+    j: Any
+    args: list = field(repr=False)
+    residual_expr: Any = field(repr=False)
+    _by_free: dict = field(default_factory=dict, repr=False)
+
+    def rj_free(self, free: NDArray[np.bool_]):
+        """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
+        import casadi as ca
+
+        key = free.tobytes()
+        with _FUNCTION_CACHE_LOCK:
+            f = self._by_free.get(key)
+        if f is None:
+            theta = self.args[2]
+            cols = ca.vertcat(*[theta[int(i)] for i in np.flatnonzero(free)])
+            J = ca.jacobian(self.residual_expr, cols)
+            f = ca.Function("rjf", self.args, [self.residual_expr, ca.densify(J.T)])
+            with _FUNCTION_CACHE_LOCK:
+                if len(self._by_free) >= 8:  # bounded: a few parameter sets per structure
+                    self._by_free.pop(next(iter(self._by_free)))
+                self._by_free[key] = f
+        return f
+
+
+#: Compiled residual functions by problem structure (see :func:`build_problem`): a small
+#: LRU so that cross-validation folds, parameter sets and Monte Carlo trials on the same
+#: robot and observation layout build the CasADi graph once.
+_FUNCTION_CACHE: OrderedDict[tuple, tuple[GroupFunctions, ...]] = OrderedDict()
+_FUNCTION_CACHE_SIZE = 16
+_FUNCTION_CACHE_LOCK = threading.Lock()
+
+
+def clear_function_cache() -> None:
+    """Forget every cached CasADi residual function (they are rebuilt on demand)."""
+    with _FUNCTION_CACHE_LOCK:
+        _FUNCTION_CACHE.clear()
+
+
+@dataclass(frozen=True, eq=False)
+class ResidualGroup:
+    """One observation group in the problem: its data and CasADi residual functions.
+
+    Attributes
+    ----------
+    kind : ObservationKind
+    group : object
+        The observation group (e.g. :class:`~kinfw.measurements.PoseObservations`).
+    qs : ndarray, shape (J, m)
+        Joint values of its samples, model joint order.
+    data : ndarray, shape (width, m)
+        Measured values, one column per observation.
+    functions : GroupFunctions
+        Shared (cached) by every problem of the same structure.
+    const : ndarray
+        This problem's numbers (reference CPC model, block starts), an input of the
+        functions.
+    """
+
+    kind: ObservationKind
+    group: Any
+    qs: NDArray[np.float64]
+    data: NDArray[np.float64]
+    functions: GroupFunctions
+    const: NDArray[np.float64]
+    _maps: dict = field(default_factory=dict, repr=False)
+    _q_rows: NDArray[np.float64] = field(init=False, repr=False)
+    _data_rows: NDArray[np.float64] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
+        object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
+        object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
+        object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
+
+    @property
+    def sample(self) -> NDArray[np.int64]:
+        return self.group.sample
+
+    @property
+    def rows(self) -> int:
+        """Residual rows per observation."""
+        return self.kind.rows
+
+    @property
+    def components(self) -> tuple[NoiseComponent, ...]:
+        return self.kind.components
+
+    @property
+    def frame(self) -> str:
+        return self.kind.frames(self.group)[0]
+
+    @property
+    def marker(self) -> str | None:
+        return getattr(self.group, "marker", None)
+
+    def row_sigma(self, noise: Any) -> NDArray[np.float64]:
+        """Per residual row of one observation, its noise sigma (SI)."""
+        return np.concatenate([np.full(c.rows, noise.sigma(c)) for c in self.components])
+
+    def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
+        key = (which, None if free is None else free.tobytes())
+        if key not in self._maps:
+            f = getattr(self.functions, which) if free is None else \
+                self.functions.rj_free(free)
+            self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
+        return self._maps[key]
+
+    @property
+    def residual(self):
+        """Unwhitened residuals ``(q (J, m), data (width, m), x) -> (rows, m)`` (CasADi;
+        numeric or symbolic arguments)."""
+        f = self._mapped("r")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    @property
+    def jacobian(self):
+        """Their Jacobian ``(q, data, x) -> (rows, m * P)`` (CasADi)."""
+        f = self._mapped("j")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    def evaluate(self, x: NDArray, with_jacobian: bool,
+                 free: NDArray[np.bool_] | None = None) -> tuple[NDArray, NDArray | None]:
+        """Unwhitened residuals ``(m * rows,)`` (observation-major) and Jacobian
+        ``(m * rows, P)``, or only its ``free`` columns ``(m * rows, n_free)``, written by
+        CasADi straight into numpy arrays."""
+        m = len(self.sample)
+        n_cols = len(x) if free is None else int(free.sum())
+        fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
+        buf, call = fn.buffer()
+        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float),
+                self.const)
+        for i, a in enumerate(args):
+            buf.set_arg(i, memoryview(a))
+        r = np.empty(m * self.rows)
+        buf.set_res(0, memoryview(r))
+        J = np.empty((m * self.rows, n_cols)) if with_jacobian else None
+        if J is not None:
+            buf.set_res(1, memoryview(J))
+        call()
+        return r, J
+
+
+@dataclass(frozen=True, slots=True)
+class LeastSquaresProblem:
+    """The assembled problem: parameter blocks, their start values, the residual groups.
+
+    ``x`` below is the vector of chart coordinates from the start (rad, m): the blocks'
+    entries one after the other, in the order of :attr:`names`; only the :attr:`free`
+    entries are estimated.
+
+    Attributes
+    ----------
+    model0 : CPCModel
+        The start model (end frames: every observed frame) in the model frame.
+    model_frame : str or None
+        None for the URDF root, else the one external measurement frame.
+    blocks : tuple of Block
+        CPC chart, base, zero offsets, then the unknowns (:attr:`n_robot_blocks` = 3).
+    groups : tuple of ResidualGroup
+    prior_mean, prior_sigma : ndarray, shape (P,)
+        Gaussian prior on ``x`` (sigma inf: none).
+    fitted : tuple of (BlockKey, str)
+        The unknowns whose start was estimated from these data, with a description.
+    """
+
+    model0: CPCModel
+    model_frame: str | None
+    blocks: tuple[Block, ...]
+    groups: tuple[ResidualGroup, ...]
+    prior_mean: NDArray[np.float64]
+    prior_sigma: NDArray[np.float64]
+    fitted: tuple[tuple[BlockKey, str], ...] = ()
+
+    n_robot_blocks = 3
+
+    @property
+    def slices(self) -> tuple[slice, ...]:
+        """The slice of ``x`` of each block."""
+        out, k = [], 0
+        for b in self.blocks:
+            out.append(slice(k, k + b.size))
+            k += b.size
+        return tuple(out)
+
+    def block(self, key: BlockKey) -> tuple[Block, slice]:
+        """A block and its slice of ``x`` by key (KeyError if absent)."""
+        for b, s in zip(self.blocks, self.slices, strict=True):
+            if b.key == key:
+                return b, s
+        raise KeyError(key)
+
+    @property
+    def unknown_blocks(self) -> tuple[Block, ...]:
+        """The blocks besides the robot's (targets, frames, markers, offsets...)."""
+        return self.blocks[self.n_robot_blocks:]
+
+    @property
+    def names(self) -> tuple[ParameterName, ...]:
+        return tuple(n for b in self.blocks for n in b.names)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """SI unit of each parameter (``"rad"`` or ``"m"``), from its block."""
+        return tuple(u for b in self.blocks for u in b.units)
+
+    @property
+    def free(self) -> NDArray[np.bool_]:
+        return np.concatenate([b.free for b in self.blocks])
+
+    @property
+    def robot_stop(self) -> int:
+        """End of the robot's entries in ``x`` (CPC, base, zero offsets)."""
+        return self.slices[self.n_robot_blocks - 1].stop
+
+    @property
+    def prior_rows(self) -> NDArray[np.int64]:
+        """Parameters with a prior (free, finite sigma): one residual row each."""
+        return np.flatnonzero(self.free & np.isfinite(self.prior_sigma))
+
+    @property
+    def n_parameters(self) -> int:
+        return sum(b.size for b in self.blocks)
+
+    @property
+    def obs_sizes(self) -> list[tuple[int, int]]:
+        """(observations, rows per observation) of each group, then one row per prior."""
+        sizes = [(len(g.sample), g.rows) for g in self.groups]
+        return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
+
+    @property
+    def obs_components(self) -> list[tuple[int, tuple[NoiseComponent, ...]]]:
+        """(observations, noise components) of each group, then the prior's rows (one
+        Gaussian row each): what :func:`identification.problem.solver.thresholds` needs."""
+        out = [(len(g.sample), g.components) for g in self.groups]
+        return out + ([(len(self.prior_rows), (PRIOR,))] if len(self.prior_rows) else [])
+
+    def raw_residuals(self, x: NDArray, with_jacobian: bool = True
+                      ) -> list[tuple[NDArray, NDArray | None]]:
+        """Per group the unwhitened residuals (m, rows) and Jacobian (m, rows, P) at x."""
+        out = []
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian)
+            m = len(g.sample)
+            out.append((r.reshape(m, g.rows),
+                        None if J is None else J.reshape(m, g.rows, len(x))))
+        return out
+
+    def evaluate(self, x: NDArray, noise: Any, with_jacobian: bool = True, *,
+                 only_free: bool = False) -> tuple[NDArray, NDArray | None]:
+        """Whitened residuals (N,) and their Jacobian (N, P) at ``x``.
+
+        Rows are observation by observation (each observation's rows together), group
+        by group, then one row per prior entry; each row divided by its component's
+        sigma in ``noise`` (:class:`identification.refine.NoiseModel`). With
+        ``only_free`` the columns of the fixed parameters are left at zero (not
+        computed: what the fit needs, cheaper for the small parameter sets).
+        """
+        P = self.n_parameters
+        free = self.free
+        no_columns = only_free and not free.any()
+        rs, Js = [], []
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian and not no_columns,
+                              free if only_free else None)
+            inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
+            rs.append(r * inv)
+            if with_jacobian:
+                if only_free:
+                    full = np.zeros((len(r), P))
+                    if J is not None:
+                        full[:, free] = J * inv[:, None]
+                    J = full
+                else:
+                    J *= inv[:, None]
+                Js.append(J)
+        k = self.prior_rows
+        if len(k):  # Gaussian prior: (x - mean) / sigma
+            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
+            if with_jacobian:
+                Jp = np.zeros((len(k), P))
+                Jp[np.arange(len(k)), k] = 1.0 / self.prior_sigma[k]
+                Js.append(Jp)
+        return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
+
+    def casadi_residual(self, noise: Any):
+        """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened
+        residual vector as an MX expression of it (data embedded), for CasADi solvers."""
+        import casadi as ca
+
+        x_free = ca.MX.sym("x", int(self.free.sum()))
+        x = self.full_x(x_free)
+        parts = []
+        for g in self.groups:
+            sig = np.tile(g.row_sigma(noise)[:, None], (1, len(g.sample)))
+            parts.append(ca.vec(g.residual(ca.DM(g.qs), ca.DM(g.data), x) / ca.DM(sig)))
+        return x_free, ca.vertcat(*parts)
+
+    def full_x(self, x_free):
+        """The whole chart vector (CasADi MX) from its free entries, fixed ones at zero."""
+        import casadi as ca
+
+        parts, k = [], 0
+        for f in self.free:
+            if f:
+                parts.append(x_free[k])
+                k += 1
+            else:
+                parts.append(ca.MX(0.0))
+        return ca.vertcat(*parts)
+
+    def model_at(self, x: NDArray) -> CPCModel:
+        """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
+        from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
+
+        s_cpc, s_base, s_zero = self.slices[: self.n_robot_blocks]
+        model = self.model0.perturbed(x[s_cpc])
+        base = rigid_from_chart(np.eye(4), x[s_base])
+        zero = x[s_zero]
+        if not np.any(base != np.eye(4)) and not np.any(zero):
+            return model
+        # FK(q + zero) = FK with every joint pre-moved by its offset: the geometry at q = 0
+        # of the offset model is the original geometry at q = zero.
+        moved = model.joint_frames(zero)[0]
+        geo = geometry_from_cpc(model)
+        axes = moved[:, :3, 2] * model.sign[:, None]
+        shifted = ZeroGeometry(geo.topology, axes @ base[:3, :3].T,
+                               moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
+                               base @ model.frame_poses(zero))
+        return cpc_from_geometry(shifted, sign=model.sign)
+
+    def start_context(self, measurements: Measurements) -> StartContext:
+        """The start model's poses at the samples of ``measurements`` (those the problem
+        was built from) and the external frames' starts, for the kinds' estimators."""
+        q_all = measurements.q_of(self.model0.topology.joint_names)
+        meas_T_w = {b.key.name: b.start for b in self.unknown_blocks if b.key.kind == "frame"}
+        return _start_context(self.model0, q_all, meas_T_w, self.model_frame)
+
+    def with_starts(self, group: ResidualGroup, blocks: Sequence[Block]) -> ResidualGroup:
+        """``group`` evaluated with other start values for some of the problem's unknown
+        blocks (same keys; e.g. each group's own closed-form fit): the functions take the
+        starts as inputs, so nothing is rebuilt."""
+        const = group.const.copy()
+        offsets, c = {}, 0
+        for b in self.blocks:
+            n = len(b.constants())
+            offsets[b.key] = slice(c, c + n)
+            c += n
+        for b in blocks:
+            const[offsets[b.key]] = b.constants()
+        return replace(group, const=const)
+
+    def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
+        """Every unknown block's value at ``x`` (targets, frames, markers, offsets...)."""
+        return tuple(Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
+                     for b, s in zip(self.blocks[self.n_robot_blocks:],
+                                     self.slices[self.n_robot_blocks:], strict=True))
+
+
+def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str,
+               meas_T_root: NDArray | None = None) -> CPCModel:
+    """The model moved into the external frame ``name`` by ``name_T_root``: given, or a
+    closed-form estimate (the kinds' root-pose estimates averaged, or their point pairs
+    registered)."""
+    from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
+    from kinfw.registration import register_points
+
+    groups = list(measurements.all_groups())
+    if meas_T_root is None:
+        start = _start_context(model, q_all, {}, None)
+        est = [e for g in groups
+               if (e := kind_of(g).root_pose_estimates(g, start)) is not None]
+        if est:
+            meas_T_root = average_transform(np.concatenate(est))
+        else:
+            pairs = [p for g in groups if (p := kind_of(g).root_point_pairs(g, start))]
+            if not pairs:
+                raise DatasetError(
+                    f"{measurements.source}: everything is measured in {name!r} through "
+                    "markers or points of unknown offset; give at least one point offset "
+                    "(or a marker-free pose) so that the frame can be placed")
+            meas_T_root = register_points(np.concatenate([p[0] for p in pairs]),
+                                          np.concatenate([p[1] for p in pairs]))
+    geo = geometry_from_cpc(model)
+    R, p = meas_T_root[:3, :3], meas_T_root[:3, 3]
+    moved = ZeroGeometry(geo.topology, geo.axes @ R.T, geo.points @ R.T + p,
+                         meas_T_root @ geo.w_T_frames)
+    return cpc_from_geometry(moved, sign=model.sign)
+
+
+def _start_context(model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray],
+                   model_frame: str | None) -> StartContext:
+    w_T = model.frame_poses(q_all)
+    w_T = w_T[None] if w_T.ndim == 3 else w_T
+    return StartContext(w_T, model.topology.frames, meas_T_w, model_frame)
+
+
+def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPCModel,
+                    q_all: NDArray, model_frame: str | None,
+                    given: dict[BlockKey, NDArray]
+                    ) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
+    """Every unknown block with its start value, in closed form (or as ``given``).
+
+    External measurement frames first (from the kinds' root-pose estimates), then the
+    blocks the groups request (:meth:`ObservationKind.unknowns`), merged by key. Returns
+    the blocks and a description of each one estimated from these data.
+    """
+    start = _start_context(model0, q_all, {}, model_frame)
+    blocks: list[Block] = []
+    fitted: list[tuple[BlockKey, str]] = []
+    meas_T_w: dict[str, NDArray] = {}
+    external = sorted({kind_of(g).measured_in(g) for g in groups} - {None, model_frame})
+    for name in external:
+        key = BlockKey("frame", name)
+        if key in given:
+            meas_T_w[name] = np.asarray(given[key], dtype=float)
+        else:
+            est = [e for g in groups if kind_of(g).measured_in(g) == name
+                   and (e := kind_of(g).root_pose_estimates(g, start)) is not None]
+            if not est:
+                raise DatasetError(
+                    f"{measurements.source}: frame {name!r} is observed only through markers "
+                    "or points; give some marker-free pose observations in it, or measure "
+                    "everything in it (then the model is expressed in it)")
+            meas_T_w[name] = average_transform(np.concatenate(est))
+            fitted.append((key, f"pose of the root link in {name!r} (from "
+                                f"{sum(map(len, est))} poses)"))
+        blocks.append(RigidFrameBlock(key, start=meas_T_w[name]))
+    start = _start_context(model0, q_all, meas_T_w, model_frame)
+    requests: dict[BlockKey, list[Any]] = {}
+    for g in groups:
+        for req in kind_of(g).unknowns(g, start):
+            requests.setdefault(req.key, []).append(req)
+    for key, reqs in requests.items():
+        if key in given:
+            value = np.asarray(given[key], dtype=float)
+            blocks.append(reqs[0].block(key, value[None]))
+        else:
+            blocks.append(reqs[0].block(key, np.concatenate([r.estimates for r in reqs])))
+            fitted.append((key, reqs[0].description))
+    return blocks, fitted
+
+
+def _build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[Any],
+                     model_frame: str | None, n_const: int) -> tuple[GroupFunctions, ...]:
+    """The CasADi residual functions of every group, of ``(q, m, theta, const)``.
+
+    ``const`` is the blocks' :meth:`~kinfw.blocks.Block.constants` one after the other
+    (the CPC block's: the reference model of :func:`kinfw.cpc_casadi.cpc_reference_vector`).
+    """
+    import casadi as ca
+
+    P = sum(b.size for b in blocks)
+    theta = ca.SX.sym("theta", P)
+    const = ca.SX.sym("const", n_const)
+    q = ca.SX.sym("q", model0.n_joints)
+    slices, consts, k, c = [], [], 0, 0
+    for b in blocks:
+        n = len(b.constants())
+        slices.append(slice(k, k + b.size))
+        consts.append(const[c : c + n])
+        k, c = k + b.size, c + n
+    fk = cpc_fk_function(model0, symbolic_reference=True)
+    T_frames = fk(q + theta[slices[2]], theta[slices[0]], consts[0])
+    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
+    w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
+    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
+    values = {b.key: b.casadi_value(theta[s], cs)
+              for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)}
+    context = SymbolicContext(ca, frames, values, model_frame)
+    out = []
+    for g in groups:
+        kind = kind_of(g)
+        m_sym = ca.SX.sym("m", np.shape(kind.data(g))[1])
+        r = kind.residual(g, context, m_sym)
+        args = [q, m_sym, theta, const]
+        J = ca.jacobian(r, theta)
+        out.append(GroupFunctions(ca.Function("r", args, [r]),
+                                  ca.Function("rj", args, [r, ca.densify(J.T)]),
+                                  ca.Function("j", args, [J]), args, r))
+    return tuple(out)
+
+
+def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
+                  targets: dict[str, NDArray] | None = None,
+                  parameters: str | tuple[str, ...] = "full",
+                  prior: tuple[float, float] | None = None,
+                  known: tuple[Unknown, ...] = ()) -> LeastSquaresProblem:
+    """Assemble the least-squares problem (see :func:`identification.refine.refine`).
+
+    ``known`` gives start values for unknown blocks (e.g. a previous calibration's target
+    pose and markers) instead of estimating them from these data; ``targets`` gives
+    target poses ``root_T_target`` the same way.
+    """
+    measurements = check_against_robot(measurements, robot)
+    start = robot if start is None else start
+    groups = list(measurements.all_groups())
+    observed = measurements.observed_frames
+    in_frames = {kind_of(g).measured_in(g) for g in groups}
+    model_frame = None
+    if len(in_frames) == 1 and None not in in_frames:
+        model_frame = next(iter(in_frames))  # everything in one external frame
+    model0 = cpc_from_robot(start, observed)
+    q_all = measurements.q_of(model0.topology.joint_names)
+    given = {BlockKey(u.kind, u.name): u.value for u in known}
+    given.update({BlockKey("target", n): T for n, T in (targets or {}).items()
+                  if BlockKey("target", n) not in given})
+    fitted_frame = []
+    if model_frame is not None:
+        model0 = express_in(model0, measurements, q_all, model_frame,
+                            given.get(BlockKey("frame", model_frame)))
+        if BlockKey("frame", model_frame) not in given:
+            fitted_frame.append((BlockKey("frame", model_frame),
+                                 f"pose of the root link in {model_frame!r}"))
+    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame,
+                                      given)
+    blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
+    P = sum(b.size for b in blocks)
+
+    # -- the CasADi functions: every number (reference model, block starts) is an input,
+    # so problems of one structure (topology, blocks, groups' keys) share them
+    topo = model0.topology
+    key = ((topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
+           tuple(float(v) for v in model0.sign), model_frame,
+           tuple((type(b).__name__, b.key, b.size) for b in blocks),
+           tuple(kind_of(g).key(g) for g in groups))
+    const = np.concatenate([b.constants() for b in blocks])
+    with _FUNCTION_CACHE_LOCK:
+        functions = _FUNCTION_CACHE.get(key)
+        if functions is not None:
+            _FUNCTION_CACHE.move_to_end(key)
+    if functions is None:
+        functions = _build_functions(model0, blocks, groups, model_frame, len(const))
+        with _FUNCTION_CACHE_LOCK:
+            _FUNCTION_CACHE[key] = functions
+            while len(_FUNCTION_CACHE) > _FUNCTION_CACHE_SIZE:
+                _FUNCTION_CACHE.popitem(last=False)
+    residual_groups = [
+        ResidualGroup(kind_of(g), g, q_all[g.sample].T,
+                      np.asarray(kind_of(g).data(g), dtype=float).T, fn, const)
+        for g, fn in zip(groups, functions, strict=True)]
+
+    prior_sigma = np.full(P, np.inf)
+    prior_mean = np.zeros(P)
+    if prior is not None:
+        sigma_m, sigma_rad = prior
+        stop = sum(b.size for b in blocks[:3])
+        units = np.array([u for b in blocks[:3] for u in b.units])
+        prior_sigma[:stop] = np.where(units == "rad", sigma_rad, sigma_m)
+        if model_frame is None:  # deviations from the nominal, in the start's chart
+            from kinfw.cpc import cpc_from_geometry, geometry_from_robot
+
+            nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
+            prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
+    return LeastSquaresProblem(model0, model_frame, tuple(blocks), tuple(residual_groups),
+                               prior_mean, prior_sigma, (*fitted_frame, *fitted))

@@ -1,0 +1,508 @@
+"""What every observation kind provides, and the helpers the kinds share.
+
+An observation kind is one class (:class:`ObservationKind`) that knows everything about
+one ``"kind"`` of a ``kinfw-measurements`` file:
+
+- its group dataclass (frozen, batch-first arrays, a ``sample`` index per row);
+- the file edge: one observation dict -> (group key, row of SI numbers), rows -> group,
+  group -> dicts (:meth:`ObservationKind.parse`, :meth:`~ObservationKind.group_from_rows`,
+  :meth:`~ObservationKind.to_dicts`);
+- the URDF frames it observes and which of them it pins directly (gauge);
+- the unknown parameter blocks it needs (a target's pose, a marker, a point offset) with
+  their closed-form start estimates (:meth:`~ObservationKind.unknowns`, the one place for
+  start values);
+- its residual ``measured - predicted`` as a CasADi expression
+  (:meth:`~ObservationKind.residual`), in rows grouped by noise component
+  (:attr:`~ObservationKind.components`: e.g. position 3 rows in m, rotation 3 rows in rad).
+
+The estimation problem (:mod:`identification.problem`), the measurement files
+(:mod:`kinfw.measurements`) and verification loop over the registry
+(:mod:`kinfw.observations`) and never branch on a kind.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.blocks import Block, BlockKey
+
+__all__ = [
+    "DatasetError",
+    "NoiseComponent",
+    "ObservationKind",
+    "ObservationReader",
+    "StartContext",
+    "SymbolicContext",
+    "UnknownRequest",
+    "data_array",
+    "frozen_array",
+    "sample_array",
+]
+
+
+class DatasetError(ValueError):
+    """A measurement file or dataset that cannot be used.
+
+    The message names the file (``Measurements.source``), the sample index and key path
+    when relevant (``samples[7].observations[1].quat_xyzw``) and what was expected.
+    """
+
+
+# -- array helpers for group dataclasses -------------------------------------------------
+
+
+def frozen_array(values: ArrayLike, dtype: type) -> NDArray[Any]:
+    """A read-only copy of ``values``: dataset arrays are shared, never mutated."""
+    arr = np.array(values, dtype=dtype, copy=True)
+    arr.flags.writeable = False
+    return arr
+
+
+def sample_array(values: ArrayLike, name: str) -> NDArray[np.int64]:
+    """Sample indices (m,) as read-only int64, checked (integers, >= 0)."""
+    arr = np.asarray(values)
+    if arr.ndim != 1:
+        raise ValueError(f"{name}: expected shape (m,), got {arr.shape}")
+    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"{name}: expected integer sample indices, got dtype {arr.dtype}")
+    if arr.size and arr.min() < 0:
+        raise ValueError(f"{name}: sample indices must be >= 0, got {int(arr.min())}")
+    return frozen_array(arr, np.int64)
+
+
+def data_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
+    """Finite float data of an exact shape, read-only."""
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != shape:
+        expected = "(" + ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name}: expected shape {expected}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name}: all values must be finite")
+    return frozen_array(arr, np.float64)
+
+
+# -- reading one observation ---------------------------------------------------------------
+
+
+def describe(value: Any) -> str:
+    """A short description of a JSON value for 'got ...' in messages."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return repr(value if len(value) <= 40 else value[:37] + "...")
+    if isinstance(value, list):
+        return f"a list of {len(value)} items"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+class ObservationReader:
+    """Validation helpers that raise :class:`DatasetError` naming the file and key path.
+
+    Attributes
+    ----------
+    source : str
+        File name used in messages.
+    length_unit : {"m", "mm"}
+        The file's length unit (:meth:`lengths` converts to metres).
+    default_measured_in : str or None
+        The file's top-level ``measured_in``.
+    quaternions, rounded : int, list of float
+        Quaternions read, and the norm deviations of the rounded ones (one warning per
+        file, by the reader of the file).
+    """
+
+    def __init__(self, source: str, length_unit: str = "m",
+                 default_measured_in: str | None = None) -> None:
+        self.source = source
+        self.length_unit = length_unit
+        self.default_measured_in = default_measured_in
+        #: quaternions read, and the norm deviations of those that were rounded
+        self.quaternions = 0
+        self.rounded: list[float] = []
+
+    def error(self, where: str, what: str) -> DatasetError:
+        return DatasetError(f"{self.source}: {where}: {what}" if where else
+                            f"{self.source}: {what}")
+
+    def get(self, obj: dict[str, Any], key: str, where: str, expected: str) -> Any:
+        """A required key; JSON null is an error too."""
+        value = obj.get(key)
+        if value is None:
+            state = "missing" if key not in obj else "null"
+            raise self.error(_join(where, key), f"{state}; expected {expected}")
+        return value
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.error(where, f"expected a non-empty string, got {describe(value)}")
+        return value
+
+    def optional_string(self, obj: dict[str, Any], key: str, where: str) -> str | None:
+        value = obj.get(key)
+        return None if value is None else self.string(value, _join(where, key))
+
+    def choice(self, value: Any, where: str, choices: tuple[str, ...]) -> str:
+        if not isinstance(value, str) or value not in choices:
+            options = ", ".join(repr(c) for c in choices)
+            raise self.error(where, f"expected one of {options}, got {describe(value)}")
+        return value
+
+    def numbers(self, value: Any, n: int, where: str, what: str = "") -> list[float]:
+        """A list of ``n`` finite numbers, as floats."""
+        what = f" ({what})" if what else ""
+        if not isinstance(value, list):
+            raise self.error(where, f"expected a list of {n} numbers{what}, "
+                                    f"got {describe(value)}")
+        if len(value) != n:
+            raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
+        out = []
+        for k, x in enumerate(value):
+            ok = isinstance(x, (int, float)) and not isinstance(x, bool)
+            try:
+                ok = ok and math.isfinite(float(x))
+            except OverflowError:  # an integer too large for a float
+                ok = False
+            if not ok:
+                raise self.error(f"{where}[{k}]", f"expected a finite number, got {describe(x)}")
+            out.append(float(x))
+        return out
+
+    def number(self, obj: dict[str, Any], key: str, where: str, expected: str) -> float:
+        """One required finite number."""
+        value = self.get(obj, key, where, expected)
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not ok or not math.isfinite(float(value)):
+            raise self.error(_join(where, key), f"expected {expected}, got {describe(value)}")
+        return float(value)
+
+    def lengths(self, values: Sequence[float]) -> list[float]:
+        """Lengths in the file's unit converted to metres."""
+        return [x / 1000.0 for x in values] if self.length_unit == "mm" else list(values)
+
+    def list_of(self, value: Any, where: str, what: str) -> list[Any]:
+        if not isinstance(value, list) or not value:
+            raise self.error(where, f"expected a non-empty list of {what}, got {describe(value)}")
+        return value
+
+    def obj(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(where, f"expected an object, got {describe(value)}")
+        return value
+
+    def not_allowed(self, obs: dict[str, Any], key: str, where: str, kind: str,
+                    why: str) -> None:
+        """Refuse a key that does not belong on this kind of observation."""
+        if obs.get(key) is not None:
+            raise self.error(_join(where, key), f"not allowed on a {kind!r} observation ({why})")
+
+
+# -- noise components, start values, symbolic prediction ----------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseComponent:
+    """A set of residual rows that share one noise standard deviation.
+
+    Attributes
+    ----------
+    name : str
+        ``"position"``, ``"rotation"``, or a kind's own (e.g. ``"distance"``); the key of
+        :class:`identification.refine.NoiseModel`.
+    rows : int
+        Rows per observation.
+    unit : {"m", "rad"}
+        SI unit of the rows; also the fallback sigma of a noise model that does not name
+        this component (its ``position`` for ``m``, ``rotation`` for ``rad``).
+    sine : bool
+        The rows are ``sin(angle) u`` (an orientation error): the error angle is
+        ``arcsin`` of their norm.
+    distribution : {"gaussian", "angle"}
+        The noise model of the rows, for the robust constants and thresholds:
+        ``"gaussian"``, independent N(0, sigma) rows (whitened squared norm
+        ``chi2(rows)``); ``"angle"``, a rotation by an angle N(0, sqrt(3) sigma) about a
+        uniformly random axis (3 rows; whitened squared norm ``3 chi2(1)``; Shih et al.
+        1992, Fig. 10, as :func:`verification.simulate.perturb_poses` draws it).
+    """
+
+    name: str
+    rows: int
+    unit: str
+    sine: bool = False
+    distribution: str = "gaussian"
+
+    def magnitude(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Per observation, the error size in SI (m, or rad as an angle): rows (m, rows)."""
+        norm = np.linalg.norm(rows, axis=1)
+        return np.arcsin(np.clip(norm, 0.0, 1.0)) if self.sine else norm
+
+
+POSITION = NoiseComponent("position", 3, "m")
+ROTATION = NoiseComponent("rotation", 3, "rad", sine=True, distribution="angle")
+
+
+@dataclass(frozen=True, slots=True)
+class UnknownRequest:
+    """An unknown block a group needs, with per-sample closed-form estimates of it.
+
+    Requests with the same key from several groups are merged: their ``estimates`` are
+    concatenated and ``block`` builds the block from them (a chordal mean of poses, the
+    mean of points).
+
+    Attributes
+    ----------
+    key : BlockKey
+    estimates : ndarray, shape (k, ...)
+        Per-sample estimates of the block's value (start values).
+    block : callable
+        ``block(key, estimates) -> Block``.
+    description : str
+        Human-readable, e.g. ``"pose of target 'board' (seen by 'camera')"``.
+    """
+
+    key: BlockKey
+    estimates: NDArray[np.float64]
+    block: Callable[[BlockKey, NDArray[np.float64]], Block]
+    description: str
+
+
+class StartContext:
+    """Numeric view of the start model for start-value estimators.
+
+    Parameters
+    ----------
+    w_T_frames : ndarray, shape (n, F, 4, 4)
+        Every frame's pose in the model frame ``w`` at every sample.
+    frames : sequence of str
+        Frame names (axis 1).
+    meas_T_w : dict of str to ndarray (4, 4)
+        Start pose of the model frame in each external measurement frame.
+    model_frame : str or None
+        The external frame the model is expressed in (None: the URDF root).
+    """
+
+    def __init__(self, w_T_frames: NDArray[np.float64], frames: Sequence[str],
+                 meas_T_w: dict[str, NDArray[np.float64]], model_frame: str | None) -> None:
+        self._w_T = w_T_frames
+        self._index = {f: k for k, f in enumerate(frames)}
+        self._meas_T_w = meas_T_w
+        self.model_frame = model_frame
+
+    def w_T(self, frame: str, sample: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Pose of ``frame`` in the model frame at the samples, shape (m, 4, 4)."""
+        return self._w_T[sample, self._index[frame]]
+
+    def meas_T(self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
+               ) -> NDArray[np.float64]:
+        """Pose of ``frame`` in the measurement frame ``measured_in`` (None: the root)."""
+        T = self.w_T(frame, sample)
+        if measured_in is None or measured_in == self.model_frame:
+            return T
+        return self._meas_T_w[measured_in] @ T
+
+
+class SymbolicContext:
+    """CasADi view of the model for residuals: frames at the symbolic ``q``, block values.
+
+    Attributes
+    ----------
+    ca : module
+        ``casadi``.
+    """
+
+    def __init__(self, ca: Any, frames: dict[str, Any], values: dict[BlockKey, Any],
+                 model_frame: str | None) -> None:
+        self.ca = ca
+        self._frames = frames
+        self._values = values
+        self.model_frame = model_frame
+
+    def w_T(self, frame: str) -> Any:
+        """SX 4x4 pose of a URDF frame in the model frame."""
+        return self._frames[frame]
+
+    def value(self, key: BlockKey) -> Any:
+        """SX value of an unknown block (4x4 for a rigid frame, 3x1 for a point)."""
+        return self._values[key]
+
+    def meas_T(self, measured_in: str | None, frame: str) -> Any:
+        """SX 4x4 pose of ``frame`` in the measurement frame ``measured_in``."""
+        T = self.w_T(frame)
+        if measured_in is None or measured_in == self.model_frame:
+            return T
+        return self.value(BlockKey("frame", measured_in)) @ T
+
+
+def inverse_casadi(ca: Any, T: Any) -> Any:
+    """Inverse of a CasADi 4x4 rigid transform."""
+    R = T[0:3, 0:3]
+    return ca.vertcat(ca.horzcat(R.T, -R.T @ T[0:3, 3]), ca.horzcat(0, 0, 0, 1))
+
+
+def pose_residual(ca: Any, T_pred: Any, m: Any) -> Any:
+    """``(p_meas - p_pred, 0.5 vee(R_pred^T R_meas - R_meas^T R_pred))``: 6 rows (m, rad).
+
+    ``m`` is the measured pose as 12 numbers (rotation column-major, then position). The
+    orientation rows are ``sin(angle) u`` in the predicted frame: smooth at zero error.
+    """
+    Rm = ca.reshape(m[0:9], 3, 3)
+    Rp = T_pred[0:3, 0:3]
+    E = Rp.T @ Rm - Rm.T @ Rp
+    return ca.vertcat(m[9:12] - T_pred[0:3, 3], 0.5 * ca.vertcat(E[2, 1], E[0, 2], E[1, 0]))
+
+
+def pose_rows(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(m, 4, 4) poses as (m, 12) rows: rotation column-major, then position."""
+    return np.concatenate([np.swapaxes(T[:, :3, :3], 1, 2).reshape(len(T), 9),
+                           T[:, :3, 3]], axis=1)
+
+
+# -- the kind ------------------------------------------------------------------------------
+
+
+class ObservationKind:
+    """One kind of observation: its data, file edge, unknowns and residual.
+
+    Subclasses set the class attributes and implement :meth:`parse`,
+    :meth:`group_from_rows`, :meth:`to_dicts`, :meth:`frames`, :meth:`data` and
+    :meth:`residual`; the rest has defaults. Register an instance with
+    :func:`kinfw.observations.register_kind`.
+
+    Attributes
+    ----------
+    name : str
+        The file's ``"kind"``.
+    group_type : type
+        The frozen group dataclass; it has ``sample`` (m,) and the arrays of
+        :attr:`row_fields`, batch first.
+    row_fields : tuple of str
+        Group fields with one row per observation (taken by ``subset``, merged).
+    components : tuple of NoiseComponent
+        Residual rows per observation, in order.
+    measurements_field : str or None
+        For the built-in kinds, the :class:`~kinfw.measurements.Measurements` field that
+        holds their groups (``"poses"``); None for the others (held in ``others``).
+    has_measured_in : bool
+        Whether groups carry a ``measured_in`` frame (None: the URDF root).
+    """
+
+    name: ClassVar[str]
+    group_type: ClassVar[type]
+    row_fields: ClassVar[tuple[str, ...]]
+    components: ClassVar[tuple[NoiseComponent, ...]]
+    measurements_field: ClassVar[str | None] = None
+    has_measured_in: ClassVar[bool] = False
+
+    @property
+    def rows(self) -> int:
+        """Residual rows per observation."""
+        return sum(c.rows for c in self.components)
+
+    # -- file edge
+    def parse(self, reader: ObservationReader, obs: dict[str, Any], at: str, frame: str
+              ) -> tuple[tuple[tuple[str, Any], ...], list[float]]:
+        """One observation dict -> (group key, row of numbers in SI).
+
+        The key is ``((field, value), ...)``: the group's constructor arguments besides
+        ``sample`` and the row fields (hashable; observations with equal keys form one
+        group). ``frame`` is the already-checked ``"frame"``.
+        """
+        raise NotImplementedError
+
+    def group_from_rows(self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64],
+                        rows: NDArray[np.float64]) -> Any:
+        """The group of observations with one key: rows (m, width) from :meth:`parse`."""
+        raise NotImplementedError
+
+    def to_dicts(self, group: Any, top_measured_in: str | None) -> list[dict[str, Any]]:
+        """One JSON-ready dict per row (SI), in row order; ``top_measured_in`` is the
+        file's top-level ``measured_in`` (leave it out of the dicts that have it)."""
+        raise NotImplementedError
+
+    def marker(self, key: tuple[tuple[str, Any], ...]) -> tuple[str, str] | None:
+        """``(marker, frame)`` of a group key, for the one-frame-per-marker rule."""
+        k = dict(key)
+        return (k["marker"], k["frame"]) if k.get("marker") is not None else None
+
+    def key(self, group: Any) -> tuple[Any, ...]:
+        """Groups with equal keys observe the same thing (merged on concatenation)."""
+        out = [self.name]
+        for f in dataclasses.fields(group):
+            if f.name == "sample" or f.name in self.row_fields:
+                continue
+            value = getattr(group, f.name)
+            out.append(tuple(value.tolist()) if isinstance(value, np.ndarray) else value)
+        return tuple(out)
+
+    def take(self, group: Any, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> Any:
+        """The group restricted to some rows, with new sample indices."""
+        return dataclasses.replace(group, sample=sample,
+                                   **{f: getattr(group, f)[rows] for f in self.row_fields})
+
+    def concatenate(self, parts: Sequence[Any]) -> Any:
+        """Groups of one key merged, rows sorted by sample."""
+        sample = np.concatenate([g.sample for g in parts])
+        order = np.argsort(sample, kind="stable")
+        return dataclasses.replace(parts[0], sample=sample[order], **{
+            f: np.concatenate([getattr(g, f) for g in parts])[order] for f in self.row_fields})
+
+    # -- structure
+    def frames(self, group: Any) -> tuple[str, ...]:
+        """URDF frames whose poses the observations depend on."""
+        raise NotImplementedError
+
+    def direct_frames(self, group: Any) -> tuple[str, ...]:
+        """Frames whose own pose the observations pin (no unknown offset in between);
+        an end frame observed only indirectly keeps its nominal tool transform."""
+        return ()
+
+    def measured_in(self, group: Any) -> str | None:
+        """The measurement frame of a group (None: the URDF root)."""
+        return getattr(group, "measured_in", None) if self.has_measured_in else None
+
+    def root_pose_estimates(self, group: Any, start: StartContext
+                            ) -> NDArray[np.float64] | None:
+        """Per-sample estimates (k, 4, 4) of ``meas_T_w`` (model frame in the group's
+        measurement frame), when the group pins it alone; else None."""
+        return None
+
+    def root_point_pairs(self, group: Any, start: StartContext
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """Point pairs ``(w_p, meas_p)`` (k, 3) each that register the model frame in the
+        group's measurement frame; None when the group gives none."""
+        return None
+
+    # -- estimation
+    def unknowns(self, group: Any, start: StartContext) -> tuple[UnknownRequest, ...]:
+        """The unknown blocks the group needs, with closed-form start estimates."""
+        return ()
+
+    def data(self, group: Any) -> NDArray[np.float64]:
+        """The measured values the residual compares against, (m, width) per row."""
+        raise NotImplementedError
+
+    def residual(self, group: Any, model: SymbolicContext, m: Any) -> Any:
+        """``measured - predicted`` for one observation as an SX column of
+        :attr:`rows` entries (unwhitened, SI), ``m`` the SX of one :meth:`data` row.
+
+        The graph is cached by the problem's structure, which includes :meth:`key` of
+        each group: a residual may embed numbers of the group's key (a known offset),
+        never of its rows (those enter through ``m``) nor start values (through
+        ``model``)."""
+        raise NotImplementedError

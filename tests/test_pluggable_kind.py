@@ -1,0 +1,227 @@
+"""The proof of the design: a new observation kind defined entirely in this file.
+
+"sphere": a probe point on a robot frame (unknown offset) touches a fixed sphere of
+unknown centre and known radius (a ball bar of known length: the distance from the
+probe to the ball's centre is the radius). Residual: ``radius - |w_p_probe - centre|``,
+one row in metres. The kind is registered, written to and read from a
+``kinfw-measurements`` file, and calibrates the 6R arm through the public ``refine``.
+
+Truth: contacts are simulated on a perturbed arm by solving for the joint angle that puts
+the probe on the sphere. A rigid motion of the world moves the model and the centre
+together without changing any distance, so the data determine everything but those 6
+directions: the test checks the rank, and that the calibrated model predicts the
+probe-to-centre distance at held-out configurations (not on the sphere) to 1e-9 m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+
+from identification.refine import NoiseModel, refine
+from kinfw.blocks import BlockKey, PointBlock
+from kinfw.measurements import Measurements, read_measurements, write_measurements
+from kinfw.observations import (
+    NoiseComponent,
+    ObservationKind,
+    UnknownRequest,
+    register_kind,
+    unregister_kind,
+)
+from kinfw.observations.base import data_array, sample_array
+from kinfw.robot import load_robot
+from tests.robots import ARM_6R
+from verification.crosscheck import random_joint_values
+from verification.simulate import perturb_robot
+
+
+# -- the new kind: one group dataclass and one ObservationKind --------------------------
+@dataclass(frozen=True, slots=True, eq=False)
+class SphereContacts:
+    """Contacts of a probe on ``frame`` with the fixed sphere ``sphere``.
+
+    sample : (m,) sample indices; radius_m : (m,) the sphere's radius at each contact.
+    """
+
+    kind: ClassVar[str] = "sphere"
+    frame: str
+    sample: NDArray[np.int64]
+    radius_m: NDArray[np.float64]
+    sphere: str = "sphere"
+
+    def __post_init__(self) -> None:
+        sample = sample_array(self.sample, "SphereContacts.sample")
+        object.__setattr__(self, "sample", sample)
+        object.__setattr__(self, "radius_m", data_array(self.radius_m, (len(sample),),
+                                                        "SphereContacts.radius_m"))
+
+
+def probe_key(frame: str) -> BlockKey:
+    return BlockKey("probe", frame)
+
+
+class SphereKind(ObservationKind):
+    """``{"frame": f, "kind": "sphere", "sphere": name, "radius": r}``."""
+
+    name = "sphere"
+    group_type = SphereContacts
+    row_fields = ("radius_m",)
+    components = (NoiseComponent("distance", 1, "m"),)
+
+    def parse(self, reader, obs, at, frame):
+        radius = reader.number(obs, "radius", at, "the sphere's radius (a positive length)")
+        sphere = reader.optional_string(obs, "sphere", at) or "sphere"
+        return (("frame", frame), ("sphere", sphere)), reader.lengths([radius])
+
+    def group_from_rows(self, key, sample, rows):
+        return SphereContacts(sample=sample, radius_m=rows[:, 0], **dict(key))
+
+    def to_dicts(self, group, top_measured_in):
+        return [{"frame": group.frame, "kind": "sphere", "sphere": group.sphere, "radius": r}
+                for r in group.radius_m.tolist()]
+
+    def frames(self, group):
+        return (group.frame,)
+
+    def unknowns(self, group, start):
+        """Closed form: |R_i o + t_i - c|^2 = r_i^2 is linear in (o, c, c o^T, |o|^2 +
+        |c|^2) once c^T R_i o is written <R_i, c o^T>: 16 unknowns by least squares."""
+        T = start.w_T(group.frame, group.sample)
+        R, t = T[:, :3, :3], T[:, :3, 3]
+        A = np.concatenate([2 * np.einsum("nji,nj->ni", R, t), -2 * t,
+                            -2 * R.reshape(len(R), 9), np.ones((len(R), 1))], axis=1)
+        b = group.radius_m**2 - np.sum(t**2, axis=1)
+        sol = np.linalg.lstsq(A, b, rcond=None)[0]
+        return (UnknownRequest(probe_key(group.frame), sol[None, 0:3],
+                               PointBlock.from_estimates, f"probe on {group.frame!r}"),
+                UnknownRequest(BlockKey("sphere", group.sphere), sol[None, 3:6],
+                               PointBlock.from_estimates, f"centre of {group.sphere!r}"))
+
+    def data(self, group):
+        return group.radius_m[:, None]
+
+    def residual(self, group, model, m):
+        T = model.w_T(group.frame)
+        p = T[0:3, 0:3] @ model.value(probe_key(group.frame)) + T[0:3, 3]
+        return m[0] - model.ca.norm_2(p - model.value(BlockKey("sphere", group.sphere)))
+
+
+@pytest.fixture
+def sphere_kind():
+    kind = register_kind(SphereKind())
+    yield kind
+    unregister_kind(kind.name)
+
+
+# -- simulated contacts on a perturbed arm ------------------------------------------------
+NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
+RADIUS = 0.15
+
+
+def _probe(robot, qs, offset):
+    T = robot.frame_poses(qs, "flange", NAMES)
+    return T[:, :3, :3] @ offset + T[:, :3, 3]
+
+
+def _contacts(truth, offset, centre, n, rng):
+    """n configurations with the probe on the sphere: random joints, then j2 solved by
+    bisection between two grid angles where the distance crosses the radius."""
+    out = []
+    grid = np.linspace(-3.0, 3.0, 241)
+    while sum(map(len, out)) < n:
+        q = random_joint_values(truth, NAMES, 200, rng)
+        f = np.stack([np.linalg.norm(_probe(truth, np.column_stack(
+            [q[:, :1], np.full(len(q), a), q[:, 2:]]), offset) - centre, axis=1) - RADIUS
+            for a in grid], axis=1)
+        cross = np.argmax(np.sign(f[:, :-1]) != np.sign(f[:, 1:]), axis=1)
+        ok = np.sign(f[np.arange(len(q)), cross]) != np.sign(f[np.arange(len(q)), cross + 1])
+        q, lo, hi = q[ok], grid[cross[ok]], grid[cross[ok] + 1]
+        f_lo = f[ok, cross[ok]]
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            q[:, 1] = mid
+            f_mid = np.linalg.norm(_probe(truth, q, offset) - centre, axis=1) - RADIUS
+            left = np.sign(f_mid) == np.sign(f_lo)
+            lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
+            hi = np.where(left, hi, mid)
+        q[:, 1] = 0.5 * (lo + hi)
+        out.append(q)
+    return np.concatenate(out)[:n]
+
+
+def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, tmp_path):
+    nominal = load_robot(ARM_6R)
+    rng = np.random.default_rng(11)
+    truth = load_robot(perturb_robot(nominal, rng))
+    offset = np.array([0.02, -0.01, 0.04])  # probe in the flange frame
+    centre = _probe(truth, np.full((1, 6), 0.3), offset)[0] + [0.05, 0.1, -0.05]
+    qs = _contacts(truth, offset, centre, 120, rng)
+    np.testing.assert_allclose(np.linalg.norm(_probe(truth, qs, offset) - centre, axis=1),
+                               RADIUS, atol=1e-12)
+    data = Measurements(NAMES, qs, others=(SphereContacts(
+        "flange", np.arange(len(qs)), np.full(len(qs), RADIUS), sphere="ball"),))
+
+    # the file edge: written and read back through the registry, in mm too
+    path = tmp_path / "contacts.json"
+    write_measurements(path, data)
+    back = read_measurements(path)
+    (group,) = back.groups("sphere")
+    assert isinstance(group, SphereContacts) and group.sphere == "ball"
+    np.testing.assert_array_equal(back.qs, qs)
+    np.testing.assert_array_equal(group.radius_m, RADIUS)
+    assert back.observed_frames == ("flange",)
+
+    result = refine(nominal, back, noise=NoiseModel(sigmas={"distance": 1e-4}))
+    assert result.converged
+    ident = result.identifiability
+    assert ident.rank == ident.n_parameters - 6  # a rigid motion of the world is free
+    (g,) = result.residuals
+    assert g.kind == "sphere" and np.abs(g.component("distance")).max() < 1e-10
+    found = {u.kind: u.value for u in result.unknowns}
+
+    # what the data determines: the probe-to-centre distance anywhere in joint space
+    q_test = random_joint_values(nominal, NAMES, 200, np.random.default_rng(12))
+    model_qs = q_test[:, [NAMES.index(j) for j in result.model.topology.joint_names]]
+    T = result.model.frame_poses(model_qs, "flange")
+    predicted = np.linalg.norm(T[:, :3, :3] @ found["probe"] + T[:, :3, 3] - found["sphere"],
+                               axis=1)
+    true = np.linalg.norm(_probe(truth, q_test, offset) - centre, axis=1)
+    assert np.abs(true - RADIUS).max() > 0.05  # held out: off the sphere
+    np.testing.assert_allclose(predicted, true, rtol=0, atol=1e-9)
+
+
+def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_kind, tmp_path):
+    doc = ('{"format": "kinfw-measurements", "version": 1, '
+           '"units": {"length": "mm", "angle": "deg"}, "joint_names": ["j1"], "samples": ['
+           '{"q": [10], "observations": [{"frame": "flange", "kind": "sphere", '
+           '"sphere": "ball", "radius": 150}]},'
+           '{"q": [20], "observations": [{"frame": "flange", "kind": "sphere", '
+           '"radius": "big"}]}]}')
+    path = tmp_path / "bad.json"
+    path.write_text(doc)
+    from kinfw.measurements import DatasetError
+
+    with pytest.raises(DatasetError, match=r"bad\.json: samples\[1\]\.observations\[0\]"
+                                           r"\.radius: expected the sphere's radius"):
+        read_measurements(path)
+    path.write_text(doc.replace('"big"', "120"))
+    m = read_measurements(path)
+    by_sphere = {g.sphere: g for g in m.groups("sphere")}
+    np.testing.assert_array_equal(by_sphere["ball"].radius_m, [0.15])  # mm -> m
+    np.testing.assert_array_equal(by_sphere["sphere"].sample, [1])
+
+
+def test_without_the_kind_registered_the_file_is_refused(tmp_path):
+    path = tmp_path / "x.json"
+    path.write_text('{"format": "kinfw-measurements", "version": 1, "units": {"length": '
+                    '"m", "angle": "rad"}, "joint_names": ["j1"], "samples": [{"q": [0], '
+                    '"observations": [{"frame": "f", "kind": "sphere", "radius": 1}]}]}')
+    from kinfw.measurements import DatasetError
+
+    with pytest.raises(DatasetError, match="kind: expected one of 'pose', 'target', 'point', "
+                                           "got 'sphere'"):
+        read_measurements(path)
