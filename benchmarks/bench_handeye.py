@@ -225,7 +225,7 @@ def transform(R: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.floa
 
 
 def ours_axxb(v: Views) -> tuple[Callable[[], object], Callable[[object], Estimates]]:
-    return (lambda: solve_axxb(v.base_T_hands, v.cam_T_worlds)), (lambda r: (r.X,))
+    return (lambda: solve_axxb(v.base_T_hands, v.cam_T_worlds)), (lambda r: (r.hand_T_camera,))
 
 
 def opencv_axxb(method: int) -> Prepare:
@@ -247,7 +247,7 @@ def opencv_axxb(method: int) -> Prepare:
 def ours_axyb(refine: bool) -> Prepare:
     def prepare(v: Views) -> tuple[Callable[[], object], Callable[[object], Estimates]]:
         return ((lambda: solve_axyb(v.cam_T_worlds, v.hand_T_bases, refine=refine)),
-                (lambda r: (r.X, r.Y)))
+                (lambda r: (r.camera_T_hand, r.root_T_target)))
 
     return prepare
 

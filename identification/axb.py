@@ -10,6 +10,9 @@ Problem" (ICRA 2001). The paper's frames map onto the plain batches of
     Y    = b_T_w    (base-world: pose of the world in the base)
 
 so that eqs. (1)-(6) read ``A[i] = X @ B[i] @ Y`` (the paper's ``^aH_b`` is our ``a_T_b``).
+:class:`AXYBResult` names the unknowns by their frames, with the robot's hand (end
+effector ``e``) and root (base ``b``) and the target that defines the world ``w``:
+``camera_T_hand`` (``X``) and ``root_T_target`` (``Y``); ``X`` and ``Y`` stay as aliases.
 
 The algorithm (paper section 3)
     Rotations: from a guess of ``Y`` (the identity in the paper) every pose gives an
@@ -133,14 +136,17 @@ class AXYBError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class AXYBResult:
-    """Estimate of ``A[i] ≈ X @ B[i] @ Y`` and its quality.
+    """Estimate of ``camera_T_target[i] ≈ camera_T_hand @ hand_T_root[i] @ root_T_target``
+    (``A[i] ≈ X @ B[i] @ Y``) and its quality.
 
     Attributes
     ----------
-    X : ndarray, shape (4, 4)
-        Left unknown (the paper's hand-eye ``c_T_e``), input length unit.
-    Y : ndarray, shape (4, 4)
-        Right unknown (the paper's base-world ``b_T_w``), input length unit.
+    camera_T_hand : ndarray, shape (4, 4)
+        Pose of the hand (end effector) in the camera frame, input length unit: the left
+        unknown ``X``, the paper's hand-eye ``c_T_e``.
+    root_T_target : ndarray, shape (4, 4)
+        Pose of the target (the paper's world) in the robot's root (base) frame, input
+        length unit: the right unknown ``Y``, the paper's base-world ``b_T_w``.
     iterations : int
         Iterations of the paper's alternation, rotation plus translation phase (restarts
         included; the refinement's Gauss-Newton steps are not counted).
@@ -154,22 +160,50 @@ class AXYBResult:
     rms_translation : float
         RMS over poses of the distance between the translations of ``X B[i] Y`` and
         ``A[i]``, input length unit.
-    history_X, history_Y : ndarray, shape (iterations, 4, 4), or None
+    camera_T_hand_history, root_T_target_history : ndarray, shape (iterations, 4, 4), or None
         With ``record_history=True``: the estimates after each iteration of the paper's
         alternation (before any refinement). During the rotation phase the translations
         are those of the translation start: ``Y``'s starting translation, and for ``X``
         the average of eqs. (4)-(6) given it and the current rotation.
+
+    Notes
+    -----
+    For readers of Hirsh et al., the paper's names are read-only aliases: ``X`` is
+    ``camera_T_hand``, ``Y`` is ``root_T_target``, ``history_X`` and ``history_Y`` are
+    ``camera_T_hand_history`` and ``root_T_target_history``. When the inputs are other
+    frames than the camera and robot ones (``A`` and ``B`` are any batches with
+    ``A[i] ≈ X @ B[i] @ Y``), the aliases are the neutral names.
     """
 
-    X: NDArray[np.float64]
-    Y: NDArray[np.float64]
+    camera_T_hand: NDArray[np.float64]
+    root_T_target: NDArray[np.float64]
     iterations: int
     converged: bool
     restarts: int
     rms_rotation_rad: float
     rms_translation: float
-    history_X: NDArray[np.float64] | None
-    history_Y: NDArray[np.float64] | None
+    camera_T_hand_history: NDArray[np.float64] | None
+    root_T_target_history: NDArray[np.float64] | None
+
+    @property
+    def X(self) -> NDArray[np.float64]:
+        """Alias of :attr:`camera_T_hand`: the left unknown ``X`` of ``A = X B Y``."""
+        return self.camera_T_hand
+
+    @property
+    def Y(self) -> NDArray[np.float64]:
+        """Alias of :attr:`root_T_target`: the right unknown ``Y`` of ``A = X B Y``."""
+        return self.root_T_target
+
+    @property
+    def history_X(self) -> NDArray[np.float64] | None:
+        """Alias of :attr:`camera_T_hand_history`."""
+        return self.camera_T_hand_history
+
+    @property
+    def history_Y(self) -> NDArray[np.float64] | None:
+        """Alias of :attr:`root_T_target_history`."""
+        return self.root_T_target_history
 
 
 # ------------------------------------------------------------------- quaternions
@@ -529,10 +563,12 @@ def solve_axyb(
     Parameters
     ----------
     A : array_like, shape (n, 4, 4)
-        Left-hand poses, e.g. ``camera_T_world`` from camera calibration (the paper's
-        ``c_iH_w``), n >= 3. Any length unit; the result uses the same.
+        Left-hand poses, e.g. ``camera_T_target`` from camera calibration (the paper's
+        ``c_iH_w``, the target defining the world), n >= 3. Any length unit; the result
+        uses the same.
     B : array_like, shape (n, 4, 4)
-        Middle poses, e.g. ``hand_T_base`` from the robot's kinematics (``e_iH_b``).
+        Middle poses, e.g. ``hand_T_root`` from the robot's kinematics (``e_iH_b``:
+        the inverse of the hand's forward kinematics).
     X0, Y0 : array_like, shape (4, 4), optional
         Initial guess of one unknown (the paper starts from a guess of ``Y``, eq. 7); give
         at most one. ``X0`` is turned into ``Y0`` by one averaging step. The translation
@@ -553,11 +589,14 @@ def solve_axyb(
         rotations and exact least squares for the translations (module docstring).
         ``False``: the paper's algorithm alone.
     record_history : bool
-        Keep the estimates after each iteration in ``history_X`` / ``history_Y``.
+        Keep the estimates after each iteration in ``camera_T_hand_history`` /
+        ``root_T_target_history``.
 
     Returns
     -------
     AXYBResult
+        ``camera_T_hand`` (``X``) and ``root_T_target`` (``Y``) in the input length unit,
+        and the fit's quality.
 
     Raises
     ------
@@ -675,7 +714,8 @@ def solve_axyb(
             np.concatenate([R_Y_rot, np.broadcast_to(R_Y_final, (k_tra, 3, 3))]),
             np.concatenate([np.broadcast_to(t_Y0, (len(R_Y_rot), 3)), tra.history_Y]))
 
-    return AXYBResult(X=X, Y=Y, iterations=rot.iterations + tra.iterations,
+    return AXYBResult(camera_T_hand=X, root_T_target=Y,
+                      iterations=rot.iterations + tra.iterations,
                       converged=bool(converged), restarts=rot.restarts,
                       rms_rotation_rad=rms_rot, rms_translation=rms_tra,
-                      history_X=history_X, history_Y=history_Y)
+                      camera_T_hand_history=history_X, root_T_target_history=history_Y)

@@ -9,8 +9,9 @@ observation is one equation of the form ``A = X B Y`` (Hirsh et al.; Shih et al.
 
 where ``hand`` is the URDF link the camera's fixed joint hangs from (for the IIS-head, the
 plate: the paper's "camera mount coordinate system"). The camera's fixed joint origin
-``hand_T_camera = inv(X)`` is what the calibrated URDF changes; ``Y`` is the target's
-pose in the measurement frame, which belongs in the report, not the URDF.
+``hand_T_camera = inv(camera_T_hand)`` is what the calibrated URDF changes;
+``root_T_target`` is the target's pose in the measurement frame, which belongs in the
+report, not the URDF.
 """
 
 from __future__ import annotations
@@ -99,15 +100,13 @@ def _solve_one(robot: Robot, group: TargetObservations, measurements: Measuremen
                rng: np.random.Generator) -> CameraCalibration:
     joint, hand = camera_mount(robot, group.camera)
     model = cpc_from_robot(robot, (hand,))
-    root_T_hand = model.frame_poses(measurements.q_of(model.topology.joint_names)[group.sample],
-                                    hand)
-    if root_T_hand.ndim == 2:
-        root_T_hand = root_T_hand[None]
-    result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hand), rng=rng)
+    qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
+    root_T_hands = model.frame_poses(qs, hand)
+    result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hands), rng=rng)
     return CameraCalibration(
         camera=group.camera, target=group.target, joint=joint, hand=hand,
-        hand_T_camera=inverse_transform(result.X), root_T_target=result.Y,
-        n_views=len(group.sample), solver=result)
+        hand_T_camera=inverse_transform(result.camera_T_hand),
+        root_T_target=result.root_T_target, n_views=len(group.sample), solver=result)
 
 
 def calibrate_cameras(robot: Robot, measurements: Measurements, *,

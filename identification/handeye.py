@@ -9,6 +9,9 @@ looks at a target fixed in the world. At pose ``i`` the robot's forward kinemati
 
     base_T_target = A[i] @ X @ B[i]          for every i,   X = hand_T_eye.
 
+The result names it by its frames, :attr:`HandEyeResult.hand_T_camera`; ``X`` is kept as
+an alias.
+
 For two poses ``i, j`` this becomes (eqs. 70-71; the paper's ``k, j`` are our ``i, j``)::
 
     A_ij X = X B_ij,   A_ij = inv(A[j]) @ A[i],   B_ij = B[j] @ inv(B[i]).
@@ -78,8 +81,9 @@ class HandEyeResult:
 
     Attributes
     ----------
-    X : ndarray, shape (4, 4)
-        ``hand_T_eye``: pose of the eye (camera) in the hand frame, input length unit.
+    hand_T_camera : ndarray, shape (4, 4)
+        Pose of the camera (the eye) in the hand frame, in the input length unit: the
+        unknown ``X`` of ``A X = X B``.
     n_pairs : int
         Relative motions (unordered pose pairs) used.
     rms_rotation_rad : float
@@ -95,19 +99,29 @@ class HandEyeResult:
     axis_spread_rad : float
         Largest angle between the rotation axes (as lines) of the motions used, radians:
         0 means all about one axis.
+
+    Notes
+    -----
+    ``X`` is a read-only alias of ``hand_T_camera`` for readers of Tsai & Lenz and
+    Shih et al., who call the hand-eye transform ``X``.
     """
 
-    X: NDArray[np.float64]
+    hand_T_camera: NDArray[np.float64]
     n_pairs: int
     rms_rotation_rad: float
     rms_translation: float
     rotation_condition: float
     axis_spread_rad: float
 
+    @property
+    def X(self) -> NDArray[np.float64]:
+        """Alias of :attr:`hand_T_camera`: the papers' ``X`` in ``A X = X B``."""
+        return self.hand_T_camera
+
 
 def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
                ) -> HandEyeResult:
-    """Hand-eye transform ``X = hand_T_eye`` from absolute poses, by Tsai & Lenz.
+    """Hand-eye transform ``X = hand_T_camera`` from absolute poses, by Tsai & Lenz.
 
     Parameters
     ----------
@@ -123,7 +137,8 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
     Returns
     -------
     HandEyeResult
-        ``X`` in the input length unit, and the fit's quality.
+        ``hand_T_camera`` (the papers' ``X``) in the input length unit, and the fit's
+        quality.
 
     Raises
     ------
@@ -262,7 +277,7 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
                     "%.3g); X's rotation about it and its translation along it are poorly "
                     "determined: add motions about other axes", condition)
     return HandEyeResult(
-        X=hand_T_eye,
+        hand_T_camera=hand_T_eye,
         n_pairs=len(i),
         rms_rotation_rad=rms_rotation,
         rms_translation=float(np.sqrt(np.mean(trans_res**2))),

@@ -275,23 +275,37 @@ class CPCModel:
     def frame_poses(self, qs: ArrayLike, frame: str | None = None) -> NDArray[np.float64]:
         """Pose of the end frames in ``w``, vectorised over configurations.
 
+        Batch in, batch out: one configuration of shape (J,) gives one pose, a batch of
+        shape (n, J) gives n poses, with the batch axis kept for n = 1.
+
         Parameters
         ----------
-        qs : array_like, shape (n, J) or (J,)
-            Joint values in ``topology.joint_names`` order (rad, m).
+        qs : array_like, shape (J,) or (n, J)
+            Joint values in ``topology.joint_names`` order (rad, m): one configuration,
+            or a batch of n.
         frame : str, optional
-            One end frame; default all of them.
+            One end frame; default all of them, in ``topology.frames`` order.
 
         Returns
         -------
         ndarray
-            ``w_T_frame`` of shape (n, 4, 4), or (n, E, 4, 4) for all frames; the
-            leading ``n`` axis is dropped for a single configuration.
+            ``w_T_frame``, metres. For a batch ``qs`` (n, J): shape (n, 4, 4) for one
+            ``frame``, (n, E, 4, 4) for all E end frames. For one configuration (J,):
+            the same without the leading axis, (4, 4) or (E, 4, 4).
+
+        Raises
+        ------
+        ValueError
+            ``qs`` neither (J,) nor (n, J).
+        KeyError
+            ``frame`` is not an end frame of the model.
         """
-        single = np.asarray(qs).ndim == 1
-        frames = self.joint_frames(qs)
-        names = self.topology.frames
-        idx = range(len(names)) if frame is None else [self._frame_index(frame)]
+        qs = np.asarray(qs, dtype=float)
+        if qs.ndim not in (1, 2):
+            raise ValueError(f"qs: expected shape ({self.n_joints},) or (n, {self.n_joints}) "
+                             f"(columns {list(self.topology.joint_names)}), got {qs.shape}")
+        frames = self.joint_frames(qs)  # (n, J, 4, 4); n = 1 for one configuration
+        idx = range(len(self.topology.frames)) if frame is None else [self._frame_index(frame)]
         out = np.stack(
             [
                 np.broadcast_to(self.tool_T[e], (len(frames), 4, 4))
@@ -303,7 +317,7 @@ class CPCModel:
         )
         if frame is not None:
             out = out[:, 0]
-        return out[0] if single else out
+        return out[0] if qs.ndim == 1 else out
 
     def _frame_index(self, frame: str) -> int:
         try:

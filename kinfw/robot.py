@@ -531,10 +531,14 @@ class Robot:
                     joint_names: tuple[str, ...] | None = None) -> NDArray[np.float64]:
         """Pose of ``frame`` in the root link, ``root_T_frame``, by Pinocchio FK.
 
+        Batch in, batch out: one configuration of shape (k,) gives one pose, a batch of
+        shape (n, k) gives n poses, with the batch axis kept for n = 1.
+
         Parameters
         ----------
         qs : array_like, shape (k,) or (n, k)
-            URDF joint values (rad, m) in the order of ``joint_names``.
+            URDF joint values (rad, m) in the order of ``joint_names``: one
+            configuration, or a batch of n.
         frame : str
             Link or joint name.
         joint_names : sequence of str, optional
@@ -542,15 +546,28 @@ class Robot:
 
         Returns
         -------
-        ndarray, shape (4, 4) or (n, 4, 4)
+        ndarray, shape (4, 4) for qs (k,), (n, 4, 4) for qs (n, k)
+            ``root_T_frame``, metres.
+
+        Raises
+        ------
+        ValueError
+            ``qs`` neither (k,) nor (n, k).
+        UnknownFrameError
+            ``frame`` is neither a link nor a joint of the robot.
         """
-        single = np.asarray(qs).ndim == 1
+        qs = np.asarray(qs, dtype=float)
+        if qs.ndim not in (1, 2):
+            names = self.joint_names if joint_names is None else tuple(joint_names)
+            raise ValueError(f"qs: expected shape ({len(names)},) or (n, {len(names)}) "
+                             f"(columns {list(names)}), got {qs.shape}")
         fid = self.frame_id(frame)
-        out = np.empty((len(np.atleast_2d(qs)), 4, 4))
-        for k, q in enumerate(self.pin_configurations(qs, joint_names)):
+        configurations = self.pin_configurations(qs, joint_names)  # (n, nq); n = 1 for (k,)
+        out = np.empty((len(configurations), 4, 4))
+        for k, q in enumerate(configurations):
             pin.forwardKinematics(self.model, self._data, q)
             out[k] = pin.updateFramePlacement(self.model, self._data, fid).homogeneous
-        return out[0] if single else out
+        return out[0] if qs.ndim == 1 else out
 
 
 def builtin_head_urdf() -> Path:

@@ -4,6 +4,7 @@ Truth is built with Pinocchio (``pin.exp3``, ``pin.SE3``), never with the module
 helpers; real data is Tabb's dataset 1 with Tabb's published solution.
 """
 
+import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -58,18 +59,44 @@ def test_noise_free_poses_give_the_true_x_and_y(n, refine):
     X, Y, B, A = _problem(seed=n, n=n)
     result = solve_axyb(A, B, refine=refine, max_iterations=100_000)
     assert result.converged
-    np.testing.assert_allclose(result.X, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.Y, Y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
     assert result.rms_rotation_rad < 1e-9 and result.rms_translation < 1e-9
     assert result.restarts == 0
 
+
+def test_result_is_named_by_frames_with_the_paper_names_as_read_only_aliases():
+    """``camera_T_hand`` and ``root_T_target`` chain a robot's ``hand_T_root`` (the
+    inverse of its forward kinematics) into the camera's view of the target:
+    ``camera_T_target[i] = camera_T_hand @ hand_T_root[i] @ root_T_target``; the paper's
+    ``X``, ``Y`` and histories are the same arrays."""
+    rng = np.random.default_rng(12)
+    camera_T_hand = _random_transforms(rng, 1, 0.3)[0]
+    root_T_target = _random_transforms(rng, 1, 1.0)[0]
+    root_T_hands = _random_transforms(rng, 6, 0.5)
+    hand_T_roots = np.array([pin.SE3(T).inverse().homogeneous for T in root_T_hands])
+    camera_T_targets = np.array([camera_T_hand @ pin.SE3(T).inverse().homogeneous
+                                 @ root_T_target for T in root_T_hands])
+    result = solve_axyb(camera_T_targets, hand_T_roots, refine=False, record_history=True)
+    np.testing.assert_allclose(result.camera_T_hand, camera_T_hand, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.root_T_target, root_T_target, rtol=0, atol=1e-9)
+    assert result.X is result.camera_T_hand
+    assert result.Y is result.root_T_target
+    assert result.history_X is result.camera_T_hand_history
+    assert result.history_Y is result.root_T_target_history
+    for name in ("X", "Y", "history_X", "history_Y"):  # no setter (TypeError on CPython 3.11)
+        with pytest.raises((AttributeError, TypeError)):
+            setattr(result, name, np.eye(4))
+    for name in ("camera_T_hand", "root_T_target"):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(result, name, np.eye(4))
 
 def test_a_start_given_as_x0_also_works():
     X, Y, B, A = _problem(seed=7, n=6)
     X0 = pin.SE3(pin.exp3(np.array([0.4, -0.3, 0.2])) @ X[:3, :3], np.zeros(3)).homogeneous
     result = solve_axyb(A, B, X0=X0, refine=False)
-    np.testing.assert_allclose(result.X, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.Y, Y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
 
 
 # ------------------------------------------------------------- the paper itself
@@ -80,7 +107,7 @@ def test_the_iteration_is_the_papers_per_pose_averaging():
     _, Y, B, A = _problem(seed=3, n=8, rotation_noise_deg=2.0)
     Y0 = pin.SE3(pin.exp3(np.array([0.5, 0.2, -0.4])) @ Y[:3, :3], np.zeros(3)).homogeneous
     result = solve_axyb(A, B, Y0=Y0, refine=False, record_history=True)
-    RX, RY = result.history_X[:, :3, :3], result.history_Y[:, :3, :3]
+    RX, RY = result.camera_T_hand_history[:, :3, :3], result.root_T_target_history[:, :3, :3]
     RA, RB = A[:, :3, :3], B[:, :3, :3]
 
     def average(Rs, near):  # paper section 2.2 property 4, signs aligned to `near`
@@ -102,13 +129,14 @@ def test_the_iteration_is_the_papers_per_pose_averaging():
 def test_history_holds_every_iteration_and_ends_at_the_result():
     _, Y, B, A = _problem(seed=4, n=5, rotation_noise_deg=1.0)
     result = solve_axyb(A, B, refine=False, record_history=True)
-    assert result.history_X.shape == result.history_Y.shape == (result.iterations, 4, 4)
-    np.testing.assert_allclose(result.history_X[-1], result.X, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(result.history_Y[-1], result.Y, rtol=0, atol=1e-12)
+    history_X, history_Y = result.camera_T_hand_history, result.root_T_target_history
+    assert history_X.shape == history_Y.shape == (result.iterations, 4, 4)
+    np.testing.assert_allclose(history_X[-1], result.camera_T_hand, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(history_Y[-1], result.root_T_target, rtol=0, atol=1e-12)
     # the paper's Fig. 3/4 quantity: the rotation error of Y falls from the identity start
-    errors = [_angle_deg(H[:3, :3], Y[:3, :3]) for H in result.history_Y]
+    errors = [_angle_deg(H[:3, :3], Y[:3, :3]) for H in result.root_T_target_history]
     assert errors[-1] < 1.0 < errors[0]
-    assert solve_axyb(A, B).history_X is None
+    assert solve_axyb(A, B).camera_T_hand_history is None
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -120,9 +148,9 @@ def test_a_start_180_degrees_off_stalls_then_restarts_to_the_truth(seed):
     result = solve_axyb(A, B, Y0=Y0, refine=False, record_history=True)
     assert result.restarts >= 1
     # the stall: the first estimates stay 180 degrees from the truth (section 4)
-    assert _angle_deg(result.history_Y[0, :3, :3], Y[:3, :3]) > 179.9
-    np.testing.assert_allclose(result.X, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.Y, Y, rtol=0, atol=1e-9)
+    assert _angle_deg(result.root_T_target_history[0, :3, :3], Y[:3, :3]) > 179.9
+    np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
     # the closed-form start of refine=True does not stall at all
     assert solve_axyb(A, B).restarts == 0
 
@@ -137,8 +165,8 @@ def test_sample_order_does_not_matter(order):
     for refine in (True, False):
         ref = solve_axyb(A, B, refine=refine)
         shuffled = solve_axyb(A[order], B[order], refine=refine)
-        np.testing.assert_allclose(shuffled.X, ref.X, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(shuffled.Y, ref.Y, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(shuffled.camera_T_hand, ref.camera_T_hand, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(shuffled.root_T_target, ref.root_T_target, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("refine", [True, False])
@@ -150,7 +178,8 @@ def test_the_length_unit_does_not_matter(refine):
     B_mm[:, :3, 3] *= 1000.0
     in_mm = solve_axyb(A_mm, B_mm, refine=refine)
     assert in_mm.iterations == in_m.iterations
-    for T_mm, T_m in ((in_mm.X, in_m.X), (in_mm.Y, in_m.Y)):
+    for T_mm, T_m in ((in_mm.camera_T_hand, in_m.camera_T_hand),
+                      (in_mm.root_T_target, in_m.root_T_target)):
         np.testing.assert_allclose(T_mm[:3, :3], T_m[:3, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(T_mm[:3, 3], 1000.0 * T_m[:3, 3], rtol=0, atol=1e-9)
     assert in_mm.rms_translation == pytest.approx(1000.0 * in_m.rms_translation, rel=1e-9)
@@ -170,8 +199,8 @@ def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
         for refine in (True, False):
             result = solve_axyb(A, B, refine=refine)
             assert result.converged and result.restarts == 0
-            errors[refine] += [_angle_deg(result.X[:3, :3], X[:3, :3]),
-                               _angle_deg(result.Y[:3, :3], Y[:3, :3])]
+            errors[refine] += [_angle_deg(result.camera_T_hand[:3, :3], X[:3, :3]),
+                               _angle_deg(result.root_T_target[:3, :3], Y[:3, :3])]
     for refine in (True, False):
         e = np.array(errors[refine])
         assert e.mean() < 0.4 and np.percentile(e, 95) < 0.7 and e.max() < 1.0, refine
@@ -238,7 +267,7 @@ def test_weak_motion_is_warned_about(caplog):
     with caplog.at_level(logging.WARNING, logger="identification.axb"):
         result = solve_axyb(X @ B @ Y, B)
     assert "weak motion" in caplog.text
-    np.testing.assert_allclose(result.X, X, rtol=0, atol=1e-9)  # noise-free: still exact
+    np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)  # noise-free: exact
 
 
 def test_inverted_b_is_an_error_not_an_answer():
@@ -292,8 +321,8 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     A, B, world_T_base, cam_T_gripper = _tabb()
     result = solve_axyb(A, B)
     assert result.converged
-    x_rot, x_t = _errors(result.X, cam_T_gripper)
-    y_rot, y_t = _errors(np.linalg.inv(result.Y), world_T_base)
+    x_rot, x_t = _errors(result.camera_T_hand, cam_T_gripper)
+    y_rot, y_t = _errors(np.linalg.inv(result.root_T_target), world_T_base)
     assert x_rot < 1.0 and x_t < 50.0 and y_rot < 1.0 and y_t < 50.0
     assert (x_rot, x_t, y_rot, y_t) == pytest.approx((0.545, 25.39, 0.503, 20.40), abs=0.01)
     assert np.degrees(result.rms_rotation_rad) == pytest.approx(0.406, abs=1e-3)
@@ -304,10 +333,10 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     with caplog.at_level(logging.WARNING, logger="identification.axb"):
         paper = solve_axyb(A, B, refine=False)
     assert not paper.converged and "did not converge" in caplog.text
-    assert _angle_deg(paper.X[:3, :3], result.X[:3, :3]) < 0.01
-    assert np.linalg.norm(paper.X[:3, 3] - result.X[:3, 3]) < 1.0
-    assert np.linalg.norm(paper.Y[:3, 3] - result.Y[:3, 3]) < 1.0
-    x_rot, x_t = _errors(paper.X, cam_T_gripper)
+    assert _angle_deg(paper.camera_T_hand[:3, :3], result.camera_T_hand[:3, :3]) < 0.01
+    assert np.linalg.norm(paper.camera_T_hand[:3, 3] - result.camera_T_hand[:3, 3]) < 1.0
+    assert np.linalg.norm(paper.root_T_target[:3, 3] - result.root_T_target[:3, 3]) < 1.0
+    x_rot, x_t = _errors(paper.camera_T_hand, cam_T_gripper)
     assert x_rot < 1.0 and x_t < 50.0
 
     # in metres: the same answer
@@ -315,5 +344,7 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     A_m[:, :3, 3] /= 1000.0
     B_m[:, :3, 3] /= 1000.0
     in_m = solve_axyb(A_m, B_m)
-    np.testing.assert_allclose(in_m.X[:3, :3], result.X[:3, :3], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(1000.0 * in_m.Y[:3, 3], result.Y[:3, 3], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(in_m.camera_T_hand[:3, :3], result.camera_T_hand[:3, :3],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(1000.0 * in_m.root_T_target[:3, 3], result.root_T_target[:3, 3],
+                               rtol=0, atol=1e-8)

@@ -183,3 +183,34 @@ def test_chart_coordinates_invert_the_chart():
     delta = np.random.default_rng(6).normal(size=model.n_parameters) * 0.05
     moved = model.perturbed(delta)
     np.testing.assert_allclose(model.chart_coordinates(moved), delta, atol=1e-12)
+
+
+@pytest.mark.parametrize(("urdf", "frames"), CASES)
+def test_frame_poses_batch_in_batch_out(urdf, frames):
+    """(J,) gives one pose, (n, J) n poses with the axis kept for n = 1; all equal
+    Pinocchio's FK of the same configurations."""
+    robot = load_robot(urdf)
+    model = cpc_from_robot(robot, frames)
+    names = model.topology.joint_names
+    qs = _random_qs(robot, names, 3, np.random.default_rng(5))
+    pin_all = np.stack([robot.frame_poses(qs, f, names) for f in frames], axis=1)  # (3, E)
+    single, one, batch = qs[0], qs[:1], qs
+    assert model.frame_poses(single, frames[0]).shape == (4, 4)
+    assert model.frame_poses(one, frames[0]).shape == (1, 4, 4)
+    assert model.frame_poses(batch, frames[0]).shape == (3, 4, 4)
+    assert model.frame_poses(single).shape == (len(frames), 4, 4)
+    assert model.frame_poses(one).shape == (1, len(frames), 4, 4)
+    assert model.frame_poses(np.empty((0, len(names)))).shape == (0, len(frames), 4, 4)
+    for e, frame in enumerate(frames):
+        for got, want in ((model.frame_poses(single, frame), pin_all[0, e]),
+                          (model.frame_poses(one, frame), pin_all[:1, e]),
+                          (model.frame_poses(batch, frame), pin_all[:, e])):
+            dp, dr = _pose_error(got, want)
+            assert dp < 1e-12 and dr < 1e-12, (frame, dp, dr)
+    for got, want in ((model.frame_poses(single), pin_all[0]),
+                      (model.frame_poses(one), pin_all[:1])):
+        dp, dr = _pose_error(got, want)
+        assert dp < 1e-12 and dr < 1e-12, (dp, dr)
+    with pytest.raises(ValueError, match=rf"qs: expected shape \({len(names)},\) or "
+                                         rf"\(n, {len(names)}\).*got \(1, 1, {len(names)}\)"):
+        model.frame_poses(qs[None, :1])

@@ -1,6 +1,7 @@
 """Hand-eye AX = XB (Tsai & Lenz) against independent truth: simulated setups built from a
 known X, OpenCV's exact regression case and Tabb's real dataset 1 with its reference."""
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -100,13 +101,33 @@ def test_noise_free_poses_give_the_true_x(n, kind):
         X_true, A, B = _setup(rng, n, X_ROTATIONS[kind])
         result = solve_axxb(A, B)
         assert isinstance(result, HandEyeResult)
-        assert np.linalg.norm(result.X[:3, :3] - X_true[:3, :3]) < 1e-9, (kind, seed)
-        assert np.linalg.norm(result.X[:3, 3] - X_true[:3, 3]) < 1e-9, (kind, seed)
-        np.testing.assert_array_equal(result.X[3], [0.0, 0.0, 0.0, 1.0])
+        assert np.linalg.norm(result.hand_T_camera[:3, :3] - X_true[:3, :3]) < 1e-9, (kind, seed)
+        assert np.linalg.norm(result.hand_T_camera[:3, 3] - X_true[:3, 3]) < 1e-9, (kind, seed)
+        np.testing.assert_array_equal(result.hand_T_camera[3], [0.0, 0.0, 0.0, 1.0])
         assert result.n_pairs == n * (n - 1) // 2
         assert result.rms_rotation_rad < 1e-9 and result.rms_translation < 1e-9
         assert 0.0 < result.rotation_condition <= 1.0
 
+
+def test_result_is_named_by_frames_with_x_as_a_read_only_alias():
+    """``hand_T_camera`` is the pose of the camera in the hand: with it, the target's pose
+    ``base_T_hand @ hand_T_camera @ camera_T_target`` is the same at every pose (the
+    defining property, checked on the setup's own truth); ``X`` is the same array."""
+    rng = np.random.default_rng(11)
+    hand_T_camera, base_T_hands, camera_T_targets = _setup(rng, 6)
+    result = solve_axxb(base_T_hands, camera_T_targets)
+    base_T_targets = base_T_hands @ result.hand_T_camera @ camera_T_targets
+    np.testing.assert_allclose(base_T_targets, np.broadcast_to(base_T_targets[0], (6, 4, 4)),
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.hand_T_camera, hand_T_camera, rtol=0, atol=1e-9)
+    assert result.X is result.hand_T_camera
+    # read-only: a frozen field raises FrozenInstanceError; the alias has no setter
+    # (CPython 3.11's slotted frozen __setattr__ raises TypeError for a non-field name)
+    with pytest.raises((AttributeError, TypeError)):
+        result.X = np.eye(4)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.hand_T_camera = np.eye(4)
+    assert "X" not in [f.name for f in dataclasses.fields(result)]
 
 def test_half_turn_motions_of_the_hand_are_used_with_the_right_sign():
     """Wrist flips (relative motions of exactly 180 deg, whose axis sign is arbitrary)."""
@@ -117,11 +138,11 @@ def test_half_turn_motions_of_the_hand_are_used_with_the_right_sign():
     base_T_target = _transform(_random_rotation(rng), [0.2, 0.1, 0.9])
     B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
     result = solve_axxb(A, B)
-    rot, trans = _errors(result.X, X_true)
+    rot, trans = _errors(result.hand_T_camera, X_true)
     assert rot < 1e-9 and trans < 1e-9
     # with 0.2 deg of rotation noise on the camera the flips do not spoil the answer
     noisy = solve_axxb(A, _perturb_rotations(B, rng, np.radians(0.2)))
-    assert _errors(noisy.X, X_true)[0] < np.radians(0.2)
+    assert _errors(noisy.hand_T_camera, X_true)[0] < np.radians(0.2)
 
 
 def test_eye_to_hand_is_solved_with_inverted_robot_poses():
@@ -133,7 +154,7 @@ def test_eye_to_hand_is_solved_with_inverted_robot_poses():
     _, base_T_hands, _ = _setup(rng, 10)
     cam_T_targets = np.stack([_inv(base_T_cam) @ A @ hand_T_target for A in base_T_hands])
     result = solve_axxb(_inv(base_T_hands), cam_T_targets)
-    rot, trans = _errors(result.X, base_T_cam)
+    rot, trans = _errors(result.hand_T_camera, base_T_cam)
     assert rot < 1e-9 and trans < 1e-9
 
 
@@ -154,7 +175,7 @@ def test_the_answer_does_not_depend_on_sample_order(seed, order):
     order = np.array(order)
     reference = solve_axxb(A, B)
     permuted = solve_axxb(A[order], B[order])
-    np.testing.assert_allclose(permuted.X, reference.X, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(permuted.hand_T_camera, reference.hand_T_camera, rtol=0, atol=1e-12)
     assert permuted.n_pairs == reference.n_pairs
     np.testing.assert_allclose(permuted.rms_translation, reference.rms_translation, rtol=1e-9)
 
@@ -168,9 +189,10 @@ def test_the_answer_does_not_depend_on_the_length_unit(seed):
     A_mm[:, :3, 3] *= 1000.0
     B_mm[:, :3, 3] *= 1000.0
     in_mm = solve_axxb(A_mm, B_mm)
-    np.testing.assert_allclose(in_mm.X[:3, :3], in_m.X[:3, :3], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(in_mm.X[:3, 3], 1000.0 * in_m.X[:3, 3], rtol=1e-9,
-                               atol=1e-9 * 1000.0 * np.linalg.norm(in_m.X[:3, 3]))
+    X_mm, X_m = in_mm.hand_T_camera, in_m.hand_T_camera
+    np.testing.assert_allclose(X_mm[:3, :3], X_m[:3, :3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(X_mm[:3, 3], 1000.0 * X_m[:3, 3], rtol=1e-9,
+                               atol=1e-9 * 1000.0 * np.linalg.norm(X_m[:3, 3]))
     np.testing.assert_allclose(in_mm.rms_translation, 1000.0 * in_m.rms_translation, rtol=1e-9)
     np.testing.assert_allclose(in_mm.rms_rotation_rad, in_m.rms_rotation_rad, rtol=1e-9)
 
@@ -181,7 +203,7 @@ def _median_rotation_error(sigma_deg, n, trials=40):
     errors = []
     for seed in range(trials):
         X_true, A, B = _noisy_setup(seed, n, sigma_deg=sigma_deg)
-        errors.append(_errors(solve_axxb(A, B).X, X_true)[0])
+        errors.append(_errors(solve_axxb(A, B).hand_T_camera, X_true)[0])
     return float(np.degrees(np.median(errors)))
 
 
@@ -231,7 +253,7 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
     assert narrow.axis_spread_rad == pytest.approx(spread, abs=1e-9)
     assert np.radians(1.0) < spread < np.radians(10.0)
     assert narrow.rotation_condition < 0.1 * result.rotation_condition
-    assert _errors(narrow.X, X_true)[0] < 1e-9
+    assert _errors(narrow.hand_T_camera, X_true)[0] < 1e-9
     print(f"axis spread {np.degrees(spread):.2f} deg: condition {narrow.rotation_condition:.3g}"
           f" (random motions: {result.rotation_condition:.3g})")
 
@@ -331,9 +353,9 @@ def test_swapped_or_both_inverted_poses_are_consistent_and_answer_the_target_pos
     X_true, A, _ = _setup(rng, 8)
     base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
-    rot, trans = _errors(solve_axxb(B, A).X, _inv(base_T_target))
+    rot, trans = _errors(solve_axxb(B, A).hand_T_camera, _inv(base_T_target))
     assert rot < 1e-9 and trans < 1e-9
-    rot, trans = _errors(solve_axxb(_inv(A), _inv(B)).X, base_T_target)
+    rot, trans = _errors(solve_axxb(_inv(A), _inv(B)).hand_T_camera, base_T_target)
     assert rot < 1e-9 and trans < 1e-9
 
 
@@ -354,8 +376,8 @@ def test_opencv_regression_24871_is_exact():
         data["R_target2cam"], np.reshape(data["t_target2cam"], (-1, 3)), strict=True)])
     gripper_T_cam = np.array(data["T_cam2gripper_true"], dtype=float)
     result = solve_axxb(base_T_grippers, cam_T_targets)
-    assert np.linalg.norm(result.X[:3, :3] - gripper_T_cam[:3, :3]) < 1e-12
-    assert np.linalg.norm(result.X[:3, 3] - gripper_T_cam[:3, 3]) < 1e-12
+    assert np.linalg.norm(result.hand_T_camera[:3, :3] - gripper_T_cam[:3, :3]) < 1e-12
+    assert np.linalg.norm(result.hand_T_camera[:3, 3] - gripper_T_cam[:3, 3]) < 1e-12
 
 
 def _tabb_ds1():
@@ -371,7 +393,7 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     its TSAI lands 0.62 deg / 45.8 mm (README). Measured here: 0.55 deg / 34.2 mm."""
     base_T_grippers, cam_T_worlds, gripper_T_cam_ref = _tabb_ds1()
     result = solve_axxb(base_T_grippers, cam_T_worlds)
-    rot, trans = _errors(result.X, gripper_T_cam_ref)
+    rot, trans = _errors(result.hand_T_camera, gripper_T_cam_ref)
     print(f"Tabb DS1: kinfw Tsai {np.degrees(rot):.2f} deg / {trans:.1f} mm from Tabb's "
           f"reference (OpenCV TSAI 0.62 deg / 45.8 mm); {result.n_pairs} motions, RMS residual "
           f"{np.degrees(result.rms_rotation_rad):.2f} deg / {result.rms_translation:.1f} mm, "
@@ -384,8 +406,9 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     base_T_grippers[:, :3, 3] /= 1000.0
     cam_T_worlds[:, :3, 3] /= 1000.0
     in_m = solve_axxb(base_T_grippers, cam_T_worlds)
-    np.testing.assert_allclose(in_m.X[:3, :3], result.X[:3, :3], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(1000.0 * in_m.X[:3, 3], result.X[:3, 3], rtol=1e-9)
+    X_m, X_mm = in_m.hand_T_camera, result.hand_T_camera
+    np.testing.assert_allclose(X_m[:3, :3], X_mm[:3, :3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(1000.0 * X_m[:3, 3], X_mm[:3, 3], rtol=1e-9)
 
 
 def test_an_inconsistency_with_small_motions_names_both_causes():
@@ -412,4 +435,4 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
         result = solve_axxb(A, B)
     assert result.rotation_condition < 0.05
     assert "mostly about one axis" in caplog.text
-    np.testing.assert_allclose(result.X, X, atol=1e-9)  # noise-free: still exact
+    np.testing.assert_allclose(result.hand_T_camera, X, atol=1e-9)  # noise-free: still exact

@@ -339,22 +339,24 @@ def _eth(name):
     A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=best.offset_s)
     axxb = solve_axxb(A, B)
     A0, B0 = align_streams(t_hand, base_T_hand, t_eye, target_T_eye)
-    X0 = solve_axxb(A0, B0).X
+    X0 = solve_axxb(A0, B0).hand_T_camera
     # A[i] = X B[i] Y with A = eye_T_target, X = eye_T_hand, B = hand_T_base, Y = base_T_target
     axyb = solve_axyb(B, _inv(A))
     out = {"case": case, "best": best, "A": A, "B": B, "axxb": axxb, "axyb": axyb,
-           "spread": implied_target_spread(A, axxb.X, B),
+           "spread": implied_target_spread(A, axxb.hand_T_camera, B),
            "spread_at_zero": implied_target_spread(A0, X0, B0)}
-    t, t_axyb = axxb.X[:3, 3], _inv(axyb.X)[:3, 3]
+    hand_T_eye, hand_T_eye_axyb = axxb.hand_T_camera, _inv(axyb.camera_T_hand)
+    t, t_axyb = hand_T_eye[:3, 3], hand_T_eye_axyb[:3, 3]
     print(f"\n[{name}] best offset {best.offset_s:+.3f} s, {len(A)} pairs: spread "
           f"{out['spread'][0] * 1e3:.2f} mm / {np.degrees(out['spread'][1]):.3f} deg; offset 0 "
           f"({len(A0)} pairs): {out['spread_at_zero'][0] * 1e3:.2f} mm / "
           f"{np.degrees(out['spread_at_zero'][1]):.3f} deg\n  AXXB t = {np.round(t * 1e3, 1)} mm"
           f" (README {np.round(np.array(case.readme_t_m) * 1e3, 1)}), optical axis "
-          f"{np.round(axxb.X[:3, 2], 3)}, rotation condition {axxb.rotation_condition:.3f}\n"
+          f"{np.round(hand_T_eye[:3, 2], 3)}, rotation condition {axxb.rotation_condition:.3f}\n"
           f"  AXYB t = {np.round(t_axyb * 1e3, 1)} mm, "
-          f"{np.degrees(_angle(_inv(axyb.X)[:3, :3], axxb.X[:3, :3])):.3f} deg from AXXB; Y t = "
-          f"{np.round(axyb.Y[:3, 3] * 1e3, 1)} mm")
+          f"{np.degrees(_angle(hand_T_eye_axyb[:3, :3], hand_T_eye[:3, :3])):.3f} deg from "
+          f"AXXB; Y t = "
+          f"{np.round(axyb.root_T_target[:3, 3] * 1e3, 1)} mm")
     return out
 
 
@@ -383,7 +385,7 @@ def test_eth_target_in_base_is_as_constant_as_the_readme_found(name):
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_hand_eye_matches_the_readmes_estimate(name):
     eth = _eth(name)
-    case, X = eth["case"], eth["axxb"].X
+    case, X = eth["case"], eth["axxb"].hand_T_camera
     axis = np.asarray(case.readme_optical_axis) / np.linalg.norm(case.readme_optical_axis)
     assert np.degrees(np.arccos(np.clip(X[:3, 2] @ axis, -1.0, 1.0))) < 3.0
     # Tolerances cover the subsample: on the full streams, over every phase of camera
@@ -428,8 +430,8 @@ def _mean_rotation(Rs):
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_axyb_agrees_with_axxb(name):
     eth = _eth(name)
-    hand_T_eye = _inv(eth["axyb"].X)
-    X = eth["axxb"].X
+    hand_T_eye = _inv(eth["axyb"].camera_T_hand)
+    X = eth["axxb"].hand_T_camera
     weak_axis = eth["case"].weak_axis
     assert np.degrees(_angle(hand_T_eye[:3, :3], X[:3, :3])) < 1.0
     # Full streams, every subsample phase as above: 0.8-4.7 mm apart (real); 2.2-3.4 mm
@@ -443,7 +445,7 @@ def test_eth_axyb_agrees_with_axxb(name):
         assert abs(along) < 0.015
     # Y is the target in the base: the (median, mean) pose implied with AXYB's own X, and
     # with AXXB's X where the two X agree
-    Y = eth["axyb"].Y
+    Y = eth["axyb"].root_T_target
     base_T_targets = eth["A"] @ hand_T_eye @ eth["B"]
     assert np.linalg.norm(Y[:3, 3] - np.median(base_T_targets[:, :3, 3], axis=0)) < 0.001
     assert np.degrees(_angle(Y[:3, :3], _mean_rotation(base_T_targets[:, :3, :3]))) < 0.1

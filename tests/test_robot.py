@@ -1,6 +1,7 @@
 """kinfw.robot: loading, names, FK of continuous joints, topology, refused joints."""
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from kinfw.robot import RobotModelError, UnknownFrameError, load_robot
@@ -44,6 +45,40 @@ def test_continuous_joint_fk_by_hand():
     np.testing.assert_allclose(T[:3, 3], expected_p, atol=1e-15)
     np.testing.assert_allclose(T[:3, :3], expected_R, atol=1e-15)
 
+
+def _pinocchio_fk(urdf, names, q, frame):
+    """``root_T_frame`` straight from Pinocchio (its own model, not kinfw's): revolute and
+    prismatic joints take q, continuous ones (cos q, sin q)."""
+    model = pin.buildModelFromXML(urdf)
+    data = model.createData()
+    config = pin.neutral(model)
+    for name, value in zip(names, q, strict=True):
+        joint = model.joints[model.getJointId(name)]
+        config[joint.idx_q:joint.idx_q + joint.nq] = (
+            [np.cos(value), np.sin(value)] if joint.nq == 2 else [value])
+    pin.framesForwardKinematics(model, data, config)
+    return data.oMf[model.getFrameId(frame)].homogeneous
+
+
+def test_frame_poses_batch_in_batch_out():
+    """(k,) gives (4, 4), (n, k) gives (n, 4, 4) also for n = 1; the poses are
+    Pinocchio's own FK."""
+    robot = load_robot(ARM_6R)
+    names = robot.joint_names
+    qs = np.random.default_rng(3).uniform(-2.5, 2.5, size=(4, len(names)))
+    truth = np.stack([_pinocchio_fk(ARM_6R, names, q, "flange") for q in qs])
+    single = robot.frame_poses(qs[0], "flange")
+    assert single.shape == (4, 4)
+    np.testing.assert_allclose(single, truth[0], rtol=0, atol=1e-12)
+    one = robot.frame_poses(qs[:1], "flange")
+    assert one.shape == (1, 4, 4)
+    np.testing.assert_allclose(one, truth[:1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(robot.frame_poses(qs, "flange"), truth, rtol=0, atol=1e-12)
+    assert robot.frame_poses(np.empty((0, len(names))), "flange").shape == (0, 4, 4)
+    with pytest.raises(ValueError, match=r"qs: expected shape \(6,\) or \(n, 6\).*got \(\)"):
+        robot.frame_poses(0.0, "flange")
+    with pytest.raises(ValueError, match=r"qs: expected shape \(6,\) or \(n, 6\)"):
+        robot.frame_poses(qs[None], "flange")
 
 def test_unlisted_joints_are_held_at_zero():
     robot = load_robot(MIXED)

@@ -467,11 +467,13 @@ def _hirsh_trial(seed: int, noise_deg: float, n: int, t: int, k: int,
         log.warning("hirsh: %d views, trial %d: the solver failed: %s", n, t, err)
         return factor, initial, None
     return factor, initial, (
-        _padded(np.degrees(quaternion_angle(res.history_Y[:, :3, :3], p.b_T_w[:3, :3])), k),
-        _padded(np.degrees(quaternion_angle(res.history_X[:, :3, :3], p.c_T_e[:3, :3])), k),
-        np.degrees(quaternion_angle(res.Y[:3, :3], p.b_T_w[:3, :3])),
-        np.degrees(quaternion_angle(res.X[:3, :3], p.c_T_e[:3, :3])),
-        np.linalg.norm(res.Y[:3, 3] - p.b_T_w[:3, 3]), res.iterations, res.restarts,
+        _padded(np.degrees(quaternion_angle(res.root_T_target_history[:, :3, :3],
+                                            p.b_T_w[:3, :3])), k),
+        _padded(np.degrees(quaternion_angle(res.camera_T_hand_history[:, :3, :3],
+                                            p.c_T_e[:3, :3])), k),
+        np.degrees(quaternion_angle(res.root_T_target[:3, :3], p.b_T_w[:3, :3])),
+        np.degrees(quaternion_angle(res.camera_T_hand[:3, :3], p.c_T_e[:3, :3])),
+        np.linalg.norm(res.root_T_target[:3, 3] - p.b_T_w[:3, 3]), res.iterations, res.restarts,
         res.converged)
 
 

@@ -465,13 +465,14 @@ def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike
             A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=offset,
                                  max_gap_s=max_gap_s, step=step)
             try:
-                X = solve_axxb(A, B).X
+                hand_T_eye = solve_axxb(A, B).hand_T_camera
             except HandEyeError as err:
                 log.info("best_time_offset: offset %.4f s: hand-eye solve failed (%s)",
                          offset, err)
                 evaluated[offset] = (np.inf, np.inf, None, len(A))
             else:
-                evaluated[offset] = (*implied_target_spread(A, X, B), X, len(A))
+                evaluated[offset] = (*implied_target_spread(A, hand_T_eye, B), hand_T_eye,
+                                     len(A))
         return evaluated[offset][0]
 
     def grid(a: float, b: float, h: float) -> NDArray[np.float64]:
@@ -483,10 +484,10 @@ def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike
     best = min([best, *fine], key=evaluate)
     offsets = np.array(sorted(evaluated))
     spreads = np.array([evaluated[o][0] for o in offsets])
-    position, rotation, X, n = evaluated[round(best, 12)]
-    if X is None:  # the minimum is inf: every solve failed
+    position, rotation, hand_T_eye, n = evaluated[round(best, 12)]
+    if hand_T_eye is None:  # the minimum is inf: every solve failed
         raise HandEyeError(f"the hand-eye solve failed at every offset in [{lo!r}, {hi!r}] s "
                            f"(see the INFO log for each reason)")
     return TimeOffsetResult(offset_s=float(round(best, 12)), position_spread=position,
-                            rotation_spread_rad=rotation, hand_T_eye=X, n_pairs=n,
+                            rotation_spread_rad=rotation, hand_T_eye=hand_T_eye, n_pairs=n,
                             offsets_s=offsets, position_spreads=spreads)
