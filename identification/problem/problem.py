@@ -462,9 +462,8 @@ def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name
 
 def _start_context(model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray],
                    model_frame: str | None) -> StartContext:
-    w_T = model.frame_poses(q_all)
-    w_T = w_T[None] if w_T.ndim == 3 else w_T
-    return StartContext(w_T, model.topology.frames, meas_T_w, model_frame)
+    # q_all is (n, J): frame_poses keeps the batch axis, (n, E, 4, 4)
+    return StartContext(model.frame_poses(q_all), model.topology.frames, meas_T_w, model_frame)
 
 
 def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPCModel,
