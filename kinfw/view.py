@@ -6,9 +6,10 @@
   overlaid at one configuration (Pinocchio's ``MeshcatVisualizer``: URDF boxes,
   cylinders, spheres and the meshes that can be found; missing meshes are skipped with a
   logged warning);
-- the observations of one sample of a dataset: a triad (x red, y green, z blue, 3 cm, a
-  dark ball at the origin) per measured ``pose``, a ball per measured ``point``, a triad
-  per ``target`` where a camera saw it;
+- the observations of one sample of a dataset, each kind through its ``drawing``
+  (:class:`kinfw.observations.numeric.Drawing`): a triad (x red, y green, z blue, 3 cm, a
+  dark ball at the origin) per measured orientation (a ``pose``; a ``target`` where a
+  camera saw it), a ball per measured position (a ``point``);
 - a residual line per observation, from the model's prediction towards the measurement,
   ``residual_scale`` times as long as the error so that millimetres show, coloured by
   the error (:data:`RESIDUAL_COLOR_STOPS_MM`);
@@ -53,7 +54,7 @@ import os
 import re
 import warnings
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -61,10 +62,13 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.blocks import BlockKey
 from kinfw.files import write_text_atomic
 from kinfw.measurements import Measurements, check_against_robot
+from kinfw.observations import kind_of
+from kinfw.observations.numeric import MissingValue, NumericContext
 from kinfw.robot import Robot, load_robot
-from kinfw.transforms import check_transform, inverse_transform
+from kinfw.transforms import check_transform
 
 if TYPE_CHECKING:
     import meshcat
@@ -499,7 +503,8 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
           residual_scale: float = 10.0, meas_T_root: ArrayLike | None = None,
           up: ArrayLike | None = None, package_dirs: Sequence[str | Path] = (),
           ghost_rgba: Sequence[float] = GHOST_RGBA,
-          solid_rgba: Sequence[float] | None = SOLID_RGBA) -> meshcat.Visualizer:
+          solid_rgba: Sequence[float] | None = SOLID_RGBA,
+          unknowns: Mapping[BlockKey, ArrayLike] | None = None) -> meshcat.Visualizer:
     """Draw a calibration for a visual check: nominal ghost, calibrated robot, data.
 
     Parameters
@@ -544,6 +549,11 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     ghost_rgba, solid_rgba : sequence of 4 floats
         Colours of the ghost and of the solid robot; ``solid_rgba=None`` keeps the
         URDF's materials.
+    unknowns : mapping of BlockKey to array_like, optional
+        Values of other unknown blocks in the root frame (a marker's pose (4, 4), a
+        point offset (3,), a kind's own): observations that need them get residual
+        lines. Every kind is drawn by its
+        :meth:`~kinfw.observations.base.ObservationKind.drawing`.
 
     Returns
     -------
@@ -605,8 +615,9 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
                                 model.pin_configurations(q, joint_names)[0], solid_rgba, dirs))
     focus_ps = []
     if data is not None and sample is not None:
+        values = _known_values(data, targets, meas_T_root, unknowns)
         focus_ps.append(_draw_observations(root, model, data, sample, q, joint_names,
-                                           dict(targets), residual_scale, meas_T_root))
+                                           values, residual_scale))
     focus_ps.append(_draw_cameras(root, model, data, q, joint_names))
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
@@ -622,84 +633,87 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     return vis
 
 
+def _known_values(data: Measurements, targets: tuple[tuple[str, NDArray], ...],
+                  meas_T_root: ArrayLike | None,
+                  unknowns: Mapping[BlockKey, ArrayLike] | None) -> dict[BlockKey, NDArray]:
+    """The block values the view knows: the targets, ``meas_T_root`` for every
+    measurement frame of the data, and ``unknowns``."""
+    values = {BlockKey("target", name): T for name, T in targets}
+    if meas_T_root is not None:
+        meas_T_root = check_transform(np.asarray(meas_T_root, float), name="meas_T_root")
+        for g in data.all_groups():
+            measured_in = kind_of(g).measured_in(g)
+            if measured_in is not None:
+                values[BlockKey("frame", measured_in)] = meas_T_root
+    values.update({k: np.asarray(v, dtype=float) for k, v in (unknowns or {}).items()})
+    return values
+
+
 def _up_hint(robot: Robot) -> NDArray[np.float64]:
     return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
 
 
 def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurements,
                        sample: int, q: NDArray, joint_names: tuple[str, ...],
-                       targets: dict[str, NDArray], residual_scale: float,
-                       meas_T_root: ArrayLike | None) -> NDArray[np.float64]:
-    """Measured poses, points and seen targets of one sample and their residual lines;
-    return the points to frame: measured and predicted poses and points (not targets)."""
+                       values: dict[BlockKey, NDArray], residual_scale: float
+                       ) -> NDArray[np.float64]:
+    """The observations of one sample and their residual lines, every kind through its
+    :meth:`~kinfw.observations.base.ObservationKind.drawing`; return the points to
+    frame (the measured and predicted positions of the kinds that ask for it)."""
     import meshcat.geometry as mg
 
-    root_T_meas = None if meas_T_root is None else inverse_transform(
-        check_transform(np.asarray(meas_T_root, float), name="meas_T_root"))
+    context = NumericContext.from_robot(model, q, joint_names, values)
     drawn = []
-
-    def in_root(measured_in: str | None, what: str) -> NDArray | None:
-        if measured_in is None:
-            return np.eye(4)
-        if root_T_meas is None:
-            logger.warning("%s: sample %d: %s is measured in %r; pass meas_T_root (the "
-                           "sidecar's w_T_root) to draw it", data.source, sample, what,
-                           measured_in)
-        return root_T_meas
-
-    def residual(path: str, root_p_pred: NDArray, root_p_meas: NDArray) -> None:
-        error = root_p_meas - root_p_pred
-        rgb = residual_color(float(np.linalg.norm(error)))
-        node = root[path]
-        _stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
-        node["tip"].set_object(_overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
-        node["tip"].set_transform(
-            _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0]))
-        return root_p_pred
-
-    for g in data.poses:
-        for row in np.flatnonzero(g.sample == sample):
-            name = _node_name(g.frame, g.marker)
-            to_root = in_root(g.measured_in, f"pose of {name!r}")
-            if to_root is None:
+    for g in data.all_groups():
+        kind = kind_of(g)
+        rows = np.flatnonzero(g.sample == sample)
+        if not rows.size:
+            continue
+        try:
+            drawing = kind.drawing(kind.take(g, rows, np.zeros(len(rows), np.int64)), context)
+        except MissingValue as exc:
+            hint = ("; pass meas_T_root (the sidecar's w_T_root) to draw it"
+                    if exc.key.kind == "frame" else "")
+            logger.warning("%s: sample %d: cannot draw %r (%s)%s", data.source, sample, g,
+                           exc, hint)
+            continue
+        except NotImplementedError as exc:
+            logger.info("%s: %s", data.source, exc)
+            continue
+        for k in range(len(rows)):
+            node = root["measured/" + drawing.node]
+            w_p = drawing.w_p_measured[k]
+            if drawing.w_R_measured is not None:
+                w_T = np.eye(4)
+                w_T[:3, :3], w_T[:3, 3] = drawing.w_R_measured[k], w_p
+                _triad(node, w_T, origin_rgb=MEASURED_RGB)
+            else:
+                node.set_object(_overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
+                node.set_transform(_translation(w_p))
+            if drawing.focus:
+                drawn.append(w_p)
+            if drawing.w_p_predicted is None:
+                logger.info("%s: sample %d: no residual for %s (%s is unknown)", data.source,
+                            sample, drawing.node, drawing.missing)
                 continue
-            root_T_measured = to_root @ g.meas_T_frame[row]
-            _triad(root["measured/poses/" + name], root_T_measured, origin_rgb=MEASURED_RGB)
-            drawn.append(root_T_measured[:3, 3])
-            if g.marker is not None:
-                logger.info("%s: no residual for marker %r (its pose on %r is unknown)",
-                            data.source, g.marker, g.frame)
-                continue
-            root_p_pred = model.frame_poses(q, g.frame, joint_names)[:3, 3]
-            drawn.append(residual("residuals/poses/" + name, root_p_pred,
-                                  root_T_measured[:3, 3]))
-
-    for g in data.points:
-        for row in np.flatnonzero(g.sample == sample):
-            name = _node_name(g.frame, g.marker)
-            to_root = in_root(g.measured_in, f"point on {name!r}")
-            if to_root is None:
-                continue
-            root_p_measured = to_root[:3, :3] @ g.meas_p_point[row] + to_root[:3, 3]
-            node = root["measured/points/" + name]
-            node.set_object(_overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
-            node.set_transform(_translation(root_p_measured))
-            drawn.append(root_p_measured)
-            if g.offset is None:
-                continue
-            root_T_frame = model.frame_poses(q, g.frame, joint_names)
-            root_p_pred = root_T_frame[:3, :3] @ g.offset + root_T_frame[:3, 3]
-            drawn.append(residual("residuals/points/" + name, root_p_pred, root_p_measured))
-
-    for g in data.targets:
-        for row in np.flatnonzero(g.sample == sample):
-            root_T_seen = model.frame_poses(q, g.camera, joint_names) @ g.camera_T_target[row]
-            name = f"{_node_name(g.camera, None)}/{_node_name(g.target, None)}"
-            _triad(root["measured/targets/" + name], root_T_seen, origin_rgb=MEASURED_RGB)
-            if g.target in targets:
-                residual("residuals/targets/" + name, targets[g.target][:3, 3],
-                         root_T_seen[:3, 3])
+            w_p_pred = drawing.w_p_predicted[k]
+            _residual_line(root["residuals/" + drawing.node], w_p_pred, w_p, residual_scale)
+            if drawing.focus:
+                drawn.append(w_p_pred)
     return np.array(drawn).reshape(-1, 3)
+
+
+def _residual_line(node: meshcat.Visualizer, root_p_pred: NDArray, root_p_meas: NDArray,
+                   residual_scale: float) -> None:
+    """A residual line from the prediction towards the measurement, scaled."""
+    import meshcat.geometry as mg
+
+    error = root_p_meas - root_p_pred
+    rgb = residual_color(float(np.linalg.norm(error)))
+    _stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
+    node["tip"].set_object(_overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
+    node["tip"].set_transform(
+        _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0]))
 
 
 def _draw_targets(root: meshcat.Visualizer, targets: tuple[tuple[str, NDArray], ...]
@@ -721,7 +735,8 @@ def _draw_cameras(root: meshcat.Visualizer, model: Robot, data: Measurements | N
                   q: NDArray, joint_names: tuple[str, ...]) -> NDArray[np.float64]:
     cameras = dict.fromkeys(model.default_cameras)
     if data is not None:
-        cameras.update(dict.fromkeys(g.camera for g in data.targets))
+        cameras.update(dict.fromkeys(c for g in data.all_groups()
+                                     for c in kind_of(g).camera_frames(g)))
     drawn = []
     for camera in cameras:
         root_T_camera = model.frame_poses(q, camera, joint_names)

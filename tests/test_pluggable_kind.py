@@ -4,7 +4,10 @@
 unknown centre and known radius (a ball bar of known length: the distance from the
 probe to the ball's centre is the radius). Residual: ``radius - |w_p_probe - centre|``,
 one row in metres. The kind is registered, written to and read from a
-``kinfw-measurements`` file, and calibrates the 6R arm through the public ``refine``.
+``kinfw-measurements`` file, and calibrates the 6R arm through the public ``refine``;
+with its numpy prediction and its drawing (and the default Gaussian simulation) it is
+simulated by ``verification.simulate.simulate`` and drawn by ``kinfw.view.scene``, whose
+code names no kind.
 
 Truth: contacts are simulated on a perturbed arm by solving for the joint angle that puts
 the probe on the sphere. A rigid motion of the world moves the model and the centre
@@ -33,10 +36,11 @@ from kinfw.observations import (
     unregister_kind,
 )
 from kinfw.observations.base import data_array, sample_array
+from kinfw.observations.numeric import Drawing, node_name
 from kinfw.robot import load_robot
 from tests.robots import ARM_6R
 from verification.crosscheck import random_joint_values
-from verification.simulate import perturb_robot
+from verification.simulate import perturb_robot, simulate
 
 
 # -- the new kind: one group dataclass and one ObservationKind --------------------------
@@ -108,6 +112,24 @@ class SphereKind(ObservationKind):
         T = model.w_T(group.frame)
         p = T[0:3, 0:3] @ model.value(probe_key(group.frame)) + T[0:3, 3]
         return m[0] - model.ca.norm_2(p - model.value(BlockKey("sphere", group.sphere)))
+
+    # numpy: the prediction (simulate() adds the Gaussian noise of "distance"), the drawing
+    def _probe_and_centre(self, group, model):
+        T = model.w_T(group.frame, group.sample)
+        return (T[:, :3, :3] @ model.value(probe_key(group.frame)) + T[:, :3, 3],
+                model.value(BlockKey("sphere", group.sphere)))
+
+    def predict(self, group, model):
+        p, c = self._probe_and_centre(group, model)
+        return np.linalg.norm(p - c, axis=1)[:, None]
+
+    def drawing(self, group, model):
+        """Predicted: the probe; measured: the point at the measured radius from the
+        centre on the line through the probe."""
+        p, c = self._probe_and_centre(group, model)
+        u = (p - c) / np.linalg.norm(p - c, axis=1)[:, None]
+        return Drawing(node_name("spheres", group.frame, group.sphere),
+                       c + group.radius_m[:, None] * u, None, p)
 
 
 @pytest.fixture
@@ -225,3 +247,64 @@ def test_without_the_kind_registered_the_file_is_refused(tmp_path):
     with pytest.raises(DatasetError, match="kind: expected one of 'pose', 'target', 'point', "
                                            "got 'sphere'"):
         read_measurements(path)
+
+
+def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
+    from kinfw.view import OfflineWindow, scene
+
+    nominal = load_robot(ARM_6R)
+    rng = np.random.default_rng(11)
+    truth = load_robot(perturb_robot(nominal, rng))
+    offset = np.array([0.02, -0.01, 0.04])
+    centre = _probe(truth, np.full((1, 6), 0.3), offset)[0] + [0.05, 0.1, -0.05]
+    unknowns = {probe_key("flange"): offset, BlockKey("sphere", "ball"): centre}
+
+    def template(n):  # what is observed and when; simulate() fills in the radii
+        return SphereContacts("flange", np.arange(n), np.zeros(n), sphere="ball")
+
+    # noise-free: contacts found by bisection on the sphere measure its radius
+    qs = _contacts(truth, offset, centre, 30, rng)
+    data = simulate(truth, qs, NAMES, groups=[template(30)], unknowns=unknowns,
+                    rng=np.random.default_rng(0))
+    (g,) = data.groups("sphere")
+    assert g.sphere == "ball" and not data.poses and not data.points
+    np.testing.assert_allclose(g.radius_m, RADIUS, rtol=0, atol=1e-12)
+
+    # noisy, anywhere: the distance plus N(0, noise_m) (the "distance" component is in m)
+    n, sigma = 4000, 1e-3
+    q_any = random_joint_values(truth, NAMES, n, rng)
+    noisy = simulate(truth, q_any, NAMES, groups=[template(n)], unknowns=unknowns,
+                     rng=np.random.default_rng(1), noise_m=sigma).groups("sphere")[0]
+    error = noisy.radius_m - np.linalg.norm(_probe(truth, q_any, offset) - centre, axis=1)
+    assert abs(error.std() / sigma - 1) < 0.05 and abs(error.mean()) < 4 * sigma / np.sqrt(n)
+    by_name = simulate(truth, q_any[:5], NAMES, groups=[template(5)], unknowns=unknowns,
+                       rng=np.random.default_rng(1), sigmas={"distance": 0.0}, noise_m=sigma)
+    np.testing.assert_allclose(by_name.groups("sphere")[0].radius_m, np.linalg.norm(
+        _probe(truth, q_any[:5], offset) - centre, axis=1), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="needs the true value of sphere:ball; give it in "
+                                         "unknowns"):
+        simulate(truth, qs, NAMES, groups=[template(30)], rng=rng,
+                 unknowns={probe_key("flange"): offset})
+
+    # drawn: a ball where the measured radius puts the probe, a line from the probe
+    data = Measurements(NAMES, q_any[:3], others=(SphereContacts(
+        "flange", np.arange(3), noisy.radius_m[:3] + 0.01, sphere="ball"),))
+    window = OfflineWindow()
+    scene(truth, data=data, sample=2, window=window, residual_scale=10.0, unknowns=unknowns)
+    objects = {c["path"]: c["object"] for c in window.commands if c["type"] == "set_object"}
+    transforms = {c["path"]: np.array(c["matrix"], float).reshape(4, 4).T
+                  for c in window.commands if c["type"] == "set_transform"}
+    probe = _probe(truth, q_any[2:3], offset)[0]
+    u = (probe - centre) / np.linalg.norm(probe - centre)
+    measured = centre + data.others[0].radius_m[2] * u
+    base = "/meshcat/kinfw/"
+    assert objects[base + "measured/spheres/flange/ball"]["geometries"][0]["type"] == \
+        "SphereGeometry"
+    np.testing.assert_allclose(transforms[base + "measured/spheres/flange/ball"][:3, 3],
+                               measured, rtol=0, atol=1e-12)
+    line = transforms[base + "residuals/spheres/flange/ball"]
+    height = objects[base + "residuals/spheres/flange/ball/stick"]["geometries"][0]["height"]
+    np.testing.assert_allclose(line[:3, 3], probe, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(height * line[:3, 1], 10.0 * (measured - probe), rtol=0,
+                               atol=1e-12)
+    assert abs(height - 10.0 * (0.01 + error[2])) < 1e-9  # 10 x the radius error

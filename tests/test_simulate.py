@@ -9,7 +9,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.measurements import Measurements
+from kinfw.measurements import Measurements, PoseObservations
 from kinfw.robot import load_robot
 from kinfw.transforms import (
     inverse_transform,
@@ -387,6 +387,29 @@ def test_simulate_is_reproducible_and_defaults_to_robot_joints(arm) -> None:
     np.testing.assert_array_equal(a.poses[0].meas_T_frame, b.poses[0].meas_T_frame)
 
 
+def test_simulate_keeps_its_random_stream(arm) -> None:
+    """Draw by draw as before the kinds simulated their groups: each frame's pose noise
+    (perturb_poses), then each camera's, then each marker's N(0, noise_m) (n, 3)."""
+    qs = random_qs(arm, 6, 10)
+    offset = np.array([0.0, 0.01, 0.02])
+    m = simulate(arm, qs, ARM_JOINTS, frames=["flange", "link2"], cameras=["camera"],
+                 markers=[("flange", offset), ("link3", offset, "ball")],
+                 rng=np.random.default_rng(4), noise_m=1e-3, noise_rad=2e-3)
+    rng = np.random.default_rng(4)
+    w_T = {f: pin_fk(ARM_URDF, ARM_JOINTS, qs, f) for f in ("flange", "link2", "link3",
+                                                            "camera")}
+    for g, frame in zip(m.poses, ("flange", "link2"), strict=True):
+        np.testing.assert_allclose(g.meas_T_frame, perturb_poses(w_T[frame], rng, 1e-3, 2e-3),
+                                   rtol=0, atol=1e-12)
+    w_T_target = default_target_pose(arm, qs, ARM_JOINTS, ["camera"])
+    np.testing.assert_allclose(m.targets[0].camera_T_target, perturb_poses(
+        inverse_transform(w_T["camera"]) @ w_T_target, rng, 1e-3, 2e-3), rtol=0, atol=1e-12)
+    for g, frame in zip(m.points, ("flange", "link3"), strict=True):
+        expected = w_T[frame][:, :3, :3] @ offset + w_T[frame][:, :3, 3]
+        np.testing.assert_allclose(g.meas_p_point, expected + rng.normal(0.0, 1e-3, (6, 3)),
+                                   rtol=0, atol=1e-12)
+
+
 def test_simulate_errors(arm) -> None:
     qs = random_qs(arm, 2, 9)
     rng = np.random.default_rng(0)
@@ -400,6 +423,16 @@ def test_simulate_errors(arm) -> None:
         simulate(arm, qs, ARM_JOINTS, frames=["nope"], rng=rng)
     with pytest.raises(ValueError, match="noise_rad: expected a finite standard deviation"):
         simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, noise_rad=np.nan)
+    with pytest.raises(ValueError, match=r"sigmas\['distance'\]: expected a finite"):
+        simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, sigmas={"distance": -1.0})
+    template = PoseObservations("flange", [0, 2], np.tile(np.eye(4), (2, 1, 1)))
+    with pytest.raises(ValueError, match="refers to sample 2, but qs has 2 rows"):
+        simulate(arm, qs, ARM_JOINTS, groups=[template], rng=rng)
+    with pytest.raises(TypeError, match="not the group of a registered observation kind"):
+        simulate(arm, qs, ARM_JOINTS, groups=[object()], rng=rng)
+    marked = PoseObservations("flange", [0, 1], np.tile(np.eye(4), (2, 1, 1)), marker="m")
+    with pytest.raises(ValueError, match="needs the true value of marker:m; give it in"):
+        simulate(arm, qs, ARM_JOINTS, groups=[marked], rng=rng)
 
 
 def test_default_target_pose_faces_the_cameras(arm) -> None:

@@ -273,6 +273,51 @@ def test_missing_meshes_are_skipped_with_a_warning(caplog):
     assert sorted(geometries) == ["BoxGeometry", "CylinderGeometry"]
 
 
+def test_points_and_frames_measured_elsewhere_are_drawn_through_their_kinds(head, caplog):
+    """Points are balls, with a residual line when their offset is known (or given in
+    ``unknowns``); observations made in another frame need ``meas_T_root``."""
+    from kinfw.blocks import BlockKey
+    from kinfw.measurements import Measurements, PointObservations, PoseObservations
+
+    names = head.joint_names
+    q = np.linspace(0.1, 0.3, len(names))
+    oMf = _pin_fk(head.urdf_xml, names, q)
+    frame = head.default_frames[0]
+    offset, marker_offset = np.array([0.01, 0.02, -0.03]), np.array([0.0, 0.05, 0.0])
+    meas_T_root = np.eye(4)
+    meas_T_root[:3, :3] = pin.rpy.rpyToMatrix(0.1, 0.2, -0.3)
+    meas_T_root[:3, 3] = [1.0, -2.0, 0.5]
+    measured = oMf[frame][:3, :3] @ offset + oMf[frame][:3, 3] + [0.002, 0.0, 0.0]
+    in_tracker = meas_T_root @ oMf[frame]
+    data = Measurements(names, q[None], poses=(PoseObservations(
+        frame, [0], in_tracker[None], measured_in="tracker"),), points=(
+        PointObservations(frame, [0], measured[None], offset=offset),
+        PointObservations(frame, [0], measured[None], marker="m")))
+    window = RecordingWindow()
+    with caplog.at_level("WARNING", logger="kinfw.view"):
+        scene(head, data=data, sample=0, window=window, residual_scale=10.0)
+    assert "frame:tracker" in caplog.text and "pass meas_T_root" in caplog.text
+    objects, transforms = _objects(window.commands), _transforms(window.commands)
+    assert not any("/measured/poses/" in p for p in objects)
+    ball = f"{KINFW}/measured/points/{frame}"
+    assert objects[ball]["geometries"][0]["type"] == "SphereGeometry"
+    np.testing.assert_allclose(transforms[ball][:3, 3], measured, atol=1e-12)
+    line = f"{KINFW}/residuals/points/{frame}"
+    height = objects[line + "/stick"]["geometries"][0]["height"]
+    np.testing.assert_allclose(height, 10.0 * 0.002, atol=1e-12)
+    assert f"{line}@m/stick" not in objects  # the marker's offset is unknown
+
+    window = RecordingWindow()
+    scene(head, data=data, sample=0, window=window, meas_T_root=meas_T_root,
+          unknowns={BlockKey("offset", f"{frame}:m"): marker_offset})
+    objects, transforms = _objects(window.commands), _transforms(window.commands)
+    np.testing.assert_allclose(transforms[f"{KINFW}/measured/poses/{frame}"], oMf[frame],
+                               atol=1e-12)
+    np.testing.assert_allclose(transforms[f"{KINFW}/residuals/points/{frame}@m"][:3, 3],
+                               oMf[frame][:3, :3] @ marker_offset + oMf[frame][:3, 3],
+                               atol=1e-12)
+
+
 def test_bad_arguments_are_refused(head, case):
     data = case["data"]
     with pytest.raises(IndexError, match="sample 3 is out of range for 3 samples"):

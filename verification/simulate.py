@@ -19,26 +19,31 @@ global random state is used, so a seed reproduces a study exactly.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.blocks import BlockKey
 from kinfw.measurements import (
     Measurements,
     PointObservations,
     PoseObservations,
     TargetObservations,
 )
+from kinfw.observations import kind_of
+from kinfw.observations.numeric import (
+    MissingValue,
+    NumericContext,
+    perturb_transforms,
+    random_small_rotations,
+)
+from kinfw.observations.point import offset_key
 from kinfw.registration import register_points
 from kinfw.robot import JointInfo, Robot
-from kinfw.transforms import (
-    check_transform,
-    inverse_transform,
-    matrix_from_rotation_vector,
-    transform_from_rotation_translation,
-)
+from kinfw.transforms import check_transform, transform_from_rotation_translation
 from kinfw.urdf_export import edit_urdf
 
 __all__ = [
@@ -64,20 +69,6 @@ def _check_sigma(value: float, name: str) -> float:
     if not (np.isfinite(value) and value >= 0.0):
         raise ValueError(f"{name}: expected a finite standard deviation >= 0, got {value}")
     return value
-
-
-def _random_unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
-    """``n`` unit vectors uniformly distributed on the sphere, shape (n, 3)."""
-    v = rng.normal(size=(n, 3))
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _random_small_rotations(rng: np.random.Generator, n: int, sigma_rad: float
-                            ) -> NDArray[np.float64]:
-    """``n`` rotations about uniformly random axes by angles N(0, sigma_rad), (n, 3, 3)."""
-    axes = _random_unit_vectors(rng, n)
-    angles = rng.normal(0.0, sigma_rad, size=n)
-    return matrix_from_rotation_vector(axes * angles[:, None])
 
 
 # -- the true robot --------------------------------------------------------------------
@@ -159,7 +150,7 @@ def perturb_robot(robot: Robot, rng: np.random.Generator, *, origin_mm: float = 
         j = robot.joint(name)  # raises UnknownFrameError naming the joint
         parent_T_child = j.parent_T_child
         dp = rng.normal(0.0, origin_m, size=3)
-        dR = _random_small_rotations(rng, 1, origin_rad)[0]
+        dR = random_small_rotations(rng, 1, origin_rad)[0]
         joint_origins[name] = transform_from_rotation_translation(
             parent_T_child[:3, :3] @ dR, parent_T_child[:3, 3] + dp)
         if j.is_movable:
@@ -338,10 +329,7 @@ def perturb_poses(a_T_bs: ArrayLike, rng: np.random.Generator, sigma_m: float,
     sigma_m = _check_sigma(sigma_m, "sigma_m")
     sigma_rad = _check_sigma(sigma_rad, "sigma_rad")
     single = a_T_bs.ndim == 2
-    T = a_T_bs.reshape(-1, 4, 4)
-    dp = rng.normal(0.0, sigma_m, size=(len(T), 3))
-    dR = _random_small_rotations(rng, len(T), sigma_rad)
-    out = transform_from_rotation_translation(T[:, :3, :3] @ dR, T[:, :3, 3] + dp)
+    out = perturb_transforms(a_T_bs.reshape(-1, 4, 4), rng, sigma_m, sigma_rad)
     return out[0] if single else out
 
 
@@ -452,11 +440,15 @@ def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
              markers: Iterable[tuple[Any, ...]] = (), rng: np.random.Generator,
              noise_m: float = 0.0, noise_rad: float = 0.0,
              stereo_sigma_m: float | None = None,
-             w_T_target: ArrayLike | None = None) -> Measurements:
+             w_T_target: ArrayLike | None = None, groups: Iterable[Any] = (),
+             unknowns: Mapping[BlockKey, ArrayLike] | None = None,
+             sigmas: Mapping[str, float] | None = None) -> Measurements:
     """A measurement dataset of ``robot`` (the truth) in configurations ``qs``.
 
     Forward kinematics is Pinocchio's (:meth:`Robot.frame_poses`), in the robot's root
-    link ``w``, the default measurement frame.
+    link ``w``, the default measurement frame. Every group is simulated by its kind
+    (:meth:`kinfw.observations.base.ObservationKind.simulate`: its numpy prediction plus
+    its noise model), in order: poses, targets, points, then ``groups``.
 
     Parameters
     ----------
@@ -481,65 +473,93 @@ def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
         Source of all noise.
     noise_m : float, optional
         Standard deviation of each position component of poses, targets and points,
-        metres.
+        metres; also of any noise component in metres of another kind.
     noise_rad : float, optional
         Standard deviation of the rotation error angle of poses and targets, radians
-        (see :func:`perturb_poses`).
+        (see :func:`perturb_poses`); also of any noise component in radians.
     stereo_sigma_m : float, optional
         If given, poses are measured by the simulated stereo rig instead
         (:func:`stereo_measure` with this point noise, metres); ``noise_m`` and
         ``noise_rad`` then apply to targets and points only.
     w_T_target : array_like, shape (4, 4), optional
         Pose of the target in ``w``; default :func:`default_target_pose`.
+    groups : iterable of observation groups, optional
+        Groups of any registered kind (e.g. a kind added by an application), used as
+        templates: what is observed and at which samples (indices into ``qs``); their
+        measured values are replaced by simulated ones.
+    unknowns : mapping of BlockKey to array_like, optional
+        True values of the unknown blocks the ``groups`` need (a marker's pose (4, 4),
+        a point (3,), ...), in ``w``.
+    sigmas : mapping of str to float, optional
+        Standard deviation per noise component name (``"position"``, ``"rotation"``, a
+        kind's own), SI; a component not named takes ``noise_m`` (unit m) or
+        ``noise_rad`` (unit rad).
 
     Returns
     -------
     Measurements
-        One pose group per frame, one target group per camera and one point group per
-        marker, each with every sample; ``source`` is ``"<simulated>"``.
+        One pose group per frame, one target group per camera, one point group per
+        marker, each with every sample, and the simulated ``groups``; ``source`` is
+        ``"<simulated>"``.
     """
     frames, cameras, markers = tuple(frames), tuple(cameras), tuple(markers)
+    groups = tuple(groups)
     for name, value in (("frames", frames), ("cameras", cameras)):
         if any(not isinstance(v, str) for v in value):
             raise TypeError(f"simulate: {name} must be a sequence of frame names")
-    if not (frames or cameras or markers):
-        raise ValueError("simulate: nothing to observe; give frames, cameras or markers")
+    if not (frames or cameras or markers or groups):
+        raise ValueError("simulate: nothing to observe; give frames, cameras, markers or "
+                         "groups")
     names = tuple(robot.joint_names if joint_names is None else joint_names)
     qs = np.atleast_2d(np.asarray(qs, dtype=float))
     noise_m = _check_sigma(noise_m, "noise_m")
     noise_rad = _check_sigma(noise_rad, "noise_rad")
+    sigmas = {str(k): _check_sigma(v, f"sigmas[{k!r}]") for k, v in (sigmas or {}).items()}
     sample = np.arange(len(qs))
+    values = {k: np.asarray(v, dtype=float) for k, v in (unknowns or {}).items()}
 
-    poses = []
-    for frame in frames:
-        w_T_frames = robot.frame_poses(qs, frame, names)
-        if stereo_sigma_m is None:
-            meas = perturb_poses(w_T_frames, rng, noise_m, noise_rad)
-        else:
-            meas = stereo_measure(w_T_frames, rng, stereo_sigma_m)
-        poses.append(PoseObservations(frame=frame, sample=sample, meas_T_frame=meas))
-
-    targets = []
+    # templates: what is observed, at which samples (the kinds fill in the values)
+    templates: list[Any] = [PoseObservations(frame=frame, sample=sample,
+                                             meas_T_frame=np.tile(np.eye(4), (len(qs), 1, 1)))
+                            for frame in frames]
     if cameras:
-        w_T_target = (default_target_pose(robot, qs, names, cameras) if w_T_target is None
-                      else check_transform(w_T_target, name="w_T_target"))
-        for camera in cameras:
-            camera_T_targets = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_target
-            meas = perturb_poses(camera_T_targets, rng, noise_m, noise_rad)
-            targets.append(TargetObservations(camera=camera, sample=sample,
-                                              camera_T_target=meas))
-
-    points = []
+        values[BlockKey("target", "target")] = (
+            default_target_pose(robot, qs, names, cameras) if w_T_target is None
+            else check_transform(w_T_target, name="w_T_target"))
+        templates += [TargetObservations(camera=camera, sample=sample,
+                                         camera_T_target=np.tile(np.eye(4), (len(qs), 1, 1)))
+                      for camera in cameras]
     for marker in markers:
         frame, offset, name = _marker_spec(marker)
-        w_T_frames = robot.frame_poses(qs, frame, names)
-        w_p_points = w_T_frames[:, :3, :3] @ offset + w_T_frames[:, :3, 3]
-        meas = w_p_points + rng.normal(0.0, noise_m, size=w_p_points.shape)
-        points.append(PointObservations(frame=frame, sample=sample, meas_p_point=meas,
-                                        offset=offset if name is None else None,
-                                        marker=name))
-    return Measurements(joint_names=names, qs=qs, poses=tuple(poses), targets=tuple(targets),
-                        points=tuple(points), source="<simulated>")
+        if name is not None:
+            values[offset_key(frame, name)] = offset
+        templates.append(PointObservations(frame=frame, sample=sample,
+                                           meas_p_point=np.zeros((len(qs), 3)),
+                                           offset=offset if name is None else None,
+                                           marker=name))
+    for g in groups:
+        kind_of(g)  # a registered kind's group, else TypeError
+        if len(g.sample) and g.sample.max() >= len(qs):
+            raise ValueError(f"simulate: groups: {g!r} refers to sample "
+                             f"{int(g.sample.max())}, but qs has {len(qs)} rows")
+    truth = NumericContext.from_robot(robot, qs, names, values)
+
+    out = []
+    for g in (*templates, *groups):
+        kind = kind_of(g)
+        try:
+            if stereo_sigma_m is not None and isinstance(g, PoseObservations):
+                predicted = kind.with_data(g, kind.predict(g, truth))
+                out.append(replace(g, meas_T_frame=stereo_measure(
+                    predicted.meas_T_frame, rng, stereo_sigma_m)))
+                continue
+            noise = {c.name: sigmas.get(c.name, noise_m if c.unit == "m" else noise_rad)
+                     for c in kind.components}
+            out.append(kind.simulate(g, truth, rng, noise))
+        except MissingValue as exc:
+            raise ValueError(f"simulate: {g!r} needs the true value of {exc.key}; give it "
+                             "in unknowns") from None
+    return Measurements(joint_names=names, qs=qs, source="<simulated>").with_groups(out)
 
 
 def _marker_spec(marker: Sequence[Any]) -> tuple[str, NDArray[np.float64], str | None]:

@@ -13,10 +13,13 @@ one ``"kind"`` of a ``kinfw-measurements`` file:
   start values);
 - its residual ``measured - predicted`` as a CasADi expression
   (:meth:`~ObservationKind.residual`), in rows grouped by noise component
-  (:attr:`~ObservationKind.components`: e.g. position 3 rows in m, rotation 3 rows in rad).
+  (:attr:`~ObservationKind.components`: e.g. position 3 rows in m, rotation 3 rows in rad);
+- the same prediction in numpy, its simulation (prediction plus its noise model) and what
+  the view draws of it (:meth:`~ObservationKind.predict`, :meth:`~ObservationKind.simulate`,
+  :meth:`~ObservationKind.drawing`; :mod:`kinfw.observations.numeric`).
 
 The estimation problem (:mod:`identification.problem`), the measurement files
-(:mod:`kinfw.measurements`) and verification loop over the registry
+(:mod:`kinfw.measurements`), verification, the simulation and the view loop over the registry
 (:mod:`kinfw.observations`) and never branch on a kind.
 """
 
@@ -24,7 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -32,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.blocks import Block, BlockKey
+from kinfw.observations.numeric import Drawing, NumericContext, gaussian_rows
 
 __all__ = [
     "DatasetError",
@@ -506,3 +510,48 @@ class ObservationKind:
         never of its rows (those enter through ``m``) nor start values (through
         ``model``)."""
         raise NotImplementedError
+
+    # -- numpy prediction, simulation and drawing (kinfw.observations.numeric) -----------
+    def predict(self, group: Any, model: NumericContext) -> NDArray[np.float64]:
+        """What the observations would measure, (m, width) in the layout of :meth:`data`.
+
+        The numpy twin of :meth:`residual`'s prediction, batched over ``group.sample``:
+        the residual of a predicted row is zero.
+        """
+        raise NotImplementedError(f"kind {self.name!r} has no numpy prediction")
+
+    def with_data(self, group: Any, rows: NDArray[np.float64]) -> Any:
+        """The group with other measured values, rows (m, width) in the layout of
+        :meth:`data`. Default: the one row field, reshaped."""
+        if len(self.row_fields) != 1:
+            raise NotImplementedError(f"kind {self.name!r}: with_data needs one row field")
+        field = self.row_fields[0]
+        rows = np.reshape(rows, np.shape(getattr(group, field)))
+        return dataclasses.replace(group, **{field: rows})
+
+    def simulate(self, group: Any, model: NumericContext, rng: np.random.Generator,
+                 sigmas: Mapping[str, float]) -> Any:
+        """Simulated observations: the group's rows replaced by :meth:`predict` plus the
+        noise model, ``sigmas`` (SI) by noise component name.
+
+        Default: independent N(0, sigma) rows per component, for a kind whose data rows
+        are its residual rows (``measured - predicted``: a point, a distance); a kind
+        with another noise model (a pose's rotation) overrides it.
+        """
+        predicted = self.predict(group, model)
+        if predicted.shape[1] != self.rows or any(c.distribution != "gaussian"
+                                                  for c in self.components):
+            raise NotImplementedError(f"kind {self.name!r}: its noise is not Gaussian "
+                                      "rows; it must define simulate")
+        return self.with_data(group, gaussian_rows(
+            predicted, rng, [(float(sigmas[c.name]), c.rows) for c in self.components]))
+
+    def drawing(self, group: Any, model: NumericContext) -> Drawing:
+        """What the view draws of the observations (measured and predicted positions, in
+        the model frame); raises :class:`~kinfw.observations.numeric.MissingValue` when
+        the measured positions need a value the view does not have."""
+        raise NotImplementedError(f"kind {self.name!r} has no drawing")
+
+    def camera_frames(self, group: Any) -> tuple[str, ...]:
+        """URDF frames that carry the sensor (a camera): the view draws their triads."""
+        return ()

@@ -18,6 +18,12 @@ from kinfw.observations.base import (
     data_array,
     sample_array,
 )
+from kinfw.observations.numeric import (
+    Drawing,
+    NumericContext,
+    node_name,
+    predicted_or_missing,
+)
 
 __all__ = ["PointKind", "PointObservations", "offset_key"]
 
@@ -151,3 +157,24 @@ class PointKind(ObservationKind):
         o = model.ca.DM(group.offset) if group.offset is not None \
             else model.value(offset_key(group.frame, group.marker))
         return m - (T[0:3, 0:3] @ o + T[0:3, 3])
+
+    # -- numpy prediction, simulation (the default: Gaussian position noise), drawing
+    def _offset(self, group, model: NumericContext):
+        return group.offset if group.offset is not None \
+            else model.value(offset_key(group.frame, group.marker))
+
+    def predict(self, group, model: NumericContext):
+        T = model.meas_T(group.measured_in, group.frame, group.sample)
+        return T[:, :3, :3] @ self._offset(group, model) + T[:, :3, 3]
+
+    def drawing(self, group, model: NumericContext):
+        w_T_meas = model.w_T_meas(group.measured_in)
+        w_p = group.meas_p_point @ w_T_meas[:3, :3].T + w_T_meas[:3, 3]
+
+        def predicted():
+            T = model.w_T(group.frame, group.sample)
+            return T[:, :3, :3] @ self._offset(group, model) + T[:, :3, 3]
+
+        predicted, missing = predicted_or_missing(predicted)
+        return Drawing(node_name("points", group.frame, marker=group.marker), w_p, None,
+                       predicted, missing=missing)

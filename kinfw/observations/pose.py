@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,6 +21,14 @@ from kinfw.observations.base import (
     pose_residual,
     pose_rows,
     sample_array,
+)
+from kinfw.observations.numeric import (
+    Drawing,
+    NumericContext,
+    node_name,
+    perturb_transforms,
+    predicted_or_missing,
+    transforms_from_pose_rows,
 )
 from kinfw.transforms import (
     check_transform,
@@ -170,3 +178,34 @@ class PoseKind(ObservationKind):
         if group.marker is not None:
             T = T @ model.value(BlockKey("marker", group.marker))
         return pose_residual(model.ca, T, m)
+
+    # -- numpy prediction, simulation, drawing
+    def w_T_predicted(self, group, model: NumericContext):
+        """Predicted pose (m, 4, 4) of the frame (or its marker) in the model frame."""
+        T = model.w_T(group.frame, group.sample)
+        return T if group.marker is None else T @ model.value(BlockKey("marker", group.marker))
+
+    def predicted_transforms(self, group, model: NumericContext):
+        """Predicted ``meas_T_frame`` (m, 4, 4), as :meth:`residual` forms it."""
+        T = model.meas_T(group.measured_in, group.frame, group.sample)
+        return T if group.marker is None else T @ model.value(BlockKey("marker", group.marker))
+
+    def predict(self, group, model: NumericContext):
+        return pose_rows(self.predicted_transforms(group, model))
+
+    def with_data(self, group, rows):
+        return replace(group, meas_T_frame=transforms_from_pose_rows(rows))
+
+    def simulate(self, group, model: NumericContext, rng, sigmas):
+        """Position noise N(0, sigmas["position"]) per axis in the measurement frame, a
+        rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
+        return replace(group, meas_T_frame=perturb_transforms(
+            self.predicted_transforms(group, model), rng, float(sigmas["position"]),
+            float(sigmas["rotation"])))
+
+    def drawing(self, group, model: NumericContext):
+        w_T = model.w_T_meas(group.measured_in) @ group.meas_T_frame
+        predicted, missing = predicted_or_missing(
+            lambda: self.w_T_predicted(group, model)[:, :3, 3])
+        return Drawing(node_name("poses", group.frame, marker=group.marker), w_T[:, :3, 3],
+                       w_T[:, :3, :3], predicted, missing=missing)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -22,8 +22,16 @@ from kinfw.observations.base import (
     pose_rows,
     sample_array,
 )
+from kinfw.observations.numeric import (
+    Drawing,
+    NumericContext,
+    node_name,
+    perturb_transforms,
+    predicted_or_missing,
+    transforms_from_pose_rows,
+)
 from kinfw.observations.pose import read_quaternion, transforms_from_rows
-from kinfw.transforms import check_transform, xyz_quat_xyzw_from_transform
+from kinfw.transforms import check_transform, inverse_transform, xyz_quat_xyzw_from_transform
 
 __all__ = ["DEFAULT_TARGET", "TargetKind", "TargetObservations"]
 
@@ -126,3 +134,34 @@ class TargetKind(ObservationKind):
         T = inverse_casadi(model.ca, model.w_T(group.camera)) \
             @ model.value(BlockKey("target", group.target))
         return pose_residual(model.ca, T, m)
+
+    # -- numpy prediction, simulation, drawing
+    def predicted_transforms(self, group, model: NumericContext):
+        """Predicted ``camera_T_target`` (m, 4, 4), as :meth:`residual` forms it."""
+        return inverse_transform(model.w_T(group.camera, group.sample)) \
+            @ model.value(BlockKey("target", group.target))
+
+    def predict(self, group, model: NumericContext):
+        return pose_rows(self.predicted_transforms(group, model))
+
+    def with_data(self, group, rows):
+        return replace(group, camera_T_target=transforms_from_pose_rows(rows))
+
+    def simulate(self, group, model: NumericContext, rng, sigmas):
+        """Position noise N(0, sigmas["position"]) per axis in the camera frame, a
+        rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
+        return replace(group, camera_T_target=perturb_transforms(
+            self.predicted_transforms(group, model), rng, float(sigmas["position"]),
+            float(sigmas["rotation"])))
+
+    def drawing(self, group, model: NumericContext):
+        """The target where the camera saw it (not framed: it may be far away), the
+        residual line from the target's known pose."""
+        w_T_seen = model.w_T(group.camera, group.sample) @ group.camera_T_target
+        predicted, missing = predicted_or_missing(lambda: np.broadcast_to(
+            model.value(BlockKey("target", group.target))[:3, 3], (len(group.sample), 3)))
+        return Drawing(node_name("targets", group.camera, group.target), w_T_seen[:, :3, 3],
+                       w_T_seen[:, :3, :3], predicted, focus=False, missing=missing)
+
+    def camera_frames(self, group):
+        return (group.camera,)
