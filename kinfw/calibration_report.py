@@ -96,6 +96,10 @@ class GroupErrorSummary:
         "position_mean_mm", "position_rms_mm", "position_max_mm", "rotation_mean_deg",
         "rotation_rms_deg", "rotation_max_deg")
 
+    def __post_init__(self) -> None:
+        for key in ("abs_mean_xyz_mm", "abs_std_xyz_mm"):
+            object.__setattr__(self, key, tuple(float(v) for v in getattr(self, key)))
+
     @property
     def group(self) -> str:
         """The report's label: ``"frame (kind)"``, ``"frame [marker] (kind)"``."""
