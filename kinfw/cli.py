@@ -27,6 +27,8 @@ from typing import TYPE_CHECKING, NoReturn
 from kinfw.files import check_output_dir, check_outputs, write_text_atomic
 
 if TYPE_CHECKING:
+    from kinfw.calibration_file import BeforeAfter
+    from kinfw.calibration_report import RefineSection, StageErrors
     from kinfw.robot import Robot
 
 __all__ = ["main"]
@@ -37,10 +39,6 @@ log = logging.getLogger("kinfw")
 #: ``kinfw.measurements.DatasetError``, ``kinfw.robot.RobotModelError`` and
 #: ``kinfw.files.OutputPathError`` are ValueErrors (caught here without importing them).
 USER_ERRORS = (ValueError, OSError)
-
-#: What ``kinfw demo`` writes into its --out directory.
-DEMO_FILES = ("data.json", "held_out.json", "true.urdf", "calibrated.urdf",
-              "calibrated.kinfw.json", "report.json", "errors.png", "scene.html")
 
 
 def _progress_printer():
@@ -146,20 +144,21 @@ def accuracy_table(report_dict: dict) -> str:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
+    from kinfw.calibration_file import read_sidecar
     from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.accuracy import evaluate_model
 
     robot = load_robot(args.model)
     data = read_measurements(args.data)
-    sidecar_path = args.sidecar or Path(args.model).with_suffix(".kinfw.json")
-    sidecar_doc = None
+    sidecar_path = args.sidecar or _sidecar_path(args.model)
+    sidecar = None
     if Path(sidecar_path).is_file() and not args.no_sidecar:
-        sidecar_doc = json.loads(Path(sidecar_path).read_text(encoding="utf-8"))
+        sidecar = read_sidecar(sidecar_path)
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
-    report = evaluate_model(robot, data, sidecar=sidecar_doc)
-    used = str(sidecar_path) if sidecar_doc else None
+    report = evaluate_model(robot, data, sidecar=sidecar)
+    used = str(sidecar_path) if sidecar is not None else None
     if args.json:
         print(json.dumps({"model": str(args.model), "data": str(args.data), "sidecar": used,
                           **report.to_dict(per_sample=True)}, indent=2))
@@ -176,19 +175,19 @@ def _cmd_verify(args: argparse.Namespace) -> int:
 
 
 # -- kinfw calibrate ---------------------------------------------------------------------
-def _before_after_table(rows: list[dict]) -> str:
+def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
     return _format_table(
-        [[r["group"], r["n"], f"{r['before_position_rms_mm']:.3f}",
-          f"{r['after_position_rms_mm']:.3f}", f"{r['before_rotation_rms_deg']:.4f}",
-          f"{r['after_rotation_rms_deg']:.4f}"] for r in rows],
+        [[r.group, r.n, f"{r.before_position_rms_mm:.3f}", f"{r.after_position_rms_mm:.3f}",
+          f"{r.before_rotation_rms_deg:.4f}", f"{r.after_rotation_rms_deg:.4f}"]
+         for r in rows],
         ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"])
 
 
-def _stage_table(stage_rms: dict[str, dict[str, float]]) -> str:
-    stages = list(stage_rms)
-    groups = list(stage_rms["nominal"])
-    return _format_table([[g, *(f"{stage_rms[s][g]:.3f}" for s in stages)] for g in groups],
-                         ["position RMS mm", *stages])
+def _stage_table(stages: Sequence[StageErrors]) -> str:
+    rms = {s.stage: dict(s.position_rms_mm) for s in stages}
+    groups = [g for g, _ in stages[0].position_rms_mm]
+    return _format_table([[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
+                         ["position RMS mm", *rms])
 
 
 def _params_arg(text: str) -> str | tuple[str, ...]:
@@ -223,169 +222,103 @@ def _sidecar_path(out: Path) -> Path:
     return Path(out).with_suffix(".kinfw.json")
 
 
-def _calibrate(nominal: Robot, data, out: Path, *, method: str, noise=None,
-               loss: str = "huber", parameters="full", prior=None, data_path=None,
-               held_out=None):
-    """Calibrate (:func:`identification.pipeline.calibrate`), then write ``out`` and its
-    sidecar ``<stem>.kinfw.json`` (each atomically, once everything is computed);
-    return the report and the calibration."""
-    from identification.pipeline import calibrate
-    from kinfw.robot import Robot
-    from kinfw.urdf_export import write_urdf
-    from verification.report import calibration_report, sidecar
-
-    result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
-                       parameters=parameters, prior=prior, progress=_progress_printer())
-    report = calibration_report(nominal, Robot(result.urdf_xml, str(out)), data, result,
-                                method=method, loss=loss, data_path=data_path,
-                                held_out=held_out)
-    nominal_path = None if nominal.source.startswith("<") else nominal.source
-    sidecar_path = _sidecar_path(out)
-    sidecar_text = json.dumps(sidecar(report, result, nominal_path=nominal_path,
-                                      calibrated_path=out), indent=2) + "\n"
-    write_urdf(out, result.urdf_xml)
-    write_text_atomic(sidecar_path, sidecar_text)
-    report["sidecar"] = str(sidecar_path)
-    return report, result
-
-
 def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from kinfw.calibration_report import write_report
     from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
+    from verification.report import calibrate_to_files
 
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     held_out = read_measurements(args.holdout) if args.holdout else None
-    report, _ = _calibrate(nominal, data, args.out, method=args.method,
-                           noise=_noise_arg(args), loss=args.loss,
-                           parameters=_params_arg(args.params), prior=_prior_arg(args),
-                           data_path=args.data, held_out=held_out)
+    report, _ = calibrate_to_files(nominal, data, args.out, method=args.method,
+                                   noise=_noise_arg(args), loss=args.loss,
+                                   parameters=_params_arg(args.params),
+                                   prior=_prior_arg(args), data_path=args.data,
+                                   held_out=held_out, progress=_progress_printer())
     if args.report:
-        write_text_atomic(args.report, json.dumps(report, indent=2) + "\n")
+        write_report(args.report, report)
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(json.dumps(report.to_dict(), indent=2))
         return 0
     print(f"calibrated {args.urdf} with {args.method} from {args.data} "
-          f"({data.n_samples} samples) -> {args.out} (+ {report['sidecar']})")
-    for note in report["notes"]:
+          f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})")
+    for note in report.notes:
         print(f"note: {note}")
     print("position RMS on the calibration data after each stage (in-sample):")
-    print(_stage_table(report["position_rms_mm_by_stage"]))
-    if "refine" in report:
-        ref = report["refine"]
-        ident = ref["identifiability"]
-        if ident["condition"] is not None:
-            condition = f"condition {ident['condition']:.3g}"
-        else:  # null in the report: no free parameters, or a rank-deficient problem
-            condition = "condition undefined" if not ident["n_parameters"] else "condition inf"
-        print(f"refine: noise sigma {ref['noise']['position_sigma_mm']:.3g} mm, "
-              f"{ref['noise']['rotation_sigma_deg_per_component']:.3g} deg per component "
-              f"({'estimated' if ref['noise']['estimated'] else 'given'}); reduced chi-square "
-              f"{ref['reduced_chi_square']:.3g}; rank {ident['rank']}/{ident['n_parameters']}, "
-              + condition)
-        n_fixed = sum(row["fixed"] for row in ref["parameters"])
-        print(f"  parameters: {len(ref['parameters']) - n_fixed} estimated, {n_fixed} fixed "
-              "(not estimated; std null in the report)")
-        for item in ident["not_identifiable"]:
-            print(f"  not identifiable: {', '.join(item['parameters'])}: {item['why']}")
-        down = ref["downweighted"]
-        if down:
-            print(f"  {len(down)} observations down-weighted by the {ref['loss']} loss, "
-                  "worst first:")
-        for row in down[:5]:
-            where = row["frame"] + (f" marker {row['marker']}" if row["marker"] else "")
-            rotation = ("" if row["rotation_residual_deg"] is None
-                        else f", {row['rotation_residual_deg']:.3g} deg")
-            print(f"    samples[{row['sample']}] {where} ({row['kind']}): residual "
-                  f"{row['position_residual_mm']:.3g} mm{rotation}, weight {row['weight']:.2g}")
-        if len(down) > 5:
-            print(f"    ... and {len(down) - 5} more "
-                  f"({'see the report' if args.report else 'write them with --report'})")
-    if held_out is not None:
+    print(_stage_table(report.position_rms_by_stage))
+    if report.refine is not None:
+        _print_refine(report.refine, has_report=bool(args.report))
+    if report.errors_held_out is not None:
         print("held-out errors:")
-        print(_before_after_table(report["errors_held_out"]))
+        print(_before_after_table(report.errors_held_out))
     if args.report:
         print(f"report: {args.report}")
     return 0
 
 
+def _sigma(value: float | None, fmt: str) -> str:
+    return "-" if value is None else format(value, fmt)
+
+
+def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
+    """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
+    the worst down-weighted observations."""
+    ident = ref.identifiability
+    if ident.condition is not None:
+        condition = f"condition {ident.condition:.3g}"
+    else:  # null in the report: no free parameters, or a rank-deficient problem
+        condition = "condition undefined" if not ident.n_parameters else "condition inf"
+    noise = ref.noise
+    print(f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
+          f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
+          f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+          f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, "
+          + condition)
+    print(f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
+          "(not estimated; std null in the report)")
+    for item in ident.not_identifiable:
+        print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
+    down = ref.downweighted
+    if down:
+        print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, "
+              "worst first:")
+    for row in down[:5]:
+        where = row.frame + (f" marker {row.marker}" if row.marker else "")
+        rotation = ("" if row.rotation_residual_deg is None
+                    else f", {row.rotation_residual_deg:.3g} deg")
+        print(f"    samples[{row.sample}] {where} ({row.kind}): residual "
+              f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}")
+    if len(down) > 5:
+        print(f"    ... and {len(down) - 5} more "
+              f"({'see the report' if has_report else 'write them with --report'})")
+
+
 # -- kinfw demo --------------------------------------------------------------------------
 def _cmd_demo(args: argparse.Namespace) -> int:
-    import numpy as np
+    from verification.demo import NOISE_DEG, NOISE_MM, run_demo
 
-    from kinfw.measurements import concatenate_measurements, write_measurements
-    from kinfw.robot import Robot, builtin_head_urdf, load_robot
-    from verification.report import before_after_rows, errors_by_group, plot_stage_errors
-    from verification.simulate import (
-        default_target_pose,
-        one_joint_at_a_time,
-        perturb_robot,
-        random_configurations,
-        simulate,
-    )
-
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    nominal = load_robot(builtin_head_urdf())
-    rng = np.random.default_rng(args.seed)
-    truth_xml = perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
-    truth = load_robot(truth_xml)
-    plates, cameras = nominal.default_frames, nominal.default_cameras
-    names = nominal.topology((*plates, *cameras)).joint_names
-    lower, upper = nominal.joint_limits(names)
-    noise = {"noise_m": 0.5e-3, "noise_rad": np.radians(0.5)}
-    # stage 1: plates seen by the stereo rig, one joint at a time; stage 2: the cameras
-    # see a fixed target at random configurations.
-    qs1, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=0.8)
-    qs2 = random_configurations(lower, upper, 30, rng, fraction=0.8)
-    w_T_target = default_target_pose(truth, qs2, names, cameras)
-    data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise))
-    q_test = random_configurations(lower, upper, 100, rng, fraction=0.8)
-    observed = {"frames": plates, "cameras": cameras, "w_T_target": w_T_target}
-    held_out = simulate(truth, q_test, names, rng=rng, **observed, **noise)
-    exact = simulate(truth, q_test, names, rng=rng, **observed)
-    write_measurements(out / "data.json", data)
-    write_measurements(out / "held_out.json", held_out)
-    write_text_atomic(out / "true.urdf", truth_xml)
-    report, result = _calibrate(nominal, data, out / "calibrated.urdf", method="refine",
-                                data_path=out / "data.json", held_out=held_out)
-    report["errors_vs_truth_held_out"] = before_after_rows(
-        errors_by_group(nominal, exact),
-        errors_by_group(load_robot(out / "calibrated.urdf"), exact))
-    truth_rms = {"nominal": errors_by_group(nominal, exact)}
-    for name, xml in result.stages:
-        truth_rms[name] = errors_by_group(Robot(xml, name), exact)
-    report["position_rms_mm_vs_truth_held_out_by_stage"] = {
-        stage: {k: v["position_rms_mm"] for k, v in errors.items()}
-        for stage, errors in truth_rms.items()}
-    write_text_atomic(out / "report.json", json.dumps(report, indent=2) + "\n")
-    plot_stage_errors(report["position_rms_mm_vs_truth_held_out_by_stage"], out / "errors.png",
-                      title="IIS-head demo: held-out error against the true robot")
-    from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
-
-    write_html(scene(nominal, load_robot(out / "calibrated.urdf"), data,
-                     targets=targets_from_sidecar(out / "calibrated.kinfw.json"),
-                     residual_scale=30.0, window=OfflineWindow()), out / "scene.html")
+    demo = run_demo(args.out, seed=args.seed, progress=_progress_printer())
+    report = demo.report
     if args.json:
-        print(json.dumps(report, indent=2))
+        print(json.dumps(report.to_dict(), indent=2))
         return 0
+    out = demo.out
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
     print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
-          f"{len(qs1)} one-joint-at-a-time configurations (9 per joint), plate poses from the "
-          "stereo rig; stage 2: both cameras see a fixed target in 30 random configurations; "
-          "noise sigma 0.5 mm / 0.5 deg; closed form, A = X B Y, then the joint least "
-          "squares; 100 held-out configurations")
+          f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
+          "the stereo rig; stage 2: both cameras see a fixed target in 30 random "
+          f"configurations; noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
+          "A = X B Y, then the joint least squares; 100 held-out configurations")
     print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
-    print(_stage_table(report["position_rms_mm_vs_truth_held_out_by_stage"]))
+    print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
     print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
-    print(_before_after_table(report["errors_held_out"]))
-    ref = report["refine"]
-    print(f"\nestimated noise: {ref['noise']['position_sigma_mm']:.3f} mm per axis, "
-          f"{ref['noise']['rotation_sigma_deg_per_component']:.3f} deg per orientation "
-          f"component (true: 0.5 mm, {0.5 / np.sqrt(3.0):.3f} deg)")
-    print(f"wrote {out / 'calibrated.urdf'} (+ {report['sidecar']}), {out / 'report.json'} "
+    print(_before_after_table(report.errors_held_out))
+    noise = report.refine.noise
+    print(f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+          f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
+          f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)")
+    print(f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
           f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
     print(f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
           f"{out / 'scene.html'} (open in any browser, no network needed)")
@@ -446,8 +379,8 @@ def _cmd_crossval(args: argparse.Namespace) -> int:
 
 # -- kinfw view --------------------------------------------------------------------------
 def _cmd_view(args: argparse.Namespace) -> int:
-    import numpy as np
 
+    from kinfw.calibration_file import read_sidecar
     from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
@@ -466,9 +399,8 @@ def _cmd_view(args: argparse.Namespace) -> int:
         sidecar_path = guess if guess.is_file() else None
     extra = {}
     if sidecar_path is not None:
-        doc = json.loads(Path(sidecar_path).read_text(encoding="utf-8"))
-        extra = {"targets": targets_from_sidecar(doc),
-                 "meas_T_root": np.array(doc["w_T_root"])}
+        sidecar = read_sidecar(sidecar_path)
+        extra = {"targets": targets_from_sidecar(sidecar), "meas_T_root": sidecar.w_T_root}
     up = args.up
     vis = scene(nominal, calibrated, data, sample=args.sample, residual_scale=args.residual_scale,
                 up=up, package_dirs=tuple(args.package_dir),
@@ -554,6 +486,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
                       inputs={"--urdf": args.urdf, "data file": args.data,
                               "--holdout": args.holdout})
     elif command == "demo":
+        from verification.demo import DEMO_FILES
+
         check_output_dir(args.out, label="--out", files=DEMO_FILES)
     elif command == "view" and args.html is not None:
         sidecar = args.sidecar or (args.calibrated and _sidecar_path(args.calibrated))

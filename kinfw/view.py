@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import base64
 import itertools
-import json
 import logging
 import math
 import os
@@ -63,6 +62,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.blocks import BlockKey
+from kinfw.calibration_file import CalibrationSidecar, read_sidecar
 from kinfw.files import write_text_atomic
 from kinfw.measurements import Measurements, check_against_robot
 from kinfw.observations import kind_of
@@ -749,15 +749,16 @@ def _draw_cameras(root: meshcat.Visualizer, model: Robot, data: Measurements | N
 # -- files -------------------------------------------------------------------------------
 
 
-def targets_from_sidecar(sidecar: str | Path | dict[str, Any]
+def targets_from_sidecar(sidecar: str | Path | CalibrationSidecar
                          ) -> tuple[tuple[str, NDArray[np.float64]], ...]:
     """``(name, root_T_target)`` of every target in a calibration sidecar
-    (``*.kinfw.json`` written by ``kinfw calibrate``), for :func:`scene`'s ``targets``."""
-    doc = sidecar if isinstance(sidecar, dict) else json.loads(
-        Path(sidecar).read_text(encoding="utf-8"))
-    return tuple((str(t["target"]), check_transform(np.asarray(t["root_T_target"], float),
-                                                    name=f"targets[{t['target']!r}]"))
-                 for t in doc.get("targets", ()))
+    (``*.kinfw.json`` written by ``kinfw calibrate``, or one read by
+    :func:`kinfw.calibration_file.read_sidecar`), for :func:`scene`'s ``targets``: the
+    refined pose when the calibration refined it, else the hand-eye one
+    (:attr:`~kinfw.calibration_file.CalibrationSidecar.root_T_targets`)."""
+    doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
+    return tuple((t, check_transform(T, name=f"targets[{t!r}]"))
+                 for t, T in doc.root_T_targets)
 
 
 def external_urls(html: str) -> list[str]:

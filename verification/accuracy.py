@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.blocks import BlockKey
+from kinfw.calibration_file import CalibrationSidecar
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
 
@@ -123,24 +124,17 @@ class AccuracyReport:
         return {"fitted": list(self.fitted), "groups": groups}
 
 
-def known_frames(sidecar: dict | None) -> dict[tuple[str, str], NDArray]:
-    """The rigid frames and offsets a calibration sidecar (``*.kinfw.json``) provides:
+def known_frames(sidecar: CalibrationSidecar | None) -> dict[tuple[str, str], NDArray]:
+    """The rigid frames and offsets a calibration sidecar (``*.kinfw.json``, read with
+    :func:`kinfw.calibration_file.read_sidecar`) provides:
     ``{("frame", name): meas_T_root, ("target", name): root_T_target,
-    ("marker", name): frame_T_marker, ("offset", "frame:marker"): frame_p_point}``."""
-    if not sidecar:
-        return {}
-    known: dict[tuple[str, str], NDArray] = {}
-    for t in sidecar.get("targets", []):
-        known[("target", t["target"])] = np.array(t["root_T_target"])
-    for u in sidecar.get("unknowns", []):
-        known[(u["kind"], u["name"])] = np.array(u["value"])
-    if sidecar.get("measurement_frame"):
-        known[("frame", sidecar["measurement_frame"])] = np.array(sidecar["w_T_root"])
-    return known
+    ("marker", name): frame_T_marker, ("offset", "frame:marker"): frame_p_point}``
+    (:meth:`~kinfw.calibration_file.CalibrationSidecar.known_frames`)."""
+    return {} if sidecar is None else sidecar.known_frames()
 
 
 def evaluate_model(robot: Robot, measurements: Measurements, *,
-                   sidecar: dict | None = None) -> AccuracyReport:
+                   sidecar: CalibrationSidecar | None = None) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
     The prediction is the estimation problem's at its start

@@ -1,5 +1,6 @@
-"""Calibration reports: before/after errors and the identified parameters, as JSON-ready
-dictionaries (SI inside; field names say mm or deg where a value is not SI)."""
+"""Calibration reports and sidecars built from the pipeline's result, as the typed
+:class:`kinfw.calibration_report.CalibrationReport` and
+:class:`kinfw.calibration_file.CalibrationSidecar` (dictionaries only when written)."""
 
 from __future__ import annotations
 
@@ -8,12 +9,36 @@ import hashlib
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
 from identification.cameras import CamerasResult
 from identification.closed_form import ClosedFormResult
 from identification.pipeline import Calibration
 from identification.refine import RefineResult, parameter_unit
+from kinfw.calibration_file import (
+    BeforeAfter,
+    CalibratedUnknown,
+    CalibrationSidecar,
+    DataProvenance,
+    NoiseSummary,
+)
+from kinfw.calibration_report import (
+    CalibrationReport,
+    CameraMount,
+    ClosedFormSection,
+    Correlation,
+    DownweightedRow,
+    ExportSection,
+    GroupErrorSummary,
+    HandEyeSection,
+    IdentifiabilitySummary,
+    KinematicValue,
+    NotIdentifiable,
+    ParameterRow,
+    RefineSection,
+    StageErrors,
+    TargetEstimate,
+    before_after,
+)
 from kinfw.files import atomic_path
 from kinfw.measurements import Measurements
 from kinfw.robot import Robot
@@ -21,12 +46,14 @@ from verification.accuracy import evaluate_model
 
 __all__ = [
     "before_after_rows",
+    "calibrate_to_files",
     "calibration_report",
     "downweighted_rows",
     "errors_by_group",
     "file_sha256",
     "plot_stage_errors",
     "sidecar",
+    "sidecar_path",
 ]
 
 
@@ -35,75 +62,51 @@ def file_sha256(path: str | Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def errors_by_group(robot: Robot, data: Measurements) -> dict[str, dict]:
-    """Errors of ``robot`` on ``data`` keyed "frame (kind)" (see evaluate_model)."""
+def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary, ...]:
+    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
+    each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
     report = evaluate_model(robot, data)
-    return {f"{g['frame']} ({g['kind']})": g for g in report.to_dict()["groups"]}
+    return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary())
+                 for g in report.groups)
 
 
-def before_after_rows(before: dict[str, dict], after: dict[str, dict]) -> list[dict]:
+def before_after_rows(before: tuple[GroupErrorSummary, ...],
+                      after: tuple[GroupErrorSummary, ...]) -> tuple[BeforeAfter, ...]:
     """Per observation group: RMS position (mm) and rotation (deg) before and after."""
-    return [
-        {"group": key,
-         "n": before[key]["n"],
-         "before_position_rms_mm": before[key]["position_rms_mm"],
-         "after_position_rms_mm": after[key]["position_rms_mm"],
-         "before_rotation_rms_deg": before[key]["rotation_rms_deg"],
-         "after_rotation_rms_deg": after[key]["rotation_rms_deg"]}
-        for key in before
-    ]
+    return before_after(before, after)
 
 
-def _closed_form_section(result: ClosedFormResult) -> dict:
+def _kinematic_values(model) -> tuple[KinematicValue, ...]:
+    return tuple(KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
+                 for o, n, v in model.describe())
+
+
+def _closed_form_section(result: ClosedFormResult) -> ClosedFormSection:
     model = result.model
-    return {
-        "method": "CPC closed form, Shih et al. (1992) section 4",
-        "joint_names": list(model.topology.joint_names),
-        "frames": list(model.topology.frames),
-        "q0": result.q0.tolist(),
-        "samples_per_joint": result.group_sizes.tolist(),
-        "axis_residual_rad": [None if np.isnan(v) else float(v)
-                              for v in result.axis_residual_rad],
-        "motion_per_unit_joint_value": result.motion_scale.tolist(),
-        "position_rms_mm": 1e3 * result.position_rms_m,
-        "parameters": {
-            "note": "canonical CPC parameters (Shih et al. eqs. 3-4, Table 1 gauge): per joint "
-                    "the axis b of its frame in its parent's moved frame, beta, l (m) and the "
-                    "motion sense; per end frame its pose in the moved frame of its last "
-                    "joint (m, URDF rpy in rad)",
-            "values": [{"owner": o, "name": n, "value": v,
-                        "unit": parameter_unit(o, n, model.topology)}
-                       for o, n, v in model.describe()],
-            "n_identifiable": model.n_parameters,
-        },
-    }
+    return ClosedFormSection(
+        joint_names=tuple(model.topology.joint_names), frames=tuple(model.topology.frames),
+        q0=tuple(result.q0.tolist()), samples_per_joint=tuple(result.group_sizes.tolist()),
+        axis_residual_rad=tuple(float(v) for v in result.axis_residual_rad),
+        motion_per_unit_joint_value=tuple(result.motion_scale.tolist()),
+        position_rms_mm=1e3 * result.position_rms_m, values=_kinematic_values(model),
+        n_identifiable=model.n_parameters)
 
 
-def _xyz_rpy(T: np.ndarray) -> dict:
-    return {"xyz_m": T[:3, 3].tolist(), "rpy_rad": pin.rpy.matrixToRpy(T[:3, :3]).tolist(),
-            "matrix": T.tolist()}
-
-
-def _hand_eye_section(result: CamerasResult) -> dict:
-    return {
-        "method": "iterative A = X B Y, Hirsh, DeSouza & Kak (2001), per camera",
-        "cameras": [
-            {"camera": c.camera, "target": c.target, "joint": c.joint, "hand": c.hand,
-             "hand_T_camera": _xyz_rpy(c.hand_T_camera), "n_views": c.n_views,
-             "iterations": c.solver.iterations, "restarts": c.solver.restarts,
-             "converged": c.solver.converged,
-             "rms_rotation_deg": float(np.degrees(c.solver.rms_rotation_rad)),
-             "rms_translation_mm": 1e3 * c.solver.rms_translation}
-            for c in result.cameras],
-        "targets": [
-            {"target": t, "root_T_target": _xyz_rpy(T), "camera_disagreement_mm": 1e3 * dp,
-             "camera_disagreement_deg": float(np.degrees(dr))}
+def _hand_eye_section(result: CamerasResult) -> HandEyeSection:
+    return HandEyeSection(
+        cameras=tuple(
+            CameraMount(c.camera, c.target, c.joint, c.hand, c.hand_T_camera, c.n_views,
+                        c.solver.iterations, c.solver.restarts, c.solver.converged,
+                        float(np.degrees(c.solver.rms_rotation_rad)),
+                        1e3 * c.solver.rms_translation)
+            for c in result.cameras),
+        targets=tuple(
+            TargetEstimate(t, T, 1e3 * dp, float(np.degrees(dr)))
             for (t, T), (_, dp, dr) in zip(result.root_T_targets, result.target_spread,
-                                           strict=True)],
-    }
+                                           strict=True)))
 
 
-def downweighted_rows(result: RefineResult) -> list[dict]:
+def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
     """The observations the robust loss down-weighted, the worst (lowest weight) first.
 
     Parameters
@@ -112,7 +115,7 @@ def downweighted_rows(result: RefineResult) -> list[dict]:
 
     Returns
     -------
-    list of dict
+    tuple of DownweightedRow
         One per down-weighted observation: ``sample`` (index into the data file's
         ``samples``, from 0), ``kind``, ``frame`` (the camera for ``target``
         observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
@@ -126,64 +129,46 @@ def downweighted_rows(result: RefineResult) -> list[dict]:
         position_mm = 1e3 * np.linalg.norm(g.position_m[rows_g], axis=1)
         rotation_deg = (None if g.rotation_rad is None else np.degrees(np.arcsin(np.clip(
             np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))))
-        rows += [{"sample": int(g.sample[k]), "kind": g.kind, "frame": g.frame,
-                  "marker": g.marker, "position_residual_mm": float(position_mm[c]),
-                  "rotation_residual_deg": None if rotation_deg is None
-                  else float(rotation_deg[c]),
-                  "weight": float(g.weight[k])}
+        rows += [DownweightedRow(int(g.sample[k]), g.kind, g.frame, g.marker,
+                                 float(position_mm[c]),
+                                 None if rotation_deg is None else float(rotation_deg[c]),
+                                 float(g.weight[k]))
                  for c, k in enumerate(rows_g)]
-    rows.sort(key=lambda row: (row["weight"], row["sample"]))
-    return rows
+    rows.sort(key=lambda row: (row.weight, row.sample))
+    return tuple(rows)
 
 
-def _refine_section(result: RefineResult, loss: str) -> dict:
+def _noise_summary(result: RefineResult) -> NoiseSummary:
+    return NoiseSummary(tuple(result.noise.sigmas), result.noise.estimated)
+
+
+def _unknowns(result: RefineResult) -> tuple[CalibratedUnknown, ...]:
+    return tuple(CalibratedUnknown(u.kind, u.name, u.value) for u in result.unknowns)
+
+
+def _refine_section(result: RefineResult, loss: str) -> RefineSection:
     ident = result.identifiability
-    topology = result.model.topology
-    return {
-        "method": "joint nonlinear least squares (CasADi residuals and Jacobians, "
-                  "Levenberg-Marquardt), residuals whitened by the noise below",
-        "loss": loss,
-        "noise": {"position_sigma_mm": 1e3 * result.noise.position_m,
-                  "rotation_sigma_deg_per_component": float(np.degrees(
-                      result.noise.rotation_rad)),
-                  "estimated": result.noise.estimated,
-                  "sigma_per_component": dict(result.noise.sigmas),
-                  "note": "weights: 1/sigma^2 per position component (mm) and per "
-                          "small-angle orientation component (an angle sigma of s about a "
-                          "random axis is s/sqrt(3) per component)"},
-        "reduced_chi_square": result.sigma_hat2,
-        "iterations": result.iterations, "converged": result.converged,
-        "seconds": result.seconds,
-        "model_frame": result.model_frame,
-        "parameters_note": "delta_from_start and std in the parameter's unit (rad, m or "
-                           "unitless); fixed: not estimated (held at the start, "
-                           "delta_from_start 0, std null)",
-        "parameters": [
-            {"owner": o, "field": f, "unit": unit,
-             "fixed": not free, "delta_from_start": float(d),
-             "std": float(sd) if free else None}
+    return RefineSection(
+        loss=loss, noise=_noise_summary(result), reduced_chi_square=result.sigma_hat2,
+        iterations=result.iterations, converged=result.converged, seconds=result.seconds,
+        model_frame=result.model_frame,
+        # units from the parameter blocks (RefineResult.parameter_units)
+        parameters=tuple(
+            ParameterRow(o, f, unit, not free, float(d), float(sd) if free else None)
             for (o, f), unit, free, d, sd in zip(result.parameter_names,
                                                  result.parameter_units, result.free,
-                                                 result.estimate, result.std, strict=True)],
-        "kinematics": [{"owner": o, "name": n, "value": v,
-                        "unit": parameter_unit(o, n, topology)}
-                       for o, n, v in result.model.describe()],
-        "unknowns": [{"kind": u.kind, "name": u.name, "value": u.value.tolist()}
-                     for u in result.unknowns],
-        "identifiability": {
-            "rank": ident.rank, "n_parameters": ident.n_parameters,
-            # strict JSON: an undefined (no parameters) or infinite value is null
-            "condition": _finite_or_none(ident.condition),
-            "observability_O1": _finite_or_none(ident.observability_o1),
-            "not_identifiable": [{"parameters": [":".join(p) for p in params], "why": why}
-                                 for params, why in ident.unidentifiable],
-            "correlations_above_0.9": [{"a": a, "b": b, "rho": r}
-                                       for a, b, r in ident.correlations]},
-        "downweighted_note": "observations beyond the robust loss's threshold, the worst "
-                             "(lowest weight) first; sample is the index into the data "
-                             "file's samples (from 0)",
-        "downweighted": downweighted_rows(result),
-    }
+                                                 result.estimate, result.std, strict=True)),
+        kinematics=_kinematic_values(result.model),
+        unknowns=_unknowns(result),
+        identifiability=IdentifiabilitySummary(
+            rank=ident.rank, n_parameters=ident.n_parameters,
+            # strict JSON: an undefined (no parameters) or infinite value is None (null)
+            condition=_finite_or_none(ident.condition),
+            observability_o1=_finite_or_none(ident.observability_o1),
+            not_identifiable=tuple(NotIdentifiable(tuple(":".join(p) for p in params), why)
+                                   for params, why in ident.unidentifiable),
+            correlations=tuple(Correlation(a, b, r) for a, b, r in ident.correlations)),
+        downweighted=downweighted_rows(result))
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -193,8 +178,8 @@ def _finite_or_none(value: float) -> float | None:
 def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
                        calibration: Calibration, *, method: str, loss: str = "huber",
                        data_path: str | Path | None = None,
-                       held_out: Measurements | None = None) -> dict:
-    """Everything a user needs to trust (or not) a calibration, as a dictionary.
+                       held_out: Measurements | None = None) -> CalibrationReport:
+    """Everything a user needs to trust (or not) a calibration.
 
     Parameters
     ----------
@@ -209,69 +194,60 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
         Recorded with its SHA-256.
     held_out : Measurements, optional
         Samples not used for calibration; their errors are the honest accuracy.
+
+    Returns
+    -------
+    CalibrationReport
+        ``to_dict()`` is the JSON of ``kinfw calibrate --report``.
     """
     before = errors_by_group(nominal, data)
     after = errors_by_group(calibrated, data)
-    stage_rms = {"nominal": {k: v["position_rms_mm"] for k, v in before.items()}}
-    for name, xml in calibration.stages:
-        errors = errors_by_group(Robot(xml, name), data)
-        stage_rms[name] = {k: v["position_rms_mm"] for k, v in errors.items()}
-    report = {
-        "format": "kinfw-calibration-report", "version": 1,
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "method": method,
-        "nominal_urdf": nominal.source,
-        "data": {"source": data.source, "n_samples": data.n_samples,
-                 "sha256": file_sha256(data_path) if data_path else None},
-        "notes": list(calibration.notes),
-        "errors_in_sample": before_after_rows(before, after),
-        "position_rms_mm_by_stage": stage_rms,
-        "errors_before": before,
-        "errors_after": after,
-    }
-    if calibration.closed_form is not None:
-        report["kinematics"] = _closed_form_section(calibration.closed_form)
-    if calibration.cameras is not None:
-        report["hand_eye"] = _hand_eye_section(calibration.cameras)
-    if calibration.refined is not None:
-        report["refine"] = _refine_section(calibration.refined, loss)
-    if calibration.export is not None:
-        report["export"] = {
-            "w_T_root": calibration.export.w_T_root.tolist(),
-            "moved_link_frames": [
-                {"link": link, "shift_mm": 1e3 * float(np.linalg.norm(T[:3, 3]))}
-                for link, T in calibration.export.link_shifts],
-        }
-    if held_out is not None:
-        report["errors_held_out"] = before_after_rows(errors_by_group(nominal, held_out),
-                                                      errors_by_group(calibrated, held_out))
-    return report
+    stage_rms = [StageErrors.of("nominal", before)]
+    stage_rms += [StageErrors.of(name, errors_by_group(Robot(xml, name), data))
+                  for name, xml in calibration.stages]
+    export = calibration.export
+    return CalibrationReport(
+        created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        method=method, nominal_urdf=nominal.source,
+        data=DataProvenance(data.source, data.n_samples,
+                            file_sha256(data_path) if data_path else None),
+        notes=tuple(calibration.notes),
+        errors_in_sample=before_after(before, after),
+        position_rms_by_stage=tuple(stage_rms),
+        errors_before=before, errors_after=after,
+        kinematics=None if calibration.closed_form is None
+        else _closed_form_section(calibration.closed_form),
+        hand_eye=None if calibration.cameras is None
+        else _hand_eye_section(calibration.cameras),
+        refine=None if calibration.refined is None
+        else _refine_section(calibration.refined, loss),
+        export=None if export is None else ExportSection(
+            export.w_T_root, tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3])))
+                                   for link, T in export.link_shifts)),
+        errors_held_out=None if held_out is None
+        else before_after(errors_by_group(nominal, held_out),
+                          errors_by_group(calibrated, held_out)))
 
 
-def sidecar(report: dict, calibration: Calibration, *, nominal_path: str | Path | None,
-            calibrated_path: str | Path) -> dict:
+def sidecar(report: CalibrationReport, calibration: Calibration, *,
+            nominal_path: str | Path | None, calibrated_path: str | Path
+            ) -> CalibrationSidecar:
     """The provenance written beside a calibrated URDF: what produced it and what is
     needed to predict measurements that is not in the URDF (the root's pose in the
     measurement frame, target poses, markers, noise)."""
     refined = calibration.refined
-    return {
-        "format": "kinfw-calibration", "version": 1,
-        "created": report["created"],
-        "kinfw_version": _kinfw_version(),
-        "method": report["method"],
-        "calibrated_urdf": Path(calibrated_path).name,
-        "nominal_urdf": {"path": str(nominal_path) if nominal_path else None,
-                         "sha256": file_sha256(nominal_path) if nominal_path else None},
-        "data": report["data"],
-        "w_T_root": calibration.w_T_root.tolist(),
-        "measurement_frame": None if refined is None else refined.model_frame,
-        "noise": None if refined is None else report["refine"]["noise"],
-        "unknowns": [] if refined is None else report["refine"]["unknowns"],
-        "targets": [] if calibration.cameras is None else [
-            {"target": t, "root_T_target": T.tolist()}
-            for t, T in calibration.cameras.root_T_targets],
-        "errors_held_out": report.get("errors_held_out"),
-    }
+    return CalibrationSidecar(
+        created=report.created, kinfw_version=_kinfw_version(), method=report.method,
+        calibrated_urdf=Path(calibrated_path).name,
+        nominal_urdf=str(nominal_path) if nominal_path else None,
+        nominal_urdf_sha256=file_sha256(nominal_path) if nominal_path else None,
+        data=report.data, w_T_root=calibration.w_T_root,
+        measurement_frame=None if refined is None else refined.model_frame,
+        noise=None if refined is None else _noise_summary(refined),
+        unknowns=() if refined is None else _unknowns(refined),
+        hand_eye_targets=() if calibration.cameras is None
+        else tuple(calibration.cameras.root_T_targets),
+        errors_held_out=report.errors_held_out)
 
 
 def _kinfw_version() -> str:
@@ -283,13 +259,11 @@ def _kinfw_version() -> str:
         return "unknown (not installed)"
 
 
-def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, *,
+def plot_stage_errors(stages: tuple[StageErrors, ...], path: str | Path, *,
                       title: str = "") -> Path:
-    """Grouped bars: position RMS (mm, log scale) per observation group after each stage.
-
-    ``stage_rms`` maps a stage name ("nominal", "closed form", ...) to
-    ``{"frame (kind)": rms_mm}``, as in the reports' ``*_by_stage`` entries.
-    """
+    """Grouped bars: position RMS (mm, log scale) per observation group after each stage
+    (the report's ``position_rms_by_stage`` or ``..._vs_truth_held_out_by_stage``)."""
+    stage_rms = {s.stage: dict(s.position_rms_mm) for s in stages}
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -320,3 +294,43 @@ def plot_stage_errors(stage_rms: dict[str, dict[str, float]], path: str | Path, 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=120, format=path.suffix.lstrip(".") or "png")
     return path
+
+
+def sidecar_path(urdf_path: str | Path) -> Path:
+    """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
+    ``<stem>.kinfw.json`` beside it."""
+    return Path(urdf_path).with_suffix(".kinfw.json")
+
+
+def calibrate_to_files(nominal: Robot, data: Measurements, out: str | Path, *,
+                       method: str, noise=None, loss: str = "huber",
+                       parameters: str | tuple[str, ...] = "full", prior=None,
+                       data_path: str | Path | None = None,
+                       held_out: Measurements | None = None, progress=None
+                       ) -> tuple[CalibrationReport, Calibration]:
+    """Calibrate (:func:`identification.pipeline.calibrate`), then write the calibrated
+    URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
+    is computed.
+
+    Returns
+    -------
+    report : CalibrationReport
+        With ``sidecar`` set to the sidecar's path.
+    calibration : Calibration
+    """
+    from dataclasses import replace
+
+    from identification.pipeline import calibrate
+    from kinfw.calibration_file import write_sidecar
+    from kinfw.urdf_export import write_urdf
+
+    result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
+                       parameters=parameters, prior=prior, progress=progress)
+    report = calibration_report(nominal, Robot(result.urdf_xml, str(out)), data, result,
+                                method=method, loss=loss, data_path=data_path,
+                                held_out=held_out)
+    nominal_path = None if nominal.source.startswith("<") else nominal.source
+    side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out)
+    write_urdf(out, result.urdf_xml)
+    write_sidecar(sidecar_path(out), side)
+    return replace(report, sidecar=str(sidecar_path(out))), result
