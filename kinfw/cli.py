@@ -489,7 +489,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import contextlib
     import io
 
-    from verification import crlb, hirsh_experiments, shih_experiments
+    from verification import head_studies, hirsh_experiments, shih_experiments
 
     argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
     if args.trials is not None:
@@ -497,7 +497,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     if args.study == "hirsh":
         run, written = (lambda: hirsh_experiments.main(argv)), "hirsh.json"
     elif args.study in ("crlb", "robust"):
-        run, written = (lambda: crlb.main([args.study, *argv])), f"{args.study}.json"
+        run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
     else:
         run, written = (lambda: shih_experiments.main([args.study, *argv])), \
             f"{args.study}.json"
