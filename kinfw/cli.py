@@ -489,7 +489,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import contextlib
     import io
 
-    from verification import head_studies, hirsh_experiments, shih_experiments
+    from verification import head_studies, hirsh_experiments, shih_figures
 
     argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
     if args.trials is not None:
@@ -499,7 +499,7 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     elif args.study in ("crlb", "robust"):
         run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
     else:
-        run, written = (lambda: shih_experiments.main([args.study, *argv])), \
+        run, written = (lambda: shih_figures.main([args.study, *argv])), \
             f"{args.study}.json"
     if not args.json:
         return run()
