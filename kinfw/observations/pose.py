@@ -13,7 +13,6 @@ from kinfw.observations.base import (
     POSITION,
     ROTATION,
     ObservationKind,
-    ObservationReader,
     StartContext,
     SymbolicContext,
     UnknownRequest,
@@ -22,6 +21,7 @@ from kinfw.observations.base import (
     pose_rows,
     sample_array,
 )
+from kinfw.observations.reader import ObservationReader
 from kinfw.transforms import (
     check_transform,
     inverse_transform,
