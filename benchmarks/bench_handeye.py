@@ -411,7 +411,8 @@ def git_head() -> str:
 def solver_digests() -> list[tuple[str, str]]:
     """Short content hashes of the benchmarked modules (they may be uncommitted)."""
     out = []
-    for rel in ("identification/handeye.py", "identification/axb.py"):
+    for rel in ("identification/handeye.py", "identification/axb.py",
+                "identification/axb_iteration.py", "identification/axb_refinement.py"):
         path = REPO / rel
         digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else "n/a"
         out.append((rel, digest))

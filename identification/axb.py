@@ -29,34 +29,8 @@ Quaternions here are kinfw's, scalar last ``(x, y, z, w)``; the paper's ``(s, v)
 ``(w; x, y, z)``. Products and averages are written for that layout throughout; nothing
 is converted.
 
-Signs. Section 4's argument needs the per-pose errors of eq. (10) to be conjugates of
-*one* quaternion, sign included. A rotation matrix fixes its quaternion only up to sign,
-so the quaternions of ``A`` and ``B`` are given consistent signs once, from the data
-(:func:`_consistent_quats_xyzw`). Aligning each average's inputs to the current estimate
-instead makes errors beyond ~90 degrees grow to 180: measured on 200 noise-free problems
-with uniformly random rotations and the identity start, that variant needed restarts in
-61 % of the runs for n = 5 and 10 (36 % for n = 3) and ended at wrong answers with small
-residuals in 35 of 200 runs for n = 3 (3 and 4 for n = 5 and 10). With consistent signs:
-no restart and no wrong answer for n = 5 and 10; for n = 3 one restart, and 2 runs (both
-nearly degenerate) not converged within 3000 iterations.
-
-What the iteration is. Averaging is linear, so the average of the per-pose ``X``
-estimates is ``N q_Y^-1`` and that of the ``Y`` estimates ``N^T q_X^-1`` (after the
-conjugation is folded into ``N``) for one 4x4 matrix ``N = mean_i L(q_A[i]) R(q_B[i]^-1)
-diag(-1, -1, -1, 1)``: the alternation is the power iteration for the top singular pair
-of ``N``. Its fixed point, that singular pair, maximises ``sum_i q_X . q_X[i]`` = the
-sum of ``cos(theta_i / 2)`` (``theta_i`` the rotation residual of pose ``i``, signs from
-the data): block-coordinate ascent without spurious local optima. The paper's error "s-component" is
-the component of the estimate along it; the 180-degree stall is a start orthogonal to
-it; the convergence factor per iteration is ``(sigma_2 / sigma_1)^2`` of ``N`` (0.9929
-measured on Tabb's real data: 88 poses, median relative rotation 12.7 deg, so 1000
-iterations do not reach the default tolerance). The code computes the averages this way (O(1) per
-iteration after an O(n) set-up); ``tests/test_axb.py`` checks them against the explicit
-per-pose averages. The translation alternation is block Gauss-Seidel on the linear least
-squares of eqs. (4)-(6) and converges to its exact solution, at the rate ``sigma^2``
-(0.9928 on Tabb),
-``sigma`` the largest singular value of ``mean_i R_B[i]`` (1 exactly when all rotations
-of ``B`` share one axis, when neither X nor Y is determined).
+The iteration itself, its quaternion signs and why it converges (it is the power
+iteration of one 4x4 matrix) are in :mod:`identification.axb_iteration`.
 
 Refinement (``refine=True``, the default) adds, measured in the notes of
 :func:`solve_axyb`:
@@ -84,16 +58,27 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identification.axb_iteration import (
+    STALL_RAD,
+    AXYBError,
+    consistent_quats_xyzw,
+    iteration_matrix,
+    normalise,
+    rotation_from_quat_xyzw,
+    rotation_iteration,
+    translation_iteration,
+)
+from identification.axb_refinement import (
+    GN_MAX_STEPS,
+    refine_rotations,
+    translations_least_squares,
+)
 from kinfw.transforms import (
     check_transform,
-    matrix_from_rotation_vector,
     project_to_rotation,
     quat_xyzw_from_matrix,
     rotation_angle,
-    rotation_vector_from_matrix,
-    skew,
     transform_from_rotation_translation,
-    transform_from_xyz_quat_xyzw,
 )
 
 __all__ = [
@@ -105,33 +90,22 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+
 #: Fewest poses: two give a single relative motion, i.e. one axis (paper section 4).
 MIN_POSES = 3
+
+
 #: Orthonormality accepted in the inputs (text files with 6 significant digits are off by
 #: ~1.2e-6, Tabb DS1); the rotation blocks are then projected onto SO(3).
 INPUT_ORTHONORMAL_TOL = 1e-5
+
+
 #: Off-axis rotation spread of ``B`` (rad) below which X and Y are called undetermined.
 MIN_MOTION_RAD = 1e-3
+
+
 #: Below this spread (rad) X and Y are poorly determined: a warning is logged.
 WEAK_MOTION_RAD = np.radians(2.0)
-#: A rotation residual (rad) above this is not a calibration: during the iteration (as
-#: ``2 acos(mean_i cos(theta_i / 2))``) it marks a stall when it stops falling; at the end
-#: (as the RMS) it is an error.
-STALL_RAD = 0.5
-#: Stall: over this many iterations the residual fell by less than STALL_PROGRESS.
-STALL_WINDOW = 5
-STALL_PROGRESS = 1e-3
-#: Norm of an averaged quaternion below which the average is undefined (the paper's
-#: bisector with d = 0, section 2.2 property 4).
-COLLAPSE = 1e-9
-MAX_RESTARTS = 10
-GN_MAX_STEPS = 50
-
-_CONJUGATE = np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-class AXYBError(ValueError):
-    """The poses cannot determine X and Y, or the input is not a batch of rigid transforms."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,91 +180,8 @@ class AXYBResult:
         return self.root_T_target_history
 
 
-# ------------------------------------------------------------------- quaternions
-
-def _rotation_from_quat_xyzw(quat_xyzw: NDArray[np.float64]) -> NDArray[np.float64]:
-    return transform_from_xyz_quat_xyzw(np.zeros(3), quat_xyzw)[..., :3, :3]
-
-
-def _left_product_matrix_xyzw(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``L(p)`` with ``p * q = L(p) q`` (Hamilton product, section 2.2 property 2)."""
-    pv, pw = p[..., :3], p[..., 3]
-    out = np.zeros((*p.shape[:-1], 4, 4))
-    out[..., :3, :3] = pw[..., None, None] * np.eye(3) + skew(pv)
-    out[..., :3, 3] = pv
-    out[..., 3, :3] = -pv
-    out[..., 3, 3] = pw
-    return out
-
-
-def _right_product_matrix_xyzw(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``R(q)`` with ``p * q = R(q) p``."""
-    qv, qw = q[..., :3], q[..., 3]
-    out = np.zeros((*q.shape[:-1], 4, 4))
-    out[..., :3, :3] = qw[..., None, None] * np.eye(3) - skew(qv)
-    out[..., :3, 3] = qv
-    out[..., 3, :3] = -qv
-    out[..., 3, 3] = qw
-    return out
-
-
-def _consistent_quats_xyzw(R_As: NDArray, R_Bs: NDArray) -> tuple[NDArray, NDArray]:
-    """Quaternions of ``R_A[i]``, ``R_B[i]`` with signs such that ``q_A[i] = q_X q_B[i] q_Y``.
-
-    The scalar part of ``q_A[i] q_A[j]^-1`` is ``s_i s_j`` times that of
-    ``q_B[i] q_B[j]^-1`` (conjugation keeps it, Appendix A), so
-    ``S_ij = (q_A[i] . q_A[j]) (q_B[i] . q_B[j]) = s_i s_j c_ij^2`` with ``c_ij^2 >= 0``:
-    the signs ``s_i`` are those of the top eigenvector of ``S`` (Perron-Frobenius).
-    ``S = Z Z^T`` with ``Z[i] = q_A[i] kron q_B[i]``, so that eigenvector is ``Z v``,
-    ``v`` the top eigenvector of the 16x16 ``Z^T Z``. Sample order does not matter.
-    """
-    q_As = quat_xyzw_from_matrix(R_As)
-    q_Bs = quat_xyzw_from_matrix(R_Bs)
-    Z = np.einsum("ni,nj->nij", q_As, q_Bs).reshape(len(q_As), 16)
-    v = np.linalg.eigh(Z.T @ Z)[1][:, -1]
-    return np.where((Z @ v < 0.0)[:, None], -q_As, q_As), q_Bs
-
-
-def _iteration_matrix(q_As: NDArray, q_Bs: NDArray) -> NDArray[np.float64]:
-    """``N`` with ``mean_i q_A[i] q_Y^-1 q_B[i]^-1 = N q_Y`` and
-    ``mean_i q_B[i]^-1 q_X^-1 q_A[i] = N^T q_X`` (module docstring)."""
-    M = np.mean(_left_product_matrix_xyzw(q_As)
-                @ _right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0)
-    return M * _CONJUGATE  # right-multiplied by diag(-1, -1, -1, 1): q_Y -> q_Y^-1
-
-
-def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
-    """Error shrink factor per iteration of the paper's rotation alternation.
-
-    The alternation is a power iteration on the 4x4 matrix ``N`` (module docstring), so
-    the rotation error shrinks by ``(sigma_2 / sigma_1)^2`` of ``N`` per iteration: near
-    1 for weakly spread rotations (slow), near 0 for well spread ones.
-
-    Parameters
-    ----------
-    A, B : array_like, shape (n, 4, 4)
-        As for :func:`solve_axyb`.
-    """
-    As, Bs = _check_inputs(A, B)
-    q_As, q_Bs = _consistent_quats_xyzw(As[:, :3, :3], Bs[:, :3, :3])
-    s = np.linalg.svd(_iteration_matrix(q_As, q_Bs), compute_uv=False)
-    return float((s[1] / s[0]) ** 2)
-
-
-def _normalise(total: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-    """The paper's bisector (section 2.2 property 4) for n quaternions: the average
-    ``total`` divided by its norm ``d``; returns both. ``d`` near 0: undefined."""
-    d = float(np.linalg.norm(total))
-    return total / max(d, COLLAPSE), d
-
-
-def _quat_angle(p: NDArray[np.float64], q: NDArray[np.float64]) -> float:
-    """Rotation angle between unit quaternions, accurate near 0 (chord, not acos)."""
-    chord = min(np.linalg.norm(p - q), np.linalg.norm(p + q))
-    return 4.0 * float(np.arcsin(min(chord / 2.0, 1.0)))
-
-
 # ------------------------------------------------------------------------ checks
+
 
 def _check_inputs(A: ArrayLike, B: ArrayLike) -> tuple[NDArray, NDArray]:
     As = np.asarray(A, dtype=float)
@@ -364,187 +255,26 @@ def _motion_check(R_Bs: NDArray[np.float64]) -> None:
             "iteration)", np.degrees(spreads[0]), S[0] ** 2)
 
 
-# ---------------------------------------------------------------------- the paper
+def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
+    """Error shrink factor per iteration of the paper's rotation alternation.
 
-@dataclass(frozen=True, slots=True)
-class _RotationRun:
-    q_X: NDArray[np.float64]
-    q_Y: NDArray[np.float64]
-    iterations: int
-    converged: bool
-    restarts: int
-    history_X: NDArray[np.float64]  # (iterations, 4) quaternions
-    history_Y: NDArray[np.float64]
+    The alternation is a power iteration on the 4x4 matrix ``N`` (module docstring), so
+    the rotation error shrinks by ``(sigma_2 / sigma_1)^2`` of ``N`` per iteration: near
+    1 for weakly spread rotations (slow), near 0 for well spread ones.
 
-
-def _rotation_iteration(N: NDArray, q_Y: NDArray, *, tol: float, max_iterations: int,
-                        rng: np.random.Generator) -> _RotationRun:
-    """Section 3, first paragraph, and section 4: alternate averages of eqs. (1)-(3).
-
-    Eq. (9): given the guess ``Y``, pose ``i`` gives ``q_X[i] = q_A[i] q_Y^-1 q_B[i]^-1``;
-    their average (``N q_Y``) normalised is the new ``X``. Then ``q_Y[i] = q_B[i]^-1
-    q_X^-1 q_A[i]`` averaged (``N^T q_X``). With sign-consistent quaternions the errors of
-    the ``q_X[i]`` are conjugates of one quaternion (eq. 10), so each normalised average
-    divides the error's scalar part by ``d <= 1``: the error angle shrinks monotonically
-    from any start short of 180 degrees. Stops when neither rotation moves by more than
-    ``tol`` rad in an iteration.
-
-    Stall (section 4, last paragraph): at 180 degrees the error's scalar part is 0 and
-    does not grow. Observable as the residual ``2 acos(d)`` (``d`` = norm of the average
-    of the ``Y`` estimates = ``mean_i cos(theta_i / 2)``) staying above ``STALL_RAD``
-    without falling by ``STALL_PROGRESS`` over ``STALL_WINDOW`` iterations or reaching a
-    fixed point there, or as an average whose norm collapses. Then: a random ``Y``.
+    Parameters
+    ----------
+    A, B : array_like, shape (n, 4, 4)
+        As for :func:`solve_axyb`.
     """
-    q_X_prev: NDArray | None = None
-    hist_X: list[NDArray] = []
-    hist_Y: list[NDArray] = []
-    residual_run: list[float] = []
-    restarts = 0
-    best: tuple[float, NDArray, NDArray] | None = None  # lowest residual so far
-    k = 0
-    while k < max_iterations:
-        k += 1
-        q_X, d_X = _normalise(N @ q_Y)      # eq. (9) for every pose, averaged
-        q_Y_new, d_Y = _normalise(N.T @ q_X)  # the same for Y given the new X
-        step = np.inf if q_X_prev is None else max(_quat_angle(q_X, q_X_prev),
-                                                   _quat_angle(q_Y_new, q_Y))
-        q_Y, q_X_prev = q_Y_new, q_X
-        hist_X.append(q_X)
-        hist_Y.append(q_Y)
-        residual = 2.0 * float(np.arccos(np.clip(d_Y, -1.0, 1.0)))
-        residual_run.append(residual)
-        if best is None or residual < best[0]:
-            best = (residual, q_X, q_Y)
-        if step <= tol and residual <= STALL_RAD:
-            return _RotationRun(q_X, q_Y, k, True, restarts, np.array(hist_X),
-                                np.array(hist_Y))
-        collapsed = min(d_X, d_Y) < COLLAPSE
-        flat = (len(residual_run) > STALL_WINDOW and residual > STALL_RAD and residual
-                > (1.0 - STALL_PROGRESS) * residual_run[-1 - STALL_WINDOW])
-        if (collapsed or flat or step <= tol) and restarts < MAX_RESTARTS:
-            log.info("rotation iteration stalled after %d iterations (residual %.3g deg%s): "
-                     "restart from a random guess", k, np.degrees(residual),
-                     ", average collapsed" if collapsed else "")
-            restarts += 1
-            q_Y = rng.normal(size=4)
-            q_Y /= np.linalg.norm(q_Y)
-            q_X_prev, residual_run = None, []
-    if best is None:  # unreachable: max_iterations >= 1 is checked by the caller
-        raise AXYBError("no iteration was run")
-    return _RotationRun(best[1], best[2], k, False, restarts, np.array(hist_X),
-                        np.array(hist_Y))
-
-
-@dataclass(frozen=True, slots=True)
-class _TranslationRun:
-    t_X: NDArray[np.float64]
-    t_Y: NDArray[np.float64]
-    iterations: int
-    converged: bool
-    history_X: NDArray[np.float64]  # (iterations, 3)
-    history_Y: NDArray[np.float64]
-
-
-def _translation_iteration(As: NDArray, Bs: NDArray, R_X: NDArray, t_Y: NDArray, *,
-                           tol: float, max_iterations: int) -> _TranslationRun:
-    """Section 3, second paragraph: alternate averages of eqs. (4)-(6) for translations.
-
-    The translation part of eq. (4), ``t_A = R_X (R_B t_Y + t_B) + t_X``, gives per pose
-    ``t_X[i] = t_A[i] - R_X (R_B[i] t_Y + t_B[i])`` for the current ``t_Y``, averaged,
-    then ``t_Y[i] = R_B[i]^T (R_X^T (t_A[i] - t_X) - t_B[i])``, averaged (the averages by
-    linearity from means formed once). Only ``X``'s rotation enters. Stops when neither
-    moves by more than ``tol`` times the RMS length of the input translations.
-    """
-    R_Bs, t_As, t_Bs = Bs[:, :3, :3], As[:, :3, 3], Bs[:, :3, 3]
-    scale = float(np.sqrt(np.mean(np.sum(t_As**2, 1)) + np.mean(np.sum(t_Bs**2, 1))))
-    mean_R_B = R_Bs.mean(axis=0)
-    mean_t_A, mean_t_B = t_As.mean(axis=0), t_Bs.mean(axis=0)
-    mean_Rt_B_Rt_X_t_A = np.einsum("nji,kj,nk->i", R_Bs, R_X, t_As) / len(As)
-    mean_Rt_B_t_B = np.einsum("nji,nj->i", R_Bs, t_Bs) / len(As)
-    t_X: NDArray | None = None
-    hist_X: list[NDArray] = []
-    hist_Y: list[NDArray] = []
-    k = 0
-    while k < max_iterations:
-        k += 1
-        t_X_new = mean_t_A - R_X @ (mean_R_B @ t_Y + mean_t_B)
-        t_Y_new = mean_Rt_B_Rt_X_t_A - mean_R_B.T @ (R_X.T @ t_X_new) - mean_Rt_B_t_B
-        step = np.inf if t_X is None else max(np.linalg.norm(t_X_new - t_X),
-                                              np.linalg.norm(t_Y_new - t_Y))
-        t_X, t_Y = t_X_new, t_Y_new
-        hist_X.append(t_X)
-        hist_Y.append(t_Y)
-        if step <= tol * scale:
-            return _TranslationRun(t_X, t_Y, k, True, np.array(hist_X), np.array(hist_Y))
-    return _TranslationRun(t_X, t_Y, k, False, np.array(hist_X), np.array(hist_Y))
-
-
-# ----------------------------------------------------------------- refinement
-
-def _translations_least_squares(As: NDArray, Bs: NDArray, R_X: NDArray
-                                ) -> tuple[NDArray, NDArray]:
-    """Exact linear least squares of eqs. (4)-(6) for both translations, rotations fixed.
-
-    ``t_X + R_X R_B[i] t_Y = t_A[i] - R_X t_B[i]`` stacked over poses (3n x 6); every
-    entry is a length, so the solution does not depend on the unit.
-    """
-    n = len(As)
-    P = R_X @ Bs[:, :3, :3]
-    M = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), P], axis=2).reshape(3 * n, 6)
-    rhs = (As[:, :3, 3] - Bs[:, :3, 3] @ R_X.T).reshape(3 * n)
-    sol = np.linalg.lstsq(M, rhs, rcond=None)[0]
-    return sol[:3], sol[3:]
-
-
-def _inverse_right_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``d log(exp(phi) exp(xi)) / d xi`` at ``xi = 0``, (n, 3) -> (n, 3, 3)."""
-    theta = np.linalg.norm(phi, axis=-1)
-    small = theta < 1e-6
-    safe = np.where(small, 1.0, theta)
-    coef = np.where(small, 1.0 / 12.0 + theta**2 / 720.0,
-                    1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)))
-    K = skew(phi)
-    return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
-
-
-def _refine_rotations(R_As: NDArray, R_Bs: NDArray, R_X: NDArray, R_Y: NDArray, *,
-                      tol: float) -> tuple[NDArray, NDArray, bool]:
-    """Gauss-Newton on ``sum_i |log(R_A[i]^T R_X R_B[i] R_Y)|^2`` over both rotations.
-
-    Updates ``R_X exp(dx)``, ``R_Y exp(dy)``; with ``E_i`` the residual rotation and
-    ``C_i = R_B[i] R_Y``, ``E_i -> E_i exp(C_i^T dx + dy)`` to first order, so the
-    Jacobian of ``r_i = log E_i`` is ``Jr^-1(r_i) [C_i^T, I]``. Steps are halved while
-    they raise the cost; converged when a step is below ``tol`` rad or no step lowers the
-    cost any more (the optimum to rounding).
-    """
-    Rt_As = np.swapaxes(R_As, 1, 2)
-
-    def residuals(R_X: NDArray, R_Y: NDArray) -> NDArray:
-        return rotation_vector_from_matrix(Rt_As @ R_X @ R_Bs @ R_Y)
-
-    r = residuals(R_X, R_Y)
-    cost = float(np.sum(r**2))
-    for _ in range(GN_MAX_STEPS):
-        Jinv = _inverse_right_jacobian(r)
-        J = np.concatenate([Jinv @ np.swapaxes(R_Bs @ R_Y, 1, 2), Jinv], axis=2)  # (n, 3, 6)
-        delta = -np.linalg.solve(np.einsum("nki,nkj->ij", J, J), np.einsum("nki,nk->i", J, r))
-        for _ in range(30):
-            R_X_new = project_to_rotation(R_X @ matrix_from_rotation_vector(delta[:3]))
-            R_Y_new = project_to_rotation(R_Y @ matrix_from_rotation_vector(delta[3:]))
-            r_new = residuals(R_X_new, R_Y_new)
-            cost_new = float(np.sum(r_new**2))
-            if cost_new <= cost:
-                break
-            delta = 0.5 * delta
-        else:  # no step lowers the cost: at the optimum to rounding
-            return R_X, R_Y, True
-        R_X, R_Y, r, cost = R_X_new, R_Y_new, r_new, cost_new
-        if np.linalg.norm(delta) <= tol:
-            return R_X, R_Y, True
-    return R_X, R_Y, False
+    As, Bs = _check_inputs(A, B)
+    q_As, q_Bs = consistent_quats_xyzw(As[:, :3, :3], Bs[:, :3, :3])
+    s = np.linalg.svd(iteration_matrix(q_As, q_Bs), compute_uv=False)
+    return float((s[1] / s[0]) ** 2)
 
 
 # ---------------------------------------------------------------------- entry point
+
 
 def solve_axyb(
     A: ArrayLike,
@@ -650,33 +380,33 @@ def solve_axyb(
     rng = np.random.default_rng(0) if rng is None else rng
     R_As, R_Bs = As[:, :3, :3], Bs[:, :3, :3]
     _motion_check(R_Bs)
-    q_As, q_Bs = _consistent_quats_xyzw(R_As, R_Bs)
-    N = _iteration_matrix(q_As, q_Bs)
+    q_As, q_Bs = consistent_quats_xyzw(R_As, R_Bs)
+    N = iteration_matrix(q_As, q_Bs)
 
     if Y0 is not None:
         start = _check_start(Y0, "Y0")
         q_Y0, t_Y0 = quat_xyzw_from_matrix(start[:3, :3]), start[:3, 3]
     elif X0 is not None:
         start = _check_start(X0, "X0")
-        q_Y0, _ = _normalise(N.T @ quat_xyzw_from_matrix(start[:3, :3]))
+        q_Y0, _ = normalise(N.T @ quat_xyzw_from_matrix(start[:3, :3]))
         t_Y0 = np.mean(np.einsum("nji,nj->ni", R_Bs, (As[:, :3, 3] - start[:3, 3])
                                  @ start[:3, :3] - Bs[:, :3, 3]), axis=0)
     elif refine:
         U, _, Vt = np.linalg.svd(N)  # the iteration's fixed point in closed form
         q_Y0 = Vt[0]
-        _, t_Y0 = _translations_least_squares(As, Bs, _rotation_from_quat_xyzw(U[:, 0]))
+        _, t_Y0 = translations_least_squares(As, Bs, rotation_from_quat_xyzw(U[:, 0]))
     else:
         q_Y0, t_Y0 = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
 
-    rot = _rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
-    R_X, R_Y = _rotation_from_quat_xyzw(rot.q_X), _rotation_from_quat_xyzw(rot.q_Y)
-    tra = _translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
+    rot = rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
+    R_X, R_Y = rotation_from_quat_xyzw(rot.q_X), rotation_from_quat_xyzw(rot.q_Y)
+    tra = translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
     t_X, t_Y = tra.t_X, tra.t_Y
     converged = rot.converged and tra.converged
     paper_converged = converged
     if refine:
-        R_X, R_Y, converged = _refine_rotations(R_As, R_Bs, R_X, R_Y, tol=tol)
-        t_X, t_Y = _translations_least_squares(As, Bs, R_X)
+        R_X, R_Y, converged = refine_rotations(R_As, R_Bs, R_X, R_Y, tol=tol)
+        t_X, t_Y = translations_least_squares(As, Bs, R_X)
 
     X = transform_from_rotation_translation(R_X, t_X)
     Y = transform_from_rotation_translation(R_Y, t_Y)
@@ -699,14 +429,14 @@ def solve_axyb(
 
     history_X = history_Y = None
     if record_history:
-        R_X_rot = _rotation_from_quat_xyzw(rot.history_X)
-        R_Y_rot = _rotation_from_quat_xyzw(rot.history_Y)
+        R_X_rot = rotation_from_quat_xyzw(rot.history_X)
+        R_Y_rot = rotation_from_quat_xyzw(rot.history_Y)
         # rotation phase: Y's starting translation and the X translation it implies
         t_X_rot = (As[:, :3, 3].mean(axis=0)
                    - R_X_rot @ (R_Bs.mean(axis=0) @ t_Y0 + Bs[:, :3, 3].mean(axis=0)))
         k_tra = tra.iterations
-        R_X_final = _rotation_from_quat_xyzw(rot.q_X)
-        R_Y_final = _rotation_from_quat_xyzw(rot.q_Y)
+        R_X_final = rotation_from_quat_xyzw(rot.q_X)
+        R_Y_final = rotation_from_quat_xyzw(rot.q_Y)
         history_X = transform_from_rotation_translation(
             np.concatenate([R_X_rot, np.broadcast_to(R_X_final, (k_tra, 3, 3))]),
             np.concatenate([t_X_rot, tra.history_X]))

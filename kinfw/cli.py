@@ -421,17 +421,17 @@ def _cmd_reproduce(args: argparse.Namespace) -> int:
     import contextlib
     import io
 
-    from verification import crlb, hirsh_experiments, shih_experiments
+    from verification import head_studies, hirsh_figures, shih_figures
 
     argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":
-        run, written = (lambda: hirsh_experiments.main(argv)), "hirsh.json"
+        run, written = (lambda: hirsh_figures.main(argv)), "hirsh.json"
     elif args.study in ("crlb", "robust"):
-        run, written = (lambda: crlb.main([args.study, *argv])), f"{args.study}.json"
+        run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
     else:
-        run, written = (lambda: shih_experiments.main([args.study, *argv])), \
+        run, written = (lambda: shih_figures.main([args.study, *argv])), \
             f"{args.study}.json"
     if not args.json:
         return run()

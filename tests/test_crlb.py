@@ -1,4 +1,5 @@
-"""Tests of verification.crlb: the Cramér-Rao bound and the robustness study."""
+"""Tests of the Cramér-Rao bound (verification.crlb), the CRLB study and the robustness
+study (verification.crlb_study, verification.robust, verification.head_studies)."""
 
 from __future__ import annotations
 
@@ -14,20 +15,19 @@ from kinfw.measurements import concatenate_measurements
 from kinfw.robot import load_robot
 from kinfw.transforms import matrix_from_rotation_vector, rotation_angle
 from verification.crlb import (
-    CRLBStudy,
-    RobustStudy,
     cramer_rao,
-    crlb_study,
-    format_crlb,
-    format_robustness,
-    main,
-    plant_outliers,
-    plot_crlb,
-    plot_robustness,
     position_jacobians,
     predicted_position_rms,
-    robustness_study,
     true_chart_coordinates,
+)
+from verification.crlb_study import CRLBStudy, crlb_study, format_crlb
+from verification.head_studies import main
+from verification.head_study_plots import plot_crlb, plot_robustness
+from verification.robust import (
+    RobustStudy,
+    format_robustness,
+    plant_outliers,
+    robustness_study,
 )
 from verification.simulate import (
     default_target_pose,

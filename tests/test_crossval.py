@@ -182,17 +182,17 @@ def test_cached_functions_fit_like_fresh_ones_and_recover_the_truth():
 
 
 def test_the_function_cache_is_keyed_by_structure_and_bounded(monkeypatch):
-    import identification.problem.problem as refine_module
+    import identification.problem.functions as functions_module
     from identification.refine import NoiseModel, build_problem, clear_function_cache
 
     nominal, _, data = _noise_free_case()
     noise = NoiseModel(1e-3, 1e-2)
     one_plate = replace(data, poses=data.poses[:1])  # another structure: one frame
     clear_function_cache()
-    monkeypatch.setattr(refine_module, "_FUNCTION_CACHE_SIZE", 1)
+    monkeypatch.setattr(functions_module, "_FUNCTION_CACHE_SIZE", 1)
     both = build_problem(nominal, data)
     single = build_problem(nominal, one_plate)  # evicts the first structure
-    assert len(refine_module._FUNCTION_CACHE) == 1
+    assert len(functions_module._FUNCTION_CACHE) == 1
     again = build_problem(nominal, data)  # rebuilt, not the one-plate functions
     x = np.random.default_rng(26).normal(size=both.n_parameters) * 1e-3
     r0, J0 = both.evaluate(x, noise)

@@ -11,19 +11,13 @@ import pytest
 
 from identification.axb import AXYBError, solve_axyb
 from verification import hirsh_experiments
-from verification.hirsh_experiments import (
-    CONVERGED_DEG,
-    HirshResult,
-    format_hirsh,
-    hirsh_study,
-    load_hirsh,
-    main,
-    plot_hirsh,
+from verification.hirsh_experiments import CONVERGED_DEG, HirshResult, hirsh_study
+from verification.hirsh_figures import format_hirsh, load_hirsh, main, plot_hirsh, run_hirsh
+from verification.hirsh_problem import (
     quaternion_angle,
     random_problem,
     rotate_about_random_axes,
     rotations_about_random_axes,
-    run_hirsh,
 )
 
 VIEWS = (3, 5, 10)

@@ -11,12 +11,8 @@ import pytest
 from identification.closed_form import identify_closed_form
 from kinfw.measurements import Measurements, PoseObservations
 from kinfw.robot import load_robot
-from verification.shih_experiments import (
-    PAPER_TABLE4_MU_MM,
-    PAPER_TABLE4_SIGMA_MM,
-    Fig11Result,
-    Table4Result,
-    fig11_study,
+from verification.shih_experiments import Fig11Result, fig11_study
+from verification.shih_figures import (
     format_fig11,
     format_table4,
     main,
@@ -24,6 +20,11 @@ from verification.shih_experiments import (
     plot_table4,
     run_fig11,
     run_table4,
+)
+from verification.shih_table4 import (
+    PAPER_TABLE4_MU_MM,
+    PAPER_TABLE4_SIGMA_MM,
+    Table4Result,
     table4_study,
 )
 from verification.simulate import one_joint_at_a_time, perturb_robot, random_configurations

@@ -1,9 +1,11 @@
 """Plumbing shared by the simulation studies: arrays, JSON, figures, files, command line.
 
 The studies (:mod:`verification.shih_experiments`, :mod:`verification.hirsh_experiments`,
-:mod:`verification.crlb`) each run random trials, keep the raw numbers in a frozen result
-with read-only arrays, and write the result as a PNG and a JSON side by side; each has a
-``main`` that runs a study with progress on stderr and prints its table. What they share
+:mod:`verification.crlb_study`, :mod:`verification.robust`) each run random trials, keep
+the raw numbers in a frozen result with read-only arrays, and write the result as a PNG
+and a JSON side by side; a ``main`` (:mod:`verification.shih_figures`,
+:mod:`verification.hirsh_figures`, :mod:`verification.head_studies`) runs a study with
+progress on stderr and prints its table. What they share
 is here: argument checks and sample statistics, the array and dataclass conversions of
 their ``to_dict`` / ``from_dict``, matplotlib figures without pyplot, the output files,
 and the command-line scaffolding.

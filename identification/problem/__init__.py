@@ -3,6 +3,8 @@
 - :mod:`.problem`: :func:`build_problem` assembles a :class:`LeastSquaresProblem` from a
   robot and measurements, looping over the observation kinds of :mod:`kinfw.observations`
   and the parameter blocks of :mod:`kinfw.blocks`;
+- :mod:`.start`: the start values, in closed form (the kinds' estimators);
+- :mod:`.functions`: the CasADi residual functions, cached by structure;
 - :mod:`.gauge`: which robot parameters are free;
 - :mod:`.solver`: Levenberg-Marquardt with robust losses (IRLS);
 - :mod:`.noise`: :class:`NoiseModel` and variance-component estimation;
@@ -17,19 +19,11 @@ from .diagnostics import (
     covariance_and_identifiability,
     group_residuals,
 )
+from .functions import GroupFunctions, clear_function_cache
 from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
-from .problem import (
-    PRIOR,
-    GroupFunctions,
-    LeastSquaresProblem,
-    ResidualGroup,
-    Unknown,
-    build_problem,
-    clear_function_cache,
-    estimate_unknowns,
-    express_in,
-)
+from .problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown, build_problem
 from .solver import LOSSES, levenberg_marquardt, observation_norms, row_weights, thresholds
+from .start import estimate_unknowns, express_in
 
 __all__ = [
     "LOSSES",

@@ -12,8 +12,6 @@ There is no branch on an observation kind here.
 
 from __future__ import annotations
 
-import threading
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -21,20 +19,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.blocks import Block, BlockKey, ParameterName, RigidFrameBlock
+from kinfw.blocks import Block, BlockKey, ParameterName
 from kinfw.chart import rigid_from_chart
 from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.cpc_casadi import cpc_fk_function
-from kinfw.measurements import DatasetError, Measurements, check_against_robot
-from kinfw.observations import ObservationKind, StartContext, SymbolicContext, kind_of
+from kinfw.measurements import Measurements, check_against_robot
+from kinfw.observations import ObservationKind, StartContext, kind_of
 from kinfw.observations.base import NoiseComponent
 from kinfw.robot import Robot
-from kinfw.transforms import average_transform
 
+from .functions import GroupFunctions, group_functions
 from .gauge import robot_blocks
+from .start import estimate_unknowns, express_in, start_context
 
-__all__ = ["PRIOR", "GroupFunctions", "LeastSquaresProblem", "ResidualGroup", "Unknown",
-           "build_problem", "clear_function_cache", "estimate_unknowns", "express_in"]
+__all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown", "build_problem"]
 
 PRIOR = NoiseComponent("prior", 1, "m")
 """The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
@@ -59,54 +56,6 @@ class Unknown:
     kind: str
     name: str
     value: NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class GroupFunctions:
-    """Per-observation CasADi functions of one group, all of ``(q, m, theta, const)``:
-    residual ``r``; residual and transposed dense Jacobian ``rj`` (one call, shared
-    subexpressions); Jacobian ``j``; and :meth:`rj_free`, the Jacobian's columns of the
-    estimated parameters only (cheaper for the small parameter sets). Unwhitened (SI).
-    """
-
-    r: Any
-    rj: Any
-    j: Any
-    args: list = field(repr=False)
-    residual_expr: Any = field(repr=False)
-    _by_free: dict = field(default_factory=dict, repr=False)
-
-    def rj_free(self, free: NDArray[np.bool_]):
-        """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
-        import casadi as ca
-
-        key = free.tobytes()
-        with _FUNCTION_CACHE_LOCK:
-            f = self._by_free.get(key)
-        if f is None:
-            theta = self.args[2]
-            cols = ca.vertcat(*[theta[int(i)] for i in np.flatnonzero(free)])
-            J = ca.jacobian(self.residual_expr, cols)
-            f = ca.Function("rjf", self.args, [self.residual_expr, ca.densify(J.T)])
-            with _FUNCTION_CACHE_LOCK:
-                if len(self._by_free) >= 8:  # bounded: a few parameter sets per structure
-                    self._by_free.pop(next(iter(self._by_free)))
-                self._by_free[key] = f
-        return f
-
-
-#: Compiled residual functions by problem structure (see :func:`build_problem`): a small
-#: LRU so that cross-validation folds, parameter sets and Monte Carlo trials on the same
-#: robot and observation layout build the CasADi graph once.
-_FUNCTION_CACHE: OrderedDict[tuple, tuple[GroupFunctions, ...]] = OrderedDict()
-_FUNCTION_CACHE_SIZE = 16
-_FUNCTION_CACHE_LOCK = threading.Lock()
-
-
-def clear_function_cache() -> None:
-    """Forget every cached CasADi residual function (they are rebuilt on demand)."""
-    with _FUNCTION_CACHE_LOCK:
-        _FUNCTION_CACHE.clear()
 
 
 @dataclass(frozen=True, eq=False)
@@ -406,7 +355,7 @@ class LeastSquaresProblem:
         was built from) and the external frames' starts, for the kinds' estimators."""
         q_all = measurements.q_of(self.model0.topology.joint_names)
         meas_T_w = {b.key.name: b.start for b in self.unknown_blocks if b.key.kind == "frame"}
-        return _start_context(self.model0, q_all, meas_T_w, self.model_frame)
+        return start_context(self.model0, q_all, meas_T_w, self.model_frame)
 
     def with_starts(self, group: ResidualGroup, blocks: Sequence[Block]) -> ResidualGroup:
         """``group`` evaluated with other start values for some of the problem's unknown
@@ -427,129 +376,6 @@ class LeastSquaresProblem:
         return tuple(Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
                      for b, s in zip(self.blocks[self.n_robot_blocks:],
                                      self.slices[self.n_robot_blocks:], strict=True))
-
-
-def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str,
-               meas_T_root: NDArray | None = None) -> CPCModel:
-    """The model moved into the external frame ``name`` by ``name_T_root``: given, or a
-    closed-form estimate (the kinds' root-pose estimates averaged, or their point pairs
-    registered)."""
-    from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
-    from kinfw.registration import register_points
-
-    groups = list(measurements.all_groups())
-    if meas_T_root is None:
-        start = _start_context(model, q_all, {}, None)
-        est = [e for g in groups
-               if (e := kind_of(g).root_pose_estimates(g, start)) is not None]
-        if est:
-            meas_T_root = average_transform(np.concatenate(est))
-        else:
-            pairs = [p for g in groups if (p := kind_of(g).root_point_pairs(g, start))]
-            if not pairs:
-                raise DatasetError(
-                    f"{measurements.source}: everything is measured in {name!r} through "
-                    "markers or points of unknown offset; give at least one point offset "
-                    "(or a marker-free pose) so that the frame can be placed")
-            meas_T_root = register_points(np.concatenate([p[0] for p in pairs]),
-                                          np.concatenate([p[1] for p in pairs]))
-    geo = geometry_from_cpc(model)
-    R, p = meas_T_root[:3, :3], meas_T_root[:3, 3]
-    moved = ZeroGeometry(geo.topology, geo.axes @ R.T, geo.points @ R.T + p,
-                         meas_T_root @ geo.w_T_frames)
-    return cpc_from_geometry(moved, sign=model.sign)
-
-
-def _start_context(model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray],
-                   model_frame: str | None) -> StartContext:
-    # q_all is (n, J): frame_poses keeps the batch axis, (n, E, 4, 4)
-    return StartContext(model.frame_poses(q_all), model.topology.frames, meas_T_w, model_frame)
-
-
-def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPCModel,
-                    q_all: NDArray, model_frame: str | None,
-                    given: dict[BlockKey, NDArray]
-                    ) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
-    """Every unknown block with its start value, in closed form (or as ``given``).
-
-    External measurement frames first (from the kinds' root-pose estimates), then the
-    blocks the groups request (:meth:`ObservationKind.unknowns`), merged by key. Returns
-    the blocks and a description of each one estimated from these data.
-    """
-    start = _start_context(model0, q_all, {}, model_frame)
-    blocks: list[Block] = []
-    fitted: list[tuple[BlockKey, str]] = []
-    meas_T_w: dict[str, NDArray] = {}
-    external = sorted({kind_of(g).measured_in(g) for g in groups} - {None, model_frame})
-    for name in external:
-        key = BlockKey("frame", name)
-        if key in given:
-            meas_T_w[name] = np.asarray(given[key], dtype=float)
-        else:
-            est = [e for g in groups if kind_of(g).measured_in(g) == name
-                   and (e := kind_of(g).root_pose_estimates(g, start)) is not None]
-            if not est:
-                raise DatasetError(
-                    f"{measurements.source}: frame {name!r} is observed only through markers "
-                    "or points; give some marker-free pose observations in it, or measure "
-                    "everything in it (then the model is expressed in it)")
-            meas_T_w[name] = average_transform(np.concatenate(est))
-            fitted.append((key, f"pose of the root link in {name!r} (from "
-                                f"{sum(map(len, est))} poses)"))
-        blocks.append(RigidFrameBlock(key, start=meas_T_w[name]))
-    start = _start_context(model0, q_all, meas_T_w, model_frame)
-    requests: dict[BlockKey, list[Any]] = {}
-    for g in groups:
-        for req in kind_of(g).unknowns(g, start):
-            requests.setdefault(req.key, []).append(req)
-    for key, reqs in requests.items():
-        if key in given:
-            value = np.asarray(given[key], dtype=float)
-            blocks.append(reqs[0].block(key, value[None]))
-        else:
-            blocks.append(reqs[0].block(key, np.concatenate([r.estimates for r in reqs])))
-            fitted.append((key, reqs[0].description))
-    return blocks, fitted
-
-
-def _build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[Any],
-                     model_frame: str | None, n_const: int) -> tuple[GroupFunctions, ...]:
-    """The CasADi residual functions of every group, of ``(q, m, theta, const)``.
-
-    ``const`` is the blocks' :meth:`~kinfw.blocks.Block.constants` one after the other
-    (the CPC block's: the reference model of :func:`kinfw.cpc_casadi.cpc_reference_vector`).
-    """
-    import casadi as ca
-
-    P = sum(b.size for b in blocks)
-    theta = ca.SX.sym("theta", P)
-    const = ca.SX.sym("const", n_const)
-    q = ca.SX.sym("q", model0.n_joints)
-    slices, consts, k, c = [], [], 0, 0
-    for b in blocks:
-        n = len(b.constants())
-        slices.append(slice(k, k + b.size))
-        consts.append(const[c : c + n])
-        k, c = k + b.size, c + n
-    fk = cpc_fk_function(model0, symbolic_reference=True)
-    T_frames = fk(q + theta[slices[2]], theta[slices[0]], consts[0])
-    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
-    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
-    values = {b.key: b.casadi_value(theta[s], cs)
-              for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)}
-    context = SymbolicContext(ca, frames, values, model_frame)
-    out = []
-    for g in groups:
-        kind = kind_of(g)
-        m_sym = ca.SX.sym("m", np.shape(kind.data(g))[1])
-        r = kind.residual(g, context, m_sym)
-        args = [q, m_sym, theta, const]
-        J = ca.jacobian(r, theta)
-        out.append(GroupFunctions(ca.Function("r", args, [r]),
-                                  ca.Function("rj", args, [r, ca.densify(J.T)]),
-                                  ca.Function("j", args, [J]), args, r))
-    return tuple(out)
 
 
 def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
@@ -588,24 +414,9 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
     P = sum(b.size for b in blocks)
 
-    # -- the CasADi functions: every number (reference model, block starts) is an input,
-    # so problems of one structure (topology, blocks, groups' keys) share them
-    topo = model0.topology
-    key = ((topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
-           tuple(float(v) for v in model0.sign), model_frame,
-           tuple((type(b).__name__, b.key, b.size) for b in blocks),
-           tuple(kind_of(g).key(g) for g in groups))
+    # the CasADi functions: every number (reference model, block starts) is an input
     const = np.concatenate([b.constants() for b in blocks])
-    with _FUNCTION_CACHE_LOCK:
-        functions = _FUNCTION_CACHE.get(key)
-        if functions is not None:
-            _FUNCTION_CACHE.move_to_end(key)
-    if functions is None:
-        functions = _build_functions(model0, blocks, groups, model_frame, len(const))
-        with _FUNCTION_CACHE_LOCK:
-            _FUNCTION_CACHE[key] = functions
-            while len(_FUNCTION_CACHE) > _FUNCTION_CACHE_SIZE:
-                _FUNCTION_CACHE.popitem(last=False)
+    functions = group_functions(model0, blocks, groups, model_frame, len(const))
     residual_groups = [
         ResidualGroup(kind_of(g), g, q_all[g.sample].T,
                       np.asarray(kind_of(g).data(g), dtype=float).T, fn, const)

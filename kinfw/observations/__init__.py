@@ -14,16 +14,15 @@ from __future__ import annotations
 from typing import Any
 
 from kinfw.observations.base import (
-    DatasetError,
     NoiseComponent,
     ObservationKind,
-    ObservationReader,
     StartContext,
     SymbolicContext,
     UnknownRequest,
 )
 from kinfw.observations.point import PointKind, PointObservations
 from kinfw.observations.pose import PoseKind, PoseObservations
+from kinfw.observations.reader import DatasetError, ObservationReader
 from kinfw.observations.target import TargetKind, TargetObservations
 
 __all__ = [

@@ -13,7 +13,6 @@ from kinfw.observations.base import (
     POSITION,
     ROTATION,
     ObservationKind,
-    ObservationReader,
     StartContext,
     SymbolicContext,
     UnknownRequest,
@@ -30,6 +29,7 @@ from kinfw.observations.numeric import (
     predicted_or_missing,
     transforms_from_pose_rows,
 )
+from kinfw.observations.reader import ObservationReader
 from kinfw.transforms import (
     check_transform,
     inverse_transform,
