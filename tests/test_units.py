@@ -190,7 +190,8 @@ def test_a_gear_ratio_seen_by_the_closed_form_is_refused_by_refine_too(datasets)
     """pan values twice its angle: no unit explains it; the closed form measures 0.5 rad
     per unit, which used to become a note before a refinement that wrote a URDF."""
     nominal, data = datasets["head-one-at-a-time"]
-    with pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"):
+    with pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"), \
+            pytest.warns(UserWarning, match=r"joint 'pan' is outside its URDF limits"):
         calibrate(nominal, _scaled_joint(data, "pan", 2.0), method="refine")
 
 
