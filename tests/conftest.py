@@ -13,13 +13,10 @@ import pytest
 from hypothesis import settings
 
 from kinfw.robot import Robot, load_robot
+from tests.robots import HEAD_URDF
 
 settings.register_profile("kinfw", derandomize=True, deadline=None)
 settings.load_profile("kinfw")
-
-#: The built-in IIS-head URDF of the repository (Shih et al. 1992, Tables 2-3).
-HEAD_URDF = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
-
 
 @pytest.fixture(scope="session")
 def head_urdf() -> Path:

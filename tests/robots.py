@@ -1,10 +1,16 @@
-"""URDF strings of test robots, shared by the tests (not fixtures: plain data).
+"""Test robots shared by the tests (not fixtures: plain data; fixtures are in conftest.py).
+
+- ``HEAD_URDF``: path of the repository's built-in IIS-head URDF.
 
 - ``ARM_6R``: a serial 6R arm with tilted axes, a ``0 0 -1`` axis, an axis exactly
   anti-parallel to the previous one, a continuous joint and a pitch = pi/2 origin.
 - ``PRISMATIC_TREE``: two prismatic joints (one tilted) under a pan joint that carries
   three branches (R-R, a fixed camera, P-R).
 """
+
+from pathlib import Path
+
+HEAD_URDF = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 
 ARM_6R = """<?xml version="1.0"?>
 <robot name="arm6">

@@ -1,6 +1,5 @@
 """Stage 2: hand-eye of every camera and the target pose, on simulated data."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +9,7 @@ from identification.pipeline import calibrate
 from kinfw.measurements import DatasetError, concatenate_measurements
 from kinfw.robot import load_robot
 from kinfw.urdf_export import edit_urdf
+from tests.robots import HEAD_URDF as HEAD
 from verification.crosscheck import pose_discrepancy, random_joint_values
 from verification.simulate import (
     default_target_pose,
@@ -19,7 +19,6 @@ from verification.simulate import (
     simulate,
 )
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 CAMERAS = ("left_camera", "right_camera")
 
 ARM_WITH_CAMERA = """<?xml version="1.0"?>

@@ -1,7 +1,6 @@
 """CPC closed form (Shih et al. section 4) on simulated data with a known truth."""
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,10 +11,10 @@ from kinfw.measurements import Measurements
 from kinfw.robot import load_robot
 from kinfw.urdf_export import export_urdf
 from tests.robots import ARM_6R, PRISMATIC_TREE
+from tests.robots import HEAD_URDF as HEAD
 from verification.crosscheck import pose_discrepancy, random_joint_values
 from verification.simulate import one_joint_at_a_time, perturb_robot, simulate
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 CASES = [
     pytest.param(HEAD, ("left_plate", "right_plate"), id="iis-head"),
     pytest.param(ARM_6R, ("flange",), id="arm6r"),

@@ -1,6 +1,5 @@
 """The tree CPC model against Pinocchio FK, hand geometry and the paper's parameter count."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,8 +17,8 @@ from kinfw.cpc_casadi import cpc_fk_function
 from kinfw.robot import load_robot
 from kinfw.transforms import rotation_angle, rotation_vector_from_matrix
 from tests.robots import ARM_6R, PRISMATIC_TREE
+from tests.robots import HEAD_URDF as HEAD
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 HEAD_FRAMES = ("left_plate", "right_plate")
 
 CASES = [

@@ -4,7 +4,6 @@ study (verification.crlb_study, verification.robust, verification.head_studies).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +13,7 @@ from kinfw.cpc import cpc_from_robot
 from kinfw.measurements import concatenate_measurements
 from kinfw.robot import load_robot
 from kinfw.transforms import matrix_from_rotation_vector, rotation_angle
+from tests.robots import HEAD_URDF as IIS_HEAD
 from verification.crlb import (
     cramer_rao,
     position_jacobians,
@@ -37,7 +37,6 @@ from verification.simulate import (
     simulate,
 )
 
-IIS_HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 FRAMES = (*PLATES, *CAMERAS)

@@ -1,18 +1,17 @@
 """Cross-validation, parameter sets and the outlier that must not bend the model."""
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from identification.pipeline import calibrate
 from kinfw.cpc import cpc_from_robot
 from kinfw.robot import load_robot
+from tests.robots import HEAD_URDF as HEAD
 from verification.crossval import crossvalidate
 from verification.report import calibration_report
 from verification.simulate import perturb_robot, random_configurations, simulate
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 
 
@@ -24,8 +23,8 @@ def _data(truth, n, seed, noise_m=0.5e-3, noise_rad=0.005):
                     noise_rad=noise_rad)
 
 
-def test_calibration_beats_both_baselines_when_the_joints_are_off():
-    nominal = load_robot(HEAD)
+def test_calibration_beats_both_baselines_when_the_joints_are_off(head):
+    nominal = head
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(0), origin_mm=5.0,
                                      origin_deg=1.0, axis_deg=1.0))
     cv = crossvalidate(nominal, _data(truth, 60, 1), k=4, select=True,
@@ -36,9 +35,9 @@ def test_calibration_beats_both_baselines_when_the_joints_are_off():
     assert means[3] < 1.5  # mm, noise 0.5 mm per axis
 
 
-def test_overfitting_on_small_data_is_warned_about():
+def test_overfitting_on_small_data_is_warned_about(head):
     """Only the plates' mounts are off: 'frames' is the right model, 'full' overfits."""
-    nominal = load_robot(HEAD)
+    nominal = head
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(2), origin_mm=5.0,
                                      origin_deg=1.0, axis_deg=0.0,
                                      joints=("left_plate_joint", "right_plate_joint")))
@@ -50,8 +49,8 @@ def test_overfitting_on_small_data_is_warned_about():
     assert "likely cause" in cv.warnings[0]
 
 
-def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model():
-    nominal = load_robot(HEAD)
+def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
+    nominal = head
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(4), origin_mm=5.0,
                                      origin_deg=1.0, axis_deg=1.0))
     clean = _data(truth, 60, 5)
@@ -82,8 +81,8 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model():
     assert entry.weight < 0.2
 
 
-def test_parameter_masks_by_joint_and_field():
-    nominal = load_robot(HEAD)
+def test_parameter_masks_by_joint_and_field(head):
+    nominal = head
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(7), origin_mm=3.0,
                                      origin_deg=0.5, axis_deg=0.5))
     data = _data(truth, 40, 8)
@@ -112,10 +111,10 @@ def _fold_numbers(cv):
                      for s in cv.scores], dtype=float)
 
 
-def test_thread_and_process_executors_give_the_serial_scores():
+def test_thread_and_process_executors_give_the_serial_scores(head):
     from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
-    nominal = load_robot(HEAD)
+    nominal = head
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(11), origin_mm=5.0,
                                      origin_deg=1.0, axis_deg=1.0))
     data = _data(truth, 24, 12)
@@ -135,10 +134,10 @@ def test_thread_and_process_executors_give_the_serial_scores():
         assert done[-1] == (9, 9) and len(done) == 9
 
 
-def test_robot_pickles_as_its_urdf():
+def test_robot_pickles_as_its_urdf(head):
     import pickle
 
-    nominal = load_robot(HEAD)
+    nominal = head
     copy = pickle.loads(pickle.dumps(nominal))
     assert copy.urdf_xml == nominal.urdf_xml and copy.source == nominal.source
     q = np.linspace(-0.3, 0.3, len(nominal.joint_names))

@@ -11,14 +11,13 @@ Pinocchio's forward kinematics of the URDF must reproduce that product at the pl
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import yourdfpy
 
-URDF_PATH = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
+from tests.robots import HEAD_URDF as URDF_PATH
 
 DEG = np.pi / 180.0
 MM = 1e-3

@@ -1,6 +1,5 @@
 """The noise that ``refine`` estimates, against the simulator's known sigma."""
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,6 +10,7 @@ from identification.refine import NoiseModel, refine
 from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import load_robot
 from kinfw.transforms import rotation_vector_from_matrix
+from tests.robots import HEAD_URDF as HEAD
 from verification.robust import plant_outliers
 from verification.simulate import (
     default_target_pose,
@@ -20,7 +20,6 @@ from verification.simulate import (
     simulate,
 )
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 NOISE_M, NOISE_RAD = 0.5e-3, np.radians(0.5)

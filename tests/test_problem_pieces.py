@@ -1,6 +1,5 @@
 """The pieces of the estimation problem: blocks, noise model, noise estimation, registry."""
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import casadi as ca
@@ -14,9 +13,9 @@ from kinfw.observations import NoiseComponent, kinds, register_kind
 from kinfw.observations.pose import PoseKind
 from kinfw.robot import load_robot
 from kinfw.transforms import matrix_from_rotation_vector, transform_from_rotation_translation
+from tests.robots import HEAD_URDF as HEAD
 from verification.simulate import default_target_pose, random_configurations, simulate
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 

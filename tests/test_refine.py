@@ -2,7 +2,6 @@
 
 import warnings
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +13,7 @@ from kinfw.robot import load_robot
 from kinfw.transforms import inverse_transform, matrix_from_rotation_vector
 from kinfw.urdf_export import export_urdf
 from tests.robots import ARM_6R
+from tests.robots import HEAD_URDF as HEAD
 from verification.crosscheck import pose_discrepancy, random_joint_values
 from verification.simulate import (
     default_target_pose,
@@ -22,7 +22,6 @@ from verification.simulate import (
     simulate,
 )
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 SIGMA = NoiseModel(0.5e-3, np.radians(0.5) / np.sqrt(3.0))

@@ -6,7 +6,6 @@ import io
 import json
 import re
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from kinfw.cli import main
 from kinfw.cpc import cpc_from_robot
 from kinfw.measurements import read_measurements, write_measurements
 from kinfw.robot import load_robot
+from tests.robots import HEAD_URDF as HEAD
 from verification.simulate import (
     default_target_pose,
     perturb_robot,
@@ -23,7 +23,6 @@ from verification.simulate import (
     simulate,
 )
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 #: Gross position errors added to left_plate pose observations (mm), in file order.

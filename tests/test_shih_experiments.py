@@ -11,6 +11,7 @@ import pytest
 from identification.closed_form import identify_closed_form
 from kinfw.measurements import Measurements, PoseObservations
 from kinfw.robot import load_robot
+from tests.robots import HEAD_URDF as IIS_HEAD
 from verification.shih_experiments import Fig11Result, fig11_study
 from verification.shih_figures import (
     format_fig11,
@@ -29,7 +30,6 @@ from verification.shih_table4 import (
 )
 from verification.simulate import one_joint_at_a_time, perturb_robot, random_configurations
 
-IIS_HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 FRAMES = ("left_plate", "right_plate")
 
 

@@ -8,7 +8,6 @@ saying m / rad whose numbers are mm / degrees), exactly as a user's file would b
 import json
 import math
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +25,7 @@ from kinfw.measurements import (
 )
 from kinfw.robot import load_robot
 from tests.robots import ARM_6R
+from tests.robots import HEAD_URDF as HEAD
 from verification.simulate import (
     default_target_pose,
     one_joint_at_a_time,
@@ -34,7 +34,6 @@ from verification.simulate import (
     simulate,
 )
 
-HEAD = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 NOISE = {"noise_m": 0.5e-3, "noise_rad": math.radians(0.5)}
