@@ -9,27 +9,36 @@ Every output path is checked before any work (:func:`_check_outputs`) and every 
 written atomically (:mod:`kinfw.files`). This module imports only the standard library at
 start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pinocchio
 (through :mod:`kinfw.robot`), CasADi, matplotlib and meshcat are imported by the commands.
+
+This module holds the parser, the checks of the outputs, the warning printer and
+:func:`main`; the commands themselves (``cmd_simulate``, ``cmd_calibrate``, ...) are in
+:mod:`kinfw.cli_commands`.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import logging
 import math
 import sys
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import NoReturn
 
-from kinfw.files import check_output_dir, check_outputs, write_text_atomic
-
-if TYPE_CHECKING:
-    from kinfw.calibration_file import BeforeAfter
-    from kinfw.calibration_report import RefineSection, StageErrors
-    from kinfw.robot import Robot
+from kinfw.cli_commands import (
+    cmd_calibrate,
+    cmd_crosscheck,
+    cmd_crossval,
+    cmd_demo,
+    cmd_reproduce,
+    cmd_simulate,
+    cmd_verify,
+    cmd_view,
+    default_sidecar_path,
+)
+from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["main"]
 
@@ -39,436 +48,6 @@ log = logging.getLogger("kinfw")
 #: ``kinfw.measurements.DatasetError``, ``kinfw.robot.RobotModelError`` and
 #: ``kinfw.files.OutputPathError`` are ValueErrors (caught here without importing them).
 USER_ERRORS = (ValueError, OSError)
-
-
-def _progress_printer():
-    """Progress lines on stderr when a person is watching (a terminal, or --verbose)."""
-    if sys.stderr.isatty() or log.isEnabledFor(logging.INFO):
-        return lambda message: print(f"  {message}", file=sys.stderr, flush=True)
-    return None
-
-
-def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: Robot
-                ) -> tuple[str, ...]:
-    if value:
-        return tuple(v for v in value.replace(",", " ").split() if v)
-    if default:
-        return default
-    raise ValueError(
-        f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
-        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}')
-
-
-# -- kinfw simulate ----------------------------------------------------------------------
-def _cmd_simulate(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from kinfw.measurements import concatenate_measurements, write_measurements
-    from kinfw.robot import load_robot
-    from verification.simulate import (
-        default_target_pose,
-        one_joint_at_a_time,
-        perturb_robot,
-        random_configurations,
-        simulate,
-    )
-
-    nominal = load_robot(args.urdf)
-    rng = np.random.default_rng(args.seed)
-    stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
-    frames = _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) \
-        if 1 in stages else ()
-    cameras = _frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal) \
-        if 2 in stages else ()
-    truth_xml = perturb_robot(nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg,
-                              axis_deg=args.error_deg)
-    truth = load_robot(truth_xml)
-    names = nominal.topology((*frames, *cameras)).joint_names
-    lower, upper = nominal.joint_limits(names)
-    noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
-    if args.stereo_mm is not None:
-        noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
-    parts = []
-    if frames:
-        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint,
-                                    fraction=args.fraction)
-        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
-    if cameras:
-        qs = random_configurations(lower, upper, args.stage2_samples, rng,
-                                   fraction=args.fraction)
-        w_T_target = default_target_pose(truth, qs, names, cameras)
-        parts.append(simulate(truth, qs, names, cameras=cameras, rng=rng,
-                              w_T_target=w_T_target, **noise))
-    data = concatenate_measurements(*parts)
-    write_measurements(args.out, data)
-    write_text_atomic(args.truth_out, truth_xml)
-    if args.json:
-        print(json.dumps({"data": str(args.out), "truth": str(args.truth_out),
-                          "n_samples": data.n_samples, "frames": list(data.observed_frames),
-                          "noise_mm": args.noise_mm, "noise_deg": args.noise_deg,
-                          "stereo_mm": args.stereo_mm, "error_mm": args.error_mm,
-                          "error_deg": args.error_deg, "seed": args.seed}, indent=2))
-        return 0
-    print(f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
-          f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
-          + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-          + ")")
-    print(f"wrote {args.truth_out}: the true robot (nominal with errors of "
-          f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})")
-    return 0
-
-
-# -- kinfw verify ------------------------------------------------------------------------
-def _format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
-    widths = [max(len(str(r[k])) for r in (header, *rows)) for k in range(len(header))]
-    lines = ["  ".join(str(h).rjust(w) for h, w in zip(header, widths, strict=True))]
-    lines += ["  ".join(str(c).rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-    return "\n".join(lines)
-
-
-def accuracy_table(report_dict: dict) -> str:
-    """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
-    rows = []
-    for g in report_dict["groups"]:
-        mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
-        rows.append([
-            g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""), g["kind"], g["n"],
-            f"{g['position_mean_mm']:.3f}", f"{g['position_rms_mm']:.3f}",
-            f"{g['position_max_mm']:.3f}", f"{g['rotation_rms_deg']:.4f}",
-            f"{g['rotation_max_deg']:.4f}",
-            " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
-        ])
-    header = ["frame", "kind", "n", "pos mean mm", "pos RMS mm", "pos max mm",
-              "rot RMS deg", "rot max deg", "|e| x y z mean/std mm (Table 4)"]
-    return _format_table(rows, header)
-
-
-def _cmd_verify(args: argparse.Namespace) -> int:
-    from kinfw.calibration_file import read_sidecar
-    from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
-    from verification.accuracy import evaluate_model
-
-    robot = load_robot(args.model)
-    data = read_measurements(args.data)
-    sidecar_path = args.sidecar or _sidecar_path(args.model)
-    sidecar = None
-    if Path(sidecar_path).is_file() and not args.no_sidecar:
-        sidecar = read_sidecar(sidecar_path)
-    elif args.sidecar:
-        raise OSError(f"{args.sidecar}: sidecar not found")
-    report = evaluate_model(robot, data, sidecar=sidecar)
-    used = str(sidecar_path) if sidecar is not None else None
-    if args.json:
-        print(json.dumps({"model": str(args.model), "data": str(args.data), "sidecar": used,
-                          **report.to_dict(per_sample=True)}, indent=2))
-        return 0
-    print(f"errors of {args.model} against {args.data} ({data.n_samples} samples; "
-          "measured minus predicted)")
-    if used:
-        print(f"using the calibration sidecar {used} (measurement frame, targets, markers "
-              "as calibrated, not refitted)")
-    print(accuracy_table(report.to_dict()))
-    for note in report.fitted:
-        print(f"note: fitted from the data: {note}")
-    return 0
-
-
-# -- kinfw calibrate ---------------------------------------------------------------------
-def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
-    return _format_table(
-        [[r.group, r.n, f"{r.before_position_rms_mm:.3f}", f"{r.after_position_rms_mm:.3f}",
-          f"{r.before_rotation_rms_deg:.4f}", f"{r.after_rotation_rms_deg:.4f}"]
-         for r in rows],
-        ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"])
-
-
-def _stage_table(stages: Sequence[StageErrors]) -> str:
-    rms = {s.stage: dict(s.position_rms_mm) for s in stages}
-    groups = [g for g, _ in stages[0].position_rms_mm]
-    return _format_table([[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
-                         ["position RMS mm", *rms])
-
-
-def _params_arg(text: str) -> str | tuple[str, ...]:
-    """``full``, ``offsets``, ``frames``, ``none``, or a comma-separated mask."""
-    if text in ("full", "offsets", "frames", "none"):
-        return text
-    return tuple(t for t in text.replace(" ", "").split(",") if t)
-
-
-def _prior_arg(args: argparse.Namespace):
-    if args.prior_mm is None and args.prior_deg is None:
-        return None
-    if args.prior_mm is None or args.prior_deg is None:
-        raise ValueError("give both --prior-mm and --prior-deg")
-    return args.prior_mm * 1e-3, math.radians(args.prior_deg)
-
-
-def _noise_arg(args: argparse.Namespace):
-    from identification.refine import NoiseModel
-
-    if args.sigma_mm is None and args.sigma_deg is None:
-        return None
-    if args.sigma_mm is None or args.sigma_deg is None:
-        raise ValueError("give both --sigma-mm and --sigma-deg, or neither (then the noise "
-                         "is estimated from the residuals)")
-    # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
-    return NoiseModel(args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0))
-
-
-def _sidecar_path(out: Path) -> Path:
-    """Where the calibration sidecar of the calibrated URDF ``out`` goes."""
-    return Path(out).with_suffix(".kinfw.json")
-
-
-def _cmd_calibrate(args: argparse.Namespace) -> int:
-    from kinfw.calibration_report import write_report
-    from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
-    from verification.report import calibrate_to_files
-
-    nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
-    held_out = read_measurements(args.holdout) if args.holdout else None
-    report, _ = calibrate_to_files(nominal, data, args.out, method=args.method,
-                                   noise=_noise_arg(args), loss=args.loss,
-                                   parameters=_params_arg(args.params),
-                                   prior=_prior_arg(args), data_path=args.data,
-                                   held_out=held_out, progress=_progress_printer())
-    if args.report:
-        write_report(args.report, report)
-    if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
-        return 0
-    print(f"calibrated {args.urdf} with {args.method} from {args.data} "
-          f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})")
-    for note in report.notes:
-        print(f"note: {note}")
-    print("position RMS on the calibration data after each stage (in-sample):")
-    print(_stage_table(report.position_rms_by_stage))
-    if report.refine is not None:
-        _print_refine(report.refine, has_report=bool(args.report))
-    if report.errors_held_out is not None:
-        print("held-out errors:")
-        print(_before_after_table(report.errors_held_out))
-    if args.report:
-        print(f"report: {args.report}")
-    return 0
-
-
-def _sigma(value: float | None, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
-
-
-def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
-    """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
-    the worst down-weighted observations."""
-    ident = ref.identifiability
-    if ident.condition is not None:
-        condition = f"condition {ident.condition:.3g}"
-    else:  # null in the report: no free parameters, or a rank-deficient problem
-        condition = "condition undefined" if not ident.n_parameters else "condition inf"
-    noise = ref.noise
-    print(f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-          f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
-          f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
-          f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, "
-          + condition)
-    print(f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
-          "(not estimated; std null in the report)")
-    for item in ident.not_identifiable:
-        print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
-    down = ref.downweighted
-    if down:
-        print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, "
-              "worst first:")
-    for row in down[:5]:
-        where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        rotation = ("" if row.rotation_residual_deg is None
-                    else f", {row.rotation_residual_deg:.3g} deg")
-        print(f"    samples[{row.sample}] {where} ({row.kind}): residual "
-              f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}")
-    if len(down) > 5:
-        print(f"    ... and {len(down) - 5} more "
-              f"({'see the report' if has_report else 'write them with --report'})")
-
-
-# -- kinfw demo --------------------------------------------------------------------------
-def _cmd_demo(args: argparse.Namespace) -> int:
-    from verification.demo import NOISE_DEG, NOISE_MM, run_demo
-
-    demo = run_demo(args.out, seed=args.seed, progress=_progress_printer())
-    report = demo.report
-    if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
-        return 0
-    out = demo.out
-    print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
-    print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
-          f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
-          "the stereo rig; stage 2: both cameras see a fixed target in 30 random "
-          f"configurations; noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
-          "A = X B Y, then the joint least squares; 100 held-out configurations")
-    print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
-    print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
-    print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
-    print(_before_after_table(report.errors_held_out))
-    noise = report.refine.noise
-    print(f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
-          f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
-          f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)")
-    print(f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
-          f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
-    print(f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
-          f"{out / 'scene.html'} (open in any browser, no network needed)")
-    return 0
-
-
-# -- kinfw crossval ----------------------------------------------------------------------
-def _cmd_crossval(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
-    from verification.crossval import BASELINES, crossvalidate
-    from verification.studies import executor_for_jobs
-
-    nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
-    sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
-    prior = _prior_arg(args)
-    watch = _progress_printer()
-    executor = executor_for_jobs(args.jobs)
-    try:
-        cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets,
-                           select=args.select, noise=_noise_arg(args), loss=args.loss,
-                           prior=prior, executor=executor,
-                           progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None)
-    finally:
-        if executor is not None:
-            executor.shutdown()
-    if args.json:
-        print(json.dumps(cv.to_dict(), indent=2))
-        return 0
-    label = {"none": "nominal", "frames": "frames only", "offsets": "offsets+frames",
-             "full": "calibrated"}
-    print(f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
-          f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg")
-    def cell(position_mm: float, rotation_deg: float) -> str:
-        rot = "-" if np.isnan(rotation_deg) else f"{rotation_deg:.3f}"
-        return f"{position_mm:.3f} / {rot}"
-
-    rows = []
-    for fold in range(args.k):
-        row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
-        for p in sets:
-            sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
-            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg))
-        rows.append(row)
-    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg"))
-                               for p in sets)])
-    print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
-    for warning in cv.warnings:
-        print(f"warning: {warning}")
-    if cv.selected:
-        print(f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
-              f"position error ({cv.mean(cv.selected):.3f} mm)")
-    return 0
-
-
-# -- kinfw view --------------------------------------------------------------------------
-def _cmd_view(args: argparse.Namespace) -> int:
-
-    from kinfw.calibration_file import read_sidecar
-    from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
-    from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
-
-    if args.sample is not None and args.data is None:
-        raise ValueError(f"--sample {args.sample}: give --data, the measurements to draw")
-    nominal = load_robot(args.nominal)
-    calibrated = load_robot(args.calibrated) if args.calibrated else None
-    data = read_measurements(args.data) if args.data else None
-    if args.sample is not None and not 0 <= args.sample < data.n_samples:
-        raise ValueError(f"--sample {args.sample}: out of range, {args.data} has "
-                         f"{data.n_samples} samples (give 0 to {data.n_samples - 1})")
-    sidecar_path = args.sidecar
-    if sidecar_path is None and args.calibrated:
-        guess = Path(args.calibrated).with_suffix(".kinfw.json")
-        sidecar_path = guess if guess.is_file() else None
-    extra = {}
-    if sidecar_path is not None:
-        sidecar = read_sidecar(sidecar_path)
-        extra = {"targets": targets_from_sidecar(sidecar), "meas_T_root": sidecar.w_T_root}
-    up = args.up
-    vis = scene(nominal, calibrated, data, sample=args.sample, residual_scale=args.residual_scale,
-                up=up, package_dirs=tuple(args.package_dir),
-                window=OfflineWindow() if args.html else None, **extra)
-    if args.html:
-        path = write_html(vis, args.html)
-        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
-              "any browser, no network needed)")
-        return 0
-    print(f"meshcat is serving the scene at {vis.url()} (127.0.0.1); press Enter to stop")
-    with contextlib.suppress(EOFError, KeyboardInterrupt):
-        input()
-    return 0
-
-
-# -- kinfw reproduce ---------------------------------------------------------------------
-def _cmd_reproduce(args: argparse.Namespace) -> int:
-    import contextlib
-    import io
-
-    from verification import head_studies, hirsh_figures, shih_figures
-
-    argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
-    if args.trials is not None:
-        argv += ["--trials", str(args.trials)]
-    if args.study == "hirsh":
-        run, written = (lambda: hirsh_figures.main(argv)), "hirsh.json"
-    elif args.study in ("crlb", "robust"):
-        run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
-    else:
-        run, written = (lambda: shih_figures.main([args.study, *argv])), \
-            f"{args.study}.json"
-    if not args.json:
-        return run()
-    with contextlib.redirect_stdout(io.StringIO()):
-        code = run()
-    print((Path(args.out) / written).read_text(encoding="utf-8"))
-    return code
-
-
-# -- kinfw crosscheck --------------------------------------------------------------------
-def _cmd_crosscheck(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from kinfw.robot import load_robot
-    from verification.crosscheck import crosscheck_cpc
-
-    robot = load_robot(args.urdf)
-    frames = _frames_arg(args.frames, (*robot.default_frames, *robot.default_cameras),
-                         "--frames", robot)
-    result = crosscheck_cpc(robot, frames, n=args.n, rng=np.random.default_rng(args.seed))
-    if args.json:
-        print(json.dumps({"urdf": str(args.urdf), "frames": list(result.frames),
-                          "n_configurations": result.n_configurations,
-                          "numpy_position_m": result.numpy_position_m,
-                          "numpy_rotation_rad": result.numpy_rotation_rad,
-                          "casadi_position_m": result.casadi_position_m,
-                          "casadi_rotation_rad": result.casadi_rotation_rad,
-                          "passed": result.passed()}, indent=2))
-    else:
-        print(f"CPC vs Pinocchio FK of {args.urdf}, {result.n_configurations} random "
-              f"configurations, frames {', '.join(result.frames)}")
-        print(f"  numpy : max position {result.numpy_position_m:.2e} m, "
-              f"rotation {result.numpy_rotation_rad:.2e} rad")
-        print(f"  CasADi: max position {result.casadi_position_m:.2e} m, "
-              f"rotation {result.casadi_rotation_rad:.2e} rad")
-        print("  passed (< 1e-12)" if result.passed() else "  FAILED (>= 1e-12)")
-    return 0 if result.passed() else 1
 
 
 # -- outputs -----------------------------------------------------------------------------
@@ -481,7 +60,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_outputs({"--out": args.out, "--truth-out": args.truth_out},
                       inputs={"--urdf": args.urdf})
     elif command == "calibrate":
-        check_outputs({"--out": args.out, "sidecar": _sidecar_path(args.out),
+        check_outputs({"--out": args.out, "sidecar": default_sidecar_path(args.out),
                        "--report": args.report},
                       inputs={"--urdf": args.urdf, "data file": args.data,
                               "--holdout": args.holdout})
@@ -490,7 +69,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
         check_output_dir(args.out, label="--out", files=DEMO_FILES)
     elif command == "view" and args.html is not None:
-        sidecar = args.sidecar or (args.calibrated and _sidecar_path(args.calibrated))
+        sidecar = args.sidecar or (args.calibrated and default_sidecar_path(args.calibrated))
         check_outputs({"--html": args.html},
                       inputs={"nominal": args.nominal, "--calibrated": args.calibrated,
                               "--data": args.data, "sidecar": sidecar})
@@ -609,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=_cmd_simulate)
+    p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("verify", help="errors of a URDF model against measurements")
     p.add_argument("model", type=Path, help="URDF to evaluate")
@@ -620,7 +199,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="ignore the sidecar: fit nuisance frames to these data")
     p.add_argument("--json", action="store_true",
                    help="print the report as JSON, with per-sample errors")
-    p.set_defaults(func=_cmd_verify)
+    p.set_defaults(func=cmd_verify)
 
     p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
@@ -638,14 +217,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "those joints' CPC parameters)")
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.set_defaults(func=_cmd_calibrate)
+    p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
     p.add_argument("--out", type=Path, default=Path("demo_out"),
                    help="output directory (default demo_out)")
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.set_defaults(func=_cmd_demo)
+    p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("crossval", help="k-fold cross-validation against baselines",
                        description="Held-out error of the calibration (folds by sample) next "
@@ -663,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=_COUNT, default=1, help="run the fits in N worker processes "
                    "(default 1: in this process)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
-    p.set_defaults(func=_cmd_crossval)
+    p.set_defaults(func=cmd_crossval)
 
     p = sub.add_parser("view", help="nominal and calibrated robots and measurements in 3D",
                        description="Meshcat view: the nominal robot as a grey ghost, the "
@@ -686,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where package:// meshes live (repeatable)")
     p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of "
                    "serving")
-    p.set_defaults(func=_cmd_view)
+    p.set_defaults(func=cmd_view)
 
     p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
                        description="fig11: Shih et al. Fig. 11 (positioning error vs "
@@ -702,7 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=_COUNT, default=1, help="run the trials in N worker "
                    "processes (default 1: in this process)")
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
-    p.set_defaults(func=_cmd_reproduce)
+    p.set_defaults(func=cmd_reproduce)
 
     p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")
     p.add_argument("urdf", type=Path)
@@ -710,7 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-n", type=_COUNT, default=200, help="random configurations (default 200)")
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.set_defaults(func=_cmd_crosscheck)
+    p.set_defaults(func=cmd_crosscheck)
     return parser
 
 

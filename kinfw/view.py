@@ -41,34 +41,33 @@ predicted|`` reaching from the node's origin along y, its child ``tip`` a ball a
 script inlined, no network access). Without a server, draw into an
 :class:`OfflineWindow`. meshcat is imported inside the functions: ``import kinfw`` does not
 load it.
+
+The robot's geometry and the view's framing are drawn by :mod:`kinfw.view_robot`; the
+offline window and the HTML file are in :mod:`kinfw.view_html` (:class:`OfflineWindow`,
+:func:`write_html` and :func:`external_urls` are re-exported here).
 """
 
 from __future__ import annotations
 
-import base64
 import itertools
 import logging
-import math
 import os
-import re
-import warnings
-import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.blocks import BlockKey
 from kinfw.calibration_file import CalibrationSidecar, read_sidecar
-from kinfw.files import write_text_atomic
 from kinfw.measurements import Measurements, check_against_robot
 from kinfw.observations import kind_of
 from kinfw.observations.numeric import MissingValue, NumericContext
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import check_transform
+from kinfw.view_html import OfflineWindow, external_urls, write_html
+from kinfw.view_robot import display_frame, draw_robot, set_camera
 
 if TYPE_CHECKING:
     import meshcat
@@ -119,119 +118,6 @@ CAMERA_FOV_DEG = 30.0
 """Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
 BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
 """Background gradient (top, bottom)."""
-
-# URLs that a browser never fetches: XML namespaces in meshcat's viewer script.
-_NAMESPACE_URLS = ("http://www.w3.org/",)
-_URL = re.compile(r"https?://[^\s\"'<>)]*", re.IGNORECASE)
-
-
-# -- offline window ----------------------------------------------------------------------
-
-
-class OfflineWindow:
-    """A meshcat window without a server: records commands, serves the static HTML.
-
-    ``meshcat.Visualizer(window=OfflineWindow())`` draws into it like into a server:
-    the scene tree is kept with the server's rules (a ``set_object`` replaces the node's
-    object and properties, ``delete`` removes a subtree), and :meth:`get_scene` returns
-    the same self-contained HTML as ``meshcat-server`` (the viewer script inlined).
-
-    Attributes
-    ----------
-    commands : list of dict
-        Every command sent, as ``command.lower()`` (keys ``type``, ``path`` and the
-        command's fields), in order.
-    """
-
-    def __init__(self) -> None:
-        from meshcat.servers.tree import SceneTree
-
-        self.commands: list[dict[str, Any]] = []
-        self._tree = SceneTree()
-
-    def send(self, command: Any) -> None:
-        """Record one meshcat command (``SetObject``, ``SetTransform``, ...)."""
-        import umsgpack
-        from meshcat.servers.tree import SceneTree, find_node
-
-        data = command.lower()
-        self.commands.append(data)
-        kind = data["type"]
-        path = [p for p in data.get("path", "").split("/") if p]
-        packed = umsgpack.packb(data)
-        if kind == "set_object":
-            node = find_node(self._tree, path)
-            node.object, node.properties = packed, []
-        elif kind == "set_transform":
-            find_node(self._tree, path).transform = packed
-        elif kind == "set_property":
-            find_node(self._tree, path).properties.append(packed)
-        elif kind == "set_animation":
-            find_node(self._tree, path).animation = packed
-        elif kind == "delete":
-            if path:
-                parent = find_node(self._tree, path[:-1])
-                parent.pop(path[-1], None)
-            else:
-                self._tree = SceneTree()
-        else:
-            raise ValueError(f"OfflineWindow: cannot record a {kind!r} command without a "
-                             "browser (get_image needs meshcat.Visualizer())")
-
-    def get_scene(self) -> str:
-        """The scene as one self-contained HTML page (what ``meshcat-server`` returns)."""
-        import meshcat
-        from meshcat.servers.tree import walk
-
-        def command(packed: bytes) -> str:  # as meshcat.servers.zmqserver.create_command
-            return ('\nfetch("data:application/octet-binary;base64,'
-                    f'{base64.b64encode(packed).decode("utf-8")}")\n'
-                    "    .then(res => res.arrayBuffer())\n"
-                    "    .then(buffer => viewer.handle_command_bytearray("
-                    "new Uint8Array(buffer)));\n    ")
-
-        parts = []
-        for node in walk(self._tree):
-            if node.object is not None:
-                parts.append(command(node.object))
-            parts.extend(command(p) for p in node.properties)
-            if node.transform is not None:
-                parts.append(command(node.transform))
-            if node.animation is not None:
-                parts.append(command(node.animation))
-        viewer = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
-        return _HTML.format(mainminjs=viewer.read_text(encoding="utf-8"),
-                            commands="".join(parts))
-
-    def open(self) -> OfflineWindow:  # meshcat.Visualizer.open() calls this
-        raise RuntimeError("OfflineWindow has no server to open; use write_html()")
-
-
-_HTML = """<!DOCTYPE html>
-<html>
-    <head> <meta charset=utf-8> <title>kinfw - MeshCat</title> </head>
-    <body>
-        <div id="meshcat-pane">
-        </div>
-        <script>
-            {mainminjs}
-        </script>
-        <script>
-            var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-            {commands}
-        </script>
-         <style>
-            body {{margin: 0; }}
-            #meshcat-pane {{
-                width: 100vw;
-                height: 100vh;
-                overflow: hidden;
-            }}
-        </style>
-        <script id="embedded-json"></script>
-    </body>
-</html>
-"""
 
 
 # -- small helpers -----------------------------------------------------------------------
@@ -336,161 +222,6 @@ def _translation(p: ArrayLike) -> NDArray[np.float64]:
 def _node_name(frame: str, marker: str | None) -> str:
     name = frame if marker is None else f"{frame}@{marker}"
     return name.replace("/", "_")
-
-
-# -- robot geometry ----------------------------------------------------------------------
-
-
-def _resolve_mesh(filename: str, base_dir: Path | None,
-                  package_dirs: Sequence[Path]) -> Path | None:
-    """The existing file a URDF mesh ``filename`` names, or None."""
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://"):].partition("/")
-        candidates = []
-        for d in package_dirs:
-            candidates += [d / package / rest, d / rest]
-        if base_dir is not None:  # .../<package>/urdf/robot.urdf: look up the tree
-            candidates += [a / rest for a in (base_dir, *base_dir.parents) if a.name == package]
-    elif filename.startswith("file://"):
-        candidates = [Path(filename[len("file://"):])]
-    else:
-        path = Path(filename)
-        candidates = [path if path.is_absolute() or base_dir is None else base_dir / path]
-    return next((c.resolve() for c in candidates if c.is_file()), None)
-
-
-def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
-    """The robot's URDF with mesh paths made absolute and visuals whose mesh is missing
-    removed (each with a logged warning)."""
-    root = ET.fromstring(robot.urdf_xml)
-    source = Path(robot.source)
-    base_dir = source.resolve().parent if source.is_file() else None
-    changed = False
-    for link in root.iter("link"):
-        for visual in list(link.findall("visual")):
-            mesh = visual.find("geometry/mesh")
-            if mesh is None:
-                continue
-            filename = mesh.get("filename", "")
-            found = _resolve_mesh(filename, base_dir, package_dirs)
-            if found is None:
-                logger.warning("%s: mesh %r of link %r not found (searched %s); that visual "
-                               "is not drawn", robot.source, filename, link.get("name"),
-                               [str(d) for d in package_dirs] or "no package_dirs")
-                link.remove(visual)
-            else:
-                mesh.set("filename", str(found))
-            changed = True
-    return ET.tostring(root, encoding="unicode") if changed else robot.urdf_xml
-
-
-def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryModel:
-    xml = _visual_urdf(robot, package_dirs)
-    try:
-        return pin.buildGeomFromUrdfString(robot.model, xml, pin.GeometryType.VISUAL)
-    except Exception as exc:  # a mesh that exists but cannot be read
-        logger.warning("%s: cannot load the visual geometry (%s); drawing primitives only",
-                       robot.source, exc)
-        root = ET.fromstring(xml)
-        for link in root.iter("link"):
-            for visual in list(link.findall("visual")):
-                if visual.find("geometry/mesh") is not None:
-                    link.remove(visual)
-        return pin.buildGeomFromUrdfString(robot.model, ET.tostring(root, encoding="unicode"),
-                                           pin.GeometryType.VISUAL)
-
-
-def _draw_robot(vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray,
-                rgba: Sequence[float] | None, package_dirs: Sequence[Path]
-                ) -> NDArray[np.float64]:
-    """Draw ``robot`` at ``pin_q`` under ``node``; return the points to frame, (m, 3):
-    the centres of the visuals of its moving links (of all links if none moves; the link
-    frames' origins if it has no visuals)."""
-    from pinocchio.visualize import MeshcatVisualizer
-
-    visual_model = _visual_model(robot, package_dirs)
-    viz = MeshcatVisualizer(robot.model, None, visual_model)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        viz.initViewer(viewer=vis)
-        viz.loadViewerModel(rootNodeName=node,
-                            visual_color=None if rgba is None else list(rgba))
-        viz.display(pin_q)
-    for w in caught:
-        logger.warning("%s: %s", robot.source, w.message)
-    # Frame the moving part: the centres of the visuals behind a movable joint (Pinocchio
-    # merges fixed joints, so parentJoint 0 means rigidly attached to the root link).
-    placements = [(g.parentJoint, oMg.translation) for g, oMg in
-                  zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)]
-    if not placements:
-        pin.updateFramePlacements(viz.model, viz.data)
-        placements = [(f.parentJoint, oMf.translation) for f, oMf in
-                      zip(viz.model.frames, viz.data.oMf, strict=True)
-                      if f.type == pin.FrameType.BODY]
-    moving = [p for joint, p in placements if joint > 0]
-    return np.array(moving or [p for _, p in placements]).reshape(-1, 3)
-
-
-# -- camera ------------------------------------------------------------------------------
-
-
-def _display_frame(points: NDArray[np.float64], up: NDArray[np.float64], *,
-                   fov_deg: float, aspect: float = 4.0 / 3.0, pad: float = 0.08
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``display_T_root`` and the camera position in display coordinates.
-
-    The display frame has its origin at the centre of the points' bounding box and
-    ``up`` along z; its x axis points horizontally towards the root origin (the
-    measurement system when the root is the measurement frame), or along the points'
-    longest horizontal extent when the root origin is above or below the centre. The
-    camera looks at the origin from 35 deg to the side of x and 15 deg above the
-    horizon, just far enough that a ball of radius ``pad`` (metres) about every point
-    is inside 85 % of the field of view (``fov_deg`` vertically) of a window of
-    width / height ``aspect`` or wider.
-    """
-    up = up / np.linalg.norm(up)
-    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
-    x = -centre - (-centre @ up) * up
-    if np.linalg.norm(x) < 1e-3 and len(points) > 1:
-        flat = (points - centre) - np.outer((points - centre) @ up, up)
-        x = np.linalg.svd(flat, full_matrices=False)[2][0]
-        x = x - (x @ up) * up
-    if np.linalg.norm(x) < 1e-9:  # nothing horizontal: any horizontal axis
-        x = np.cross(up, np.eye(3)[np.argmin(np.abs(up))])
-    x /= np.linalg.norm(x)
-    root_R_display = np.column_stack([x, np.cross(up, x), up])
-    display_T_root = np.eye(4)
-    display_T_root[:3, :3] = root_R_display.T
-    display_T_root[:3, 3] = -root_R_display.T @ centre
-    display_ps = (points - centre) @ root_R_display
-
-    azimuth, elevation = math.radians(35.0), math.radians(15.0)
-    back = np.array([math.cos(elevation) * math.cos(azimuth),
-                     math.cos(elevation) * math.sin(azimuth), math.sin(elevation)])
-    right = np.cross([0.0, 0.0, 1.0], back)
-    right /= np.linalg.norm(right)
-    screen_up = np.cross(back, right)
-    tan_v = 0.85 * math.tan(math.radians(fov_deg / 2))
-    tan_h = aspect * tan_v
-    # A point p is in view from distance D when |p.right| <= (D - p.back) tan_h and
-    # |p.screen_up| <= (D - p.back) tan_v.
-    depth = display_ps @ back
-    need = np.maximum((np.abs(display_ps @ right) + pad) / tan_h,
-                      (np.abs(display_ps @ screen_up) + pad) / tan_v)
-    distance = max(float(np.max(depth + need)), 0.3)
-    return display_T_root, distance * back
-
-
-def _set_camera(vis: meshcat.Visualizer, display_offset: NDArray[np.float64],
-                fov_deg: float) -> None:
-    """Put meshcat's orbit camera at ``display_offset`` (it looks at the origin)."""
-    # The camera lives in /Cameras/default/rotated, which turns three.js' y-up frame
-    # into meshcat's z-up one: display (x, y, z) is three.js (x, z, -y).
-    x, y, z = (float(v) for v in display_offset)
-    vis["/Cameras/default"].set_transform(np.eye(4))
-    camera = vis["/Cameras/default/rotated/<object>"]
-    camera.set_property("position", [x, z, -y])
-    camera.set_property("fov", fov_deg)
 
 
 # -- the scene ---------------------------------------------------------------------------
@@ -607,10 +338,10 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     root = vis["kinfw"]
     robot_ps = []
     if calibrated is not None:
-        robot_ps.append(_draw_robot(vis, nominal, "kinfw/nominal",
+        robot_ps.append(draw_robot(vis, nominal, "kinfw/nominal",
                                     nominal.pin_configurations(q, joint_names)[0],
                                     ghost_rgba, dirs))
-    robot_ps.append(_draw_robot(vis, model, "kinfw/calibrated" if calibrated is not None
+    robot_ps.append(draw_robot(vis, model, "kinfw/calibrated" if calibrated is not None
                                 else "kinfw/nominal",
                                 model.pin_configurations(q, joint_names)[0], solid_rgba, dirs))
     focus_ps = []
@@ -622,10 +353,10 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
 
-    display_T_root, camera_offset = _display_frame(focus, up,
+    display_T_root, camera_offset = display_frame(focus, up,
                                                    fov_deg=CAMERA_FOV_DEG)
     root.set_transform(display_T_root)
-    _set_camera(vis, camera_offset, CAMERA_FOV_DEG)
+    set_camera(vis, camera_offset, CAMERA_FOV_DEG)
     vis["/Axes"].set_property("visible", False)
     vis["/Grid"].set_property("visible", False)
     vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
@@ -759,32 +490,3 @@ def targets_from_sidecar(sidecar: str | Path | CalibrationSidecar
     doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
     return tuple((t, check_transform(T, name=f"targets[{t!r}]"))
                  for t, T in doc.root_T_targets)
-
-
-def external_urls(html: str) -> list[str]:
-    """The http(s) URLs in ``html`` that a browser could fetch (XML namespace URIs of
-    the viewer script are not counted)."""
-    return [u for u in _URL.findall(html) if not u.lower().startswith(_NAMESPACE_URLS)]
-
-
-def write_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
-    """Save the scene as one self-contained HTML file and return its path.
-
-    The file holds meshcat's viewer script and the scene's commands; it opens in a
-    browser without network access or a server.
-
-    The file is written atomically (:func:`kinfw.files.write_text_atomic`).
-
-    Raises
-    ------
-    ValueError
-        If the HTML would load something from the network (a URL to a CDN).
-    """
-    html = vis.static_html()
-    urls = external_urls(html)
-    if urls:
-        raise ValueError(f"the meshcat HTML refers to the network ({urls[:3]}); it would "
-                         "not be self-contained")
-    path = write_text_atomic(path, html)
-    logger.debug("wrote %s (%d bytes)", path, path.stat().st_size)
-    return path
