@@ -93,8 +93,9 @@ STEP_NAMES = (
 # -- timing ------------------------------------------------------------------------------
 
 
-def closed_form_by_steps(robot: Robot, measurements: Measurements
-                         ) -> tuple[CPCModel, NDArray[np.float64]]:
+def closed_form_by_steps(
+    robot: Robot, measurements: Measurements
+) -> tuple[CPCModel, NDArray[np.float64]]:
     """``identify_closed_form(robot, measurements).model``, timing each step.
 
     Calls the step functions of :mod:`identification.closed_form` in the order
@@ -108,8 +109,9 @@ def closed_form_by_steps(robot: Robot, measurements: Measurements
     ticks.append(time.perf_counter())
     axes, _residual, scale = cf.identify_axes(topo, data, measurements.source)
     ticks.append(time.perf_counter())
-    w_T_e_q0, points, directions, p_scale, _rms = cf.identify_translations(topo, data, q0, axes,
-                                                            measurements.source)
+    w_T_e_q0, points, directions, p_scale, _rms = cf.identify_translations(
+        topo, data, q0, axes, measurements.source
+    )
     prismatic = ~np.array(topo.revolute)
     axes[prismatic] = directions[prismatic]
     scale[prismatic] = p_scale[prismatic]
@@ -121,8 +123,9 @@ def closed_form_by_steps(robot: Robot, measurements: Measurements
     return model, np.diff(ticks)
 
 
-def time_steps(robot: Robot, datasets: Sequence[Measurements], repeats: int
-               ) -> NDArray[np.float64] | None:
+def time_steps(
+    robot: Robot, datasets: Sequence[Measurements], repeats: int
+) -> NDArray[np.float64] | None:
     """Seconds per step of :func:`closed_form_by_steps`, round robin over ``datasets``.
 
     Returns an array of shape (len(datasets), len(STEP_NAMES), repeats), or None with a
@@ -132,8 +135,10 @@ def time_steps(robot: Robot, datasets: Sequence[Measurements], repeats: int
     try:
         closed_form_by_steps(robot, datasets[0])
     except (AttributeError, TypeError, ValueError) as exc:
-        print(f"[per-step breakdown unavailable: identification.closed_form internals "
-              f"changed ({type(exc).__name__}: {exc})]")
+        print(
+            f"[per-step breakdown unavailable: identification.closed_form internals "
+            f"changed ({type(exc).__name__}: {exc})]"
+        )
         return None
     for _ in range(WARMUP):
         for measurements in datasets:
@@ -167,8 +172,9 @@ def make_case(nominal: Robot, per_joint: int, rng: np.random.Generator) -> Case:
     names = truth.topology(FRAMES).joint_names
     lower, upper = truth.joint_limits(names)
     qs, _moved = one_joint_at_a_time(lower, upper, per_joint=per_joint)
-    measurements = simulate(truth, qs, names, frames=FRAMES, rng=rng, noise_m=NOISE_M,
-                            noise_rad=NOISE_RAD)
+    measurements = simulate(
+        truth, qs, names, frames=FRAMES, rng=rng, noise_m=NOISE_M, noise_rad=NOISE_RAD
+    )
     test_qs = random_configurations(lower, upper, N_TEST, rng)
     w_T_test = np.stack([truth.frame_poses(test_qs, f, names) for f in FRAMES], axis=1)
     return Case(truth, names, qs, measurements, test_qs, w_T_test)
@@ -181,8 +187,10 @@ def held_out_error_mm(model: CPCModel, case: Case) -> float:
     model itself, not of a noisy measurement of it.
     """
     if model.topology.joint_names != case.joint_names or model.topology.frames != FRAMES:
-        raise ValueError(f"model topology {model.topology.joint_names} / "
-                         f"{model.topology.frames} does not match the case's")
+        raise ValueError(
+            f"model topology {model.topology.joint_names} / "
+            f"{model.topology.frames} does not match the case's"
+        )
     w_T_frames = model.frame_poses(case.test_qs)
     dp = w_T_frames[..., :3, 3] - case.w_T_test_frames[..., :3, 3]
     return 1e3 * float(np.linalg.norm(dp, axis=-1).mean())
@@ -204,92 +212,151 @@ def step1_pairs(nominal: Robot, case: Case) -> int:
 
 
 def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
-    print(f"\n1. Closed form on the paper's protocol: {PAPER_PER_JOINT} values per joint, "
-          f"{len(case.qs)} configurations x {len(FRAMES)} plates, {repeats} repeats")
-    whole, = time_interleaved([lambda: cf.identify_closed_form(nominal, case.measurements)],
-                              repeats, warmup=WARMUP)
+    print(
+        f"\n1. Closed form on the paper's protocol: {PAPER_PER_JOINT} values per joint, "
+        f"{len(case.qs)} configurations x {len(FRAMES)} plates, {repeats} repeats"
+    )
+    (whole,) = time_interleaved(
+        [lambda: cf.identify_closed_form(nominal, case.measurements)], repeats, warmup=WARMUP
+    )
     model_whole = cf.identify_closed_form(nominal, case.measurements).model
     rows = []
     steps = time_steps(nominal, [case.measurements], repeats)
     if steps is not None:
         steps = steps[0]
         total = Timings(steps.sum(axis=0))
-        rows = [[name, f"{Timings(s).median_ms:.3f}", f"{Timings(s).iqr_ms:.3f}",
-                 f"{100 * np.median(s) / np.median(total.seconds):.1f}"]
-                for name, s in zip(STEP_NAMES, steps, strict=True)]
+        rows = [
+            [
+                name,
+                f"{Timings(s).median_ms:.3f}",
+                f"{Timings(s).iqr_ms:.3f}",
+                f"{100 * np.median(s) / np.median(total.seconds):.1f}",
+            ]
+            for name, s in zip(STEP_NAMES, steps, strict=True)
+        ]
         rows.append(["sum of steps", f"{total.median_ms:.3f}", f"{total.iqr_ms:.3f}", "100.0"])
-    rows.append(["identify_closed_form (whole call)", f"{whole.median_ms:.3f}",
-                 f"{whole.iqr_ms:.3f}", ""])
+    rows.append(
+        ["identify_closed_form (whole call)", f"{whole.median_ms:.3f}", f"{whole.iqr_ms:.3f}", ""]
+    )
     print(format_table(["step", "median ms", "IQR ms", "% of sum"], rows))
     if steps is not None:
         model_steps, _ = closed_form_by_steps(nominal, case.measurements)
-        same = all(np.allclose(getattr(model_steps, a), getattr(model_whole, a), rtol=0.0,
-                               atol=1e-12) for a in ("b", "beta", "l", "sign", "tool_T"))
-        print("Per-step times: identification.closed_form's steps collect_frame_data, "
-              "identify_axes,\nidentify_translations, geometry_at_zero and "
-              "kinfw.cpc.cpc_from_geometry called in identify_closed_form's order\n"
-              "(identify_translations row includes the prismatic fix-up). Step-wise model == "
-              "whole-call\nmodel (atol 1e-12): "
-              f"{same}.")
-    print(f"Held-out position error of this estimate: {held_out_error_mm(model_whole, case):.3f}"
-          f" mm (mean over {N_TEST} random configurations x {len(FRAMES)} plates).")
+        same = all(
+            np.allclose(getattr(model_steps, a), getattr(model_whole, a), rtol=0.0, atol=1e-12)
+            for a in ("b", "beta", "l", "sign", "tool_T")
+        )
+        print(
+            "Per-step times: identification.closed_form's steps collect_frame_data, "
+            "identify_axes,\nidentify_translations, geometry_at_zero and "
+            "kinfw.cpc.cpc_from_geometry called in identify_closed_form's order\n"
+            "(identify_translations row includes the prismatic fix-up). Step-wise model == "
+            "whole-call\nmodel (atol 1e-12): "
+            f"{same}."
+        )
+    print(
+        f"Held-out position error of this estimate: {held_out_error_mm(model_whole, case):.3f}"
+        f" mm (mean over {N_TEST} random configurations x {len(FRAMES)} plates)."
+    )
 
 
-def section_growth(nominal: Robot, per_joints: Sequence[int], repeats: int, trials: int,
-                   seed: int) -> None:
-    print(f"\n2. Growth with values per joint M ({repeats} repeats; held-out error: mean "
-          f"over {trials} true robots,\n   each {N_TEST} random test configurations x "
-          f"{len(FRAMES)} plates vs noise-free truth;\n   training noise sigma "
-          f"{1e3 * NOISE_M:g} mm per axis, {NOISE_RAD:g} rad rotation)")
+def section_growth(
+    nominal: Robot, per_joints: Sequence[int], repeats: int, trials: int, seed: int
+) -> None:
+    print(
+        f"\n2. Growth with values per joint M ({repeats} repeats; held-out error: mean "
+        f"over {trials} true robots,\n   each {N_TEST} random test configurations x "
+        f"{len(FRAMES)} plates vs noise-free truth;\n   training noise sigma "
+        f"{1e3 * NOISE_M:g} mm per axis, {NOISE_RAD:g} rad rotation)"
+    )
     cases = []
     for m in per_joints:
         rng = np.random.default_rng([seed, m])
         cases.append([make_case(nominal, m, rng) for _ in range(trials)])
     first = [c[0] for c in cases]  # the timed dataset of each M
     wholes = time_interleaved(
-        [lambda c=c: cf.identify_closed_form(nominal, c.measurements) for c in first], repeats,
-        warmup=WARMUP)
+        [lambda c=c: cf.identify_closed_form(nominal, c.measurements) for c in first],
+        repeats,
+        warmup=WARMUP,
+    )
     steps = time_steps(nominal, [c.measurements for c in first], repeats)
-    steps_ms = (np.full((len(first), len(STEP_NAMES)), np.nan) if steps is None
-                else 1e3 * np.median(steps, axis=2))
+    steps_ms = (
+        np.full((len(first), len(STEP_NAMES)), np.nan)
+        if steps is None
+        else 1e3 * np.median(steps, axis=2)
+    )
     n_samples = [len(c.qs) for c in first]
     medians = [w.median_ms for w in wholes]
     step1, step2 = steps_ms[:, 2], steps_ms[:, 3]
     rows, nominal_mm = [], []
     for k, (m, trial_cases, whole) in enumerate(zip(per_joints, cases, wholes, strict=True)):
-        errors = [held_out_error_mm(cf.identify_closed_form(nominal, c.measurements).model, c)
-                  for c in trial_cases]
-        nominal_mm += [held_out_error_mm(cpc_from_robot(nominal, FRAMES), c)
-                       for c in trial_cases]
+        errors = [
+            held_out_error_mm(cf.identify_closed_form(nominal, c.measurements).model, c)
+            for c in trial_cases
+        ]
+        nominal_mm += [held_out_error_mm(cpc_from_robot(nominal, FRAMES), c) for c in trial_cases]
         local = "" if k == 0 else f"{slope(n_samples[k - 1 : k + 1], medians[k - 1 : k + 1]):.2f}"
         sd = np.std(errors, ddof=1) if trials > 1 else np.nan
         pairs = step1_pairs(nominal, first[k])
-        rows.append([f"{m}", f"{n_samples[k]}", f"{pairs}", f"{whole.median_ms:.2f}",
-                     f"{whole.iqr_ms:.2f}", f"{1e3 * whole.median_ms / n_samples[k]:.1f}",
-                     f"{step1[k]:.2f}", f"{1e3 * step1[k] / pairs:.2f}", f"{step2[k]:.2f}",
-                     local, f"{np.mean(errors):.3f}", f"{sd:.3f}"])
-    print(format_table(["M", "samples", "S1 pairs", "median ms", "IQR ms", "us/sample",
-                        "step1 ms", "us/pair", "step2 ms", "slope", "held-out mm", "sd mm"],
-                       rows))
-    print(f"samples = {len(first[0].joint_names)} M + 1 configurations, each measuring both "
-          "plates.\nS1 pairs = rotation pairs Step 1 stacks: per revolute joint and per frame "
-          "below it, every\npair of its M + 1 group samples (its M values and q0), C(M+1, 2): "
-          "O(M^2) per joint.\nstep1/step2 ms = medians of the per-step timing; us/pair = step1 "
-          "time per S1 pair.\nslope = local d log(time) / d log(samples); sd mm = across true "
-          "robots.")
+        rows.append(
+            [
+                f"{m}",
+                f"{n_samples[k]}",
+                f"{pairs}",
+                f"{whole.median_ms:.2f}",
+                f"{whole.iqr_ms:.2f}",
+                f"{1e3 * whole.median_ms / n_samples[k]:.1f}",
+                f"{step1[k]:.2f}",
+                f"{1e3 * step1[k] / pairs:.2f}",
+                f"{step2[k]:.2f}",
+                local,
+                f"{np.mean(errors):.3f}",
+                f"{sd:.3f}",
+            ]
+        )
+    print(
+        format_table(
+            [
+                "M",
+                "samples",
+                "S1 pairs",
+                "median ms",
+                "IQR ms",
+                "us/sample",
+                "step1 ms",
+                "us/pair",
+                "step2 ms",
+                "slope",
+                "held-out mm",
+                "sd mm",
+            ],
+            rows,
+        )
+    )
+    print(
+        f"samples = {len(first[0].joint_names)} M + 1 configurations, each measuring both "
+        "plates.\nS1 pairs = rotation pairs Step 1 stacks: per revolute joint and per frame "
+        "below it, every\npair of its M + 1 group samples (its M values and q0), C(M+1, 2): "
+        "O(M^2) per joint.\nstep1/step2 ms = medians of the per-step timing; us/pair = step1 "
+        "time per S1 pair.\nslope = local d log(time) / d log(samples); sd mm = across true "
+        "robots."
+    )
     large = [k for k, m in enumerate(per_joints) if m >= 25]
     if len(large) >= 2:
         pick = [n_samples[k] for k in large]
-        fits = [f"{label} ~ samples^{slope(pick, [ys[k] for k in large]):.2f}"
-                for label, ys in (("total", medians), ("step1", step1), ("step2", step2))]
+        fits = [
+            f"{label} ~ samples^{slope(pick, [ys[k] for k in large]):.2f}"
+            for label, ys in (("total", medians), ("step1", step1), ("step2", step2))
+        ]
         print(f"Observed log-log fit over M >= 25: {', '.join(fits)}.")
     print(f"Nominal (uncalibrated) URDF on the same test sets: {np.mean(nominal_mm):.3f} mm.")
 
 
 def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed: int) -> None:
-    print(f"\n3. Ratios on the same data in the same run ({repeats} repeats; in each repeat "
-          "the four calls\n   of every M are timed back to back; ratio = median over repeats "
-          "of the per-repeat ratio)")
+    print(
+        f"\n3. Ratios on the same data in the same run ({repeats} repeats; in each repeat "
+        "the four calls\n   of every M are timed back to back; ratio = median over repeats "
+        "of the per-repeat ratio)"
+    )
     cases = [make_case(nominal, m, np.random.default_rng([seed, m])) for m in per_joints]
     calls: list[Callable[[], object]] = []
     for case in cases:
@@ -308,25 +375,54 @@ def section_ratios(nominal: Robot, per_joints: Sequence[int], repeats: int, seed
         def ratio(other: Timings, closed: Timings = closed) -> str:
             return f"{np.median(closed.seconds / other.seconds):.1f}"
 
-        rows.append([f"{m}", f"{len(case.qs)}", f"{closed.median_ms:.3f}",
-                     f"{cpc_fk.median_ms:.3f}", f"{cpc_build_fk.median_ms:.3f}",
-                     f"{pin_fk.median_ms:.3f}", ratio(cpc_fk), ratio(cpc_build_fk),
-                     ratio(pin_fk)])
-    print(format_table(["M", "samples", "CF ms", "CPC FK ms", "CPC+build ms", "Pin FK ms",
-                        "CF/CPC FK", "CF/CPC+build", "CF/Pin FK"], rows))
-    print("CF = identify_closed_form(nominal, data).\n"
-          "CPC FK = model.frame_poses(qs), model = cpc_from_robot(truth, frames) built "
-          "beforehand\n  (numpy, vectorised over samples, both frames in one call).\n"
-          "CPC+build = cpc_from_robot(truth, frames).frame_poses(qs), construction included.\n"
-          "Pin FK = truth.frame_poses(qs, frame, names) per frame (Pinocchio, a Python loop "
-          "over samples).")
+        rows.append(
+            [
+                f"{m}",
+                f"{len(case.qs)}",
+                f"{closed.median_ms:.3f}",
+                f"{cpc_fk.median_ms:.3f}",
+                f"{cpc_build_fk.median_ms:.3f}",
+                f"{pin_fk.median_ms:.3f}",
+                ratio(cpc_fk),
+                ratio(cpc_build_fk),
+                ratio(pin_fk),
+            ]
+        )
+    print(
+        format_table(
+            [
+                "M",
+                "samples",
+                "CF ms",
+                "CPC FK ms",
+                "CPC+build ms",
+                "Pin FK ms",
+                "CF/CPC FK",
+                "CF/CPC+build",
+                "CF/Pin FK",
+            ],
+            rows,
+        )
+    )
+    print(
+        "CF = identify_closed_form(nominal, data).\n"
+        "CPC FK = model.frame_poses(qs), model = cpc_from_robot(truth, frames) built "
+        "beforehand\n  (numpy, vectorised over samples, both frames in one call).\n"
+        "CPC+build = cpc_from_robot(truth, frames).frame_poses(qs), construction included.\n"
+        "Pin FK = truth.frame_poses(qs, frame, names) per frame (Pinocchio, a Python loop "
+        "over samples)."
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args, repeats = parse_repeats(
-        argv, __doc__.splitlines()[0], full=30, quick=5,
+        argv,
+        __doc__.splitlines()[0],
+        full=30,
+        quick=5,
         quick_help=f"M in {QUICK_PER_JOINT}, ratios at M = {QUICK_RATIO_PER_JOINT}, "
-                   f"{QUICK_TRIALS} accuracy trials")
+        f"{QUICK_TRIALS} accuracy trials",
+    )
     per_joints = QUICK_PER_JOINT if args.quick else FULL_PER_JOINT
     ratio_per_joints = QUICK_RATIO_PER_JOINT if args.quick else FULL_RATIO_PER_JOINT
     trials = QUICK_TRIALS if args.quick else FULL_TRIALS
@@ -336,8 +432,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(machine_info([("pinocchio", pin.__version__)]))
     print(mode_line(args, repeats, WARMUP))
     nominal = load_robot(HEAD_URDF)
-    paper = make_case(nominal, PAPER_PER_JOINT, np.random.default_rng([args.seed,
-                                                                      PAPER_PER_JOINT]))
+    paper = make_case(nominal, PAPER_PER_JOINT, np.random.default_rng([args.seed, PAPER_PER_JOINT]))
     section_paper_protocol(nominal, paper, repeats)
     section_growth(nominal, per_joints, repeats, trials, args.seed)
     section_ratios(nominal, ratio_per_joints, repeats, args.seed)

@@ -74,8 +74,10 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
 try:
     import cv2
 except ImportError as err:  # pragma: no cover - the message is the point
-    sys.exit('bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
-             f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}")
+    sys.exit(
+        'bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
+        f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}"
+    )
 
 from benchmarks.common import (  # noqa: E402
     format_table,
@@ -156,16 +158,20 @@ def random_rotations(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
     return transform_from_xyz_quat_xyzw(np.zeros((n, 3)), rng.normal(size=(n, 4)))[:, :3, :3]
 
 
-def make_scene(rng: np.random.Generator, n: int, max_rotation_deg: float,
-               seed: tuple[int, ...]) -> Scene:
+def make_scene(
+    rng: np.random.Generator, n: int, max_rotation_deg: float, seed: tuple[int, ...]
+) -> Scene:
     """A random true setup seen from ``n`` robot poses (see the module docstring)."""
     rotations = random_rotations(rng, 3)
     hand_T_cam = transform_from_rotation_translation(
-        rotations[0], rng.normal(0.0, HAND_CAM_SIGMA_M, 3))
+        rotations[0], rng.normal(0.0, HAND_CAM_SIGMA_M, 3)
+    )
     base_T_hand0 = transform_from_rotation_translation(
-        rotations[1], np.array([0.5, 0.0, 0.4]) + rng.normal(0.0, 0.05, 3))
+        rotations[1], np.array([0.5, 0.0, 0.4]) + rng.normal(0.0, 0.05, 3)
+    )
     cam0_T_world = transform_from_rotation_translation(
-        rotations[2], np.array([0.0, 0.0, TARGET_DISTANCE_M]))
+        rotations[2], np.array([0.0, 0.0, TARGET_DISTANCE_M])
+    )
     base_T_world = base_T_hand0 @ hand_T_cam @ cam0_T_world
     axes = rng.normal(size=(n, 3))
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
@@ -173,17 +179,20 @@ def make_scene(rng: np.random.Generator, n: int, max_rotation_deg: float,
     hand0_R_hands = matrix_from_rotation_vector(axes * angles[:, None])
     base_T_hands = transform_from_rotation_translation(
         base_T_hand0[:3, :3] @ hand0_R_hands,
-        base_T_hand0[:3, 3] + rng.uniform(-HALF_SHIFT_M, HALF_SHIFT_M, (n, 3)))
+        base_T_hand0[:3, 3] + rng.uniform(-HALF_SHIFT_M, HALF_SHIFT_M, (n, 3)),
+    )
     return Scene(hand_T_cam, base_T_world, base_T_hands, seed)
 
 
 def views(scene: Scene, n: int, noise: tuple[float, float]) -> Views:
     """The first ``n`` poses of ``scene`` with camera poses noisy by (deg, mm per axis)."""
     base_T_hands = scene.base_T_hands[:n]
-    cam_T_worlds = (inverse_transform(scene.hand_T_cam) @ inverse_transform(base_T_hands)
-                    @ scene.base_T_world)
-    noisy = perturb_poses(cam_T_worlds, np.random.default_rng([*scene.seed, n]),
-                          1e-3 * noise[1], np.radians(noise[0]))
+    cam_T_worlds = (
+        inverse_transform(scene.hand_T_cam) @ inverse_transform(base_T_hands) @ scene.base_T_world
+    )
+    noisy = perturb_poses(
+        cam_T_worlds, np.random.default_rng([*scene.seed, n]), 1e-3 * noise[1], np.radians(noise[0])
+    )
     return Views(base_T_hands, noisy, inverse_transform(base_T_hands))
 
 
@@ -234,10 +243,13 @@ def opencv_axxb(method: int) -> Prepare:
         R_target2cam, t_target2cam = rt(v.cam_T_worlds)
 
         def call() -> object:
-            return cv2.calibrateHandEye(R_gripper2base=R_gripper2base,
-                                        t_gripper2base=t_gripper2base,
-                                        R_target2cam=R_target2cam, t_target2cam=t_target2cam,
-                                        method=method)
+            return cv2.calibrateHandEye(
+                R_gripper2base=R_gripper2base,
+                t_gripper2base=t_gripper2base,
+                R_target2cam=R_target2cam,
+                t_target2cam=t_target2cam,
+                method=method,
+            )
 
         return call, lambda out: (transform(*out),)  # cam2gripper = hand_T_eye
 
@@ -246,8 +258,10 @@ def opencv_axxb(method: int) -> Prepare:
 
 def ours_axyb(refine: bool) -> Prepare:
     def prepare(v: Views) -> tuple[Callable[[], object], Callable[[object], Estimates]]:
-        return ((lambda: solve_axyb(v.cam_T_worlds, v.hand_T_bases, refine=refine)),
-                (lambda r: (r.camera_T_hand, r.root_T_target)))
+        return (
+            (lambda: solve_axyb(v.cam_T_worlds, v.hand_T_bases, refine=refine)),
+            (lambda r: (r.camera_T_hand, r.root_T_target)),
+        )
 
     return prepare
 
@@ -259,14 +273,20 @@ def opencv_axyb(method: int) -> Prepare:
 
         def call() -> object:
             return cv2.calibrateRobotWorldHandEye(
-                R_world2cam=R_world2cam, t_world2cam=t_world2cam,
-                R_base2gripper=R_base2gripper, t_base2gripper=t_base2gripper, method=method)
+                R_world2cam=R_world2cam,
+                t_world2cam=t_world2cam,
+                R_base2gripper=R_base2gripper,
+                t_base2gripper=t_base2gripper,
+                method=method,
+            )
 
         def read(out: object) -> Estimates:
             R_base2world, t_base2world, R_gripper2cam, t_gripper2cam = out  # type: ignore[misc]
             # base2world = world_T_base = inv(Y); gripper2cam = cam_T_hand = X
-            return (transform(R_gripper2cam, t_gripper2cam),
-                    inverse_transform(transform(R_base2world, t_base2world)))
+            return (
+                transform(R_gripper2cam, t_gripper2cam),
+                inverse_transform(transform(R_base2world, t_base2world)),
+            )
 
         return call, read
 
@@ -311,8 +331,9 @@ class Outcome:
         self.messages.setdefault(kind, [0, msg])[0] += 1
 
 
-def errors_deg_mm(estimates: Estimates, truths: Estimates, metres_per_unit: float = 1.0
-                  ) -> NDArray[np.float64]:
+def errors_deg_mm(
+    estimates: Estimates, truths: Estimates, metres_per_unit: float = 1.0
+) -> NDArray[np.float64]:
     """Rotation angle (deg) and translation distance (mm) of each estimate from its truth."""
     out = []
     for est, true in zip(estimates, truths, strict=True):
@@ -334,8 +355,9 @@ def timed(call: Callable[[], object]) -> tuple[float, object, BaseException | No
     return time.perf_counter() - start, result, None
 
 
-def read_result(read: Callable[[object], Estimates], result: object,
-                exc: BaseException | None) -> tuple[Estimates | None, str | None]:
+def read_result(
+    read: Callable[[object], Estimates], result: object, exc: BaseException | None
+) -> tuple[Estimates | None, str | None]:
     """The estimates of one call, or None and a one-line message when it failed."""
     estimates = None
     if exc is None:
@@ -343,18 +365,22 @@ def read_result(read: Callable[[object], Estimates], result: object,
             estimates = read(result)
         except Exception as read_exc:
             exc = read_exc
-    if exc is None and estimates is not None and not all(
-            np.isfinite(e).all() for e in estimates):
+    if exc is None and estimates is not None and not all(np.isfinite(e).all() for e in estimates):
         exc = FloatingPointError("non-finite result")
     if exc is not None or estimates is None:
         return None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}"
     return estimates, None
 
 
-def run_setting(methods: Sequence[Method], trials: Sequence[Views],
-                truths: Sequence[Estimates], *, subset_trials: int,
-                metres_per_unit: float = 1.0, timed_calls: int = TIMED_CALLS
-                ) -> list[Outcome]:
+def run_setting(
+    methods: Sequence[Method],
+    trials: Sequence[Views],
+    truths: Sequence[Estimates],
+    *,
+    subset_trials: int,
+    metres_per_unit: float = 1.0,
+    timed_calls: int = TIMED_CALLS,
+) -> list[Outcome]:
     """Every method on every trial (``subset`` methods on the first ``subset_trials``),
     round robin within a trial, after warm-up calls on the first trial.
 
@@ -362,8 +388,9 @@ def run_setting(methods: Sequence[Method], trials: Sequence[Views],
     call alone; the others are called ``timed_calls`` times and their median is kept.
     """
     k = 2 * len(truths[0])
-    outcomes = [Outcome(np.full((len(trials), k), np.nan), np.full(len(trials), np.nan))
-                for _ in methods]
+    outcomes = [
+        Outcome(np.full((len(trials), k), np.nan), np.full(len(trials), np.nan)) for _ in methods
+    ]
     prepared = [[m.prepare(v) for m in methods] for v in trials]
     for call, _read in prepared[0]:
         if timed(call)[0] < SLOW_S:
@@ -401,8 +428,13 @@ def run_setting(methods: Sequence[Method], trials: Sequence[Views],
 
 def git_head() -> str:
     try:
-        out = subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
-                             capture_output=True, text=True, timeout=10, check=True)
+        out = subprocess.run(
+            ["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        )
     except (OSError, subprocess.SubprocessError):
         return "n/a"
     return out.stdout.strip()
@@ -411,8 +443,12 @@ def git_head() -> str:
 def solver_digests() -> list[tuple[str, str]]:
     """Short content hashes of the benchmarked modules (they may be uncommitted)."""
     out = []
-    for rel in ("identification/handeye.py", "identification/axb.py",
-                "identification/axb_iteration.py", "identification/axb_refinement.py"):
+    for rel in (
+        "identification/handeye.py",
+        "identification/axb.py",
+        "identification/axb_iteration.py",
+        "identification/axb_refinement.py",
+    ):
         path = REPO / rel
         digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else "n/a"
         out.append((rel, digest))
@@ -427,8 +463,7 @@ def medians(out: Outcome, trials: NDArray[np.bool_] | None = None) -> NDArray[np
     """Median of each error column over the trials (of ``trials``, a mask) that ran and did
     not fail; NaN if none."""
     ok = ~np.isnan(out.errors[:, 0]) & (True if trials is None else trials)
-    return (np.median(out.errors[ok], axis=0) if ok.any()
-            else np.full(out.errors.shape[1], np.nan))
+    return np.median(out.errors[ok], axis=0) if ok.any() else np.full(out.errors.shape[1], np.nan)
 
 
 def iqrs(out: Outcome) -> NDArray[np.float64]:
@@ -439,8 +474,9 @@ def iqrs(out: Outcome) -> NDArray[np.float64]:
     return q75 - q25
 
 
-def best_opencv(methods: Sequence[Method], outcomes: Sequence[Outcome],
-                trials: NDArray[np.bool_] | None = None) -> tuple[NDArray[np.int_], int]:
+def best_opencv(
+    methods: Sequence[Method], outcomes: Sequence[Outcome], trials: NDArray[np.bool_] | None = None
+) -> tuple[NDArray[np.int_], int]:
     """Index of the OpenCV method with the lowest median in each error column, and of the
     fastest one (median time), over ``trials`` (a mask; default all)."""
     theirs = [j for j, m in enumerate(methods) if not m.ours]
@@ -451,8 +487,7 @@ def best_opencv(methods: Sequence[Method], outcomes: Sequence[Outcome],
     return np.array(theirs)[np.argmin(med, axis=0)], theirs[int(np.argmin(times))]
 
 
-def setting_rows(n: int, methods: Sequence[Method], outcomes: Sequence[Outcome]
-                 ) -> list[list[str]]:
+def setting_rows(n: int, methods: Sequence[Method], outcomes: Sequence[Outcome]) -> list[list[str]]:
     best_err, best_time = best_opencv(methods, outcomes)
     rows = []
     for j, (m, out) in enumerate(zip(methods, outcomes, strict=True)):
@@ -462,14 +497,20 @@ def setting_rows(n: int, methods: Sequence[Method], outcomes: Sequence[Outcome]
             star = "*" if best_err[c] == j else ""
             cells += [g(med[c]) + star, g(iqr[c])]
         us = 1e6 * float(np.nanmedian(out.seconds))
-        cells += [f"{us:.1f}" + ("*" if best_time == j else ""), f"{out.identity}",
-                  f"{out.unconverged}", f"{out.failed}", f"{out.runs}"]
+        cells += [
+            f"{us:.1f}" + ("*" if best_time == j else ""),
+            f"{out.identity}",
+            f"{out.unconverged}",
+            f"{out.failed}",
+            f"{out.runs}",
+        ]
         rows.append(cells)
     return rows
 
 
-def print_notes(methods: Sequence[Method], per_n: Sequence[Sequence[Outcome]],
-                views_list: Sequence[int]) -> None:
+def print_notes(
+    methods: Sequence[Method], per_n: Sequence[Sequence[Outcome]], views_list: Sequence[int]
+) -> None:
     for n, outcomes in zip(views_list, per_n, strict=True):
         for m, out in zip(methods, outcomes, strict=True):
             for count, example in out.messages.values():
@@ -484,9 +525,11 @@ def error_headers(names: Sequence[str]) -> list[str]:
 
 
 COUNT_HEADERS = ["us/solve", "ident", "unconv", "fail", "runs"]
-COUNT_NOTE = ("ident = answers equal to the identity (OpenCV's silent failure); unconv = "
-              "answers flagged\nconverged=False; fail = exceptions or non-finite answers "
-              "(excluded from the medians);\nruns = trials run.")
+COUNT_NOTE = (
+    "ident = answers equal to the identity (OpenCV's silent failure); unconv = "
+    "answers flagged\nconverged=False; fail = exceptions or non-finite answers "
+    "(excluded from the medians);\nruns = trials run."
+)
 
 
 # -- sections ----------------------------------------------------------------------------
@@ -507,8 +550,14 @@ class Summary:
     fastest: str
 
 
-def summarise(problem: str, noise: tuple[float, float], n: int, methods: Sequence[Method],
-              outcomes: Sequence[Outcome], columns: tuple[str, ...]) -> list[Summary]:
+def summarise(
+    problem: str,
+    noise: tuple[float, float],
+    n: int,
+    methods: Sequence[Method],
+    outcomes: Sequence[Outcome],
+    columns: tuple[str, ...],
+) -> list[Summary]:
     out = []
     for m, o in zip(methods, outcomes, strict=True):
         if m.ours:
@@ -521,41 +570,69 @@ def summarise(problem: str, noise: tuple[float, float], n: int, methods: Sequenc
                 lower = int(np.sum(o.errors[both, c] < outcomes[j].errors[both, c]))
                 wins.append(f"{lower} of {int(both.sum())}")
             ratio = float(np.nanmedian(o.seconds / outcomes[best_time].seconds))
-            out.append(Summary(problem, noise, n, m.name, columns, medians(o), best,
-                               tuple(methods[j].name for j in best_err), tuple(wins), ratio,
-                               methods[best_time].name))
+            out.append(
+                Summary(
+                    problem,
+                    noise,
+                    n,
+                    m.name,
+                    columns,
+                    medians(o),
+                    best,
+                    tuple(methods[j].name for j in best_err),
+                    tuple(wins),
+                    ratio,
+                    methods[best_time].name,
+                )
+            )
     return out
 
 
 def noise_label(noise: tuple[float, float]) -> str:
-    return ("no noise" if noise == (0.0, 0.0)
-            else f"{noise[0]:g} deg + {noise[1]:g} mm/axis")
+    return "no noise" if noise == (0.0, 0.0) else f"{noise[0]:g} deg + {noise[1]:g} mm/axis"
 
 
-def section_synthetic(title: str, problem: str, methods: Sequence[Method],
-                      scenes: Sequence[Scene], views_list: Sequence[int],
-                      noises: Sequence[tuple[float, float]],
-                      truths: Callable[[Scene], Estimates], names: Sequence[str],
-                      subset_trials: int) -> list[Summary]:
+def section_synthetic(
+    title: str,
+    problem: str,
+    methods: Sequence[Method],
+    scenes: Sequence[Scene],
+    views_list: Sequence[int],
+    noises: Sequence[tuple[float, float]],
+    truths: Callable[[Scene], Estimates],
+    names: Sequence[str],
+    subset_trials: int,
+) -> list[Summary]:
     print(f"\n{title}")
     slow = [m.name for m in methods if m.subset]
     if slow and subset_trials < len(scenes):
-        print(f"   ({', '.join(slow)}: first {subset_trials} trials only, see --subset-trials; "
-              "its ratios\n   and win counts use those trials)")
+        print(
+            f"   ({', '.join(slow)}: first {subset_trials} trials only, see --subset-trials; "
+            "its ratios\n   and win counts use those trials)"
+        )
     summaries = []
     for noise in noises:
         per_n = []
         rows: list[list[str]] = []
         for n in views_list:
             trials = [views(s, n, noise) for s in scenes]
-            outcomes = run_setting(methods, trials, [truths(s) for s in scenes],
-                                   subset_trials=subset_trials)
+            outcomes = run_setting(
+                methods, trials, [truths(s) for s in scenes], subset_trials=subset_trials
+            )
             per_n.append(outcomes)
             rows += setting_rows(n, methods, outcomes)
-            summaries += summarise(problem, noise, n, methods, outcomes,
-                                   tuple(f"{x} {u}" for x in names for u in ("rot", "mm")))
-        print(f"\n{problem}, camera-pose noise {noise_label(noise)}, {len(scenes)} trials "
-              "(median, IQR over trials; * = best OpenCV method in the column)")
+            summaries += summarise(
+                problem,
+                noise,
+                n,
+                methods,
+                outcomes,
+                tuple(f"{x} {u}" for x in names for u in ("rot", "mm")),
+            )
+        print(
+            f"\n{problem}, camera-pose noise {noise_label(noise)}, {len(scenes)} trials "
+            "(median, IQR over trials; * = best OpenCV method in the column)"
+        )
         print(format_table(["n", "method", *error_headers(names), *COUNT_HEADERS], rows))
         print_notes(methods, per_n, views_list)
     print(COUNT_NOTE)
@@ -563,20 +640,35 @@ def section_synthetic(title: str, problem: str, methods: Sequence[Method],
 
 
 def section_small_motion(trials: int, seed: int) -> list[Summary]:
-    print(f"\n1b. AX = XB with small motions: {SMALL_MOTION_VIEWS} poses rotated "
-          f"U(0, {SMALL_MOTION_DEG:g} deg) from the reference\n    (every relative "
-          f"rotation < {2 * SMALL_MOTION_DEG:g} deg), {trials} trials")
-    scenes = [make_scene(np.random.default_rng([seed, 1, t]), SMALL_MOTION_VIEWS,
-                         SMALL_MOTION_DEG, (seed, 1, t)) for t in range(trials)]
+    print(
+        f"\n1b. AX = XB with small motions: {SMALL_MOTION_VIEWS} poses rotated "
+        f"U(0, {SMALL_MOTION_DEG:g} deg) from the reference\n    (every relative "
+        f"rotation < {2 * SMALL_MOTION_DEG:g} deg), {trials} trials"
+    )
+    scenes = [
+        make_scene(
+            np.random.default_rng([seed, 1, t]), SMALL_MOTION_VIEWS, SMALL_MOTION_DEG, (seed, 1, t)
+        )
+        for t in range(trials)
+    ]
     rows: list[list[str]] = []
     notes = []
     summaries = []
     for noise in NOISE_LEVELS:
-        outcomes = run_setting(AXXB_METHODS, [views(s, SMALL_MOTION_VIEWS, noise)
-                                              for s in scenes],
-                               [(s.hand_T_cam,) for s in scenes], subset_trials=trials)
-        summaries += summarise("AX = XB, small motions", noise, SMALL_MOTION_VIEWS,
-                               AXXB_METHODS, outcomes, ("X rot", "X mm"))
+        outcomes = run_setting(
+            AXXB_METHODS,
+            [views(s, SMALL_MOTION_VIEWS, noise) for s in scenes],
+            [(s.hand_T_cam,) for s in scenes],
+            subset_trials=trials,
+        )
+        summaries += summarise(
+            "AX = XB, small motions",
+            noise,
+            SMALL_MOTION_VIEWS,
+            AXXB_METHODS,
+            outcomes,
+            ("X rot", "X mm"),
+        )
         for j, r in enumerate(setting_rows(SMALL_MOTION_VIEWS, AXXB_METHODS, outcomes)):
             rows.append([noise_label(noise) if j == 0 else "", *r[1:]])
         notes.append((noise, outcomes))
@@ -584,8 +676,7 @@ def section_small_motion(trials: int, seed: int) -> list[Summary]:
     for noise, outcomes in notes:
         for m, out in zip(AXXB_METHODS, outcomes, strict=True):
             for count, example in out.messages.values():
-                print(f"  {noise_label(noise)}: {m.name} failed {count}x, e.g. "
-                      f"{example[:150]}")
+                print(f"  {noise_label(noise)}: {m.name} failed {count}x, e.g. {example[:150]}")
     print(COUNT_NOTE)
     return summaries
 
@@ -594,8 +685,10 @@ def load_tabb() -> tuple[Views, Estimates, Estimates]:
     """Tabb DS1 in our conventions (mm), the A = X B Y reference (cam_T_hand, base_T_world)
     and the AX = XB reference (hand_T_eye,)."""
     if not TABB_JSON.is_file():
-        sys.exit(f"bench_handeye.py: {TABB_JSON}: Tabb DS1 data missing (it ships with the "
-                 f"repository in tests/data/tabb_ds1/)")
+        sys.exit(
+            f"bench_handeye.py: {TABB_JSON}: Tabb DS1 data missing (it ships with the "
+            f"repository in tests/data/tabb_ds1/)"
+        )
     data = json.loads(TABB_JSON.read_text())
     cam_T_worlds = np.array(data[TABB_A_KEY], dtype=float)
     hand_T_bases = np.array(data[TABB_B_KEY], dtype=float)
@@ -609,8 +702,7 @@ def load_tabb() -> tuple[Views, Estimates, Estimates]:
 TabbRun = tuple[Method, str, NDArray[np.float64] | str, float, Estimates | None, bool]
 
 
-def tabb_runs(methods: Sequence[Method], v_mm: Views, reference_mm: Estimates
-              ) -> list[TabbRun]:
+def tabb_runs(methods: Sequence[Method], v_mm: Views, reference_mm: Estimates) -> list[TabbRun]:
     """Each method on the mm data and on the same data in metres: errors against the
     reference in deg/mm (or the failure message), us per solve, estimates in mm, and
     whether the answer is flagged ``converged=False``.
@@ -633,10 +725,19 @@ def tabb_runs(methods: Sequence[Method], v_mm: Views, reference_mm: Estimates
             if estimates is None:
                 runs.append((m, unit, str(msg), us, None, False))
                 continue
-            est_mm = tuple(transform(e[:3, :3], e[:3, 3] * metres_per_unit * 1e3)
-                           for e in estimates)
-            runs.append((m, unit, errors_deg_mm(est_mm, reference_mm, 1e-3), us, est_mm,
-                         not getattr(result, "converged", True)))
+            est_mm = tuple(
+                transform(e[:3, :3], e[:3, 3] * metres_per_unit * 1e3) for e in estimates
+            )
+            runs.append(
+                (
+                    m,
+                    unit,
+                    errors_deg_mm(est_mm, reference_mm, 1e-3),
+                    us,
+                    est_mm,
+                    not getattr(result, "converged", True),
+                )
+            )
     return runs
 
 
@@ -659,33 +760,49 @@ TabbRow = tuple[str, Method, str, tuple[str, ...], NDArray[np.float64]]
 
 def section_tabb() -> list[TabbRow]:
     """Print the Tabb DS1 tables; return (problem, method, unit, columns, errors) rows."""
-    print(f"\n3. Real data: Tabb DS1 ({TABB_JSON.parent.name}), 88 poses, against Tabb's "
-          "reference\n   (reprojection-optimised, AA_RPI; itself an estimate). Lengths "
-          "given in mm (as published)\n   and in m (the same numbers / 1000); errors "
-          "always in mm. 'm vs mm' = how far the\n   m-input answer (converted to mm) lies "
-          "from the mm-input answer: nonzero = depends on the unit.\n   'OpenCV test' = "
-          f"within the tolerance of OpenCV's own regression test on this data\n   "
-          f"(< {OPENCV_TEST_DEG:g} deg and < {OPENCV_TEST_MM:g} mm on every transform).")
+    print(
+        f"\n3. Real data: Tabb DS1 ({TABB_JSON.parent.name}), 88 poses, against Tabb's "
+        "reference\n   (reprojection-optimised, AA_RPI; itself an estimate). Lengths "
+        "given in mm (as published)\n   and in m (the same numbers / 1000); errors "
+        "always in mm. 'm vs mm' = how far the\n   m-input answer (converted to mm) lies "
+        "from the mm-input answer: nonzero = depends on the unit.\n   'OpenCV test' = "
+        f"within the tolerance of OpenCV's own regression test on this data\n   "
+        f"(< {OPENCV_TEST_DEG:g} deg and < {OPENCV_TEST_MM:g} mm on every transform)."
+    )
     v_mm, ref_axyb, ref_axxb = load_tabb()
     collected: list[TabbRow] = []
     for problem, methods, reference, names in (
-            ("AX = XB: X = hand_T_eye (vs inv(Tabb's Z))", AXXB_METHODS, ref_axxb, ["X"]),
-            ("A = X B Y: X = cam_T_hand (vs Tabb's Z), inv(Y) = base2world (vs Tabb's X)",
-             AXYB_METHODS, ref_axyb, ["X", "inv(Y)"])):
+        ("AX = XB: X = hand_T_eye (vs inv(Tabb's Z))", AXXB_METHODS, ref_axxb, ["X"]),
+        (
+            "A = X B Y: X = cam_T_hand (vs Tabb's Z), inv(Y) = base2world (vs Tabb's X)",
+            AXYB_METHODS,
+            ref_axyb,
+            ["X", "inv(Y)"],
+        ),
+    ):
         runs = tabb_runs(methods, v_mm, reference)
         by_key = {(r[0].name, r[1]): r[4] for r in runs}
         rows = []
         for m, unit, err, us, est, unconverged in runs:
             if isinstance(err, str) or est is None:
-                rows.append([m.name, unit, *(["fail"] * 2 * len(names)), "", f"{us:.0f}",
-                             "", str(err)[:60]])
+                rows.append(
+                    [m.name, unit, *(["fail"] * 2 * len(names)), "", f"{us:.0f}", "", str(err)[:60]]
+                )
                 continue
             if names[-1] == "inv(Y)":  # compare base2world as OpenCV's test does
                 err = err.copy()
-                err[2:] = errors_deg_mm((inverse_transform(est[1]),),
-                                        (inverse_transform(reference[1]),), 1e-3)
-            collected.append((problem.split(":")[0], m, unit,
-                              tuple(f"{x} {u}" for x in names for u in ("rot", "mm")), err))
+                err[2:] = errors_deg_mm(
+                    (inverse_transform(est[1]),), (inverse_transform(reference[1]),), 1e-3
+                )
+            collected.append(
+                (
+                    problem.split(":")[0],
+                    m,
+                    unit,
+                    tuple(f"{x} {u}" for x in names for u in ("rot", "mm")),
+                    err,
+                )
+            )
             mm_est = by_key.get((m.name, "mm"))
             if unit == "m" and mm_est is not None:
                 diff = errors_deg_mm(est, mm_est, 1e-3)
@@ -693,14 +810,26 @@ def section_tabb() -> list[TabbRow]:
             else:
                 vs = ""
             ok = bool(np.all(err[0::2] < OPENCV_TEST_DEG) and np.all(err[1::2] < OPENCV_TEST_MM))
-            rows.append([m.name, unit, *(g(x) for x in err), vs, f"{us:.0f}",
-                         "pass" if ok else "FAIL", "converged=False" if unconverged else ""])
+            rows.append(
+                [
+                    m.name,
+                    unit,
+                    *(g(x) for x in err),
+                    vs,
+                    f"{us:.0f}",
+                    "pass" if ok else "FAIL",
+                    "converged=False" if unconverged else "",
+                ]
+            )
         heads = []
         for name in names:
             heads += [f"{name} rot deg", f"{name} mm"]
         print(f"\n{problem}")
-        print(format_table(["method", "lengths", *heads, "m vs mm", "us/solve",
-                            "OpenCV test", "note"], rows))
+        print(
+            format_table(
+                ["method", "lengths", *heads, "m vs mm", "us/solve", "OpenCV test", "note"], rows
+            )
+        )
     return collected
 
 
@@ -740,22 +869,28 @@ def print_tabb_summary(tabb: Sequence[TabbRow], losses: dict[str, list[str]]) ->
                         u = "deg" if col.endswith("rot") else "mm"
                         losses.setdefault(
                             f"Tabb DS1, {problem}, lengths in {unit}, {r[1].name}:", []
-                        ).append(f"{col} error {ours:.3g} {u} vs {best[1].name} "
-                                 f"{best_c:.3g} {u} (x{ours / best_c:.2f})")
-                rows.append([problem, unit, r[1].name,
-                             *(cells.get(col, "") for col in all_columns)])
-    print("\nTabb DS1: kinfw error / best OpenCV error (same column, same length unit) "
-          "against Tabb's\nreference, which is an estimate too: lower = closer to Tabb's "
-          "answer, not necessarily to the truth")
-    print(format_table(["problem", "lengths", "kinfw", *(f"{c} ratio" for c in all_columns)],
-                       rows))
+                        ).append(
+                            f"{col} error {ours:.3g} {u} vs {best[1].name} "
+                            f"{best_c:.3g} {u} (x{ours / best_c:.2f})"
+                        )
+                rows.append(
+                    [problem, unit, r[1].name, *(cells.get(col, "") for col in all_columns)]
+                )
+    print(
+        "\nTabb DS1: kinfw error / best OpenCV error (same column, same length unit) "
+        "against Tabb's\nreference, which is an estimate too: lower = closer to Tabb's "
+        "answer, not necessarily to the truth"
+    )
+    print(format_table(["problem", "lengths", "kinfw", *(f"{c} ratio" for c in all_columns)], rows))
 
 
 def print_summary(summaries: Sequence[Summary], tabb: Sequence[TabbRow]) -> None:
-    print("\n4. Summary: kinfw median error / best OpenCV median error in the same column, "
-          "and kinfw time /\n   fastest OpenCV time in the same trial (median over trials). "
-          "< 1 = kinfw better.\n   '~0' = both errors at rounding level (< "
-          f"{EXACT_DEG:g} deg, < {EXACT_MM:g} mm), no ratio; 'a vs ~0' = only one is.")
+    print(
+        "\n4. Summary: kinfw median error / best OpenCV median error in the same column, "
+        "and kinfw time /\n   fastest OpenCV time in the same trial (median over trials). "
+        "< 1 = kinfw better.\n   '~0' = both errors at rounding level (< "
+        f"{EXACT_DEG:g} deg, < {EXACT_MM:g} mm), no ratio; 'a vs ~0' = only one is."
+    )
     losses: dict[str, list[str]] = {}
     for problem in dict.fromkeys(s.problem for s in summaries):
         group = [s for s in summaries if s.problem == problem]
@@ -763,8 +898,7 @@ def print_summary(summaries: Sequence[Summary], tabb: Sequence[TabbRow]) -> None
         rows = []
         for s in group:
             cells = [noise_label(s.noise), f"{s.n}", s.method]
-            lost = losses.setdefault(f"{problem}, {noise_label(s.noise)}, n={s.n}, "
-                                     f"{s.method}:", [])
+            lost = losses.setdefault(f"{problem}, {noise_label(s.noise)}, n={s.n}, {s.method}:", [])
             for c, col in enumerate(columns):
                 floor = EXACT_DEG if col.endswith("rot") else EXACT_MM
                 ours, best = s.ours[c], s.best[c]
@@ -773,20 +907,28 @@ def print_summary(summaries: Sequence[Summary], tabb: Sequence[TabbRow]) -> None
                     unit = "deg" if col.endswith("rot") else "mm"
                     shown = "~0 (rounding)" if best < floor else f"{best:.3g} {unit}"
                     times = f"x{ours / best:.2f}; " if best >= floor else ""
-                    lost.append(f"{col} error {ours:.3g} {unit} vs {s.best_names[c]} "
-                                f"{shown} ({times}kinfw lower in {s.wins[c]} trials)")
+                    lost.append(
+                        f"{col} error {ours:.3g} {unit} vs {s.best_names[c]} "
+                        f"{shown} ({times}kinfw lower in {s.wins[c]} trials)"
+                    )
             cells.append(f"{s.time_ratio:.2f}")
             cells.append(s.fastest.replace("OpenCV ", ""))
             if s.time_ratio > 1.0:
                 lost.append(f"time x{s.time_ratio:.2f} of {s.fastest}")
             rows.append(cells)
         print(f"\n{problem}")
-        print(format_table(["noise", "n", "kinfw", *(f"{c} ratio" for c in columns),
-                            "time ratio", "fastest"], rows))
+        print(
+            format_table(
+                ["noise", "n", "kinfw", *(f"{c} ratio" for c in columns), "time ratio", "fastest"],
+                rows,
+            )
+        )
     print_tabb_summary(tabb, losses)
     losses = {k: v for k, v in losses.items() if v}
-    print(f"\nWhere kinfw loses (median error above the best OpenCV median, or slower than "
-          f"the fastest; {len(losses)} cases):")
+    print(
+        f"\nWhere kinfw loses (median error above the best OpenCV median, or slower than "
+        f"the fastest; {len(losses)} cases):"
+    )
     for head, items in losses.items():
         print(f"  {head}")
         for item in items:
@@ -795,18 +937,27 @@ def print_summary(summaries: Sequence[Summary], tabb: Sequence[TabbRow]) -> None
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=None,
-                        help=f"random setups per setting (default {FULL_TRIALS}, or "
-                             f"{QUICK_TRIALS} with --quick)")
-    parser.add_argument("--quick", action="store_true",
-                        help=f"views {QUICK_VIEWS} only, {QUICK_TRIALS} trials")
-    parser.add_argument("--subset-trials", type=int, default=None,
-                        help="run the pure paper iteration (refine=False), which can be slow, "
-                             "on the first M trials only (default: all)")
+    parser.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        help=f"random setups per setting (default {FULL_TRIALS}, or {QUICK_TRIALS} with --quick)",
+    )
+    parser.add_argument(
+        "--quick", action="store_true", help=f"views {QUICK_VIEWS} only, {QUICK_TRIALS} trials"
+    )
+    parser.add_argument(
+        "--subset-trials",
+        type=int,
+        default=None,
+        help="run the pure paper iteration (refine=False), which can be slow, "
+        "on the first M trials only (default: all)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
     args = parser.parse_args(argv)
-    trials = args.trials if args.trials is not None else (QUICK_TRIALS if args.quick
-                                                          else FULL_TRIALS)
+    trials = (
+        args.trials if args.trials is not None else (QUICK_TRIALS if args.quick else FULL_TRIALS)
+    )
     if trials < 1:
         parser.error("--trials: expected at least 1")
     subset_trials = min(trials, trials if args.subset_trials is None else args.subset_trials)
@@ -818,34 +969,64 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     started = time.perf_counter()
     print("kinfw hand-eye benchmark: identification.handeye / identification.axb vs OpenCV")
-    print(machine_info(
-        [("opencv", f"{cv2.__version__} (threads {cv2.getNumThreads()})")],
-        code=[("kinfw", f"{REPO} (git {git_head()})"),
-              *(("solver", f"{path} sha256 {digest}") for path, digest in solver_digests())]))
-    print(f"mode       {'quick' if args.quick else 'full'}, trials {trials} (refine=False: "
-          f"{subset_trials}), views {views_list}, seed {args.seed}")
-    print(f"timing     per trial median of {TIMED_CALLS} calls (1 call if slower than "
-          f"{1e3 * SLOW_S:g} ms), warm-up {WARMUP} calls\n           (1 if slow), gc "
-          "disabled while timing; OpenCV's log and kinfw's warnings silenced\n           "
-          "(identity answers and converged=False are counted instead)")
-    print(f"data       robot poses: reference rotated U(0, {MAX_ROTATION_DEG:g} deg) about "
-          f"random axes, shifted U(+-{HALF_SHIFT_M:g} m)/axis;\n           target "
-          f"{TARGET_DISTANCE_M:g} m in front of the reference camera; noise on the camera "
-          "poses only\n           (rotation N(0, sigma) about a random axis, translation "
-          "N(0, sigma_t) per axis):\n           "
-          + ", ".join(noise_label(nz) for nz in NOISE_LEVELS))
-    scenes = [make_scene(np.random.default_rng([args.seed, 0, t]), max(FULL_VIEWS),
-                         MAX_ROTATION_DEG, (args.seed, 0, t)) for t in range(trials)]
+    print(
+        machine_info(
+            [("opencv", f"{cv2.__version__} (threads {cv2.getNumThreads()})")],
+            code=[
+                ("kinfw", f"{REPO} (git {git_head()})"),
+                *(("solver", f"{path} sha256 {digest}") for path, digest in solver_digests()),
+            ],
+        )
+    )
+    print(
+        f"mode       {'quick' if args.quick else 'full'}, trials {trials} (refine=False: "
+        f"{subset_trials}), views {views_list}, seed {args.seed}"
+    )
+    print(
+        f"timing     per trial median of {TIMED_CALLS} calls (1 call if slower than "
+        f"{1e3 * SLOW_S:g} ms), warm-up {WARMUP} calls\n           (1 if slow), gc "
+        "disabled while timing; OpenCV's log and kinfw's warnings silenced\n           "
+        "(identity answers and converged=False are counted instead)"
+    )
+    print(
+        f"data       robot poses: reference rotated U(0, {MAX_ROTATION_DEG:g} deg) about "
+        f"random axes, shifted U(+-{HALF_SHIFT_M:g} m)/axis;\n           target "
+        f"{TARGET_DISTANCE_M:g} m in front of the reference camera; noise on the camera "
+        "poses only\n           (rotation N(0, sigma) about a random axis, translation "
+        "N(0, sigma_t) per axis):\n           " + ", ".join(noise_label(nz) for nz in NOISE_LEVELS)
+    )
+    scenes = [
+        make_scene(
+            np.random.default_rng([args.seed, 0, t]),
+            max(FULL_VIEWS),
+            MAX_ROTATION_DEG,
+            (args.seed, 0, t),
+        )
+        for t in range(trials)
+    ]
     summaries = section_synthetic(
         "1. AX = XB (eye-in-hand): X = hand_T_eye; A = base_T_hand, B = cam_T_target",
-        "AX = XB", AXXB_METHODS, scenes, views_list, NOISE_LEVELS,
-        lambda s: (s.hand_T_cam,), ["X"], subset_trials)
+        "AX = XB",
+        AXXB_METHODS,
+        scenes,
+        views_list,
+        NOISE_LEVELS,
+        lambda s: (s.hand_T_cam,),
+        ["X"],
+        subset_trials,
+    )
     summaries += section_small_motion(trials, args.seed)
     summaries += section_synthetic(
         "2. A = X B Y: A = cam_T_world, B = hand_T_base, X = cam_T_hand, Y = base_T_world",
-        "A = X B Y", AXYB_METHODS, scenes, views_list, NOISE_LEVELS,
-        lambda s: (inverse_transform(s.hand_T_cam), s.base_T_world), ["X", "Y"],
-        subset_trials)
+        "A = X B Y",
+        AXYB_METHODS,
+        scenes,
+        views_list,
+        NOISE_LEVELS,
+        lambda s: (inverse_transform(s.hand_T_cam), s.base_T_world),
+        ["X", "Y"],
+        subset_trials,
+    )
     tabb = section_tabb()
     print_summary(summaries, tabb)
     print(wall_time_line(started))

@@ -71,8 +71,9 @@ def gc_disabled() -> Iterator[None]:
             gc.enable()
 
 
-def time_interleaved(calls: Sequence[Callable[[], object]], repeats: int, *, warmup: int
-                     ) -> list[Timings]:
+def time_interleaved(
+    calls: Sequence[Callable[[], object]], repeats: int, *, warmup: int
+) -> list[Timings]:
     """Time each call ``repeats`` times, round robin, after ``warmup`` untimed rounds.
 
     Round robin puts the calls of one repeat next to each other in time, so a ratio of
@@ -99,15 +100,19 @@ def slope(x: Sequence[float], y: Sequence[float]) -> float:
 # -- command line ------------------------------------------------------------------------
 
 
-def parse_repeats(argv: Sequence[str] | None, description: str, *, quick_help: str,
-                  full: int, quick: int) -> tuple[argparse.Namespace, int]:
+def parse_repeats(
+    argv: Sequence[str] | None, description: str, *, quick_help: str, full: int, quick: int
+) -> tuple[argparse.Namespace, int]:
     """The command line of a benchmark timed in repeats, ``[--repeats R] [--quick]
     [--seed S]``: the arguments and the repeats, ``R`` or by default ``full`` (``quick``
     with ``--quick``); exits with a usage error when they are below 1."""
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--repeats", type=int, default=None,
-                        help=f"timed repeats per measurement (default {full}, or {quick} "
-                             "with --quick)")
+    parser.add_argument(
+        "--repeats",
+        type=int,
+        default=None,
+        help=f"timed repeats per measurement (default {full}, or {quick} with --quick)",
+    )
     parser.add_argument("--quick", action="store_true", help=quick_help)
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
     args = parser.parse_args(argv)
@@ -119,8 +124,10 @@ def parse_repeats(argv: Sequence[str] | None, description: str, *, quick_help: s
 
 def mode_line(args: argparse.Namespace, repeats: int, warmup: int) -> str:
     """The header line after :func:`machine_info` of a :func:`parse_repeats` benchmark."""
-    return (f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
-            f"warm-up {warmup}, seed {args.seed}, gc disabled while timing")
+    return (
+        f"mode       {'quick' if args.quick else 'full'}, repeats {repeats}, "
+        f"warm-up {warmup}, seed {args.seed}, gc disabled while timing"
+    )
 
 
 # -- output ------------------------------------------------------------------------------
@@ -131,48 +138,61 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     widths = [max(len(h), *(len(r[k]) for r in rows)) for k, h in enumerate(headers)]
 
     def line(cells: Sequence[str]) -> str:
-        return "  ".join(c.ljust(w) if k == 0 else c.rjust(w)
-                         for k, (c, w) in enumerate(zip(cells, widths, strict=True)))
+        return "  ".join(
+            c.ljust(w) if k == 0 else c.rjust(w)
+            for k, (c, w) in enumerate(zip(cells, widths, strict=True))
+        )
 
     return "\n".join([line(headers), line(["-" * w for w in widths]), *map(line, rows)])
 
 
 def load_average() -> str:
     """The 1, 5 and 15 minute load averages, or "n/a" where the OS has none."""
-    return ("n/a" if not hasattr(os, "getloadavg")
-            else " ".join(f"{x:.2f}" for x in os.getloadavg()))
+    return "n/a" if not hasattr(os, "getloadavg") else " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def machine_info(libraries: Sequence[tuple[str, str]] = (), *,
-                 probes: Sequence[tuple[str, str]] = (),
-                 code: Sequence[tuple[str, str]] = (("kinfw", str(REPO)),)) -> str:
+def machine_info(
+    libraries: Sequence[tuple[str, str]] = (),
+    *,
+    probes: Sequence[tuple[str, str]] = (),
+    code: Sequence[tuple[str, str]] = (("kinfw", str(REPO)),),
+) -> str:
     """The header of a benchmark's output, one ``label  value`` line each.
 
     Python and numpy, then ``libraries`` (name, version); platform, processor, CPUs,
     the BLAS thread variables and the load average; then ``probes`` (label, a measured
     value) and ``code``, the benchmarked code (default: the repository's path).
     """
-    affinity = (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
-                else "n/a")
-    threads = ", ".join(f"{v}={os.environ[v]}" for v in
-                        ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-                        if v in os.environ) or "not set"
-    return "\n".join(f"{label:<10} {value}" for label, value in [
-        ("python", f"{platform.python_version()} ({platform.python_implementation()})"),
-        ("numpy", np.__version__),
-        *libraries,
-        ("platform", platform.platform()),
-        ("processor", platform.processor() or platform.machine()),
-        ("CPUs", f"{os.cpu_count()} (usable by this process: {affinity})"),
-        ("BLAS env", threads),
-        ("load avg", f"{load_average()} (1, 5, 15 min; other load skews absolute times)"),
-        *probes,
-        *code,
-    ])
+    affinity = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else "n/a"
+    threads = (
+        ", ".join(
+            f"{v}={os.environ[v]}"
+            for v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+            if v in os.environ
+        )
+        or "not set"
+    )
+    return "\n".join(
+        f"{label:<10} {value}"
+        for label, value in [
+            ("python", f"{platform.python_version()} ({platform.python_implementation()})"),
+            ("numpy", np.__version__),
+            *libraries,
+            ("platform", platform.platform()),
+            ("processor", platform.processor() or platform.machine()),
+            ("CPUs", f"{os.cpu_count()} (usable by this process: {affinity})"),
+            ("BLAS env", threads),
+            ("load avg", f"{load_average()} (1, 5, 15 min; other load skews absolute times)"),
+            *probes,
+            *code,
+        ]
+    )
 
 
 def wall_time_line(started: float) -> str:
     """The last line of a benchmark: wall time since ``started`` (``time.perf_counter``)
     and the load average now."""
-    return (f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
-            f"load avg now {load_average()}")
+    return (
+        f"\ntotal benchmark wall time {time.perf_counter() - started:.1f} s, "
+        f"load avg now {load_average()}"
+    )

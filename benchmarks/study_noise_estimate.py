@@ -51,8 +51,7 @@ def demo_data(seed: int, outliers: float) -> tuple[Robot, Measurements]:
     """The nominal head and a ``kinfw demo`` dataset of a perturbed one."""
     nominal = load_robot(builtin_head_urdf())
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0,
-                                     axis_deg=1.0))
+    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0))
     plates, cameras = nominal.default_frames, nominal.default_cameras
     names = nominal.topology((*plates, *cameras)).joint_names
     lower, upper = nominal.joint_limits(names)
@@ -62,19 +61,21 @@ def demo_data(seed: int, outliers: float) -> tuple[Robot, Measurements]:
     w_T_target = default_target_pose(truth, qs2, names, cameras)
     data = concatenate_measurements(
         simulate(truth, qs1, names, frames=plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target,
-                 **noise))
+        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise),
+    )
     if outliers > 0.0:
-        data, _ = plant_outliers(data, rng, fraction=outliers, distance_m=0.02,
-                                 angle_rad=np.radians(10.0))
+        data, _ = plant_outliers(
+            data, rng, fraction=outliers, distance_m=0.02, angle_rad=np.radians(10.0)
+        )
     return nominal, data
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=30, help="datasets (default 30)")
-    parser.add_argument("--outliers", type=float, default=0.0,
-                        help="fraction of gross outliers (default 0)")
+    parser.add_argument(
+        "--outliers", type=float, default=0.0, help="fraction of gross outliers (default 0)"
+    )
     args = parser.parse_args(argv)
     t0 = time.perf_counter()
     sigmas = {loss: [] for loss in LOSSES}
@@ -82,20 +83,30 @@ def main(argv: list[str] | None = None) -> int:
         nominal, data = demo_data(seed, args.outliers)
         for loss in LOSSES:
             noise = refine(nominal, data, loss=loss).noise
-            sigmas[loss].append((noise.position_m / NOISE_M,
-                                 noise.rotation_rad / (NOISE_RAD / np.sqrt(3.0))))
+            sigmas[loss].append(
+                (noise.position_m / NOISE_M, noise.rotation_rad / (NOISE_RAD / np.sqrt(3.0)))
+            )
     rows = []
     for loss, ratios in sigmas.items():
         r = np.array(ratios)
         mean, sd = r.mean(axis=0), r.std(axis=0, ddof=1) if len(r) > 1 else np.zeros(2)
-        rows.append([loss, f"{1e3 * NOISE_M * mean[0]:.4f}", f"{mean[0]:.3f}", f"{sd[0]:.3f}",
-                     f"{np.degrees(NOISE_RAD) / np.sqrt(3.0) * mean[1]:.4f}", f"{mean[1]:.3f}",
-                     f"{sd[1]:.3f}"])
-    print(f"estimated noise of refine on kinfw-demo data, {args.seeds} seeds, "
-          f"{args.outliers:.0%} gross outliers; truth 0.5 mm per axis, "
-          f"{np.degrees(NOISE_RAD) / np.sqrt(3.0):.4f} deg per orientation component")
-    print(format_table(["loss", "position mm", "ratio", "sd", "rotation deg", "ratio", "sd"],
-                       rows))
+        rows.append(
+            [
+                loss,
+                f"{1e3 * NOISE_M * mean[0]:.4f}",
+                f"{mean[0]:.3f}",
+                f"{sd[0]:.3f}",
+                f"{np.degrees(NOISE_RAD) / np.sqrt(3.0) * mean[1]:.4f}",
+                f"{mean[1]:.3f}",
+                f"{sd[1]:.3f}",
+            ]
+        )
+    print(
+        f"estimated noise of refine on kinfw-demo data, {args.seeds} seeds, "
+        f"{args.outliers:.0%} gross outliers; truth 0.5 mm per axis, "
+        f"{np.degrees(NOISE_RAD) / np.sqrt(3.0):.4f} deg per orientation component"
+    )
+    print(format_table(["loss", "position mm", "ratio", "sd", "rotation deg", "ratio", "sd"], rows))
     print(f"({time.perf_counter() - t0:.0f} s)")
     return 0
 

@@ -190,13 +190,15 @@ def _check_inputs(A: ArrayLike, B: ArrayLike) -> tuple[NDArray, NDArray]:
         if T.ndim != 3 or T.shape[1:] != (4, 4):
             raise AXYBError(f"{name}: expected shape (n, 4, 4), got {T.shape}")
     if As.shape != Bs.shape:
-        raise AXYBError(f"A and B must pair up pose by pose: A has shape {As.shape}, "
-                        f"B has shape {Bs.shape}")
+        raise AXYBError(
+            f"A and B must pair up pose by pose: A has shape {As.shape}, B has shape {Bs.shape}"
+        )
     if len(As) < MIN_POSES:
         raise AXYBError(
             f"A = X B Y needs at least {MIN_POSES} poses (two give one relative motion, "
             f"whose axis leaves a rotation of X and Y undetermined; Hirsh et al. section 4), "
-            f"got {len(As)}")
+            f"got {len(As)}"
+        )
     try:
         As = check_transform(As, "A", tol=INPUT_ORTHONORMAL_TOL)
         Bs = check_transform(Bs, "B", tol=INPUT_ORTHONORMAL_TOL)
@@ -237,7 +239,8 @@ def _motion_check(R_Bs: NDArray[np.float64]) -> None:
         raise AXYBError(
             f"the rotations of B barely differ (spread {np.degrees(spreads[1]):.3g} deg, "
             f"need {np.degrees(MIN_MOTION_RAD):.3g} deg): the poses determine neither the "
-            f"rotations nor the translations of X and Y, only their combination X B Y")
+            f"rotations nor the translations of X and Y, only their combination X B Y"
+        )
     if spreads[0] < MIN_MOTION_RAD:
         sense = np.sign(U[np.argmax(np.abs(U[:, 0])), 0])  # an axis has no sign
         u, v = np.round(sense * U[:, 0], 4) + 0.0, np.round(sense * Vt[0], 4) + 0.0
@@ -247,12 +250,16 @@ def _motion_check(R_Bs: NDArray[np.float64]) -> None:
             f"the rotation of X about u = {u.tolist()} (in B's left frame), "
             f"that of Y about v = {v.tolist()} (in B's right frame) and the "
             f"translations along these axes are undetermined; add poses that rotate "
-            f"about another axis")
+            f"about another axis"
+        )
     if spreads[0] < WEAK_MOTION_RAD:
         log.warning(
             "weak motion: the rotations of B spread only %.3g deg off their common axis; "
             "X and Y will be poorly determined and the iteration slow (factor %.6f per "
-            "iteration)", np.degrees(spreads[0]), S[0] ** 2)
+            "iteration)",
+            np.degrees(spreads[0]),
+            S[0] ** 2,
+        )
 
 
 def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
@@ -372,11 +379,12 @@ def solve_axyb(
     """
     As, Bs = _check_inputs(A, B)
     if X0 is not None and Y0 is not None:
-        raise AXYBError("give X0 or Y0, not both: the iteration starts from one guess "
-                        "(Hirsh et al. eq. 7) and derives the other")
+        raise AXYBError(
+            "give X0 or Y0, not both: the iteration starts from one guess "
+            "(Hirsh et al. eq. 7) and derives the other"
+        )
     if not tol > 0.0 or max_iterations < 1:
-        raise AXYBError(f"need tol > 0 and max_iterations >= 1, got {tol!r}, "
-                        f"{max_iterations!r}")
+        raise AXYBError(f"need tol > 0 and max_iterations >= 1, got {tol!r}, {max_iterations!r}")
     rng = np.random.default_rng(0) if rng is None else rng
     R_As, R_Bs = As[:, :3, :3], Bs[:, :3, :3]
     _motion_check(R_Bs)
@@ -389,8 +397,12 @@ def solve_axyb(
     elif X0 is not None:
         start = _check_start(X0, "X0")
         q_Y0, _ = normalise(N.T @ quat_xyzw_from_matrix(start[:3, :3]))
-        t_Y0 = np.mean(np.einsum("nji,nj->ni", R_Bs, (As[:, :3, 3] - start[:3, 3])
-                                 @ start[:3, :3] - Bs[:, :3, 3]), axis=0)
+        t_Y0 = np.mean(
+            np.einsum(
+                "nji,nj->ni", R_Bs, (As[:, :3, 3] - start[:3, 3]) @ start[:3, :3] - Bs[:, :3, 3]
+            ),
+            axis=0,
+        )
     elif refine:
         U, _, Vt = np.linalg.svd(N)  # the iteration's fixed point in closed form
         q_Y0 = Vt[0]
@@ -411,19 +423,23 @@ def solve_axyb(
     X = transform_from_rotation_translation(R_X, t_X)
     Y = transform_from_rotation_translation(R_Y, t_Y)
     fit = X @ Bs @ Y
-    rms_rot = float(np.sqrt(np.mean(
-        rotation_angle(np.swapaxes(R_As, 1, 2) @ fit[:, :3, :3]) ** 2)))
+    rms_rot = float(np.sqrt(np.mean(rotation_angle(np.swapaxes(R_As, 1, 2) @ fit[:, :3, :3]) ** 2)))
     rms_tra = float(np.sqrt(np.mean(np.sum((fit[:, :3, 3] - As[:, :3, 3]) ** 2, axis=1))))
     if rms_rot > STALL_RAD:
         raise AXYBError(
             f"no consistent X, Y: RMS rotation residual {np.degrees(rms_rot):.3g} deg after "
             f"{rot.iterations} rotation iterations and {rot.restarts} restarts; check that "
-            f"A[i] and B[i] are paired and oriented as A[i] = X @ B[i] @ Y")
+            f"A[i] and B[i] are paired and oriented as A[i] = X @ B[i] @ Y"
+        )
     if not paper_converged:
         (log.info if refine else log.warning)(
             "the paper's iteration did not converge within %d iterations (rotation: %s, "
-            "translation: %s)%s", max_iterations, rot.converged, tra.converged,
-            "; the refinement continues from its estimate" if refine else "")
+            "translation: %s)%s",
+            max_iterations,
+            rot.converged,
+            tra.converged,
+            "; the refinement continues from its estimate" if refine else "",
+        )
     if refine and not converged:
         log.warning("Gauss-Newton refinement did not converge in %d steps", GN_MAX_STEPS)
 
@@ -432,20 +448,29 @@ def solve_axyb(
         R_X_rot = rotation_from_quat_xyzw(rot.history_X)
         R_Y_rot = rotation_from_quat_xyzw(rot.history_Y)
         # rotation phase: Y's starting translation and the X translation it implies
-        t_X_rot = (As[:, :3, 3].mean(axis=0)
-                   - R_X_rot @ (R_Bs.mean(axis=0) @ t_Y0 + Bs[:, :3, 3].mean(axis=0)))
+        t_X_rot = As[:, :3, 3].mean(axis=0) - R_X_rot @ (
+            R_Bs.mean(axis=0) @ t_Y0 + Bs[:, :3, 3].mean(axis=0)
+        )
         k_tra = tra.iterations
         R_X_final = rotation_from_quat_xyzw(rot.q_X)
         R_Y_final = rotation_from_quat_xyzw(rot.q_Y)
         history_X = transform_from_rotation_translation(
             np.concatenate([R_X_rot, np.broadcast_to(R_X_final, (k_tra, 3, 3))]),
-            np.concatenate([t_X_rot, tra.history_X]))
+            np.concatenate([t_X_rot, tra.history_X]),
+        )
         history_Y = transform_from_rotation_translation(
             np.concatenate([R_Y_rot, np.broadcast_to(R_Y_final, (k_tra, 3, 3))]),
-            np.concatenate([np.broadcast_to(t_Y0, (len(R_Y_rot), 3)), tra.history_Y]))
+            np.concatenate([np.broadcast_to(t_Y0, (len(R_Y_rot), 3)), tra.history_Y]),
+        )
 
-    return AXYBResult(camera_T_hand=X, root_T_target=Y,
-                      iterations=rot.iterations + tra.iterations,
-                      converged=bool(converged), restarts=rot.restarts,
-                      rms_rotation_rad=rms_rot, rms_translation=rms_tra,
-                      camera_T_hand_history=history_X, root_T_target_history=history_Y)
+    return AXYBResult(
+        camera_T_hand=X,
+        root_T_target=Y,
+        iterations=rot.iterations + tra.iterations,
+        converged=bool(converged),
+        restarts=rot.restarts,
+        rms_rotation_rad=rms_rot,
+        rms_translation=rms_tra,
+        camera_T_hand_history=history_X,
+        root_T_target_history=history_Y,
+    )

@@ -144,8 +144,9 @@ def consistent_quats_xyzw(R_As: NDArray, R_Bs: NDArray) -> tuple[NDArray, NDArra
 def iteration_matrix(q_As: NDArray, q_Bs: NDArray) -> NDArray[np.float64]:
     """``N`` with ``mean_i q_A[i] q_Y^-1 q_B[i]^-1 = N q_Y`` and
     ``mean_i q_B[i]^-1 q_X^-1 q_A[i] = N^T q_X`` (module docstring)."""
-    M = np.mean(_left_product_matrix_xyzw(q_As)
-                @ _right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0)
+    M = np.mean(
+        _left_product_matrix_xyzw(q_As) @ _right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0
+    )
     return M * _CONJUGATE  # right-multiplied by diag(-1, -1, -1, 1): q_Y -> q_Y^-1
 
 
@@ -178,8 +179,9 @@ class RotationRun:
     history_Y: NDArray[np.float64]
 
 
-def rotation_iteration(N: NDArray, q_Y: NDArray, *, tol: float, max_iterations: int,
-                       rng: np.random.Generator) -> RotationRun:
+def rotation_iteration(
+    N: NDArray, q_Y: NDArray, *, tol: float, max_iterations: int, rng: np.random.Generator
+) -> RotationRun:
     """Section 3, first paragraph, and section 4: alternate averages of eqs. (1)-(3).
 
     Eq. (9): given the guess ``Y``, pose ``i`` gives ``q_X[i] = q_A[i] q_Y^-1 q_B[i]^-1``;
@@ -205,10 +207,13 @@ def rotation_iteration(N: NDArray, q_Y: NDArray, *, tol: float, max_iterations: 
     k = 0
     while k < max_iterations:
         k += 1
-        q_X, d_X = normalise(N @ q_Y)      # eq. (9) for every pose, averaged
+        q_X, d_X = normalise(N @ q_Y)  # eq. (9) for every pose, averaged
         q_Y_new, d_Y = normalise(N.T @ q_X)  # the same for Y given the new X
-        step = np.inf if q_X_prev is None else max(_quat_angle(q_X, q_X_prev),
-                                                   _quat_angle(q_Y_new, q_Y))
+        step = (
+            np.inf
+            if q_X_prev is None
+            else max(_quat_angle(q_X, q_X_prev), _quat_angle(q_Y_new, q_Y))
+        )
         q_Y, q_X_prev = q_Y_new, q_X
         hist_X.append(q_X)
         hist_Y.append(q_Y)
@@ -217,23 +222,28 @@ def rotation_iteration(N: NDArray, q_Y: NDArray, *, tol: float, max_iterations: 
         if best is None or residual < best[0]:
             best = (residual, q_X, q_Y)
         if step <= tol and residual <= STALL_RAD:
-            return RotationRun(q_X, q_Y, k, True, restarts, np.array(hist_X),
-                                np.array(hist_Y))
+            return RotationRun(q_X, q_Y, k, True, restarts, np.array(hist_X), np.array(hist_Y))
         collapsed = min(d_X, d_Y) < COLLAPSE
-        flat = (len(residual_run) > STALL_WINDOW and residual > STALL_RAD and residual
-                > (1.0 - STALL_PROGRESS) * residual_run[-1 - STALL_WINDOW])
+        flat = (
+            len(residual_run) > STALL_WINDOW
+            and residual > STALL_RAD
+            and residual > (1.0 - STALL_PROGRESS) * residual_run[-1 - STALL_WINDOW]
+        )
         if (collapsed or flat or step <= tol) and restarts < MAX_RESTARTS:
-            log.info("rotation iteration stalled after %d iterations (residual %.3g deg%s): "
-                     "restart from a random guess", k, np.degrees(residual),
-                     ", average collapsed" if collapsed else "")
+            log.info(
+                "rotation iteration stalled after %d iterations (residual %.3g deg%s): "
+                "restart from a random guess",
+                k,
+                np.degrees(residual),
+                ", average collapsed" if collapsed else "",
+            )
             restarts += 1
             q_Y = rng.normal(size=4)
             q_Y /= np.linalg.norm(q_Y)
             q_X_prev, residual_run = None, []
     if best is None:  # unreachable: max_iterations >= 1 is checked by the caller
         raise AXYBError("no iteration was run")
-    return RotationRun(best[1], best[2], k, False, restarts, np.array(hist_X),
-                        np.array(hist_Y))
+    return RotationRun(best[1], best[2], k, False, restarts, np.array(hist_X), np.array(hist_Y))
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,8 +258,9 @@ class TranslationRun:
     history_Y: NDArray[np.float64]
 
 
-def translation_iteration(As: NDArray, Bs: NDArray, R_X: NDArray, t_Y: NDArray, *,
-                          tol: float, max_iterations: int) -> TranslationRun:
+def translation_iteration(
+    As: NDArray, Bs: NDArray, R_X: NDArray, t_Y: NDArray, *, tol: float, max_iterations: int
+) -> TranslationRun:
     """Section 3, second paragraph: alternate averages of eqs. (4)-(6) for translations.
 
     The translation part of eq. (4), ``t_A = R_X (R_B t_Y + t_B) + t_X``, gives per pose
@@ -272,8 +283,11 @@ def translation_iteration(As: NDArray, Bs: NDArray, R_X: NDArray, t_Y: NDArray, 
         k += 1
         t_X_new = mean_t_A - R_X @ (mean_R_B @ t_Y + mean_t_B)
         t_Y_new = mean_Rt_B_Rt_X_t_A - mean_R_B.T @ (R_X.T @ t_X_new) - mean_Rt_B_t_B
-        step = np.inf if t_X is None else max(np.linalg.norm(t_X_new - t_X),
-                                              np.linalg.norm(t_Y_new - t_Y))
+        step = (
+            np.inf
+            if t_X is None
+            else max(np.linalg.norm(t_X_new - t_X), np.linalg.norm(t_Y_new - t_Y))
+        )
         t_X, t_Y = t_X_new, t_Y_new
         hist_X.append(t_X)
         hist_Y.append(t_Y)

@@ -30,8 +30,7 @@ __all__ = ["GN_MAX_STEPS", "refine_rotations", "translations_least_squares"]
 GN_MAX_STEPS = 50
 
 
-def translations_least_squares(As: NDArray, Bs: NDArray, R_X: NDArray
-                               ) -> tuple[NDArray, NDArray]:
+def translations_least_squares(As: NDArray, Bs: NDArray, R_X: NDArray) -> tuple[NDArray, NDArray]:
     """Exact linear least squares of eqs. (4)-(6) for both translations, rotations fixed.
 
     ``t_X + R_X R_B[i] t_Y = t_A[i] - R_X t_B[i]`` stacked over poses (3n x 6); every
@@ -50,14 +49,18 @@ def _inverse_right_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
     theta = np.linalg.norm(phi, axis=-1)
     small = theta < 1e-6
     safe = np.where(small, 1.0, theta)
-    coef = np.where(small, 1.0 / 12.0 + theta**2 / 720.0,
-                    1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)))
+    coef = np.where(
+        small,
+        1.0 / 12.0 + theta**2 / 720.0,
+        1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+    )
     K = skew(phi)
     return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
 
 
-def refine_rotations(R_As: NDArray, R_Bs: NDArray, R_X: NDArray, R_Y: NDArray, *,
-                     tol: float) -> tuple[NDArray, NDArray, bool]:
+def refine_rotations(
+    R_As: NDArray, R_Bs: NDArray, R_X: NDArray, R_Y: NDArray, *, tol: float
+) -> tuple[NDArray, NDArray, bool]:
     """Gauss-Newton on ``sum_i |log(R_A[i]^T R_X R_B[i] R_Y)|^2`` over both rotations.
 
     Updates ``R_X exp(dx)``, ``R_Y exp(dy)``; with ``E_i`` the residual rotation and

@@ -92,25 +92,34 @@ def camera_mount(robot: Robot, camera: str) -> tuple[str, str]:
     if not path or path[-1].type != "fixed" or path[-1].child != camera:
         raise DatasetError(
             f"{robot.source}: camera frame {camera!r} must be a link attached by a fixed "
-            "joint (its mount) to the robot; give the camera its own link and fixed joint")
+            "joint (its mount) to the robot; give the camera its own link and fixed joint"
+        )
     return path[-1].name, path[-1].parent
 
 
-def _solve_one(robot: Robot, group: TargetObservations, measurements: Measurements,
-               rng: np.random.Generator) -> CameraCalibration:
+def _solve_one(
+    robot: Robot, group: TargetObservations, measurements: Measurements, rng: np.random.Generator
+) -> CameraCalibration:
     joint, hand = camera_mount(robot, group.camera)
     model = cpc_from_robot(robot, (hand,))
     qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
     root_T_hands = model.frame_poses(qs, hand)
     result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hands), rng=rng)
     return CameraCalibration(
-        camera=group.camera, target=group.target, joint=joint, hand=hand,
+        camera=group.camera,
+        target=group.target,
+        joint=joint,
+        hand=hand,
         hand_T_camera=inverse_transform(result.camera_T_hand),
-        root_T_target=result.root_T_target, n_views=len(group.sample), solver=result)
+        root_T_target=result.root_T_target,
+        n_views=len(group.sample),
+        solver=result,
+    )
 
 
-def calibrate_cameras(robot: Robot, measurements: Measurements, *,
-                      rng: np.random.Generator | None = None) -> CamerasResult:
+def calibrate_cameras(
+    robot: Robot, measurements: Measurements, *, rng: np.random.Generator | None = None
+) -> CamerasResult:
     """Hand-eye transform of every camera with ``target`` observations, and the targets.
 
     Parameters
@@ -143,9 +152,11 @@ def calibrate_cameras(robot: Robot, measurements: Measurements, *,
         estimates = np.stack([c.root_T_target for c in cameras if c.target == target])
         mean = average_transform(estimates)
         poses.append((target, mean))
-        spread.append((
-            target,
-            float(np.linalg.norm(estimates[:, :3, 3] - mean[:3, 3], axis=1).max()),
-            float(rotation_angle(mean[:3, :3].T @ estimates[:, :3, :3]).max()),
-        ))
+        spread.append(
+            (
+                target,
+                float(np.linalg.norm(estimates[:, :3, 3] - mean[:3, 3], axis=1).max()),
+                float(rotation_angle(mean[:3, :3].T @ estimates[:, :3, :3]).max()),
+            )
+        )
     return CamerasResult(tuple(cameras), tuple(poses), tuple(spread))

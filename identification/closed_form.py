@@ -139,8 +139,9 @@ def _mode(values: NDArray[np.float64]) -> float:
     return float(v[starts[np.argmax(counts)]])
 
 
-def one_joint_groups(qs: NDArray[np.float64], joint_names: tuple[str, ...], source: str
-                     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def one_joint_groups(
+    qs: NDArray[np.float64], joint_names: tuple[str, ...], source: str
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The common configuration ``q0`` and which joint moved in each sample.
 
     Parameters
@@ -172,7 +173,8 @@ def one_joint_groups(qs: NDArray[np.float64], joint_names: tuple[str, ...], sour
         raise ProtocolError(
             f"{source}: sample {k} differs from the common configuration q0 in joints "
             f"{names}; the closed form needs one-joint-at-a-time data (Shih et al. "
-            "section 4.1): every sample equal to q0 except in at most one joint")
+            "section 4.1): every sample equal to q0 except in at most one joint"
+        )
     moved = np.where(count == 1, np.argmax(differs, axis=1), -1)
     return q0, moved
 
@@ -188,8 +190,9 @@ def _smallest_eigenvector(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], 
     return V[:, 0], float(max(w[0], 0.0))
 
 
-def _step1_axis(R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, source: str
-                ) -> tuple[NDArray, float, float]:
+def _step1_axis(
+    R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, source: str
+) -> tuple[NDArray, float, float]:
     """Axis (sense from the data), RMS residual and rotation per unit q of one joint.
 
     ``R`` (m, 3, 3) are measured orientations; pairs ``(a[i], b[i])`` index rows of ``R``
@@ -206,15 +209,20 @@ def _step1_axis(R: NDArray, a: NDArray, b: NDArray, dq: NDArray, name: str, sour
         scale = float((rotvec[short] @ axis) @ dq[short] / (dq[short] @ dq[short]))
     else:  # no unambiguous pair: still tell degrees-read-as-radians apart
         clear = theta < np.pi - 0.2
-        scale = float(theta[clear] @ np.abs(dq[clear]) / (dq[clear] @ dq[clear])) \
-            if np.any(clear) else float("nan")
+        scale = (
+            float(theta[clear] @ np.abs(dq[clear]) / (dq[clear] @ dq[clear]))
+            if np.any(clear)
+            else float("nan")
+        )
     if scale < 0.0:
         axis, scale = -axis, -scale
     check_joint_scale(name, scale, revolute=True, source=source, error=JointScaleError)
     if not np.any(short):
-        raise ProtocolError(f"{source}: joint {name!r}: every pair of its values is at least "
-                            "pi - 0.2 rad apart, so the sense of rotation is ambiguous; add "
-                            "values closer together")
+        raise ProtocolError(
+            f"{source}: joint {name!r}: every pair of its values is at least "
+            "pi - 0.2 rad apart, so the sense of rotation is ambiguous; add "
+            "values closer together"
+        )
     return axis, float(np.sqrt(lam / len(C))), scale
 
 
@@ -223,8 +231,9 @@ def _pairs(rows: NDArray[np.int64]) -> tuple[NDArray, NDArray]:
     return rows[a], rows[b]
 
 
-def _unit_sphere_gauss_newton(A: NDArray, y: NDArray, x: NDArray, blocks: list[slice],
-                              iterations: int = 30) -> NDArray:
+def _unit_sphere_gauss_newton(
+    A: NDArray, y: NDArray, x: NDArray, blocks: list[slice], iterations: int = 30
+) -> NDArray:
     """Minimise ``|A x - y|^2`` subject to every ``x[block]`` being a unit 3-vector.
 
     The constrained least squares of eq. (64): Gauss-Newton in the tangent spaces of the
@@ -261,8 +270,9 @@ class _FrameData:
     moved: NDArray[np.int64]  # (m,) joint index, -1 at q0
 
 
-def collect_frame_data(robot: Robot, measurements: Measurements, frames: tuple[str, ...] | None
-             ) -> tuple[Topology, NDArray, list[_FrameData], NDArray]:
+def collect_frame_data(
+    robot: Robot, measurements: Measurements, frames: tuple[str, ...] | None
+) -> tuple[Topology, NDArray, list[_FrameData], NDArray]:
     """Topology, q0, per-frame data and per-joint group sizes; checks the protocol."""
     source = measurements.source
     groups = [g for g in measurements.poses if g.marker is None and g.measured_in is None]
@@ -271,7 +281,8 @@ def collect_frame_data(robot: Robot, measurements: Measurements, frames: tuple[s
     if not groups:
         raise ProtocolError(
             f"{source}: the closed form needs 'pose' observations of end frames in the root "
-            f"frame {robot.root_link!r} (no marker, no measured_in)")
+            f"frame {robot.root_link!r} (no marker, no measured_in)"
+        )
     topo = robot.topology(tuple(dict.fromkeys(g.frame for g in groups)))
     names = topo.joint_names
     q_all = measurements.q_of(names)
@@ -283,8 +294,9 @@ def collect_frame_data(robot: Robot, measurements: Measurements, frames: tuple[s
     for f in topo.frames:
         mine = [g for g in groups if g.frame == f]
         sample = np.concatenate([g.sample for g in mine])
-        data.append(_FrameData(np.concatenate([g.meas_T_frame for g in mine]), q_all[sample],
-                               moved[sample]))
+        data.append(
+            _FrameData(np.concatenate([g.meas_T_frame for g in mine]), q_all[sample], moved[sample])
+        )
     sizes = np.array([int(np.sum(moved_observed == j)) for j in range(len(names))])
     for j, name in enumerate(names):
         in_group = (moved_observed == j) | (moved_observed == -1)
@@ -293,12 +305,14 @@ def collect_frame_data(robot: Robot, measurements: Measurements, frames: tuple[s
             raise ProtocolError(
                 f"{source}: joint {name!r} moves through {len(values)} distinct value(s) in "
                 "the one-joint-at-a-time samples; it needs at least 2 (with every other "
-                "joint at q0), observed by a frame below it, to be identified")
+                "joint at q0), observed by a frame below it, to be identified"
+            )
     return topo, q0, data, sizes
 
 
-def identify_axes(topo: Topology, data: list[_FrameData], source: str
-           ) -> tuple[NDArray, NDArray, NDArray]:
+def identify_axes(
+    topo: Topology, data: list[_FrameData], source: str
+) -> tuple[NDArray, NDArray, NDArray]:
     """Revolute axes at q0 in w (eqs. 33-35, 52), their residuals and motion scales."""
     J = len(topo.joint_names)
     axes = np.zeros((J, 3))
@@ -320,16 +334,24 @@ def identify_axes(topo: Topology, data: list[_FrameData], source: str
             offset += len(d.moved)
         dq = np.concatenate(dq_all)
         if not len(dq):
-            raise ProtocolError(f"{source}: joint {topo.joint_names[j]!r}: no frame below it "
-                                "was measured at two of its values")
+            raise ProtocolError(
+                f"{source}: joint {topo.joint_names[j]!r}: no frame below it "
+                "was measured at two of its values"
+            )
         axes[j], residual[j], scale[j] = _step1_axis(
-            np.concatenate(R), np.concatenate(a_all), np.concatenate(b_all), dq,
-            topo.joint_names[j], source)
+            np.concatenate(R),
+            np.concatenate(a_all),
+            np.concatenate(b_all),
+            dq,
+            topo.joint_names[j],
+            source,
+        )
     return axes, residual, scale
 
 
-def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, axes: NDArray,
-                          source: str) -> tuple[NDArray, NDArray, NDArray, NDArray, float]:
+def identify_translations(
+    topo: Topology, data: list[_FrameData], q0: NDArray, axes: NDArray, source: str
+) -> tuple[NDArray, NDArray, NDArray, NDArray, float]:
     """End-frame poses at q0, axis points, prismatic directions (eqs. 58-64).
 
     Returns ``w_T_e_q0`` (E, 4, 4), revolute axis points (J, 3), prismatic directions
@@ -345,8 +367,11 @@ def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, a
     for e, f in enumerate(topo.frames):
         d = data[e]
         m = len(d.moved)
-        dq = np.where(d.moved >= 0, d.qs[np.arange(m), np.maximum(d.moved, 0)]
-                      - q0[np.maximum(d.moved, 0)], 0.0)
+        dq = np.where(
+            d.moved >= 0,
+            d.qs[np.arange(m), np.maximum(d.moved, 0)] - q0[np.maximum(d.moved, 0)],
+            0.0,
+        )
         A = np.zeros((m, 3, n))
         A[:, :, 3 * e : 3 * e + 3] = np.eye(3)
         undo = np.tile(np.eye(3), (m, 1, 1))
@@ -370,8 +395,9 @@ def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, a
     scale = np.ones(J)
     for j in prismatic:
         scale[j] = float(np.linalg.norm(x[col[j] : col[j] + 3]))
-        check_joint_scale(topo.joint_names[j], scale[j], revolute=False, source=source,
-                          error=JointScaleError)
+        check_joint_scale(
+            topo.joint_names[j], scale[j], revolute=False, source=source, error=JointScaleError
+        )
     if prismatic:
         x = _unit_sphere_gauss_newton(A, y, x, [slice(col[j], col[j] + 3) for j in prismatic])
     points = np.zeros((J, 3))
@@ -381,14 +407,14 @@ def identify_translations(topo: Topology, data: list[_FrameData], q0: NDArray, a
             points[j] = bases[j].T @ x[col[j] : col[j] + 2]
         else:
             directions[j] = x[col[j] : col[j] + 3]
-    w_T_e_q0 = transform_from_rotation_translation(np.stack(w_R_e_q0),
-                                                   x[: 3 * E].reshape(E, 3))
+    w_T_e_q0 = transform_from_rotation_translation(np.stack(w_R_e_q0), x[: 3 * E].reshape(E, 3))
     rms = float(np.sqrt(np.mean((A @ x - y) ** 2) * 3.0))
     return w_T_e_q0, points, directions, scale, rms
 
 
-def geometry_at_zero(topo: Topology, axes: NDArray, points: NDArray, w_T_e_q0: NDArray,
-                      q0: NDArray) -> ZeroGeometry:
+def geometry_at_zero(
+    topo: Topology, axes: NDArray, points: NDArray, w_T_e_q0: NDArray, q0: NDArray
+) -> ZeroGeometry:
     """Carry screw axes and end-frame poses from configuration ``q0`` back to ``q = 0``.
 
     With ``G_j`` the motion of everything below joint ``j``'s parent link when the joints
@@ -413,8 +439,9 @@ def geometry_at_zero(topo: Topology, axes: NDArray, points: NDArray, w_T_e_q0: N
     return ZeroGeometry(topo, axes0, points0, inverse_transform(last) @ w_T_e_q0)
 
 
-def identify_closed_form(robot: Robot, measurements: Measurements, *,
-                         frames: tuple[str, ...] | None = None) -> ClosedFormResult:
+def identify_closed_form(
+    robot: Robot, measurements: Measurements, *, frames: tuple[str, ...] | None = None
+) -> ClosedFormResult:
     """Identify the CPC model of ``robot``'s tree from one-joint-at-a-time pose data.
 
     Parameters
@@ -440,13 +467,17 @@ def identify_closed_form(robot: Robot, measurements: Measurements, *,
     measurements = check_against_robot(measurements, robot)
     topo, q0, data, sizes = collect_frame_data(robot, measurements, frames)
     axes, residual, scale = identify_axes(topo, data, measurements.source)
-    w_T_e_q0, points, directions, p_scale, rms = identify_translations(topo, data, q0, axes,
-                                                         measurements.source)
+    w_T_e_q0, points, directions, p_scale, rms = identify_translations(
+        topo, data, q0, axes, measurements.source
+    )
     prismatic = ~np.array(topo.revolute)
     axes[prismatic] = directions[prismatic]
     scale[prismatic] = p_scale[prismatic]
     geometry = geometry_at_zero(topo, axes, points, w_T_e_q0, q0)
-    log.info("closed form: %d joints, %d frames, position RMS %.3g mm",
-             len(topo.joint_names), len(topo.frames), 1e3 * rms)
-    return ClosedFormResult(cpc_from_geometry(geometry), geometry, q0, sizes, residual, scale,
-                            rms)
+    log.info(
+        "closed form: %d joints, %d frames, position RMS %.3g mm",
+        len(topo.joint_names),
+        len(topo.frames),
+        1e3 * rms,
+    )
+    return ClosedFormResult(cpc_from_geometry(geometry), geometry, q0, sizes, residual, scale, rms)

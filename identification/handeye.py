@@ -119,8 +119,9 @@ class HandEyeResult:
         return self.hand_T_camera
 
 
-def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
-               ) -> HandEyeResult:
+def solve_axxb(
+    A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
+) -> HandEyeResult:
     """Hand-eye transform ``X = hand_T_camera`` from absolute poses, by Tsai & Lenz.
 
     Parameters
@@ -259,9 +260,15 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
     if rms_rotation > INCONSISTENT_RAD:
         k = int(np.argmax(rot_res[: len(i)]))
         motion = float(np.degrees(np.median(rotation_angle(A_ijs[:, :3, :3]))))
-        small = (f" The motions are small (median relative rotation {motion:.3g} deg), so "
-                 "camera noise may also be the cause: move the robot through larger "
-                 "rotations (tens of degrees about different axes).") if motion < 30.0 else ""
+        small = (
+            (
+                f" The motions are small (median relative rotation {motion:.3g} deg), so "
+                "camera noise may also be the cause: move the robot through larger "
+                "rotations (tens of degrees about different axes)."
+            )
+            if motion < 30.0
+            else ""
+        )
         raise HandEyeError(
             f"no single X relates the motions of A and B: RMS rotation residual of "
             f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {i[k]} and "
@@ -273,9 +280,12 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
         )
     condition = float(singular_values[-1] / singular_values[0])
     if condition < POOR_CONDITION:
-        log.warning("solve_axxb: the motions turn mostly about one axis (rotation condition "
-                    "%.3g); X's rotation about it and its translation along it are poorly "
-                    "determined: add motions about other axes", condition)
+        log.warning(
+            "solve_axxb: the motions turn mostly about one axis (rotation condition "
+            "%.3g); X's rotation about it and its translation along it are poorly "
+            "determined: add motions about other axes",
+            condition,
+        )
     return HandEyeResult(
         hand_T_camera=hand_T_eye,
         n_pairs=len(i),
@@ -286,8 +296,7 @@ def solve_axxb(A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(
     )
 
 
-def _check_poses(A: ArrayLike, B: ArrayLike
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _check_poses(A: ArrayLike, B: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Validate both pose batches; return them with re-orthonormalised rotations."""
     out = []
     for name, T in (("A", A), ("B", B)):
@@ -298,20 +307,29 @@ def _check_poses(A: ArrayLike, B: ArrayLike
             T = check_transform(T, name=name, tol=ORTHONORMAL_TOL)
         except ValueError as err:
             raise HandEyeError(str(err)) from err
-        out.append(transform_from_rotation_translation(project_to_rotation(T[:, :3, :3]),
-                                                       T[:, :3, 3]))
+        out.append(
+            transform_from_rotation_translation(project_to_rotation(T[:, :3, :3]), T[:, :3, 3])
+        )
     base_T_hands, eye_T_targets = out
     if base_T_hands.shape != eye_T_targets.shape:
-        raise HandEyeError(f"A and B must hold the same number of poses, got A "
-                           f"{base_T_hands.shape} and B {eye_T_targets.shape}")
+        raise HandEyeError(
+            f"A and B must hold the same number of poses, got A "
+            f"{base_T_hands.shape} and B {eye_T_targets.shape}"
+        )
     if len(base_T_hands) < 3:
-        raise HandEyeError(f"at least 3 poses are needed (two motions about different axes), "
-                           f"got {len(base_T_hands)}")
+        raise HandEyeError(
+            f"at least 3 poses are needed (two motions about different axes), "
+            f"got {len(base_T_hands)}"
+        )
     return base_T_hands, eye_T_targets
 
 
-def _check_angles_agree(angles_A: NDArray[np.float64], angles_B: NDArray[np.float64],
-                        i: NDArray[np.intp], j: NDArray[np.intp]) -> None:
+def _check_angles_agree(
+    angles_A: NDArray[np.float64],
+    angles_B: NDArray[np.float64],
+    i: NDArray[np.intp],
+    j: NDArray[np.intp],
+) -> None:
     """A motion and its view from the eye are conjugate: their rotation angles agree.
 
     The RMS difference is tested, so that a single pair in the tail of the measurement
@@ -357,8 +375,10 @@ def _largest_line_angle(axes: NDArray[np.float64]) -> float:
         return lower
     candidates = axes[to_r >= lower - to_r.max() - 1e-7]
     rows = max(1, (1 << 22) // len(candidates))
-    smallest = min(float(np.abs(candidates[k:k + rows] @ candidates.T).min())
-                   for k in range(0, len(candidates), rows))
+    smallest = min(
+        float(np.abs(candidates[k : k + rows] @ candidates.T).min())
+        for k in range(0, len(candidates), rows)
+    )
     return max(lower, float(np.arccos(min(smallest, 1.0))))
 
 
@@ -367,16 +387,21 @@ def _line_angles(axes: NDArray[np.float64], axis: NDArray[np.float64]) -> NDArra
     return np.arccos(np.minimum(np.abs(axes @ axis), 1.0))
 
 
-def _rotation(rotvecs_A: NDArray[np.float64], rotvecs_B: NDArray[np.float64]
-              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _rotation(
+    rotvecs_A: NDArray[np.float64], rotvecs_B: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``hand_R_eye`` by Tsai & Lenz with the half-turn safeguards; and the final system's
     singular values (see :func:`solve_axxb`, Notes)."""
     P_As, P_Bs = _modified_rodrigues(rotvecs_A), _modified_rodrigues(rotvecs_B)
     half_turn = np.linalg.norm(rotvecs_A, axis=1) > np.pi - HALF_TURN_BAND_RAD
     first = ~half_turn
-    if np.any(half_turn) and (not np.any(first) or _largest_line_angle(
+    if np.any(half_turn) and (
+        not np.any(first)
+        or _largest_line_angle(
             rotvecs_A[first] / np.linalg.norm(rotvecs_A[first], axis=1, keepdims=True)
-    ) < PARALLEL_AXES_RAD):
+        )
+        < PARALLEL_AXES_RAD
+    ):
         first = np.ones_like(half_turn)
     R0, singular_values = _tsai_rotation(P_As[first], P_Bs[first])
     if not np.any(half_turn) and rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
@@ -387,8 +412,10 @@ def _rotation(rotvecs_A: NDArray[np.float64], rotvecs_B: NDArray[np.float64]
     if rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
         R0 = np.eye(3)
     else:
-        log.debug("X turns by %.1f deg: re-solving about the first estimate",
-                  np.degrees(rotation_angle(R0)))
+        log.debug(
+            "X turns by %.1f deg: re-solving about the first estimate",
+            np.degrees(rotation_angle(R0)),
+        )
     R_prime, singular_values = _tsai_rotation(P_As, P_Bs @ R0.T)
     return R_prime @ R0, singular_values
 
@@ -399,8 +426,9 @@ def _modified_rodrigues(rotvecs: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.sinc(theta / (2.0 * np.pi)) * rotvecs  # sinc(x) = sin(pi x) / (pi x)
 
 
-def _tsai_rotation(P_As: NDArray[np.float64], P_Bs: NDArray[np.float64]
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _tsai_rotation(
+    P_As: NDArray[np.float64], P_Bs: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Solve ``skew(P_A + P_B) P'_X = P_B - P_A`` (Tsai & Lenz eq. 12) by least squares.
 
     Returns the rotation by ``2 atan(|P'_X|)`` about ``P'_X`` (eq. 14), or the half turn

@@ -76,11 +76,17 @@ class Calibration:
         return np.eye(4) if self.export is None else self.export.w_T_root
 
 
-def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
-              noise: NoiseModel | None = None, loss: str = "huber",
-              parameters: str | tuple[str, ...] = "full",
-              prior: tuple[float, float] | None = None,
-              progress: Callable[[str], None] | None = None) -> Calibration:
+def calibrate(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    method: str = "refine",
+    noise: NoiseModel | None = None,
+    loss: str = "huber",
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
     1. Closed form (Shih et al. section 4) when the data has one-joint-at-a-time
@@ -148,17 +154,20 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
         cameras_seen = {g.camera for g in data.targets}
         smaller = None
         if parameters == "full":
-            smaller = ("frames", build_problem(nominal, data, parameters="frames",
-                                               prior=prior))
-        check_redundancy(build_problem(nominal, data, parameters=parameters, prior=prior),
-                         noise_given=noise is not None, n_samples=data.n_samples,
-                         source=data.source, cameras=cameras_seen, smaller=smaller)
+            smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
+        check_redundancy(
+            build_problem(nominal, data, parameters=parameters, prior=prior),
+            noise_given=noise is not None,
+            n_samples=data.n_samples,
+            source=data.source,
+            cameras=cameras_seen,
+            smaller=smaller,
+        )
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
     xml = nominal.urdf_xml
-    if parameters == "full" and any(g.marker is None and g.measured_in is None
-                                    for g in data.poses):
+    if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
         try:
             closed_form = identify_closed_form(nominal, data)
         except ProtocolError as exc:
@@ -169,34 +178,54 @@ def calibrate(nominal: Robot, data: Measurements, *, method: str = "refine",
             export = export_urdf(nominal, closed_form.geometry)
             xml = export.urdf_xml
             stages.append(("closed form", xml))
-            done(f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
-                 f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm")
+            done(
+                f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
+                f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm"
+            )
     if data.targets and parameters != "none":
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
         mounts: dict[str, list[NDArray]] = {}
         for c in cameras.cameras:  # a camera that saw several targets: average its mounts
             mounts.setdefault(c.joint, []).append(c.hand_T_camera)
-        xml = edit_urdf(xml, joint_origins={joint: average_transform(np.stack(poses))
-                                            for joint, poses in mounts.items()})
+        xml = edit_urdf(
+            xml,
+            joint_origins={
+                joint: average_transform(np.stack(poses)) for joint, poses in mounts.items()
+            },
+        )
         stages.append(("hand-eye", xml))
         done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
         targets = dict(cameras.root_T_targets) if cameras is not None else None
-        refined = refine(nominal, data, start=Robot(xml, nominal.source), targets=targets,
-                         noise=noise, loss=loss, parameters=parameters, prior=prior)
+        refined = refine(
+            nominal,
+            data,
+            start=Robot(xml, nominal.source),
+            targets=targets,
+            noise=noise,
+            loss=loss,
+            parameters=parameters,
+            prior=prior,
+        )
         if parameters == "full":
             check_fit(refined, data.source)
-        export = export_urdf(nominal, geometry_from_cpc(refined.model),
-                             root_is_measurement_frame=refined.model_frame is None)
+        export = export_urdf(
+            nominal,
+            geometry_from_cpc(refined.model),
+            root_is_measurement_frame=refined.model_frame is None,
+        )
         xml = export.urdf_xml
         stages.append(("refine", xml))
-        done(f"refine: {refined.identifiability.n_parameters} free parameters, "
-             f"{refined.iterations} iterations, reduced chi-square {refined.sigma_hat2:.3g}")
+        done(
+            f"refine: {refined.identifiability.n_parameters} free parameters, "
+            f"{refined.iterations} iterations, reduced chi-square {refined.sigma_hat2:.3g}"
+        )
     if not stages:
         raise DatasetError(
             f"{data.source}: nothing to calibrate: the closed form needs one-joint-at-a-time "
             "'pose' observations in the root frame and the hand-eye step 'target' "
-            "observations; use the default method 'refine' for any other data")
+            "observations; use the default method 'refine' for any other data"
+        )
     for note in notes:
         log.info(note)
     return Calibration(xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes))

@@ -29,8 +29,13 @@ from identification.refine import LeastSquaresProblem
 from kinfw.blocks import BlockKey
 from kinfw.measurements import DatasetError
 
-__all__ = ["MIN_DOF_PER_KIND", "InsufficientDataError", "Redundancy", "check_redundancy",
-           "redundancy"]
+__all__ = [
+    "MIN_DOF_PER_KIND",
+    "InsufficientDataError",
+    "Redundancy",
+    "check_redundancy",
+    "redundancy",
+]
 
 #: Residual degrees of freedom required per estimated noise component.
 MIN_DOF_PER_KIND = 10
@@ -76,12 +81,15 @@ class Redundancy:
         return self.n_rows >= self.needed
 
 
-_UNKNOWN_LABELS = {"target": "target {!r} pose", "frame": "measurement frame {!r} pose",
-                   "marker": "marker {!r} pose", "offset": "point {!r} offset"}
+_UNKNOWN_LABELS = {
+    "target": "target {!r} pose",
+    "frame": "measurement frame {!r} pose",
+    "marker": "marker {!r} pose",
+    "offset": "point {!r} offset",
+}
 
 
-def _owner_label(key: BlockKey, owner: str, cameras: set[str], frames: tuple[str, ...]
-                 ) -> str:
+def _owner_label(key: BlockKey, owner: str, cameras: set[str], frames: tuple[str, ...]) -> str:
     if key.kind == "base":
         return "base frame"
     if key.kind not in ("cpc", "zero_offset"):  # an unknown of an observation kind
@@ -93,8 +101,13 @@ def _owner_label(key: BlockKey, owner: str, cameras: set[str], frames: tuple[str
     return f"joint {owner!r}"
 
 
-def redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_samples: int,
-               cameras: set[str] | frozenset[str] = frozenset()) -> Redundancy:
+def redundancy(
+    problem: LeastSquaresProblem,
+    *,
+    noise_given: bool,
+    n_samples: int,
+    cameras: set[str] | frozenset[str] = frozenset(),
+) -> Redundancy:
     """Count residual rows and free parameters of ``problem``.
 
     Parameters
@@ -133,13 +146,20 @@ def redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_samples: in
                 by_owner[label] = by_owner.get(label, 0) + 1
     per_sample = data_rows / n_samples if n_samples else 0.0
     samples_needed = math.ceil((needed - prior) / per_sample) if per_sample else 0
-    return Redundancy(rows, n_rows, P, tuple(by_owner.items()), needed, n_samples,
-                      max(samples_needed, 0))
+    return Redundancy(
+        rows, n_rows, P, tuple(by_owner.items()), needed, n_samples, max(samples_needed, 0)
+    )
 
 
-def check_redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_samples: int,
-                     source: str, cameras: set[str] | frozenset[str] = frozenset(),
-                     smaller: tuple[str, LeastSquaresProblem] | None = None) -> Redundancy:
+def check_redundancy(
+    problem: LeastSquaresProblem,
+    *,
+    noise_given: bool,
+    n_samples: int,
+    source: str,
+    cameras: set[str] | frozenset[str] = frozenset(),
+    smaller: tuple[str, LeastSquaresProblem] | None = None,
+) -> Redundancy:
     """Refuse a refinement whose residuals cannot determine its parameters with redundancy.
 
     Parameters
@@ -170,17 +190,24 @@ def check_redundancy(problem: LeastSquaresProblem, *, noise_given: bool, n_sampl
         return r
     rows = ", ".join(f"{n} {k}" for k, n in r.rows)
     owners = ", ".join(f"{label} ({n})" for label, n in r.by_owner)
-    why = ("noise given: as many rows as parameters" if noise_given else
-           f"noise estimated: the parameters plus {MIN_DOF_PER_KIND} per estimated noise "
-           "component")
-    message = (f"{source}: too little data to refine: {r.n_rows} residual rows ({rows}) "
-               f"for {r.n_parameters} free parameters ({owners}); {r.needed} rows are needed "
-               f"({why}), at least {r.samples_needed} samples like these instead of "
-               f"{r.n_samples}")
+    why = (
+        "noise given: as many rows as parameters"
+        if noise_given
+        else f"noise estimated: the parameters plus {MIN_DOF_PER_KIND} per estimated noise "
+        "component"
+    )
+    message = (
+        f"{source}: too little data to refine: {r.n_rows} residual rows ({rows}) "
+        f"for {r.n_parameters} free parameters ({owners}); {r.needed} rows are needed "
+        f"({why}), at least {r.samples_needed} samples like these instead of "
+        f"{r.n_samples}"
+    )
     if smaller is not None:
         name, small = smaller
         s = redundancy(small, noise_given=noise_given, n_samples=n_samples, cameras=cameras)
         if s.sufficient:
-            message += (f"; or refine fewer parameters: --params {name} "
-                        f"({s.n_parameters} parameters) is determined by these data")
+            message += (
+                f"; or refine fewer parameters: --params {name} "
+                f"({s.n_parameters} parameters) is determined by these data"
+            )
     raise InsufficientDataError(message)

@@ -82,8 +82,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Fields whose values are angles (rad): chart tilts and rotations, CPC beta, URDF rpy.
-_ANGLE_FIELDS = frozenset({"b_tilt_1", "b_tilt_2", "rot_x", "rot_y", "rot_z", "beta", "roll",
-                           "pitch", "yaw"})
+_ANGLE_FIELDS = frozenset(
+    {"b_tilt_1", "b_tilt_2", "rot_x", "rot_y", "rot_z", "beta", "roll", "pitch", "yaw"}
+)
 #: Fields whose values are lengths (m): CPC l, frame and point translations.
 _LENGTH_FIELDS = frozenset({"l_x", "l_y", "l_z", "x", "y", "z"})
 #: Fields without a unit: components of the CPC unit axis b, the motion sense.
@@ -131,12 +132,16 @@ def parameter_unit(owner: str, field: str, topology: Topology) -> str:
         return "unitless"
     if field == "zero_offset":
         if owner not in topology.joint_names:
-            raise ValueError(f"parameter ({owner!r}, 'zero_offset'): {owner!r} is not a joint "
-                             f"of the model; expected one of {list(topology.joint_names)}")
+            raise ValueError(
+                f"parameter ({owner!r}, 'zero_offset'): {owner!r} is not a joint "
+                f"of the model; expected one of {list(topology.joint_names)}"
+            )
         return "rad" if topology.revolute[topology.joint_names.index(owner)] else "m"
-    raise ValueError(f"parameter ({owner!r}, {field!r}): unknown field; expected an angle "
-                     f"{sorted(_ANGLE_FIELDS)}, a length {sorted(_LENGTH_FIELDS)}, unitless "
-                     f"{sorted(_UNITLESS_FIELDS)} or 'zero_offset'")
+    raise ValueError(
+        f"parameter ({owner!r}, {field!r}): unknown field; expected an angle "
+        f"{sorted(_ANGLE_FIELDS)}, a length {sorted(_LENGTH_FIELDS)}, unitless "
+        f"{sorted(_UNITLESS_FIELDS)} or 'zero_offset'"
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,12 +221,21 @@ def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArr
     return Jf.T @ Jf
 
 
-def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
-           targets: dict[str, NDArray] | None = None, noise: NoiseModel | None = None,
-           loss: str = "linear", loss_scale: float = 2.33, max_iterations: int = 100,
-           noise_rounds: int = 5, parameters: str | tuple[str, ...] = "full",
-           prior: tuple[float, float] | None = None,
-           known: tuple[Unknown, ...] = ()) -> RefineResult:
+def refine(
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    start: Robot | None = None,
+    targets: dict[str, NDArray] | None = None,
+    noise: NoiseModel | None = None,
+    loss: str = "linear",
+    loss_scale: float = 2.33,
+    max_iterations: int = 100,
+    noise_rounds: int = 5,
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    known: tuple[Unknown, ...] = (),
+) -> RefineResult:
     """Refine every unknown jointly by whitened nonlinear least squares.
 
     Parameters
@@ -277,8 +291,15 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     if loss not in LOSSES:
         raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
     t0 = time.perf_counter()
-    problem = build_problem(robot, measurements, start=start, targets=targets,
-                            parameters=parameters, prior=prior, known=known)
+    problem = build_problem(
+        robot,
+        measurements,
+        start=start,
+        targets=targets,
+        parameters=parameters,
+        prior=prior,
+        known=known,
+    )
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
     sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
@@ -287,15 +308,27 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         x, its, converged = levenberg_marquardt(
-            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True), x, free,
-            obs_sizes, loss, k, max_iterations)
+            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True),
+            x,
+            free,
+            obs_sizes,
+            loss,
+            k,
+            max_iterations,
+        )
         iterations += its
         if given:
             break
         r, J = problem.evaluate(x, sigma, True, only_free=True)
         Q, _ = np.linalg.qr(J[:, free] * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None])
-        sigma = estimate_noise(r, problem.groups, sigma, np.sum(Q**2, axis=1),
-                                robust=loss != "linear", first=round_ == 0)
+        sigma = estimate_noise(
+            r,
+            problem.groups,
+            sigma,
+            np.sum(Q**2, axis=1),
+            robust=loss != "linear",
+            first=round_ == 0,
+        )
     r, J = problem.evaluate(x, sigma, True, only_free=True)
     w_rows = row_weights(r, obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
@@ -303,21 +336,37 @@ def refine(robot: Robot, measurements: Measurements, *, start: Robot | None = No
     sigma_hat2 = float(rw @ rw / dof)
     # a given noise model is trusted; an estimated one is rescaled by the fit
     covariance, ident = covariance_and_identifiability(
-        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements,
-        problem.model0)
+        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements, problem.model0
+    )
     flagged = observation_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
-    residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma,
-                                               flagged)
+    residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma, flagged)
     result = RefineResult(
-        model=problem.model_at(x), model_frame=problem.model_frame,
-        unknowns=problem.unknowns_at(x), parameter_names=problem.names,
-        parameter_units=problem.units, free=problem.free.copy(), estimate=x,
-        covariance=covariance, noise=sigma, sigma_hat2=sigma_hat2, residuals=residuals,
-        downweighted=downweighted, identifiability=ident, iterations=iterations,
-        converged=converged, cost=0.5 * float(rw @ rw), seconds=time.perf_counter() - t0)
-    log.info("refine: %d free parameters (%d before gauge fixing and the parameter set), "
-             "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s", ident.n_parameters, P,
-             len(r), iterations, sigma_hat2, result.seconds)
+        model=problem.model_at(x),
+        model_frame=problem.model_frame,
+        unknowns=problem.unknowns_at(x),
+        parameter_names=problem.names,
+        parameter_units=problem.units,
+        free=problem.free.copy(),
+        estimate=x,
+        covariance=covariance,
+        noise=sigma,
+        sigma_hat2=sigma_hat2,
+        residuals=residuals,
+        downweighted=downweighted,
+        identifiability=ident,
+        iterations=iterations,
+        converged=converged,
+        cost=0.5 * float(rw @ rw),
+        seconds=time.perf_counter() - t0,
+    )
+    log.info(
+        "refine: %d free parameters (%d before gauge fixing and the parameter set), "
+        "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
+        ident.n_parameters,
+        P,
+        len(r),
+        iterations,
+        sigma_hat2,
+        result.seconds,
+    )
     return result
-
-

@@ -107,8 +107,12 @@ SCALE_TOLERANCE = 0.1
 _DEG = math.pi / 180.0
 # (SI value per value as read, what the numbers look like, how they were read)
 _REVOLUTE = ((_DEG, "degrees", "radians"), (1.0 / _DEG, "radians", "degrees"))
-_PRISMATIC = ((1e-3, "millimetres", "metres"), (1e3, "metres", "millimetres"),
-              (1.0 / _DEG, "metres", "degrees"), (1e-3 / _DEG, "millimetres", "degrees"))
+_PRISMATIC = (
+    (1e-3, "millimetres", "metres"),
+    (1e3, "metres", "millimetres"),
+    (1.0 / _DEG, "metres", "degrees"),
+    (1e-3 / _DEG, "millimetres", "degrees"),
+)
 _LENGTH = ((1e-3, "millimetres", "metres"), (1e3, "metres", "millimetres"))
 
 
@@ -208,8 +212,11 @@ class UnitDiagnostics:
     def refused(self) -> bool:
         """True when another reading explains the data much better than the values as
         read (:data:`BAD_SCORE`, :data:`BETTER_FACTOR`)."""
-        return (not self.best.is_as_read and self.score_as_read > BAD_SCORE
-                and self.best_score < BETTER_FACTOR * self.score_as_read)
+        return (
+            not self.best.is_as_read
+            and self.score_as_read > BAD_SCORE
+            and self.best_score < BETTER_FACTOR * self.score_as_read
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -239,8 +246,15 @@ def _tracks(data: Measurements) -> list[_Track]:
         tracks.append(_Track(t.camera, t.sample[k], T[:, :3, 3], T[:, :3, :3], np.zeros(3)))
     for p in data.points:
         k = _evenly(len(p.sample))
-        tracks.append(_Track(p.frame, p.sample[k], p.meas_p_point[k], None,
-                             np.zeros(3) if p.offset is None else p.offset))
+        tracks.append(
+            _Track(
+                p.frame,
+                p.sample[k],
+                p.meas_p_point[k],
+                None,
+                np.zeros(3) if p.offset is None else p.offset,
+            )
+        )
     return [t for t in tracks if len(t.sample) >= 2]
 
 
@@ -250,8 +264,9 @@ def _relative(a: NDArray, b: NDArray, floor: float) -> NDArray:
     return np.where(top < floor, 0.5, np.abs(a - b) / np.maximum(top, floor))
 
 
-def _pair_motion(p: NDArray, R: NDArray | None, i: NDArray, j: NDArray
-                 ) -> tuple[NDArray, NDArray | None]:
+def _pair_motion(
+    p: NDArray, R: NDArray | None, i: NDArray, j: NDArray
+) -> tuple[NDArray, NDArray | None]:
     d = np.linalg.norm(p[j] - p[i], axis=1)
     if R is None:
         return d, None
@@ -271,8 +286,17 @@ def _joint_values(nominal: Robot, names: tuple[str, ...], qs: NDArray) -> tuple[
             spans = math.inf if beyond > 1e-9 else 0.0
         else:
             spans = float(beyond / span)
-        out.append(JointValues(name, nominal.joint(name).is_revolute, low, high,
-                               float(lower[c]), float(upper[c]), spans))
+        out.append(
+            JointValues(
+                name,
+                nominal.joint(name).is_revolute,
+                low,
+                high,
+                float(lower[c]),
+                float(upper[c]),
+                spans,
+            )
+        )
     return tuple(out)
 
 
@@ -290,8 +314,11 @@ def _hypotheses(revolute: list[str], prismatic: list[str]) -> list[UnitHypothesi
         for r_scale, r_looks, r_read in _REVOLUTE[:1]:
             for p_scale, p_looks, p_read in _PRISMATIC[:1]:
                 joint_readings.append(
-                    ({**{n: r_scale for n in revolute}, **{n: p_scale for n in prismatic}},
-                     f"{r_looks} and {p_looks} read as {r_read} and {p_read}"))
+                    (
+                        {**{n: r_scale for n in revolute}, **{n: p_scale for n in prismatic}},
+                        f"{r_looks} and {p_looks} read as {r_read} and {p_read}",
+                    )
+                )
     out = []
     for scales, looks in joint_readings:
         out.append(UnitHypothesis(scales, 1.0, looks, ""))
@@ -324,8 +351,9 @@ def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     prismatic = [n for n in listed if not nominal.joint(n).is_revolute]
     tracks = _tracks(data)
     pairs = [np.triu_indices(len(t.sample), k=1) for t in tracks]
-    measured = [_pair_motion(t.meas_p, t.meas_R, i, j)
-                for t, (i, j) in zip(tracks, pairs, strict=True)]
+    measured = [
+        _pair_motion(t.meas_p, t.meas_R, i, j) for t, (i, j) in zip(tracks, pairs, strict=True)
+    ]
     n_pairs = int(sum(len(i) for i, _ in pairs))
     hypotheses = _hypotheses(revolute, prismatic)
     predicted: dict[tuple[tuple[str, float], ...], list] = {}
@@ -355,15 +383,24 @@ def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     best = int(np.argmin(scores))  # index 0 (as read) wins ties
     if scores[best] >= scores[0]:
         best = 0
-    return UnitDiagnostics(n_pairs, float(scores[0]), hypotheses[best], float(scores[best]),
-                           float(np.min(scores[1:])), float(ratios[best]), joints,
-                           tuple(dict.fromkeys(t.frame for t in tracks)))
+    return UnitDiagnostics(
+        n_pairs,
+        float(scores[0]),
+        hypotheses[best],
+        float(scores[best]),
+        float(np.min(scores[1:])),
+        float(ratios[best]),
+        joints,
+        tuple(dict.fromkeys(t.frame for t in tracks)),
+    )
 
 
 def _limits_text(j: JointValues) -> str:
     unit = "rad" if j.revolute else "m"
-    return (f"joint {j.joint!r} values {j.low:.4g}..{j.high:.4g} (URDF limits "
-            f"{j.lower:.4g}..{j.upper:.4g} {unit})")
+    return (
+        f"joint {j.joint!r} values {j.low:.4g}..{j.high:.4g} (URDF limits "
+        f"{j.lower:.4g}..{j.upper:.4g} {unit})"
+    )
 
 
 def _fix(hyp: UnitHypothesis, all_revolute: bool, any_prismatic: bool) -> str:
@@ -374,8 +411,10 @@ def _fix(hyp: UnitHypothesis, all_revolute: bool, any_prismatic: bool) -> str:
         if all_revolute and looks == "degrees" and not any_prismatic:
             fixes.append('declare "units": {"angle": "deg"} (or per joint "joint_units")')
         else:
-            fixes.append('declare the unit of each joint in "joint_units" (one of "m", '
-                         '"mm", "rad", "deg" per entry of "joint_names")')
+            fixes.append(
+                'declare the unit of each joint in "joint_units" (one of "m", '
+                '"mm", "rad", "deg" per entry of "joint_names")'
+            )
     if hyp.length_scale != 1.0:
         unit = "mm" if hyp.length_scale < 1.0 else "m"
         fixes.append(f'declare "units": {{"length": "{unit}"}}')
@@ -408,8 +447,9 @@ def check_units(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     if diag.refused:
         hyp = diag.best
         parts = []
-        seen = ", ".join(repr(f) for f in diag.frames[:4]) + (", ..." if len(diag.frames) > 4
-                                                               else "")
+        seen = ", ".join(repr(f) for f in diag.frames[:4]) + (
+            ", ..." if len(diag.frames) > 4 else ""
+        )
         if hyp.joint_scale:
             names = list(hyp.joint_scale)
             scale = next(iter(hyp.joint_scale.values()))
@@ -419,32 +459,41 @@ def check_units(nominal: Robot, data: Measurements) -> UnitDiagnostics:
                 f"the values of joint(s) {names} look like {hyp.joint_looks}"
                 + (f" ({shown})" if shown else "")
                 + f": the measured motion of {seen} matches the nominal robot's only with "
-                f"the values multiplied by {scale:.4g}")
+                f"the values multiplied by {scale:.4g}"
+            )
         if hyp.length_scale != 1.0:
             parts.append(
                 f"the measured positions of {seen} look like {hyp.length_looks}: they move "
                 f"{diag.length_ratio:.4g} times the nominal robot's prediction (median over "
-                f"{diag.n_pairs} sample pairs)")
+                f"{diag.n_pairs} sample pairs)"
+            )
         revolute = {j.joint for j in diag.joints if j.revolute}
         prismatic = {j.joint for j in diag.joints if not j.revolute}
         raise UnitError(
             f"{src}: {'; and '.join(parts)} (mean relative motion discrepancy "
             f"{diag.score_as_read:.2f} as read, {diag.best_score:.2f} rescaled). "
-            f"{_fix(hyp, revolute <= set(hyp.joint_scale), bool(prismatic))}")
+            f"{_fix(hyp, revolute <= set(hyp.joint_scale), bool(prismatic))}"
+        )
     far = [j for j in diag.joints if j.outside_spans > LIMIT_FACTOR]
     if far and diag.score_as_read > LIMIT_SCORE:
         raise UnitError(
             f"{src}: {'; '.join(_limits_text(j) for j in far[:3])}: far outside the URDF "
             "limits, and the measured motion does not match the nominal robot's (mean "
             f"relative discrepancy {diag.score_as_read:.2f}): are the joint values in "
-            'another unit (degrees, mm)? Declare "units" / "joint_units", or convert them')
-    log.info("%s: units agree with the nominal robot (discrepancy %.3f over %d pairs)",
-             src, diag.score_as_read, diag.n_pairs)
+            'another unit (degrees, mm)? Declare "units" / "joint_units", or convert them'
+        )
+    log.info(
+        "%s: units agree with the nominal robot (discrepancy %.3f over %d pairs)",
+        src,
+        diag.score_as_read,
+        diag.n_pairs,
+    )
     return diag
 
 
-def check_joint_scale(name: str, scale: float, *, revolute: bool, source: str,
-                      error: type[UnitError] = UnitError) -> None:
+def check_joint_scale(
+    name: str, scale: float, *, revolute: bool, source: str, error: type[UnitError] = UnitError
+) -> None:
     """Refuse a joint whose measured motion per unit of its value is not 1.
 
     Used by the closed form, which measures the motion of each joint alone.
@@ -473,11 +522,13 @@ def check_joint_scale(name: str, scale: float, *, revolute: bool, source: str,
         raise error(
             f"{source}: joint {name!r} turns {scale:.4g} rad per unit of its joint value "
             "(expected 1): are its values in another unit (degrees read as radians, or "
-            "a gear ratio)? Fix the file's units / joint_units")
+            "a gear ratio)? Fix the file's units / joint_units"
+        )
     raise error(
         f"{source}: joint {name!r} moves {scale:.4g} m per unit of its joint value "
         "(expected 1): are its values in another unit (mm read as m)? Fix the file's "
-        "units / joint_units")
+        "units / joint_units"
+    )
 
 
 def check_fit(result: RefineResult, source: str) -> None:
@@ -500,18 +551,21 @@ def check_fit(result: RefineResult, source: str) -> None:
     """
     with_position = [g for g in result.residuals if g.position_m is not None]
     pos = [np.linalg.norm(g.position_m, axis=1) for g in with_position]
-    rot = [np.linalg.norm(g.rotation_rad, axis=1) for g in result.residuals
-           if g.rotation_rad is not None]
+    rot = [
+        np.linalg.norm(g.rotation_rad, axis=1)
+        for g in result.residuals
+        if g.rotation_rad is not None
+    ]
     med_p = float(np.median(np.concatenate(pos))) if pos else 0.0
     med_r = float(np.median(np.concatenate(rot))) if rot else 0.0
     if med_p <= FIT_LIMIT_M and med_r <= FIT_LIMIT_RAD:
         return
-    worst = max(with_position, key=lambda g: float(np.median(np.linalg.norm(g.position_m,
-                                                                               axis=1))))
+    worst = max(with_position, key=lambda g: float(np.median(np.linalg.norm(g.position_m, axis=1))))
     raise UnitError(
         f"{source}: the refinement over every parameter still leaves a median residual of "
         f"{1e3 * med_p:.3g} mm and {math.degrees(med_r):.3g} deg (worst: {worst.kind} "
         f"{worst.frame!r}, noise {'estimated' if result.noise.estimated else 'given'} "
         f"{1e3 * result.noise.position_m:.3g} mm): the data does not describe this robot. "
         'Are the units right ("units", "joint_units": mm read as m, degrees read as '
-        "radians), the joint order, and the URDF this robot's? Nothing was written")
+        "radians), the joint order, and the URDF this robot's? Nothing was written"
+    )

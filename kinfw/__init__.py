@@ -39,15 +39,25 @@ if TYPE_CHECKING:
 #: ``import kinfw.cli`` (which runs this file) loads neither numpy nor Pinocchio and
 #: ``kinfw --help`` starts at once.
 _HOME = {
-    "CPCModel": "cpc", "ZeroGeometry": "cpc", "cpc_from_robot": "cpc",
+    "CPCModel": "cpc",
+    "ZeroGeometry": "cpc",
+    "cpc_from_robot": "cpc",
     "geometry_from_cpc": "cpc",
-    "DatasetError": "measurements", "Measurements": "measurements",
-    "PointObservations": "measurements", "PoseObservations": "measurements",
-    "TargetObservations": "measurements", "read_measurements": "measurements",
+    "DatasetError": "measurements",
+    "Measurements": "measurements",
+    "PointObservations": "measurements",
+    "PoseObservations": "measurements",
+    "TargetObservations": "measurements",
+    "read_measurements": "measurements",
     "write_measurements": "measurements",
-    "Robot": "robot", "RobotModelError": "robot", "UnknownFrameError": "robot",
-    "builtin_head_urdf": "robot", "load_robot": "robot",
-    "ExportError": "urdf_export", "export_urdf": "urdf_export", "write_urdf": "urdf_export",
+    "Robot": "robot",
+    "RobotModelError": "robot",
+    "UnknownFrameError": "robot",
+    "builtin_head_urdf": "robot",
+    "load_robot": "robot",
+    "ExportError": "urdf_export",
+    "export_urdf": "urdf_export",
+    "write_urdf": "urdf_export",
 }
 
 _SUBMODULES = ("cpc", "measurements", "robot", "transforms", "urdf_export")

@@ -82,33 +82,32 @@ class DocReader:
             raise self.fail(at, "an object", value)
         return value
 
-    def value(self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
-              ) -> Any:
+    def value(self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False) -> Any:
         if key not in doc:
             if optional:
                 return None
             raise self.fail(self.path(at, key), "a value (the key is missing)")
         return doc[key]
 
-    def string(self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
-               ) -> str | None:
+    def string(
+        self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
+    ) -> str | None:
         v = self.value(doc, key, at, optional=optional)
         if v is None and optional:
             return None
         if not isinstance(v, str):
-            raise self.fail(self.path(at, key), "a string" + (" or null" if optional else ""),
-                            v)
+            raise self.fail(self.path(at, key), "a string" + (" or null" if optional else ""), v)
         return v
 
-    def number(self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
-               ) -> float | None:
+    def number(
+        self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
+    ) -> float | None:
         """A number (NaN allowed: the reports write NaN for a point's rotation)."""
         v = self.value(doc, key, at, optional=optional)
         if v is None and optional:
             return None
         if isinstance(v, bool) or not isinstance(v, int | float):
-            raise self.fail(self.path(at, key), "a number" + (" or null" if optional else ""),
-                            v)
+            raise self.fail(self.path(at, key), "a number" + (" or null" if optional else ""), v)
         return float(v)
 
     def integer(self, doc: dict[str, Any], key: str, at: str) -> int:
@@ -123,8 +122,9 @@ class DocReader:
             raise self.fail(self.path(at, key), "true or false", v)
         return v
 
-    def items(self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
-              ) -> list[Any] | None:
+    def items(
+        self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
+    ) -> list[Any] | None:
         v = self.value(doc, key, at, optional=optional)
         if v is None and optional:
             return None
@@ -132,8 +132,9 @@ class DocReader:
             raise self.fail(self.path(at, key), "a list" + (" or null" if optional else ""), v)
         return v
 
-    def array(self, value: Any, at: str, shape: tuple[int, ...] | None = None, *,
-              allow_null: bool = False) -> NDArray[np.float64]:
+    def array(
+        self, value: Any, at: str, shape: tuple[int, ...] | None = None, *, allow_null: bool = False
+    ) -> NDArray[np.float64]:
         """Nested lists of numbers as a float array (``shape`` checked when given);
         with ``allow_null`` a null entry is NaN."""
         what = f"an array of shape {shape}" if shape else "an array of numbers"
@@ -160,8 +161,11 @@ class DocReader:
         if doc.get("format") != fmt:
             raise self.fail("format", f"{fmt!r} (is this a {fmt} file?)", doc.get("format"))
         if doc.get("version") != version:
-            raise self.fail("version", f"{version} (this kinfw reads {fmt} version "
-                            f"{version})", doc.get("version"))
+            raise self.fail(
+                "version",
+                f"{version} (this kinfw reads {fmt} version {version})",
+                doc.get("version"),
+            )
         return doc
 
 
@@ -173,8 +177,9 @@ def _nulls_to_nan(value: Any) -> Any:
     return value
 
 
-def _array(value: ArrayLike, name: str, shape: tuple[int, ...] | None = None
-           ) -> NDArray[np.float64]:
+def _array(
+    value: ArrayLike, name: str, shape: tuple[int, ...] | None = None
+) -> NDArray[np.float64]:
     a = np.array(value, dtype=float)
     if shape is not None and a.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {a.shape}")
@@ -197,8 +202,11 @@ class DataProvenance:
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> DataProvenance:
         doc = reader.obj(doc, at)
-        return cls(reader.string(doc, "source", at), reader.integer(doc, "n_samples", at),
-                   reader.string(doc, "sha256", at, optional=True))
+        return cls(
+            reader.string(doc, "source", at),
+            reader.integer(doc, "n_samples", at),
+            reader.string(doc, "sha256", at, optional=True),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -219,7 +227,8 @@ class NoiseSummary:
 
     NOTE: ClassVar[str] = (
         "weights: 1/sigma^2 per position component (mm) and per small-angle orientation "
-        "component (an angle sigma of s about a random axis is s/sqrt(3) per component)")
+        "component (an angle sigma of s about a random axis is s/sqrt(3) per component)"
+    )
 
     def of(self, name: str) -> float | None:
         """The sigma of a component (SI), None when the calibration has no such rows."""
@@ -236,11 +245,13 @@ class NoiseSummary:
         return None if sigma is None else float(np.degrees(sigma))
 
     def to_dict(self) -> dict[str, Any]:
-        return {"position_sigma_mm": self.position_sigma_mm,
-                "rotation_sigma_deg_per_component": self.rotation_sigma_deg_per_component,
-                "estimated": self.estimated,
-                "sigma_per_component": dict(self.sigmas),
-                "note": self.NOTE}
+        return {
+            "position_sigma_mm": self.position_sigma_mm,
+            "rotation_sigma_deg_per_component": self.rotation_sigma_deg_per_component,
+            "estimated": self.estimated,
+            "sigma_per_component": dict(self.sigmas),
+            "note": self.NOTE,
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> NoiseSummary:
@@ -286,8 +297,11 @@ class CalibratedUnknown:
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> CalibratedUnknown:
         doc = reader.obj(doc, at)
-        return cls(reader.string(doc, "kind", at), reader.string(doc, "name", at),
-                   reader.array(reader.value(doc, "value", at), reader.path(at, "value")))
+        return cls(
+            reader.string(doc, "kind", at),
+            reader.string(doc, "name", at),
+            reader.array(reader.value(doc, "value", at), reader.path(at, "value")),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -303,18 +317,23 @@ class BeforeAfter:
     after_rotation_rms_deg: float
 
     _KEYS: ClassVar[tuple[str, ...]] = (
-        "before_position_rms_mm", "after_position_rms_mm", "before_rotation_rms_deg",
-        "after_rotation_rms_deg")
+        "before_position_rms_mm",
+        "after_position_rms_mm",
+        "before_rotation_rms_deg",
+        "after_rotation_rms_deg",
+    )
 
     def to_dict(self) -> dict[str, Any]:
-        return {"group": self.group, "n": self.n,
-                **{k: getattr(self, k) for k in self._KEYS}}
+        return {"group": self.group, "n": self.n, **{k: getattr(self, k) for k in self._KEYS}}
 
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> BeforeAfter:
         doc = reader.obj(doc, at)
-        return cls(reader.string(doc, "group", at), reader.integer(doc, "n", at),
-                   *(reader.number(doc, k, at) for k in cls._KEYS))
+        return cls(
+            reader.string(doc, "group", at),
+            reader.integer(doc, "n", at),
+            *(reader.number(doc, k, at) for k in cls._KEYS),
+        )
 
     @classmethod
     def rows_from(cls, docs: Any, reader: DocReader, at: str) -> tuple[BeforeAfter, ...]:
@@ -376,9 +395,14 @@ class CalibrationSidecar:
     def __post_init__(self) -> None:
         object.__setattr__(self, "w_T_root", _array(self.w_T_root, "w_T_root", (4, 4)))
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
-        object.__setattr__(self, "hand_eye_targets", tuple(
-            (str(t), _array(T, f"hand_eye_targets[{t!r}]", (4, 4)))
-            for t, T in self.hand_eye_targets))
+        object.__setattr__(
+            self,
+            "hand_eye_targets",
+            tuple(
+                (str(t), _array(T, f"hand_eye_targets[{t!r}]", (4, 4)))
+                for t, T in self.hand_eye_targets
+            ),
+        )
         if self.errors_held_out is not None:
             object.__setattr__(self, "errors_held_out", tuple(self.errors_held_out))
 
@@ -389,7 +413,8 @@ class CalibrationSidecar:
         name)``: ``frame_T_marker``; ``("offset", "frame:marker")``: ``frame_p_point``;
         and any other kind's unknowns."""
         known: dict[tuple[str, str], NDArray[np.float64]] = {
-            ("target", t): T for t, T in self.hand_eye_targets}
+            ("target", t): T for t, T in self.hand_eye_targets
+        }
         known.update({(u.kind, u.name): u.value for u in self.unknowns})
         if self.measurement_frame:
             known[("frame", self.measurement_frame)] = self.w_T_root
@@ -400,14 +425,17 @@ class CalibrationSidecar:
         """``(target, root_T_target)`` of every target, as calibrated (refined when
         refined, else from the hand-eye step), in the order of first appearance."""
         known = self.known_frames()
-        names = dict.fromkeys([t for t, _ in self.hand_eye_targets]
-                              + [u.name for u in self.unknowns if u.kind == "target"])
+        names = dict.fromkeys(
+            [t for t, _ in self.hand_eye_targets]
+            + [u.name for u in self.unknowns if u.kind == "target"]
+        )
         return tuple((t, known[("target", t)]) for t in names)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (``kinfw-calibration`` v1)."""
         return {
-            "format": self.FORMAT, "version": self.VERSION,
+            "format": self.FORMAT,
+            "version": self.VERSION,
             "created": self.created,
             "kinfw_version": self.kinfw_version,
             "method": self.method,
@@ -418,9 +446,11 @@ class CalibrationSidecar:
             "measurement_frame": self.measurement_frame,
             "noise": None if self.noise is None else self.noise.to_dict(),
             "unknowns": [u.to_dict() for u in self.unknowns],
-            "targets": [{"target": t, "root_T_target": T.tolist()}
-                        for t, T in self.hand_eye_targets],
-            "errors_held_out": None if self.errors_held_out is None
+            "targets": [
+                {"target": t, "root_T_target": T.tolist()} for t, T in self.hand_eye_targets
+            ],
+            "errors_held_out": None
+            if self.errors_held_out is None
             else [row.to_dict() for row in self.errors_held_out],
         }
 
@@ -441,8 +471,12 @@ class CalibrationSidecar:
         for k, t in enumerate(r.items(doc, "targets", "", optional=True) or []):
             at = f"targets[{k}]"
             t = r.obj(t, at)
-            targets.append((r.string(t, "target", at), r.array(
-                r.value(t, "root_T_target", at), f"{at}.root_T_target", (4, 4))))
+            targets.append(
+                (
+                    r.string(t, "target", at),
+                    r.array(r.value(t, "root_T_target", at), f"{at}.root_T_target", (4, 4)),
+                )
+            )
         held_out = r.value(doc, "errors_held_out", "", optional=True)
         return cls(
             created=r.string(doc, "created", ""),
@@ -455,12 +489,16 @@ class CalibrationSidecar:
             w_T_root=r.array(r.value(doc, "w_T_root", ""), "w_T_root", (4, 4)),
             measurement_frame=r.string(doc, "measurement_frame", "", optional=True),
             noise=None if noise is None else NoiseSummary.from_dict(noise, r, "noise"),
-            unknowns=tuple(CalibratedUnknown.from_dict(u, r, f"unknowns[{k}]") for k, u in
-                           enumerate(r.items(doc, "unknowns", "", optional=True) or [])),
+            unknowns=tuple(
+                CalibratedUnknown.from_dict(u, r, f"unknowns[{k}]")
+                for k, u in enumerate(r.items(doc, "unknowns", "", optional=True) or [])
+            ),
             hand_eye_targets=tuple(targets),
-            errors_held_out=None if held_out is None
+            errors_held_out=None
+            if held_out is None
             else BeforeAfter.rows_from(held_out, r, "errors_held_out"),
-            source=source)
+            source=source,
+        )
 
 
 def read_sidecar(path: str | Path) -> CalibrationSidecar:
@@ -479,8 +517,9 @@ def read_sidecar(path: str | Path) -> CalibrationSidecar:
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise CalibrationFileError(f"{path}: not JSON (line {exc.lineno}, column "
-                                   f"{exc.colno}: {exc.msg})") from None
+        raise CalibrationFileError(
+            f"{path}: not JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
     return CalibrationSidecar.from_dict(doc, str(path))
 
 

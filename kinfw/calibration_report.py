@@ -60,8 +60,7 @@ __all__ = [
 
 def _rows(cls, doc: dict, key: str, r: DocReader, at: str) -> tuple:
     path = r.path(at, key)
-    return tuple(cls.from_dict(d, r, f"{path}[{k}]")
-                 for k, d in enumerate(r.items(doc, key, at)))
+    return tuple(cls.from_dict(d, r, f"{path}[{k}]") for k, d in enumerate(r.items(doc, key, at)))
 
 
 # -- errors -----------------------------------------------------------------------------
@@ -86,8 +85,13 @@ class GroupErrorSummary:
     abs_std_xyz_mm: tuple[float, float, float]
 
     _NUMBERS: ClassVar[tuple[str, ...]] = (
-        "position_mean_mm", "position_rms_mm", "position_max_mm", "rotation_mean_deg",
-        "rotation_rms_deg", "rotation_max_deg")
+        "position_mean_mm",
+        "position_rms_mm",
+        "position_max_mm",
+        "rotation_mean_deg",
+        "rotation_rms_deg",
+        "rotation_max_deg",
+    )
 
     def __post_init__(self) -> None:
         for key in ("abs_mean_xyz_mm", "abs_std_xyz_mm"):
@@ -100,29 +104,49 @@ class GroupErrorSummary:
         return f"{self.frame}{marker} ({self.kind})"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"frame": self.frame, "kind": self.kind, "marker": self.marker, "n": self.n,
-                **{k: getattr(self, k) for k in self._NUMBERS},
-                "abs_mean_xyz_mm": list(self.abs_mean_xyz_mm),
-                "abs_std_xyz_mm": list(self.abs_std_xyz_mm)}
+        return {
+            "frame": self.frame,
+            "kind": self.kind,
+            "marker": self.marker,
+            "n": self.n,
+            **{k: getattr(self, k) for k in self._NUMBERS},
+            "abs_mean_xyz_mm": list(self.abs_mean_xyz_mm),
+            "abs_std_xyz_mm": list(self.abs_std_xyz_mm),
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> GroupErrorSummary:
         doc = r.obj(doc, at)
-        return cls(r.string(doc, "frame", at), r.string(doc, "kind", at),
-                   r.string(doc, "marker", at, optional=True), r.integer(doc, "n", at),
-                   *(r.number(doc, k, at) for k in cls._NUMBERS),
-                   *(tuple(r.array(r.value(doc, k, at), r.path(at, k), (3,)).tolist())
-                     for k in ("abs_mean_xyz_mm", "abs_std_xyz_mm")))
+        return cls(
+            r.string(doc, "frame", at),
+            r.string(doc, "kind", at),
+            r.string(doc, "marker", at, optional=True),
+            r.integer(doc, "n", at),
+            *(r.number(doc, k, at) for k in cls._NUMBERS),
+            *(
+                tuple(r.array(r.value(doc, k, at), r.path(at, k), (3,)).tolist())
+                for k in ("abs_mean_xyz_mm", "abs_std_xyz_mm")
+            ),
+        )
 
 
-def before_after(before: tuple[GroupErrorSummary, ...],
-                 after: tuple[GroupErrorSummary, ...]) -> tuple[BeforeAfter, ...]:
+def before_after(
+    before: tuple[GroupErrorSummary, ...], after: tuple[GroupErrorSummary, ...]
+) -> tuple[BeforeAfter, ...]:
     """Per group: RMS position (mm) and rotation (deg) before and after (matched by
     group label)."""
     after_of = {g.group: g for g in after}
-    return tuple(BeforeAfter(g.group, g.n, g.position_rms_mm,
-                             after_of[g.group].position_rms_mm, g.rotation_rms_deg,
-                             after_of[g.group].rotation_rms_deg) for g in before)
+    return tuple(
+        BeforeAfter(
+            g.group,
+            g.n,
+            g.position_rms_mm,
+            after_of[g.group].position_rms_mm,
+            g.rotation_rms_deg,
+            after_of[g.group].rotation_rms_deg,
+        )
+        for g in before
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -205,16 +229,24 @@ class CalibrationReport:
         """The JSON document (``kinfw-calibration-report`` v1); optional sections only
         when present."""
         doc: dict[str, Any] = {
-            "format": self.FORMAT, "version": self.VERSION, "created": self.created,
-            "method": self.method, "nominal_urdf": self.nominal_urdf,
-            "data": self.data.to_dict(), "notes": list(self.notes),
+            "format": self.FORMAT,
+            "version": self.VERSION,
+            "created": self.created,
+            "method": self.method,
+            "nominal_urdf": self.nominal_urdf,
+            "data": self.data.to_dict(),
+            "notes": list(self.notes),
             "errors_in_sample": [row.to_dict() for row in self.errors_in_sample],
             "position_rms_mm_by_stage": _stages_to_dict(self.position_rms_by_stage),
             "errors_before": {g.group: g.to_dict() for g in self.errors_before},
             "errors_after": {g.group: g.to_dict() for g in self.errors_after},
         }
-        for key, section in (("kinematics", self.kinematics), ("hand_eye", self.hand_eye),
-                             ("refine", self.refine), ("export", self.export)):
+        for key, section in (
+            ("kinematics", self.kinematics),
+            ("hand_eye", self.hand_eye),
+            ("refine", self.refine),
+            ("export", self.export),
+        ):
             if section is not None:
                 doc[key] = section.to_dict()
         if self.errors_held_out is not None:
@@ -222,11 +254,11 @@ class CalibrationReport:
         if self.sidecar is not None:
             doc["sidecar"] = self.sidecar
         if self.errors_vs_truth_held_out is not None:
-            doc["errors_vs_truth_held_out"] = [r.to_dict()
-                                               for r in self.errors_vs_truth_held_out]
+            doc["errors_vs_truth_held_out"] = [r.to_dict() for r in self.errors_vs_truth_held_out]
         if self.position_rms_vs_truth_held_out_by_stage is not None:
             doc["position_rms_mm_vs_truth_held_out_by_stage"] = _stages_to_dict(
-                self.position_rms_vs_truth_held_out_by_stage)
+                self.position_rms_vs_truth_held_out_by_stage
+            )
         return doc
 
     @classmethod
@@ -238,8 +270,9 @@ class CalibrationReport:
 
         def errors(key: str) -> tuple[GroupErrorSummary, ...]:
             groups = r.obj(r.value(doc, key, ""), key)
-            return tuple(GroupErrorSummary.from_dict(g, r, f"{key}[{k!r}]")
-                         for k, g in groups.items())
+            return tuple(
+                GroupErrorSummary.from_dict(g, r, f"{key}[{k!r}]") for k, g in groups.items()
+            )
 
         def section(key: str, kind: Any) -> Any:
             return kind.from_dict(doc[key], r, key) if key in doc else None
@@ -249,17 +282,24 @@ class CalibrationReport:
 
         truth_key = "position_rms_mm_vs_truth_held_out_by_stage"
         return cls(
-            r.string(doc, "created", ""), r.string(doc, "method", ""),
+            r.string(doc, "created", ""),
+            r.string(doc, "method", ""),
             r.string(doc, "nominal_urdf", ""),
             DataProvenance.from_dict(r.value(doc, "data", ""), r, "data"),
-            r.strings(doc, "notes", ""), rows("errors_in_sample") or (),
+            r.strings(doc, "notes", ""),
+            rows("errors_in_sample") or (),
             _stages_from(doc, "position_rms_mm_by_stage", r),
-            errors("errors_before"), errors("errors_after"),
-            section("kinematics", ClosedFormSection), section("hand_eye", HandEyeSection),
-            section("refine", RefineSection), section("export", ExportSection),
-            rows("errors_held_out"), r.string(doc, "sidecar", "", optional=True),
+            errors("errors_before"),
+            errors("errors_after"),
+            section("kinematics", ClosedFormSection),
+            section("hand_eye", HandEyeSection),
+            section("refine", RefineSection),
+            section("export", ExportSection),
+            rows("errors_held_out"),
+            r.string(doc, "sidecar", "", optional=True),
             rows("errors_vs_truth_held_out"),
-            _stages_from(doc, truth_key, r) if truth_key in doc else None)
+            _stages_from(doc, truth_key, r) if truth_key in doc else None,
+        )
 
 
 def read_report(path: str | Path) -> CalibrationReport:
@@ -269,8 +309,9 @@ def read_report(path: str | Path) -> CalibrationReport:
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
-        raise CalibrationFileError(f"{path}: not JSON (line {exc.lineno}, column "
-                                   f"{exc.colno}: {exc.msg})") from None
+        raise CalibrationFileError(
+            f"{path}: not JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from None
     return CalibrationReport.from_dict(doc, str(path))
 
 

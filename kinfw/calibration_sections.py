@@ -34,15 +34,17 @@ def _none_if_nan(v: float) -> float | None:
 
 def _rows(cls, doc: dict, key: str, r: DocReader, at: str) -> tuple:
     path = r.path(at, key)
-    return tuple(cls.from_dict(d, r, f"{path}[{k}]")
-                 for k, d in enumerate(r.items(doc, key, at)))
+    return tuple(cls.from_dict(d, r, f"{path}[{k}]") for k, d in enumerate(r.items(doc, key, at)))
 
 
 def _xyz_rpy(T: NDArray[np.float64]) -> dict[str, Any]:
     import pinocchio as pin
 
-    return {"xyz_m": T[:3, 3].tolist(), "rpy_rad": pin.rpy.matrixToRpy(T[:3, :3]).tolist(),
-            "matrix": T.tolist()}
+    return {
+        "xyz_m": T[:3, 3].tolist(),
+        "rpy_rad": pin.rpy.matrixToRpy(T[:3, :3]).tolist(),
+        "matrix": T.tolist(),
+    }
 
 
 def _pose(doc: dict, key: str, r: DocReader, at: str) -> NDArray[np.float64]:
@@ -64,14 +66,17 @@ class KinematicValue:
     unit: str
 
     def to_dict(self) -> dict[str, Any]:
-        return {"owner": self.owner, "name": self.name, "value": self.value,
-                "unit": self.unit}
+        return {"owner": self.owner, "name": self.name, "value": self.value, "unit": self.unit}
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> KinematicValue:
         doc = r.obj(doc, at)
-        return cls(r.string(doc, "owner", at), r.string(doc, "name", at),
-                   r.number(doc, "value", at), r.string(doc, "unit", at))
+        return cls(
+            r.string(doc, "owner", at),
+            r.string(doc, "name", at),
+            r.number(doc, "value", at),
+            r.string(doc, "unit", at),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,18 +100,25 @@ class ClosedFormSection:
         "canonical CPC parameters (Shih et al. eqs. 3-4, Table 1 gauge): per joint the "
         "axis b of its frame in its parent's moved frame, beta, l (m) and the motion "
         "sense; per end frame its pose in the moved frame of its last joint (m, URDF rpy "
-        "in rad)")
+        "in rad)"
+    )
 
     def to_dict(self) -> dict[str, Any]:
-        return {"method": self.METHOD, "joint_names": list(self.joint_names),
-                "frames": list(self.frames), "q0": list(self.q0),
-                "samples_per_joint": list(self.samples_per_joint),
-                "axis_residual_rad": [_none_if_nan(v) for v in self.axis_residual_rad],
-                "motion_per_unit_joint_value": list(self.motion_per_unit_joint_value),
-                "position_rms_mm": self.position_rms_mm,
-                "parameters": {"note": self.NOTE,
-                               "values": [v.to_dict() for v in self.values],
-                               "n_identifiable": self.n_identifiable}}
+        return {
+            "method": self.METHOD,
+            "joint_names": list(self.joint_names),
+            "frames": list(self.frames),
+            "q0": list(self.q0),
+            "samples_per_joint": list(self.samples_per_joint),
+            "axis_residual_rad": [_none_if_nan(v) for v in self.axis_residual_rad],
+            "motion_per_unit_joint_value": list(self.motion_per_unit_joint_value),
+            "position_rms_mm": self.position_rms_mm,
+            "parameters": {
+                "note": self.NOTE,
+                "values": [v.to_dict() for v in self.values],
+                "n_identifiable": self.n_identifiable,
+            },
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> ClosedFormSection:
@@ -115,18 +127,22 @@ class ClosedFormSection:
         p_at = r.path(at, "parameters")
 
         def numbers(key: str, null: bool = False) -> tuple[float, ...]:
-            return tuple(r.array(r.value(doc, key, at), r.path(at, key),
-                                 allow_null=null).tolist())
+            return tuple(r.array(r.value(doc, key, at), r.path(at, key), allow_null=null).tolist())
 
         samples = r.items(doc, "samples_per_joint", at)
         if not all(isinstance(v, int) and not isinstance(v, bool) for v in samples):
             raise r.fail(r.path(at, "samples_per_joint"), "a list of integers", samples)
-        return cls(r.strings(doc, "joint_names", at), r.strings(doc, "frames", at),
-                   numbers("q0"), tuple(samples), numbers("axis_residual_rad", True),
-                   numbers("motion_per_unit_joint_value"),
-                   r.number(doc, "position_rms_mm", at),
-                   _rows(KinematicValue, params, "values", r, p_at),
-                   r.integer(params, "n_identifiable", p_at))
+        return cls(
+            r.strings(doc, "joint_names", at),
+            r.strings(doc, "frames", at),
+            numbers("q0"),
+            tuple(samples),
+            numbers("axis_residual_rad", True),
+            numbers("motion_per_unit_joint_value"),
+            r.number(doc, "position_rms_mm", at),
+            _rows(KinematicValue, params, "values", r, p_at),
+            r.integer(params, "n_identifiable", p_at),
+        )
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -147,21 +163,34 @@ class CameraMount:
     rms_translation_mm: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {"camera": self.camera, "target": self.target, "joint": self.joint,
-                "hand": self.hand, "hand_T_camera": _xyz_rpy(self.hand_T_camera),
-                "n_views": self.n_views, "iterations": self.iterations,
-                "restarts": self.restarts, "converged": self.converged,
-                "rms_rotation_deg": self.rms_rotation_deg,
-                "rms_translation_mm": self.rms_translation_mm}
+        return {
+            "camera": self.camera,
+            "target": self.target,
+            "joint": self.joint,
+            "hand": self.hand,
+            "hand_T_camera": _xyz_rpy(self.hand_T_camera),
+            "n_views": self.n_views,
+            "iterations": self.iterations,
+            "restarts": self.restarts,
+            "converged": self.converged,
+            "rms_rotation_deg": self.rms_rotation_deg,
+            "rms_translation_mm": self.rms_translation_mm,
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> CameraMount:
         doc = r.obj(doc, at)
         s = (r.string(doc, k, at) for k in ("camera", "target", "joint", "hand"))
-        return cls(*s, _pose(doc, "hand_T_camera", r, at), r.integer(doc, "n_views", at),
-                   r.integer(doc, "iterations", at), r.integer(doc, "restarts", at),
-                   r.boolean(doc, "converged", at), r.number(doc, "rms_rotation_deg", at),
-                   r.number(doc, "rms_translation_mm", at))
+        return cls(
+            *s,
+            _pose(doc, "hand_T_camera", r, at),
+            r.integer(doc, "n_views", at),
+            r.integer(doc, "iterations", at),
+            r.integer(doc, "restarts", at),
+            r.boolean(doc, "converged", at),
+            r.number(doc, "rms_rotation_deg", at),
+            r.number(doc, "rms_translation_mm", at),
+        )
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -174,16 +203,22 @@ class TargetEstimate:
     camera_disagreement_deg: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {"target": self.target, "root_T_target": _xyz_rpy(self.root_T_target),
-                "camera_disagreement_mm": self.camera_disagreement_mm,
-                "camera_disagreement_deg": self.camera_disagreement_deg}
+        return {
+            "target": self.target,
+            "root_T_target": _xyz_rpy(self.root_T_target),
+            "camera_disagreement_mm": self.camera_disagreement_mm,
+            "camera_disagreement_deg": self.camera_disagreement_deg,
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> TargetEstimate:
         doc = r.obj(doc, at)
-        return cls(r.string(doc, "target", at), _pose(doc, "root_T_target", r, at),
-                   r.number(doc, "camera_disagreement_mm", at),
-                   r.number(doc, "camera_disagreement_deg", at))
+        return cls(
+            r.string(doc, "target", at),
+            _pose(doc, "root_T_target", r, at),
+            r.number(doc, "camera_disagreement_mm", at),
+            r.number(doc, "camera_disagreement_deg", at),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,14 +231,18 @@ class HandEyeSection:
     METHOD: ClassVar[str] = "iterative A = X B Y, Hirsh, DeSouza & Kak (2001), per camera"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"method": self.METHOD, "cameras": [c.to_dict() for c in self.cameras],
-                "targets": [t.to_dict() for t in self.targets]}
+        return {
+            "method": self.METHOD,
+            "cameras": [c.to_dict() for c in self.cameras],
+            "targets": [t.to_dict() for t in self.targets],
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> HandEyeSection:
         doc = r.obj(doc, at)
-        return cls(_rows(CameraMount, doc, "cameras", r, at),
-                   _rows(TargetEstimate, doc, "targets", r, at))
+        return cls(
+            _rows(CameraMount, doc, "cameras", r, at), _rows(TargetEstimate, doc, "targets", r, at)
+        )
 
 
 # -- refinement -------------------------------------------------------------------------
@@ -220,17 +259,26 @@ class ParameterRow:
     std: float | None
 
     def to_dict(self) -> dict[str, Any]:
-        return {"owner": self.owner, "field": self.field, "unit": self.unit,
-                "fixed": self.fixed, "delta_from_start": self.delta_from_start,
-                "std": self.std}
+        return {
+            "owner": self.owner,
+            "field": self.field,
+            "unit": self.unit,
+            "fixed": self.fixed,
+            "delta_from_start": self.delta_from_start,
+            "std": self.std,
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> ParameterRow:
         doc = r.obj(doc, at)
-        return cls(r.string(doc, "owner", at), r.string(doc, "field", at),
-                   r.string(doc, "unit", at), r.boolean(doc, "fixed", at),
-                   r.number(doc, "delta_from_start", at),
-                   r.number(doc, "std", at, optional=True))
+        return cls(
+            r.string(doc, "owner", at),
+            r.string(doc, "field", at),
+            r.string(doc, "unit", at),
+            r.boolean(doc, "fixed", at),
+            r.number(doc, "delta_from_start", at),
+            r.number(doc, "std", at, optional=True),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -279,19 +327,26 @@ class IdentifiabilitySummary:
     correlations: tuple[Correlation, ...]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"rank": self.rank, "n_parameters": self.n_parameters,
-                "condition": self.condition, "observability_O1": self.observability_o1,
-                "not_identifiable": [n.to_dict() for n in self.not_identifiable],
-                "correlations_above_0.9": [c.to_dict() for c in self.correlations]}
+        return {
+            "rank": self.rank,
+            "n_parameters": self.n_parameters,
+            "condition": self.condition,
+            "observability_O1": self.observability_o1,
+            "not_identifiable": [n.to_dict() for n in self.not_identifiable],
+            "correlations_above_0.9": [c.to_dict() for c in self.correlations],
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> IdentifiabilitySummary:
         doc = r.obj(doc, at)
-        return cls(r.integer(doc, "rank", at), r.integer(doc, "n_parameters", at),
-                   r.number(doc, "condition", at, optional=True),
-                   r.number(doc, "observability_O1", at, optional=True),
-                   _rows(NotIdentifiable, doc, "not_identifiable", r, at),
-                   _rows(Correlation, doc, "correlations_above_0.9", r, at))
+        return cls(
+            r.integer(doc, "rank", at),
+            r.integer(doc, "n_parameters", at),
+            r.number(doc, "condition", at, optional=True),
+            r.number(doc, "observability_O1", at, optional=True),
+            _rows(NotIdentifiable, doc, "not_identifiable", r, at),
+            _rows(Correlation, doc, "correlations_above_0.9", r, at),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -309,18 +364,28 @@ class DownweightedRow:
     weight: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {"sample": self.sample, "kind": self.kind, "frame": self.frame,
-                "marker": self.marker, "position_residual_mm": self.position_residual_mm,
-                "rotation_residual_deg": self.rotation_residual_deg, "weight": self.weight}
+        return {
+            "sample": self.sample,
+            "kind": self.kind,
+            "frame": self.frame,
+            "marker": self.marker,
+            "position_residual_mm": self.position_residual_mm,
+            "rotation_residual_deg": self.rotation_residual_deg,
+            "weight": self.weight,
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> DownweightedRow:
         doc = r.obj(doc, at)
-        return cls(r.integer(doc, "sample", at), r.string(doc, "kind", at),
-                   r.string(doc, "frame", at), r.string(doc, "marker", at, optional=True),
-                   r.number(doc, "position_residual_mm", at),
-                   r.number(doc, "rotation_residual_deg", at, optional=True),
-                   r.number(doc, "weight", at))
+        return cls(
+            r.integer(doc, "sample", at),
+            r.string(doc, "kind", at),
+            r.string(doc, "frame", at),
+            r.string(doc, "marker", at, optional=True),
+            r.number(doc, "position_residual_mm", at),
+            r.number(doc, "rotation_residual_deg", at, optional=True),
+            r.number(doc, "weight", at),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -342,13 +407,16 @@ class RefineSection:
 
     METHOD: ClassVar[str] = (
         "joint nonlinear least squares (CasADi residuals and Jacobians, "
-        "Levenberg-Marquardt), residuals whitened by the noise below")
+        "Levenberg-Marquardt), residuals whitened by the noise below"
+    )
     PARAMETERS_NOTE: ClassVar[str] = (
         "delta_from_start and std in the parameter's unit (rad, m or unitless); fixed: not "
-        "estimated (held at the start, delta_from_start 0, std null)")
+        "estimated (held at the start, delta_from_start 0, std null)"
+    )
     DOWNWEIGHTED_NOTE: ClassVar[str] = (
         "observations beyond the robust loss's threshold, the worst (lowest weight) first; "
-        "sample is the index into the data file's samples (from 0)")
+        "sample is the index into the data file's samples (from 0)"
+    )
 
     @property
     def n_fixed(self) -> int:
@@ -356,31 +424,42 @@ class RefineSection:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "method": self.METHOD, "loss": self.loss, "noise": self.noise.to_dict(),
-            "reduced_chi_square": self.reduced_chi_square, "iterations": self.iterations,
-            "converged": self.converged, "seconds": self.seconds,
-            "model_frame": self.model_frame, "parameters_note": self.PARAMETERS_NOTE,
+            "method": self.METHOD,
+            "loss": self.loss,
+            "noise": self.noise.to_dict(),
+            "reduced_chi_square": self.reduced_chi_square,
+            "iterations": self.iterations,
+            "converged": self.converged,
+            "seconds": self.seconds,
+            "model_frame": self.model_frame,
+            "parameters_note": self.PARAMETERS_NOTE,
             "parameters": [p.to_dict() for p in self.parameters],
             "kinematics": [k.to_dict() for k in self.kinematics],
             "unknowns": [u.to_dict() for u in self.unknowns],
             "identifiability": self.identifiability.to_dict(),
             "downweighted_note": self.DOWNWEIGHTED_NOTE,
-            "downweighted": [d.to_dict() for d in self.downweighted]}
+            "downweighted": [d.to_dict() for d in self.downweighted],
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> RefineSection:
         doc = r.obj(doc, at)
-        return cls(r.string(doc, "loss", at),
-                   NoiseSummary.from_dict(r.value(doc, "noise", at), r, r.path(at, "noise")),
-                   r.number(doc, "reduced_chi_square", at), r.integer(doc, "iterations", at),
-                   r.boolean(doc, "converged", at), r.number(doc, "seconds", at),
-                   r.string(doc, "model_frame", at, optional=True),
-                   _rows(ParameterRow, doc, "parameters", r, at),
-                   _rows(KinematicValue, doc, "kinematics", r, at),
-                   _rows(CalibratedUnknown, doc, "unknowns", r, at),
-                   IdentifiabilitySummary.from_dict(r.value(doc, "identifiability", at), r,
-                                                    r.path(at, "identifiability")),
-                   _rows(DownweightedRow, doc, "downweighted", r, at))
+        return cls(
+            r.string(doc, "loss", at),
+            NoiseSummary.from_dict(r.value(doc, "noise", at), r, r.path(at, "noise")),
+            r.number(doc, "reduced_chi_square", at),
+            r.integer(doc, "iterations", at),
+            r.boolean(doc, "converged", at),
+            r.number(doc, "seconds", at),
+            r.string(doc, "model_frame", at, optional=True),
+            _rows(ParameterRow, doc, "parameters", r, at),
+            _rows(KinematicValue, doc, "kinematics", r, at),
+            _rows(CalibratedUnknown, doc, "unknowns", r, at),
+            IdentifiabilitySummary.from_dict(
+                r.value(doc, "identifiability", at), r, r.path(at, "identifiability")
+            ),
+            _rows(DownweightedRow, doc, "downweighted", r, at),
+        )
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -392,9 +471,12 @@ class ExportSection:
     moved_link_frames: tuple[tuple[str, float], ...]
 
     def to_dict(self) -> dict[str, Any]:
-        return {"w_T_root": self.w_T_root.tolist(),
-                "moved_link_frames": [{"link": link, "shift_mm": mm}
-                                      for link, mm in self.moved_link_frames]}
+        return {
+            "w_T_root": self.w_T_root.tolist(),
+            "moved_link_frames": [
+                {"link": link, "shift_mm": mm} for link, mm in self.moved_link_frames
+            ],
+        }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> ExportSection:
@@ -404,5 +486,4 @@ class ExportSection:
             m_at = f"{at}.moved_link_frames[{k}]"
             m = r.obj(m, m_at)
             moved.append((r.string(m, "link", m_at), r.number(m, "shift_mm", m_at)))
-        return cls(r.array(r.value(doc, "w_T_root", at), f"{at}.w_T_root", (4, 4)),
-                   tuple(moved))
+        return cls(r.array(r.value(doc, "w_T_root", at), f"{at}.w_T_root", (4, 4)), tuple(moved))

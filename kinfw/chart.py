@@ -42,9 +42,17 @@ def cayley_entries(x: Any, y: Any, z: Any) -> tuple[Any, ...]:
     (element-wise over any batch shape) and CasADi symbols.
     """
     c = 2.0 / (1.0 + x * x + y * y + z * z)
-    return (1.0 - c * (y * y + z * z), c * (x * y - z), c * (x * z + y),
-            c * (x * y + z), 1.0 - c * (x * x + z * z), c * (y * z - x),
-            c * (x * z - y), c * (y * z + x), 1.0 - c * (x * x + y * y))
+    return (
+        1.0 - c * (y * y + z * z),
+        c * (x * y - z),
+        c * (x * z + y),
+        c * (x * y + z),
+        1.0 - c * (x * x + z * z),
+        c * (y * z - x),
+        c * (x * z - y),
+        c * (y * z + x),
+        1.0 - c * (x * x + y * y),
+    )
 
 
 def cayley_rotation(a: ArrayLike) -> NDArray[np.float64]:
@@ -61,8 +69,14 @@ def rotation_chart(dR: ArrayLike) -> NDArray[np.float64]:
     first order (rad); undefined at a half turn.
     """
     dR = np.asarray(dR, dtype=float)
-    a = np.stack([dR[..., 2, 1] - dR[..., 1, 2], dR[..., 0, 2] - dR[..., 2, 0],
-                  dR[..., 1, 0] - dR[..., 0, 1]], axis=-1)
+    a = np.stack(
+        [
+            dR[..., 2, 1] - dR[..., 1, 2],
+            dR[..., 0, 2] - dR[..., 2, 0],
+            dR[..., 1, 0] - dR[..., 0, 1],
+        ],
+        axis=-1,
+    )
     return 2.0 * a / (1.0 + np.trace(dR, axis1=-2, axis2=-1))[..., None]
 
 
@@ -112,8 +126,9 @@ def rigid_from_chart_casadi(T0: Any, d: Any) -> Any:
         T0 = np.asarray(T0, dtype=float)
         R0, p0 = ca.DM(T0[:3, :3]), ca.DM(T0[:3, 3])
     e = cayley_entries(0.5 * d[0], 0.5 * d[1], 0.5 * d[2])
-    dR = ca.vertcat(ca.horzcat(e[0], e[1], e[2]), ca.horzcat(e[3], e[4], e[5]),
-                    ca.horzcat(e[6], e[7], e[8]))
+    dR = ca.vertcat(
+        ca.horzcat(e[0], e[1], e[2]), ca.horzcat(e[3], e[4], e[5]), ca.horzcat(e[6], e[7], e[8])
+    )
     R = R0 @ dR
     p = p0 + ca.vertcat(d[3], d[4], d[5])
     return ca.vertcat(ca.horzcat(R, p), ca.horzcat(0, 0, 0, 1))

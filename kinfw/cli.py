@@ -57,29 +57,42 @@ def _check_outputs(args: argparse.Namespace) -> None:
     input (symlinks resolved). Raises :class:`kinfw.files.OutputPathError`."""
     command = args.command
     if command == "simulate":
-        check_outputs({"--out": args.out, "--truth-out": args.truth_out},
-                      inputs={"--urdf": args.urdf})
+        check_outputs(
+            {"--out": args.out, "--truth-out": args.truth_out}, inputs={"--urdf": args.urdf}
+        )
     elif command == "calibrate":
-        check_outputs({"--out": args.out, "sidecar": default_sidecar_path(args.out),
-                       "--report": args.report},
-                      inputs={"--urdf": args.urdf, "data file": args.data,
-                              "--holdout": args.holdout})
+        check_outputs(
+            {"--out": args.out, "sidecar": default_sidecar_path(args.out), "--report": args.report},
+            inputs={"--urdf": args.urdf, "data file": args.data, "--holdout": args.holdout},
+        )
     elif command == "demo":
         from verification.demo import DEMO_FILES
 
         check_output_dir(args.out, label="--out", files=DEMO_FILES)
     elif command == "view" and args.html is not None:
         sidecar = args.sidecar or (args.calibrated and default_sidecar_path(args.calibrated))
-        check_outputs({"--html": args.html},
-                      inputs={"nominal": args.nominal, "--calibrated": args.calibrated,
-                              "--data": args.data, "sidecar": sidecar})
+        check_outputs(
+            {"--html": args.html},
+            inputs={
+                "nominal": args.nominal,
+                "--calibrated": args.calibrated,
+                "--data": args.data,
+                "sidecar": sidecar,
+            },
+        )
     elif command == "reproduce":
         check_output_dir(args.out, label="--out")
 
 
 # -- numbers on the command line -----------------------------------------------------------
-def _number(kind: type, *, low: float | None = None, high: float | None = None,
-            low_open: bool = False, unit: str = "") -> Callable[[str], float | int]:
+def _number(
+    kind: type,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    unit: str = "",
+) -> Callable[[str], float | int]:
     """An argparse ``type``: ``kind`` (int or float) within ``[low, high]`` (``(low,
     high]`` with ``low_open``); argparse names the flag in the error."""
     if low is not None and high is not None:
@@ -96,11 +109,15 @@ def _number(kind: type, *, low: float | None = None, high: float | None = None,
             value = kind(text)
         except ValueError:
             value = None
-        if (value is None or not math.isfinite(value)
-                or (low is not None and (value <= low if low_open else value < low))
-                or (high is not None and value > high)):
-            raise argparse.ArgumentTypeError(f"expected {' '.join(filter(None, (noun, want)))}"
-                                             f"{suffix}, got {text!r}")
+        if (
+            value is None
+            or not math.isfinite(value)
+            or (low is not None and (value <= low if low_open else value < low))
+            or (high is not None and value > high)
+        ):
+            raise argparse.ArgumentTypeError(
+                f"expected {' '.join(filter(None, (noun, want)))}{suffix}, got {text!r}"
+            )
         return value
 
     parse.__name__ = kind.__name__  # argparse's own messages say "invalid int value"
@@ -122,8 +139,9 @@ def _up_arg(text: str) -> list[float]:
     except ValueError:
         up = []
     if len(up) != 3 or not all(map(math.isfinite, up)) or not any(up):
-        raise argparse.ArgumentTypeError(f'expected three numbers "x y z", not all zero, '
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f'expected three numbers "x y z", not all zero, got {text!r}'
+        )
     return up
 
 
@@ -131,59 +149,102 @@ class _Parser(argparse.ArgumentParser):
     """Errors in one line, ``kinfw CMD: error: ...`` (exit 2), like every other error."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see "
-                     f"'{self.prog} --help')\n")
+        self.exit(
+            2, f"{self.prog}: error: {' '.join(message.split())} (see '{self.prog} --help')\n"
+        )
 
 
 # -- parser ------------------------------------------------------------------------------
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
     """Noise, robust loss and prior of the refinement (calibrate and crossval)."""
-    p.add_argument("--sigma-mm", type=_POSITIVE_MM, help="position noise sigma per axis, mm "
-                   "(default: estimated from the residuals)")
-    p.add_argument("--sigma-deg", type=_POSITIVE_DEG, help="orientation noise: angle sigma "
-                   "about a random axis, deg (default: estimated)")
-    p.add_argument("--loss", choices=("huber", "linear", "cauchy"), default="huber",
-                   help="robust loss of the refinement (default huber: gross outliers are "
-                   "down-weighted and listed)")
-    p.add_argument("--prior-mm", type=_POSITIVE_MM, help="Gaussian prior on deviations from "
-                   "the nominal: sigma of lengths, mm (for small datasets)")
+    p.add_argument(
+        "--sigma-mm",
+        type=_POSITIVE_MM,
+        help="position noise sigma per axis, mm (default: estimated from the residuals)",
+    )
+    p.add_argument(
+        "--sigma-deg",
+        type=_POSITIVE_DEG,
+        help="orientation noise: angle sigma about a random axis, deg (default: estimated)",
+    )
+    p.add_argument(
+        "--loss",
+        choices=("huber", "linear", "cauchy"),
+        default="huber",
+        help="robust loss of the refinement (default huber: gross outliers are "
+        "down-weighted and listed)",
+    )
+    p.add_argument(
+        "--prior-mm",
+        type=_POSITIVE_MM,
+        help="Gaussian prior on deviations from "
+        "the nominal: sigma of lengths, mm (for small datasets)",
+    )
     p.add_argument("--prior-deg", type=_POSITIVE_DEG, help="... and of angles, deg")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="kinfw", description="Calibrate robot kinematics from measurements.")
+    parser = _Parser(prog="kinfw", description="Calibrate robot kinematics from measurements.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("simulate", help="simulate measurements of a perturbed robot",
-                       description="Perturb the nominal URDF into a 'true' robot and simulate "
-                       "its measurements: stage 1 poses of --frames, one joint at a time "
-                       "(Shih et al. section 4.1); stage 2 camera observations of a fixed "
-                       "target at random configurations.")
-    p.add_argument("--urdf", type=Path, default=None,
-                   help="nominal URDF (default: the built-in IIS-head)")
+    p = sub.add_parser(
+        "simulate",
+        help="simulate measurements of a perturbed robot",
+        description="Perturb the nominal URDF into a 'true' robot and simulate "
+        "its measurements: stage 1 poses of --frames, one joint at a time "
+        "(Shih et al. section 4.1); stage 2 camera observations of a fixed "
+        "target at random configurations.",
+    )
+    p.add_argument(
+        "--urdf", type=Path, default=None, help="nominal URDF (default: the built-in IIS-head)"
+    )
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
     p.add_argument("--truth-out", type=Path, required=True, help="true robot URDF to write")
-    p.add_argument("--per-joint", type=_COUNT, default=9,
-                   help="stage 1 measurements per joint (default 9, as the paper)")
-    p.add_argument("--noise-mm", type=_MM, default=0.5,
-                   help="position noise sigma per axis, mm (default 0.5)")
-    p.add_argument("--noise-deg", type=_DEG, default=0.5,
-                   help="rotation noise angle sigma, deg (default 0.5)")
-    p.add_argument("--stereo-mm", type=_MM, default=None,
-                   help="simulate the stereo rig: point noise sigma on the nine-circle "
-                   "plate, mm (replaces --noise-mm/--noise-deg for stage 1 poses)")
-    p.add_argument("--error-mm", type=_MM, default=2.0,
-                   help="true robot: joint origin error sigma, mm (default 2)")
-    p.add_argument("--error-deg", type=_DEG, default=0.5,
-                   help="true robot: joint origin and axis error sigma, deg (default 0.5)")
-    p.add_argument("--fraction", type=_number(float, low=0.0, high=1.0, low_open=True),
-                   default=0.8,
-                   help="fraction of each joint range used (default 0.8)")
+    p.add_argument(
+        "--per-joint",
+        type=_COUNT,
+        default=9,
+        help="stage 1 measurements per joint (default 9, as the paper)",
+    )
+    p.add_argument(
+        "--noise-mm", type=_MM, default=0.5, help="position noise sigma per axis, mm (default 0.5)"
+    )
+    p.add_argument(
+        "--noise-deg", type=_DEG, default=0.5, help="rotation noise angle sigma, deg (default 0.5)"
+    )
+    p.add_argument(
+        "--stereo-mm",
+        type=_MM,
+        default=None,
+        help="simulate the stereo rig: point noise sigma on the nine-circle "
+        "plate, mm (replaces --noise-mm/--noise-deg for stage 1 poses)",
+    )
+    p.add_argument(
+        "--error-mm",
+        type=_MM,
+        default=2.0,
+        help="true robot: joint origin error sigma, mm (default 2)",
+    )
+    p.add_argument(
+        "--error-deg",
+        type=_DEG,
+        default=0.5,
+        help="true robot: joint origin and axis error sigma, deg (default 0.5)",
+    )
+    p.add_argument(
+        "--fraction",
+        type=_number(float, low=0.0, high=1.0, low_open=True),
+        default=0.8,
+        help="fraction of each joint range used (default 0.8)",
+    )
     p.add_argument("--stage", choices=("1", "2", "both"), default="1")
-    p.add_argument("--stage2-samples", type=_COUNT, default=30,
-                   help="stage 2 random configurations (default 30)")
+    p.add_argument(
+        "--stage2-samples",
+        type=_COUNT,
+        default=30,
+        help="stage 2 random configurations (default 30)",
+    )
     p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
     p.add_argument("--seed", type=_SEED, default=0)
@@ -193,12 +254,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("verify", help="errors of a URDF model against measurements")
     p.add_argument("model", type=Path, help="URDF to evaluate")
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
-    p.add_argument("--sidecar", type=Path, help="calibration sidecar (default: "
-                   "MODEL.kinfw.json beside the model, used when present)")
-    p.add_argument("--no-sidecar", action="store_true",
-                   help="ignore the sidecar: fit nuisance frames to these data")
-    p.add_argument("--json", action="store_true",
-                   help="print the report as JSON, with per-sample errors")
+    p.add_argument(
+        "--sidecar",
+        type=Path,
+        help="calibration sidecar (default: MODEL.kinfw.json beside the model, used when present)",
+    )
+    p.add_argument(
+        "--no-sidecar",
+        action="store_true",
+        help="ignore the sidecar: fit nuisance frames to these data",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print the report as JSON, with per-sample errors"
+    )
     p.set_defaults(func=cmd_verify)
 
     p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")
@@ -206,80 +274,128 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
     p.add_argument("--out", type=Path, required=True, help="calibrated URDF to write")
     p.add_argument("--report", type=Path, help="write the report (JSON) here")
-    p.add_argument("--method", choices=("refine", "closed-form"), default="refine",
-                   help="refine (default): closed form and hand-eye, then the joint "
-                   "nonlinear least squares; closed-form: stop after closed form and hand-eye")
-    p.add_argument("--holdout", type=Path, help="measurement file not used for calibration; "
-                   "its errors go to the report and sidecar")
-    p.add_argument("--params", default="full", help="what to estimate: full (default), "
-                   "offsets (joint zero offsets + base and tool frames), frames (base and "
-                   "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
-                   "those joints' CPC parameters)")
+    p.add_argument(
+        "--method",
+        choices=("refine", "closed-form"),
+        default="refine",
+        help="refine (default): closed form and hand-eye, then the joint "
+        "nonlinear least squares; closed-form: stop after closed form and hand-eye",
+    )
+    p.add_argument(
+        "--holdout",
+        type=Path,
+        help="measurement file not used for calibration; its errors go to the report and sidecar",
+    )
+    p.add_argument(
+        "--params",
+        default="full",
+        help="what to estimate: full (default), "
+        "offsets (joint zero offsets + base and tool frames), frames (base and "
+        "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
+        "those joints' CPC parameters)",
+    )
     _add_fit_options(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
-    p.add_argument("--out", type=Path, default=Path("demo_out"),
-                   help="output directory (default demo_out)")
+    p.add_argument(
+        "--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)"
+    )
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("crossval", help="k-fold cross-validation against baselines",
-                       description="Held-out error of the calibration (folds by sample) next "
-                       "to two baselines on the same folds: the nominal geometry and 'frames "
-                       "only' (nominal joints; measurement frame, markers, target and tool / "
-                       "hand-eye frames fitted). Warns when the calibration is worse than "
-                       "frames only, with the likely cause.")
+    p = sub.add_parser(
+        "crossval",
+        help="k-fold cross-validation against baselines",
+        description="Held-out error of the calibration (folds by sample) next "
+        "to two baselines on the same folds: the nominal geometry and 'frames "
+        "only' (nominal joints; measurement frame, markers, target and tool / "
+        "hand-eye frames fitted). Warns when the calibration is worse than "
+        "frames only, with the likely cause.",
+    )
     p.add_argument("data", type=Path, help="measurement file")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
     p.add_argument("--k", type=_number(int, low=2), default=5, help="folds (default 5)")
     p.add_argument("--seed", type=_SEED, default=0)
-    p.add_argument("--select", action="store_true", help="also try 'offsets' and pick the "
-                   "parameter set with the lowest held-out error")
+    p.add_argument(
+        "--select",
+        action="store_true",
+        help="also try 'offsets' and pick the parameter set with the lowest held-out error",
+    )
     _add_fit_options(p)
-    p.add_argument("--jobs", type=_COUNT, default=1, help="run the fits in N worker processes "
-                   "(default 1: in this process)")
+    p.add_argument(
+        "--jobs",
+        type=_COUNT,
+        default=1,
+        help="run the fits in N worker processes (default 1: in this process)",
+    )
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)
 
-    p = sub.add_parser("view", help="nominal and calibrated robots and measurements in 3D",
-                       description="Meshcat view: the nominal robot as a grey ghost, the "
-                       "calibrated one in colour, a sample's measured poses as triads and "
-                       "lines from prediction to measurement (scaled), targets and cameras. "
-                       "Live on 127.0.0.1, or one self-contained HTML file with --html.")
+    p = sub.add_parser(
+        "view",
+        help="nominal and calibrated robots and measurements in 3D",
+        description="Meshcat view: the nominal robot as a grey ghost, the "
+        "calibrated one in colour, a sample's measured poses as triads and "
+        "lines from prediction to measurement (scaled), targets and cameras. "
+        "Live on 127.0.0.1, or one self-contained HTML file with --html.",
+    )
     p.add_argument("nominal", type=Path, help="nominal URDF")
     p.add_argument("--calibrated", type=Path, help="calibrated URDF")
     p.add_argument("--data", type=Path, help="measurement file: draw one sample's observations")
-    p.add_argument("--sidecar", type=Path, help="calibration sidecar (default: "
-                   "CALIBRATED.kinfw.json beside --calibrated, if present)")
-    p.add_argument("--sample", type=_number(int), default=None,
-                   help="sample to draw (default 0)")
-    p.add_argument("--residual-scale", type=_number(float, low=0.0, low_open=True),
-                   default=10.0,
-                   help="lengthen prediction-to-measurement lines by this factor (default 10)")
-    p.add_argument("--up", type=_up_arg, help='"x y z": up direction of the root frame '
-                   "(default: the URDF's <kinfw up> hint, else z)")
-    p.add_argument("--package-dir", action="append", default=[],
-                   help="where package:// meshes live (repeatable)")
-    p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of "
-                   "serving")
+    p.add_argument(
+        "--sidecar",
+        type=Path,
+        help="calibration sidecar (default: CALIBRATED.kinfw.json beside --calibrated, if present)",
+    )
+    p.add_argument("--sample", type=_number(int), default=None, help="sample to draw (default 0)")
+    p.add_argument(
+        "--residual-scale",
+        type=_number(float, low=0.0, low_open=True),
+        default=10.0,
+        help="lengthen prediction-to-measurement lines by this factor (default 10)",
+    )
+    p.add_argument(
+        "--up",
+        type=_up_arg,
+        help='"x y z": up direction of the root frame '
+        "(default: the URDF's <kinfw up> hint, else z)",
+    )
+    p.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="where package:// meshes live (repeatable)",
+    )
+    p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of serving")
     p.set_defaults(func=cmd_view)
 
-    p = sub.add_parser("reproduce", help="reproduce a paper's experiment in simulation (PNG)",
-                       description="fig11: Shih et al. Fig. 11 (positioning error vs "
-                       "measurements per joint and noise); table4: their Table 4 protocol; "
-                       "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
-                       "the joint refinement against the Cramer-Rao bound; robust: with 5 % "
-                       "gross outliers, per robust loss.")
+    p = sub.add_parser(
+        "reproduce",
+        help="reproduce a paper's experiment in simulation (PNG)",
+        description="fig11: Shih et al. Fig. 11 (positioning error vs "
+        "measurements per joint and noise); table4: their Table 4 protocol; "
+        "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
+        "the joint refinement against the Cramer-Rao bound; robust: with 5 % "
+        "gross outliers, per robust loss.",
+    )
     p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust"))
-    p.add_argument("--out", type=Path, default=Path("reproduce_out"),
-                   help="output directory (default reproduce_out)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("reproduce_out"),
+        help="output directory (default reproduce_out)",
+    )
     p.add_argument("--trials", type=_COUNT, default=None, help="random trials per point")
     p.add_argument("--seed", type=_SEED, default=0)
-    p.add_argument("--jobs", type=_COUNT, default=1, help="run the trials in N worker "
-                   "processes (default 1: in this process)")
+    p.add_argument(
+        "--jobs",
+        type=_COUNT,
+        default=1,
+        help="run the trials in N worker processes (default 1: in this process)",
+    )
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
     p.set_defaults(func=cmd_reproduce)
 
@@ -318,8 +434,11 @@ class _WarningPrinter(logging.Handler):
             if record.levelno >= logging.WARNING:
                 self.warn(record.getMessage())
             else:
-                print(f"{record.levelname} {record.name}: {record.getMessage()}",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"{record.levelname} {record.name}: {record.getMessage()}",
+                    file=sys.stderr,
+                    flush=True,
+                )
         except Exception:
             self.handleError(record)
 

@@ -50,15 +50,17 @@ def _progress_printer():
     return None
 
 
-def _frames_arg(value: str | None, default: tuple[str, ...], flag: str, robot: Robot
-                ) -> tuple[str, ...]:
+def _frames_arg(
+    value: str | None, default: tuple[str, ...], flag: str, robot: Robot
+) -> tuple[str, ...]:
     if value:
         return tuple(v for v in value.replace(",", " ").split() if v)
     if default:
         return default
     raise ValueError(
         f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
-        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}')
+        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}'
+    )
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
@@ -78,12 +80,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     rng = np.random.default_rng(args.seed)
     stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
-    frames = _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) \
-        if 1 in stages else ()
-    cameras = _frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal) \
-        if 2 in stages else ()
-    truth_xml = perturb_robot(nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg,
-                              axis_deg=args.error_deg)
+    frames = (
+        _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
+    )
+    cameras = (
+        _frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal)
+        if 2 in stages
+        else ()
+    )
+    truth_xml = perturb_robot(
+        nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg, axis_deg=args.error_deg
+    )
     truth = load_robot(truth_xml)
     names = nominal.topology((*frames, *cameras)).joint_names
     lower, upper = nominal.joint_limits(names)
@@ -92,31 +99,46 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
     parts = []
     if frames:
-        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint,
-                                    fraction=args.fraction)
+        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
         parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
     if cameras:
-        qs = random_configurations(lower, upper, args.stage2_samples, rng,
-                                   fraction=args.fraction)
+        qs = random_configurations(lower, upper, args.stage2_samples, rng, fraction=args.fraction)
         w_T_target = default_target_pose(truth, qs, names, cameras)
-        parts.append(simulate(truth, qs, names, cameras=cameras, rng=rng,
-                              w_T_target=w_T_target, **noise))
+        parts.append(
+            simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
+        )
     data = concatenate_measurements(*parts)
     write_measurements(args.out, data)
     write_text_atomic(args.truth_out, truth_xml)
     if args.json:
-        print(json.dumps({"data": str(args.out), "truth": str(args.truth_out),
-                          "n_samples": data.n_samples, "frames": list(data.observed_frames),
-                          "noise_mm": args.noise_mm, "noise_deg": args.noise_deg,
-                          "stereo_mm": args.stereo_mm, "error_mm": args.error_mm,
-                          "error_deg": args.error_deg, "seed": args.seed}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "data": str(args.out),
+                    "truth": str(args.truth_out),
+                    "n_samples": data.n_samples,
+                    "frames": list(data.observed_frames),
+                    "noise_mm": args.noise_mm,
+                    "noise_deg": args.noise_deg,
+                    "stereo_mm": args.stereo_mm,
+                    "error_mm": args.error_mm,
+                    "error_deg": args.error_deg,
+                    "seed": args.seed,
+                },
+                indent=2,
+            )
+        )
         return 0
-    print(f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
-          f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
-          + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-          + ")")
-    print(f"wrote {args.truth_out}: the true robot (nominal with errors of "
-          f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})")
+    print(
+        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
+        f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
+        + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
+        + ")"
+    )
+    print(
+        f"wrote {args.truth_out}: the true robot (nominal with errors of "
+        f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
+    )
     return 0
 
 
@@ -133,15 +155,30 @@ def accuracy_table(report_dict: dict) -> str:
     rows = []
     for g in report_dict["groups"]:
         mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
-        rows.append([
-            g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""), g["kind"], g["n"],
-            f"{g['position_mean_mm']:.3f}", f"{g['position_rms_mm']:.3f}",
-            f"{g['position_max_mm']:.3f}", f"{g['rotation_rms_deg']:.4f}",
-            f"{g['rotation_max_deg']:.4f}",
-            " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
-        ])
-    header = ["frame", "kind", "n", "pos mean mm", "pos RMS mm", "pos max mm",
-              "rot RMS deg", "rot max deg", "|e| x y z mean/std mm (Table 4)"]
+        rows.append(
+            [
+                g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""),
+                g["kind"],
+                g["n"],
+                f"{g['position_mean_mm']:.3f}",
+                f"{g['position_rms_mm']:.3f}",
+                f"{g['position_max_mm']:.3f}",
+                f"{g['rotation_rms_deg']:.4f}",
+                f"{g['rotation_max_deg']:.4f}",
+                " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+            ]
+        )
+    header = [
+        "frame",
+        "kind",
+        "n",
+        "pos mean mm",
+        "pos RMS mm",
+        "pos max mm",
+        "rot RMS deg",
+        "rot max deg",
+        "|e| x y z mean/std mm (Table 4)",
+    ]
     return _format_table(rows, header)
 
 
@@ -162,14 +199,27 @@ def cmd_verify(args: argparse.Namespace) -> int:
     report = evaluate_model(robot, data, sidecar=sidecar)
     used = str(sidecar_path) if sidecar is not None else None
     if args.json:
-        print(json.dumps({"model": str(args.model), "data": str(args.data), "sidecar": used,
-                          **report.to_dict(per_sample=True)}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "model": str(args.model),
+                    "data": str(args.data),
+                    "sidecar": used,
+                    **report.to_dict(per_sample=True),
+                },
+                indent=2,
+            )
+        )
         return 0
-    print(f"errors of {args.model} against {args.data} ({data.n_samples} samples; "
-          "measured minus predicted)")
+    print(
+        f"errors of {args.model} against {args.data} ({data.n_samples} samples; "
+        "measured minus predicted)"
+    )
     if used:
-        print(f"using the calibration sidecar {used} (measurement frame, targets, markers "
-              "as calibrated, not refitted)")
+        print(
+            f"using the calibration sidecar {used} (measurement frame, targets, markers "
+            "as calibrated, not refitted)"
+        )
     print(accuracy_table(report.to_dict()))
     for note in report.fitted:
         print(f"note: fitted from the data: {note}")
@@ -179,17 +229,28 @@ def cmd_verify(args: argparse.Namespace) -> int:
 # -- kinfw calibrate ---------------------------------------------------------------------
 def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
     return _format_table(
-        [[r.group, r.n, f"{r.before_position_rms_mm:.3f}", f"{r.after_position_rms_mm:.3f}",
-          f"{r.before_rotation_rms_deg:.4f}", f"{r.after_rotation_rms_deg:.4f}"]
-         for r in rows],
-        ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"])
+        [
+            [
+                r.group,
+                r.n,
+                f"{r.before_position_rms_mm:.3f}",
+                f"{r.after_position_rms_mm:.3f}",
+                f"{r.before_rotation_rms_deg:.4f}",
+                f"{r.after_rotation_rms_deg:.4f}",
+            ]
+            for r in rows
+        ],
+        ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"],
+    )
 
 
 def _stage_table(stages: Sequence[StageErrors]) -> str:
     rms = {s.stage: dict(s.position_rms_mm) for s in stages}
     groups = [g for g, _ in stages[0].position_rms_mm]
-    return _format_table([[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
-                         ["position RMS mm", *rms])
+    return _format_table(
+        [[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
+        ["position RMS mm", *rms],
+    )
 
 
 def _params_arg(text: str) -> str | tuple[str, ...]:
@@ -213,8 +274,10 @@ def _noise_arg(args: argparse.Namespace):
     if args.sigma_mm is None and args.sigma_deg is None:
         return None
     if args.sigma_mm is None or args.sigma_deg is None:
-        raise ValueError("give both --sigma-mm and --sigma-deg, or neither (then the noise "
-                         "is estimated from the residuals)")
+        raise ValueError(
+            "give both --sigma-mm and --sigma-deg, or neither (then the noise "
+            "is estimated from the residuals)"
+        )
     # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
     return NoiseModel(args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0))
 
@@ -233,18 +296,28 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     held_out = read_measurements(args.holdout) if args.holdout else None
-    report, _ = calibrate_to_files(nominal, data, args.out, method=args.method,
-                                   noise=_noise_arg(args), loss=args.loss,
-                                   parameters=_params_arg(args.params),
-                                   prior=_prior_arg(args), data_path=args.data,
-                                   held_out=held_out, progress=_progress_printer())
+    report, _ = calibrate_to_files(
+        nominal,
+        data,
+        args.out,
+        method=args.method,
+        noise=_noise_arg(args),
+        loss=args.loss,
+        parameters=_params_arg(args.params),
+        prior=_prior_arg(args),
+        data_path=args.data,
+        held_out=held_out,
+        progress=_progress_printer(),
+    )
     if args.report:
         write_report(args.report, report)
     if args.json:
         print(json.dumps(report.to_dict(), indent=2))
         return 0
-    print(f"calibrated {args.urdf} with {args.method} from {args.data} "
-          f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})")
+    print(
+        f"calibrated {args.urdf} with {args.method} from {args.data} "
+        f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})"
+    )
     for note in report.notes:
         print(f"note: {note}")
     print("position RMS on the calibration data after each stage (in-sample):")
@@ -272,28 +345,35 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     else:  # null in the report: no free parameters, or a rank-deficient problem
         condition = "condition undefined" if not ident.n_parameters else "condition inf"
     noise = ref.noise
-    print(f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-          f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
-          f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
-          f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, "
-          + condition)
-    print(f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
-          "(not estimated; std null in the report)")
+    print(
+        f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
+        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
+        f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+        f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
+    )
+    print(
+        f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
+        "(not estimated; std null in the report)"
+    )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
     down = ref.downweighted
     if down:
-        print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, "
-              "worst first:")
+        print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
     for row in down[:5]:
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        rotation = ("" if row.rotation_residual_deg is None
-                    else f", {row.rotation_residual_deg:.3g} deg")
-        print(f"    samples[{row.sample}] {where} ({row.kind}): residual "
-              f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}")
+        rotation = (
+            "" if row.rotation_residual_deg is None else f", {row.rotation_residual_deg:.3g} deg"
+        )
+        print(
+            f"    samples[{row.sample}] {where} ({row.kind}): residual "
+            f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}"
+        )
     if len(down) > 5:
-        print(f"    ... and {len(down) - 5} more "
-              f"({'see the report' if has_report else 'write them with --report'})")
+        print(
+            f"    ... and {len(down) - 5} more "
+            f"({'see the report' if has_report else 'write them with --report'})"
+        )
 
 
 # -- kinfw demo --------------------------------------------------------------------------
@@ -307,23 +387,31 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return 0
     out = demo.out
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
-    print(f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
-          f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
-          "the stereo rig; stage 2: both cameras see a fixed target in 30 random "
-          f"configurations; noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
-          "A = X B Y, then the joint least squares; 100 held-out configurations")
+    print(
+        f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
+        f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
+        "the stereo rig; stage 2: both cameras see a fixed target in 30 random "
+        f"configurations; noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
+        "A = X B Y, then the joint least squares; 100 held-out configurations"
+    )
     print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
     print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
     print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
     print(_before_after_table(report.errors_held_out))
     noise = report.refine.noise
-    print(f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
-          f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
-          f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)")
-    print(f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
-          f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})")
-    print(f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
-          f"{out / 'scene.html'} (open in any browser, no network needed)")
+    print(
+        f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+        f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
+        f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)"
+    )
+    print(
+        f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
+        f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})"
+    )
+    print(
+        f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
+        f"{out / 'scene.html'} (open in any browser, no network needed)"
+    )
     return 0
 
 
@@ -343,20 +431,36 @@ def cmd_crossval(args: argparse.Namespace) -> int:
     watch = _progress_printer()
     executor = executor_for_jobs(args.jobs)
     try:
-        cv = crossvalidate(nominal, data, k=args.k, seed=args.seed, sets=sets,
-                           select=args.select, noise=_noise_arg(args), loss=args.loss,
-                           prior=prior, executor=executor,
-                           progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None)
+        cv = crossvalidate(
+            nominal,
+            data,
+            k=args.k,
+            seed=args.seed,
+            sets=sets,
+            select=args.select,
+            noise=_noise_arg(args),
+            loss=args.loss,
+            prior=prior,
+            executor=executor,
+            progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
+        )
     finally:
         if executor is not None:
             executor.shutdown()
     if args.json:
         print(json.dumps(cv.to_dict(), indent=2))
         return 0
-    label = {"none": "nominal", "frames": "frames only", "offsets": "offsets+frames",
-             "full": "calibrated"}
-    print(f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
-          f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg")
+    label = {
+        "none": "nominal",
+        "frames": "frames only",
+        "offsets": "offsets+frames",
+        "full": "calibrated",
+    }
+    print(
+        f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
+        f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg"
+    )
+
     def cell(position_mm: float, rotation_deg: float) -> str:
         rot = "-" if np.isnan(rotation_deg) else f"{rotation_deg:.3f}"
         return f"{position_mm:.3f} / {rot}"
@@ -368,14 +472,15 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
             row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg))
         rows.append(row)
-    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg"))
-                               for p in sets)])
+    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg")) for p in sets)])
     print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
     for warning in cv.warnings:
         print(f"warning: {warning}")
     if cv.selected:
-        print(f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
-              f"position error ({cv.mean(cv.selected):.3f} mm)")
+        print(
+            f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
+            f"position error ({cv.mean(cv.selected):.3f} mm)"
+        )
     return 0
 
 
@@ -393,8 +498,10 @@ def cmd_view(args: argparse.Namespace) -> int:
     calibrated = load_robot(args.calibrated) if args.calibrated else None
     data = read_measurements(args.data) if args.data else None
     if args.sample is not None and not 0 <= args.sample < data.n_samples:
-        raise ValueError(f"--sample {args.sample}: out of range, {args.data} has "
-                         f"{data.n_samples} samples (give 0 to {data.n_samples - 1})")
+        raise ValueError(
+            f"--sample {args.sample}: out of range, {args.data} has "
+            f"{data.n_samples} samples (give 0 to {data.n_samples - 1})"
+        )
     sidecar_path = args.sidecar
     if sidecar_path is None and args.calibrated:
         guess = Path(args.calibrated).with_suffix(".kinfw.json")
@@ -404,13 +511,23 @@ def cmd_view(args: argparse.Namespace) -> int:
         sidecar = read_sidecar(sidecar_path)
         extra = {"targets": targets_from_sidecar(sidecar), "meas_T_root": sidecar.w_T_root}
     up = args.up
-    vis = scene(nominal, calibrated, data, sample=args.sample, residual_scale=args.residual_scale,
-                up=up, package_dirs=tuple(args.package_dir),
-                window=OfflineWindow() if args.html else None, **extra)
+    vis = scene(
+        nominal,
+        calibrated,
+        data,
+        sample=args.sample,
+        residual_scale=args.residual_scale,
+        up=up,
+        package_dirs=tuple(args.package_dir),
+        window=OfflineWindow() if args.html else None,
+        **extra,
+    )
     if args.html:
         path = write_html(vis, args.html)
-        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
-              "any browser, no network needed)")
+        print(
+            f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
+            "any browser, no network needed)"
+        )
         return 0
     print(f"meshcat is serving the scene at {vis.url()} (127.0.0.1); press Enter to stop")
     with contextlib.suppress(EOFError, KeyboardInterrupt):
@@ -433,8 +550,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     elif args.study in ("crlb", "robust"):
         run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
     else:
-        run, written = (lambda: shih_figures.main([args.study, *argv])), \
-            f"{args.study}.json"
+        run, written = (lambda: shih_figures.main([args.study, *argv])), f"{args.study}.json"
     if not args.json:
         return run()
     with contextlib.redirect_stdout(io.StringIO()):
@@ -451,23 +567,38 @@ def cmd_crosscheck(args: argparse.Namespace) -> int:
     from verification.crosscheck import crosscheck_cpc
 
     robot = load_robot(args.urdf)
-    frames = _frames_arg(args.frames, (*robot.default_frames, *robot.default_cameras),
-                         "--frames", robot)
+    frames = _frames_arg(
+        args.frames, (*robot.default_frames, *robot.default_cameras), "--frames", robot
+    )
     result = crosscheck_cpc(robot, frames, n=args.n, rng=np.random.default_rng(args.seed))
     if args.json:
-        print(json.dumps({"urdf": str(args.urdf), "frames": list(result.frames),
-                          "n_configurations": result.n_configurations,
-                          "numpy_position_m": result.numpy_position_m,
-                          "numpy_rotation_rad": result.numpy_rotation_rad,
-                          "casadi_position_m": result.casadi_position_m,
-                          "casadi_rotation_rad": result.casadi_rotation_rad,
-                          "passed": result.passed()}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "urdf": str(args.urdf),
+                    "frames": list(result.frames),
+                    "n_configurations": result.n_configurations,
+                    "numpy_position_m": result.numpy_position_m,
+                    "numpy_rotation_rad": result.numpy_rotation_rad,
+                    "casadi_position_m": result.casadi_position_m,
+                    "casadi_rotation_rad": result.casadi_rotation_rad,
+                    "passed": result.passed(),
+                },
+                indent=2,
+            )
+        )
     else:
-        print(f"CPC vs Pinocchio FK of {args.urdf}, {result.n_configurations} random "
-              f"configurations, frames {', '.join(result.frames)}")
-        print(f"  numpy : max position {result.numpy_position_m:.2e} m, "
-              f"rotation {result.numpy_rotation_rad:.2e} rad")
-        print(f"  CasADi: max position {result.casadi_position_m:.2e} m, "
-              f"rotation {result.casadi_rotation_rad:.2e} rad")
+        print(
+            f"CPC vs Pinocchio FK of {args.urdf}, {result.n_configurations} random "
+            f"configurations, frames {', '.join(result.frames)}"
+        )
+        print(
+            f"  numpy : max position {result.numpy_position_m:.2e} m, "
+            f"rotation {result.numpy_rotation_rad:.2e} rad"
+        )
+        print(
+            f"  CasADi: max position {result.casadi_position_m:.2e} m, "
+            f"rotation {result.casadi_rotation_rad:.2e} rad"
+        )
         print("  passed (< 1e-12)" if result.passed() else "  FAILED (>= 1e-12)")
     return 0 if result.passed() else 1

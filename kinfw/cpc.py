@@ -255,14 +255,17 @@ class CPCModel:
         """
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         if qs.shape[1] != self.n_joints:
-            raise ValueError(f"qs: expected {self.n_joints} columns "
-                             f"{list(self.topology.joint_names)}, got shape {qs.shape}")
+            raise ValueError(
+                f"qs: expected {self.n_joints} columns "
+                f"{list(self.topology.joint_names)}, got shape {qs.shape}"
+            )
         n = qs.shape[0]
         links = self.link_transforms()
         sq = qs * self.sign
         out = np.empty((n, self.n_joints, 4, 4))
-        for j, (rev, p) in enumerate(zip(self.topology.revolute, self.topology.parent,
-                                         strict=True)):
+        for j, (rev, p) in enumerate(
+            zip(self.topology.revolute, self.topology.parent, strict=True)
+        ):
             w_T_Fj = links[j] if p < 0 else out[:, p] @ links[j]
             motion = np.tile(np.eye(4), (n, 1, 1))
             if rev:
@@ -302,8 +305,10 @@ class CPCModel:
         """
         qs = np.asarray(qs, dtype=float)
         if qs.ndim not in (1, 2):
-            raise ValueError(f"qs: expected shape ({self.n_joints},) or (n, {self.n_joints}) "
-                             f"(columns {list(self.topology.joint_names)}), got {qs.shape}")
+            raise ValueError(
+                f"qs: expected shape ({self.n_joints},) or (n, {self.n_joints}) "
+                f"(columns {list(self.topology.joint_names)}), got {qs.shape}"
+            )
         frames = self.joint_frames(qs)  # (n, J, 4, 4); n = 1 for one configuration
         idx = range(len(self.topology.frames)) if frame is None else [self._frame_index(frame)]
         out = np.stack(
@@ -323,8 +328,9 @@ class CPCModel:
         try:
             return self.topology.frames.index(frame)
         except ValueError:
-            raise KeyError(f"no end frame {frame!r}; the model has {self.topology.frames}"
-                           ) from None
+            raise KeyError(
+                f"no end frame {frame!r}; the model has {self.topology.frames}"
+            ) from None
 
     # -- reporting ---------------------------------------------------------------------
     def describe(self) -> list[tuple[str, str, float]]:
@@ -423,7 +429,8 @@ def geometry_from_robot(robot: Robot, frames: tuple[str, ...] | list[str]) -> Ze
     return ZeroGeometry(topology=topo, axes=axes, points=points, w_T_frames=w_T_frames)
 
 
-def cpc_from_robot(robot: Robot, frames: tuple[str, ...] | list[str],
-                   sign: ArrayLike | None = None) -> CPCModel:
+def cpc_from_robot(
+    robot: Robot, frames: tuple[str, ...] | list[str], sign: ArrayLike | None = None
+) -> CPCModel:
     """The canonical CPC model of a URDF's nominal geometry for the given end frames."""
     return cpc_from_geometry(geometry_from_robot(robot, frames), sign=sign)

@@ -52,13 +52,18 @@ def cpc_reference_vector(model: CPCModel) -> np.ndarray:
     """
     cs = np.stack([np.cos(model.beta), np.sin(model.beta)], axis=1)
     joints = np.concatenate([model.b, model.axis_bases().reshape(-1, 6), model.l, cs], axis=1)
-    tools = np.concatenate([np.swapaxes(model.tool_T[:, :3, :3], 1, 2).reshape(-1, 9),
-                            model.tool_T[:, :3, 3]], axis=1)
+    tools = np.concatenate(
+        [np.swapaxes(model.tool_T[:, :3, :3], 1, 2).reshape(-1, 9), model.tool_T[:, :3, 3]], axis=1
+    )
     return np.concatenate([joints.reshape(-1), tools.reshape(-1)])
 
 
-def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None = None,
-                    *, symbolic_reference: bool = False):
+def cpc_fk_function(
+    model: CPCModel,
+    frames: tuple[str, ...] | list[str] | None = None,
+    *,
+    symbolic_reference: bool = False,
+):
     """CasADi function ``fk(q, delta) -> (w_T_e1, w_T_e2, ...)``.
 
     Parameters
@@ -88,14 +93,21 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
         ref = ca.SX.sym("reference", len(cpc_reference_vector(model)))
         per_joint = [ref[14 * j : 14 * (j + 1)] for j in range(model.n_joints)]
         t0 = 14 * model.n_joints
-        tools = [(ca.reshape(ref[t0 + 12 * e : t0 + 12 * e + 9], 3, 3),
-                  ref[t0 + 12 * e + 9 : t0 + 12 * (e + 1)]) for e in range(len(topo.frames))]
+        tools = [
+            (
+                ca.reshape(ref[t0 + 12 * e : t0 + 12 * e + 9], 3, 3),
+                ref[t0 + 12 * e + 9 : t0 + 12 * (e + 1)],
+            )
+            for e in range(len(topo.frames))
+        ]
     else:
         ref = None
         numeric = cpc_reference_vector(model)
         per_joint = [numeric[14 * j : 14 * (j + 1)] for j in range(model.n_joints)]
-        tools = [(ca.DM(model.tool_T[e, :3, :3]), ca.DM(model.tool_T[e, :3, 3]))
-                 for e in range(len(topo.frames))]
+        tools = [
+            (ca.DM(model.tool_T[e, :3, :3]), ca.DM(model.tool_T[e, :3, 3]))
+            for e in range(len(topo.frames))
+        ]
 
     k = 0
     moved = []  # w_T_F_j' per joint
@@ -109,15 +121,22 @@ def cpc_fk_function(model: CPCModel, frames: tuple[str, ...] | list[str] | None 
             l = l + ca.vertcat(delta[k], delta[k + 1], 0)
             k += 2
         c, s = c_j[12], c_j[13]
-        Rz = ca.DM([[c, -s, 0], [s, c, 0], [0, 0, 1]]) if ref is None else \
-            ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
+        Rz = (
+            ca.DM([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+            if ref is None
+            else ca.vertcat(ca.horzcat(c, -s, 0), ca.horzcat(s, c, 0), ca.horzcat(0, 0, 1))
+        )
         R = _rotation_from_axis(ca, b) @ Rz
         link = _homogeneous(ca, R, R @ l)
         sq = model.sign[j] * q[j]
         if rev:
             cq, sn = ca.cos(sq), ca.sin(sq)
-            motion = ca.vertcat(ca.horzcat(cq, -sn, 0, 0), ca.horzcat(sn, cq, 0, 0),
-                                ca.horzcat(0, 0, 1, 0), ca.horzcat(0, 0, 0, 1))
+            motion = ca.vertcat(
+                ca.horzcat(cq, -sn, 0, 0),
+                ca.horzcat(sn, cq, 0, 0),
+                ca.horzcat(0, 0, 1, 0),
+                ca.horzcat(0, 0, 0, 1),
+            )
         else:
             motion = _homogeneous(ca, ca.DM.eye(3), ca.vertcat(0, 0, sq))
         moved.append((link if p < 0 else moved[p] @ link) @ motion)

@@ -50,8 +50,9 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def check_writable(path: PathLike, *, label: str | None = None,
-                   inputs: Mapping[str, PathLike | None] | None = None) -> Path:
+def check_writable(
+    path: PathLike, *, label: str | None = None, inputs: Mapping[str, PathLike | None] | None = None
+) -> Path:
     """Check that ``path`` can be written as a file and is none of ``inputs``.
 
     Nothing is created or changed.
@@ -81,10 +82,15 @@ def check_writable(path: PathLike, *, label: str | None = None,
     path = Path(path)
     name = _label(path, label)
     for key, source in (inputs or {}).items():
-        if source is not None and not str(source).lstrip().startswith("<") \
-                and _same_file(path, Path(source)):
-            raise OutputPathError(f"{name} is the same file as {_label(source, key)}: "
-                                  "refusing to overwrite an input; choose another output")
+        if (
+            source is not None
+            and not str(source).lstrip().startswith("<")
+            and _same_file(path, Path(source))
+        ):
+            raise OutputPathError(
+                f"{name} is the same file as {_label(source, key)}: "
+                "refusing to overwrite an input; choose another output"
+            )
     parent = path.parent
     if not parent.exists():
         raise OutputPathError(f"{name}: directory {os.fspath(parent)!r} does not exist")
@@ -99,8 +105,9 @@ def check_writable(path: PathLike, *, label: str | None = None,
     return path
 
 
-def check_output_dir(path: PathLike, *, label: str | None = None,
-                     files: tuple[str, ...] = ()) -> Path:
+def check_output_dir(
+    path: PathLike, *, label: str | None = None, files: tuple[str, ...] = ()
+) -> Path:
     """Check that ``path`` is, or can be created as, a writable directory, and that the
     ``files`` in it can be written (see :func:`check_writable`). Nothing is created.
 
@@ -126,13 +133,13 @@ def check_output_dir(path: PathLike, *, label: str | None = None,
     if not ancestor.is_dir():
         raise OutputPathError(f"{name}: cannot create it, {os.fspath(ancestor)!r} is a file")
     if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{name}: cannot create it, {os.fspath(ancestor)!r} is not "
-                              "writable")
+        raise OutputPathError(f"{name}: cannot create it, {os.fspath(ancestor)!r} is not writable")
     return path
 
 
-def check_outputs(outputs: Mapping[str, PathLike | None], *,
-                  inputs: Mapping[str, PathLike | None] | None = None) -> None:
+def check_outputs(
+    outputs: Mapping[str, PathLike | None], *, inputs: Mapping[str, PathLike | None] | None = None
+) -> None:
     """:func:`check_writable` for each output, and check that no two outputs are one file.
 
     ``outputs`` and ``inputs`` map how the user gave a path (``"--out"``) to the path;
@@ -143,10 +150,12 @@ def check_outputs(outputs: Mapping[str, PathLike | None], *,
         check_writable(path, label=key, inputs=inputs)
     keys = list(given)
     for i, a in enumerate(keys):
-        for b in keys[i + 1:]:
+        for b in keys[i + 1 :]:
             if _same_file(given[a], given[b]):
-                raise OutputPathError(f"{_label(given[b], b)} is the same file as "
-                                      f"{_label(given[a], a)}: give two different outputs")
+                raise OutputPathError(
+                    f"{_label(given[b], b)} is the same file as "
+                    f"{_label(given[a], a)}: give two different outputs"
+                )
 
 
 @contextlib.contextmanager
@@ -172,8 +181,9 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
         raise
 
 
-def write_text_atomic(path: PathLike, text: str, *, encoding: str = "utf-8",
-                      newline: str | None = None) -> Path:
+def write_text_atomic(
+    path: PathLike, text: str, *, encoding: str = "utf-8", newline: str | None = None
+) -> Path:
     """Write ``text`` to ``path`` atomically (see the module docstring).
 
     ``newline`` is as for :func:`open` (``""``: no translation). Returns ``path``.

@@ -72,31 +72,38 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
         if name in movable:
             continue
         if name in joint_types:
-            raise DatasetError(f"{src}: joint_names[{c}]: joint {name!r} is a "
-                               f"{joint_types[name]} joint in {robot.source}; only movable "
-                               f"joints can be listed: {list(movable)}")
-        raise DatasetError(f"{src}: joint_names[{c}]: joint {name!r} is not in "
-                           f"{robot.source}; its movable joints are {list(movable)}")
+            raise DatasetError(
+                f"{src}: joint_names[{c}]: joint {name!r} is a "
+                f"{joint_types[name]} joint in {robot.source}; only movable "
+                f"joints can be listed: {list(movable)}"
+            )
+        raise DatasetError(
+            f"{src}: joint_names[{c}]: joint {name!r} is not in "
+            f"{robot.source}; its movable joints are {list(movable)}"
+        )
 
     used: set[str] = set()
     for frame, (i, kind) in first_uses(m).items():
         if not robot.has_frame(frame):
-            raise DatasetError(f"{src}: samples[{i}]: frame {frame!r} ({kind} observation) is "
-                               f"not a link or joint of {robot.source}; its links are "
-                               f"{list(robot.link_names)}")
+            raise DatasetError(
+                f"{src}: samples[{i}]: frame {frame!r} ({kind} observation) is "
+                f"not a link or joint of {robot.source}; its links are "
+                f"{list(robot.link_names)}"
+            )
         try:
             used.update(robot.movable_path(frame))
         except RobotModelError as exc:
-            raise DatasetError(f"{src}: samples[{i}]: frame {frame!r} cannot be calibrated "
-                               f"with this URDF: {exc}") from None
+            raise DatasetError(
+                f"{src}: samples[{i}]: frame {frame!r} cannot be calibrated with this URDF: {exc}"
+            ) from None
     idle = [n for n in m.joint_names if n not in used]
     if idle:
-        logger.info("%s: joints %s are not on the path to any observed frame; ignored",
-                    src, idle)
+        logger.info("%s: joints %s are not on the path to any observed frame; ignored", src, idle)
     held = [n for n in movable if n in used and n not in m.joint_names]
     if held:
-        logger.info("%s: joints %s on observed paths are not in joint_names; held at zero",
-                    src, held)
+        logger.info(
+            "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
+        )
 
     root = robot.root_link
     first_in: dict[str, int] = {}
@@ -118,9 +125,12 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     _warn_limits(m, robot)
     if root not in first_in:
         return m
-    return m.with_groups(merge_same_key(
-        replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
-        for g in m.all_groups()))
+    return m.with_groups(
+        merge_same_key(
+            replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
+            for g in m.all_groups()
+        )
+    )
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:
@@ -148,8 +158,9 @@ def _warn_limits(m: Measurements, robot: Robot) -> None:
         )
 
 
-def check_joint_motion(measurements: Measurements, joint_names: Sequence[str], *,
-                       min_distinct: int = 2) -> None:
+def check_joint_motion(
+    measurements: Measurements, joint_names: Sequence[str], *, min_distinct: int = 2
+) -> None:
     """Check that each joint moves through enough distinct values to be identified.
 
     Parameters
@@ -169,8 +180,7 @@ def check_joint_motion(measurements: Measurements, joint_names: Sequence[str], *
         how many are needed.
     """
     if isinstance(joint_names, str):
-        raise TypeError("check_joint_motion: joint_names must be a sequence of names, "
-                        "not a string")
+        raise TypeError("check_joint_motion: joint_names must be a sequence of names, not a string")
     if min_distinct < 1:
         raise ValueError(f"check_joint_motion: min_distinct must be >= 1, got {min_distinct}")
     m = measurements
@@ -178,12 +188,14 @@ def check_joint_motion(measurements: Measurements, joint_names: Sequence[str], *
     problems = []
     for c, name in enumerate(joint_names):
         values = np.sort(qs[:, c]) + 0.0  # + 0.0 turns -0.0 into 0.0 for the message
-        distinct = values[np.concatenate(([True], np.diff(values) >= DISTINCT_TOL))] \
-            if len(values) else values
+        distinct = (
+            values[np.concatenate(([True], np.diff(values) >= DISTINCT_TOL))]
+            if len(values)
+            else values
+        )
         if len(distinct) >= min_distinct:
             continue
-        shown = ", ".join(f"{v:.6g}" for v in distinct[:5]) + (", ..." if len(distinct) > 5
-                                                               else "")
+        shown = ", ".join(f"{v:.6g}" for v in distinct[:5]) + (", ..." if len(distinct) > 5 else "")
         held = "" if name in m.joint_names else " (not in joint_names, so held at zero)"
         plural = "" if len(distinct) == 1 else "s"
         problems.append(

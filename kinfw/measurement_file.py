@@ -44,6 +44,7 @@ _JOINT_UNITS = ("m", "mm", "rad", "deg")
 
 # -- reading ---------------------------------------------------------------------------
 
+
 def _columns_to_si(qs: NDArray[np.float64], units: Sequence[str]) -> NDArray[np.float64]:
     out = qs.copy()
     for c, unit in enumerate(units):
@@ -80,8 +81,9 @@ def read_measurements(path: str | Path) -> Measurements:
     except FileNotFoundError:
         raise DatasetError(f"{source}: measurement file not found") from None
     except UnicodeDecodeError as exc:
-        raise DatasetError(f"{source}: not a UTF-8 text file ({exc.reason} at byte "
-                           f"{exc.start})") from None
+        raise DatasetError(
+            f"{source}: not a UTF-8 text file ({exc.reason} at byte {exc.start})"
+        ) from None
     except OSError as exc:
         raise DatasetError(f"{source}: cannot read measurement file ({exc.strerror})") from None
     if not text.strip():
@@ -89,8 +91,9 @@ def read_measurements(path: str | Path) -> Measurements:
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"{source}: invalid JSON at line {exc.lineno}, column {exc.colno}: "
-                           f"{exc.msg}") from None
+        raise DatasetError(
+            f"{source}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        ) from None
     return measurements_from_dict(doc, source=source)
 
 
@@ -122,23 +125,31 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     version = p.get(doc, "version", "", "1")
     if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
         supported = ", ".join(map(str, SUPPORTED_VERSIONS))
-        raise p.error("version", f"unsupported version {describe(version)}; this reader "
-                                 f"supports version {supported}")
-    units = p.obj(p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'),
-                  "units")
-    length_unit = p.choice(p.get(units, "length", "units", '"m" or "mm"'), "units.length",
-                           _LENGTH_UNITS)
-    angle_unit = p.choice(p.get(units, "angle", "units", '"rad" or "deg"'), "units.angle",
-                          _ANGLE_UNITS)
+        raise p.error(
+            "version",
+            f"unsupported version {describe(version)}; this reader supports version {supported}",
+        )
+    units = p.obj(
+        p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'), "units"
+    )
+    length_unit = p.choice(
+        p.get(units, "length", "units", '"m" or "mm"'), "units.length", _LENGTH_UNITS
+    )
+    angle_unit = p.choice(
+        p.get(units, "angle", "units", '"rad" or "deg"'), "units.angle", _ANGLE_UNITS
+    )
 
-    raw_names = p.list_of(p.get(doc, "joint_names", "", "a list of joint names"), "joint_names",
-                          "joint names")
+    raw_names = p.list_of(
+        p.get(doc, "joint_names", "", "a list of joint names"), "joint_names", "joint names"
+    )
     joint_names = tuple(p.string(x, f"joint_names[{c}]") for c, x in enumerate(raw_names))
     seen: dict[str, int] = {}
     for c, name in enumerate(joint_names):
         if name in seen:
-            raise p.error(f"joint_names[{c}]", f"joint {name!r} is already joint_names"
-                                               f"[{seen[name]}]; names must be distinct")
+            raise p.error(
+                f"joint_names[{c}]",
+                f"joint {name!r} is already joint_names[{seen[name]}]; names must be distinct",
+            )
         seen[name] = c
     k = len(joint_names)
     joint_units: Sequence[str] = (angle_unit,) * k
@@ -146,10 +157,13 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
         raw_units = doc["joint_units"]
         if not isinstance(raw_units, list) or len(raw_units) != k:
             got = f"{len(raw_units)}" if isinstance(raw_units, list) else describe(raw_units)
-            raise p.error("joint_units", f"expected a list of {k} units (one per joint_names "
-                                         f"entry), got {got}")
-        joint_units = [p.choice(u, f"joint_units[{c}]", _JOINT_UNITS)
-                       for c, u in enumerate(raw_units)]
+            raise p.error(
+                "joint_units",
+                f"expected a list of {k} units (one per joint_names entry), got {got}",
+            )
+        joint_units = [
+            p.choice(u, f"joint_units[{c}]", _JOINT_UNITS) for c, u in enumerate(raw_units)
+        ]
     default_measured_in = None
     if doc.get("measured_in") is not None:
         default_measured_in = p.string(doc["measured_in"], "measured_in")
@@ -157,8 +171,11 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
     reader = ObservationReader(source, length_unit, default_measured_in)
     names = tuple(k.name for k in kinds())
-    expected_kind = (", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
-                     if len(names) > 1 else repr(names[0]))
+    expected_kind = (
+        ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
+        if len(names) > 1
+        else repr(names[0])
+    )
     q_rows: list[list[float]] = []
     # One entry per observation, flat; arrays are built once per group at the end.
     obs_group: list[int] = []
@@ -170,27 +187,39 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     for i, raw_sample in enumerate(samples):
         at = f"samples[{i}]"
         sample = p.obj(raw_sample, at)
-        q_rows.append(p.numbers(p.get(sample, "q", at, f"a list of {k} joint values"),
-                                k, f"{at}.q", "one per joint_names entry"))
+        q_rows.append(
+            p.numbers(
+                p.get(sample, "q", at, f"a list of {k} joint values"),
+                k,
+                f"{at}.q",
+                "one per joint_names entry",
+            )
+        )
         observations = p.list_of(
             p.get(sample, "observations", at, "a non-empty list of observations"),
-            f"{at}.observations", "observations")
+            f"{at}.observations",
+            "observations",
+        )
         for j, raw_obs in enumerate(observations):
             at_obs = f"{at}.observations[{j}]"
             obs = p.obj(raw_obs, at_obs)
-            frame = p.string(p.get(obs, "frame", at_obs, "the name of a URDF frame"),
-                             f"{at_obs}.frame")
-            kind = kind_named(p.choice(p.get(obs, "kind", at_obs, expected_kind),
-                                       f"{at_obs}.kind", names))
+            frame = p.string(
+                p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame"
+            )
+            kind = kind_named(
+                p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names)
+            )
             key, row = kind.parse(reader, obs, at_obs, frame)
             marker = kind.marker(key)
             if marker is not None:
                 home = marker_home.setdefault(marker[0], (marker[1], at_obs))
                 if home[0] != marker[1]:
-                    raise p.error(f"{at_obs}.marker",
-                                  f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
-                                  f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
-                                  "attached to one frame")
+                    raise p.error(
+                        f"{at_obs}.marker",
+                        f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
+                        f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
+                        "attached to one frame",
+                    )
             obs_group.append(group_of_key.setdefault((kind.name, key), len(group_of_key)))
             obs_sample.append(i)
             rows.append(row)
@@ -204,16 +233,22 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
             stacklevel=2,
         )
     group_ids = np.array(obs_group)
-    rows_of_group = np.split(np.argsort(group_ids, kind="stable"),
-                             np.cumsum(np.bincount(group_ids))[:-1])
+    rows_of_group = np.split(
+        np.argsort(group_ids, kind="stable"), np.cumsum(np.bincount(group_ids))[:-1]
+    )
     sample_ids = np.array(obs_sample, dtype=np.int64)
     groups = []
     for (kind_name, key), members in zip(group_of_key, rows_of_group, strict=True):
         data = np.array([rows[r] for r in members], dtype=float)
         groups.append(kind_named(kind_name).group_from_rows(key, sample_ids[members], data))
     out = Measurements(joint_names, qs, source=source).with_groups(groups)
-    logger.debug("%s: %d samples, %d observations in %d groups", source, out.n_samples,
-                 len(obs_group), len(group_of_key))
+    logger.debug(
+        "%s: %d samples, %d observations in %d groups",
+        source,
+        out.n_samples,
+        len(obs_group),
+        len(group_of_key),
+    )
     return out
 
 
@@ -249,14 +284,15 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     frames_in = {kind_of(g).measured_in(g) for g in m.all_groups() if kind_of(g).has_measured_in}
     top_measured_in = next(iter(frames_in)) if len(frames_in) == 1 else None
     for g in m.all_groups():
-        for s, obs in zip(g.sample.tolist(), kind_of(g).to_dicts(g, top_measured_in),
-                          strict=True):
+        for s, obs in zip(g.sample.tolist(), kind_of(g).to_dicts(g, top_measured_in), strict=True):
             per_sample[s].append(obs)
 
     empty = [i for i, obs in enumerate(per_sample) if not obs]
     if empty:
-        raise DatasetError(f"{m.source}: samples[{empty[0]}]: has no observations; every "
-                           "sample of a file needs at least one (use subset() to drop it)")
+        raise DatasetError(
+            f"{m.source}: samples[{empty[0]}]: has no observations; every "
+            "sample of a file needs at least one (use subset() to drop it)"
+        )
     doc: dict[str, Any] = {
         "format": FORMAT,
         "version": SUPPORTED_VERSIONS[-1],
@@ -265,24 +301,30 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     }
     if top_measured_in is not None:
         doc["measured_in"] = top_measured_in
-    doc["samples"] = [{"q": q, "observations": obs}
-                      for q, obs in zip(m.qs.tolist(), per_sample, strict=True)]
+    doc["samples"] = [
+        {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
+    ]
     return doc
 
 
 def _dumps(doc: dict[str, Any]) -> str:
     """JSON text with one sample's ``q`` and one observation per line."""
+
     def dump(value: Any) -> str:
         return json.dumps(value, allow_nan=False, ensure_ascii=False)
 
     lines = [f"  {dump(key)}: {dump(value)}" for key, value in doc.items() if key != "samples"]
     samples = []
     for sample in doc["samples"]:
-        extra = "".join(f", {dump(key)}: {dump(value)}" for key, value in sample.items()
-                        if key not in ("q", "observations"))
+        extra = "".join(
+            f", {dump(key)}: {dump(value)}"
+            for key, value in sample.items()
+            if key not in ("q", "observations")
+        )
         observations = ",\n".join(f"      {dump(obs)}" for obs in sample["observations"])
-        samples.append(f'    {{"q": {dump(sample["q"])}{extra}, "observations": [\n'
-                       f"{observations}\n    ]}}")
+        samples.append(
+            f'    {{"q": {dump(sample["q"])}{extra}, "observations": [\n{observations}\n    ]}}'
+        )
     lines.append('  "samples": [\n' + ",\n".join(samples) + "\n  ]")
     return "{\n" + ",\n".join(lines) + "\n}\n"
 

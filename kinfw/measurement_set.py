@@ -80,21 +80,28 @@ class Measurements:
         object.__setattr__(self, "joint_names", names)
         object.__setattr__(self, "qs", frozen_array(qs, np.float64))
         n = qs.shape[0]
-        for attr, cls in (("poses", PoseObservations), ("targets", TargetObservations),
-                          ("points", PointObservations), ("others", None)):
+        for attr, cls in (
+            ("poses", PoseObservations),
+            ("targets", TargetObservations),
+            ("points", PointObservations),
+            ("others", None),
+        ):
             groups = tuple(getattr(self, attr))
             for g in groups:
                 if cls is not None and not isinstance(g, cls):
-                    raise DatasetError(f"{src}: {attr}: expected {cls.__name__}, got "
-                                       f"{type(g).__name__}")
+                    raise DatasetError(
+                        f"{src}: {attr}: expected {cls.__name__}, got {type(g).__name__}"
+                    )
                 if cls is None:
                     try:
                         kind = kind_of(g)
                     except TypeError as exc:
                         raise DatasetError(f"{src}: others: {exc}") from None
                     if kind.measurements_field is not None:
-                        raise DatasetError(f"{src}: others: {kind.name!r} groups belong in "
-                                           f"{kind.measurements_field}")
+                        raise DatasetError(
+                            f"{src}: others: {kind.name!r} groups belong in "
+                            f"{kind.measurements_field}"
+                        )
                 if len(g.sample) and g.sample.max() >= n:
                     raise DatasetError(
                         f"{src}: {attr}: {g!r} refers to sample {int(g.sample.max())}, "
@@ -104,9 +111,11 @@ class Measurements:
 
     def __repr__(self) -> str:
         others = f", others={list(self.others)}" if self.others else ""
-        return (f"Measurements(source={self.source!r}, n_samples={self.n_samples}, "
-                f"joint_names={list(self.joint_names)}, poses={list(self.poses)}, "
-                f"targets={list(self.targets)}, points={list(self.points)}{others})")
+        return (
+            f"Measurements(source={self.source!r}, n_samples={self.n_samples}, "
+            f"joint_names={list(self.joint_names)}, poses={list(self.poses)}, "
+            f"targets={list(self.targets)}, points={list(self.points)}{others})"
+        )
 
     def groups(self, kind: str) -> tuple[Any, ...]:
         """The observation groups of one kind (by its file name, e.g. ``"pose"``)."""
@@ -123,8 +132,7 @@ class Measurements:
     def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
         """The dataset with other observation groups (of any registered kinds), and
         other ``changes`` of its fields (e.g. ``qs``)."""
-        by_field: dict[str, list[Any]] = {"poses": [], "targets": [], "points": [],
-                                          "others": []}
+        by_field: dict[str, list[Any]] = {"poses": [], "targets": [], "points": [], "others": []}
         for g in groups:
             by_field[kind_of(g).measurements_field or "others"].append(g)
         return replace(self, **{k: tuple(v) for k, v in by_field.items()}, **changes)
@@ -167,18 +175,22 @@ class Measurements:
         n = self.n_samples
         if sel.dtype == bool:
             if sel.shape != (n,):
-                raise ValueError(f"{self.source}: subset: a boolean mask needs shape ({n},), "
-                                 f"got {sel.shape}")
+                raise ValueError(
+                    f"{self.source}: subset: a boolean mask needs shape ({n},), got {sel.shape}"
+                )
             sel = np.flatnonzero(sel)
         if sel.size == 0:
             sel = sel.astype(np.int64)
         if sel.ndim != 1 or not np.issubdtype(sel.dtype, np.integer):
-            raise ValueError(f"{self.source}: subset: expected a 1-D array of sample indices, "
-                             f"got shape {sel.shape}, dtype {sel.dtype}")
+            raise ValueError(
+                f"{self.source}: subset: expected a 1-D array of sample indices, "
+                f"got shape {sel.shape}, dtype {sel.dtype}"
+            )
         if sel.size and (sel.min() < 0 or sel.max() >= n):
             bad = int(sel[(sel < 0) | (sel >= n)][0])
-            raise IndexError(f"{self.source}: subset: sample index {bad} is out of range "
-                             f"for {n} samples")
+            raise IndexError(
+                f"{self.source}: subset: sample index {bad} is out of range for {n} samples"
+            )
         order = np.argsort(sel, kind="stable")
         sorted_sel = sel[order]
 
@@ -192,8 +204,7 @@ class Measurements:
             starts = np.repeat(np.cumsum(counts) - counts, counts)
             new = order[np.repeat(left, counts) + np.arange(len(rows)) - starts]
             by_sample = np.lexsort((rows, new))
-            return kind_of(group).take(group, rows[by_sample],
-                                       new[by_sample].astype(np.int64))
+            return kind_of(group).take(group, rows[by_sample], new[by_sample].astype(np.int64))
 
         kept = [g for g in map(select, self.all_groups()) if g is not None]
         return self.with_groups(kept, qs=self.qs[sel])
@@ -238,8 +249,10 @@ def merge_same_key(groups: Iterable[Any]) -> tuple[Any, ...]:
     by_key: dict[tuple[Any, ...], list[Any]] = {}
     for g in groups:
         by_key.setdefault(kind_of(g).key(g), []).append(g)
-    return tuple(parts[0] if len(parts) == 1 else kind_of(parts[0]).concatenate(parts)
-                 for parts in by_key.values())
+    return tuple(
+        parts[0] if len(parts) == 1 else kind_of(parts[0]).concatenate(parts)
+        for parts in by_key.values()
+    )
 
 
 def concatenate_measurements(*parts: Measurements) -> Measurements:
@@ -255,9 +268,13 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
     names = tuple(dict.fromkeys(n for p in parts for n in p.joint_names))
     offsets = np.cumsum([0, *(p.n_samples for p in parts[:-1])])
 
-    groups = merge_same_key(replace(g, sample=g.sample + off)
-                             for p, off in zip(parts, offsets, strict=True)
-                             for g in p.all_groups())
+    groups = merge_same_key(
+        replace(g, sample=g.sample + off)
+        for p, off in zip(parts, offsets, strict=True)
+        for g in p.all_groups()
+    )
     return Measurements(names, np.zeros((0, len(names)))).with_groups(
-        groups, qs=np.concatenate([p.q_of(names) for p in parts]),
-        source=" + ".join(dict.fromkeys(p.source for p in parts)))
+        groups,
+        qs=np.concatenate([p.q_of(names) for p in parts]),
+        source=" + ".join(dict.fromkeys(p.source for p in parts)),
+    )

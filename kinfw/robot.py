@@ -163,8 +163,10 @@ class Robot:
         self.default_up = up_vector(hint.get("up"), source)
         for name in (*self.default_frames, *self.default_cameras):
             if not self.model.existFrame(name):
-                raise RobotModelError(f"{source}: <kinfw> names frame {name!r}, which the "
-                                      f"URDF does not have; links are {list(self.link_names)}")
+                raise RobotModelError(
+                    f"{source}: <kinfw> names frame {name!r}, which the "
+                    f"URDF does not have; links are {list(self.link_names)}"
+                )
         # For each movable joint: (first index in pin q, is it continuous (nq = 2)).
         self._q_slot = {}
         for name in self.joint_names:
@@ -172,8 +174,7 @@ class Robot:
             self._q_slot[name] = (pj.idx_q, pj.nq == 2)
 
     def __repr__(self) -> str:
-        return (f"Robot({self.source!r}, root={self.root_link!r}, "
-                f"joints={list(self.joint_names)})")
+        return f"Robot({self.source!r}, root={self.root_link!r}, joints={list(self.joint_names)})"
 
     # -- names -------------------------------------------------------------------------
     def joint(self, name: str) -> JointInfo:
@@ -275,15 +276,17 @@ class Robot:
         )
 
     # -- configurations and kinematics --------------------------------------------------
-    def joint_limits(self, joint_names: tuple[str, ...] | None = None
-                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    def joint_limits(
+        self, joint_names: tuple[str, ...] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Lower and upper limits (rad or m) of ``joint_names``; +-inf where unbounded."""
         names = self.joint_names if joint_names is None else joint_names
         js = [self.joint(n) for n in names]
         return np.array([j.lower for j in js]), np.array([j.upper for j in js])
 
-    def pin_configurations(self, qs: ArrayLike, joint_names: tuple[str, ...] | None = None
-                           ) -> NDArray[np.float64]:
+    def pin_configurations(
+        self, qs: ArrayLike, joint_names: tuple[str, ...] | None = None
+    ) -> NDArray[np.float64]:
         """Pinocchio configuration vectors (n, nq) for URDF joint values ``qs`` (n, k).
 
         Unlisted joints stay at Pinocchio's neutral configuration (value zero);
@@ -292,8 +295,9 @@ class Robot:
         names = self.joint_names if joint_names is None else tuple(joint_names)
         qs = np.atleast_2d(np.asarray(qs, dtype=float))
         if qs.shape[1] != len(names):
-            raise ValueError(f"qs: expected {len(names)} columns ({list(names)}), "
-                             f"got shape {qs.shape}")
+            raise ValueError(
+                f"qs: expected {len(names)} columns ({list(names)}), got shape {qs.shape}"
+            )
         out = np.tile(pin.neutral(self.model), (qs.shape[0], 1))
         for col, name in enumerate(names):
             if name not in self._q_slot:
@@ -306,8 +310,9 @@ class Robot:
                 out[:, i] = qs[:, col]
         return out
 
-    def frame_poses(self, qs: ArrayLike, frame: str,
-                    joint_names: tuple[str, ...] | None = None) -> NDArray[np.float64]:
+    def frame_poses(
+        self, qs: ArrayLike, frame: str, joint_names: tuple[str, ...] | None = None
+    ) -> NDArray[np.float64]:
         """Pose of ``frame`` in the root link, ``root_T_frame``, by Pinocchio FK.
 
         Batch in, batch out: one configuration of shape (k,) gives one pose, a batch of
@@ -338,8 +343,10 @@ class Robot:
         qs = np.asarray(qs, dtype=float)
         if qs.ndim not in (1, 2):
             names = self.joint_names if joint_names is None else tuple(joint_names)
-            raise ValueError(f"qs: expected shape ({len(names)},) or (n, {len(names)}) "
-                             f"(columns {list(names)}), got {qs.shape}")
+            raise ValueError(
+                f"qs: expected shape ({len(names)},) or (n, {len(names)}) "
+                f"(columns {list(names)}), got {qs.shape}"
+            )
         fid = self.frame_id(frame)
         configurations = self.pin_configurations(qs, joint_names)  # (n, nq); n = 1 for (k,)
         out = np.empty((len(configurations), 4, 4))

@@ -159,8 +159,10 @@ def quat_xyzw_from_matrix(a_R_b: ArrayLike) -> NDArray[np.float64]:
     R = np.asarray(a_R_b, dtype=float)
     m00, m11, m22 = R[..., 0, 0], R[..., 1, 1], R[..., 2, 2]
     # Shepperd's method: pick the largest of 4w^2, 4x^2, 4y^2, 4z^2 for stability.
-    cand = np.stack([1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22,
-                     1 - m00 - m11 + m22], axis=-1)
+    cand = np.stack(
+        [1 + m00 + m11 + m22, 1 + m00 - m11 - m22, 1 - m00 + m11 - m22, 1 - m00 - m11 + m22],
+        axis=-1,
+    )
     k = np.argmax(cand, axis=-1)
     r = np.sqrt(np.maximum(np.take_along_axis(cand, k[..., None], axis=-1)[..., 0], 1e-300))
     s = 0.5 / r
@@ -211,8 +213,9 @@ def xyz_quat_xyzw_from_transform(
     return a_T_b[..., :3, 3].copy(), quat_xyzw_from_matrix(a_T_b[..., :3, :3])
 
 
-def check_rotation(a_R_b: ArrayLike, name: str = "rotation", tol: float = _ORTHONORMAL_TOL
-                   ) -> NDArray[np.float64]:
+def check_rotation(
+    a_R_b: ArrayLike, name: str = "rotation", tol: float = _ORTHONORMAL_TOL
+) -> NDArray[np.float64]:
     """Validate rotation matrices (..., 3, 3): finite, orthonormal within ``tol``, det +1.
 
     Returns the array as float64; raises ``ValueError`` naming ``name`` and the first
@@ -236,8 +239,9 @@ def check_rotation(a_R_b: ArrayLike, name: str = "rotation", tol: float = _ORTHO
     return R
 
 
-def check_transform(a_T_b: ArrayLike, name: str = "transform", tol: float = _ORTHONORMAL_TOL
-                    ) -> NDArray[np.float64]:
+def check_transform(
+    a_T_b: ArrayLike, name: str = "transform", tol: float = _ORTHONORMAL_TOL
+) -> NDArray[np.float64]:
     """Validate homogeneous rigid transforms (..., 4, 4); returns them as float64.
 
     Raises ``ValueError`` naming ``name`` (and the batch index) when the shape is wrong,

@@ -183,8 +183,12 @@ def _check_unit(axis: ArrayLike, name: str) -> NDArray[np.float64]:
     return axis / norm
 
 
-def _shifted_elements(link: etree._Element, joints: Mapping[str, etree._Element],
-                      link_name: str, skip: Mapping[str, object]) -> Iterator[etree._Element]:
+def _shifted_elements(
+    link: etree._Element,
+    joints: Mapping[str, etree._Element],
+    link_name: str,
+    skip: Mapping[str, object],
+) -> Iterator[etree._Element]:
     """The link's visuals, collisions, inertials and its child joints not in ``skip``."""
     yield from (e for e in link if e.tag in _GEOMETRY_TAGS)
     for name, joint in joints.items():
@@ -198,8 +202,9 @@ def _describe(elem: etree._Element) -> str:
     return f"{owner.tag} {owner.get('name')!r}" + ("" if owner is elem else f" <{elem.tag}>")
 
 
-def _floats(elem: etree._Element | None, attr: str, default: tuple[float, ...]
-            ) -> NDArray[np.float64]:
+def _floats(
+    elem: etree._Element | None, attr: str, default: tuple[float, ...]
+) -> NDArray[np.float64]:
     text = None if elem is None else elem.get(attr)
     if text is None:
         return np.array(default)
@@ -208,8 +213,9 @@ def _floats(elem: etree._Element | None, attr: str, default: tuple[float, ...]
     except ValueError:
         values = np.array([])
     if values.shape != (3,):
-        raise ExportError(f"{_describe(elem.getparent())}: <{elem.tag} {attr}={text!r}> "
-                          "is not three numbers")
+        raise ExportError(
+            f"{_describe(elem.getparent())}: <{elem.tag} {attr}={text!r}> is not three numbers"
+        )
     return values
 
 
@@ -235,8 +241,10 @@ def _rpy_from_matrix(a_R_b: NDArray[np.float64], what: str) -> NDArray[np.float6
     rpy = pin.rpy.matrixToRpy(a_R_b)
     error = np.abs(pin.rpy.rpyToMatrix(rpy) - a_R_b).max()
     if not error <= SAME_TOL:
-        raise ExportError(f"{what}: rpy {rpy.tolist()} reproduce the rotation only to "
-                          f"{error:.3g} (> {SAME_TOL:g}); is the matrix orthonormal?")
+        raise ExportError(
+            f"{what}: rpy {rpy.tolist()} reproduce the rotation only to "
+            f"{error:.3g} (> {SAME_TOL:g}); is the matrix orthonormal?"
+        )
     return rpy
 
 
@@ -277,8 +285,9 @@ def _set_axis(joint: etree._Element, axis: NDArray[np.float64]) -> bool:
 # -- the calibrated export ----------------------------------------------------------------
 
 
-def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
-                root_is_measurement_frame: bool = True) -> ExportResult:
+def export_urdf(
+    robot: Robot, geometry: ZeroGeometry, *, root_is_measurement_frame: bool = True
+) -> ExportResult:
     """A URDF whose Pinocchio FK reproduces a calibrated screw geometry exactly.
 
     Parameters
@@ -323,8 +332,10 @@ def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
     """
     topology = robot.topology(geometry.topology.frames)
     if topology != geometry.topology:
-        raise ExportError(f"geometry.topology {geometry.topology} does not match the robot's "
-                          f"topology for its frames: {topology}")
+        raise ExportError(
+            f"geometry.topology {geometry.topology} does not match the robot's "
+            f"topology for its frames: {topology}"
+        )
     w_T_root, w_T_placed = _anchor(robot, geometry, root_is_measurement_frame)
     lines = {name: j for j, name in enumerate(topology.joint_names)}
     w_T_links = {robot.root_link: w_T_root}
@@ -338,8 +349,9 @@ def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
         w_T_child = w_T_placed.get(joint.child)
         if joint.name in lines:
             j = lines[joint.name]
-            old_T_new = _shift_onto_line(joint, w_T_candidate, geometry.axes[j],
-                                         geometry.points[j], w_T_child)
+            old_T_new = _shift_onto_line(
+                joint, w_T_candidate, geometry.axes[j], geometry.points[j], w_T_child
+            )
             if _close(old_T_new, np.eye(4), SAME_TOL):  # rounding only: keep the nominal frame
                 old_T_new = np.eye(4)
             else:
@@ -351,8 +363,9 @@ def export_urdf(robot: Robot, geometry: ZeroGeometry, *,
             continue
         joint_origins[joint.name] = inverse_transform(w_T_parent) @ w_T_child
         w_T_links[joint.child] = w_T_child
-    xml = edit_urdf(robot.urdf_xml, joint_origins=joint_origins, joint_axes=joint_axes,
-                    link_shifts=old_T_news)
+    xml = edit_urdf(
+        robot.urdf_xml, joint_origins=joint_origins, joint_axes=joint_axes, link_shifts=old_T_news
+    )
     return ExportResult(urdf_xml=xml, w_T_root=w_T_root, link_shifts=tuple(old_T_news.items()))
 
 
@@ -379,9 +392,13 @@ def _joints_from_root(robot: Robot) -> list[JointInfo]:
     return order
 
 
-def _shift_onto_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis: ArrayLike,
-                     point: ArrayLike, w_T_end: NDArray[np.float64] | None
-                     ) -> NDArray[np.float64]:
+def _shift_onto_line(
+    joint: JointInfo,
+    w_T_candidate: NDArray[np.float64],
+    axis: ArrayLike,
+    point: ArrayLike,
+    w_T_end: NDArray[np.float64] | None,
+) -> NDArray[np.float64]:
     """Shift ``old_T_new`` of a measured joint's child link from its candidate pose.
 
     Parameters
@@ -413,15 +430,17 @@ def _shift_onto_line(joint: JointInfo, w_T_candidate: NDArray[np.float64], axis:
     return old_T_new
 
 
-def _closest_point(w_p: NDArray[np.float64], axis: ArrayLike, point: ArrayLike
-                   ) -> NDArray[np.float64]:
+def _closest_point(
+    w_p: NDArray[np.float64], axis: ArrayLike, point: ArrayLike
+) -> NDArray[np.float64]:
     """The point of the line ``(axis, point)`` closest to ``w_p`` (all in ``w``, metres)."""
     direction, point = _unit(axis), np.asarray(point, dtype=float)
     return point + ((w_p - point) @ direction) * direction
 
 
-def _check_on_line(joint: JointInfo, w_p_end: NDArray[np.float64], axis: ArrayLike,
-                   point: ArrayLike) -> None:
+def _check_on_line(
+    joint: JointInfo, w_p_end: NDArray[np.float64], axis: ArrayLike, point: ArrayLike
+) -> None:
     distance = np.linalg.norm(w_p_end - _closest_point(w_p_end, axis, point))
     if distance > ON_AXIS_TOL:
         raise ExportError(
@@ -433,8 +452,9 @@ def _check_on_line(joint: JointInfo, w_p_end: NDArray[np.float64], axis: ArrayLi
         )
 
 
-def _anchor(robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: bool
-            ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]]]:
+def _anchor(
+    robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: bool
+) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]]]:
     """``w_T_root`` and the links placed outright: ``{link: w_T_link}`` at q = 0.
 
     The placed links are the end-frame links (a joint frame is its child link's frame at
@@ -450,8 +470,9 @@ def _anchor(robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: boo
     for frame, w_T_e in zip(frames, geometry.w_T_frames, strict=True):
         link = frame if frame in robot.link_names else robot.joint(frame).child
         if link in w_T_placed and not _close(w_T_placed[link], w_T_e, ON_AXIS_TOL):
-            raise ExportError(f"end frames {frames} name link {link!r} twice with different "
-                              "calibrated poses")
+            raise ExportError(
+                f"end frames {frames} name link {link!r} twice with different calibrated poses"
+            )
         w_T_placed[link] = np.asarray(w_T_e, dtype=float)
     w_T_root = np.eye(4)
     root_joints = [j for j in robot.joints if j.parent == robot.root_link]
@@ -460,18 +481,22 @@ def _anchor(robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: boo
     elif len(root_joints) == 1 and root_joints[0].type == "fixed":
         base = root_joints[0].child
         root_T_base = data.oMf[robot.frame_id(base)].homogeneous
-        w_T_base = _register_frames(inverse_transform(root_T_base) @ root_T_ends,
-                                    geometry.w_T_frames)
+        w_T_base = _register_frames(
+            inverse_transform(root_T_base) @ root_T_ends, geometry.w_T_frames
+        )
         w_T_placed.setdefault(base, w_T_base)
     root = robot.root_link
     if root in w_T_placed and not _close(w_T_placed[root], w_T_root, ON_AXIS_TOL):
-        raise ExportError(f"end frame {root!r} is the root link, whose pose in the measurement "
-                          "frame is fixed by the anchor; it cannot take its calibrated pose")
+        raise ExportError(
+            f"end frame {root!r} is the root link, whose pose in the measurement "
+            "frame is fixed by the anchor; it cannot take its calibrated pose"
+        )
     return w_T_root, w_T_placed
 
 
-def _register_frames(a_T_frames: NDArray[np.float64], w_T_frames: NDArray[np.float64]
-                     ) -> NDArray[np.float64]:
+def _register_frames(
+    a_T_frames: NDArray[np.float64], w_T_frames: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Least-squares rigid ``w_T_a`` with ``w_T_a @ a_T_frames ~ w_T_frames``.
 
     Parameters

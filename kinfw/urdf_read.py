@@ -113,8 +113,9 @@ def check_urdf_xml(xml: str, source: str) -> ET.Element:
     except ET.ParseError as exc:
         raise RobotModelError(f"{source}: not well-formed XML ({exc})") from None
     if root.tag != "robot":
-        raise RobotModelError(f"{source}: not a URDF (the root element is <{root.tag}>, "
-                              "expected <robot>)")
+        raise RobotModelError(
+            f"{source}: not a URDF (the root element is <{root.tag}>, expected <robot>)"
+        )
     _check_links_and_joints(root, source)
     return root
 
@@ -150,11 +151,14 @@ def _check_links_and_joints(root: ET.Element, source: str) -> None:
                 hint = f"; did you mean {close[0]!r}?" if close else ""
                 raise RobotModelError(
                     f"{source}: joint {name!r}: its {role} link {link!r} is not a <link> of "
-                    f"the URDF (links: {', '.join(links)}){hint}")
+                    f"the URDF (links: {', '.join(links)}){hint}"
+                )
         child = joint.find("child").get("link")
         if child in parent_joint:
-            raise RobotModelError(f"{source}: link {child!r} is the child of two joints, "
-                                  f"{parent_joint[child]!r} and {name!r}")
+            raise RobotModelError(
+                f"{source}: link {child!r} is the child of two joints, "
+                f"{parent_joint[child]!r} and {name!r}"
+            )
         parent_joint[child] = name
 
 
@@ -199,8 +203,10 @@ def pinocchio_model(urdf_xml: str, source: str) -> pin.Model:
             error = exc
     said = " ".join(native.getvalue().split())
     if model is None:  # urdfdom's own lines say why; Pinocchio's only that it failed
-        lines = [m.strip().removeprefix("Error:").strip()
-                 for m in _URDFDOM_LINE.sub("\n", said).splitlines()]
+        lines = [
+            m.strip().removeprefix("Error:").strip()
+            for m in _URDFDOM_LINE.sub("\n", said).splitlines()
+        ]
         why = "; ".join(m for m in lines if m) or str(error)
         raise RobotModelError(f"{source}: Pinocchio cannot load this URDF ({why})")
     if said:
@@ -216,13 +222,15 @@ def up_vector(text: str | None, source: str) -> NDArray[np.float64] | None:
     except ValueError:
         up = np.zeros(0)
     if up.shape != (3,) or not np.linalg.norm(up) > 0:
-        raise RobotModelError(f"{source}: <kinfw up={text!r}>: expected three numbers, "
-                              "not all zero")
+        raise RobotModelError(
+            f"{source}: <kinfw up={text!r}>: expected three numbers, not all zero"
+        )
     return up / np.linalg.norm(up)
 
 
-def _floats(element: ET.Element | None, key: str, n: int, default: list[float],
-            where: str) -> list[float]:
+def _floats(
+    element: ET.Element | None, key: str, n: int, default: list[float], where: str
+) -> list[float]:
     """``n`` numbers of attribute ``key`` of ``element`` (``default`` when absent)."""
     text = None if element is None else element.get(key)
     if text is None:
@@ -236,8 +244,9 @@ def _floats(element: ET.Element | None, key: str, n: int, default: list[float],
     return values
 
 
-def parse_joints(root: ET.Element, source: str
-                  ) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
+def parse_joints(
+    root: ET.Element, source: str
+) -> tuple[tuple[JointInfo, ...], tuple[str, ...], str]:
     """Joints (document order), links and the root link of a checked ``<robot>`` element
     (:func:`check_urdf_xml`). Origins follow URDF: ``rpy`` is fixed-axis roll, pitch, yaw,
     ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (:func:`pinocchio.rpy.rpyToMatrix`)."""
@@ -251,9 +260,9 @@ def parse_joints(root: ET.Element, source: str
         parent_T_child = np.eye(4)
         parent_T_child[:3, 3] = _floats(origin, "xyz", 3, [0.0, 0.0, 0.0], f"{where} <origin>")
         parent_T_child[:3, :3] = pin.rpy.rpyToMatrix(
-            np.array(_floats(origin, "rpy", 3, [0.0, 0.0, 0.0], f"{where} <origin>")))
-        axis = np.array(_floats(element.find("axis"), "xyz", 3, [1.0, 0.0, 0.0],
-                                f"{where} <axis>"))
+            np.array(_floats(origin, "rpy", 3, [0.0, 0.0, 0.0], f"{where} <origin>"))
+        )
+        axis = np.array(_floats(element.find("axis"), "xyz", 3, [1.0, 0.0, 0.0], f"{where} <axis>"))
         norm = np.linalg.norm(axis)
         if kind in MOVABLE_TYPES and not norm > 0.0:
             raise RobotModelError(f"{source}: joint {name!r} has a zero axis")
@@ -263,11 +272,19 @@ def parse_joints(root: ET.Element, source: str
         if kind == "continuous":
             lower, upper = -np.inf, np.inf
         mimic = element.find("mimic")
-        joints.append(JointInfo(
-            name=name, type=kind, parent=element.find("parent").get("link"),
-            child=element.find("child").get("link"), parent_T_child=parent_T_child,
-            axis=axis / norm if norm > 0 else axis, lower=lower, upper=upper,
-            mimic=None if mimic is None else mimic.get("joint")))
+        joints.append(
+            JointInfo(
+                name=name,
+                type=kind,
+                parent=element.find("parent").get("link"),
+                child=element.find("child").get("link"),
+                parent_T_child=parent_T_child,
+                axis=axis / norm if norm > 0 else axis,
+                lower=lower,
+                upper=upper,
+                mimic=None if mimic is None else mimic.get("joint"),
+            )
+        )
     links = tuple(link.get("name") for link in root.findall("link"))
     children = {j.child for j in joints}
     roots = [name for name in links if name not in children]

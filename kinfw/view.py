@@ -92,8 +92,11 @@ SOLID_RGBA = (0.1, 0.45, 0.85, 1.0)
 """Colour of the calibrated robot (of the nominal one when it is drawn alone)."""
 TARGET_RGBA = (0.95, 0.8, 0.25, 0.8)
 """Colour of a fixed target's flat box."""
-RESIDUAL_COLOR_STOPS_MM = ((0.0, (0.0, 0.7, 0.2)), (2.0, (1.0, 0.6, 0.0)),
-                           (10.0, (0.85, 0.0, 0.85)))
+RESIDUAL_COLOR_STOPS_MM = (
+    (0.0, (0.0, 0.7, 0.2)),
+    (2.0, (1.0, 0.6, 0.0)),
+    (10.0, (0.85, 0.0, 0.85)),
+)
 """Residual line colour against the error (before scaling), mm: green at 0 mm, orange at
 2 mm, magenta at 10 mm and more, linear in between."""
 TRIAD_LENGTH = 0.03
@@ -155,8 +158,9 @@ def _overlay_material(rgb: Sequence[float]) -> Any:
     triads inside a link's visual and residuals behind the ghost stay visible."""
     import meshcat.geometry as mg
 
-    return mg.MeshBasicMaterial(color=_rgb_int(rgb), transparent=True, opacity=1.0,
-                                depthTest=False, depthWrite=False)
+    return mg.MeshBasicMaterial(
+        color=_rgb_int(rgb), transparent=True, opacity=1.0, depthTest=False, depthWrite=False
+    )
 
 
 def _overlay_object(geometry: Any, rgb: Sequence[float]) -> Any:
@@ -182,8 +186,13 @@ def _rotation_y_onto(direction: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.column_stack([x, y, np.cross(x, y)])
 
 
-def _stick(node: meshcat.Visualizer, origin: ArrayLike, vector: ArrayLike, radius: float,
-           rgb: Sequence[float]) -> None:
+def _stick(
+    node: meshcat.Visualizer,
+    origin: ArrayLike,
+    vector: ArrayLike,
+    radius: float,
+    rgb: Sequence[float],
+) -> None:
     """A thin cylinder from ``origin`` to ``origin + vector`` (coordinates of the node's
     parent). ``node`` gets the transform ``[R | origin]``, R taking y onto ``vector``;
     its child ``stick`` holds the cylinder of height ``|vector|``."""
@@ -199,9 +208,14 @@ def _stick(node: meshcat.Visualizer, origin: ArrayLike, vector: ArrayLike, radiu
     node["stick"].set_transform(_translation([0.0, 0.5 * length, 0.0]))
 
 
-def _triad(node: meshcat.Visualizer, parent_T_frame: NDArray[np.float64], *,
-           length: float = TRIAD_LENGTH, radius: float = STICK_RADIUS,
-           origin_rgb: Sequence[float] | None = None) -> None:
+def _triad(
+    node: meshcat.Visualizer,
+    parent_T_frame: NDArray[np.float64],
+    *,
+    length: float = TRIAD_LENGTH,
+    radius: float = STICK_RADIUS,
+    origin_rgb: Sequence[float] | None = None,
+) -> None:
     """Axes x (red), y (green), z (blue) of a frame: children ``x``, ``y``, ``z`` (and
     ``origin``, a small ball, when ``origin_rgb`` is given)."""
     import meshcat.geometry as mg
@@ -227,15 +241,24 @@ def _node_name(frame: str, marker: str | None) -> str:
 # -- the scene ---------------------------------------------------------------------------
 
 
-def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = None,
-          data: Measurements | None = None, *, q: ArrayLike | None = None,
-          joint_names: Sequence[str] | None = None, sample: int | None = None,
-          targets: Iterable[tuple[str, ArrayLike]] = (), window: Any = None,
-          residual_scale: float = 10.0, meas_T_root: ArrayLike | None = None,
-          up: ArrayLike | None = None, package_dirs: Sequence[str | Path] = (),
-          ghost_rgba: Sequence[float] = GHOST_RGBA,
-          solid_rgba: Sequence[float] | None = SOLID_RGBA,
-          unknowns: Mapping[BlockKey, ArrayLike] | None = None) -> meshcat.Visualizer:
+def scene(
+    nominal: Robot | str | Path,
+    calibrated: Robot | str | Path | None = None,
+    data: Measurements | None = None,
+    *,
+    q: ArrayLike | None = None,
+    joint_names: Sequence[str] | None = None,
+    sample: int | None = None,
+    targets: Iterable[tuple[str, ArrayLike]] = (),
+    window: Any = None,
+    residual_scale: float = 10.0,
+    meas_T_root: ArrayLike | None = None,
+    up: ArrayLike | None = None,
+    package_dirs: Sequence[str | Path] = (),
+    ghost_rgba: Sequence[float] = GHOST_RGBA,
+    solid_rgba: Sequence[float] | None = SOLID_RGBA,
+    unknowns: Mapping[BlockKey, ArrayLike] | None = None,
+) -> meshcat.Visualizer:
     """Draw a calibration for a visual check: nominal ghost, calibrated robot, data.
 
     Parameters
@@ -324,37 +347,55 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
             q = np.zeros(len(joint_names))
     q = np.asarray(q, dtype=float)
     if q.shape != (len(joint_names),):
-        raise ValueError(f"q: expected shape ({len(joint_names)},) for joints "
-                         f"{list(joint_names)}, got {q.shape}")
-    targets = tuple((str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
-                    for name, T in targets)
+        raise ValueError(
+            f"q: expected shape ({len(joint_names)},) for joints {list(joint_names)}, got {q.shape}"
+        )
+    targets = tuple(
+        (str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
+        for name, T in targets
+    )
     up = _up_hint(model) if up is None else np.asarray(up, dtype=float)
     if up.shape != (3,) or not np.linalg.norm(up) > 0:
         raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
     dirs = tuple(Path(d) for d in package_dirs) + tuple(
-        Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d)
+        Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d
+    )
 
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     root = vis["kinfw"]
     robot_ps = []
     if calibrated is not None:
-        robot_ps.append(draw_robot(vis, nominal, "kinfw/nominal",
-                                    nominal.pin_configurations(q, joint_names)[0],
-                                    ghost_rgba, dirs))
-    robot_ps.append(draw_robot(vis, model, "kinfw/calibrated" if calibrated is not None
-                                else "kinfw/nominal",
-                                model.pin_configurations(q, joint_names)[0], solid_rgba, dirs))
+        robot_ps.append(
+            draw_robot(
+                vis,
+                nominal,
+                "kinfw/nominal",
+                nominal.pin_configurations(q, joint_names)[0],
+                ghost_rgba,
+                dirs,
+            )
+        )
+    robot_ps.append(
+        draw_robot(
+            vis,
+            model,
+            "kinfw/calibrated" if calibrated is not None else "kinfw/nominal",
+            model.pin_configurations(q, joint_names)[0],
+            solid_rgba,
+            dirs,
+        )
+    )
     focus_ps = []
     if data is not None and sample is not None:
         values = _known_values(data, targets, meas_T_root, unknowns)
-        focus_ps.append(_draw_observations(root, model, data, sample, q, joint_names,
-                                           values, residual_scale))
+        focus_ps.append(
+            _draw_observations(root, model, data, sample, q, joint_names, values, residual_scale)
+        )
     focus_ps.append(_draw_cameras(root, model, data, q, joint_names))
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
 
-    display_T_root, camera_offset = display_frame(focus, up,
-                                                   fov_deg=CAMERA_FOV_DEG)
+    display_T_root, camera_offset = display_frame(focus, up, fov_deg=CAMERA_FOV_DEG)
     root.set_transform(display_T_root)
     set_camera(vis, camera_offset, CAMERA_FOV_DEG)
     vis["/Axes"].set_property("visible", False)
@@ -364,9 +405,12 @@ def scene(nominal: Robot | str | Path, calibrated: Robot | str | Path | None = N
     return vis
 
 
-def _known_values(data: Measurements, targets: tuple[tuple[str, NDArray], ...],
-                  meas_T_root: ArrayLike | None,
-                  unknowns: Mapping[BlockKey, ArrayLike] | None) -> dict[BlockKey, NDArray]:
+def _known_values(
+    data: Measurements,
+    targets: tuple[tuple[str, NDArray], ...],
+    meas_T_root: ArrayLike | None,
+    unknowns: Mapping[BlockKey, ArrayLike] | None,
+) -> dict[BlockKey, NDArray]:
     """The block values the view knows: the targets, ``meas_T_root`` for every
     measurement frame of the data, and ``unknowns``."""
     values = {BlockKey("target", name): T for name, T in targets}
@@ -384,10 +428,16 @@ def _up_hint(robot: Robot) -> NDArray[np.float64]:
     return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
 
 
-def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurements,
-                       sample: int, q: NDArray, joint_names: tuple[str, ...],
-                       values: dict[BlockKey, NDArray], residual_scale: float
-                       ) -> NDArray[np.float64]:
+def _draw_observations(
+    root: meshcat.Visualizer,
+    model: Robot,
+    data: Measurements,
+    sample: int,
+    q: NDArray,
+    joint_names: tuple[str, ...],
+    values: dict[BlockKey, NDArray],
+    residual_scale: float,
+) -> NDArray[np.float64]:
     """The observations of one sample and their residual lines, every kind through its
     :meth:`~kinfw.observations.base.ObservationKind.drawing`; return the points to
     frame (the measured and predicted positions of the kinds that ask for it)."""
@@ -403,10 +453,14 @@ def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurement
         try:
             drawing = kind.drawing(kind.take(g, rows, np.zeros(len(rows), np.int64)), context)
         except MissingValue as exc:
-            hint = ("; pass meas_T_root (the sidecar's w_T_root) to draw it"
-                    if exc.key.kind == "frame" else "")
-            logger.warning("%s: sample %d: cannot draw %r (%s)%s", data.source, sample, g,
-                           exc, hint)
+            hint = (
+                "; pass meas_T_root (the sidecar's w_T_root) to draw it"
+                if exc.key.kind == "frame"
+                else ""
+            )
+            logger.warning(
+                "%s: sample %d: cannot draw %r (%s)%s", data.source, sample, g, exc, hint
+            )
             continue
         except NotImplementedError as exc:
             logger.info("%s: %s", data.source, exc)
@@ -424,8 +478,13 @@ def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurement
             if drawing.focus:
                 drawn.append(w_p)
             if drawing.w_p_predicted is None:
-                logger.info("%s: sample %d: no residual for %s (%s is unknown)", data.source,
-                            sample, drawing.node, drawing.missing)
+                logger.info(
+                    "%s: sample %d: no residual for %s (%s is unknown)",
+                    data.source,
+                    sample,
+                    drawing.node,
+                    drawing.missing,
+                )
                 continue
             w_p_pred = drawing.w_p_predicted[k]
             _residual_line(root["residuals/" + drawing.node], w_p_pred, w_p, residual_scale)
@@ -434,8 +493,9 @@ def _draw_observations(root: meshcat.Visualizer, model: Robot, data: Measurement
     return np.array(drawn).reshape(-1, 3)
 
 
-def _residual_line(node: meshcat.Visualizer, root_p_pred: NDArray, root_p_meas: NDArray,
-                   residual_scale: float) -> None:
+def _residual_line(
+    node: meshcat.Visualizer, root_p_pred: NDArray, root_p_meas: NDArray, residual_scale: float
+) -> None:
     """A residual line from the prediction towards the measurement, scaled."""
     import meshcat.geometry as mg
 
@@ -444,17 +504,20 @@ def _residual_line(node: meshcat.Visualizer, root_p_pred: NDArray, root_p_meas: 
     _stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
     node["tip"].set_object(_overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
     node["tip"].set_transform(
-        _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0]))
+        _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0])
+    )
 
 
-def _draw_targets(root: meshcat.Visualizer, targets: tuple[tuple[str, NDArray], ...]
-                  ) -> NDArray[np.float64]:
+def _draw_targets(
+    root: meshcat.Visualizer, targets: tuple[tuple[str, NDArray], ...]
+) -> NDArray[np.float64]:
     import meshcat.geometry as mg
 
     for name, root_T_target in targets:
         node = root["targets/" + _node_name(name, None)]
-        material = mg.MeshLambertMaterial(color=_rgb_int(TARGET_RGBA),
-                                          opacity=TARGET_RGBA[3], transparent=True)
+        material = mg.MeshLambertMaterial(
+            color=_rgb_int(TARGET_RGBA), opacity=TARGET_RGBA[3], transparent=True
+        )
         node["board"].set_object(mg.Box(TARGET_SIZE), material)
         node["board"].set_transform(_translation([0.0, 0.0, -0.5 * TARGET_SIZE[2]]))
         _triad(node["triad"], np.eye(4), length=2 * TRIAD_LENGTH)
@@ -462,17 +525,27 @@ def _draw_targets(root: meshcat.Visualizer, targets: tuple[tuple[str, NDArray], 
     return np.array([T[:3, 3] for _, T in targets]).reshape(-1, 3)
 
 
-def _draw_cameras(root: meshcat.Visualizer, model: Robot, data: Measurements | None,
-                  q: NDArray, joint_names: tuple[str, ...]) -> NDArray[np.float64]:
+def _draw_cameras(
+    root: meshcat.Visualizer,
+    model: Robot,
+    data: Measurements | None,
+    q: NDArray,
+    joint_names: tuple[str, ...],
+) -> NDArray[np.float64]:
     cameras = dict.fromkeys(model.default_cameras)
     if data is not None:
-        cameras.update(dict.fromkeys(c for g in data.all_groups()
-                                     for c in kind_of(g).camera_frames(g)))
+        cameras.update(
+            dict.fromkeys(c for g in data.all_groups() for c in kind_of(g).camera_frames(g))
+        )
     drawn = []
     for camera in cameras:
         root_T_camera = model.frame_poses(q, camera, joint_names)
-        _triad(root["cameras/" + _node_name(camera, None)], root_T_camera,
-               length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
+        _triad(
+            root["cameras/" + _node_name(camera, None)],
+            root_T_camera,
+            length=CAMERA_TRIAD_LENGTH,
+            radius=0.7 * STICK_RADIUS,
+        )
         drawn.append(root_T_camera[:3, 3])
     return np.array(drawn).reshape(-1, 3)
 
@@ -480,13 +553,13 @@ def _draw_cameras(root: meshcat.Visualizer, model: Robot, data: Measurements | N
 # -- files -------------------------------------------------------------------------------
 
 
-def targets_from_sidecar(sidecar: str | Path | CalibrationSidecar
-                         ) -> tuple[tuple[str, NDArray[np.float64]], ...]:
+def targets_from_sidecar(
+    sidecar: str | Path | CalibrationSidecar,
+) -> tuple[tuple[str, NDArray[np.float64]], ...]:
     """``(name, root_T_target)`` of every target in a calibration sidecar
     (``*.kinfw.json`` written by ``kinfw calibrate``, or one read by
     :func:`kinfw.calibration_file.read_sidecar`), for :func:`scene`'s ``targets``: the
     refined pose when the calibration refined it, else the hand-eye one
     (:attr:`~kinfw.calibration_file.CalibrationSidecar.root_T_targets`)."""
     doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
-    return tuple((t, check_transform(T, name=f"targets[{t!r}]"))
-                 for t, T in doc.root_T_targets)
+    return tuple((t, check_transform(T, name=f"targets[{t!r}]")) for t, T in doc.root_T_targets)

@@ -79,8 +79,10 @@ class OfflineWindow:
             else:
                 self._tree = SceneTree()
         else:
-            raise ValueError(f"OfflineWindow: cannot record a {kind!r} command without a "
-                             "browser (get_image needs meshcat.Visualizer())")
+            raise ValueError(
+                f"OfflineWindow: cannot record a {kind!r} command without a "
+                "browser (get_image needs meshcat.Visualizer())"
+            )
 
     def get_scene(self) -> str:
         """The scene as one self-contained HTML page (what ``meshcat-server`` returns)."""
@@ -88,11 +90,13 @@ class OfflineWindow:
         from meshcat.servers.tree import walk
 
         def command(packed: bytes) -> str:  # as meshcat.servers.zmqserver.create_command
-            return ('\nfetch("data:application/octet-binary;base64,'
-                    f'{base64.b64encode(packed).decode("utf-8")}")\n'
-                    "    .then(res => res.arrayBuffer())\n"
-                    "    .then(buffer => viewer.handle_command_bytearray("
-                    "new Uint8Array(buffer)));\n    ")
+            return (
+                '\nfetch("data:application/octet-binary;base64,'
+                f'{base64.b64encode(packed).decode("utf-8")}")\n'
+                "    .then(res => res.arrayBuffer())\n"
+                "    .then(buffer => viewer.handle_command_bytearray("
+                "new Uint8Array(buffer)));\n    "
+            )
 
         parts = []
         for node in walk(self._tree):
@@ -104,8 +108,7 @@ class OfflineWindow:
             if node.animation is not None:
                 parts.append(command(node.animation))
         viewer = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
-        return _HTML.format(mainminjs=viewer.read_text(encoding="utf-8"),
-                            commands="".join(parts))
+        return _HTML.format(mainminjs=viewer.read_text(encoding="utf-8"), commands="".join(parts))
 
     def open(self) -> OfflineWindow:  # meshcat.Visualizer.open() calls this
         raise RuntimeError("OfflineWindow has no server to open; use write_html()")
@@ -160,8 +163,9 @@ def write_html(vis: meshcat.Visualizer, path: str | Path) -> Path:
     html = vis.static_html()
     urls = external_urls(html)
     if urls:
-        raise ValueError(f"the meshcat HTML refers to the network ({urls[:3]}); it would "
-                         "not be self-contained")
+        raise ValueError(
+            f"the meshcat HTML refers to the network ({urls[:3]}); it would not be self-contained"
+        )
     path = write_text_atomic(path, html)
     logger.debug("wrote %s (%d bytes)", path, path.stat().st_size)
     return path

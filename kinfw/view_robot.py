@@ -34,18 +34,19 @@ logger = logging.getLogger("kinfw.view")
 # -- robot geometry ----------------------------------------------------------------------
 
 
-def _resolve_mesh(filename: str, base_dir: Path | None,
-                  package_dirs: Sequence[Path]) -> Path | None:
+def _resolve_mesh(
+    filename: str, base_dir: Path | None, package_dirs: Sequence[Path]
+) -> Path | None:
     """The existing file a URDF mesh ``filename`` names, or None."""
     if filename.startswith("package://"):
-        package, _, rest = filename[len("package://"):].partition("/")
+        package, _, rest = filename[len("package://") :].partition("/")
         candidates = []
         for d in package_dirs:
             candidates += [d / package / rest, d / rest]
         if base_dir is not None:  # .../<package>/urdf/robot.urdf: look up the tree
             candidates += [a / rest for a in (base_dir, *base_dir.parents) if a.name == package]
     elif filename.startswith("file://"):
-        candidates = [Path(filename[len("file://"):])]
+        candidates = [Path(filename[len("file://") :])]
     else:
         path = Path(filename)
         candidates = [path if path.is_absolute() or base_dir is None else base_dir / path]
@@ -67,9 +68,13 @@ def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
             filename = mesh.get("filename", "")
             found = _resolve_mesh(filename, base_dir, package_dirs)
             if found is None:
-                logger.warning("%s: mesh %r of link %r not found (searched %s); that visual "
-                               "is not drawn", robot.source, filename, link.get("name"),
-                               [str(d) for d in package_dirs] or "no package_dirs")
+                logger.warning(
+                    "%s: mesh %r of link %r not found (searched %s); that visual is not drawn",
+                    robot.source,
+                    filename,
+                    link.get("name"),
+                    [str(d) for d in package_dirs] or "no package_dirs",
+                )
                 link.remove(visual)
             else:
                 mesh.set("filename", str(found))
@@ -82,20 +87,27 @@ def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryMod
     try:
         return pin.buildGeomFromUrdfString(robot.model, xml, pin.GeometryType.VISUAL)
     except Exception as exc:  # a mesh that exists but cannot be read
-        logger.warning("%s: cannot load the visual geometry (%s); drawing primitives only",
-                       robot.source, exc)
+        logger.warning(
+            "%s: cannot load the visual geometry (%s); drawing primitives only", robot.source, exc
+        )
         root = ET.fromstring(xml)
         for link in root.iter("link"):
             for visual in list(link.findall("visual")):
                 if visual.find("geometry/mesh") is not None:
                     link.remove(visual)
-        return pin.buildGeomFromUrdfString(robot.model, ET.tostring(root, encoding="unicode"),
-                                           pin.GeometryType.VISUAL)
+        return pin.buildGeomFromUrdfString(
+            robot.model, ET.tostring(root, encoding="unicode"), pin.GeometryType.VISUAL
+        )
 
 
-def draw_robot(vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray,
-                rgba: Sequence[float] | None, package_dirs: Sequence[Path]
-                ) -> NDArray[np.float64]:
+def draw_robot(
+    vis: meshcat.Visualizer,
+    robot: Robot,
+    node: str,
+    pin_q: NDArray,
+    rgba: Sequence[float] | None,
+    package_dirs: Sequence[Path],
+) -> NDArray[np.float64]:
     """Draw ``robot`` at ``pin_q`` under ``node``; return the points to frame, (m, 3):
     the centres of the visuals of its moving links (of all links if none moves; the link
     frames' origins if it has no visuals)."""
@@ -106,20 +118,23 @@ def draw_robot(vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray,
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         viz.initViewer(viewer=vis)
-        viz.loadViewerModel(rootNodeName=node,
-                            visual_color=None if rgba is None else list(rgba))
+        viz.loadViewerModel(rootNodeName=node, visual_color=None if rgba is None else list(rgba))
         viz.display(pin_q)
     for w in caught:
         logger.warning("%s: %s", robot.source, w.message)
     # Frame the moving part: the centres of the visuals behind a movable joint (Pinocchio
     # merges fixed joints, so parentJoint 0 means rigidly attached to the root link).
-    placements = [(g.parentJoint, oMg.translation) for g, oMg in
-                  zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)]
+    placements = [
+        (g.parentJoint, oMg.translation)
+        for g, oMg in zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)
+    ]
     if not placements:
         pin.updateFramePlacements(viz.model, viz.data)
-        placements = [(f.parentJoint, oMf.translation) for f, oMf in
-                      zip(viz.model.frames, viz.data.oMf, strict=True)
-                      if f.type == pin.FrameType.BODY]
+        placements = [
+            (f.parentJoint, oMf.translation)
+            for f, oMf in zip(viz.model.frames, viz.data.oMf, strict=True)
+            if f.type == pin.FrameType.BODY
+        ]
     moving = [p for joint, p in placements if joint > 0]
     return np.array(moving or [p for _, p in placements]).reshape(-1, 3)
 
@@ -127,9 +142,14 @@ def draw_robot(vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray,
 # -- camera ------------------------------------------------------------------------------
 
 
-def display_frame(points: NDArray[np.float64], up: NDArray[np.float64], *,
-                   fov_deg: float, aspect: float = 4.0 / 3.0, pad: float = 0.08
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def display_frame(
+    points: NDArray[np.float64],
+    up: NDArray[np.float64],
+    *,
+    fov_deg: float,
+    aspect: float = 4.0 / 3.0,
+    pad: float = 0.08,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``display_T_root`` and the camera position in display coordinates.
 
     The display frame has its origin at the centre of the points' bounding box and
@@ -158,8 +178,13 @@ def display_frame(points: NDArray[np.float64], up: NDArray[np.float64], *,
     display_ps = (points - centre) @ root_R_display
 
     azimuth, elevation = math.radians(35.0), math.radians(15.0)
-    back = np.array([math.cos(elevation) * math.cos(azimuth),
-                     math.cos(elevation) * math.sin(azimuth), math.sin(elevation)])
+    back = np.array(
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
+    )
     right = np.cross([0.0, 0.0, 1.0], back)
     right /= np.linalg.norm(right)
     screen_up = np.cross(back, right)
@@ -168,14 +193,16 @@ def display_frame(points: NDArray[np.float64], up: NDArray[np.float64], *,
     # A point p is in view from distance D when |p.right| <= (D - p.back) tan_h and
     # |p.screen_up| <= (D - p.back) tan_v.
     depth = display_ps @ back
-    need = np.maximum((np.abs(display_ps @ right) + pad) / tan_h,
-                      (np.abs(display_ps @ screen_up) + pad) / tan_v)
+    need = np.maximum(
+        (np.abs(display_ps @ right) + pad) / tan_h, (np.abs(display_ps @ screen_up) + pad) / tan_v
+    )
     distance = max(float(np.max(depth + need)), 0.3)
     return display_T_root, distance * back
 
 
-def set_camera(vis: meshcat.Visualizer, display_offset: NDArray[np.float64],
-                fov_deg: float) -> None:
+def set_camera(
+    vis: meshcat.Visualizer, display_offset: NDArray[np.float64], fov_deg: float
+) -> None:
     """Put meshcat's orbit camera at ``display_offset`` (it looks at the origin)."""
     # The camera lives in /Cameras/default/rotated, which turns three.js' y-up frame
     # into meshcat's z-up one: display (x, y, z) is three.js (x, z, -y).

@@ -18,6 +18,7 @@ from tests.robots import HEAD_URDF
 settings.register_profile("kinfw", derandomize=True, deadline=None)
 settings.load_profile("kinfw")
 
+
 @pytest.fixture(scope="session")
 def head_urdf() -> Path:
     """Path of the built-in IIS-head URDF."""

@@ -28,8 +28,11 @@ def robots_dir() -> Path | None:
         pass
     else:
         candidates.append(Path(str(dist.locate_file(Path("cmeel.prefix") / _SHARE))))
-    candidates += [Path(p).resolve().parents[2] / _SHARE
-                   for p in sys.path if p and len(Path(p).resolve().parents) > 2]
+    candidates += [
+        Path(p).resolve().parents[2] / _SHARE
+        for p in sys.path
+        if p and len(Path(p).resolve().parents) > 2
+    ]
     return next((c for c in candidates if c.is_dir()), None)
 
 
@@ -38,8 +41,10 @@ def urdf_path(relative: str) -> Path:
     installed robots directory; raises FileNotFoundError naming the fix when absent."""
     root = robots_dir()
     if root is None:
-        raise FileNotFoundError("example-robot-data is not installed: "
-                                "pip install example-robot-data (it is in the test extra)")
+        raise FileNotFoundError(
+            "example-robot-data is not installed: "
+            "pip install example-robot-data (it is in the test extra)"
+        )
     path = root / relative
     if not path.is_file():
         raise FileNotFoundError(f"{path}: not in this example-robot-data installation")

@@ -26,8 +26,9 @@ def _random_rotation(rng):
 
 
 def _random_transforms(rng, n, scale=1.0):
-    return np.array([pin.SE3(_random_rotation(rng), scale * rng.normal(size=3)).homogeneous
-                     for _ in range(n)])
+    return np.array(
+        [pin.SE3(_random_rotation(rng), scale * rng.normal(size=3)).homogeneous for _ in range(n)]
+    )
 
 
 def _problem(seed, n, rotation_noise_deg=0.0, translation_noise=0.0):
@@ -53,6 +54,7 @@ def _angle_deg(R, R_true):
 
 # ------------------------------------------------------------------- noise-free
 
+
 @pytest.mark.parametrize("n", [3, 5, 10, 30])
 @pytest.mark.parametrize("refine", [True, False])
 def test_noise_free_poses_give_the_true_x_and_y(n, refine):
@@ -75,8 +77,9 @@ def test_result_is_named_by_frames_with_the_paper_names_as_read_only_aliases():
     root_T_target = _random_transforms(rng, 1, 1.0)[0]
     root_T_hands = _random_transforms(rng, 6, 0.5)
     hand_T_roots = np.array([pin.SE3(T).inverse().homogeneous for T in root_T_hands])
-    camera_T_targets = np.array([camera_T_hand @ pin.SE3(T).inverse().homogeneous
-                                 @ root_T_target for T in root_T_hands])
+    camera_T_targets = np.array(
+        [camera_T_hand @ pin.SE3(T).inverse().homogeneous @ root_T_target for T in root_T_hands]
+    )
     result = solve_axyb(camera_T_targets, hand_T_roots, refine=False, record_history=True)
     np.testing.assert_allclose(result.camera_T_hand, camera_T_hand, rtol=0, atol=1e-9)
     np.testing.assert_allclose(result.root_T_target, root_T_target, rtol=0, atol=1e-9)
@@ -91,6 +94,7 @@ def test_result_is_named_by_frames_with_the_paper_names_as_read_only_aliases():
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(result, name, np.eye(4))
 
+
 def test_a_start_given_as_x0_also_works():
     X, Y, B, A = _problem(seed=7, n=6)
     X0 = pin.SE3(pin.exp3(np.array([0.4, -0.3, 0.2])) @ X[:3, :3], np.zeros(3)).homogeneous
@@ -100,6 +104,7 @@ def test_a_start_given_as_x0_also_works():
 
 
 # ------------------------------------------------------------- the paper itself
+
 
 def test_the_iteration_is_the_papers_per_pose_averaging():
     """Each recorded step equals eq. (9) done explicitly: one X per pose, averaged as
@@ -157,6 +162,7 @@ def test_a_start_180_degrees_off_stalls_then_restarts_to_the_truth(seed):
 
 # ----------------------------------------------------------------- invariances
 
+
 @settings(max_examples=25, deadline=None)
 @given(order=st.permutations(range(12)))
 def test_sample_order_does_not_matter(order):
@@ -178,14 +184,17 @@ def test_the_length_unit_does_not_matter(refine):
     B_mm[:, :3, 3] *= 1000.0
     in_mm = solve_axyb(A_mm, B_mm, refine=refine)
     assert in_mm.iterations == in_m.iterations
-    for T_mm, T_m in ((in_mm.camera_T_hand, in_m.camera_T_hand),
-                      (in_mm.root_T_target, in_m.root_T_target)):
+    for T_mm, T_m in (
+        (in_mm.camera_T_hand, in_m.camera_T_hand),
+        (in_mm.root_T_target, in_m.root_T_target),
+    ):
         np.testing.assert_allclose(T_mm[:3, :3], T_m[:3, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(T_mm[:3, 3], 1000.0 * T_m[:3, 3], rtol=0, atol=1e-9)
     assert in_mm.rms_translation == pytest.approx(1000.0 * in_m.rms_translation, rel=1e-9)
 
 
 # -------------------------------------------------------------- noise statistics
+
 
 def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
     """The paper's Fig. 4 claim, over 200 trials of 10 views with each A rotated by
@@ -199,8 +208,10 @@ def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
         for refine in (True, False):
             result = solve_axyb(A, B, refine=refine)
             assert result.converged and result.restarts == 0
-            errors[refine] += [_angle_deg(result.camera_T_hand[:3, :3], X[:3, :3]),
-                               _angle_deg(result.root_T_target[:3, :3], Y[:3, :3])]
+            errors[refine] += [
+                _angle_deg(result.camera_T_hand[:3, :3], X[:3, :3]),
+                _angle_deg(result.root_T_target[:3, :3], Y[:3, :3]),
+            ]
     for refine in (True, False):
         e = np.array(errors[refine])
         assert e.mean() < 0.4 and np.percentile(e, 95) < 0.7 and e.max() < 1.0, refine
@@ -208,6 +219,7 @@ def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
 
 
 # --------------------------------------------------------------------- errors
+
 
 def test_fewer_than_three_poses_is_an_error():
     _, _, B, A = _problem(seed=0, n=2)
@@ -243,10 +255,20 @@ def test_rotations_of_b_about_one_axis_are_an_error_that_names_the_axis():
     rng = np.random.default_rng(5)
     X, Y = _random_transforms(rng, 2)
     B0 = _random_transforms(rng, 1)[0]
-    B = np.array([pin.SE3(pin.exp3(np.array([0.0, 0.0, a])), rng.normal(size=3)).homogeneous
-                  for a in rng.uniform(-2.0, 2.0, 8)]) @ B0
-    with pytest.raises(AXYBError, match=r"about one axis.*u = \[0\.0, 0\.0, 1\.0\]"
-                       r".*translations along these axes are undetermined"):
+    B = (
+        np.array(
+            [
+                pin.SE3(pin.exp3(np.array([0.0, 0.0, a])), rng.normal(size=3)).homogeneous
+                for a in rng.uniform(-2.0, 2.0, 8)
+            ]
+        )
+        @ B0
+    )
+    with pytest.raises(
+        AXYBError,
+        match=r"about one axis.*u = \[0\.0, 0\.0, 1\.0\]"
+        r".*translations along these axes are undetermined",
+    ):
         solve_axyb(X @ B @ Y, B)
 
 
@@ -262,8 +284,12 @@ def test_weak_motion_is_warned_about(caplog):
     rng = np.random.default_rng(8)
     X, Y = _random_transforms(rng, 2)
     tilts = [pin.exp3(w) for w in rng.normal(size=(8, 3)) * np.radians(0.5)]
-    B = np.array([pin.SE3(pin.exp3(np.array([0.0, 0.0, a])) @ t, rng.normal(size=3)).homogeneous
-                  for a, t in zip(rng.uniform(-2.0, 2.0, 8), tilts, strict=True)])
+    B = np.array(
+        [
+            pin.SE3(pin.exp3(np.array([0.0, 0.0, a])) @ t, rng.normal(size=3)).homogeneous
+            for a, t in zip(rng.uniform(-2.0, 2.0, 8), tilts, strict=True)
+        ]
+    )
     with caplog.at_level(logging.WARNING, logger="identification.axb"):
         result = solve_axyb(X @ B @ Y, B)
     assert "weak motion" in caplog.text
@@ -294,12 +320,15 @@ def test_running_out_of_iterations_is_reported_not_raised(caplog):
 
 # -------------------------------------------------------------------- real data
 
+
 def _tabb():
     if not TABB.is_file():
-        pytest.fail(f"{TABB}: Tabb DS1 test data missing (it ships with the repository in "
-                    f"tests/data/tabb_ds1/; restore it: git checkout -- tests/data)")
+        pytest.fail(
+            f"{TABB}: Tabb DS1 test data missing (it ships with the repository in "
+            f"tests/data/tabb_ds1/; restore it: git checkout -- tests/data)"
+        )
     data = json.loads(TABB.read_text())
-    A = np.array(data["T_world2cam (A_i = cTw, from cali.txt)"])      # cam_T_world, mm
+    A = np.array(data["T_world2cam (A_i = cTw, from cali.txt)"])  # cam_T_world, mm
     B = np.array(data["T_base2gripper (B_i = gTb, from robot_cali.txt)"])  # gripper_T_base
     ref = data["reference_rwhe_AA_RPI"]
     world_T_base = np.array(ref["X = wTb (base2world)"])
@@ -344,7 +373,9 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     A_m[:, :3, 3] /= 1000.0
     B_m[:, :3, 3] /= 1000.0
     in_m = solve_axyb(A_m, B_m)
-    np.testing.assert_allclose(in_m.camera_T_hand[:3, :3], result.camera_T_hand[:3, :3],
-                               rtol=0, atol=1e-12)
-    np.testing.assert_allclose(1000.0 * in_m.root_T_target[:3, 3], result.root_T_target[:3, 3],
-                               rtol=0, atol=1e-8)
+    np.testing.assert_allclose(
+        in_m.camera_T_hand[:3, :3], result.camera_T_hand[:3, :3], rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        1000.0 * in_m.root_T_target[:3, 3], result.root_T_target[:3, 3], rtol=0, atol=1e-8
+    )

@@ -1,6 +1,5 @@
 """Stage 2: hand-eye of every camera and the target pose, on simulated data."""
 
-
 import numpy as np
 import pytest
 
@@ -66,8 +65,7 @@ def test_a_camera_on_an_arm_with_trusted_kinematics_gives_its_mount_and_the_targ
 def test_both_stages_give_the_true_cameras_through_the_urdf():
     nominal = load_robot(HEAD)
     rng = np.random.default_rng(1)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=10.0, origin_deg=2.0,
-                                     axis_deg=2.0))
+    truth = load_robot(perturb_robot(nominal, rng, origin_mm=10.0, origin_deg=2.0, axis_deg=2.0))
     plates = ("left_plate", "right_plate")
     names = nominal.topology((*plates, *CAMERAS)).joint_names
     lower, upper = nominal.joint_limits(names)
@@ -76,23 +74,30 @@ def test_both_stages_give_the_true_cameras_through_the_urdf():
     w_T_target = default_target_pose(truth, qs2, names, CAMERAS)
     data = concatenate_measurements(
         simulate(truth, qs1, names, frames=plates, rng=rng),
-        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target))
+        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target),
+    )
     result = calibrate(nominal, data)
     calibrated = load_robot(result.urdf_xml)
     qs = random_joint_values(nominal, names, 100, np.random.default_rng(2))
     for frame in (*plates, *CAMERAS):
-        dp, dr = pose_discrepancy(calibrated.frame_poses(qs, frame, names),
-                                  truth.frame_poses(qs, frame, names))
+        dp, dr = pose_discrepancy(
+            calibrated.frame_poses(qs, frame, names), truth.frame_poses(qs, frame, names)
+        )
         assert dp < 1e-9 and dr < 1e-9, (frame, dp, dr)
-    (_, pose), = result.cameras.root_T_targets
+    ((_, pose),) = result.cameras.root_T_targets
     np.testing.assert_allclose(pose, w_T_target, atol=1e-9)
     assert result.cameras.target_spread[0][1] < 1e-9
 
 
 def test_nothing_to_calibrate_is_explained():
     nominal = load_robot(ARM_WITH_CAMERA)
-    data = simulate(nominal, np.zeros((3, 3)), nominal.joint_names, markers=(
-        ("flange", np.zeros(3)),), rng=np.random.default_rng(0))
+    data = simulate(
+        nominal,
+        np.zeros((3, 3)),
+        nominal.joint_names,
+        markers=(("flange", np.zeros(3)),),
+        rng=np.random.default_rng(0),
+    )
     with pytest.raises(DatasetError, match="nothing to calibrate"):
         calibrate(nominal, data, method="closed-form")
     with pytest.raises(DatasetError, match="joint 'j1' moves through 1 distinct value"):
@@ -101,7 +106,8 @@ def test_nothing_to_calibrate_is_explained():
 
 def test_a_camera_without_a_fixed_mount_is_refused():
     robot = load_robot(ARM_WITH_CAMERA)
-    with pytest.raises(DatasetError, match="camera frame 'flange' must be a link attached by "
-                                           "a fixed joint"):
+    with pytest.raises(
+        DatasetError, match="camera frame 'flange' must be a link attached by a fixed joint"
+    ):
         camera_mount(robot, "flange")
     assert camera_mount(robot, "camera") == ("camera_joint", "flange")

@@ -16,7 +16,8 @@ def _start(rng):
     axis = rng.normal(size=3)
     return transform_from_rotation_translation(
         matrix_from_rotation_vector(axis / np.linalg.norm(axis) * rng.uniform(-3, 3)),
-        rng.normal(size=3))
+        rng.normal(size=3),
+    )
 
 
 def test_numpy_matches_casadi():
@@ -25,8 +26,7 @@ def test_numpy_matches_casadi():
     for _ in range(20):
         T0, d = _start(rng), rng.normal(size=6)
         f = ca.Function("T", [d_sym], [rigid_from_chart_casadi(T0, d_sym)])
-        np.testing.assert_allclose(np.array(f(d)), rigid_from_chart(T0, d), atol=1e-15,
-                                   rtol=0)
+        np.testing.assert_allclose(np.array(f(d)), rigid_from_chart(T0, d), atol=1e-15, rtol=0)
 
 
 def test_batched_equals_one_by_one():
@@ -49,8 +49,11 @@ def test_rotation_part_is_a_turn_of_twice_the_gibbs_angle():
     # hand geometry: cayley(tan(theta/2) u) is the rotation by theta about u
     u = np.array([1.0, 2.0, 2.0]) / 3.0
     for theta in (-2.5, -0.3, 0.0, 1e-4, 1.0, 3.0):
-        np.testing.assert_allclose(cayley_rotation(np.tan(theta / 2) * u),
-                                   matrix_from_rotation_vector(theta * u), atol=1e-14)
+        np.testing.assert_allclose(
+            cayley_rotation(np.tan(theta / 2) * u),
+            matrix_from_rotation_vector(theta * u),
+            atol=1e-14,
+        )
     # d[:3] is the rotation vector to first order, d[3:] adds in the outer frame
     T = rigid_from_chart(np.eye(4), [1e-7, 0, 0, 0.1, 0.2, 0.3])
     np.testing.assert_allclose(T[:3, 3], [0.1, 0.2, 0.3])

@@ -26,9 +26,25 @@ def _run(argv, capsys):
 @pytest.fixture(scope="module")
 def noise_free(tmp_path_factory):
     d = tmp_path_factory.mktemp("sim")
-    code = main(["simulate", "--urdf", str(HEAD), "--out", str(d / "data.json"),
-                 "--truth-out", str(d / "true.urdf"), "--noise-mm", "0", "--noise-deg", "0",
-                 "--stage", "both", "--seed", "3"])
+    code = main(
+        [
+            "simulate",
+            "--urdf",
+            str(HEAD),
+            "--out",
+            str(d / "data.json"),
+            "--truth-out",
+            str(d / "true.urdf"),
+            "--noise-mm",
+            "0",
+            "--noise-deg",
+            "0",
+            "--stage",
+            "both",
+            "--seed",
+            "3",
+        ]
+    )
     assert code == 0
     return d
 
@@ -55,8 +71,9 @@ def test_simulate_without_noise_writes_pinocchio_fk_of_the_written_truth(noise_f
 
 
 def test_verify_of_the_truth_reports_zero(noise_free, capsys):
-    code, out, _ = _run(["verify", noise_free / "true.urdf", noise_free / "data.json",
-                         "--json"], capsys)
+    code, out, _ = _run(
+        ["verify", noise_free / "true.urdf", noise_free / "data.json", "--json"], capsys
+    )
     assert code == 0
     report = json.loads(out)
     assert len(report["groups"]) == 4
@@ -92,10 +109,24 @@ def test_crosscheck_of_the_head_passes(capsys):
     [
         (["verify", "missing.urdf", "x.json"], r"missing\.urdf: cannot read URDF"),
         (["verify", HEAD, "missing.json"], r"missing\.json"),
-        (["simulate", "--urdf", "ARM", "--out", "d.json", "--truth-out", "t.urdf"],
-         r"give --frames"),
-        (["simulate", "--urdf", "ARM", "--out", "d.json", "--truth-out", "t.urdf",
-          "--frames", "flang"], r"no frame 'flang'"),
+        (
+            ["simulate", "--urdf", "ARM", "--out", "d.json", "--truth-out", "t.urdf"],
+            r"give --frames",
+        ),
+        (
+            [
+                "simulate",
+                "--urdf",
+                "ARM",
+                "--out",
+                "d.json",
+                "--truth-out",
+                "t.urdf",
+                "--frames",
+                "flang",
+            ],
+            r"no frame 'flang'",
+        ),
         (["crosscheck", HEAD, "--frames", "left_plate,nose"], r"no frame 'nose'"),
     ],
 )
@@ -111,31 +142,78 @@ def test_bad_input_exits_2_with_one_line(argv, message, tmp_path, capsys, monkey
 
 def test_bad_measurement_file_names_sample_and_key(tmp_path, capsys):
     bad = tmp_path / "bad.json"
-    bad.write_text(json.dumps({
-        "format": "kinfw-measurements", "version": 1,
-        "units": {"length": "m", "angle": "rad"}, "joint_names": ["pan"],
-        "samples": [{"q": [0.1], "observations": [
-            {"frame": "left_plate", "kind": "pose", "xyz": [0, 0, 1],
-             "quat_xyzw": [0, 0, 0, 2]}]}]}), encoding="utf-8")
+    bad.write_text(
+        json.dumps(
+            {
+                "format": "kinfw-measurements",
+                "version": 1,
+                "units": {"length": "m", "angle": "rad"},
+                "joint_names": ["pan"],
+                "samples": [
+                    {
+                        "q": [0.1],
+                        "observations": [
+                            {
+                                "frame": "left_plate",
+                                "kind": "pose",
+                                "xyz": [0, 0, 1],
+                                "quat_xyzw": [0, 0, 0, 2],
+                            }
+                        ],
+                    }
+                ],
+            }
+        ),
+        encoding="utf-8",
+    )
     code, _, err = _run(["verify", HEAD, bad], capsys)
     assert code == 2
     assert "samples[0].observations[0].quat_xyzw" in err
 
 
 def test_installed_entry_point_runs():
-    result = subprocess.run([sys.executable, "-m", "kinfw.cli", "--help"], capture_output=True,
-                            text=True, check=False)
+    result = subprocess.run(
+        [sys.executable, "-m", "kinfw.cli", "--help"], capture_output=True, text=True, check=False
+    )
     assert result.returncode == 0
     assert "simulate" in result.stdout and "verify" in result.stdout
 
 
 def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, capsys):
-    code, _, _ = _run(["simulate", "--out", tmp_path / "d.json", "--truth-out",
-                       tmp_path / "t.urdf", "--noise-mm", "0", "--noise-deg", "0",
-                       "--error-mm", "20", "--error-deg", "3", "--seed", "4"], capsys)
+    code, _, _ = _run(
+        [
+            "simulate",
+            "--out",
+            tmp_path / "d.json",
+            "--truth-out",
+            tmp_path / "t.urdf",
+            "--noise-mm",
+            "0",
+            "--noise-deg",
+            "0",
+            "--error-mm",
+            "20",
+            "--error-deg",
+            "3",
+            "--seed",
+            "4",
+        ],
+        capsys,
+    )
     assert code == 0
-    code, out, _ = _run(["calibrate", tmp_path / "d.json", "--urdf", HEAD, "--out",
-                         tmp_path / "cal.urdf", "--report", tmp_path / "r.json"], capsys)
+    code, out, _ = _run(
+        [
+            "calibrate",
+            tmp_path / "d.json",
+            "--urdf",
+            HEAD,
+            "--out",
+            tmp_path / "cal.urdf",
+            "--report",
+            tmp_path / "r.json",
+        ],
+        capsys,
+    )
     assert code == 0, out
     truth = pin.buildModelFromXML((tmp_path / "t.urdf").read_text())
     cal = pin.buildModelFromXML((tmp_path / "cal.urdf").read_text())
@@ -146,16 +224,16 @@ def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, 
         q = pin.neutral(truth)
         for name in ("x_table", "y_table", "pan", "tilt", "vergence_left", "vergence_right"):
             j = truth.joints[truth.getJointId(name)]
-            q[j.idx_q] = rng.uniform(truth.lowerPositionLimit[j.idx_q],
-                                     truth.upperPositionLimit[j.idx_q])
+            q[j.idx_q] = rng.uniform(
+                truth.lowerPositionLimit[j.idx_q], truth.upperPositionLimit[j.idx_q]
+            )
         poses = []
         for model in (truth, cal, nominal):
             data = model.createData()
             pin.framesForwardKinematics(model, data, q)
             poses.append(data.oMf[model.getFrameId("right_plate")])
         worst = max(worst, np.linalg.norm(pin.log6(poses[0].inverse() * poses[1]).vector))
-        nominal_err = max(nominal_err, np.linalg.norm(poses[0].translation
-                                                      - poses[2].translation))
+        nominal_err = max(nominal_err, np.linalg.norm(poses[0].translation - poses[2].translation))
     assert worst < 1e-9  # 1e-6 mm and 1e-9 rad
     assert nominal_err > 0.02  # the nominal was centimetres off
     report = json.loads((tmp_path / "r.json").read_text())
@@ -170,13 +248,34 @@ def test_random_configurations_need_the_refinement(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
     # the demo's held-out data: plate poses and targets at random configurations
-    code, _, err = _run(["calibrate", tmp_path / "held_out.json", "--urdf", HEAD, "--out",
-                         tmp_path / "cal.urdf", "--method", "closed-form"], capsys)
+    code, _, err = _run(
+        [
+            "calibrate",
+            tmp_path / "held_out.json",
+            "--urdf",
+            HEAD,
+            "--out",
+            tmp_path / "cal.urdf",
+            "--method",
+            "closed-form",
+        ],
+        capsys,
+    )
     assert code == 2
     assert "differs from the common configuration q0 in joints" in err
     assert not (tmp_path / "cal.urdf").exists()
-    code, out, _ = _run(["calibrate", tmp_path / "held_out.json", "--urdf", HEAD, "--out",
-                         tmp_path / "cal.urdf", "--json"], capsys)
+    code, out, _ = _run(
+        [
+            "calibrate",
+            tmp_path / "held_out.json",
+            "--urdf",
+            HEAD,
+            "--out",
+            tmp_path / "cal.urdf",
+            "--json",
+        ],
+        capsys,
+    )
     assert code == 0
     report = json.loads(out)
     assert report["notes"][0].startswith("closed form skipped")
@@ -187,17 +286,43 @@ def test_random_configurations_need_the_refinement(tmp_path, capsys):
 
 
 def test_calibrate_target_only_data_on_trusted_kinematics(tmp_path, capsys):
-    code, _, _ = _run(["simulate", "--out", tmp_path / "d.json", "--truth-out",
-                       tmp_path / "t.urdf", "--stage", "2", "--error-mm", "0", "--error-deg",
-                       "0", "--noise-mm", "0", "--noise-deg", "0"], capsys)
+    code, _, _ = _run(
+        [
+            "simulate",
+            "--out",
+            tmp_path / "d.json",
+            "--truth-out",
+            tmp_path / "t.urdf",
+            "--stage",
+            "2",
+            "--error-mm",
+            "0",
+            "--error-deg",
+            "0",
+            "--noise-mm",
+            "0",
+            "--noise-deg",
+            "0",
+        ],
+        capsys,
+    )
     assert code == 0
-    code, out, _ = _run(["calibrate", tmp_path / "d.json", "--urdf", HEAD, "--out",
-                         tmp_path / "cal.urdf", "--json"], capsys)
+    code, out, _ = _run(
+        [
+            "calibrate",
+            tmp_path / "d.json",
+            "--urdf",
+            HEAD,
+            "--out",
+            tmp_path / "cal.urdf",
+            "--json",
+        ],
+        capsys,
+    )
     assert code == 0
     report = json.loads(out)
     assert "kinematics" not in report
-    assert {c["camera"] for c in report["hand_eye"]["cameras"]} == {"left_camera",
-                                                                    "right_camera"}
+    assert {c["camera"] for c in report["hand_eye"]["cameras"]} == {"left_camera", "right_camera"}
     for row in report["errors_in_sample"]:
         assert row["after_position_rms_mm"] < 1e-6
 
@@ -213,8 +338,16 @@ def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
         else:  # camera_T_target of a target ~0.8 m away: 0.2 deg is ~3 mm there
             assert row["after_position_rms_mm"] < row["before_position_rms_mm"] / 3
             assert row["after_rotation_rms_deg"] < 0.3
-    for name in ("calibrated.urdf", "calibrated.kinfw.json", "report.json", "data.json",
-                 "held_out.json", "true.urdf", "errors.png", "scene.html"):
+    for name in (
+        "calibrated.urdf",
+        "calibrated.kinfw.json",
+        "report.json",
+        "data.json",
+        "held_out.json",
+        "true.urdf",
+        "errors.png",
+        "scene.html",
+    ):
         assert (tmp_path / "demo" / name).is_file()
 
 
@@ -236,10 +369,17 @@ def test_reproduce_hirsh_writes_png_and_json(tmp_path, capsys):
 
 @pytest.mark.parametrize("command", ["simulate", "reproduce"])
 def test_json_output_is_valid_json(command, tmp_path, capsys):
-    argv = {"simulate": ["simulate", "--out", tmp_path / "d.json", "--truth-out",
-                         tmp_path / "t.urdf", "--json"],
-            "reproduce": ["reproduce", "table4", "--out", tmp_path, "--trials", "1",
-                          "--json"]}[command]
+    argv = {
+        "simulate": [
+            "simulate",
+            "--out",
+            tmp_path / "d.json",
+            "--truth-out",
+            tmp_path / "t.urdf",
+            "--json",
+        ],
+        "reproduce": ["reproduce", "table4", "--out", tmp_path, "--trials", "1", "--json"],
+    }[command]
     code, out, _ = _run(argv, capsys)
     assert code == 0
     assert isinstance(json.loads(out), dict)
@@ -248,9 +388,21 @@ def test_json_output_is_valid_json(command, tmp_path, capsys):
 def test_view_writes_a_self_contained_html(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
-    code, out, _ = _run(["view", HEAD, "--calibrated", tmp_path / "calibrated.urdf", "--data",
-                         tmp_path / "data.json", "--sample", "60", "--html",
-                         tmp_path / "v.html"], capsys)
+    code, out, _ = _run(
+        [
+            "view",
+            HEAD,
+            "--calibrated",
+            tmp_path / "calibrated.urdf",
+            "--data",
+            tmp_path / "data.json",
+            "--sample",
+            "60",
+            "--html",
+            tmp_path / "v.html",
+        ],
+        capsys,
+    )
     assert code == 0, out
     html = (tmp_path / "v.html").read_text(encoding="utf-8")
     assert "no network needed" in out
@@ -261,8 +413,9 @@ def test_view_writes_a_self_contained_html(tmp_path, capsys):
 def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
-    code, out, _ = _run(["verify", tmp_path / "calibrated.urdf", tmp_path / "held_out.json",
-                         "--json"], capsys)
+    code, out, _ = _run(
+        ["verify", tmp_path / "calibrated.urdf", tmp_path / "held_out.json", "--json"], capsys
+    )
     assert code == 0
     report = json.loads(out)
     assert report["sidecar"].endswith("calibrated.kinfw.json")
@@ -271,8 +424,16 @@ def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
     assert len(camera["samples"]) == camera["n"] == 100
     rms = np.sqrt(np.mean([s["position_mm"] ** 2 for s in camera["samples"]]))
     assert rms == pytest.approx(camera["position_rms_mm"], rel=1e-9)
-    code, out, _ = _run(["verify", tmp_path / "calibrated.urdf", tmp_path / "held_out.json",
-                         "--json", "--no-sidecar"], capsys)
+    code, out, _ = _run(
+        [
+            "verify",
+            tmp_path / "calibrated.urdf",
+            tmp_path / "held_out.json",
+            "--json",
+            "--no-sidecar",
+        ],
+        capsys,
+    )
     assert json.loads(out)["sidecar"] is None
     assert len(json.loads(out)["fitted"]) == 2
 
@@ -280,13 +441,15 @@ def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
 def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
-    code, out, _ = _run(["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3",
-                         "--json"], capsys)
+    code, out, _ = _run(
+        ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", "--json"], capsys
+    )
     assert code == 0
     cv = json.loads(out)
     means = cv["mean_position_rms_mm"]
     assert means["full"] < means["frames"] < means["none"]
     assert len(cv["folds"]) == 3 * 3
-    code, out, _ = _run(["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3",
-                         "--select"], capsys)
+    code, out, _ = _run(
+        ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", "--select"], capsys
+    )
     assert code == 0 and "selected: calibrated ('full')" in out

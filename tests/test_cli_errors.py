@@ -57,9 +57,26 @@ def _snapshot(root: Path) -> dict[str, str]:
 def simulated(tmp_path_factory):
     """A noise-free head dataset (stage 1 and 2) and its true URDF, made once."""
     d = tmp_path_factory.mktemp("sim")
-    assert main(["simulate", "--out", str(d / "d.json"), "--truth-out", str(d / "t.urdf"),
-                 "--noise-mm", "0", "--noise-deg", "0", "--stage", "both",
-                 "--seed", "5"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--out",
+                str(d / "d.json"),
+                "--truth-out",
+                str(d / "t.urdf"),
+                "--noise-mm",
+                "0",
+                "--noise-deg",
+                "0",
+                "--stage",
+                "both",
+                "--seed",
+                "5",
+            ]
+        )
+        == 0
+    )
     return d
 
 
@@ -92,43 +109,83 @@ SIM = ["simulate", "--urdf", "head.urdf"]
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        ([*CAL, "--out", "missing_dir/c.urdf"],
-         r"--out missing_dir/c\.urdf: directory 'missing_dir' does not exist"),
-        ([*CAL, "--out", "c.urdf", "--report", "missing_dir/r.json"],
-         r"--report missing_dir/r\.json: directory 'missing_dir' does not exist"),
+        (
+            [*CAL, "--out", "missing_dir/c.urdf"],
+            r"--out missing_dir/c\.urdf: directory 'missing_dir' does not exist",
+        ),
+        (
+            [*CAL, "--out", "c.urdf", "--report", "missing_dir/r.json"],
+            r"--report missing_dir/r\.json: directory 'missing_dir' does not exist",
+        ),
         ([*CAL, "--out", "notes.txt/c.urdf"], r"'notes\.txt' is not a directory"),
         ([*CAL, "--out", "out_dir"], r"--out out_dir: is a directory"),
-        (["calibrate", "d.json", "--urdf", "c.urdf", "--out", "c.urdf"],
-         r"--out c\.urdf is the same file as --urdf c\.urdf: refusing to overwrite an input"),
-        (["calibrate", "d.json", "--urdf", "link.urdf", "--out", "c.urdf"],
-         r"--out c\.urdf is the same file as --urdf link\.urdf"),
-        (["calibrate", "d.json", "--urdf", "head.urdf", "--out", "./out_dir/../head.urdf"],
-         r"is the same file as --urdf head\.urdf"),
-        ([*CAL, "--out", "c.urdf", "--report", "d.json"],
-         r"--report d\.json is the same file as data file d\.json"),
-        ([*CAL, "--out", "c.urdf", "--holdout", "h.json", "--report", "h.json"],
-         r"--report h\.json is the same file as --holdout h\.json"),
-        (["calibrate", "c.kinfw.json", "--urdf", "head.urdf", "--out", "c.urdf"],
-         r"sidecar c\.kinfw\.json is the same file as data file c\.kinfw\.json"),
-        ([*CAL, "--out", "c.urdf", "--report", "c.urdf"],
-         r"--report c\.urdf is the same file as --out c\.urdf: give two different outputs"),
-        ([*SIM, "--out", "a.json", "--truth-out", "a.json"],
-         r"--truth-out a\.json is the same file as --out a\.json"),
-        ([*SIM, "--out", "head.urdf", "--truth-out", "t2.urdf"],
-         r"--out head\.urdf is the same file as --urdf head\.urdf"),
-        ([*SIM, "--out", "x.json", "--truth-out", "missing_dir/t.urdf"],
-         r"--truth-out missing_dir/t\.urdf: directory 'missing_dir' does not exist"),
+        (
+            ["calibrate", "d.json", "--urdf", "c.urdf", "--out", "c.urdf"],
+            r"--out c\.urdf is the same file as --urdf c\.urdf: refusing to overwrite an input",
+        ),
+        (
+            ["calibrate", "d.json", "--urdf", "link.urdf", "--out", "c.urdf"],
+            r"--out c\.urdf is the same file as --urdf link\.urdf",
+        ),
+        (
+            ["calibrate", "d.json", "--urdf", "head.urdf", "--out", "./out_dir/../head.urdf"],
+            r"is the same file as --urdf head\.urdf",
+        ),
+        (
+            [*CAL, "--out", "c.urdf", "--report", "d.json"],
+            r"--report d\.json is the same file as data file d\.json",
+        ),
+        (
+            [*CAL, "--out", "c.urdf", "--holdout", "h.json", "--report", "h.json"],
+            r"--report h\.json is the same file as --holdout h\.json",
+        ),
+        (
+            ["calibrate", "c.kinfw.json", "--urdf", "head.urdf", "--out", "c.urdf"],
+            r"sidecar c\.kinfw\.json is the same file as data file c\.kinfw\.json",
+        ),
+        (
+            [*CAL, "--out", "c.urdf", "--report", "c.urdf"],
+            r"--report c\.urdf is the same file as --out c\.urdf: give two different outputs",
+        ),
+        (
+            [*SIM, "--out", "a.json", "--truth-out", "a.json"],
+            r"--truth-out a\.json is the same file as --out a\.json",
+        ),
+        (
+            [*SIM, "--out", "head.urdf", "--truth-out", "t2.urdf"],
+            r"--out head\.urdf is the same file as --urdf head\.urdf",
+        ),
+        (
+            [*SIM, "--out", "x.json", "--truth-out", "missing_dir/t.urdf"],
+            r"--truth-out missing_dir/t\.urdf: directory 'missing_dir' does not exist",
+        ),
         (["demo", "--out", "notes.txt"], r"--out notes\.txt: exists and is not a directory"),
-        (["view", "head.urdf", "--html", "head.urdf"],
-         r"--html head\.urdf is the same file as nominal head\.urdf"),
-        (["view", "head.urdf", "--calibrated", "t.urdf", "--html", "c.kinfw.json",
-          "--sidecar", "c.kinfw.json"], r"--html c\.kinfw\.json is the same file as sidecar"),
-        (["reproduce", "table4", "--out", "notes.txt/sub"],
-         r"--out notes\.txt/sub: cannot create it, '.*notes\.txt' is a file"),
+        (
+            ["view", "head.urdf", "--html", "head.urdf"],
+            r"--html head\.urdf is the same file as nominal head\.urdf",
+        ),
+        (
+            [
+                "view",
+                "head.urdf",
+                "--calibrated",
+                "t.urdf",
+                "--html",
+                "c.kinfw.json",
+                "--sidecar",
+                "c.kinfw.json",
+            ],
+            r"--html c\.kinfw\.json is the same file as sidecar",
+        ),
+        (
+            ["reproduce", "table4", "--out", "notes.txt/sub"],
+            r"--out notes\.txt/sub: cannot create it, '.*notes\.txt' is a file",
+        ),
     ],
 )
-def test_bad_output_fails_before_any_work_and_changes_no_file(argv, message, workdir, capsys,
-                                                              monkeypatch):
+def test_bad_output_fails_before_any_work_and_changes_no_file(
+    argv, message, workdir, capsys, monkeypatch
+):
     import identification.pipeline
     import verification.simulate
 
@@ -150,8 +207,7 @@ def test_a_good_calibration_replaces_the_earlier_outputs(workdir, capsys):
     code, _, err = _run([*CAL, "--out", "c.urdf", "--report", "r.json"], capsys)
     assert code == 0, err
     after = _snapshot(workdir)
-    assert {k for k in after if after[k] != before.get(k)} == {"c.urdf", "c.kinfw.json",
-                                                               "r.json"}
+    assert {k for k in after if after[k] != before.get(k)} == {"c.urdf", "c.kinfw.json", "r.json"}
     assert set(after) == set(before)  # no temporary file left
     assert json.loads((workdir / "r.json").read_text())["sidecar"] == "c.kinfw.json"
 
@@ -206,17 +262,22 @@ def test_check_outputs_without_labels_and_directory_creation(tmp_path):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["view", HEAD, "--data", "D", "--sample", "999"],
-         r"--sample 999: out of range, D has 6 samples \(give 0 to 5\)"),
-        (["view", HEAD, "--data", "D", "--sample", "-1"],
-         r"--sample -1: out of range, D has 6 samples \(give 0 to 5\)"),
+        (
+            ["view", HEAD, "--data", "D", "--sample", "999"],
+            r"--sample 999: out of range, D has 6 samples \(give 0 to 5\)",
+        ),
+        (
+            ["view", HEAD, "--data", "D", "--sample", "-1"],
+            r"--sample -1: out of range, D has 6 samples \(give 0 to 5\)",
+        ),
         (["view", HEAD, "--sample", "2"], r"--sample 2: give --data"),
         (["verify", HEAD, "empty.json"], r"empty\.json: the file is empty"),
         (["verify", HEAD, "blank.json"], r"blank\.json: the file is empty"),
     ],
 )
-def test_bad_input_names_the_range_or_the_empty_file(argv, message, simulated, tmp_path,
-                                                     capsys, monkeypatch):
+def test_bad_input_names_the_range_or_the_empty_file(
+    argv, message, simulated, tmp_path, capsys, monkeypatch
+):
     from kinfw.measurements import read_measurements, write_measurements
 
     monkeypatch.chdir(tmp_path)
@@ -268,8 +329,10 @@ def test_numbers_are_checked_in_the_users_units_naming_the_flag(argv, flag, expe
 def test_argument_errors_are_one_line_too(capsys):
     code, _, err = _run(["calibrate", "d.json"], capsys)
     assert code == 2
-    assert err == ("kinfw calibrate: error: the following arguments are required: --urdf, "
-                   "--out (see 'kinfw calibrate --help')\n")
+    assert err == (
+        "kinfw calibrate: error: the following arguments are required: --urdf, "
+        "--out (see 'kinfw calibrate --help')\n"
+    )
 
 
 MISSING_PARENT = """<robot name="r">
@@ -286,14 +349,23 @@ MISSING_PARENT = """<robot name="r">
 @pytest.mark.parametrize(
     ("xml", "message"),
     [
-        (MISSING_PARENT, r"joint 'j1': its parent link 'bse' is not a <link> of the URDF "
-                         r"\(links: base, l1\); did you mean 'base'\?"),
-        (MISSING_PARENT.replace('"bse"', '"base"').replace('"l1"/><axis', '"l2"/><axis'),
-         r"joint 'j1': its child link 'l2' is not a <link> of the URDF"),
-        (MISSING_PARENT.replace('"bse"', '"base"').replace("<parent link=\"base\"/>", ""),
-         r"joint 'j1' has no <parent link=\.\.\.>"),
-        (MISSING_PARENT.replace('<link name="l1"/>', '<link name="base"/>'),
-         r"link 'base' is declared twice"),
+        (
+            MISSING_PARENT,
+            r"joint 'j1': its parent link 'bse' is not a <link> of the URDF "
+            r"\(links: base, l1\); did you mean 'base'\?",
+        ),
+        (
+            MISSING_PARENT.replace('"bse"', '"base"').replace('"l1"/><axis', '"l2"/><axis'),
+            r"joint 'j1': its child link 'l2' is not a <link> of the URDF",
+        ),
+        (
+            MISSING_PARENT.replace('"bse"', '"base"').replace('<parent link="base"/>', ""),
+            r"joint 'j1' has no <parent link=\.\.\.>",
+        ),
+        (
+            MISSING_PARENT.replace('<link name="l1"/>', '<link name="base"/>'),
+            r"link 'base' is declared twice",
+        ),
     ],
 )
 def test_a_urdf_with_an_undeclared_link_names_the_joint_and_the_link(xml, message):
@@ -309,9 +381,11 @@ def test_a_missing_parent_link_is_one_line_and_urdfdom_prints_nothing(tmp_path, 
     out, err = capfd.readouterr()  # file descriptors: C++ output would be here
     assert code == 2
     assert out == ""
-    assert err.splitlines() == [f"kinfw crosscheck: error: {tmp_path / 'bad.urdf'}: joint "
-                                "'j1': its parent link 'bse' is not a <link> of the URDF "
-                                "(links: base, l1); did you mean 'base'?"]
+    assert err.splitlines() == [
+        f"kinfw crosscheck: error: {tmp_path / 'bad.urdf'}: joint "
+        "'j1': its parent link 'bse' is not a <link> of the URDF "
+        "(links: base, l1); did you mean 'base'?"
+    ]
 
 
 def test_urdfdom_errors_become_the_message_not_stderr_lines(capfd):
@@ -320,9 +394,13 @@ def test_urdfdom_errors_become_the_message_not_stderr_lines(capfd):
     from kinfw.robot import RobotModelError, load_robot
 
     xml = MISSING_PARENT.replace('"bse"', '"base"').replace(
-        '<limit lower="-1" upper="1" effort="1" velocity="1"/>', "")
-    with pytest.raises(RobotModelError, match=r"Pinocchio cannot load this URDF \(Joint \[j1\] "
-                       r"is of type REVOLUTE but it does not specify limits"):
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/>', ""
+    )
+    with pytest.raises(
+        RobotModelError,
+        match=r"Pinocchio cannot load this URDF \(Joint \[j1\] "
+        r"is of type REVOLUTE but it does not specify limits",
+    ):
         load_robot(xml)
     assert capfd.readouterr().err == ""
 
@@ -339,8 +417,17 @@ def _narrow_pan(tmp_path: Path) -> Path:
 
 
 def test_the_joint_limit_warning_is_printed_once_as_one_line(simulated, tmp_path, capsys):
-    code, _, err = _run(["calibrate", simulated / "d.json", "--urdf", _narrow_pan(tmp_path),
-                         "--out", tmp_path / "c.urdf"], capsys)
+    code, _, err = _run(
+        [
+            "calibrate",
+            simulated / "d.json",
+            "--urdf",
+            _narrow_pan(tmp_path),
+            "--out",
+            tmp_path / "c.urdf",
+        ],
+        capsys,
+    )
     assert code == 0, err
     lines = err.splitlines()
     limit_lines = [line for line in lines if "outside its URDF limits" in line]
@@ -362,21 +449,23 @@ def test_the_joint_limit_warning_is_attributed_to_one_place(simulated, tmp_path)
         warnings.simplefilter("default")
         check_against_robot(data, robot)  # as the closed form does
         check_against_robot(data, robot)  # as the refinement does, from another line
-    assert [str(w.message).split(": ", 1)[1][:24] for w in caught] == [
-        "joint 'pan' is outside i"]
+    assert [str(w.message).split(": ", 1)[1][:24] for w in caught] == ["joint 'pan' is outside i"]
 
 
 # -- start-up ----------------------------------------------------------------------------
 def test_the_command_line_loads_no_heavy_module_to_start():
     heavy = ("numpy", "pinocchio", "casadi", "matplotlib", "meshcat", "yourdfpy")
-    code = ("import contextlib, io, sys\n"
-            "import kinfw.cli\n"
-            "with contextlib.redirect_stdout(io.StringIO()):\n"
-            "    assert kinfw.cli.main(['--help']) == 0\n"
-            "    assert kinfw.cli.main(['calibrate', '--help']) == 0\n"
-            f"print(sorted(m for m in {heavy!r} if m in sys.modules))\n")
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                            check=False)
+    code = (
+        "import contextlib, io, sys\n"
+        "import kinfw.cli\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    assert kinfw.cli.main(['--help']) == 0\n"
+        "    assert kinfw.cli.main(['calibrate', '--help']) == 0\n"
+        f"print(sorted(m for m in {heavy!r} if m in sys.modules))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=False
+    )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
 
@@ -408,8 +497,10 @@ def test_warnings_and_logged_warnings_are_printed_once_each(capsys):
         logging.getLogger("identification.x").warning("logged %d", 1)
         logging.getLogger("identification.x").info("not shown")
     assert capsys.readouterr().err.splitlines() == [
-        "kinfw demo: warning: the same text", "kinfw demo: warning: another",
-        "kinfw demo: warning: logged 1"]
+        "kinfw demo: warning: the same text",
+        "kinfw demo: warning: another",
+        "kinfw demo: warning: logged 1",
+    ]
     with _warnings_printed_once("demo", verbose=True):
         logging.getLogger("identification.x").info("shown")
     assert capsys.readouterr().err == "INFO identification.x: shown\n"

@@ -22,18 +22,27 @@ CASES = [
 ]
 
 
-def _experiment(urdf, frames, *, seed=0, per_joint=5, noise_mm=0.0, noise_deg=0.0,
-                error_mm=20.0, error_deg=3.0):
+def _experiment(
+    urdf, frames, *, seed=0, per_joint=5, noise_mm=0.0, noise_deg=0.0, error_mm=20.0, error_deg=3.0
+):
     """Nominal robot, a truth cm/degrees away from it, and one-joint-at-a-time data."""
     nominal = load_robot(urdf)
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=error_mm, origin_deg=error_deg,
-                                     axis_deg=error_deg))
+    truth = load_robot(
+        perturb_robot(nominal, rng, origin_mm=error_mm, origin_deg=error_deg, axis_deg=error_deg)
+    )
     names = nominal.topology(frames).joint_names
     lower, upper = nominal.joint_limits(names)
     qs, _ = one_joint_at_a_time(lower, upper, per_joint=per_joint)
-    data = simulate(truth, qs, names, frames=frames, rng=rng, noise_m=noise_mm * 1e-3,
-                    noise_rad=np.radians(noise_deg))
+    data = simulate(
+        truth,
+        qs,
+        names,
+        frames=frames,
+        rng=rng,
+        noise_m=noise_mm * 1e-3,
+        noise_rad=np.radians(noise_deg),
+    )
     return nominal, truth, data
 
 
@@ -45,20 +54,24 @@ def test_noise_free_data_gives_the_true_robot_through_the_exported_urdf(urdf, fr
     names = result.model.topology.joint_names
     qs = random_joint_values(nominal, names, 200, np.random.default_rng(9))
     for frame in frames:
-        dp, dr = pose_discrepancy(calibrated.frame_poses(qs, frame, names),
-                                  truth.frame_poses(qs, frame, names))
+        dp, dr = pose_discrepancy(
+            calibrated.frame_poses(qs, frame, names), truth.frame_poses(qs, frame, names)
+        )
         assert dp < 1e-9 and dr < 1e-9, (frame, dp, dr)  # 1e-6 mm
     # the nominal was far off: several mm / degrees
-    dp, dr = pose_discrepancy(nominal.frame_poses(qs, frames[0], names),
-                              truth.frame_poses(qs, frames[0], names))
+    dp, dr = pose_discrepancy(
+        nominal.frame_poses(qs, frames[0], names), truth.frame_poses(qs, frames[0], names)
+    )
     assert dp > 5e-3 and dr > np.radians(0.5)
 
 
 def test_the_answer_does_not_depend_on_the_nominal_geometry():
-    nominal, _, data = _experiment(HEAD, ("left_plate", "right_plate"), noise_mm=0.5,
-                                       noise_deg=0.3)
-    far = load_robot(perturb_robot(nominal, np.random.default_rng(5), origin_mm=50.0,
-                                   origin_deg=10.0, axis_deg=10.0))
+    nominal, _, data = _experiment(HEAD, ("left_plate", "right_plate"), noise_mm=0.5, noise_deg=0.3)
+    far = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(5), origin_mm=50.0, origin_deg=10.0, axis_deg=10.0
+        )
+    )
     a = identify_closed_form(nominal, data).model
     b = identify_closed_form(far, data).model
     qs = random_joint_values(nominal, a.topology.joint_names, 100, np.random.default_rng(1))
@@ -67,8 +80,7 @@ def test_the_answer_does_not_depend_on_the_nominal_geometry():
 
 
 def test_the_answer_does_not_depend_on_sample_order():
-    nominal, _, data = _experiment(HEAD, ("left_plate", "right_plate"), noise_mm=0.5,
-                                   noise_deg=0.3)
+    nominal, _, data = _experiment(HEAD, ("left_plate", "right_plate"), noise_mm=0.5, noise_deg=0.3)
     perm = np.random.default_rng(2).permutation(data.n_samples)
     shuffled = data.subset(perm)
     a = identify_closed_form(nominal, data).model
@@ -81,8 +93,9 @@ def test_the_answer_does_not_depend_on_sample_order():
 @pytest.mark.filterwarnings("ignore:.*outside its URDF limits")
 def test_the_answer_does_not_depend_on_the_length_unit():
     """Positions and prismatic joint values in mm give the same axes, lengths x 1000."""
-    nominal, _, data = _experiment(PRISMATIC_TREE, ("tool_a", "cam", "tool_b"),
-                                   noise_mm=0.3, noise_deg=0.2)
+    nominal, _, data = _experiment(
+        PRISMATIC_TREE, ("tool_a", "cam", "tool_b"), noise_mm=0.3, noise_deg=0.2
+    )
     prismatic = [not nominal.joint(n).is_revolute for n in data.joint_names]
     scaled_q = data.qs.copy()
     scaled_q[:, prismatic] *= 1000.0
@@ -99,8 +112,7 @@ def test_the_answer_does_not_depend_on_the_length_unit():
     revolute = np.array(a.topology.revolute)
     np.testing.assert_allclose(b.points[revolute], 1000.0 * a.points[revolute], atol=1e-9)
     np.testing.assert_allclose(b.w_T_frames[:, :3, :3], a.w_T_frames[:, :3, :3], atol=1e-12)
-    np.testing.assert_allclose(b.w_T_frames[:, :3, 3], 1000.0 * a.w_T_frames[:, :3, 3],
-                               atol=1e-9)
+    np.testing.assert_allclose(b.w_T_frames[:, :3, 3], 1000.0 * a.w_T_frames[:, :3, 3], atol=1e-9)
 
 
 def test_shared_joints_are_identified_from_either_branch():
@@ -113,9 +125,13 @@ def test_shared_joints_are_identified_from_either_branch():
     moved_shared = (np.abs(data.qs - q0) > 1e-9)[:, shared].any(axis=1)
     left = data.poses[0]
     keep = ~moved_shared[left.sample]
-    thinned = replace(data, poses=(replace(left, sample=left.sample[keep],
-                                           meas_T_frame=left.meas_T_frame[keep]),
-                                   data.poses[1]))
+    thinned = replace(
+        data,
+        poses=(
+            replace(left, sample=left.sample[keep], meas_T_frame=left.meas_T_frame[keep]),
+            data.poses[1],
+        ),
+    )
     result = identify_closed_form(nominal, thinned)
     truth_model = cpc_from_robot(truth, ("left_plate", "right_plate"))
     qs = random_joint_values(nominal, names, 100, np.random.default_rng(3))
@@ -127,9 +143,16 @@ def test_paper_noise_gives_sub_millimetre_held_out_error():
     """sigma 0.5 mm, 9 per joint: the paper's Fig. 11 finds < 1 mm positioning error."""
     errors = []
     for seed in range(5):
-        nominal, truth, data = _experiment(HEAD, ("left_plate", "right_plate"), seed=seed,
-                                           per_joint=9, noise_mm=0.5, noise_deg=0.3,
-                                           error_mm=5.0, error_deg=1.0)
+        nominal, truth, data = _experiment(
+            HEAD,
+            ("left_plate", "right_plate"),
+            seed=seed,
+            per_joint=9,
+            noise_mm=0.5,
+            noise_deg=0.3,
+            error_mm=5.0,
+            error_deg=1.0,
+        )
         model = identify_closed_form(nominal, data).model
         truth_model = cpc_from_robot(truth, ("left_plate", "right_plate"))
         qs = random_joint_values(nominal, data.joint_names, 200, np.random.default_rng(seed))
@@ -153,9 +176,11 @@ def test_two_joints_moved_at_once_is_refused_naming_sample_and_joints():
     nominal, _, data = _head_data()
     qs = data.qs.copy()
     qs[7, data.joint_names.index("tilt")] += 0.1  # samples 6-10 move y_table already
-    with pytest.raises(ProtocolError,
-                       match=r"sample 7 differs from the common configuration q0 in joints "
-                             r"\['y_table', 'tilt'\]; the closed form needs one-joint-at-a-time"):
+    with pytest.raises(
+        ProtocolError,
+        match=r"sample 7 differs from the common configuration q0 in joints "
+        r"\['y_table', 'tilt'\]; the closed form needs one-joint-at-a-time",
+    ):
         identify_closed_form(nominal, replace(data, qs=qs))
 
 
@@ -174,8 +199,11 @@ def test_joints_not_in_the_file_are_held_at_zero_and_so_never_move():
     q0 = np.median(data.qs, axis=0)
     pan_still = np.abs(data.qs[:, data.joint_names.index("pan")] - q0[2]) < 1e-9
     dropped = data.subset(np.flatnonzero(pan_still))
-    dropped = replace(dropped, joint_names=tuple(n for n in data.joint_names if n != "pan"),
-                      qs=dropped.qs[:, keep])
+    dropped = replace(
+        dropped,
+        joint_names=tuple(n for n in data.joint_names if n != "pan"),
+        qs=dropped.qs[:, keep],
+    )
     with pytest.raises(ProtocolError, match="joint 'pan' moves through 1 distinct value"):
         identify_closed_form(nominal, dropped)
 
@@ -186,8 +214,11 @@ def test_degrees_read_as_radians_are_caught():
     qs = data.qs.copy()
     pan = data.joint_names.index("pan")
     qs[:, pan] = np.degrees(qs[:, pan])
-    with pytest.raises(ProtocolError, match=r"joint 'pan' turns 0\.01745 rad per unit .*"
-                                            r"degrees read as radians"):
+    with pytest.raises(
+        ProtocolError,
+        match=r"joint 'pan' turns 0\.01745 rad per unit .*"
+        r"degrees read as radians",
+    ):
         identify_closed_form(nominal, replace(data, qs=qs))
 
 
@@ -218,8 +249,11 @@ def test_only_far_apart_values_leave_the_sense_ambiguous():
         qs[1 + 2 * j, j], qs[2 + 2 * j, j] = 0.4, 0.8
     qs[1, 0], qs[2, 0] = 3.0, 3.0  # j1 takes only the values 0 and 3.0
     data = simulate(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
-    with pytest.raises(ProtocolError, match=r"joint 'j1': every pair of its values is at "
-                                            r"least pi - 0.2 rad apart"):
+    with pytest.raises(
+        ProtocolError,
+        match=r"joint 'j1': every pair of its values is at "
+        r"least pi - 0.2 rad apart",
+    ):
         identify_closed_form(nominal, data)
     qs[2, 0] = 1.0  # one more value closer to 0: fine
     data = simulate(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))

@@ -1,6 +1,5 @@
 """The tree CPC model against Pinocchio FK, hand geometry and the paper's parameter count."""
 
-
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -68,7 +67,13 @@ def test_identifiable_count_is_32_for_the_head_plates():
     """4 per revolute + 2 per prismatic + 6 per end effector (DESIGN.md, Table 1)."""
     model = cpc_from_robot(load_robot(HEAD), HEAD_FRAMES)
     assert model.topology.joint_names == (
-        "x_table", "y_table", "pan", "tilt", "vergence_left", "vergence_right")
+        "x_table",
+        "y_table",
+        "pan",
+        "tilt",
+        "vergence_left",
+        "vergence_right",
+    )
     assert model.n_parameters == 4 * 4 + 2 * 2 + 6 * 2 == 32
     assert len(set(model.parameter_names)) == 32
 
@@ -80,8 +85,9 @@ def test_rotation_of_eq4_takes_z_onto_b_by_the_minimal_rotation():
     b /= np.linalg.norm(b, axis=1, keepdims=True)
     R = rotation_from_axis(b)
     np.testing.assert_allclose(R[:, :, 2], b, atol=1e-15)
-    np.testing.assert_allclose(np.swapaxes(R, 1, 2) @ R, np.broadcast_to(np.eye(3), R.shape),
-                               atol=1e-14)
+    np.testing.assert_allclose(
+        np.swapaxes(R, 1, 2) @ R, np.broadcast_to(np.eye(3), R.shape), atol=1e-14
+    )
     np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-14)
     # minimal: rotation axis is z x b, angle acos(b_z)
     w = rotation_vector_from_matrix(R)
@@ -142,8 +148,9 @@ def test_chart_is_identity_at_zero_and_first_order_in_radians_and_metres():
         moved = model.perturbed(d)
         if field.startswith("b_tilt"):
             j = model.topology.joint_names.index(owner)
-            angle = np.arctan2(np.linalg.norm(np.cross(moved.b[j], model.b[j])),
-                               moved.b[j] @ model.b[j])
+            angle = np.arctan2(
+                np.linalg.norm(np.cross(moved.b[j], model.b[j])), moved.b[j] @ model.b[j]
+            )
             assert angle == pytest.approx(eps, rel=1e-6)
         elif field.startswith("rot"):
             e = model.topology.frames.index(owner)
@@ -201,15 +208,22 @@ def test_frame_poses_batch_in_batch_out(urdf, frames):
     assert model.frame_poses(one).shape == (1, len(frames), 4, 4)
     assert model.frame_poses(np.empty((0, len(names)))).shape == (0, len(frames), 4, 4)
     for e, frame in enumerate(frames):
-        for got, want in ((model.frame_poses(single, frame), pin_all[0, e]),
-                          (model.frame_poses(one, frame), pin_all[:1, e]),
-                          (model.frame_poses(batch, frame), pin_all[:, e])):
+        for got, want in (
+            (model.frame_poses(single, frame), pin_all[0, e]),
+            (model.frame_poses(one, frame), pin_all[:1, e]),
+            (model.frame_poses(batch, frame), pin_all[:, e]),
+        ):
             dp, dr = _pose_error(got, want)
             assert dp < 1e-12 and dr < 1e-12, (frame, dp, dr)
-    for got, want in ((model.frame_poses(single), pin_all[0]),
-                      (model.frame_poses(one), pin_all[:1])):
+    for got, want in (
+        (model.frame_poses(single), pin_all[0]),
+        (model.frame_poses(one), pin_all[:1]),
+    ):
         dp, dr = _pose_error(got, want)
         assert dp < 1e-12 and dr < 1e-12, (dp, dr)
-    with pytest.raises(ValueError, match=rf"qs: expected shape \({len(names)},\) or "
-                                         rf"\(n, {len(names)}\).*got \(1, 1, {len(names)}\)"):
+    with pytest.raises(
+        ValueError,
+        match=rf"qs: expected shape \({len(names)},\) or "
+        rf"\(n, {len(names)}\).*got \(1, 1, {len(names)}\)",
+    ):
         model.frame_poses(qs[None, :1])

@@ -61,16 +61,27 @@ def experiment(head):
     noise = {"noise_m": 0.5e-3, "noise_rad": np.radians(0.5)}
     data = concatenate_measurements(
         simulate(truth, qs1, names, frames=PLATES, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise))
+        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise),
+    )
     test_qs = random_configurations(lower, upper, 25, rng, fraction=0.8)
-    return {"truth": truth, "data": data, "w_T_target": w_T_target, "names": names,
-            "test_qs": test_qs}
+    return {
+        "truth": truth,
+        "data": data,
+        "w_T_target": w_T_target,
+        "names": names,
+        "test_qs": test_qs,
+    }
 
 
 @pytest.fixture(scope="module")
 def bound(experiment):
-    return cramer_rao(experiment["truth"], experiment["data"], FRAMES, noise=NOISE,
-                      targets={"target": experiment["w_T_target"]})
+    return cramer_rao(
+        experiment["truth"],
+        experiment["data"],
+        FRAMES,
+        noise=NOISE,
+        targets={"target": experiment["w_T_target"]},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -80,9 +91,17 @@ def small_study(head):
 
 @pytest.fixture(scope="module")
 def small_robust(head):
-    return robustness_study(head, trials=2, n_test=60,
-                            variants=(("linear", "given"), ("huber", "given"),
-                                      ("cauchy", "given"), ("huber", "estimated")))
+    return robustness_study(
+        head,
+        trials=2,
+        n_test=60,
+        variants=(
+            ("linear", "given"),
+            ("huber", "given"),
+            ("cauchy", "given"),
+            ("huber", "estimated"),
+        ),
+    )
 
 
 def _model_qs(experiment, model):
@@ -104,8 +123,9 @@ def test_casadi_position_jacobians_match_central_differences(bound, experiment):
 def test_predicted_rms_by_casadi_equals_finite_differences(bound, experiment):
     qs = _model_qs(experiment, bound.model)
     by_casadi = predicted_position_rms(bound, bound.model, qs, FRAMES)
-    by_differences = predicted_position_rms(bound, bound.model, qs, FRAMES,
-                                            method="finite_difference")
+    by_differences = predicted_position_rms(
+        bound, bound.model, qs, FRAMES, method="finite_difference"
+    )
     assert 1e-5 < by_casadi < 5e-3  # a fraction of a millimetre
     assert by_casadi == pytest.approx(by_differences, rel=1e-6)
 
@@ -116,30 +136,39 @@ def test_predicted_rms_is_the_root_mean_trace(bound, experiment):
     C = bound.model_covariance
     expected = np.sqrt(np.mean([np.trace(g @ C @ g.T) for g in G[:, 0]]))
     assert predicted_position_rms(bound, bound.model, qs, FRAMES[:1]) == pytest.approx(
-        expected, rel=1e-6)
+        expected, rel=1e-6
+    )
 
 
 def test_bound_inverts_the_fisher_information(bound, experiment):
     # Independent information: J^T J of the whitened residuals at the truth, from a
     # problem built here (not through cramer_rao).
-    problem = build_problem(experiment["truth"], experiment["data"], start=experiment["truth"],
-                            targets={"target": experiment["w_T_target"]})
+    problem = build_problem(
+        experiment["truth"],
+        experiment["data"],
+        start=experiment["truth"],
+        targets={"target": experiment["w_T_target"]},
+    )
     _, J = problem.evaluate(np.zeros(problem.n_parameters), NOISE, True)
     free = problem.free  # the base and zero-offset blocks are fixed in the full set
     information = J[:, free].T @ J[:, free]
     assert bound.rank == free.sum() == 50
     assert bound.parameter_names == problem.names
-    np.testing.assert_allclose(bound.covariance[np.ix_(free, free)] @ information, np.eye(50),
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        bound.covariance[np.ix_(free, free)] @ information, np.eye(50), atol=1e-6
+    )
     np.testing.assert_allclose(bound.covariance, bound.covariance.T, rtol=0, atol=1e-18)
 
 
 def test_bound_scales_with_the_noise_variance(bound, experiment):
-    doubled = cramer_rao(experiment["truth"], experiment["data"], FRAMES,
-                         noise=NoiseModel(2 * NOISE.position_m, 2 * NOISE.rotation_rad),
-                         targets={"target": experiment["w_T_target"]})
-    np.testing.assert_allclose(doubled.covariance, 4.0 * bound.covariance, rtol=1e-6,
-                               atol=1e-20)
+    doubled = cramer_rao(
+        experiment["truth"],
+        experiment["data"],
+        FRAMES,
+        noise=NoiseModel(2 * NOISE.position_m, 2 * NOISE.rotation_rad),
+        targets={"target": experiment["w_T_target"]},
+    )
+    np.testing.assert_allclose(doubled.covariance, 4.0 * bound.covariance, rtol=1e-6, atol=1e-20)
 
 
 def test_cramer_rao_needs_the_true_target(experiment):
@@ -149,17 +178,32 @@ def test_cramer_rao_needs_the_true_target(experiment):
 
 def test_cramer_rao_checks_the_frames(experiment):
     with pytest.raises(ValueError, match="frames: expected the observed end frames"):
-        cramer_rao(experiment["truth"], experiment["data"], PLATES, noise=NOISE,
-                   targets={"target": experiment["w_T_target"]})
+        cramer_rao(
+            experiment["truth"],
+            experiment["data"],
+            PLATES,
+            noise=NOISE,
+            targets={"target": experiment["w_T_target"]},
+        )
     with pytest.raises(TypeError, match="not a string"):
-        cramer_rao(experiment["truth"], experiment["data"], "left_plate", noise=NOISE,
-                   targets={"target": experiment["w_T_target"]})
+        cramer_rao(
+            experiment["truth"],
+            experiment["data"],
+            "left_plate",
+            noise=NOISE,
+            targets={"target": experiment["w_T_target"]},
+        )
 
 
 def test_cramer_rao_checks_the_noise(experiment):
     with pytest.raises(ValueError, match=r"noise\.position_m"):
-        cramer_rao(experiment["truth"], experiment["data"], FRAMES,
-                   noise=NoiseModel(0.0, 1e-3), targets={"target": experiment["w_T_target"]})
+        cramer_rao(
+            experiment["truth"],
+            experiment["data"],
+            FRAMES,
+            noise=NoiseModel(0.0, 1e-3),
+            targets={"target": experiment["w_T_target"]},
+        )
 
 
 def test_predicted_rms_rejects_another_chart(bound, experiment, head):
@@ -168,8 +212,9 @@ def test_predicted_rms_rejects_another_chart(bound, experiment, head):
     with pytest.raises(ValueError, match="does not match the bound"):
         predicted_position_rms(bound, plates_only, qs, PLATES)
     with pytest.raises(ValueError, match="method"):
-        predicted_position_rms(bound, bound.model, _model_qs(experiment, bound.model), FRAMES,
-                               method="complex_step")
+        predicted_position_rms(
+            bound, bound.model, _model_qs(experiment, bound.model), FRAMES, method="complex_step"
+        )
     with pytest.raises(ValueError, match="qs: expected"):
         predicted_position_rms(bound, bound.model, np.zeros((3, 2)), FRAMES)
     with pytest.raises(ValueError, match="frames: expected end frames"):
@@ -190,10 +235,11 @@ def test_true_chart_coordinates_reproduce_the_truth(head, experiment):
     qs = experiment["test_qs"]
     for frame in FRAMES:
         q_model = _model_qs(experiment, model)
-        np.testing.assert_allclose(model.frame_poses(q_model, frame),
-                                   experiment["truth"].frame_poses(qs, frame,
-                                                                   experiment["names"]),
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            model.frame_poses(q_model, frame),
+            experiment["truth"].frame_poses(qs, frame, experiment["names"]),
+            atol=1e-9,
+        )
     (target,) = problem.unknowns_at(x)
     np.testing.assert_allclose(target.value, w_T_target, atol=1e-12)
 
@@ -240,15 +286,20 @@ def test_crlb_study_round_trips_through_json(small_study, tmp_path):
 
 def test_plant_outliers_moves_exactly_the_planted_observations(experiment):
     data = experiment["data"]
-    corrupted, planted = plant_outliers(data, np.random.default_rng(0), fraction=0.1,
-                                        distance_m=0.05, angle_rad=np.radians(5.0))
+    corrupted, planted = plant_outliers(
+        data, np.random.default_rng(0), fraction=0.1, distance_m=0.05, angle_rad=np.radians(5.0)
+    )
     total = sum(len(g.sample) for g in (*data.poses, *data.targets))
     assert len(planted) == round(0.1 * total)
     moved = set()
-    pairs = [("pose", a.frame, a.sample, a.meas_T_frame, b.meas_T_frame)
-             for a, b in zip(data.poses, corrupted.poses, strict=True)]
-    pairs += [("target", a.camera, a.sample, a.camera_T_target, b.camera_T_target)
-              for a, b in zip(data.targets, corrupted.targets, strict=True)]
+    pairs = [
+        ("pose", a.frame, a.sample, a.meas_T_frame, b.meas_T_frame)
+        for a, b in zip(data.poses, corrupted.poses, strict=True)
+    ]
+    pairs += [
+        ("target", a.camera, a.sample, a.camera_T_target, b.camera_T_target)
+        for a, b in zip(data.targets, corrupted.targets, strict=True)
+    ]
     for kind, frame, sample, before, after in pairs:
         distance = np.linalg.norm(after[:, :3, 3] - before[:, :3, 3], axis=1)
         angle = rotation_angle(np.swapaxes(before[:, :3, :3], 1, 2) @ after[:, :3, :3])
@@ -264,8 +315,8 @@ def test_plant_outliers_moves_exactly_the_planted_observations(experiment):
 
 def test_robust_losses_resist_planted_outliers(small_robust):
     s = small_robust
-    clean = np.sqrt(np.mean(s.clean_rms_mm ** 2))
-    pooled = np.sqrt(np.mean(s.rms_mm ** 2, axis=0))
+    clean = np.sqrt(np.mean(s.clean_rms_mm**2))
+    pooled = np.sqrt(np.mean(s.rms_mm**2, axis=0))
     assert pooled[s.variant("huber")] < 1.5 * clean
     assert pooled[s.variant("cauchy")] < 1.5 * clean
     assert pooled[s.variant("linear")] > 3.0 * clean
@@ -277,8 +328,8 @@ def test_robust_losses_resist_planted_outliers(small_robust):
 
 def test_huber_with_estimated_noise_resists_planted_outliers(small_robust):
     s = small_robust
-    clean = np.sqrt(np.mean(s.clean_rms_mm ** 2))
-    pooled = np.sqrt(np.mean(s.rms_mm ** 2, axis=0))
+    clean = np.sqrt(np.mean(s.clean_rms_mm**2))
+    pooled = np.sqrt(np.mean(s.rms_mm**2, axis=0))
     assert pooled[s.variant("huber", "estimated")] < 1.5 * clean
 
 
@@ -299,7 +350,8 @@ def test_robustness_study_rejects_unknown_losses(head):
 
 
 def test_main_writes_png_and_json_and_trials_do_not_depend_on_the_count(
-        tmp_path, capsys, small_study):
+    tmp_path, capsys, small_study
+):
     assert main(["crlb", "--out", str(tmp_path), "--trials", "1"]) == 0
     out = capsys.readouterr().out
     assert "refined / CRLB" in out
@@ -307,6 +359,4 @@ def test_main_writes_png_and_json_and_trials_do_not_depend_on_the_count(
     assert doc["summary"]["trials"] == 1
     assert (tmp_path / "crlb.png").read_bytes()[:4] == b"\x89PNG"
     # trial 0 of a one-trial run is trial 0 of the four-trial study
-    np.testing.assert_allclose(doc["refined_rms_mm"][0], small_study.refined_rms_mm[0],
-                               rtol=1e-9)
-
+    np.testing.assert_allclose(doc["refined_rms_mm"][0], small_study.refined_rms_mm[0], rtol=1e-9)

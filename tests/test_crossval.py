@@ -19,16 +19,19 @@ def _data(truth, n, seed, noise_m=0.5e-3, noise_rad=0.005):
     rng = np.random.default_rng(seed)
     names = truth.topology(PLATES).joint_names
     qs = random_configurations(*truth.joint_limits(names), n, rng, fraction=0.8)
-    return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m,
-                    noise_rad=noise_rad)
+    return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad)
 
 
 def test_calibration_beats_both_baselines_when_the_joints_are_off(head):
     nominal = head
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(0), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=1.0))
-    cv = crossvalidate(nominal, _data(truth, 60, 1), k=4, select=True,
-                       sets=("none", "frames", "offsets", "full"))
+    truth = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(0), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0
+        )
+    )
+    cv = crossvalidate(
+        nominal, _data(truth, 60, 1), k=4, select=True, sets=("none", "frames", "offsets", "full")
+    )
     means = [cv.mean(p) for p in ("none", "frames", "offsets", "full")]
     assert means[0] > means[1] > means[2] > means[3]
     assert cv.selected == "full" and not cv.warnings
@@ -38,11 +41,23 @@ def test_calibration_beats_both_baselines_when_the_joints_are_off(head):
 def test_overfitting_on_small_data_is_warned_about(head):
     """Only the plates' mounts are off: 'frames' is the right model, 'full' overfits."""
     nominal = head
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(2), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=0.0,
-                                     joints=("left_plate_joint", "right_plate_joint")))
-    cv = crossvalidate(nominal, _data(truth, 12, 3, noise_m=1e-3, noise_rad=0.01), k=4,
-                       select=True, sets=("frames", "full"))
+    truth = load_robot(
+        perturb_robot(
+            nominal,
+            np.random.default_rng(2),
+            origin_mm=5.0,
+            origin_deg=1.0,
+            axis_deg=0.0,
+            joints=("left_plate_joint", "right_plate_joint"),
+        )
+    )
+    cv = crossvalidate(
+        nominal,
+        _data(truth, 12, 3, noise_m=1e-3, noise_rad=0.01),
+        k=4,
+        select=True,
+        sets=("frames", "full"),
+    )
     assert cv.mean("full") > cv.mean("frames")
     assert cv.selected == "frames"
     assert "worse held-out than frames only" in cv.warnings[0]
@@ -51,15 +66,19 @@ def test_overfitting_on_small_data_is_warned_about(head):
 
 def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     nominal = head
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(4), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=1.0))
+    truth = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(4), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0
+        )
+    )
     clean = _data(truth, 60, 5)
     pose = clean.poses[0]
     T = pose.meas_T_frame.copy()
     T[17, :3, 3] += np.array([0.07, 0.0, 0.0])  # 70 mm on one sample
     bad = replace(clean, poses=(replace(pose, meas_T_frame=T), *clean.poses[1:]))
-    qs = random_configurations(*nominal.joint_limits(clean.joint_names), 200,
-                               np.random.default_rng(6), fraction=0.8)
+    qs = random_configurations(
+        *nominal.joint_limits(clean.joint_names), 200, np.random.default_rng(6), fraction=0.8
+    )
     true_model = cpc_from_robot(truth, PLATES)
 
     def held_out_mm(result):
@@ -73,8 +92,7 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     robust = calibrate(nominal, bad)  # the default: Huber
     assert bent > 1.5 * reference
     assert held_out_mm(robust) < 1.15 * reference
-    report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust,
-                                method="refine")
+    report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust, method="refine")
     flagged = {(d.frame, d.sample): d for d in report.refine.downweighted}
     entry = flagged[(pose.frame, int(pose.sample[17]))]
     assert 60.0 < entry.position_residual_mm < 80.0
@@ -83,14 +101,22 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
 
 def test_parameter_masks_by_joint_and_field(head):
     nominal = head
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(7), origin_mm=3.0,
-                                     origin_deg=0.5, axis_deg=0.5))
+    truth = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(7), origin_mm=3.0, origin_deg=0.5, axis_deg=0.5
+        )
+    )
     data = _data(truth, 40, 8)
     from identification.refine import refine
 
     masked = refine(nominal, data, parameters=("pan", "tilt:l_x"))
-    free = {name for name, f in zip(masked.parameter_names,
-                                    np.abs(np.diag(masked.covariance)) > 0, strict=True) if f}
+    free = {
+        name
+        for name, f in zip(
+            masked.parameter_names, np.abs(np.diag(masked.covariance)) > 0, strict=True
+        )
+        if f
+    }
     assert ("pan", "b_tilt_1") in free and ("tilt", "l_x") in free
     assert ("tilt", "l_y") not in free and ("vergence_left", "l_x") not in free
     import pytest
@@ -105,32 +131,56 @@ def test_parameter_masks_by_joint_and_field(head):
 
 
 def _fold_numbers(cv):
-    return np.array([[getattr(s, f) for f in ("position_rms_mm", "rotation_rms_deg",
-                                              "worst_mm", "condition", "worst_sample",
-                                              "n_parameters", "n_residuals", "n_train")]
-                     for s in cv.scores], dtype=float)
+    return np.array(
+        [
+            [
+                getattr(s, f)
+                for f in (
+                    "position_rms_mm",
+                    "rotation_rms_deg",
+                    "worst_mm",
+                    "condition",
+                    "worst_sample",
+                    "n_parameters",
+                    "n_residuals",
+                    "n_train",
+                )
+            ]
+            for s in cv.scores
+        ],
+        dtype=float,
+    )
 
 
 def test_thread_and_process_executors_give_the_serial_scores(head):
     from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
     nominal = head
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(11), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=1.0))
+    truth = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(11), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0
+        )
+    )
     data = _data(truth, 24, 12)
     kwargs = {"k": 3, "seed": 5, "sets": ("none", "frames", "full")}
     serial = crossvalidate(nominal, data, **kwargs)
     assert [(s.fold, s.parameters) for s in serial.scores] == [
-        (f, p) for f in range(3) for p in ("none", "frames", "full")]
+        (f, p) for f in range(3) for p in ("none", "frames", "full")
+    ]
     for pool in (ThreadPoolExecutor(max_workers=2), ProcessPoolExecutor(max_workers=2)):
         with pool:
             done: list[tuple[int, int]] = []
-            cv = crossvalidate(nominal, data, executor=pool, progress=lambda d, t, done=done:
-                               done.append((d, t)), **kwargs)
-        assert [(s.fold, s.parameters) for s in cv.scores] == \
-            [(s.fold, s.parameters) for s in serial.scores]
-        np.testing.assert_allclose(_fold_numbers(cv), _fold_numbers(serial), rtol=1e-12,
-                                   atol=1e-12)
+            cv = crossvalidate(
+                nominal,
+                data,
+                executor=pool,
+                progress=lambda d, t, done=done: done.append((d, t)),
+                **kwargs,
+            )
+        assert [(s.fold, s.parameters) for s in cv.scores] == [
+            (s.fold, s.parameters) for s in serial.scores
+        ]
+        np.testing.assert_allclose(_fold_numbers(cv), _fold_numbers(serial), rtol=1e-12, atol=1e-12)
         assert done[-1] == (9, 9) and len(done) == 9
 
 
@@ -141,21 +191,26 @@ def test_robot_pickles_as_its_urdf(head):
     copy = pickle.loads(pickle.dumps(nominal))
     assert copy.urdf_xml == nominal.urdf_xml and copy.source == nominal.source
     q = np.linspace(-0.3, 0.3, len(nominal.joint_names))
-    np.testing.assert_array_equal(copy.frame_poses(q[None], "left_plate"),
-                                  nominal.frame_poses(q[None], "left_plate"))
+    np.testing.assert_array_equal(
+        copy.frame_poses(q[None], "left_plate"), nominal.frame_poses(q[None], "left_plate")
+    )
 
 
 def _noise_free_case():
     nominal = load_robot(HEAD)
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(21), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=1.0))
+    truth = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(21), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0
+        )
+    )
     return nominal, truth, _data(truth, 30, 22, noise_m=0.0, noise_rad=0.0)
 
 
 def _held_out_error_m(model, truth):
     names = model.topology.joint_names
-    qs = random_configurations(*truth.joint_limits(names), 50, np.random.default_rng(23),
-                               fraction=0.8)
+    qs = random_configurations(
+        *truth.joint_limits(names), 50, np.random.default_rng(23), fraction=0.8
+    )
     expected = cpc_from_robot(truth, PLATES).frame_poses(qs)
     return float(np.abs(model.frame_poses(qs) - expected).max())
 
@@ -166,8 +221,11 @@ def test_cached_functions_fit_like_fresh_ones_and_recover_the_truth():
     nominal, truth, data = _noise_free_case()
     # a start that is neither the nominal nor the truth: its numbers must reach the
     # cached graph through the inputs, not stay baked in from the first build
-    start = load_robot(perturb_robot(nominal, np.random.default_rng(24), origin_mm=2.0,
-                                     origin_deg=0.5, axis_deg=0.5))
+    start = load_robot(
+        perturb_robot(
+            nominal, np.random.default_rng(24), origin_mm=2.0, origin_deg=0.5, axis_deg=0.5
+        )
+    )
     noise = NoiseModel(1e-3, 1e-2)
     clear_function_cache()
     fresh = refine(nominal, data, start=start, noise=noise)
@@ -199,8 +257,9 @@ def test_the_function_cache_is_keyed_by_structure_and_bounded(monkeypatch):
     np.testing.assert_array_equal(r1, r0)
     np.testing.assert_array_equal(J1, J0)
     assert single.n_parameters != both.n_parameters
-    assert len(single.evaluate(np.zeros(single.n_parameters), noise)[0]) == \
-        6 * len(data.poses[0].sample)
+    assert len(single.evaluate(np.zeros(single.n_parameters), noise)[0]) == 6 * len(
+        data.poses[0].sample
+    )
 
 
 def test_free_column_jacobian_equals_the_full_one():
@@ -210,17 +269,23 @@ def test_free_column_jacobian_equals_the_full_one():
     noise = NoiseModel(1e-3, 1e-2)
     for parameters in ("none", "frames", "full"):
         problem = build_problem(nominal, data, parameters=parameters)
-        x = np.where(problem.free, np.random.default_rng(27).normal(
-            size=problem.n_parameters) * 1e-3, 0.0)
+        x = np.where(
+            problem.free, np.random.default_rng(27).normal(size=problem.n_parameters) * 1e-3, 0.0
+        )
         r, J = problem.evaluate(x, noise, True)
         r_free, J_free = problem.evaluate(x, noise, True, only_free=True)
         np.testing.assert_array_equal(r_free, r)
-        np.testing.assert_allclose(J_free[:, problem.free], J[:, problem.free], rtol=0,
-                                   atol=1e-9 * np.abs(J).max())
+        np.testing.assert_allclose(
+            J_free[:, problem.free], J[:, problem.free], rtol=0, atol=1e-9 * np.abs(J).max()
+        )
         assert not np.any(J_free[:, ~problem.free])
         # and both equal the CasADi Jacobian in its original (rows, m * P) layout
         g = problem.groups[0]
         m, P = len(g.sample), problem.n_parameters
         legacy = np.array(g.jacobian(g.qs, g.data, x)) / g.row_sigma(noise)[:, None]
-        np.testing.assert_allclose(legacy.reshape(g.rows, m, P).transpose(1, 0, 2)
-                                   .reshape(-1, P), J[: m * g.rows], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            legacy.reshape(g.rows, m, P).transpose(1, 0, 2).reshape(-1, P),
+            J[: m * g.rows],
+            rtol=0,
+            atol=1e-12,
+        )

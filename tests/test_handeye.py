@@ -18,6 +18,7 @@ DATA = Path(__file__).resolve().parent / "data"
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
 
+
 def _rotation(rotvec):
     return pin.exp3(np.asarray(rotvec, dtype=float))
 
@@ -29,8 +30,9 @@ def _transform(R, p):
 
 
 def _inv(T):
-    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]
-                    ).reshape(np.shape(T))
+    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
+        np.shape(T)
+    )
 
 
 def _random_rotation(rng, max_angle=np.pi):
@@ -50,9 +52,9 @@ def _setup(rng, n, hand_R_eye=None, scale=1.0):
         hand_R_eye = _random_rotation(rng)
     hand_T_eye = _transform(hand_R_eye, rng.normal(scale=0.1 * scale, size=3))
     base_T_target = _transform(_random_rotation(rng), rng.normal(scale=scale, size=3))
-    base_T_hands = np.stack([_transform(_random_rotation(rng), rng.normal(scale=0.5 * scale,
-                                                                          size=3))
-                             for _ in range(n)])
+    base_T_hands = np.stack(
+        [_transform(_random_rotation(rng), rng.normal(scale=0.5 * scale, size=3)) for _ in range(n)]
+    )
     eye_T_targets = np.stack([_inv(hand_T_eye) @ _inv(A) @ base_T_target for A in base_T_hands])
     return hand_T_eye, base_T_hands, eye_T_targets
 
@@ -62,22 +64,27 @@ def _perturb_rotations(T, rng, sigma_rad):
     out = T.copy()
     for k in range(len(T)):
         axis = rng.normal(size=3)
-        out[k, :3, :3] = _rotation(axis / np.linalg.norm(axis) * rng.normal(scale=sigma_rad)
-                                   ) @ T[k, :3, :3]
+        out[k, :3, :3] = (
+            _rotation(axis / np.linalg.norm(axis) * rng.normal(scale=sigma_rad)) @ T[k, :3, :3]
+        )
     return out
 
 
 def _errors(X, X_true):
     """Rotation error (rad, by Pinocchio's log3) and translation error of X."""
-    return (float(np.linalg.norm(pin.log3(X[:3, :3].T @ X_true[:3, :3]))),
-            float(np.linalg.norm(X[:3, 3] - X_true[:3, 3])))
+    return (
+        float(np.linalg.norm(pin.log3(X[:3, :3].T @ X_true[:3, :3]))),
+        float(np.linalg.norm(X[:3, 3] - X_true[:3, 3])),
+    )
 
 
 def _data_file(relative):
     path = DATA / relative
     if not path.is_file():
-        pytest.fail(f"{path}: hand-eye test data missing (it ships with the repository in "
-                    f"tests/data/; restore it: git checkout -- tests/data)")
+        pytest.fail(
+            f"{path}: hand-eye test data missing (it ships with the repository in "
+            f"tests/data/; restore it: git checkout -- tests/data)"
+        )
     return path
 
 
@@ -85,8 +92,9 @@ def _data_file(relative):
 
 X_ROTATIONS = {
     "random": None,
-    "near-180deg": _rotation(np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
-                             * (np.pi - 1e-4)),
+    "near-180deg": _rotation(
+        np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]) * (np.pi - 1e-4)
+    ),
     "180deg-random-axis": _half_turn([0.3, -0.5, 0.8]),
     "180deg-about-z": np.diag([-1.0, -1.0, 1.0]),
     "180deg-about-x": np.diag([1.0, -1.0, -1.0]),
@@ -117,8 +125,9 @@ def test_result_is_named_by_frames_with_x_as_a_read_only_alias():
     hand_T_camera, base_T_hands, camera_T_targets = _setup(rng, 6)
     result = solve_axxb(base_T_hands, camera_T_targets)
     base_T_targets = base_T_hands @ result.hand_T_camera @ camera_T_targets
-    np.testing.assert_allclose(base_T_targets, np.broadcast_to(base_T_targets[0], (6, 4, 4)),
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        base_T_targets, np.broadcast_to(base_T_targets[0], (6, 4, 4)), rtol=0, atol=1e-9
+    )
     np.testing.assert_allclose(result.hand_T_camera, hand_T_camera, rtol=0, atol=1e-9)
     assert result.X is result.hand_T_camera
     # read-only: a frozen field raises FrozenInstanceError; the alias has no setter
@@ -128,6 +137,7 @@ def test_result_is_named_by_frames_with_x_as_a_read_only_alias():
     with pytest.raises(dataclasses.FrozenInstanceError):
         result.hand_T_camera = np.eye(4)
     assert "X" not in [f.name for f in dataclasses.fields(result)]
+
 
 def test_half_turn_motions_of_the_hand_are_used_with_the_right_sign():
     """Wrist flips (relative motions of exactly 180 deg, whose axis sign is arbitrary)."""
@@ -160,6 +170,7 @@ def test_eye_to_hand_is_solved_with_inverted_robot_poses():
 
 # -- invariances (Hypothesis) --------------------------------------------------------------
 
+
 def _noisy_setup(seed, n, sigma_deg=0.5, scale=1.0):
     rng = np.random.default_rng(seed)
     X_true, A, B = _setup(rng, n, scale=scale)
@@ -191,13 +202,15 @@ def test_the_answer_does_not_depend_on_the_length_unit(seed):
     in_mm = solve_axxb(A_mm, B_mm)
     X_mm, X_m = in_mm.hand_T_camera, in_m.hand_T_camera
     np.testing.assert_allclose(X_mm[:3, :3], X_m[:3, :3], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(X_mm[:3, 3], 1000.0 * X_m[:3, 3], rtol=1e-9,
-                               atol=1e-9 * 1000.0 * np.linalg.norm(X_m[:3, 3]))
+    np.testing.assert_allclose(
+        X_mm[:3, 3], 1000.0 * X_m[:3, 3], rtol=1e-9, atol=1e-9 * 1000.0 * np.linalg.norm(X_m[:3, 3])
+    )
     np.testing.assert_allclose(in_mm.rms_translation, 1000.0 * in_m.rms_translation, rtol=1e-9)
     np.testing.assert_allclose(in_mm.rms_rotation_rad, in_m.rms_rotation_rad, rtol=1e-9)
 
 
 # -- noise statistics ----------------------------------------------------------------------
+
 
 def _median_rotation_error(sigma_deg, n, trials=40):
     errors = []
@@ -216,14 +229,17 @@ def test_rotation_error_grows_linearly_with_noise_and_stays_far_below_it():
     sigmas = [0.01, 0.1, 1.0]
     ratios_30 = [_median_rotation_error(s, 30) / s for s in sigmas]
     ratio_5 = _median_rotation_error(0.1, 5) / 0.1
-    print(f"median rotation error of X / sigma: 30 views {np.round(ratios_30, 3)} "
-          f"(sigma = {sigmas} deg), 5 views {ratio_5:.3f}")
+    print(
+        f"median rotation error of X / sigma: 30 views {np.round(ratios_30, 3)} "
+        f"(sigma = {sigmas} deg), 5 views {ratio_5:.3f}"
+    )
     assert max(ratios_30) / min(ratios_30) < 1.1  # linear in sigma
     assert max(ratios_30) < 0.35  # far below sigma with 30 views
     assert ratio_5 > 1.5 * max(ratios_30)  # and more views help
 
 
 # -- quality figures -----------------------------------------------------------------------
+
 
 def _brute_force_axis_spread(A):
     """Largest angle between the axes (lines) of all relative motions, pair by pair."""
@@ -243,9 +259,14 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
     # turning about z with wobbles of at most 1.5 deg about x: solved, but flagged
     qs = np.radians([0.0, 20.0, 45.0, 70.0, 100.0, 130.0])
     wobbles = np.radians([0.0, 1.5, -1.0, 0.5, 1.2, -1.5])
-    base_T_hands = np.stack([_transform(_rotation([w, 0.0, 0.0]) @ _rotation([0.0, 0.0, q]),
-                                        rng.normal(scale=0.3, size=3))
-                             for q, w in zip(qs, wobbles, strict=True)])
+    base_T_hands = np.stack(
+        [
+            _transform(
+                _rotation([w, 0.0, 0.0]) @ _rotation([0.0, 0.0, q]), rng.normal(scale=0.3, size=3)
+            )
+            for q, w in zip(qs, wobbles, strict=True)
+        ]
+    )
     base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in base_T_hands])
     narrow = solve_axxb(base_T_hands, B)
@@ -254,11 +275,14 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
     assert np.radians(1.0) < spread < np.radians(10.0)
     assert narrow.rotation_condition < 0.1 * result.rotation_condition
     assert _errors(narrow.hand_T_camera, X_true)[0] < 1e-9
-    print(f"axis spread {np.degrees(spread):.2f} deg: condition {narrow.rotation_condition:.3g}"
-          f" (random motions: {result.rotation_condition:.3g})")
+    print(
+        f"axis spread {np.degrees(spread):.2f} deg: condition {narrow.rotation_condition:.3g}"
+        f" (random motions: {result.rotation_condition:.3g})"
+    )
 
 
 # -- errors: degenerate or wrong input is explained, never answered -------------------------
+
 
 def test_fewer_than_three_poses_are_refused():
     _, A, B = _setup(np.random.default_rng(0), 2)
@@ -305,8 +329,12 @@ def test_pure_translations_are_not_informative():
     with pytest.raises(HandEyeError, match="no informative motion"):
         solve_axxb(A, B)
     # small rotations, below the threshold, are no better
-    A_small = np.stack([_transform(_rotation([0.0, np.radians(0.5 * k), 0.0]) @ A[0, :3, :3],
-                                   A[k, :3, 3]) for k in range(6)])
+    A_small = np.stack(
+        [
+            _transform(_rotation([0.0, np.radians(0.5 * k), 0.0]) @ A[0, :3, :3], A[k, :3, 3])
+            for k in range(6)
+        ]
+    )
     B_small = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A_small])
     with pytest.raises(HandEyeError, match=r"no informative motion.*below min_angle_rad = 4 deg"):
         solve_axxb(A_small, B_small, min_angle_rad=np.radians(4.0))
@@ -316,21 +344,30 @@ def test_motions_about_one_axis_are_refused():
     rng = np.random.default_rng(2)
     X_true, _, _ = _setup(rng, 3)
     base_R_hand0 = _random_rotation(rng)
-    A = np.stack([_transform(base_R_hand0 @ _rotation([0.0, 0.0, q]), rng.normal(size=3))
-                  for q in np.radians([0.0, 15.0, 40.0, 90.0, 170.0])])
+    A = np.stack(
+        [
+            _transform(base_R_hand0 @ _rotation([0.0, 0.0, q]), rng.normal(size=3))
+            for q in np.radians([0.0, 15.0, 40.0, 90.0, 170.0])
+        ]
+    )
     base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
-    with pytest.raises(HandEyeError,
-                       match=r"all relative rotations are about one axis \(\[.*\] in the hand "
-                             r"frame.*the rotation of X about it and the translation of X along "
-                             r"it are not determined: add motions about another axis"):
+    with pytest.raises(
+        HandEyeError,
+        match=r"all relative rotations are about one axis \(\[.*\] in the hand "
+        r"frame.*the rotation of X about it and the translation of X along "
+        r"it are not determined: add motions about another axis",
+    ):
         solve_axxb(A, B)
 
 
 def test_mispaired_samples_are_refused():
     _, A, B = _setup(np.random.default_rng(5), 8)
-    with pytest.raises(HandEyeError, match=r"A and B motions are inconsistent.*worst: between "
-                                           r"poses \d+ and \d+.*pairing and order"):
+    with pytest.raises(
+        HandEyeError,
+        match=r"A and B motions are inconsistent.*worst: between "
+        r"poses \d+ and \d+.*pairing and order",
+    ):
         solve_axxb(A, B[::-1])
 
 
@@ -341,8 +378,11 @@ def test_one_inverted_pose_list_is_refused(mistake):
     A X = X B, not by the angles."""
     _, A, B = _setup(np.random.default_rng(6), 8)
     A, B = {"A inverted": (_inv(A), B), "B inverted": (A, _inv(B))}[mistake]
-    with pytest.raises(HandEyeError, match=r"no single X relates the motions of A and B.*"
-                                           r"A or B may be inverted"):
+    with pytest.raises(
+        HandEyeError,
+        match=r"no single X relates the motions of A and B.*"
+        r"A or B may be inverted",
+    ):
         solve_axxb(A, B)
 
 
@@ -367,13 +407,26 @@ def test_min_angle_out_of_range_is_refused():
 
 # -- real and reference data ---------------------------------------------------------------
 
+
 def test_opencv_regression_24871_is_exact():
     """OpenCV's exact case (rotations near 180 deg): X to 1e-12, OpenCV's own criterion."""
     data = json.loads(_data_file("opencv_regression_24871/regression_24871.json").read_text())
-    base_T_grippers = np.stack([_transform(R, t) for R, t in zip(
-        data["R_gripper2base"], np.reshape(data["t_gripper2base"], (-1, 3)), strict=True)])
-    cam_T_targets = np.stack([_transform(R, t) for R, t in zip(
-        data["R_target2cam"], np.reshape(data["t_target2cam"], (-1, 3)), strict=True)])
+    base_T_grippers = np.stack(
+        [
+            _transform(R, t)
+            for R, t in zip(
+                data["R_gripper2base"], np.reshape(data["t_gripper2base"], (-1, 3)), strict=True
+            )
+        ]
+    )
+    cam_T_targets = np.stack(
+        [
+            _transform(R, t)
+            for R, t in zip(
+                data["R_target2cam"], np.reshape(data["t_target2cam"], (-1, 3)), strict=True
+            )
+        ]
+    )
     gripper_T_cam = np.array(data["T_cam2gripper_true"], dtype=float)
     result = solve_axxb(base_T_grippers, cam_T_targets)
     assert np.linalg.norm(result.hand_T_camera[:3, :3] - gripper_T_cam[:3, :3]) < 1e-12
@@ -394,11 +447,13 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     base_T_grippers, cam_T_worlds, gripper_T_cam_ref = _tabb_ds1()
     result = solve_axxb(base_T_grippers, cam_T_worlds)
     rot, trans = _errors(result.hand_T_camera, gripper_T_cam_ref)
-    print(f"Tabb DS1: kinfw Tsai {np.degrees(rot):.2f} deg / {trans:.1f} mm from Tabb's "
-          f"reference (OpenCV TSAI 0.62 deg / 45.8 mm); {result.n_pairs} motions, RMS residual "
-          f"{np.degrees(result.rms_rotation_rad):.2f} deg / {result.rms_translation:.1f} mm, "
-          f"condition {result.rotation_condition:.2f}, axis spread "
-          f"{np.degrees(result.axis_spread_rad):.1f} deg")
+    print(
+        f"Tabb DS1: kinfw Tsai {np.degrees(rot):.2f} deg / {trans:.1f} mm from Tabb's "
+        f"reference (OpenCV TSAI 0.62 deg / 45.8 mm); {result.n_pairs} motions, RMS residual "
+        f"{np.degrees(result.rms_rotation_rad):.2f} deg / {result.rms_translation:.1f} mm, "
+        f"condition {result.rotation_condition:.2f}, axis spread "
+        f"{np.degrees(result.axis_spread_rad):.1f} deg"
+    )
     assert np.degrees(rot) < 1.0 and trans < 50.0
     assert np.degrees(rot) < 0.62 and trans < 45.8  # not worse than OpenCV's Tsai
 
@@ -415,11 +470,18 @@ def test_an_inconsistency_with_small_motions_names_both_causes():
     rng = np.random.default_rng(0)
     X = _transform(_random_rotation(rng), [0.05, 0.02, 0.1])
     base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
-    A = np.stack([_transform(_random_rotation(rng, np.radians(12.0)),
-                             rng.uniform(-0.25, 0.25, 3)) for _ in range(10)])
+    A = np.stack(
+        [
+            _transform(_random_rotation(rng, np.radians(12.0)), rng.uniform(-0.25, 0.25, 3))
+            for _ in range(10)
+        ]
+    )
     B = np.stack([_inv(a @ X) @ base_T_target for a in A])
-    with pytest.raises(HandEyeError, match=r"motions are small \(median relative rotation "
-                                           r"[\d.]+ deg\).*A or B may be inverted"):
+    with pytest.raises(
+        HandEyeError,
+        match=r"motions are small \(median relative rotation "
+        r"[\d.]+ deg\).*A or B may be inverted",
+    ):
         solve_axxb(A, np.stack([_inv(b) for b in B]))
 
 
@@ -427,9 +489,17 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
     rng = np.random.default_rng(3)
     X = _transform(_random_rotation(rng), [0.01, -0.02, 0.05])
     base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
-    A = np.stack([_transform(_rotation([rng.uniform(-1.0, 1.0), rng.uniform(-0.02, 0.02),
-                                        rng.uniform(-0.02, 0.02)]), rng.uniform(-0.2, 0.2, 3))
-                  for _ in range(20)])
+    A = np.stack(
+        [
+            _transform(
+                _rotation(
+                    [rng.uniform(-1.0, 1.0), rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02)]
+                ),
+                rng.uniform(-0.2, 0.2, 3),
+            )
+            for _ in range(20)
+        ]
+    )
     B = np.stack([_inv(a @ X) @ base_T_target for a in A])
     with caplog.at_level("WARNING", logger="identification.handeye"):
         result = solve_axxb(A, B)

@@ -86,13 +86,13 @@ def test_quaternion_angle_is_the_rotation_angle_and_accurate_near_zero():
     R_true = pin.exp3(np.array([0.3, -1.2, 0.4]))
     expected = [_angle_deg(R_true, R) for R in Rs]
     # (both lose ~1e-10 deg close to 180 deg)
-    np.testing.assert_allclose(np.degrees(quaternion_angle(Rs, R_true)), expected,
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        np.degrees(quaternion_angle(Rs, R_true)), expected, rtol=0, atol=1e-9
+    )
     # the paper's form: 2 acos(|<q, q_true>|), quaternions from Pinocchio
     q_true = pin.Quaternion(R_true).coeffs()
     dots = np.abs([pin.Quaternion(R).coeffs() @ q_true for R in Rs])
-    np.testing.assert_allclose(quaternion_angle(Rs, R_true), 2.0 * np.arccos(dots),
-                               atol=1e-7)
+    np.testing.assert_allclose(quaternion_angle(Rs, R_true), 2.0 * np.arccos(dots), atol=1e-7)
     # where acos fails: tiny angles (the dot product rounds to 1 below ~1e-8 rad)
     for tiny in (1e-9, 1e-12):
         R = R_true @ pin.exp3(np.array([0.0, tiny, 0.0]))
@@ -142,10 +142,10 @@ def test_study_records_the_solver_history_against_the_truth():
     x_err = [_angle_deg(X[:3, :3], T[:3, :3]) for T in res.camera_T_hand_history[:k]]
     np.testing.assert_allclose(result.y_error_deg[0, 2, :k], y_err, atol=1e-9)
     np.testing.assert_allclose(result.x_error_deg[0, 2, :k], x_err, atol=1e-9)
-    np.testing.assert_allclose(result.initial_y_error_deg[0, 2], _angle_deg(np.eye(3),
-                                                                            Y[:3, :3]))
-    np.testing.assert_allclose(result.solved_y_error_deg[0, 2],
-                               _angle_deg(Y[:3, :3], res.root_T_target[:3, :3]))
+    np.testing.assert_allclose(result.initial_y_error_deg[0, 2], _angle_deg(np.eye(3), Y[:3, :3]))
+    np.testing.assert_allclose(
+        result.solved_y_error_deg[0, 2], _angle_deg(Y[:3, :3], res.root_T_target[:3, :3])
+    )
 
 
 def test_noise_free_error_falls_below_1e_6_deg_for_every_view_count(noise_free):
@@ -232,8 +232,12 @@ def test_json_round_trip(noise_free, noisy, tmp_path):
 
 def test_format_reports_the_papers_claims(noise_free, noisy):
     text = format_hirsh(noise_free, noisy)
-    for claim in ("converges very quickly", "improves the speed of convergence",
-                  "any initial guess", "below the noise line"):
+    for claim in (
+        "converges very quickly",
+        "improves the speed of convergence",
+        "any initial guess",
+        "below the noise line",
+    ):
         assert claim in text
     assert "| 10 |" in text
 
@@ -252,8 +256,10 @@ def test_run_and_main_write_png_and_json(tmp_path, capsys):
     np.testing.assert_array_equal(back_noisy.y_error_deg, noisy.y_error_deg)
     assert back_free.noise_deg == 0.0 and back_noisy.noise_deg == 1.0
 
-    assert main(["--out", str(tmp_path / "b"), "--trials", "2", "--seed", "3",
-                 "--iterations", "12"]) == 0
+    assert (
+        main(["--out", str(tmp_path / "b"), "--trials", "2", "--seed", "3", "--iterations", "12"])
+        == 0
+    )
     out = capsys.readouterr().out
     assert "Fig. 3" in out and "Fig. 4" in out and "hirsh_fig3_fig4.png" in out
     doc = json.loads((tmp_path / "b" / "hirsh.json").read_text())

@@ -32,18 +32,30 @@ MOVABLE_JOINTS = ("x_table", "y_table", "pan", "tilt", "vergence_left", "vergenc
 # Table 3 of the paper: theta, d, alpha, a (mm -> m, deg -> rad). For a revolute joint the
 # joint variable is theta (offset 0 here), for a prismatic one it is d (offset 0 here).
 TABLE3 = {
-    "x_table": {"type": "prismatic", "theta": 0.0 * DEG, "d": 0.0, "alpha": -90.0 * DEG,
-                "a": 0.0},
-    "y_table": {"type": "prismatic", "theta": 90.0 * DEG, "d": 0.0, "alpha": -90.0 * DEG,
-                "a": 0.0},
-    "pan": {"type": "revolute", "theta": 0.0, "d": 450.0 * MM, "alpha": -90.0 * DEG,
-            "a": 0.0},
-    "tilt": {"type": "revolute", "theta": 0.0, "d": 150.0 * MM, "alpha": 85.0 * DEG,
-             "a": 50.0 * MM},
-    "vergence_left": {"type": "revolute", "theta": 0.0, "d": 100.0 * MM, "alpha": 0.0 * DEG,
-                      "a": 0.0},
-    "vergence_right": {"type": "revolute", "theta": 0.0, "d": 250.0 * MM, "alpha": 35.0 * DEG,
-                       "a": 70.0 * MM},
+    "x_table": {"type": "prismatic", "theta": 0.0 * DEG, "d": 0.0, "alpha": -90.0 * DEG, "a": 0.0},
+    "y_table": {"type": "prismatic", "theta": 90.0 * DEG, "d": 0.0, "alpha": -90.0 * DEG, "a": 0.0},
+    "pan": {"type": "revolute", "theta": 0.0, "d": 450.0 * MM, "alpha": -90.0 * DEG, "a": 0.0},
+    "tilt": {
+        "type": "revolute",
+        "theta": 0.0,
+        "d": 150.0 * MM,
+        "alpha": 85.0 * DEG,
+        "a": 50.0 * MM,
+    },
+    "vergence_left": {
+        "type": "revolute",
+        "theta": 0.0,
+        "d": 100.0 * MM,
+        "alpha": 0.0 * DEG,
+        "a": 0.0,
+    },
+    "vergence_right": {
+        "type": "revolute",
+        "theta": 0.0,
+        "d": 250.0 * MM,
+        "alpha": 35.0 * DEG,
+        "a": 70.0 * MM,
+    },
 }
 
 # Table 2 of the paper: joint ranges (mm -> m, deg -> rad).
@@ -163,8 +175,9 @@ def xml_origin_T(joint: ET.Element) -> np.ndarray:
     origin = joint.find("origin")
     if origin is None:
         return np.eye(4)
-    return xyz_rpy_to_T(parse_floats(origin.get("xyz"), "0 0 0"),
-                        parse_floats(origin.get("rpy"), "0 0 0"))
+    return xyz_rpy_to_T(
+        parse_floats(origin.get("xyz"), "0 0 0"), parse_floats(origin.get("rpy"), "0 0 0")
+    )
 
 
 @pytest.fixture(scope="module")
@@ -249,8 +262,9 @@ def test_movable_joints_in_document_order_with_paper_types(xml_root, model):
     for joint in movable:
         name = joint.get("name")
         assert joint.get("type") == TABLE3[name]["type"], name
-        np.testing.assert_array_equal(parse_floats(joint.find("axis").get("xyz"), ""),
-                                      [0.0, 0.0, 1.0], err_msg=name)
+        np.testing.assert_array_equal(
+            parse_floats(joint.find("axis").get("xyz"), ""), [0.0, 0.0, 1.0], err_msg=name
+        )
     # Pinocchio: universe + the six joints, one coordinate each, in the same order
     assert tuple(model.names)[1:] == MOVABLE_JOINTS
     assert model.nq == len(MOVABLE_JOINTS)
@@ -279,8 +293,9 @@ def test_joint_limits_match_table2(xml_root, model, idx_q):
 def test_zero_configuration_equals_dh_zero(model, idx_q, world_T_base, side):
     data = pin_fk(model, idx_q, ZERO)
     expected = table3_world_T_plates(ZERO, world_T_base)[side]
-    np.testing.assert_allclose(frame_pose(model, data, BRANCHES[side][0]), expected,
-                               rtol=0.0, atol=ATOL_POSE)
+    np.testing.assert_allclose(
+        frame_pose(model, data, BRANCHES[side][0]), expected, rtol=0.0, atol=ATOL_POSE
+    )
 
 
 def test_plate_poses_match_table3_dh_product(model, idx_q, world_T_base):
@@ -299,8 +314,14 @@ def test_plate_poses_match_table3_dh_product(model, idx_q, world_T_base):
 
 def test_stereo_rig_faces_the_head_from_about_1p5_m(model, idx_q, world_T_base):
     # table at mid travel, pan 90 deg: the head looks towards the rig (DESIGN: rig ~1.5 m)
-    q = {"x_table": 0.5, "y_table": 0.25, "pan": 90.0 * DEG, "tilt": 0.0,
-         "vergence_left": 0.0, "vergence_right": 0.0}
+    q = {
+        "x_table": 0.5,
+        "y_table": 0.25,
+        "pan": 90.0 * DEG,
+        "tilt": 0.0,
+        "vergence_left": 0.0,
+        "vergence_right": 0.0,
+    }
     data = pin_fk(model, idx_q, q)
     for plate, _, _ in BRANCHES.values():
         world_T_plate = frame_pose(model, data, plate)
@@ -321,9 +342,11 @@ def test_camera_is_rigidly_attached_to_its_plate(xml_root, model, idx_q, side):
     for k, q in enumerate(CONFIGURATIONS):
         data = pin_fk(model, idx_q, q)
         plate_T_camera = np.linalg.inv(frame_pose(model, data, plate)) @ frame_pose(
-            model, data, camera)
-        np.testing.assert_allclose(plate_T_camera, nominal, rtol=0.0, atol=ATOL_POSE,
-                                   err_msg=f"configuration {k}")
+            model, data, camera
+        )
+        np.testing.assert_allclose(
+            plate_T_camera, nominal, rtol=0.0, atol=ATOL_POSE, err_msg=f"configuration {k}"
+        )
     # a non-trivial, plausible hand-eye transform: tens of mm away from the plate
     offset = np.linalg.norm(nominal[:3, 3])
     assert 0.02 <= offset <= 0.15, offset
@@ -347,10 +370,12 @@ def test_camera_follows_optical_convention_and_looks_forward(model, idx_q, world
         assert y_cam @ vergence_axis < -0.9, msg
     # the nominal mount is a few degrees off the exact optical alignment (non-trivial)
     data = pin_fk(model, idx_q, ZERO)
-    plate_R_camera = (np.linalg.inv(frame_pose(model, data, plate))
-                      @ frame_pose(model, data, camera))[:3, :3]
-    plate_R_vergence = (np.linalg.inv(frame_pose(model, data, plate))[:3, :3]
-                        @ data.oMi[jid].rotation)
+    plate_R_camera = (
+        np.linalg.inv(frame_pose(model, data, plate)) @ frame_pose(model, data, camera)
+    )[:3, :3]
+    plate_R_vergence = (
+        np.linalg.inv(frame_pose(model, data, plate))[:3, :3] @ data.oMi[jid].rotation
+    )
     z_ideal = np.array([1.0, 0.0, 0.0])
     y_ideal = -plate_R_vergence[:, 2]
     y_ideal = y_ideal - (y_ideal @ z_ideal) * z_ideal
@@ -381,8 +406,9 @@ def test_links_have_primitive_visuals_materials_and_plausible_inertials(xml_root
             for dim in ("size", "radius", "length"):
                 value = visual.find("geometry")[0].get(dim)
                 if value is not None:
-                    assert np.all((parse_floats(value, "") > 0.0)
-                                  & (parse_floats(value, "") < 2.0)), (name, dim, value)
+                    assert np.all(
+                        (parse_floats(value, "") > 0.0) & (parse_floats(value, "") < 2.0)
+                    ), (name, dim, value)
             material = visual.find("material")
             assert material is not None and material.get("name") in materials, name
         inertial = link.find("inertial")
@@ -393,9 +419,13 @@ def test_links_have_primitive_visuals_materials_and_plausible_inertials(xml_root
         mass = float(inertial.find("mass").get("value"))
         assert 0.01 <= mass <= 100.0, (name, mass)
         i = {k: float(v) for k, v in inertial.find("inertia").attrib.items()}
-        inertia = np.array([[i["ixx"], i["ixy"], i["ixz"]],
-                            [i["ixy"], i["iyy"], i["iyz"]],
-                            [i["ixz"], i["iyz"], i["izz"]]])
+        inertia = np.array(
+            [
+                [i["ixx"], i["ixy"], i["ixz"]],
+                [i["ixy"], i["iyy"], i["iyz"]],
+                [i["ixz"], i["iyz"], i["izz"]],
+            ]
+        )
         principal = np.linalg.eigvalsh(inertia)
         assert principal[0] > 0.0, name
         # triangle inequality of principal moments (a physical rigid body)

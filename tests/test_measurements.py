@@ -75,8 +75,7 @@ def pose(frame: str, xyz=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), **extra: An
 
 
 def target(frame: str, xyz=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), **extra: Any) -> dict:
-    return {"frame": frame, "kind": "target", "xyz": list(xyz), "quat_xyzw": list(quat),
-            **extra}
+    return {"frame": frame, "kind": "target", "xyz": list(xyz), "quat_xyzw": list(quat), **extra}
 
 
 def point(frame: str, xyz=(0.0, 0.0, 0.0), **extra: Any) -> dict:
@@ -87,11 +86,17 @@ def sample(q, *observations: dict) -> dict:
     return {"q": list(q), "observations": list(observations)}
 
 
-def document(*samples: dict, joint_names=("slide", "pan"), length="m", angle="rad",
-             **top: Any) -> dict:
-    return {"format": "kinfw-measurements", "version": 1,
-            "units": {"length": length, "angle": angle},
-            "joint_names": list(joint_names), **top, "samples": list(samples)}
+def document(
+    *samples: dict, joint_names=("slide", "pan"), length="m", angle="rad", **top: Any
+) -> dict:
+    return {
+        "format": "kinfw-measurements",
+        "version": 1,
+        "units": {"length": length, "angle": angle},
+        "joint_names": list(joint_names),
+        **top,
+        "samples": list(samples),
+    }
 
 
 def write_doc(directory: Path, doc: Any, name: str = "data.json") -> Path:
@@ -124,8 +129,11 @@ def test_pose_quaternions_give_hand_written_matrices_and_mm_become_m(tmp_path):
     )
     m = read_measurements(write_doc(tmp_path, doc))
     assert [g.frame for g in m.poses] == ["head", "camera", "slider"]
-    expected = [(ROT_Z_90, [0.1, -0.25, 1.5]), (ROT_Y_90, [0.001, 0.002, 0.003]),
-                (ROT_X_180, [-0.0005, 0.0, 2.0])]
+    expected = [
+        (ROT_Z_90, [0.1, -0.25, 1.5]),
+        (ROT_Y_90, [0.001, 0.002, 0.003]),
+        (ROT_X_180, [-0.0005, 0.0, 2.0]),
+    ]
     for g, (rotation, translation), i in zip(m.poses, expected, range(3), strict=True):
         assert_array_equal(g.sample, [i])
         assert g.meas_T_frame.shape == (1, 4, 4)
@@ -135,8 +143,9 @@ def test_pose_quaternions_give_hand_written_matrices_and_mm_become_m(tmp_path):
 
 
 def test_joint_values_in_degrees_become_radians():
-    m = measurements_from_dict(document(sample([90, -45], pose("head")),
-                                        sample([180, 0], pose("head")), angle="deg"))
+    m = measurements_from_dict(
+        document(sample([90, -45], pose("head")), sample([180, 0], pose("head")), angle="deg")
+    )
     assert_allclose(m.qs, [[math.pi / 2, -math.pi / 4], [math.pi, 0.0]], rtol=0, atol=1e-15)
 
 
@@ -148,9 +157,13 @@ def test_joint_values_in_a_rad_file_are_read_unchanged():
 
 
 def test_joint_units_win_over_the_angle_unit():
-    doc = document(sample([250, 90, 0.5, 0.125], pose("head")),
-                   joint_names=["slide", "pan", "tilt", "lift"], length="mm", angle="deg",
-                   joint_units=["mm", "deg", "rad", "m"])
+    doc = document(
+        sample([250, 90, 0.5, 0.125], pose("head")),
+        joint_names=["slide", "pan", "tilt", "lift"],
+        length="mm",
+        angle="deg",
+        joint_units=["mm", "deg", "rad", "m"],
+    )
     m = measurements_from_dict(doc)
     assert_allclose(m.qs, [[0.25, math.pi / 2, 0.5, 0.125]], rtol=0, atol=1e-15)
     assert m.qs[0, 0] == 0.25
@@ -158,14 +171,20 @@ def test_joint_units_win_over_the_angle_unit():
 
 def test_target_observations_are_grouped_by_camera_and_target():
     doc = document(
-        sample([0, 0], target("camera", xyz=[0, 0, 800], quat=[0, 0, S, S]),
-               target("camera", xyz=[10, 0, 500], target="board")),
+        sample(
+            [0, 0],
+            target("camera", xyz=[0, 0, 800], quat=[0, 0, S, S]),
+            target("camera", xyz=[10, 0, 500], target="board"),
+        ),
         sample([0, 0], target("head", xyz=[0, 50, 0]), target("camera", xyz=[0, 0, 900])),
         length="mm",
     )
     m = measurements_from_dict(doc)
     assert [(g.camera, g.target) for g in m.targets] == [
-        ("camera", "target"), ("camera", "board"), ("head", "target")]
+        ("camera", "target"),
+        ("camera", "board"),
+        ("head", "target"),
+    ]
     first = m.targets[0]
     assert_array_equal(first.sample, [0, 1])
     assert_allclose(first.camera_T_target[0, :3, :3], ROT_Z_90, rtol=0, atol=1e-15)
@@ -177,17 +196,27 @@ def test_target_observations_are_grouped_by_camera_and_target():
 
 def test_point_observations_offsets_markers_and_groups():
     doc = document(
-        sample([0, 0], point("head", xyz=[310, 5, 920], offset=[0, 0, 25]),
-               point("head", xyz=[1, 2, 3]), point("camera", xyz=[4, 5, 6], marker="m1")),
-        sample([0, 0], point("head", xyz=[300, 0, 900], offset=[0, 0, 25]),
-               point("head", xyz=[7, 8, 9], offset=[0, 0, 30])),
+        sample(
+            [0, 0],
+            point("head", xyz=[310, 5, 920], offset=[0, 0, 25]),
+            point("head", xyz=[1, 2, 3]),
+            point("camera", xyz=[4, 5, 6], marker="m1"),
+        ),
+        sample(
+            [0, 0],
+            point("head", xyz=[300, 0, 900], offset=[0, 0, 25]),
+            point("head", xyz=[7, 8, 9], offset=[0, 0, 30]),
+        ),
         length="mm",
     )
     m = measurements_from_dict(doc)
-    keys = [(g.frame, None if g.offset is None else g.offset.tolist(), g.marker)
-            for g in m.points]
-    assert keys == [("head", [0, 0, 0.025], None), ("head", None, None),
-                    ("camera", None, "m1"), ("head", [0, 0, 0.03], None)]
+    keys = [(g.frame, None if g.offset is None else g.offset.tolist(), g.marker) for g in m.points]
+    assert keys == [
+        ("head", [0, 0, 0.025], None),
+        ("head", None, None),
+        ("camera", None, "m1"),
+        ("head", [0, 0, 0.03], None),
+    ]
     assert_array_equal(m.points[0].sample, [0, 1])
     assert_array_equal(m.points[0].meas_p_point, [[0.31, 0.005, 0.92], [0.3, 0.0, 0.9]])
     assert_array_equal(m.points[1].meas_p_point, [[0.001, 0.002, 0.003]])
@@ -196,16 +225,23 @@ def test_point_observations_offsets_markers_and_groups():
 
 def test_measured_in_top_level_default_and_override():
     doc = document(
-        sample([0, 0], pose("head"), pose("head", measured_in="tracker"),
-               pose("head", measured_in="world"), point("camera"), target("camera")),
+        sample(
+            [0, 0],
+            pose("head"),
+            pose("head", measured_in="tracker"),
+            pose("head", measured_in="world"),
+            point("camera"),
+            target("camera"),
+        ),
         measured_in="mocap",
     )
     m = measurements_from_dict(doc)
     assert [g.measured_in for g in m.poses] == ["mocap", "tracker", "world"]
     assert m.points[0].measured_in == "mocap"
     assert (m.targets[0].camera, m.targets[0].target) == ("camera", "target")
-    assert measurements_from_dict(document(sample([0, 0], pose("head")))).poses[0] \
-        .measured_in is None
+    assert (
+        measurements_from_dict(document(sample([0, 0], pose("head")))).poses[0].measured_in is None
+    )
 
 
 def test_groups_in_first_seen_order_with_their_sample_indices():
@@ -216,7 +252,10 @@ def test_groups_in_first_seen_order_with_their_sample_indices():
     )
     m = measurements_from_dict(doc)
     assert [(g.frame, g.marker) for g in m.poses] == [
-        ("head", None), ("slider", None), ("head", "plate")]
+        ("head", None),
+        ("slider", None),
+        ("head", "plate"),
+    ]
     assert [g.sample.tolist() for g in m.poses] == [[0, 1], [1, 2], [2]]
     assert_array_equal(m.points[0].sample, [1, 2])
     assert m.n_samples == 3
@@ -226,8 +265,12 @@ def test_groups_in_first_seen_order_with_their_sample_indices():
 
 def test_extra_keys_are_ignored_and_null_optional_keys_are_absent():
     obs = pose("head", quat=[0, 0, S, S], note="left plate", marker=None, measured_in=None)
-    doc = document(sample([0, 0], obs, point("camera", offset=None)), comment="lab 3",
-                   measured_in=None, joint_units=None)
+    doc = document(
+        sample([0, 0], obs, point("camera", offset=None)),
+        comment="lab 3",
+        measured_in=None,
+        joint_units=None,
+    )
     doc["samples"][0]["timestamp"] = 12.5
     doc["units"]["temperature"] = "C"
     m = measurements_from_dict(doc)
@@ -238,8 +281,9 @@ def test_extra_keys_are_ignored_and_null_optional_keys_are_absent():
 
 def test_quaternion_norm_within_1e6_is_accepted_and_renormalised_silently():
     k = 1.0 + 1e-7
-    doc = document(sample([0, 0], pose("head", quat=[0, 0, 0, k]),
-                          pose("camera", quat=[0, 0, S * k, S * k])))
+    doc = document(
+        sample([0, 0], pose("head", quat=[0, 0, 0, k]), pose("camera", quat=[0, 0, S * k, S * k]))
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         m = measurements_from_dict(doc)
@@ -248,8 +292,7 @@ def test_quaternion_norm_within_1e6_is_accepted_and_renormalised_silently():
 
 
 @pytest.mark.parametrize("decimals", [4, 5])
-def test_quaternions_rounded_to_few_decimals_are_renormalised_with_one_warning(
-        decimals, tmp_path):
+def test_quaternions_rounded_to_few_decimals_are_renormalised_with_one_warning(decimals, tmp_path):
     from scipy.spatial.transform import Rotation
 
     rng = np.random.default_rng(decimals)
@@ -257,45 +300,65 @@ def test_quaternions_rounded_to_few_decimals_are_renormalised_with_one_warning(
     quats = np.round(quats / np.linalg.norm(quats, axis=1, keepdims=True), decimals)
     off = np.abs(np.linalg.norm(quats, axis=1) - 1.0)
     assert off.max() > 1e-6  # the rounding does break the old 1e-6 rule
-    doc = document(*[sample([0, 0], pose("head", quat=q.tolist()), target("camera"))
-                     for q in quats])
+    doc = document(
+        *[sample([0, 0], pose("head", quat=q.tolist()), target("camera")) for q in quats]
+    )
     path = write_doc(tmp_path, doc)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         m = read_measurements(path)
     messages = [str(w.message) for w in caught if issubclass(w.category, UserWarning)]
     n_off = int(np.sum(off > 1e-6))
-    assert messages == [f"{path}: {n_off} of 60 quaternions had norms off by up to "
-                        f"{off.max():.2g} (rounded?); renormalised"]
+    assert messages == [
+        f"{path}: {n_off} of 60 quaternions had norms off by up to "
+        f"{off.max():.2g} (rounded?); renormalised"
+    ]
     # scipy normalises the quaternion itself: an independent conversion
-    assert_allclose(m.poses[0].meas_T_frame[:, :3, :3], Rotation.from_quat(quats).as_matrix(),
-                    rtol=0, atol=1e-12)
+    assert_allclose(
+        m.poses[0].meas_T_frame[:, :3, :3],
+        Rotation.from_quat(quats).as_matrix(),
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def test_quaternion_norm_1_002_is_rejected_naming_sample_and_observation(tmp_path):
-    doc = document(sample([0, 0], pose("head")),
-                   sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0.6 * 1.002,
-                                                                     0.8 * 1.002])))
+    doc = document(
+        sample([0, 0], pose("head")),
+        sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0.6 * 1.002, 0.8 * 1.002])),
+    )
     norm = math.hypot(0.6 * 1.002, 0.8 * 1.002)  # 1.002 (a 3-4-5 triangle, scaled)
     assert norm == pytest.approx(1.002, abs=1e-12)
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             f"data.json: samples[1].observations[1].quat_xyzw: quaternion norm is {norm:.9g}; "
-            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)")):
+            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)"
+        ),
+    ):
         read_measurements(write_doc(tmp_path, doc))
 
 
 def test_quaternion_norm_1_01_is_rejected_with_the_norm(tmp_path):
-    doc = document(sample([0, 0], pose("head")),
-                   sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0, 1.01])))
-    with pytest.raises(DatasetError, match=re.escape(
+    doc = document(
+        sample([0, 0], pose("head")),
+        sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0, 1.01])),
+    )
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "data.json: samples[1].observations[1].quat_xyzw: quaternion norm is 1.01; "
-            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)")):
+            "expected a unit quaternion [x, y, z, w] (norm within 0.001 of 1)"
+        ),
+    ):
         read_measurements(write_doc(tmp_path, doc))
 
 
 def test_first_bad_quaternion_in_file_order_is_reported():
-    doc = document(sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0, 2])),
-                   sample([0, 0], pose("head", quat=[0, 0, 0, 0.5])))
+    doc = document(
+        sample([0, 0], pose("head"), pose("camera", quat=[0, 0, 0, 2])),
+        sample([0, 0], pose("head", quat=[0, 0, 0, 0.5])),
+    )
     with pytest.raises(DatasetError, match=re.escape("samples[0].observations[1].quat_xyzw")):
         measurements_from_dict(doc)
 
@@ -327,120 +390,297 @@ def mutated(doc: dict, path: tuple, value: Any) -> dict:
 
 OBS = ("samples", 1, "observations", 0)
 ERROR_CASES = [
-    pytest.param(("format",), "kinfw-dataset",
-                 "format: expected 'kinfw-measurements', got 'kinfw-dataset'", id="format"),
-    pytest.param(("format",), DELETE, "format: missing; expected 'kinfw-measurements'",
-                 id="format-missing"),
-    pytest.param(("version",), 2,
-                 "version: unsupported version 2; this reader supports version 1",
-                 id="version"),
+    pytest.param(
+        ("format",),
+        "kinfw-dataset",
+        "format: expected 'kinfw-measurements', got 'kinfw-dataset'",
+        id="format",
+    ),
+    pytest.param(
+        ("format",), DELETE, "format: missing; expected 'kinfw-measurements'", id="format-missing"
+    ),
+    pytest.param(
+        ("version",),
+        2,
+        "version: unsupported version 2; this reader supports version 1",
+        id="version",
+    ),
     pytest.param(("version",), DELETE, "version: missing; expected 1", id="version-missing"),
     pytest.param(("units",), DELETE, "units: missing; expected {", id="units-missing"),
     pytest.param(("units",), "SI", "units: expected an object, got 'SI'", id="units-type"),
-    pytest.param(("units", "length"), "cm",
-                 "units.length: expected one of 'm', 'mm', got 'cm'", id="length-unit"),
-    pytest.param(("units", "angle"), DELETE,
-                 'units.angle: missing; expected "rad" or "deg"', id="angle-missing"),
-    pytest.param(("units", "angle"), "grad",
-                 "units.angle: expected one of 'rad', 'deg', got 'grad'", id="angle-unit"),
-    pytest.param(("joint_names",), [],
-                 "joint_names: expected a non-empty list of joint names, got a list of 0 items",
-                 id="joint-names-empty"),
-    pytest.param(("joint_names",), DELETE, "joint_names: missing; expected a list of joint "
-                 "names", id="joint-names-missing"),
-    pytest.param(("joint_names",), ["slide", 3],
-                 "joint_names[1]: expected a non-empty string, got 3", id="joint-name-type"),
-    pytest.param(("joint_names",), ["pan", "pan"],
-                 "joint_names[1]: joint 'pan' is already joint_names[0]; names must be "
-                 "distinct", id="joint-names-duplicate"),
-    pytest.param(("joint_units",), ["m"], "joint_units: expected a list of 2 units (one per "
-                 "joint_names entry), got 1", id="joint-units-length"),
-    pytest.param(("joint_units",), ["m", "grad"],
-                 "joint_units[1]: expected one of 'm', 'mm', 'rad', 'deg', got 'grad'",
-                 id="joint-units-value"),
-    pytest.param(("measured_in",), 5, "measured_in: expected a non-empty string, got 5",
-                 id="measured-in-type"),
-    pytest.param(("samples",), [],
-                 "samples: expected a non-empty list of samples, got a list of 0 items",
-                 id="samples-empty"),
-    pytest.param(("samples",), {"q": []},
-                 "samples: expected a non-empty list of samples, got an object",
-                 id="samples-type"),
-    pytest.param(("samples", 1), [0, 1], "samples[1]: expected an object, got a list of 2 "
-                 "items", id="sample-type"),
-    pytest.param(("samples", 1, "q"), DELETE,
-                 "samples[1].q: missing; expected a list of 2 joint values", id="q-missing"),
-    pytest.param(("samples", 1, "q"), None,
-                 "samples[1].q: null; expected a list of 2 joint values", id="q-null"),
-    pytest.param(("samples", 1, "q"), [0, 1, 2], "samples[1].q: expected 2 numbers (one per "
-                 "joint_names entry), got 3", id="q-length"),
-    pytest.param(("samples", 1, "q"), 0.5, "samples[1].q: expected a list of 2 numbers (one "
-                 "per joint_names entry), got 0.5", id="q-type"),
-    pytest.param(("samples", 1, "q", 1), "0.5",
-                 "samples[1].q[1]: expected a finite number, got '0.5'", id="q-string"),
-    pytest.param(("samples", 1, "q", 0), True,
-                 "samples[1].q[0]: expected a finite number, got true", id="q-bool"),
-    pytest.param(("samples", 1, "q", 0), float("nan"),
-                 "samples[1].q[0]: expected a finite number, got nan", id="q-nan"),
-    pytest.param(("samples", 1, "observations"), DELETE, "samples[1].observations: missing; "
-                 "expected a non-empty list of observations", id="observations-missing"),
-    pytest.param(("samples", 1, "observations"), [], "samples[1].observations: expected a "
-                 "non-empty list of observations, got a list of 0 items",
-                 id="observations-empty"),
-    pytest.param(OBS, "head", "samples[1].observations[0]: expected an object, got 'head'",
-                 id="observation-type"),
-    pytest.param((*OBS, "frame"), DELETE, "samples[1].observations[0].frame: missing; "
-                 "expected the name of a URDF frame", id="frame-missing"),
-    pytest.param((*OBS, "frame"), "", "samples[1].observations[0].frame: expected a "
-                 "non-empty string, got ''", id="frame-empty"),
-    pytest.param((*OBS, "kind"), "posture", "samples[1].observations[0].kind: expected one "
-                 "of 'pose', 'target', 'point', got 'posture'", id="kind"),
-    pytest.param((*OBS, "kind"), DELETE, "samples[1].observations[0].kind: missing; "
-                 "expected 'pose', 'target' or 'point'", id="kind-missing"),
-    pytest.param((*OBS, "xyz"), [1, 2], "samples[1].observations[0].xyz: expected 3 numbers, "
-                 "got 2", id="xyz-length"),
-    pytest.param((*OBS, "xyz"), DELETE, "samples[1].observations[0].xyz: missing; expected "
-                 "3 numbers [x, y, z]", id="xyz-missing"),
-    pytest.param((*OBS, "xyz", 2), float("inf"), "samples[1].observations[0].xyz[2]: "
-                 "expected a finite number, got inf", id="xyz-inf"),
-    pytest.param((*OBS, "xyz", 0), None, "samples[1].observations[0].xyz[0]: expected a "
-                 "finite number, got null", id="xyz-null-element"),
-    pytest.param((*OBS, "quat_xyzw"), [0, 0, 1], "samples[1].observations[0].quat_xyzw: "
-                 "expected 4 numbers ([x, y, z, w], scalar last), got 3", id="quat-length"),
-    pytest.param((*OBS, "quat_xyzw"), DELETE, "samples[1].observations[0].quat_xyzw: "
-                 "missing; expected 4 numbers [x, y, z, w] (scalar last)", id="quat-missing"),
-    pytest.param((*OBS, "quat_xyzw"), [0, 0, 0, 0], "samples[1].observations[0].quat_xyzw: "
-                 "quaternion norm is 0; expected a unit quaternion", id="quat-zero"),
-    pytest.param((*OBS, "offset"), [0, 0, 1], "samples[1].observations[0].offset: not "
-                 "allowed on a 'pose' observation", id="offset-on-pose"),
-    pytest.param((*OBS, "target"), "board", "samples[1].observations[0].target: not allowed "
-                 "on a 'pose' observation", id="target-on-pose"),
-    pytest.param((*OBS, "marker"), 7, "samples[1].observations[0].marker: expected a "
-                 "non-empty string, got 7", id="marker-type"),
-    pytest.param((*OBS, "marker"), "m1", "samples[1].observations[0].marker: marker 'm1' is "
-                 "on frame 'head' here but on frame 'slider' in samples[0].observations[0]",
-                 id="marker-on-two-frames"),
-    pytest.param((*OBS, "measured_in"), "", "samples[1].observations[0].measured_in: "
-                 "expected a non-empty string, got ''", id="measured-in-empty"),
-    pytest.param(("samples", 0, "observations", 1, "marker"), "m2",
-                 "samples[0].observations[1].marker: not allowed on a 'target' observation",
-                 id="marker-on-target"),
-    pytest.param(("samples", 0, "observations", 1, "measured_in"), "mocap",
-                 "samples[0].observations[1].measured_in: not allowed on a 'target' "
-                 "observation", id="measured-in-on-target"),
-    pytest.param(("samples", 0, "observations", 1, "offset"), [0, 0, 0],
-                 "samples[0].observations[1].offset: not allowed on a 'target' observation",
-                 id="offset-on-target"),
-    pytest.param(("samples", 1, "observations", 1, "quat_xyzw"), [0, 0, 0, 1],
-                 "samples[1].observations[1].quat_xyzw: not allowed on a 'point' "
-                 "observation", id="quat-on-point"),
-    pytest.param(("samples", 1, "observations", 1, "offset"), [0, 0],
-                 "samples[1].observations[1].offset: expected 3 numbers, got 2",
-                 id="offset-length"),
-    pytest.param(("samples", 1, "observations", 1),
-                 point("head", offset=[0, 0, 1], marker="m3"),
-                 "samples[1].observations[1].offset: an offset and a marker ('m3') exclude "
-                 "each other", id="offset-and-marker"),
+    pytest.param(
+        ("units", "length"),
+        "cm",
+        "units.length: expected one of 'm', 'mm', got 'cm'",
+        id="length-unit",
+    ),
+    pytest.param(
+        ("units", "angle"),
+        DELETE,
+        'units.angle: missing; expected "rad" or "deg"',
+        id="angle-missing",
+    ),
+    pytest.param(
+        ("units", "angle"),
+        "grad",
+        "units.angle: expected one of 'rad', 'deg', got 'grad'",
+        id="angle-unit",
+    ),
+    pytest.param(
+        ("joint_names",),
+        [],
+        "joint_names: expected a non-empty list of joint names, got a list of 0 items",
+        id="joint-names-empty",
+    ),
+    pytest.param(
+        ("joint_names",),
+        DELETE,
+        "joint_names: missing; expected a list of joint names",
+        id="joint-names-missing",
+    ),
+    pytest.param(
+        ("joint_names",),
+        ["slide", 3],
+        "joint_names[1]: expected a non-empty string, got 3",
+        id="joint-name-type",
+    ),
+    pytest.param(
+        ("joint_names",),
+        ["pan", "pan"],
+        "joint_names[1]: joint 'pan' is already joint_names[0]; names must be distinct",
+        id="joint-names-duplicate",
+    ),
+    pytest.param(
+        ("joint_units",),
+        ["m"],
+        "joint_units: expected a list of 2 units (one per joint_names entry), got 1",
+        id="joint-units-length",
+    ),
+    pytest.param(
+        ("joint_units",),
+        ["m", "grad"],
+        "joint_units[1]: expected one of 'm', 'mm', 'rad', 'deg', got 'grad'",
+        id="joint-units-value",
+    ),
+    pytest.param(
+        ("measured_in",),
+        5,
+        "measured_in: expected a non-empty string, got 5",
+        id="measured-in-type",
+    ),
+    pytest.param(
+        ("samples",),
+        [],
+        "samples: expected a non-empty list of samples, got a list of 0 items",
+        id="samples-empty",
+    ),
+    pytest.param(
+        ("samples",),
+        {"q": []},
+        "samples: expected a non-empty list of samples, got an object",
+        id="samples-type",
+    ),
+    pytest.param(
+        ("samples", 1),
+        [0, 1],
+        "samples[1]: expected an object, got a list of 2 items",
+        id="sample-type",
+    ),
+    pytest.param(
+        ("samples", 1, "q"),
+        DELETE,
+        "samples[1].q: missing; expected a list of 2 joint values",
+        id="q-missing",
+    ),
+    pytest.param(
+        ("samples", 1, "q"),
+        None,
+        "samples[1].q: null; expected a list of 2 joint values",
+        id="q-null",
+    ),
+    pytest.param(
+        ("samples", 1, "q"),
+        [0, 1, 2],
+        "samples[1].q: expected 2 numbers (one per joint_names entry), got 3",
+        id="q-length",
+    ),
+    pytest.param(
+        ("samples", 1, "q"),
+        0.5,
+        "samples[1].q: expected a list of 2 numbers (one per joint_names entry), got 0.5",
+        id="q-type",
+    ),
+    pytest.param(
+        ("samples", 1, "q", 1),
+        "0.5",
+        "samples[1].q[1]: expected a finite number, got '0.5'",
+        id="q-string",
+    ),
+    pytest.param(
+        ("samples", 1, "q", 0),
+        True,
+        "samples[1].q[0]: expected a finite number, got true",
+        id="q-bool",
+    ),
+    pytest.param(
+        ("samples", 1, "q", 0),
+        float("nan"),
+        "samples[1].q[0]: expected a finite number, got nan",
+        id="q-nan",
+    ),
+    pytest.param(
+        ("samples", 1, "observations"),
+        DELETE,
+        "samples[1].observations: missing; expected a non-empty list of observations",
+        id="observations-missing",
+    ),
+    pytest.param(
+        ("samples", 1, "observations"),
+        [],
+        "samples[1].observations: expected a non-empty list of observations, got a list of 0 items",
+        id="observations-empty",
+    ),
+    pytest.param(
+        OBS,
+        "head",
+        "samples[1].observations[0]: expected an object, got 'head'",
+        id="observation-type",
+    ),
+    pytest.param(
+        (*OBS, "frame"),
+        DELETE,
+        "samples[1].observations[0].frame: missing; expected the name of a URDF frame",
+        id="frame-missing",
+    ),
+    pytest.param(
+        (*OBS, "frame"),
+        "",
+        "samples[1].observations[0].frame: expected a non-empty string, got ''",
+        id="frame-empty",
+    ),
+    pytest.param(
+        (*OBS, "kind"),
+        "posture",
+        "samples[1].observations[0].kind: expected one of 'pose', 'target', 'point', got 'posture'",
+        id="kind",
+    ),
+    pytest.param(
+        (*OBS, "kind"),
+        DELETE,
+        "samples[1].observations[0].kind: missing; expected 'pose', 'target' or 'point'",
+        id="kind-missing",
+    ),
+    pytest.param(
+        (*OBS, "xyz"),
+        [1, 2],
+        "samples[1].observations[0].xyz: expected 3 numbers, got 2",
+        id="xyz-length",
+    ),
+    pytest.param(
+        (*OBS, "xyz"),
+        DELETE,
+        "samples[1].observations[0].xyz: missing; expected 3 numbers [x, y, z]",
+        id="xyz-missing",
+    ),
+    pytest.param(
+        (*OBS, "xyz", 2),
+        float("inf"),
+        "samples[1].observations[0].xyz[2]: expected a finite number, got inf",
+        id="xyz-inf",
+    ),
+    pytest.param(
+        (*OBS, "xyz", 0),
+        None,
+        "samples[1].observations[0].xyz[0]: expected a finite number, got null",
+        id="xyz-null-element",
+    ),
+    pytest.param(
+        (*OBS, "quat_xyzw"),
+        [0, 0, 1],
+        "samples[1].observations[0].quat_xyzw: "
+        "expected 4 numbers ([x, y, z, w], scalar last), got 3",
+        id="quat-length",
+    ),
+    pytest.param(
+        (*OBS, "quat_xyzw"),
+        DELETE,
+        "samples[1].observations[0].quat_xyzw: "
+        "missing; expected 4 numbers [x, y, z, w] (scalar last)",
+        id="quat-missing",
+    ),
+    pytest.param(
+        (*OBS, "quat_xyzw"),
+        [0, 0, 0, 0],
+        "samples[1].observations[0].quat_xyzw: quaternion norm is 0; expected a unit quaternion",
+        id="quat-zero",
+    ),
+    pytest.param(
+        (*OBS, "offset"),
+        [0, 0, 1],
+        "samples[1].observations[0].offset: not allowed on a 'pose' observation",
+        id="offset-on-pose",
+    ),
+    pytest.param(
+        (*OBS, "target"),
+        "board",
+        "samples[1].observations[0].target: not allowed on a 'pose' observation",
+        id="target-on-pose",
+    ),
+    pytest.param(
+        (*OBS, "marker"),
+        7,
+        "samples[1].observations[0].marker: expected a non-empty string, got 7",
+        id="marker-type",
+    ),
+    pytest.param(
+        (*OBS, "marker"),
+        "m1",
+        "samples[1].observations[0].marker: marker 'm1' is "
+        "on frame 'head' here but on frame 'slider' in samples[0].observations[0]",
+        id="marker-on-two-frames",
+    ),
+    pytest.param(
+        (*OBS, "measured_in"),
+        "",
+        "samples[1].observations[0].measured_in: expected a non-empty string, got ''",
+        id="measured-in-empty",
+    ),
+    pytest.param(
+        ("samples", 0, "observations", 1, "marker"),
+        "m2",
+        "samples[0].observations[1].marker: not allowed on a 'target' observation",
+        id="marker-on-target",
+    ),
+    pytest.param(
+        ("samples", 0, "observations", 1, "measured_in"),
+        "mocap",
+        "samples[0].observations[1].measured_in: not allowed on a 'target' observation",
+        id="measured-in-on-target",
+    ),
+    pytest.param(
+        ("samples", 0, "observations", 1, "offset"),
+        [0, 0, 0],
+        "samples[0].observations[1].offset: not allowed on a 'target' observation",
+        id="offset-on-target",
+    ),
+    pytest.param(
+        ("samples", 1, "observations", 1, "quat_xyzw"),
+        [0, 0, 0, 1],
+        "samples[1].observations[1].quat_xyzw: not allowed on a 'point' observation",
+        id="quat-on-point",
+    ),
+    pytest.param(
+        ("samples", 1, "observations", 1, "offset"),
+        [0, 0],
+        "samples[1].observations[1].offset: expected 3 numbers, got 2",
+        id="offset-length",
+    ),
+    pytest.param(
+        ("samples", 1, "observations", 1),
+        point("head", offset=[0, 0, 1], marker="m3"),
+        "samples[1].observations[1].offset: an offset and a marker ('m3') exclude each other",
+        id="offset-and-marker",
+    ),
 ]
 
 
@@ -470,8 +710,11 @@ def test_invalid_json_gives_line_and_column(tmp_path):
 
 def test_top_level_must_be_an_object(tmp_path):
     path = write_doc(tmp_path, [1, 2])
-    with pytest.raises(DatasetError, match=r"data\.json: expected a JSON object at the top "
-                                           r"level, got a list of 2 items"):
+    with pytest.raises(
+        DatasetError,
+        match=r"data\.json: expected a JSON object at the top "
+        r"level, got a list of 2 items",
+    ):
         read_measurements(path)
 
 
@@ -486,27 +729,47 @@ def test_errors_from_a_dict_name_the_given_source():
 
 finite = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)
 quaternions = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(
-    lambda q: np.linalg.norm(q) > 0.1)
-observation_docs = st.one_of(
-    st.builds(lambda f, x, q, mk, mi: pose(f, x, (q / np.linalg.norm(q)).tolist(),
-                                           **({"marker": f"{f}_{mk}"} if mk else {}),
-                                           **({"measured_in": mi} if mi else {})),
-              st.sampled_from(["head", "slider"]), st.lists(finite, min_size=3, max_size=3),
-              quaternions.map(np.array), st.sampled_from([None, "plate"]),
-              st.sampled_from([None, "mocap"])),
-    st.builds(lambda f, x, q, t: target(f, x, (q / np.linalg.norm(q)).tolist(),
-                                        **({"target": t} if t else {})),
-              st.sampled_from(["camera", "head"]), st.lists(finite, min_size=3, max_size=3),
-              quaternions.map(np.array), st.sampled_from([None, "board"])),
-    st.builds(lambda f, x, off, mi: point(f, x, **({"offset": off} if off else {}),
-                                          **({"measured_in": mi} if mi else {})),
-              st.sampled_from(["head", "camera"]), st.lists(finite, min_size=3, max_size=3),
-              st.sampled_from([None, [0.0, 0.0, 0.025], [0.1, -0.2, 0.3]]),
-              st.sampled_from([None, "tracker"])),
+    lambda q: np.linalg.norm(q) > 0.1
 )
-sample_docs = st.builds(lambda q, observations: sample(q, *observations),
-                        st.lists(finite, min_size=2, max_size=2),
-                        st.lists(observation_docs, min_size=1, max_size=4))
+observation_docs = st.one_of(
+    st.builds(
+        lambda f, x, q, mk, mi: pose(
+            f,
+            x,
+            (q / np.linalg.norm(q)).tolist(),
+            **({"marker": f"{f}_{mk}"} if mk else {}),
+            **({"measured_in": mi} if mi else {}),
+        ),
+        st.sampled_from(["head", "slider"]),
+        st.lists(finite, min_size=3, max_size=3),
+        quaternions.map(np.array),
+        st.sampled_from([None, "plate"]),
+        st.sampled_from([None, "mocap"]),
+    ),
+    st.builds(
+        lambda f, x, q, t: target(
+            f, x, (q / np.linalg.norm(q)).tolist(), **({"target": t} if t else {})
+        ),
+        st.sampled_from(["camera", "head"]),
+        st.lists(finite, min_size=3, max_size=3),
+        quaternions.map(np.array),
+        st.sampled_from([None, "board"]),
+    ),
+    st.builds(
+        lambda f, x, off, mi: point(
+            f, x, **({"offset": off} if off else {}), **({"measured_in": mi} if mi else {})
+        ),
+        st.sampled_from(["head", "camera"]),
+        st.lists(finite, min_size=3, max_size=3),
+        st.sampled_from([None, [0.0, 0.0, 0.025], [0.1, -0.2, 0.3]]),
+        st.sampled_from([None, "tracker"]),
+    ),
+)
+sample_docs = st.builds(
+    lambda q, observations: sample(q, *observations),
+    st.lists(finite, min_size=2, max_size=2),
+    st.lists(observation_docs, min_size=1, max_size=4),
+)
 datasets = st.lists(sample_docs, min_size=1, max_size=6).map(lambda ss: document(*ss))
 
 
@@ -549,22 +812,28 @@ def test_write_read_round_trip(tmp_path_factory, doc):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.lists(finite, min_size=3, max_size=3), quaternions),
-                min_size=1, max_size=8),
-       st.sampled_from([None, "mocap"]))
+@given(
+    st.lists(
+        st.tuples(st.lists(finite, min_size=3, max_size=3), quaternions), min_size=1, max_size=8
+    ),
+    st.sampled_from([None, "mocap"]),
+)
 def test_round_trip_of_constructed_poses(tmp_path_factory, poses, measured_in):
     xyzs = np.array([p for p, _ in poses])
     quats = np.array([q for _, q in poses])
     n = len(poses)
     meas_T_frames = transform_from_xyz_quat_xyzw(xyzs, quats)
-    m = Measurements(("pan",), np.linspace(-1, 1, n)[:, None],
-                     poses=(PoseObservations("head", np.arange(n), meas_T_frames,
-                                             measured_in=measured_in),),
-                     targets=(TargetObservations("camera", np.arange(n)[::-1],
-                                                 meas_T_frames, target="board"),),
-                     points=(PointObservations("head", np.arange(n), xyzs,
-                                               offset=[0.0, 0.0, 0.1],
-                                               measured_in=measured_in),))
+    m = Measurements(
+        ("pan",),
+        np.linspace(-1, 1, n)[:, None],
+        poses=(PoseObservations("head", np.arange(n), meas_T_frames, measured_in=measured_in),),
+        targets=(TargetObservations("camera", np.arange(n)[::-1], meas_T_frames, target="board"),),
+        points=(
+            PointObservations(
+                "head", np.arange(n), xyzs, offset=[0.0, 0.0, 0.1], measured_in=measured_in
+            ),
+        ),
+    )
     path = tmp_path_factory.mktemp("rt") / "rt.json"
     write_measurements(path, m)
     back = read_measurements(path)
@@ -573,16 +842,14 @@ def test_round_trip_of_constructed_poses(tmp_path_factory, poses, measured_in):
     assert_array_equal(back.poses[0].meas_T_frame[:, :3, 3], xyzs)
     assert back.poses[0].measured_in == measured_in
     assert back.points[0].measured_in == measured_in
-    assert_allclose(back.targets[0].camera_T_target, meas_T_frames[::-1], rtol=0,
-                    atol=ROT_ATOL)
+    assert_allclose(back.targets[0].camera_T_target, meas_T_frames[::-1], rtol=0, atol=ROT_ATOL)
     assert back.targets[0].target == "board"
     assert_array_equal(back.points[0].meas_p_point, xyzs)
     assert_array_equal(back.points[0].offset, [0.0, 0.0, 0.1])
 
 
 @settings(max_examples=80, deadline=None)
-@given(datasets.flatmap(lambda d: st.tuples(st.just(d),
-                                            st.permutations(range(len(d["samples"]))))))
+@given(datasets.flatmap(lambda d: st.tuples(st.just(d), st.permutations(range(len(d["samples"]))))))
 def test_groups_do_not_depend_on_sample_order(doc_and_perm):
     doc, perm = doc_and_perm
     permuted = dict(doc, samples=[doc["samples"][i] for i in perm])
@@ -595,16 +862,28 @@ def test_groups_do_not_depend_on_sample_order(doc_and_perm):
 
 
 def test_length_unit_mm_file_equals_m_file():
-    in_m = document(sample([0.1, 0.2], pose("head", [0.1, 0.25, 1.5], [0, 0, S, S]),
-                           point("camera", [0.3, 0.0, 0.002], offset=[0, 0, 0.025])))
-    in_mm = document(sample([0.1, 0.2], pose("head", [100, 250, 1500], [0, 0, S, S]),
-                            point("camera", [300, 0, 2], offset=[0, 0, 25])), length="mm")
+    in_m = document(
+        sample(
+            [0.1, 0.2],
+            pose("head", [0.1, 0.25, 1.5], [0, 0, S, S]),
+            point("camera", [0.3, 0.0, 0.002], offset=[0, 0, 0.025]),
+        )
+    )
+    in_mm = document(
+        sample(
+            [0.1, 0.2],
+            pose("head", [100, 250, 1500], [0, 0, S, S]),
+            point("camera", [300, 0, 2], offset=[0, 0, 25]),
+        ),
+        length="mm",
+    )
     assert_same_groups(measurements_from_dict(in_m), measurements_from_dict(in_mm))
 
 
 def test_writer_writes_si_units_and_a_common_measured_in_once(tmp_path):
-    doc = document(sample([90, 0], pose("head", [100, 0, 0])), length="mm", angle="deg",
-                   measured_in="mocap")
+    doc = document(
+        sample([90, 0], pose("head", [100, 0, 0])), length="mm", angle="deg", measured_in="mocap"
+    )
     path = tmp_path / "out.json"
     write_measurements(path, measurements_from_dict(doc))
     written = json.loads(path.read_text())
@@ -618,8 +897,12 @@ def test_writer_writes_si_units_and_a_common_measured_in_once(tmp_path):
 
 
 def test_writer_rejects_a_sample_without_observations():
-    m = Measurements(("pan",), [[0.0], [1.0]],
-                     poses=(PoseObservations("head", [0], np.eye(4)[None]),), source="s.json")
+    m = Measurements(
+        ("pan",),
+        [[0.0], [1.0]],
+        poses=(PoseObservations("head", [0], np.eye(4)[None]),),
+        source="s.json",
+    )
     with pytest.raises(DatasetError, match=re.escape("s.json: samples[1]: has no observations")):
         measurements_to_dict(m)
 
@@ -639,8 +922,9 @@ def test_constructor_validation():
     with pytest.raises(DatasetError, match=re.escape("x.json: qs: expected shape (n, 2)")):
         Measurements(("a", "b"), np.zeros((3, 3)), source="x.json")
     with pytest.raises(DatasetError, match="refers to sample 3, but there are 3 samples"):
-        Measurements(("a",), np.zeros((3, 1)),
-                     poses=(PoseObservations("head", [3], np.eye(4)[None]),))
+        Measurements(
+            ("a",), np.zeros((3, 1)), poses=(PoseObservations("head", [3], np.eye(4)[None]),)
+        )
     with pytest.raises(DatasetError, match="joint 'a' is listed twice"):
         Measurements(("a", "a"), np.zeros((1, 2)))
     with pytest.raises(ValueError, match=re.escape("meas_T_frame: expected shape (2, 4, 4)")):
@@ -689,8 +973,10 @@ def test_q_of_reorders_columns_and_holds_other_joints_at_zero():
 
 
 def test_observed_frames_in_first_seen_order_without_duplicates():
-    doc = document(sample([0, 0], point("camera"), pose("head")),
-                   sample([0, 0], target("camera"), pose("slider"), pose("head", marker="p")))
+    doc = document(
+        sample([0, 0], point("camera"), pose("head")),
+        sample([0, 0], target("camera"), pose("slider"), pose("head", marker="p")),
+    )
     m = measurements_from_dict(doc)
     # Sample 0: poses before points at the same sample; then sample 1 adds slider.
     assert m.observed_frames == ("head", "camera", "slider")
@@ -712,42 +998,65 @@ def test_check_against_robot_accepts_a_good_dataset(robot):
 
 def test_check_against_robot_unknown_joint(robot):
     m = robot_doc(sample([0, 0], pose("head")), joint_names=["slide", "elbow"])
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "data.json: joint_names[1]: joint 'elbow' is not in <urdf string>; its movable "
-            "joints are ['slide', 'pan', 'spin']")):
+            "joints are ['slide', 'pan', 'spin']"
+        ),
+    ):
         check_against_robot(m, robot)
 
 
 def test_check_against_robot_fixed_joint(robot):
     m = robot_doc(sample([0], pose("head")), joint_names=["cam_mount"])
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "data.json: joint_names[0]: joint 'cam_mount' is a fixed joint in <urdf string>; "
-            "only movable joints can be listed: ['slide', 'pan', 'spin']")):
+            "only movable joints can be listed: ['slide', 'pan', 'spin']"
+        ),
+    ):
         check_against_robot(m, robot)
 
 
 def test_check_against_robot_unknown_frame_names_first_sample(robot):
-    m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head")),
-                  sample([0, 0], pose("head"), point("gripper")),
-                  sample([0, 0], point("gripper")))
-    with pytest.raises(DatasetError, match=re.escape(
+    m = robot_doc(
+        sample([0, 0], pose("head")),
+        sample([0, 0], pose("head")),
+        sample([0, 0], pose("head"), point("gripper")),
+        sample([0, 0], point("gripper")),
+    )
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "data.json: samples[2]: frame 'gripper' (point observation) is not a link or joint "
-            "of <urdf string>")):
+            "of <urdf string>"
+        ),
+    ):
         check_against_robot(m, robot)
 
 
 def test_check_against_robot_unsupported_joint_on_path(robot):
     m = robot_doc(sample([0, 0], pose("puck")))
-    with pytest.raises(DatasetError, match=r"samples\[0\]: frame 'puck' cannot be calibrated.*"
-                                           r"joint 'loose'.*floating"):
+    with pytest.raises(
+        DatasetError,
+        match=r"samples\[0\]: frame 'puck' cannot be calibrated.*"
+        r"joint 'loose'.*floating",
+    ):
         check_against_robot(m, robot)
 
 
 def test_check_against_robot_root_measured_in_becomes_none_and_groups_merge(robot):
-    m = robot_doc(sample([0, 0], pose("head", [0, 0, 0], measured_in="world")),
-                  sample([0, 0], pose("head", [1, 0, 0])),
-                  sample([0, 0], pose("head", [2, 0, 0], measured_in="world"),
-                         point("camera", measured_in="world")))
+    m = robot_doc(
+        sample([0, 0], pose("head", [0, 0, 0], measured_in="world")),
+        sample([0, 0], pose("head", [1, 0, 0])),
+        sample(
+            [0, 0],
+            pose("head", [2, 0, 0], measured_in="world"),
+            point("camera", measured_in="world"),
+        ),
+    )
     assert len(m.poses) == 2
     checked = check_against_robot(m, robot)
     assert checked is not m
@@ -766,18 +1075,24 @@ def test_check_against_robot_external_measured_in_is_kept(robot):
 
 def test_check_against_robot_rejects_a_non_root_urdf_frame_as_measured_in(robot):
     m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head", measured_in="base")))
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "data.json: samples[1]: measured_in 'base' is a frame of <urdf string> but not its "
-            "root link 'world'")):
+            "root link 'world'"
+        ),
+    ):
         check_against_robot(m, robot)
 
 
 def test_check_against_robot_warns_once_per_joint_outside_limits(robot):
-    m = robot_doc(sample([0.1, 0.0, 100.0], pose("head")),
-                  sample([0.7, 1.4, -100.0], pose("head")),
-                  sample([0.9, 1.6, 0.0], pose("head")),
-                  sample([-0.6, 0.0, 0.0], pose("head")),
-                  joint_names=["slide", "pan", "spin"])
+    m = robot_doc(
+        sample([0.1, 0.0, 100.0], pose("head")),
+        sample([0.7, 1.4, -100.0], pose("head")),
+        sample([0.9, 1.6, 0.0], pose("head")),
+        sample([-0.6, 0.0, 0.0], pose("head")),
+        joint_names=["slide", "pan", "spin"],
+    )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         check_against_robot(m, robot)
@@ -803,17 +1118,25 @@ def motion_data(tilt: np.ndarray) -> Measurements:
 
 def test_check_joint_motion_names_a_joint_that_does_not_move():
     m = motion_data(np.full(90, 0.3))
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "DATA.json: joint 'tilt' moves through 1 distinct value (0.3) in 90 samples; at "
-            "least 2 are needed to identify it")):
+            "least 2 are needed to identify it"
+        ),
+    ):
         check_joint_motion(m, ["pan", "tilt"])
 
 
 def test_check_joint_motion_a_joint_not_in_the_data_is_held_at_zero():
     m = motion_data(np.linspace(0, 1, 90))
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "DATA.json: joint 'vergence' (not in joint_names, so held at zero) moves through 1 "
-            "distinct value (0) in 90 samples; at least 2 are needed")):
+            "distinct value (0) in 90 samples; at least 2 are needed"
+        ),
+    ):
         check_joint_motion(m, ["pan", "vergence"])
 
 
@@ -827,9 +1150,13 @@ def test_check_joint_motion_treats_values_closer_than_1e9_as_equal():
 def test_check_joint_motion_min_distinct_and_all_joints_reported():
     m = motion_data(np.array([0.2, -0.1, 0.2, -0.1]))
     check_joint_motion(m, ["pan", "tilt"])
-    with pytest.raises(DatasetError, match=re.escape(
+    with pytest.raises(
+        DatasetError,
+        match=re.escape(
             "DATA.json: joint 'tilt' moves through 2 distinct values (-0.1, 0.2) in 4 samples; "
-            "at least 3 are needed to identify it; joint 'lift' (not in joint_names")):
+            "at least 3 are needed to identify it; joint 'lift' (not in joint_names"
+        ),
+    ):
         check_joint_motion(m, ["pan", "tilt", "lift"], min_distinct=3)
     with pytest.raises(ValueError, match="min_distinct must be >= 1"):
         check_joint_motion(m, ["pan"], min_distinct=0)
@@ -839,14 +1166,18 @@ def test_check_joint_motion_min_distinct_and_all_joints_reported():
 
 def test_concatenate_shifts_samples_unites_joints_and_merges_groups():
     a = Measurements(
-        joint_names=("j1",), qs=np.array([[0.1], [0.2]]),
-        poses=(PoseObservations("f", np.array([0, 1]), np.stack([np.eye(4)] * 2)),))
+        joint_names=("j1",),
+        qs=np.array([[0.1], [0.2]]),
+        poses=(PoseObservations("f", np.array([0, 1]), np.stack([np.eye(4)] * 2)),),
+    )
     T = np.eye(4)
     T[0, 3] = 5.0
     b = Measurements(
-        joint_names=("j2", "j1"), qs=np.array([[1.0, 0.3]]),
+        joint_names=("j2", "j1"),
+        qs=np.array([[1.0, 0.3]]),
         poses=(PoseObservations("f", np.array([0]), T[None]),),
-        points=(PointObservations("g", np.array([0]), np.array([[1.0, 2.0, 3.0]])),))
+        points=(PointObservations("g", np.array([0]), np.array([[1.0, 2.0, 3.0]])),),
+    )
     c = concatenate_measurements(a, b)
     assert c.joint_names == ("j1", "j2")
     np.testing.assert_array_equal(c.qs, [[0.1, 0.0], [0.2, 0.0], [0.3, 1.0]])
@@ -867,7 +1198,11 @@ def test_the_documentation_examples_parse():
     assert len(blocks) >= 5
     for block in blocks:
         if "samples" not in block:  # a single observation: wrap it
-            block = {"format": "kinfw-measurements", "version": 1,
-                     "units": {"length": "m", "angle": "rad"}, "joint_names": ["a"],
-                     "samples": [{"q": [0.0], "observations": [block]}]}
+            block = {
+                "format": "kinfw-measurements",
+                "version": 1,
+                "units": {"length": "m", "angle": "rad"},
+                "joint_names": ["a"],
+                "samples": [{"q": [0.0], "observations": [block]}],
+            }
         assert measurements_from_dict(block, "docs").n_samples >= 1

@@ -31,14 +31,21 @@ SEEDS = (0, 1, 2, 3)
 def _head_data(seed, n=120):
     nominal = load_robot(HEAD)
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0,
-                                     axis_deg=1.0))
+    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0))
     names = nominal.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
-    data = simulate(truth, qs, names, frames=PLATES, cameras=CAMERAS, rng=rng,
-                    w_T_target=default_target_pose(truth, qs, names, CAMERAS),
-                    noise_m=NOISE_M, noise_rad=NOISE_RAD)
+    data = simulate(
+        truth,
+        qs,
+        names,
+        frames=PLATES,
+        cameras=CAMERAS,
+        rng=rng,
+        w_T_target=default_target_pose(truth, qs, names, CAMERAS),
+        noise_m=NOISE_M,
+        noise_rad=NOISE_RAD,
+    )
     return nominal, data
 
 
@@ -49,8 +56,13 @@ def datasets():
 
 def _mean_ratios(results):
     """Estimated over true sigma, (position, rotation per component), mean over seeds."""
-    return np.mean([(r.noise.position_m / NOISE_M, r.noise.rotation_rad / ROTATION_PER_COMPONENT)
-                    for r in results], axis=0)
+    return np.mean(
+        [
+            (r.noise.position_m / NOISE_M, r.noise.rotation_rad / ROTATION_PER_COMPONENT)
+            for r in results
+        ],
+        axis=0,
+    )
 
 
 def test_robust_constants_match_the_simulated_noise_model():
@@ -60,8 +72,9 @@ def test_robust_constants_match_the_simulated_noise_model():
     n, s_m, s_rad = 400_000, 1e-3, 1e-3
     noisy = perturb_poses(np.broadcast_to(np.eye(4), (n, 4, 4)), rng, s_m, s_rad)
     x_position = np.sum((noisy[:, :3, 3] / s_m) ** 2, axis=1)
-    x_rotation = np.sum((rotation_vector_from_matrix(noisy[:, :3, :3])
-                         / (s_rad / np.sqrt(3.0))) ** 2, axis=1)
+    x_rotation = np.sum(
+        (rotation_vector_from_matrix(noisy[:, :3, :3]) / (s_rad / np.sqrt(3.0))) ** 2, axis=1
+    )
     for x, shape in ((x_position, noise_shape(POSITION)), (x_rotation, noise_shape(ROTATION))):
         assert np.mean(x) == pytest.approx(3.0, rel=0.01)  # whitened: unit variance per row
         assert np.mean(x < shape.median) == pytest.approx(0.5, abs=0.003)
@@ -89,8 +102,7 @@ def test_the_robust_rounds_converge_to_the_true_sigma(orientation):
     sigma = NoiseModel(2.0, 0.5)
     for first in (True, False, False, False):
         r = np.concatenate([position / sigma.position_m, rotation / sigma.rotation_rad], axis=1)
-        sigma = estimate_noise(r.ravel(), [group], sigma, np.zeros(6 * m), robust=True,
-                                first=first)
+        sigma = estimate_noise(r.ravel(), [group], sigma, np.zeros(6 * m), robust=True, first=first)
     assert sigma.position_m == pytest.approx(1.0, abs=0.01)
     assert sigma.rotation_rad == pytest.approx(1.0, abs=0.01)
 
@@ -118,9 +130,13 @@ def test_huber_flags_one_percent_of_clean_observations(datasets, huber_results):
 def test_the_robust_noise_estimate_resists_5_percent_gross_outliers(datasets):
     results = []
     for seed, (nominal, data) in zip(SEEDS, datasets, strict=True):
-        corrupt, planted = plant_outliers(data, np.random.default_rng(100 + seed),
-                                          fraction=0.05, distance_m=0.02,
-                                          angle_rad=np.radians(10.0))
+        corrupt, planted = plant_outliers(
+            data,
+            np.random.default_rng(100 + seed),
+            fraction=0.05,
+            distance_m=0.02,
+            angle_rad=np.radians(10.0),
+        )
         assert len(planted) >= 20
         results.append(refine(nominal, corrupt, loss="huber"))
     np.testing.assert_allclose(_mean_ratios(results), 1.0, atol=0.1)

@@ -60,8 +60,9 @@ class SphereContacts:
     def __post_init__(self) -> None:
         sample = sample_array(self.sample, "SphereContacts.sample")
         object.__setattr__(self, "sample", sample)
-        object.__setattr__(self, "radius_m", data_array(self.radius_m, (len(sample),),
-                                                        "SphereContacts.radius_m"))
+        object.__setattr__(
+            self, "radius_m", data_array(self.radius_m, (len(sample),), "SphereContacts.radius_m")
+        )
 
 
 def probe_key(frame: str) -> BlockKey:
@@ -85,8 +86,10 @@ class SphereKind(ObservationKind):
         return SphereContacts(sample=sample, radius_m=rows[:, 0], **dict(key))
 
     def to_dicts(self, group, top_measured_in):
-        return [{"frame": group.frame, "kind": "sphere", "sphere": group.sphere, "radius": r}
-                for r in group.radius_m.tolist()]
+        return [
+            {"frame": group.frame, "kind": "sphere", "sphere": group.sphere, "radius": r}
+            for r in group.radius_m.tolist()
+        ]
 
     def frames(self, group):
         return (group.frame,)
@@ -96,14 +99,31 @@ class SphereKind(ObservationKind):
         |c|^2) once c^T R_i o is written <R_i, c o^T>: 16 unknowns by least squares."""
         T = start.w_T(group.frame, group.sample)
         R, t = T[:, :3, :3], T[:, :3, 3]
-        A = np.concatenate([2 * np.einsum("nji,nj->ni", R, t), -2 * t,
-                            -2 * R.reshape(len(R), 9), np.ones((len(R), 1))], axis=1)
+        A = np.concatenate(
+            [
+                2 * np.einsum("nji,nj->ni", R, t),
+                -2 * t,
+                -2 * R.reshape(len(R), 9),
+                np.ones((len(R), 1)),
+            ],
+            axis=1,
+        )
         b = group.radius_m**2 - np.sum(t**2, axis=1)
         sol = np.linalg.lstsq(A, b, rcond=None)[0]
-        return (UnknownRequest(probe_key(group.frame), sol[None, 0:3],
-                               PointBlock.from_estimates, f"probe on {group.frame!r}"),
-                UnknownRequest(BlockKey("sphere", group.sphere), sol[None, 3:6],
-                               PointBlock.from_estimates, f"centre of {group.sphere!r}"))
+        return (
+            UnknownRequest(
+                probe_key(group.frame),
+                sol[None, 0:3],
+                PointBlock.from_estimates,
+                f"probe on {group.frame!r}",
+            ),
+            UnknownRequest(
+                BlockKey("sphere", group.sphere),
+                sol[None, 3:6],
+                PointBlock.from_estimates,
+                f"centre of {group.sphere!r}",
+            ),
+        )
 
     def data(self, group):
         return group.radius_m[:, None]
@@ -116,8 +136,10 @@ class SphereKind(ObservationKind):
     # numpy: the prediction (simulate() adds the Gaussian noise of "distance"), the drawing
     def _probe_and_centre(self, group, model):
         T = model.w_T(group.frame, group.sample)
-        return (T[:, :3, :3] @ model.value(probe_key(group.frame)) + T[:, :3, 3],
-                model.value(BlockKey("sphere", group.sphere)))
+        return (
+            T[:, :3, :3] @ model.value(probe_key(group.frame)) + T[:, :3, 3],
+            model.value(BlockKey("sphere", group.sphere)),
+        )
 
     def predict(self, group, model):
         p, c = self._probe_and_centre(group, model)
@@ -128,8 +150,12 @@ class SphereKind(ObservationKind):
         centre on the line through the probe."""
         p, c = self._probe_and_centre(group, model)
         u = (p - c) / np.linalg.norm(p - c, axis=1)[:, None]
-        return Drawing(node_name("spheres", group.frame, group.sphere),
-                       c + group.radius_m[:, None] * u, None, p)
+        return Drawing(
+            node_name("spheres", group.frame, group.sphere),
+            c + group.radius_m[:, None] * u,
+            None,
+            p,
+        )
 
 
 @pytest.fixture
@@ -156,9 +182,18 @@ def _contacts(truth, offset, centre, n, rng):
     grid = np.linspace(-3.0, 3.0, 241)
     while sum(map(len, out)) < n:
         q = random_joint_values(truth, NAMES, 200, rng)
-        f = np.stack([np.linalg.norm(_probe(truth, np.column_stack(
-            [q[:, :1], np.full(len(q), a), q[:, 2:]]), offset) - centre, axis=1) - RADIUS
-            for a in grid], axis=1)
+        f = np.stack(
+            [
+                np.linalg.norm(
+                    _probe(truth, np.column_stack([q[:, :1], np.full(len(q), a), q[:, 2:]]), offset)
+                    - centre,
+                    axis=1,
+                )
+                - RADIUS
+                for a in grid
+            ],
+            axis=1,
+        )
         cross = np.argmax(np.sign(f[:, :-1]) != np.sign(f[:, 1:]), axis=1)
         ok = np.sign(f[np.arange(len(q)), cross]) != np.sign(f[np.arange(len(q)), cross + 1])
         q, lo, hi = q[ok], grid[cross[ok]], grid[cross[ok] + 1]
@@ -182,10 +217,16 @@ def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, t
     offset = np.array([0.02, -0.01, 0.04])  # probe in the flange frame
     centre = _probe(truth, np.full((1, 6), 0.3), offset)[0] + [0.05, 0.1, -0.05]
     qs = _contacts(truth, offset, centre, 120, rng)
-    np.testing.assert_allclose(np.linalg.norm(_probe(truth, qs, offset) - centre, axis=1),
-                               RADIUS, atol=1e-12)
-    data = Measurements(NAMES, qs, others=(SphereContacts(
-        "flange", np.arange(len(qs)), np.full(len(qs), RADIUS), sphere="ball"),))
+    np.testing.assert_allclose(
+        np.linalg.norm(_probe(truth, qs, offset) - centre, axis=1), RADIUS, atol=1e-12
+    )
+    data = Measurements(
+        NAMES,
+        qs,
+        others=(
+            SphereContacts("flange", np.arange(len(qs)), np.full(len(qs), RADIUS), sphere="ball"),
+        ),
+    )
 
     # the file edge: written and read back through the registry, in mm too
     path = tmp_path / "contacts.json"
@@ -209,26 +250,32 @@ def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, t
     q_test = random_joint_values(nominal, NAMES, 200, np.random.default_rng(12))
     model_qs = q_test[:, [NAMES.index(j) for j in result.model.topology.joint_names]]
     T = result.model.frame_poses(model_qs, "flange")
-    predicted = np.linalg.norm(T[:, :3, :3] @ found["probe"] + T[:, :3, 3] - found["sphere"],
-                               axis=1)
+    predicted = np.linalg.norm(
+        T[:, :3, :3] @ found["probe"] + T[:, :3, 3] - found["sphere"], axis=1
+    )
     true = np.linalg.norm(_probe(truth, q_test, offset) - centre, axis=1)
     assert np.abs(true - RADIUS).max() > 0.05  # held out: off the sphere
     np.testing.assert_allclose(predicted, true, rtol=0, atol=1e-9)
 
 
 def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_kind, tmp_path):
-    doc = ('{"format": "kinfw-measurements", "version": 1, '
-           '"units": {"length": "mm", "angle": "deg"}, "joint_names": ["j1"], "samples": ['
-           '{"q": [10], "observations": [{"frame": "flange", "kind": "sphere", '
-           '"sphere": "ball", "radius": 150}]},'
-           '{"q": [20], "observations": [{"frame": "flange", "kind": "sphere", '
-           '"radius": "big"}]}]}')
+    doc = (
+        '{"format": "kinfw-measurements", "version": 1, '
+        '"units": {"length": "mm", "angle": "deg"}, "joint_names": ["j1"], "samples": ['
+        '{"q": [10], "observations": [{"frame": "flange", "kind": "sphere", '
+        '"sphere": "ball", "radius": 150}]},'
+        '{"q": [20], "observations": [{"frame": "flange", "kind": "sphere", '
+        '"radius": "big"}]}]}'
+    )
     path = tmp_path / "bad.json"
     path.write_text(doc)
     from kinfw.measurements import DatasetError
 
-    with pytest.raises(DatasetError, match=r"bad\.json: samples\[1\]\.observations\[0\]"
-                                           r"\.radius: expected the sphere's radius"):
+    with pytest.raises(
+        DatasetError,
+        match=r"bad\.json: samples\[1\]\.observations\[0\]"
+        r"\.radius: expected the sphere's radius",
+    ):
         read_measurements(path)
     path.write_text(doc.replace('"big"', "120"))
     m = read_measurements(path)
@@ -239,13 +286,16 @@ def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_k
 
 def test_without_the_kind_registered_the_file_is_refused(tmp_path):
     path = tmp_path / "x.json"
-    path.write_text('{"format": "kinfw-measurements", "version": 1, "units": {"length": '
-                    '"m", "angle": "rad"}, "joint_names": ["j1"], "samples": [{"q": [0], '
-                    '"observations": [{"frame": "f", "kind": "sphere", "radius": 1}]}]}')
+    path.write_text(
+        '{"format": "kinfw-measurements", "version": 1, "units": {"length": '
+        '"m", "angle": "rad"}, "joint_names": ["j1"], "samples": [{"q": [0], '
+        '"observations": [{"frame": "f", "kind": "sphere", "radius": 1}]}]}'
+    )
     from kinfw.measurements import DatasetError
 
-    with pytest.raises(DatasetError, match="kind: expected one of 'pose', 'target', 'point', "
-                                           "got 'sphere'"):
+    with pytest.raises(
+        DatasetError, match="kind: expected one of 'pose', 'target', 'point', got 'sphere'"
+    ):
         read_measurements(path)
 
 
@@ -264,8 +314,9 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
 
     # noise-free: contacts found by bisection on the sphere measure its radius
     qs = _contacts(truth, offset, centre, 30, rng)
-    data = simulate(truth, qs, NAMES, groups=[template(30)], unknowns=unknowns,
-                    rng=np.random.default_rng(0))
+    data = simulate(
+        truth, qs, NAMES, groups=[template(30)], unknowns=unknowns, rng=np.random.default_rng(0)
+    )
     (g,) = data.groups("sphere")
     assert g.sphere == "ball" and not data.poses and not data.points
     np.testing.assert_allclose(g.radius_m, RADIUS, rtol=0, atol=1e-12)
@@ -273,38 +324,66 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     # noisy, anywhere: the distance plus N(0, noise_m) (the "distance" component is in m)
     n, sigma = 4000, 1e-3
     q_any = random_joint_values(truth, NAMES, n, rng)
-    noisy = simulate(truth, q_any, NAMES, groups=[template(n)], unknowns=unknowns,
-                     rng=np.random.default_rng(1), noise_m=sigma).groups("sphere")[0]
+    noisy = simulate(
+        truth,
+        q_any,
+        NAMES,
+        groups=[template(n)],
+        unknowns=unknowns,
+        rng=np.random.default_rng(1),
+        noise_m=sigma,
+    ).groups("sphere")[0]
     error = noisy.radius_m - np.linalg.norm(_probe(truth, q_any, offset) - centre, axis=1)
     assert abs(error.std() / sigma - 1) < 0.05 and abs(error.mean()) < 4 * sigma / np.sqrt(n)
-    by_name = simulate(truth, q_any[:5], NAMES, groups=[template(5)], unknowns=unknowns,
-                       rng=np.random.default_rng(1), sigmas={"distance": 0.0}, noise_m=sigma)
-    np.testing.assert_allclose(by_name.groups("sphere")[0].radius_m, np.linalg.norm(
-        _probe(truth, q_any[:5], offset) - centre, axis=1), rtol=0, atol=1e-15)
-    with pytest.raises(ValueError, match="needs the true value of sphere:ball; give it in "
-                                         "unknowns"):
-        simulate(truth, qs, NAMES, groups=[template(30)], rng=rng,
-                 unknowns={probe_key("flange"): offset})
+    by_name = simulate(
+        truth,
+        q_any[:5],
+        NAMES,
+        groups=[template(5)],
+        unknowns=unknowns,
+        rng=np.random.default_rng(1),
+        sigmas={"distance": 0.0},
+        noise_m=sigma,
+    )
+    np.testing.assert_allclose(
+        by_name.groups("sphere")[0].radius_m,
+        np.linalg.norm(_probe(truth, q_any[:5], offset) - centre, axis=1),
+        rtol=0,
+        atol=1e-15,
+    )
+    with pytest.raises(
+        ValueError, match="needs the true value of sphere:ball; give it in unknowns"
+    ):
+        simulate(
+            truth, qs, NAMES, groups=[template(30)], rng=rng, unknowns={probe_key("flange"): offset}
+        )
 
     # drawn: a ball where the measured radius puts the probe, a line from the probe
-    data = Measurements(NAMES, q_any[:3], others=(SphereContacts(
-        "flange", np.arange(3), noisy.radius_m[:3] + 0.01, sphere="ball"),))
+    data = Measurements(
+        NAMES,
+        q_any[:3],
+        others=(SphereContacts("flange", np.arange(3), noisy.radius_m[:3] + 0.01, sphere="ball"),),
+    )
     window = OfflineWindow()
     scene(truth, data=data, sample=2, window=window, residual_scale=10.0, unknowns=unknowns)
     objects = {c["path"]: c["object"] for c in window.commands if c["type"] == "set_object"}
-    transforms = {c["path"]: np.array(c["matrix"], float).reshape(4, 4).T
-                  for c in window.commands if c["type"] == "set_transform"}
+    transforms = {
+        c["path"]: np.array(c["matrix"], float).reshape(4, 4).T
+        for c in window.commands
+        if c["type"] == "set_transform"
+    }
     probe = _probe(truth, q_any[2:3], offset)[0]
     u = (probe - centre) / np.linalg.norm(probe - centre)
     measured = centre + data.others[0].radius_m[2] * u
     base = "/meshcat/kinfw/"
-    assert objects[base + "measured/spheres/flange/ball"]["geometries"][0]["type"] == \
-        "SphereGeometry"
-    np.testing.assert_allclose(transforms[base + "measured/spheres/flange/ball"][:3, 3],
-                               measured, rtol=0, atol=1e-12)
+    assert (
+        objects[base + "measured/spheres/flange/ball"]["geometries"][0]["type"] == "SphereGeometry"
+    )
+    np.testing.assert_allclose(
+        transforms[base + "measured/spheres/flange/ball"][:3, 3], measured, rtol=0, atol=1e-12
+    )
     line = transforms[base + "residuals/spheres/flange/ball"]
     height = objects[base + "residuals/spheres/flange/ball/stick"]["geometries"][0]["height"]
     np.testing.assert_allclose(line[:3, 3], probe, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(height * line[:3, 1], 10.0 * (measured - probe), rtol=0,
-                               atol=1e-12)
+    np.testing.assert_allclose(height * line[:3, 1], 10.0 * (measured - probe), rtol=0, atol=1e-12)
     assert abs(height - 10.0 * (0.01 + error[2])) < 1e-9  # 10 x the radius error

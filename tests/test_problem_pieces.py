@@ -25,8 +25,15 @@ def test_block_units_agree_with_the_unit_of_each_name_and_joint_type():
     rng = np.random.default_rng(0)
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     qs = random_configurations(*head.joint_limits(names), 8, rng, fraction=0.8)
-    data = simulate(head, qs, names, frames=PLATES, cameras=CAMERAS, rng=rng,
-                    w_T_target=default_target_pose(head, qs, names, CAMERAS))
+    data = simulate(
+        head,
+        qs,
+        names,
+        frames=PLATES,
+        cameras=CAMERAS,
+        rng=rng,
+        w_T_target=default_target_pose(head, qs, names, CAMERAS),
+    )
     problem = build_problem(head, data, parameters="offsets")
     assert len(problem.units) == len(problem.names) == problem.n_parameters
     for (owner, field), unit in zip(problem.names, problem.units, strict=True):
@@ -39,8 +46,9 @@ def test_block_units_agree_with_the_unit_of_each_name_and_joint_type():
 
 def test_rigid_and_point_blocks_give_the_same_value_in_numpy_and_casadi():
     rng = np.random.default_rng(1)
-    start = transform_from_rotation_translation(matrix_from_rotation_vector([0.3, -1.0, 2.0]),
-                                                [0.1, 0.2, -0.3])
+    start = transform_from_rotation_translation(
+        matrix_from_rotation_vector([0.3, -1.0, 2.0]), [0.1, 0.2, -0.3]
+    )
     rigid = RigidFrameBlock(BlockKey("target", "board"), start=start)
     point = PointBlock(BlockKey("offset", "flange:point"), start=np.array([0.01, 0.0, 0.2]))
     for block in (rigid, point):
@@ -48,8 +56,12 @@ def test_rigid_and_point_blocks_give_the_same_value_in_numpy_and_casadi():
         f = ca.Function("v", [d_sym], [block.casadi_value(d_sym)])
         for _ in range(5):
             d = rng.normal(size=block.size)
-            np.testing.assert_allclose(np.array(f(d)).reshape(np.shape(block.numpy_value(d))),
-                                       block.numpy_value(d), atol=1e-15, rtol=0)
+            np.testing.assert_allclose(
+                np.array(f(d)).reshape(np.shape(block.numpy_value(d))),
+                block.numpy_value(d),
+                atol=1e-15,
+                rtol=0,
+            )
             np.testing.assert_allclose(block.coordinates(block.numpy_value(d)), d, atol=1e-12)
     assert rigid.names[0] == ("target:board", "rot_x")
     assert rigid.units == ("rad",) * 3 + ("m",) * 3 and point.units == ("m",) * 3
@@ -72,21 +84,31 @@ def test_variance_components_are_estimated_for_any_component_rows():
     wrong guess: each estimate comes back within its statistical precision."""
     rng = np.random.default_rng(2)
     position, distance = NoiseComponent("position", 3, "m"), NoiseComponent("distance", 1, "m")
-    groups = [SimpleNamespace(sample=np.arange(4000), rows=4, components=(position, distance)),
-              SimpleNamespace(sample=np.arange(3000), rows=1, components=(distance,))]
-    si = [np.column_stack([rng.normal(0, 0.5, (4000, 3)), rng.normal(0, 2.0, (4000, 1))]),
-          rng.normal(0, 2.0, (3000, 1))]
+    groups = [
+        SimpleNamespace(sample=np.arange(4000), rows=4, components=(position, distance)),
+        SimpleNamespace(sample=np.arange(3000), rows=1, components=(distance,)),
+    ]
+    si = [
+        np.column_stack([rng.normal(0, 0.5, (4000, 3)), rng.normal(0, 2.0, (4000, 1))]),
+        rng.normal(0, 2.0, (3000, 1)),
+    ]
 
     def whitened(noise):  # rows in the problem's order, divided by the model's sigmas
-        return np.concatenate([
-            (rows / np.concatenate([np.full(c.rows, noise.sigma(c)) for c in g.components]))
-            .ravel() for g, rows in zip(groups, si, strict=True)])
+        return np.concatenate(
+            [
+                (
+                    rows / np.concatenate([np.full(c.rows, noise.sigma(c)) for c in g.components])
+                ).ravel()
+                for g, rows in zip(groups, si, strict=True)
+            ]
+        )
 
     guess = NoiseModel(1.0, 1.0, sigmas={"distance": 1.0})
     least_squares = estimate_noise(whitened(guess), groups, guess, np.zeros(19000))
     robust = estimate_noise(whitened(guess), groups, guess, np.zeros(19000), robust=True)
-    trimmed = estimate_noise(whitened(robust), groups, robust, np.zeros(19000), robust=True,
-                             first=False)  # the second round, from the first's sigmas
+    trimmed = estimate_noise(
+        whitened(robust), groups, robust, np.zeros(19000), robust=True, first=False
+    )  # the second round, from the first's sigmas
     for est in (least_squares, robust, trimmed):
         assert est.estimated
         assert est.of("position") == pytest.approx(0.5, rel=0.05)

@@ -22,24 +22,34 @@ def test_the_demo_numbers_in_the_readme_are_what_the_demo_prints(tmp_path, capsy
     the tolerance the README states (BLAS changes the last digits)."""
     report = _demo_report(tmp_path, capsys)
     text = README.read_text()
-    block = re.search(r"held-out position RMS against the true robot \(noise-free\), mm, "
-                      r"after each stage:\n(.*?)```", text, re.S).group(1).splitlines()
+    block = (
+        re.search(
+            r"held-out position RMS against the true robot \(noise-free\), mm, "
+            r"after each stage:\n(.*?)```",
+            text,
+            re.S,
+        )
+        .group(1)
+        .splitlines()
+    )
     stages = block[0].split()[3:]  # after "position RMS mm"
     by_stage = report["position_rms_mm_vs_truth_held_out_by_stage"]
-    assert [s.replace("closed", "closed form") for s in stages if s != "form"] == \
-        list(by_stage)
+    assert [s.replace("closed", "closed form") for s in stages if s != "form"] == list(by_stage)
     assert len(block) == 1 + len(by_stage["nominal"])
     for line in block[1:]:
         group, values = line.rsplit(")", 1)
         for stage, value in zip(by_stage, values.split(), strict=True):
-            assert float(value) == pytest.approx(by_stage[stage][group.strip() + ")"],
-                                                 abs=0.005), (group, stage)
-    noise = re.search(r"estimated noise is printed too: ([\d.]+) mm per axis and\s+([\d.]+)°",
-                      text)
+            assert float(value) == pytest.approx(by_stage[stage][group.strip() + ")"], abs=0.005), (
+                group,
+                stage,
+            )
+    noise = re.search(r"estimated noise is printed too: ([\d.]+) mm per axis and\s+([\d.]+)°", text)
     assert float(noise.group(1)) == pytest.approx(
-        report["refine"]["noise"]["position_sigma_mm"], abs=0.002)
+        report["refine"]["noise"]["position_sigma_mm"], abs=0.002
+    )
     assert float(noise.group(2)) == pytest.approx(
-        report["refine"]["noise"]["rotation_sigma_deg_per_component"], abs=0.002)
+        report["refine"]["noise"]["rotation_sigma_deg_per_component"], abs=0.002
+    )
 
 
 def test_the_python_api_example_runs(tmp_path, monkeypatch, capsys):

@@ -34,9 +34,11 @@ ETH = Path(__file__).resolve().parent / "data" / "eth_asl_robot_arm"
 
 # -- independent helpers ----------------------------------------------------------------
 
+
 def _inv(T):
-    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]
-                    ).reshape(np.shape(T))
+    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
+        np.shape(T)
+    )
 
 
 def _angle(R_a, R_b):
@@ -54,12 +56,14 @@ def _screw_trajectory(t, *, space_fixed):
     for ti in np.atleast_1d(t):
         turn = pin.exp3(1.3 * ti * AXIS)
         R = turn @ R_START if space_fixed else R_START @ turn
-        out.append(pin.SE3(R, np.array([0.2, -0.1, 0.5]) + ti * np.array([0.03, 0.07, -0.05])
-                           ).homogeneous)
+        out.append(
+            pin.SE3(R, np.array([0.2, -0.1, 0.5]) + ti * np.array([0.03, 0.07, -0.05])).homogeneous
+        )
     return np.array(out)
 
 
 # -- interpolation against independent truth -------------------------------------------
+
 
 @pytest.mark.parametrize("space_fixed", [False, True], ids=["body-axis", "space-axis"])
 def test_interpolation_is_exact_on_a_constant_rate_screw(space_fixed):
@@ -69,8 +73,9 @@ def test_interpolation_is_exact_on_a_constant_rate_screw(space_fixed):
     t_query = np.concatenate([rng.uniform(t[0], t[-1], size=200), t[[0, 7, -1]]])
     got, valid = interpolate_poses(t, a_T_bs, t_query)
     assert got.shape == (203, 4, 4) and valid.all()
-    np.testing.assert_allclose(got, _screw_trajectory(t_query, space_fixed=space_fixed),
-                               atol=1e-12, rtol=0.0)
+    np.testing.assert_allclose(
+        got, _screw_trajectory(t_query, space_fixed=space_fixed), atol=1e-12, rtol=0.0
+    )
 
 
 def test_slerp_midpoint_is_the_rotation_by_half_the_relative_angle():
@@ -80,11 +85,13 @@ def test_slerp_midpoint_is_the_rotation_by_half_the_relative_angle():
         axis /= np.linalg.norm(axis)
         R_a = pin.exp3(rng.normal(size=3))
         R_b = R_a @ pin.exp3(theta * axis)
-        stream = np.array([pin.SE3(R_a, np.zeros(3)).homogeneous,
-                           pin.SE3(R_b, np.ones(3)).homogeneous])
+        stream = np.array(
+            [pin.SE3(R_a, np.zeros(3)).homogeneous, pin.SE3(R_b, np.ones(3)).homogeneous]
+        )
         got, _ = interpolate_poses([2.0, 4.0], stream, [3.0, 2.5])
-        np.testing.assert_allclose(got[0, :3, :3], R_a @ pin.exp3(0.5 * theta * axis),
-                                   atol=1e-12, rtol=0.0)
+        np.testing.assert_allclose(
+            got[0, :3, :3], R_a @ pin.exp3(0.5 * theta * axis), atol=1e-12, rtol=0.0
+        )
         assert _angle(R_a, got[0, :3, :3]) == pytest.approx(theta / 2, abs=1e-12)
         np.testing.assert_allclose(got[0, :3, 3], 0.5, atol=1e-15)
         # Eigen's quaternion SLERP (via Pinocchio) at another fraction
@@ -102,8 +109,9 @@ def test_a_query_at_a_stamp_returns_that_sample_exactly():
 
 def test_query_shape_is_preserved():
     t = np.array([0.0, 1.0, 2.0])
-    got, valid = interpolate_poses(t, _screw_trajectory(t, space_fixed=False),
-                                   [[0.5, 1.5], [0.2, 1.0]])
+    got, valid = interpolate_poses(
+        t, _screw_trajectory(t, space_fixed=False), [[0.5, 1.5], [0.2, 1.0]]
+    )
     assert got.shape == (2, 2, 4, 4) and valid.shape == (2, 2)
     scalar, scalar_valid = interpolate_poses(t, _screw_trajectory(t, space_fixed=False), 0.5)
     assert scalar.shape == (4, 4) and scalar_valid.shape == ()
@@ -112,8 +120,11 @@ def test_query_shape_is_preserved():
 def test_queries_outside_the_stream_are_refused():
     t = np.array([1.0, 2.0, 3.0])
     a_T_bs = _screw_trajectory(t, space_fixed=False)
-    with pytest.raises(ValueError, match=r"2 of 4 query times lie outside the stream's time "
-                                         r"range \[1\.0, 3\.0\] s"):
+    with pytest.raises(
+        ValueError,
+        match=r"2 of 4 query times lie outside the stream's time "
+        r"range \[1\.0, 3\.0\] s",
+    ):
         interpolate_poses(t, a_T_bs, [0.5, 1.5, 2.5, 3.01])
     with pytest.raises(ValueError, match="1 of 1 query times"):
         interpolate_poses(t, a_T_bs, [np.nan])
@@ -131,11 +142,14 @@ def test_queries_across_a_long_gap_are_masked():
         interpolate_poses(t, a_T_bs, [0.2], max_gap_s=0.0)
 
 
-@pytest.mark.parametrize(("t", "match"), [
-    ([0.0, 0.2, 0.1], r"strictly increasing; t\[1\] = 0\.2 and t\[2\] = 0\.1"),
-    ([0.0, 0.1, 0.1], r"strictly increasing; t\[1\] = 0\.1 and t\[2\] = 0\.1"),
-    ([[0.0, 0.1, 0.2]], r"stamps must have shape \(n,\)"),
-])
+@pytest.mark.parametrize(
+    ("t", "match"),
+    [
+        ([0.0, 0.2, 0.1], r"strictly increasing; t\[1\] = 0\.2 and t\[2\] = 0\.1"),
+        ([0.0, 0.1, 0.1], r"strictly increasing; t\[1\] = 0\.1 and t\[2\] = 0\.1"),
+        ([[0.0, 0.1, 0.2]], r"stamps must have shape \(n,\)"),
+    ],
+)
 def test_unordered_or_duplicate_stamps_are_refused(t, match):
     with pytest.raises(ValueError, match=match):
         interpolate_poses(t, _screw_trajectory([0.0, 0.1, 0.2], space_fixed=False), [0.05])
@@ -145,11 +159,11 @@ def test_a_single_sample_or_mismatched_poses_are_refused():
     with pytest.raises(ValueError, match="at least 2 samples"):
         interpolate_poses([0.0], _screw_trajectory([0.0], space_fixed=False), [0.0])
     with pytest.raises(ValueError, match=r"poses must have shape \(3, 4, 4\)"):
-        interpolate_poses([0.0, 1.0, 2.0], _screw_trajectory([0.0, 1.0], space_fixed=False),
-                          [0.5])
+        interpolate_poses([0.0, 1.0, 2.0], _screw_trajectory([0.0, 1.0], space_fixed=False), [0.5])
 
 
 # -- reading ETH CSV files --------------------------------------------------------------
+
 
 def _line(t, T):
     q = pin.Quaternion(T[:3, :3])
@@ -158,17 +172,23 @@ def _line(t, T):
 
 def test_read_pose_csv_reads_xyz_and_scalar_last_quaternions(tmp_path):
     path = tmp_path / "poses.csv"
-    path.write_text("0.5, 1.0, 2.0, 3.0, 0.0, 0.0, 0.7071067811865476, 0.7071067811865476\n"
-                    "\n"
-                    "0.75, -1.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0\n")
+    path.write_text(
+        "0.5, 1.0, 2.0, 3.0, 0.0, 0.0, 0.7071067811865476, 0.7071067811865476\n"
+        "\n"
+        "0.75, -1.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0\n"
+    )
     t, a_T_bs = read_pose_csv(path)
     np.testing.assert_array_equal(t, [0.5, 0.75])
-    np.testing.assert_allclose(a_T_bs[0], pin.SE3(pin.exp3(np.array([0.0, 0.0, np.pi / 2])),
-                                                  np.array([1.0, 2.0, 3.0])).homogeneous,
-                               atol=1e-15)
-    np.testing.assert_allclose(a_T_bs[1], pin.SE3(np.diag([1.0, -1.0, -1.0]),
-                                                  np.array([-1.0, 0.0, 0.5])).homogeneous,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        a_T_bs[0],
+        pin.SE3(pin.exp3(np.array([0.0, 0.0, np.pi / 2])), np.array([1.0, 2.0, 3.0])).homogeneous,
+        atol=1e-15,
+    )
+    np.testing.assert_allclose(
+        a_T_bs[1],
+        pin.SE3(np.diag([1.0, -1.0, -1.0]), np.array([-1.0, 0.0, 0.5])).homogeneous,
+        atol=1e-15,
+    )
 
 
 def test_read_pose_csv_sorts_and_drops_exact_duplicates(tmp_path, caplog):
@@ -185,16 +205,23 @@ def test_read_pose_csv_sorts_and_drops_exact_duplicates(tmp_path, caplog):
     assert "dropped 3 exact duplicate lines" in caplog.text
 
 
-@pytest.mark.parametrize(("text", "match"), [
-    ("0.0, 1, 2, 3, 0, 0, 0, 1\n0.1, 1, 2, 3, 0, 0, 1\n",
-     r"bad\.csv:2: expected 8 comma-separated numbers \(t, x, y, z, qx, qy, qz, qw\), got 7"),
-    ("0.0, 1, 2, 3, 0, 0, 0, 1\n\n0.1, 1, 2, three, 0, 0, 0, 1\n", r"bad\.csv:3: not a number"),
-    ("0.0, 1, 2, nan, 0, 0, 0, 1\n", r"bad\.csv:1: all values must be finite"),
-    ("0.0, 1, 2, 3, 0, 0, 0, 1.01\n", r"bad\.csv:1: quaternion .* has norm 1\.01, expected 1"),
-    ("0.0, 1, 2, 3, 0, 0, 0, 1\n0.0, 1, 2, 3.5, 0, 0, 0, 1\n",
-     r"bad\.csv: lines 1 and 2 share the stamp 0\.0 but give different poses"),
-    ("\n", r"bad\.csv: no poses"),
-])
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        (
+            "0.0, 1, 2, 3, 0, 0, 0, 1\n0.1, 1, 2, 3, 0, 0, 1\n",
+            r"bad\.csv:2: expected 8 comma-separated numbers \(t, x, y, z, qx, qy, qz, qw\), got 7",
+        ),
+        ("0.0, 1, 2, 3, 0, 0, 0, 1\n\n0.1, 1, 2, three, 0, 0, 0, 1\n", r"bad\.csv:3: not a number"),
+        ("0.0, 1, 2, nan, 0, 0, 0, 1\n", r"bad\.csv:1: all values must be finite"),
+        ("0.0, 1, 2, 3, 0, 0, 0, 1.01\n", r"bad\.csv:1: quaternion .* has norm 1\.01, expected 1"),
+        (
+            "0.0, 1, 2, 3, 0, 0, 0, 1\n0.0, 1, 2, 3.5, 0, 0, 0, 1\n",
+            r"bad\.csv: lines 1 and 2 share the stamp 0\.0 but give different poses",
+        ),
+        ("\n", r"bad\.csv: no poses"),
+    ],
+)
 def test_read_pose_csv_names_file_and_line_of_bad_rows(tmp_path, text, match):
     path = tmp_path / "bad.csv"
     path.write_text(text)
@@ -209,21 +236,30 @@ def test_read_pose_csv_missing_file(tmp_path):
 
 # -- alignment and time offset on a synthetic hand-eye set-up with a known delay --------
 
-X_TRUE = pin.SE3(pin.exp3(np.array([1.2, -0.4, 0.9])), np.array([0.03, -0.05, 0.08])
-                 ).homogeneous  # hand_T_eye
-BASE_T_TARGET = pin.SE3(pin.exp3(np.array([0.1, 0.3, -2.0])), np.array([0.9, 0.2, -0.1])
-                        ).homogeneous
+X_TRUE = pin.SE3(
+    pin.exp3(np.array([1.2, -0.4, 0.9])), np.array([0.03, -0.05, 0.08])
+).homogeneous  # hand_T_eye
+BASE_T_TARGET = pin.SE3(
+    pin.exp3(np.array([0.1, 0.3, -2.0])), np.array([0.9, 0.2, -0.1])
+).homogeneous
 DELAY_S = 0.037  # camera stamps lag the robot's: the offset to add to the hand stamps
 
 
 def _hand(t):
     """A smooth, non-geodesic hand trajectory (rotations about three axes at once)."""
-    return np.array([pin.SE3(
-        pin.exp3(np.array([0.6 * np.sin(0.9 * s), 0.0, 0.0]))
-        @ pin.exp3(np.array([0.0, 0.5 * np.sin(0.7 * s + 1.0), 0.0]))
-        @ pin.exp3(np.array([0.0, 0.0, 0.8 * np.sin(0.5 * s + 2.0)])),
-        np.array([0.5 + 0.15 * np.sin(0.6 * s), 0.1 * np.cos(0.8 * s), 0.6 + 0.1 * np.sin(s)]),
-    ).homogeneous for s in t])
+    return np.array(
+        [
+            pin.SE3(
+                pin.exp3(np.array([0.6 * np.sin(0.9 * s), 0.0, 0.0]))
+                @ pin.exp3(np.array([0.0, 0.5 * np.sin(0.7 * s + 1.0), 0.0]))
+                @ pin.exp3(np.array([0.0, 0.0, 0.8 * np.sin(0.5 * s + 2.0)])),
+                np.array(
+                    [0.5 + 0.15 * np.sin(0.6 * s), 0.1 * np.cos(0.8 * s), 0.6 + 0.1 * np.sin(s)]
+                ),
+            ).homogeneous
+            for s in t
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -245,16 +281,20 @@ def test_aligned_pairs_close_the_loop_at_the_true_offset(synthetic_streams, capl
     assert np.abs(loop[:, :3, 3] - BASE_T_TARGET[:3, 3]).max() < 2e-4
     assert max(_angle(R, BASE_T_TARGET[:3, :3]) for R in loop[:, :3, :3]) < 2e-4
     A3, _ = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=DELAY_S, step=3)
-    np.testing.assert_array_equal(A3, align_streams(
-        t_hand, base_T_hand, t_eye[::3], target_T_eye[::3], offset_s=DELAY_S)[0])
+    np.testing.assert_array_equal(
+        A3, align_streams(t_hand, base_T_hand, t_eye[::3], target_T_eye[::3], offset_s=DELAY_S)[0]
+    )
 
 
 def test_align_streams_refuses_bad_step_and_disjoint_clocks(synthetic_streams):
     t_hand, base_T_hand, t_eye, target_T_eye = synthetic_streams
     with pytest.raises(ValueError, match="step must be a positive integer, got 0"):
         align_streams(t_hand, base_T_hand, t_eye, target_T_eye, step=0)
-    with pytest.raises(ValueError, match=r"no camera sample lies within the hand stream's time "
-                                         r"range: camera \[1000\.0"):
+    with pytest.raises(
+        ValueError,
+        match=r"no camera sample lies within the hand stream's time "
+        r"range: camera \[1000\.0",
+    ):
         align_streams(t_hand, base_T_hand, t_eye - t_eye[0] + 1000.0, target_T_eye)
 
 
@@ -275,8 +315,11 @@ def test_best_time_offset_refuses_bad_searches(synthetic_streams):
     t_hand, base_T_hand, t_eye, target_T_eye = synthetic_streams
     with pytest.raises(ValueError, match=r"need search_s = \(lo, hi\) with lo <= hi"):
         best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye, search_s=(0.1, -0.1))
-    with pytest.raises(ValueError, match=r"no camera sample stays within the hand stream's "
-                                         r"time range for every offset in \[-20\.0, 20\.0\]"):
+    with pytest.raises(
+        ValueError,
+        match=r"no camera sample stays within the hand stream's "
+        r"time range for every offset in \[-20\.0, 20\.0\]",
+    ):
         best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye, search_s=(-20.0, 20.0))
 
 
@@ -289,6 +332,7 @@ def test_best_time_offset_fails_when_no_offset_determines_x():
 
 
 # -- ETH ASL robot arm, real and simulated ------------------------------------------------
+
 
 @dataclass(frozen=True)
 class EthCase:
@@ -305,20 +349,36 @@ class EthCase:
 
 
 CASES = {
-    "real": EthCase("real/robot_arm_complete_bag_color_and_ir_base_link_sr300_hinge.csv",
-                    "real/robot_arm_complete_bag_color_and_ir_target_ir.csv",
-                    -0.02, 3.2, (0.0011, -0.0176, 0.0043), (0.89, 0.46, -0.01), 6.0, None),
-    "sim": EthCase("sim/robot_arm_sim_hand.csv", "sim/robot_arm_sim_camera.csv",
-                   0.0, 0.8, (-0.0049, -0.0107, 0.0064), (0.85, 0.53, -0.06), 2.0,
-                   (1.0, 0.0, 0.0)),
+    "real": EthCase(
+        "real/robot_arm_complete_bag_color_and_ir_base_link_sr300_hinge.csv",
+        "real/robot_arm_complete_bag_color_and_ir_target_ir.csv",
+        -0.02,
+        3.2,
+        (0.0011, -0.0176, 0.0043),
+        (0.89, 0.46, -0.01),
+        6.0,
+        None,
+    ),
+    "sim": EthCase(
+        "sim/robot_arm_sim_hand.csv",
+        "sim/robot_arm_sim_camera.csv",
+        0.0,
+        0.8,
+        (-0.0049, -0.0107, 0.0064),
+        (0.85, 0.53, -0.06),
+        2.0,
+        (1.0, 0.0, 0.0),
+    ),
 }
 
 
 def _eth_file(relative):
     path = ETH / relative
     if not path.is_file():
-        pytest.fail(f"{path}: ETH ASL test data missing (it ships with the repository in "
-                    f"tests/data/eth_asl_robot_arm/; restore it: git checkout -- tests/data)")
+        pytest.fail(
+            f"{path}: ETH ASL test data missing (it ships with the repository in "
+            f"tests/data/eth_asl_robot_arm/; restore it: git checkout -- tests/data)"
+        )
     return path
 
 
@@ -342,21 +402,30 @@ def _eth(name):
     X0 = solve_axxb(A0, B0).hand_T_camera
     # A[i] = X B[i] Y with A = eye_T_target, X = eye_T_hand, B = hand_T_base, Y = base_T_target
     axyb = solve_axyb(B, _inv(A))
-    out = {"case": case, "best": best, "A": A, "B": B, "axxb": axxb, "axyb": axyb,
-           "spread": implied_target_spread(A, axxb.hand_T_camera, B),
-           "spread_at_zero": implied_target_spread(A0, X0, B0)}
+    out = {
+        "case": case,
+        "best": best,
+        "A": A,
+        "B": B,
+        "axxb": axxb,
+        "axyb": axyb,
+        "spread": implied_target_spread(A, axxb.hand_T_camera, B),
+        "spread_at_zero": implied_target_spread(A0, X0, B0),
+    }
     hand_T_eye, hand_T_eye_axyb = axxb.hand_T_camera, _inv(axyb.camera_T_hand)
     t, t_axyb = hand_T_eye[:3, 3], hand_T_eye_axyb[:3, 3]
-    print(f"\n[{name}] best offset {best.offset_s:+.3f} s, {len(A)} pairs: spread "
-          f"{out['spread'][0] * 1e3:.2f} mm / {np.degrees(out['spread'][1]):.3f} deg; offset 0 "
-          f"({len(A0)} pairs): {out['spread_at_zero'][0] * 1e3:.2f} mm / "
-          f"{np.degrees(out['spread_at_zero'][1]):.3f} deg\n  AXXB t = {np.round(t * 1e3, 1)} mm"
-          f" (README {np.round(np.array(case.readme_t_m) * 1e3, 1)}), optical axis "
-          f"{np.round(hand_T_eye[:3, 2], 3)}, rotation condition {axxb.rotation_condition:.3f}\n"
-          f"  AXYB t = {np.round(t_axyb * 1e3, 1)} mm, "
-          f"{np.degrees(_angle(hand_T_eye_axyb[:3, :3], hand_T_eye[:3, :3])):.3f} deg from "
-          f"AXXB; Y t = "
-          f"{np.round(axyb.root_T_target[:3, 3] * 1e3, 1)} mm")
+    print(
+        f"\n[{name}] best offset {best.offset_s:+.3f} s, {len(A)} pairs: spread "
+        f"{out['spread'][0] * 1e3:.2f} mm / {np.degrees(out['spread'][1]):.3f} deg; offset 0 "
+        f"({len(A0)} pairs): {out['spread_at_zero'][0] * 1e3:.2f} mm / "
+        f"{np.degrees(out['spread_at_zero'][1]):.3f} deg\n  AXXB t = {np.round(t * 1e3, 1)} mm"
+        f" (README {np.round(np.array(case.readme_t_m) * 1e3, 1)}), optical axis "
+        f"{np.round(hand_T_eye[:3, 2], 3)}, rotation condition {axxb.rotation_condition:.3f}\n"
+        f"  AXYB t = {np.round(t_axyb * 1e3, 1)} mm, "
+        f"{np.degrees(_angle(hand_T_eye_axyb[:3, :3], hand_T_eye[:3, :3])):.3f} deg from "
+        f"AXXB; Y t = "
+        f"{np.round(axyb.root_T_target[:3, 3] * 1e3, 1)} mm"
+    )
     return out
 
 
@@ -406,13 +475,19 @@ def test_eth_weak_axis_is_what_the_motions_leave_undetermined(name):
     x rests on rotations of 1-2.5 deg (RMS) about the others; the real motions are spread."""
     eth = _eth(name)
     A = eth["A"]
-    rotvecs = np.array([pin.log3(A[j, :3, :3].T @ A[i, :3, :3])
-                        for k in (1, 5, 20, 60) for i, j in zip(range(len(A) - k),
-                                                                range(k, len(A)), strict=True)])
+    rotvecs = np.array(
+        [
+            pin.log3(A[j, :3, :3].T @ A[i, :3, :3])
+            for k in (1, 5, 20, 60)
+            for i, j in zip(range(len(A) - k), range(k, len(A)), strict=True)
+        ]
+    )
     moments, axes = np.linalg.eigh(rotvecs.T @ rotvecs)
     ratio = np.sqrt(moments[-1] / moments[-2])
-    print(f"[{name}] motion axes: RMS ratio {ratio:.1f}, "
-          f"condition {eth['axxb'].rotation_condition:.3f}")
+    print(
+        f"[{name}] motion axes: RMS ratio {ratio:.1f}, "
+        f"condition {eth['axxb'].rotation_condition:.3f}"
+    )
     weak_axis = eth["case"].weak_axis
     if weak_axis is None:
         assert ratio < 3.0 and eth["axxb"].rotation_condition > 0.5

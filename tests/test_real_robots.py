@@ -45,7 +45,8 @@ if robots_dir() is None:  # a test dependency (the "test" extra): fail, never sk
 SIGMA = NoiseModel(1e-3, 1e-3)
 TOL = 1e-8  # m and rad
 MOCAP_T_ROOT = transform_from_rotation_translation(
-    matrix_from_rotation_vector([0.3, -0.2, 1.0]), [1.0, -0.5, 0.2])
+    matrix_from_rotation_vector([0.3, -0.2, 1.0]), [1.0, -0.5, 0.2]
+)
 
 
 @dataclass(frozen=True)
@@ -65,22 +66,41 @@ class RealRobot:
 
 
 REAL_ROBOTS = (
-    RealRobot("panda", "panda_description/urdf/panda.urdf", ("panda_hand",), "panda_hand",
-              frozenset({"meshes", "mimic", "idle joints"})),
-    RealRobot("ur10", "ur_description/urdf/ur10_robot.urdf", ("tool0",), "tool0",
-              frozenset({"meshes"})),
-    RealRobot("tiago", "tiago_description/robots/tiago.urdf",
-              ("arm_tool_link", "xtion_rgb_optical_frame"), "arm_tool_link",
-              frozenset({"meshes", "sensors", "wheels", "prismatic on path",
-                         "idle joints"})),
-    RealRobot("pr2", "pr2_description/urdf/pr2.urdf",
-              ("l_gripper_tool_frame", "r_gripper_tool_frame"), "l_gripper_tool_frame",
-              frozenset({"meshes", "sensors", "mimic", "continuous on path",
-                         "prismatic on path", "idle joints"})),
+    RealRobot(
+        "panda",
+        "panda_description/urdf/panda.urdf",
+        ("panda_hand",),
+        "panda_hand",
+        frozenset({"meshes", "mimic", "idle joints"}),
+    ),
+    RealRobot(
+        "ur10", "ur_description/urdf/ur10_robot.urdf", ("tool0",), "tool0", frozenset({"meshes"})
+    ),
+    RealRobot(
+        "tiago",
+        "tiago_description/robots/tiago.urdf",
+        ("arm_tool_link", "xtion_rgb_optical_frame"),
+        "arm_tool_link",
+        frozenset({"meshes", "sensors", "wheels", "prismatic on path", "idle joints"}),
+    ),
+    RealRobot(
+        "pr2",
+        "pr2_description/urdf/pr2.urdf",
+        ("l_gripper_tool_frame", "r_gripper_tool_frame"),
+        "l_gripper_tool_frame",
+        frozenset(
+            {"meshes", "sensors", "mimic", "continuous on path", "prismatic on path", "idle joints"}
+        ),
+    ),
     # 'head', 'l_hand', 'r_hand' are child links of revolute joints; the known marker goes
     # on 'imu_frame' (fixed on the head); see the export test at the end.
-    RealRobot("icub", "icub_description/robots/icub.urdf", ("head", "l_hand", "r_hand"),
-              "imu_frame", frozenset({"meshes", "sensors", "idle joints"})),
+    RealRobot(
+        "icub",
+        "icub_description/robots/icub.urdf",
+        ("head", "l_hand", "r_hand"),
+        "imu_frame",
+        frozenset({"meshes", "sensors", "idle joints"}),
+    ),
 )
 BY_NAME = {r.name: r for r in REAL_ROBOTS}
 
@@ -114,56 +134,71 @@ def _identifiable_count(robot: Robot, frames: tuple[str, ...]) -> int:
     an end frame that is itself a revolute joint's child link, whose origin a URDF keeps
     on the joint axis."""
     revolute = robot.topology(frames).revolute
-    on_axis = sum(1 for f in frames if robot.path_joints(f)[-1].child == f
-                  and robot.path_joints(f)[-1].is_revolute)
-    return (4 * sum(revolute) + 2 * (len(revolute) - sum(revolute)) + 6 * len(frames)
-            - 2 * on_axis)
+    on_axis = sum(
+        1
+        for f in frames
+        if robot.path_joints(f)[-1].child == f and robot.path_joints(f)[-1].is_revolute
+    )
+    return 4 * sum(revolute) + 2 * (len(revolute) - sum(revolute)) + 6 * len(frames) - 2 * on_axis
 
 
 def _setup(spec: RealRobot, frames: tuple[str, ...], seed: int, n: int | None = None):
     """Nominal and true robots, the joints of the paths, data and held-out configurations."""
     nominal = load_robot(urdf_path(spec.urdf))
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=1.0, origin_deg=0.2,
-                                     axis_deg=0.2, joints=_path_joints(nominal, frames)))
+    truth = load_robot(
+        perturb_robot(
+            nominal,
+            rng,
+            origin_mm=1.0,
+            origin_deg=0.2,
+            axis_deg=0.2,
+            joints=_path_joints(nominal, frames),
+        )
+    )
     names = nominal.topology(frames).joint_names
     qs = random_configurations(*nominal.joint_limits(names), n or spec.n, rng, fraction=0.8)
     q_test = random_joint_values(nominal, names, 30, np.random.default_rng(seed + 1))
     return nominal, truth, names, qs, q_test, rng
 
 
-def _mocap_data(truth: Robot, qs, names, spec: RealRobot, rng: np.random.Generator, *,
-                noise_m: float = 0.0):
+def _mocap_data(
+    truth: Robot, qs, names, spec: RealRobot, rng: np.random.Generator, *, noise_m: float = 0.0
+):
     """Points of three unknown-offset markers per frame and one known, in 'mocap'."""
-    offsets = {(f, f"{f}_m{k}"): rng.normal(0.0, 0.05, size=3)
-               for f in spec.frames for k in range(3)}
+    offsets = {
+        (f, f"{f}_m{k}"): rng.normal(0.0, 0.05, size=3) for f in spec.frames for k in range(3)
+    }
     known = (spec.known_frame, np.array([0.02, -0.01, 0.03]))
     markers = [(f, offset, name) for (f, name), offset in offsets.items()]
     data = simulate(truth, qs, names, markers=[*markers, known], rng=rng, noise_m=noise_m)
     R, p = MOCAP_T_ROOT[:3, :3], MOCAP_T_ROOT[:3, 3]
-    moved = tuple(replace(g, meas_p_point=g.meas_p_point @ R.T + p, measured_in="mocap")
-                  for g in data.points)
+    moved = tuple(
+        replace(g, meas_p_point=g.meas_p_point @ R.T + p, measured_in="mocap") for g in data.points
+    )
     return Measurements(data.joint_names, data.qs, points=moved), offsets, known
 
 
-def _marker_prediction_errors(result, nominal: Robot, truth: Robot, names, q_test, offsets,
-                              known) -> dict[str, float]:
+def _marker_prediction_errors(
+    result, nominal: Robot, truth: Robot, names, q_test, offsets, known
+) -> dict[str, float]:
     """Largest distance (m) per marker between the calibrated prediction in mocap
     (export's w_T_root @ Pinocchio FK of the exported URDF @ estimated offset) and the
     truth's, at held-out configurations."""
-    export = export_urdf(nominal, geometry_from_cpc(result.model),
-                         root_is_measurement_frame=False)
+    export = export_urdf(nominal, geometry_from_cpc(result.model), root_is_measurement_frame=False)
     calibrated = load_robot(export.urdf_xml)
     estimated = {u.name: u.value for u in result.unknowns if u.kind == "offset"}
-    checks = [(f, estimated[f"{f}:{name}"], offset, name)
-              for (f, name), offset in offsets.items()]
+    checks = [(f, estimated[f"{f}:{name}"], offset, name) for (f, name), offset in offsets.items()]
     checks.append((known[0], known[1], known[1], "known"))
     errors = {}
     for frame, offset_hat, offset, name in checks:
         pred = export.w_T_root @ calibrated.frame_poses(q_test, frame, names)
         true = MOCAP_T_ROOT @ truth.frame_poses(q_test, frame, names)
-        d = (pred[:, :3, :3] @ offset_hat + pred[:, :3, 3]
-             - (true[:, :3, :3] @ offset + true[:, :3, 3]))
+        d = (
+            pred[:, :3, :3] @ offset_hat
+            + pred[:, :3, 3]
+            - (true[:, :3, :3] @ offset + true[:, :3, 3])
+        )
         errors[name] = float(np.linalg.norm(d, axis=-1).max())
     return errors
 

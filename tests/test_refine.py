@@ -30,14 +30,24 @@ SIGMA = NoiseModel(0.5e-3, np.radians(0.5) / np.sqrt(3.0))
 def _head_data(seed=0, n=40, noise_m=0.0, noise_rad=0.0, error_mm=5.0, error_deg=1.0):
     nominal = load_robot(HEAD)
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=error_mm, origin_deg=error_deg,
-                                     axis_deg=error_deg))
+    truth = load_robot(
+        perturb_robot(nominal, rng, origin_mm=error_mm, origin_deg=error_deg, axis_deg=error_deg)
+    )
     names = nominal.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
     w_T_target = default_target_pose(truth, qs, names, CAMERAS)
-    data = simulate(truth, qs, names, frames=PLATES, cameras=CAMERAS, rng=rng,
-                    w_T_target=w_T_target, noise_m=noise_m, noise_rad=noise_rad)
+    data = simulate(
+        truth,
+        qs,
+        names,
+        frames=PLATES,
+        cameras=CAMERAS,
+        rng=rng,
+        w_T_target=w_T_target,
+        noise_m=noise_m,
+        noise_rad=noise_rad,
+    )
     return nominal, truth, data, w_T_target
 
 
@@ -49,8 +59,9 @@ def test_noise_free_data_from_the_nominal_gives_the_truth_through_the_urdf():
     names = result.model.topology.joint_names
     qs = random_joint_values(nominal, names, 100, np.random.default_rng(1))
     for frame in (*PLATES, *CAMERAS):
-        dp, dr = pose_discrepancy(calibrated.frame_poses(qs, frame, names),
-                                  truth.frame_poses(qs, frame, names))
+        dp, dr = pose_discrepancy(
+            calibrated.frame_poses(qs, frame, names), truth.frame_poses(qs, frame, names)
+        )
         assert dp < 1e-9 and dr < 1e-9, (frame, dp, dr)
     (target,) = [u for u in result.unknowns if u.kind == "target"]
     np.testing.assert_allclose(target.value, w_T_target, atol=1e-9)
@@ -67,8 +78,13 @@ def test_casadi_residuals_equal_an_independent_numpy_computation():
     T = model.frame_poses(q[pose.sample], pose.frame)
     expected_p = (pose.meas_T_frame[:, :3, 3] - T[:, :3, 3]) / SIGMA.position_m
     E = np.swapaxes(T[:, :3, :3], 1, 2) @ pose.meas_T_frame[:, :3, :3]
-    expected_r = 0.5 * np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0],
-                                 E[:, 1, 0] - E[:, 0, 1]], axis=1) / SIGMA.rotation_rad
+    expected_r = (
+        0.5
+        * np.stack(
+            [E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0], E[:, 1, 0] - E[:, 0, 1]], axis=1
+        )
+        / SIGMA.rotation_rad
+    )
     block = r[: 6 * len(pose.sample)].reshape(-1, 6)
     np.testing.assert_allclose(block[:, :3], expected_p, atol=1e-9)
     np.testing.assert_allclose(block[:, 3:], expected_r, atol=1e-9)
@@ -83,8 +99,9 @@ def test_jacobian_equals_central_differences():
     for k in range(0, problem.n_parameters, 7):
         e = np.zeros(problem.n_parameters)
         e[k] = h
-        numeric = (problem.evaluate(x + e, SIGMA, False)[0]
-                   - problem.evaluate(x - e, SIGMA, False)[0]) / (2 * h)
+        numeric = (
+            problem.evaluate(x + e, SIGMA, False)[0] - problem.evaluate(x - e, SIGMA, False)[0]
+        ) / (2 * h)
         np.testing.assert_allclose(J[:, k], numeric, rtol=1e-5, atol=1e-4)
 
 
@@ -93,8 +110,7 @@ def test_the_estimate_does_not_depend_on_sample_order():
     perm = np.random.default_rng(3).permutation(data.n_samples)
     a = refine(nominal, data, noise=SIGMA)
     b = refine(nominal, data.subset(perm), noise=SIGMA)
-    qs = random_joint_values(nominal, a.model.topology.joint_names, 50,
-                             np.random.default_rng(0))
+    qs = random_joint_values(nominal, a.model.topology.joint_names, 50, np.random.default_rng(0))
     dp, dr = pose_discrepancy(a.model.frame_poses(qs), b.model.frame_poses(qs))
     assert dp < 1e-9 and dr < 1e-9
 
@@ -127,8 +143,9 @@ def test_gross_outliers_are_downweighted_by_the_robust_loss():
     clean = held_out_rms(refine(nominal, data, noise=SIGMA))
     linear = held_out_rms(refine(nominal, corrupt, noise=SIGMA))
     robust = refine(nominal, corrupt, noise=SIGMA, loss="cauchy")
-    flagged = {s for kind, frame, s, _ in robust.downweighted
-               if kind == "pose" and frame == pose.frame}
+    flagged = {
+        s for kind, frame, s, _ in robust.downweighted if kind == "pose" and frame == pose.frame
+    }
     assert set(pose.sample[bad]) <= flagged
     assert held_out_rms(robust) < 1.3 * clean < linear
 
@@ -161,10 +178,12 @@ def test_no_free_parameter_gives_the_nominal_and_undefined_conditioning(loss, no
     assert np.isnan(ident.condition) and np.isnan(ident.observability_o1)
     assert not np.any(result.estimate) and not np.any(result.covariance)
     for group, res in zip(data.poses, result.residuals, strict=True):
-        nominal_p = nominal.frame_poses(data.q_of(data.joint_names)[group.sample], group.frame,
-                                        data.joint_names)[:, :3, 3]
-        np.testing.assert_allclose(res.position_m, group.meas_T_frame[:, :3, 3] - nominal_p,
-                                   atol=1e-12)
+        nominal_p = nominal.frame_poses(
+            data.q_of(data.joint_names)[group.sample], group.frame, data.joint_names
+        )[:, :3, 3]
+        np.testing.assert_allclose(
+            res.position_m, group.meas_T_frame[:, :3, 3] - nominal_p, atol=1e-12
+        )
 
 
 def test_markers_measured_in_an_external_frame_are_recovered():
@@ -179,26 +198,38 @@ def test_markers_measured_in_an_external_frame_are_recovered():
     mocap_T_root[:3, :3] = matrix_from_rotation_vector([0.3, -0.2, 1.0])
     mocap_T_root[:3, 3] = [1.0, -0.5, 0.2]
     offsets = {"m1": [0.05, 0.0, 0.0], "m2": [0.0, 0.04, 0.01], "m3": [0.0, 0.0, 0.06]}
-    data = simulate(truth, qs, names, markers=[("flange", np.array(o), name)
-                                               for name, o in offsets.items()], rng=rng)
-    known = simulate(truth, qs, names, markers=(("flange", np.array([0.02, 0.02, 0.0])),),
-                     rng=rng)
+    data = simulate(
+        truth,
+        qs,
+        names,
+        markers=[("flange", np.array(o), name) for name, o in offsets.items()],
+        rng=rng,
+    )
+    known = simulate(truth, qs, names, markers=(("flange", np.array([0.02, 0.02, 0.0])),), rng=rng)
     data = concatenate_measurements(data, known)
-    moved = tuple(replace(g, meas_p_point=g.meas_p_point @ mocap_T_root[:3, :3].T
-                          + mocap_T_root[:3, 3], measured_in="mocap") for g in data.points)
+    moved = tuple(
+        replace(
+            g,
+            meas_p_point=g.meas_p_point @ mocap_T_root[:3, :3].T + mocap_T_root[:3, 3],
+            measured_in="mocap",
+        )
+        for g in data.points
+    )
     data = Measurements(data.joint_names, data.qs, points=moved)
     result = refine(nominal, data, noise=SIGMA)
     assert result.model_frame == "mocap"
-    export = export_urdf(nominal, geometry_from_cpc(result.model),
-                         root_is_measurement_frame=False)
+    export = export_urdf(nominal, geometry_from_cpc(result.model), root_is_measurement_frame=False)
     calibrated = load_robot(export.urdf_xml)
     for name, offset in offsets.items():
         (u,) = [u for u in result.unknowns if u.name == f"flange:{name}"]
         q_test = random_joint_values(nominal, names, 30, np.random.default_rng(8))
         pred = export.w_T_root @ calibrated.frame_poses(q_test, "flange", names)
         true = mocap_T_root @ truth.frame_poses(q_test, "flange", names)
-        np.testing.assert_allclose(pred[:, :3, :3] @ u.value + pred[:, :3, 3],
-                                   true[:, :3, :3] @ offset + true[:, :3, 3], atol=1e-9)
+        np.testing.assert_allclose(
+            pred[:, :3, :3] @ u.value + pred[:, :3, 3],
+            true[:, :3, :3] @ offset + true[:, :3, 3],
+            atol=1e-9,
+        )
     assert inverse_transform(export.w_T_root).shape == (4, 4)
 
 

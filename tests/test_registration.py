@@ -20,8 +20,9 @@ PLATE = 0.02 * np.array([[x, y, 0.0] for y in (-1, 0, 1) for x in (-1, 0, 1)])
 def random_poses(rng: np.random.Generator, n: int) -> np.ndarray:
     rotvecs = rng.normal(size=(n, 3))
     rotvecs *= (rng.uniform(0.0, np.pi, n) / np.linalg.norm(rotvecs, axis=1))[:, None]
-    return transform_from_rotation_translation(matrix_from_rotation_vector(rotvecs),
-                                                rng.normal(0.0, 1.0, (n, 3)))
+    return transform_from_rotation_translation(
+        matrix_from_rotation_vector(rotvecs), rng.normal(0.0, 1.0, (n, 3))
+    )
 
 
 def apply(T: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -35,18 +36,22 @@ def horn_rotation(frame_p: np.ndarray, meas_p: np.ndarray) -> np.ndarray:
     b = meas_p - meas_p.mean(axis=0)
     S = a.T @ b  # S[i, j] = sum a_i b_j
     (sxx, sxy, sxz), (syx, syy, syz), (szx, szy, szz) = S
-    N = np.array([
-        [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
-        [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
-        [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
-        [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
-    ])
+    N = np.array(
+        [
+            [sxx + syy + szz, syz - szy, szx - sxz, sxy - syx],
+            [syz - szy, sxx - syy - szz, sxy + syx, szx + sxz],
+            [szx - sxz, sxy + syx, -sxx + syy - szz, syz + szy],
+            [sxy - syx, szx + sxz, syz + szy, -sxx - syy + szz],
+        ]
+    )
     w, x, y, z = np.linalg.eigh(N)[1][:, -1]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def test_recovers_single_pose_exactly() -> None:
@@ -79,10 +84,13 @@ def test_batched_frame_points_broadcast() -> None:
     rng = np.random.default_rng(4)
     frame_ps = rng.normal(0.0, 0.1, (7, 4, 3))
     meas_T_frames = random_poses(rng, 7)
-    meas_ps = np.einsum("nij,nkj->nki", meas_T_frames[:, :3, :3], frame_ps) \
+    meas_ps = (
+        np.einsum("nij,nkj->nki", meas_T_frames[:, :3, :3], frame_ps)
         + meas_T_frames[:, None, :3, 3]
-    np.testing.assert_allclose(register_points(frame_ps, meas_ps), meas_T_frames,
-                               rtol=0, atol=1e-12)
+    )
+    np.testing.assert_allclose(
+        register_points(frame_ps, meas_ps), meas_T_frames, rtol=0, atol=1e-12
+    )
 
 
 def test_reflection_fix_on_coplanar_noisy_points() -> None:
@@ -91,8 +99,9 @@ def test_reflection_fix_on_coplanar_noisy_points() -> None:
     rng = np.random.default_rng(5)
     meas_T_frames = random_poses(rng, 200)
     meas_ps = apply(meas_T_frames, PLATE) + rng.normal(0.0, 1e-3, (200, 9, 3))
-    H = np.einsum("nki,kj->nij", meas_ps - meas_ps.mean(axis=1, keepdims=True),
-                  PLATE - PLATE.mean(axis=0))
+    H = np.einsum(
+        "nki,kj->nij", meas_ps - meas_ps.mean(axis=1, keepdims=True), PLATE - PLATE.mean(axis=0)
+    )
     U, _, Vt = np.linalg.svd(H)
     naive_det = np.linalg.det(U @ Vt)
     assert np.sum(naive_det < 0) >= 20  # the reflection case really occurs here
@@ -100,8 +109,9 @@ def test_reflection_fix_on_coplanar_noisy_points() -> None:
     got = register_points(PLATE, meas_ps)
     R = got[:, :3, :3]
     np.testing.assert_allclose(np.linalg.det(R), 1.0, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape),
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        R @ np.swapaxes(R, 1, 2), np.broadcast_to(np.eye(3), R.shape), rtol=0, atol=1e-12
+    )
     for k in np.flatnonzero(naive_det < 0)[:20]:
         np.testing.assert_allclose(R[k], horn_rotation(PLATE, meas_ps[k]), rtol=0, atol=1e-9)
     assert rotation_angle(np.swapaxes(R, 1, 2) @ meas_T_frames[:, :3, :3]).max() < 0.2
@@ -116,8 +126,9 @@ def test_reflection_fix_on_mirrored_points_is_least_squares_rotation() -> None:
     got = register_points(frame_p, meas_p)
     np.testing.assert_allclose(np.linalg.det(got[:3, :3]), 1.0, rtol=0, atol=1e-12)
     np.testing.assert_allclose(got[:3, :3], horn_rotation(frame_p, meas_p), rtol=0, atol=1e-9)
-    np.testing.assert_allclose(got[:3, 3], meas_p.mean(axis=0) - got[:3, :3]
-                               @ frame_p.mean(axis=0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        got[:3, 3], meas_p.mean(axis=0) - got[:3, :3] @ frame_p.mean(axis=0), rtol=0, atol=1e-12
+    )
 
 
 def test_noisy_points_match_horn() -> None:
@@ -127,8 +138,9 @@ def test_noisy_points_match_horn() -> None:
     meas_ps = apply(meas_T_frames, frame_p) + rng.normal(0.0, 0.01, (30, 9, 3))
     got = register_points(frame_p, meas_ps)
     for k in range(30):
-        np.testing.assert_allclose(got[k, :3, :3], horn_rotation(frame_p, meas_ps[k]),
-                                   rtol=0, atol=1e-9)
+        np.testing.assert_allclose(
+            got[k, :3, :3], horn_rotation(frame_p, meas_ps[k]), rtol=0, atol=1e-9
+        )
 
 
 def test_position_error_statistics() -> None:
@@ -152,8 +164,9 @@ def test_invariant_to_point_order_and_length_unit(seed: int, scale: float) -> No
     meas_p = apply(random_poses(rng, 1)[0], frame_p) + rng.normal(0.0, 0.005, (6, 3))
     ref = register_points(frame_p, meas_p)
     perm = rng.permutation(6)
-    np.testing.assert_allclose(register_points(frame_p[perm], meas_p[perm]), ref,
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        register_points(frame_p[perm], meas_p[perm]), ref, rtol=0, atol=1e-12
+    )
     scaled = register_points(scale * frame_p, scale * meas_p)
     np.testing.assert_allclose(scaled[:3, :3], ref[:3, :3], rtol=0, atol=1e-10)
     np.testing.assert_allclose(scaled[:3, 3] / scale, ref[:3, 3], rtol=0, atol=1e-10)

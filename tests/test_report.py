@@ -80,8 +80,15 @@ def test_every_problem_parameter_and_kinematic_row_has_the_unit_of_its_joint_typ
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = head.joint_limits(names)
     qs = random_configurations(lower, upper, 8, rng, fraction=0.8)
-    data = simulate(head, qs, names, frames=PLATES, cameras=CAMERAS, rng=rng,
-                    w_T_target=default_target_pose(head, qs, names, CAMERAS))
+    data = simulate(
+        head,
+        qs,
+        names,
+        frames=PLATES,
+        cameras=CAMERAS,
+        rng=rng,
+        w_T_target=default_target_pose(head, qs, names, CAMERAS),
+    )
     problem = build_problem(head, data, parameters="offsets")
     topo = problem.model0.topology
     for owner, field in problem.names:
@@ -92,13 +99,19 @@ def test_every_problem_parameter_and_kinematic_row_has_the_unit_of_its_joint_typ
             assert unit in ("rad", "m")
     model = cpc_from_robot(head, (*PLATES, *CAMERAS))
     assert {parameter_unit(o, n, model.topology) for o, n, _ in model.describe()} == {
-        "rad", "m", "unitless"}
+        "rad",
+        "m",
+        "unitless",
+    }
 
 
-@pytest.mark.parametrize(("owner", "field", "message"), [
-    ("pan", "bogus", "parameter ('pan', 'bogus'): unknown field"),
-    ("left_plate", "zero_offset", "'left_plate' is not a joint of the model"),
-])
+@pytest.mark.parametrize(
+    ("owner", "field", "message"),
+    [
+        ("pan", "bogus", "parameter ('pan', 'bogus'): unknown field"),
+        ("left_plate", "zero_offset", "'left_plate' is not a joint of the model"),
+    ],
+)
 def test_an_unknown_parameter_is_refused(topology, owner, field, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         parameter_unit(owner, field, topology)
@@ -112,9 +125,17 @@ def outlier_run(tmp_path_factory, head):
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = head.joint_limits(names)
     qs = random_configurations(lower, upper, 60, rng, fraction=0.8)
-    data = simulate(truth, qs, names, frames=PLATES, cameras=CAMERAS, rng=rng,
-                    w_T_target=default_target_pose(truth, qs, names, CAMERAS),
-                    noise_m=0.3e-3, noise_rad=np.radians(0.2))
+    data = simulate(
+        truth,
+        qs,
+        names,
+        frames=PLATES,
+        cameras=CAMERAS,
+        rng=rng,
+        w_T_target=default_target_pose(truth, qs, names, CAMERAS),
+        noise_m=0.3e-3,
+        noise_rad=np.radians(0.2),
+    )
     (k,) = [k for k, g in enumerate(data.poses) if g.frame == "left_plate"]
     pose = data.poses[k]
     rows = np.arange(3, 3 + 7 * 5, 5)
@@ -128,12 +149,27 @@ def outlier_run(tmp_path_factory, head):
     write_measurements(out / "data.json", replace(data, poses=tuple(poses)))
     screen = io.StringIO()
     with contextlib.redirect_stdout(screen):
-        code = main(["calibrate", str(out / "data.json"), "--urdf", str(HEAD), "--out",
-                     str(out / "cal.urdf"), "--report", str(out / "report.json")])
+        code = main(
+            [
+                "calibrate",
+                str(out / "data.json"),
+                "--urdf",
+                str(HEAD),
+                "--out",
+                str(out / "cal.urdf"),
+                "--report",
+                str(out / "report.json"),
+            ]
+        )
     assert code == 0
     report = json.loads((out / "report.json").read_text())
-    return {"samples": pose.sample[rows], "report": report, "screen": screen.getvalue(),
-            "data": read_measurements(out / "data.json"), "dir": out}
+    return {
+        "samples": pose.sample[rows],
+        "report": report,
+        "screen": screen.getvalue(),
+        "data": read_measurements(out / "data.json"),
+        "dir": out,
+    }
 
 
 def test_downweighted_observations_are_named_worst_first(outlier_run):
@@ -144,7 +180,11 @@ def test_downweighted_observations_are_named_worst_first(outlier_run):
     order = np.argsort(OUTLIERS_MM)[::-1]
     for row, c in zip(down[:7], order, strict=True):
         assert (row["sample"], row["kind"], row["frame"], row["marker"]) == (
-            int(outlier_run["samples"][c]), "pose", "left_plate", None)
+            int(outlier_run["samples"][c]),
+            "pose",
+            "left_plate",
+            None,
+        )
         assert row["position_residual_mm"] == pytest.approx(OUTLIERS_MM[c], abs=3.0)
         assert row["rotation_residual_deg"] < 1.5  # orientation untouched: noise and fit
 
@@ -167,7 +207,8 @@ def test_fixed_parameters_are_written_as_fixed_with_their_units(outlier_run):
     joints = ("x_table", "y_table", "pan", "tilt", "vergence_left", "vergence_right")
     # parameters="full": the base and the joint zero offsets are redundant with the chart
     expected_fixed = {("base", f) for f in ("rot_x", "rot_y", "rot_z", "x", "y", "z")} | {
-        (j, "zero_offset") for j in joints}
+        (j, "zero_offset") for j in joints
+    }
     assert {(p["owner"], p["field"]) for p in params if p["fixed"]} == expected_fixed
     for p in params:
         if p["fixed"]:
@@ -177,8 +218,9 @@ def test_fixed_parameters_are_written_as_fixed_with_their_units(outlier_run):
     unit = {(p["owner"], p["field"]): p["unit"] for p in params}
     assert unit[("pan", "zero_offset")] == "rad" and unit[("x_table", "zero_offset")] == "m"
     assert unit[("pan", "b_tilt_1")] == "rad" and unit[("pan", "l_x")] == "m"
-    kinematics = {(k["owner"], k["name"]): k["unit"]
-                  for k in outlier_run["report"]["refine"]["kinematics"]}
+    kinematics = {
+        (k["owner"], k["name"]): k["unit"] for k in outlier_run["report"]["refine"]["kinematics"]
+    }
     assert kinematics[("pan", "b_x")] == "unitless" and kinematics[("pan", "beta")] == "rad"
 
 

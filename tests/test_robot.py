@@ -54,8 +54,9 @@ def _pinocchio_fk(urdf, names, q, frame):
     config = pin.neutral(model)
     for name, value in zip(names, q, strict=True):
         joint = model.joints[model.getJointId(name)]
-        config[joint.idx_q:joint.idx_q + joint.nq] = (
-            [np.cos(value), np.sin(value)] if joint.nq == 2 else [value])
+        config[joint.idx_q : joint.idx_q + joint.nq] = (
+            [np.cos(value), np.sin(value)] if joint.nq == 2 else [value]
+        )
     pin.framesForwardKinematics(model, data, config)
     return data.oMf[model.getFrameId(frame)].homogeneous
 
@@ -79,6 +80,7 @@ def test_frame_poses_batch_in_batch_out():
         robot.frame_poses(0.0, "flange")
     with pytest.raises(ValueError, match=r"qs: expected shape \(6,\) or \(n, 6\)"):
         robot.frame_poses(qs[None], "flange")
+
 
 def test_unlisted_joints_are_held_at_zero():
     robot = load_robot(MIXED)
@@ -150,8 +152,8 @@ def test_import_kinfw_loads_neither_casadi_nor_meshcat():
     import subprocess
     import sys
 
-    code = ("import sys, kinfw; "
-            "print(int('casadi' in sys.modules), int('meshcat' in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout.split()
+    code = "import sys, kinfw; print(int('casadi' in sys.modules), int('meshcat' in sys.modules))"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
     assert out == ["0", "0"]

@@ -60,20 +60,27 @@ def test_noise_free_closed_form_recovers_the_truth_for_every_m(head):
 
 def test_noise_free_identification_matches_pinocchio_fk_of_the_true_urdf(head):
     # Independent truth: Pinocchio FK of a perturbed URDF, data built here, not by the study.
-    truth = load_robot(perturb_robot(head, np.random.default_rng(7), origin_mm=5.0,
-                                     origin_deg=1.0, axis_deg=1.0))
+    truth = load_robot(
+        perturb_robot(head, np.random.default_rng(7), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
+    )
     names = head.topology(FRAMES).joint_names
     lower, upper = head.joint_limits(names)
     qs, _ = one_joint_at_a_time(lower, upper, per_joint=3, fraction=0.8)
     sample = np.arange(len(qs))
-    data = Measurements(joint_names=names, qs=qs, poses=tuple(
-        PoseObservations(frame=f, sample=sample, meas_T_frame=truth.frame_poses(qs, f, names))
-        for f in FRAMES))
+    data = Measurements(
+        joint_names=names,
+        qs=qs,
+        poses=tuple(
+            PoseObservations(frame=f, sample=sample, meas_T_frame=truth.frame_poses(qs, f, names))
+            for f in FRAMES
+        ),
+    )
     model = identify_closed_form(head, data).model
     test_qs = random_configurations(lower, upper, 30, np.random.default_rng(1), fraction=0.8)
     for f in FRAMES:
-        np.testing.assert_allclose(model.frame_poses(test_qs, f),
-                                   truth.frame_poses(test_qs, f, names), atol=1e-10)
+        np.testing.assert_allclose(
+            model.frame_poses(test_qs, f), truth.frame_poses(test_qs, f, names), atol=1e-10
+        )
 
 
 def test_error_decreases_with_m_and_grows_with_sigma(tiny):
@@ -101,8 +108,14 @@ def test_a_cell_does_not_depend_on_the_other_cells(head, tiny):
 
 def test_progress_is_called_once_per_trial(head):
     calls = []
-    fig11_study(head, per_joint=(2, 3), sigmas_mm=(0.5,), trials=2, n_test=5,
-                progress=lambda done, total: calls.append((done, total)))
+    fig11_study(
+        head,
+        per_joint=(2, 3),
+        sigmas_mm=(0.5,),
+        trials=2,
+        n_test=5,
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
 
 
@@ -111,15 +124,18 @@ def test_smallest_per_joint_meeting_a_requirement(tiny):
     assert np.all(np.isnan(tiny.smallest_per_joint(0.0)))
 
 
-@pytest.mark.parametrize(("kwargs", "match"), [
-    ({"per_joint": (0,)}, "per_joint"),
-    ({"per_joint": ()}, "per_joint"),
-    ({"sigmas_mm": (-0.1,)}, "sigmas_mm"),
-    ({"trials": 0}, "trials"),
-    ({"n_test": 0}, "n_test"),
-    ({"fraction": 1.5}, "fraction"),
-    ({"error_mm": float("nan")}, "error_mm"),
-])
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"per_joint": (0,)}, "per_joint"),
+        ({"per_joint": ()}, "per_joint"),
+        ({"sigmas_mm": (-0.1,)}, "sigmas_mm"),
+        ({"trials": 0}, "trials"),
+        ({"n_test": 0}, "n_test"),
+        ({"fraction": 1.5}, "fraction"),
+        ({"error_mm": float("nan")}, "error_mm"),
+    ],
+)
 def test_fig11_rejects_bad_arguments(head, kwargs, match):
     with pytest.raises(ValueError, match=match):
         fig11_study(head, **{"per_joint": (2,), "trials": 1, "n_test": 2, **kwargs})
@@ -194,8 +210,10 @@ def _is_png(path: Path) -> bool:
 
 
 def test_plots_are_written(tiny, small_table4, tmp_path):
-    for path in (plot_fig11(tiny, tmp_path / "f.png"),
-                 plot_table4(small_table4, tmp_path / "t.png")):
+    for path in (
+        plot_fig11(tiny, tmp_path / "f.png"),
+        plot_table4(small_table4, tmp_path / "t.png"),
+    ):
         assert _is_png(path)
         assert path.stat().st_size > 20_000
 

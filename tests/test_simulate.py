@@ -135,10 +135,12 @@ def test_one_joint_at_a_time_structure(arm) -> None:
         assert len(values) == per_joint
         assert len(np.unique(values)) == per_joint  # distinct, none equal to q0
         half = 0.5 * fraction * (hi[i] - lo[i])
-        np.testing.assert_allclose([values.min(), values.max()],
-                                   [q0[i] - half, q0[i] + half], rtol=0, atol=1e-12)
-        np.testing.assert_allclose(np.diff(np.sort(np.append(values, q0[i])))[[0, -1]],
-                                   2 * half / per_joint, rtol=1e-9)
+        np.testing.assert_allclose(
+            [values.min(), values.max()], [q0[i] - half, q0[i] + half], rtol=0, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            np.diff(np.sort(np.append(values, q0[i])))[[0, -1]], 2 * half / per_joint, rtol=1e-9
+        )
 
 
 def test_one_joint_at_a_time_given_q0_and_continuous_limits() -> None:
@@ -249,12 +251,15 @@ def test_stereo_measure_statistics() -> None:
 
 
 def test_perturb_robot_zero_sigmas_keeps_kinematics(arm) -> None:
-    xml = perturb_robot(arm, np.random.default_rng(0), origin_mm=0.0, origin_deg=0.0,
-                        axis_deg=0.0)
+    xml = perturb_robot(arm, np.random.default_rng(0), origin_mm=0.0, origin_deg=0.0, axis_deg=0.0)
     qs = random_qs(arm, 20, 1)
     for frame in ("flange", "camera", "link2"):
-        np.testing.assert_allclose(pin_fk(xml, ARM_JOINTS, qs, frame),
-                                   pin_fk(ARM_URDF, ARM_JOINTS, qs, frame), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            pin_fk(xml, ARM_JOINTS, qs, frame),
+            pin_fk(ARM_URDF, ARM_JOINTS, qs, frame),
+            rtol=0,
+            atol=1e-12,
+        )
 
 
 def test_perturb_robot_error_sizes(arm) -> None:
@@ -263,17 +268,16 @@ def test_perturb_robot_error_sizes(arm) -> None:
     nominal = {j.name: j for j in arm.joints}
     dps, angles, tilts = [], [], []
     for _ in range(150):
-        true = load_robot(perturb_robot(arm, rng, origin_mm=origin_mm, origin_deg=origin_deg,
-                                        axis_deg=axis_deg))
+        true = load_robot(
+            perturb_robot(arm, rng, origin_mm=origin_mm, origin_deg=origin_deg, axis_deg=axis_deg)
+        )
         for j in true.joints:
             nom = nominal[j.name]
             if j.name not in ARM_PERTURBED:  # the intermediate fixed mount stays nominal
-                np.testing.assert_allclose(j.parent_T_child, nom.parent_T_child,
-                                           rtol=0, atol=1e-12)
+                np.testing.assert_allclose(j.parent_T_child, nom.parent_T_child, rtol=0, atol=1e-12)
                 continue
             dps.append(j.parent_T_child[:3, 3] - nom.parent_T_child[:3, 3])
-            angles.append(rotation_angle(nom.parent_T_child[:3, :3].T
-                                         @ j.parent_T_child[:3, :3]))
+            angles.append(rotation_angle(nom.parent_T_child[:3, :3].T @ j.parent_T_child[:3, :3]))
             if j.is_movable:
                 # The origin rotation turns the axis with the child frame, so the tilt is
                 # the angle between the axes in child coordinates.
@@ -283,10 +287,10 @@ def test_perturb_robot_error_sizes(arm) -> None:
             assert abs(np.linalg.norm(xyz) - 1.0) < 1e-12
     dps = np.array(dps)
     np.testing.assert_allclose(dps.std(axis=0), origin_mm * 1e-3, rtol=0.1)
-    np.testing.assert_allclose(np.sqrt(np.mean(np.square(angles))), np.deg2rad(origin_deg),
-                               rtol=0.1)
-    np.testing.assert_allclose(np.sqrt(np.mean(np.square(tilts))), np.deg2rad(axis_deg),
-                               rtol=0.12)
+    np.testing.assert_allclose(
+        np.sqrt(np.mean(np.square(angles))), np.deg2rad(origin_deg), rtol=0.1
+    )
+    np.testing.assert_allclose(np.sqrt(np.mean(np.square(tilts))), np.deg2rad(axis_deg), rtol=0.12)
 
 
 def test_perturb_robot_changes_fk_by_about_the_requested_size(arm) -> None:
@@ -320,9 +324,15 @@ def test_simulate_zero_noise_matches_pinocchio(arm) -> None:
     qs = random_qs(arm, 25, 3)
     w_T_target = default_target_pose(arm, qs, ARM_JOINTS, ["camera"])
     offset = np.array([0.01, -0.02, 0.03])
-    m = simulate(arm, qs, ARM_JOINTS, frames=["flange", "link2"], cameras=["camera"],
-                 markers=[("flange", offset), ("link3", [0.0, 0.0, 0.05], "ball")],
-                 rng=np.random.default_rng(0))
+    m = simulate(
+        arm,
+        qs,
+        ARM_JOINTS,
+        frames=["flange", "link2"],
+        cameras=["camera"],
+        markers=[("flange", offset), ("link3", [0.0, 0.0, 0.05], "ball")],
+        rng=np.random.default_rng(0),
+    )
     assert isinstance(m, Measurements)
     assert m.joint_names == ARM_JOINTS
     np.testing.assert_array_equal(m.qs, qs)
@@ -330,36 +340,57 @@ def test_simulate_zero_noise_matches_pinocchio(arm) -> None:
     for g in m.poses:
         np.testing.assert_array_equal(g.sample, np.arange(25))
         assert g.measured_in is None and g.marker is None
-        np.testing.assert_allclose(g.meas_T_frame, pin_fk(ARM_URDF, ARM_JOINTS, qs, g.frame),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            g.meas_T_frame, pin_fk(ARM_URDF, ARM_JOINTS, qs, g.frame), rtol=0, atol=1e-12
+        )
     (tg,) = m.targets
     assert tg.camera == "camera" and tg.target == "target"
     w_T_cams = pin_fk(ARM_URDF, ARM_JOINTS, qs, "camera")
-    np.testing.assert_allclose(tg.camera_T_target, inverse_transform(w_T_cams) @ w_T_target,
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        tg.camera_T_target, inverse_transform(w_T_cams) @ w_T_target, rtol=0, atol=1e-12
+    )
     known, named = m.points
     w_T_flanges = pin_fk(ARM_URDF, ARM_JOINTS, qs, "flange")
-    np.testing.assert_allclose(known.meas_p_point, w_T_flanges[:, :3, :3] @ offset
-                               + w_T_flanges[:, :3, 3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        known.meas_p_point,
+        w_T_flanges[:, :3, :3] @ offset + w_T_flanges[:, :3, 3],
+        rtol=0,
+        atol=1e-12,
+    )
     np.testing.assert_array_equal(known.offset, offset)
     assert known.marker is None
     assert named.offset is None and named.marker == "ball"
     w_T_link3s = pin_fk(ARM_URDF, ARM_JOINTS, qs, "link3")
-    np.testing.assert_allclose(named.meas_p_point, w_T_link3s[:, :3, :3] @ [0.0, 0.0, 0.05]
-                               + w_T_link3s[:, :3, 3], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        named.meas_p_point,
+        w_T_link3s[:, :3, :3] @ [0.0, 0.0, 0.05] + w_T_link3s[:, :3, 3],
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def test_simulate_noise_statistics(arm) -> None:
     n, noise_m, noise_rad = 4000, 1e-3, np.deg2rad(0.2)
     qs = random_qs(arm, n, 4)
     w_T_target = default_target_pose(arm, qs[:10], ARM_JOINTS, ["camera"])
-    m = simulate(arm, qs, ARM_JOINTS, frames=["flange"], cameras=["camera"],
-                 markers=[("flange", [0.0, 0.0, 0.02])], rng=np.random.default_rng(5),
-                 noise_m=noise_m, noise_rad=noise_rad, w_T_target=w_T_target)
+    m = simulate(
+        arm,
+        qs,
+        ARM_JOINTS,
+        frames=["flange"],
+        cameras=["camera"],
+        markers=[("flange", [0.0, 0.0, 0.02])],
+        rng=np.random.default_rng(5),
+        noise_m=noise_m,
+        noise_rad=noise_rad,
+        w_T_target=w_T_target,
+    )
     truth = pin_fk(ARM_URDF, ARM_JOINTS, qs, "flange")
     expected_target = inverse_transform(pin_fk(ARM_URDF, ARM_JOINTS, qs, "camera")) @ w_T_target
-    for meas, true in ((m.poses[0].meas_T_frame, truth),
-                       (m.targets[0].camera_T_target, expected_target)):
+    for meas, true in (
+        (m.poses[0].meas_T_frame, truth),
+        (m.targets[0].camera_T_target, expected_target),
+    ):
         dp = meas[:, :3, 3] - true[:, :3, 3]
         np.testing.assert_allclose(dp.std(axis=0), noise_m, rtol=0.05)
         np.testing.assert_allclose(dp.mean(axis=0), 0.0, rtol=0, atol=4 * noise_m / np.sqrt(n))
@@ -372,8 +403,9 @@ def test_simulate_noise_statistics(arm) -> None:
 def test_simulate_stereo_rig(arm) -> None:
     n, sigma = 3000, 5e-4
     qs = random_qs(arm, n, 6)
-    m = simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(7),
-                 stereo_sigma_m=sigma)
+    m = simulate(
+        arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(7), stereo_sigma_m=sigma
+    )
     err = m.poses[0].meas_T_frame[:, :3, 3] - pin_fk(ARM_URDF, ARM_JOINTS, qs, "flange")[:, :3, 3]
     np.testing.assert_allclose(np.sqrt(np.mean(err**2, axis=0)), sigma / 3, rtol=0.1)
 
@@ -381,8 +413,7 @@ def test_simulate_stereo_rig(arm) -> None:
 def test_simulate_is_reproducible_and_defaults_to_robot_joints(arm) -> None:
     qs = random_qs(arm, 5, 8)
     a = simulate(arm, qs, None, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3)
-    b = simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(1),
-                 noise_m=1e-3)
+    b = simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3)
     assert a.joint_names == arm.joint_names
     np.testing.assert_array_equal(a.poses[0].meas_T_frame, b.poses[0].meas_T_frame)
 
@@ -392,22 +423,35 @@ def test_simulate_keeps_its_random_stream(arm) -> None:
     (perturb_poses), then each camera's, then each marker's N(0, noise_m) (n, 3)."""
     qs = random_qs(arm, 6, 10)
     offset = np.array([0.0, 0.01, 0.02])
-    m = simulate(arm, qs, ARM_JOINTS, frames=["flange", "link2"], cameras=["camera"],
-                 markers=[("flange", offset), ("link3", offset, "ball")],
-                 rng=np.random.default_rng(4), noise_m=1e-3, noise_rad=2e-3)
+    m = simulate(
+        arm,
+        qs,
+        ARM_JOINTS,
+        frames=["flange", "link2"],
+        cameras=["camera"],
+        markers=[("flange", offset), ("link3", offset, "ball")],
+        rng=np.random.default_rng(4),
+        noise_m=1e-3,
+        noise_rad=2e-3,
+    )
     rng = np.random.default_rng(4)
-    w_T = {f: pin_fk(ARM_URDF, ARM_JOINTS, qs, f) for f in ("flange", "link2", "link3",
-                                                            "camera")}
+    w_T = {f: pin_fk(ARM_URDF, ARM_JOINTS, qs, f) for f in ("flange", "link2", "link3", "camera")}
     for g, frame in zip(m.poses, ("flange", "link2"), strict=True):
-        np.testing.assert_allclose(g.meas_T_frame, perturb_poses(w_T[frame], rng, 1e-3, 2e-3),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            g.meas_T_frame, perturb_poses(w_T[frame], rng, 1e-3, 2e-3), rtol=0, atol=1e-12
+        )
     w_T_target = default_target_pose(arm, qs, ARM_JOINTS, ["camera"])
-    np.testing.assert_allclose(m.targets[0].camera_T_target, perturb_poses(
-        inverse_transform(w_T["camera"]) @ w_T_target, rng, 1e-3, 2e-3), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        m.targets[0].camera_T_target,
+        perturb_poses(inverse_transform(w_T["camera"]) @ w_T_target, rng, 1e-3, 2e-3),
+        rtol=0,
+        atol=1e-12,
+    )
     for g, frame in zip(m.points, ("flange", "link3"), strict=True):
         expected = w_T[frame][:, :3, :3] @ offset + w_T[frame][:, :3, 3]
-        np.testing.assert_allclose(g.meas_p_point, expected + rng.normal(0.0, 1e-3, (6, 3)),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            g.meas_p_point, expected + rng.normal(0.0, 1e-3, (6, 3)), rtol=0, atol=1e-12
+        )
 
 
 def test_simulate_errors(arm) -> None:
@@ -444,8 +488,9 @@ def test_default_target_pose_faces_the_cameras(arm) -> None:
     w_T_cams = pin_fk(ARM_URDF, ARM_JOINTS, qs, "camera")
     mean_z = w_T_cams[:, :3, 2].mean(axis=0)
     mean_z /= np.linalg.norm(mean_z)
-    np.testing.assert_allclose(w_T_target[:3, 3], w_T_cams[:, :3, 3].mean(axis=0) + 0.8 * mean_z,
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        w_T_target[:3, 3], w_T_cams[:, :3, 3].mean(axis=0) + 0.8 * mean_z, rtol=0, atol=1e-12
+    )
     np.testing.assert_allclose(R[:, 2], -mean_z, rtol=0, atol=1e-12)
     camera_T_targets = inverse_transform(w_T_cams) @ w_T_target
     assert np.all(camera_T_targets[:, 2, 3] > 0.5)  # in front of every camera
@@ -468,13 +513,15 @@ def test_iis_head_one_joint_at_a_time_zero_noise() -> None:
     m = simulate(head, qs, names, frames=frames, cameras=cameras, rng=np.random.default_rng(0))
     assert [g.frame for g in m.poses] == list(frames)
     for g in m.poses:
-        np.testing.assert_allclose(g.meas_T_frame, pin_fk(xml, names, qs, g.frame),
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            g.meas_T_frame, pin_fk(xml, names, qs, g.frame), rtol=0, atol=1e-12
+        )
     w_T_target = default_target_pose(head, qs, names, cameras)
     for g in m.targets:
         w_T_cams = pin_fk(xml, names, qs, g.camera)
-        np.testing.assert_allclose(g.camera_T_target, inverse_transform(w_T_cams) @ w_T_target,
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            g.camera_T_target, inverse_transform(w_T_cams) @ w_T_target, rtol=0, atol=1e-12
+        )
         assert np.median(g.camera_T_target[:, 2, 3]) > 0.0  # mostly in front of the camera
 
 
@@ -484,11 +531,22 @@ def test_iis_head_perturbed_truth() -> None:
     qs = random_configurations(*head.joint_limits(names), 30, np.random.default_rng(1))
     true = load_robot(perturb_robot(head, np.random.default_rng(2)))
     assert true.joint_names == names
-    changed = {j.name for j, nom in zip(true.joints, head.joints, strict=True)
-               if not np.allclose(j.parent_T_child, nom.parent_T_child, rtol=0, atol=1e-12)}
-    assert changed == {"world_to_base", *names, "left_plate_joint", "right_plate_joint",
-                       "left_camera_joint", "right_camera_joint"}
+    changed = {
+        j.name
+        for j, nom in zip(true.joints, head.joints, strict=True)
+        if not np.allclose(j.parent_T_child, nom.parent_T_child, rtol=0, atol=1e-12)
+    }
+    assert changed == {
+        "world_to_base",
+        *names,
+        "left_plate_joint",
+        "right_plate_joint",
+        "left_camera_joint",
+        "right_camera_joint",
+    }
     for frame in ("left_plate", "right_plate"):
-        diff = (pin_fk(true.urdf_xml, names, qs, frame)[:, :3, 3]
-                - pin_fk(head.urdf_xml, names, qs, frame)[:, :3, 3])
+        diff = (
+            pin_fk(true.urdf_xml, names, qs, frame)[:, :3, 3]
+            - pin_fk(head.urdf_xml, names, qs, frame)[:, :3, 3]
+        )
         assert 1e-3 < np.sqrt(np.mean(np.sum(diff**2, axis=1))) < 0.05

@@ -84,11 +84,13 @@ def test_inverse_transform_matches_pinocchio_se3_inverse():
     rng = np.random.default_rng(2)
     for _ in range(50):
         M = pin.SE3.Random()
-        np.testing.assert_allclose(inverse_transform(M.homogeneous), M.inverse().homogeneous,
-                                   atol=1e-14)
+        np.testing.assert_allclose(
+            inverse_transform(M.homogeneous), M.inverse().homogeneous, atol=1e-14
+        )
     batch = np.stack([pin.SE3.Random().homogeneous for _ in range(10)])
-    np.testing.assert_allclose(inverse_transform(batch) @ batch, np.broadcast_to(np.eye(4),
-                               batch.shape), atol=1e-14)
+    np.testing.assert_allclose(
+        inverse_transform(batch) @ batch, np.broadcast_to(np.eye(4), batch.shape), atol=1e-14
+    )
     assert rng is not None
 
 

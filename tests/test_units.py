@@ -44,8 +44,7 @@ def _dataset(name: str, seed: int = 0):
     urdf = ARM_6R if name.startswith("arm") else HEAD
     nominal = load_robot(urdf)
     rng = np.random.default_rng(seed)
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0,
-                                     axis_deg=1.0))
+    truth = load_robot(perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0))
     frames = ("flange",) if name.startswith("arm") else PLATES
     cameras = CAMERAS if name == "head-targets" else ()
     observed = cameras or frames
@@ -57,14 +56,21 @@ def _dataset(name: str, seed: int = 0):
     else:
         qs = random_configurations(lower, upper, 30, rng, fraction=0.8)
     if cameras:
-        return nominal, simulate(truth, qs, names, cameras=cameras, rng=rng,
-                                 w_T_target=default_target_pose(truth, qs, names, cameras),
-                                 **NOISE)
+        return nominal, simulate(
+            truth,
+            qs,
+            names,
+            cameras=cameras,
+            rng=rng,
+            w_T_target=default_target_pose(truth, qs, names, cameras),
+            **NOISE,
+        )
     return nominal, simulate(truth, qs, names, frames=frames, rng=rng, **NOISE)
 
 
-def _in_units(nominal, data, *, angle="rad", prismatic="m", length="m", declare=False,
-              source="data.json"):
+def _in_units(
+    nominal, data, *, angle="rad", prismatic="m", length="m", declare=False, source="data.json"
+):
     """The dataset as read from a file whose numbers are in the given units.
 
     With ``declare=False`` the file says ``m`` / ``rad`` whatever its numbers (the
@@ -74,8 +80,10 @@ def _in_units(nominal, data, *, angle="rad", prismatic="m", length="m", declare=
     factor = {"rad": 1.0, "deg": 180.0 / math.pi, "m": 1.0, "mm": 1e3}
     revolute = [nominal.joint(n).is_revolute for n in data.joint_names]
     for sample in doc["samples"]:
-        sample["q"] = [q * factor[angle if r else prismatic]
-                       for q, r in zip(sample["q"], revolute, strict=True)]
+        sample["q"] = [
+            q * factor[angle if r else prismatic]
+            for q, r in zip(sample["q"], revolute, strict=True)
+        ]
         for obs in sample["observations"]:
             obs["xyz"] = [x * factor[length] for x in obs["xyz"]]
             if "offset" in obs:
@@ -86,16 +94,26 @@ def _in_units(nominal, data, *, angle="rad", prismatic="m", length="m", declare=
     return measurements_from_dict(json.loads(json.dumps(doc)), source=source)
 
 
-SETUPS = ["head-one-at-a-time", "head-random", "head-targets", "arm-one-at-a-time",
-          "arm-random"]
+SETUPS = ["head-one-at-a-time", "head-random", "head-targets", "arm-one-at-a-time", "arm-random"]
 MISTAKES = [
     pytest.param({"angle": "deg"}, r"look like degrees read as radians", id="deg-as-rad"),
-    pytest.param({"length": "mm"}, r"look like millimetres read as metres: they move "
-                 r"(9[5-9]\d|10[0-4]\d)(\.\d)? times", id="mm-as-m-positions"),
-    pytest.param({"prismatic": "mm"}, r"joint\(s\) \['x_table', 'y_table'\] look like "
-                 r"millimetres read as metres", id="prismatic-mm-as-m"),
-    pytest.param({"angle": "deg", "length": "mm", "prismatic": "mm"}, r"look like degrees",
-                 id="all-mm-deg-as-m-rad"),
+    pytest.param(
+        {"length": "mm"},
+        r"look like millimetres read as metres: they move "
+        r"(9[5-9]\d|10[0-4]\d)(\.\d)? times",
+        id="mm-as-m-positions",
+    ),
+    pytest.param(
+        {"prismatic": "mm"},
+        r"joint\(s\) \['x_table', 'y_table'\] look like "
+        r"millimetres read as metres",
+        id="prismatic-mm-as-m",
+    ),
+    pytest.param(
+        {"angle": "deg", "length": "mm", "prismatic": "mm"},
+        r"look like degrees",
+        id="all-mm-deg-as-m-rad",
+    ),
 ]
 
 
@@ -105,8 +123,12 @@ def datasets():
 
 
 # every setup with every mistake it can make (the 6R arm has no prismatic joint)
-CASES = [pytest.param(setup, *m.values, id=f"{setup}-{m.id}") for setup in SETUPS
-         for m in MISTAKES if not (setup.startswith("arm") and m.id == "prismatic-mm-as-m")]
+CASES = [
+    pytest.param(setup, *m.values, id=f"{setup}-{m.id}")
+    for setup in SETUPS
+    for m in MISTAKES
+    if not (setup.startswith("arm") and m.id == "prismatic-mm-as-m")
+]
 
 
 @pytest.mark.parametrize("method", ["refine", "closed-form"])
@@ -123,8 +145,7 @@ def test_a_unit_mistake_is_refused_by_every_method(setup, mistake, message, meth
 @pytest.mark.parametrize("setup", SETUPS)
 def test_the_same_data_in_declared_units_passes_and_reads_back_the_same(setup, datasets):
     nominal, data = datasets[setup]
-    declared = _in_units(nominal, data, angle="deg", prismatic="mm", length="mm",
-                         declare=True)
+    declared = _in_units(nominal, data, angle="deg", prismatic="mm", length="mm", declare=True)
     np.testing.assert_allclose(declared.qs, data.qs, rtol=1e-12, atol=1e-15)
     for diag in (unit_diagnostics(nominal, data), check_units(nominal, declared)):
         assert diag.best.is_as_read and not diag.refused
@@ -149,8 +170,7 @@ def test_the_diagnostics_measure_the_true_factors(datasets):
     assert set(deg.best.joint_scale) == {"pan", "tilt", "vergence_left", "vergence_right"}
     assert all(s == pytest.approx(math.pi / 180) for s in deg.best.joint_scale.values())
     pan = next(j for j in deg.joints if j.joint == "pan")
-    assert pan.high == pytest.approx(np.degrees(data.qs[:, data.joint_names.index("pan")]
-                                                .max()))
+    assert pan.high == pytest.approx(np.degrees(data.qs[:, data.joint_names.index("pan")].max()))
     assert pan.outside_spans > 10  # values up to ~150 with limits 0..pi
     # a file declared in degrees whose numbers are radians: the reverse factor
     rad = unit_diagnostics(nominal, _radians_read_as_degrees(nominal, data))
@@ -160,8 +180,7 @@ def test_the_diagnostics_measure_the_true_factors(datasets):
 def _radians_read_as_degrees(nominal, data):
     doc = measurements_to_dict(data)
     doc["units"] = {"length": "m", "angle": "deg"}
-    doc["joint_units"] = ["deg" if nominal.joint(n).is_revolute else "m"
-                          for n in data.joint_names]
+    doc["joint_units"] = ["deg" if nominal.joint(n).is_revolute else "m" for n in data.joint_names]
     return measurements_from_dict(doc, source="data.json")
 
 
@@ -172,8 +191,11 @@ def test_one_joint_in_degrees_is_named_alone(datasets):
     for sample in doc["samples"]:
         sample["q"][k] = math.degrees(sample["q"][k])
     wrong = measurements_from_dict(doc, source="data.json")
-    with pytest.raises(UnitError, match=r"joint\(s\) \['j2'\] look like degrees read as "
-                                        r"radians .*multiplied by 0\.01745"):
+    with pytest.raises(
+        UnitError,
+        match=r"joint\(s\) \['j2'\] look like degrees read as "
+        r"radians .*multiplied by 0\.01745",
+    ):
         calibrate(nominal, wrong)
 
 
@@ -189,8 +211,10 @@ def test_a_gear_ratio_seen_by_the_closed_form_is_refused_by_refine_too(datasets)
     """pan values twice its angle: no unit explains it; the closed form measures 0.5 rad
     per unit, which used to become a note before a refinement that wrote a URDF."""
     nominal, data = datasets["head-one-at-a-time"]
-    with pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"), \
-            pytest.warns(UserWarning, match=r"joint 'pan' is outside its URDF limits"):
+    with (
+        pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"),
+        pytest.warns(UserWarning, match=r"joint 'pan' is outside its URDF limits"),
+    ):
         calibrate(nominal, _scaled_joint(data, "pan", 2.0), method="refine")
 
 
@@ -199,8 +223,11 @@ def test_values_far_outside_the_limits_with_unexplained_motion_are_refused(datas
     wrong = _scaled_joint(data, "tilt", 1000.0)  # limits 0..1.05 rad, values up to ~900
     diag = unit_diagnostics(nominal, wrong)
     assert not diag.refused  # no unit reading explains a factor 1000 ...
-    with pytest.raises(UnitError, match=r"joint 'tilt' values \d+(\.\d+)?\.\.\d{3}(\.\d+)? \(URDF "
-                                        r"limits 0\.\.1\.047 rad\): far outside"):
+    with pytest.raises(
+        UnitError,
+        match=r"joint 'tilt' values \d+(\.\d+)?\.\.\d{3}(\.\d+)? \(URDF "
+        r"limits 0\.\.1\.047 rad\): far outside",
+    ):
         calibrate(nominal, wrong)  # ... but the limits do
 
 
@@ -214,16 +241,21 @@ def test_three_stage_2_samples_are_refused_with_the_parameter_count():
     # prismatic joint, 6 per camera mount, 6 for the target pose; 6 rows per observation
     n_params = 4 * 4 + 2 * 2 + 6 * 2 + 6
     n_rows = 3 * 2 * 6
-    with pytest.raises(InsufficientDataError,
-                       match=rf"{n_rows} residual rows \(18 position, 18 orientation\) for "
-                             rf"{n_params} free parameters \(.*joint 'pan' \(4\).*camera "
-                             rf"'left_camera' mount \(6\).*target 'target' pose \(6\)\); "
-                             rf"{n_params + 20} rows are needed"):
+    with pytest.raises(
+        InsufficientDataError,
+        match=rf"{n_rows} residual rows \(18 position, 18 orientation\) for "
+        rf"{n_params} free parameters \(.*joint 'pan' \(4\).*camera "
+        rf"'left_camera' mount \(6\).*target 'target' pose \(6\)\); "
+        rf"{n_params + 20} rows are needed",
+    ):
         calibrate(nominal, data)
     # a given noise needs rows >= parameters only; "frames" (2 mounts + target) would do
     sigma = NoiseModel(0.5e-3, math.radians(0.5))
-    with pytest.raises(InsufficientDataError, match=rf"{n_params} rows are needed.*--params "
-                                                    r"frames \(18 parameters\) is determined"):
+    with pytest.raises(
+        InsufficientDataError,
+        match=rf"{n_params} rows are needed.*--params "
+        r"frames \(18 parameters\) is determined",
+    ):
         calibrate(nominal, data, noise=sigma)
     result = calibrate(nominal, data, noise=sigma, parameters="frames")
     assert result.refined.identifiability.n_parameters == 18
@@ -243,13 +275,16 @@ def test_a_fit_that_leaves_centimetres_is_refused():
     """Poses of another robot in shuffled configurations: no geometry of the nominal fits."""
     nominal, data = _dataset("arm-random")
     rng = np.random.default_rng(4)
-    other = load_robot(perturb_robot(nominal, rng, origin_mm=150.0, origin_deg=40.0,
-                                     axis_deg=40.0))
-    foreign = simulate(other, rng.permuted(data.qs, axis=0), data.joint_names,
-                       frames=("flange",), rng=rng, **NOISE)
+    other = load_robot(perturb_robot(nominal, rng, origin_mm=150.0, origin_deg=40.0, axis_deg=40.0))
+    foreign = simulate(
+        other, rng.permuted(data.qs, axis=0), data.joint_names, frames=("flange",), rng=rng, **NOISE
+    )
     bad = replace(data, poses=foreign.poses, source="data.json")
-    with pytest.raises(UnitError, match=r"^data\.json: the refinement over every parameter "
-                                        r"still leaves a median residual of \d+"):
+    with pytest.raises(
+        UnitError,
+        match=r"^data\.json: the refinement over every parameter "
+        r"still leaves a median residual of \d+",
+    ):
         check_fit(refine(nominal, bad), bad.source)
     with pytest.raises(DatasetError):
         calibrate(nominal, bad)
@@ -260,14 +295,16 @@ def test_the_cli_exits_2_and_writes_nothing(tmp_path, capsys, datasets):
     doc = measurements_to_dict(data)
     revolute = [nominal.joint(n).is_revolute for n in data.joint_names]
     for sample in doc["samples"]:
-        sample["q"] = [math.degrees(q) if r else q for q, r in zip(sample["q"], revolute,
-                                                                   strict=True)]
+        sample["q"] = [
+            math.degrees(q) if r else q for q, r in zip(sample["q"], revolute, strict=True)
+        ]
     path = tmp_path / "data.json"
     path.write_text(json.dumps(doc), encoding="utf-8")
     out = tmp_path / "calibrated.urdf"
     for method in ("refine", "closed-form"):
-        code = main(["calibrate", "--urdf", str(HEAD), "--out", str(out), "--method", method,
-                     str(path)])
+        code = main(
+            ["calibrate", "--urdf", str(HEAD), "--out", str(out), "--method", method, str(path)]
+        )
         err = capsys.readouterr().err
         assert code == 2
         assert err.startswith("kinfw calibrate: error: ") and len(err.strip().splitlines()) == 1

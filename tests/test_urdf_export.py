@@ -425,8 +425,10 @@ def _fk_errors(result, model, n=200, seed=0, m_T_w=None):
     names = model.topology.joint_names
     qs = _random_qs(model.topology, n, np.random.default_rng(seed))
     root_T_w = inverse_transform(result.w_T_root) @ (np.eye(4) if m_T_w is None else m_T_w)
-    errors = [_pose_errors(exported.frame_poses(qs, f, names), root_T_w @ model.frame_poses(qs, f))
-              for f in model.topology.frames]
+    errors = [
+        _pose_errors(exported.frame_poses(qs, f, names), root_T_w @ model.frame_poses(qs, f))
+        for f in model.topology.frames
+    ]
     return max(e[0] for e in errors), max(e[1] for e in errors)
 
 
@@ -438,8 +440,12 @@ def _perturbed(robot, frames, seed, scale=0.01):
 def _moved(m_T_w, geometry):
     """The same geometry expressed in another frame ``m``."""
     R, t = m_T_w[:3, :3], m_T_w[:3, 3]
-    return ZeroGeometry(topology=geometry.topology, axes=geometry.axes @ R.T,
-                        points=geometry.points @ R.T + t, w_T_frames=m_T_w @ geometry.w_T_frames)
+    return ZeroGeometry(
+        topology=geometry.topology,
+        axes=geometry.axes @ R.T,
+        points=geometry.points @ R.T + t,
+        w_T_frames=m_T_w @ geometry.w_T_frames,
+    )
 
 
 def _transform(rpy, xyz=(0.1, -0.2, 0.3)):
@@ -457,8 +463,11 @@ def _links_at_zero(robot):
 
 def _non_origin_content(xml):
     """Everything lxml sees but <origin> and <axis>: (tag, attributes, text, tail) in order."""
-    return [(str(e.tag), tuple(e.attrib.items()), e.text, e.tail)
-            for e in etree.fromstring(xml.encode()).iter() if e.tag not in ("origin", "axis")]
+    return [
+        (str(e.tag), tuple(e.attrib.items()), e.text, e.tail)
+        for e in etree.fromstring(xml.encode()).iter()
+        if e.tag not in ("origin", "axis")
+    ]
 
 
 # -- identity and idempotence -------------------------------------------------------------
@@ -477,19 +486,27 @@ def test_nominal_geometry_exports_the_nominal_urdf_unchanged(name):
     names = robot.topology(frames).joint_names
     qs = _random_qs(robot.topology(frames), 50, np.random.default_rng(1))
     for frame in frames:
-        np.testing.assert_allclose(reloaded.frame_poses(qs, frame, names),
-                                   robot.frame_poses(qs, frame, names), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            reloaded.frame_poses(qs, frame, names),
+            robot.frame_poses(qs, frame, names),
+            rtol=0,
+            atol=1e-12,
+        )
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
 @pytest.mark.parametrize("root_is_w", [True, False])
 def test_reexport_of_the_exported_urdf_is_identical(name, root_is_w):
     robot, frames = _case(name)
-    first = export_urdf(robot, geometry_from_cpc(_perturbed(robot, frames, seed=2)),
-                        root_is_measurement_frame=root_is_w)
+    first = export_urdf(
+        robot,
+        geometry_from_cpc(_perturbed(robot, frames, seed=2)),
+        root_is_measurement_frame=root_is_w,
+    )
     exported = load_robot(first.urdf_xml)
-    again = export_urdf(exported, geometry_from_robot(exported, frames),
-                        root_is_measurement_frame=root_is_w)
+    again = export_urdf(
+        exported, geometry_from_robot(exported, frames), root_is_measurement_frame=root_is_w
+    )
     assert again.urdf_xml == first.urdf_xml
     assert again.link_shifts == ()
 
@@ -508,8 +525,9 @@ def test_calibrated_export_keeps_every_other_tag_comment_and_declaration():
     assert tree.find("joint[@name='joint1']/calibration") is not None
     nominal_tree = etree.fromstring(robot.urdf_xml.encode())
     assert [m.attrib for m in tree.iter("mesh")] == [m.attrib for m in nominal_tree.iter("mesh")]
-    assert "<vendor_data serial=\"A-17\" note=\"kept as written\">free text &amp; more" in (
-        result.urdf_xml)  # lxml normalises quotes and spaces inside a tag, nothing else
+    assert '<vendor_data serial="A-17" note="kept as written">free text &amp; more' in (
+        result.urdf_xml
+    )  # lxml normalises quotes and spaces inside a tag, nothing else
 
 
 # -- calibrated forward kinematics --------------------------------------------------------
@@ -531,8 +549,9 @@ def test_external_measurement_frame_is_reported_not_written(name):
     robot, frames = _case(name)
     model = _perturbed(robot, frames, seed=4)
     mocap_T_root = _transform((0.4, -1.1, 2.0), xyz=(3.0, -1.5, 0.8))
-    result = export_urdf(robot, _moved(mocap_T_root, geometry_from_cpc(model)),
-                         root_is_measurement_frame=False)
+    result = export_urdf(
+        robot, _moved(mocap_T_root, geometry_from_cpc(model)), root_is_measurement_frame=False
+    )
     dp, dr = _fk_errors(result, model, n=100, seed=5, m_T_w=mocap_T_root)
     assert dp < FK_TOL and dr < FK_TOL, (dp, dr)
     exported = load_robot(result.urdf_xml)
@@ -545,8 +564,11 @@ def test_external_measurement_frame_of_the_nominal_robot_is_found_exactly():
     for name in sorted(CASES):
         robot, frames = _case(name)
         mocap_T_root = _transform((0.4, -1.1, 2.0), xyz=(3.0, -1.5, 0.8))
-        result = export_urdf(robot, _moved(mocap_T_root, geometry_from_robot(robot, frames)),
-                             root_is_measurement_frame=False)
+        result = export_urdf(
+            robot,
+            _moved(mocap_T_root, geometry_from_robot(robot, frames)),
+            root_is_measurement_frame=False,
+        )
         np.testing.assert_allclose(result.w_T_root, mocap_T_root, rtol=0, atol=1e-12)
         assert result.urdf_xml == robot.urdf_xml
 
@@ -585,8 +607,11 @@ def test_end_frames_named_by_joints_are_their_child_links():
 def test_any_small_perturbation_is_reproduced(name, data):
     robot, frames = _case(name)
     model = cpc_from_robot(robot, frames)
-    delta = data.draw(arrays(np.float64, model.n_parameters,
-                             elements=st.floats(-0.03, 0.03, allow_subnormal=False)))
+    delta = data.draw(
+        arrays(
+            np.float64, model.n_parameters, elements=st.floats(-0.03, 0.03, allow_subnormal=False)
+        )
+    )
     calibrated = model.perturbed(delta)
     dp, dr = _fk_errors(export_urdf(robot, geometry_from_cpc(calibrated)), calibrated, n=100)
     assert dp < FK_TOL and dr < FK_TOL, (dp, dr)
@@ -605,13 +630,16 @@ def test_moved_link_frames_are_projections_onto_the_calibrated_axes(name):
     w_T_links = _links_at_zero(exported)
     for j, joint_name in enumerate(geometry.topology.joint_names):
         joint = robot.joint(joint_name)
-        w_T_candidate = (w_T_links[joint.parent]
-                         @ inverse_transform(shifts.get(joint.parent, np.eye(4)))
-                         @ joint.parent_T_child)
+        w_T_candidate = (
+            w_T_links[joint.parent]
+            @ inverse_transform(shifts.get(joint.parent, np.eye(4)))
+            @ joint.parent_T_child
+        )
         w_T_child = w_T_links[joint.child]
         axis = geometry.axes[j] / np.linalg.norm(geometry.axes[j])
-        np.testing.assert_allclose(w_T_child[:3, :3] @ exported.joint(joint_name).axis, axis,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            w_T_child[:3, :3] @ exported.joint(joint_name).axis, axis, atol=1e-12
+        )
         np.testing.assert_allclose(w_T_child[:3, :3], w_T_candidate[:3, :3], atol=1e-12)
         if not joint.is_revolute:
             np.testing.assert_allclose(w_T_child[:3, 3], w_T_candidate[:3, 3], atol=1e-12)
@@ -623,8 +651,9 @@ def test_moved_link_frames_are_projections_onto_the_calibrated_axes(name):
         assert moved <= distance + 1e-12
         np.testing.assert_allclose(w_T_child[:3, 3], projection, atol=1e-12)
         if joint.child in shifts:
-            np.testing.assert_allclose(shifts[joint.child],
-                                       inverse_transform(w_T_candidate) @ w_T_child, atol=1e-12)
+            np.testing.assert_allclose(
+                shifts[joint.child], inverse_transform(w_T_candidate) @ w_T_child, atol=1e-12
+            )
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -637,18 +666,27 @@ def test_shifted_links_keep_visuals_collisions_inertials_and_children_in_place(n
     nominal_urdf, exported_urdf = _yourdfpy(robot.urdf_xml), _yourdfpy(result.urdf_xml)
     for link, old_T_new in result.link_shifts:
         w_T_old = w_T_links[link] @ inverse_transform(old_T_new)  # the nominal link frame
-        for old_T_x, new_T_x in zip(_geometry_origins(nominal_urdf, link),
-                                    _geometry_origins(exported_urdf, link), strict=True):
+        for old_T_x, new_T_x in zip(
+            _geometry_origins(nominal_urdf, link),
+            _geometry_origins(exported_urdf, link),
+            strict=True,
+        ):
             np.testing.assert_allclose(w_T_links[link] @ new_T_x, w_T_old @ old_T_x, atol=1e-12)
         for joint in robot.joints:
             if joint.parent == link and joint.child not in frames and not joint.is_movable:
-                np.testing.assert_allclose(w_T_links[joint.child], w_T_old @ joint.parent_T_child,
-                                           atol=1e-12)
+                np.testing.assert_allclose(
+                    w_T_links[joint.child], w_T_old @ joint.parent_T_child, atol=1e-12
+                )
 
 
 def _yourdfpy(xml):
-    return yourdfpy.URDF.load(io.BytesIO(xml.encode()), load_meshes=False, build_scene_graph=False,
-                              load_collision_meshes=False, build_collision_scene_graph=False)
+    return yourdfpy.URDF.load(
+        io.BytesIO(xml.encode()),
+        load_meshes=False,
+        build_scene_graph=False,
+        load_collision_meshes=False,
+        build_collision_scene_graph=False,
+    )
 
 
 def _geometry_origins(urdf, link):
@@ -691,8 +729,11 @@ def test_end_frame_off_its_revolute_axis_is_refused_with_the_fix():
     robot = load_robot(TREE_URDF)
     model = cpc_from_robot(robot, REVOLUTE_CHILD_FRAMES)
     calibrated = model.perturbed(_delta(model, c_link__y=1e-3))
-    with pytest.raises(ExportError, match=r"'c_link' is the child link of revolute joint 'c1'"
-                       r".*0\.001 m off.*fixed"):
+    with pytest.raises(
+        ExportError,
+        match=r"'c_link' is the child link of revolute joint 'c1'"
+        r".*0\.001 m off.*fixed",
+    ):
         export_urdf(robot, geometry_from_cpc(calibrated))
 
 
@@ -748,14 +789,18 @@ def test_origin_round_trips_through_rpy_at_and_near_gimbal_lock(pitch, roll, yaw
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.floats(-np.pi, np.pi), st.floats(-np.pi, np.pi), st.sampled_from([PI_2, -PI_2]),
-       st.floats(-1e-6, 1e-6), arrays(np.float64, 3, elements=st.floats(-1e-8, 1e-8)))
+@given(
+    st.floats(-np.pi, np.pi),
+    st.floats(-np.pi, np.pi),
+    st.sampled_from([PI_2, -PI_2]),
+    st.floats(-1e-6, 1e-6),
+    arrays(np.float64, 3, elements=st.floats(-1e-8, 1e-8)),
+)
 def test_rpy_near_gimbal_lock_reproduces_the_matrix(roll, yaw, pitch, tiny, rotvec):
     a_T_b = _transform((roll, pitch + tiny, yaw))
     a_T_b[:3, :3] = a_T_b[:3, :3] @ pin.exp3(rotvec)  # also off the rpy grid
     xml = edit_urdf(ONE_JOINT, joint_origins={"j": a_T_b})
-    np.testing.assert_allclose(load_robot(xml).joint("j").parent_T_child, a_T_b, rtol=0,
-                               atol=1e-12)
+    np.testing.assert_allclose(load_robot(xml).joint("j").parent_T_child, a_T_b, rtol=0, atol=1e-12)
 
 
 def test_floats_are_written_with_repr_and_read_back_exactly():
@@ -772,14 +817,18 @@ def test_floats_are_written_with_repr_and_read_back_exactly():
 
 
 def test_edit_creates_missing_origin_and_axis_and_keeps_the_rest():
-    xml = edit_urdf(ONE_JOINT, joint_origins={"j": _transform((0, 0, 0), xyz=(0, 0, 0.5))},
-                    joint_axes={"j": [0.0, 1.0, 0.0]})
+    xml = edit_urdf(
+        ONE_JOINT,
+        joint_origins={"j": _transform((0, 0, 0), xyz=(0, 0, 0.5))},
+        joint_axes={"j": [0.0, 1.0, 0.0]},
+    )
     assert '<origin xyz="0.0 0.0 0.5"/>' in xml  # the rotation did not change: no rpy
     assert '<axis xyz="0.0 1.0 0.0"/>' in xml
     robot = load_robot(xml)
     np.testing.assert_array_equal(robot.joint("j").axis, [0.0, 1.0, 0.0])
     stripped = xml.replace('<origin xyz="0.0 0.0 0.5"/>\n    ', "").replace(
-        '<axis xyz="0.0 1.0 0.0"/>\n    ', "")
+        '<axis xyz="0.0 1.0 0.0"/>\n    ', ""
+    )
     assert stripped == ONE_JOINT
 
 
@@ -788,54 +837,73 @@ def test_unchanged_values_keep_the_original_text():
     origins = {j.name: j.parent_T_child + 1e-13 * (j.parent_T_child != 0) for j in robot.joints}
     axes = {j.name: j.axis for j in robot.joints if j.is_movable}
     shifts = {"link3": np.eye(4)}
-    assert edit_urdf(robot.urdf_xml, joint_origins=origins, joint_axes=axes,
-                     link_shifts=shifts) == robot.urdf_xml
+    assert (
+        edit_urdf(robot.urdf_xml, joint_origins=origins, joint_axes=axes, link_shifts=shifts)
+        == robot.urdf_xml
+    )
 
 
 def test_link_shift_reexpresses_geometry_and_child_joints_unless_given():
     robot, _ = _case("arm")
     old_T_new = _transform((0.05, -0.02, 0.1), xyz=(0.01, 0.02, -0.03))
     given_origin = _transform((0.0, PI_2, 0.0), xyz=(0.0, 0.0, 0.07))
-    xml = edit_urdf(robot.urdf_xml, link_shifts={"link6": old_T_new},
-                    joint_origins={"flange_joint": given_origin})
+    xml = edit_urdf(
+        robot.urdf_xml,
+        link_shifts={"link6": old_T_new},
+        joint_origins={"flange_joint": given_origin},
+    )
     new_T_old = inverse_transform(old_T_new)
     before, after = _yourdfpy(robot.urdf_xml), _yourdfpy(xml)
-    for old_T_x, new_T_x in zip(_geometry_origins(before, "link6"),
-                                _geometry_origins(after, "link6"), strict=True):
+    for old_T_x, new_T_x in zip(
+        _geometry_origins(before, "link6"), _geometry_origins(after, "link6"), strict=True
+    ):
         np.testing.assert_allclose(new_T_x, new_T_old @ old_T_x, atol=1e-12)
     edited = load_robot(xml)
-    np.testing.assert_allclose(edited.joint("gripper_mount").parent_T_child,
-                               new_T_old @ robot.joint("gripper_mount").parent_T_child, atol=1e-12)
-    np.testing.assert_allclose(edited.joint("flange_joint").parent_T_child, given_origin,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        edited.joint("gripper_mount").parent_T_child,
+        new_T_old @ robot.joint("gripper_mount").parent_T_child,
+        atol=1e-12,
+    )
+    np.testing.assert_allclose(
+        edited.joint("flange_joint").parent_T_child, given_origin, atol=1e-12
+    )
     # Everything else, e.g. the transmission's own <joint name="joint1">, is untouched.
-    np.testing.assert_array_equal(edited.joint("joint6").parent_T_child,
-                                  robot.joint("joint6").parent_T_child)
+    np.testing.assert_array_equal(
+        edited.joint("joint6").parent_T_child, robot.joint("joint6").parent_T_child
+    )
     assert _non_origin_content(xml) == _non_origin_content(robot.urdf_xml)
 
 
 def test_unknown_joint_and_link_names_are_all_named():
     with pytest.raises(ExportError, match=r"unknown joint name\(s\) \['nope', 'zzz'\]"):
-        edit_urdf(ONE_JOINT, joint_origins={"nope": np.eye(4), "j": np.eye(4)},
-                  joint_axes={"zzz": [0.0, 0.0, 1.0]})
+        edit_urdf(
+            ONE_JOINT,
+            joint_origins={"nope": np.eye(4), "j": np.eye(4)},
+            joint_axes={"zzz": [0.0, 0.0, 1.0]},
+        )
     with pytest.raises(ExportError, match=r"unknown link name\(s\) \['c'\]"):
         edit_urdf(ONE_JOINT, link_shifts={"c": np.eye(4)})
 
 
 def test_joints_inside_a_transmission_are_not_edited():
     robot, _ = _case("arm")
-    xml = edit_urdf(robot.urdf_xml, joint_origins={"joint1": _transform((0.0, 0.0, 0.1))},
-                    joint_axes={"joint1": [0.0, 0.0, -1.0]})
+    xml = edit_urdf(
+        robot.urdf_xml,
+        joint_origins={"joint1": _transform((0.0, 0.0, 0.1))},
+        joint_axes={"joint1": [0.0, 0.0, -1.0]},
+    )
     tree = etree.fromstring(xml.encode())
     assert tree.find("transmission/joint").getchildren()[0].tag == "hardwareInterface"
     assert len(tree.find("transmission/joint")) == 1
-    np.testing.assert_allclose(load_robot(xml).joint("joint1").parent_T_child,
-                               _transform((0.0, 0.0, 0.1)), atol=1e-12)
+    np.testing.assert_allclose(
+        load_robot(xml).joint("joint1").parent_T_child, _transform((0.0, 0.0, 0.1)), atol=1e-12
+    )
 
 
 def test_attribute_order_is_kept_when_an_origin_changes():
-    urdf = ONE_JOINT.replace('<parent link="a"/>', '<origin rpy="0 0 0" xyz="0 0 0"/>'
-                             '<parent link="a"/>')
+    urdf = ONE_JOINT.replace(
+        '<parent link="a"/>', '<origin rpy="0 0 0" xyz="0 0 0"/><parent link="a"/>'
+    )
     xml = edit_urdf(urdf, joint_origins={"j": _transform((0.0, 0.5, 0.0), xyz=(0, 0, 0))})
     assert '<origin rpy="0.0 0.5 0.0" xyz="0 0 0"/><parent link="a"/>' in xml
 
@@ -844,12 +912,14 @@ def test_attribute_order_is_kept_when_an_origin_changes():
     ("kwargs", "error", "match"),
     [
         ({"joint_origins": {"j": np.ones((3, 4))}}, ValueError, r"joint_origins\['j'\].*shape"),
-        ({"joint_origins": {"j": np.diag([1.0, 1.0, -1.0, 1.0])}}, ValueError,
-         "not a rotation"),
+        ({"joint_origins": {"j": np.diag([1.0, 1.0, -1.0, 1.0])}}, ValueError, "not a rotation"),
         ({"joint_axes": {"j": [0.0, 0.0, 2.0]}}, ExportError, "unit 3-vector"),
         ({"joint_axes": {"j": [0.0, 1.0]}}, ExportError, "unit 3-vector"),
-        ({"joint_origins": {"j": _transform((0, 0, 0)) @ np.diag([1.0, 1.0 + 1e-9, 1.0, 1.0])}},
-         ExportError, "reproduce the rotation only to"),
+        (
+            {"joint_origins": {"j": _transform((0, 0, 0)) @ np.diag([1.0, 1.0 + 1e-9, 1.0, 1.0])}},
+            ExportError,
+            "reproduce the rotation only to",
+        ),
     ],
 )
 def test_bad_edits_are_refused(kwargs, error, match):

@@ -40,9 +40,16 @@ HEAD = builtin_head_urdf()
 KINFW = "/meshcat/kinfw"
 CHROMIUM_NAMES = ("chromium", "chromium-browser")  # Debian, Ubuntu
 REQUIRE_BROWSER = "KINFW_REQUIRE_BROWSER"
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-                  "--no-first-run", "--disable-background-networking",
-                  "--disable-component-update", "--disable-sync"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 
 
 class RecordingWindow:
@@ -66,18 +73,24 @@ def _objects(commands):
 def _transforms(commands):
     """{path: 4x4 matrix} of the last set_transform of every path (meshcat sends
     column-major lists)."""
-    return {c["path"]: np.array(c["matrix"], float).reshape(4, 4).T
-            for c in commands if c["type"] == "set_transform"}
+    return {
+        c["path"]: np.array(c["matrix"], float).reshape(4, 4).T
+        for c in commands
+        if c["type"] == "set_transform"
+    }
 
 
 def _properties(commands, path):
-    return {c["property"]: c["value"] for c in commands
-            if c["type"] == "set_property" and c["path"] == path}
+    return {
+        c["property"]: c["value"]
+        for c in commands
+        if c["type"] == "set_property" and c["path"] == path
+    }
 
 
 def _children(paths, prefix):
     """Names of the nodes directly below ``prefix``."""
-    return {p[len(prefix):].split("/")[0] for p in paths if p.startswith(prefix)}
+    return {p[len(prefix) :].split("/")[0] for p in paths if p.startswith(prefix)}
 
 
 def _pin_fk(urdf_xml, joint_names, q):
@@ -120,16 +133,31 @@ def case(head):
     w_T_target = np.eye(4)
     w_T_target[:3, 3] = [0.6, 0.4, 1.2]
     w_T_target[:3, :3] = pin.rpy.rpyToMatrix(0.3, -2.5, 0.2)
-    data = simulate(truth, qs, names, frames=head.default_frames, cameras=head.default_cameras,
-                    rng=rng, w_T_target=w_T_target)
+    data = simulate(
+        truth,
+        qs,
+        names,
+        frames=head.default_frames,
+        cameras=head.default_cameras,
+        rng=rng,
+        w_T_target=w_T_target,
+    )
     return {"calibrated": calibrated, "data": data, "targets": [("target", w_T_target)]}
 
 
 @pytest.fixture(scope="module")
 def drawn(head, head_up, case):
     window = RecordingWindow()
-    vis = scene(head, case["calibrated"], case["data"], sample=1, targets=case["targets"],
-                window=window, residual_scale=25.0, up=head_up)
+    vis = scene(
+        head,
+        case["calibrated"],
+        case["data"],
+        sample=1,
+        targets=case["targets"],
+        window=window,
+        residual_scale=25.0,
+        up=head_up,
+    )
     assert vis.window is window
     return window.commands
 
@@ -137,8 +165,10 @@ def drawn(head, head_up, case):
 def test_both_models_are_drawn_under_their_root_names(head, case, drawn):
     objects = _objects(drawn)
     n_visuals = len(ET.fromstring(head.urdf_xml).findall("link/visual"))
-    for root, robot, rgba in (("nominal", head, GHOST_RGBA),
-                              ("calibrated", case["calibrated"], SOLID_RGBA)):
+    for root, robot, rgba in (
+        ("nominal", head, GHOST_RGBA),
+        ("calibrated", case["calibrated"], SOLID_RGBA),
+    ):
         prefix = f"{KINFW}/{root}/visuals/"
         meshes = {p: o for p, o in objects.items() if p.startswith(prefix)}
         assert len(meshes) == n_visuals
@@ -156,9 +186,11 @@ def test_both_models_are_drawn_under_their_root_names(head, case, drawn):
     ghost = next(o for p, o in objects.items() if p.startswith(f"{KINFW}/nominal/"))
     assert ghost["materials"][0]["opacity"] < 1.0
     # the two models really differ where the data is measured
-    assert not np.allclose(_transforms(drawn)[f"{KINFW}/nominal/visuals/left_plate_0"],
-                           _transforms(drawn)[f"{KINFW}/calibrated/visuals/left_plate_0"],
-                           atol=1e-3)
+    assert not np.allclose(
+        _transforms(drawn)[f"{KINFW}/nominal/visuals/left_plate_0"],
+        _transforms(drawn)[f"{KINFW}/calibrated/visuals/left_plate_0"],
+        atol=1e-3,
+    )
 
 
 def test_one_triad_per_measured_pose_of_the_sample(case, drawn):
@@ -171,8 +203,9 @@ def test_one_triad_per_measured_pose_of_the_sample(case, drawn):
     objects, transforms = _objects(drawn), _transforms(drawn)
     for frame, meas_T_frame in measured.items():
         np.testing.assert_allclose(transforms[prefix + frame], meas_T_frame, atol=1e-12)
-        for axis, (name, color) in enumerate(zip("xyz", (0xFF0000, 0x00FF00, 0x0000FF),
-                                                 strict=True)):
+        for axis, (name, color) in enumerate(
+            zip("xyz", (0xFF0000, 0x00FF00, 0x0000FF), strict=True)
+        ):
             stick = objects[f"{prefix}{frame}/{name}/stick"]
             assert stick["geometries"][0]["height"] == pytest.approx(TRIAD_LENGTH)
             assert stick["materials"][0]["color"] == color
@@ -185,7 +218,7 @@ def test_one_triad_per_measured_pose_of_the_sample(case, drawn):
 
 
 def test_fixed_targets_are_a_flat_board_and_a_triad(case, drawn):
-    (name, root_T_target), = case["targets"]
+    ((name, root_T_target),) = case["targets"]
     node = f"{KINFW}/targets/{name}"
     np.testing.assert_allclose(_transforms(drawn)[node], root_T_target, atol=1e-12)
     board = _objects(drawn)[node + "/board"]["geometries"][0]
@@ -206,20 +239,23 @@ def test_residual_lines_are_the_scaled_prediction_errors(case, drawn):
         node = transforms[f"{KINFW}/residuals/poses/{g.frame}"]
         length = objects[f"{KINFW}/residuals/poses/{g.frame}/stick"]["geometries"][0]["height"]
         np.testing.assert_allclose(node[:3, 3], root_p_predicted, atol=1e-12)
-        np.testing.assert_allclose(length * node[:3, 1],
-                                   25.0 * (root_p_measured - root_p_predicted), atol=1e-12)
+        np.testing.assert_allclose(
+            length * node[:3, 1], 25.0 * (root_p_measured - root_p_predicted), atol=1e-12
+        )
         errors.append(np.linalg.norm(root_p_measured - root_p_predicted))
     assert min(errors) > 1e-4  # millimetres: the lines are centimetres long
     # the target residual: from the given target to where the calibrated camera saw it
-    (name, root_T_target), = case["targets"]
+    ((name, root_T_target),) = case["targets"]
     for g in data.targets:
         root_T_seen = oMf[g.camera] @ g.camera_T_target[np.flatnonzero(g.sample == 1)[0]]
         path = f"{KINFW}/residuals/targets/{g.camera}/{name}"
         length = objects[path + "/stick"]["geometries"][0]["height"]
         np.testing.assert_allclose(transforms[path][:3, 3], root_T_target[:3, 3], atol=1e-12)
-        np.testing.assert_allclose(length * transforms[path][:3, 1],
-                                   25.0 * (root_T_seen[:3, 3] - root_T_target[:3, 3]),
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            length * transforms[path][:3, 1],
+            25.0 * (root_T_seen[:3, 3] - root_T_target[:3, 3]),
+            atol=1e-12,
+        )
 
 
 def test_residual_colour_runs_from_green_to_magenta():
@@ -239,8 +275,9 @@ def test_camera_looks_at_the_robot_with_up_upwards(head, head_up, case, drawn):
     ps = np.array([T[:3, 3] for T in oMf.values()])
     assert np.all(target > ps.min(axis=0)) and np.all(target < ps.max(axis=0))
     # up (in the root frame) is the display's z axis
-    np.testing.assert_allclose(display_T_root[:3, :3] @ head_up,
-                               [0.0, 0.0, np.linalg.norm(head_up)], atol=1e-12)
+    np.testing.assert_allclose(
+        display_T_root[:3, :3] @ head_up, [0.0, 0.0, np.linalg.norm(head_up)], atol=1e-12
+    )
     camera = _properties(drawn, "/Cameras/default/rotated/<object>")
     x, y, z = camera["position"]  # three.js y-up: display (x, -z, y)
     display_p_camera = np.array([x, -z, y])
@@ -268,8 +305,11 @@ def test_missing_meshes_are_skipped_with_a_warning(caplog):
         scene(load_robot(urdf), window=window)
     assert "package://nowhere/base.stl" in caplog.text
     assert "meshes/missing.dae" in caplog.text
-    geometries = [o["geometries"][0]["type"] for p, o in _objects(window.commands).items()
-                  if p.startswith(f"{KINFW}/nominal/visuals/")]
+    geometries = [
+        o["geometries"][0]["type"]
+        for p, o in _objects(window.commands).items()
+        if p.startswith(f"{KINFW}/nominal/visuals/")
+    ]
     assert sorted(geometries) == ["BoxGeometry", "CylinderGeometry"]
 
 
@@ -289,10 +329,15 @@ def test_points_and_frames_measured_elsewhere_are_drawn_through_their_kinds(head
     meas_T_root[:3, 3] = [1.0, -2.0, 0.5]
     measured = oMf[frame][:3, :3] @ offset + oMf[frame][:3, 3] + [0.002, 0.0, 0.0]
     in_tracker = meas_T_root @ oMf[frame]
-    data = Measurements(names, q[None], poses=(PoseObservations(
-        frame, [0], in_tracker[None], measured_in="tracker"),), points=(
-        PointObservations(frame, [0], measured[None], offset=offset),
-        PointObservations(frame, [0], measured[None], marker="m")))
+    data = Measurements(
+        names,
+        q[None],
+        poses=(PoseObservations(frame, [0], in_tracker[None], measured_in="tracker"),),
+        points=(
+            PointObservations(frame, [0], measured[None], offset=offset),
+            PointObservations(frame, [0], measured[None], marker="m"),
+        ),
+    )
     window = RecordingWindow()
     with caplog.at_level("WARNING", logger="kinfw.view"):
         scene(head, data=data, sample=0, window=window, residual_scale=10.0)
@@ -308,14 +353,23 @@ def test_points_and_frames_measured_elsewhere_are_drawn_through_their_kinds(head
     assert f"{line}@m/stick" not in objects  # the marker's offset is unknown
 
     window = RecordingWindow()
-    scene(head, data=data, sample=0, window=window, meas_T_root=meas_T_root,
-          unknowns={BlockKey("offset", f"{frame}:m"): marker_offset})
+    scene(
+        head,
+        data=data,
+        sample=0,
+        window=window,
+        meas_T_root=meas_T_root,
+        unknowns={BlockKey("offset", f"{frame}:m"): marker_offset},
+    )
     objects, transforms = _objects(window.commands), _transforms(window.commands)
-    np.testing.assert_allclose(transforms[f"{KINFW}/measured/poses/{frame}"], oMf[frame],
-                               atol=1e-12)
-    np.testing.assert_allclose(transforms[f"{KINFW}/residuals/points/{frame}@m"][:3, 3],
-                               oMf[frame][:3, :3] @ marker_offset + oMf[frame][:3, 3],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        transforms[f"{KINFW}/measured/poses/{frame}"], oMf[frame], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        transforms[f"{KINFW}/residuals/points/{frame}@m"][:3, 3],
+        oMf[frame][:3, :3] @ marker_offset + oMf[frame][:3, 3],
+        atol=1e-12,
+    )
 
 
 def test_bad_arguments_are_refused(head, case):
@@ -362,10 +416,14 @@ def demo(tmp_path_factory):
 def demo_html(demo, head, head_up):
     from kinfw.measurements import read_measurements
 
-    vis = scene(head, load_robot(demo / "calibrated.urdf"),
-                read_measurements(demo / "data.json"),
-                targets=targets_from_sidecar(demo / "calibrated.kinfw.json"),
-                window=OfflineWindow(), up=head_up)
+    vis = scene(
+        head,
+        load_robot(demo / "calibrated.urdf"),
+        read_measurements(demo / "data.json"),
+        targets=targets_from_sidecar(demo / "calibrated.kinfw.json"),
+        window=OfflineWindow(),
+        up=head_up,
+    )
     return write_html(vis, demo / "scene.html")
 
 
@@ -390,10 +448,14 @@ def _chromium():
             return path
     hint = "apt-get install chromium; .ci/run installs it"
     if os.environ.get(REQUIRE_BROWSER, "") not in ("", "0"):
-        pytest.fail(f"chromium is not installed and {REQUIRE_BROWSER} is set: the screenshot "
-                    f"test needs headless Chromium ({hint})")
-    pytest.skip(f"no chromium on PATH, screenshot not checked ({hint}; "
-                f"{REQUIRE_BROWSER}=1 makes this a failure)")
+        pytest.fail(
+            f"chromium is not installed and {REQUIRE_BROWSER} is set: the screenshot "
+            f"test needs headless Chromium ({hint})"
+        )
+    pytest.skip(
+        f"no chromium on PATH, screenshot not checked ({hint}; "
+        f"{REQUIRE_BROWSER}=1 makes this a failure)"
+    )
 
 
 def test_screenshot_shows_both_models(demo_html, tmp_path):
@@ -402,13 +464,24 @@ def test_screenshot_shows_both_models(demo_html, tmp_path):
     start = time.perf_counter()
     with tempfile.TemporaryDirectory() as profile:
         run = subprocess.run(
-            [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--window-size=1000,700",
-             "--virtual-time-budget=10000", f"--screenshot={png}",
-             demo_html.resolve().as_uri()],
-            capture_output=True, text=True, timeout=180, check=False)
+            [
+                chromium,
+                *CHROMIUM_FLAGS,
+                f"--user-data-dir={profile}",
+                "--window-size=1000,700",
+                "--virtual-time-budget=10000",
+                f"--screenshot={png}",
+                demo_html.resolve().as_uri(),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=180,
+            check=False,
+        )
     print(f"\nchromium screenshot: {time.perf_counter() - start:.1f} s -> {png}")
-    assert png.is_file(), f"chromium wrote no screenshot (exit {run.returncode}):\n" \
-                          f"{run.stderr[-2000:]}"
+    assert png.is_file(), (
+        f"chromium wrote no screenshot (exit {run.returncode}):\n{run.stderr[-2000:]}"
+    )
     import matplotlib.image
 
     rgb = np.round(255 * matplotlib.image.imread(png)[..., :3]).astype(int)
@@ -426,8 +499,10 @@ def test_screenshot_shows_both_models(demo_html, tmp_path):
     red = (rgb[..., 0] > 200) & (rgb[..., 1] < 60) & (rgb[..., 2] < 60)  # triads' x
     green = (rgb[..., 1] > 200) & (rgb[..., 0] < 60) & (rgb[..., 2] < 60)  # triads' y
     n = rgb.shape[0] * rgb.shape[1]
-    print(f"pixels: background {background.sum()}, ghost {ghost.sum()}, "
-          f"calibrated {calibrated.sum()}, red {red.sum()}, green {green.sum()} of {n}")
+    print(
+        f"pixels: background {background.sum()}, ghost {ghost.sum()}, "
+        f"calibrated {calibrated.sum()}, red {red.sum()}, green {green.sum()} of {n}"
+    )
     assert ghost.sum() > 2000
     assert calibrated.sum() > 0.1 * n
     assert red.sum() > 30 and green.sum() > 30

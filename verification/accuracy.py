@@ -115,11 +115,20 @@ class AccuracyReport:
             entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
             if per_sample:
                 entry["samples"] = [
-                    {"sample": int(k), "position_mm": float(p),
-                     "position_xyz_mm": (1e3 * e).tolist(),
-                     "rotation_deg": None if np.isnan(r) else float(r)}
-                    for k, p, e, r in zip(g.sample, g.position_norm_mm, g.position_error_m,
-                                          g.rotation_deg, strict=True)]
+                    {
+                        "sample": int(k),
+                        "position_mm": float(p),
+                        "position_xyz_mm": (1e3 * e).tolist(),
+                        "rotation_deg": None if np.isnan(r) else float(r),
+                    }
+                    for k, p, e, r in zip(
+                        g.sample,
+                        g.position_norm_mm,
+                        g.position_error_m,
+                        g.rotation_deg,
+                        strict=True,
+                    )
+                ]
             groups.append(entry)
         return {"fitted": list(self.fitted), "groups": groups}
 
@@ -133,8 +142,9 @@ def known_frames(sidecar: CalibrationSidecar | None) -> dict[tuple[str, str], ND
     return {} if sidecar is None else sidecar.known_frames()
 
 
-def evaluate_model(robot: Robot, measurements: Measurements, *,
-                   sidecar: CalibrationSidecar | None = None) -> AccuracyReport:
+def evaluate_model(
+    robot: Robot, measurements: Measurements, *, sidecar: CalibrationSidecar | None = None
+) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
     The prediction is the estimation problem's at its start
@@ -158,8 +168,9 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
     from kinfw.measurements import check_against_robot
 
     measurements = check_against_robot(measurements, robot)
-    known = tuple(Unknown(kind, name, value)
-                  for (kind, name), value in known_frames(sidecar).items())
+    known = tuple(
+        Unknown(kind, name, value) for (kind, name), value in known_frames(sidecar).items()
+    )
     known_keys = {BlockKey(u.kind, u.name) for u in known}
     problem = build_problem(robot, measurements, parameters="none", known=known)
     # external measurement frames: fitted once from all the data; every other unknown
@@ -169,8 +180,7 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
     x0 = np.zeros(problem.n_parameters)
     groups: list[GroupErrors] = []
     for g in problem.groups:
-        requests = [req for req in g.kind.unknowns(g.group, start)
-                    if req.key not in known_keys]
+        requests = [req for req in g.kind.unknowns(g.group, start) if req.key not in known_keys]
         fitted += [req.description for req in requests]
         own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
         r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
@@ -185,6 +195,5 @@ def evaluate_model(robot: Robot, measurements: Measurements, *,
             elif c.name == "rotation":
                 rotation = c.magnitude(rows)
             c0 += c.rows
-        groups.append(GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position,
-                                  rotation))
+        groups.append(GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position, rotation))
     return AccuracyReport(tuple(groups), tuple(fitted))

@@ -128,8 +128,14 @@ def _pseudo_inverse(information: NDArray[np.float64]) -> tuple[NDArray[np.float6
     return inverse / np.outer(d, d), int(keep.sum())
 
 
-def cramer_rao(truth_robot: Robot, measurements: Measurements, frames: Sequence[str], *,
-               noise: NoiseModel, targets: dict[str, ArrayLike]) -> CRLB:
+def cramer_rao(
+    truth_robot: Robot,
+    measurements: Measurements,
+    frames: Sequence[str],
+    *,
+    noise: NoiseModel,
+    targets: dict[str, ArrayLike],
+) -> CRLB:
     """The Cramér-Rao bound of a simulated experiment.
 
     The least-squares problem of :func:`identification.refine.refine` is built around
@@ -181,28 +187,41 @@ def cramer_rao(truth_robot: Robot, measurements: Measurements, frames: Sequence[
     unknown = [b.key for b in problem.unknown_blocks]
     missing = [k.name for k in unknown if k.kind == "target" and k.name not in true_targets]
     if missing:
-        raise ValueError(f"targets: give the true pose of every observed target; missing "
-                         f"{missing}")
+        raise ValueError(f"targets: give the true pose of every observed target; missing {missing}")
     others = [f"{k.kind} {k.name!r}" for k in unknown if k.kind != "target"]
     if others or problem.model_frame is not None:
         raise ValueError(
             "cramer_rao: the data has unknowns whose true value cannot be given "
             f"({', '.join(others) or f'external measurement frame {problem.model_frame!r}'})"
-            "; the bound is supported for pose observations in the root frame and targets")
+            "; the bound is supported for pose observations in the root frame and targets"
+        )
     observed = problem.model0.topology.frames
     if set(frames) != set(observed) or len(frames) != len(observed):
-        raise ValueError(f"frames: expected the observed end frames {list(observed)} (any "
-                         f"order), got {list(frames)}")
+        raise ValueError(
+            f"frames: expected the observed end frames {list(observed)} (any "
+            f"order), got {list(frames)}"
+        )
     cov_free, rank = _pseudo_inverse(information_matrix(problem, noise))
     P = problem.n_parameters
     covariance = np.zeros((P, P))
     idx = np.flatnonzero(problem.free)
     covariance[np.ix_(idx, idx)] = cov_free
     if rank < len(idx):
-        log.warning("cramer_rao: the information has rank %d < %d free parameters; the "
-                    "bound covers the identifiable subspace only", rank, len(idx))
-    return CRLB(model=problem.model0, frames=frames, parameter_names=problem.names,
-                free=problem.free.copy(), covariance=covariance, rank=rank, noise=noise)
+        log.warning(
+            "cramer_rao: the information has rank %d < %d free parameters; the "
+            "bound covers the identifiable subspace only",
+            rank,
+            len(idx),
+        )
+    return CRLB(
+        model=problem.model0,
+        frames=frames,
+        parameter_names=problem.names,
+        free=problem.free.copy(),
+        covariance=covariance,
+        rank=rank,
+        noise=noise,
+    )
 
 
 # -- what the bound implies for positioning --------------------------------------------
@@ -211,9 +230,11 @@ def cramer_rao(truth_robot: Robot, measurements: Measurements, frames: Sequence[
 def _check_qs(model: CPCModel, qs: ArrayLike) -> NDArray[np.float64]:
     qs = np.asarray(qs, dtype=float)
     if qs.ndim != 2 or qs.shape[1] != model.n_joints or not np.isfinite(qs).all():
-        raise ValueError(f"qs: expected finite joint values of shape (n, {model.n_joints}) "
-                         f"in the order {list(model.topology.joint_names)}, got shape "
-                         f"{qs.shape}")
+        raise ValueError(
+            f"qs: expected finite joint values of shape (n, {model.n_joints}) "
+            f"in the order {list(model.topology.joint_names)}, got shape "
+            f"{qs.shape}"
+        )
     return qs
 
 
@@ -223,13 +244,21 @@ def _check_frames(model: CPCModel, frames: Sequence[str]) -> tuple[str, ...]:
     frames = tuple(frames)
     unknown = [f for f in frames if f not in model.topology.frames]
     if not frames or unknown:
-        raise ValueError(f"frames: expected end frames of the model "
-                         f"{list(model.topology.frames)}, got {list(frames)}")
+        raise ValueError(
+            f"frames: expected end frames of the model "
+            f"{list(model.topology.frames)}, got {list(frames)}"
+        )
     return frames
 
 
-def position_jacobians(model: CPCModel, qs: ArrayLike, frames: Sequence[str], *,
-                       method: str = "casadi", step: float = 1e-6) -> NDArray[np.float64]:
+def position_jacobians(
+    model: CPCModel,
+    qs: ArrayLike,
+    frames: Sequence[str],
+    *,
+    method: str = "casadi",
+    step: float = 1e-6,
+) -> NDArray[np.float64]:
     """Jacobians of end-frame positions with respect to the CPC chart at ``model``.
 
     Parameters
@@ -282,18 +311,22 @@ def position_jacobians(model: CPCModel, qs: ArrayLike, frames: Sequence[str], *,
 def _check_bound_model(bound: CRLB, model: CPCModel) -> None:
     n = bound.model.n_parameters
     if model.topology != bound.model.topology or model.parameter_names != bound.parameter_names[:n]:
-        raise ValueError("model: its CPC chart does not match the bound's (pass bound.model, "
-                         "the model the bound was computed around)")
+        raise ValueError(
+            "model: its CPC chart does not match the bound's (pass bound.model, "
+            "the model the bound was computed around)"
+        )
 
 
-def predicted_position_ms(covariance: NDArray[np.float64], G: NDArray[np.float64]
-                          ) -> NDArray[np.float64]:
+def predicted_position_ms(
+    covariance: NDArray[np.float64], G: NDArray[np.float64]
+) -> NDArray[np.float64]:
     """Mean over configurations of ``trace(G C G^T)`` per frame, (E,), m^2."""
     return np.einsum("nekp,pq,nekq->ne", G, covariance, G).mean(axis=0)
 
 
-def predicted_position_rms(bound: CRLB, model: CPCModel, qs: ArrayLike, frames: Sequence[str],
-                           *, method: str = "casadi") -> float:
+def predicted_position_rms(
+    bound: CRLB, model: CPCModel, qs: ArrayLike, frames: Sequence[str], *, method: str = "casadi"
+) -> float:
     """RMS positioning error at configurations ``qs`` that the bound implies, metres.
 
     Parameters
@@ -325,8 +358,9 @@ def predicted_position_rms(bound: CRLB, model: CPCModel, qs: ArrayLike, frames: 
     return float(np.sqrt(predicted_position_ms(bound.model_covariance, G).mean()))
 
 
-def true_chart_coordinates(problem: LeastSquaresProblem, truth_robot: Robot,
-                           root_T_targets: dict[str, ArrayLike]) -> NDArray[np.float64]:
+def true_chart_coordinates(
+    problem: LeastSquaresProblem, truth_robot: Robot, root_T_targets: dict[str, ArrayLike]
+) -> NDArray[np.float64]:
     """The truth in the chart of a least-squares problem (from its start), shape (P,).
 
     CPC part: ``problem.model0.chart_coordinates`` of the truth's canonical model with
@@ -341,15 +375,14 @@ def true_chart_coordinates(problem: LeastSquaresProblem, truth_robot: Robot,
     m0 = problem.model0
     unknown = problem.unknown_blocks
     if problem.model_frame is not None or any(b.key.kind != "target" for b in unknown):
-        raise ValueError("true_chart_coordinates: only the CPC chart and target poses are "
-                         "supported")
-    truth = cpc_from_geometry(geometry_from_robot(truth_robot, m0.topology.frames),
-                              sign=m0.sign)
+        raise ValueError(
+            "true_chart_coordinates: only the CPC chart and target poses are supported"
+        )
+    truth = cpc_from_geometry(geometry_from_robot(truth_robot, m0.topology.frames), sign=m0.sign)
     x = np.zeros(problem.n_parameters)
     x[: m0.n_parameters] = m0.chart_coordinates(truth)
-    for block, sl in zip(unknown, problem.slices[problem.n_robot_blocks:], strict=True):
+    for block, sl in zip(unknown, problem.slices[problem.n_robot_blocks :], strict=True):
         if block.key.name not in root_T_targets:
-            raise ValueError(f"root_T_targets: missing the true pose of target "
-                             f"{block.key.name!r}")
+            raise ValueError(f"root_T_targets: missing the true pose of target {block.key.name!r}")
         x[sl] = block.coordinates(np.asarray(root_T_targets[block.key.name], dtype=float))
     return x

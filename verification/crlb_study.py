@@ -60,9 +60,21 @@ _BAND_TAG = 9  # seeds (verification.head_experiment's docstring)
 #: The per-trial arrays of :class:`CRLBStudy`, in the order its JSON lists them, and their
 #: dtypes.
 _CRLB_ARRAYS = dict.fromkeys(
-    ("start_rms_mm", "refined_rms_mm", "estimated_noise_rms_mm", "crlb_rms_mm", "z",
-     "z_estimated_noise", "nees", "ratio_band", "noise_estimates", "sigma_hat2", "seconds"),
-    float)
+    (
+        "start_rms_mm",
+        "refined_rms_mm",
+        "estimated_noise_rms_mm",
+        "crlb_rms_mm",
+        "z",
+        "z_estimated_noise",
+        "nees",
+        "ratio_band",
+        "noise_estimates",
+        "sigma_hat2",
+        "seconds",
+    ),
+    float,
+)
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,8 +150,12 @@ class CRLBStudy:
     def trial_rms_mm(self, which: str) -> NDArray[np.float64]:
         """Per trial, RMS over frames and held-out configurations, (T,), mm; ``which`` is
         ``"start"``, ``"refined"``, ``"estimated_noise"`` or ``"crlb"``."""
-        values = {"start": self.start_rms_mm, "refined": self.refined_rms_mm,
-                  "estimated_noise": self.estimated_noise_rms_mm, "crlb": self.crlb_rms_mm}
+        values = {
+            "start": self.start_rms_mm,
+            "refined": self.refined_rms_mm,
+            "estimated_noise": self.estimated_noise_rms_mm,
+            "crlb": self.crlb_rms_mm,
+        }
         if which not in values:
             raise ValueError(f"which: expected one of {sorted(values)}, got {which!r}")
         return rms_over(values[which], axis=1)
@@ -152,14 +168,14 @@ class CRLBStudy:
     def pooled_ratio(self, which: str = "refined") -> float:
         """``sqrt(sum of mean square errors / sum of their bounds)`` over trials (1 for an
         efficient estimator)."""
-        return float(np.sqrt(np.sum(self.trial_rms_mm(which) ** 2)
-                             / np.sum(self.trial_rms_mm("crlb") ** 2)))
+        return float(
+            np.sqrt(np.sum(self.trial_rms_mm(which) ** 2) / np.sum(self.trial_rms_mm("crlb") ** 2))
+        )
 
     @property
     def pooled_ratio_per_frame(self) -> NDArray[np.float64]:
         """:meth:`pooled_ratio` of each frame, (E,)."""
-        return np.sqrt(np.sum(self.refined_rms_mm ** 2, axis=0)
-                       / np.sum(self.crlb_rms_mm ** 2, axis=0))
+        return np.sqrt(np.sum(self.refined_rms_mm**2, axis=0) / np.sum(self.crlb_rms_mm**2, axis=0))
 
     def parameter_mask(self, kind: str = "all") -> NDArray[np.bool_]:
         """``"all"``, ``"model"`` (CPC chart) or ``"target"`` parameters, (P,)."""
@@ -202,11 +218,15 @@ class CRLBStudy:
                 "within_band": self.within_band,
                 "mean_nees": float(self.nees.mean()),
                 "n_parameters": self.n_parameters,
-                "coverage": {f"{k:g}": {kind: self.coverage(k, kind=kind)
-                                        for kind in ("all", "model", "target")}
-                             for k in NORMAL_COVERAGE},
-                "coverage_estimated_noise": {f"{k:g}": self.coverage(k, estimated_noise=True)
-                                             for k in NORMAL_COVERAGE},
+                "coverage": {
+                    f"{k:g}": {
+                        kind: self.coverage(k, kind=kind) for kind in ("all", "model", "target")
+                    }
+                    for k in NORMAL_COVERAGE
+                },
+                "coverage_estimated_noise": {
+                    f"{k:g}": self.coverage(k, estimated_noise=True) for k in NORMAL_COVERAGE
+                },
                 "true_noise": self.true_noise.tolist(),
                 "noise_ratio_mean": self.noise_ratio.mean(axis=0).tolist(),
             },
@@ -215,13 +235,19 @@ class CRLBStudy:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> CRLBStudy:
         """The study written by :meth:`to_dict` (the summary is recomputed)."""
-        return cls(setup=ExperimentSetup.from_dict(doc["setup"]),
-                   parameter_names=tuple((str(o), str(f)) for o, f in doc["parameter_names"]),
-                   **arrays_from(doc, _CRLB_ARRAYS))
+        return cls(
+            setup=ExperimentSetup.from_dict(doc["setup"]),
+            parameter_names=tuple((str(o), str(f)) for o, f in doc["parameter_names"]),
+            **arrays_from(doc, _CRLB_ARRAYS),
+        )
 
 
-def _ratio_band(covariance: NDArray[np.float64], G: NDArray[np.float64],
-                rng: np.random.Generator, draws: int = 4000) -> NDArray[np.float64]:
+def _ratio_band(
+    covariance: NDArray[np.float64],
+    G: NDArray[np.float64],
+    rng: np.random.Generator,
+    draws: int = 4000,
+) -> NDArray[np.float64]:
     """5 % and 95 % quantiles of ``RMS error / CRLB RMS`` for an estimator whose error is
     ``N(0, covariance)`` (see :attr:`CRLBStudy.ratio_band`)."""
     w, U = np.linalg.eigh(covariance)
@@ -247,17 +273,19 @@ def _crlb_trial(nominal: Robot, setup: ExperimentSetup, t: int) -> tuple[tuple, 
     fit_est = refine(nominal, exp.data, start=start, targets=start_targets)
     truth = cpc_from_robot(exp.truth, setup.frames)
     qs = exp.test_qs
-    start_ms = position_ms(cpc_from_robot(start, setup.frames), truth, qs,
-                           setup.joint_names, setup.frames)
+    start_ms = position_ms(
+        cpc_from_robot(start, setup.frames), truth, qs, setup.joint_names, setup.frames
+    )
     refined_ms = position_ms(fit.model, truth, qs, setup.joint_names, setup.frames)
     estimated_ms = position_ms(fit_est.model, truth, qs, setup.joint_names, setup.frames)
-    bound = cramer_rao(exp.truth, exp.data, setup.frames, noise=setup.noise,
-                       targets=exp.root_T_targets)
-    G = position_jacobians(bound.model, in_model_order(qs, setup.joint_names, bound.model),
-                           setup.frames)
+    bound = cramer_rao(
+        exp.truth, exp.data, setup.frames, noise=setup.noise, targets=exp.root_T_targets
+    )
+    G = position_jacobians(
+        bound.model, in_model_order(qs, setup.joint_names, bound.model), setup.frames
+    )
     crlb_ms = predicted_position_ms(bound.model_covariance, G)
-    band = _ratio_band(bound.model_covariance, G,
-                       np.random.default_rng([setup.seed, _BAND_TAG, t]))
+    band = _ratio_band(bound.model_covariance, G, np.random.default_rng([setup.seed, _BAND_TAG, t]))
     # The truth in the refinement's chart: the same problem refine built.
     problem = build_problem(nominal, exp.data, start=start, targets=start_targets)
     if problem.names != fit.parameter_names:
@@ -269,17 +297,44 @@ def _crlb_trial(nominal: Robot, setup: ExperimentSetup, t: int) -> tuple[tuple, 
     nees = _nees((fit.estimate - x_true)[free], fit.covariance[np.ix_(free, free)])
     z_est = ((fit_est.estimate - x_true) / np.where(fit_est.std > 0, fit_est.std, np.nan))[free]
     seconds = time.perf_counter() - t0
-    log.info("crlb trial %d: refined %.3g mm, CRLB %.3g mm, %.2f s", t,
-             1e3 * np.sqrt(refined_ms.mean()), 1e3 * np.sqrt(crlb_ms.mean()), seconds)
-    return ((start_ms, refined_ms, estimated_ms, crlb_ms, band, z, nees, z_est,
-             (fit_est.noise.position_m, fit_est.noise.rotation_rad), fit.sigma_hat2, seconds),
-            trial_names)
+    log.info(
+        "crlb trial %d: refined %.3g mm, CRLB %.3g mm, %.2f s",
+        t,
+        1e3 * np.sqrt(refined_ms.mean()),
+        1e3 * np.sqrt(crlb_ms.mean()),
+        seconds,
+    )
+    return (
+        (
+            start_ms,
+            refined_ms,
+            estimated_ms,
+            crlb_ms,
+            band,
+            z,
+            nees,
+            z_est,
+            (fit_est.noise.position_m, fit_est.noise.rotation_rad),
+            fit.sigma_hat2,
+            seconds,
+        ),
+        trial_names,
+    )
 
 
-def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
-               sigma_deg: float = 0.5, per_joint: int = 9, stage2_views: int = 30,
-               n_test: int = 200, seed: int = 0, progress: Progress | None = None,
-               executor: Executor | None = None) -> CRLBStudy:
+def crlb_study(
+    nominal: Robot,
+    *,
+    trials: int = 30,
+    sigma_mm: float = 0.5,
+    sigma_deg: float = 0.5,
+    per_joint: int = 9,
+    stage2_views: int = 30,
+    n_test: int = 200,
+    seed: int = 0,
+    progress: Progress | None = None,
+    executor: Executor | None = None,
+) -> CRLBStudy:
     """The refined two-stage calibration against its Cramér-Rao bound.
 
     Each trial (module docstring) draws a true head and its data, starts from the
@@ -316,9 +371,15 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
     -------
     CRLBStudy
     """
-    setup = setup_experiment(nominal, sigma_mm=sigma_mm, sigma_deg=sigma_deg,
-                             per_joint=per_joint, stage2_views=stage2_views, n_test=n_test,
-                             seed=seed)
+    setup = setup_experiment(
+        nominal,
+        sigma_mm=sigma_mm,
+        sigma_deg=sigma_deg,
+        per_joint=per_joint,
+        stage2_views=stage2_views,
+        n_test=n_test,
+        seed=seed,
+    )
     trials = check_count(trials, "trials", 1)
     E = len(setup.frames)
     start_ms, refined_ms, estimated_ms, crlb_ms = (np.empty((trials, E)) for _ in range(4))
@@ -326,11 +387,26 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
     nees, band = np.empty(trials), np.empty((trials, 2))
     sigma_hat2, seconds = np.empty(trials), np.empty(trials)
     names: tuple[tuple[str, str], ...] | None = None
-    trial_results = run_trials(_crlb_trial, [(nominal, setup, t) for t in range(trials)],
-                               executor=executor, progress=progress)
+    trial_results = run_trials(
+        _crlb_trial,
+        [(nominal, setup, t) for t in range(trials)],
+        executor=executor,
+        progress=progress,
+    )
     for t, (res, trial_names) in enumerate(trial_results):
-        (start_ms[t], refined_ms[t], estimated_ms[t], crlb_ms[t], band[t], z, nees[t], z_est,
-         noise_est[t], sigma_hat2[t], seconds[t]) = res
+        (
+            start_ms[t],
+            refined_ms[t],
+            estimated_ms[t],
+            crlb_ms[t],
+            band[t],
+            z,
+            nees[t],
+            z_est,
+            noise_est[t],
+            sigma_hat2[t],
+            seconds[t],
+        ) = res
         zs.append(z)
         zs_est.append(z_est)
         if names is None:
@@ -338,12 +414,20 @@ def crlb_study(nominal: Robot, *, trials: int = 30, sigma_mm: float = 0.5,
         elif names != trial_names:
             raise RuntimeError("crlb_study: the free parameters differ between trials")
     result = CRLBStudy(
-        setup=setup, parameter_names=names or (),
-        start_rms_mm=1e3 * np.sqrt(start_ms), refined_rms_mm=1e3 * np.sqrt(refined_ms),
-        estimated_noise_rms_mm=1e3 * np.sqrt(estimated_ms), crlb_rms_mm=1e3 * np.sqrt(crlb_ms),
-        z=np.array(zs), z_estimated_noise=np.array(zs_est), nees=nees, ratio_band=band,
+        setup=setup,
+        parameter_names=names or (),
+        start_rms_mm=1e3 * np.sqrt(start_ms),
+        refined_rms_mm=1e3 * np.sqrt(refined_ms),
+        estimated_noise_rms_mm=1e3 * np.sqrt(estimated_ms),
+        crlb_rms_mm=1e3 * np.sqrt(crlb_ms),
+        z=np.array(zs),
+        z_estimated_noise=np.array(zs_est),
+        nees=nees,
+        ratio_band=band,
         noise_estimates=noise_est,
-        sigma_hat2=sigma_hat2, seconds=seconds)
+        sigma_hat2=sigma_hat2,
+        seconds=seconds,
+    )
     freeze(*(getattr(result, name) for name in _CRLB_ARRAYS))
     return result
 
@@ -355,8 +439,12 @@ def format_crlb(study: CRLBStudy) -> str:
     """Markdown tables of the CRLB study: errors per frame, coverage, noise (mm, deg)."""
     s = study
     frames = s.setup.frames
-    columns = (("start", s.start_rms_mm), ("refined", s.refined_rms_mm),
-               ("estimated_noise", s.estimated_noise_rms_mm), ("crlb", s.crlb_rms_mm))
+    columns = (
+        ("start", s.start_rms_mm),
+        ("refined", s.refined_rms_mm),
+        ("estimated_noise", s.estimated_noise_rms_mm),
+        ("crlb", s.crlb_rms_mm),
+    )
     lines = [
         f"Cramér-Rao bound study: {s.trials} trials; held-out RMS position error against "
         "the truth (mm), pooled over trials (sqrt of the mean square).",
@@ -368,8 +456,9 @@ def format_crlb(study: CRLBStudy) -> str:
     ]
     for e, frame in enumerate(frames):
         cells = [f"{rms_over(v[:, e], 0):.3f}" for _, v in columns]
-        lines.append(f"| {frame} | " + " | ".join(cells)
-                     + f" | {s.pooled_ratio_per_frame[e]:.3f} |")
+        lines.append(
+            f"| {frame} | " + " | ".join(cells) + f" | {s.pooled_ratio_per_frame[e]:.3f} |"
+        )
     cells = [f"{rms_over(s.trial_rms_mm(name), 0):.3f}" for name, _ in columns]
     lines.append("| **all frames** | " + " | ".join(cells) + f" | {s.pooled_ratio():.3f} |")
     ratio = s.ratio
@@ -390,16 +479,23 @@ def format_crlb(study: CRLBStudy) -> str:
         "|---:|---:|---:|---:|---:|---:|",
     ]
     for k, expected in NORMAL_COVERAGE.items():
-        cells = [s.coverage(k, kind="model"), s.coverage(k, kind="target"), s.coverage(k),
-                 s.coverage(k, estimated_noise=True)]
-        lines.append(f"| {k:g} | {100 * expected:.1f} % | "
-                     + " | ".join(f"{100 * c:.1f} %" for c in cells) + " |")
+        cells = [
+            s.coverage(k, kind="model"),
+            s.coverage(k, kind="target"),
+            s.coverage(k),
+            s.coverage(k, estimated_noise=True),
+        ]
+        lines.append(
+            f"| {k:g} | {100 * expected:.1f} % | "
+            + " | ".join(f"{100 * c:.1f} %" for c in cells)
+            + " |"
+        )
     z = s.z[np.isfinite(s.z)]
     true = s.true_noise
     est, ratio_n = s.noise_estimates, s.noise_ratio
     lines += [
         "",
-        f"RMS of (estimate - truth) / σ: {np.sqrt(np.mean(z ** 2)):.3f} (1 expected). "
+        f"RMS of (estimate - truth) / σ: {np.sqrt(np.mean(z**2)):.3f} (1 expected). "
         f"NEES (x_hat - x)^T C^-1 (x_hat - x): mean {s.nees.mean():.1f} over {s.trials} "
         f"trials (chi-square: {s.n_parameters} ± {np.sqrt(2.0 * s.n_parameters / s.trials):.1f})"
         f"; reduced chi-square of the fit, σ given: mean {s.sigma_hat2.mean():.3f}.",

@@ -38,12 +38,20 @@ class CrossCheck:
 
     def passed(self, tol: float = 1e-12) -> bool:
         """True when every discrepancy is below ``tol`` (m and rad)."""
-        return max(self.numpy_position_m, self.numpy_rotation_rad,
-                   self.casadi_position_m, self.casadi_rotation_rad) < tol
+        return (
+            max(
+                self.numpy_position_m,
+                self.numpy_rotation_rad,
+                self.casadi_position_m,
+                self.casadi_rotation_rad,
+            )
+            < tol
+        )
 
 
-def random_joint_values(robot: Robot, joint_names: tuple[str, ...], n: int,
-                        rng: np.random.Generator) -> NDArray[np.float64]:
+def random_joint_values(
+    robot: Robot, joint_names: tuple[str, ...], n: int, rng: np.random.Generator
+) -> NDArray[np.float64]:
     """Uniform joint values inside the URDF limits, (n, k); [-pi, pi] where unbounded."""
     lower, upper = robot.joint_limits(joint_names)
     lower = np.where(np.isfinite(lower), lower, -np.pi)
@@ -51,17 +59,21 @@ def random_joint_values(robot: Robot, joint_names: tuple[str, ...], n: int,
     return rng.uniform(lower, upper, size=(n, len(joint_names)))
 
 
-def pose_discrepancy(a_T_x: NDArray[np.float64], a_T_y: NDArray[np.float64]
-                     ) -> tuple[float, float]:
+def pose_discrepancy(a_T_x: NDArray[np.float64], a_T_y: NDArray[np.float64]) -> tuple[float, float]:
     """Largest position (m) and rotation (rad) difference between two pose batches."""
     dp = np.linalg.norm(a_T_x[..., :3, 3] - a_T_y[..., :3, 3], axis=-1)
     dr = rotation_angle(np.swapaxes(a_T_x[..., :3, :3], -1, -2) @ a_T_y[..., :3, :3])
     return float(dp.max(initial=0.0)), float(dr.max(initial=0.0))
 
 
-def crosscheck_cpc(robot: Robot, frames: tuple[str, ...] | list[str], *, n: int = 200,
-                   rng: np.random.Generator | None = None,
-                   model: CPCModel | None = None) -> CrossCheck:
+def crosscheck_cpc(
+    robot: Robot,
+    frames: tuple[str, ...] | list[str],
+    *,
+    n: int = 200,
+    rng: np.random.Generator | None = None,
+    model: CPCModel | None = None,
+) -> CrossCheck:
     """Compare CPC FK (numpy and CasADi) with Pinocchio FK of ``robot``.
 
     Parameters
@@ -87,6 +99,11 @@ def crosscheck_cpc(robot: Robot, frames: tuple[str, ...] | list[str], *, n: int 
     for frame, out in zip(frames, outs, strict=True):
         reference = robot.frame_poses(qs, frame, names)
         casadi_T = np.array(out).reshape(4, n, 4).transpose(1, 0, 2)
-        worst = np.maximum(worst, [*pose_discrepancy(model.frame_poses(qs, frame), reference),
-                                   *pose_discrepancy(casadi_T, reference)])
+        worst = np.maximum(
+            worst,
+            [
+                *pose_discrepancy(model.frame_poses(qs, frame), reference),
+                *pose_discrepancy(casadi_T, reference),
+            ],
+        )
     return CrossCheck(tuple(frames), n, *map(float, worst))

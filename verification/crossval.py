@@ -97,29 +97,36 @@ class CrossValidation:
 
     def mean(self, parameters: str, field: str = "position_rms_mm") -> float:
         """Mean over folds of a score field for one parameter set."""
-        return float(np.mean([getattr(s, field) for s in self.scores
-                              if s.parameters == parameters]))
+        return float(
+            np.mean([getattr(s, field) for s in self.scores if s.parameters == parameters])
+        )
 
     def to_dict(self) -> dict:
         return {
-            "k": self.k, "seed": self.seed, "sets": list(self.sets),
+            "k": self.k,
+            "seed": self.seed,
+            "sets": list(self.sets),
             "folds": [{f: getattr(s, f) for f in FoldScore.__slots__} for s in self.scores],
             "mean_position_rms_mm": {p: self.mean(p) for p in self.sets},
             "mean_rotation_rms_deg": {p: self.mean(p, "rotation_rms_deg") for p in self.sets},
-            "warnings": list(self.warnings), "selected": self.selected,
+            "warnings": list(self.warnings),
+            "selected": self.selected,
         }
 
 
-def held_out_errors(nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...],
-                    test: Measurements) -> tuple[NDArray, NDArray, NDArray]:
+def held_out_errors(
+    nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
+) -> tuple[NDArray, NDArray, NDArray]:
     """Per-observation held-out position errors (m), rotation errors (rad, NaN for
     points) and sample indices of ``test``, predicted by a calibrated URDF and its frames.
     """
-    problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"),
-                            known=unknowns)
+    problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"), known=unknowns)
     pos, rot, samples = [], [], []
-    for g, (r, _) in zip(problem.groups, problem.raw_residuals(
-            np.zeros(problem.n_parameters), with_jacobian=False), strict=True):
+    for g, (r, _) in zip(
+        problem.groups,
+        problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False),
+        strict=True,
+    ):
         size = {c.name: np.full(len(g.sample), np.nan) for c in (POSITION, ROTATION)}
         c0 = 0
         for c in g.components:  # error sizes per noise component (m, rad)
@@ -131,13 +138,21 @@ def held_out_errors(nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ..
     return np.concatenate(pos), np.concatenate(rot), np.concatenate(samples)
 
 
-def _score(nominal: Robot, train: Measurements, test: Measurements, test_ids: NDArray,
-           parameters: str, fold: int, noise, loss, prior) -> FoldScore:
+def _score(
+    nominal: Robot,
+    train: Measurements,
+    test: Measurements,
+    test_ids: NDArray,
+    parameters: str,
+    fold: int,
+    noise,
+    loss,
+    prior,
+) -> FoldScore:
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
     original indices of the test samples). One task of :func:`crossvalidate`: module
     level, picklable arguments."""
-    result = calibrate(nominal, train, parameters=parameters, noise=noise, loss=loss,
-                       prior=prior)
+    result = calibrate(nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior)
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:  # the root's pose in the external frame
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
@@ -145,13 +160,20 @@ def _score(nominal: Robot, train: Measurements, test: Measurements, test_ids: ND
     worst = int(np.argmax(pos))
     ident = result.refined.identifiability
     return FoldScore(
-        fold=fold, parameters=parameters, n_train=train.n_samples, n_test=test.n_samples,
+        fold=fold,
+        parameters=parameters,
+        n_train=train.n_samples,
+        n_test=test.n_samples,
         position_rms_mm=1e3 * float(np.sqrt(np.mean(pos**2))),
         rotation_rms_deg=float(np.degrees(np.sqrt(np.nanmean(rot**2))))
-        if np.any(np.isfinite(rot)) else float("nan"),
-        worst_sample=int(test_ids[samples[worst]]), worst_mm=1e3 * float(pos[worst]),
-        condition=ident.condition, n_parameters=ident.n_parameters,
-        n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals))
+        if np.any(np.isfinite(rot))
+        else float("nan"),
+        worst_sample=int(test_ids[samples[worst]]),
+        worst_mm=1e3 * float(pos[worst]),
+        condition=ident.condition,
+        n_parameters=ident.n_parameters,
+        n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals),
+    )
 
 
 def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:
@@ -164,29 +186,43 @@ def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:
         causes = []
         ratio = np.mean([s.n_residuals / max(s.n_parameters, 1) for s in full])
         if ratio < 10:
-            causes.append(f"too many parameters for the data ({ratio:.1f} training "
-                          "residuals per parameter)")
+            causes.append(
+                f"too many parameters for the data ({ratio:.1f} training residuals per parameter)"
+            )
         worst = max(full, key=lambda s: s.worst_mm)
         if worst.worst_mm > 5 * np.median([s.position_rms_mm for s in full]):
-            causes.append(f"an outlier (sample {worst.worst_sample}: {worst.worst_mm:.1f} mm "
-                          "held out; try --loss huber)")
+            causes.append(
+                f"an outlier (sample {worst.worst_sample}: {worst.worst_mm:.1f} mm "
+                "held out; try --loss huber)"
+            )
         cond = max(s.condition for s in full)
         if cond > 1e4:
-            causes.append(f"poor excitation (condition number {cond:.3g}: move the joints "
-                          "through more of their ranges)")
+            causes.append(
+                f"poor excitation (condition number {cond:.3g}: move the joints "
+                "through more of their ranges)"
+            )
         out.append(
             f"the full calibration is worse held-out than frames only ({mean('full'):.3f} mm "
             f"vs {mean('frames'):.3f} mm); likely cause: "
-            + ("; ".join(causes) if causes else "too many parameters for the data"))
+            + ("; ".join(causes) if causes else "too many parameters for the data")
+        )
     return out
 
 
-def crossvalidate(nominal: Robot, data: Measurements, *, k: int = 5, seed: int = 0,
-                  sets: tuple[str, ...] = BASELINES, select: bool = False,
-                  noise: NoiseModel | None = None, loss: str = "huber",
-                  prior: tuple[float, float] | None = None,
-                  progress: Callable[[int, int], None] | None = None,
-                  executor: Executor | None = None) -> CrossValidation:
+def crossvalidate(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    k: int = 5,
+    seed: int = 0,
+    sets: tuple[str, ...] = BASELINES,
+    select: bool = False,
+    noise: NoiseModel | None = None,
+    loss: str = "huber",
+    prior: tuple[float, float] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    executor: Executor | None = None,
+) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
     Parameters
@@ -214,12 +250,16 @@ def crossvalidate(nominal: Robot, data: Measurements, *, k: int = 5, seed: int =
     for f, test_idx in enumerate(np.array_split(order, k)):
         test_ids = np.sort(test_idx)
         train, test = data.subset(np.sort(np.setdiff1d(order, test_idx))), data.subset(test_ids)
-        tasks += [(nominal, train, test, test_ids, parameters, f, noise, loss, prior)
-                  for parameters in sets]
+        tasks += [
+            (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
+            for parameters in sets
+        ]
     scores = run_trials(_score, tasks, executor=executor, progress=progress)
     selected = None
     if select:
-        selected = min(sets, key=lambda p: np.mean([s.position_rms_mm for s in scores
-                                                    if s.parameters == p]))
-    return CrossValidation(k, seed, tuple(sets), tuple(scores), tuple(_warnings(scores, sets)),
-                           selected)
+        selected = min(
+            sets, key=lambda p: np.mean([s.position_rms_mm for s in scores if s.parameters == p])
+        )
+    return CrossValidation(
+        k, seed, tuple(sets), tuple(scores), tuple(_warnings(scores, sets)), selected
+    )

@@ -37,8 +37,16 @@ from verification.simulate import (
 __all__ = ["DEMO_FILES", "NOISE_DEG", "NOISE_MM", "DemoResult", "run_demo"]
 
 #: What :func:`run_demo` writes into its output directory.
-DEMO_FILES = ("data.json", "held_out.json", "true.urdf", "calibrated.urdf",
-              "calibrated.kinfw.json", "report.json", "errors.png", "scene.html")
+DEMO_FILES = (
+    "data.json",
+    "held_out.json",
+    "true.urdf",
+    "calibrated.urdf",
+    "calibrated.kinfw.json",
+    "report.json",
+    "errors.png",
+    "scene.html",
+)
 #: Simulated measurement noise: position sigma per axis (mm), rotation angle sigma (deg).
 NOISE_MM = 0.5
 NOISE_DEG = 0.5
@@ -71,8 +79,9 @@ class DemoResult:
         return self.out / name
 
 
-def run_demo(out: str | Path, *, seed: int = 0,
-             progress: Callable[[str], None] | None = None) -> DemoResult:
+def run_demo(
+    out: str | Path, *, seed: int = 0, progress: Callable[[str], None] | None = None
+) -> DemoResult:
     """Simulate, calibrate and evaluate the IIS-head; write :data:`DEMO_FILES` into ``out``
     (created if missing; each file atomically).
 
@@ -102,7 +111,8 @@ def run_demo(out: str | Path, *, seed: int = 0,
     w_T_target = default_target_pose(truth, qs2, names, cameras)
     data = concatenate_measurements(
         simulate(truth, qs1, names, frames=plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise))
+        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise),
+    )
     q_test = random_configurations(lower, upper, 100, rng, fraction=0.8)
     observed = {"frames": plates, "cameras": cameras, "w_T_target": w_T_target}
     held_out = simulate(truth, q_test, names, rng=rng, **observed, **noise)
@@ -110,24 +120,46 @@ def run_demo(out: str | Path, *, seed: int = 0,
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     write_text_atomic(out / "true.urdf", truth_xml)
-    report, result = calibrate_to_files(nominal, data, out / "calibrated.urdf",
-                                        method="refine", data_path=out / "data.json",
-                                        held_out=held_out, progress=progress)
+    report, result = calibrate_to_files(
+        nominal,
+        data,
+        out / "calibrated.urdf",
+        method="refine",
+        data_path=out / "data.json",
+        held_out=held_out,
+        progress=progress,
+    )
     calibrated = load_robot(out / "calibrated.urdf")
     nominal_errors = errors_by_group(nominal, exact)
     truth_rms = [StageErrors.of("nominal", nominal_errors)]
-    truth_rms += [StageErrors.of(name, errors_by_group(Robot(xml, name), exact))
-                  for name, xml in result.stages]
-    report = replace(report,
-                     errors_vs_truth_held_out=before_after_rows(
-                         nominal_errors, errors_by_group(calibrated, exact)),
-                     position_rms_vs_truth_held_out_by_stage=tuple(truth_rms))
+    truth_rms += [
+        StageErrors.of(name, errors_by_group(Robot(xml, name), exact))
+        for name, xml in result.stages
+    ]
+    report = replace(
+        report,
+        errors_vs_truth_held_out=before_after_rows(
+            nominal_errors, errors_by_group(calibrated, exact)
+        ),
+        position_rms_vs_truth_held_out_by_stage=tuple(truth_rms),
+    )
     write_report(out / "report.json", report)
-    plot_stage_errors(report.position_rms_vs_truth_held_out_by_stage, out / "errors.png",
-                      title="IIS-head demo: held-out error against the true robot")
+    plot_stage_errors(
+        report.position_rms_vs_truth_held_out_by_stage,
+        out / "errors.png",
+        title="IIS-head demo: held-out error against the true robot",
+    )
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
 
-    write_html(scene(nominal, calibrated, data,
-                     targets=targets_from_sidecar(out / "calibrated.kinfw.json"),
-                     residual_scale=30.0, window=OfflineWindow()), out / "scene.html")
+    write_html(
+        scene(
+            nominal,
+            calibrated,
+            data,
+            targets=targets_from_sidecar(out / "calibrated.kinfw.json"),
+            residual_scale=30.0,
+            window=OfflineWindow(),
+        ),
+        out / "scene.html",
+    )
     return DemoResult(report, len(qs1), out)

@@ -130,12 +130,14 @@ class ExperimentSetup(FieldsJSON):
 
     def describe(self) -> str:
         """One line for headers and titles."""
-        return (f"truth = nominal + N(0, {self.error_mm:g} mm) origins, N(0, "
-                f"{self.error_deg:g} deg) rotations and axes; stage 1: {self.per_joint} "
-                f"values per joint, {' + '.join(self.plates)}; stage 2: {self.stage2_views} "
-                f"random views of a fixed target by {' + '.join(self.cameras)}; noise "
-                f"{self.sigma_mm:g} mm per axis, {self.sigma_deg:g} deg about a random axis; "
-                f"{self.n_test} held-out configurations")
+        return (
+            f"truth = nominal + N(0, {self.error_mm:g} mm) origins, N(0, "
+            f"{self.error_deg:g} deg) rotations and axes; stage 1: {self.per_joint} "
+            f"values per joint, {' + '.join(self.plates)}; stage 2: {self.stage2_views} "
+            f"random views of a fixed target by {' + '.join(self.cameras)}; noise "
+            f"{self.sigma_mm:g} mm per axis, {self.sigma_deg:g} deg about a random axis; "
+            f"{self.n_test} held-out configurations"
+        )
 
 
 def check_positive(value: float, name: str) -> float:
@@ -146,19 +148,33 @@ def check_positive(value: float, name: str) -> float:
     return value
 
 
-def setup_experiment(nominal: Robot, *, sigma_mm: float, sigma_deg: float, per_joint: int,
-                     stage2_views: int, n_test: int, seed: int, error_mm: float = 5.0,
-                     error_deg: float = 1.0, fraction: float = 0.8) -> ExperimentSetup:
+def setup_experiment(
+    nominal: Robot,
+    *,
+    sigma_mm: float,
+    sigma_deg: float,
+    per_joint: int,
+    stage2_views: int,
+    n_test: int,
+    seed: int,
+    error_mm: float = 5.0,
+    error_deg: float = 1.0,
+    fraction: float = 0.8,
+) -> ExperimentSetup:
     """The checked set-up of a study on ``nominal`` (plates and cameras from its
     ``<kinfw>`` hint); the arguments are :class:`ExperimentSetup`'s fields."""
     plates, cameras = nominal.default_frames, nominal.default_cameras
     if not plates or not cameras:
-        raise ValueError(f"{nominal.source}: the study needs a URDF with a "
-                         '<kinfw frames="..." cameras="..."/> hint (plates and cameras)')
+        raise ValueError(
+            f"{nominal.source}: the study needs a URDF with a "
+            '<kinfw frames="..." cameras="..."/> hint (plates and cameras)'
+        )
     if not 0.0 < float(fraction) <= 1.0:
         raise ValueError(f"fraction: expected 0 < fraction <= 1, got {fraction}")
     return ExperimentSetup(
-        urdf=nominal.source, plates=plates, cameras=cameras,
+        urdf=nominal.source,
+        plates=plates,
+        cameras=cameras,
         joint_names=nominal.topology((*plates, *cameras)).joint_names,
         error_mm=check_positive(error_mm, "error_mm"),
         error_deg=check_positive(error_deg, "error_deg"),
@@ -166,7 +182,10 @@ def setup_experiment(nominal: Robot, *, sigma_mm: float, sigma_deg: float, per_j
         sigma_deg=check_positive(sigma_deg, "sigma_deg"),
         per_joint=check_count(per_joint, "per_joint", 2),
         stage2_views=check_count(stage2_views, "stage2_views", 3),
-        n_test=check_count(n_test, "n_test", 1), fraction=float(fraction), seed=int(seed))
+        n_test=check_count(n_test, "n_test", 1),
+        fraction=float(fraction),
+        seed=int(seed),
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,45 +201,70 @@ class Experiment:
 def simulate_experiment(nominal: Robot, setup: ExperimentSetup, trial: int) -> Experiment:
     """A new true head, its two-stage data and held-out configurations (module docstring)."""
     rng = np.random.default_rng([setup.seed, _EXPERIMENT_TAG, trial])
-    truth = load_robot(perturb_robot(nominal, rng, origin_mm=setup.error_mm,
-                                     origin_deg=setup.error_deg, axis_deg=setup.error_deg))
+    truth = load_robot(
+        perturb_robot(
+            nominal,
+            rng,
+            origin_mm=setup.error_mm,
+            origin_deg=setup.error_deg,
+            axis_deg=setup.error_deg,
+        )
+    )
     names = setup.joint_names
     lower, upper = nominal.joint_limits(names)
-    qs1, _ = one_joint_at_a_time(lower, upper, per_joint=setup.per_joint,
-                                 fraction=setup.fraction)
+    qs1, _ = one_joint_at_a_time(lower, upper, per_joint=setup.per_joint, fraction=setup.fraction)
     qs2 = random_configurations(lower, upper, setup.stage2_views, rng, fraction=setup.fraction)
     w_T_target = default_target_pose(truth, qs2, names, setup.cameras)
     noise = {"noise_m": 1e-3 * setup.sigma_mm, "noise_rad": float(np.radians(setup.sigma_deg))}
     data = concatenate_measurements(
         simulate(truth, qs1, names, frames=setup.plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target,
-                 **noise))
+        simulate(truth, qs2, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target, **noise),
+    )
     test_qs = random_configurations(lower, upper, setup.n_test, rng, fraction=setup.fraction)
     targets = {name: w_T_target for name in dict.fromkeys(g.target for g in data.targets)}
     return Experiment(truth, data, targets, test_qs)
 
 
-def pipeline_start(nominal: Robot, data: Measurements
-                   ) -> tuple[Robot, dict[str, NDArray[np.float64]]]:
+def pipeline_start(
+    nominal: Robot, data: Measurements
+) -> tuple[Robot, dict[str, NDArray[np.float64]]]:
     """Closed form + hand-eye: the start URDF and target poses ``refine`` begins from."""
     cal = calibrate(nominal, data, method="closed-form")
     targets = {} if cal.cameras is None else dict(cal.cameras.root_T_targets)
     return Robot(cal.urdf_xml, nominal.source), targets
 
 
-def in_model_order(qs: NDArray[np.float64], names: Sequence[str], model: CPCModel
-                   ) -> NDArray[np.float64]:
+def in_model_order(
+    qs: NDArray[np.float64], names: Sequence[str], model: CPCModel
+) -> NDArray[np.float64]:
     """Columns of ``qs`` (in ``names`` order) in the model's joint order."""
     return qs[:, [list(names).index(j) for j in model.topology.joint_names]]
 
 
-def position_ms(model: CPCModel, truth: CPCModel, qs: NDArray[np.float64],
-                names: Sequence[str], frames: Sequence[str]) -> NDArray[np.float64]:
+def position_ms(
+    model: CPCModel,
+    truth: CPCModel,
+    qs: NDArray[np.float64],
+    names: Sequence[str],
+    frames: Sequence[str],
+) -> NDArray[np.float64]:
     """Mean square position error of each frame over ``qs`` (``names`` order), (E,), m^2."""
     q_model, q_truth = in_model_order(qs, names, model), in_model_order(qs, names, truth)
-    return np.array([np.mean(np.sum((model.frame_poses(q_model, f)[:, :3, 3]
-                                     - truth.frame_poses(q_truth, f)[:, :3, 3]) ** 2, axis=1))
-                     for f in frames])
+    return np.array(
+        [
+            np.mean(
+                np.sum(
+                    (
+                        model.frame_poses(q_model, f)[:, :3, 3]
+                        - truth.frame_poses(q_truth, f)[:, :3, 3]
+                    )
+                    ** 2,
+                    axis=1,
+                )
+            )
+            for f in frames
+        ]
+    )
 
 
 def rms_over(values_mm: NDArray[np.float64], axis: int | tuple[int, ...]) -> Any:

@@ -21,16 +21,16 @@ from verification.studies import choice_main, run_on_head
 __all__ = ["main", "run_crlb", "run_robustness"]
 
 
-def run_crlb(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
-             ) -> CRLBStudy:
+def run_crlb(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any) -> CRLBStudy:
     """Run :func:`verification.crlb_study.crlb_study` (on the built-in IIS-head unless
     ``urdf``) and write ``crlb.png`` and ``crlb.json`` into ``out_dir``; ``kwargs`` go to
     the study."""
     return run_on_head(crlb_study, plot_crlb, out_dir, "crlb", urdf, kwargs)
 
 
-def run_robustness(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
-                   ) -> RobustStudy:
+def run_robustness(
+    out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
+) -> RobustStudy:
     """Run :func:`verification.robust.robustness_study` (on the built-in IIS-head unless
     ``urdf``) and write ``robust.png`` and ``robust.json`` into ``out_dir``; ``kwargs`` go
     to the study."""
@@ -41,12 +41,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m verification.head_studies {crlb,robust} --out DIR [--trials N] [--seed S]``: run
     one study on the built-in head, write its PNG and JSON, print the table."""
     return choice_main(
-        argv, prog="python -m verification.head_studies",
+        argv,
+        prog="python -m verification.head_studies",
         description="crlb: refined calibration vs its Cramér-Rao bound; robust: refinement "
-                    "with planted outliers (linear, Huber, Cauchy losses).",
+        "with planted outliers (linear, Huber, Cauchy losses).",
         trials_help="random trials (default: 30 for crlb, 20 for robust)",
-        studies={"crlb": (run_crlb, format_crlb),
-                 "robust": (run_robustness, format_robustness)})
+        studies={"crlb": (run_crlb, format_crlb), "robust": (run_robustness, format_robustness)},
+    )
 
 
 if __name__ == "__main__":

@@ -133,10 +133,17 @@ def _nan_quantiles(values: NDArray[np.float64], q: Sequence[float]) -> NDArray[n
 #: The per-trial arrays of :class:`HirshResult`, in the order its JSON lists them, and
 #: their dtypes.
 _TRIAL_ARRAYS = {
-    "initial_y_error_deg": float, "y_error_deg": float, "x_error_deg": float,
-    "solved_y_error_deg": float, "solved_x_error_deg": float,
-    "solved_y_translation_error_m": float, "solver_iterations": np.int64, "converged": bool,
-    "restarts": np.int64, "convergence_factors": float, "failed": bool,
+    "initial_y_error_deg": float,
+    "y_error_deg": float,
+    "x_error_deg": float,
+    "solved_y_error_deg": float,
+    "solved_x_error_deg": float,
+    "solved_y_translation_error_m": float,
+    "solver_iterations": np.int64,
+    "converged": bool,
+    "restarts": np.int64,
+    "convergence_factors": float,
+    "failed": bool,
 }
 
 
@@ -209,8 +216,7 @@ class HirshResult:
     @property
     def y_curve_deg(self) -> NDArray[np.float64]:
         """Error of ``Y`` at iterations 0..K (0 = initial guess), shape (V, T, K + 1)."""
-        return np.concatenate([self.initial_y_error_deg[..., None], self.y_error_deg],
-                              axis=2)
+        return np.concatenate([self.initial_y_error_deg[..., None], self.y_error_deg], axis=2)
 
     @property
     def y_median_deg(self) -> NDArray[np.float64]:
@@ -227,8 +233,7 @@ class HirshResult:
         """Median over trials of :attr:`x_error_deg` (iterations 1..K), shape (V, K)."""
         return _nan_quantiles(self.x_error_deg, [0.5])[0]
 
-    def iterations_to_reach(self, threshold_deg: float = CONVERGED_DEG
-                            ) -> NDArray[np.float64]:
+    def iterations_to_reach(self, threshold_deg: float = CONVERGED_DEG) -> NDArray[np.float64]:
         """Per views and trial, the first iteration whose ``Y`` error is at most
         ``threshold_deg`` (0 = the initial guess); ``inf`` if none of the K does, NaN for a
         failed trial. Shape (V, T)."""
@@ -237,19 +242,25 @@ class HirshResult:
         out = np.where(below.any(axis=2), np.argmax(below, axis=2), np.inf)
         return np.where(self.failed, np.nan, out)
 
-    def median_iterations_to_reach(self, threshold_deg: float = CONVERGED_DEG
-                                   ) -> NDArray[np.float64]:
+    def median_iterations_to_reach(
+        self, threshold_deg: float = CONVERGED_DEG
+    ) -> NDArray[np.float64]:
         """Median over trials of :meth:`iterations_to_reach`, shape (V,) (``inf``: more
         than half the trials did not get there within K iterations)."""
         its = self.iterations_to_reach(threshold_deg)
-        return np.array([np.median(row[~np.isnan(row)]) if (~np.isnan(row)).any() else
-                         np.nan for row in its])
+        return np.array(
+            [np.median(row[~np.isnan(row)]) if (~np.isnan(row)).any() else np.nan for row in its]
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: set-up, raw per-trial errors (degrees, metres) and the summary."""
         return {
-            "study": ("Hirsh, DeSouza & Kak 2001, Fig. 3" if self.noise_deg == 0.0 else
-                      "Hirsh, DeSouza & Kak 2001, Fig. 4") + " (simulation)",
+            "study": (
+                "Hirsh, DeSouza & Kak 2001, Fig. 3"
+                if self.noise_deg == 0.0
+                else "Hirsh, DeSouza & Kak 2001, Fig. 4"
+            )
+            + " (simulation)",
             "views": self.views.tolist(),
             "noise_deg": self.noise_deg,
             "seed": self.seed,
@@ -259,21 +270,27 @@ class HirshResult:
             "iterations": self.iterations,
             **json_lists(self, _TRIAL_ARRAYS, strict=True),
             "summary": {
-                **json_lists(self, ("y_median_deg", "y_quartiles_deg", "x_median_deg"),
-                             strict=True),
+                **json_lists(
+                    self, ("y_median_deg", "y_quartiles_deg", "x_median_deg"), strict=True
+                ),
                 # null: not reached within the recorded iterations
                 "median_iterations_to_1e-6_deg": json_list(
-                    self.median_iterations_to_reach(CONVERGED_DEG)),
+                    self.median_iterations_to_reach(CONVERGED_DEG)
+                ),
             },
         }
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> HirshResult:
         """The result written by :meth:`to_dict` (the summary is recomputed)."""
-        return cls(views=readonly(doc["views"], np.int64), noise_deg=float(doc["noise_deg"]),
-                   seed=int(doc["seed"]), hand_rotation_deg=float(doc["hand_rotation_deg"]),
-                   hand_translation_m=float(doc["hand_translation_m"]),
-                   **arrays_from(doc, _TRIAL_ARRAYS, writeable=False))
+        return cls(
+            views=readonly(doc["views"], np.int64),
+            noise_deg=float(doc["noise_deg"]),
+            seed=int(doc["seed"]),
+            hand_rotation_deg=float(doc["hand_rotation_deg"]),
+            hand_translation_m=float(doc["hand_translation_m"]),
+            **arrays_from(doc, _TRIAL_ARRAYS, writeable=False),
+        )
 
 
 def _padded(values: NDArray[np.float64], k: int) -> NDArray[np.float64]:
@@ -282,41 +299,74 @@ def _padded(values: NDArray[np.float64], k: int) -> NDArray[np.float64]:
     return np.concatenate([values, np.full(k - len(values), values[-1])])
 
 
-def _hirsh_trial(seed: int, noise_deg: float, n: int, t: int, k: int,
-                 hand_rotation_deg: float, hand_translation_m: float) -> tuple:
+def _hirsh_trial(
+    seed: int,
+    noise_deg: float,
+    n: int,
+    t: int,
+    k: int,
+    hand_rotation_deg: float,
+    hand_translation_m: float,
+) -> tuple:
     """Trial ``t`` with ``n`` views of :func:`hirsh_study` (a task: module level,
     picklable arguments): the convergence factor, the initial Y error and, unless the
     solver failed (None), the recorded errors and the solver's outcome."""
     rng = _trial_rng(seed, noise_deg, n, t)
-    p = draw_problem(rng, n, hand_rotation_deg=hand_rotation_deg,
-                     hand_translation_m=hand_translation_m)
+    p = draw_problem(
+        rng, n, hand_rotation_deg=hand_rotation_deg, hand_translation_m=hand_translation_m
+    )
     c_T_ws = p.c_T_ws
     if noise_deg > 0.0:
         c_T_ws = rotate_about_random_axes(c_T_ws, rng, np.radians(noise_deg))
     factor = convergence_factor(c_T_ws, p.e_T_bs)
     initial = np.degrees(quaternion_angle(np.eye(3), p.b_T_w[:3, :3]))
     try:
-        res = solve_axyb(c_T_ws, p.e_T_bs, Y0=np.eye(4), refine=False, record_history=True,
-                         rng=rng, max_iterations=max(k, SOLVER_MAX_ITERATIONS))
+        res = solve_axyb(
+            c_T_ws,
+            p.e_T_bs,
+            Y0=np.eye(4),
+            refine=False,
+            record_history=True,
+            rng=rng,
+            max_iterations=max(k, SOLVER_MAX_ITERATIONS),
+        )
     except AXYBError as err:
         log.warning("hirsh: %d views, trial %d: the solver failed: %s", n, t, err)
         return factor, initial, None
-    return factor, initial, (
-        _padded(np.degrees(quaternion_angle(res.root_T_target_history[:, :3, :3],
-                                            p.b_T_w[:3, :3])), k),
-        _padded(np.degrees(quaternion_angle(res.camera_T_hand_history[:, :3, :3],
-                                            p.c_T_e[:3, :3])), k),
-        np.degrees(quaternion_angle(res.root_T_target[:3, :3], p.b_T_w[:3, :3])),
-        np.degrees(quaternion_angle(res.camera_T_hand[:3, :3], p.c_T_e[:3, :3])),
-        np.linalg.norm(res.root_T_target[:3, 3] - p.b_T_w[:3, 3]), res.iterations, res.restarts,
-        res.converged)
+    return (
+        factor,
+        initial,
+        (
+            _padded(
+                np.degrees(quaternion_angle(res.root_T_target_history[:, :3, :3], p.b_T_w[:3, :3])),
+                k,
+            ),
+            _padded(
+                np.degrees(quaternion_angle(res.camera_T_hand_history[:, :3, :3], p.c_T_e[:3, :3])),
+                k,
+            ),
+            np.degrees(quaternion_angle(res.root_T_target[:3, :3], p.b_T_w[:3, :3])),
+            np.degrees(quaternion_angle(res.camera_T_hand[:3, :3], p.c_T_e[:3, :3])),
+            np.linalg.norm(res.root_T_target[:3, 3] - p.b_T_w[:3, 3]),
+            res.iterations,
+            res.restarts,
+            res.converged,
+        ),
+    )
 
 
-def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
-                trials: int = 50, iterations: int = 100, seed: int = 0,
-                hand_rotation_deg: float = 180.0, hand_translation_m: float = 0.5,
-                progress: Progress | None = None,
-                executor: Executor | None = None) -> HirshResult:
+def hirsh_study(
+    *,
+    views: Iterable[int] = PAPER_VIEWS,
+    noise_deg: float = 0.0,
+    trials: int = 50,
+    iterations: int = 100,
+    seed: int = 0,
+    hand_rotation_deg: float = 180.0,
+    hand_translation_m: float = 0.5,
+    progress: Progress | None = None,
+    executor: Executor | None = None,
+) -> HirshResult:
     """Hirsh et al. (2001) Fig. 3 (``noise_deg = 0``) or Fig. 4 (``noise_deg = 1``).
 
     For each number of views, ``trials`` random problems (module docstring, steps 1-3);
@@ -371,27 +421,67 @@ def hirsh_study(*, views: Iterable[int] = PAPER_VIEWS, noise_deg: float = 0.0,
     failed = np.zeros(shape, dtype=bool)
     factors = np.full(shape, np.nan)
     cells = [(v, t) for v in range(len(vs)) for t in range(trials)]
-    results = run_trials(_hirsh_trial, [(seed, noise_deg, int(vs[v]), t, k,
-                                         hand_rotation_deg, hand_translation_m)
-                                        for v, t in cells],
-                         executor=executor, progress=progress)
+    results = run_trials(
+        _hirsh_trial,
+        [
+            (seed, noise_deg, int(vs[v]), t, k, hand_rotation_deg, hand_translation_m)
+            for v, t in cells
+        ],
+        executor=executor,
+        progress=progress,
+    )
     for (v, t), (factor, init, solved) in zip(cells, results, strict=True):
         factors[v, t], initial[v, t] = factor, init
         if solved is None:
             failed[v, t] = True
             continue
-        (y_err[v, t], x_err[v, t], solved_y[v, t], solved_x[v, t], solved_t[v, t],
-         solver_its[v, t], restarts[v, t], converged[v, t]) = solved
+        (
+            y_err[v, t],
+            x_err[v, t],
+            solved_y[v, t],
+            solved_x[v, t],
+            solved_t[v, t],
+            solver_its[v, t],
+            restarts[v, t],
+            converged[v, t],
+        ) = solved
     for v, n in enumerate(vs):
-        log.info("hirsh: noise %g deg, %d views: median Y error after %d iterations %.3g deg",
-                 noise_deg, n, k, np.nanmedian(y_err[v, :, -1]))
-    freeze(vs, initial, y_err, x_err, solved_y, solved_x, solved_t, solver_its, converged,
-           restarts, factors, failed)
-    return HirshResult(views=vs, noise_deg=noise_deg, seed=int(seed),
-                       hand_rotation_deg=float(hand_rotation_deg),
-                       hand_translation_m=float(hand_translation_m),
-                       initial_y_error_deg=initial, y_error_deg=y_err, x_error_deg=x_err,
-                       solved_y_error_deg=solved_y, solved_x_error_deg=solved_x,
-                       solved_y_translation_error_m=solved_t, solver_iterations=solver_its,
-                       converged=converged, restarts=restarts,
-                       convergence_factors=factors, failed=failed)
+        log.info(
+            "hirsh: noise %g deg, %d views: median Y error after %d iterations %.3g deg",
+            noise_deg,
+            n,
+            k,
+            np.nanmedian(y_err[v, :, -1]),
+        )
+    freeze(
+        vs,
+        initial,
+        y_err,
+        x_err,
+        solved_y,
+        solved_x,
+        solved_t,
+        solver_its,
+        converged,
+        restarts,
+        factors,
+        failed,
+    )
+    return HirshResult(
+        views=vs,
+        noise_deg=noise_deg,
+        seed=int(seed),
+        hand_rotation_deg=float(hand_rotation_deg),
+        hand_translation_m=float(hand_translation_m),
+        initial_y_error_deg=initial,
+        y_error_deg=y_err,
+        x_error_deg=x_err,
+        solved_y_error_deg=solved_y,
+        solved_x_error_deg=solved_x,
+        solved_y_translation_error_m=solved_t,
+        solver_iterations=solver_its,
+        converged=converged,
+        restarts=restarts,
+        convergence_factors=factors,
+        failed=failed,
+    )

@@ -60,7 +60,7 @@ def _its(value: float, k: int) -> str:
 
 
 def _verdict(ok: NDArray[np.bool_], views: NDArray[np.int64]) -> str:
-    """"yes" / "no" / "partly (n views)" from one flag per number of views."""
+    """ "yes" / "no" / "partly (n views)" from one flag per number of views."""
     if ok.all():
         return "yes"
     if not ok.any():
@@ -86,26 +86,39 @@ def _claims(noise_free: HirshResult, noisy: HirshResult) -> list[tuple[str, str,
     line = b.noise_deg
     noisy_final = b.y_median_deg[:, -1]
     return [
-        ("converges very quickly (Fig. 3)",
-         f"median iterations to reach {CONVERGED_DEG:g}°: {per_views} (criterion: within "
-         f"{QUICK_ITERATIONS})", _verdict(its <= QUICK_ITERATIONS, a.views)),
-        ("a larger number of views improves the speed of convergence (Fig. 3)",
-         f"iterations to {CONVERGED_DEG:g}° (ties: median error at {k}) fall as the views "
-         "grow; median shrink factor per iteration: " + ", ".join(
-             f"{v}: {np.nanmedian(f):.2f}" for v, f in
-             zip(a.views, a.convergence_factors, strict=True)),
-         "yes" if faster else "no"),
-        ("true for any initial guess (Fig. 3)",
-         f"initial errors {np.nanmin(a.initial_y_error_deg):.0f}° to "
-         f"{np.nanmax(a.initial_y_error_deg):.0f}°: the solver's answer is off by more "
-         f"than {CONVERGED_DEG:g}° after converging or failed in {wrong} of {a.failed.size} "
-         f"problems; {slow} more were still converging at the solver's cap of "
-         f"{max(k, SOLVER_MAX_ITERATIONS)} iterations (slow data, not the start); "
-         f"{int(a.restarts.sum())} random restarts", "yes" if wrong == 0 else "no"),
-        ("with noise, converged to a value below the noise line (Fig. 4)",
-         f"median Y error at iteration {b.iterations}: " + ", ".join(
-             f"{v} views {e:.2g}°" for v, e in zip(b.views, noisy_final, strict=True))
-         + f" (line: {line:g}°)", _verdict(noisy_final < line, b.views)),
+        (
+            "converges very quickly (Fig. 3)",
+            f"median iterations to reach {CONVERGED_DEG:g}°: {per_views} (criterion: within "
+            f"{QUICK_ITERATIONS})",
+            _verdict(its <= QUICK_ITERATIONS, a.views),
+        ),
+        (
+            "a larger number of views improves the speed of convergence (Fig. 3)",
+            f"iterations to {CONVERGED_DEG:g}° (ties: median error at {k}) fall as the views "
+            "grow; median shrink factor per iteration: "
+            + ", ".join(
+                f"{v}: {np.nanmedian(f):.2f}"
+                for v, f in zip(a.views, a.convergence_factors, strict=True)
+            ),
+            "yes" if faster else "no",
+        ),
+        (
+            "true for any initial guess (Fig. 3)",
+            f"initial errors {np.nanmin(a.initial_y_error_deg):.0f}° to "
+            f"{np.nanmax(a.initial_y_error_deg):.0f}°: the solver's answer is off by more "
+            f"than {CONVERGED_DEG:g}° after converging or failed in {wrong} of {a.failed.size} "
+            f"problems; {slow} more were still converging at the solver's cap of "
+            f"{max(k, SOLVER_MAX_ITERATIONS)} iterations (slow data, not the start); "
+            f"{int(a.restarts.sum())} random restarts",
+            "yes" if wrong == 0 else "no",
+        ),
+        (
+            "with noise, converged to a value below the noise line (Fig. 4)",
+            f"median Y error at iteration {b.iterations}: "
+            + ", ".join(f"{v} views {e:.2g}°" for v, e in zip(b.views, noisy_final, strict=True))
+            + f" (line: {line:g}°)",
+            _verdict(noisy_final < line, b.views),
+        ),
     ]
 
 
@@ -146,7 +159,8 @@ def format_hirsh(noise_free: HirshResult, noisy: HirshResult) -> str:
             f"{100 * reached[v]:.0f} % | {fmt(med_a[v, -1])}° "
             f"[{fmt(q_a[0, v, -1])}, {fmt(q_a[1, v, -1])}] | {fmt(x_a[v, -1])}° | "
             f"{np.nanmedian(a.convergence_factors[v]):.3f} | "
-            f"{fmt(np.nanmedian(a.solved_y_error_deg[v]))}° |")
+            f"{fmt(np.nanmedian(a.solved_y_error_deg[v]))}° |"
+        )
     line = b.noise_deg
     lines += [
         "",
@@ -165,19 +179,24 @@ def format_hirsh(noise_free: HirshResult, noisy: HirshResult) -> str:
             f"{fmt(q_b[1, v, -1])}] | {100 * np.mean(ok < line) if ok.size else np.nan:.0f} "
             f"% of trials | {fmt(x_b[v, -1])}° | "
             f"{fmt(np.nanmedian(b.solved_y_error_deg[v]))}° | "
-            f"{1e3 * np.nanmedian(b.solved_y_translation_error_m[v]):.3g} mm |")
+            f"{1e3 * np.nanmedian(b.solved_y_translation_error_m[v]):.3g} mm |"
+        )
     lines += ["", "| paper's claim (section 5) | ours | agree |", "|---|---|---|"]
     for claim, evidence, verdict in _claims(a, b):
         lines.append(f"| {claim} | {evidence} | {verdict} |")
     notes = []
     for r, name in ((a, "Fig. 3"), (b, "Fig. 4")):
         if r.failed.any():
-            notes.append(f"{name}: the solver failed in {int(r.failed.sum())} of "
-                         f"{r.failed.size} trials (left out of the statistics).")
+            notes.append(
+                f"{name}: the solver failed in {int(r.failed.sum())} of "
+                f"{r.failed.size} trials (left out of the statistics)."
+            )
         if r.restarts.any():
-            notes.append(f"{name}: the solver restarted from a random guess in "
-                         f"{int((r.restarts > 0).sum())} of {r.restarts.size} trials "
-                         f"({int(r.restarts.sum())} restarts in all).")
+            notes.append(
+                f"{name}: the solver restarted from a random guess in "
+                f"{int((r.restarts > 0).sum())} of {r.restarts.size} trials "
+                f"({int(r.restarts.sum())} restarts in all)."
+            )
     lines += [
         "",
         "The shrink factor per iteration is (σ2/σ1)² of the iteration matrix N "
@@ -199,9 +218,16 @@ def _draw_curves(ax: Any, result: HirshResult) -> None:
     median = np.maximum(result.y_median_deg, DISPLAY_FLOOR_DEG)
     q25, q75 = np.maximum(result.y_quartiles_deg, DISPLAY_FLOOR_DEG)
     for v, n in enumerate(result.views):
-        line, = ax.plot(it, median[v], linewidth=1.8, label=f"{n} views: median")
-        ax.fill_between(it, q25[v], q75[v], color=line.get_color(), alpha=0.18, linewidth=0,
-                        label=f"{n} views: interquartile range")
+        (line,) = ax.plot(it, median[v], linewidth=1.8, label=f"{n} views: median")
+        ax.fill_between(
+            it,
+            q25[v],
+            q75[v],
+            color=line.get_color(),
+            alpha=0.18,
+            linewidth=0,
+            label=f"{n} views: interquartile range",
+        )
     ax.set_yscale("log")
     ax.set_xlim(0, result.iterations)
     ax.set_xlabel("iteration (0 = initial guess Y = identity)")
@@ -229,25 +255,45 @@ def plot_hirsh(noise_free: HirshResult, noisy: HirshResult, path: str | Path) ->
     fig = new_figure((12.5, 5.8))
     ax3, ax4 = fig.subplots(1, 2)
     _draw_curves(ax3, noise_free)
-    ax3.axhline(CONVERGED_DEG, color="0.35", linestyle=":", linewidth=1.2,
-                label=f"{CONVERGED_DEG:g}°: 'converged' in the table")
+    ax3.axhline(
+        CONVERGED_DEG,
+        color="0.35",
+        linestyle=":",
+        linewidth=1.2,
+        label=f"{CONVERGED_DEG:g}°: 'converged' in the table",
+    )
     low = np.nanmin(np.maximum(noise_free.y_quartiles_deg[0], DISPLAY_FLOOR_DEG))
     ax3.set_ylim(bottom=0.003 * min(low, CONVERGED_DEG), top=500.0)  # room for the note
     ax3.yaxis.set_major_locator(LogLocator(numticks=20))
     ax3.yaxis.set_minor_formatter(NullFormatter())
     ax3.set_title("Fig. 3 (Hirsh et al. 2001): 3, 5, 10 views, no noise", fontsize=10)
-    ax3.text(0.98, 0.02, "flat at the bottom: the solver has stopped\n(steps below its "
-             "tolerance, 1e-12 rad)", transform=ax3.transAxes, ha="right", va="bottom",
-             fontsize=8, color="0.3")
+    ax3.text(
+        0.98,
+        0.02,
+        "flat at the bottom: the solver has stopped\n(steps below its tolerance, 1e-12 rad)",
+        transform=ax3.transAxes,
+        ha="right",
+        va="bottom",
+        fontsize=8,
+        color="0.3",
+    )
 
     _draw_curves(ax4, noisy)
-    ax4.axhline(noisy.noise_deg, color="0.15", linestyle="--", linewidth=1.3,
-                label=f"noise line: {noisy.noise_deg:g}°, the rotation noise on each A[i]")
+    ax4.axhline(
+        noisy.noise_deg,
+        color="0.15",
+        linestyle="--",
+        linewidth=1.3,
+        label=f"noise line: {noisy.noise_deg:g}°, the rotation noise on each A[i]",
+    )
     low = np.nanmin(noisy.y_quartiles_deg[0])
     ax4.set_ylim(bottom=0.7 * min(low, noisy.noise_deg), top=300.0)
     plain_log_ticks(ax4.yaxis)
-    ax4.set_title(f"Fig. 4 (Hirsh et al. 2001): 3, 5, 10 views, each A[i] turned "
-                  f"{noisy.noise_deg:g}° about a random axis", fontsize=10)
+    ax4.set_title(
+        f"Fig. 4 (Hirsh et al. 2001): 3, 5, 10 views, each A[i] turned "
+        f"{noisy.noise_deg:g}° about a random axis",
+        fontsize=10,
+    )
 
     shared_legend(fig, (ax3, ax4))
     fig.suptitle(
@@ -256,15 +302,18 @@ def plot_hirsh(noise_free: HirshResult, noisy: HirshResult, path: str | Path) ->
         f"{noise_free.trials} / {noisy.trials} random problems\n"
         f"hand poses: rotations up to {noise_free.hand_rotation_deg:g}° about random axes; "
         "X, Y uniformly random; error = angle between the quaternions of estimate and "
-        "truth", fontsize=10)
+        "truth",
+        fontsize=10,
+    )
     return save_figure(fig, path)
 
 
 # -- run -------------------------------------------------------------------------------
 
 
-def run_hirsh(out_dir: str | Path, *, noise_deg: float = PAPER_NOISE_DEG, **kwargs: Any
-              ) -> tuple[HirshResult, HirshResult]:
+def run_hirsh(
+    out_dir: str | Path, *, noise_deg: float = PAPER_NOISE_DEG, **kwargs: Any
+) -> tuple[HirshResult, HirshResult]:
     """Run :func:`verification.hirsh_experiments.hirsh_study` without noise (Fig. 3) and
     with ``noise_deg`` (Fig. 4) and write ``hirsh_fig3_fig4.png`` and ``hirsh.json`` into
     ``out_dir``.
@@ -277,8 +326,11 @@ def run_hirsh(out_dir: str | Path, *, noise_deg: float = PAPER_NOISE_DEG, **kwar
     noise_free = hirsh_study(noise_deg=0.0, **kwargs)
     noisy = hirsh_study(noise_deg=noise_deg, **kwargs)
     plot_hirsh(noise_free, noisy, out / "hirsh_fig3_fig4.png")
-    write_json(out / "hirsh.json", {"noise_free": noise_free.to_dict(), "noisy": noisy.to_dict()},
-               allow_nan=False)
+    write_json(
+        out / "hirsh.json",
+        {"noise_free": noise_free.to_dict(), "noisy": noisy.to_dict()},
+        allow_nan=False,
+    )
     return noise_free, noisy
 
 
@@ -293,10 +345,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     [--iterations K]``: run Figs. 3 and 4, write the PNG and the JSON, print the table."""
     parser = study_parser(
         "python -m verification.hirsh_figures",
-        "Hirsh, DeSouza & Kak (2001) Figs. 3 and 4 in simulation.", trials_default=50,
-        trials_help="random problems per number of views (default 50)")
-    parser.add_argument("--iterations", type=int, default=100,
-                        help="iterations recorded and plotted (default 100)")
+        "Hirsh, DeSouza & Kak (2001) Figs. 3 and 4 in simulation.",
+        trials_default=50,
+        trials_help="random problems per number of views (default 50)",
+    )
+    parser.add_argument(
+        "--iterations", type=int, default=100, help="iterations recorded and plotted (default 100)"
+    )
     args = parser.parse_args(argv)
     # Slow trials end unconverged at the solver's cap by design (the study records them);
     # its per-trial warning about that is noise here.
@@ -307,10 +362,17 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     executor = executor_for_jobs(args.jobs)
     try:
-        return run_and_print("hirsh", run, {"trials": args.trials, "seed": args.seed,
-                                            "iterations": args.iterations,
-                                            "executor": executor},
-                             (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"))
+        return run_and_print(
+            "hirsh",
+            run,
+            {
+                "trials": args.trials,
+                "seed": args.seed,
+                "iterations": args.iterations,
+                "executor": executor,
+            },
+            (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"),
+        )
     finally:
         if executor is not None:
             executor.shutdown()

@@ -45,8 +45,9 @@ _X_TRANSLATION_M = 0.1
 _Y_TRANSLATION_M = 1.0
 
 
-def rotations_about_random_axes(rng: np.random.Generator, n: int, angle_rad: float
-                                ) -> NDArray[np.float64]:
+def rotations_about_random_axes(
+    rng: np.random.Generator, n: int, angle_rad: float
+) -> NDArray[np.float64]:
     """``n`` rotations by exactly ``angle_rad`` about uniformly random axes, (n, 3, 3).
 
     The axes are normalised standard normal vectors (isotropic on the sphere), one per
@@ -61,8 +62,9 @@ def rotations_about_random_axes(rng: np.random.Generator, n: int, angle_rad: flo
     return matrix_from_rotation_vector(angle_rad * axes)
 
 
-def rotate_about_random_axes(a_T_bs: ArrayLike, rng: np.random.Generator, angle_rad: float
-                             ) -> NDArray[np.float64]:
+def rotate_about_random_axes(
+    a_T_bs: ArrayLike, rng: np.random.Generator, angle_rad: float
+) -> NDArray[np.float64]:
     """Noise of the paper's Fig. 4: each pose turned by ``angle_rad`` about its own axis.
 
     Parameters
@@ -106,8 +108,9 @@ def quaternion_angle(a_R_bs: ArrayLike, a_R_b_true: ArrayLike) -> NDArray[np.flo
     q = quat_xyzw_from_matrix(a_R_bs)
     q_true = np.broadcast_to(quat_xyzw_from_matrix(a_R_b_true), q.shape)
     q = np.where(np.sum(q * q_true, axis=-1, keepdims=True) < 0.0, -q, q)
-    return 4.0 * np.arctan2(np.linalg.norm(q - q_true, axis=-1),
-                            np.linalg.norm(q + q_true, axis=-1))
+    return 4.0 * np.arctan2(
+        np.linalg.norm(q - q_true, axis=-1), np.linalg.norm(q + q_true, axis=-1)
+    )
 
 
 def _random_rotations(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
@@ -126,10 +129,13 @@ class SimulatedProblem:
     c_T_ws: NDArray[np.float64]  # A, (n, 4, 4)
 
 
-def random_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: float = 180.0,
-                   hand_translation_m: float = 0.5
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
-                              NDArray[np.float64]]:
+def random_problem(
+    rng: np.random.Generator,
+    views: int,
+    *,
+    hand_rotation_deg: float = 180.0,
+    hand_translation_m: float = 0.5,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The paper's test program (section 5): a true pair and ``views`` exact calibrations.
 
     Parameters
@@ -152,31 +158,36 @@ def random_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: f
     A : ndarray, shape (views, 4, 4)
         ``c_i_T_w = X @ B[i] @ Y``, noise-free.
     """
-    p = draw_problem(rng, views, hand_rotation_deg=hand_rotation_deg,
-                     hand_translation_m=hand_translation_m)
+    p = draw_problem(
+        rng, views, hand_rotation_deg=hand_rotation_deg, hand_translation_m=hand_translation_m
+    )
     return p.c_T_e, p.b_T_w, p.e_T_bs, p.c_T_ws
 
 
-def draw_problem(rng: np.random.Generator, views: int, *, hand_rotation_deg: float,
-                 hand_translation_m: float) -> SimulatedProblem:
+def draw_problem(
+    rng: np.random.Generator, views: int, *, hand_rotation_deg: float, hand_translation_m: float
+) -> SimulatedProblem:
     """:func:`random_problem` as a :class:`SimulatedProblem` (the same draws)."""
     views = check_count(views, "views", 3)
     if not (np.isfinite(hand_rotation_deg) and 0.0 < hand_rotation_deg <= 180.0):
-        raise ValueError(f"hand_rotation_deg: expected 0 < angle <= 180, got "
-                         f"{hand_rotation_deg}")
+        raise ValueError(f"hand_rotation_deg: expected 0 < angle <= 180, got {hand_rotation_deg}")
     if not (np.isfinite(hand_translation_m) and hand_translation_m >= 0.0):
-        raise ValueError(f"hand_translation_m: expected a finite length >= 0, got "
-                         f"{hand_translation_m}")
+        raise ValueError(
+            f"hand_translation_m: expected a finite length >= 0, got {hand_translation_m}"
+        )
     R_true = _random_rotations(rng, 2)
     c_T_e = transform_from_rotation_translation(
-        R_true[0], rng.uniform(-_X_TRANSLATION_M, _X_TRANSLATION_M, 3))
+        R_true[0], rng.uniform(-_X_TRANSLATION_M, _X_TRANSLATION_M, 3)
+    )
     b_T_w = transform_from_rotation_translation(
-        R_true[1], rng.uniform(-_Y_TRANSLATION_M, _Y_TRANSLATION_M, 3))
+        R_true[1], rng.uniform(-_Y_TRANSLATION_M, _Y_TRANSLATION_M, 3)
+    )
     axes = rng.normal(size=(views, 3))
     axes /= np.linalg.norm(axes, axis=-1, keepdims=True)
     angles = rng.uniform(0.0, np.radians(hand_rotation_deg), views)
     b_T_es = transform_from_rotation_translation(
         matrix_from_rotation_vector(angles[:, None] * axes),
-        rng.uniform(-hand_translation_m, hand_translation_m, (views, 3)))
+        rng.uniform(-hand_translation_m, hand_translation_m, (views, 3)),
+    )
     e_T_bs = inverse_transform(b_T_es)
     return SimulatedProblem(c_T_e=c_T_e, b_T_w=b_T_w, e_T_bs=e_T_bs, c_T_ws=c_T_e @ e_T_bs @ b_T_w)

@@ -63,15 +63,22 @@ def _default_perturbed_joints(robot: Robot) -> tuple[str, ...]:
         return any(j.is_movable or moves_below(j.child) for j in children.get(link, ()))
 
     return tuple(
-        j.name for j in robot.joints
-        if j.is_movable or (j.type == "fixed" and (j.parent == robot.root_link
-                                                   or not moves_below(j.child)))
+        j.name
+        for j in robot.joints
+        if j.is_movable
+        or (j.type == "fixed" and (j.parent == robot.root_link or not moves_below(j.child)))
     )
 
 
-def perturb_robot(robot: Robot, rng: np.random.Generator, *, origin_mm: float = 2.0,
-                  origin_deg: float = 0.5, axis_deg: float = 0.5,
-                  joints: Sequence[str] | None = None) -> str:
+def perturb_robot(
+    robot: Robot,
+    rng: np.random.Generator,
+    *,
+    origin_mm: float = 2.0,
+    origin_deg: float = 0.5,
+    axis_deg: float = 0.5,
+    joints: Sequence[str] | None = None,
+) -> str:
     """URDF text of a "true" robot: the nominal one with random geometric errors.
 
     For each perturbed joint, the ``<origin>`` ``parent_T_child`` becomes
@@ -127,14 +134,16 @@ def perturb_robot(robot: Robot, rng: np.random.Generator, *, origin_mm: float = 
         dp = rng.normal(0.0, origin_m, size=3)
         dR = random_small_rotations(rng, 1, origin_rad)[0]
         joint_origins[name] = transform_from_rotation_translation(
-            parent_T_child[:3, :3] @ dR, parent_T_child[:3, 3] + dp)
+            parent_T_child[:3, :3] @ dR, parent_T_child[:3, 3] + dp
+        )
         if j.is_movable:
             joint_axes[name] = _tilted_axis(j.axis, rng, axis_rad)
     return edit_urdf(robot.urdf_xml, joint_origins=joint_origins, joint_axes=joint_axes)
 
 
-def _tilted_axis(axis: NDArray[np.float64], rng: np.random.Generator, sigma_rad: float
-                 ) -> NDArray[np.float64]:
+def _tilted_axis(
+    axis: NDArray[np.float64], rng: np.random.Generator, sigma_rad: float
+) -> NDArray[np.float64]:
     """Unit ``axis`` turned by N(0, sigma_rad) about a random direction perpendicular to it."""
     u = rng.normal(size=3)
     u -= (u @ axis) * axis
@@ -148,13 +157,15 @@ def _tilted_axis(axis: NDArray[np.float64], rng: np.random.Generator, sigma_rad:
 # -- measurement protocols -------------------------------------------------------------
 
 
-def _finite_limits(lower: ArrayLike, upper: ArrayLike
-                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _finite_limits(
+    lower: ArrayLike, upper: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     lower = np.array(lower, dtype=float, ndmin=1)
     upper = np.array(upper, dtype=float, ndmin=1)
     if lower.ndim != 1 or lower.shape != upper.shape:
-        raise ValueError(f"lower, upper: expected two arrays of shape (k,), got {lower.shape} "
-                         f"and {upper.shape}")
+        raise ValueError(
+            f"lower, upper: expected two arrays of shape (k,), got {lower.shape} and {upper.shape}"
+        )
     if np.isnan(lower).any() or np.isnan(upper).any():
         raise ValueError("lower, upper: limits must not be NaN")
     lower = np.where(np.isneginf(lower), -_UNBOUNDED, lower)
@@ -164,8 +175,7 @@ def _finite_limits(lower: ArrayLike, upper: ArrayLike
     bad = np.flatnonzero(lower > upper)
     if bad.size:
         i = int(bad[0])
-        raise ValueError(f"lower, upper: joint {i} has lower {lower[i]:.6g} > upper "
-                         f"{upper[i]:.6g}")
+        raise ValueError(f"lower, upper: joint {i} has lower {lower[i]:.6g} > upper {upper[i]:.6g}")
     return lower, upper
 
 
@@ -176,9 +186,14 @@ def _check_fraction(fraction: float) -> float:
     return fraction
 
 
-def one_joint_at_a_time(lower: ArrayLike, upper: ArrayLike, *, per_joint: int = 9,
-                        fraction: float = 0.8, q0: ArrayLike | None = None
-                        ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def one_joint_at_a_time(
+    lower: ArrayLike,
+    upper: ArrayLike,
+    *,
+    per_joint: int = 9,
+    fraction: float = 0.8,
+    q0: ArrayLike | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """The measurement protocol of Shih et al. (1992), section 4.1 (their Fig. 8).
 
     Sample 0 is the initial configuration ``q0``; then each joint ``i`` in turn takes
@@ -225,8 +240,10 @@ def one_joint_at_a_time(lower: ArrayLike, upper: ArrayLike, *, per_joint: int = 
         raise ValueError(f"q0: expected {n_joints} finite values, got shape {q0.shape}")
     flat = np.flatnonzero(half <= 0.0)
     if flat.size:
-        raise ValueError(f"lower, upper: joint {int(flat[0])} has an empty range "
-                         f"[{lower[flat[0]]:.6g}, {upper[flat[0]]:.6g}]; it cannot be moved")
+        raise ValueError(
+            f"lower, upper: joint {int(flat[0])} has an empty range "
+            f"[{lower[flat[0]]:.6g}, {upper[flat[0]]:.6g}]; it cannot be moved"
+        )
     t = np.linspace(-1.0, 1.0, per_joint + 1)
     candidates = mid[:, None] + half[:, None] * t  # (N, M + 1)
     drop = np.argmin(np.abs(candidates - q0[:, None]), axis=1)
@@ -242,9 +259,9 @@ def one_joint_at_a_time(lower: ArrayLike, upper: ArrayLike, *, per_joint: int = 
     return qs, moved
 
 
-def random_configurations(lower: ArrayLike, upper: ArrayLike, n: int,
-                          rng: np.random.Generator, *, fraction: float = 1.0
-                          ) -> NDArray[np.float64]:
+def random_configurations(
+    lower: ArrayLike, upper: ArrayLike, n: int, rng: np.random.Generator, *, fraction: float = 1.0
+) -> NDArray[np.float64]:
     """Configurations drawn uniformly in the centred ``fraction`` of each joint's range.
 
     Parameters

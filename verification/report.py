@@ -66,44 +66,61 @@ def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary
     """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
     each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
     report = evaluate_model(robot, data)
-    return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary())
-                 for g in report.groups)
+    return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary()) for g in report.groups)
 
 
-def before_after_rows(before: tuple[GroupErrorSummary, ...],
-                      after: tuple[GroupErrorSummary, ...]) -> tuple[BeforeAfter, ...]:
+def before_after_rows(
+    before: tuple[GroupErrorSummary, ...], after: tuple[GroupErrorSummary, ...]
+) -> tuple[BeforeAfter, ...]:
     """Per observation group: RMS position (mm) and rotation (deg) before and after."""
     return before_after(before, after)
 
 
 def _kinematic_values(model) -> tuple[KinematicValue, ...]:
-    return tuple(KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
-                 for o, n, v in model.describe())
+    return tuple(
+        KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
+        for o, n, v in model.describe()
+    )
 
 
 def _closed_form_section(result: ClosedFormResult) -> ClosedFormSection:
     model = result.model
     return ClosedFormSection(
-        joint_names=tuple(model.topology.joint_names), frames=tuple(model.topology.frames),
-        q0=tuple(result.q0.tolist()), samples_per_joint=tuple(result.group_sizes.tolist()),
+        joint_names=tuple(model.topology.joint_names),
+        frames=tuple(model.topology.frames),
+        q0=tuple(result.q0.tolist()),
+        samples_per_joint=tuple(result.group_sizes.tolist()),
         axis_residual_rad=tuple(float(v) for v in result.axis_residual_rad),
         motion_per_unit_joint_value=tuple(result.motion_scale.tolist()),
-        position_rms_mm=1e3 * result.position_rms_m, values=_kinematic_values(model),
-        n_identifiable=model.n_parameters)
+        position_rms_mm=1e3 * result.position_rms_m,
+        values=_kinematic_values(model),
+        n_identifiable=model.n_parameters,
+    )
 
 
 def _hand_eye_section(result: CamerasResult) -> HandEyeSection:
     return HandEyeSection(
         cameras=tuple(
-            CameraMount(c.camera, c.target, c.joint, c.hand, c.hand_T_camera, c.n_views,
-                        c.solver.iterations, c.solver.restarts, c.solver.converged,
-                        float(np.degrees(c.solver.rms_rotation_rad)),
-                        1e3 * c.solver.rms_translation)
-            for c in result.cameras),
+            CameraMount(
+                c.camera,
+                c.target,
+                c.joint,
+                c.hand,
+                c.hand_T_camera,
+                c.n_views,
+                c.solver.iterations,
+                c.solver.restarts,
+                c.solver.converged,
+                float(np.degrees(c.solver.rms_rotation_rad)),
+                1e3 * c.solver.rms_translation,
+            )
+            for c in result.cameras
+        ),
         targets=tuple(
             TargetEstimate(t, T, 1e3 * dp, float(np.degrees(dr)))
-            for (t, T), (_, dp, dr) in zip(result.root_T_targets, result.target_spread,
-                                           strict=True)))
+            for (t, T), (_, dp, dr) in zip(result.root_T_targets, result.target_spread, strict=True)
+        ),
+    )
 
 
 def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
@@ -127,13 +144,25 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
     for g in result.residuals:
         rows_g = np.flatnonzero(g.downweighted)
         position_mm = 1e3 * np.linalg.norm(g.position_m[rows_g], axis=1)
-        rotation_deg = (None if g.rotation_rad is None else np.degrees(np.arcsin(np.clip(
-            np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))))
-        rows += [DownweightedRow(int(g.sample[k]), g.kind, g.frame, g.marker,
-                                 float(position_mm[c]),
-                                 None if rotation_deg is None else float(rotation_deg[c]),
-                                 float(g.weight[k]))
-                 for c, k in enumerate(rows_g)]
+        rotation_deg = (
+            None
+            if g.rotation_rad is None
+            else np.degrees(
+                np.arcsin(np.clip(np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))
+            )
+        )
+        rows += [
+            DownweightedRow(
+                int(g.sample[k]),
+                g.kind,
+                g.frame,
+                g.marker,
+                float(position_mm[c]),
+                None if rotation_deg is None else float(rotation_deg[c]),
+                float(g.weight[k]),
+            )
+            for c, k in enumerate(rows_g)
+        ]
     rows.sort(key=lambda row: (row.weight, row.sample))
     return tuple(rows)
 
@@ -149,36 +178,58 @@ def _unknowns(result: RefineResult) -> tuple[CalibratedUnknown, ...]:
 def _refine_section(result: RefineResult, loss: str) -> RefineSection:
     ident = result.identifiability
     return RefineSection(
-        loss=loss, noise=_noise_summary(result), reduced_chi_square=result.sigma_hat2,
-        iterations=result.iterations, converged=result.converged, seconds=result.seconds,
+        loss=loss,
+        noise=_noise_summary(result),
+        reduced_chi_square=result.sigma_hat2,
+        iterations=result.iterations,
+        converged=result.converged,
+        seconds=result.seconds,
         model_frame=result.model_frame,
         # units from the parameter blocks (RefineResult.parameter_units)
         parameters=tuple(
             ParameterRow(o, f, unit, not free, float(d), float(sd) if free else None)
-            for (o, f), unit, free, d, sd in zip(result.parameter_names,
-                                                 result.parameter_units, result.free,
-                                                 result.estimate, result.std, strict=True)),
+            for (o, f), unit, free, d, sd in zip(
+                result.parameter_names,
+                result.parameter_units,
+                result.free,
+                result.estimate,
+                result.std,
+                strict=True,
+            )
+        ),
         kinematics=_kinematic_values(result.model),
         unknowns=_unknowns(result),
         identifiability=IdentifiabilitySummary(
-            rank=ident.rank, n_parameters=ident.n_parameters,
+            rank=ident.rank,
+            n_parameters=ident.n_parameters,
             # strict JSON: an undefined (no parameters) or infinite value is None (null)
             condition=_finite_or_none(ident.condition),
             observability_o1=_finite_or_none(ident.observability_o1),
-            not_identifiable=tuple(NotIdentifiable(tuple(":".join(p) for p in params), why)
-                                   for params, why in ident.unidentifiable),
-            correlations=tuple(Correlation(a, b, r) for a, b, r in ident.correlations)),
-        downweighted=downweighted_rows(result))
+            not_identifiable=tuple(
+                NotIdentifiable(tuple(":".join(p) for p in params), why)
+                for params, why in ident.unidentifiable
+            ),
+            correlations=tuple(Correlation(a, b, r) for a, b, r in ident.correlations),
+        ),
+        downweighted=downweighted_rows(result),
+    )
 
 
 def _finite_or_none(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
-def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
-                       calibration: Calibration, *, method: str, loss: str = "huber",
-                       data_path: str | Path | None = None,
-                       held_out: Measurements | None = None) -> CalibrationReport:
+def calibration_report(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    calibration: Calibration,
+    *,
+    method: str,
+    loss: str = "huber",
+    data_path: str | Path | None = None,
+    held_out: Measurements | None = None,
+) -> CalibrationReport:
     """Everything a user needs to trust (or not) a calibration.
 
     Parameters
@@ -203,51 +254,70 @@ def calibration_report(nominal: Robot, calibrated: Robot, data: Measurements,
     before = errors_by_group(nominal, data)
     after = errors_by_group(calibrated, data)
     stage_rms = [StageErrors.of("nominal", before)]
-    stage_rms += [StageErrors.of(name, errors_by_group(Robot(xml, name), data))
-                  for name, xml in calibration.stages]
+    stage_rms += [
+        StageErrors.of(name, errors_by_group(Robot(xml, name), data))
+        for name, xml in calibration.stages
+    ]
     export = calibration.export
     return CalibrationReport(
         created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        method=method, nominal_urdf=nominal.source,
-        data=DataProvenance(data.source, data.n_samples,
-                            file_sha256(data_path) if data_path else None),
+        method=method,
+        nominal_urdf=nominal.source,
+        data=DataProvenance(
+            data.source, data.n_samples, file_sha256(data_path) if data_path else None
+        ),
         notes=tuple(calibration.notes),
         errors_in_sample=before_after(before, after),
         position_rms_by_stage=tuple(stage_rms),
-        errors_before=before, errors_after=after,
-        kinematics=None if calibration.closed_form is None
+        errors_before=before,
+        errors_after=after,
+        kinematics=None
+        if calibration.closed_form is None
         else _closed_form_section(calibration.closed_form),
-        hand_eye=None if calibration.cameras is None
-        else _hand_eye_section(calibration.cameras),
-        refine=None if calibration.refined is None
-        else _refine_section(calibration.refined, loss),
-        export=None if export is None else ExportSection(
-            export.w_T_root, tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3])))
-                                   for link, T in export.link_shifts)),
-        errors_held_out=None if held_out is None
-        else before_after(errors_by_group(nominal, held_out),
-                          errors_by_group(calibrated, held_out)))
+        hand_eye=None if calibration.cameras is None else _hand_eye_section(calibration.cameras),
+        refine=None if calibration.refined is None else _refine_section(calibration.refined, loss),
+        export=None
+        if export is None
+        else ExportSection(
+            export.w_T_root,
+            tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3]))) for link, T in export.link_shifts),
+        ),
+        errors_held_out=None
+        if held_out is None
+        else before_after(
+            errors_by_group(nominal, held_out), errors_by_group(calibrated, held_out)
+        ),
+    )
 
 
-def sidecar(report: CalibrationReport, calibration: Calibration, *,
-            nominal_path: str | Path | None, calibrated_path: str | Path
-            ) -> CalibrationSidecar:
+def sidecar(
+    report: CalibrationReport,
+    calibration: Calibration,
+    *,
+    nominal_path: str | Path | None,
+    calibrated_path: str | Path,
+) -> CalibrationSidecar:
     """The provenance written beside a calibrated URDF: what produced it and what is
     needed to predict measurements that is not in the URDF (the root's pose in the
     measurement frame, target poses, markers, noise)."""
     refined = calibration.refined
     return CalibrationSidecar(
-        created=report.created, kinfw_version=_kinfw_version(), method=report.method,
+        created=report.created,
+        kinfw_version=_kinfw_version(),
+        method=report.method,
         calibrated_urdf=Path(calibrated_path).name,
         nominal_urdf=str(nominal_path) if nominal_path else None,
         nominal_urdf_sha256=file_sha256(nominal_path) if nominal_path else None,
-        data=report.data, w_T_root=calibration.w_T_root,
+        data=report.data,
+        w_T_root=calibration.w_T_root,
         measurement_frame=None if refined is None else refined.model_frame,
         noise=None if refined is None else _noise_summary(refined),
         unknowns=() if refined is None else _unknowns(refined),
-        hand_eye_targets=() if calibration.cameras is None
+        hand_eye_targets=()
+        if calibration.cameras is None
         else tuple(calibration.cameras.root_T_targets),
-        errors_held_out=report.errors_held_out)
+        errors_held_out=report.errors_held_out,
+    )
 
 
 def _kinfw_version() -> str:
@@ -259,8 +329,9 @@ def _kinfw_version() -> str:
         return "unknown (not installed)"
 
 
-def plot_stage_errors(stages: tuple[StageErrors, ...], path: str | Path, *,
-                      title: str = "") -> Path:
+def plot_stage_errors(
+    stages: tuple[StageErrors, ...], path: str | Path, *, title: str = ""
+) -> Path:
     """Grouped bars: position RMS (mm, log scale) per observation group after each stage
     (the report's ``position_rms_by_stage`` or ``..._vs_truth_held_out_by_stage``)."""
     stage_rms = {s.stage: dict(s.position_rms_mm) for s in stages}
@@ -279,15 +350,25 @@ def plot_stage_errors(stages: tuple[StageErrors, ...], path: str | Path, *,
     x = np.arange(len(groups))
     for k, stage in enumerate(stages):
         values = [stage_rms[stage][g] for g in groups]
-        bars = ax.bar(x + (k - (len(stages) - 1) / 2) * width, values, width, label=stage,
-                      color=colours[k % len(colours)])
+        bars = ax.bar(
+            x + (k - (len(stages) - 1) / 2) * width,
+            values,
+            width,
+            label=stage,
+            color=colours[k % len(colours)],
+        )
         ax.bar_label(bars, labels=[f"{v:.2g}" for v in values], fontsize=7, padding=1)
     ax.set_yscale("log")
     ax.set_xticks(x, groups)
     ax.set_ylabel("held-out position RMS (mm, log scale)")
     ax.grid(axis="y", which="both", alpha=0.3)
-    ax.legend(title="after stage", ncols=len(stages), loc="upper center",
-              bbox_to_anchor=(0.5, -0.11), frameon=False)
+    ax.legend(
+        title="after stage",
+        ncols=len(stages),
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.11),
+        frameon=False,
+    )
     if title:
         ax.set_title(title, fontsize=10)
     path = Path(path)
@@ -302,12 +383,20 @@ def sidecar_path(urdf_path: str | Path) -> Path:
     return Path(urdf_path).with_suffix(".kinfw.json")
 
 
-def calibrate_to_files(nominal: Robot, data: Measurements, out: str | Path, *,
-                       method: str, noise=None, loss: str = "huber",
-                       parameters: str | tuple[str, ...] = "full", prior=None,
-                       data_path: str | Path | None = None,
-                       held_out: Measurements | None = None, progress=None
-                       ) -> tuple[CalibrationReport, Calibration]:
+def calibrate_to_files(
+    nominal: Robot,
+    data: Measurements,
+    out: str | Path,
+    *,
+    method: str,
+    noise=None,
+    loss: str = "huber",
+    parameters: str | tuple[str, ...] = "full",
+    prior=None,
+    data_path: str | Path | None = None,
+    held_out: Measurements | None = None,
+    progress=None,
+) -> tuple[CalibrationReport, Calibration]:
     """Calibrate (:func:`identification.pipeline.calibrate`), then write the calibrated
     URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
     is computed.
@@ -324,11 +413,26 @@ def calibrate_to_files(nominal: Robot, data: Measurements, out: str | Path, *,
     from kinfw.calibration_file import write_sidecar
     from kinfw.urdf_export import write_urdf
 
-    result = calibrate(nominal, data, method=method, noise=noise, loss=loss,
-                       parameters=parameters, prior=prior, progress=progress)
-    report = calibration_report(nominal, Robot(result.urdf_xml, str(out)), data, result,
-                                method=method, loss=loss, data_path=data_path,
-                                held_out=held_out)
+    result = calibrate(
+        nominal,
+        data,
+        method=method,
+        noise=noise,
+        loss=loss,
+        parameters=parameters,
+        prior=prior,
+        progress=progress,
+    )
+    report = calibration_report(
+        nominal,
+        Robot(result.urdf_xml, str(out)),
+        data,
+        result,
+        method=method,
+        loss=loss,
+        data_path=data_path,
+        held_out=held_out,
+    )
     nominal_path = None if nominal.source.startswith("<") else nominal.source
     side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out)
     write_urdf(out, result.urdf_xml)

@@ -62,16 +62,27 @@ _OUTLIER_TAG = 8  # seeds (verification.head_experiment's docstring)
 
 
 #: Default variants of the robustness study: (loss, "given" | "estimated" noise).
-ROBUST_VARIANTS = (("linear", "given"), ("huber", "given"), ("cauchy", "given"),
-                   ("huber", "estimated"), ("cauchy", "estimated"))
+ROBUST_VARIANTS = (
+    ("linear", "given"),
+    ("huber", "given"),
+    ("cauchy", "given"),
+    ("huber", "estimated"),
+    ("cauchy", "estimated"),
+)
 
 
 #: The per-trial arrays of :class:`RobustStudy`, in the order its JSON lists them, and
 #: their dtypes.
 _ROBUST_ARRAYS = {
-    "clean_rms_mm": float, "start_rms_mm": float, "rms_mm": float, "n_observations": np.int64,
-    "n_planted": np.int64, "flagged_planted": np.int64, "flagged_clean": np.int64,
-    "noise_used": float, "seconds": float,
+    "clean_rms_mm": float,
+    "start_rms_mm": float,
+    "rms_mm": float,
+    "n_observations": np.int64,
+    "n_planted": np.int64,
+    "flagged_planted": np.int64,
+    "flagged_clean": np.int64,
+    "noise_used": float,
+    "seconds": float,
 }
 
 
@@ -127,16 +138,16 @@ class RobustStudy:
     @property
     def labels(self) -> tuple[str, ...]:
         """A short label per variant."""
-        return tuple(loss if noise == "given" else f"{loss}, σ estimated"
-                     for loss, noise in self.variants)
+        return tuple(
+            loss if noise == "given" else f"{loss}, σ estimated" for loss, noise in self.variants
+        )
 
     def variant(self, loss: str, noise: str = "given") -> int:
         """Index of a variant."""
         try:
             return self.variants.index((loss, noise))
         except ValueError:
-            raise KeyError(f"no variant {(loss, noise)}; the study has {self.variants}"
-                           ) from None
+            raise KeyError(f"no variant {(loss, noise)}; the study has {self.variants}") from None
 
     @property
     def ratio_to_clean(self) -> NDArray[np.float64]:
@@ -159,26 +170,39 @@ class RobustStudy:
         return {
             "study": "Robust refinement with planted outliers (simulation)",
             "setup": self.setup.to_dict(),
-            "outlier_fraction": self.outlier_fraction, "outlier_mm": self.outlier_mm,
+            "outlier_fraction": self.outlier_fraction,
+            "outlier_mm": self.outlier_mm,
             "outlier_deg": self.outlier_deg,
             "variants": [list(v) for v in self.variants],
             **json_lists(self, _ROBUST_ARRAYS),
-            "summary": {label: {"median_ratio_to_clean": float(np.median(ratio)),
-                                "max_ratio_to_clean": float(np.max(ratio)),
-                                "recall": float(rec), "false_alarm_rate": float(fa)}
-                        for label, ratio, rec, fa in zip(
-                            self.labels, self.ratio_to_clean.T, self.recall,
-                            self.false_alarm_rate, strict=True)},
+            "summary": {
+                label: {
+                    "median_ratio_to_clean": float(np.median(ratio)),
+                    "max_ratio_to_clean": float(np.max(ratio)),
+                    "recall": float(rec),
+                    "false_alarm_rate": float(fa),
+                }
+                for label, ratio, rec, fa in zip(
+                    self.labels,
+                    self.ratio_to_clean.T,
+                    self.recall,
+                    self.false_alarm_rate,
+                    strict=True,
+                )
+            },
         }
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> RobustStudy:
         """The study written by :meth:`to_dict` (the summary is recomputed)."""
-        return cls(setup=ExperimentSetup.from_dict(doc["setup"]),
-                   outlier_fraction=float(doc["outlier_fraction"]),
-                   outlier_mm=float(doc["outlier_mm"]), outlier_deg=float(doc["outlier_deg"]),
-                   variants=tuple((str(a), str(b)) for a, b in doc["variants"]),
-                   **arrays_from(doc, _ROBUST_ARRAYS))
+        return cls(
+            setup=ExperimentSetup.from_dict(doc["setup"]),
+            outlier_fraction=float(doc["outlier_fraction"]),
+            outlier_mm=float(doc["outlier_mm"]),
+            outlier_deg=float(doc["outlier_deg"]),
+            variants=tuple((str(a), str(b)) for a, b in doc["variants"]),
+            **arrays_from(doc, _ROBUST_ARRAYS),
+        )
 
 
 def _unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
@@ -186,9 +210,14 @@ def _unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def plant_outliers(data: Measurements, rng: np.random.Generator, *, fraction: float,
-                   distance_m: float, angle_rad: float
-                   ) -> tuple[Measurements, frozenset[tuple[str, str, int]]]:
+def plant_outliers(
+    data: Measurements,
+    rng: np.random.Generator,
+    *,
+    fraction: float,
+    distance_m: float,
+    angle_rad: float,
+) -> tuple[Measurements, frozenset[tuple[str, str, int]]]:
     """Corrupt a random ``fraction`` of the pose and target observations.
 
     Each chosen observation (one sample of one pose or target group) has its position
@@ -204,8 +233,9 @@ def plant_outliers(data: Measurements, rng: np.random.Generator, *, fraction: fl
     """
     if not 0.0 <= fraction <= 1.0:
         raise ValueError(f"fraction: expected 0 <= fraction <= 1, got {fraction}")
-    groups = [("pose", g.frame, g.sample, g.meas_T_frame) for g in data.poses] + \
-             [("target", g.camera, g.sample, g.camera_T_target) for g in data.targets]
+    groups = [("pose", g.frame, g.sample, g.meas_T_frame) for g in data.poses] + [
+        ("target", g.camera, g.sample, g.camera_T_target) for g in data.targets
+    ]
     index = [(k, r) for k, (_, _, sample, _) in enumerate(groups) for r in range(len(sample))]
     n = round(fraction * len(index)) if fraction > 0.0 else 0
     n = max(n, 1) if fraction > 0.0 else 0
@@ -222,16 +252,24 @@ def plant_outliers(data: Measurements, rng: np.random.Generator, *, fraction: fl
         planted.add((kind, frame, int(sample[r])))
     n_poses = len(data.poses)
     poses = tuple(replace(g, meas_T_frame=arrays[k]) for k, g in enumerate(data.poses))
-    targets = tuple(replace(g, camera_T_target=arrays[n_poses + k])
-                    for k, g in enumerate(data.targets))
-    corrupted = replace(data, poses=poses, targets=targets,
-                        source=f"{data.source} + {n} planted outliers")
+    targets = tuple(
+        replace(g, camera_T_target=arrays[n_poses + k]) for k, g in enumerate(data.targets)
+    )
+    corrupted = replace(
+        data, poses=poses, targets=targets, source=f"{data.source} + {n} planted outliers"
+    )
     return corrupted, frozenset(planted)
 
 
-def _robust_trial(nominal: Robot, setup: ExperimentSetup, t: int,
-                  variants: tuple[tuple[str, str], ...], outlier_fraction: float,
-                  outlier_mm: float, outlier_deg: float) -> tuple:
+def _robust_trial(
+    nominal: Robot,
+    setup: ExperimentSetup,
+    t: int,
+    variants: tuple[tuple[str, str], ...],
+    outlier_fraction: float,
+    outlier_mm: float,
+    outlier_deg: float,
+) -> tuple:
     """Trial ``t`` of :func:`robustness_study` (a task: module level, picklable
     arguments)."""
     t0 = time.perf_counter()
@@ -239,45 +277,81 @@ def _robust_trial(nominal: Robot, setup: ExperimentSetup, t: int,
     truth = cpc_from_robot(exp.truth, setup.frames)
 
     def held_out_ms(model: CPCModel) -> float:
-        return float(position_ms(model, truth, exp.test_qs, setup.joint_names,
-                                 setup.frames).mean())
+        return float(position_ms(model, truth, exp.test_qs, setup.joint_names, setup.frames).mean())
 
     V = len(variants)
     rms_ms, noise_used = np.empty(V), np.empty((V, 2))
     flagged_planted, flagged_clean = np.zeros(V, np.int64), np.zeros(V, np.int64)
     start, start_targets = pipeline_start(nominal, exp.data)
-    clean_ms = held_out_ms(refine(nominal, exp.data, start=start, targets=start_targets,
-                                  noise=setup.noise).model)
+    clean_ms = held_out_ms(
+        refine(nominal, exp.data, start=start, targets=start_targets, noise=setup.noise).model
+    )
     rng = np.random.default_rng([setup.seed, _OUTLIER_TAG, t])
-    data, planted = plant_outliers(exp.data, rng, fraction=outlier_fraction,
-                                   distance_m=1e-3 * outlier_mm,
-                                   angle_rad=float(np.radians(outlier_deg)))
+    data, planted = plant_outliers(
+        exp.data,
+        rng,
+        fraction=outlier_fraction,
+        distance_m=1e-3 * outlier_mm,
+        angle_rad=float(np.radians(outlier_deg)),
+    )
     n_obs = sum(len(g.sample) for g in (*data.poses, *data.targets))
     start, start_targets = pipeline_start(nominal, data)
     start_ms = held_out_ms(cpc_from_robot(start, setup.frames))
     for v, (loss, noise) in enumerate(variants):
-        fit = refine(nominal, data, start=start, targets=start_targets, loss=loss,
-                     noise=setup.noise if noise == "given" else None)
+        fit = refine(
+            nominal,
+            data,
+            start=start,
+            targets=start_targets,
+            loss=loss,
+            noise=setup.noise if noise == "given" else None,
+        )
         rms_ms[v] = held_out_ms(fit.model)
         flagged = {(kind, frame, sample) for kind, frame, sample, _ in fit.downweighted}
         flagged_planted[v] = len(flagged & planted)
         flagged_clean[v] = len(flagged - planted)
         noise_used[v] = fit.noise.position_m, fit.noise.rotation_rad
     seconds = time.perf_counter() - t0
-    log.info("robust trial %d: clean %.3g mm, %s, %.2f s", t, 1e3 * np.sqrt(clean_ms),
-             ", ".join(f"{loss}/{noise} {1e3 * np.sqrt(m):.3g} mm"
-                       for (loss, noise), m in zip(variants, rms_ms, strict=True)), seconds)
-    return (clean_ms, start_ms, rms_ms, n_obs, len(planted), flagged_planted, flagged_clean,
-            noise_used, seconds)
+    log.info(
+        "robust trial %d: clean %.3g mm, %s, %.2f s",
+        t,
+        1e3 * np.sqrt(clean_ms),
+        ", ".join(
+            f"{loss}/{noise} {1e3 * np.sqrt(m):.3g} mm"
+            for (loss, noise), m in zip(variants, rms_ms, strict=True)
+        ),
+        seconds,
+    )
+    return (
+        clean_ms,
+        start_ms,
+        rms_ms,
+        n_obs,
+        len(planted),
+        flagged_planted,
+        flagged_clean,
+        noise_used,
+        seconds,
+    )
 
 
-def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: float = 0.05,
-                     outlier_mm: float = 50.0, outlier_deg: float = 5.0,
-                     variants: Sequence[tuple[str, str]] = ROBUST_VARIANTS,
-                     sigma_mm: float = 0.5, sigma_deg: float = 0.5, per_joint: int = 9,
-                     stage2_views: int = 30, n_test: int = 200, seed: int = 0,
-                     progress: Progress | None = None,
-                     executor: Executor | None = None) -> RobustStudy:
+def robustness_study(
+    nominal: Robot,
+    *,
+    trials: int = 20,
+    outlier_fraction: float = 0.05,
+    outlier_mm: float = 50.0,
+    outlier_deg: float = 5.0,
+    variants: Sequence[tuple[str, str]] = ROBUST_VARIANTS,
+    sigma_mm: float = 0.5,
+    sigma_deg: float = 0.5,
+    per_joint: int = 9,
+    stage2_views: int = 30,
+    n_test: int = 200,
+    seed: int = 0,
+    progress: Progress | None = None,
+    executor: Executor | None = None,
+) -> RobustStudy:
     """Refinement of data with planted gross errors, linear vs robust losses.
 
     Each trial takes the data of the same trial of
@@ -315,20 +389,27 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
     observation exceeds with probability ``P(chi2_6 > 9) = 17 %`` — the Cauchy variants'
     "clean down-weighted" counts those, not misfits.
     """
-    setup = setup_experiment(nominal, sigma_mm=sigma_mm, sigma_deg=sigma_deg,
-                             per_joint=per_joint, stage2_views=stage2_views, n_test=n_test,
-                             seed=seed)
+    setup = setup_experiment(
+        nominal,
+        sigma_mm=sigma_mm,
+        sigma_deg=sigma_deg,
+        per_joint=per_joint,
+        stage2_views=stage2_views,
+        n_test=n_test,
+        seed=seed,
+    )
     trials = check_count(trials, "trials", 1)
     variants = tuple((str(loss), str(noise)) for loss, noise in variants)
     for loss, noise in variants:
         if loss not in ("linear", "huber", "cauchy") or noise not in ("given", "estimated"):
-            raise ValueError(f"variants: expected (loss, noise) with loss linear, huber or "
-                             f"cauchy and noise given or estimated, got {(loss, noise)}")
+            raise ValueError(
+                f"variants: expected (loss, noise) with loss linear, huber or "
+                f"cauchy and noise given or estimated, got {(loss, noise)}"
+            )
     if not variants:
         raise ValueError("variants: give at least one (loss, noise)")
     if not 0.0 <= float(outlier_fraction) <= 1.0:
-        raise ValueError(f"outlier_fraction: expected 0 <= fraction <= 1, got "
-                         f"{outlier_fraction}")
+        raise ValueError(f"outlier_fraction: expected 0 <= fraction <= 1, got {outlier_fraction}")
     outlier_mm = check_positive(outlier_mm, "outlier_mm")
     outlier_deg = float(outlier_deg)
     if not (np.isfinite(outlier_deg) and outlier_deg >= 0.0):
@@ -337,22 +418,48 @@ def robustness_study(nominal: Robot, *, trials: int = 20, outlier_fraction: floa
     clean_ms, start_ms, seconds = np.empty(trials), np.empty(trials), np.empty(trials)
     rms_ms = np.empty((trials, V))
     n_obs, n_planted = np.empty(trials, np.int64), np.empty(trials, np.int64)
-    flagged_planted, flagged_clean = np.zeros((trials, V), np.int64), np.zeros((trials, V),
-                                                                                np.int64)
+    flagged_planted, flagged_clean = (
+        np.zeros((trials, V), np.int64),
+        np.zeros((trials, V), np.int64),
+    )
     noise_used = np.empty((trials, V, 2))
     trial_results = run_trials(
-        _robust_trial, [(nominal, setup, t, variants, float(outlier_fraction), outlier_mm,
-                         outlier_deg) for t in range(trials)],
-        executor=executor, progress=progress)
+        _robust_trial,
+        [
+            (nominal, setup, t, variants, float(outlier_fraction), outlier_mm, outlier_deg)
+            for t in range(trials)
+        ],
+        executor=executor,
+        progress=progress,
+    )
     for t, res in enumerate(trial_results):
-        (clean_ms[t], start_ms[t], rms_ms[t], n_obs[t], n_planted[t], flagged_planted[t],
-         flagged_clean[t], noise_used[t], seconds[t]) = res
+        (
+            clean_ms[t],
+            start_ms[t],
+            rms_ms[t],
+            n_obs[t],
+            n_planted[t],
+            flagged_planted[t],
+            flagged_clean[t],
+            noise_used[t],
+            seconds[t],
+        ) = res
     result = RobustStudy(
-        setup=setup, outlier_fraction=float(outlier_fraction), outlier_mm=outlier_mm,
-        outlier_deg=outlier_deg, variants=variants, clean_rms_mm=1e3 * np.sqrt(clean_ms),
-        start_rms_mm=1e3 * np.sqrt(start_ms), rms_mm=1e3 * np.sqrt(rms_ms),
-        n_observations=n_obs, n_planted=n_planted, flagged_planted=flagged_planted,
-        flagged_clean=flagged_clean, noise_used=noise_used, seconds=seconds)
+        setup=setup,
+        outlier_fraction=float(outlier_fraction),
+        outlier_mm=outlier_mm,
+        outlier_deg=outlier_deg,
+        variants=variants,
+        clean_rms_mm=1e3 * np.sqrt(clean_ms),
+        start_rms_mm=1e3 * np.sqrt(start_ms),
+        rms_mm=1e3 * np.sqrt(rms_ms),
+        n_observations=n_obs,
+        n_planted=n_planted,
+        flagged_planted=flagged_planted,
+        flagged_clean=flagged_clean,
+        noise_used=noise_used,
+        seconds=seconds,
+    )
     freeze(*(getattr(result, name) for name in _ROBUST_ARRAYS))
     return result
 
@@ -384,13 +491,21 @@ def format_robustness(study: RobustStudy) -> str:
         lines.append(
             f"| {label} | {np.median(s.rms_mm[:, v]):.3f} | {s.rms_mm[:, v].max():.3f} | "
             f"{np.median(ratio[:, v]):.2f} | {ratio[:, v].max():.2f} | "
-            f"{100 * s.recall[v]:.0f} % | {100 * s.false_alarm_rate[v]:.1f} % |")
+            f"{100 * s.recall[v]:.0f} % | {100 * s.false_alarm_rate[v]:.1f} % |"
+        )
     estimated = [v for v, (_, noise) in enumerate(s.variants) if noise == "estimated"]
     if estimated:
         sp = 1e3 * s.noise_used[:, estimated, 0]
-        lines += ["", f"Noise estimated with outliers: position {np.median(sp):.2f} mm per "
-                  f"component (median; true {s.setup.sigma_mm:g} mm)."]
-    lines += ["", "Down-weighted: refine's `downweighted` (observations beyond the robust "
-              "loss's threshold: the 99 % quantile of a clean residual norm).",
-              "", f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial)."]
+        lines += [
+            "",
+            f"Noise estimated with outliers: position {np.median(sp):.2f} mm per "
+            f"component (median; true {s.setup.sigma_mm:g} mm).",
+        ]
+    lines += [
+        "",
+        "Down-weighted: refine's `downweighted` (observations beyond the robust "
+        "loss's threshold: the 99 % quantile of a clean residual norm).",
+        "",
+        f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial).",
+    ]
     return "\n".join(lines)

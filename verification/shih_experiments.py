@@ -143,15 +143,24 @@ class StudySetup(FieldsJSON):
 
     def describe(self) -> str:
         """One line: truth errors, noise model and range, for headers and titles."""
-        return (f"truth = nominal + N(0, {self.error_mm:g} mm) origins, N(0, "
-                f"{self.error_deg:g} deg) rotations and axes; noise: position N(0, sigma) per "
-                f"axis, rotation N(0, sigma x {self.rot_per_mm_rad:.4g} rad/mm) about a random "
-                f"axis; central {100 * self.fraction:g} % of each joint range")
+        return (
+            f"truth = nominal + N(0, {self.error_mm:g} mm) origins, N(0, "
+            f"{self.error_deg:g} deg) rotations and axes; noise: position N(0, sigma) per "
+            f"axis, rotation N(0, sigma x {self.rot_per_mm_rad:.4g} rad/mm) about a random "
+            f"axis; central {100 * self.fraction:g} % of each joint range"
+        )
 
 
-def setup_study(nominal: Robot, frames: Sequence[str] | None, *, error_mm: float,
-                error_deg: float, rot_per_mm_rad: float, fraction: float, seed: int
-                ) -> StudySetup:
+def setup_study(
+    nominal: Robot,
+    frames: Sequence[str] | None,
+    *,
+    error_mm: float,
+    error_deg: float,
+    rot_per_mm_rad: float,
+    fraction: float,
+    seed: int,
+) -> StudySetup:
     """The checked set-up of a study on ``nominal`` (``frames`` default to its
     ``<kinfw frames>`` hint); the arguments are :class:`StudySetup`'s fields."""
     if frames is None:
@@ -160,19 +169,29 @@ def setup_study(nominal: Robot, frames: Sequence[str] | None, *, error_mm: float
         raise TypeError("frames: expected a sequence of frame names, not a string")
     frames = tuple(frames)
     if not frames:
-        raise ValueError(f"{nominal.source}: give frames (the measured plates); this URDF has "
-                         'no <kinfw frames="..."/> hint')
-    for name, value in (("error_mm", error_mm), ("error_deg", error_deg),
-                        ("rot_per_mm_rad", rot_per_mm_rad)):
+        raise ValueError(
+            f"{nominal.source}: give frames (the measured plates); this URDF has "
+            'no <kinfw frames="..."/> hint'
+        )
+    for name, value in (
+        ("error_mm", error_mm),
+        ("error_deg", error_deg),
+        ("rot_per_mm_rad", rot_per_mm_rad),
+    ):
         if not (np.isfinite(value) and value >= 0.0):
             raise ValueError(f"{name}: expected a finite value >= 0, got {value}")
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"fraction: expected 0 < fraction <= 1, got {fraction}")
-    return StudySetup(urdf=nominal.source, frames=frames,
-                      joint_names=nominal.topology(frames).joint_names,
-                      error_mm=float(error_mm), error_deg=float(error_deg),
-                      rot_per_mm_rad=float(rot_per_mm_rad), fraction=float(fraction),
-                      seed=int(seed))
+    return StudySetup(
+        urdf=nominal.source,
+        frames=frames,
+        joint_names=nominal.topology(frames).joint_names,
+        error_mm=float(error_mm),
+        error_deg=float(error_deg),
+        rot_per_mm_rad=float(rot_per_mm_rad),
+        fraction=float(fraction),
+        seed=int(seed),
+    )
 
 
 def check_sigmas_mm(values: Iterable[float], name: str) -> NDArray[np.float64]:
@@ -184,8 +203,9 @@ def check_sigmas_mm(values: Iterable[float], name: str) -> NDArray[np.float64]:
     return out
 
 
-def trial_rng(setup: StudySetup, study: int, sigma_mm: float, per_joint: int, trial: int
-              ) -> np.random.Generator:
+def trial_rng(
+    setup: StudySetup, study: int, sigma_mm: float, per_joint: int, trial: int
+) -> np.random.Generator:
     """The generator of one trial (module docstring: seeds)."""
     sigma_nm = round(float(sigma_mm) * 1e6)
     return np.random.default_rng([setup.seed, study, sigma_nm, per_joint, trial])
@@ -201,22 +221,40 @@ class Trial:
     rng: np.random.Generator
 
 
-def calibrate_once(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDArray, *,
-                   per_joint: int, sigma_mm: float, rng: np.random.Generator) -> Trial:
+def calibrate_once(
+    nominal: Robot,
+    setup: StudySetup,
+    lower: NDArray,
+    upper: NDArray,
+    *,
+    per_joint: int,
+    sigma_mm: float,
+    rng: np.random.Generator,
+) -> Trial:
     """Steps 1-4 of the module docstring: a new truth, noisy one-joint data, closed form."""
-    truth_xml = perturb_robot(nominal, rng, origin_mm=setup.error_mm,
-                              origin_deg=setup.error_deg, axis_deg=setup.error_deg)
+    truth_xml = perturb_robot(
+        nominal, rng, origin_mm=setup.error_mm, origin_deg=setup.error_deg, axis_deg=setup.error_deg
+    )
     truth = cpc_from_robot(load_robot(truth_xml), setup.frames)
     qs, _ = one_joint_at_a_time(lower, upper, per_joint=per_joint, fraction=setup.fraction)
     w_T_plates = truth.frame_poses(qs)  # (n, E, 4, 4)
     sample = np.arange(len(qs))
     poses = tuple(
-        PoseObservations(frame=f, sample=sample,
-                         meas_T_frame=perturb_poses(w_T_plates[:, e], rng, 1e-3 * sigma_mm,
-                                                    float(setup.sigma_rad(sigma_mm))))
-        for e, f in enumerate(truth.topology.frames))
-    data = Measurements(joint_names=setup.joint_names, qs=qs, poses=poses,
-                        source=f"<simulated: M = {per_joint}, sigma = {sigma_mm:g} mm>")
+        PoseObservations(
+            frame=f,
+            sample=sample,
+            meas_T_frame=perturb_poses(
+                w_T_plates[:, e], rng, 1e-3 * sigma_mm, float(setup.sigma_rad(sigma_mm))
+            ),
+        )
+        for e, f in enumerate(truth.topology.frames)
+    )
+    data = Measurements(
+        joint_names=setup.joint_names,
+        qs=qs,
+        poses=poses,
+        source=f"<simulated: M = {per_joint}, sigma = {sigma_mm:g} mm>",
+    )
     identified = identify_closed_form(nominal, data, frames=setup.frames).model
     return Trial(truth, identified, rng)
 
@@ -278,8 +316,7 @@ class Fig11Result:
         """Standard deviation over trials of :attr:`trial_mean_mm`, shape (S, K), mm."""
         return sample_std(self.trial_mean_mm, axis=2)
 
-    def smallest_per_joint(self, requirement_mm: float = PAPER_ACCURACY_MM
-                           ) -> NDArray[np.float64]:
+    def smallest_per_joint(self, requirement_mm: float = PAPER_ACCURACY_MM) -> NDArray[np.float64]:
         """Per noise level, the smallest ``M`` from which on every mean error is below
         ``requirement_mm`` (NaN if none), shape (S,)."""
         ok = self.mean_mm < requirement_mm
@@ -309,33 +346,50 @@ class Fig11Result:
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> Fig11Result:
         """The result written by :meth:`to_dict` (the summary is recomputed)."""
-        return cls(setup=StudySetup.from_dict(doc["setup"]),
-                   per_joint=np.array(doc["per_joint"], dtype=np.int64),
-                   sigmas_mm=np.array(doc["sigmas_mm"], dtype=float),
-                   n_test=int(doc["n_test"]),
-                   errors_mm=np.array(doc["errors_mm"], dtype=float))
+        return cls(
+            setup=StudySetup.from_dict(doc["setup"]),
+            per_joint=np.array(doc["per_joint"], dtype=np.int64),
+            sigmas_mm=np.array(doc["sigmas_mm"], dtype=float),
+            n_test=int(doc["n_test"]),
+            errors_mm=np.array(doc["errors_mm"], dtype=float),
+        )
 
 
-def _fig11_trial(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDArray,
-                 sigma: float, m: int, t: int, n_test: int) -> NDArray[np.float64]:
+def _fig11_trial(
+    nominal: Robot,
+    setup: StudySetup,
+    lower: NDArray,
+    upper: NDArray,
+    sigma: float,
+    m: int,
+    t: int,
+    n_test: int,
+) -> NDArray[np.float64]:
     """One trial of :func:`fig11_study` (a task: module level, picklable arguments): the
     mean held-out position error per frame, mm."""
     rng = trial_rng(setup, _FIG11_TAG, sigma, m, t)
-    trial = calibrate_once(nominal, setup, lower, upper, per_joint=m, sigma_mm=sigma,
-                           rng=rng)
+    trial = calibrate_once(nominal, setup, lower, upper, per_joint=m, sigma_mm=sigma, rng=rng)
     qs = random_configurations(lower, upper, n_test, trial.rng, fraction=setup.fraction)
-    d = (positions_m(trial.truth, qs, setup.frames)
-         - positions_m(trial.identified, qs, setup.frames))
+    d = positions_m(trial.truth, qs, setup.frames) - positions_m(trial.identified, qs, setup.frames)
     return 1e3 * np.linalg.norm(d, axis=-1).mean(axis=0)
 
 
-def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
-                sigmas_mm: Iterable[float] = (0.1, 0.25, 0.5, 1.0), trials: int = 10,
-                n_test: int = 200, rot_per_mm_rad: float = 1.0 / 50.0, error_mm: float = 5.0,
-                error_deg: float = 1.0, fraction: float = 0.8, seed: int = 0,
-                frames: Sequence[str] | None = None,
-                progress: Progress | None = None,
-                executor: Executor | None = None) -> Fig11Result:
+def fig11_study(
+    nominal: Robot,
+    *,
+    per_joint: Iterable[int] = range(2, 16),
+    sigmas_mm: Iterable[float] = (0.1, 0.25, 0.5, 1.0),
+    trials: int = 10,
+    n_test: int = 200,
+    rot_per_mm_rad: float = 1.0 / 50.0,
+    error_mm: float = 5.0,
+    error_deg: float = 1.0,
+    fraction: float = 0.8,
+    seed: int = 0,
+    frames: Sequence[str] | None = None,
+    progress: Progress | None = None,
+    executor: Executor | None = None,
+) -> Fig11Result:
     """Shih et al. (1992) Fig. 11: positioning error vs measurements per joint and noise.
 
     For each noise level ``sigma`` and each ``M`` in ``per_joint``, ``trials`` random
@@ -382,8 +436,15 @@ def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
     test configurations, per frame. Noise-free data (``sigma = 0``) recovers the truth
     exactly, whatever ``M``.
     """
-    setup = setup_study(nominal, frames, error_mm=error_mm, error_deg=error_deg,
-                        rot_per_mm_rad=rot_per_mm_rad, fraction=fraction, seed=seed)
+    setup = setup_study(
+        nominal,
+        frames,
+        error_mm=error_mm,
+        error_deg=error_deg,
+        rot_per_mm_rad=rot_per_mm_rad,
+        fraction=fraction,
+        seed=seed,
+    )
     ms = np.array([check_count(m, "per_joint", 1) for m in per_joint], dtype=np.int64)
     if not ms.size:
         raise ValueError("per_joint: expected at least one number of measurements per joint")
@@ -392,17 +453,22 @@ def fig11_study(nominal: Robot, *, per_joint: Iterable[int] = range(2, 16),
     n_test = check_count(n_test, "n_test", 1)
     lower, upper = nominal.joint_limits(setup.joint_names)
     errors = np.empty((len(sigmas), len(ms), trials, len(setup.frames)))
-    cells = [(s, k, t) for s in range(len(sigmas)) for k in range(len(ms))
-             for t in range(trials)]
-    results = run_trials(_fig11_trial, [(nominal, setup, lower, upper, float(sigmas[s]),
-                                         int(ms[k]), t, n_test) for s, k, t in cells],
-                         executor=executor, progress=progress)
+    cells = [(s, k, t) for s in range(len(sigmas)) for k in range(len(ms)) for t in range(trials)]
+    results = run_trials(
+        _fig11_trial,
+        [
+            (nominal, setup, lower, upper, float(sigmas[s]), int(ms[k]), t, n_test)
+            for s, k, t in cells
+        ],
+        executor=executor,
+        progress=progress,
+    )
     for (s, k, t), error in zip(cells, results, strict=True):
         errors[s, k, t] = error
     for s, sigma in enumerate(sigmas):
         for k, m in enumerate(ms):
-            log.info("fig11: sigma %.3g mm, M = %d: mean error %.3g mm", sigma, m,
-                     errors[s, k].mean())
+            log.info(
+                "fig11: sigma %.3g mm, M = %d: mean error %.3g mm", sigma, m, errors[s, k].mean()
+            )
     freeze(ms, sigmas, errors)
-    return Fig11Result(setup=setup, per_joint=ms, sigmas_mm=sigmas, n_test=n_test,
-                       errors_mm=errors)
+    return Fig11Result(setup=setup, per_joint=ms, sigmas_mm=sigmas, n_test=n_test, errors_mm=errors)

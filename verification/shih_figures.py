@@ -61,8 +61,10 @@ def format_fig11(result: Fig11Result) -> str:
     paper's conclusion beside ours.
     """
     r = result
-    head = [f"σ = {s:g} mm ({np.degrees(a):.2f}°)" for s, a in
-            zip(r.sigmas_mm, r.sigmas_rad, strict=True)]
+    head = [
+        f"σ = {s:g} mm ({np.degrees(a):.2f}°)"
+        for s, a in zip(r.sigmas_mm, r.sigmas_rad, strict=True)
+    ]
     lines = [
         "Shih et al. (1992) Fig. 11 in simulation: mean positioning error (mm) of the "
         f"closed-form model on {r.n_test} held-out configurations, mean ± std over "
@@ -79,7 +81,8 @@ def format_fig11(result: Fig11Result) -> str:
     smallest = r.smallest_per_joint(PAPER_ACCURACY_MM)
     ours = "; ".join(
         f"σ = {s:g} mm: {'none of the M tried' if np.isnan(m) else f'M >= {int(m)}'}"
-        for s, m in zip(r.sigmas_mm, smallest, strict=True))
+        for s, m in zip(r.sigmas_mm, smallest, strict=True)
+    )
     lines += [
         "",
         f"Paper: for {PAPER_ACCURACY_MM:g} mm accuracy the observation error must stay below "
@@ -107,12 +110,24 @@ def format_table4(result: Table4Result) -> str:
     ]
     for e, (frame, row) in enumerate(zip(r.setup.frames, r.paper_rows(), strict=True)):
         for a, axis in enumerate("xyz"):
-            paper = (["–", "–"] if row is None else
-                     [f"{PAPER_TABLE4_MU_MM[row, a]:.2f}", f"{PAPER_TABLE4_SIGMA_MM[row, a]:.2f}"])
-            ours = [r.measured_mu_mm[e, a], r.measured_sigma_mm[e, a], r.truth_mu_mm[e, a],
-                    r.truth_sigma_mm[e, a]]
-            lines.append(f"| {frame} | {axis} | " + " | ".join(paper)
-                         + " | " + " | ".join(f"{v:.2f}" for v in ours) + " |")
+            paper = (
+                ["–", "–"]
+                if row is None
+                else [f"{PAPER_TABLE4_MU_MM[row, a]:.2f}", f"{PAPER_TABLE4_SIGMA_MM[row, a]:.2f}"]
+            )
+            ours = [
+                r.measured_mu_mm[e, a],
+                r.measured_sigma_mm[e, a],
+                r.truth_mu_mm[e, a],
+                r.truth_sigma_mm[e, a],
+            ]
+            lines.append(
+                f"| {frame} | {axis} | "
+                + " | ".join(paper)
+                + " | "
+                + " | ".join(f"{v:.2f}" for v in ours)
+                + " |"
+            )
     lines += [
         "",
         "Paper: real data (stereo rig, about 0.5 mm), nine test configurations; its errors "
@@ -143,14 +158,31 @@ def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
     for s, (sigma, sigma_rad) in enumerate(zip(r.sigmas_mm, r.sigmas_rad, strict=True)):
         # On a log axis, a lower bar below zero cannot be drawn: stop it at 5 % of the mean.
         lower = np.minimum(std[s], 0.95 * mean[s])
-        ax.errorbar(r.per_joint, mean[s], yerr=np.stack([lower, std[s]]), marker="o",
-                    markersize=4, capsize=3, linewidth=1.5,
-                    label=_sigma_label(sigma, sigma_rad))
-    ax.axhline(PAPER_ACCURACY_MM, color="0.2", linestyle="--", linewidth=1.2,
-               label=f"paper's requirement: {PAPER_ACCURACY_MM:g} mm")
+        ax.errorbar(
+            r.per_joint,
+            mean[s],
+            yerr=np.stack([lower, std[s]]),
+            marker="o",
+            markersize=4,
+            capsize=3,
+            linewidth=1.5,
+            label=_sigma_label(sigma, sigma_rad),
+        )
+    ax.axhline(
+        PAPER_ACCURACY_MM,
+        color="0.2",
+        linestyle="--",
+        linewidth=1.2,
+        label=f"paper's requirement: {PAPER_ACCURACY_MM:g} mm",
+    )
     if r.per_joint.min() <= PAPER_PER_JOINT <= r.per_joint.max():
-        ax.axvline(PAPER_PER_JOINT, color="0.5", linestyle=":", linewidth=1.2,
-                   label=f"paper's choice: M = {PAPER_PER_JOINT}")
+        ax.axvline(
+            PAPER_PER_JOINT,
+            color="0.5",
+            linestyle=":",
+            linewidth=1.2,
+            label=f"paper's choice: M = {PAPER_PER_JOINT}",
+        )
     positive = mean[mean > 0]
     if positive.size and positive.max() / positive.min() > 8.0:
         log_axes(ax, "y")
@@ -161,7 +193,9 @@ def plot_fig11(result: Fig11Result, path: str | Path) -> Path:
     ax.set_title(
         "Reproduction of Shih et al. (1992) Fig. 11: closed-form CPC identification\n"
         f"{r.trials} random trials per point (new true robot each), {r.n_test} held-out "
-        f"test configurations, {' + '.join(r.setup.frames)}", fontsize=10)
+        f"test configurations, {' + '.join(r.setup.frames)}",
+        fontsize=10,
+    )
     fig.legend(fontsize=8.5, loc="outside lower center", ncols=3)
     return save_figure(fig, path)
 
@@ -194,11 +228,23 @@ def plot_table4(result: Table4Result, path: str | Path) -> Path:
             k = rows[e] if i == 0 else e
             # |error| >= 0: a lower bar that would cross zero stops there.
             yerr = np.stack([np.minimum(sigma[k], mu[k]), sigma[k]])
-            ax.bar(x + (i - 1) * width, mu[k], width, yerr=yerr, capsize=3, color=color,
-                   label=label,
-                   error_kw={"elinewidth": 1.0})
-        ax.axhline(r.sigma_mm * np.sqrt(2.0 / np.pi), color="0.2", linestyle=":",
-                   linewidth=1.0, label="measurement noise alone, σ√(2/π)")
+            ax.bar(
+                x + (i - 1) * width,
+                mu[k],
+                width,
+                yerr=yerr,
+                capsize=3,
+                color=color,
+                label=label,
+                error_kw={"elinewidth": 1.0},
+            )
+        ax.axhline(
+            r.sigma_mm * np.sqrt(2.0 / np.pi),
+            color="0.2",
+            linestyle=":",
+            linewidth=1.0,
+            label="measurement noise alone, σ√(2/π)",
+        )
         ax.set_xticks(x, ["x", "y", "z"])
         ax.set_title(frame)
         ax.set_xlabel("axis of the measurement frame")
@@ -210,23 +256,25 @@ def plot_table4(result: Table4Result, path: str | Path) -> Path:
         f"Reproduction of Shih et al. (1992) Table 4: {r.per_joint} measurements per joint, "
         f"{_sigma_label(r.sigma_mm, r.sigma_rad)}\n"
         f"{r.n_test} held-out test configurations × {r.trials} trials (new true robot each); "
-        "paper: real data", fontsize=10)
+        "paper: real data",
+        fontsize=10,
+    )
     return save_figure(fig, path)
 
 
 # -- runs on the built-in head ---------------------------------------------------------
 
 
-def run_fig11(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
-              ) -> Fig11Result:
+def run_fig11(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any) -> Fig11Result:
     """Run :func:`verification.shih_experiments.fig11_study` (on the built-in IIS-head
     unless ``urdf``) and write ``fig11.png`` and ``fig11.json`` into ``out_dir``;
     ``kwargs`` go to the study."""
     return run_on_head(fig11_study, plot_fig11, out_dir, "fig11", urdf, kwargs)
 
 
-def run_table4(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
-               ) -> Table4Result:
+def run_table4(
+    out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any
+) -> Table4Result:
     """Run :func:`verification.shih_table4.table4_study` (on the built-in IIS-head unless
     ``urdf``) and write ``table4.png`` and ``table4.json`` into ``out_dir``; ``kwargs`` go
     to the study."""
@@ -238,10 +286,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     [--seed S]``: run one study on the built-in head, write its PNG and JSON, print the
     table."""
     return choice_main(
-        argv, prog="python -m verification.shih_figures",
+        argv,
+        prog="python -m verification.shih_figures",
         description="Shih et al. (1992) section 6 in simulation: Fig. 11 or Table 4.",
         trials_help="random trials (default: 10 per Fig. 11 point, 20 for Table 4)",
-        studies={"fig11": (run_fig11, format_fig11), "table4": (run_table4, format_table4)})
+        studies={"fig11": (run_fig11, format_fig11), "table4": (run_table4, format_table4)},
+    )
 
 
 if __name__ == "__main__":

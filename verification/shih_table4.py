@@ -126,8 +126,10 @@ class Table4Result:
 
     def paper_rows(self) -> list[int | None]:
         """Per frame, its row in the paper's Table 4 (``PAPER_TABLE4_FRAMES``), or None."""
-        return [PAPER_TABLE4_FRAMES.index(f) if f in PAPER_TABLE4_FRAMES else None
-                for f in self.setup.frames]
+        return [
+            PAPER_TABLE4_FRAMES.index(f) if f in PAPER_TABLE4_FRAMES else None
+            for f in self.setup.frames
+        ]
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: set-up, raw errors, our statistics and the paper's (mm)."""
@@ -142,35 +144,53 @@ class Table4Result:
             "error_vs_measured_mm": self.error_vs_measured_mm.tolist(),
             "error_vs_truth_mm": self.error_vs_truth_mm.tolist(),
             "summary": {
-                f: {"measured_mu_mm": self.measured_mu_mm[e].tolist(),
+                f: {
+                    "measured_mu_mm": self.measured_mu_mm[e].tolist(),
                     "measured_sigma_mm": self.measured_sigma_mm[e].tolist(),
                     "truth_mu_mm": self.truth_mu_mm[e].tolist(),
                     "truth_sigma_mm": self.truth_sigma_mm[e].tolist(),
-                    **({} if row is None else
-                       {"paper_mu_mm": PAPER_TABLE4_MU_MM[row].tolist(),
-                        "paper_sigma_mm": PAPER_TABLE4_SIGMA_MM[row].tolist()})}
-                for e, (f, row) in enumerate(zip(self.setup.frames, self.paper_rows(),
-                                                 strict=True))
+                    **(
+                        {}
+                        if row is None
+                        else {
+                            "paper_mu_mm": PAPER_TABLE4_MU_MM[row].tolist(),
+                            "paper_sigma_mm": PAPER_TABLE4_SIGMA_MM[row].tolist(),
+                        }
+                    ),
+                }
+                for e, (f, row) in enumerate(zip(self.setup.frames, self.paper_rows(), strict=True))
             },
         }
 
     @classmethod
     def from_dict(cls, doc: dict[str, Any]) -> Table4Result:
         """The result written by :meth:`to_dict` (the summary is recomputed)."""
-        return cls(setup=StudySetup.from_dict(doc["setup"]), per_joint=int(doc["per_joint"]),
-                   sigma_mm=float(doc["sigma_mm"]), n_test=int(doc["n_test"]),
-                   error_vs_measured_mm=np.array(doc["error_vs_measured_mm"], dtype=float),
-                   error_vs_truth_mm=np.array(doc["error_vs_truth_mm"], dtype=float))
+        return cls(
+            setup=StudySetup.from_dict(doc["setup"]),
+            per_joint=int(doc["per_joint"]),
+            sigma_mm=float(doc["sigma_mm"]),
+            n_test=int(doc["n_test"]),
+            error_vs_measured_mm=np.array(doc["error_vs_measured_mm"], dtype=float),
+            error_vs_truth_mm=np.array(doc["error_vs_truth_mm"], dtype=float),
+        )
 
 
-def _table4_trial(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDArray,
-                  sigma: float, per_joint: int, t: int, n_test: int
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def _table4_trial(
+    nominal: Robot,
+    setup: StudySetup,
+    lower: NDArray,
+    upper: NDArray,
+    sigma: float,
+    per_joint: int,
+    t: int,
+    n_test: int,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """One trial of :func:`table4_study` (a task): held-out errors against the noisy
     measurements and against the truth, (n_test, E, 3) mm."""
     rng = trial_rng(setup, _TABLE4_TAG, sigma, per_joint, t)
-    trial = calibrate_once(nominal, setup, lower, upper, per_joint=per_joint,
-                           sigma_mm=sigma, rng=rng)
+    trial = calibrate_once(
+        nominal, setup, lower, upper, per_joint=per_joint, sigma_mm=sigma, rng=rng
+    )
     qs = random_configurations(lower, upper, n_test, trial.rng, fraction=setup.fraction)
     true_p = positions_m(trial.truth, qs, setup.frames)
     measured_p = true_p + trial.rng.normal(0.0, 1e-3 * sigma, size=true_p.shape)
@@ -178,12 +198,22 @@ def _table4_trial(nominal: Robot, setup: StudySetup, lower: NDArray, upper: NDAr
     return 1e3 * (measured_p - predicted_p), 1e3 * (true_p - predicted_p)
 
 
-def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: float = 0.5,
-                 trials: int = 20, n_test: int = 9, rot_per_mm_rad: float = 1.0 / 50.0,
-                 error_mm: float = 5.0, error_deg: float = 1.0, fraction: float = 0.8,
-                 seed: int = 0, frames: Sequence[str] | None = None,
-                 progress: Progress | None = None,
-                 executor: Executor | None = None) -> Table4Result:
+def table4_study(
+    nominal: Robot,
+    *,
+    per_joint: int = PAPER_PER_JOINT,
+    sigma_mm: float = 0.5,
+    trials: int = 20,
+    n_test: int = 9,
+    rot_per_mm_rad: float = 1.0 / 50.0,
+    error_mm: float = 5.0,
+    error_deg: float = 1.0,
+    fraction: float = 0.8,
+    seed: int = 0,
+    frames: Sequence[str] | None = None,
+    progress: Progress | None = None,
+    executor: Executor | None = None,
+) -> Table4Result:
     """Shih et al. (1992) Table 4's protocol in simulation.
 
     Each trial calibrates a new true robot in closed form from ``per_joint`` one-joint
@@ -221,8 +251,15 @@ def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: 
     Against noisy measurements, ``|error|`` per axis cannot average below the noise
     alone, ``E|N(0, sigma)| = sigma sqrt(2 / pi)`` (0.40 mm at sigma = 0.5 mm).
     """
-    setup = setup_study(nominal, frames, error_mm=error_mm, error_deg=error_deg,
-                        rot_per_mm_rad=rot_per_mm_rad, fraction=fraction, seed=seed)
+    setup = setup_study(
+        nominal,
+        frames,
+        error_mm=error_mm,
+        error_deg=error_deg,
+        rot_per_mm_rad=rot_per_mm_rad,
+        fraction=fraction,
+        seed=seed,
+    )
     per_joint = check_count(per_joint, "per_joint", 1)
     sigma = float(check_sigmas_mm([sigma_mm], "sigma_mm")[0])
     trials = check_count(trials, "trials", 1)
@@ -230,11 +267,20 @@ def table4_study(nominal: Robot, *, per_joint: int = PAPER_PER_JOINT, sigma_mm: 
     lower, upper = nominal.joint_limits(setup.joint_names)
     shape = (trials, n_test, len(setup.frames), 3)
     vs_measured, vs_truth = np.empty(shape), np.empty(shape)
-    results = run_trials(_table4_trial, [(nominal, setup, lower, upper, sigma, per_joint, t,
-                                          n_test) for t in range(trials)],
-                         executor=executor, progress=progress)
+    results = run_trials(
+        _table4_trial,
+        [(nominal, setup, lower, upper, sigma, per_joint, t, n_test) for t in range(trials)],
+        executor=executor,
+        progress=progress,
+    )
     for t, (measured, truth) in enumerate(results):
         vs_measured[t], vs_truth[t] = measured, truth
     freeze(vs_measured, vs_truth)
-    return Table4Result(setup=setup, per_joint=per_joint, sigma_mm=sigma, n_test=n_test,
-                        error_vs_measured_mm=vs_measured, error_vs_truth_mm=vs_truth)
+    return Table4Result(
+        setup=setup,
+        per_joint=per_joint,
+        sigma_mm=sigma,
+        n_test=n_test,
+        error_vs_measured_mm=vs_measured,
+        error_vs_truth_mm=vs_truth,
+    )

@@ -69,8 +69,9 @@ __all__ = [
 # -- measurement noise and the stereo rig ----------------------------------------------
 
 
-def perturb_poses(a_T_bs: ArrayLike, rng: np.random.Generator, sigma_m: float,
-                  sigma_rad: float) -> NDArray[np.float64]:
+def perturb_poses(
+    a_T_bs: ArrayLike, rng: np.random.Generator, sigma_m: float, sigma_rad: float
+) -> NDArray[np.float64]:
     """Noisy copies of poses, as the simulation of Shih et al. (1992), Fig. 10.
 
     Parameters
@@ -125,8 +126,12 @@ def nine_circle_plate(spacing: float = 0.02) -> NDArray[np.float64]:
     return spacing * np.stack([x.ravel(), y.ravel(), np.zeros(9)], axis=-1)
 
 
-def stereo_measure(meas_T_plates: ArrayLike, rng: np.random.Generator, sigma_point_m: float,
-                   plate: ArrayLike | None = None) -> NDArray[np.float64]:
+def stereo_measure(
+    meas_T_plates: ArrayLike,
+    rng: np.random.Generator,
+    sigma_point_m: float,
+    plate: ArrayLike | None = None,
+) -> NDArray[np.float64]:
     """Plate poses as the stereo rig of stage 1 measures them (Shih et al. section 3).
 
     The rig triangulates each circle centre with an error ``N(0, sigma_point_m^2 I)``;
@@ -151,8 +156,10 @@ def stereo_measure(meas_T_plates: ArrayLike, rng: np.random.Generator, sigma_poi
     meas_T_plates = check_transform(meas_T_plates, name="meas_T_plates")
     sigma_point_m = check_sigma(sigma_point_m, "sigma_point_m")
     plate_p = nine_circle_plate() if plate is None else np.asarray(plate, dtype=float)
-    meas_p = (np.einsum("...ij,kj->...ki", meas_T_plates[..., :3, :3], plate_p)
-              + meas_T_plates[..., None, :3, 3])
+    meas_p = (
+        np.einsum("...ij,kj->...ki", meas_T_plates[..., :3, :3], plate_p)
+        + meas_T_plates[..., None, :3, 3]
+    )
     meas_p = meas_p + rng.normal(0.0, sigma_point_m, size=meas_p.shape)
     return register_points(plate_p, meas_p)
 
@@ -160,8 +167,13 @@ def stereo_measure(meas_T_plates: ArrayLike, rng: np.random.Generator, sigma_poi
 # -- datasets --------------------------------------------------------------------------
 
 
-def default_target_pose(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None,
-                        cameras: Sequence[str], distance: float = 0.8) -> NDArray[np.float64]:
+def default_target_pose(
+    robot: Robot,
+    qs: ArrayLike,
+    joint_names: Sequence[str] | None,
+    cameras: Sequence[str],
+    distance: float = 0.8,
+) -> NDArray[np.float64]:
     """A plausible fixed target pose in front of the cameras, ``w_T_target``.
 
     The target's origin is the mean camera position (over all samples and cameras) plus
@@ -192,8 +204,9 @@ def default_target_pose(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] 
     w_T_cams = np.concatenate([robot.frame_poses(qs2, c, names) for c in cameras])
     mean_z = w_T_cams[:, :3, 2].mean(axis=0)
     if np.linalg.norm(mean_z) < 1e-6:
-        raise ValueError("default_target_pose: the cameras' optical axes average to zero; "
-                         "give w_T_target")
+        raise ValueError(
+            "default_target_pose: the cameras' optical axes average to zero; give w_T_target"
+        )
     mean_z /= np.linalg.norm(mean_z)
     z = -mean_z
     x = w_T_cams[:, :3, 0].mean(axis=0)
@@ -206,14 +219,23 @@ def default_target_pose(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] 
     return transform_from_rotation_translation(w_R_target, w_p_target)
 
 
-def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
-             frames: Iterable[str] = (), cameras: Iterable[str] = (),
-             markers: Iterable[tuple[Any, ...]] = (), rng: np.random.Generator,
-             noise_m: float = 0.0, noise_rad: float = 0.0,
-             stereo_sigma_m: float | None = None,
-             w_T_target: ArrayLike | None = None, groups: Iterable[Any] = (),
-             unknowns: Mapping[BlockKey, ArrayLike] | None = None,
-             sigmas: Mapping[str, float] | None = None) -> Measurements:
+def simulate(
+    robot: Robot,
+    qs: ArrayLike,
+    joint_names: Sequence[str] | None,
+    *,
+    frames: Iterable[str] = (),
+    cameras: Iterable[str] = (),
+    markers: Iterable[tuple[Any, ...]] = (),
+    rng: np.random.Generator,
+    noise_m: float = 0.0,
+    noise_rad: float = 0.0,
+    stereo_sigma_m: float | None = None,
+    w_T_target: ArrayLike | None = None,
+    groups: Iterable[Any] = (),
+    unknowns: Mapping[BlockKey, ArrayLike] | None = None,
+    sigmas: Mapping[str, float] | None = None,
+) -> Measurements:
     """A measurement dataset of ``robot`` (the truth) in configurations ``qs``.
 
     Forward kinematics is Pinocchio's (:meth:`Robot.frame_poses`), in the robot's root
@@ -279,8 +301,7 @@ def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
         if any(not isinstance(v, str) for v in value):
             raise TypeError(f"simulate: {name} must be a sequence of frame names")
     if not (frames or cameras or markers or groups):
-        raise ValueError("simulate: nothing to observe; give frames, cameras, markers or "
-                         "groups")
+        raise ValueError("simulate: nothing to observe; give frames, cameras, markers or groups")
     names = tuple(robot.joint_names if joint_names is None else joint_names)
     qs = np.atleast_2d(np.asarray(qs, dtype=float))
     noise_m = check_sigma(noise_m, "noise_m")
@@ -290,29 +311,44 @@ def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
     values = {k: np.asarray(v, dtype=float) for k, v in (unknowns or {}).items()}
 
     # templates: what is observed, at which samples (the kinds fill in the values)
-    templates: list[Any] = [PoseObservations(frame=frame, sample=sample,
-                                             meas_T_frame=np.tile(np.eye(4), (len(qs), 1, 1)))
-                            for frame in frames]
+    templates: list[Any] = [
+        PoseObservations(
+            frame=frame, sample=sample, meas_T_frame=np.tile(np.eye(4), (len(qs), 1, 1))
+        )
+        for frame in frames
+    ]
     if cameras:
         values[BlockKey("target", "target")] = (
-            default_target_pose(robot, qs, names, cameras) if w_T_target is None
-            else check_transform(w_T_target, name="w_T_target"))
-        templates += [TargetObservations(camera=camera, sample=sample,
-                                         camera_T_target=np.tile(np.eye(4), (len(qs), 1, 1)))
-                      for camera in cameras]
+            default_target_pose(robot, qs, names, cameras)
+            if w_T_target is None
+            else check_transform(w_T_target, name="w_T_target")
+        )
+        templates += [
+            TargetObservations(
+                camera=camera, sample=sample, camera_T_target=np.tile(np.eye(4), (len(qs), 1, 1))
+            )
+            for camera in cameras
+        ]
     for marker in markers:
         frame, offset, name = _marker_spec(marker)
         if name is not None:
             values[offset_key(frame, name)] = offset
-        templates.append(PointObservations(frame=frame, sample=sample,
-                                           meas_p_point=np.zeros((len(qs), 3)),
-                                           offset=offset if name is None else None,
-                                           marker=name))
+        templates.append(
+            PointObservations(
+                frame=frame,
+                sample=sample,
+                meas_p_point=np.zeros((len(qs), 3)),
+                offset=offset if name is None else None,
+                marker=name,
+            )
+        )
     for g in groups:
         kind_of(g)  # a registered kind's group, else TypeError
         if len(g.sample) and g.sample.max() >= len(qs):
-            raise ValueError(f"simulate: groups: {g!r} refers to sample "
-                             f"{int(g.sample.max())}, but qs has {len(qs)} rows")
+            raise ValueError(
+                f"simulate: groups: {g!r} refers to sample "
+                f"{int(g.sample.max())}, but qs has {len(qs)} rows"
+            )
     truth = NumericContext.from_robot(robot, qs, names, values)
 
     out = []
@@ -321,26 +357,35 @@ def simulate(robot: Robot, qs: ArrayLike, joint_names: Sequence[str] | None, *,
         try:
             if stereo_sigma_m is not None and isinstance(g, PoseObservations):
                 predicted = kind.with_data(g, kind.predict(g, truth))
-                out.append(replace(g, meas_T_frame=stereo_measure(
-                    predicted.meas_T_frame, rng, stereo_sigma_m)))
+                out.append(
+                    replace(
+                        g, meas_T_frame=stereo_measure(predicted.meas_T_frame, rng, stereo_sigma_m)
+                    )
+                )
                 continue
-            noise = {c.name: sigmas.get(c.name, noise_m if c.unit == "m" else noise_rad)
-                     for c in kind.components}
+            noise = {
+                c.name: sigmas.get(c.name, noise_m if c.unit == "m" else noise_rad)
+                for c in kind.components
+            }
             out.append(kind.simulate(g, truth, rng, noise))
         except MissingValue as exc:
-            raise ValueError(f"simulate: {g!r} needs the true value of {exc.key}; give it "
-                             "in unknowns") from None
+            raise ValueError(
+                f"simulate: {g!r} needs the true value of {exc.key}; give it in unknowns"
+            ) from None
     return Measurements(joint_names=names, qs=qs, source="<simulated>").with_groups(out)
 
 
 def _marker_spec(marker: Sequence[Any]) -> tuple[str, NDArray[np.float64], str | None]:
     """``(frame, offset (3,), name or None)`` of a marker given as a 2- or 3-tuple."""
     if isinstance(marker, str) or len(marker) not in (2, 3):
-        raise ValueError(f"markers: expected (frame, offset) or (frame, offset, name), "
-                         f"got {marker!r}")
+        raise ValueError(
+            f"markers: expected (frame, offset) or (frame, offset, name), got {marker!r}"
+        )
     frame, offset = marker[0], np.asarray(marker[1], dtype=float)
     name = marker[2] if len(marker) == 3 else None
     if offset.shape != (3,) or not np.isfinite(offset).all():
-        raise ValueError(f"markers: offset of a marker on {frame!r}: expected 3 finite "
-                         f"numbers, got {marker[1]!r}")
+        raise ValueError(
+            f"markers: offset of a marker on {frame!r}: expected 3 finite "
+            f"numbers, got {marker[1]!r}"
+        )
     return str(frame), offset, name

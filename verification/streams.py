@@ -74,8 +74,10 @@ _COLUMNS = "t, x, y, z, qx, qy, qz, qw"
 
 # ------------------------------------------------------------------------------ reading
 
-def read_pose_csv(path: str | Path, *, quat_norm_tol: float = QUAT_NORM_TOL
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+
+def read_pose_csv(
+    path: str | Path, *, quat_norm_tol: float = QUAT_NORM_TOL
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Read a time-stamped pose stream in the ETH ASL CSV format.
 
     Parameters
@@ -119,21 +121,25 @@ def read_pose_csv(path: str | Path, *, quat_norm_tol: float = QUAT_NORM_TOL
             continue
         fields = line.split(",")
         if len(fields) != _N_COLUMNS:
-            raise DatasetError(f"{path}:{number}: expected {_N_COLUMNS} comma-separated "
-                               f"numbers ({_COLUMNS}), got {len(fields)}: {line.strip()!r}")
+            raise DatasetError(
+                f"{path}:{number}: expected {_N_COLUMNS} comma-separated "
+                f"numbers ({_COLUMNS}), got {len(fields)}: {line.strip()!r}"
+            )
         try:
             values = [float(f) for f in fields]
         except ValueError as err:
-            raise DatasetError(f"{path}:{number}: not a number ({err}); expected "
-                               f"{_COLUMNS}: {line.strip()!r}") from None
+            raise DatasetError(
+                f"{path}:{number}: not a number ({err}); expected {_COLUMNS}: {line.strip()!r}"
+            ) from None
         if not np.isfinite(values).all():
-            raise DatasetError(f"{path}:{number}: all values must be finite, got "
-                               f"{line.strip()!r}")
+            raise DatasetError(f"{path}:{number}: all values must be finite, got {line.strip()!r}")
         norm = float(np.linalg.norm(values[4:]))
         if abs(norm - 1.0) > quat_norm_tol:
-            raise DatasetError(f"{path}:{number}: quaternion (qx, qy, qz, qw) = "
-                               f"{values[4:]} has norm {norm:.9g}, expected 1 within "
-                               f"{quat_norm_tol:g}")
+            raise DatasetError(
+                f"{path}:{number}: quaternion (qx, qy, qz, qw) = "
+                f"{values[4:]} has norm {norm:.9g}, expected 1 within "
+                f"{quat_norm_tol:g}"
+            )
         rows.append(values)
         line_numbers.append(number)
     if not rows:
@@ -151,43 +157,49 @@ def read_pose_csv(path: str | Path, *, quat_norm_tol: float = QUAT_NORM_TOL
         differ = np.any(data[same, 1:] != data[same + 1, 1:], axis=1)
         if np.any(differ):
             k = same[np.argmax(differ)]
-            raise DatasetError(f"{path}: lines {lines[k]} and {lines[k + 1]} share the stamp "
-                               f"{float(data[k, 0])!r} but give different poses; a stream "
-                               f"needs one pose per stamp")
+            raise DatasetError(
+                f"{path}: lines {lines[k]} and {lines[k + 1]} share the stamp "
+                f"{float(data[k, 0])!r} but give different poses; a stream "
+                f"needs one pose per stamp"
+            )
         keep = np.ones(len(data), dtype=bool)
         keep[same + 1] = False
         data = data[keep]
-        log.info("%s: dropped %d exact duplicate lines (same stamp and pose)", path,
-                 same.size)
+        log.info("%s: dropped %d exact duplicate lines (same stamp and pose)", path, same.size)
     return data[:, 0].copy(), transform_from_xyz_quat_xyzw(data[:, 1:4], data[:, 4:])
 
 
 # ------------------------------------------------------------------------ interpolation
 
-def _check_stream(t: ArrayLike, a_T_bs: ArrayLike, name: str
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+
+def _check_stream(
+    t: ArrayLike, a_T_bs: ArrayLike, name: str
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Validate a stream: stamps (n,) finite and strictly increasing, poses (n, 4, 4)."""
     t = np.asarray(t, dtype=float)
     T = np.asarray(a_T_bs, dtype=float)
     if t.ndim != 1:
         raise ValueError(f"{name}: stamps must have shape (n,), got {t.shape}")
     if T.ndim != 3 or T.shape[1:] != (4, 4) or len(T) != len(t):
-        raise ValueError(f"{name}: poses must have shape ({len(t)}, 4, 4) to match the "
-                         f"stamps, got {T.shape}")
+        raise ValueError(
+            f"{name}: poses must have shape ({len(t)}, 4, 4) to match the stamps, got {T.shape}"
+        )
     if not np.isfinite(t).all():
         raise ValueError(f"{name}: stamps must be finite")
     steps = np.diff(t)
     if np.any(steps <= 0.0):
         k = int(np.argmax(steps <= 0.0))
-        raise ValueError(f"{name}: stamps must be strictly increasing; t[{k}] = "
-                         f"{float(t[k])!r} and t[{k + 1}] = {float(t[k + 1])!r} (sort and drop "
-                         f"duplicates first, as read_pose_csv does)")
+        raise ValueError(
+            f"{name}: stamps must be strictly increasing; t[{k}] = "
+            f"{float(t[k])!r} and t[{k + 1}] = {float(t[k + 1])!r} (sort and drop "
+            f"duplicates first, as read_pose_csv does)"
+        )
     return t, check_transform(T, name=name)
 
 
-def interpolate_poses(t: ArrayLike, a_T_bs: ArrayLike, t_query: ArrayLike, *,
-                      max_gap_s: float | None = None
-                      ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+def interpolate_poses(
+    t: ArrayLike, a_T_bs: ArrayLike, t_query: ArrayLike, *, max_gap_s: float | None = None
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """Poses of a stream at other instants: linear in position, SLERP in rotation.
 
     Parameters
@@ -239,10 +251,12 @@ def interpolate_poses(t: ArrayLike, a_T_bs: ArrayLike, t_query: ArrayLike, *,
     tq = t_query.reshape(-1)
     outside = ~((tq >= t[0]) & (tq <= t[-1]))  # NaN counts as outside
     if np.any(outside):
-        raise ValueError(f"{int(np.count_nonzero(outside))} of {tq.size} query times lie "
-                         f"outside the stream's time range [{float(t[0])!r}, {float(t[-1])!r}] "
-                         f"s (or are not finite); interpolation does not extrapolate: trim the "
-                         f"queries")
+        raise ValueError(
+            f"{int(np.count_nonzero(outside))} of {tq.size} query times lie "
+            f"outside the stream's time range [{float(t[0])!r}, {float(t[-1])!r}] "
+            f"s (or are not finite); interpolation does not extrapolate: trim the "
+            f"queries"
+        )
     k = np.clip(np.searchsorted(t, tq, side="right") - 1, 0, len(t) - 2)
     dt = t[k + 1] - t[k]
     s = (tq - t[k]) / dt
@@ -262,10 +276,17 @@ def interpolate_poses(t: ArrayLike, a_T_bs: ArrayLike, t_query: ArrayLike, *,
 
 # ---------------------------------------------------------------------------- alignment
 
-def align_streams(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike,
-                  target_T_eye: ArrayLike, *, offset_s: float = 0.0,
-                  max_gap_s: float | None = 0.05, step: int = 1
-                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+
+def align_streams(
+    t_hand: ArrayLike,
+    base_T_hand: ArrayLike,
+    t_eye: ArrayLike,
+    target_T_eye: ArrayLike,
+    *,
+    offset_s: float = 0.0,
+    max_gap_s: float | None = 0.05,
+    step: int = 1,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Hand-eye pairs at the camera stamps, the hand stream interpolated there.
 
     Parameters
@@ -319,23 +340,33 @@ def align_streams(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike,
             f"no camera sample lies within the hand stream's time range: camera "
             f"[{float(t_eye[0])!r}, {float(t_eye[-1])!r}] s, hand [{float(t_hand[0])!r}, "
             f"{float(t_hand[-1])!r}] s shifted by offset_s = {float(offset_s)!r} s; are both "
-            f"stamps on one clock and in seconds?")
-    base_T_hands, valid = interpolate_poses(t_hand, base_T_hand, t_query[inside],
-                                            max_gap_s=max_gap_s)
+            f"stamps on one clock and in seconds?"
+        )
+    base_T_hands, valid = interpolate_poses(
+        t_hand, base_T_hand, t_query[inside], max_gap_s=max_gap_s
+    )
     eye_T_targets = inverse_transform(target_T_eye[inside])
     n_outside = int(np.count_nonzero(~inside))
     n_gap = int(np.count_nonzero(~valid))
     if n_outside or n_gap:
-        log.info("align_streams: kept %d of %d camera samples (%d outside the hand stream's "
-                 "range, %d across a gap > %s s)", int(np.count_nonzero(valid)), len(t_eye),
-                 n_outside, n_gap, max_gap_s)
+        log.info(
+            "align_streams: kept %d of %d camera samples (%d outside the hand stream's "
+            "range, %d across a gap > %s s)",
+            int(np.count_nonzero(valid)),
+            len(t_eye),
+            n_outside,
+            n_gap,
+            max_gap_s,
+        )
     return base_T_hands[valid], eye_T_targets[valid]
 
 
 # --------------------------------------------------------------------- offset estimation
 
-def implied_target_spread(base_T_hands: ArrayLike, hand_T_eye: ArrayLike,
-                          eye_T_targets: ArrayLike) -> tuple[float, float]:
+
+def implied_target_spread(
+    base_T_hands: ArrayLike, hand_T_eye: ArrayLike, eye_T_targets: ArrayLike
+) -> tuple[float, float]:
     """How constant the target's implied pose in the base is: median deviations.
 
     Parameters
@@ -355,8 +386,11 @@ def implied_target_spread(base_T_hands: ArrayLike, hand_T_eye: ArrayLike,
     rotation_rad : float
         Median angle of those poses' rotations from their chordal mean, radians.
     """
-    base_T_targets = (np.asarray(base_T_hands, dtype=float) @ np.asarray(hand_T_eye, float)
-                      @ np.asarray(eye_T_targets, dtype=float))
+    base_T_targets = (
+        np.asarray(base_T_hands, dtype=float)
+        @ np.asarray(hand_T_eye, float)
+        @ np.asarray(eye_T_targets, dtype=float)
+    )
     p = base_T_targets[:, :3, 3]
     position = float(np.median(np.linalg.norm(p - np.median(p, axis=0), axis=1)))
     mean_R = average_transform(base_T_targets)[:3, :3]
@@ -396,12 +430,18 @@ class TimeOffsetResult:
     position_spreads: NDArray[np.float64]
 
 
-def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike,
-                     target_T_eye: ArrayLike, *,
-                     search_s: tuple[float, float] = (-0.1, 0.1),
-                     coarse_step_s: float = 0.01, fine_step_s: float = 0.001,
-                     max_gap_s: float | None = 0.05, step: int = 1
-                     ) -> TimeOffsetResult:
+def best_time_offset(
+    t_hand: ArrayLike,
+    base_T_hand: ArrayLike,
+    t_eye: ArrayLike,
+    target_T_eye: ArrayLike,
+    *,
+    search_s: tuple[float, float] = (-0.1, 0.1),
+    coarse_step_s: float = 0.01,
+    fine_step_s: float = 0.001,
+    max_gap_s: float | None = 0.05,
+    step: int = 1,
+) -> TimeOffsetResult:
     """Time offset that makes the target's implied pose in the base most constant.
 
     At each candidate offset the streams are aligned (:func:`align_streams`), ``X`` is
@@ -447,14 +487,17 @@ def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike
     t_eye, target_T_eye = _check_stream(t_eye, target_T_eye, "target_T_eye")
     lo, hi = (float(v) for v in search_s)
     if not (lo <= hi and coarse_step_s > 0.0 and fine_step_s > 0.0):
-        raise ValueError(f"need search_s = (lo, hi) with lo <= hi and positive steps, got "
-                         f"{search_s!r}, {coarse_step_s!r}, {fine_step_s!r}")
+        raise ValueError(
+            f"need search_s = (lo, hi) with lo <= hi and positive steps, got "
+            f"{search_s!r}, {coarse_step_s!r}, {fine_step_s!r}"
+        )
     common = (t_eye >= t_hand[0] + hi) & (t_eye <= t_hand[-1] + lo)
     if not np.any(common):
         raise ValueError(
             f"no camera sample stays within the hand stream's time range for every offset "
             f"in [{lo!r}, {hi!r}] s: camera [{float(t_eye[0])!r}, {float(t_eye[-1])!r}] s, hand "
-            f"[{float(t_hand[0])!r}, {float(t_hand[-1])!r}] s")
+            f"[{float(t_hand[0])!r}, {float(t_hand[-1])!r}] s"
+        )
     t_eye, target_T_eye = t_eye[common], target_T_eye[common]
 
     evaluated: dict[float, tuple[float, float, NDArray[np.float64] | None, int]] = {}
@@ -462,17 +505,22 @@ def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike
     def evaluate(offset: float) -> float:
         offset = round(offset, 12)  # one key per grid point despite rounding of the grid
         if offset not in evaluated:
-            A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=offset,
-                                 max_gap_s=max_gap_s, step=step)
+            A, B = align_streams(
+                t_hand,
+                base_T_hand,
+                t_eye,
+                target_T_eye,
+                offset_s=offset,
+                max_gap_s=max_gap_s,
+                step=step,
+            )
             try:
                 hand_T_eye = solve_axxb(A, B).hand_T_camera
             except HandEyeError as err:
-                log.info("best_time_offset: offset %.4f s: hand-eye solve failed (%s)",
-                         offset, err)
+                log.info("best_time_offset: offset %.4f s: hand-eye solve failed (%s)", offset, err)
                 evaluated[offset] = (np.inf, np.inf, None, len(A))
             else:
-                evaluated[offset] = (*implied_target_spread(A, hand_T_eye, B), hand_T_eye,
-                                     len(A))
+                evaluated[offset] = (*implied_target_spread(A, hand_T_eye, B), hand_T_eye, len(A))
         return evaluated[offset][0]
 
     def grid(a: float, b: float, h: float) -> NDArray[np.float64]:
@@ -486,8 +534,16 @@ def best_time_offset(t_hand: ArrayLike, base_T_hand: ArrayLike, t_eye: ArrayLike
     spreads = np.array([evaluated[o][0] for o in offsets])
     position, rotation, hand_T_eye, n = evaluated[round(best, 12)]
     if hand_T_eye is None:  # the minimum is inf: every solve failed
-        raise HandEyeError(f"the hand-eye solve failed at every offset in [{lo!r}, {hi!r}] s "
-                           f"(see the INFO log for each reason)")
-    return TimeOffsetResult(offset_s=float(round(best, 12)), position_spread=position,
-                            rotation_spread_rad=rotation, hand_T_eye=hand_T_eye, n_pairs=n,
-                            offsets_s=offsets, position_spreads=spreads)
+        raise HandEyeError(
+            f"the hand-eye solve failed at every offset in [{lo!r}, {hi!r}] s "
+            f"(see the INFO log for each reason)"
+        )
+    return TimeOffsetResult(
+        offset_s=float(round(best, 12)),
+        position_spread=position,
+        rotation_spread_rad=rotation,
+        hand_T_eye=hand_T_eye,
+        n_pairs=n,
+        offsets_s=offsets,
+        position_spreads=spreads,
+    )

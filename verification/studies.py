@@ -73,8 +73,7 @@ def check_count(value: int, name: str, least: int) -> int:
     return int(value)
 
 
-def sample_std(values: NDArray[np.float64], axis: int | tuple[int, ...] = 0
-               ) -> NDArray[np.float64]:
+def sample_std(values: NDArray[np.float64], axis: int | tuple[int, ...] = 0) -> NDArray[np.float64]:
     """Sample standard deviation along ``axis`` (``ddof = 1``; 0 for a single value)."""
     n = np.prod([values.shape[a] for a in np.atleast_1d(axis)])
     return np.std(values, axis=axis, ddof=1 if n > 1 else 0)
@@ -83,9 +82,13 @@ def sample_std(values: NDArray[np.float64], axis: int | tuple[int, ...] = 0
 # -- trials, serially or as tasks of an executor ---------------------------------------------
 
 
-def run_trials(trial: Callable[..., R], args: Sequence[tuple], *,
-               executor: Executor | None = None, progress: Progress | None = None
-               ) -> list[R]:
+def run_trials(
+    trial: Callable[..., R],
+    args: Sequence[tuple],
+    *,
+    executor: Executor | None = None,
+    progress: Progress | None = None,
+) -> list[R]:
     """``[trial(*a) for a in args]``: in this process (``executor`` None) or submitted as
     tasks to any :class:`concurrent.futures.Executor` (a process pool, Dask's or Ray's
     executor); the results come back in the order of ``args`` either way.
@@ -142,12 +145,15 @@ def json_list(values: NDArray) -> Any:
 def json_lists(obj: Any, names: Iterable[str], *, strict: bool = False) -> dict[str, Any]:
     """``{name: obj.<name>.tolist()}`` for the array attributes ``names``, in that order;
     with ``strict``, NaN and infinities become ``None`` (:func:`json_list`)."""
-    return {name: json_list(getattr(obj, name)) if strict else getattr(obj, name).tolist()
-            for name in names}
+    return {
+        name: json_list(getattr(obj, name)) if strict else getattr(obj, name).tolist()
+        for name in names
+    }
 
 
-def arrays_from(doc: Mapping[str, Any], dtypes: Mapping[str, Any], *, writeable: bool = True
-                ) -> dict[str, NDArray]:
+def arrays_from(
+    doc: Mapping[str, Any], dtypes: Mapping[str, Any], *, writeable: bool = True
+) -> dict[str, NDArray]:
     """``{name: np.array(doc[name], dtype)}`` for each ``name: dtype`` of ``dtypes``: the
     arrays of a result read back from JSON lists (read-only with ``writeable=False``)."""
     out = {name: np.array(doc[name], dtype=dtype) for name, dtype in dtypes.items()}
@@ -235,8 +241,7 @@ def shared_legend(fig: Any, axes: Iterable[Any]) -> None:
     legend: dict[str, Any] = {}
     for ax in axes:
         legend.update(zip(*reversed(ax.get_legend_handles_labels()), strict=True))
-    fig.legend(legend.values(), legend.keys(), fontsize=8.5, loc="outside lower center",
-               ncols=4)
+    fig.legend(legend.values(), legend.keys(), fontsize=8.5, loc="outside lower center", ncols=4)
 
 
 # -- output files --------------------------------------------------------------------------
@@ -255,8 +260,9 @@ def write_json(path: Path, doc: Any, *, allow_nan: bool = True) -> None:
     write_text_atomic(path, json.dumps(doc, indent=1, allow_nan=allow_nan) + "\n")
 
 
-def write_study(result: Any, out_dir: str | Path, name: str,
-                plot: Callable[[Any, Path], Path]) -> None:
+def write_study(
+    result: Any, out_dir: str | Path, name: str, plot: Callable[[Any, Path], Path]
+) -> None:
     """Write ``<name>.png`` (``plot(result, path)``) and ``<name>.json``
     (``result.to_dict()``) side by side into ``out_dir``."""
     out = output_dir(out_dir)
@@ -264,8 +270,14 @@ def write_study(result: Any, out_dir: str | Path, name: str,
     write_json(out / f"{name}.json", result.to_dict())
 
 
-def run_on_head(study: Callable[..., R], plot: Callable[[R, Path], Path], out_dir: str | Path,
-                name: str, urdf: str | Path | None, kwargs: Mapping[str, Any]) -> R:
+def run_on_head(
+    study: Callable[..., R],
+    plot: Callable[[R, Path], Path],
+    out_dir: str | Path,
+    name: str,
+    urdf: str | Path | None,
+    kwargs: Mapping[str, Any],
+) -> R:
     """``study(nominal, **kwargs)`` on the built-in IIS-head (or the URDF ``urdf``), written
     by :func:`write_study` as ``<name>.png`` and ``<name>.json`` into ``out_dir``."""
     nominal = load_robot(builtin_head_urdf() if urdf is None else urdf)
@@ -285,9 +297,14 @@ def stderr_progress(done: int, total: int) -> None:
     sys.stderr.flush()
 
 
-def study_parser(prog: str, description: str, *, trials_help: str,
-                 trials_default: int | None = None, studies: Sequence[str] = ()
-                 ) -> argparse.ArgumentParser:
+def study_parser(
+    prog: str,
+    description: str,
+    *,
+    trials_help: str,
+    trials_default: int | None = None,
+    studies: Sequence[str] = (),
+) -> argparse.ArgumentParser:
     """The arguments every study's ``main`` takes: the study (when ``studies`` names a
     choice), ``--out DIR`` (required), ``--trials N`` and ``--seed S`` (default 0)."""
     parser = argparse.ArgumentParser(prog=prog, description=description)
@@ -296,13 +313,15 @@ def study_parser(prog: str, description: str, *, trials_help: str,
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--trials", type=int, default=trials_default, help=trials_help)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--jobs", type=int, default=1,
-                        help="run the trials in N worker processes (default 1: here)")
+    parser.add_argument(
+        "--jobs", type=int, default=1, help="run the trials in N worker processes (default 1: here)"
+    )
     return parser
 
 
-def run_and_print(label: str, run: Callable[..., str], kwargs: Mapping[str, Any],
-                  written: Sequence[Path]) -> int:
+def run_and_print(
+    label: str, run: Callable[..., str], kwargs: Mapping[str, Any], written: Sequence[Path]
+) -> int:
     """Call ``run(**kwargs)`` (a study that writes ``written`` and returns its table) with
     :func:`stderr_progress` when stderr is a terminal; print the table, then one line with
     ``label``, the wall time and the files written. Returns 0, the exit status."""
@@ -312,19 +331,28 @@ def run_and_print(label: str, run: Callable[..., str], kwargs: Mapping[str, Any]
     start = time.perf_counter()
     text = run(**kwargs)
     print(text)
-    print(f"\n{label}: {time.perf_counter() - start:.1f} s; wrote "
-          + " and ".join(str(path) for path in written))
+    print(
+        f"\n{label}: {time.perf_counter() - start:.1f} s; wrote "
+        + " and ".join(str(path) for path in written)
+    )
     return 0
 
 
-def choice_main(argv: Sequence[str] | None, *, prog: str, description: str, trials_help: str,
-                studies: Mapping[str, tuple[Callable[..., R], Callable[[R], str]]]) -> int:
+def choice_main(
+    argv: Sequence[str] | None,
+    *,
+    prog: str,
+    description: str,
+    trials_help: str,
+    studies: Mapping[str, tuple[Callable[..., R], Callable[[R], str]]],
+) -> int:
     """``main`` of a module with several studies: ``prog STUDY --out DIR [--trials N]
     [--seed S]`` runs ``run(out, seed=S[, trials=N])`` of ``studies[STUDY] = (run,
     format)``, which writes ``STUDY.png`` and ``STUDY.json``, and prints ``format(result)``
     (:func:`run_and_print`)."""
-    args = study_parser(prog, description, trials_help=trials_help,
-                        studies=tuple(studies)).parse_args(argv)
+    args = study_parser(
+        prog, description, trials_help=trials_help, studies=tuple(studies)
+    ).parse_args(argv)
     kwargs: dict[str, Any] = {"seed": args.seed}
     if args.trials is not None:
         kwargs["trials"] = args.trials
@@ -333,9 +361,12 @@ def choice_main(argv: Sequence[str] | None, *, prog: str, description: str, tria
     if executor is not None:
         kwargs["executor"] = executor
     try:
-        return run_and_print(args.study, lambda **kw: format_table(run(args.out, **kw)),
-                             kwargs, (args.out / f"{args.study}.png",
-                                      args.out / f"{args.study}.json"))
+        return run_and_print(
+            args.study,
+            lambda **kw: format_table(run(args.out, **kw)),
+            kwargs,
+            (args.out / f"{args.study}.png", args.out / f"{args.study}.json"),
+        )
     finally:
         if executor is not None:
             executor.shutdown()

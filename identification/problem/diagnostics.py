@@ -16,8 +16,7 @@ from numpy.typing import NDArray
 from kinfw.cpc import CPCModel
 from kinfw.measurements import Measurements
 
-__all__ = ["GroupResiduals", "Identifiability", "covariance_and_identifiability",
-           "group_residuals"]
+__all__ = ["GroupResiduals", "Identifiability", "covariance_and_identifiability", "group_residuals"]
 
 _ROTATION_FIELDS = ("rot_x", "rot_y", "rot_z")
 
@@ -97,9 +96,14 @@ class GroupResiduals:
         return sum(v.shape[1] for _, v in self.components)
 
 
-def covariance_and_identifiability(Jw: NDArray, free: NDArray, names: Sequence[tuple[str, str]],
-                                   sigma_hat2: float, measurements: Measurements,
-                                   model: CPCModel) -> tuple[NDArray, Identifiability]:
+def covariance_and_identifiability(
+    Jw: NDArray,
+    free: NDArray,
+    names: Sequence[tuple[str, str]],
+    sigma_hat2: float,
+    measurements: Measurements,
+    model: CPCModel,
+) -> tuple[NDArray, Identifiability]:
     """``sigma_hat2 (J^T J)^+`` on the identifiable subspace, and what the data determines.
 
     ``Jw`` is the whitened (and robust-weighted) Jacobian (N, P); ``names`` the
@@ -118,45 +122,62 @@ def covariance_and_identifiability(Jw: NDArray, free: NDArray, names: Sequence[t
     idx = np.flatnonzero(free)
     covariance[np.ix_(idx, idx)] = cov_free
     free_names = [tuple(names[k]) for k in idx]
-    q_range = np.ptp(measurements.q_of(model.topology.joint_names), axis=0) \
-        if measurements.n_samples else np.zeros(model.n_joints)
-    still = {n for n, rng in zip(model.topology.joint_names, q_range, strict=True)
-             if rng < 1e-9}
+    q_range = (
+        np.ptp(measurements.q_of(model.topology.joint_names), axis=0)
+        if measurements.n_samples
+        else np.zeros(model.n_joints)
+    )
+    still = {n for n, rng in zip(model.topology.joint_names, q_range, strict=True) if rng < 1e-9}
     unidentifiable = []
     for v in Vt[rank:]:
         involved = tuple(free_names[k] for k in np.flatnonzero(np.abs(v) > 0.2 * np.abs(v).max()))
         owners = {o for o, _ in involved}
         if owners & still:
-            why = (f"joint(s) {sorted(owners & still)} never move in the data, so their "
-                   "axes are not observed")
+            why = (
+                f"joint(s) {sorted(owners & still)} never move in the data, so their "
+                "axes are not observed"
+            )
         elif all(f in _ROTATION_FIELDS for _, f in involved):
             why = "only positions of these frames are observed; their orientation is free"
         else:
-            why = ("these parameters change every prediction in the same way; the data "
-                   "cannot tell them apart (add motion of the joints involved)")
+            why = (
+                "these parameters change every prediction in the same way; the data "
+                "cannot tell them apart (add motion of the joints involved)"
+            )
         unidentifiable.append((involved, why))
     d = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         rho = cov_free / np.outer(d, d)
-    pairs = [(abs(rho[a, b]), a, b) for a in range(len(d)) for b in range(a + 1, len(d))
-             if d[a] > 0 and d[b] > 0 and abs(rho[a, b]) > 0.9]
+    pairs = [
+        (abs(rho[a, b]), a, b)
+        for a in range(len(d))
+        for b in range(a + 1, len(d))
+        if d[a] > 0 and d[b] > 0 and abs(rho[a, b]) > 0.9
+    ]
     pairs.sort(reverse=True)
-    correlations = tuple((":".join(free_names[a]), ":".join(free_names[b]), float(rho[a, b]))
-                         for _, a, b in pairs[:20])
+    correlations = tuple(
+        (":".join(free_names[a]), ":".join(free_names[b]), float(rho[a, b]))
+        for _, a, b in pairs[:20]
+    )
     # no free parameter: nothing to condition or observe, both undefined (nan)
     if not len(s):
         o1 = condition = float("nan")
     else:
-        o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) \
-            else 0.0
+        o1 = float(np.exp(np.mean(np.log(s))) / np.sqrt(Jf.shape[0])) if rank == len(s) else 0.0
         condition = float(s[0] / s[rank - 1]) if rank else float("inf")
     return covariance, Identifiability(
-        rank=rank, n_parameters=len(free_names), condition=condition,
-        observability_o1=o1, unidentifiable=tuple(unidentifiable), correlations=correlations)
+        rank=rank,
+        n_parameters=len(free_names),
+        condition=condition,
+        observability_o1=o1,
+        unidentifiable=tuple(unidentifiable),
+        correlations=correlations,
+    )
 
 
-def group_residuals(groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: Any,
-                    flagged: NDArray) -> tuple[tuple[GroupResiduals, ...], tuple]:
+def group_residuals(
+    groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: Any, flagged: NDArray
+) -> tuple[tuple[GroupResiduals, ...], tuple]:
     """Per-group residuals in SI, and the observations beyond the robust threshold.
 
     ``groups`` are the problem's residual groups, ``r`` the whitened residuals (group
@@ -171,11 +192,22 @@ def group_residuals(groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: A
         for c in grp.components:
             comps.append((c.name, block[:, c0 : c0 + c.rows] * noise.sigma(c)))
             c0 += c.rows
-        out.append(GroupResiduals(grp.kind.name, grp.frame, grp.marker, grp.sample,
-                                  tuple(comps), weight, flagged[o : o + m].copy()))
-        down += [(grp.kind.name, grp.frame, int(sm), float(wt))
-                 for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
-                 if bad]
+        out.append(
+            GroupResiduals(
+                grp.kind.name,
+                grp.frame,
+                grp.marker,
+                grp.sample,
+                tuple(comps),
+                weight,
+                flagged[o : o + m].copy(),
+            )
+        )
+        down += [
+            (grp.kind.name, grp.frame, int(sm), float(wt))
+            for sm, wt, bad in zip(grp.sample, weight, flagged[o : o + m], strict=True)
+            if bad
+        ]
         k += m * rows
         o += m
     return tuple(out), tuple(down)

@@ -76,8 +76,13 @@ def clear_function_cache() -> None:
         _FUNCTION_CACHE.clear()
 
 
-def build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[Any],
-                     model_frame: str | None, n_const: int) -> tuple[GroupFunctions, ...]:
+def build_functions(
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    groups: list[Any],
+    model_frame: str | None,
+    n_const: int,
+) -> tuple[GroupFunctions, ...]:
     """The CasADi residual functions of every group, of ``(q, m, theta, const)``.
 
     ``const`` is the blocks' :meth:`~kinfw.blocks.Block.constants` one after the other
@@ -100,8 +105,10 @@ def build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[An
     T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
     w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
     frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
-    values = {b.key: b.casadi_value(theta[s], cs)
-              for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)}
+    values = {
+        b.key: b.casadi_value(theta[s], cs)
+        for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)
+    }
     context = SymbolicContext(ca, frames, values, model_frame)
     out = []
     for g in groups:
@@ -110,22 +117,36 @@ def build_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[An
         r = kind.residual(g, context, m_sym)
         args = [q, m_sym, theta, const]
         J = ca.jacobian(r, theta)
-        out.append(GroupFunctions(ca.Function("r", args, [r]),
-                                  ca.Function("rj", args, [r, ca.densify(J.T)]),
-                                  ca.Function("j", args, [J]), args, r))
+        out.append(
+            GroupFunctions(
+                ca.Function("r", args, [r]),
+                ca.Function("rj", args, [r, ca.densify(J.T)]),
+                ca.Function("j", args, [J]),
+                args,
+                r,
+            )
+        )
     return tuple(out)
 
 
-def group_functions(model0: CPCModel, blocks: tuple[Block, ...], groups: list[Any],
-                    model_frame: str | None, n_const: int) -> tuple[GroupFunctions, ...]:
+def group_functions(
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    groups: list[Any],
+    model_frame: str | None,
+    n_const: int,
+) -> tuple[GroupFunctions, ...]:
     """:func:`build_functions`, cached by the problem's structure: every number
     (reference model, block starts) is an input, so problems of one structure (topology,
     blocks, groups' keys) share them."""
     topo = model0.topology
-    key = ((topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
-           tuple(float(v) for v in model0.sign), model_frame,
-           tuple((type(b).__name__, b.key, b.size) for b in blocks),
-           tuple(kind_of(g).key(g) for g in groups))
+    key = (
+        (topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
+        tuple(float(v) for v in model0.sign),
+        model_frame,
+        tuple((type(b).__name__, b.key, b.size) for b in blocks),
+        tuple(kind_of(g).key(g) for g in groups),
+    )
     with _FUNCTION_CACHE_LOCK:
         functions = _FUNCTION_CACHE.get(key)
         if functions is not None:

@@ -36,8 +36,13 @@ def _ancestors(topo: Any, j: int) -> list[int]:
     return out
 
 
-def _cpc_free(model0: CPCModel, robot: Robot, groups: list[Any], observed: tuple[str, ...],
-              parameters: str | tuple[str, ...]) -> NDArray[np.bool_]:
+def _cpc_free(
+    model0: CPCModel,
+    robot: Robot,
+    groups: list[Any],
+    observed: tuple[str, ...],
+    parameters: str | tuple[str, ...],
+) -> NDArray[np.bool_]:
     names = list(model0.parameter_names)
     free = np.ones(len(names), bool)
     direct = {f for g in groups for f in kind_of(g).direct_frames(g)}
@@ -55,25 +60,33 @@ def _cpc_free(model0: CPCModel, robot: Robot, groups: list[Any], observed: tuple
     if parameters in ("offsets", "frames", "none"):
         return free & (tools if parameters != "none" else np.zeros(len(names), bool))
     wanted = set()  # a mask: joint names (all their parameters) or "joint:field" entries
-    for token in ([] if isinstance(parameters, str) else parameters):
+    for token in [] if isinstance(parameters, str) else parameters:
         owner, _, field_ = token.partition(":")
-        matches = [k for k, (o, f) in enumerate(names) if o == owner
-                   and (not field_ or f == field_)]
+        matches = [
+            k for k, (o, f) in enumerate(names) if o == owner and (not field_ or f == field_)
+        ]
         if owner not in model0.topology.joint_names or not matches:
             raise ValueError(
                 f"parameters: expected 'full', 'offsets', 'frames', 'none', joint names "
                 f"or 'joint:field' of {list(model0.topology.joint_names)} (fields "
-                f"b_tilt_1, b_tilt_2, l_x, l_y); got {token!r}")
+                f"b_tilt_1, b_tilt_2, l_x, l_y); got {token!r}"
+            )
         wanted.update(matches)
     if isinstance(parameters, str) or not wanted:
-        raise ValueError(f"parameters: expected 'full', 'offsets', 'frames', 'none' or a "
-                         f"mask of joints; got {parameters!r}")
+        raise ValueError(
+            f"parameters: expected 'full', 'offsets', 'frames', 'none' or a "
+            f"mask of joints; got {parameters!r}"
+        )
     return free & (tools | np.isin(np.arange(len(names)), sorted(wanted)))
 
 
-def robot_blocks(model0: CPCModel, robot: Robot, groups: list[Any], model_frame: str | None,
-                 parameters: str | tuple[str, ...]
-                 ) -> tuple[CPCBlock, RigidFrameBlock, ZeroOffsetBlock]:
+def robot_blocks(
+    model0: CPCModel,
+    robot: Robot,
+    groups: list[Any],
+    model_frame: str | None,
+    parameters: str | tuple[str, ...],
+) -> tuple[CPCBlock, RigidFrameBlock, ZeroOffsetBlock]:
     """The robot's blocks with their free masks: CPC chart, base, joint zero offsets.
 
     Parameters
@@ -90,20 +103,29 @@ def robot_blocks(model0: CPCModel, robot: Robot, groups: list[Any], model_frame:
         The parameter set (see :func:`identification.refine.refine`).
     """
     observed = model0.topology.frames
-    cpc = CPCBlock(BlockKey("cpc"), free=_cpc_free(model0, robot, groups, observed,
-                                                   parameters), model=model0)
-    in_model_frame = any(kind_of(g).has_measured_in and kind_of(g).measured_in(g) == model_frame
-                         for g in groups)
+    cpc = CPCBlock(
+        BlockKey("cpc"), free=_cpc_free(model0, robot, groups, observed, parameters), model=model0
+    )
+    in_model_frame = any(
+        kind_of(g).has_measured_in and kind_of(g).measured_in(g) == model_frame for g in groups
+    )
     base_free = parameters not in ("full", "none") and in_model_frame
     base = RigidFrameBlock(BlockKey("base"), free=np.full(6, base_free), start=np.eye(4))
     topo = model0.topology
     # a zero offset is redundant with a tool when the joint carries only end frames, and
     # with the base when only prismatic joints lie above it (a constant translation)
-    useful = np.array([
-        (topo.revolute[j] and bool(topo.children(j)))
-        or (not topo.revolute[j] and any(topo.revolute[a] for a in _ancestors(topo, j)))
-        for j in range(model0.n_joints)], dtype=bool)
-    zero = ZeroOffsetBlock(BlockKey("zero_offset"), free=useful & (parameters == "offsets"),
-                           joint_names=tuple(topo.joint_names),
-                           revolute=tuple(bool(r) for r in topo.revolute))
+    useful = np.array(
+        [
+            (topo.revolute[j] and bool(topo.children(j)))
+            or (not topo.revolute[j] and any(topo.revolute[a] for a in _ancestors(topo, j)))
+            for j in range(model0.n_joints)
+        ],
+        dtype=bool,
+    )
+    zero = ZeroOffsetBlock(
+        BlockKey("zero_offset"),
+        free=useful & (parameters == "offsets"),
+        joint_names=tuple(topo.joint_names),
+        revolute=tuple(bool(r) for r in topo.revolute),
+    )
     return cpc, base, zero

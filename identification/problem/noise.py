@@ -19,8 +19,15 @@ from numpy.typing import NDArray
 
 from kinfw.observations.base import NoiseComponent
 
-__all__ = ["NoiseModel", "NoiseShape", "chi2_cdf", "estimate_noise", "noise_shape", "norm2_cdf",
-           "quantile"]
+__all__ = [
+    "NoiseModel",
+    "NoiseShape",
+    "chi2_cdf",
+    "estimate_noise",
+    "noise_shape",
+    "norm2_cdf",
+    "quantile",
+]
 
 #: The component whose sigma a noise model uses for a component it does not name, by unit.
 DEFAULT_COMPONENT = {"m": "position", "rad": "rotation"}
@@ -55,9 +62,14 @@ class NoiseModel:
     sigmas: tuple[tuple[str, float], ...]
     estimated: bool
 
-    def __init__(self, position_m: float | None = None, rotation_rad: float | None = None,
-                 estimated: bool = False, *, sigmas: Mapping[str, float] | None = None
-                 ) -> None:
+    def __init__(
+        self,
+        position_m: float | None = None,
+        rotation_rad: float | None = None,
+        estimated: bool = False,
+        *,
+        sigmas: Mapping[str, float] | None = None,
+    ) -> None:
         values: dict[str, float] = {}
         if position_m is not None:
             values["position"] = float(position_m)
@@ -88,8 +100,10 @@ class NoiseModel:
             return values[component.name]
         fallback = DEFAULT_COMPONENT.get(component.unit)
         if fallback is None or fallback not in values:
-            raise KeyError(f"noise: no sigma for component {component.name!r} (unit "
-                           f"{component.unit}); give it in NoiseModel(sigmas=...)")
+            raise KeyError(
+                f"noise: no sigma for component {component.name!r} (unit "
+                f"{component.unit}); give it in NoiseModel(sigmas=...)"
+            )
         return values[fallback]
 
 
@@ -144,8 +158,9 @@ def norm2_cdf(components: Sequence[NoiseComponent]) -> Callable[[float], float]:
         b = math.sqrt(s / 3.0)
         t = 0.5 * b * (nodes + 1.0)
         f = np.array([chi2_cdf(s - 3.0 * ti * ti, gaussian) for ti in t])
-        return float(0.5 * b * np.sum(weights * 2.0 * np.exp(-0.5 * t * t)
-                                      / math.sqrt(2.0 * math.pi) * f))
+        return float(
+            0.5 * b * np.sum(weights * 2.0 * np.exp(-0.5 * t * t) / math.sqrt(2.0 * math.pi) * f)
+        )
 
     return cdf
 
@@ -176,12 +191,18 @@ def _shape(rows: int, distribution: str) -> NoiseShape:
     if distribution == "angle":
         # X = 3 chi2(1): E[X | X < c] / 3 = E[Y | Y < c/3] = F_3(c/3) / F_1(c/3)
         cut = 3.0 * quantile(lambda x: chi2_cdf(x, 1), 0.999)
-        return NoiseShape(3.0 * quantile(lambda x: chi2_cdf(x, 1), 0.5), cut,
-                          chi2_cdf(cut / 3.0, 3) / chi2_cdf(cut / 3.0, 1))
+        return NoiseShape(
+            3.0 * quantile(lambda x: chi2_cdf(x, 1), 0.5),
+            cut,
+            chi2_cdf(cut / 3.0, 3) / chi2_cdf(cut / 3.0, 1),
+        )
     # X ~ chi2(k): E[X; X < c] = k F_{k+2}(c), so E[X | X < c] / k = F_{k+2}(c) / F_k(c)
     cut = quantile(lambda x: chi2_cdf(x, rows), 0.999)
-    return NoiseShape(quantile(lambda x: chi2_cdf(x, rows), 0.5), cut,
-                      chi2_cdf(cut, rows + 2) / chi2_cdf(cut, rows))
+    return NoiseShape(
+        quantile(lambda x: chi2_cdf(x, rows), 0.5),
+        cut,
+        chi2_cdf(cut, rows + 2) / chi2_cdf(cut, rows),
+    )
 
 
 def noise_shape(component: NoiseComponent) -> NoiseShape:
@@ -195,9 +216,15 @@ def noise_shape(component: NoiseComponent) -> NoiseShape:
     return _shape(component.rows, component.distribution)
 
 
-def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
-                   leverage: NDArray, *, robust: bool = False, first: bool = True
-                   ) -> NoiseModel:
+def estimate_noise(
+    r: NDArray,
+    groups: Sequence[Any],
+    sigma: NoiseModel,
+    leverage: NDArray,
+    *,
+    robust: bool = False,
+    first: bool = True,
+) -> NoiseModel:
     """Rescale each noise component's sigma from the whitened residuals.
 
     Parameters
@@ -250,8 +277,10 @@ def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
         c0 = 0
         for c in grp.components:
             if comps.setdefault(c.name, c).rows != c.rows:
-                raise ValueError(f"noise component {c.name!r} has {c.rows} rows in one kind "
-                                 f"and {comps[c.name].rows} in another")
+                raise ValueError(
+                    f"noise component {c.name!r} has {c.rows} rows in one kind "
+                    f"and {comps[c.name].rows} in another"
+                )
             blocks.setdefault(c.name, []).append(block[:, c0 : c0 + c.rows])
             hats.setdefault(c.name, []).append(h[:, c0 : c0 + c.rows])
             c0 += c.rows
@@ -266,8 +295,11 @@ def estimate_noise(r: NDArray, groups: Sequence[Any], sigma: NoiseModel,
             return float(np.sqrt(np.median(s2) / (shape.median * share)))
         if robust:
             inside = s2[s2 < shape.cut]
-            return float(np.sqrt(np.mean(inside) / (comps[name].rows * shape.trimmed * share))) \
-                if len(inside) else 1.0
+            return (
+                float(np.sqrt(np.mean(inside) / (comps[name].rows * shape.trimmed * share)))
+                if len(inside)
+                else 1.0
+            )
         return float(np.sqrt(np.sum(s2) / (block.size * share)))
 
     values = dict(sigma.sigmas)

@@ -122,8 +122,7 @@ class ResidualGroup:
     def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
         key = (which, None if free is None else free.tobytes())
         if key not in self._maps:
-            f = getattr(self.functions, which) if free is None else \
-                self.functions.rj_free(free)
+            f = getattr(self.functions, which) if free is None else self.functions.rj_free(free)
             self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
         return self._maps[key]
 
@@ -140,8 +139,9 @@ class ResidualGroup:
         f = self._mapped("j")
         return lambda qs, data, x: f(qs, data, x, self.const)
 
-    def evaluate(self, x: NDArray, with_jacobian: bool,
-                 free: NDArray[np.bool_] | None = None) -> tuple[NDArray, NDArray | None]:
+    def evaluate(
+        self, x: NDArray, with_jacobian: bool, free: NDArray[np.bool_] | None = None
+    ) -> tuple[NDArray, NDArray | None]:
         """Unwhitened residuals ``(m * rows,)`` (observation-major) and Jacobian
         ``(m * rows, P)``, or only its ``free`` columns ``(m * rows, n_free)``, written by
         CasADi straight into numpy arrays."""
@@ -149,8 +149,7 @@ class ResidualGroup:
         n_cols = len(x) if free is None else int(free.sum())
         fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
         buf, call = fn.buffer()
-        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float),
-                self.const)
+        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float), self.const)
         for i, a in enumerate(args):
             buf.set_arg(i, memoryview(a))
         r = np.empty(m * self.rows)
@@ -214,7 +213,7 @@ class LeastSquaresProblem:
     @property
     def unknown_blocks(self) -> tuple[Block, ...]:
         """The blocks besides the robot's (targets, frames, markers, offsets...)."""
-        return self.blocks[self.n_robot_blocks:]
+        return self.blocks[self.n_robot_blocks :]
 
     @property
     def names(self) -> tuple[ParameterName, ...]:
@@ -256,19 +255,20 @@ class LeastSquaresProblem:
         out = [(len(g.sample), g.components) for g in self.groups]
         return out + ([(len(self.prior_rows), (PRIOR,))] if len(self.prior_rows) else [])
 
-    def raw_residuals(self, x: NDArray, with_jacobian: bool = True
-                      ) -> list[tuple[NDArray, NDArray | None]]:
+    def raw_residuals(
+        self, x: NDArray, with_jacobian: bool = True
+    ) -> list[tuple[NDArray, NDArray | None]]:
         """Per group the unwhitened residuals (m, rows) and Jacobian (m, rows, P) at x."""
         out = []
         for g in self.groups:
             r, J = g.evaluate(x, with_jacobian)
             m = len(g.sample)
-            out.append((r.reshape(m, g.rows),
-                        None if J is None else J.reshape(m, g.rows, len(x))))
+            out.append((r.reshape(m, g.rows), None if J is None else J.reshape(m, g.rows, len(x))))
         return out
 
-    def evaluate(self, x: NDArray, noise: Any, with_jacobian: bool = True, *,
-                 only_free: bool = False) -> tuple[NDArray, NDArray | None]:
+    def evaluate(
+        self, x: NDArray, noise: Any, with_jacobian: bool = True, *, only_free: bool = False
+    ) -> tuple[NDArray, NDArray | None]:
         """Whitened residuals (N,) and their Jacobian (N, P) at ``x``.
 
         Rows are observation by observation (each observation's rows together), group
@@ -282,8 +282,7 @@ class LeastSquaresProblem:
         no_columns = only_free and not free.any()
         rs, Js = [], []
         for g in self.groups:
-            r, J = g.evaluate(x, with_jacobian and not no_columns,
-                              free if only_free else None)
+            r, J = g.evaluate(x, with_jacobian and not no_columns, free if only_free else None)
             inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
             rs.append(r * inv)
             if with_jacobian:
@@ -345,9 +344,12 @@ class LeastSquaresProblem:
         moved = model.joint_frames(zero)[0]
         geo = geometry_from_cpc(model)
         axes = moved[:, :3, 2] * model.sign[:, None]
-        shifted = ZeroGeometry(geo.topology, axes @ base[:3, :3].T,
-                               moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
-                               base @ model.frame_poses(zero))
+        shifted = ZeroGeometry(
+            geo.topology,
+            axes @ base[:3, :3].T,
+            moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
+            base @ model.frame_poses(zero),
+        )
         return cpc_from_geometry(shifted, sign=model.sign)
 
     def start_context(self, measurements: Measurements) -> StartContext:
@@ -373,16 +375,24 @@ class LeastSquaresProblem:
 
     def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
         """Every unknown block's value at ``x`` (targets, frames, markers, offsets...)."""
-        return tuple(Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
-                     for b, s in zip(self.blocks[self.n_robot_blocks:],
-                                     self.slices[self.n_robot_blocks:], strict=True))
+        return tuple(
+            Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
+            for b, s in zip(
+                self.blocks[self.n_robot_blocks :], self.slices[self.n_robot_blocks :], strict=True
+            )
+        )
 
 
-def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | None = None,
-                  targets: dict[str, NDArray] | None = None,
-                  parameters: str | tuple[str, ...] = "full",
-                  prior: tuple[float, float] | None = None,
-                  known: tuple[Unknown, ...] = ()) -> LeastSquaresProblem:
+def build_problem(
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    start: Robot | None = None,
+    targets: dict[str, NDArray] | None = None,
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    known: tuple[Unknown, ...] = (),
+) -> LeastSquaresProblem:
     """Assemble the least-squares problem (see :func:`identification.refine.refine`).
 
     ``known`` gives start values for unknown blocks (e.g. a previous calibration's target
@@ -400,17 +410,23 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
     given = {BlockKey(u.kind, u.name): u.value for u in known}
-    given.update({BlockKey("target", n): T for n, T in (targets or {}).items()
-                  if BlockKey("target", n) not in given})
+    given.update(
+        {
+            BlockKey("target", n): T
+            for n, T in (targets or {}).items()
+            if BlockKey("target", n) not in given
+        }
+    )
     fitted_frame = []
     if model_frame is not None:
-        model0 = express_in(model0, measurements, q_all, model_frame,
-                            given.get(BlockKey("frame", model_frame)))
+        model0 = express_in(
+            model0, measurements, q_all, model_frame, given.get(BlockKey("frame", model_frame))
+        )
         if BlockKey("frame", model_frame) not in given:
-            fitted_frame.append((BlockKey("frame", model_frame),
-                                 f"pose of the root link in {model_frame!r}"))
-    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame,
-                                      given)
+            fitted_frame.append(
+                (BlockKey("frame", model_frame), f"pose of the root link in {model_frame!r}")
+            )
+    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
     blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
     P = sum(b.size for b in blocks)
 
@@ -418,9 +434,16 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
     const = np.concatenate([b.constants() for b in blocks])
     functions = group_functions(model0, blocks, groups, model_frame, len(const))
     residual_groups = [
-        ResidualGroup(kind_of(g), g, q_all[g.sample].T,
-                      np.asarray(kind_of(g).data(g), dtype=float).T, fn, const)
-        for g, fn in zip(groups, functions, strict=True)]
+        ResidualGroup(
+            kind_of(g),
+            g,
+            q_all[g.sample].T,
+            np.asarray(kind_of(g).data(g), dtype=float).T,
+            fn,
+            const,
+        )
+        for g, fn in zip(groups, functions, strict=True)
+    ]
 
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
@@ -434,5 +457,12 @@ def build_problem(robot: Robot, measurements: Measurements, *, start: Robot | No
 
             nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
             prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
-    return LeastSquaresProblem(model0, model_frame, tuple(blocks), tuple(residual_groups),
-                               prior_mean, prior_sigma, (*fitted_frame, *fitted))
+    return LeastSquaresProblem(
+        model0,
+        model_frame,
+        tuple(blocks),
+        tuple(residual_groups),
+        prior_mean,
+        prior_sigma,
+        (*fitted_frame, *fitted),
+    )

@@ -18,8 +18,14 @@ from kinfw.observations.base import NoiseComponent
 
 from .noise import norm2_cdf, quantile
 
-__all__ = ["LOSSES", "levenberg_marquardt", "observation_norms", "robust_loss",
-           "row_weights", "thresholds"]
+__all__ = [
+    "LOSSES",
+    "levenberg_marquardt",
+    "observation_norms",
+    "robust_loss",
+    "row_weights",
+    "thresholds",
+]
 
 LOSSES = ("linear", "huber", "cauchy")
 
@@ -43,8 +49,7 @@ def _repeat_rows(per_obs: NDArray, obs_sizes: ObsSizes) -> NDArray:
     return np.concatenate(out)
 
 
-def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: float
-               ) -> NDArray:
+def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: float) -> NDArray:
     """Per observation, the ``Phi(z)`` quantile of the norm of its clean whitened residual.
 
     ``observations`` lists, per group, its number of observations and its noise
@@ -53,8 +58,9 @@ def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: 
     ``chi2(3)``, a pose's ``chi2(3) + 3 chi2(1)``, a prior row's ``chi2(1)``; exact
     quantiles, so ``z = 2.33`` flags 1 % of clean observations of every kind.
     """
-    per_obs = [np.full(m, _threshold(tuple(components), float(z)))
-               for m, components in observations]
+    per_obs = [
+        np.full(m, _threshold(tuple(components), float(z))) for m, components in observations
+    ]
     return np.concatenate(per_obs) if per_obs else np.zeros(0)
 
 
@@ -80,9 +86,15 @@ def row_weights(r: NDArray, obs_sizes: ObsSizes, loss: str, k: NDArray) -> NDArr
     return _repeat_rows(robust_loss(observation_norms(r, obs_sizes), loss, k)[1], obs_sizes)
 
 
-def levenberg_marquardt(evaluate: Callable[[NDArray, bool], tuple[NDArray, NDArray | None]],
-                        x: NDArray, free: NDArray, obs_sizes: ObsSizes, loss: str,
-                        k: NDArray, max_iterations: int) -> tuple[NDArray, int, bool]:
+def levenberg_marquardt(
+    evaluate: Callable[[NDArray, bool], tuple[NDArray, NDArray | None]],
+    x: NDArray,
+    free: NDArray,
+    obs_sizes: ObsSizes,
+    loss: str,
+    k: NDArray,
+    max_iterations: int,
+) -> tuple[NDArray, int, bool]:
     """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
 
     Steps solve ``(Js^T Js + lam I) y = -Js^T r`` with unit-norm columns ``Js``: no
@@ -108,6 +120,7 @@ def levenberg_marquardt(evaluate: Callable[[NDArray, bool], tuple[NDArray, NDArr
     iterations : int
     converged : bool
     """
+
     def cost_of(r):
         return float(robust_loss(observation_norms(r, obs_sizes), loss, k)[0].sum())
 

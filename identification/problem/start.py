@@ -22,16 +22,22 @@ from kinfw.transforms import average_transform
 __all__ = ["estimate_unknowns", "express_in", "start_context"]
 
 
-def start_context(model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray],
-                  model_frame: str | None) -> StartContext:
+def start_context(
+    model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray], model_frame: str | None
+) -> StartContext:
     """The kinds' start context: ``model``'s frame poses at ``q_all`` and the external
     frames' start poses ``meas_T_w``."""
     # q_all is (n, J): frame_poses keeps the batch axis, (n, E, 4, 4)
     return StartContext(model.frame_poses(q_all), model.topology.frames, meas_T_w, model_frame)
 
 
-def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name: str,
-               meas_T_root: NDArray | None = None) -> CPCModel:
+def express_in(
+    model: CPCModel,
+    measurements: Measurements,
+    q_all: NDArray,
+    name: str,
+    meas_T_root: NDArray | None = None,
+) -> CPCModel:
     """The model moved into the external frame ``name`` by ``name_T_root``: given, or a
     closed-form estimate (the kinds' root-pose estimates averaged, or their point pairs
     registered)."""
@@ -41,8 +47,7 @@ def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name
     groups = list(measurements.all_groups())
     if meas_T_root is None:
         start = start_context(model, q_all, {}, None)
-        est = [e for g in groups
-               if (e := kind_of(g).root_pose_estimates(g, start)) is not None]
+        est = [e for g in groups if (e := kind_of(g).root_pose_estimates(g, start)) is not None]
         if est:
             meas_T_root = average_transform(np.concatenate(est))
         else:
@@ -51,20 +56,27 @@ def express_in(model: CPCModel, measurements: Measurements, q_all: NDArray, name
                 raise DatasetError(
                     f"{measurements.source}: everything is measured in {name!r} through "
                     "markers or points of unknown offset; give at least one point offset "
-                    "(or a marker-free pose) so that the frame can be placed")
-            meas_T_root = register_points(np.concatenate([p[0] for p in pairs]),
-                                          np.concatenate([p[1] for p in pairs]))
+                    "(or a marker-free pose) so that the frame can be placed"
+                )
+            meas_T_root = register_points(
+                np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+            )
     geo = geometry_from_cpc(model)
     R, p = meas_T_root[:3, :3], meas_T_root[:3, 3]
-    moved = ZeroGeometry(geo.topology, geo.axes @ R.T, geo.points @ R.T + p,
-                         meas_T_root @ geo.w_T_frames)
+    moved = ZeroGeometry(
+        geo.topology, geo.axes @ R.T, geo.points @ R.T + p, meas_T_root @ geo.w_T_frames
+    )
     return cpc_from_geometry(moved, sign=model.sign)
 
 
-def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPCModel,
-                    q_all: NDArray, model_frame: str | None,
-                    given: dict[BlockKey, NDArray]
-                    ) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
+def estimate_unknowns(
+    measurements: Measurements,
+    groups: list[Any],
+    model0: CPCModel,
+    q_all: NDArray,
+    model_frame: str | None,
+    given: dict[BlockKey, NDArray],
+) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
     """Every unknown block with its start value, in closed form (or as ``given``).
 
     External measurement frames first (from the kinds' root-pose estimates), then the
@@ -81,16 +93,22 @@ def estimate_unknowns(measurements: Measurements, groups: list[Any], model0: CPC
         if key in given:
             meas_T_w[name] = np.asarray(given[key], dtype=float)
         else:
-            est = [e for g in groups if kind_of(g).measured_in(g) == name
-                   and (e := kind_of(g).root_pose_estimates(g, start)) is not None]
+            est = [
+                e
+                for g in groups
+                if kind_of(g).measured_in(g) == name
+                and (e := kind_of(g).root_pose_estimates(g, start)) is not None
+            ]
             if not est:
                 raise DatasetError(
                     f"{measurements.source}: frame {name!r} is observed only through markers "
                     "or points; give some marker-free pose observations in it, or measure "
-                    "everything in it (then the model is expressed in it)")
+                    "everything in it (then the model is expressed in it)"
+                )
             meas_T_w[name] = average_transform(np.concatenate(est))
-            fitted.append((key, f"pose of the root link in {name!r} (from "
-                                f"{sum(map(len, est))} poses)"))
+            fitted.append(
+                (key, f"pose of the root link in {name!r} (from {sum(map(len, est))} poses)")
+            )
         blocks.append(RigidFrameBlock(key, start=meas_T_w[name]))
     start = start_context(model0, q_all, meas_T_w, model_frame)
     requests: dict[BlockKey, list[Any]] = {}

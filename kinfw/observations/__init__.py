@@ -56,8 +56,9 @@ def register_kind(kind: ObservationKind) -> ObservationKind:
     if kind.name in _REGISTRY:
         raise ValueError(f"register_kind: a kind named {kind.name!r} is already registered")
     if any(k.group_type is kind.group_type for k in _REGISTRY.values()):
-        raise ValueError(f"register_kind: {kind.group_type.__name__} already belongs to a "
-                         "registered kind")
+        raise ValueError(
+            f"register_kind: {kind.group_type.__name__} already belongs to a registered kind"
+        )
     _REGISTRY[kind.name] = kind
     return kind
 
@@ -84,11 +85,13 @@ def kind_of(group: Any) -> ObservationKind:
     try:
         kind = _REGISTRY[group.kind]
     except (AttributeError, KeyError):
-        raise TypeError(f"{type(group).__name__} is not the group of a registered "
-                        "observation kind") from None
+        raise TypeError(
+            f"{type(group).__name__} is not the group of a registered observation kind"
+        ) from None
     if not isinstance(group, kind.group_type):
-        raise TypeError(f"{type(group).__name__}: expected {kind.group_type.__name__} for "
-                        f"kind {kind.name!r}")
+        raise TypeError(
+            f"{type(group).__name__}: expected {kind.group_type.__name__} for kind {kind.name!r}"
+        )
     return kind
 
 

@@ -171,8 +171,13 @@ class StartContext:
         The external frame the model is expressed in (None: the URDF root).
     """
 
-    def __init__(self, w_T_frames: NDArray[np.float64], frames: Sequence[str],
-                 meas_T_w: dict[str, NDArray[np.float64]], model_frame: str | None) -> None:
+    def __init__(
+        self,
+        w_T_frames: NDArray[np.float64],
+        frames: Sequence[str],
+        meas_T_w: dict[str, NDArray[np.float64]],
+        model_frame: str | None,
+    ) -> None:
         self._w_T = w_T_frames
         self._index = {f: k for k, f in enumerate(frames)}
         self._meas_T_w = meas_T_w
@@ -182,8 +187,9 @@ class StartContext:
         """Pose of ``frame`` in the model frame at the samples, shape (m, 4, 4)."""
         return self._w_T[sample, self._index[frame]]
 
-    def meas_T(self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
-               ) -> NDArray[np.float64]:
+    def meas_T(
+        self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
         """Pose of ``frame`` in the measurement frame ``measured_in`` (None: the root)."""
         T = self.w_T(frame, sample)
         if measured_in is None or measured_in == self.model_frame:
@@ -200,8 +206,9 @@ class SymbolicContext:
         ``casadi``.
     """
 
-    def __init__(self, ca: Any, frames: dict[str, Any], values: dict[BlockKey, Any],
-                 model_frame: str | None) -> None:
+    def __init__(
+        self, ca: Any, frames: dict[str, Any], values: dict[BlockKey, Any], model_frame: str | None
+    ) -> None:
         self.ca = ca
         self._frames = frames
         self._values = values
@@ -243,8 +250,7 @@ def pose_residual(ca: Any, T_pred: Any, m: Any) -> Any:
 
 def pose_rows(T: NDArray[np.float64]) -> NDArray[np.float64]:
     """(m, 4, 4) poses as (m, 12) rows: rotation column-major, then position."""
-    return np.concatenate([np.swapaxes(T[:, :3, :3], 1, 2).reshape(len(T), 9),
-                           T[:, :3, 3]], axis=1)
+    return np.concatenate([np.swapaxes(T[:, :3, :3], 1, 2).reshape(len(T), 9), T[:, :3, 3]], axis=1)
 
 
 # -- the kind ------------------------------------------------------------------------------
@@ -289,8 +295,9 @@ class ObservationKind:
         return sum(c.rows for c in self.components)
 
     # -- file edge
-    def parse(self, reader: ObservationReader, obs: dict[str, Any], at: str, frame: str
-              ) -> tuple[tuple[tuple[str, Any], ...], list[float]]:
+    def parse(
+        self, reader: ObservationReader, obs: dict[str, Any], at: str, frame: str
+    ) -> tuple[tuple[tuple[str, Any], ...], list[float]]:
         """One observation dict -> (group key, row of numbers in SI).
 
         The key is ``((field, value), ...)``: the group's constructor arguments besides
@@ -299,8 +306,9 @@ class ObservationKind:
         """
         raise NotImplementedError
 
-    def group_from_rows(self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64],
-                        rows: NDArray[np.float64]) -> Any:
+    def group_from_rows(
+        self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], rows: NDArray[np.float64]
+    ) -> Any:
         """The group of observations with one key: rows (m, width) from :meth:`parse`."""
         raise NotImplementedError
 
@@ -326,15 +334,19 @@ class ObservationKind:
 
     def take(self, group: Any, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> Any:
         """The group restricted to some rows, with new sample indices."""
-        return dataclasses.replace(group, sample=sample,
-                                   **{f: getattr(group, f)[rows] for f in self.row_fields})
+        return dataclasses.replace(
+            group, sample=sample, **{f: getattr(group, f)[rows] for f in self.row_fields}
+        )
 
     def concatenate(self, parts: Sequence[Any]) -> Any:
         """Groups of one key merged, rows sorted by sample."""
         sample = np.concatenate([g.sample for g in parts])
         order = np.argsort(sample, kind="stable")
-        return dataclasses.replace(parts[0], sample=sample[order], **{
-            f: np.concatenate([getattr(g, f) for g in parts])[order] for f in self.row_fields})
+        return dataclasses.replace(
+            parts[0],
+            sample=sample[order],
+            **{f: np.concatenate([getattr(g, f) for g in parts])[order] for f in self.row_fields},
+        )
 
     # -- structure
     def frames(self, group: Any) -> tuple[str, ...]:
@@ -350,14 +362,14 @@ class ObservationKind:
         """The measurement frame of a group (None: the URDF root)."""
         return getattr(group, "measured_in", None) if self.has_measured_in else None
 
-    def root_pose_estimates(self, group: Any, start: StartContext
-                            ) -> NDArray[np.float64] | None:
+    def root_pose_estimates(self, group: Any, start: StartContext) -> NDArray[np.float64] | None:
         """Per-sample estimates (k, 4, 4) of ``meas_T_w`` (model frame in the group's
         measurement frame), when the group pins it alone; else None."""
         return None
 
-    def root_point_pairs(self, group: Any, start: StartContext
-                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+    def root_point_pairs(
+        self, group: Any, start: StartContext
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         """Point pairs ``(w_p, meas_p)`` (k, 3) each that register the model frame in the
         group's measurement frame; None when the group gives none."""
         return None
@@ -399,8 +411,13 @@ class ObservationKind:
         rows = np.reshape(rows, np.shape(getattr(group, field)))
         return dataclasses.replace(group, **{field: rows})
 
-    def simulate(self, group: Any, model: NumericContext, rng: np.random.Generator,
-                 sigmas: Mapping[str, float]) -> Any:
+    def simulate(
+        self,
+        group: Any,
+        model: NumericContext,
+        rng: np.random.Generator,
+        sigmas: Mapping[str, float],
+    ) -> Any:
         """Simulated observations: the group's rows replaced by :meth:`predict` plus the
         noise model, ``sigmas`` (SI) by noise component name.
 
@@ -409,12 +426,18 @@ class ObservationKind:
         with another noise model (a pose's rotation) overrides it.
         """
         predicted = self.predict(group, model)
-        if predicted.shape[1] != self.rows or any(c.distribution != "gaussian"
-                                                  for c in self.components):
-            raise NotImplementedError(f"kind {self.name!r}: its noise is not Gaussian "
-                                      "rows; it must define simulate")
-        return self.with_data(group, gaussian_rows(
-            predicted, rng, [(float(sigmas[c.name]), c.rows) for c in self.components]))
+        if predicted.shape[1] != self.rows or any(
+            c.distribution != "gaussian" for c in self.components
+        ):
+            raise NotImplementedError(
+                f"kind {self.name!r}: its noise is not Gaussian rows; it must define simulate"
+            )
+        return self.with_data(
+            group,
+            gaussian_rows(
+                predicted, rng, [(float(sigmas[c.name]), c.rows) for c in self.components]
+            ),
+        )
 
     def drawing(self, group: Any, model: NumericContext) -> Drawing:
         """What the view draws of the observations (measured and predicted positions, in

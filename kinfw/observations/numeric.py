@@ -82,17 +82,25 @@ class NumericContext:
         The external frame the model is expressed in (None: the URDF root).
     """
 
-    def __init__(self, w_T_frames: Callable[[str], NDArray[np.float64]],
-                 values: Mapping[BlockKey, ArrayLike] | None = None,
-                 model_frame: str | None = None) -> None:
+    def __init__(
+        self,
+        w_T_frames: Callable[[str], NDArray[np.float64]],
+        values: Mapping[BlockKey, ArrayLike] | None = None,
+        model_frame: str | None = None,
+    ) -> None:
         self._w_T_frames = w_T_frames
         self._cache: dict[str, NDArray[np.float64]] = {}
         self._values = {k: np.asarray(v, dtype=float) for k, v in (values or {}).items()}
         self.model_frame = model_frame
 
     @classmethod
-    def from_robot(cls, robot: Any, qs: ArrayLike, joint_names: Sequence[str] | None,
-                   values: Mapping[BlockKey, ArrayLike] | None = None) -> NumericContext:
+    def from_robot(
+        cls,
+        robot: Any,
+        qs: ArrayLike,
+        joint_names: Sequence[str] | None,
+        values: Mapping[BlockKey, ArrayLike] | None = None,
+    ) -> NumericContext:
         """The context of a :class:`~kinfw.robot.Robot` at configurations ``qs`` (n, k)
         (columns in ``joint_names`` order; None: the robot's), in its root link."""
         qs2 = np.atleast_2d(np.asarray(qs, dtype=float))
@@ -122,8 +130,9 @@ class NumericContext:
             return np.eye(4)
         return self.value(BlockKey("frame", measured_in))
 
-    def meas_T(self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
-               ) -> NDArray[np.float64]:
+    def meas_T(
+        self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
         """Pose (m, 4, 4) of ``frame`` in the measurement frame ``measured_in``."""
         T = self.w_T(frame, sample)
         if measured_in is None or measured_in == self.model_frame:
@@ -180,8 +189,9 @@ def node_name(*path: str, marker: str | None = None) -> str:
     return "/".join([*names, last])
 
 
-def predicted_or_missing(predict: Callable[[], NDArray[np.float64]]
-                         ) -> tuple[NDArray[np.float64] | None, BlockKey | None]:
+def predicted_or_missing(
+    predict: Callable[[], NDArray[np.float64]],
+) -> tuple[NDArray[np.float64] | None, BlockKey | None]:
     """``(predict(), None)``, or ``(None, key)`` when it needs a missing value."""
     try:
         return predict(), None
@@ -198,16 +208,18 @@ def random_unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def random_small_rotations(rng: np.random.Generator, n: int, sigma_rad: float
-                           ) -> NDArray[np.float64]:
+def random_small_rotations(
+    rng: np.random.Generator, n: int, sigma_rad: float
+) -> NDArray[np.float64]:
     """``n`` rotations about uniformly random axes by angles N(0, sigma_rad), (n, 3, 3)."""
     axes = random_unit_vectors(rng, n)
     angles = rng.normal(0.0, sigma_rad, size=n)
     return matrix_from_rotation_vector(axes * angles[:, None])
 
 
-def perturb_transforms(a_T_bs: NDArray[np.float64], rng: np.random.Generator,
-                       sigma_m: float, sigma_rad: float) -> NDArray[np.float64]:
+def perturb_transforms(
+    a_T_bs: NDArray[np.float64], rng: np.random.Generator, sigma_m: float, sigma_rad: float
+) -> NDArray[np.float64]:
     """``[a_R_b dR, a_p_b + dp]`` for poses (n, 4, 4): ``dp ~ N(0, sigma_m^2 I)`` in frame
     a, ``dR`` a rotation by N(0, sigma_rad) about a uniformly random axis (in frame b).
 
@@ -219,8 +231,9 @@ def perturb_transforms(a_T_bs: NDArray[np.float64], rng: np.random.Generator,
     return transform_from_rotation_translation(a_T_bs[:, :3, :3] @ dR, a_T_bs[:, :3, 3] + dp)
 
 
-def gaussian_rows(rows: NDArray[np.float64], rng: np.random.Generator,
-                  sigma_widths: Sequence[tuple[float, int]]) -> NDArray[np.float64]:
+def gaussian_rows(
+    rows: NDArray[np.float64], rng: np.random.Generator, sigma_widths: Sequence[tuple[float, int]]
+) -> NDArray[np.float64]:
     """``rows`` (m, w) plus independent N(0, sigma) noise on blocks of columns.
 
     ``sigma_widths`` is ``((sigma, width), ...)`` in column order, widths summing to w
@@ -238,4 +251,5 @@ def transforms_from_pose_rows(rows: NDArray[np.float64]) -> NDArray[np.float64]:
     inverse of :func:`kinfw.observations.base.pose_rows`)."""
     rows = np.asarray(rows, dtype=float)
     return transform_from_rotation_translation(
-        np.swapaxes(rows[:, :9].reshape(len(rows), 3, 3), 1, 2), rows[:, 9:12])
+        np.swapaxes(rows[:, :9].reshape(len(rows), 3, 3), 1, 2), rows[:, 9:12]
+    )

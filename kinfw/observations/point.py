@@ -74,8 +74,10 @@ class PointObservations:
 
     def __repr__(self) -> str:
         offset = None if self.offset is None else self.offset.tolist()
-        return (f"PointObservations(frame={self.frame!r}, marker={self.marker!r}, "
-                f"measured_in={self.measured_in!r}, offset={offset}, m={len(self.sample)})")
+        return (
+            f"PointObservations(frame={self.frame!r}, marker={self.marker!r}, "
+            f"measured_in={self.measured_in!r}, offset={offset}, m={len(self.sample)})"
+        )
 
     @property
     def _key(self) -> tuple[Any, ...]:
@@ -96,35 +98,54 @@ class PointKind(ObservationKind):
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")
-        reader.not_allowed(obs, "target", at, self.name,
-                           "only 'target' observations name a target")
-        reader.not_allowed(obs, "quat_xyzw", at, self.name,
-                           "a point has a position only; use kind 'pose' for a pose")
+        reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
+        reader.not_allowed(
+            obs,
+            "quat_xyzw",
+            at,
+            self.name,
+            "a point has a position only; use kind 'pose' for a pose",
+        )
         offset = None
         if obs.get("offset") is not None:
             offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
         marker = reader.optional_string(obs, "marker", at)
         if marker is not None and offset is not None:
-            raise reader.error(f"{at}.offset", f"an offset and a marker ({marker!r}) exclude "
-                               "each other: a marker's offset is unknown and estimated; drop "
-                               "the marker to use a known offset")
-        measured_in = reader.optional_string(obs, "measured_in", at) \
-            or reader.default_measured_in
-        key = (("frame", frame), ("offset", offset), ("marker", marker),
-               ("measured_in", measured_in))
+            raise reader.error(
+                f"{at}.offset",
+                f"an offset and a marker ({marker!r}) exclude "
+                "each other: a marker's offset is unknown and estimated; drop "
+                "the marker to use a known offset",
+            )
+        measured_in = reader.optional_string(obs, "measured_in", at) or reader.default_measured_in
+        key = (
+            ("frame", frame),
+            ("offset", offset),
+            ("marker", marker),
+            ("measured_in", measured_in),
+        )
         return key, reader.lengths(xyz)
 
     def group_from_rows(self, key, sample, rows):
         return PointObservations(sample=sample, meas_p_point=rows, **dict(key))
 
     def to_dicts(self, group, top_measured_in):
-        more = {k: v for k, v in (
-            ("offset", None if group.offset is None else group.offset.tolist()),
-            ("marker", group.marker),
-            ("measured_in", None if group.measured_in == top_measured_in
-             else group.measured_in)) if v is not None}
-        return [{"frame": group.frame, "kind": "point", "xyz": xyz, **more}
-                for xyz in group.meas_p_point.tolist()]
+        more = {
+            k: v
+            for k, v in (
+                ("offset", None if group.offset is None else group.offset.tolist()),
+                ("marker", group.marker),
+                (
+                    "measured_in",
+                    None if group.measured_in == top_measured_in else group.measured_in,
+                ),
+            )
+            if v is not None
+        }
+        return [
+            {"frame": group.frame, "kind": "point", "xyz": xyz, **more}
+            for xyz in group.meas_p_point.tolist()
+        ]
 
     def frames(self, group):
         return (group.frame,)
@@ -145,23 +166,34 @@ class PointKind(ObservationKind):
         # least-squares offset of each sample: R_i^T (m_i - p_i); the block takes the mean
         estimates = np.einsum("nji,nj->ni", T[:, :3, :3], group.meas_p_point - T[:, :3, 3])
         who = repr(group.marker) if group.marker else f"on {group.frame!r}"
-        return (UnknownRequest(offset_key(group.frame, group.marker), estimates,
-                               PointBlock.from_estimates,
-                               f"offset of point {who} on {group.frame!r}"),)
+        return (
+            UnknownRequest(
+                offset_key(group.frame, group.marker),
+                estimates,
+                PointBlock.from_estimates,
+                f"offset of point {who} on {group.frame!r}",
+            ),
+        )
 
     def data(self, group):
         return np.asarray(group.meas_p_point)
 
     def residual(self, group, model: SymbolicContext, m):
         T = model.meas_T(group.measured_in, group.frame)
-        o = model.ca.DM(group.offset) if group.offset is not None \
+        o = (
+            model.ca.DM(group.offset)
+            if group.offset is not None
             else model.value(offset_key(group.frame, group.marker))
+        )
         return m - (T[0:3, 0:3] @ o + T[0:3, 3])
 
     # -- numpy prediction, simulation (the default: Gaussian position noise), drawing
     def _offset(self, group, model: NumericContext):
-        return group.offset if group.offset is not None \
+        return (
+            group.offset
+            if group.offset is not None
             else model.value(offset_key(group.frame, group.marker))
+        )
 
     def predict(self, group, model: NumericContext):
         T = model.meas_T(group.measured_in, group.frame, group.sample)
@@ -176,5 +208,10 @@ class PointKind(ObservationKind):
             return T[:, :3, :3] @ self._offset(group, model) + T[:, :3, 3]
 
         predicted, missing = predicted_or_missing(predicted)
-        return Drawing(node_name("points", group.frame, marker=group.marker), w_p, None,
-                       predicted, missing=missing)
+        return Drawing(
+            node_name("points", group.frame, marker=group.marker),
+            w_p,
+            None,
+            predicted,
+            missing=missing,
+        )

@@ -37,8 +37,7 @@ from kinfw.transforms import (
     xyz_quat_xyzw_from_transform,
 )
 
-__all__ = ["QUAT_NORM_TOL", "QUAT_ROUNDED_TOL", "PoseKind", "PoseObservations",
-           "read_quaternion"]
+__all__ = ["QUAT_NORM_TOL", "QUAT_ROUNDED_TOL", "PoseKind", "PoseObservations", "read_quaternion"]
 
 QUAT_NORM_TOL = 1e-3
 """Largest accepted ``| |quat_xyzw| - 1 |`` in a file (quaternions written with 4 or 5
@@ -83,8 +82,10 @@ class PoseObservations:
         object.__setattr__(self, "meas_T_frame", T)
 
     def __repr__(self) -> str:
-        return (f"PoseObservations(frame={self.frame!r}, marker={self.marker!r}, "
-                f"measured_in={self.measured_in!r}, m={len(self.sample)})")
+        return (
+            f"PoseObservations(frame={self.frame!r}, marker={self.marker!r}, "
+            f"measured_in={self.measured_in!r}, m={len(self.sample)})"
+        )
 
     @property
     def _key(self) -> tuple[Any, ...]:
@@ -95,13 +96,19 @@ def read_quaternion(reader: ObservationReader, obs: dict[str, Any], at: str) -> 
     """``quat_xyzw`` of an observation: 4 numbers of unit norm (within QUAT_NORM_TOL),
     renormalised later; norms off by more than QUAT_ROUNDED_TOL are noted in the reader
     (``reader.rounded``) for one warning per file."""
-    quat = reader.numbers(reader.get(obs, "quat_xyzw", at, "4 numbers [x, y, z, w] (scalar "
-                                     "last)"), 4, f"{at}.quat_xyzw", "[x, y, z, w], scalar last")
+    quat = reader.numbers(
+        reader.get(obs, "quat_xyzw", at, "4 numbers [x, y, z, w] (scalar last)"),
+        4,
+        f"{at}.quat_xyzw",
+        "[x, y, z, w], scalar last",
+    )
     norm = float(np.linalg.norm(quat))
     if not abs(norm - 1.0) <= QUAT_NORM_TOL:
-        raise reader.error(f"{at}.quat_xyzw",
-                           f"quaternion norm is {norm:.9g}; expected a unit quaternion "
-                           f"[x, y, z, w] (norm within {QUAT_NORM_TOL:g} of 1)")
+        raise reader.error(
+            f"{at}.quat_xyzw",
+            f"quaternion norm is {norm:.9g}; expected a unit quaternion "
+            f"[x, y, z, w] (norm within {QUAT_NORM_TOL:g} of 1)",
+        )
     reader.quaternions += 1
     if abs(norm - 1.0) > QUAT_ROUNDED_TOL:
         reader.rounded.append(abs(norm - 1.0))
@@ -111,8 +118,7 @@ def read_quaternion(reader: ObservationReader, obs: dict[str, Any], at: str) -> 
 def transforms_from_rows(rows: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rows (m, 7) of xyz (m) and quat_xyzw -> (m, 4, 4), quaternions renormalised."""
     quats = rows[:, 3:7]
-    return transform_from_xyz_quat_xyzw(rows[:, :3],
-                                        quats / np.linalg.norm(quats, axis=1)[:, None])
+    return transform_from_xyz_quat_xyzw(rows[:, :3], quats / np.linalg.norm(quats, axis=1)[:, None])
 
 
 class PoseKind(ObservationKind):
@@ -128,27 +134,34 @@ class PoseKind(ObservationKind):
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")
-        reader.not_allowed(obs, "target", at, self.name,
-                           "only 'target' observations name a target")
+        reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
         quat = read_quaternion(reader, obs, at)
-        reader.not_allowed(obs, "offset", at, self.name, "offset belongs to 'point' "
-                                                         "observations")
+        reader.not_allowed(obs, "offset", at, self.name, "offset belongs to 'point' observations")
         marker = reader.optional_string(obs, "marker", at)
-        measured_in = reader.optional_string(obs, "measured_in", at) \
-            or reader.default_measured_in
+        measured_in = reader.optional_string(obs, "measured_in", at) or reader.default_measured_in
         key = (("frame", frame), ("marker", marker), ("measured_in", measured_in))
         return key, [*reader.lengths(xyz), *quat]
 
     def group_from_rows(self, key, sample, rows):
-        return PoseObservations(sample=sample, meas_T_frame=transforms_from_rows(rows),
-                                **dict(key))
+        return PoseObservations(sample=sample, meas_T_frame=transforms_from_rows(rows), **dict(key))
 
     def to_dicts(self, group, top_measured_in):
-        more = {k: v for k, v in (("marker", group.marker), ("measured_in", None if
-                group.measured_in == top_measured_in else group.measured_in)) if v is not None}
+        more = {
+            k: v
+            for k, v in (
+                ("marker", group.marker),
+                (
+                    "measured_in",
+                    None if group.measured_in == top_measured_in else group.measured_in,
+                ),
+            )
+            if v is not None
+        }
         xyzs, quats = xyz_quat_xyzw_from_transform(group.meas_T_frame)
-        return [{"frame": group.frame, "kind": "pose", "xyz": xyz, "quat_xyzw": quat, **more}
-                for xyz, quat in zip(xyzs.tolist(), quats.tolist(), strict=True)]
+        return [
+            {"frame": group.frame, "kind": "pose", "xyz": xyz, "quat_xyzw": quat, **more}
+            for xyz, quat in zip(xyzs.tolist(), quats.tolist(), strict=True)
+        ]
 
     def frames(self, group):
         return (group.frame,)
@@ -165,10 +178,14 @@ class PoseKind(ObservationKind):
         if group.marker is None:
             return ()
         pred = start.meas_T(group.measured_in, group.frame, group.sample)
-        return (UnknownRequest(BlockKey("marker", group.marker),
-                               inverse_transform(pred) @ group.meas_T_frame,
-                               RigidFrameBlock.from_estimates,
-                               f"pose of marker {group.marker!r} on {group.frame!r}"),)
+        return (
+            UnknownRequest(
+                BlockKey("marker", group.marker),
+                inverse_transform(pred) @ group.meas_T_frame,
+                RigidFrameBlock.from_estimates,
+                f"pose of marker {group.marker!r} on {group.frame!r}",
+            ),
+        )
 
     def data(self, group):
         return pose_rows(group.meas_T_frame)
@@ -199,13 +216,25 @@ class PoseKind(ObservationKind):
     def simulate(self, group, model: NumericContext, rng, sigmas):
         """Position noise N(0, sigmas["position"]) per axis in the measurement frame, a
         rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
-        return replace(group, meas_T_frame=perturb_transforms(
-            self.predicted_transforms(group, model), rng, float(sigmas["position"]),
-            float(sigmas["rotation"])))
+        return replace(
+            group,
+            meas_T_frame=perturb_transforms(
+                self.predicted_transforms(group, model),
+                rng,
+                float(sigmas["position"]),
+                float(sigmas["rotation"]),
+            ),
+        )
 
     def drawing(self, group, model: NumericContext):
         w_T = model.w_T_meas(group.measured_in) @ group.meas_T_frame
         predicted, missing = predicted_or_missing(
-            lambda: self.w_T_predicted(group, model)[:, :3, 3])
-        return Drawing(node_name("poses", group.frame, marker=group.marker), w_T[:, :3, 3],
-                       w_T[:, :3, :3], predicted, missing=missing)
+            lambda: self.w_T_predicted(group, model)[:, :3, 3]
+        )
+        return Drawing(
+            node_name("poses", group.frame, marker=group.marker),
+            w_T[:, :3, 3],
+            w_T[:, :3, :3],
+            predicted,
+            missing=missing,
+        )

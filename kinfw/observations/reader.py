@@ -61,8 +61,9 @@ class ObservationReader:
         file, by the reader of the file).
     """
 
-    def __init__(self, source: str, length_unit: str = "m",
-                 default_measured_in: str | None = None) -> None:
+    def __init__(
+        self, source: str, length_unit: str = "m", default_measured_in: str | None = None
+    ) -> None:
         self.source = source
         self.length_unit = length_unit
         self.default_measured_in = default_measured_in
@@ -71,8 +72,9 @@ class ObservationReader:
         self.rounded: list[float] = []
 
     def error(self, where: str, what: str) -> DatasetError:
-        return DatasetError(f"{self.source}: {where}: {what}" if where else
-                            f"{self.source}: {what}")
+        return DatasetError(
+            f"{self.source}: {where}: {what}" if where else f"{self.source}: {what}"
+        )
 
     def get(self, obj: dict[str, Any], key: str, where: str, expected: str) -> Any:
         """A required key; JSON null is an error too."""
@@ -101,8 +103,7 @@ class ObservationReader:
         """A list of ``n`` finite numbers, as floats."""
         what = f" ({what})" if what else ""
         if not isinstance(value, list):
-            raise self.error(where, f"expected a list of {n} numbers{what}, "
-                                    f"got {describe(value)}")
+            raise self.error(where, f"expected a list of {n} numbers{what}, got {describe(value)}")
         if len(value) != n:
             raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
         out = []
@@ -139,8 +140,7 @@ class ObservationReader:
             raise self.error(where, f"expected an object, got {describe(value)}")
         return value
 
-    def not_allowed(self, obs: dict[str, Any], key: str, where: str, kind: str,
-                    why: str) -> None:
+    def not_allowed(self, obs: dict[str, Any], key: str, where: str, kind: str, why: str) -> None:
         """Refuse a key that does not belong on this kind of observation."""
         if obs.get(key) is not None:
             raise self.error(_join(where, key), f"not allowed on a {kind!r} observation ({why})")

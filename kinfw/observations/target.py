@@ -70,8 +70,10 @@ class TargetObservations:
         object.__setattr__(self, "camera_T_target", T)
 
     def __repr__(self) -> str:
-        return (f"TargetObservations(camera={self.camera!r}, target={self.target!r}, "
-                f"m={len(self.sample)})")
+        return (
+            f"TargetObservations(camera={self.camera!r}, target={self.target!r}, "
+            f"m={len(self.sample)})"
+        )
 
     @property
     def _key(self) -> tuple[Any, ...]:
@@ -91,12 +93,17 @@ class TargetKind(ObservationKind):
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")
-        reader.not_allowed(obs, "marker", at, self.name, "the target's pose in the world is "
-                           "the unknown; a camera frame has no marker")
-        reader.not_allowed(obs, "measured_in", at, self.name, "the pose is measured in the "
-                                                              "camera frame")
-        reader.not_allowed(obs, "offset", at, self.name, "offset belongs to 'point' "
-                                                         "observations")
+        reader.not_allowed(
+            obs,
+            "marker",
+            at,
+            self.name,
+            "the target's pose in the world is the unknown; a camera frame has no marker",
+        )
+        reader.not_allowed(
+            obs, "measured_in", at, self.name, "the pose is measured in the camera frame"
+        )
+        reader.not_allowed(obs, "offset", at, self.name, "offset belongs to 'point' observations")
         quat = read_quaternion(reader, obs, at)
         target = reader.optional_string(obs, "target", at) or DEFAULT_TARGET
         return (("camera", frame), ("target", target)), [*reader.lengths(xyz), *quat]
@@ -105,14 +112,17 @@ class TargetKind(ObservationKind):
         return None
 
     def group_from_rows(self, key, sample, rows):
-        return TargetObservations(sample=sample, camera_T_target=transforms_from_rows(rows),
-                                  **dict(key))
+        return TargetObservations(
+            sample=sample, camera_T_target=transforms_from_rows(rows), **dict(key)
+        )
 
     def to_dicts(self, group, top_measured_in):
         more = {} if group.target == DEFAULT_TARGET else {"target": group.target}
         xyzs, quats = xyz_quat_xyzw_from_transform(group.camera_T_target)
-        return [{"frame": group.camera, "kind": "target", "xyz": xyz, "quat_xyzw": quat,
-                 **more} for xyz, quat in zip(xyzs.tolist(), quats.tolist(), strict=True)]
+        return [
+            {"frame": group.camera, "kind": "target", "xyz": xyz, "quat_xyzw": quat, **more}
+            for xyz, quat in zip(xyzs.tolist(), quats.tolist(), strict=True)
+        ]
 
     def frames(self, group):
         return (group.camera,)
@@ -121,25 +131,30 @@ class TargetKind(ObservationKind):
         return (group.camera,)
 
     def unknowns(self, group, start: StartContext):
-        return (UnknownRequest(BlockKey("target", group.target),
-                               start.w_T(group.camera, group.sample) @ group.camera_T_target,
-                               RigidFrameBlock.from_estimates,
-                               f"pose of target {group.target!r} (seen by "
-                               f"{group.camera!r})"),)
+        return (
+            UnknownRequest(
+                BlockKey("target", group.target),
+                start.w_T(group.camera, group.sample) @ group.camera_T_target,
+                RigidFrameBlock.from_estimates,
+                f"pose of target {group.target!r} (seen by {group.camera!r})",
+            ),
+        )
 
     def data(self, group):
         return pose_rows(group.camera_T_target)
 
     def residual(self, group, model: SymbolicContext, m):
-        T = inverse_casadi(model.ca, model.w_T(group.camera)) \
-            @ model.value(BlockKey("target", group.target))
+        T = inverse_casadi(model.ca, model.w_T(group.camera)) @ model.value(
+            BlockKey("target", group.target)
+        )
         return pose_residual(model.ca, T, m)
 
     # -- numpy prediction, simulation, drawing
     def predicted_transforms(self, group, model: NumericContext):
         """Predicted ``camera_T_target`` (m, 4, 4), as :meth:`residual` forms it."""
-        return inverse_transform(model.w_T(group.camera, group.sample)) \
-            @ model.value(BlockKey("target", group.target))
+        return inverse_transform(model.w_T(group.camera, group.sample)) @ model.value(
+            BlockKey("target", group.target)
+        )
 
     def predict(self, group, model: NumericContext):
         return pose_rows(self.predicted_transforms(group, model))
@@ -150,18 +165,33 @@ class TargetKind(ObservationKind):
     def simulate(self, group, model: NumericContext, rng, sigmas):
         """Position noise N(0, sigmas["position"]) per axis in the camera frame, a
         rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
-        return replace(group, camera_T_target=perturb_transforms(
-            self.predicted_transforms(group, model), rng, float(sigmas["position"]),
-            float(sigmas["rotation"])))
+        return replace(
+            group,
+            camera_T_target=perturb_transforms(
+                self.predicted_transforms(group, model),
+                rng,
+                float(sigmas["position"]),
+                float(sigmas["rotation"]),
+            ),
+        )
 
     def drawing(self, group, model: NumericContext):
         """The target where the camera saw it (not framed: it may be far away), the
         residual line from the target's known pose."""
         w_T_seen = model.w_T(group.camera, group.sample) @ group.camera_T_target
-        predicted, missing = predicted_or_missing(lambda: np.broadcast_to(
-            model.value(BlockKey("target", group.target))[:3, 3], (len(group.sample), 3)))
-        return Drawing(node_name("targets", group.camera, group.target), w_T_seen[:, :3, 3],
-                       w_T_seen[:, :3, :3], predicted, focus=False, missing=missing)
+        predicted, missing = predicted_or_missing(
+            lambda: np.broadcast_to(
+                model.value(BlockKey("target", group.target))[:3, 3], (len(group.sample), 3)
+            )
+        )
+        return Drawing(
+            node_name("targets", group.camera, group.target),
+            w_T_seen[:, :3, 3],
+            w_T_seen[:, :3, :3],
+            predicted,
+            focus=False,
+            missing=missing,
+        )
 
     def camera_frames(self, group):
         return (group.camera,)
