@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -12,7 +12,6 @@ from kinfw.blocks import BlockKey, RigidFrameBlock
 from kinfw.observations.base import (
     POSITION,
     ROTATION,
-    ObservationKind,
     StartContext,
     SymbolicContext,
     UnknownRequest,
@@ -25,11 +24,10 @@ from kinfw.observations.numeric import (
     Drawing,
     NumericContext,
     node_name,
-    perturb_transforms,
     predicted_or_missing,
-    transforms_from_pose_rows,
 )
 from kinfw.observations.reader import ObservationReader
+from kinfw.observations.rigid import RigidTransformKind
 from kinfw.transforms import (
     check_transform,
     inverse_transform,
@@ -121,7 +119,7 @@ def transforms_from_rows(rows: NDArray[np.float64]) -> NDArray[np.float64]:
     return transform_from_xyz_quat_xyzw(rows[:, :3], quats / np.linalg.norm(quats, axis=1)[:, None])
 
 
-class PoseKind(ObservationKind):
+class PoseKind(RigidTransformKind):
     """``"pose"``: ``xyz`` and ``quat_xyzw`` of ``frame`` (or of its ``marker``) in the
     measurement frame. Residual: position (3, m) and orientation (3, rad)."""
 
@@ -206,25 +204,6 @@ class PoseKind(ObservationKind):
         """Predicted ``meas_T_frame`` (m, 4, 4), as :meth:`residual` forms it."""
         T = model.meas_T(group.measured_in, group.frame, group.sample)
         return T if group.marker is None else T @ model.value(BlockKey("marker", group.marker))
-
-    def predict(self, group, model: NumericContext):
-        return pose_rows(self.predicted_transforms(group, model))
-
-    def with_data(self, group, rows):
-        return replace(group, meas_T_frame=transforms_from_pose_rows(rows))
-
-    def simulate(self, group, model: NumericContext, rng, sigmas):
-        """Position noise N(0, sigmas["position"]) per axis in the measurement frame, a
-        rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
-        return replace(
-            group,
-            meas_T_frame=perturb_transforms(
-                self.predicted_transforms(group, model),
-                rng,
-                float(sigmas["position"]),
-                float(sigmas["rotation"]),
-            ),
-        )
 
     def drawing(self, group, model: NumericContext):
         w_T = model.w_T_meas(group.measured_in) @ group.meas_T_frame

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -12,7 +12,6 @@ from kinfw.blocks import BlockKey, RigidFrameBlock
 from kinfw.observations.base import (
     POSITION,
     ROTATION,
-    ObservationKind,
     StartContext,
     SymbolicContext,
     UnknownRequest,
@@ -26,11 +25,10 @@ from kinfw.observations.numeric import (
     Drawing,
     NumericContext,
     node_name,
-    perturb_transforms,
     predicted_or_missing,
-    transforms_from_pose_rows,
 )
 from kinfw.observations.pose import read_quaternion, transforms_from_rows
+from kinfw.observations.rigid import RigidTransformKind
 from kinfw.transforms import check_transform, inverse_transform, xyz_quat_xyzw_from_transform
 
 __all__ = ["DEFAULT_TARGET", "TargetKind", "TargetObservations"]
@@ -80,7 +78,7 @@ class TargetObservations:
         return TargetKind().key(self)
 
 
-class TargetKind(ObservationKind):
+class TargetKind(RigidTransformKind):
     """``"target"``: ``xyz`` and ``quat_xyzw`` of the fixed target ``target`` in the
     camera frame ``frame``. Unknown: the target's pose in the root. Residual: position
     (3, m, in the camera frame) and orientation (3, rad)."""
@@ -154,25 +152,6 @@ class TargetKind(ObservationKind):
         """Predicted ``camera_T_target`` (m, 4, 4), as :meth:`residual` forms it."""
         return inverse_transform(model.w_T(group.camera, group.sample)) @ model.value(
             BlockKey("target", group.target)
-        )
-
-    def predict(self, group, model: NumericContext):
-        return pose_rows(self.predicted_transforms(group, model))
-
-    def with_data(self, group, rows):
-        return replace(group, camera_T_target=transforms_from_pose_rows(rows))
-
-    def simulate(self, group, model: NumericContext, rng, sigmas):
-        """Position noise N(0, sigmas["position"]) per axis in the camera frame, a
-        rotation by N(0, sigmas["rotation"]) about a uniformly random axis."""
-        return replace(
-            group,
-            camera_T_target=perturb_transforms(
-                self.predicted_transforms(group, model),
-                rng,
-                float(sigmas["position"]),
-                float(sigmas["rotation"]),
-            ),
         )
 
     def drawing(self, group, model: NumericContext):
