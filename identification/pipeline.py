@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -21,6 +22,7 @@ from numpy.typing import NDArray
 
 from identification.cameras import CamerasResult, calibrate_cameras
 from identification.closed_form import ClosedFormResult, ProtocolError, identify_closed_form
+from identification.fit_checks import fit_warnings
 from identification.redundancy import check_redundancy
 from identification.refine import NoiseModel, RefineResult, build_problem, refine
 from identification.units import UnitError, check_fit, check_units
@@ -131,6 +133,10 @@ def calibrate(
     - after the refinement over every parameter, that it fits
       (:func:`identification.units.check_fit`).
 
+    After the refinement over every parameter, residuals that follow the joint values or
+    exceed a plausible noise are warned about (``UserWarning``, one line each, naming the
+    frame, the joint and the likely cause: :func:`identification.fit_checks.fit_warnings`).
+
     Raises
     ------
     DatasetError
@@ -207,8 +213,16 @@ def calibrate(
             parameters=parameters,
             prior=prior,
         )
+        # a smaller set is a deliberately restricted model (baselines, cross-validation):
+        # its residuals are expected to show what it leaves out
+        found = fit_warnings(refined, data) if parameters == "full" else ()
         if parameters == "full":
-            check_fit(refined, data.source)
+            try:
+                check_fit(refined, data.source)
+            except UnitError as exc:  # the residuals' structure names a likelier cause
+                raise UnitError(" ".join((str(exc), *(f"Also: {w}" for w in found)))) from None
+        for warning in found:
+            warnings.warn(f"{data.source}: {warning}", UserWarning, stacklevel=2)
         export = export_urdf(
             nominal,
             geometry_from_cpc(refined.model),
