@@ -148,3 +148,17 @@ def test_too_few_samples_name_the_undetermined_quantities():
     data = _one_marker(nominal, frame, names, 2)
     with pytest.raises(DatasetError, match=r"frame 'mocap' is seen only through markers"):
         build_problem(nominal, data)
+
+
+def test_the_report_says_not_available_when_the_nominal_cannot_be_placed():
+    """The report's "before" errors do not crash on data the nominal cannot be evaluated on
+    (issue 12 bullet 3): NaN numbers and a note that names the reason."""
+    from verification.report import _errors_or_unavailable, errors_by_group
+
+    nominal, _, frame, names = _robots("arm")
+    good = errors_by_group(nominal, _one_marker(nominal, frame, names, 30))
+    assert good[0].position_rms_mm < 1e-6
+    notes = []
+    (row,) = _errors_or_unavailable(nominal, _one_marker(nominal, frame, names, 2), good, notes)
+    assert np.isnan(row.position_rms_mm) and row.group == good[0].group
+    assert len(notes) == 1 and "not available" in notes[0] and "'mocap'" in notes[0]

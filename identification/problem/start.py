@@ -305,7 +305,7 @@ def _undetermined(J, cols, rotations, name, describe):
     scale[scale == 0.0] = 1.0
     _, s, Vt = np.linalg.svd(J / scale, full_matrices=True)
     rank = int(np.sum(s > MARKER_RANK_TOL * s[0])) if len(s) and s[0] > 0 else 0
-    names = []
+    seen: dict[str, list[NDArray]] = {}  # quantity -> its directions in the null space
     for v in Vt[rank:] / scale:
         parts = [(f"the rotation of {name!r}", v[:3]), (f"the position of {name!r}", v[3:6])]
         for label, c in cols.items():
@@ -315,9 +315,15 @@ def _undetermined(J, cols, rotations, name, describe):
         big = max(np.linalg.norm(p) for _, p in parts)
         for what, p in parts:
             if np.linalg.norm(p) > 0.1 * big:
-                d = p / np.linalg.norm(p)
-                names.append(f"{what} along [{d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}]")
-    return tuple(dict.fromkeys(names))
+                seen.setdefault(what, []).append(p / np.linalg.norm(p))
+    names = []
+    for what, dirs in seen.items():
+        if len(dirs) == 1:
+            d = dirs[0]
+            names.append(f"{what} along [{d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}]")
+        else:
+            names.append(f"{what} ({min(len(dirs), 3)} directions)")
+    return tuple(names)
 
 
 def frame_from_markers(
