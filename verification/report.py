@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,7 @@ from kinfw.calibration_report import (
     before_after,
 )
 from kinfw.files import atomic_path
-from kinfw.measurements import Measurements
+from kinfw.measurements import DatasetError, Measurements
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
 
@@ -67,6 +68,28 @@ def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary
     each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
     report = evaluate_model(robot, data)
     return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary()) for g in report.groups)
+
+
+def _errors_or_unavailable(
+    robot: Robot, data: Measurements, like: tuple[GroupErrorSummary, ...], notes: list[str]
+) -> tuple[GroupErrorSummary, ...]:
+    """:func:`errors_by_group`, or, when ``robot`` cannot be evaluated on ``data`` (a
+    frame its geometry cannot place: :class:`DatasetError`), the groups of ``like`` with
+    every number NaN ("not available") and the reason added to ``notes``."""
+    try:
+        return errors_by_group(robot, data)
+    except DatasetError as e:
+        notes.append(f"errors of {robot.source or 'the nominal'} not available: {e}")
+        nan = float("nan")
+        return tuple(
+            replace(
+                g,
+                **{k: nan for k in GroupErrorSummary._NUMBERS},
+                abs_mean_xyz_mm=(nan, nan, nan),
+                abs_std_xyz_mm=(nan, nan, nan),
+            )
+            for g in like
+        )
 
 
 def before_after_rows(
@@ -251,8 +274,14 @@ def calibration_report(
     CalibrationReport
         ``to_dict()`` is the JSON of ``kinfw calibrate --report``.
     """
-    before = errors_by_group(nominal, data)
     after = errors_by_group(calibrated, data)
+    notes = list(calibration.notes)
+    before = _errors_or_unavailable(nominal, data, after, notes)
+    held_out_rows = None
+    if held_out is not None:
+        after_held = errors_by_group(calibrated, held_out)
+        before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
+        held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
     stage_rms += [
         StageErrors.of(name, errors_by_group(Robot(xml, name), data))
@@ -266,7 +295,7 @@ def calibration_report(
         data=DataProvenance(
             data.source, data.n_samples, file_sha256(data_path) if data_path else None
         ),
-        notes=tuple(calibration.notes),
+        notes=tuple(notes),
         errors_in_sample=before_after(before, after),
         position_rms_by_stage=tuple(stage_rms),
         errors_before=before,
@@ -282,11 +311,7 @@ def calibration_report(
             export.w_T_root,
             tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3]))) for link, T in export.link_shifts),
         ),
-        errors_held_out=None
-        if held_out is None
-        else before_after(
-            errors_by_group(nominal, held_out), errors_by_group(calibrated, held_out)
-        ),
+        errors_held_out=None if held_out is None else held_out_rows,
     )
 
 
@@ -407,7 +432,6 @@ def calibrate_to_files(
         With ``sidecar`` set to the sidecar's path.
     calibration : Calibration
     """
-    from dataclasses import replace
 
     from identification.pipeline import calibrate
     from kinfw.calibration_file import write_sidecar

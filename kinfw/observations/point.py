@@ -159,6 +159,19 @@ class PointKind(ObservationKind):
         T = start.w_T(group.frame, group.sample)
         return (T @ np.append(group.offset, 1.0))[:, :3], group.meas_p_point
 
+    def marker_tracks(self, group, start: StartContext):
+        """For placing an external frame seen only through markers
+        (:func:`identification.problem.start.frame_from_markers`): the frame's start
+        poses in the model frame, the measured positions, the known offset (or None),
+        no measured rotation, and the offset's block key."""
+        return (
+            start.w_T(group.frame, group.sample),
+            group.meas_p_point,
+            group.offset,
+            None,
+            offset_key(group.frame, group.marker),
+        )
+
     def unknowns(self, group, start: StartContext):
         if group.offset is not None:
             return ()

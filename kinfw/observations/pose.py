@@ -172,6 +172,21 @@ class PoseKind(RigidTransformKind):
             return None
         return group.meas_T_frame @ inverse_transform(start.w_T(group.frame, group.sample))
 
+    def marker_tracks(self, group, start: StartContext):
+        """A marker pose for placing an external frame seen only through markers
+        (:func:`identification.problem.start.frame_from_markers`): the frame's start poses
+        in the model frame, the marker's measured positions and rotations and its block
+        key; None for a marker-free pose (it places the frame alone)."""
+        if group.marker is None:
+            return None
+        return (
+            start.w_T(group.frame, group.sample),
+            group.meas_T_frame[:, :3, 3],
+            None,
+            group.meas_T_frame[:, :3, :3],
+            BlockKey("marker", group.marker),
+        )
+
     def unknowns(self, group, start: StartContext):
         if group.marker is None:
             return ()
