@@ -73,12 +73,7 @@ def express_in(
 def _from_markers(groups: list[Any], start: StartContext, name: str, source: str) -> NDArray:
     """``name_T_w`` from the groups' marker tracks (:func:`frame_from_markers`); a clear
     error when the groups have none."""
-    tracks = [
-        t
-        for g in groups
-        if (f := getattr(kind_of(g), "marker_tracks", None)) is not None
-        and (t := f(g, start)) is not None
-    ]
+    tracks = [t for g in groups if (t := kind_of(g).marker_tracks(g, start)) is not None]
     if not tracks:
         raise DatasetError(
             f"{source}: frame {name!r} is observed through nothing that places it (no "

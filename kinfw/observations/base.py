@@ -367,6 +367,14 @@ class ObservationKind:
         measurement frame), when the group pins it alone; else None."""
         return None
 
+    def marker_tracks(self, group: Any, start: StartContext) -> tuple[Any, ...] | None:
+        """A track that places an external frame seen only through markers or points of
+        unknown offset (:func:`identification.problem.start.frame_from_markers`): the
+        frame's start poses ``w_T_frame`` (k, 4, 4), the measured positions (k, 3), the
+        known offset (3,) or None, the measured rotations (k, 3, 3) or None, and the
+        unknown's block key; None when the group has no such track."""
+        return None
+
     def root_point_pairs(
         self, group: Any, start: StartContext
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
