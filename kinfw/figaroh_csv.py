@@ -20,8 +20,10 @@ calibration), so ``phix, phiy, phiz`` are roll, pitch, yaw about fixed axes:
 A marker with ``x, y, z`` only becomes a ``point`` observation of a marker of unknown
 offset on ``frame``; with all six columns, a ``pose`` observation of a rigid marker of
 unknown pose on ``frame``. Both are in ``measured_in`` (default: the URDF root link).
-Files written by some FIGAROH tools end each line with a comma; the empty last column
-is accepted when all its cells are empty.
+Column names are stripped of spaces (some sessions pad them: ``"x1 "``). Unnamed columns
+(``""`` or pandas' ``"Unnamed: N"``: a row index written by ``DataFrame.to_csv``, the empty
+column after a trailing comma) are ignored, as FIGAROH ignores every column it does not
+ask for; any other column must be a marker or a joint of the robot.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ __all__ = ["IGNORED_COLUMNS", "matrix_from_figaroh_rpy", "measurements_from_figa
 #: Columns FIGAROH reads that are not joints or markers (kept out of the joint list).
 IGNORED_COLUMNS = ("session_id",)
 
+_PANDAS_UNNAMED = re.compile(r"^Unnamed: [0-9]+$")
 _MARKER_COLUMN = re.compile(r"^(x|y|z|phix|phiy|phiz)([1-9][0-9]*)$")
 _POSITION = ("x", "y", "z")
 _ORIENTATION = ("phix", "phiy", "phiz")
@@ -79,9 +82,14 @@ def matrix_from_figaroh_rpy(rpy: ArrayLike) -> NDArray[np.float64]:
     )
 
 
+def _unnamed(name: str) -> bool:
+    """A column pandas would call ``Unnamed: N``: an index written by ``to_csv`` or the
+    empty column after a trailing comma. Ignored, as FIGAROH ignores it."""
+    return name == "" or _PANDAS_UNNAMED.match(name) is not None
+
+
 def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header (stripped) and the data rows with their line numbers (blank lines skipped);
-    an all-empty trailing column is dropped."""
+    """Header (stripped) and the data rows with their line numbers (blank lines skipped)."""
     try:
         with path.open(newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
@@ -95,25 +103,16 @@ def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
     ]
     if not data:
         raise DatasetError(f"{path}: no data rows after the header")
-    while header and header[-1] == "":
-        last = len(header) - 1
-        for line, row in data:
-            if len(row) > last and row[last].strip():
-                raise DatasetError(
-                    f"{path}: line {line}: a value ({row[last].strip()!r}) under the "
-                    f"unnamed column {last + 1}; expected it empty or the column named"
-                )
-        header.pop()
     for i, name in enumerate(header):
-        if name == "":
-            raise DatasetError(f"{path}: header: column {i + 1} has no name")
-        if header.index(name) != i:
+        if not _unnamed(name) and header.index(name) != i:
             raise DatasetError(f"{path}: header: column {name!r} appears twice")
     out = []
     for line, row in data:
         cells = [c.strip() for c in row]
         while len(cells) > len(header) and cells[-1] == "":
             cells.pop()
+        if len(cells) < len(header) and all(_unnamed(h) for h in header[len(cells) :]):
+            cells += [""] * (len(header) - len(cells))
         if len(cells) != len(header):
             raise DatasetError(
                 f"{path}: line {line}: {len(cells)} values, expected {len(header)} (one per "
@@ -127,9 +126,11 @@ def _numbers(
     path: Path, header: list[str], rows: list[tuple[int, list[str]]]
 ) -> NDArray[np.float64]:
     """The table as floats; names the row, line and column of the first bad cell."""
-    table = np.empty((len(rows), len(header)))
+    table = np.full((len(rows), len(header)), np.nan)
+    named = [c for c, name in enumerate(header) if not _unnamed(name)]
     for r, (line, cells) in enumerate(rows):
-        for c, cell in enumerate(cells):
+        for c in named:
+            cell = cells[c]
             try:
                 table[r, c] = float(cell)
             except ValueError:
@@ -137,7 +138,8 @@ def _numbers(
                     f"{path}: row {r} (line {line}), column {header[c]!r}: expected a "
                     f"number, got {cell!r}"
                 ) from None
-    bad = ~np.isfinite(table)
+    bad = np.zeros(table.shape, dtype=bool)
+    bad[:, named] = ~np.isfinite(table[:, named])
     if bad.any():
         r, c = np.argwhere(bad)[0]
         raise DatasetError(
@@ -232,7 +234,7 @@ def measurements_from_figaroh_csv(
     joint_columns = [
         c
         for c, name in enumerate(header)
-        if c not in marker_columns and name not in IGNORED_COLUMNS
+        if c not in marker_columns and name not in IGNORED_COLUMNS and not _unnamed(name)
     ]
     movable = set(robot.joint_names)
     for c in joint_columns:

@@ -149,6 +149,23 @@ def _csv(tmp_path, text, name="data.csv"):
     return path
 
 
+def test_pandas_index_and_trailing_commas_are_ignored(tiago, tmp_path):
+    plain = _csv(tmp_path, "x1,y1,z1,arm_1_joint\n1,2,3,0.5\n4,5,6,0.25\n", "plain.csv")
+    # as in eye_hand_calibration_recorded_data_palhey5_13_optimal_from_500.csv
+    pandas = _csv(
+        tmp_path,
+        "   ,x1 ,y1 , z1,arm_1_joint ,Unnamed: 5\n  0 ,1,2,3,0.5,\n\n  5 ,4,5,6,0.25 ,\n",
+        "pandas.csv",
+    )
+    a = measurements_from_figaroh_csv(plain, robot=tiago, frame="arm_7_link")
+    b = measurements_from_figaroh_csv(pandas, robot=tiago, frame="arm_7_link")
+    np.testing.assert_array_equal(b.qs, a.qs)
+    np.testing.assert_array_equal(b.points[0].meas_p_point, [[1, 2, 3], [4, 5, 6]])
+    bad = _csv(tmp_path, " ,x1,y1,z1,arm_1_joint\n0,1,2,3,4\n\n1,1,2,x,4\n", "bad.csv")
+    with pytest.raises(DatasetError, match=r"row 1 \(line 4\), column 'z1'"):
+        measurements_from_figaroh_csv(bad, robot=tiago, frame="arm_7_link")
+
+
 def test_units_convert_lengths_angles_and_prismatic_joints(tiago, tmp_path):
     si = _csv(
         tmp_path,
@@ -188,7 +205,6 @@ def test_units_convert_lengths_angles_and_prismatic_joints(tiago, tmp_path):
         ("x1,y1,z1,arm_1_joint\n1,2,3,4\n1,2,oops,4\n", r"row 1 \(line 3\), column 'z1'.*'oops'"),
         ("x1,y1,z1,arm_1_joint\n1,2,nan,4\n", r"row 0 \(line 2\), column 'z1'.*occluded"),
         ("x1,y1,z1,arm_1_joint\n1,2,3\n", "line 2: 3 values, expected 4"),
-        ("x1,y1,z1,arm_1_joint,\n1,2,3,4,5\n", "unnamed column 5"),
         ("x1,y1,z1,x1,arm_1_joint\n1,2,3,4,5\n", "column 'x1' appears twice"),
         ("x1,y1,z1,arm_1_joint\n", "no data rows"),
         ("", "empty file"),
