@@ -32,6 +32,7 @@ from kinfw.cli_commands import (
     cmd_crosscheck,
     cmd_crossval,
     cmd_demo,
+    cmd_import_csv,
     cmd_reproduce,
     cmd_simulate,
     cmd_verify,
@@ -82,6 +83,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         )
     elif command == "reproduce":
         check_output_dir(args.out, label="--out")
+    elif command == "import-csv":
+        check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "csv": args.csv})
 
 
 # -- numbers on the command line -----------------------------------------------------------
@@ -406,6 +409,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_crosscheck)
+
+    p = sub.add_parser(
+        "import-csv",
+        help="convert a FIGAROH calibration CSV into a measurement file",
+        description="Read a FIGAROH-style calibration CSV (marker columns x1, y1, z1 "
+        "[phix1, phiy1, phiz1], ...; one column per URDF joint) and write it as a "
+        "kinfw-measurements file: per marker, points (or poses with the phi columns) "
+        "of a marker of unknown offset on --frame.",
+    )
+    p.add_argument("csv", type=Path, help="FIGAROH CSV file")
+    p.add_argument("--urdf", type=Path, required=True, help="URDF naming the joint columns")
+    p.add_argument("--frame", required=True, help="URDF link or joint the markers are on")
+    p.add_argument(
+        "--measured-in",
+        default=None,
+        help="measurement frame, not in the URDF (default: the URDF root link)",
+    )
+    p.add_argument("--marker", default="marker", help="marker name prefix (default 'marker')")
+    p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
+    p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
+    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.set_defaults(func=cmd_import_csv)
     return parser
 
 

@@ -33,6 +33,7 @@ __all__ = [
     "cmd_crosscheck",
     "cmd_crossval",
     "cmd_demo",
+    "cmd_import_csv",
     "cmd_reproduce",
     "cmd_simulate",
     "cmd_verify",
@@ -602,3 +603,32 @@ def cmd_crosscheck(args: argparse.Namespace) -> int:
         )
         print("  passed (< 1e-12)" if result.passed() else "  FAILED (>= 1e-12)")
     return 0 if result.passed() else 1
+
+
+# -- kinfw import-csv --------------------------------------------------------------------
+def cmd_import_csv(args: argparse.Namespace) -> int:
+    """``kinfw import-csv``: a FIGAROH calibration CSV to a measurement file."""
+    from kinfw.figaroh_csv import measurements_from_figaroh_csv
+    from kinfw.measurements import check_against_robot, write_measurements
+    from kinfw.robot import load_robot
+
+    robot = load_robot(args.urdf)
+    measurements = measurements_from_figaroh_csv(
+        args.csv,
+        robot=robot,
+        frame=args.frame,
+        measured_in=args.measured_in,
+        marker=args.marker,
+        length_unit=args.length_unit,
+        angle_unit=args.angle_unit,
+    )
+    check_against_robot(measurements, robot)
+    write_measurements(args.out, measurements)
+    kinds = ", ".join(
+        f"{len(g.sample)} {type(g).kind} of {g.marker!r}" for g in measurements.all_groups()
+    )
+    print(
+        f"wrote {args.out}: {measurements.n_samples} samples, joints "
+        f"{', '.join(measurements.joint_names)}; {kinds} on {args.frame!r}"
+    )
+    return 0
