@@ -27,9 +27,12 @@ from kinfw.transforms import (
     inverse_transform,
     rotation_angle,
 )
+from tests.erd import urdf_path
 
 DATA = Path(__file__).parent / "data" / "tiago_figaroh"
-URDF = DATA / "tiago_no_hand.urdf"
+# The nominal TIAGo (PAL's URDF, CC BY-NC-ND): taken from example-robot-data (a test
+# dependency), not shipped here.
+URDF = urdf_path("tiago_description/robots/tiago_no_hand.urdf")
 VICON_CSV = DATA / "vicon_calibration_gripper3_base1.csv"
 VICON_JSON = DATA / "vicon_gripper3_base1.json"
 EYE_HAND_CSV = DATA / "eye_hand_calibration_recorded_data_48c_hey5_12_test1.csv"
