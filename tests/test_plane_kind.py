@@ -14,6 +14,7 @@ the rest (held-out distances, the planes' normals and offsets to 1e-9).
 from __future__ import annotations
 
 import json
+from functools import partial
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ from kinfw.measurements import (
 )
 from kinfw.observations import PlaneContacts, kind_of
 from kinfw.observations.numeric import NumericContext
-from kinfw.observations.plane import PlaneBlock, fit_plane, lifted_probe_offset, plane_key
+from kinfw.observations.plane import DISTANCE, PlaneBlock, fit_plane, lifted_probe_offset, plane_key
 from kinfw.observations.point import offset_key
 from kinfw.robot import load_robot
 from tests.robots import ARM_6R
@@ -91,14 +92,18 @@ def scene():
     """The nominal, the truth, two tilted planes (n, d) through points the probe reaches."""
     nominal = load_robot(ARM_6R)
     rng = np.random.default_rng(5)
-    truth = load_robot(perturb_robot(nominal, rng))
+    # the movable joints are perturbed; the flange's mounting on l6 stays the URDF's (the
+    # given-offset case means "the probe is at OFFSET in the URDF's flange")
+    truth = load_robot(perturb_robot(nominal, rng, joints=NAMES))
     reach = _probe(truth, np.array([[0.3, 0.2, -0.4, 0.5, 0.6, 0.1]]))[0]
     n_table = _unit([0.15, -0.1, 1.0])  # nearly horizontal
     n_wall = _unit([1.0, 0.3, -0.2])  # nearly vertical
     planes = {
-        "table": np.append(n_table, n_table @ (reach - [0.0, 0.0, 0.05])),
-        "wall": np.append(n_wall, n_wall @ (reach + [0.05, 0.0, 0.0])),
+        "table": np.append(n_table, n_table @ (reach - np.array([0.0, 0.0, 0.05]))),
+        "wall": np.append(n_wall, n_wall @ (reach + np.array([0.05, 0.0, 0.0]))),
     }
+    # the kind's sign convention: the normal points towards the root (d < 0)
+    planes = {k: p if p[3] < 0 else -p for k, p in planes.items()}
     contacts = {k: _contacts(truth, p, 60, rng) for k, p in planes.items()}
     return nominal, truth, planes, contacts
 
@@ -125,7 +130,9 @@ def _dataset(contacts, *, offset=None, marker="tip", points=None):
     if points is not None:
         q_pts, xyz = points
         point_groups = (
-            PointObservations("flange", np.arange(len(qs), len(qs) + len(q_pts)), xyz, marker=marker),
+            PointObservations(
+                "flange", np.arange(len(qs), len(qs) + len(q_pts)), xyz, marker=marker
+            ),
         )
         qs = np.concatenate([qs, q_pts])
     return Measurements(NAMES, qs, points=point_groups, others=tuple(groups))
@@ -171,13 +178,12 @@ def test_the_plane_chart_is_minimal_unit_and_its_casadi_twin_agrees():
 
 
 def test_the_closed_form_recovers_the_probe_and_the_plane_on_the_truth(scene):
-    nominal, truth, planes, contacts = scene
+    _, truth, planes, contacts = scene
     T = truth.frame_poses(contacts["table"], "flange", NAMES)
     o = lifted_probe_offset(T[:, :3, :3], T[:, :3, 3])
     np.testing.assert_allclose(o, OFFSET, rtol=0, atol=1e-9)
     plane = fit_plane(T[:, :3, :3] @ o + T[:, :3, 3])
-    sign = np.sign(plane[:3] @ planes["table"][:3])
-    np.testing.assert_allclose(sign * plane, planes["table"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(plane, planes["table"], rtol=0, atol=1e-9)
     # a fixed orientation cannot tell the offset from the plane: no answer, not a wrong one
     R = np.repeat(T[:1, :3, :3], len(T), axis=0)
     assert lifted_probe_offset(R, T[:, :3, 3]) is None
@@ -187,23 +193,19 @@ def test_the_closed_form_recovers_the_probe_and_the_plane_on_the_truth(scene):
 
 
 def test_numpy_prediction_equals_the_casadi_residual(scene):
-    nominal, truth, planes, contacts = scene
+    nominal, _, planes, contacts = scene
     for offset in (None, OFFSET):
         data = _dataset(contacts, offset=offset)
         problem = build_problem(nominal, data)
         rng = np.random.default_rng(3)
         x = rng.normal(0.0, 1e-2, size=problem.n_parameters)
         model = problem.model_at(x)
-        values = {
-            (u.kind, u.name): u.value for u in problem.unknowns_at(x)
-        }  # the plane (4,), the probe (3,)
-        ctx = NumericContext(
-            lambda frame, model=model, qs=data.q_of(model.topology.joint_names): (
-                model.frame_poses(qs, frame)
-            ),
-            {plane_key(k): values["plane", k] for k in planes}
-            | ({} if offset is not None else {offset_key("flange", "tip"): values["offset", "flange:tip"]}),
-        )
+        values = {(u.kind, u.name): u.value for u in problem.unknowns_at(x)}
+        known = {plane_key(k): values["plane", k] for k in planes}
+        if offset is None:
+            known[offset_key("flange", "tip")] = values["offset", "flange:tip"]
+        qs = data.q_of(model.topology.joint_names)
+        ctx = NumericContext(partial(model.frame_poses, qs), known)
         r, _ = problem.evaluate(x, NoiseModel(sigmas={"distance": 1.0}), with_jacobian=False)
         k = 0
         for grp in problem.groups:
@@ -217,12 +219,19 @@ def test_numpy_prediction_equals_the_casadi_residual(scene):
 
 
 def test_the_file_round_trips_and_reads_a_hand_written_contact(scene, tmp_path):
-    nominal, truth, planes, contacts = scene
+    contacts = scene[3]
     data = _dataset(contacts)
     noisy = data.with_groups(
         [
-            g if i else PlaneContacts("flange", g.sample, np.linspace(-1e-3, 1e-3, len(g.sample)),
-                                      plane=g.plane, marker="tip")
+            g
+            if i
+            else PlaneContacts(
+                "flange",
+                g.sample,
+                np.linspace(-1e-3, 1e-3, len(g.sample)),
+                plane=g.plane,
+                marker="tip",
+            )
             for i, g in enumerate(data.others)
         ]
     )
@@ -244,8 +253,12 @@ def test_the_file_round_trips_and_reads_a_hand_written_contact(scene, tmp_path):
         "units": {"length": "mm", "angle": "deg"},
         "joint_names": ["j1"],
         "samples": [
-            {"q": [10], "observations": [{"frame": "flange", "kind": "plane", "plane": "table",
-                                          "offset": [0, 0, 100]}]},
+            {
+                "q": [10],
+                "observations": [
+                    {"frame": "flange", "kind": "plane", "plane": "table", "offset": [0, 0, 100]}
+                ],
+            },
             {"q": [20], "observations": [{"frame": "flange", "kind": "plane"}]},
         ],
     }
@@ -268,3 +281,132 @@ def test_the_file_round_trips_and_reads_a_hand_written_contact(scene, tmp_path):
         path.write_text(json.dumps(d2))
         with pytest.raises(DatasetError, match=r"contacts\.json: samples\[0\]\." + match):
             read_measurements(path)
+
+
+# -- calibration --------------------------------------------------------------------------
+
+
+def _held_out(result, truth, planes, offset_found):
+    """Predicted and true distances (200, k) of held-out configurations from each plane."""
+    q = random_joint_values(truth, NAMES, 200, np.random.default_rng(12))
+    found = _found(result)
+    p = _model_probe(result, q, offset_found)
+    pred = np.column_stack([p @ found["plane", k][:3] - found["plane", k][3] for k in planes])
+    true = np.column_stack([_distance(truth, q, planes[k]) for k in planes])
+    assert np.abs(true).max() > 0.1  # held out: off the planes
+    return pred, true
+
+
+@pytest.mark.parametrize(
+    ("which", "given", "n_free"),
+    [
+        (("table", "wall"), False, 7),  # a world motion (6) and the scale (1)
+        (("table",), False, 7),
+        (("table", "wall"), True, 10),  # and the tool's orientation about the probe (3)
+    ],
+)
+def test_contacts_alone_determine_the_robot_up_to_a_world_motion_and_a_scale(
+    scene, which, given, n_free
+):
+    nominal, truth, planes, contacts = scene
+    planes = {k: planes[k] for k in which}
+    data = _dataset({k: contacts[k] for k in which}, offset=OFFSET if given else None)
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4}))
+    assert result.converged
+    ident = result.identifiability
+    assert ident.rank == ident.n_parameters - n_free
+    assert len(ident.unidentifiable) == n_free
+    assert {g.kind for g in result.residuals} == {"plane"}
+    assert max(np.abs(g.component("distance")).max() for g in result.residuals) < 1e-10
+
+    # what the data determine: every held-out distance up to one common scale
+    offset = OFFSET if given else _found(result)["offset", "flange:tip"]
+    pred, true = _held_out(result, truth, planes, offset)
+    scale = float(np.sum(pred * true) / np.sum(true * true))
+    assert 0.8 < scale < 1.2
+    np.testing.assert_allclose(pred, scale * true, rtol=0, atol=1e-9)
+    if len(which) == 2:  # the angle between the planes
+        found = _found(result)
+        np.testing.assert_allclose(
+            found["plane", "table"][:3] @ found["plane", "wall"][:3],
+            planes["table"][:3] @ planes["wall"][:3],
+            rtol=0,
+            atol=1e-9,
+        )
+
+
+def _points(truth, n, seed):
+    q = random_joint_values(truth, NAMES, n, np.random.default_rng(seed))
+    return q, _probe(truth, q)
+
+
+def test_a_few_points_of_the_probe_fix_the_world_and_the_scale(scene):
+    """8 tracker positions of the probe (the same marker: one offset) in the root frame:
+    every parameter is determined; the planes, the probe and held-out distances exactly."""
+    nominal, truth, planes, contacts = scene
+    data = _dataset(contacts, points=_points(truth, 8, 21))
+    assert len(data.points) == 1 and len(data.groups("plane")) == 2
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4, "position": 1e-4}))
+    assert result.converged
+    ident = result.identifiability
+    assert ident.rank == ident.n_parameters and not ident.unidentifiable
+    found = _found(result)
+    assert [k for k in found if k[0] == "offset"] == [("offset", "flange:tip")]
+    for k, plane in planes.items():
+        np.testing.assert_allclose(found["plane", k], plane, rtol=0, atol=1e-9)
+    pred, true = _held_out(result, truth, planes, found["offset", "flange:tip"])
+    np.testing.assert_allclose(pred, true, rtol=0, atol=1e-9)
+    q, p = _points(truth, 50, 22)
+    np.testing.assert_allclose(
+        _model_probe(result, q, found["offset", "flange:tip"]), p, rtol=0, atol=1e-9
+    )
+
+
+def test_simulated_distance_noise_is_estimated_within_10_percent(scene):
+    """Contacts whose distances carry N(0, sigma) noise (simulated by the kind, through
+    ``verification.simulate``): the estimated sigma of "distance" is within 10 %."""
+    nominal, truth, planes, _ = scene
+    rng = np.random.default_rng(8)
+    contacts = {k: _contacts(truth, p, 300, rng) for k, p in planes.items()}
+    clean = _dataset(contacts, points=_points(truth, 8, 21))
+    sigma = 2e-4
+    unknowns = {plane_key(k): p for k, p in planes.items()}
+    unknowns[offset_key("flange", "tip")] = OFFSET
+    noisy = simulate(
+        truth,
+        clean.qs,
+        NAMES,
+        groups=[*clean.points, *clean.others],
+        unknowns=unknowns,
+        rng=np.random.default_rng(9),
+        sigmas={"distance": sigma, "position": sigma},
+    )
+    errors = np.concatenate([g.distance_m for g in noisy.groups("plane")])
+    assert abs(errors.std() / sigma - 1) < 0.1  # the simulation: distances N(0, sigma)
+    result = refine(nominal, noisy)
+    assert result.converged and result.noise.estimated
+    assert abs(result.noise.sigma(DISTANCE) / sigma - 1) < 0.1
+    found = _found(result)
+    for k, plane in planes.items():  # and the planes within a few sigma of the truth
+        assert np.abs(found["plane", k] - plane).max() < 10 * sigma
+
+
+def test_the_contacts_are_drawn_on_the_plane(scene):
+    _, truth, planes, contacts = scene
+    data = _dataset(contacts)
+    group = data.groups("plane")[0]
+    qs = data.qs
+    ctx = NumericContext.from_robot(
+        truth,
+        qs,
+        NAMES,
+        {plane_key(k): p for k, p in planes.items()} | {offset_key("flange", "tip"): OFFSET},
+    )
+    shifted = PlaneContacts(
+        "flange", group.sample, np.full(len(group.sample), 0.01), plane=group.plane, marker="tip"
+    )
+    drawing = kind_of(group).drawing(shifted, ctx)
+    plane = planes[group.plane]
+    assert drawing.node == "planes/flange/table@tip"
+    np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, qs[group.sample]), atol=1e-12)
+    np.testing.assert_allclose(drawing.w_p_measured @ plane[:3] - plane[3], 0.01, atol=1e-12)

@@ -320,9 +320,15 @@ class PlaneKind(ObservationKind):
             for dist in group.distance_m.tolist()
         ]
 
-    # -- structure: the probe pins a point, never the frame's pose (its tool stays nominal)
+    # -- structure
     def frames(self, group):
         return (group.frame,)
+
+    def direct_frames(self, group):
+        """With a given offset the frame's tool transform is estimated (it carries the
+        probe, as for a ``point`` of known offset); with an unknown one the offset does
+        and the tool stays nominal."""
+        return (group.frame,) if group.offset is not None else ()
 
     # -- estimation
     def unknowns(self, group, start: StartContext):
