@@ -28,8 +28,9 @@ frame's 6). With the robot's kinematics free, distances of 0 are also unchanged 
 - with the probe's orientation fixed over the contacts, the probe offset's components
   that the frame's motion never turns towards the normal.
 
-The identifiability report lists each such direction with the parameters it involves
-(the scale: every length parameter together).
+The identifiability report counts these directions and lists the parameters each of its
+null vectors involves; it does not name them (its null basis mixes the world motion and
+the scale), so ``docs/measurements.md`` lists them for the user.
 """
 
 from __future__ import annotations
