@@ -410,3 +410,54 @@ def test_the_contacts_are_drawn_on_the_plane(scene):
     assert drawing.node == "planes/flange/table@tip"
     np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, qs[group.sample]), atol=1e-12)
     np.testing.assert_allclose(drawing.w_p_measured @ plane[:3] - plane[3], 0.01, atol=1e-12)
+
+
+def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene, tmp_path):
+    """The CLI end to end: contacts with N(0, 0.1 mm) noise and one 5 mm gross error, and 8
+    tracked positions of the probe; the robust default fit flags the bad contact and the
+    report lists it with its distance residual."""
+    from kinfw.cli import main
+
+    _, truth, planes, contacts = scene
+    clean = _dataset(contacts, points=_points(truth, 8, 21))
+    unknowns = {plane_key(k): p for k, p in planes.items()}
+    unknowns[offset_key("flange", "tip")] = OFFSET
+    noisy = simulate(
+        truth,
+        clean.qs,
+        NAMES,
+        groups=[*clean.points, *clean.others],
+        unknowns=unknowns,
+        rng=np.random.default_rng(4),
+        sigmas={"distance": 1e-4, "position": 1e-4},
+    )
+    table = noisy.groups("plane")[0]
+    distance = table.distance_m.copy()
+    distance[3] += 5e-3
+    noisy = noisy.with_groups(
+        [
+            *noisy.points,
+            PlaneContacts("flange", table.sample, distance, plane=table.plane, marker="tip"),
+            *noisy.groups("plane")[1:],
+        ]
+    )
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    write_measurements(tmp_path / "contacts.json", noisy)
+    code = main(
+        [
+            "calibrate",
+            "--urdf",
+            str(tmp_path / "arm.urdf"),
+            str(tmp_path / "contacts.json"),
+            "--out",
+            str(tmp_path / "out.urdf"),
+            "--report",
+            str(tmp_path / "report.json"),
+        ]
+    )
+    assert code == 0 and (tmp_path / "out.urdf").exists()
+    report = json.loads((tmp_path / "report.json").read_text())
+    flagged = report["refine"]["downweighted"]
+    worst = flagged[0]
+    assert (worst["kind"], worst["sample"]) == ("plane", int(table.sample[3]))
+    assert abs(worst["position_residual_mm"] - 5.0) < 0.5
