@@ -561,13 +561,14 @@ ERROR_CASES = [
     pytest.param(
         (*OBS, "kind"),
         "posture",
-        "samples[1].observations[0].kind: expected one of 'pose', 'target', 'point', got 'posture'",
+        "samples[1].observations[0].kind: expected one of 'pose', 'target', 'point', "
+        "'plane', got 'posture'",
         id="kind",
     ),
     pytest.param(
         (*OBS, "kind"),
         DELETE,
-        "samples[1].observations[0].kind: missing; expected 'pose', 'target' or 'point'",
+        "samples[1].observations[0].kind: missing; expected 'pose', 'target', 'point' or 'plane'",
         id="kind-missing",
     ),
     pytest.param(

@@ -42,6 +42,7 @@ from kinfw.calibration_report import (
 )
 from kinfw.files import atomic_path
 from kinfw.measurements import DatasetError, Measurements
+from kinfw.observations import kind_named
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
 
@@ -159,14 +160,18 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
         One per down-weighted observation: ``sample`` (index into the data file's
         ``samples``, from 0), ``kind``, ``frame`` (the camera for ``target``
         observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
-        measured minus predicted position), ``rotation_residual_deg`` (angle between
+        measured minus predicted position; for a kind without positions, of its rows in
+        metres, e.g. a plane contact's distance), ``rotation_residual_deg`` (angle between
         measured and predicted orientation; None for points) and ``weight`` (the robust
         loss's weight, 1 = full). Sorted by weight, then sample.
     """
     rows = []
     for g in result.residuals:
         rows_g = np.flatnonzero(g.downweighted)
-        position_mm = 1e3 * np.linalg.norm(g.position_m[rows_g], axis=1)
+        # a kind without positions (a plane contact's distance): its rows in metres
+        units = {c.name: c.unit for c in kind_named(g.kind).components}
+        lengths = [v for n, v in g.components if units[n] == "m"]
+        position_mm = 1e3 * np.linalg.norm(np.hstack(lengths)[rows_g], axis=1)
         rotation_deg = (
             None
             if g.rotation_rad is None

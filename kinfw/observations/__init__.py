@@ -1,6 +1,6 @@
 """The registry of observation kinds.
 
-Every kind of observation (``pose``, ``target``, ``point``, and any kind registered by an
+Every kind of observation (``pose``, ``target``, ``point``, ``plane``, and any kind registered by an
 application or a test) is one :class:`~kinfw.observations.base.ObservationKind`. The
 measurement files, the estimation problem and verification look kinds up here and
 loop over :func:`kinds`; none of them branches on a kind's name.
@@ -20,6 +20,7 @@ from kinfw.observations.base import (
     SymbolicContext,
     UnknownRequest,
 )
+from kinfw.observations.plane import PlaneContacts, PlaneKind
 from kinfw.observations.point import PointKind, PointObservations
 from kinfw.observations.pose import PoseKind, PoseObservations
 from kinfw.observations.reader import DatasetError, ObservationReader
@@ -30,6 +31,7 @@ __all__ = [
     "NoiseComponent",
     "ObservationKind",
     "ObservationReader",
+    "PlaneContacts",
     "PointObservations",
     "PoseObservations",
     "StartContext",
@@ -65,13 +67,13 @@ def register_kind(kind: ObservationKind) -> ObservationKind:
 
 def unregister_kind(name: str) -> None:
     """Remove a kind added by :func:`register_kind` (the built-in kinds stay)."""
-    if name in ("pose", "target", "point"):
+    if name in _BUILT_IN:
         raise ValueError(f"unregister_kind: {name!r} is a built-in kind")
     _REGISTRY.pop(name, None)
 
 
 def kinds() -> tuple[ObservationKind, ...]:
-    """Every registered kind, built-ins first (``pose``, ``target``, ``point``)."""
+    """Every registered kind, built-ins first (``pose``, ``target``, ``point``, ``plane``)."""
     return tuple(_REGISTRY.values())
 
 
@@ -95,5 +97,6 @@ def kind_of(group: Any) -> ObservationKind:
     return kind
 
 
-for _kind in (PoseKind(), TargetKind(), PointKind()):
+for _kind in (PoseKind(), TargetKind(), PointKind(), PlaneKind()):
     register_kind(_kind)
+_BUILT_IN = frozenset(_REGISTRY)

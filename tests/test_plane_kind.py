@@ -1,0 +1,463 @@
+"""The ``plane`` kind: a probe on the robot touches planes of unknown pose.
+
+Truth: a perturbed 6R arm (``tests/robots.py``) with a probe at a known offset on its
+flange touches two tilted planes; each contact configuration is random but for ``j2``,
+solved by bisection so that the true probe lies on the plane (to 1e-15 m). Plane contacts
+alone leave 7 directions free (a rigid motion of the world, and a common scale of every
+length, since a contact stays a contact when everything grows): the tests check that
+rank, that what the data do determine is recovered exactly from noise-free data (the
+distances at held-out configurations up to that one scale, the angle between the
+planes), and that a few ``point`` observations of the same probe in the root frame fix
+the rest (held-out distances, the planes' normals and offsets to 1e-9).
+"""
+
+from __future__ import annotations
+
+import json
+from functools import partial
+
+import numpy as np
+import pytest
+
+from identification.problem import build_problem
+from identification.refine import NoiseModel, refine
+from kinfw.measurements import (
+    DatasetError,
+    Measurements,
+    PointObservations,
+    read_measurements,
+    write_measurements,
+)
+from kinfw.observations import PlaneContacts, kind_of
+from kinfw.observations.numeric import NumericContext
+from kinfw.observations.plane import DISTANCE, PlaneBlock, fit_plane, lifted_probe_offset, plane_key
+from kinfw.observations.point import offset_key
+from kinfw.robot import load_robot
+from tests.robots import ARM_6R
+from verification.crosscheck import random_joint_values
+from verification.simulate import perturb_robot, simulate
+
+NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
+OFFSET = np.array([0.03, -0.02, 0.09])  # the probe on the flange, metres
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def _probe(robot, qs, offset=OFFSET):
+    T = robot.frame_poses(qs, "flange", NAMES)
+    return T[:, :3, :3] @ offset + T[:, :3, 3]
+
+
+def _distance(robot, qs, plane, offset=OFFSET):
+    return _probe(robot, qs, offset) @ plane[:3] - plane[3]
+
+
+def _contacts(truth, plane, n, rng, offset=OFFSET):
+    """n configurations with the true probe on ``plane`` (n, d): random joints, then j2
+    solved by bisection between two grid angles where the signed distance changes sign."""
+    out = []
+    grid = np.linspace(-3.0, 3.0, 241)
+    while sum(map(len, out)) < n:
+        q = random_joint_values(truth, NAMES, 200, rng)
+        f = np.stack(
+            [
+                _distance(
+                    truth, np.column_stack([q[:, :1], np.full(len(q), a), q[:, 2:]]), plane, offset
+                )
+                for a in grid
+            ],
+            axis=1,
+        )
+        cross = np.argmax(np.sign(f[:, :-1]) != np.sign(f[:, 1:]), axis=1)
+        rows = np.arange(len(q))
+        ok = np.sign(f[rows, cross]) != np.sign(f[rows, cross + 1])
+        q, lo, hi, f_lo = q[ok], grid[cross[ok]], grid[cross[ok] + 1], f[ok, cross[ok]]
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            q[:, 1] = mid
+            f_mid = _distance(truth, q, plane, offset)
+            left = np.sign(f_mid) == np.sign(f_lo)
+            lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
+            hi = np.where(left, hi, mid)
+        q[:, 1] = 0.5 * (lo + hi)
+        out.append(q)
+    return np.concatenate(out)[:n]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """The nominal, the truth, two tilted planes (n, d) through points the probe reaches."""
+    nominal = load_robot(ARM_6R)
+    rng = np.random.default_rng(5)
+    # the movable joints are perturbed; the flange's mounting on l6 stays the URDF's (the
+    # given-offset case means "the probe is at OFFSET in the URDF's flange")
+    truth = load_robot(perturb_robot(nominal, rng, joints=NAMES))
+    reach = _probe(truth, np.array([[0.3, 0.2, -0.4, 0.5, 0.6, 0.1]]))[0]
+    n_table = _unit([0.15, -0.1, 1.0])  # nearly horizontal
+    n_wall = _unit([1.0, 0.3, -0.2])  # nearly vertical
+    planes = {
+        "table": np.append(n_table, n_table @ (reach - np.array([0.0, 0.0, 0.05]))),
+        "wall": np.append(n_wall, n_wall @ (reach + np.array([0.05, 0.0, 0.0]))),
+    }
+    # the kind's sign convention: the normal points towards the root (d < 0)
+    planes = {k: p if p[3] < 0 else -p for k, p in planes.items()}
+    contacts = {k: _contacts(truth, p, 60, rng) for k, p in planes.items()}
+    return nominal, truth, planes, contacts
+
+
+def _dataset(contacts, *, offset=None, marker="tip", points=None):
+    """Plane contacts (distance 0) of the probe, and optionally ``points`` (q, xyz)."""
+    names = list(contacts)
+    qs = np.concatenate([contacts[k] for k in names])
+    groups, k0 = [], 0
+    for k in names:
+        m = len(contacts[k])
+        groups.append(
+            PlaneContacts(
+                "flange",
+                np.arange(k0, k0 + m),
+                np.zeros(m),
+                plane=k,
+                offset=offset,
+                marker=None if offset is not None else marker,
+            )
+        )
+        k0 += m
+    point_groups = ()
+    if points is not None:
+        q_pts, xyz = points
+        point_groups = (
+            PointObservations(
+                "flange", np.arange(len(qs), len(qs) + len(q_pts)), xyz, marker=marker
+            ),
+        )
+        qs = np.concatenate([qs, q_pts])
+    return Measurements(NAMES, qs, points=point_groups, others=tuple(groups))
+
+
+def _found(result):
+    return {(u.kind, u.name): u.value for u in result.unknowns}
+
+
+def _model_probe(result, qs, offset):
+    cols = [NAMES.index(j) for j in result.model.topology.joint_names]
+    T = result.model.frame_poses(qs[:, cols], "flange")
+    return T[:, :3, :3] @ offset + T[:, :3, 3]
+
+
+# -- the block and the closed form ---------------------------------------------------------
+
+
+def test_the_plane_chart_is_minimal_unit_and_its_casadi_twin_agrees():
+    import casadi as ca
+
+    rng = np.random.default_rng(0)
+    block = PlaneBlock(plane_key("p"), start=np.append(_unit([0.2, -0.9, 0.3]), -0.4))
+    assert block.size == 3 and block.units == ("rad", "rad", "m")
+    d = ca.SX.sym("d", 3)
+    c = ca.SX.sym("c", len(block.constants()))
+    f = ca.Function("f", [d, c], [block.casadi_value(d, c)])
+    for x in rng.normal(0.0, 1.0, size=(20, 3)):
+        value = block.numpy_value(x)
+        np.testing.assert_allclose(np.linalg.norm(value[:3]), 1.0, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(
+            np.array(f(x, block.constants())).ravel(), value, rtol=0, atol=1e-15
+        )
+        np.testing.assert_allclose(block.coordinates(value), x, rtol=0, atol=1e-12)
+    # at zero: the start; the derivative turns the normal about the tangent basis
+    np.testing.assert_array_equal(block.numpy_value(np.zeros(3)), block.start)
+    eps = 1e-7
+    dn = (block.numpy_value([eps, 0, 0]) - block.numpy_value([-eps, 0, 0]))[:3] / (2 * eps)
+    u, v, n0 = block.constants()[0:3], block.constants()[3:6], block.start[:3]
+    np.testing.assert_allclose(dn, np.cross(u, n0), rtol=0, atol=1e-8)  # = -v
+    np.testing.assert_allclose(u @ n0, 0.0, atol=1e-15)
+    np.testing.assert_allclose(np.cross(u, v), n0, rtol=0, atol=1e-15)
+
+
+def test_the_closed_form_recovers_the_probe_and_the_plane_on_the_truth(scene):
+    _, truth, planes, contacts = scene
+    T = truth.frame_poses(contacts["table"], "flange", NAMES)
+    o = lifted_probe_offset(T[:, :3, :3], T[:, :3, 3])
+    np.testing.assert_allclose(o, OFFSET, rtol=0, atol=1e-9)
+    plane = fit_plane(T[:, :3, :3] @ o + T[:, :3, 3])
+    np.testing.assert_allclose(plane, planes["table"], rtol=0, atol=1e-9)
+    # a fixed orientation cannot tell the offset from the plane: no answer, not a wrong one
+    R = np.repeat(T[:1, :3, :3], len(T), axis=0)
+    assert lifted_probe_offset(R, T[:, :3, 3]) is None
+
+
+# -- the numeric twin, the file ----------------------------------------------------------
+
+
+def test_numpy_prediction_equals_the_casadi_residual(scene):
+    nominal, _, planes, contacts = scene
+    for offset in (None, OFFSET):
+        data = _dataset(contacts, offset=offset)
+        problem = build_problem(nominal, data)
+        rng = np.random.default_rng(3)
+        x = rng.normal(0.0, 1e-2, size=problem.n_parameters)
+        model = problem.model_at(x)
+        values = {(u.kind, u.name): u.value for u in problem.unknowns_at(x)}
+        known = {plane_key(k): values["plane", k] for k in planes}
+        if offset is None:
+            known[offset_key("flange", "tip")] = values["offset", "flange:tip"]
+        qs = data.q_of(model.topology.joint_names)
+        ctx = NumericContext(partial(model.frame_poses, qs), known)
+        r, _ = problem.evaluate(x, NoiseModel(sigmas={"distance": 1.0}), with_jacobian=False)
+        k = 0
+        for grp in problem.groups:
+            m = len(grp.sample)
+            predicted = kind_of(grp.group).predict(grp.group, ctx)
+            np.testing.assert_allclose(
+                r[k : k + m], grp.group.distance_m - predicted[:, 0], rtol=0, atol=1e-12
+            )
+            k += m
+        assert k == len(r)
+
+
+def test_the_file_round_trips_and_reads_a_hand_written_contact(scene, tmp_path):
+    contacts = scene[3]
+    data = _dataset(contacts)
+    noisy = data.with_groups(
+        [
+            g
+            if i
+            else PlaneContacts(
+                "flange",
+                g.sample,
+                np.linspace(-1e-3, 1e-3, len(g.sample)),
+                plane=g.plane,
+                marker="tip",
+            )
+            for i, g in enumerate(data.others)
+        ]
+    )
+    for d in (data, noisy):
+        path = tmp_path / "contacts.json"
+        write_measurements(path, d)
+        back = read_measurements(path)
+        np.testing.assert_array_equal(back.qs, d.qs)
+        for a, b in zip(d.groups("plane"), back.groups("plane"), strict=True):
+            assert (a.frame, a.plane, a.marker, a.offset) == (b.frame, b.plane, b.marker, b.offset)
+            np.testing.assert_array_equal(a.sample, b.sample)
+            np.testing.assert_array_equal(a.distance_m, b.distance_m)
+    written = json.loads(path.read_text())["samples"][0]["observations"][0]
+    assert written["kind"] == "plane" and "xyz" not in written
+
+    doc = {
+        "format": "kinfw-measurements",
+        "version": 1,
+        "units": {"length": "mm", "angle": "deg"},
+        "joint_names": ["j1"],
+        "samples": [
+            {
+                "q": [10],
+                "observations": [
+                    {"frame": "flange", "kind": "plane", "plane": "table", "offset": [0, 0, 100]}
+                ],
+            },
+            {"q": [20], "observations": [{"frame": "flange", "kind": "plane"}]},
+        ],
+    }
+    path.write_text(json.dumps(doc))
+    m = read_measurements(path)
+    by_plane = {g.plane: g for g in m.groups("plane")}
+    np.testing.assert_array_equal(by_plane["table"].offset, [0, 0, 0.1])  # mm -> m
+    np.testing.assert_array_equal(by_plane["table"].distance_m, [0.0])
+    assert by_plane["plane"].offset is None and list(by_plane["plane"].sample) == [1]
+
+    bad = [
+        ({"xyz": [1, 2, 3]}, r"observations\[0\]\.xyz: not allowed on a 'plane' observation"),
+        ({"marker": "tip"}, r"observations\[0\]\.offset: an offset and a marker \('tip'\)"),
+        ({"distance": "far"}, r"observations\[0\]\.distance: expected the probe's signed"),
+        ({"offset": [0, 0]}, r"observations\[0\]\.offset: expected 3 numbers"),
+    ]
+    for extra, match in bad:
+        d2 = json.loads(json.dumps(doc))
+        d2["samples"][0]["observations"][0].update(extra)
+        path.write_text(json.dumps(d2))
+        with pytest.raises(DatasetError, match=r"contacts\.json: samples\[0\]\." + match):
+            read_measurements(path)
+
+
+# -- calibration --------------------------------------------------------------------------
+
+
+def _held_out(result, truth, planes, offset_found):
+    """Predicted and true distances (200, k) of held-out configurations from each plane."""
+    q = random_joint_values(truth, NAMES, 200, np.random.default_rng(12))
+    found = _found(result)
+    p = _model_probe(result, q, offset_found)
+    pred = np.column_stack([p @ found["plane", k][:3] - found["plane", k][3] for k in planes])
+    true = np.column_stack([_distance(truth, q, planes[k]) for k in planes])
+    assert np.abs(true).max() > 0.1  # held out: off the planes
+    return pred, true
+
+
+@pytest.mark.parametrize(
+    ("which", "given", "n_free"),
+    [
+        (("table", "wall"), False, 7),  # a world motion (6) and the scale (1)
+        (("table",), False, 7),
+        (("table", "wall"), True, 10),  # and the tool's orientation about the probe (3)
+    ],
+)
+def test_contacts_alone_determine_the_robot_up_to_a_world_motion_and_a_scale(
+    scene, which, given, n_free
+):
+    nominal, truth, planes, contacts = scene
+    planes = {k: planes[k] for k in which}
+    data = _dataset({k: contacts[k] for k in which}, offset=OFFSET if given else None)
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4}))
+    assert result.converged
+    ident = result.identifiability
+    assert ident.rank == ident.n_parameters - n_free
+    assert len(ident.unidentifiable) == n_free
+    assert {g.kind for g in result.residuals} == {"plane"}
+    assert max(np.abs(g.component("distance")).max() for g in result.residuals) < 1e-10
+
+    # what the data determine: every held-out distance up to one common scale
+    offset = OFFSET if given else _found(result)["offset", "flange:tip"]
+    pred, true = _held_out(result, truth, planes, offset)
+    scale = float(np.sum(pred * true) / np.sum(true * true))
+    assert 0.8 < scale < 1.2
+    np.testing.assert_allclose(pred, scale * true, rtol=0, atol=1e-9)
+    if len(which) == 2:  # the angle between the planes
+        found = _found(result)
+        np.testing.assert_allclose(
+            found["plane", "table"][:3] @ found["plane", "wall"][:3],
+            planes["table"][:3] @ planes["wall"][:3],
+            rtol=0,
+            atol=1e-9,
+        )
+
+
+def _points(truth, n, seed):
+    q = random_joint_values(truth, NAMES, n, np.random.default_rng(seed))
+    return q, _probe(truth, q)
+
+
+def test_a_few_points_of_the_probe_fix_the_world_and_the_scale(scene):
+    """8 tracker positions of the probe (the same marker: one offset) in the root frame:
+    every parameter is determined; the planes, the probe and held-out distances exactly."""
+    nominal, truth, planes, contacts = scene
+    data = _dataset(contacts, points=_points(truth, 8, 21))
+    assert len(data.points) == 1 and len(data.groups("plane")) == 2
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4, "position": 1e-4}))
+    assert result.converged
+    ident = result.identifiability
+    assert ident.rank == ident.n_parameters and not ident.unidentifiable
+    found = _found(result)
+    assert [k for k in found if k[0] == "offset"] == [("offset", "flange:tip")]
+    for k, plane in planes.items():
+        np.testing.assert_allclose(found["plane", k], plane, rtol=0, atol=1e-9)
+    pred, true = _held_out(result, truth, planes, found["offset", "flange:tip"])
+    np.testing.assert_allclose(pred, true, rtol=0, atol=1e-9)
+    q, p = _points(truth, 50, 22)
+    np.testing.assert_allclose(
+        _model_probe(result, q, found["offset", "flange:tip"]), p, rtol=0, atol=1e-9
+    )
+
+
+def test_simulated_distance_noise_is_estimated_within_10_percent(scene):
+    """Contacts whose distances carry N(0, sigma) noise (simulated by the kind, through
+    ``verification.simulate``): the estimated sigma of "distance" is within 10 %."""
+    nominal, truth, planes, _ = scene
+    rng = np.random.default_rng(8)
+    contacts = {k: _contacts(truth, p, 300, rng) for k, p in planes.items()}
+    clean = _dataset(contacts, points=_points(truth, 8, 21))
+    sigma = 2e-4
+    unknowns = {plane_key(k): p for k, p in planes.items()}
+    unknowns[offset_key("flange", "tip")] = OFFSET
+    noisy = simulate(
+        truth,
+        clean.qs,
+        NAMES,
+        groups=[*clean.points, *clean.others],
+        unknowns=unknowns,
+        rng=np.random.default_rng(9),
+        sigmas={"distance": sigma, "position": sigma},
+    )
+    errors = np.concatenate([g.distance_m for g in noisy.groups("plane")])
+    assert abs(errors.std() / sigma - 1) < 0.1  # the simulation: distances N(0, sigma)
+    result = refine(nominal, noisy)
+    assert result.converged and result.noise.estimated
+    assert abs(result.noise.sigma(DISTANCE) / sigma - 1) < 0.1
+    found = _found(result)
+    for k, plane in planes.items():  # and the planes within a few sigma of the truth
+        assert np.abs(found["plane", k] - plane).max() < 10 * sigma
+
+
+def test_the_contacts_are_drawn_on_the_plane(scene):
+    _, truth, planes, contacts = scene
+    data = _dataset(contacts)
+    group = data.groups("plane")[0]
+    qs = data.qs
+    ctx = NumericContext.from_robot(
+        truth,
+        qs,
+        NAMES,
+        {plane_key(k): p for k, p in planes.items()} | {offset_key("flange", "tip"): OFFSET},
+    )
+    shifted = PlaneContacts(
+        "flange", group.sample, np.full(len(group.sample), 0.01), plane=group.plane, marker="tip"
+    )
+    drawing = kind_of(group).drawing(shifted, ctx)
+    plane = planes[group.plane]
+    assert drawing.node == "planes/flange/table@tip"
+    np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, qs[group.sample]), atol=1e-12)
+    np.testing.assert_allclose(drawing.w_p_measured @ plane[:3] - plane[3], 0.01, atol=1e-12)
+
+
+def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene, tmp_path):
+    """The CLI end to end: contacts with N(0, 0.1 mm) noise and one 5 mm gross error, and 8
+    tracked positions of the probe; the robust default fit flags the bad contact and the
+    report lists it with its distance residual."""
+    from kinfw.cli import main
+
+    _, truth, planes, contacts = scene
+    clean = _dataset(contacts, points=_points(truth, 8, 21))
+    unknowns = {plane_key(k): p for k, p in planes.items()}
+    unknowns[offset_key("flange", "tip")] = OFFSET
+    noisy = simulate(
+        truth,
+        clean.qs,
+        NAMES,
+        groups=[*clean.points, *clean.others],
+        unknowns=unknowns,
+        rng=np.random.default_rng(4),
+        sigmas={"distance": 1e-4, "position": 1e-4},
+    )
+    table = noisy.groups("plane")[0]
+    distance = table.distance_m.copy()
+    distance[3] += 5e-3
+    noisy = noisy.with_groups(
+        [
+            *noisy.points,
+            PlaneContacts("flange", table.sample, distance, plane=table.plane, marker="tip"),
+            *noisy.groups("plane")[1:],
+        ]
+    )
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    write_measurements(tmp_path / "contacts.json", noisy)
+    code = main(
+        [
+            "calibrate",
+            "--urdf",
+            str(tmp_path / "arm.urdf"),
+            str(tmp_path / "contacts.json"),
+            "--out",
+            str(tmp_path / "out.urdf"),
+            "--report",
+            str(tmp_path / "report.json"),
+        ]
+    )
+    assert code == 0 and (tmp_path / "out.urdf").exists()
+    report = json.loads((tmp_path / "report.json").read_text())
+    flagged = report["refine"]["downweighted"]
+    worst = flagged[0]
+    assert (worst["kind"], worst["sample"]) == ("plane", int(table.sample[3]))
+    assert abs(worst["position_residual_mm"] - 5.0) < 0.5
