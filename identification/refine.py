@@ -197,7 +197,9 @@ class RefineResult:
     seconds : float
     rejected : tuple of RejectedObservation
         Observations excluded as gross errors (not in the fit; ``residuals`` and the
-        noise estimate are of the others), the worst (largest ``excess``) first.
+        noise estimate are of the others), the worst (largest ``excess``) first; their
+        residuals are against this fit (against the fit that rejected them only when
+        the rejection removed a whole unknown, e.g. a marker's every observation).
     rejection_note : str or None
         Why fewer observations were rejected than the threshold asked (more than the
         allowed fraction beyond it: the data may be inconsistent with the model), or
@@ -383,6 +385,7 @@ def refine(
     n_obs = sum(len(g.sample) for g in problem.groups)
     allowed = int(np.floor(max_reject_fraction * n_obs))
     rejected: list[RejectedObservation] = []
+    rounds: list[tuple[LeastSquaresProblem, NDArray, NDArray]] = []
     note = None
     data = measurements
     for _ in range(max_reject_rounds):
@@ -410,6 +413,7 @@ def refine(
             if not beyond.any():
                 break
         new = rejected_observations(groups, r, result.noise, norms, k, beyond)
+        rounds.append((problem, k, beyond))
         reduced = _without(data, groups, beyond)
         try:
             refit, refit_problem, refit_r = fit(reduced)
@@ -423,6 +427,18 @@ def refine(
         data, result, problem, r = reduced, refit, refit_problem, refit_r
         if note is not None:
             break
+    # the rejected observations' residuals against the final fit, when the problems
+    # they were in have its layout (the same blocks: the functions take the model and
+    # the starts as inputs); else those at the fit that rejected them
+    final = []
+    for p_round, k, mask in rounds:
+        r_final = _residuals_with(p_round, problem, result.estimate, result.noise)
+        if r_final is None:
+            final = rejected
+            break
+        norms = observation_norms(r_final, [(len(g.sample), g.rows) for g in p_round.groups])
+        final += rejected_observations(p_round.groups, r_final, result.noise, norms, k, mask)
+    rejected = list(final)
     rejected.sort(key=lambda o: -o.excess)
     if rejected:
         log.info(
@@ -447,6 +463,25 @@ def refine(
 def _phi(z: float) -> float:
     """The standard normal CDF."""
     return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def _residuals_with(
+    problem: LeastSquaresProblem, other: LeastSquaresProblem, x: NDArray, noise: NoiseModel
+) -> NDArray | None:
+    """The whitened residuals of ``problem``'s observations under ``other``'s model,
+    starts and estimate ``x`` (groups only, no prior rows); None when the two problems'
+    blocks differ (e.g. a group left empty by the rejection took its marker along)."""
+    layout = [(b.key, b.size) for b in problem.blocks]
+    if layout != [(b.key, b.size) for b in other.blocks] or not other.groups:
+        return None
+    const = other.groups[0].const
+    if len(const) != len(problem.groups[0].const):
+        return None
+    out = []
+    for g in problem.groups:
+        r, _ = replace(g, const=const).evaluate(x, False)
+        out.append(r / np.tile(g.row_sigma(noise), len(g.sample)))
+    return np.concatenate(out)
 
 
 def _without(data: Measurements, groups: list, drop: NDArray[np.bool_]) -> Measurements:

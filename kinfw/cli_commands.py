@@ -357,6 +357,19 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
+    for row in ref.rejected:
+        where = row.frame + (f" marker {row.marker}" if row.marker else "")
+        sizes = [
+            f"{v:.3g} {unit}"
+            for v, unit in ((row.position_residual_mm, "mm"), (row.rotation_residual_deg, "deg"))
+            if v is not None
+        ]
+        print(
+            f"  rejected as a gross error: samples[{row.sample}] {where} ({row.kind}): "
+            f"residual {', '.join(sizes)}, {row.excess:.3g} x the threshold (refitted without it)"
+        )
+    if ref.rejection_note:
+        print(f"  warning: {ref.rejection_note}")
     down = ref.downweighted
     if down:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")

@@ -119,10 +119,10 @@ class RejectedObservation:
         Per noise component of the kind: its name, its unit (``"m"``, ``"rad"``) and the
         size of the residual (measured minus predicted) in that unit: the norm of the
         component's rows, an angle for orientations
-        (:meth:`kinfw.observations.NoiseComponent.magnitude`). At the fit that rejected
-        the observation (it was in that fit, with a robust weight).
+        (:meth:`kinfw.observations.NoiseComponent.magnitude`), against the fit it
+        is reported with (:attr:`identification.refine.RefineResult.rejected`).
     whitened_norm : float
-        Norm of its whitened residual at that fit.
+        Norm of its whitened residual (by that fit's noise).
     threshold : float
         The rejection threshold of that norm (the clean residual norm's quantile).
     """
