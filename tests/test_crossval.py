@@ -93,10 +93,12 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     assert bent > 1.5 * reference
     assert held_out_mm(robust) < 1.15 * reference
     report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust, method="refine")
-    flagged = {(d.frame, d.sample): d for d in report.refine.downweighted}
-    entry = flagged[(pose.frame, int(pose.sample[17]))]
-    assert 60.0 < entry.position_residual_mm < 80.0
-    assert entry.weight < 0.2
+    (entry,) = report.refine.rejected  # rejected, not merely down-weighted
+    assert (entry.kind, entry.frame, entry.sample) == ("pose", pose.frame, int(pose.sample[17]))
+    assert 60.0 < entry.position_residual_mm < 80.0 and entry.excess > 10
+    assert (pose.frame, int(pose.sample[17])) not in {
+        (d.frame, d.sample) for d in report.refine.downweighted
+    }
 
 
 def test_parameter_masks_by_joint_and_field(head):
