@@ -456,6 +456,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             prior=prior,
             executor=executor,
             progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
+            exclude_flagged=args.exclude_flagged,
         )
     finally:
         if executor is not None:
@@ -487,12 +488,24 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         rows.append(row)
     rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg")) for p in sets)])
     print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
+    if args.exclude_flagged:
+        print(
+            f"excluded from scoring: {len(cv.excluded)} observations the full-data fit "
+            f"rejected as gross errors" + (":" if cv.excluded else "")
+        )
+        for sample, kind, frame, marker in cv.excluded:
+            where = frame + (f" marker {marker}" if marker else "")
+            print(f"  samples[{sample}] {where} ({kind})")
     for warning in cv.warnings:
         print(f"warning: {warning}")
     if cv.selected:
+        sp, sr = cv.noise
         print(
             f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
-            f"position error ({cv.mean(cv.selected):.3f} mm)"
+            f"error whitened by the noise ({sp * 1e3:.3g} mm, {np.degrees(sr):.3g} deg per "
+            f"component): {cv.mean(cv.selected):.3f} mm / "
+            f"{cv.mean(cv.selected, 'rotation_rms_deg'):.3f} deg, whitened "
+            f"{cv.whitened(cv.selected):.3g}"
         )
     return 0
 
