@@ -445,7 +445,8 @@ class RefineSection:
     unknowns: tuple[CalibratedUnknown, ...]
     identifiability: IdentifiabilitySummary
     downweighted: tuple[DownweightedRow, ...]
-    rejected: tuple[RejectedRow, ...] = ()
+    #: None: a report written before rejection existed (the keys are then not written)
+    rejected: tuple[RejectedRow, ...] | None = ()
     rejection_note: str | None = None
 
     METHOD: ClassVar[str] = (
@@ -488,9 +489,15 @@ class RefineSection:
             "identifiability": self.identifiability.to_dict(),
             "downweighted_note": self.DOWNWEIGHTED_NOTE,
             "downweighted": [d.to_dict() for d in self.downweighted],
-            "rejected_note": self.REJECTED_NOTE,
-            "rejected": [d.to_dict() for d in self.rejected],
-            "rejection_note": self.rejection_note,
+            **(
+                {}
+                if self.rejected is None
+                else {
+                    "rejected_note": self.REJECTED_NOTE,
+                    "rejected": [d.to_dict() for d in self.rejected],
+                    "rejection_note": self.rejection_note,
+                }
+            ),
         }
 
     @classmethod
@@ -511,10 +518,9 @@ class RefineSection:
                 r.value(doc, "identifiability", at), r, r.path(at, "identifiability")
             ),
             _rows(DownweightedRow, doc, "downweighted", r, at),
-            tuple(  # optional: reports written before rejection have none
-                RejectedRow.from_dict(d, r, f"{r.path(at, 'rejected')}[{k}]")
-                for k, d in enumerate(r.items(doc, "rejected", at, optional=True) or ())
-            ),
+            None  # a report written before rejection existed
+            if "rejected" not in doc
+            else _rows(RejectedRow, doc, "rejected", r, at),
             r.string(doc, "rejection_note", at, optional=True),
         )
 

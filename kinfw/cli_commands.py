@@ -357,7 +357,7 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
-    for row in ref.rejected:
+    for row in ref.rejected or ():
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
         sizes = [
             f"{v:.3g} {unit}"
