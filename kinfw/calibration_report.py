@@ -33,6 +33,7 @@ from kinfw.calibration_sections import (
     NotIdentifiable,
     ParameterRow,
     RefineSection,
+    RejectedRow,
     TargetEstimate,
 )
 from kinfw.files import write_text_atomic
@@ -51,6 +52,7 @@ __all__ = [
     "NotIdentifiable",
     "ParameterRow",
     "RefineSection",
+    "RejectedRow",
     "StageErrors",
     "TargetEstimate",
     "read_report",

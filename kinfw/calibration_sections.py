@@ -389,6 +389,47 @@ class DownweightedRow:
 
 
 @dataclass(frozen=True, slots=True)
+class RejectedRow:
+    """An observation excluded from the fit as a gross error
+    (:class:`identification.refine.RejectedObservation`): ``sample`` (index into the
+    data file's samples, from 0), kind, frame (camera for targets), marker, residual
+    norms against the calibration (mm; deg, None without orientation), and how far
+    beyond the rejection threshold its whitened norm was (``excess``, > 1)."""
+
+    sample: int
+    kind: str
+    frame: str
+    marker: str | None
+    position_residual_mm: float | None
+    rotation_residual_deg: float | None
+    excess: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "sample": self.sample,
+            "kind": self.kind,
+            "frame": self.frame,
+            "marker": self.marker,
+            "position_residual_mm": self.position_residual_mm,
+            "rotation_residual_deg": self.rotation_residual_deg,
+            "excess": self.excess,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, r: DocReader, at: str) -> RejectedRow:
+        doc = r.obj(doc, at)
+        return cls(
+            r.integer(doc, "sample", at),
+            r.string(doc, "kind", at),
+            r.string(doc, "frame", at),
+            r.string(doc, "marker", at, optional=True),
+            r.number(doc, "position_residual_mm", at, optional=True),
+            r.number(doc, "rotation_residual_deg", at, optional=True),
+            r.number(doc, "excess", at),
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class RefineSection:
     """The joint least squares (:class:`identification.refine.RefineResult`) as reported."""
 
@@ -404,6 +445,9 @@ class RefineSection:
     unknowns: tuple[CalibratedUnknown, ...]
     identifiability: IdentifiabilitySummary
     downweighted: tuple[DownweightedRow, ...]
+    #: None: a report written before rejection existed (the keys are then not written)
+    rejected: tuple[RejectedRow, ...] | None = ()
+    rejection_note: str | None = None
 
     METHOD: ClassVar[str] = (
         "joint nonlinear least squares (CasADi residuals and Jacobians, "
@@ -416,6 +460,12 @@ class RefineSection:
     DOWNWEIGHTED_NOTE: ClassVar[str] = (
         "observations beyond the robust loss's threshold, the worst (lowest weight) first; "
         "sample is the index into the data file's samples (from 0)"
+    )
+    REJECTED_NOTE: ClassVar[str] = (
+        "gross errors: observations beyond the 99.9 % quantile of the clean residual norm "
+        "under the estimated noise, excluded and the problem refitted without them (not in "
+        "the fit, the noise estimate nor the errors above); the worst (largest excess over "
+        "the threshold) first; residuals against the calibrated model"
     )
 
     @property
@@ -439,6 +489,15 @@ class RefineSection:
             "identifiability": self.identifiability.to_dict(),
             "downweighted_note": self.DOWNWEIGHTED_NOTE,
             "downweighted": [d.to_dict() for d in self.downweighted],
+            **(
+                {}
+                if self.rejected is None
+                else {
+                    "rejected_note": self.REJECTED_NOTE,
+                    "rejected": [d.to_dict() for d in self.rejected],
+                    "rejection_note": self.rejection_note,
+                }
+            ),
         }
 
     @classmethod
@@ -459,6 +518,10 @@ class RefineSection:
                 r.value(doc, "identifiability", at), r, r.path(at, "identifiability")
             ),
             _rows(DownweightedRow, doc, "downweighted", r, at),
+            None  # a report written before rejection existed
+            if "rejected" not in doc
+            else _rows(RejectedRow, doc, "rejected", r, at),
+            r.string(doc, "rejection_note", at, optional=True),
         )
 
 

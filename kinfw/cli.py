@@ -325,7 +325,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--select",
         action="store_true",
-        help="also try 'offsets' and pick the parameter set with the lowest held-out error",
+        help="also try 'offsets' and pick the parameter set with the lowest held-out error, "
+        "position and orientation together (each whitened by the estimated noise)",
+    )
+    p.add_argument(
+        "--exclude-flagged",
+        action="store_true",
+        help="leave the observations the full-data fit rejects as gross errors out of the "
+        "held-out scores (and list them)",
     )
     _add_fit_options(p)
     p.add_argument(

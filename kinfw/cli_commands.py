@@ -358,6 +358,19 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
+    for row in ref.rejected or ():
+        where = row.frame + (f" marker {row.marker}" if row.marker else "")
+        sizes = [
+            f"{v:.3g} {unit}"
+            for v, unit in ((row.position_residual_mm, "mm"), (row.rotation_residual_deg, "deg"))
+            if v is not None
+        ]
+        print(
+            f"  rejected as a gross error: samples[{row.sample}] {where} ({row.kind}): "
+            f"residual {', '.join(sizes)}, {row.excess:.3g} x the threshold (refitted without it)"
+        )
+    if ref.rejection_note:
+        print(f"  warning: {ref.rejection_note}")
     down = ref.downweighted
     if down:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
@@ -444,6 +457,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             prior=prior,
             executor=executor,
             progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
+            exclude_flagged=args.exclude_flagged,
         )
     finally:
         if executor is not None:
@@ -475,12 +489,24 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         rows.append(row)
     rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg")) for p in sets)])
     print(_format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
+    if args.exclude_flagged:
+        print(
+            f"excluded from scoring: {len(cv.excluded)} observations the full-data fit "
+            f"rejected as gross errors" + (":" if cv.excluded else "")
+        )
+        for sample, kind, frame, marker in cv.excluded:
+            where = frame + (f" marker {marker}" if marker else "")
+            print(f"  samples[{sample}] {where} ({kind})")
     for warning in cv.warnings:
         print(f"warning: {warning}")
     if cv.selected:
+        sp, sr = cv.noise
         print(
             f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
-            f"position error ({cv.mean(cv.selected):.3f} mm)"
+            f"error whitened by the noise ({sp * 1e3:.3g} mm, {np.degrees(sr):.3g} deg per "
+            f"component): {cv.mean(cv.selected):.3f} mm / "
+            f"{cv.mean(cv.selected, 'rotation_rms_deg'):.3f} deg, whitened "
+            f"{cv.whitened(cv.selected):.3g}"
         )
     return 0
 

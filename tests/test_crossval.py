@@ -3,6 +3,7 @@
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from identification.pipeline import calibrate
 from kinfw.cpc import cpc_from_robot
@@ -93,10 +94,12 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     assert bent > 1.5 * reference
     assert held_out_mm(robust) < 1.15 * reference
     report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust, method="refine")
-    flagged = {(d.frame, d.sample): d for d in report.refine.downweighted}
-    entry = flagged[(pose.frame, int(pose.sample[17]))]
-    assert 60.0 < entry.position_residual_mm < 80.0
-    assert entry.weight < 0.2
+    (entry,) = report.refine.rejected  # rejected, not merely down-weighted
+    assert (entry.kind, entry.frame, entry.sample) == ("pose", pose.frame, int(pose.sample[17]))
+    assert 60.0 < entry.position_residual_mm < 80.0 and entry.excess > 10
+    assert (pose.frame, int(pose.sample[17])) not in {
+        (d.frame, d.sample) for d in report.refine.downweighted
+    }
 
 
 def test_parameter_masks_by_joint_and_field(head):
@@ -289,3 +292,70 @@ def test_free_column_jacobian_equals_the_full_one():
             rtol=0,
             atol=1e-12,
         )
+
+
+# -- gross errors out of scoring, whitened selection, advice that fits the loss ---------------
+def test_exclude_flagged_leaves_the_rejected_observation_out_of_scoring(head):
+    truth = load_robot(
+        perturb_robot(head, np.random.default_rng(4), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
+    )
+    clean = _data(truth, 40, 5)
+    pose = clean.poses[0]
+    T = pose.meas_T_frame.copy()
+    T[11, :3, 3] += np.array([0.0, 0.07, 0.0])  # 70 mm on one observation
+    bad = replace(clean, poses=(replace(pose, meas_T_frame=T), *clean.poses[1:]))
+    sample = int(pose.sample[11])
+    scored = crossvalidate(head, bad, k=4, sets=("full",))
+    assert scored.excluded == ()
+    fold = next(s for s in scored.scores if s.worst_sample == sample)
+    assert 60.0 < fold.worst_mm < 80.0  # the bad pose, held out, scored
+    cv = crossvalidate(head, bad, k=4, sets=("full",), exclude_flagged=True)
+    assert cv.excluded == ((sample, "pose", pose.frame, None),)
+    assert cv.to_dict()["excluded"] == [
+        {"sample": sample, "kind": "pose", "frame": pose.frame, "marker": None}
+    ]
+    assert max(s.worst_mm for s in cv.scores) < 5.0  # noise 0.5 mm: nothing gross scored
+    # the same folds and fits: only the bad observation's fold changes
+    changed = [
+        a.fold
+        for a, b in zip(scored.scores, cv.scores, strict=True)
+        if a.position_rms_mm != b.position_rms_mm
+    ]
+    assert changed == [fold.fold]
+
+
+def test_selection_weighs_position_and_orientation_by_the_noise():
+    """By hand: 'offsets' is 10 % better in position but 0.2 deg worse in orientation on
+    0.1 deg noise; whitened, 'full' wins (position alone would pick 'offsets')."""
+    from verification.crossval import CrossValidation, FoldScore
+
+    def score(fold, p, mm, deg):
+        return FoldScore(fold, p, 30, 10, mm, deg, 0, mm, 10.0, 20, 300)
+
+    scores = (
+        score(0, "offsets", 0.9, 0.6),
+        score(1, "offsets", 0.9, 0.6),
+        score(0, "full", 1.0, 0.4),
+        score(1, "full", 1.0, 0.4),
+    )
+    cv = CrossValidation(2, 0, ("offsets", "full"), scores, (), None, (1e-3, np.radians(0.1)))
+    assert cv.whitened("offsets") == pytest.approx(0.9**2 + 6.0**2)
+    assert cv.whitened("full") == pytest.approx(1.0**2 + 4.0**2)
+    assert min(cv.sets, key=cv.whitened) == "full"
+    assert min(cv.sets, key=cv.mean) == "offsets"
+
+
+def test_the_outlier_advice_names_huber_only_when_it_is_not_in_use():
+    from verification.crossval import FoldScore, _warnings
+
+    scores = [
+        FoldScore(0, "frames", 30, 10, 1.0, 0.1, 3, 2.0, 10.0, 12, 300),
+        FoldScore(1, "frames", 30, 10, 1.0, 0.1, 4, 2.0, 10.0, 12, 300),
+        FoldScore(0, "full", 30, 10, 1.5, 0.1, 3, 2.0, 10.0, 20, 300),
+        FoldScore(1, "full", 30, 10, 2.0, 0.1, 4, 70.0, 10.0, 20, 300),
+    ]
+    (linear,) = _warnings(scores, ("frames", "full"), "linear")
+    assert "sample 4: 70.0 mm" in linear and "try --loss huber" in linear
+    (huber,) = _warnings(scores, ("frames", "full"), "huber")
+    assert "sample 4: 70.0 mm" in huber and "try --loss huber" not in huber
+    assert "--exclude-flagged" in huber

@@ -172,13 +172,15 @@ def outlier_run(tmp_path_factory, head):
     }
 
 
-def test_downweighted_observations_are_named_worst_first(outlier_run):
-    down = outlier_run["report"]["refine"]["downweighted"]
-    weights = [row["weight"] for row in down]
-    assert weights == sorted(weights) and all(0 < w < 1 for w in weights)
-    # the injected errors, largest first, head the list with their own size
+def test_gross_errors_are_rejected_and_named_worst_first(outlier_run):
+    rejected = outlier_run["report"]["refine"]["rejected"]
+    excess = [row["excess"] for row in rejected]
+    assert excess == sorted(excess, reverse=True) and all(e > 1 for e in excess)
+    # the injected errors (20-80 mm on 0.3 mm noise), largest first, are rejected with
+    # their own size; clean rejections are rare (0.1 %) and come after them
+    assert len(rejected) <= 7 + 2
     order = np.argsort(OUTLIERS_MM)[::-1]
-    for row, c in zip(down[:7], order, strict=True):
+    for row, c in zip(rejected[:7], order, strict=True):
         assert (row["sample"], row["kind"], row["frame"], row["marker"]) == (
             int(outlier_run["samples"][c]),
             "pose",
@@ -187,15 +189,20 @@ def test_downweighted_observations_are_named_worst_first(outlier_run):
         )
         assert row["position_residual_mm"] == pytest.approx(OUTLIERS_MM[c], abs=3.0)
         assert row["rotation_residual_deg"] < 1.5  # orientation untouched: noise and fit
+    # rejected, so not merely down-weighted
+    planted = {int(s) for s in outlier_run["samples"]}
+    down = outlier_run["report"]["refine"]["downweighted"]
+    assert not planted & {row["sample"] for row in down if row["frame"] == "left_plate"}
+    assert all(0 < row["weight"] < 1 for row in down)
 
 
-def test_downweighted_residuals_equal_the_calibrated_urdf_against_the_file(outlier_run):
+def test_rejected_residuals_equal_the_calibrated_urdf_against_the_file(outlier_run):
     """Independent of the refine plumbing: the written URDF's FK against the file."""
     calibrated = load_robot(outlier_run["dir"] / "cal.urdf")
     data = outlier_run["data"]
     (pose,) = [g for g in data.poses if g.frame == "left_plate"]
     names = data.joint_names
-    for row in outlier_run["report"]["refine"]["downweighted"][:7]:
+    for row in outlier_run["report"]["refine"]["rejected"][:7]:
         i = int(np.flatnonzero(pose.sample == row["sample"])[0])
         predicted = calibrated.frame_poses(data.qs[row["sample"]][None], "left_plate", names)
         error_mm = 1e3 * np.linalg.norm(pose.meas_T_frame[i, :3, 3] - predicted[0, :3, 3])
@@ -224,11 +231,16 @@ def test_fixed_parameters_are_written_as_fixed_with_their_units(outlier_run):
     assert kinematics[("pan", "b_x")] == "unitless" and kinematics[("pan", "beta")] == "rad"
 
 
-def test_the_screen_names_the_five_worst_and_counts_the_rest(outlier_run):
+def test_the_screen_names_the_rejected_worst_first(outlier_run):
     screen = outlier_run["screen"]
+    rejected = outlier_run["report"]["refine"]["rejected"]
+    listed = re.findall(
+        r"rejected as a gross error: samples\[(\d+)\] left_plate \(pose\): residual "
+        r"([\d.]+) mm",
+        screen,
+    )
+    assert [int(s) for s, _ in listed] == [row["sample"] for row in rejected]
     down = outlier_run["report"]["refine"]["downweighted"]
-    assert f"{len(down)} observations down-weighted by the huber loss, worst first:" in screen
-    listed = re.findall(r"samples\[(\d+)\] left_plate \(pose\): residual ([\d.]+) mm", screen)
-    assert [int(s) for s, _ in listed] == [row["sample"] for row in down[:5]]
-    assert f"... and {len(down) - 5} more (see the report)" in screen
+    if down:
+        assert f"{len(down)} observations down-weighted by the huber loss" in screen
     assert "parameters: 50 estimated, 12 fixed" in screen

@@ -14,13 +14,20 @@ other folds with several parameter sets and scored on the held-out one:
 Held-out errors are predictions with the trained frames (targets, markers, the root's pose
 in an external frame) held fixed: nothing is refitted to the test fold. Position errors are
 per-sample error vector norms (mm); orientation errors the small-angle rotation (deg).
+
+Selection (``select``) ranks the sets by the held-out error whitened by the noise the
+full-data fit estimates (or the given one): position and orientation together, each in
+units of its own noise, so a set that is better in millimetres but worse in degrees by
+more than the noise can tell is not chosen. With ``exclude_flagged`` the observations
+the full-data fit rejects as gross errors are left out of the held-out scores (they are
+still in the training folds, where each fit rejects them itself).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,6 +35,7 @@ from numpy.typing import NDArray
 from identification.pipeline import calibrate
 from identification.refine import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
+from kinfw.observations import kind_of
 from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import Robot
 from verification.studies import run_trials
@@ -85,7 +93,14 @@ class CrossValidation:
         E.g. the full calibration is worse held-out than frames only, with the likely
         cause.
     selected : str or None
-        With selection, the set with the lowest mean held-out position RMS.
+        With selection, the set with the lowest mean whitened held-out error
+        (:meth:`whitened`).
+    noise : tuple of (float, float) or None
+        ``(position_m, rotation_rad)`` per component whitening the selection: the given
+        noise, else that of the full-data fit; None without selection.
+    excluded : tuple of (int, str, str, str or None)
+        Observations left out of the held-out scores as ``(sample, kind, frame,
+        marker)``: those the full-data fit rejected (``exclude_flagged``).
     """
 
     k: int
@@ -94,12 +109,35 @@ class CrossValidation:
     scores: tuple[FoldScore, ...]
     warnings: tuple[str, ...]
     selected: str | None
+    noise: tuple[float, float] | None = None
+    excluded: tuple[tuple[int, str, str, str | None], ...] = ()
 
     def mean(self, parameters: str, field: str = "position_rms_mm") -> float:
         """Mean over folds of a score field for one parameter set."""
         return float(
             np.mean([getattr(s, field) for s in self.scores if s.parameters == parameters])
         )
+
+    def whitened(self, parameters: str) -> float:
+        """Mean over folds of ``(position RMS / sigma_p)^2 + (rotation RMS /
+        sigma_r)^2`` for one set, with :attr:`noise`'s sigmas (per component, so a clean
+        prediction scores about 3 + 3 for poses, 3 for points); NaN without ``noise``.
+
+        An observation's squared position error has mean ``3 sigma_p^2`` under the
+        noise and its squared rotation angle ``3 sigma_r^2``: each term counts its
+        component in units of what the noise can tell, position and orientation on one
+        scale.
+        """
+        if self.noise is None:
+            return float("nan")
+        sp, sr = self.noise
+        out = []
+        for s in self.scores:
+            if s.parameters != parameters:
+                continue
+            rot = 0.0 if np.isnan(s.rotation_rms_deg) else np.radians(s.rotation_rms_deg) / sr
+            out.append((1e-3 * s.position_rms_mm / sp) ** 2 + rot**2)
+        return float(np.mean(out))
 
     def to_dict(self) -> dict:
         return {
@@ -109,6 +147,15 @@ class CrossValidation:
             "folds": [{f: getattr(s, f) for f in FoldScore.__slots__} for s in self.scores],
             "mean_position_rms_mm": {p: self.mean(p) for p in self.sets},
             "mean_rotation_rms_deg": {p: self.mean(p, "rotation_rms_deg") for p in self.sets},
+            "mean_whitened": (
+                None if self.noise is None else {p: self.whitened(p) for p in self.sets}
+            ),
+            "noise": None
+            if self.noise is None
+            else {"position_m": self.noise[0], "rotation_rad": self.noise[1]},
+            "excluded": [
+                {"sample": s, "kind": k, "frame": f, "marker": m} for s, k, f, m in self.excluded
+            ],
             "warnings": list(self.warnings),
             "selected": self.selected,
         }
@@ -176,7 +223,7 @@ def _score(
     )
 
 
-def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:
+def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...], loss: str) -> list[str]:
     def mean(p, f="position_rms_mm"):
         return float(np.mean([getattr(s, f) for s in cv_scores if s.parameters == p]))
 
@@ -191,9 +238,15 @@ def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...]) -> list[str]:
             )
         worst = max(full, key=lambda s: s.worst_mm)
         if worst.worst_mm > 5 * np.median([s.position_rms_mm for s in full]):
+            advice = (
+                "try --loss huber"
+                if loss == "linear"
+                else f"the {loss} loss already rejects gross errors in training; "
+                "--exclude-flagged leaves those out of the scores"
+            )
             causes.append(
                 f"an outlier (sample {worst.worst_sample}: {worst.worst_mm:.1f} mm "
-                "held out; try --loss huber)"
+                f"held out; {advice})"
             )
         cond = max(s.condition for s in full)
         if cond > 1e4:
@@ -222,6 +275,7 @@ def crossvalidate(
     prior: tuple[float, float] | None = None,
     progress: Callable[[int, int], None] | None = None,
     executor: Executor | None = None,
+    exclude_flagged: bool = False,
 ) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
@@ -235,31 +289,78 @@ def crossvalidate(
     sets : tuple of str
         Parameter sets (see :func:`identification.refine.refine`).
     select : bool
-        Pick the set with the lowest mean held-out position RMS (``selected``).
+        Pick the set with the lowest mean whitened held-out error
+        (:meth:`CrossValidation.whitened`: position and orientation together, in units
+        of the given noise, else that of the full-data fit).
     noise, loss, prior
         As for :func:`identification.pipeline.calibrate`.
     progress : callable(done, total), optional
     executor : concurrent.futures.Executor, optional
         Run the fits (folds x sets) as tasks of this executor (a process pool, Dask's or
         Ray's); default serially in this process. The scores are the same either way.
+    exclude_flagged : bool
+        Leave the observations the full-data fit (``"full"``, this ``loss``) rejects as
+        gross errors out of the held-out scores (:attr:`CrossValidation.excluded`);
+        nothing is rejected with ``loss="linear"``.
     """
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
+    reference = None
+    if exclude_flagged or (select and noise is None):
+        # the full-data fit: its noise whitens the selection, its rejections are flagged
+        reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
+    excluded: tuple[tuple[int, str, str, str | None], ...] = ()
+    scored = data
+    if exclude_flagged and reference is not None:
+        rejected = reference.refined.rejected
+        excluded = tuple(
+            sorted(
+                ((o.sample, o.kind, o.frame, o.marker) for o in rejected),
+                key=lambda e: (e[0], e[1], e[2], e[3] or ""),
+            )
+        )
+        drop = {(o.kind, o.frame, o.marker, o.sample) for o in rejected}
+        scored = _without_observations(data, drop)
     order = np.random.default_rng(seed).permutation(data.n_samples)
     tasks = []
     for f, test_idx in enumerate(np.array_split(order, k)):
         test_ids = np.sort(test_idx)
-        train, test = data.subset(np.sort(np.setdiff1d(order, test_idx))), data.subset(test_ids)
+        train = data.subset(np.sort(np.setdiff1d(order, test_idx)))
+        test = scored.subset(test_ids)
         tasks += [
             (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
             for parameters in sets
         ]
     scores = run_trials(_score, tasks, executor=executor, progress=progress)
-    selected = None
+    selected, sigma = None, None
     if select:
-        selected = min(
-            sets, key=lambda p: np.mean([s.position_rms_mm for s in scores if s.parameters == p])
-        )
-    return CrossValidation(
-        k, seed, tuple(sets), tuple(scores), tuple(_warnings(scores, sets)), selected
+        used = noise if noise is not None else reference.refined.noise
+        sigma = (float(used.position_m), float(used.rotation_rad))
+    cv = CrossValidation(
+        k,
+        seed,
+        tuple(sets),
+        tuple(scores),
+        tuple(_warnings(scores, sets, loss)),
+        None,
+        sigma,
+        excluded,
     )
+    if select:
+        selected = min(sets, key=cv.whitened)
+    return replace(cv, selected=selected)
+
+
+def _without_observations(
+    data: Measurements, drop: set[tuple[str, str, str | None, int]]
+) -> Measurements:
+    """``data`` without the observations keyed ``(kind, frame, marker, sample)`` in
+    ``drop`` (samples keep their indices; groups left empty go)."""
+    kept = []
+    for g in data.all_groups():
+        kind = kind_of(g)
+        key = (kind.name, kind.frames(g)[0], getattr(g, "marker", None))
+        rows = np.flatnonzero([(*key, int(s)) not in drop for s in g.sample])
+        if len(rows):
+            kept.append(kind.take(g, rows, g.sample[rows]))
+    return data.with_groups(kept)

@@ -36,6 +36,7 @@ from kinfw.calibration_report import (
     NotIdentifiable,
     ParameterRow,
     RefineSection,
+    RejectedRow,
     StageErrors,
     TargetEstimate,
     before_after,
@@ -54,6 +55,7 @@ __all__ = [
     "errors_by_group",
     "file_sha256",
     "plot_stage_errors",
+    "rejected_rows",
     "sidecar",
     "sidecar_path",
 ]
@@ -195,6 +197,41 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
     return tuple(rows)
 
 
+def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
+    """The observations rejected as gross errors, the worst (largest excess over the
+    rejection threshold) first.
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    tuple of RejectedRow
+        One per :attr:`RefineResult.rejected` entry: ``sample`` (index into the data
+        file's samples, from 0), ``kind``, ``frame``, ``marker``, the residual norms in
+        mm and deg (None for a kind without that component) against the final fit,
+        and ``excess`` (its whitened norm over the threshold). Sorted by excess, largest
+        first, then sample.
+    """
+    rows = []
+    for o in result.rejected:
+        p, rot = o.residual("position"), o.residual("rotation")
+        rows.append(
+            RejectedRow(
+                o.sample,
+                o.kind,
+                o.frame,
+                o.marker,
+                None if p is None else 1e3 * p,
+                None if rot is None else float(np.degrees(rot)),
+                o.excess,
+            )
+        )
+    rows.sort(key=lambda row: (-row.excess, row.sample))
+    return tuple(rows)
+
+
 def _noise_summary(result: RefineResult) -> NoiseSummary:
     return NoiseSummary(tuple(result.noise.sigmas), result.noise.estimated)
 
@@ -240,6 +277,8 @@ def _refine_section(result: RefineResult, loss: str) -> RefineSection:
             correlations=tuple(Correlation(a, b, r) for a, b, r in ident.correlations),
         ),
         downweighted=downweighted_rows(result),
+        rejected=rejected_rows(result),
+        rejection_note=result.rejection_note,
     )
 
 

@@ -307,7 +307,9 @@ def _robust_trial(
             noise=setup.noise if noise == "given" else None,
         )
         rms_ms[v] = held_out_ms(fit.model)
-        flagged = {(kind, frame, sample) for kind, frame, sample, _ in fit.downweighted}
+        flagged = {(kind, frame, sample) for kind, frame, sample, _ in fit.downweighted} | {
+            (o.kind, o.frame, o.sample) for o in fit.rejected
+        }
         flagged_planted[v] = len(flagged & planted)
         flagged_clean[v] = len(flagged - planted)
         noise_used[v] = fit.noise.position_m, fit.noise.rotation_rad
@@ -504,7 +506,8 @@ def format_robustness(study: RobustStudy) -> str:
     lines += [
         "",
         "Down-weighted: refine's `downweighted` (observations beyond the robust "
-        "loss's threshold: the 99 % quantile of a clean residual norm).",
+        "loss's threshold: the 99 % quantile of a clean residual norm) or `rejected` "
+        "(beyond the 99.9 % quantile: excluded and the problem refitted).",
         "",
         f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial).",
     ]

@@ -16,7 +16,14 @@ from numpy.typing import NDArray
 from kinfw.cpc import CPCModel
 from kinfw.measurements import Measurements
 
-__all__ = ["GroupResiduals", "Identifiability", "covariance_and_identifiability", "group_residuals"]
+__all__ = [
+    "GroupResiduals",
+    "Identifiability",
+    "RejectedObservation",
+    "covariance_and_identifiability",
+    "group_residuals",
+    "rejected_observations",
+]
 
 _ROTATION_FIELDS = ("rot_x", "rot_y", "rot_z")
 
@@ -94,6 +101,85 @@ class GroupResiduals:
     def rows(self) -> int:
         """Residual rows per observation."""
         return sum(v.shape[1] for _, v in self.components)
+
+
+@dataclass(frozen=True, slots=True)
+class RejectedObservation:
+    """An observation excluded from the fit as a gross error (beyond the rejection
+    threshold of :func:`identification.refine.refine`).
+
+    Attributes
+    ----------
+    kind, frame : str
+        Observation kind and frame (the camera for ``target`` observations).
+    marker : str or None
+    sample : int
+        Index into the data's samples (from 0).
+    residuals : tuple of (str, str, float)
+        Per noise component of the kind: its name, its unit (``"m"``, ``"rad"``) and the
+        size of the residual (measured minus predicted) in that unit: the norm of the
+        component's rows, an angle for orientations
+        (:meth:`kinfw.observations.NoiseComponent.magnitude`), against the fit it
+        is reported with (:attr:`identification.refine.RefineResult.rejected`).
+    whitened_norm : float
+        Norm of its whitened residual (by that fit's noise).
+    threshold : float
+        The rejection threshold of that norm (the clean residual norm's quantile).
+    """
+
+    kind: str
+    frame: str
+    marker: str | None
+    sample: int
+    residuals: tuple[tuple[str, str, float], ...]
+    whitened_norm: float
+    threshold: float
+
+    @property
+    def excess(self) -> float:
+        """How far beyond the threshold (``whitened_norm / threshold``); worst first."""
+        return self.whitened_norm / self.threshold
+
+    def residual(self, component: str) -> float | None:
+        """The residual size of one component (SI), None if the kind has no such one."""
+        return next((v for n, _, v in self.residuals if n == component), None)
+
+
+def rejected_observations(
+    groups: Sequence[Any],
+    r: NDArray,
+    noise: Any,
+    norms: NDArray,
+    threshold: NDArray,
+    rejected: NDArray,
+) -> tuple[RejectedObservation, ...]:
+    """The observations marked in ``rejected`` (per observation, groups in order) as
+    :class:`RejectedObservation`, from the whitened residuals ``r`` (group rows first)
+    whitened by ``noise``, their ``norms`` and ``threshold`` (per observation)."""
+    out, k, o = [], 0, 0
+    for grp in groups:
+        m, rows = len(grp.sample), grp.rows
+        block = r[k : k + m * rows].reshape(m, rows)
+        for i in np.flatnonzero(rejected[o : o + m]):
+            sizes, c0 = [], 0
+            for c in grp.components:
+                rows_si = block[i : i + 1, c0 : c0 + c.rows] * noise.sigma(c)
+                sizes.append((c.name, c.unit, float(c.magnitude(rows_si)[0])))
+                c0 += c.rows
+            out.append(
+                RejectedObservation(
+                    grp.kind.name,
+                    grp.frame,
+                    grp.marker,
+                    int(grp.sample[i]),
+                    tuple(sizes),
+                    float(norms[o + i]),
+                    float(threshold[o + i]),
+                )
+            )
+        k += m * rows
+        o += m
+    return tuple(out)
 
 
 def covariance_and_identifiability(
