@@ -210,13 +210,19 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
     tuple of RejectedRow
         One per :attr:`RefineResult.rejected` entry: ``sample`` (index into the data
         file's samples, from 0), ``kind``, ``frame``, ``marker``, the residual norms in
-        mm and deg (None for a kind without that component) against the final fit,
+        mm (for a kind without positions, of its rows in metres) and deg (None without
+        orientation) against the final fit,
         and ``excess`` (its whitened norm over the threshold). Sorted by excess, largest
         first, then sample.
     """
     rows = []
     for o in result.rejected:
-        p, rot = o.residual("position"), o.residual("rotation")
+        # a kind without positions (a plane contact's distance): its lengths, as for
+        # the down-weighted rows
+        lengths = [v for _, unit, v in o.residuals if unit == "m"]
+        p = o.residual("position")
+        p = float(np.linalg.norm(lengths)) if p is None and lengths else p
+        rot = o.residual("rotation")
         rows.append(
             RejectedRow(
                 o.sample,
