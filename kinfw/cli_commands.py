@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import logging
 import math
@@ -297,19 +298,31 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     data = read_measurements(args.data)
     held_out = read_measurements(args.holdout) if args.holdout else None
+    noise, prior = _noise_arg(args), _prior_arg(args)
+    choice = None
+    parameters = "full" if args.params == "auto" else _params_arg(args.params)
+    if args.params == "auto" and args.method == "refine":
+        from verification.model_choice import choose_parameters
+
+        choice = choose_parameters(nominal, data, noise=noise, loss=args.loss, prior=prior)
+        parameters, prior = choice.parameters, choice.prior
     report, _ = calibrate_to_files(
         nominal,
         data,
         args.out,
         method=args.method,
-        noise=_noise_arg(args),
+        noise=noise,
         loss=args.loss,
-        parameters=_params_arg(args.params),
-        prior=_prior_arg(args),
+        parameters=parameters,
+        prior=prior,
         data_path=args.data,
         held_out=held_out,
         progress=_progress_printer(),
     )
+    if choice is not None:  # the choice goes to the report's notes
+        report = dataclasses.replace(
+            report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
+        )
     if args.report:
         write_report(args.report, report)
     if args.json:
@@ -321,6 +334,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     )
     for note in report.notes:
         print(f"note: {note}")
+    if choice is not None and choice.candidates:
+        print(f"model choice: {choice.k}-fold held-out error of each candidate:")
+        print(_choice_table(choice))
     print("position RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
@@ -331,6 +347,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def _choice_table(choice) -> str:
+    """The candidates of a model choice with their held-out scores, the chosen marked."""
+    head = f"  {'candidate':<32} {'whitened':>9} {'pos mm':>8} {'rot deg':>8}"
+    rows = [head]
+    for c in choice.candidates:
+        mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
+        rows.append(
+            f"  {c.label:<32} {c.whitened:>9.3g} {c.position_rms_mm:>8.3g} "
+            f"{c.rotation_rms_deg:>8.3g}{mark}"
+        )
+    return "\n".join(rows)
 
 
 def _sigma(value: float | None, fmt: str) -> str:

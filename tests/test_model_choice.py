@@ -1,0 +1,117 @@
+"""Model choice by default: small data does not get the full set, plentiful data does."""
+
+import json
+
+import numpy as np
+import pytest
+
+import verification.model_choice as model_choice
+from identification.pipeline import calibrate
+from kinfw.cli import main
+from kinfw.cpc import cpc_from_robot
+from kinfw.measurement_file import write_measurements
+from kinfw.robot import load_robot
+from tests.robots import HEAD_URDF as HEAD
+from verification.model_choice import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
+from verification.simulate import perturb_robot, random_configurations, simulate
+
+PLATES = ("left_plate", "right_plate")
+
+
+def _data(truth, n, seed, noise_m, noise_rad):
+    rng = np.random.default_rng(seed)
+    names = truth.topology(PLATES).joint_names
+    qs = random_configurations(*truth.joint_limits(names), n, rng, fraction=0.8)
+    return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad)
+
+
+@pytest.fixture(scope="module")
+def mounts_only(head):
+    """Truth differs from the nominal only in the plates' mounts (the case 'full' overfits
+    with 12 samples, tests/test_crossval.py)."""
+    truth = load_robot(
+        perturb_robot(
+            head,
+            np.random.default_rng(2),
+            origin_mm=5.0,
+            origin_deg=1.0,
+            axis_deg=0.0,
+            joints=("left_plate_joint", "right_plate_joint"),
+        )
+    )
+    return truth, _data(truth, 12, 3, noise_m=1e-3, noise_rad=0.01)
+
+
+def _held_out_vs_truth(nominal, truth, data, parameters, prior):
+    """Position RMS (mm) and rotation RMS (deg) of the plates at 200 fresh configurations,
+    the model calibrated with ``parameters``/``prior`` against the noise-free truth."""
+    result = calibrate(nominal, data, parameters=parameters, prior=prior)
+    model = cpc_from_robot(load_robot(result.urdf_xml), PLATES)
+    qs = random_configurations(
+        *nominal.joint_limits(data.joint_names), 200, np.random.default_rng(6), fraction=0.8
+    )
+    T_model = model.frame_poses(qs)
+    T_true = cpc_from_robot(truth, PLATES).frame_poses(qs)
+    d = T_model[..., :3, 3] - T_true[..., :3, 3]
+    R = np.swapaxes(T_true[..., :3, :3], -1, -2) @ T_model[..., :3, :3]
+    angle = np.arccos(np.clip((np.trace(R, axis1=-2, axis2=-1) - 1) / 2, -1, 1))
+    return 1e3 * np.sqrt(np.mean(np.sum(d**2, axis=-1))), np.degrees(np.sqrt(np.mean(angle**2)))
+
+
+def test_small_data_is_not_given_the_full_set_and_predicts_the_truth_better(head, mounts_only):
+    truth, data = mounts_only
+    choice = choose_parameters(head, data, k=4)
+    assert choice.rows_per_parameter < ROWS_PER_PARAMETER and choice.k == 4
+    assert (choice.parameters, choice.prior) != ("full", None)
+    labels = [c.label for c in choice.candidates]
+    assert labels[:3] == ["frames", "offsets", "full"] and len(labels) == 6
+    assert "cross-validation" in choice.reason
+    (chosen,) = [
+        c for c in choice.candidates if (c.parameters, c.prior) == (choice.parameters, choice.prior)
+    ]
+    assert chosen.whitened <= 1.01 * min(c.whitened for c in choice.candidates)
+    assert chosen.whitened < choice.candidates[2].whitened  # full alone scores worse
+    # against the truth (not the held-out measurements): the chosen model is no worse
+    pos, rot = _held_out_vs_truth(head, truth, data, choice.parameters, choice.prior)
+    pos_full, rot_full = _held_out_vs_truth(head, truth, data, "full", None)
+    assert pos <= pos_full and rot <= rot_full
+
+
+def test_plentiful_data_gets_the_full_set_without_cross_validation(head, monkeypatch):
+    truth = load_robot(
+        perturb_robot(head, np.random.default_rng(4), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
+    )
+    small = _data(truth, 12, 5, noise_m=0.5e-3, noise_rad=0.005)
+    big = _data(truth, 85, 5, noise_m=0.5e-3, noise_rad=0.005)
+    # residual rows grow with the samples; the parameters (no per-sample unknowns) do not
+    assert rows_per_parameter(head, big) == pytest.approx(85 / 12 * rows_per_parameter(head, small))
+
+    def no_crossval(*args, **kwargs):
+        raise AssertionError("cross-validation ran on plentiful data")
+
+    monkeypatch.setattr(model_choice, "crossvalidate", no_crossval)
+    monkeypatch.setattr(model_choice, "calibrate", no_crossval)
+    choice = choose_parameters(head, big)
+    assert (choice.parameters, choice.prior, choice.candidates, choice.k) == ("full", None, (), 0)
+    assert choice.rows_per_parameter >= ROWS_PER_PARAMETER
+    assert "enough to estimate every parameter" in choice.reason
+    with pytest.raises(AssertionError, match="cross-validation ran"):
+        choose_parameters(head, small)  # the small set does go to cross-validation
+
+
+def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys, mounts_only):
+    _, data = mounts_only
+    path = tmp_path / "data.json"
+    write_measurements(path, data)
+    base = ["calibrate", "--urdf", str(HEAD), "--out", str(tmp_path / "c.urdf"), str(path)]
+    assert main([*base, "--report", str(tmp_path / "r.json")]) == 0
+    out = capsys.readouterr().out
+    assert "held-out error of each candidate" in out and "<- chosen" in out
+    notes = json.loads((tmp_path / "r.json").read_text())["notes"]
+    (note,) = [n for n in notes if n.startswith("parameters: ")]
+    assert not note.startswith("parameters: full (") and "cross-validation" in note
+    assert main([*base, "--params", "full", "--report", str(tmp_path / "f.json")]) == 0
+    out = capsys.readouterr().out
+    assert "candidate" not in out
+    notes = json.loads((tmp_path / "f.json").read_text())["notes"]
+    assert not any(n.startswith("parameters: ") for n in notes)

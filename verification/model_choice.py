@@ -1,0 +1,247 @@
+"""Model choice by default: the parameter set and prior that predict held-out data best.
+
+``kinfw calibrate`` (``--params auto``, the default) asks :func:`choose_parameters`
+which model to fit. When the data is plentiful -- at least :data:`ROWS_PER_PARAMETER`
+residual rows per free parameter of the full set -- every parameter can be estimated
+and ``"full"`` is chosen without cross-validation (fast: ``kinfw demo``'s 85 samples give
+about 20 rows per parameter). Otherwise the candidates are scored by k-fold
+cross-validation (:func:`verification.crossval.crossvalidate`) and the one with the
+lowest mean whitened held-out error wins (position and orientation together, each in
+units of its noise, :meth:`verification.crossval.CrossValidation.whitened`):
+
+- ``"frames"``: nominal joints, base and tool frames fitted;
+- ``"offsets"``: frames plus joint zero offsets;
+- ``"full"``: every identifiable CPC parameter;
+- ``"full"`` with a Gaussian prior on the deviations from the nominal, its scale chosen
+  by the same cross-validation from :data:`PRIOR_GRID_M` (lengths, m; angles
+  ``sigma / PRIOR_LENGTH_M`` rad).
+
+Ties (within 1 %) go to the simpler model, in the order above. Identification does not
+import this module; the CLI wires them.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from identification.pipeline import calibrate
+from identification.refine import NoiseModel, build_problem
+from kinfw.measurements import Measurements
+from kinfw.robot import Robot
+from verification.crossval import crossvalidate
+
+__all__ = [
+    "PRIOR_GRID_M",
+    "PRIOR_LENGTH_M",
+    "ROWS_PER_PARAMETER",
+    "Candidate",
+    "ModelChoice",
+    "choose_parameters",
+]
+
+#: Residual rows per free parameter of the full set from which "full" is chosen without
+#: cross-validation (a least-squares rule of thumb: ten observations per unknown keep the
+#: parameter scatter well below the model's bias for a well-excited robot).
+ROWS_PER_PARAMETER = 10.0
+
+#: Prior sigmas of lengths tried with "full", m.
+PRIOR_GRID_M = (1e-3, 3e-3, 10e-3)
+
+#: Lever arm converting a length sigma to an angle sigma (rad = m / PRIOR_LENGTH_M).
+PRIOR_LENGTH_M = 0.1
+
+
+@dataclass(frozen=True, slots=True)
+class Candidate:
+    """One model scored by cross-validation.
+
+    Attributes
+    ----------
+    parameters : str
+        ``"frames"``, ``"offsets"`` or ``"full"``.
+    prior : (float, float) or None
+        ``(sigma_m, sigma_rad)`` of the Gaussian prior on deviations from the nominal.
+    whitened : float
+        Mean over folds of the whitened held-out error (about 6 for poses predicted to
+        the noise, 3 for points; lower is better).
+    position_rms_mm, rotation_rms_deg : float
+        Mean over folds of the held-out RMS (rotation NaN when only points are observed).
+    """
+
+    parameters: str
+    prior: tuple[float, float] | None
+    whitened: float
+    position_rms_mm: float
+    rotation_rms_deg: float
+
+    @property
+    def label(self) -> str:
+        """E.g. ``"full"`` or ``"full, prior 3 mm / 1.72 deg"``."""
+        if self.prior is None:
+            return self.parameters
+        return (
+            f"{self.parameters}, prior {1e3 * self.prior[0]:.3g} mm / "
+            f"{np.degrees(self.prior[1]):.3g} deg"
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ModelChoice:
+    """The chosen parameter set and prior, and why.
+
+    Attributes
+    ----------
+    parameters : str
+        Set to calibrate with.
+    prior : (float, float) or None
+        ``(sigma_m, sigma_rad)`` to calibrate with.
+    reason : str
+        One line.
+    candidates : tuple of Candidate
+        Scores of every candidate, in the order tried; empty when cross-validation was
+        skipped.
+    rows_per_parameter : float
+        Residual rows per free parameter of the full set on all the data.
+    k : int
+        Folds (0 when cross-validation was skipped).
+    """
+
+    parameters: str
+    prior: tuple[float, float] | None
+    reason: str
+    candidates: tuple[Candidate, ...]
+    rows_per_parameter: float
+    k: int
+
+    @property
+    def label(self) -> str:
+        return Candidate(self.parameters, self.prior, np.nan, np.nan, np.nan).label
+
+    def to_dict(self) -> dict:
+        return {
+            "parameters": self.parameters,
+            "prior": None
+            if self.prior is None
+            else {"sigma_m": self.prior[0], "sigma_rad": self.prior[1]},
+            "reason": self.reason,
+            "rows_per_parameter": self.rows_per_parameter,
+            "k": self.k,
+            "candidates": [
+                {
+                    "label": c.label,
+                    "whitened": c.whitened,
+                    "position_rms_mm": c.position_rms_mm,
+                    "rotation_rms_deg": c.rotation_rms_deg,
+                }
+                for c in self.candidates
+            ],
+        }
+
+
+def rows_per_parameter(nominal: Robot, data: Measurements) -> float:
+    """Residual rows of ``data`` per free parameter of the full set (inf without any)."""
+    with warnings.catch_warnings():  # the data's warnings come once, from the calibration
+        warnings.simplefilter("ignore")
+        problem = build_problem(nominal, data, parameters="full")
+    rows = sum(len(g.sample) * g.rows for g in problem.groups)
+    return rows / problem.n_parameters if problem.n_parameters else float("inf")
+
+
+def choose_parameters(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    noise: NoiseModel | None = None,
+    loss: str = "huber",
+    k: int = 5,
+    seed: int = 0,
+    prior: tuple[float, float] | None = None,
+) -> ModelChoice:
+    """Choose the parameter set and prior that predict held-out data best.
+
+    Parameters
+    ----------
+    nominal : Robot
+    data : Measurements
+    noise, loss
+        As for :func:`identification.pipeline.calibrate` (``noise`` also whitens the
+        scores; default: the noise the full-data fit estimates).
+    k, seed : int
+        Folds (at most the samples) and the seed of their partition.
+    prior : (sigma_m, sigma_rad), optional
+        A prior given by the user: every set is scored with it and no prior scale is
+        searched.
+
+    Returns
+    -------
+    ModelChoice
+    """
+    ratio = rows_per_parameter(nominal, data)
+    if ratio >= ROWS_PER_PARAMETER:
+        return ModelChoice(
+            "full",
+            prior,
+            f"{ratio:.1f} residual rows per free parameter: enough to estimate every parameter",
+            (),
+            ratio,
+            0,
+        )
+    k = min(k, data.n_samples)
+    if k < 2:
+        raise ValueError(
+            f"choosing the parameters needs at least 2 samples for cross-validation, got "
+            f"{data.n_samples}; give --params"
+        )
+    if noise is None:  # whiten by the full-data fit's noise, the same scale for all
+        used = calibrate(nominal, data, parameters="full", loss=loss, prior=prior).refined.noise
+    else:
+        used = noise
+    sigma = (float(used.position_m), float(used.rotation_rad))
+    runs = [(("frames", "offsets", "full"), prior)]
+    if prior is None:
+        runs += [(("full",), (s, s / PRIOR_LENGTH_M)) for s in PRIOR_GRID_M]
+    candidates = []
+    for sets, p in runs:
+        cv = crossvalidate(
+            nominal, data, k=k, seed=seed, sets=sets, noise=noise, loss=loss, prior=p
+        )
+        cv = replace(cv, noise=sigma)
+        candidates += [
+            Candidate(s, p, cv.whitened(s), cv.mean(s), cv.mean(s, "rotation_rms_deg"))
+            for s in sets
+        ]
+    # simplest first: frames, offsets, full with the strongest prior ... full alone
+    order = [0, 1, *range(3, len(candidates)), 2]
+    scored = [c.whitened for c in candidates if np.isfinite(c.whitened)]
+    full = candidates[2]
+    if not scored:  # e.g. only plane contacts: no position or rotation error to score
+        return ModelChoice(
+            "full",
+            prior,
+            f"{k}-fold cross-validation could not score these observations (no held-out "
+            "position or orientation error): the full set, as before",
+            tuple(candidates),
+            ratio,
+            k,
+        )
+    best = min(scored)
+    chosen = next(candidates[i] for i in order if candidates[i].whitened <= 1.01 * best)
+    if chosen is full:
+        why = f"lowest held-out error ({chosen.whitened:.3g} whitened)"
+    else:
+        why = (
+            f"lowest held-out error: {chosen.whitened:.3g} whitened vs {full.whitened:.3g} "
+            f"for full alone ({chosen.position_rms_mm:.3g} vs {full.position_rms_mm:.3g} mm)"
+        )
+    return ModelChoice(
+        chosen.parameters,
+        chosen.prior,
+        f"{k}-fold cross-validation, {ratio:.1f} residual rows per free parameter of the "
+        f"full set (< {ROWS_PER_PARAMETER:g}): {why}",
+        tuple(candidates),
+        ratio,
+        k,
+    )
