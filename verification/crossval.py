@@ -25,6 +25,7 @@ still in the training folds, where each fit rejects them itself).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
@@ -199,7 +200,13 @@ def _score(
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
     original indices of the test samples). One task of :func:`crossvalidate`: module
     level, picklable arguments."""
-    result = calibrate(nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior)
+    with warnings.catch_warnings():
+        # the data's warnings (limits, fit checks) belong to the full data, said once by
+        # the caller; every fold would repeat them with its own numbers
+        warnings.simplefilter("ignore", UserWarning)
+        result = calibrate(
+            nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
+        )
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:  # the root's pose in the external frame
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))

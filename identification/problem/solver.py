@@ -75,7 +75,8 @@ def _threshold(components: tuple[NoiseComponent, ...], z: float) -> float:
 def robust_loss(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
     """Loss rho(s) and IRLS weight rho'(s)/s of whitened residual norms ``s``."""
     if loss == "huber":
-        return np.where(s <= k, 0.5 * s**2, k * s - 0.5 * k**2), np.where(s <= k, 1.0, k / s)
+        # weight min(1, k / s), written without dividing by a zero residual
+        return np.where(s <= k, 0.5 * s**2, k * s - 0.5 * k**2), k / np.maximum(s, k)
     if loss == "cauchy":
         return 0.5 * k**2 * np.log1p((s / k) ** 2), 1.0 / (1.0 + (s / k) ** 2)
     return 0.5 * s**2, np.ones_like(s)
