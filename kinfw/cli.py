@@ -11,8 +11,9 @@ start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pin
 (through :mod:`kinfw.robot`), CasADi, matplotlib and meshcat are imported by the commands.
 
 This module holds the parser, the checks of the outputs, the warning printer and
-:func:`main`; the commands themselves (``cmd_simulate``, ``cmd_calibrate``, ...) are in
-:mod:`kinfw.cli_commands`.
+:func:`main`; the commands themselves (``cmd_simulate``, ``cmd_verify``, ...) are in
+:mod:`kinfw.cli_commands`, those that fit a model (``cmd_calibrate``, ``cmd_demo``,
+``cmd_crossval``) in :mod:`kinfw.cli_fit`.
 """
 
 from __future__ import annotations
@@ -28,10 +29,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from kinfw.cli_commands import (
-    cmd_calibrate,
     cmd_crosscheck,
-    cmd_crossval,
-    cmd_demo,
     cmd_import_csv,
     cmd_reproduce,
     cmd_simulate,
@@ -39,6 +37,7 @@ from kinfw.cli_commands import (
     cmd_view,
     default_sidecar_path,
 )
+from kinfw.cli_fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["main"]
