@@ -349,6 +349,30 @@ class IdentifiabilitySummary:
         )
 
 
+def _observation_dict(row: Any) -> dict[str, Any]:
+    """The fields a down-weighted and a rejected observation share, in file order."""
+    return {
+        "sample": row.sample,
+        "kind": row.kind,
+        "frame": row.frame,
+        "marker": row.marker,
+        "position_residual_mm": row.position_residual_mm,
+        "rotation_residual_deg": row.rotation_residual_deg,
+    }
+
+
+def _observation_fields(doc: Any, r: DocReader, at: str, *, position_optional: bool) -> tuple:
+    """Those shared fields read back: (sample, kind, frame, marker, mm, deg)."""
+    return (
+        r.integer(doc, "sample", at),
+        r.string(doc, "kind", at),
+        r.string(doc, "frame", at),
+        r.string(doc, "marker", at, optional=True),
+        r.number(doc, "position_residual_mm", at, optional=position_optional),
+        r.number(doc, "rotation_residual_deg", at, optional=True),
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class DownweightedRow:
     """An observation the robust loss down-weighted: ``sample`` (index into the data
@@ -364,26 +388,13 @@ class DownweightedRow:
     weight: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "sample": self.sample,
-            "kind": self.kind,
-            "frame": self.frame,
-            "marker": self.marker,
-            "position_residual_mm": self.position_residual_mm,
-            "rotation_residual_deg": self.rotation_residual_deg,
-            "weight": self.weight,
-        }
+        return {**_observation_dict(self), "weight": self.weight}
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> DownweightedRow:
         doc = r.obj(doc, at)
         return cls(
-            r.integer(doc, "sample", at),
-            r.string(doc, "kind", at),
-            r.string(doc, "frame", at),
-            r.string(doc, "marker", at, optional=True),
-            r.number(doc, "position_residual_mm", at),
-            r.number(doc, "rotation_residual_deg", at, optional=True),
+            *_observation_fields(doc, r, at, position_optional=False),
             r.number(doc, "weight", at),
         )
 
@@ -405,26 +416,13 @@ class RejectedRow:
     excess: float
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "sample": self.sample,
-            "kind": self.kind,
-            "frame": self.frame,
-            "marker": self.marker,
-            "position_residual_mm": self.position_residual_mm,
-            "rotation_residual_deg": self.rotation_residual_deg,
-            "excess": self.excess,
-        }
+        return {**_observation_dict(self), "excess": self.excess}
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> RejectedRow:
         doc = r.obj(doc, at)
         return cls(
-            r.integer(doc, "sample", at),
-            r.string(doc, "kind", at),
-            r.string(doc, "frame", at),
-            r.string(doc, "marker", at, optional=True),
-            r.number(doc, "position_residual_mm", at, optional=True),
-            r.number(doc, "rotation_residual_deg", at, optional=True),
+            *_observation_fields(doc, r, at, position_optional=True),
             r.number(doc, "excess", at),
         )
 
