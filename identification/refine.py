@@ -171,7 +171,8 @@ def refine(
         without them (see Notes). None keeps every observation (down-weighted only).
         Ignored for ``loss="linear"``.
     max_reject_fraction : float
-        At most this fraction of the observations is rejected (the worst); when more lie
+        At most this fraction of the observations is rejected (the worst; at least one
+        when the fraction is positive: a small dataset may hold one gross error); when more lie
         beyond the threshold, :attr:`RefineResult.rejection_note` says so.
     max_reject_rounds : int
         Refits after rejection, at most.
@@ -207,9 +208,9 @@ def refine(
     Rounds: fit, reject the observations beyond the threshold, refit without them
     (from the same starts, noise re-estimated), and again until no new observation is
     beyond the threshold or ``max_reject_rounds`` refits; a rejected observation is not
-    readmitted. More than ``max_reject_fraction`` of the observations beyond the
-    threshold is not what a few gross errors look like (under the noise model, 0.1 % is
-    expected): only the worst that fraction allows are rejected and
+    readmitted. More than ``max_reject_fraction`` of the observations (at least one)
+    beyond the threshold is not what a few gross errors look like (under the noise
+    model, 0.1 % is expected): only the worst that fraction allows are rejected and
     ``rejection_note`` says the data may be inconsistent with the model. A rejection
     that leaves the problem undetermined (:class:`DatasetError` on the refit) is undone
     and noted.
@@ -244,7 +245,8 @@ def refine(
     if loss == "linear" or reject is None:
         return result
     n_obs = sum(len(g.sample) for g in problem.groups)
-    allowed = int(np.floor(max_reject_fraction * n_obs))
+    # one gross error is what any dataset may hold, however small (a training fold of 16)
+    allowed = max(int(np.floor(max_reject_fraction * n_obs)), int(max_reject_fraction > 0))
     rejected: list[RejectedObservation] = []
     rounds: list[tuple[LeastSquaresProblem, NDArray, NDArray]] = []
     note = None

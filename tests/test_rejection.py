@@ -159,3 +159,21 @@ def test_the_report_lists_rejected_apart_and_reads_back(head, truth, tmp_path):
     assert rows[1].position_residual_mm == pytest.approx(40.0, abs=3.0)
     path = write_report(tmp_path / "report.json", report)
     assert read_report(path).refine.rejected == rows
+
+
+def test_a_small_dataset_may_still_lose_its_one_gross_error(head, truth):
+    """12 samples x 1 plate: 5 % of 12 observations rounds down to none, yet one gross
+    error is what any dataset may hold (a cross-validation fold of a 15-sample session):
+    it is rejected and the refit is the fit without it."""
+    clean = _data(truth, 12, 10)
+    one_plate = replace(clean, poses=clean.poses[:1])
+    bad = _with_bad_pose(one_plate, 5, np.array([0.0, 0.0, 0.05]))
+    fit = refine(head, bad, loss="huber", parameters="frames")
+    (rejected,) = fit.rejected
+    assert rejected.sample == int(one_plate.poses[0].sample[5])
+    without = refine(head, _deleted(one_plate, 5), loss="huber", parameters="frames")
+    assert without.rejected == ()
+    q = one_plate.q_of(fit.model.topology.joint_names)
+    np.testing.assert_allclose(
+        fit.model.frame_poses(q), without.model.frame_poses(q), rtol=0, atol=1e-9
+    )
