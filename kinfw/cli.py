@@ -435,6 +435,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="measurement frame, not in the URDF (default: the URDF root link)",
     )
     p.add_argument("--marker", default="marker", help="marker name prefix (default 'marker')")
+    p.add_argument(
+        "--target",
+        default=None,
+        help="read the 6D columns as the pose of a fixed target NAME seen by a camera on "
+        "--frame (camera_T_target: a camera on the flange seeing a board; the camera's mount "
+        "and the target's pose are estimated); excludes --measured-in",
+    )
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")

@@ -366,11 +366,13 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         marker=args.marker,
         length_unit=args.length_unit,
         angle_unit=args.angle_unit,
+        target=args.target,
     )
     check_against_robot(measurements, robot)
     write_measurements(args.out, measurements)
     kinds = ", ".join(
-        f"{len(g.sample)} {type(g).kind} of {g.marker!r}" for g in measurements.all_groups()
+        f"{len(g.sample)} {type(g).kind} of {getattr(g, 'marker', None) or g.target!r}"
+        for g in measurements.all_groups()
     )
     print(
         f"wrote {args.out}: {measurements.n_samples} samples, joints "

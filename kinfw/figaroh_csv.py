@@ -184,6 +184,7 @@ def measurements_from_figaroh_csv(
     marker: str = "marker",
     length_unit: str = "m",
     angle_unit: str = "rad",
+    target: str | None = None,
 ) -> Measurements:
     """Read a FIGAROH calibration CSV (see the module docstring for its columns).
 
@@ -206,13 +207,21 @@ def measurements_from_figaroh_csv(
         Unit of ``x, y, z`` and of prismatic joint values (FIGAROH: ``"m"``).
     angle_unit : {"rad", "deg"}
         Unit of ``phix, phiy, phiz`` and of revolute joint values (FIGAROH: ``"rad"``).
+    target : str, optional
+        Read each 6D marker as the pose ``camera_T_target`` of a fixed target seen by a
+        camera on ``frame`` (a camera on a flange seeing a board): ``target``
+        observations, the target's pose and the camera's mount on ``frame`` estimated.
+        Target ``i`` is named ``target`` (one marker) or ``f"{target}{i}"``. Excludes
+        ``measured_in`` (the camera is the measurement frame); every marker needs its
+        ``phi`` columns.
 
     Returns
     -------
     Measurements
         One sample per data row, in file order; joint values in SI, columns in the
         file's order; per marker a ``point`` group (``x, y, z`` only) or a ``pose``
-        group (with ``phix, phiy, phiz``), ``marker`` named, offsets unknown.
+        group (with ``phix, phiy, phiz``), ``marker`` named, offsets unknown; with
+        ``target``, a ``target`` group per marker.
 
     Raises
     ------
@@ -230,6 +239,18 @@ def measurements_from_figaroh_csv(
         raise ValueError(f"angle_unit: expected one of {list(_ANGLE_SCALE)}, got {angle_unit!r}")
     header, rows = _read_table(path)
     markers = _markers(path, header)
+    if target is not None:
+        if measured_in is not None:
+            raise ValueError(
+                "target and measured_in exclude each other: a target's pose is measured in "
+                "the camera on the frame"
+            )
+        for i, dofs in sorted(markers.items()):
+            if "phix" not in dofs:
+                raise DatasetError(
+                    f"{path}: header: marker {i} has no phix{i}, phiy{i}, phiz{i} columns: a "
+                    "target seen by a camera needs its orientation (6D poses)"
+                )
     marker_columns = {c for dofs in markers.values() for c in dofs.values()}
     joint_columns = [
         c
@@ -258,14 +279,18 @@ def measurements_from_figaroh_csv(
     for i, dofs in sorted(markers.items()):
         xyz = table[:, [dofs[d] for d in _POSITION]] * length
         common: dict[str, Any] = {"frame": frame, "marker": f"{marker}{i}"}
+        if target is not None:
+            name = target if len(markers) == 1 else f"{target}{i}"
+            common = {"frame": frame, "target": name}
         if measured_in is not None:
             common["measured_in"] = measured_in
         if "phix" in dofs:
             rpy = table[:, [dofs[d] for d in _ORIENTATION]] * angle
             quats = quat_xyzw_from_matrix(matrix_from_figaroh_rpy(rpy))
+            kind = "pose" if target is None else "target"
             per_marker.append(
                 [
-                    {**common, "kind": "pose", "xyz": p, "quat_xyzw": q}
+                    {**common, "kind": kind, "xyz": p, "quat_xyzw": q}
                     for p, q in zip(xyz.tolist(), quats.tolist(), strict=True)
                 ]
             )

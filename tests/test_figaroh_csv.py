@@ -236,3 +236,71 @@ def test_cli_user_error_exits_2_and_writes_nothing(tmp_path, capsys):
     # an output that is an input is refused before any work
     assert main([*argv, "--out", str(path)]) == 2
     assert "kinfw import-csv: error:" in capsys.readouterr().err
+
+
+def _camera_csv(path, robot, names, qs, flange_T_camera, root_T_board):
+    """A FIGAROH CSV of ``camera_T_board`` (x1..phiz1, Pinocchio's RPY) for a camera on
+    the 6R arm's flange (Pinocchio's forward kinematics of the truth)."""
+    root_T_flange = robot.frame_poses(qs, "flange", names)
+    lines = [",".join(["x1", "y1", "z1", "phix1", "phiy1", "phiz1", *names])]
+    for q, T in zip(qs, root_T_flange, strict=True):
+        camera_T_board = inverse_transform(T @ flange_T_camera) @ root_T_board
+        rpy = pin.rpy.matrixToRpy(camera_T_board[:3, :3])
+        lines.append(",".join(repr(float(v)) for v in (*camera_T_board[:3, 3], *rpy, *q)))
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_path):
+    """``--target board``: the 6D columns are the board's pose in a camera on the flange
+    (mount and board unknown). Noise-free data of a perturbed 6R arm: calibrated, the
+    board's pose in the camera at new configurations is the truth's (Pinocchio) to 1e-8."""
+    from identification.pipeline import calibrate
+    from identification.problem.problem import Unknown
+    from kinfw.transforms import matrix_from_rotation_vector
+    from tests.robots import ARM_6R
+    from verification.crossval import held_out_errors
+    from verification.simulate import perturb_robot, random_configurations
+
+    nominal = load_robot(ARM_6R)
+    truth = load_robot(perturb_robot(nominal, np.random.default_rng(5)))
+    names = nominal.topology(("flange",)).joint_names
+    flange_T_camera = np.eye(4)
+    flange_T_camera[:3, :3] = matrix_from_rotation_vector([0.1, -0.2, 0.3])
+    flange_T_camera[:3, 3] = [0.03, -0.05, 0.08]
+    root_T_board = np.eye(4)
+    root_T_board[:3, :3] = matrix_from_rotation_vector([3.0, 0.2, -0.1])
+    root_T_board[:3, 3] = [0.6, 0.1, -0.2]
+    rng = np.random.default_rng(2)
+    qs = random_configurations(*nominal.joint_limits(names), 50, rng, fraction=0.6)
+    test_qs = random_configurations(*nominal.joint_limits(names), 20, rng, fraction=0.6)
+    for name, q in (("train.csv", qs), ("test.csv", test_qs)):
+        _camera_csv(tmp_path / name, truth, names, q, flange_T_camera, root_T_board)
+    out = tmp_path / "train.json"
+    args = ["import-csv", str(tmp_path / "train.csv"), "--urdf", str(tmp_path / "n.urdf")]
+    (tmp_path / "n.urdf").write_text(ARM_6R)
+    assert main([*args, "--frame", "flange", "--target", "board", "--out", str(out)]) == 0
+    train = read_measurements(out)
+    (group,) = train.targets
+    assert (group.camera, group.target) == ("flange", "board")
+    result = calibrate(nominal, train)
+    test = measurements_from_figaroh_csv(
+        tmp_path / "test.csv", robot=nominal, frame="flange", target="board"
+    )
+    unknowns = result.refined.unknowns
+    if result.refined.model_frame is not None:
+        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
+    pos, rot, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    assert pos.max() < 1e-8 and rot.max() < 1e-8
+    # a target needs orientation columns, and is measured in the camera
+    with pytest.raises(DatasetError, match="marker 1 has no phix1"):
+        measurements_from_figaroh_csv(
+            VICON_CSV, robot=load_robot(URDF), frame="arm_7_link", target="board"
+        )
+    with pytest.raises(ValueError, match="exclude each other"):
+        measurements_from_figaroh_csv(
+            tmp_path / "test.csv",
+            robot=nominal,
+            frame="flange",
+            target="board",
+            measured_in="mocap",
+        )
