@@ -115,3 +115,33 @@ def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys,
     assert "candidate" not in out
     notes = json.loads((tmp_path / "f.json").read_text())["notes"]
     assert not any(n.startswith("parameters: ") for n in notes)
+
+
+def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
+    """A 60 mm error planted in one plate pose: the full-data fit rejects it and the
+    choice names it; scored without it, the fold that holds it scores like the others
+    (unscored it dominates that fold: > 10 mm on 1 mm noise)."""
+    from dataclasses import replace
+
+    from verification.crossval import crossvalidate
+
+    _, clean = mounts_only
+    poses = list(clean.poses)
+    T = poses[0].meas_T_frame.copy()
+    T[7, :3, 3] += [0.0, 0.06, 0.0]
+    poses[0] = replace(poses[0], meas_T_frame=T)
+    bad = replace(clean, poses=tuple(poses))
+    choice = choose_parameters(head, bad, k=4)
+    sample = int(clean.poses[0].sample[7])
+    assert choice.excluded == ((sample, "pose", PLATES[0], None),)
+    assert f"not scored (sample(s) {sample})" in choice.reason
+    order = np.random.default_rng(0).permutation(bad.n_samples)
+    (fold,) = [f for f, idx in enumerate(np.array_split(order, 4)) if sample in idx]
+    for exclude in (False, True):
+        cv = crossvalidate(head, bad, k=4, sets=("frames",), exclude_flagged=exclude)
+        hit = next(s.position_rms_mm for s in cv.scores if s.fold == fold)
+        others = [s.position_rms_mm for s in cv.scores if s.fold != fold]
+        if exclude:
+            assert hit < 2.0 * max(others)
+        else:
+            assert hit > 10.0 > 2.0 * max(others)

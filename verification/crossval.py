@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from identification.pipeline import calibrate
+from identification.pipeline import Calibration, calibrate
 from identification.refine import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
 from kinfw.observations import kind_of
@@ -283,6 +283,7 @@ def crossvalidate(
     progress: Callable[[int, int], None] | None = None,
     executor: Executor | None = None,
     exclude_flagged: bool = False,
+    reference: Calibration | None = None,
 ) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
@@ -309,11 +310,13 @@ def crossvalidate(
         Leave the observations the full-data fit (``"full"``, this ``loss``) rejects as
         gross errors out of the held-out scores (:attr:`CrossValidation.excluded`);
         nothing is rejected with ``loss="linear"``.
+    reference : Calibration, optional
+        That full-data fit, when the caller has it already (the model choice scores
+        several priors against the same flags and noise).
     """
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
-    reference = None
-    if exclude_flagged or (select and noise is None):
+    if reference is None and (exclude_flagged or (select and noise is None)):
         # the full-data fit: its noise whitens the selection, its rejections are flagged
         reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
