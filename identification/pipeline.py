@@ -114,7 +114,10 @@ def calibrate(
         Parameter set of the refinement (:func:`identification.refine.refine`):
         ``"full"``, ``"offsets"``, ``"frames"``, ``"none"`` or joint names.
     prior : (sigma_m, sigma_rad), optional
-        Gaussian prior on deviations from the nominal geometry.
+        Gaussian prior on deviations from the nominal geometry. A deliberately
+        restricted model, like a smaller ``parameters`` set: its residuals are neither
+        refused nor warned about (a too strong prior just predicts badly; the model
+        choice scores it so).
     progress : callable, optional
         Called with a one-line message after each stage (the command line prints them);
         the library itself stays quiet.
@@ -130,12 +133,13 @@ def calibrate(
       determine the free parameters with redundancy
       (:func:`identification.redundancy.check_redundancy`; with ``parameters="full"``
       the message says whether ``"frames"`` would be determined);
-    - after the refinement over every parameter, that it fits
+    - after the refinement over every parameter (without a prior), that it fits
       (:func:`identification.units.check_fit`).
 
-    After the refinement over every parameter, residuals that follow the joint values or
-    exceed a plausible noise are warned about (``UserWarning``, one line each, naming the
-    frame, the joint and the likely cause: :func:`identification.fit_checks.fit_warnings`).
+    After the refinement over every parameter without a prior, residuals that follow the
+    joint values or exceed a plausible noise are warned about (``UserWarning``, one line
+    each, naming the frame, the joint and the likely cause:
+    :func:`identification.fit_checks.fit_warnings`).
 
     Raises
     ------
@@ -213,10 +217,11 @@ def calibrate(
             parameters=parameters,
             prior=prior,
         )
-        # a smaller set is a deliberately restricted model (baselines, cross-validation):
-        # its residuals are expected to show what it leaves out
-        found = fit_warnings(refined, data) if parameters == "full" else ()
-        if parameters == "full":
+        # a smaller set, or a prior, is a deliberately restricted model (baselines, the
+        # model choice's candidates): its residuals are expected to show what it leaves out
+        unrestricted = parameters == "full" and prior is None
+        found = fit_warnings(refined, data) if unrestricted else ()
+        if unrestricted:
             try:
                 check_fit(refined, data.source)
             except UnitError as exc:  # the residuals' structure names a likelier cause

@@ -145,3 +145,18 @@ def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
             assert hit < 2.0 * max(others)
         else:
             assert hit > 10.0 > 2.0 * max(others)
+
+
+def test_a_prior_too_strong_for_the_robot_is_scored_not_refused(head):
+    """A truth 30 mm / 3 deg from the nominal: with a 0.1 mm / 0.001 rad prior the fit
+    stays near the nominal and leaves residuals the unrestricted check would refuse
+    ("the data does not describe this robot"); a prior is a deliberate restriction, so
+    it is fitted, and predicts worse than the free fit at the truth."""
+    truth = load_robot(
+        perturb_robot(head, np.random.default_rng(8), origin_mm=30.0, origin_deg=3.0, axis_deg=1.0)
+    )
+    data = _data(truth, 20, 4, noise_m=0.5e-3, noise_rad=0.005)
+    strong = (1e-4, 1e-3)
+    pos_strong, _ = _held_out_vs_truth(head, truth, data, "full", strong)
+    pos_free, _ = _held_out_vs_truth(head, truth, data, "full", None)
+    assert pos_strong > 20.0 > 1.0 > pos_free  # mm
