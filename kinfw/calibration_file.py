@@ -38,6 +38,7 @@ __all__ = [
     "CalibrationSidecar",
     "DataProvenance",
     "DocReader",
+    "ModelSummary",
     "NoiseSummary",
     "read_sidecar",
     "write_sidecar",
@@ -210,6 +211,50 @@ class DataProvenance:
 
 
 @dataclass(frozen=True, slots=True)
+class ModelSummary:
+    """The model the refinement fitted: its parameter set and prior, and why.
+
+    Attributes
+    ----------
+    parameters : tuple of str
+        ``("full",)``, ``("offsets",)``, ``("frames",)``, ``("none",)`` or joint names.
+    prior_m, prior_rad : float or None
+        Sigmas of the Gaussian prior on the deviations from the nominal (m; rad), None
+        without a prior.
+    reason : str
+        ``"given"`` (by the caller, ``--params`` / ``--prior-*``) or the model choice's
+        one-line reason (:class:`verification.model_choice.ModelChoice`).
+    """
+
+    parameters: tuple[str, ...]
+    prior_m: float | None
+    prior_rad: float | None
+    reason: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "parameters": list(self.parameters),
+            "prior_mm": None if self.prior_m is None else 1e3 * self.prior_m,
+            "prior_deg": None if self.prior_rad is None else math.degrees(self.prior_rad),
+            "reason": self.reason,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, reader: DocReader, at: str) -> ModelSummary:
+        doc = reader.obj(doc, at)
+        mm = reader.number(doc, "prior_mm", at, optional=True)
+        deg = reader.number(doc, "prior_deg", at, optional=True)
+        if (mm is None) != (deg is None):
+            raise reader.fail(reader.path(at, "prior_mm"), "prior_mm and prior_deg both or neither")
+        return cls(
+            reader.strings(doc, "parameters", at),
+            None if mm is None else 1e-3 * mm,
+            None if deg is None else math.radians(deg),
+            reader.string(doc, "reason", at),
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class NoiseSummary:
     """The noise that whitened the residuals: one sigma per noise component.
 
@@ -372,6 +417,9 @@ class CalibrationSidecar:
         ``(target, root_T_target)`` of the hand-eye step (before the refinement).
     errors_held_out : tuple of BeforeAfter or None
         Errors on held-out data, when the calibration had some.
+    model : ModelSummary or None
+        The refinement's parameter set and prior, and why (None without the refinement,
+        and in files written before it was recorded).
     """
 
     created: str
@@ -387,6 +435,7 @@ class CalibrationSidecar:
     unknowns: tuple[CalibratedUnknown, ...] = ()
     hand_eye_targets: tuple[tuple[str, NDArray[np.float64]], ...] = ()
     errors_held_out: tuple[BeforeAfter, ...] | None = None
+    model: ModelSummary | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -452,7 +501,7 @@ class CalibrationSidecar:
             "errors_held_out": None
             if self.errors_held_out is None
             else [row.to_dict() for row in self.errors_held_out],
-        }
+        } | ({} if self.model is None else {"model": self.model.to_dict()})
 
     @classmethod
     def from_dict(cls, doc: Any, source: str = "<memory>") -> CalibrationSidecar:
@@ -478,6 +527,7 @@ class CalibrationSidecar:
                 )
             )
         held_out = r.value(doc, "errors_held_out", "", optional=True)
+        model = r.value(doc, "model", "", optional=True)
         return cls(
             created=r.string(doc, "created", ""),
             kinfw_version=r.string(doc, "kinfw_version", ""),
@@ -497,6 +547,7 @@ class CalibrationSidecar:
             errors_held_out=None
             if held_out is None
             else BeforeAfter.rows_from(held_out, r, "errors_held_out"),
+            model=None if model is None else ModelSummary.from_dict(model, r, "model"),
             source=source,
         )
 

@@ -111,8 +111,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         data_path=args.data,
         held_out=held_out,
         progress=progress_printer(),
+        reason="given" if choice is None else choice.reason,
     )
-    if choice is not None:  # the choice goes to the report's notes
+    if choice is not None:  # the choice goes to the report's notes (and the sidecar)
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )

@@ -139,6 +139,14 @@ def test_an_external_measurement_frame_is_known_as_w_T_root():
             "errors_held_out[1].n: expected an integer, got 1.5",
         ),
         (lambda d: d["data"].update(n_samples=None), "data.n_samples: expected an integer"),
+        (
+            lambda d: d.update(model={"parameters": ["full"], "prior_mm": 1.0, "reason": "x"}),
+            "model.prior_mm: expected prior_mm and prior_deg both or neither",
+        ),
+        (
+            lambda d: d.update(model={"parameters": "full", "reason": "given"}),
+            "model.parameters: expected",
+        ),
     ],
 )
 def test_a_bad_sidecar_names_the_file_and_the_key(tmp_path, legacy_doc, edit, message):

@@ -7,12 +7,14 @@ import pytest
 
 import verification.model_choice as model_choice
 from identification.pipeline import calibrate
+from kinfw.calibration_file import read_sidecar
 from kinfw.cli import main
 from kinfw.cpc import cpc_from_robot
 from kinfw.measurement_file import write_measurements
 from kinfw.robot import load_robot
 from tests.robots import HEAD_URDF as HEAD
 from verification.model_choice import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
+from verification.report import sidecar_path
 from verification.simulate import perturb_robot, random_configurations, simulate
 
 PLATES = ("left_plate", "right_plate")
@@ -110,11 +112,30 @@ def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys,
     notes = json.loads((tmp_path / "r.json").read_text())["notes"]
     (note,) = [n for n in notes if n.startswith("parameters: ")]
     assert not note.startswith("parameters: full (") and "cross-validation" in note
+    # the sidecar beside the URDF records the same choice, read back typed
+    model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
+    label = note.removeprefix("parameters: ").split(" (")[0]
+    assert label.split(",")[0] == model.parameters[0] and model.reason in note
+    assert (model.prior_m is None) == ("prior" not in label)
     assert main([*base, "--params", "full", "--report", str(tmp_path / "f.json")]) == 0
     out = capsys.readouterr().out
     assert "candidate" not in out
     notes = json.loads((tmp_path / "f.json").read_text())["notes"]
     assert not any(n.startswith("parameters: ") for n in notes)
+    model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
+    assert (model.parameters, model.prior_m, model.prior_rad, model.reason) == (
+        ("full",),
+        None,
+        None,
+        "given",
+    )
+    args = [*base, "--params", "frames", "--prior-mm", "2", "--prior-deg", "0.5"]
+    assert main(args) == 0
+    model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
+    assert model.parameters == ("frames",) and model.reason == "given"
+    assert model.prior_m == pytest.approx(2e-3) and model.prior_rad == pytest.approx(
+        np.radians(0.5)
+    )
 
 
 def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):

@@ -20,6 +20,7 @@ from kinfw.calibration_file import (
     CalibratedUnknown,
     CalibrationSidecar,
     DataProvenance,
+    ModelSummary,
     NoiseSummary,
 )
 from kinfw.calibration_report import (
@@ -371,10 +372,12 @@ def sidecar(
     *,
     nominal_path: str | Path | None,
     calibrated_path: str | Path,
+    model: ModelSummary | None = None,
 ) -> CalibrationSidecar:
     """The provenance written beside a calibrated URDF: what produced it and what is
     needed to predict measurements that is not in the URDF (the root's pose in the
-    measurement frame, target poses, markers, noise)."""
+    measurement frame, target poses, markers, noise), and the model the refinement
+    fitted (``model``; dropped without a refinement)."""
     refined = calibration.refined
     return CalibrationSidecar(
         created=report.created,
@@ -392,6 +395,7 @@ def sidecar(
         if calibration.cameras is None
         else tuple(calibration.cameras.root_T_targets),
         errors_held_out=report.errors_held_out,
+        model=None if refined is None else model,
     )
 
 
@@ -471,10 +475,12 @@ def calibrate_to_files(
     data_path: str | Path | None = None,
     held_out: Measurements | None = None,
     progress=None,
+    reason: str = "given",
 ) -> tuple[CalibrationReport, Calibration]:
     """Calibrate (:func:`identification.pipeline.calibrate`), then write the calibrated
     URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
-    is computed.
+    is computed. The sidecar records ``parameters`` and ``prior`` with ``reason`` (why
+    this model: ``"given"``, or the model choice's reason).
 
     Returns
     -------
@@ -508,7 +514,13 @@ def calibrate_to_files(
         held_out=held_out,
     )
     nominal_path = None if nominal.source.startswith("<") else nominal.source
-    side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out)
+    model = ModelSummary(
+        (parameters,) if isinstance(parameters, str) else tuple(parameters),
+        None if prior is None else float(prior[0]),
+        None if prior is None else float(prior[1]),
+        reason,
+    )
+    side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out, model=model)
     write_urdf(out, result.urdf_xml)
     write_sidecar(sidecar_path(out), side)
     return replace(report, sidecar=str(sidecar_path(out))), result
