@@ -66,7 +66,7 @@ def test_small_data_is_not_given_the_full_set_and_predicts_the_truth_better(head
     assert choice.rows_per_parameter < ROWS_PER_PARAMETER and choice.k == 4
     assert (choice.parameters, choice.prior) != ("full", None)
     labels = [c.label for c in choice.candidates]
-    assert labels[:3] == ["frames", "offsets", "full"] and len(labels) == 6
+    assert labels[:3] == ["frames", "offsets", "full"] and len(labels) == 11
     assert "cross-validation" in choice.reason
     (chosen,) = [
         c for c in choice.candidates if (c.parameters, c.prior) == (choice.parameters, choice.prior)

@@ -1,0 +1,221 @@
+"""Which prior grid should the default model choice search? Cross-validation vs the truth.
+
+Run from the repository root (needs example-robot-data, a test dependency)::
+
+    python benchmarks/study_model_choice.py              # 6 trials per regime, ~15 min
+    python benchmarks/study_model_choice.py --trials 2   # a quick look
+
+Five regimes modelled on the real datasets of issue 12, each a "true" robot perturbed
+from the nominal URDF (:func:`verification.simulate.perturb_robot`: origin translations
+and rotations, axis tilts) and measured with noise:
+
+- ``A``: TIAGo torso + arm, one mocap marker of unknown offset in an unknown frame, small
+  errors (0.5 mm, 0.1 deg) under 2 mm noise, 35 samples, one 68 mm gross error;
+- ``B``: the same arm, large errors (2 mm, 0.5 deg), 1 mm noise, 21 samples (the real
+  Vicon session's size);
+- ``C``: the same arm, 1 mm / 0.3 deg errors, 1 mm noise, 35 samples, one gross error;
+- ``D``: a UR10 with a camera on ``tool0`` seeing a fixed board (6D, 2 mm / 0.3 deg
+  noise), 1 mm / 0.3 deg errors, 23 samples;
+- ``E``: TALOS torso + left arm, one marker, 1 mm / 0.3 deg errors, 2 mm noise, 35
+  samples, one gross error.
+
+For every candidate model (frames, offsets, full, and full with a Gaussian prior
+``(s, s / lever)`` for ``s`` in 0.1-10 mm and ``lever`` 0.1 or 0.5 m), the 5-fold
+cross-validated position RMS (the rejected observations left out of the scores, as the
+model choice does) and the RMS against the truth at 300 new configurations
+(noise-free). A *rule* is a candidate list; it picks the candidate with the lowest
+cross-validated error, and the table prints the truth RMS of its picks, averaged over the
+trials, next to the oracle (the best candidate at the truth).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import warnings
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # study the code next to this script, installed or not
+    sys.path.insert(0, str(REPO))
+
+from benchmarks.common import format_table, machine_info  # noqa: E402
+from identification.pipeline import calibrate  # noqa: E402
+from identification.refine import Unknown  # noqa: E402
+from kinfw.measurements import Measurements  # noqa: E402
+from kinfw.robot import Robot, load_robot  # noqa: E402
+from kinfw.transforms import matrix_from_rotation_vector  # noqa: E402
+from tests.erd import urdf_path  # noqa: E402
+from verification.crossval import crossvalidate, held_out_errors  # noqa: E402
+from verification.simulate import perturb_robot, random_configurations, simulate  # noqa: E402
+
+#: (URDF in example-robot-data, observed frame, "marker" or "camera")
+ROBOTS = {
+    "tiago": ("tiago_description/robots/tiago_no_hand.urdf", "arm_7_link", "marker"),
+    "ur10": ("ur_description/urdf/ur10_robot.urdf", "tool0", "camera"),
+    "talos": ("talos_data/robots/talos_full_v2.urdf", "arm_left_7_link", "marker"),
+}
+MARKER_M = np.array([0.006, 0.026, 0.234])  # marker offset on the frame (TIAGo's), m
+MOCAP_T_ROOT = np.eye(4)
+MOCAP_T_ROOT[:3, :3] = matrix_from_rotation_vector([0.3, -0.2, 1.0])
+MOCAP_T_ROOT[:3, 3] = [1.0, -0.5, 0.2]
+GROSS_M = 0.068
+
+
+@dataclass(frozen=True, slots=True)
+class Regime:
+    robot: str
+    origin_mm: float
+    origin_deg: float
+    noise_m: float
+    n: int
+    gross: bool
+
+
+REGIMES = {
+    "A tiago small errors": Regime("tiago", 0.5, 0.1, 2e-3, 35, True),
+    "B tiago large errors": Regime("tiago", 2.0, 0.5, 1e-3, 21, False),
+    "C tiago mid errors": Regime("tiago", 1.0, 0.3, 1e-3, 35, True),
+    "D ur10 flange camera": Regime("ur10", 1.0, 0.3, 2e-3, 23, False),
+    "E talos torso+arm": Regime("talos", 1.0, 0.3, 2e-3, 35, True),
+}
+SETS = (("frames", None), ("offsets", None), ("full", None))
+PRIORS = tuple((s, s / lever) for s in (0.1e-3, 0.3e-3, 1e-3, 3e-3, 10e-3) for lever in (0.1, 0.5))
+RULES = {
+    "sets only": (),
+    "lever 0.1 m, 1-10 mm (before)": tuple(p for p in PRIORS if p[0] >= 1e-3 and p[0] / p[1] < 0.2),
+    "lever 0.5 m, 0.3-10 mm": tuple(p for p in PRIORS if p[0] >= 0.3e-3 and p[0] / p[1] > 0.2),
+    "both levers, 0.3-10 mm (now)": tuple(p for p in PRIORS if p[0] >= 0.3e-3),
+    "both levers, 0.1-10 mm": PRIORS,
+}
+
+
+def label(parameters: str, prior: tuple[float, float] | None) -> str:
+    if prior is None:
+        return parameters
+    return f"{parameters} {1e3 * prior[0]:.1f} mm / {1e3 * prior[1]:.1f} mrad"
+
+
+def dataset(
+    truth: Robot, regime: Regime, n: int, rng: np.random.Generator, *, noisy: bool
+) -> Measurements:
+    """``n`` samples of ``truth``: marker points in 'mocap', or board poses in the camera."""
+    _, frame, how = ROBOTS[regime.robot]
+    names = truth.topology((frame,)).joint_names
+    qs = random_configurations(*truth.joint_limits(names), n, rng, fraction=0.8)
+    noise_m = regime.noise_m if noisy else 0.0
+    if how == "camera":
+        w_T_board = truth.frame_poses(np.zeros((1, len(names))), frame, names)[0].copy()
+        w_T_board[:3, 3] += w_T_board[:3, 2] * 0.6  # 0.6 m in front of the camera at zero
+        data = simulate(
+            truth,
+            qs,
+            names,
+            cameras=[frame],
+            rng=rng,
+            noise_m=noise_m,
+            noise_rad=np.radians(0.3) if noisy else 0.0,
+            w_T_target=w_T_board,
+        )
+        if regime.gross and noisy:
+            g = data.targets[0]
+            T = g.camera_T_target.copy()
+            T[0, :3, 3] += GROSS_M * rng.normal(size=3) / np.sqrt(3)
+            data = replace(data, targets=(replace(g, camera_T_target=T),))
+        return data
+    data = simulate(truth, qs, names, markers=[(frame, MARKER_M, "m1")], rng=rng, noise_m=noise_m)
+    R, p = MOCAP_T_ROOT[:3, :3], MOCAP_T_ROOT[:3, 3]
+    g = data.points[0]
+    meas_p = g.meas_p_point @ R.T + p
+    if regime.gross and noisy:
+        meas_p[0] += GROSS_M * rng.normal(size=3) / np.sqrt(3)
+    return replace(data, points=(replace(g, meas_p_point=meas_p, measured_in="mocap"),))
+
+
+def truth_rms_mm(nominal: Robot, result, test: Measurements) -> float:
+    """Position RMS (mm) of the calibration's predictions of noise-free ``test`` data."""
+    unknowns = result.refined.unknowns
+    if result.refined.model_frame is not None:
+        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
+    pos, _, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    return 1e3 * float(np.sqrt(np.mean(pos**2)))
+
+
+def trial(nominal: Robot, regime: Regime, seed: int) -> dict[str, tuple[float, float]]:
+    """``label -> (cross-validated mm, truth mm)`` of every candidate on one dataset."""
+    rng = np.random.default_rng(seed)
+    truth = load_robot(
+        perturb_robot(
+            nominal,
+            rng,
+            origin_mm=regime.origin_mm,
+            origin_deg=regime.origin_deg,
+            axis_deg=regime.origin_deg,
+        )
+    )
+    data = dataset(truth, regime, regime.n, rng, noisy=True)
+    test = dataset(truth, regime, 300, rng, noisy=False)
+    reference = calibrate(nominal, data, parameters="full")
+    out = {}
+    for parameters, prior in (*SETS, *(("full", p) for p in PRIORS)):
+        cv = crossvalidate(
+            nominal,
+            data,
+            sets=(parameters,),
+            prior=prior,
+            exclude_flagged=True,
+            reference=reference,
+        )
+        fit = calibrate(nominal, data, parameters=parameters, prior=prior)
+        out[label(parameters, prior)] = (cv.mean(parameters), truth_rms_mm(nominal, fit, test))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=6, help="datasets per regime (6)")
+    parser.add_argument("--seed", type=int, default=100, help="first seed (100)")
+    args = parser.parse_args(argv)
+    warnings.simplefilter("ignore")  # the fits' data warnings; the study reads numbers
+    print(machine_info())
+    t0 = time.perf_counter()
+    candidates = [label(*c) for c in SETS] + [label("full", p) for p in PRIORS]
+    per_regime = {}
+    for name, regime in REGIMES.items():
+        nominal = load_robot(urdf_path(ROBOTS[regime.robot][0]))
+        runs = [trial(nominal, regime, args.seed + t) for t in range(args.trials)]
+        per_regime[name] = runs
+        rows = [
+            [
+                c,
+                f"{np.mean([r[c][0] for r in runs]):.3f}",
+                f"{np.mean([r[c][1] for r in runs]):.3f}",
+            ]
+            for c in candidates
+        ]
+        print(f"\n{name}: {regime}, {args.trials} trials")
+        print(format_table(["candidate", "CV mm", "truth mm"], rows))
+    print("\nTruth RMS (mm) of each rule's pick (lowest CV among its candidates), mean over trials")
+    rows = []
+    for rule, priors in RULES.items():
+        allowed = [label(*c) for c in SETS] + [label("full", p) for p in priors]
+        cells = [rule]
+        for runs in per_regime.values():
+            picks = [r[min(allowed, key=lambda c, r=r: r[c][0])][1] for r in runs]
+            cells.append(f"{np.mean(picks):.3f}")
+        rows.append(cells)
+    oracle = ["oracle (best at the truth)"]
+    for runs in per_regime.values():
+        oracle.append(f"{np.mean([min(v[1] for v in r.values()) for r in runs]):.3f}")
+    rows.append(oracle)
+    print(format_table(["rule", *(n.split()[0] for n in REGIMES)], rows))
+    print(f"\nwall time {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
