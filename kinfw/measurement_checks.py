@@ -22,7 +22,12 @@ from kinfw.observations.reader import DatasetError
 if TYPE_CHECKING:
     from kinfw.robot import Robot
 
-__all__ = ["DISTINCT_TOL", "check_against_robot", "check_joint_motion"]
+__all__ = [
+    "DISTINCT_TOL",
+    "check_against_robot",
+    "check_joint_motion",
+    "robot_measurement_frames",
+]
 
 logger = logging.getLogger("kinfw.measurements")
 
@@ -35,8 +40,11 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
 
     Checks that every entry of ``joint_names`` is a movable joint of the robot, that
     every observed frame is a link or joint of the URDF whose path from the root has
-    only supported joints (:meth:`Robot.movable_path`), and that every ``measured_in`` is
-    either the root link or a frame that is not in the URDF. Joint values outside the
+    only supported joints (:meth:`Robot.movable_path`), and that no observation is
+    measured in its own frame. A ``measured_in`` is the root link, a frame that is not
+    in the URDF (external: its pose in the root is estimated), or any other frame of the
+    URDF (it moves with the robot, e.g. a head camera: its path is checked like an
+    observed frame's, :func:`robot_measurement_frames`). Joint values outside the
     URDF limits are warned about (one :class:`UserWarning` per joint), not rejected.
 
     Parameters
@@ -82,8 +90,28 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             f"{robot.source}; its movable joints are {list(movable)}"
         )
 
+    root = robot.root_link
+    first_in: dict[str, int] = {}
+    for g in m.all_groups():
+        kind = kind_of(g)
+        frame_in = kind.measured_in(g)
+        if frame_in is None or not len(g.sample):
+            continue
+        first = int(g.sample.min())
+        first_in[frame_in] = min(first_in.get(frame_in, first), first)
+        if frame_in in kind.frames(g):
+            raise DatasetError(
+                f"{src}: samples[{first}]: a {kind.name} observation of frame {frame_in!r} "
+                f"is measured in {frame_in!r} itself; measured_in must be another frame "
+                f"(the root link, an external frame, or another frame of {robot.source})"
+            )
+    uses = dict(first_uses(m))
+    for frame_in, i in first_in.items():
+        if frame_in != root and robot.has_frame(frame_in) and frame_in not in uses:
+            uses[frame_in] = (i, "measured_in")
+
     used: set[str] = set()
-    for frame, (i, kind) in first_uses(m).items():
+    for frame, (i, kind) in uses.items():
         if not robot.has_frame(frame):
             raise DatasetError(
                 f"{src}: samples[{i}]: frame {frame!r} ({kind} observation) is "
@@ -105,23 +133,6 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
         )
 
-    root = robot.root_link
-    first_in: dict[str, int] = {}
-    for g in m.all_groups():
-        frame_in = kind_of(g).measured_in(g)
-        if frame_in is not None and len(g.sample):
-            first = int(g.sample.min())
-            first_in[frame_in] = min(first_in.get(frame_in, first), first)
-    for frame_in, i in first_in.items():
-        if frame_in != root and robot.has_frame(frame_in):
-            raise DatasetError(
-                f"{src}: samples[{i}]: measured_in {frame_in!r} is a frame of "
-                f"{robot.source} but not its root link {root!r}; measurements are expressed "
-                f"either in the root link (omit measured_in) or in an external frame that is "
-                f"not in the URDF (its pose in the root is then estimated). Express the data "
-                f"in {root!r}, or rename the external frame"
-            )
-
     _warn_limits(m, robot)
     if root not in first_in:
         return m
@@ -130,6 +141,20 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
             for g in m.all_groups()
         )
+    )
+
+
+def robot_measurement_frames(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The ``measured_in`` frames that are frames of ``robot`` other than its root link.
+
+    Observations in such a frame ``c`` (a camera on the robot's head) are predicted as
+    ``inv(root_T_c(q)) @ root_T_frame(q)``: ``c`` is an end frame of the model like the
+    observed frames. In order of first appearance, no duplicates.
+    """
+    root = robot.root_link
+    names = (kind_of(g).measured_in(g) for g in measurements.all_groups())
+    return tuple(
+        dict.fromkeys(n for n in names if n is not None and n != root and robot.has_frame(n))
     )
 
 
