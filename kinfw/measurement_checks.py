@@ -7,6 +7,7 @@ against the robot (and warns about joint values outside the limits);
 
 from __future__ import annotations
 
+import difflib
 import logging
 import warnings
 from collections.abc import Sequence
@@ -104,6 +105,22 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
                 f"{src}: samples[{first}]: a {kind.name} observation of frame {frame_in!r} "
                 f"is measured in {frame_in!r} itself; measured_in must be another frame "
                 f"(the root link, an external frame, or another frame of {robot.source})"
+            )
+    for frame_in, i in first_in.items():
+        close = (
+            []
+            if robot.has_frame(frame_in)
+            else difflib.get_close_matches(frame_in, robot.link_names, n=1, cutoff=0.85)
+        )
+        if close:  # an external frame, or a typo of a robot frame?
+            logger.warning(
+                "%s: samples[%d]: measured_in %r is not a frame of %s: it is taken as an "
+                "external frame whose pose is estimated; did you mean the robot frame %r?",
+                src,
+                i,
+                frame_in,
+                robot.source,
+                close[0],
             )
     uses = dict(first_uses(m))
     for frame_in, i in first_in.items():
