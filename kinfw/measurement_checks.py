@@ -27,6 +27,7 @@ __all__ = [
     "DISTINCT_TOL",
     "check_against_robot",
     "check_joint_motion",
+    "observed_joints",
     "robot_measurement_frames",
 ]
 
@@ -173,6 +174,33 @@ def robot_measurement_frames(measurements: Measurements, robot: Robot) -> tuple[
     return tuple(
         dict.fromkeys(n for n in names if n is not None and n != root and robot.has_frame(n))
     )
+
+
+def observed_joints(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The movable joints whose geometry the observations see (robot order).
+
+    The joints on the paths from the root to the observed frames and to the robot
+    frames observations are measured in; when every observation is measured in a frame
+    of the robot (relative poses), without the joints above each pair's common ancestor,
+    which move both frames alike and never enter the data.
+    """
+    frames = (*measurements.observed_frames, *robot_measurement_frames(measurements, robot))
+    names = set(robot.topology(tuple(dict.fromkeys(frames))).joint_names)
+    root = robot.root_link
+
+    def path(frame: str) -> set[str]:
+        return {j.name for j in robot.path_joints(frame) if j.type != "fixed"}
+
+    shared: set[str] | None = None
+    for g in measurements.all_groups():
+        kind = kind_of(g)
+        inside = kind.measured_in(g)
+        if inside is None or inside == root or not robot.has_frame(inside):
+            return tuple(n for n in robot.joint_names if n in names)
+        for f in kind.frames(g):
+            common = path(f) & path(inside)
+            shared = common if shared is None else shared & common
+    return tuple(n for n in robot.joint_names if n in names - (shared or set()))
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:

@@ -24,6 +24,7 @@ import pytest
 from identification.problem import build_problem
 from identification.refine import refine
 from kinfw.cli import main
+from kinfw.measurement_checks import observed_joints
 from kinfw.measurements import DatasetError, Measurements, PoseObservations, read_measurements
 from kinfw.observations import kind_of
 from kinfw.observations.numeric import NumericContext
@@ -228,6 +229,8 @@ def test_real_tiago_eye_hand_session_converts_and_calibrates(tmp_path, capsys):
     tiago = load_robot(TIAGO)
     # no torso column: torso_lift_joint is above both branches, held at zero (unseen)
     assert "torso_lift_joint" not in data.joint_names
+    seen = observed_joints(data, tiago)
+    assert "torso_lift_joint" not in seen and {"head_1_joint", "arm_7_joint"} <= set(seen)
     pos_nominal, rot_nominal = _board_constancy(tiago, data)
     assert 0.025 < pos_nominal < 0.035 and 4 < np.degrees(rot_nominal) < 6.5  # 29.6 mm, 5.2 deg
     result = refine(tiago, data, parameters="frames")
