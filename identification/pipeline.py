@@ -27,6 +27,7 @@ from identification.redundancy import check_redundancy
 from identification.refine import NoiseModel, RefineResult, build_problem, refine
 from identification.units import UnitError, check_fit, check_units
 from kinfw.cpc import geometry_from_cpc
+from kinfw.measurement_checks import observed_joints
 from kinfw.measurements import DatasetError, Measurements, check_joint_motion
 from kinfw.robot import Robot
 from kinfw.transforms import average_transform
@@ -160,7 +161,7 @@ def calibrate(
     if method == "refine":
         # every joint on a measured path must move, or its geometry is not observed
         if parameters in ("full", "offsets"):
-            check_joint_motion(data, nominal.topology(data.observed_frames).joint_names)
+            check_joint_motion(data, observed_joints(data, nominal))
         cameras_seen = {g.camera for g in data.targets}
         smaller = None
         if parameters == "full":

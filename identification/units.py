@@ -63,7 +63,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identification.refine import RefineResult
-from kinfw.measurements import DatasetError, Measurements, check_against_robot
+from kinfw.measurements import (
+    DatasetError,
+    Measurements,
+    check_against_robot,
+    robot_measurement_frames,
+)
 from kinfw.robot import Robot
 from kinfw.transforms import inverse_transform, rotation_angle
 
@@ -221,25 +226,39 @@ class UnitDiagnostics:
 
 @dataclass(frozen=True, slots=True)
 class _Track:
-    """One observation group: measured poses in a fixed frame, rows used."""
+    """One observation group: measured poses in a fixed frame (or in a frame ``inside``
+    of the robot: then compared with the nominal relative poses), rows used."""
 
     frame: str
     sample: NDArray[np.int64]  # (m,)
     meas_p: NDArray[np.float64]  # (m, 3), metres as read
     meas_R: NDArray[np.float64] | None  # (m, 3, 3) or None for points
     offset: NDArray[np.float64]  # (3,) point on the frame (zero: its origin)
+    inside: str | None = None  # a measured_in that is a frame of the robot
 
 
 def _evenly(n: int) -> NDArray[np.int64]:
     return np.unique(np.linspace(0, n - 1, min(n, MAX_OBSERVATIONS)).round().astype(np.int64))
 
 
-def _tracks(data: Measurements) -> list[_Track]:
+def _tracks(data: Measurements, nominal: Robot) -> list[_Track]:
+    def inside(name: str | None) -> str | None:
+        return name if name is not None and nominal.has_frame(name) else None
+
     tracks = []
     for g in data.poses:
         k = _evenly(len(g.sample))
         T = g.meas_T_frame[k]
-        tracks.append(_Track(g.frame, g.sample[k], T[:, :3, 3], T[:, :3, :3], np.zeros(3)))
+        tracks.append(
+            _Track(
+                g.frame,
+                g.sample[k],
+                T[:, :3, 3],
+                T[:, :3, :3],
+                np.zeros(3),
+                inside(g.measured_in),
+            )
+        )
     for t in data.targets:
         k = _evenly(len(t.sample))
         T = inverse_transform(t.camera_T_target[k])  # target_T_camera
@@ -253,6 +272,7 @@ def _tracks(data: Measurements) -> list[_Track]:
                 p.meas_p_point[k],
                 None,
                 np.zeros(3) if p.offset is None else p.offset,
+                inside(p.measured_in),
             )
         )
     return [t for t in tracks if len(t.sample) >= 2]
@@ -343,13 +363,15 @@ def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     with warnings.catch_warnings():  # limit warnings come again from the estimators
         warnings.simplefilter("ignore")
         data = check_against_robot(data, nominal)
-    topo = nominal.topology(data.observed_frames)
+    topo = nominal.topology(
+        tuple(dict.fromkeys((*data.observed_frames, *robot_measurement_frames(data, nominal))))
+    )
     listed = tuple(n for n in topo.joint_names if n in data.joint_names)
     qs = data.q_of(topo.joint_names)
     joints = _joint_values(nominal, listed, data.q_of(listed)) if listed else ()
     revolute = [n for n in listed if nominal.joint(n).is_revolute]
     prismatic = [n for n in listed if not nominal.joint(n).is_revolute]
-    tracks = _tracks(data)
+    tracks = _tracks(data, nominal)
     pairs = [np.triu_indices(len(t.sample), k=1) for t in tracks]
     measured = [
         _pair_motion(t.meas_p, t.meas_R, i, j) for t, (i, j) in zip(tracks, pairs, strict=True)
@@ -366,6 +388,9 @@ def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
             predicted[key] = []
             for t, (i, j) in zip(tracks, pairs, strict=True):
                 T = nominal.frame_poses(qs[t.sample] * scale, t.frame, topo.joint_names)
+                if t.inside is not None:  # measured in a frame of the robot: relative
+                    c_T = nominal.frame_poses(qs[t.sample] * scale, t.inside, topo.joint_names)
+                    T = inverse_transform(c_T) @ T
                 p, R = T[:, :3, :3] @ t.offset + T[:, :3, 3], T[:, :3, :3]
                 predicted[key].append(_pair_motion(p, None if t.meas_R is None else R, i, j))
         sums, count, ratio = 0.0, 0, []

@@ -7,6 +7,7 @@ against the robot (and warns about joint values outside the limits);
 
 from __future__ import annotations
 
+import difflib
 import logging
 import warnings
 from collections.abc import Sequence
@@ -22,7 +23,13 @@ from kinfw.observations.reader import DatasetError
 if TYPE_CHECKING:
     from kinfw.robot import Robot
 
-__all__ = ["DISTINCT_TOL", "check_against_robot", "check_joint_motion"]
+__all__ = [
+    "DISTINCT_TOL",
+    "check_against_robot",
+    "check_joint_motion",
+    "observed_joints",
+    "robot_measurement_frames",
+]
 
 logger = logging.getLogger("kinfw.measurements")
 
@@ -35,8 +42,11 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
 
     Checks that every entry of ``joint_names`` is a movable joint of the robot, that
     every observed frame is a link or joint of the URDF whose path from the root has
-    only supported joints (:meth:`Robot.movable_path`), and that every ``measured_in`` is
-    either the root link or a frame that is not in the URDF. Joint values outside the
+    only supported joints (:meth:`Robot.movable_path`), and that no observation is
+    measured in its own frame. A ``measured_in`` is the root link, a frame that is not
+    in the URDF (external: its pose in the root is estimated), or any other frame of the
+    URDF (it moves with the robot, e.g. a head camera: its path is checked like an
+    observed frame's, :func:`robot_measurement_frames`). Joint values outside the
     URDF limits are warned about (one :class:`UserWarning` per joint), not rejected.
 
     Parameters
@@ -82,8 +92,44 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             f"{robot.source}; its movable joints are {list(movable)}"
         )
 
+    root = robot.root_link
+    first_in: dict[str, int] = {}
+    for g in m.all_groups():
+        kind = kind_of(g)
+        frame_in = kind.measured_in(g)
+        if frame_in is None or not len(g.sample):
+            continue
+        first = int(g.sample.min())
+        first_in[frame_in] = min(first_in.get(frame_in, first), first)
+        if frame_in in kind.frames(g):
+            raise DatasetError(
+                f"{src}: samples[{first}]: a {kind.name} observation of frame {frame_in!r} "
+                f"is measured in {frame_in!r} itself; measured_in must be another frame "
+                f"(the root link, an external frame, or another frame of {robot.source})"
+            )
+    for frame_in, i in first_in.items():
+        close = (
+            []
+            if robot.has_frame(frame_in)
+            else difflib.get_close_matches(frame_in, robot.link_names, n=1, cutoff=0.85)
+        )
+        if close:  # an external frame, or a typo of a robot frame?
+            logger.warning(
+                "%s: samples[%d]: measured_in %r is not a frame of %s: it is taken as an "
+                "external frame whose pose is estimated; did you mean the robot frame %r?",
+                src,
+                i,
+                frame_in,
+                robot.source,
+                close[0],
+            )
+    uses = dict(first_uses(m))
+    for frame_in, i in first_in.items():
+        if frame_in != root and robot.has_frame(frame_in) and frame_in not in uses:
+            uses[frame_in] = (i, "measured_in")
+
     used: set[str] = set()
-    for frame, (i, kind) in first_uses(m).items():
+    for frame, (i, kind) in uses.items():
         if not robot.has_frame(frame):
             raise DatasetError(
                 f"{src}: samples[{i}]: frame {frame!r} ({kind} observation) is "
@@ -105,23 +151,6 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
         )
 
-    root = robot.root_link
-    first_in: dict[str, int] = {}
-    for g in m.all_groups():
-        frame_in = kind_of(g).measured_in(g)
-        if frame_in is not None and len(g.sample):
-            first = int(g.sample.min())
-            first_in[frame_in] = min(first_in.get(frame_in, first), first)
-    for frame_in, i in first_in.items():
-        if frame_in != root and robot.has_frame(frame_in):
-            raise DatasetError(
-                f"{src}: samples[{i}]: measured_in {frame_in!r} is a frame of "
-                f"{robot.source} but not its root link {root!r}; measurements are expressed "
-                f"either in the root link (omit measured_in) or in an external frame that is "
-                f"not in the URDF (its pose in the root is then estimated). Express the data "
-                f"in {root!r}, or rename the external frame"
-            )
-
     _warn_limits(m, robot)
     if root not in first_in:
         return m
@@ -131,6 +160,47 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             for g in m.all_groups()
         )
     )
+
+
+def robot_measurement_frames(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The ``measured_in`` frames that are frames of ``robot`` other than its root link.
+
+    Observations in such a frame ``c`` (a camera on the robot's head) are predicted as
+    ``inv(root_T_c(q)) @ root_T_frame(q)``: ``c`` is an end frame of the model like the
+    observed frames. In order of first appearance, no duplicates.
+    """
+    root = robot.root_link
+    names = (kind_of(g).measured_in(g) for g in measurements.all_groups())
+    return tuple(
+        dict.fromkeys(n for n in names if n is not None and n != root and robot.has_frame(n))
+    )
+
+
+def observed_joints(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The movable joints whose geometry the observations see (robot order).
+
+    The joints on the paths from the root to the observed frames and to the robot
+    frames observations are measured in; when every observation is measured in a frame
+    of the robot (relative poses), without the joints above each pair's common ancestor,
+    which move both frames alike and never enter the data.
+    """
+    frames = (*measurements.observed_frames, *robot_measurement_frames(measurements, robot))
+    names = set(robot.topology(tuple(dict.fromkeys(frames))).joint_names)
+    root = robot.root_link
+
+    def path(frame: str) -> set[str]:
+        return {j.name for j in robot.path_joints(frame) if j.type != "fixed"}
+
+    shared: set[str] | None = None
+    for g in measurements.all_groups():
+        kind = kind_of(g)
+        inside = kind.measured_in(g)
+        if inside is None or inside == root or not robot.has_frame(inside):
+            return tuple(n for n in robot.joint_names if n in names)
+        for f in kind.frames(g):
+            common = path(f) & path(inside)
+            shared = common if shared is None else shared & common
+    return tuple(n for n in robot.joint_names if n in names - (shared or set()))
 
 
 def _warn_limits(m: Measurements, robot: Robot) -> None:

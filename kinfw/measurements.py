@@ -81,7 +81,12 @@ writer are in :mod:`kinfw.measurement_file` and the checks in
 callers import from here).
 """
 
-from kinfw.measurement_checks import DISTINCT_TOL, check_against_robot, check_joint_motion
+from kinfw.measurement_checks import (
+    DISTINCT_TOL,
+    check_against_robot,
+    check_joint_motion,
+    robot_measurement_frames,
+)
 from kinfw.measurement_file import (
     FORMAT,
     SUPPORTED_VERSIONS,
@@ -113,5 +118,6 @@ __all__ = [
     "measurements_from_dict",
     "measurements_to_dict",
     "read_measurements",
+    "robot_measurement_frames",
     "write_measurements",
 ]

@@ -228,10 +228,13 @@ def test_cli_user_error_exits_2_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("kinfw import-csv: error: ") and "column 'z1'" in err
     assert not out.exists()
-    # measured in a frame of the URDF (the head camera): refused, the format cannot say it
+    # measured in the observed frame itself: refused (tests/test_measured_in_robot.py
+    # converts the eye-hand session in the head camera, a frame of the URDF)
     eye_hand = ["import-csv", str(EYE_HAND_CSV), *argv[2:]]
-    code = main([*eye_hand, "--measured-in", "xtion_rgb_optical_frame", "--out", str(out)])
-    assert code == 2 and "xtion_rgb_optical_frame" in capsys.readouterr().err
+    code = main([*eye_hand, "--measured-in", "arm_7_link", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.startswith("kinfw import-csv: error: ")
+    assert "frame 'arm_7_link' is measured in 'arm_7_link' itself" in err
     assert not out.exists()
     # an output that is an input is refused before any work
     assert main([*argv, "--out", str(path)]) == 2

@@ -1074,13 +1074,16 @@ def test_check_against_robot_external_measured_in_is_kept(robot):
     assert check_against_robot(m, robot).poses[0].measured_in == "mocap"
 
 
-def test_check_against_robot_rejects_a_non_root_urdf_frame_as_measured_in(robot):
+def test_check_against_robot_keeps_a_robot_frame_as_measured_in_but_not_the_frame_itself(robot):
+    # a frame of the URDF other than the root is a measurement frame that moves with the
+    # robot (tests/test_measured_in_robot.py); an observation in its own frame is refused
     m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head", measured_in="base")))
+    assert {g.measured_in for g in check_against_robot(m, robot).poses} == {None, "base"}
+    m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head", measured_in="head")))
     with pytest.raises(
         DatasetError,
         match=re.escape(
-            "data.json: samples[1]: measured_in 'base' is a frame of <urdf string> but not its "
-            "root link 'world'"
+            "data.json: samples[1]: a pose observation of frame 'head' is measured in 'head' itself"
         ),
     ):
         check_against_robot(m, robot)

@@ -12,6 +12,7 @@ There is no branch on an observation kind here.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -22,14 +23,16 @@ from numpy.typing import NDArray
 from kinfw.blocks import Block, BlockKey, ParameterName
 from kinfw.chart import rigid_from_chart
 from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.measurements import Measurements, check_against_robot
+from kinfw.measurements import Measurements, check_against_robot, robot_measurement_frames
 from kinfw.observations import ObservationKind, StartContext, kind_of
 from kinfw.observations.base import NoiseComponent
 from kinfw.robot import Robot
 
 from .functions import GroupFunctions, group_functions
-from .gauge import robot_blocks
+from .gauge import relative_gauge, robot_blocks
 from .start import estimate_unknowns, express_in, start_context
+
+logger = logging.getLogger("identification.problem")
 
 __all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown", "build_problem"]
 
@@ -402,10 +405,13 @@ def build_problem(
     measurements = check_against_robot(measurements, robot)
     start = robot if start is None else start
     groups = list(measurements.all_groups())
-    observed = measurements.observed_frames
-    in_frames = {kind_of(g).measured_in(g) for g in groups}
+    # frames of the robot that observations are measured in (a head camera) are end
+    # frames of the model too: the prediction is inv(w_T_c) w_T_frame
+    robot_in = robot_measurement_frames(measurements, robot)
+    observed = tuple(dict.fromkeys((*measurements.observed_frames, *robot_in)))
+    in_frames = {kind_of(g).measured_in(g) for g in groups} - set(robot_in)
     model_frame = None
-    if len(in_frames) == 1 and None not in in_frames:
+    if len(in_frames) == 1 and None not in in_frames and not robot_in:
         model_frame = next(iter(in_frames))  # everything in one external frame
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
@@ -444,6 +450,19 @@ def build_problem(
         )
         for g, fn in zip(groups, functions, strict=True)
     ]
+
+    if robot_in:  # relative measurements: fix what they leave undetermined
+        lower, upper = robot.joint_limits(model0.topology.joint_names)
+        blocks, fixed = relative_gauge(tuple(blocks), residual_groups, lower, upper)
+        if fixed:
+            logger.info(
+                "%s: measured in the robot's %s: %d parameters the relative poses do not "
+                "determine are fixed at their start: %s",
+                measurements.source,
+                list(robot_in),
+                len(fixed),
+                ", ".join(fixed),
+            )
 
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)

@@ -54,7 +54,7 @@ def express_in(
     seen only through points and markers, :func:`frame_from_markers`)."""
     from kinfw.cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
 
-    groups = list(measurements.all_groups())
+    groups = [g for g in measurements.all_groups() if kind_of(g).measured_in(g) == name]
     if meas_T_root is None:
         start = start_context(model, q_all, {}, None)
         est = [e for g in groups if (e := kind_of(g).root_pose_estimates(g, start)) is not None]
@@ -92,7 +92,8 @@ def estimate_unknowns(
 ) -> tuple[list[Block], list[tuple[BlockKey, str]]]:
     """Every unknown block with its start value, in closed form (or as ``given``).
 
-    External measurement frames first (from the kinds' root-pose estimates), then the
+    External measurement frames first (from the kinds' root-pose estimates; a
+    ``measured_in`` that is an end frame of ``model0`` is a robot frame, no unknown), then the
     blocks the groups request (:meth:`ObservationKind.unknowns`), merged by key. Returns
     the blocks and a description of each one estimated from these data.
     """
@@ -100,7 +101,12 @@ def estimate_unknowns(
     blocks: list[Block] = []
     fitted: list[tuple[BlockKey, str]] = []
     meas_T_w: dict[str, NDArray] = {}
-    external = sorted({kind_of(g).measured_in(g) for g in groups} - {None, model_frame})
+    # a measured_in that is a frame of the model moves with the robot: not an unknown
+    external = sorted(
+        {kind_of(g).measured_in(g) for g in groups}
+        - {None, model_frame}
+        - set(model0.topology.frames)
+    )
     for name in external:
         key = BlockKey("frame", name)
         if key in given:

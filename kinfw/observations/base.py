@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.blocks import Block, BlockKey
 from kinfw.observations.numeric import Drawing, NumericContext, gaussian_rows
 from kinfw.observations.reader import DatasetError, ObservationReader, describe
+from kinfw.transforms import inverse_transform
 
 __all__ = [
     "DatasetError",
@@ -166,7 +167,8 @@ class StartContext:
     frames : sequence of str
         Frame names (axis 1).
     meas_T_w : dict of str to ndarray (4, 4)
-        Start pose of the model frame in each external measurement frame.
+        Start pose of the model frame in each external measurement frame (a
+        ``measured_in`` that is one of ``frames`` is a robot frame: no entry).
     model_frame : str or None
         The external frame the model is expressed in (None: the URDF root).
     """
@@ -187,13 +189,22 @@ class StartContext:
         """Pose of ``frame`` in the model frame at the samples, shape (m, 4, 4)."""
         return self._w_T[sample, self._index[frame]]
 
+    def is_robot_frame(self, name: str | None) -> bool:
+        """Whether ``name`` is a frame of the model (a measurement frame that moves with
+        the robot, e.g. a head camera), not the model frame nor an external frame."""
+        return name is not None and name in self._index
+
     def meas_T(
         self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
     ) -> NDArray[np.float64]:
-        """Pose of ``frame`` in the measurement frame ``measured_in`` (None: the root)."""
+        """Pose (m, 4, 4) of ``frame`` in the measurement frame ``measured_in`` (None:
+        the root): ``meas_T_w @ w_T_frame`` for an external frame, ``inv(w_T_c) @
+        w_T_frame`` for a frame ``c`` of the robot (both from the model's FK)."""
         T = self.w_T(frame, sample)
         if measured_in is None or measured_in == self.model_frame:
             return T
+        if self.is_robot_frame(measured_in):
+            return inverse_transform(self.w_T(measured_in, sample)) @ T
         return self._meas_T_w[measured_in] @ T
 
 
@@ -222,11 +233,21 @@ class SymbolicContext:
         """SX value of an unknown block (4x4 for a rigid frame, 3x1 for a point)."""
         return self._values[key]
 
+    def is_robot_frame(self, name: str | None) -> bool:
+        """Whether ``name`` is a frame of the model (a measurement frame that moves with
+        the robot), not the model frame nor an external frame."""
+        return name is not None and name in self._frames
+
     def meas_T(self, measured_in: str | None, frame: str) -> Any:
-        """SX 4x4 pose of ``frame`` in the measurement frame ``measured_in``."""
+        """SX 4x4 pose of ``frame`` in the measurement frame ``measured_in``:
+        ``meas_T_w @ w_T_frame`` for an external frame (its block), ``inv(w_T_c) @
+        w_T_frame`` for a frame ``c`` of the robot (the calibration acts on both
+        branches)."""
         T = self.w_T(frame)
         if measured_in is None or measured_in == self.model_frame:
             return T
+        if self.is_robot_frame(measured_in):
+            return inverse_casadi(self.ca, self.w_T(measured_in)) @ T
         return self.value(BlockKey("frame", measured_in)) @ T
 
 

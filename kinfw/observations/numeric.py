@@ -80,6 +80,10 @@ class NumericContext:
         ``frame`` = ``meas_T_w`` of a measurement frame), (3,) for a point.
     model_frame : str or None
         The external frame the model is expressed in (None: the URDF root).
+    robot_frames : callable, optional
+        ``robot_frames(name) -> bool``: whether a ``measured_in`` is a frame of the
+        robot (moving with it, e.g. a head camera; observations in it are predicted as
+        ``inv(w_T_c) @ w_T_frame``); default: none is.
     """
 
     def __init__(
@@ -87,11 +91,13 @@ class NumericContext:
         w_T_frames: Callable[[str], NDArray[np.float64]],
         values: Mapping[BlockKey, ArrayLike] | None = None,
         model_frame: str | None = None,
+        robot_frames: Callable[[str], bool] | None = None,
     ) -> None:
         self._w_T_frames = w_T_frames
         self._cache: dict[str, NDArray[np.float64]] = {}
         self._values = {k: np.asarray(v, dtype=float) for k, v in (values or {}).items()}
         self.model_frame = model_frame
+        self._robot_frames = robot_frames
 
     @classmethod
     def from_robot(
@@ -105,7 +111,11 @@ class NumericContext:
         (columns in ``joint_names`` order; None: the robot's), in its root link."""
         qs2 = np.atleast_2d(np.asarray(qs, dtype=float))
         names = None if joint_names is None else tuple(joint_names)
-        return cls(lambda frame: robot.frame_poses(qs2, frame, names), values)
+        return cls(
+            lambda frame: robot.frame_poses(qs2, frame, names),
+            values,
+            robot_frames=robot.has_frame,
+        )
 
     def w_T(self, frame: str, sample: NDArray[np.int64]) -> NDArray[np.float64]:
         """Pose of ``frame`` in the model frame at the samples, shape (m, 4, 4)."""
@@ -124,24 +134,52 @@ class NumericContext:
         except KeyError:
             raise MissingValue(key) from None
 
+    def is_robot_frame(self, name: str | None) -> bool:
+        """Whether the measurement frame ``name`` is a frame of the robot."""
+        return (
+            name is not None
+            and name != self.model_frame
+            and self._robot_frames is not None
+            and bool(self._robot_frames(name))
+        )
+
     def meas_T_w(self, measured_in: str | None) -> NDArray[np.float64]:
-        """Pose (4, 4) of the model frame in the measurement frame ``measured_in``."""
+        """Pose (4, 4) of the model frame in the external measurement frame
+        ``measured_in`` (a robot frame moves: see :meth:`w_T_meas_at`)."""
         if measured_in is None or measured_in == self.model_frame:
             return np.eye(4)
+        if self.is_robot_frame(measured_in):
+            raise ValueError(
+                f"meas_T_w: {measured_in!r} is a frame of the robot; its pose depends on "
+                "the sample (w_T_meas_at)"
+            )
         return self.value(BlockKey("frame", measured_in))
 
     def meas_T(
         self, measured_in: str | None, frame: str, sample: NDArray[np.int64]
     ) -> NDArray[np.float64]:
-        """Pose (m, 4, 4) of ``frame`` in the measurement frame ``measured_in``."""
+        """Pose (m, 4, 4) of ``frame`` in the measurement frame ``measured_in``:
+        ``meas_T_w @ w_T_frame``, or ``inv(w_T_c) @ w_T_frame`` for a robot frame ``c``."""
         T = self.w_T(frame, sample)
         if measured_in is None or measured_in == self.model_frame:
             return T
+        if self.is_robot_frame(measured_in):
+            return inverse_transform(self.w_T(measured_in, sample)) @ T
         return self.value(BlockKey("frame", measured_in)) @ T
 
     def w_T_meas(self, measured_in: str | None) -> NDArray[np.float64]:
-        """Pose (4, 4) of the measurement frame ``measured_in`` in the model frame."""
+        """Pose (4, 4) of the external measurement frame ``measured_in`` in the model
+        frame."""
         return inverse_transform(self.meas_T_w(measured_in))
+
+    def w_T_meas_at(
+        self, measured_in: str | None, sample: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
+        """Pose (m, 4, 4) of the measurement frame in the model frame at the samples
+        (constant for an external frame, the FK of a robot frame)."""
+        if self.is_robot_frame(measured_in):
+            return self.w_T(measured_in, sample)
+        return np.broadcast_to(self.w_T_meas(measured_in), (len(sample), 4, 4))
 
 
 @dataclass(frozen=True, slots=True, eq=False)

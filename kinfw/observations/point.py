@@ -213,8 +213,8 @@ class PointKind(ObservationKind):
         return T[:, :3, :3] @ self._offset(group, model) + T[:, :3, 3]
 
     def drawing(self, group, model: NumericContext):
-        w_T_meas = model.w_T_meas(group.measured_in)
-        w_p = group.meas_p_point @ w_T_meas[:3, :3].T + w_T_meas[:3, 3]
+        w_T_meas = model.w_T_meas_at(group.measured_in, group.sample)
+        w_p = np.einsum("nij,nj->ni", w_T_meas[:, :3, :3], group.meas_p_point) + w_T_meas[:, :3, 3]
 
         def predicted():
             T = model.w_T(group.frame, group.sample)

@@ -221,7 +221,7 @@ class PoseKind(RigidTransformKind):
         return T if group.marker is None else T @ model.value(BlockKey("marker", group.marker))
 
     def drawing(self, group, model: NumericContext):
-        w_T = model.w_T_meas(group.measured_in) @ group.meas_T_frame
+        w_T = model.w_T_meas_at(group.measured_in, group.sample) @ group.meas_T_frame
         predicted, missing = predicted_or_missing(
             lambda: self.w_T_predicted(group, model)[:, :3, 3]
         )
