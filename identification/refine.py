@@ -160,7 +160,10 @@ def refine(
         ``l_y``).
     prior : (sigma_m, sigma_rad), optional
         Gaussian prior on the robot parameters' deviations from the nominal URDF (from
-        the start when the model lives in an external frame), for small datasets.
+        the start when the model lives in an external frame), for small datasets. With
+        ``"full"``, the joint zero offsets are estimated too, under the same prior (a
+        zero offset is one angle where the CPC chart would spread it over every axis
+        below the joint: :func:`identification.problem.gauge.robot_blocks`).
     known : tuple of Unknown
         Start values of extra unknowns (targets, frames, markers, offsets) instead of
         estimating them from these data.

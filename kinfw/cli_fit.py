@@ -149,6 +149,9 @@ def _choice_table(choice) -> str:
     rows = [head]
     for c in choice.candidates:
         mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
+        if c.failed is not None:
+            rows.append(f"  {c.label:<32} not fitted on a training fold (too few residuals)")
+            continue
         rot = "-" if math.isnan(c.rotation_rms_deg) else f"{c.rotation_rms_deg:.3g}"
         rows.append(f"  {c.label:<32} {c.whitened:>9.3g} {c.position_rms_mm:>8.3g} {rot:>8}{mark}")
     return "\n".join(rows)

@@ -33,7 +33,7 @@ import numpy as np
 
 from identification.pipeline import calibrate
 from identification.refine import NoiseModel, build_problem
-from kinfw.measurements import Measurements
+from kinfw.measurements import DatasetError, Measurements
 from kinfw.robot import Robot
 from verification.crossval import crossvalidate
 
@@ -77,6 +77,10 @@ class Candidate:
         the noise, 3 for points; lower is better).
     position_rms_mm, rotation_rms_deg : float
         Mean over folds of the held-out RMS (rotation NaN when only points are observed).
+    failed : str or None
+        Why the candidate could not be scored (a training fold too small for its
+        parameters: :class:`kinfw.measurements.DatasetError`'s message); its scores are
+        then NaN and it is not chosen.
     """
 
     parameters: str
@@ -84,6 +88,7 @@ class Candidate:
     whitened: float
     position_rms_mm: float
     rotation_rms_deg: float
+    failed: str | None = None
 
     @property
     def label(self) -> str:
@@ -148,6 +153,7 @@ class ModelChoice:
                     "whitened": c.whitened,
                     "position_rms_mm": c.position_rms_mm,
                     "rotation_rms_deg": c.rotation_rms_deg,
+                    "failed": c.failed,
                 }
                 for c in self.candidates
             ],
@@ -214,34 +220,50 @@ def choose_parameters(
     reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
     used = reference.refined.noise if noise is None else noise
     sigma = (float(used.position_m), float(used.rotation_rad))
-    runs = [(("frames", "offsets", "full"), prior)]
+    runs = [(p, prior) for p in ("frames", "offsets", "full")]
     if prior is None:
         priors = [(s, s / lever) for s in PRIOR_GRID_M for lever in PRIOR_LEVERS_M]
-        runs += [(("full",), p) for p in sorted(priors)]  # strongest first
+        runs += [("full", p) for p in sorted(priors)]  # strongest first
     candidates, excluded = [], ()
-    for sets, p in runs:
-        cv = crossvalidate(
-            nominal,
-            data,
-            k=k,
-            seed=seed,
-            sets=sets,
-            noise=noise,
-            loss=loss,
-            prior=p,
-            exclude_flagged=True,
-            reference=reference,
-        )
+    for parameters, p in runs:
+        try:
+            cv = crossvalidate(
+                nominal,
+                data,
+                k=k,
+                seed=seed,
+                sets=(parameters,),
+                noise=noise,
+                loss=loss,
+                prior=p,
+                exclude_flagged=True,
+                reference=reference,
+            )
+        except DatasetError as exc:  # a training fold too small for these parameters
+            candidates.append(Candidate(parameters, p, np.nan, np.nan, np.nan, str(exc)))
+            continue
         cv = replace(cv, noise=sigma)
         excluded = cv.excluded
-        candidates += [
-            Candidate(s, p, cv.whitened(s), cv.mean(s), cv.mean(s, "rotation_rms_deg"))
-            for s in sets
-        ]
+        candidates.append(
+            Candidate(
+                parameters,
+                p,
+                cv.whitened(parameters),
+                cv.mean(parameters),
+                cv.mean(parameters, "rotation_rms_deg"),
+            )
+        )
     # simplest first: frames, offsets, full with the strongest prior ... full alone
     order = [0, 1, *range(3, len(candidates)), 2]
     scored = [c.whitened for c in candidates if np.isfinite(c.whitened)]
     full = candidates[2]
+    failed = [c for c in candidates if c.failed is not None]
+    if len(failed) == len(candidates):
+        raise DatasetError(
+            f"{data.source}: too few samples to choose the parameters by {k}-fold "
+            f"cross-validation: no candidate can be fitted on a training fold "
+            f"({failed[0].label}: {failed[0].failed}); give --params (e.g. frames)"
+        )
     if not scored:  # e.g. only plane contacts: no position or rotation error to score
         return ModelChoice(
             "full",
@@ -256,6 +278,11 @@ def choose_parameters(
     chosen = next(candidates[i] for i in order if candidates[i].whitened <= 1.01 * best)
     if chosen is full:
         why = f"lowest held-out error ({chosen.whitened:.3g} whitened)"
+    elif full.failed is not None:
+        why = (
+            f"lowest held-out error ({chosen.whitened:.3g} whitened); full alone cannot be "
+            "fitted on a training fold (too few residuals for its parameters)"
+        )
     else:
         why = (
             f"lowest held-out error: {chosen.whitened:.3g} whitened vs {full.whitened:.3g} "

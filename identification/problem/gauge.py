@@ -92,6 +92,8 @@ def robot_blocks(
     groups: list[Any],
     model_frame: str | None,
     parameters: str | tuple[str, ...],
+    *,
+    with_prior: bool = False,
 ) -> tuple[CPCBlock, RigidFrameBlock, ZeroOffsetBlock]:
     """The robot's blocks with their free masks: CPC chart, base, joint zero offsets.
 
@@ -107,6 +109,12 @@ def robot_blocks(
         The external frame the model is expressed in, None for the URDF root.
     parameters : str or tuple of str
         The parameter set (see :func:`identification.refine.refine`).
+    with_prior : bool
+        Whether a Gaussian prior restrains the robot's parameters. With ``"full"`` the
+        joint zero offsets are then free too: redundant with the CPC chart without a
+        prior (a zero offset turns every axis below the joint), but under a prior the
+        one-parameter offset -- the encoder zero, often a real robot's largest error --
+        costs one prior term where the chart would pay one per axis below.
     """
     observed = model0.topology.frames
     cpc = CPCBlock(
@@ -130,7 +138,7 @@ def robot_blocks(
     )
     zero = ZeroOffsetBlock(
         BlockKey("zero_offset"),
-        free=useful & (parameters == "offsets"),
+        free=useful & (parameters == "offsets" or (parameters == "full" and with_prior)),
         joint_names=tuple(topo.joint_names),
         revolute=tuple(bool(r) for r in topo.revolute),
     )

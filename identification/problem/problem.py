@@ -433,7 +433,10 @@ def build_problem(
                 (BlockKey("frame", model_frame), f"pose of the root link in {model_frame!r}")
             )
     unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
-    blocks = (*robot_blocks(model0, robot, groups, model_frame, parameters), *unknown)
+    blocks = (
+        *robot_blocks(model0, robot, groups, model_frame, parameters, with_prior=prior is not None),
+        *unknown,
+    )
     P = sum(b.size for b in blocks)
 
     # the CasADi functions: every number (reference model, block starts) is an input
