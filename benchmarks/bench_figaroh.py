@@ -330,7 +330,10 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
                 except Exception as error:  # reported, not hidden: the row shows it
                     if parameters is None:
                         why = str(error).split(" (joint")[0].replace(f"{data.source}: ", "")
-                        chosen.append(f"fold {f}: FAILED, {type(error).__name__}: {why}")
+                        chosen.append(
+                            f"fold {f}: choose_parameters FAILED (its inner cross-validation "
+                            f"trains on fewer samples), {type(error).__name__}: {why}"
+                        )
                     failed.append(f)
                     p = r = np.full(len(test_ids), np.nan)
                 times.append(time.perf_counter() - start)
@@ -477,6 +480,8 @@ def main(argv: list[str] | None = None) -> int:
         "--figaroh-fit", nargs=2, metavar=("CONFIG", "URDF"), help=argparse.SUPPRESS
     )
     args = parser.parse_args(argv)
+    # FIGAROH's ndcurves re-registers a Pinocchio converter on import, and says so
+    warnings.filterwarnings("ignore", "to-Python converter", RuntimeWarning)
     try:
         import figaroh  # noqa: F401
     except ImportError:
