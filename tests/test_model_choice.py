@@ -1,6 +1,7 @@
 """Model choice by default: small data does not get the full set, plentiful data does."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -181,3 +182,34 @@ def test_a_prior_too_strong_for_the_robot_is_scored_not_refused(head):
     pos_strong, _ = _held_out_vs_truth(head, truth, data, "full", strong)
     pos_free, _ = _held_out_vs_truth(head, truth, data, "full", None)
     assert pos_strong > 20.0 > 1.0 > pos_free  # mm
+
+
+def test_a_candidate_no_training_fold_can_fit_is_skipped_not_fatal():
+    """The real TIAGo Vicon session cut to its first 16 samples: a 13-sample training
+    fold has fewer residual rows than "full" has parameters, which used to fail the
+    whole choice (`kinfw calibrate` exited 2). Now that candidate is listed as not fitted
+    and the others compete; the chosen model predicts the 5 unseen samples better than
+    the nominal joints do."""
+    from identification.refine import Unknown
+    from kinfw.measurements import read_measurements
+    from tests.erd import urdf_path
+    from verification.crossval import held_out_errors
+
+    tiago = load_robot(urdf_path("tiago_description/robots/tiago_no_hand.urdf"))
+    data = read_measurements(
+        Path(__file__).parent / "data" / "tiago_figaroh" / "vicon_gripper3_base1.json"
+    )
+    train, test = data.subset(np.arange(16)), data.subset(np.arange(16, 21))
+    choice = choose_parameters(tiago, train)
+    full = choice.candidates[2]
+    assert (full.parameters, full.prior) == ("full", None) and "too little data" in full.failed
+    assert choice.parameters != "full" or choice.prior is not None
+    assert "full alone cannot be fitted" in choice.reason
+
+    def unseen_rms_mm(parameters, prior):
+        result = calibrate(tiago, train, parameters=parameters, prior=prior)
+        frame = Unknown("frame", result.refined.model_frame, result.w_T_root)
+        pos, _, _ = held_out_errors(tiago, result.urdf_xml, (*result.refined.unknowns, frame), test)
+        return 1e3 * np.sqrt(np.mean(pos**2))
+
+    assert unseen_rms_mm(choice.parameters, choice.prior) < 0.7 * unseen_rms_mm("frames", None)
