@@ -95,7 +95,7 @@ class ResidualStructure:
     def message(self) -> str:
         """One line naming the group, what explains its residuals and the likely cause."""
         what = f"{self.kind} {self.frame!r}" + (f" [{self.marker}]" if self.marker else "")
-        size = "" if math.isnan(self.rms_m) else f" (RMS {1e3 * self.rms_m:.3g} mm)"
+        size = "" if math.isnan(self.rms_m) else f" (position RMS {1e3 * self.rms_m:.3g} mm)"
         cause = (
             f"the measured point or frame is probably not where {self.frame!r} is: a "
             "constant offset in that frame that the model cannot carry"

@@ -74,6 +74,7 @@ EYE_HAND_CSV = (
     / "tiago_figaroh"
     / "eye_hand_calibration_recorded_data_48c_hey5_12_test1.csv"
 )
+EYE_HAND_401_CSV = EYE_HAND_CSV.with_name("eye_hand_calibration_recorded_data_palhey5_401.csv")
 
 
 @pytest.fixture(scope="module")
@@ -247,3 +248,33 @@ def test_real_tiago_eye_hand_session_converts_and_calibrates(tmp_path, capsys):
     pos_fit, _ = _board_constancy(load_robot(calibrated), data)
     assert pos_fit < pos_nominal
     assert fit_pos == pytest.approx(pos_fit, rel=0.05)
+
+
+def test_real_401_sample_eye_hand_session_predicts_unseen_poses_better():
+    """FIGAROH's 401-sample TIAGo eye-hand session (head camera -> board on the hand, 6D):
+    calibrated ("full") on the first 300 samples, the 101 unseen relative poses are
+    predicted at about half the nominal robot's error (nominal joints: 25 mm / 4.3 deg;
+    calibrated: 12-14 mm / 2.7 deg, 5-fold in the README). Both predictions come from the
+    same held-out scoring (only the board and camera mounts fitted for the nominal)."""
+    from identification.pipeline import calibrate
+    from kinfw.figaroh_csv import measurements_from_figaroh_csv
+    from verification.crossval import held_out_errors
+
+    tiago = load_robot(TIAGO)
+    data = measurements_from_figaroh_csv(
+        EYE_HAND_401_CSV, robot=tiago, frame="arm_7_link", measured_in="xtion_rgb_optical_frame"
+    )
+    assert data.n_samples == 401
+    train, test = data.subset(np.arange(300)), data.subset(np.arange(300, 401))
+
+    def unseen(parameters):
+        result = calibrate(tiago, train, parameters=parameters)
+        assert result.refined.model_frame is None  # measured in the robot: no external frame
+        unknowns = result.refined.unknowns
+        pos, rot, _ = held_out_errors(tiago, result.urdf_xml, unknowns, test)
+        return 1e3 * np.sqrt(np.mean(pos**2)), np.degrees(np.sqrt(np.mean(rot**2)))
+
+    pos_nominal, rot_nominal = unseen("none")
+    pos_full, rot_full = unseen("full")
+    assert 20.0 < pos_nominal < 30.0 and 3.5 < rot_nominal < 5.0
+    assert pos_full < 0.65 * pos_nominal and rot_full < 0.8 * rot_nominal
