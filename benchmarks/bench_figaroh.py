@@ -293,7 +293,7 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     from identification.pipeline import calibrate
     from identification.refine import Unknown
     from verification.crossval import held_out_errors
-    from verification.model_choice import PRIOR_GRID_M, PRIOR_LENGTH_M, choose_parameters
+    from verification.model_choice import PRIOR_GRID_M, PRIOR_LEVERS_M, choose_parameters
 
     def fit_predict(train, test, parameters, prior):
         result = calibrate(nominal, train, parameters=parameters, prior=prior)
@@ -308,7 +308,9 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     runs = [(s, s, None) for s in sets]
     if priors:
         runs += [
-            (f"full, prior {1e3 * m:g} mm", "full", (m, m / PRIOR_LENGTH_M)) for m in PRIOR_GRID_M
+            (f"full, prior {1e3 * m:g} mm / {1e3 * m / lever:g} mrad", "full", (m, m / lever))
+            for m in PRIOR_GRID_M
+            for lever in PRIOR_LEVERS_M
         ]
     runs.append(("default (--params auto)", None, None))
     rows, chosen = [], []
@@ -331,8 +333,7 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
                     if parameters is None:
                         why = str(error).split(" (joint")[0].replace(f"{data.source}: ", "")
                         chosen.append(
-                            f"fold {f}: choose_parameters FAILED (its inner cross-validation "
-                            f"trains on fewer samples), {type(error).__name__}: {why}"
+                            f"fold {f}: choose_parameters FAILED, {type(error).__name__}: {why}"
                         )
                     failed.append(f)
                     p = r = np.full(len(test_ids), np.nan)

@@ -31,6 +31,7 @@ trials, next to the oracle (the best candidate at the truth).
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 import warnings
@@ -181,6 +182,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=100, help="first seed (100)")
     args = parser.parse_args(argv)
     warnings.simplefilter("ignore")  # the fits' data warnings; the study reads numbers
+    logging.disable(logging.WARNING)  # and their logged notes (rejections)
     print(machine_info())
     t0 = time.perf_counter()
     candidates = [label(*c) for c in SETS] + [label("full", p) for p in PRIORS]

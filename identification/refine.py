@@ -268,9 +268,9 @@ def refine(
                 f"{int(beyond.sum()) + len(rejected)} of {n_obs} observations lie beyond the "
                 f"{100 * _phi(reject):.4g} % quantile of the clean residual (expected "
                 f"{100 * (1 - _phi(reject)):.2g} %); only the worst {allowed} "
-                f"({100 * max_reject_fraction:.3g} %) are rejected: the data may be "
-                "inconsistent with the model (a missing parameter, a wrong frame or noise "
-                "model) rather than hold a few gross errors"
+                f"(at most {100 * max_reject_fraction:.3g} %, at least one) are rejected: the "
+                "data may be inconsistent with the model (a missing parameter, a wrong frame "
+                "or noise model) rather than hold a few gross errors"
             )
             order = np.argsort(-(norms / k), kind="stable")
             keep_worst = np.zeros(m, bool)
