@@ -88,7 +88,9 @@ SETS = (("frames", None), ("offsets", None), ("full", None))
 PRIORS = tuple((s, s / lever) for s in (0.1e-3, 0.3e-3, 1e-3, 3e-3, 10e-3) for lever in (0.1, 0.5))
 RULES = {
     "sets only": (),
-    "lever 0.1 m, 1-10 mm (before)": tuple(p for p in PRIORS if p[0] >= 1e-3 and p[0] / p[1] < 0.2),
+    "lever 0.1 m, 1-10 mm (previous grid)": tuple(
+        p for p in PRIORS if p[0] >= 1e-3 and p[0] / p[1] < 0.2
+    ),
     "lever 0.5 m, 0.3-10 mm": tuple(p for p in PRIORS if p[0] >= 0.3e-3 and p[0] / p[1] > 0.2),
     "both levers, 0.3-10 mm (now)": tuple(p for p in PRIORS if p[0] >= 0.3e-3),
     "both levers, 0.1-10 mm": PRIORS,
