@@ -297,3 +297,104 @@ def test_candidate_starts_for_axyb_and_all_failing():
         np.testing.assert_allclose(Y_hat, Y, atol=1e-9)
     with pytest.raises(StartError, match="at least 3 poses"):
         candidate_starts(A[:2], B[:2], problem="axyb")
+
+
+# -- OpenCV's implementations of the same methods (the ``bench`` extra) ----------------------
+
+
+@pytest.fixture(scope="module")
+def cv2():
+    return pytest.importorskip("cv2", reason="OpenCV is the 'bench' extra: pip install -e .[bench]")
+
+
+def _opencv(cv2, name, A, B):
+    """OpenCV's answer ``(X, Y)`` in our conventions (``Y`` is None for A X = X B)."""
+    if name in AXYB_STARTS:
+        method = {
+            "shah": cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH,
+            "li": cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI,
+        }[name]
+        R_w, t_w, R_g, t_g = cv2.calibrateRobotWorldHandEye(
+            A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], method=method
+        )
+        return _transform(R_g, t_g.ravel()), _inv(_transform(R_w, t_w.ravel()))
+    method = {
+        "park": cv2.CALIB_HAND_EYE_PARK,
+        "andreff": cv2.CALIB_HAND_EYE_ANDREFF,
+        "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
+    }[name]
+    R, t = cv2.calibrateHandEye(A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], method=method)
+    return _transform(R, t.ravel()), None
+
+
+@pytest.mark.parametrize("name", list(ALL))
+def test_noise_free_answers_equal_opencvs(cv2, name):
+    rng = np.random.default_rng(20)
+    for max_deg in (15.0, 50.0):
+        _, _, A, B = _data(name, rng, 10, max_deg=max_deg)
+        X_cv, Y_cv = _opencv(cv2, name, A, B)
+        X_hat, Y_hat = ALL[name](A, B)
+        np.testing.assert_allclose(X_hat, X_cv, atol=1e-9)
+        if Y_cv is not None:
+            np.testing.assert_allclose(Y_hat, Y_cv, atol=1e-9)
+
+
+def _rms_scale(name, A, B):
+    """The length scale the docstrings state: RMS over the relative motions' translations
+    (A X = X B), or over the absolute translations (Li)."""
+    if name in AXYB_STARTS:
+        t = np.concatenate([A[:, :3, 3], B[:, :3, 3]])
+    else:
+        i, j = np.triu_indices(len(A), 1)
+        t = np.concatenate([(_inv(A[j]) @ A[i])[:, :3, 3], (B[j] @ _inv(B[i]))[:, :3, 3]])
+    return float(np.sqrt(np.mean(np.sum(t**2, axis=1))))
+
+
+@pytest.mark.parametrize("name", ["daniilidis", "li"])
+def test_noisy_answers_equal_opencvs_in_the_normalised_unit(cv2, name):
+    """Daniilidis' and Li's systems are OpenCV's; given lengths already divided by the
+    stated RMS scale, OpenCV must return our answer (scaled) on noisy data too."""
+    rng = np.random.default_rng(21)
+    for max_deg in (7.5, 50.0):
+        _, _, A, B = _data(name, rng, 10, max_deg=max_deg, noise=(1.0, 2.0))
+        s = _rms_scale(name, A, B)
+        A_s, B_s = A.copy(), B.copy()
+        A_s[:, :3, 3] /= s
+        B_s[:, :3, 3] /= s
+        X_cv, Y_cv = _opencv(cv2, name, A_s, B_s)
+        X_hat, Y_hat = ALL[name](A, B)
+        np.testing.assert_allclose(X_hat[:3, :3], X_cv[:3, :3], atol=1e-8)
+        np.testing.assert_allclose(X_hat[:3, 3], s * X_cv[:3, 3], atol=1e-8 * s)
+        if Y_cv is not None:
+            np.testing.assert_allclose(Y_hat[:3, :3], Y_cv[:3, :3], atol=1e-8)
+            np.testing.assert_allclose(Y_hat[:3, 3], s * Y_cv[:3, 3], atol=1e-8 * s)
+
+
+@pytest.mark.parametrize("name", ["park", "shah"])
+def test_noisy_rotation_equals_opencvs(cv2, name):
+    """Park's M and Shah's Kronecker sum are OpenCV's: the same rotation on noisy data
+    (the translations differ: both pair orders here, another parametrisation in OpenCV)."""
+    rng = np.random.default_rng(22)
+    for max_deg in (7.5, 50.0):
+        _, _, A, B = _data(name, rng, 10, max_deg=max_deg, noise=(1.0, 2.0))
+        X_cv, Y_cv = _opencv(cv2, name, A, B)
+        X_hat, Y_hat = ALL[name](A, B)
+        np.testing.assert_allclose(X_hat[:3, :3], X_cv[:3, :3], atol=1e-9)
+        if Y_cv is not None:
+            np.testing.assert_allclose(Y_hat[:3, :3], Y_cv[:3, :3], atol=1e-9)
+
+
+@pytest.mark.parametrize("name", list(ALL))
+def test_small_motions_with_noise_are_as_accurate_as_opencv(cv2, name):
+    """1 deg + 2 mm camera noise, hand turned <= 7.5 deg from a reference (relative motions
+    <= 15 deg), 10 views, 50 trials: our rotation error's median and 90th percentile are
+    within [0.5, 1.15] x OpenCV's same method (equivalent, never clearly worse)."""
+    rng = np.random.default_rng(23)
+    ours, theirs = [], []
+    for _ in range(50):
+        X, _, A, B = _data(name, rng, 10, max_deg=7.5, noise=(1.0, 2.0))
+        ours.append(_errors(ALL[name](A, B)[0], X)[0])
+        theirs.append(_errors(_opencv(cv2, name, A, B)[0], X)[0])
+    for q in (50, 90):
+        ratio = np.percentile(ours, q) / np.percentile(theirs, q)
+        assert 0.5 <= ratio <= 1.15, (q, ratio, np.percentile(ours, q), np.percentile(theirs, q))
