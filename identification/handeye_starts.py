@@ -39,6 +39,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -48,7 +49,6 @@ from kinfw.transforms import (
     check_transform,
     inverse_transform,
     project_to_rotation,
-    quat_xyzw_from_matrix,
     rotation_angle,
     rotation_vector_from_matrix,
     skew,
@@ -87,38 +87,66 @@ class StartError(ValueError):
 
 
 def _check_pair(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose]:
-    """Validate both pose batches (n, 4, 4), n >= 3; rotations re-orthonormalised."""
-    out = []
-    for name, T in (("A", A), ("B", B)):
-        T = np.asarray(T, dtype=float)
+    """Validate both pose batches (n, 4, 4), n >= 3; return them as float arrays.
+
+    The checks of :func:`kinfw.transforms.check_transform`, on both batches in one pass
+    (this is the hot path of a 3-view solve); rotations off by more than 1e-12 are
+    re-orthonormalised (real data printed with six digits is off by ~1e-6).
+    """
+    T_A, T_B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    for name, T in (("A", T_A), ("B", T_B)):
         if T.ndim != 3 or T.shape[1:] != (4, 4):
             raise StartError(f"{method}: {name}: expected shape (n, 4, 4), got {T.shape}")
+    if T_A.shape != T_B.shape:
+        raise StartError(
+            f"{method}: A and B must hold the same number of poses, got A {T_A.shape} "
+            f"and B {T_B.shape}"
+        )
+    n = len(T_A)
+    if n < 3:
+        raise StartError(
+            f"{method}: at least 3 poses are needed (two motions about different axes), got {n}"
+        )
+    T = np.concatenate([T_A, T_B])
+    R = T[:, :3, :3]
+    err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
+    bad = ~np.isfinite(T).all(axis=(1, 2)) | (np.abs(T[:, 3] - (0.0, 0.0, 0.0, 1.0)).max(1) > 0)
+    bad |= ~(err <= ORTHONORMAL_TOL) | ~(np.linalg.det(R) > 0.0)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        name, idx = ("A", k) if k < n else ("B", k - n)
         try:
-            T = check_transform(T, name=f"{method}: {name}", tol=ORTHONORMAL_TOL)
-        except ValueError as err:
-            raise StartError(str(err)) from err
-        out.append(
-            transform_from_rotation_translation(project_to_rotation(T[:, :3, :3]), T[:, :3, 3])
-        )
-    if out[0].shape != out[1].shape:
-        raise StartError(
-            f"{method}: A and B must hold the same number of poses, got A {out[0].shape} "
-            f"and B {out[1].shape}"
-        )
-    if len(out[0]) < 3:
-        raise StartError(
-            f"{method}: at least 3 poses are needed (two motions about different axes), "
-            f"got {len(out[0])}"
-        )
-    return out[0], out[1]
+            check_transform(T[k], name=f"{method}: {name}[{idx}]", tol=ORTHONORMAL_TOL)
+        except ValueError as e:
+            raise StartError(str(e)) from e
+        raise StartError(f"{method}: {name}[{idx}]: not a rigid transform")  # pragma: no cover
+    off = err > 1e-12
+    if np.any(off):
+        T = T.copy()
+        T[off, :3, :3] = project_to_rotation(R[off])
+    return T[:n], T[n:]
+
+
+@lru_cache(maxsize=64)
+def _pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices ``i < j`` of every unordered pair of ``n`` poses (cached: read-only)."""
+    i, j = np.triu_indices(n, 1)
+    i.flags.writeable = j.flags.writeable = False
+    return i, j
+
+
+def _prepare_axxb(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose, Pose, Pose]:
+    """Checked poses ``A``, ``B`` and their relative motions ``A_ij``, ``B_ij``."""
+    base_T_hands, eye_T_targets = _check_pair(A, B, method)
+    return base_T_hands, eye_T_targets, *_relative_motions(base_T_hands, eye_T_targets)
 
 
 def _relative_motions(base_T_hands: Pose, eye_T_targets: Pose) -> tuple[Pose, Pose]:
     """``A_ij = inv(A[j]) A[i]`` and ``B_ij = B[j] inv(B[i])`` for every pair ``i < j``."""
-    i, j = np.triu_indices(len(base_T_hands), 1)
-    A_ijs = inverse_transform(base_T_hands[j]) @ base_T_hands[i]
-    B_ijs = eye_T_targets[j] @ inverse_transform(eye_T_targets[i])
-    return A_ijs, B_ijs
+    i, j = _pairs(len(base_T_hands))
+    A_inv = inverse_transform(base_T_hands)
+    B_inv = inverse_transform(eye_T_targets)
+    return A_inv[j] @ base_T_hands[i], eye_T_targets[j] @ B_inv[i]
 
 
 def _length_scale(*translations: NDArray[np.float64]) -> float:
@@ -223,9 +251,12 @@ def park_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     F. C. Park and B. J. Martin, "Robot sensor calibration: solving AX = XB on the
     Euclidean group", IEEE Trans. Robotics and Automation 10(5), 717-721, 1994.
     """
+    return _park(*_prepare_axxb(A, B, "park_axxb"))
+
+
+def _park(base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose) -> tuple[Pose, Pose]:
+    """:func:`park_axxb` on checked poses and their relative motions."""
     method = "park_axxb"
-    base_T_hands, eye_T_targets = _check_pair(A, B, method)
-    A_ijs, B_ijs = _relative_motions(base_T_hands, eye_T_targets)
     alphas = rotation_vector_from_matrix(A_ijs[:, :3, :3])
     betas = rotation_vector_from_matrix(B_ijs[:, :3, :3])
     Mt = alphas.T @ betas  # M^T = sum alpha beta^T
@@ -282,9 +313,14 @@ def andreff_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     structure-from-motion", Int. J. Robotics Research 20(3), 228-248, 2001 (and "On-line
     hand-eye calibration", 3DIM 1999, which OpenCV cites).
     """
+    return _andreff(*_prepare_axxb(A, B, "andreff_axxb"))
+
+
+def _andreff(
+    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
+) -> tuple[Pose, Pose]:
+    """:func:`andreff_axxb` on checked poses and their relative motions."""
     method = "andreff_axxb"
-    base_T_hands, eye_T_targets = _check_pair(A, B, method)
-    A_ijs, B_ijs = _relative_motions(base_T_hands, eye_T_targets)
     scale = _length_scale(A_ijs[:, :3, 3], B_ijs[:, :3, 3])
     A_ijs, B_ijs = _scaled(A_ijs, scale), _scaled(B_ijs, scale)
     R_As, t_As, R_Bs, t_Bs = A_ijs[:, :3, :3], A_ijs[:, :3, 3], B_ijs[:, :3, :3], B_ijs[:, :3, 3]
@@ -324,21 +360,81 @@ def _nearest_rotation(M: NDArray[np.float64], method: str) -> NDArray[np.float64
     return project_to_rotation(np.sign(det) * M)
 
 
+def _quat_matrix_coefficients() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``C`` (16, 9) and ``c`` (16,) with ``4 q q^T = (C vec(R) + c).reshape(4, 4)`` for
+    the unit quaternion ``q = (w, x, y, z)`` of ``R`` (row-major ``vec``)."""
+    C, c = np.zeros((4, 4, 3, 3)), np.zeros((4, 4))
+    c[np.diag_indices(4)] = 1.0
+    for k, signs in enumerate([(1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)]):
+        C[k, k][np.diag_indices(3)] = signs
+    for (r, col), (a, b), sgn in [
+        ((0, 1), (2, 1), -1),
+        ((0, 2), (0, 2), -1),
+        ((0, 3), (1, 0), -1),
+        ((1, 2), (0, 1), 1),
+        ((1, 3), (0, 2), 1),
+        ((2, 3), (1, 2), 1),
+    ]:
+        for rr, cc in ((r, col), (col, r)):
+            C[rr, cc, a, b] = 1.0
+            C[rr, cc, b, a] = sgn
+    return C.reshape(16, 9), c.reshape(16)
+
+
+_QUAT_C, _QUAT_c = _quat_matrix_coefficients()
+
+
 def _quat_wxyz(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotations (..., 3, 3)."""
-    q = quat_xyzw_from_matrix(R)
-    return np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+    """Unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotations (m, 3, 3).
+
+    Shepperd's method in one product: ``4 q q^T`` is linear in ``R``; its row with the
+    largest diagonal entry ``4 q_k^2`` is ``4 q_k q`` (as ``quat_xyzw_from_matrix``).
+    """
+    K = (R.reshape(-1, 9) @ _QUAT_C.T + _QUAT_c).reshape(-1, 4, 4)
+    k = np.argmax(np.diagonal(K, axis1=1, axis2=2), axis=1)
+    q = K[np.arange(len(K)), k]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q * np.where(q[:, :1] < 0.0, -1.0, 1.0)
 
 
-def _dual_parts(T: Pose) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Real and dual parts ``(q, q')``, each ``(w, x, y, z)``, of rigid transforms:
-    ``q' = 1/2 (0, t) q`` (Daniilidis 1999, eq. (7))."""
-    q = _quat_wxyz(T[..., :3, :3])
-    t = T[..., :3, 3]
-    w, v = q[..., 0], q[..., 1:]
-    dual_w = -0.5 * np.einsum("...i,...i->...", t, v)
-    dual_v = 0.5 * (w[..., None] * t + np.cross(t, v))
-    return q, np.concatenate([dual_w[..., None], dual_v], axis=-1)
+#: Levi-Civita symbol: ``cross(a, b)_i = EPS[i, j, k] a_j b_k``.
+_EPS = np.zeros((3, 3, 3))
+_EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
+_EPS[0, 2, 1] = _EPS[2, 1, 0] = _EPS[1, 0, 2] = -1.0
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise cross products of (m, 3) arrays (one einsum; ``np.cross`` is slower)."""
+    return np.einsum("ijk,mj,mk->mi", _EPS, a, b)
+
+
+def _qmul(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise Hamilton products of (m, 4) quaternions ``(w, x, y, z)``."""
+    pw, pv, qw, qv = p[:, :1], p[:, 1:], q[:, :1], q[:, 1:]
+    w = pw * qw - np.sum(pv * qv, axis=1, keepdims=True)
+    return np.concatenate([w, pw * qv + qw * pv + _cross(pv, qv)], axis=1)
+
+
+def _pair_dual_quats(
+    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose, scale: float
+) -> tuple[NDArray[np.float64], ...]:
+    """Real and dual parts ``(q, q')``, each (m, 4) ``(w, x, y, z)``, of ``A_ij`` and
+    ``B_ij`` with lengths divided by ``scale``: ``q' = 1/2 (0, t) q`` (Daniilidis 1999,
+    eq. (7)). The pairs' ``q`` are products of the poses' quaternions (2n conversions
+    instead of n(n-1)), with the sign that makes ``w >= 0``."""
+    n = len(base_T_hands)
+    q = _quat_wxyz(np.concatenate([base_T_hands[:, :3, :3], eye_T_targets[:, :3, :3]]))
+    conj = q * (1.0, -1.0, -1.0, -1.0)
+    i, j = _pairs(n)
+    out = []
+    for q_ij, T_ijs in ((_qmul(conj[j], q[i]), A_ijs), (_qmul(q[n + j], conj[n + i]), B_ijs)):
+        q_ij *= np.where(q_ij[:, :1] < 0.0, -1.0, 1.0)
+        t = T_ijs[:, :3, 3] / scale
+        w, v = q_ij[:, :1], q_ij[:, 1:]
+        dual_w = -0.5 * np.sum(t * v, axis=1, keepdims=True)
+        dual_v = 0.5 * (w * t + _cross(t, v))
+        out += [q_ij, np.concatenate([dual_w, dual_v], axis=1)]
+    return tuple(out)
 
 
 def daniilidis_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
@@ -380,12 +476,16 @@ def daniilidis_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     K. Daniilidis, "Hand-eye calibration using dual quaternions", Int. J. Robotics
     Research 18(3), 286-298, 1999.
     """
+    return _daniilidis(*_prepare_axxb(A, B, "daniilidis_axxb"))
+
+
+def _daniilidis(
+    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
+) -> tuple[Pose, Pose]:
+    """:func:`daniilidis_axxb` on checked poses and their relative motions."""
     method = "daniilidis_axxb"
-    base_T_hands, eye_T_targets = _check_pair(A, B, method)
-    A_ijs, B_ijs = _relative_motions(base_T_hands, eye_T_targets)
     scale = _length_scale(A_ijs[:, :3, 3], B_ijs[:, :3, 3])
-    qa, qa_d = _dual_parts(_scaled(A_ijs, scale))
-    qb, qb_d = _dual_parts(_scaled(B_ijs, scale))
+    qa, qa_d, qb, qb_d = _pair_dual_quats(base_T_hands, eye_T_targets, A_ijs, B_ijs, scale)
     a, b, a_d, b_d = qa[:, 1:], qb[:, 1:], qa_d[:, 1:], qb_d[:, 1:]
     m = len(a)
     S = np.zeros((m, 6, 8))
@@ -485,8 +585,12 @@ def shah_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     M. Shah, "Solving the robot-world/hand-eye calibration problem using the Kronecker
     product", J. Mechanisms and Robotics 5(3), 031007, 2013.
     """
+    return _shah(*_check_pair(A, B, "shah_axyb"))
+
+
+def _shah(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
+    """:func:`shah_axyb` on checked poses."""
     method = "shah_axyb"
-    camera_T_targets, hand_T_roots = _check_pair(A, B, method)
     R_As, t_As = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3]
     R_Bs, t_Bs = hand_T_roots[:, :3, :3], hand_T_roots[:, :3, 3]
     n = len(R_As)
@@ -551,8 +655,12 @@ def li_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     dual-quaternions and Kronecker product", Int. J. Physical Sciences 5(10), 1530-1536,
     2010.
     """
+    return _li(*_check_pair(A, B, "li_axyb"))
+
+
+def _li(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
+    """:func:`li_axyb` on checked poses."""
     method = "li_axyb"
-    camera_T_targets, hand_T_roots = _check_pair(A, B, method)
     scale = _length_scale(camera_T_targets[:, :3, 3], hand_T_roots[:, :3, 3])
     R_As, t_As = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3] / scale
     R_Bs, t_Bs = hand_T_roots[:, :3, :3], hand_T_roots[:, :3, 3] / scale
@@ -599,12 +707,18 @@ def candidate_starts(
     A method that raises :class:`StartError` is left out (logged at debug level); when
     all fail, the first method's error is raised.
     """
-    methods = _methods(problem)
+    cores: dict[str, Callable[..., tuple[Pose, Pose]]]
+    if _methods(problem) is AXXB_STARTS:
+        prepared = _prepare_axxb(A, B, "candidate_starts")
+        cores = {"park": _park, "andreff": _andreff, "daniilidis": _daniilidis}
+    else:
+        prepared = _check_pair(A, B, "candidate_starts")
+        cores = {"shah": _shah, "li": _li}
     out: dict[str, tuple[Pose, Pose]] = {}
     first: StartError | None = None
-    for name, solve in methods.items():
+    for name, solve in cores.items():
         try:
-            out[name] = solve(A, B)
+            out[name] = solve(*prepared)
         except StartError as err:
             log.debug("candidate_starts: %s failed: %s", name, err)
             first = first or err
