@@ -1,53 +1,39 @@
-"""Hand-eye solvers against OpenCV: accuracy and speed on the same data, side by side.
+"""Hand-eye solvers against every OpenCV method: issue 13's regimes, speed, Tabb DS1.
 
 Run from the repository root (OpenCV is the ``bench`` extra, not a kinfw dependency:
 ``pip install -e '.[bench]'`` or ``pip install "opencv-python-headless>=4.10,<5"``)::
 
-    python benchmarks/bench_handeye.py              # full run, under ~3 minutes
-    python benchmarks/bench_handeye.py --quick      # reduced set, a few seconds
-    python benchmarks/bench_handeye.py --trials 300 --seed 3
+    python benchmarks/bench_handeye.py              # full run: 200 trials per regime
+    python benchmarks/bench_handeye.py --quick      # a few seconds
+    python benchmarks/bench_handeye.py --trials 500 --seed 3 --unit mm
 
 Prints plain-text tables:
 
-1. AX = XB (hand-eye; the robot-world transform plays no part):
-   :func:`identification.handeye.solve_axxb` against OpenCV's ``calibrateHandEye`` with
-   Tsai, Park and Daniilidis. Per noise setting and number of views: rotation (deg) and
-   translation (mm) error of X = hand_T_eye, median and IQR over the trials, median time
-   per solve, OpenCV's silent identity answers and the failures (an exception or a
-   non-finite result). A small-motion probe follows (relative rotations < 16 deg, where
-   OpenCV's Tsai answers the identity with only a log line; OpenCV documents no limit).
-2. A = X B Y (robot-world and hand-eye): :func:`identification.axb.solve_axyb` refined
-   (``refine=True``) and the paper's pure iteration (``refine=False``) against
-   ``calibrateRobotWorldHandEye`` with Shah and Li: errors of X = cam_T_hand and
-   Y = base_T_world, time per solve. ``--subset-trials`` runs the pure iteration, which
-   can be slow when it does not converge, on the first trials only.
+1. Regimes (issue 13): an independent generator (:mod:`benchmarks.handeye_regimes`; not
+   kinfw's simulation) draws a random true X = hand_T_camera and Y = base_T_target,
+   exact robot poses and camera poses with noise 1 deg about a random axis (N(0, 1 deg))
+   + N(0, 2 mm) per axis. Regimes: well spread, 10 views; small motions (every
+   relative turn <= 15 deg, 10 views; <= 30 deg; <= 15 deg with 30 views); 1 of 10
+   camera poses off by a further 20 deg; X within 0.3 deg of the half turn; no noise
+   (exactness). Every solver sees the same data: kinfw's ``solve_axxb`` and
+   ``solve_axyb`` (through their public API) and OpenCV's ``calibrateHandEye`` (TSAI,
+   PARK, HORAUD, ANDREFF, DANIILIDIS) and ``calibrateRobotWorldHandEye`` (SHAH, LI).
+   Per regime and solver: median and p90 of the X rotation error (deg) and translation
+   error (mm) over the trials that did not raise, raises k/N (a raise is a result),
+   identity answers, median ms per solve; then the best OpenCV value of each column
+   ("best CV") and kinfw / best CV.
+2. Time per solve at 3, 10, 30, 100 well-spread noisy views: median over trials of the
+   median of 3 round-robin calls, gc off; kinfw / fastest OpenCV method.
 3. Tabb DS1 (a real robot and camera, 88 poses): every method of both problems against
    Tabb's reprojection-optimised reference, once with the lengths in millimetres (as
    published) and once in metres; the last column shows whose answer changes with the
    length unit.
-4. Summary per setting: our median error over the best OpenCV median error of the same
-   column (on the trials our method ran), and our time over the fastest OpenCV method's
-   time in the same trial (median of the per-trial ratios); < 1 means kinfw is better.
-   Every loss is then printed with its numbers and the count of trials in which kinfw
-   was nonetheless closer to the truth than that OpenCV method.
+4. Summary in issue 13's layout: per regime kinfw ``solve_axxb``, kinfw ``solve_axyb``,
+   best OpenCV (name per column); time per solve; Tabb DS1 ratios.
 
-Synthetic data, one draw per trial, shared by every solver and by both problems (metres):
-true hand_T_cam with a uniformly random rotation and a translation N(0, 5 cm) per axis;
-a reference hand pose with the camera looking at the target origin 0.6 m in front of it;
-robot poses base_T_hand = reference rotated by U(0, 75 deg) about a uniformly random axis
-and shifted by U(-0.25, 0.25) m per axis; exact robot poses; camera poses
-cam_T_world = inv(hand_T_cam) inv(base_T_hand) base_T_world made noisy with
-:func:`verification.simulate.perturb_poses` (rotation by N(0, sigma) about a random axis,
-translation N(0, sigma_t) per axis). The views n = 3, 5, 10, 30 are the first n poses of
-one set of 30, and every noise level draws from the same seed (per trial and n), so the
-levels differ only in scale.
-
-Timing: ``time.perf_counter`` around each call, after warm-up rounds, garbage collection
-disabled while timing; in every trial the methods are called round robin on the same
-data, and a trial's time is the median of its timed calls (a call slower than 5 ms is
-timed once and warmed up once). Inputs are handed over in each
-library's own format, prepared outside the timed call (4x4 stacks for kinfw, contiguous
-R/t stacks for OpenCV). OpenCV's log is silenced; identity answers are counted instead.
+Inputs are handed over in each library's own format (4x4 stacks for kinfw, contiguous
+R/t stacks for OpenCV). OpenCV's log and kinfw's warnings are silenced; identity answers
+and raises are counted instead.
 """
 
 from __future__ import annotations
@@ -56,12 +42,11 @@ import argparse
 import hashlib
 import json
 import logging
-import re
 import subprocess
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -79,9 +64,9 @@ except ImportError as err:  # pragma: no cover - the message is the point
         f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}"
     )
 
+from benchmarks import handeye_regimes as hr  # noqa: E402
 from benchmarks.common import (  # noqa: E402
     format_table,
-    gc_disabled,
     machine_info,
     wall_time_line,
 )
@@ -89,12 +74,9 @@ from identification.axb import solve_axyb  # noqa: E402
 from identification.handeye import solve_axxb  # noqa: E402
 from kinfw.transforms import (  # noqa: E402
     inverse_transform,
-    matrix_from_rotation_vector,
     rotation_angle,
     transform_from_rotation_translation,
-    transform_from_xyz_quat_xyzw,
 )
-from verification.simulate import perturb_poses  # noqa: E402
 
 TABB_JSON = REPO / "tests" / "data" / "tabb_ds1" / "tabb_ds1_pairs.json"  # README there
 TABB_A_KEY = "T_world2cam (A_i = cTw, from cali.txt)"
@@ -103,45 +85,24 @@ TABB_REF_KEY = "reference_rwhe_AA_RPI"
 TABB_X_KEY = "Z = cTg (gripper2cam)"  # Tabb's Z is our X of A = X B Y
 TABB_YINV_KEY = "X = wTb (base2world)"  # Tabb's X is our inv(Y)
 OPENCV_TEST_DEG, OPENCV_TEST_MM = 1.0, 50.0  # Calib3d_CalibrateRobotWorldHandEye.regression
-
-FULL_VIEWS = (3, 5, 10, 30)
-QUICK_VIEWS = (3, 10)
-FULL_TRIALS = 100
-QUICK_TRIALS = 5
-# (rotation sigma deg, translation sigma mm per axis) on the camera poses
-NOISE_LEVELS = ((0.0, 0.0), (0.5, 1.0), (1.0, 2.0))
-MAX_ROTATION_DEG = 75.0  # robot poses: reference rotated by U(0, this) about a random axis
-HALF_SHIFT_M = 0.25  # robot poses: reference shifted by U(-this, this) per axis
-TARGET_DISTANCE_M = 0.6  # target origin in front of the camera at the reference pose
-HAND_CAM_SIGMA_M = 0.05  # true hand_T_cam translation, N(0, this) per axis
-SMALL_MOTION_DEG = 8.0  # probe: pairwise relative rotations < 16 deg
-SMALL_MOTION_VIEWS = 10
-TIMED_CALLS = 3
-WARMUP = 3
-SLOW_S = 5e-3  # a call slower than this is timed once per trial, warmed up once
+FULL_TRIALS = 200
+QUICK_TRIALS = 10
+FULL_TIMING_TRIALS = 50
+QUICK_TIMING_TRIALS = 5
+QUICK_TIMING_VIEWS = (3, 10, 30)
 TABB_TIMED_CALLS = 5
 TABB_SLOW_S = 0.05
-EXACT_DEG, EXACT_MM = 1e-9, 1e-6  # below these an error is rounding: no ratio is printed
-IDENTITY_ATOL = 1e-12
 
 TSAI = cv2.CALIB_HAND_EYE_TSAI
 PARK = cv2.CALIB_HAND_EYE_PARK
+HORAUD = cv2.CALIB_HAND_EYE_HORAUD
+ANDREFF = cv2.CALIB_HAND_EYE_ANDREFF
 DANIILIDIS = cv2.CALIB_HAND_EYE_DANIILIDIS
 SHAH = cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH
 LI = cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI
 
 
-# -- data --------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Scene:
-    """One true setup and its robot poses (metres); camera poses come noisy from ``views``."""
-
-    hand_T_cam: NDArray[np.float64]  # (4, 4) truth of AX = XB's X
-    base_T_world: NDArray[np.float64]  # (4, 4) truth of A = X B Y's Y
-    base_T_hands: NDArray[np.float64]  # (N, 4, 4) exact robot poses
-    seed: tuple[int, ...]  # of the camera-pose noise
+# -- Tabb DS1 data -----------------------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,49 +112,6 @@ class Views:
     base_T_hands: NDArray[np.float64]  # (n, 4, 4)  AX = XB's A
     cam_T_worlds: NDArray[np.float64]  # (n, 4, 4)  AX = XB's B (target = world); A = X B Y's A
     hand_T_bases: NDArray[np.float64]  # (n, 4, 4)  A = X B Y's B
-
-
-def random_rotations(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
-    """``n`` uniformly distributed rotations (normalised Gaussian quaternions), (n, 3, 3)."""
-    return transform_from_xyz_quat_xyzw(np.zeros((n, 3)), rng.normal(size=(n, 4)))[:, :3, :3]
-
-
-def make_scene(
-    rng: np.random.Generator, n: int, max_rotation_deg: float, seed: tuple[int, ...]
-) -> Scene:
-    """A random true setup seen from ``n`` robot poses (see the module docstring)."""
-    rotations = random_rotations(rng, 3)
-    hand_T_cam = transform_from_rotation_translation(
-        rotations[0], rng.normal(0.0, HAND_CAM_SIGMA_M, 3)
-    )
-    base_T_hand0 = transform_from_rotation_translation(
-        rotations[1], np.array([0.5, 0.0, 0.4]) + rng.normal(0.0, 0.05, 3)
-    )
-    cam0_T_world = transform_from_rotation_translation(
-        rotations[2], np.array([0.0, 0.0, TARGET_DISTANCE_M])
-    )
-    base_T_world = base_T_hand0 @ hand_T_cam @ cam0_T_world
-    axes = rng.normal(size=(n, 3))
-    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    angles = np.radians(rng.uniform(0.0, max_rotation_deg, n))
-    hand0_R_hands = matrix_from_rotation_vector(axes * angles[:, None])
-    base_T_hands = transform_from_rotation_translation(
-        base_T_hand0[:3, :3] @ hand0_R_hands,
-        base_T_hand0[:3, 3] + rng.uniform(-HALF_SHIFT_M, HALF_SHIFT_M, (n, 3)),
-    )
-    return Scene(hand_T_cam, base_T_world, base_T_hands, seed)
-
-
-def views(scene: Scene, n: int, noise: tuple[float, float]) -> Views:
-    """The first ``n`` poses of ``scene`` with camera poses noisy by (deg, mm per axis)."""
-    base_T_hands = scene.base_T_hands[:n]
-    cam_T_worlds = (
-        inverse_transform(scene.hand_T_cam) @ inverse_transform(base_T_hands) @ scene.base_T_world
-    )
-    noisy = perturb_poses(
-        cam_T_worlds, np.random.default_rng([*scene.seed, n]), 1e-3 * noise[1], np.radians(noise[0])
-    )
-    return Views(base_T_hands, noisy, inverse_transform(base_T_hands))
 
 
 def scaled(v: Views, metres_per_unit: float) -> Views:
@@ -221,7 +139,6 @@ class Method:
     name: str
     ours: bool
     prepare: Prepare
-    subset: bool = False  # run on the first --subset-trials trials only (slow)
 
 
 def rt(T: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -297,38 +214,19 @@ AXXB_METHODS = (
     Method("kinfw solve_axxb", True, ours_axxb),
     Method("OpenCV TSAI", False, opencv_axxb(TSAI)),
     Method("OpenCV PARK", False, opencv_axxb(PARK)),
+    Method("OpenCV HORAUD", False, opencv_axxb(HORAUD)),
+    Method("OpenCV ANDREFF", False, opencv_axxb(ANDREFF)),
     Method("OpenCV DANIILIDIS", False, opencv_axxb(DANIILIDIS)),
 )
 AXYB_METHODS = (
     Method("kinfw solve_axyb", True, ours_axyb(refine=True)),
-    Method("kinfw refine=False", True, ours_axyb(refine=False), subset=True),
+    Method("kinfw refine=False", True, ours_axyb(refine=False)),
     Method("OpenCV SHAH", False, opencv_axyb(SHAH)),
     Method("OpenCV LI", False, opencv_axyb(LI)),
 )
 
 
-# -- running -----------------------------------------------------------------------------
-
-
-@dataclass(slots=True)
-class Outcome:
-    """One method over the trials of one setting: errors (trials, 2 per transform) in deg
-    and mm and seconds per solve (trials,), NaN where it failed or was not run; counts of
-    runs, identity answers, answers flagged ``converged=False``, failures."""
-
-    errors: NDArray[np.float64]
-    seconds: NDArray[np.float64]
-    runs: int = 0
-    identity: int = 0
-    unconverged: int = 0
-    failed: int = 0
-    messages: dict[str, list] = field(default_factory=dict)  # kind -> [count, example]
-
-    def add_failure(self, msg: str) -> None:
-        """Count a failure under its message with the numbers masked; keep one example."""
-        kind = re.sub(r"\d[\d.e+-]*", "#", msg)
-        self.failed += 1
-        self.messages.setdefault(kind, [0, msg])[0] += 1
+# -- Tabb DS1 runs --------------------------------------------------------------------
 
 
 def errors_deg_mm(
@@ -340,10 +238,6 @@ def errors_deg_mm(
         out.append(np.degrees(float(rotation_angle(est[:3, :3].T @ true[:3, :3]))))
         out.append(1e3 * metres_per_unit * float(np.linalg.norm(est[:3, 3] - true[:3, 3])))
     return np.array(out)
-
-
-def is_identity(T: NDArray[np.float64]) -> bool:
-    return bool(np.abs(T - np.eye(4)).max() < IDENTITY_ATOL)
 
 
 def timed(call: Callable[[], object]) -> tuple[float, object, BaseException | None]:
@@ -370,57 +264,6 @@ def read_result(
     if exc is not None or estimates is None:
         return None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}"
     return estimates, None
-
-
-def run_setting(
-    methods: Sequence[Method],
-    trials: Sequence[Views],
-    truths: Sequence[Estimates],
-    *,
-    subset_trials: int,
-    metres_per_unit: float = 1.0,
-    timed_calls: int = TIMED_CALLS,
-) -> list[Outcome]:
-    """Every method on every trial (``subset`` methods on the first ``subset_trials``),
-    round robin within a trial, after warm-up calls on the first trial.
-
-    A method whose first call of a trial takes longer than ``SLOW_S`` is timed by that
-    call alone; the others are called ``timed_calls`` times and their median is kept.
-    """
-    k = 2 * len(truths[0])
-    outcomes = [
-        Outcome(np.full((len(trials), k), np.nan), np.full(len(trials), np.nan)) for _ in methods
-    ]
-    prepared = [[m.prepare(v) for m in methods] for v in trials]
-    for call, _read in prepared[0]:
-        if timed(call)[0] < SLOW_S:
-            for _ in range(WARMUP - 1):
-                timed(call)
-    with gc_disabled():
-        for t, (calls, truth) in enumerate(zip(prepared, truths, strict=True)):
-            active = [j for j, m in enumerate(methods) if not m.subset or t < subset_trials]
-            seconds: list[list[float]] = [[] for _ in methods]
-            results: list[tuple[object, BaseException | None]] = [(None, None)] * len(methods)
-            for r in range(timed_calls):
-                for j in active:
-                    if r > 0 and seconds[j][0] >= SLOW_S:
-                        continue
-                    s, result, exc = timed(calls[j][0])
-                    seconds[j].append(s)
-                    results[j] = (result, exc)
-            for j in active:
-                out = outcomes[j]
-                out.runs += 1
-                out.seconds[t] = np.median(seconds[j])
-                result, exc = results[j]
-                estimates, msg = read_result(calls[j][1], result, exc)
-                if estimates is None:
-                    out.add_failure(str(msg))
-                    continue
-                out.identity += int(is_identity(estimates[0]))
-                out.unconverged += int(not getattr(result, "converged", True))
-                out.errors[t] = errors_deg_mm(estimates, truth, metres_per_unit)
-    return outcomes
 
 
 # -- output ------------------------------------------------------------------------------
@@ -457,228 +300,6 @@ def solver_digests() -> list[tuple[str, str]]:
 
 def g(x: float) -> str:
     return "fail" if not np.isfinite(x) else f"{x:.3g}"
-
-
-def medians(out: Outcome, trials: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
-    """Median of each error column over the trials (of ``trials``, a mask) that ran and did
-    not fail; NaN if none."""
-    ok = ~np.isnan(out.errors[:, 0]) & (True if trials is None else trials)
-    return np.median(out.errors[ok], axis=0) if ok.any() else np.full(out.errors.shape[1], np.nan)
-
-
-def iqrs(out: Outcome) -> NDArray[np.float64]:
-    ok = ~np.isnan(out.errors[:, 0])
-    if not ok.any():
-        return np.full(out.errors.shape[1], np.nan)
-    q25, q75 = np.percentile(out.errors[ok], [25.0, 75.0], axis=0)
-    return q75 - q25
-
-
-def best_opencv(
-    methods: Sequence[Method], outcomes: Sequence[Outcome], trials: NDArray[np.bool_] | None = None
-) -> tuple[NDArray[np.int_], int]:
-    """Index of the OpenCV method with the lowest median in each error column, and of the
-    fastest one (median time), over ``trials`` (a mask; default all)."""
-    theirs = [j for j, m in enumerate(methods) if not m.ours]
-    med = np.array([medians(outcomes[j], trials) for j in theirs])
-    med = np.where(np.isnan(med), np.inf, med)
-    mask = np.ones(len(outcomes[0].seconds), bool) if trials is None else trials
-    times = [np.nanmedian(outcomes[j].seconds[mask]) for j in theirs]
-    return np.array(theirs)[np.argmin(med, axis=0)], theirs[int(np.argmin(times))]
-
-
-def setting_rows(n: int, methods: Sequence[Method], outcomes: Sequence[Outcome]) -> list[list[str]]:
-    best_err, best_time = best_opencv(methods, outcomes)
-    rows = []
-    for j, (m, out) in enumerate(zip(methods, outcomes, strict=True)):
-        med, iqr = medians(out), iqrs(out)
-        cells = [f"{n}" if j == 0 else "", m.name]
-        for c in range(len(med)):
-            star = "*" if best_err[c] == j else ""
-            cells += [g(med[c]) + star, g(iqr[c])]
-        us = 1e6 * float(np.nanmedian(out.seconds))
-        cells += [
-            f"{us:.1f}" + ("*" if best_time == j else ""),
-            f"{out.identity}",
-            f"{out.unconverged}",
-            f"{out.failed}",
-            f"{out.runs}",
-        ]
-        rows.append(cells)
-    return rows
-
-
-def print_notes(
-    methods: Sequence[Method], per_n: Sequence[Sequence[Outcome]], views_list: Sequence[int]
-) -> None:
-    for n, outcomes in zip(views_list, per_n, strict=True):
-        for m, out in zip(methods, outcomes, strict=True):
-            for count, example in out.messages.values():
-                print(f"  n={n}: {m.name} failed {count}x, e.g. {example[:150]}")
-
-
-def error_headers(names: Sequence[str]) -> list[str]:
-    heads = []
-    for name in names:
-        heads += [f"{name} rot deg", "IQR", f"{name} mm", "IQR"]
-    return heads
-
-
-COUNT_HEADERS = ["us/solve", "ident", "unconv", "fail", "runs"]
-COUNT_NOTE = (
-    "ident = answers equal to the identity (OpenCV's silent failure); unconv = "
-    "answers flagged\nconverged=False; fail = exceptions or non-finite answers "
-    "(excluded from the medians);\nruns = trials run."
-)
-
-
-# -- sections ----------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Summary:
-    problem: str
-    noise: tuple[float, float]
-    n: int
-    method: str
-    columns: tuple[str, ...]
-    ours: NDArray[np.float64]  # median errors
-    best: NDArray[np.float64]  # best OpenCV median error per column
-    best_names: tuple[str, ...]
-    wins: tuple[str, ...]  # per column: trials where ours < that best method, "k of m"
-    time_ratio: float  # median over trials of ours / fastest OpenCV, same trial
-    fastest: str
-
-
-def summarise(
-    problem: str,
-    noise: tuple[float, float],
-    n: int,
-    methods: Sequence[Method],
-    outcomes: Sequence[Outcome],
-    columns: tuple[str, ...],
-) -> list[Summary]:
-    out = []
-    for m, o in zip(methods, outcomes, strict=True):
-        if m.ours:
-            run = ~np.isnan(o.seconds)  # compare on the trials this method ran
-            best_err, best_time = best_opencv(methods, outcomes, run)
-            best = np.array([medians(outcomes[j], run)[c] for c, j in enumerate(best_err)])
-            wins = []
-            for c, j in enumerate(best_err):
-                both = ~np.isnan(o.errors[:, c]) & ~np.isnan(outcomes[j].errors[:, c])
-                lower = int(np.sum(o.errors[both, c] < outcomes[j].errors[both, c]))
-                wins.append(f"{lower} of {int(both.sum())}")
-            ratio = float(np.nanmedian(o.seconds / outcomes[best_time].seconds))
-            out.append(
-                Summary(
-                    problem,
-                    noise,
-                    n,
-                    m.name,
-                    columns,
-                    medians(o),
-                    best,
-                    tuple(methods[j].name for j in best_err),
-                    tuple(wins),
-                    ratio,
-                    methods[best_time].name,
-                )
-            )
-    return out
-
-
-def noise_label(noise: tuple[float, float]) -> str:
-    return "no noise" if noise == (0.0, 0.0) else f"{noise[0]:g} deg + {noise[1]:g} mm/axis"
-
-
-def section_synthetic(
-    title: str,
-    problem: str,
-    methods: Sequence[Method],
-    scenes: Sequence[Scene],
-    views_list: Sequence[int],
-    noises: Sequence[tuple[float, float]],
-    truths: Callable[[Scene], Estimates],
-    names: Sequence[str],
-    subset_trials: int,
-) -> list[Summary]:
-    print(f"\n{title}")
-    slow = [m.name for m in methods if m.subset]
-    if slow and subset_trials < len(scenes):
-        print(
-            f"   ({', '.join(slow)}: first {subset_trials} trials only, see --subset-trials; "
-            "its ratios\n   and win counts use those trials)"
-        )
-    summaries = []
-    for noise in noises:
-        per_n = []
-        rows: list[list[str]] = []
-        for n in views_list:
-            trials = [views(s, n, noise) for s in scenes]
-            outcomes = run_setting(
-                methods, trials, [truths(s) for s in scenes], subset_trials=subset_trials
-            )
-            per_n.append(outcomes)
-            rows += setting_rows(n, methods, outcomes)
-            summaries += summarise(
-                problem,
-                noise,
-                n,
-                methods,
-                outcomes,
-                tuple(f"{x} {u}" for x in names for u in ("rot", "mm")),
-            )
-        print(
-            f"\n{problem}, camera-pose noise {noise_label(noise)}, {len(scenes)} trials "
-            "(median, IQR over trials; * = best OpenCV method in the column)"
-        )
-        print(format_table(["n", "method", *error_headers(names), *COUNT_HEADERS], rows))
-        print_notes(methods, per_n, views_list)
-    print(COUNT_NOTE)
-    return summaries
-
-
-def section_small_motion(trials: int, seed: int) -> list[Summary]:
-    print(
-        f"\n1b. AX = XB with small motions: {SMALL_MOTION_VIEWS} poses rotated "
-        f"U(0, {SMALL_MOTION_DEG:g} deg) from the reference\n    (every relative "
-        f"rotation < {2 * SMALL_MOTION_DEG:g} deg), {trials} trials"
-    )
-    scenes = [
-        make_scene(
-            np.random.default_rng([seed, 1, t]), SMALL_MOTION_VIEWS, SMALL_MOTION_DEG, (seed, 1, t)
-        )
-        for t in range(trials)
-    ]
-    rows: list[list[str]] = []
-    notes = []
-    summaries = []
-    for noise in NOISE_LEVELS:
-        outcomes = run_setting(
-            AXXB_METHODS,
-            [views(s, SMALL_MOTION_VIEWS, noise) for s in scenes],
-            [(s.hand_T_cam,) for s in scenes],
-            subset_trials=trials,
-        )
-        summaries += summarise(
-            "AX = XB, small motions",
-            noise,
-            SMALL_MOTION_VIEWS,
-            AXXB_METHODS,
-            outcomes,
-            ("X rot", "X mm"),
-        )
-        for j, r in enumerate(setting_rows(SMALL_MOTION_VIEWS, AXXB_METHODS, outcomes)):
-            rows.append([noise_label(noise) if j == 0 else "", *r[1:]])
-        notes.append((noise, outcomes))
-    print(format_table(["noise", "method", *error_headers(["X"]), *COUNT_HEADERS], rows))
-    for noise, outcomes in notes:
-        for m, out in zip(AXXB_METHODS, outcomes, strict=True):
-            for count, example in out.messages.values():
-                print(f"  {noise_label(noise)}: {m.name} failed {count}x, e.g. {example[:150]}")
-    print(COUNT_NOTE)
-    return summaries
 
 
 def load_tabb() -> tuple[Views, Estimates, Estimates]:
@@ -833,22 +454,6 @@ def section_tabb() -> list[TabbRow]:
     return collected
 
 
-def ratio_cell(ours: float, best: float, floor: float) -> str:
-    """``ours / best`` as text; '~0' when both are rounding-level, the raw value when
-    only one is."""
-    if not np.isfinite(ours):
-        return "fail"
-    if not np.isfinite(best):
-        return "no OpenCV"
-    if ours < floor and best < floor:
-        return "~0"
-    if best < floor:
-        return f"{ours:.2g} vs ~0"
-    if ours < floor:
-        return f"~0 vs {best:.2g}"
-    return f"{ours / best:.2f}"
-
-
 def print_tabb_summary(tabb: Sequence[TabbRow], losses: dict[str, list[str]]) -> None:
     """Ratios to the best OpenCV method on Tabb DS1, per problem and length unit."""
     all_columns = list(dict.fromkeys(c for r in tabb for c in r[3]))
@@ -884,55 +489,166 @@ def print_tabb_summary(tabb: Sequence[TabbRow], losses: dict[str, list[str]]) ->
     print(format_table(["problem", "lengths", "kinfw", *(f"{c} ratio" for c in all_columns)], rows))
 
 
-def print_summary(summaries: Sequence[Summary], tabb: Sequence[TabbRow]) -> None:
+# -- sections 1, 2 and the summary: issue 13's regimes ------------------------------------
+
+
+def regime_trials(regime_index: int, trials: int, seed: int) -> list[hr.Trial]:
+    regime = hr.REGIMES[regime_index]
+    return [
+        hr.make_trial(np.random.default_rng([seed, regime_index, t]), regime) for t in range(trials)
+    ]
+
+
+def section_regimes(trials: int, seed: int, metres_per_unit: float) -> list[list[hr.Column]]:
+    """Print one table per regime; return the columns (per regime, per solver)."""
+    unit = "m" if metres_per_unit == 1.0 else "mm"
     print(
-        "\n4. Summary: kinfw median error / best OpenCV median error in the same column, "
-        "and kinfw time /\n   fastest OpenCV time in the same trial (median over trials). "
-        "< 1 = kinfw better.\n   '~0' = both errors at rounding level (< "
-        f"{EXACT_DEG:g} deg, < {EXACT_MM:g} mm), no ratio; 'a vs ~0' = only one is."
+        f"\n1. Regimes of issue 13: {trials} trials each, lengths handed over in {unit}; "
+        f"errors of X = hand_T_camera\n   (A = X B Y solvers: inverse of camera_T_hand). "
+        "Median and p90 over the trials that did not raise;\n   raises = exceptions or "
+        "non-finite answers (k/N); ident = answers equal to the identity\n   (OpenCV's "
+        "silent failure); ms med = one call per trial, median. best CV = the best OpenCV "
+        "value\n   of the column (method abbreviated); x/best = kinfw over best CV (< 1: "
+        "kinfw better)."
     )
-    losses: dict[str, list[str]] = {}
-    for problem in dict.fromkeys(s.problem for s in summaries):
-        group = [s for s in summaries if s.problem == problem]
-        columns = group[0].columns
-        rows = []
-        for s in group:
-            cells = [noise_label(s.noise), f"{s.n}", s.method]
-            lost = losses.setdefault(f"{problem}, {noise_label(s.noise)}, n={s.n}, {s.method}:", [])
-            for c, col in enumerate(columns):
-                floor = EXACT_DEG if col.endswith("rot") else EXACT_MM
-                ours, best = s.ours[c], s.best[c]
-                cells.append(ratio_cell(ours, best, floor))
-                if np.isfinite(ours) and ours >= floor and not best >= ours:
-                    unit = "deg" if col.endswith("rot") else "mm"
-                    shown = "~0 (rounding)" if best < floor else f"{best:.3g} {unit}"
-                    times = f"x{ours / best:.2f}; " if best >= floor else ""
-                    lost.append(
-                        f"{col} error {ours:.3g} {unit} vs {s.best_names[c]} "
-                        f"{shown} ({times}kinfw lower in {s.wins[c]} trials)"
-                    )
-            cells.append(f"{s.time_ratio:.2f}")
-            cells.append(s.fastest.replace("OpenCV ", ""))
-            if s.time_ratio > 1.0:
-                lost.append(f"time x{s.time_ratio:.2f} of {s.fastest}")
-            rows.append(cells)
-        print(f"\n{problem}")
-        print(
-            format_table(
-                ["noise", "n", "kinfw", *(f"{c} ratio" for c in columns), "time ratio", "fastest"],
-                rows,
-            )
+    results = []
+    for i, regime in enumerate(hr.REGIMES):
+        cols = hr.run_regime(
+            regime, regime_trials(i, trials, seed), metres_per_unit=metres_per_unit
         )
-    print_tabb_summary(tabb, losses)
-    losses = {k: v for k, v in losses.items() if v}
+        results.append(cols)
+        motion = (
+            "any orientation"
+            if regime.motion_deg >= 360
+            else f"relative turns <= {regime.motion_deg:g} deg"
+        )
+        print(f"\n1.{i + 1} {regime.label} ({regime.n_views} views, {motion})")
+        print(format_table(hr.REGIME_HEADERS, hr.regime_rows(hr.SOLVERS, cols, trials)))
+        for s, c in zip(hr.SOLVERS, cols, strict=True):
+            for count, example in c.messages.values():
+                print(f"  {s.name} raised {count}x, e.g. {example[:140]}")
+    return results
+
+
+def section_timing(
+    trials: int, views_list: Sequence[int], seed: int, metres_per_unit: float
+) -> list[tuple[int, NDArray[np.float64]]]:
+    """Print the time per solve at each number of views; return (n, seconds per solver)."""
     print(
-        f"\nWhere kinfw loses (median error above the best OpenCV median, or slower than "
-        f"the fastest; {len(losses)} cases):"
+        f"\n2. Time per solve, well spread noisy views, {trials} trials per size (median "
+        "over trials of the\n   median of 3 round-robin calls after a warm-up, gc off); "
+        "x/fastest = kinfw over the fastest OpenCV\n   method at that size."
     )
-    for head, items in losses.items():
-        print(f"  {head}")
-        for item in items:
-            print(f"      {item}")
+    spread = hr.REGIMES[0]
+    out = []
+    rows = []
+    theirs = [j for j, s in enumerate(hr.SOLVERS) if not s.ours]
+    for n in views_list:
+        data = [
+            hr.make_trial(np.random.default_rng([seed, 100, n, t]), spread, n_views=n)
+            for t in range(trials)
+        ]
+        seconds = hr.time_solvers(data, metres_per_unit=metres_per_unit)
+        out.append((n, seconds))
+        fastest = min(theirs, key=lambda j: seconds[j])
+        rows.append(
+            [
+                f"{n}",
+                *(f"{1e3 * x:.3f}" for x in seconds),
+                hr.SOLVERS[fastest].name,
+                *(
+                    f"{seconds[j] / seconds[fastest]:.2f}"
+                    for j, s in enumerate(hr.SOLVERS)
+                    if s.ours
+                ),
+            ]
+        )
+    ours = [s.name.split()[-1] for s in hr.SOLVERS if s.ours]
+    print(
+        format_table(
+            [
+                "views",
+                *(f"{s.name.replace('kinfw ', '')} ms" for s in hr.SOLVERS),
+                "fastest CV",
+                *(f"{o}/fastest" for o in ours),
+            ],
+            rows,
+        )
+    )
+    return out
+
+
+def print_issue_summary(
+    regimes: Sequence[list[hr.Column]],
+    timing: Sequence[tuple[int, NDArray[np.float64]]],
+    trials: int,
+) -> None:
+    """The final table in issue 13's layout, then kinfw / best CV ratios per regime."""
+    ours = [j for j, s in enumerate(hr.SOLVERS) if s.ours]
+    theirs = [j for j, s in enumerate(hr.SOLVERS) if not s.ours]
+    print(
+        f"\n4. Summary in issue 13's layout ({trials} trials per regime): X rotation "
+        "error deg median (p90) /\n   translation mm median (p90); raises k/N when "
+        "nonzero; best OpenCV = best value per column\n   with its method (p90 and mm "
+        "may come from other methods than the median)."
+    )
+    rows = []
+    for regime, cols in zip(hr.REGIMES, regimes, strict=True):
+        rows.append(
+            [
+                regime.label,
+                *(hr.summary_cell(cols[j], trials) for j in ours),
+                hr.summary_best_cell(hr.SOLVERS, cols),
+            ]
+        )
+    for n, seconds in timing:
+        fastest = sorted(theirs, key=lambda j: seconds[j])
+        rows.append(
+            [
+                f"time per solve, {n} views",
+                *(f"{1e3 * seconds[j]:.3f} ms" for j in ours),
+                ", ".join(f"{1e3 * seconds[j]:.3f} ms ({hr.SOLVERS[j].name})" for j in fastest[:2]),
+            ]
+        )
+    heads = ["regime", *(f"kinfw `{hr.SOLVERS[j].name.split()[-1]}`" for j in ours), "best OpenCV"]
+    print("| " + " | ".join(heads) + " |\n|" + "---|" * len(heads))  # markdown, as the issue
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+    print(
+        "\nkinfw / best OpenCV per column (< 1: kinfw better; '-' = raised in every trial; "
+        "'~0' = both\nat rounding level)"
+    )
+    rows = []
+    for regime, cols in zip(hr.REGIMES, regimes, strict=True):
+        best = hr.best_cv(hr.SOLVERS, cols)
+        for j in ours:
+            st = cols[j].stats()
+            rows.append(
+                [
+                    regime.label if j == ours[0] else "",
+                    hr.SOLVERS[j].name.split()[-1],
+                    *(
+                        hr.ratio(x, b, k)
+                        for k, (x, (b, _)) in enumerate(zip(st, best, strict=True))
+                    ),
+                    f"{cols[j].raises}/{trials}",
+                ]
+            )
+    for n, seconds in timing:
+        t_best = min(seconds[j] for j in theirs)
+        for j in ours:
+            rows.append(
+                [
+                    f"time, {n} views" if j == ours[0] else "",
+                    hr.SOLVERS[j].name.split()[-1],
+                    f"time {seconds[j] / t_best:.2f}",
+                    "",
+                    "",
+                    "",
+                    "",
+                ]
+            )
+    print(format_table(["regime", "kinfw", *hr.STAT_NAMES, "raises"], rows))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -941,29 +657,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--trials",
         type=int,
         default=None,
-        help=f"random setups per setting (default {FULL_TRIALS}, or {QUICK_TRIALS} with --quick)",
+        help=f"trials per regime (default {FULL_TRIALS}, or {QUICK_TRIALS} with --quick)",
     )
     parser.add_argument(
-        "--quick", action="store_true", help=f"views {QUICK_VIEWS} only, {QUICK_TRIALS} trials"
-    )
-    parser.add_argument(
-        "--subset-trials",
-        type=int,
-        default=None,
-        help="run the pure paper iteration (refine=False), which can be slow, "
-        "on the first M trials only (default: all)",
+        "--quick",
+        action="store_true",
+        help=f"{QUICK_TRIALS} trials per regime, timing at {QUICK_TIMING_VIEWS} views",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
+    parser.add_argument(
+        "--unit",
+        choices=("m", "mm"),
+        default="m",
+        help="length unit handed to every solver in sections 1 and 2 (default m)",
+    )
+    parser.add_argument("--no-tabb", action="store_true", help="skip section 3 (Tabb DS1)")
     args = parser.parse_args(argv)
     trials = (
         args.trials if args.trials is not None else (QUICK_TRIALS if args.quick else FULL_TRIALS)
     )
     if trials < 1:
         parser.error("--trials: expected at least 1")
-    subset_trials = min(trials, trials if args.subset_trials is None else args.subset_trials)
-    if subset_trials < 1:
-        parser.error("--subset-trials: expected at least 1")
-    views_list = QUICK_VIEWS if args.quick else FULL_VIEWS
+    timing_trials = min(trials, QUICK_TIMING_TRIALS if args.quick else FULL_TIMING_TRIALS)
+    timing_views = QUICK_TIMING_VIEWS if args.quick else hr.TIMING_VIEWS
+    metres_per_unit = 1.0 if args.unit == "m" else 1e-3
     silence_opencv_log()
     logging.getLogger("identification").setLevel(logging.ERROR)
 
@@ -979,56 +696,31 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
     )
     print(
-        f"mode       {'quick' if args.quick else 'full'}, trials {trials} (refine=False: "
-        f"{subset_trials}), views {views_list}, seed {args.seed}"
+        f"mode       {'quick' if args.quick else 'full'}, trials {trials} per regime, "
+        f"timing {timing_trials} trials at {timing_views} views, seed {args.seed}, "
+        f"lengths in {args.unit}"
     )
     print(
-        f"timing     per trial median of {TIMED_CALLS} calls (1 call if slower than "
-        f"{1e3 * SLOW_S:g} ms), warm-up {WARMUP} calls\n           (1 if slow), gc "
-        "disabled while timing; OpenCV's log and kinfw's warnings silenced\n           "
-        "(identity answers and converged=False are counted instead)"
+        f"data       independent generator (benchmarks/handeye_regimes.py): camera noise "
+        f"N(0, {hr.NOISE_ROT_DEG:g} deg) about\n           a random axis + N(0, "
+        f"{hr.NOISE_MM:g} mm) per axis; robot poses exact, shifted U(+-{hr.HALF_SHIFT_M:g} m) "
+        f"per axis;\n           target {hr.TARGET_DISTANCE_M:g} m in front of the camera "
+        "at the reference pose"
     )
-    print(
-        f"data       robot poses: reference rotated U(0, {MAX_ROTATION_DEG:g} deg) about "
-        f"random axes, shifted U(+-{HALF_SHIFT_M:g} m)/axis;\n           target "
-        f"{TARGET_DISTANCE_M:g} m in front of the reference camera; noise on the camera "
-        "poses only\n           (rotation N(0, sigma) about a random axis, translation "
-        "N(0, sigma_t) per axis):\n           " + ", ".join(noise_label(nz) for nz in NOISE_LEVELS)
-    )
-    scenes = [
-        make_scene(
-            np.random.default_rng([args.seed, 0, t]),
-            max(FULL_VIEWS),
-            MAX_ROTATION_DEG,
-            (args.seed, 0, t),
-        )
-        for t in range(trials)
-    ]
-    summaries = section_synthetic(
-        "1. AX = XB (eye-in-hand): X = hand_T_eye; A = base_T_hand, B = cam_T_target",
-        "AX = XB",
-        AXXB_METHODS,
-        scenes,
-        views_list,
-        NOISE_LEVELS,
-        lambda s: (s.hand_T_cam,),
-        ["X"],
-        subset_trials,
-    )
-    summaries += section_small_motion(trials, args.seed)
-    summaries += section_synthetic(
-        "2. A = X B Y: A = cam_T_world, B = hand_T_base, X = cam_T_hand, Y = base_T_world",
-        "A = X B Y",
-        AXYB_METHODS,
-        scenes,
-        views_list,
-        NOISE_LEVELS,
-        lambda s: (inverse_transform(s.hand_T_cam), s.base_T_world),
-        ["X", "Y"],
-        subset_trials,
-    )
-    tabb = section_tabb()
-    print_summary(summaries, tabb)
+    regimes = section_regimes(trials, args.seed, metres_per_unit)
+    timing = section_timing(timing_trials, timing_views, args.seed, metres_per_unit)
+    losses: dict[str, list[str]] = {}
+    if not args.no_tabb:
+        tabb = section_tabb()
+        print_tabb_summary(tabb, losses)
+    print_issue_summary(regimes, timing, trials)
+    losses = {k: v for k, v in losses.items() if v}
+    if losses:
+        print(f"\nTabb DS1: where kinfw is farther from Tabb's reference ({len(losses)} cases):")
+        for head, items in losses.items():
+            print(f"  {head}")
+            for item in items:
+                print(f"      {item}")
     print(wall_time_line(started))
     return 0
 
