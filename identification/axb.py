@@ -68,11 +68,8 @@ from identification.axb_iteration import (
     rotation_iteration,
     translation_iteration,
 )
-from identification.axb_refinement import (
-    GN_MAX_STEPS,
-    refine_rotations,
-    translations_least_squares,
-)
+from identification.axb_refinement import translations_least_squares
+from identification.handeye_ml import assess, combined_verdict, fit_absolute, uncertainty
 from kinfw.transforms import (
     check_transform,
     project_to_rotation,
@@ -139,6 +136,24 @@ class AXYBResult:
         alternation (before any refinement). During the rotation phase the translations
         are those of the translation start: ``Y``'s starting translation, and for ``X``
         the average of eqs. (4)-(6) given it and the current rotation.
+    covariance : ndarray, shape (12, 12)
+        Covariance of the errors ``(dphi_X, dt_X, dphi_Y, dt_Y)``: rotations as
+        ``X_true = X exp(dphi_X)`` (radians, in X's and Y's child frames: hand and
+        target), translations in the parent frames (camera and root), input unit; from
+        the maximum-likelihood fit with noise scales estimated from the residuals
+        (:mod:`identification.handeye_ml`; for ``refine=False`` evaluated at the paper's
+        estimate).
+    sigma_rotation_deg, sigma_translation : ndarray, shape (2, 3)
+        1-sigma per axis of X (row 0) and Y (row 1), degrees and input unit, in the
+        frames of ``covariance``.
+    verdict : str
+        ``"determined"`` or the worse of X's and Y's ``"poorly determined (...)"`` /
+        ``"undetermined (...)"``, naming the transform.
+    rejected : tuple of int
+        Poses rejected as outliers (whitened residual above the 99.9 % quantile of
+        chi^2 with 6 degrees of freedom); empty for ``refine=False``.
+    noise_rotation_rad, noise_translation : float
+        The camera pose's noise scales per axis estimated from the residuals.
 
     Notes
     -----
@@ -158,6 +173,13 @@ class AXYBResult:
     rms_translation: float
     camera_T_hand_history: NDArray[np.float64] | None
     root_T_target_history: NDArray[np.float64] | None
+    covariance: NDArray[np.float64]
+    sigma_rotation_deg: NDArray[np.float64]
+    sigma_translation: NDArray[np.float64]
+    verdict: str
+    rejected: tuple[int, ...]
+    noise_rotation_rad: float
+    noise_translation: float
 
     @property
     def X(self) -> NDArray[np.float64]:
@@ -410,41 +432,58 @@ def solve_axyb(
     else:
         q_Y0, t_Y0 = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
 
-    rot = rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
-    R_X, R_Y = rotation_from_quat_xyzw(rot.q_X), rotation_from_quat_xyzw(rot.q_Y)
-    tra = translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
-    t_X, t_Y = tra.t_X, tra.t_Y
-    converged = rot.converged and tra.converged
-    paper_converged = converged
+    run_paper = not refine or record_history or X0 is not None or Y0 is not None
+    rot = tra = None
+    iterations = restarts = 0
+    converged = True
+    if run_paper:
+        rot = rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
+        R_X, R_Y = rotation_from_quat_xyzw(rot.q_X), rotation_from_quat_xyzw(rot.q_Y)
+        tra = translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
+        t_X, t_Y = tra.t_X, tra.t_Y
+        converged = rot.converged and tra.converged
+        iterations, restarts = rot.iterations + tra.iterations, rot.restarts
+        if not converged:
+            (log.info if refine else log.warning)(
+                "the paper's iteration did not converge within %d iterations (rotation: %s, "
+                "translation: %s)%s",
+                max_iterations,
+                rot.converged,
+                tra.converged,
+                "; the refinement continues from its estimate" if refine else "",
+            )
+        X = transform_from_rotation_translation(R_X, t_X)
+        Y = transform_from_rotation_translation(R_Y, t_Y)
     if refine:
-        R_X, R_Y, converged = refine_rotations(R_As, R_Bs, R_X, R_Y, tol=tol)
-        t_X, t_Y = translations_least_squares(As, Bs, R_X)
+        starts = [(lambda X=X, Y=Y: (X, Y))] if run_paper else []
+        fit = fit_absolute(As, Bs, starts)
+        X, Y, converged = fit.P, fit.Q, fit.converged
+        if not converged:
+            log.warning("the maximum-likelihood refinement did not converge")
+        if fit.rejected:
+            log.info("solve_axyb: poses %s rejected as outliers", list(fit.rejected))
+    else:
+        fit = assess(As, Bs, X, Y)
+    inliers = fit.inliers
 
-    X = transform_from_rotation_translation(R_X, t_X)
-    Y = transform_from_rotation_translation(R_Y, t_Y)
-    fit = X @ Bs @ Y
-    rms_rot = float(np.sqrt(np.mean(rotation_angle(np.swapaxes(R_As, 1, 2) @ fit[:, :3, :3]) ** 2)))
-    rms_tra = float(np.sqrt(np.mean(np.sum((fit[:, :3, 3] - As[:, :3, 3]) ** 2, axis=1))))
+    fit_T = X @ Bs[inliers] @ Y
+    rms_rot = float(
+        np.sqrt(np.mean(rotation_angle(np.swapaxes(R_As[inliers], 1, 2) @ fit_T[:, :3, :3]) ** 2))
+    )
+    rms_tra = float(np.sqrt(np.mean(np.sum((fit_T[:, :3, 3] - As[inliers, :3, 3]) ** 2, axis=1))))
     if rms_rot > STALL_RAD:
         raise AXYBError(
-            f"no consistent X, Y: RMS rotation residual {np.degrees(rms_rot):.3g} deg after "
-            f"{rot.iterations} rotation iterations and {rot.restarts} restarts; check that "
+            f"no consistent X, Y: RMS rotation residual {np.degrees(rms_rot):.3g} deg "
+            f"after {iterations} rotation iterations and {restarts} restarts; check that "
             f"A[i] and B[i] are paired and oriented as A[i] = X @ B[i] @ Y"
         )
-    if not paper_converged:
-        (log.info if refine else log.warning)(
-            "the paper's iteration did not converge within %d iterations (rotation: %s, "
-            "translation: %s)%s",
-            max_iterations,
-            rot.converged,
-            tra.converged,
-            "; the refinement continues from its estimate" if refine else "",
-        )
-    if refine and not converged:
-        log.warning("Gauss-Newton refinement did not converge in %d steps", GN_MAX_STEPS)
+    length = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
+    unc_X = uncertainty(fit.covariance[:6, :6], length, frame="the hand frame")
+    unc_Y = uncertainty(fit.covariance[6:, 6:], length, frame="the target frame")
+    verdict = combined_verdict([("camera_T_hand", unc_X), ("root_T_target", unc_Y)])
 
     history_X = history_Y = None
-    if record_history:
+    if record_history and rot is not None and tra is not None:
         R_X_rot = rotation_from_quat_xyzw(rot.history_X)
         R_Y_rot = rotation_from_quat_xyzw(rot.history_Y)
         # rotation phase: Y's starting translation and the X translation it implies
@@ -466,11 +505,18 @@ def solve_axyb(
     return AXYBResult(
         camera_T_hand=X,
         root_T_target=Y,
-        iterations=rot.iterations + tra.iterations,
+        iterations=iterations,
         converged=bool(converged),
-        restarts=rot.restarts,
+        restarts=restarts,
         rms_rotation_rad=rms_rot,
         rms_translation=rms_tra,
         camera_T_hand_history=history_X,
         root_T_target_history=history_Y,
+        covariance=fit.covariance,
+        sigma_rotation_deg=np.stack([unc_X.sigma_rotation_deg, unc_Y.sigma_rotation_deg]),
+        sigma_translation=np.stack([unc_X.sigma_translation, unc_Y.sigma_translation]),
+        verdict=verdict,
+        rejected=fit.rejected,
+        noise_rotation_rad=fit.sigma_rotation_rad,
+        noise_translation=fit.sigma_translation,
     )

@@ -63,7 +63,9 @@ __all__ = [
     "CHI2_6_999",
     "PoseFit",
     "Uncertainty",
+    "assess",
     "closed_form_start",
+    "combined_verdict",
     "fit_absolute",
     "uncertainty",
 ]
@@ -569,7 +571,48 @@ def _concentrated(data: _Data, P: NDArray, Q: NDArray, inliers: NDArray) -> floa
     )
 
 
+def assess(M: NDArray, N: NDArray, P: NDArray, Q: NDArray) -> PoseFit:
+    """A :class:`PoseFit` at given ``P, Q`` (not moved): noise scales from the residuals
+    (variance components) and the covariance the maximum-likelihood fit would have there."""
+    data = _Data(M, N)
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
+    ones = np.ones(data.n)
+    for _ in range(3):
+        H_r, H_t, *_ = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+        Hinv = np.linalg.pinv(H_r + H_t)
+        red_r = 3.0 * data.n - float(np.trace(Hinv @ H_r))
+        red_t = 3.0 * data.n - float(np.trace(Hinv @ H_t))
+        s_r = np.sqrt(np.sum(r_r**2) / red_r) if red_r > 1e-9 else s_r
+        s_t = np.sqrt(np.sum(r_t**2) / red_t) if red_t > 1e-9 else s_t
+        s_r, s_t = _bounded_sigmas(s_r, s_t, data.length)
+    H_r, H_t, *_ = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+    return PoseFit(
+        P=P,
+        Q=Q,
+        covariance=np.linalg.pinv(H_r + H_t),
+        sigma_rotation_rad=float(s_r),
+        sigma_translation=float(s_t),
+        rotation_residuals=r_r,
+        translation_residuals=r_t,
+        inliers=np.ones(data.n, dtype=bool),
+        iterations=0,
+        converged=True,
+    )
+
+
 # ----------------------------------------------------------------------- uncertainty
+
+
+def combined_verdict(named: Sequence[tuple[str, Uncertainty]]) -> str:
+    """One verdict for several transforms: ``"determined"`` when all are, else the worst
+    one's, naming the transform (e.g. ``"poorly determined (camera_T_hand: sigma ...)"``)."""
+    rank = {"determined": 0, "poorly": 1, "undetermined": 2}
+    worst_name, worst = max(named, key=lambda item: rank[item[1].verdict.split(" ")[0]])
+    if worst.verdict == "determined":
+        return "determined"
+    head, _, rest = worst.verdict.partition("(")
+    return f"{head}({worst_name}: {rest}"
 
 
 def uncertainty(
