@@ -248,54 +248,6 @@ def _robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, fl
     return _bounded_sigmas(s_r, s_t, length)
 
 
-def _lm(
-    data: _Data,
-    P: NDArray,
-    Q: NDArray,
-    weights: NDArray,
-    w_r: float,
-    w_t: float,
-    max_steps: int = LM_MAX_STEPS,
-) -> tuple[NDArray, NDArray, int, bool]:
-    """Minimise ``sum_i c_i (w_r |r_r|^2 + w_t |r_t|^2)`` over P, Q (Marquardt scaling)."""
-    W = np.array([w_r] * 3 + [w_t] * 3)
-    r_r, r_t, R_hat, v = data.residuals(P, Q)
-    r = np.concatenate([r_r, r_t], axis=1)
-    cost = float(np.sum(weights * (r**2 @ W)))
-    lam = 1e-6
-    steps = 0
-    for steps in range(1, max_steps + 1):
-        J = _jacobian(r_r, R_hat, v, data.R_N, P)
-        WJ = J * (W[:, None] * weights[:, None, None])
-        H = np.einsum("nki,nkj->ij", WJ, J)
-        g = np.einsum("nki,nk->i", WJ, r)
-        D = np.diag(np.maximum(np.diag(H), 1e-300))
-        while True:
-            try:
-                delta = -np.linalg.solve(H + lam * D, g)
-            except np.linalg.LinAlgError:
-                delta = -np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-            P_new = _update(P, delta[0:3], delta[3:6])
-            Q_new = _update(Q, delta[6:9], delta[9:12])
-            nr_r, nr_t, nR_hat, nv = data.residuals(P_new, Q_new)
-            nr = np.concatenate([nr_r, nr_t], axis=1)
-            new_cost = float(np.sum(weights * (nr**2 @ W)))
-            # Below ~1e-7 the cost's rounding hides the decrease: near the optimum the
-            # Gauss-Newton steps contract, so they are taken as they come.
-            if new_cost <= cost or _step_size(delta, data.length) < 1e-7:
-                break
-            lam *= 10.0
-            if lam > 1e12:
-                return P, Q, steps, True  # no step lowers the cost: optimum to rounding
-        lam = max(lam / 10.0, 1e-12)
-        done = _step_size(delta, data.length) < 1e-14 or new_cost == 0.0
-        P, Q, cost = P_new, Q_new, new_cost
-        r_r, r_t, R_hat, v, r = nr_r, nr_t, nR_hat, nv, nr
-        if done:
-            return P, Q, steps, True
-    return P, Q, steps, False
-
-
 def _step_size(delta: NDArray, length: float) -> float:
     """Largest rotation (rad) or translation (relative to ``length``) of a step."""
     return max(
@@ -306,52 +258,123 @@ def _step_size(delta: NDArray, length: float) -> float:
 
 def _normal_matrices(
     data: _Data, P: NDArray, Q: NDArray, weights: NDArray, w_r: float, w_t: float
-) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray]:
-    r_r, r_t, R_hat, v = data.residuals(P, Q)
+) -> tuple[NDArray, NDArray]:
+    """The rotation and translation parts of ``J^T W J`` at ``P, Q``."""
+    r_r, _, R_hat, v = data.residuals(P, Q)
     J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(weights)[:, None, None]
     H_r = w_r * np.einsum("nki,nkj->ij", J[:, :3], J[:, :3])
     H_t = w_t * np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:])
-    return H_r, H_t, r_r, r_t, weights
+    return H_r, H_t
 
 
-def _fit_weighted(
+@dataclass(frozen=True, slots=True)
+class _Fit:
+    P: NDArray
+    Q: NDArray
+    s_r: float
+    s_t: float
+    H: NDArray  # J^T W J at the end, inliers only, no Huber weights
+    chi2: NDArray  # squared whitened residual of every pose
+    steps: int
+    converged: bool
+
+
+def _fit(
     data: _Data,
     P: NDArray,
     Q: NDArray,
-    weights: NDArray,
+    mask: NDArray,
     s_r: float,
     s_t: float,
-    rounds: int = 4,
-) -> tuple[NDArray, NDArray, float, float, NDArray, int, bool]:
-    """Alternate the fit with the variance components; return P, Q, sigmas, H, steps."""
-    total = 0
+    *,
+    huber: bool = False,
+    max_steps: int = LM_MAX_STEPS,
+) -> _Fit:
+    """Levenberg-Marquardt on ``sum_i c_i (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over the
+    poses in ``mask``, the noise scales re-estimated after every step (variance
+    components: each group's weighted residual sum over its redundancy) and, with
+    ``huber``, ``c_i`` Huber's weights of the whitened residual norms (IRLS).
+
+    Re-estimating the scales each step is Gauss-Newton on ``sum_g red_g log RSS_g``: it
+    converges with the parameters instead of in outer rounds. With little redundancy
+    (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
+    the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
+    they come. Converged: a step below 1e-13 (radians, or relative to the scene's
+    length) with the scales settled to 1e-10.
+    """
+    n_in = float(np.count_nonzero(mask))
+    update_scales = n_in >= 4
+    maskf = mask.astype(float)
+    r_r, r_t, R_hat, v = data.residuals(P, Q)
+    lam = 1e-6
+    steps = 0
     converged = False
-    H = np.zeros((12, 12))
-    for _ in range(rounds):
-        P, Q, steps, converged = _lm(data, P, Q, weights, 1.0 / s_r**2, 1.0 / s_t**2)
-        total += steps
-        H_r, H_t, r_r, r_t, _ = _normal_matrices(data, P, Q, weights, 1.0 / s_r**2, 1.0 / s_t**2)
+    while steps < max_steps:
+        steps += 1
+        e2_r, e2_t = np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)
+        if huber:
+            e = np.sqrt(e2_r / s_r**2 + e2_t / s_t**2)
+            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(e, 1e-300))
+        else:
+            c = maskf
+        cost = float(c @ (e2_r / s_r**2 + e2_t / s_t**2))
+        J = _jacobian(r_r, R_hat, v, data.R_N, P)
+        cJ = J * c[:, None, None]
+        H_r = np.einsum("nki,nkj->ij", cJ[:, :3], J[:, :3]) / s_r**2
+        H_t = np.einsum("nki,nkj->ij", cJ[:, 3:], J[:, 3:]) / s_t**2
+        g = (
+            np.einsum("nki,nk->i", cJ[:, :3], r_r) / s_r**2
+            + np.einsum("nki,nk->i", cJ[:, 3:], r_t) / s_t**2
+        )
         H = H_r + H_t
-        Hinv = np.linalg.pinv(H)
-        red_r = 3.0 * np.sum(weights > 0) - float(np.trace(Hinv @ H_r))
-        red_t = 3.0 * np.sum(weights > 0) - float(np.trace(Hinv @ H_t))
-        ss_r = float(np.sum(weights * np.sum(r_r**2, axis=1)))
-        ss_t = float(np.sum(weights * np.sum(r_t**2, axis=1)))
-        new_r = np.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
-        new_t = np.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
-        new_r, new_t = _bounded_sigmas(new_r, new_t, data.length)
-        change = max(abs(np.log(new_r / s_r)), abs(np.log(new_t / s_t)))
-        s_r, s_t = new_r, new_t
-        if change < 1e-3:
+        D = np.diag(np.maximum(np.diag(H), 1e-300))
+        while True:
+            try:
+                delta = -np.linalg.solve(H + lam * D, g)
+            except np.linalg.LinAlgError:
+                delta = -np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
+            P_new = _update(P, delta[0:3], delta[3:6])
+            Q_new = _update(Q, delta[6:9], delta[9:12])
+            n_r, n_t, n_R, n_v = data.residuals(P_new, Q_new)
+            new_cost = float(
+                c @ (np.sum(n_r**2, axis=1) / s_r**2 + np.sum(n_t**2, axis=1) / s_t**2)
+            )
+            size = _step_size(delta, data.length)
+            if new_cost <= cost or size < 1e-7:
+                break
+            lam *= 10.0
+            if lam > 1e12:
+                break
+        if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
+            converged = True
             break
-    H_r, H_t, *_ = _normal_matrices(data, P, Q, weights, 1.0 / s_r**2, 1.0 / s_t**2)
-    return P, Q, s_r, s_t, H_r + H_t, total, converged
-
-
-def _whitened(data: _Data, P: NDArray, Q: NDArray, s_r: float, s_t: float) -> NDArray:
-    """Squared whitened residual of every pose (chi^2_6 for an inlier)."""
-    r_r, r_t, _, _ = data.residuals(P, Q)
-    return np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+        lam = max(lam / 10.0, 1e-12)
+        P, Q, r_r, r_t, R_hat, v = P_new, Q_new, n_r, n_t, n_R, n_v
+        change = 0.0
+        if update_scales:
+            try:
+                Hinv = np.linalg.inv(H)
+            except np.linalg.LinAlgError:
+                Hinv = np.linalg.pinv(H)
+            red_r = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_r.T))
+            red_t = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_t.T))
+            ss_r = float(c @ np.sum(r_r**2, axis=1))
+            ss_t = float(c @ np.sum(r_t**2, axis=1))
+            new_r = np.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+            new_t = np.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+            new_r, new_t = _bounded_sigmas(new_r, new_t, data.length)
+            change = max(abs(np.log(new_r / s_r)), abs(np.log(new_t / s_t)))
+            s_r, s_t = new_r, new_t
+        if (size < 1e-13 and change < 1e-10) or new_cost == 0.0:
+            converged = True
+            break
+    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(maskf)[:, None, None]
+    H = (
+        np.einsum("nki,nkj->ij", J[:, :3], J[:, :3]) / s_r**2
+        + np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:]) / s_t**2
+    )
+    chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+    return _Fit(P, Q, s_r, s_t, H, chi2, steps, converged)
 
 
 # ------------------------------------------------------------------------ closed form
@@ -443,41 +466,25 @@ def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDAr
 # ------------------------------------------------------------------------------- fit
 
 
-def _robust_fit(
-    data: _Data, P: NDArray, Q: NDArray, min_inliers: int
-) -> tuple[NDArray, NDArray, float, float, NDArray, NDArray, int, bool]:
-    """Huber IRLS, then rejection above ``CHI2_6_999`` and plain refits."""
+def _robust_fit(data: _Data, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[_Fit, int]:
+    """Huber IRLS, then rejection above ``CHI2_6_999`` and plain refits; total steps."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
-    total = 0
-    weights = np.ones(data.n)
-    # Huber IRLS (a few rounds: weights from the whitened residual norms)
+    everything = np.ones(data.n, dtype=bool)
+    fit = _fit(data, P, Q, everything, s_r, s_t, huber=True)
+    total = fit.steps
+    inliers = everything
     for _ in range(4):
-        e = np.sqrt(_whitened(data, P, Q, s_r, s_t))
-        new_weights = np.minimum(1.0, HUBER_K / np.maximum(e, 1e-300))
-        if np.all(new_weights == 1.0) and np.all(weights == 1.0) and total > 0:
-            break
-        weights = new_weights
-        P, Q, s_r, s_t, _, steps, _ = _fit_weighted(data, P, Q, weights, s_r, s_t, rounds=2)
-        total += steps
-    # rejection and plain refits, while the inlier set changes
-    inliers = np.ones(data.n, dtype=bool)
-    H = np.zeros((12, 12))
-    converged = False
-    for _ in range(4):
-        chi2 = _whitened(data, P, Q, s_r, s_t)
-        new_inliers = chi2 <= CHI2_6_999
+        new_inliers = fit.chi2 <= CHI2_6_999
         if np.count_nonzero(new_inliers) < min_inliers:  # keep the best min_inliers
             new_inliers = np.zeros(data.n, dtype=bool)
-            new_inliers[np.argsort(chi2, kind="stable")[:min_inliers]] = True
-        if np.array_equal(new_inliers, inliers) and total > 0 and H.any():
+            new_inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
+        if np.array_equal(new_inliers, inliers) and total > fit.steps:
             break
         inliers = new_inliers
-        P, Q, s_r, s_t, H, steps, converged = _fit_weighted(
-            data, P, Q, inliers.astype(float), s_r, s_t
-        )
-        total += steps
-    return P, Q, s_r, s_t, H, inliers, total, converged
+        fit = _fit(data, fit.P, fit.Q, inliers, fit.s_r, fit.s_t)
+        total += fit.steps
+    return fit, total
 
 
 def _score(data: _Data, P: NDArray, Q: NDArray) -> float:
@@ -530,38 +537,55 @@ def fit_absolute(
         candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
     scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
     P, Q = candidates[int(np.argmin(scores))]
-
-    if robust and data.n > 3:
-        P, Q, s_r, s_t, H, inliers, steps, converged = _robust_fit(data, P, Q, min_inliers)
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
+    everything = np.ones(data.n, dtype=bool)
+    fit = _fit(data, P, Q, everything, s_r, s_t)
+    steps = fit.steps
+    inliers = everything
+    if robust and data.n > 3 and np.any(fit.chi2 > CHI2_6_999):
+        fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
+        steps += more
+        inliers = _inlier_mask(fit, data, min_inliers)
         if not inliers.all() and data.n >= 5:
             # a pose stays off: the start may have been pulled by it; try a consensus start
             P1, Q1 = _consensus_start(data, M, N)
-            alt = _robust_fit(data, P1, Q1, min_inliers)
-            steps += alt[6]
-            if np.count_nonzero(alt[5]) > np.count_nonzero(inliers) or (
-                np.count_nonzero(alt[5]) == np.count_nonzero(inliers)
-                and _concentrated(data, alt[0], alt[1], alt[5])
-                < _concentrated(data, P, Q, inliers) - 1e-9
+            alt, more = _robust_fit(data, P1, Q1, min_inliers)
+            steps += more
+            alt_inliers = _inlier_mask(alt, data, min_inliers)
+            n_fit, n_alt = np.count_nonzero(inliers), np.count_nonzero(alt_inliers)
+            if n_alt > n_fit or (
+                n_alt == n_fit
+                and _concentrated(data, alt.P, alt.Q, alt_inliers)
+                < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
             ):
-                P, Q, s_r, s_t, H, inliers, _, converged = alt
-    else:
-        r_r, r_t, _, _ = data.residuals(P, Q)
-        s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
-        inliers = np.ones(data.n, dtype=bool)
-        P, Q, s_r, s_t, H, steps, converged = _fit_weighted(data, P, Q, np.ones(data.n), s_r, s_t)
-    r_r, r_t, _, _ = data.residuals(P, Q)
+                fit, inliers = alt, alt_inliers
+    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    try:
+        covariance = np.linalg.inv(fit.H)
+    except np.linalg.LinAlgError:
+        covariance = np.linalg.pinv(fit.H)
     return PoseFit(
-        P=P,
-        Q=Q,
-        covariance=np.linalg.pinv(H),
-        sigma_rotation_rad=float(s_r),
-        sigma_translation=float(s_t),
+        P=fit.P,
+        Q=fit.Q,
+        covariance=covariance,
+        sigma_rotation_rad=float(fit.s_r),
+        sigma_translation=float(fit.s_t),
         rotation_residuals=r_r,
         translation_residuals=r_t,
         inliers=inliers,
         iterations=int(steps),
-        converged=bool(converged),
+        converged=bool(fit.converged),
     )
+
+
+def _inlier_mask(fit: _Fit, data: _Data, min_inliers: int) -> NDArray[np.bool_]:
+    """The poses the final refit of :func:`_robust_fit` used (its H is over them)."""
+    inliers = fit.chi2 <= CHI2_6_999
+    if np.count_nonzero(inliers) < min_inliers:
+        inliers = np.zeros(data.n, dtype=bool)
+        inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
+    return inliers
 
 
 def _concentrated(data: _Data, P: NDArray, Q: NDArray, inliers: NDArray) -> float:
@@ -579,14 +603,14 @@ def assess(M: NDArray, N: NDArray, P: NDArray, Q: NDArray) -> PoseFit:
     s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
     ones = np.ones(data.n)
     for _ in range(3):
-        H_r, H_t, *_ = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+        H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
         Hinv = np.linalg.pinv(H_r + H_t)
         red_r = 3.0 * data.n - float(np.trace(Hinv @ H_r))
         red_t = 3.0 * data.n - float(np.trace(Hinv @ H_t))
         s_r = np.sqrt(np.sum(r_r**2) / red_r) if red_r > 1e-9 else s_r
         s_t = np.sqrt(np.sum(r_t**2) / red_t) if red_t > 1e-9 else s_t
         s_r, s_t = _bounded_sigmas(s_r, s_t, data.length)
-    H_r, H_t, *_ = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+    H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
     return PoseFit(
         P=P,
         Q=Q,
