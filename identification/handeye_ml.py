@@ -53,7 +53,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.transforms import (
-    matrix_from_rotation_vector,
     rotation_vector_from_matrix,
     skew,
     transform_from_rotation_translation,
@@ -187,7 +186,7 @@ def _residuals(
     R_P, t_P, R_Q, t_Q = P[:3, :3], P[:3, 3], Q[:3, :3], Q[:3, 3]
     R_hat = R_P @ R_N @ R_Q
     v = R_N @ t_Q + t_N
-    r_r = rotation_vector_from_matrix(R_M @ np.swapaxes(R_hat, 1, 2))
+    r_r = _log_small(R_M @ np.swapaxes(R_hat, 1, 2))
     r_t = t_M - v @ R_P.T - t_P
     return r_r, r_t, R_hat, v
 
@@ -207,9 +206,32 @@ def _jacobian(r_r: NDArray, R_hat: NDArray, v: NDArray, R_N: NDArray, P: NDArray
 
 
 def _update(T: NDArray, dphi: NDArray, dt: NDArray) -> NDArray:
-    return transform_from_rotation_translation(
-        T[:3, :3] @ matrix_from_rotation_vector(dphi), T[:3, 3] + dt
+    """``(R exp(dphi), t + dt)`` for one transform (Rodrigues, scalar arithmetic)."""
+    theta = float(np.sqrt(dphi @ dphi))
+    K = np.array([[0.0, -dphi[2], dphi[1]], [dphi[2], 0.0, -dphi[0]], [-dphi[1], dphi[0], 0.0]])
+    if theta < 1e-8:
+        a, b = 1.0 - theta**2 / 6.0, 0.5 - theta**2 / 24.0
+    else:
+        a, b = np.sin(theta) / theta, (1.0 - np.cos(theta)) / theta**2
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3] @ (np.eye(3) + a * K + b * (K @ K))
+    out[:3, 3] = T[:3, 3] + dt
+    return out
+
+
+def _log_small(R: NDArray) -> NDArray:
+    """Rotation vectors of rotations (n, 3, 3), fast when all are below ~170 deg (the
+    residuals); otherwise :func:`kinfw.transforms.rotation_vector_from_matrix`."""
+    v = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1
     )
+    s = np.sqrt(np.einsum("ni,ni->n", v, v))
+    c = 0.5 * (R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0)
+    if np.any(c < -0.98):
+        return rotation_vector_from_matrix(R)
+    theta = np.arctan2(s, c)
+    factor = np.where(s < 1e-8, 1.0 + theta**2 / 6.0, theta / np.where(s < 1e-8, 1.0, s))
+    return v * factor[:, None]
 
 
 class _Data:
