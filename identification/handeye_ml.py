@@ -34,7 +34,8 @@ point).
 
 Robustness: Huber IRLS on the whitened per-pose residual, then rejection of poses whose
 squared whitened residual exceeds the 99.9 % quantile of chi^2 with 6 degrees of
-freedom, and a plain refit of the others (repeated while the set changes). When a pose
+freedom (at most 5 % of the poses, at least one: the worst), and a plain refit of the
+others (repeated while the set changes). When a pose
 stays far off, a consensus start is tried as well: the closed form on every minimal
 subset of 3 poses (at most ``CONSENSUS_MAX_SUBSETS``), scored by the median residual of
 all poses.
@@ -498,7 +499,7 @@ def _robust_fit(data: _Data, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[
     inliers = everything
     for _ in range(4):
         new_inliers = fit.chi2 <= CHI2_6_999
-        if np.count_nonzero(new_inliers) < min_inliers:  # keep the best min_inliers
+        if np.count_nonzero(new_inliers) < min_inliers:  # reject only the worst
             new_inliers = np.zeros(data.n, dtype=bool)
             new_inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
         if np.array_equal(new_inliers, inliers) and total > fit.steps:
@@ -541,7 +542,8 @@ def fit_absolute(
     robust : bool
         Huber IRLS, rejection and (when a pose stays off) the consensus start.
     min_inliers : int, optional
-        Fewest poses kept; default ``max(3, n // 2 + 1)``.
+        Fewest poses kept; default: at most 5 % of the poses are rejected, at least one
+        may be (the worst ones), and never fewer than 3 kept.
 
     Returns
     -------
@@ -549,7 +551,7 @@ def fit_absolute(
     """
     data = _Data(M, N)
     if min_inliers is None:
-        min_inliers = max(3, data.n // 2 + 1)
+        min_inliers = max(3, data.n - max(1, data.n // 20))
     candidates = [closed_form_start(M, N)]
     for start in starts:
         try:
