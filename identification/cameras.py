@@ -16,6 +16,7 @@ report, not the URDF.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +106,13 @@ def _solve_one(
     qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
     root_T_hands = model.frame_poses(qs, hand)
     result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hands), rng=rng)
+    if result.verdict != "determined":
+        warnings.warn(
+            f"camera {group.camera!r}: hand-eye {result.verdict} (lengths in m); "
+            f"add views with larger rotations about different axes",
+            UserWarning,
+            stacklevel=3,
+        )
     return CameraCalibration(
         camera=group.camera,
         target=group.target,

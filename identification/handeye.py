@@ -1,4 +1,5 @@
-"""Hand-eye calibration ``A X = X B`` by Tsai & Lenz (1989), as in stage 2 of Shih et al.
+"""Hand-eye calibration ``A X = X B``: Tsai & Lenz (1989), as in stage 2 of Shih et al.,
+then maximum likelihood on SE(3) (:mod:`identification.handeye_ml`).
 
 The problem (Shih et al. 1992, section 5, eqs. 68-71)
 ------------------------------------------------------
@@ -33,7 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identification.handeye_ml import (
+    fit_absolute,
+    inverse_covariance_map,
+    uncertainty,
+)
 from kinfw.transforms import (
+    average_transform,
     check_transform,
     inverse_transform,
     matrix_from_rotation_vector,
@@ -99,6 +106,30 @@ class HandEyeResult:
     axis_spread_rad : float
         Largest angle between the rotation axes (as lines) of the motions used, radians:
         0 means all about one axis.
+    base_T_target : ndarray, shape (4, 4)
+        The target's pose in the robot base, estimated with X (``Y`` of
+        ``A[i] X B[i] = Y``), input length unit.
+    covariance : ndarray, shape (6, 6)
+        Covariance of X's error ``(dphi, dt)``: ``dphi`` the rotation vector of
+        ``X_true = X exp(dphi)`` in the camera frame (rad^2), ``dt`` the translation error
+        in the hand frame (input unit^2); from the maximum-likelihood fit with the noise
+        scales estimated from the residuals.
+    sigma_rotation_deg : ndarray, shape (3,)
+        1-sigma rotation uncertainty of X per camera axis, degrees.
+    sigma_translation : ndarray, shape (3,)
+        1-sigma translation uncertainty of X per hand axis, input length unit.
+    verdict : str
+        ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
+        ``"undetermined (<worst direction>)"``
+        (:func:`identification.handeye_ml.uncertainty`).
+    rejected : tuple of int
+        Indices of the poses rejected as outliers (whitened residual above the 99.9 %
+        quantile of chi^2 with 6 degrees of freedom).
+    noise_rotation_rad, noise_translation : float
+        The camera pose's noise scales per axis estimated from the residuals (radians,
+        input unit).
+    iterations : int
+        Levenberg-Marquardt steps of the maximum-likelihood refinement.
 
     Notes
     -----
@@ -112,17 +143,32 @@ class HandEyeResult:
     rms_translation: float
     rotation_condition: float
     axis_spread_rad: float
+    base_T_target: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    sigma_rotation_deg: NDArray[np.float64]
+    sigma_translation: NDArray[np.float64]
+    verdict: str
+    rejected: tuple[int, ...]
+    noise_rotation_rad: float
+    noise_translation: float
+    iterations: int
 
     @property
     def X(self) -> NDArray[np.float64]:
         """Alias of :attr:`hand_T_camera`: the papers' ``X`` in ``A X = X B``."""
         return self.hand_T_camera
 
+    @property
+    def Y(self) -> NDArray[np.float64]:
+        """Alias of :attr:`base_T_target`: ``A[i] X B[i] = Y``."""
+        return self.base_T_target
+
 
 def solve_axxb(
     A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
 ) -> HandEyeResult:
-    """Hand-eye transform ``X = hand_T_camera`` from absolute poses, by Tsai & Lenz.
+    """Hand-eye transform ``X = hand_T_camera`` from absolute poses: maximum likelihood
+    started from Tsai & Lenz.
 
     Parameters
     ----------
@@ -138,8 +184,8 @@ def solve_axxb(
     Returns
     -------
     HandEyeResult
-        ``hand_T_camera`` (the papers' ``X``) in the input length unit, and the fit's
-        quality.
+        ``hand_T_camera`` (the papers' ``X``) in the input length unit, its
+        covariance and verdict, the rejected poses, and the fit's quality.
 
     Raises
     ------
@@ -148,8 +194,10 @@ def solve_axxb(
         (names the argument and index), no motion with a rotation of at least
         ``min_angle_rad``, all motions about one axis (then the rotation of X about it and
         its translation along it are not determined), or motions of A and B that no
-        single X relates (mispaired samples, one of A and B inverted, eye-to-hand data
-        given as eye-in-hand, a camera that is not rigid on the hand).
+        single X relates even after outlying poses are rejected (mispaired samples, one of
+        A and B inverted, eye-to-hand data given as eye-in-hand, a camera that is not
+        rigid on the hand). Poorly determined X (small motions) is not an error: see
+        ``verdict`` and ``sigma_rotation_deg``.
 
     Warnings
     --------
@@ -191,6 +239,21 @@ def solve_axxb(
     Translation (Tsai & Lenz 1989, eq. 15): ``(A_R - I) t_X = X_R t_B - t_A``, stacked
     over all motions, linear least squares. It is linear in the lengths, so the result
     scales with the input unit, and the rotation does not use lengths at all.
+
+    Tsai & Lenz's X is only a start (its rotation ignores what the translations say,
+    which costs most at small motions). The answer is the maximum-likelihood X and
+    ``base_T_target`` of the absolute poses ``B[i] = X^-1 A[i]^-1 base_T_target`` with
+    the camera's pose noisy (rotation and translation, weighted by noise scales
+    estimated from the residuals, so the answer does not depend on the length unit):
+    :func:`identification.handeye_ml.fit_absolute`, started from the better of Tsai &
+    Lenz and the quaternion closed form (no singularity at a half turn), robust to
+    outlying poses (Huber, then rejection at the 99.9 % quantile of chi^2_6, named in
+    ``rejected``; a consensus start of minimal subsets when a pose stays off). Its
+    covariance gives ``sigma_rotation_deg``, ``sigma_translation`` and ``verdict``.
+    Measured (1 deg + 2 mm on the camera pose, 10 views, 300 trials, motions <= 15 deg):
+    X's rotation error median 0.22 deg, p90 0.39 deg (Tsai & Lenz alone: 2.7 / 4.6 deg);
+    the errors whitened by the reported covariance have mean squared norm 6.5 (6 for an
+    exact covariance).
 
     References
     ----------
@@ -241,25 +304,41 @@ def solve_axxb(
 
     hand_R_eye, singular_values = _rotation(rotvecs_A, rotvecs_B)
 
-    # Both orders of every pair: the inverse motions make the result order-invariant.
-    A_ijs = np.concatenate([A_ijs, inverse_transform(A_ijs)])
-    B_ijs = np.concatenate([B_ijs, inverse_transform(B_ijs)])
-    R_As, t_As = A_ijs[:, :3, :3], A_ijs[:, :3, 3]
-    t_Bs = B_ijs[:, :3, 3]
-    lhs = (R_As - np.eye(3)).reshape(-1, 3)
-    rhs = (np.einsum("ij,kj->ki", hand_R_eye, t_Bs) - t_As).reshape(-1)
-    hand_p_eye = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
-    hand_T_eye = transform_from_rotation_translation(hand_R_eye, hand_p_eye)
+    def tsai_start() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Tsai & Lenz's X (translation by eq. 15 over both orders of every pair)."""
+        A2 = np.concatenate([A_ijs, inverse_transform(A_ijs)])
+        B2 = np.concatenate([B_ijs, inverse_transform(B_ijs)])
+        lhs = (A2[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+        rhs = (np.einsum("ij,kj->ki", hand_R_eye, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
+        X0 = transform_from_rotation_translation(
+            hand_R_eye, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+        )
+        return inverse_transform(X0), average_transform(base_T_hands @ X0 @ eye_T_targets)
 
-    # Residuals of A_ij X = X B_ij.
-    left = A_ijs @ hand_T_eye
-    right = hand_T_eye @ B_ijs
+    # Maximum likelihood on the absolute poses: B[i] = X^-1 A[i]^-1 Y, noise in B.
+    fit = fit_absolute(eye_T_targets, inverse_transform(base_T_hands), [tsai_start])
+    hand_T_eye = inverse_transform(fit.P)
+    G = inverse_covariance_map(fit.P)
+    covariance = G @ fit.covariance[:6, :6] @ G.T
+    length = float(np.sqrt(np.mean(np.sum(eye_T_targets[:, :3, 3] ** 2, axis=1))))
+    unc = uncertainty(covariance, length, frame="the camera frame")
+
+    # Residuals of A_ij X = X B_ij over the motions between poses kept.
+    keep = fit.inliers[i] & fit.inliers[j]
+    if not np.any(keep):
+        keep = np.ones_like(keep)
+    A_k, B_k = A_ijs[keep], B_ijs[keep]
+    A_k = np.concatenate([A_k, inverse_transform(A_k)])
+    B_k = np.concatenate([B_k, inverse_transform(B_k)])
+    left = A_k @ hand_T_eye
+    right = hand_T_eye @ B_k
     rot_res = rotation_angle(np.swapaxes(left[:, :3, :3], 1, 2) @ right[:, :3, :3])
     trans_res = np.linalg.norm(left[:, :3, 3] - right[:, :3, 3], axis=1)
     rms_rotation = float(np.sqrt(np.mean(rot_res**2)))
     if rms_rotation > INCONSISTENT_RAD:
-        k = int(np.argmax(rot_res[: len(i)]))
-        motion = float(np.degrees(np.median(rotation_angle(A_ijs[:, :3, :3]))))
+        k = int(np.argmax(rot_res[: np.count_nonzero(keep)]))
+        ik, jk = i[keep][k], j[keep][k]
+        motion = float(np.degrees(np.median(rotation_angle(A_k[:, :3, :3]))))
         small = (
             (
                 f" The motions are small (median relative rotation {motion:.3g} deg), so "
@@ -271,8 +350,8 @@ def solve_axxb(
         )
         raise HandEyeError(
             f"no single X relates the motions of A and B: RMS rotation residual of "
-            f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {i[k]} and "
-            f"{j[k]}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg."
+            f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {ik} and "
+            f"{jk}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg."
             f"{small} A or B may be inverted: A must be base_T_hand (robot forward kinematics, "
             f"OpenCV gripper2base) and B eye_T_target (camera extrinsics, OpenCV target2cam); "
             f"for a camera fixed in the world looking at a target on the hand (eye-to-hand) "
@@ -286,13 +365,24 @@ def solve_axxb(
             "determined: add motions about other axes",
             condition,
         )
+    if fit.rejected:
+        log.info("solve_axxb: poses %s rejected as outliers", list(fit.rejected))
     return HandEyeResult(
         hand_T_camera=hand_T_eye,
-        n_pairs=len(i),
+        n_pairs=int(np.count_nonzero(keep)),
         rms_rotation_rad=rms_rotation,
         rms_translation=float(np.sqrt(np.mean(trans_res**2))),
         rotation_condition=condition,
         axis_spread_rad=float(spread),
+        base_T_target=fit.Q,
+        covariance=covariance,
+        sigma_rotation_deg=unc.sigma_rotation_deg,
+        sigma_translation=unc.sigma_translation,
+        verdict=unc.verdict,
+        rejected=fit.rejected,
+        noise_rotation_rad=fit.sigma_rotation_rad,
+        noise_translation=fit.sigma_translation,
+        iterations=fit.iterations,
     )
 
 
@@ -332,17 +422,18 @@ def _check_angles_agree(
 ) -> None:
     """A motion and its view from the eye are conjugate: their rotation angles agree.
 
-    The RMS difference is tested, so that a single pair in the tail of the measurement
-    noise does not reject the data; the worst pair is named.
+    The median difference is tested, so that pairs in the tail of the measurement noise
+    or involving one outlying pose (rejected later) do not reject the data; the worst
+    pair is named.
     """
     diff = np.abs(angles_A - angles_B)
-    rms = float(np.sqrt(np.mean(diff**2)))
+    rms = float(np.sqrt(np.median(diff**2)))
     n_bad = int(np.count_nonzero(diff > INCONSISTENT_RAD))
     if rms > INCONSISTENT_RAD:
         k = int(np.argmax(diff))
         raise HandEyeError(
             f"A and B motions are inconsistent: the rotation angles of the hand's and the "
-            f"eye's relative motions differ by {np.degrees(rms):.3g} deg RMS (> "
+            f"eye's relative motions differ by a median {np.degrees(rms):.3g} deg (> "
             f"{np.degrees(INCONSISTENT_RAD):.3g} deg; {n_bad} of {len(diff)} pose pairs differ "
             f"by more); worst: between poses {i[k]} and "
             f"{j[k]} the hand turns {np.degrees(angles_A[k]):.3g} deg but the eye "

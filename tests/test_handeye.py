@@ -224,7 +224,9 @@ def test_rotation_error_grows_linearly_with_noise_and_stays_far_below_it():
     """Rotation noise N(0, sigma) about a random axis on every A and B pose, 40 trials.
 
     Measured (median rotation error of X / sigma): 30 views 0.23 at every sigma from
-    0.01 to 1 deg; 5 views 0.57.
+    0.01 to 1 deg with Tsai & Lenz alone; the maximum-likelihood refinement also uses the
+    translations, whose noise here stays 1 mm, so at 1 deg it does better (0.225, 0.222,
+    0.182); 5 views 0.49.
     """
     sigmas = [0.01, 0.1, 1.0]
     ratios_30 = [_median_rotation_error(s, 30) / s for s in sigmas]
@@ -233,7 +235,8 @@ def test_rotation_error_grows_linearly_with_noise_and_stays_far_below_it():
         f"median rotation error of X / sigma: 30 views {np.round(ratios_30, 3)} "
         f"(sigma = {sigmas} deg), 5 views {ratio_5:.3f}"
     )
-    assert max(ratios_30) / min(ratios_30) < 1.1  # linear in sigma
+    assert max(ratios_30[:2]) / min(ratios_30[:2]) < 1.1  # linear while rotations dominate
+    assert ratios_30[2] < 1.05 * ratios_30[1]  # the fixed translation noise helps, not hurts
     assert max(ratios_30) < 0.35  # far below sigma with 30 views
     assert ratio_5 > 1.5 * max(ratios_30)  # and more views help
 
@@ -443,7 +446,8 @@ def _tabb_ds1():
 
 def test_tabb_ds1_meets_opencvs_acceptance():
     """Real robot and camera (mm). OpenCV accepts < 1 deg and < 50 mm from Tabb's reference;
-    its TSAI lands 0.62 deg / 45.8 mm (README). Measured here: 0.55 deg / 34.2 mm."""
+    its TSAI lands 0.62 deg / 45.8 mm (README). Measured here: 0.17 deg / 26.4 mm (Tsai &
+    Lenz alone: 0.55 deg / 34.2 mm)."""
     base_T_grippers, cam_T_worlds, gripper_T_cam_ref = _tabb_ds1()
     result = solve_axxb(base_T_grippers, cam_T_worlds)
     rot, trans = _errors(result.hand_T_camera, gripper_T_cam_ref)

@@ -1,0 +1,730 @@
+"""Maximum-likelihood hand-eye on SE(3): one refinement for ``A X = X B`` and ``A = X B Y``.
+
+The model
+---------
+Both hand-eye problems are one absolute-pose model: the camera's measured pose
+``M[i]`` (``camera_T_target``) is the product of two unknown rigid transforms and the
+robot's known pose ``N[i]``::
+
+    M[i] ≈ P @ N[i] @ Q.
+
+``A = X B Y`` (:func:`identification.axb.solve_axyb`) is it with ``M = A``, ``N = B``,
+``P = X``, ``Q = Y``; ``A X = X B`` written for absolute poses (``A[i] X B[i] =
+base_T_target``, :func:`identification.handeye.solve_axxb`) is it with ``M = B``,
+``N = A^-1``, ``P = X^-1`` and ``Q = base_T_target``.
+
+Noise model: the camera's pose is off by a rotation ``exp(e_r)`` and a translation
+``e_t``, both expressed in the camera's frame::
+
+    R_M = exp(e_r) R_P R_N R_Q,      t_M = t_P + R_P (R_N t_Q + t_N) + e_t,
+
+with ``e_r ~ N(0, sigma_r^2 I3)`` (radians) and ``e_t ~ N(0, sigma_t^2 I3)`` (length),
+independent over poses. The residuals ``r_r = log(R_M R_hat^T)`` and
+``r_t = t_M - t_hat`` are then exactly the noise, and the maximum-likelihood estimate
+minimises ``sum_i |r_r|^2 / sigma_r^2 + |r_t|^2 / sigma_t^2``. ``sigma_r`` and
+``sigma_t`` are not given: they are estimated from the residuals (variance components,
+each group's residual sum over its redundancy ``n_g - tr(H^-1 H_g)``), alternating with
+the fit. The weights therefore scale with the length unit and the estimate does not
+depend on it.
+
+Minimisation: Levenberg-Marquardt on the manifold, ``R_P <- R_P exp(dphi_P)``,
+``t_P <- t_P + dt_P`` (and the same for ``Q``), analytic Jacobians, vectorised over
+poses. The rotation parametrisation has no singularity (a half turn is an ordinary
+point).
+
+Robustness: Huber IRLS on the whitened per-pose residual, then rejection of poses whose
+squared whitened residual exceeds the 99.9 % quantile of chi^2 with 6 degrees of
+freedom (at most 5 % of the poses, at least one: the worst), and a plain refit of the
+others (repeated while the set changes). When a pose
+stays far off, a consensus start is tried as well: the closed form on every minimal
+subset of 3 poses (at most ``CONSENSUS_MAX_SUBSETS``), scored by the median residual of
+all poses.
+
+Covariance: ``(J^T W J)^-1`` at the optimum with the estimated ``sigma_r``, ``sigma_t``,
+in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.transforms import (
+    rotation_vector_from_matrix,
+    skew,
+    transform_from_rotation_translation,
+)
+
+__all__ = [
+    "CHI2_6_999",
+    "PoseFit",
+    "Uncertainty",
+    "assess",
+    "closed_form_start",
+    "combined_verdict",
+    "fit_absolute",
+    "uncertainty",
+]
+
+#: 99.9 % quantile of chi^2 with 6 degrees of freedom: the rejection threshold of a pose's
+#: squared whitened residual.
+CHI2_6_999 = 22.457744484825323
+#: Huber's threshold on the whitened residual norm (sqrt of the 95 % quantile of chi^2_6).
+HUBER_K = 3.5485
+#: Median of chi^2 with 3 degrees of freedom (robust initial noise scales).
+_CHI2_3_MEDIAN = 2.365974
+#: Most minimal subsets scored by the consensus start.
+CONSENSUS_MAX_SUBSETS = 400
+#: Levenberg-Marquardt: most steps per fit.
+LM_MAX_STEPS = 40
+#: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
+#: weights finite on noise-free data (rotation-only or translation-only noise).
+_RATIO_BOUNDS = (1e-6, 1e6)
+#: Verdict thresholds (1-sigma, worst direction): rotation in degrees, translation as a
+#: fraction of the RMS camera-target distance (so it does not depend on the unit).
+POOR_ROTATION_DEG = 1.0
+UNDETERMINED_ROTATION_DEG = 10.0
+POOR_TRANSLATION_FRACTION = 0.02
+UNDETERMINED_TRANSLATION_FRACTION = 0.2
+
+Start = Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
+
+
+@dataclass(frozen=True, slots=True)
+class PoseFit:
+    """Maximum-likelihood fit of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
+
+    Attributes
+    ----------
+    P, Q : ndarray, shape (4, 4)
+        The estimates, input length unit.
+    covariance : ndarray, shape (12, 12)
+        Of ``(dphi_P, dt_P, dphi_Q, dt_Q)``: rotations right-perturbed (``R exp(dphi)``,
+        radians, in the child frame), translations in the parent frame (input unit).
+    sigma_rotation_rad, sigma_translation : float
+        Estimated noise scales of the camera pose, per axis (radians, input unit).
+    rotation_residuals, translation_residuals : ndarray, shape (n, 3)
+        ``log(R_M R_hat^T)`` and ``t_M - t_hat`` of every pose (rejected ones included),
+        in the camera frame.
+    inliers : ndarray of bool, shape (n,)
+        Poses used by the final fit.
+    iterations : int
+        Levenberg-Marquardt steps over all stages.
+    converged : bool
+        Whether the final fit stopped on its tolerance.
+    """
+
+    P: NDArray[np.float64]
+    Q: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    sigma_rotation_rad: float
+    sigma_translation: float
+    rotation_residuals: NDArray[np.float64]
+    translation_residuals: NDArray[np.float64]
+    inliers: NDArray[np.bool_]
+    iterations: int
+    converged: bool
+
+    @property
+    def rejected(self) -> tuple[int, ...]:
+        """Indices of the poses left out as outliers."""
+        return tuple(int(k) for k in np.flatnonzero(~self.inliers))
+
+
+@dataclass(frozen=True, slots=True)
+class Uncertainty:
+    """1-sigma uncertainty of one rigid transform and the verdict on it.
+
+    Attributes
+    ----------
+    sigma_rotation_deg : ndarray, shape (3,)
+        Per axis of the transform's child frame (right perturbation), degrees.
+    sigma_translation : ndarray, shape (3,)
+        Per axis of the parent frame, input length unit.
+    worst_rotation_deg, worst_translation : float
+        Along the worst direction (square root of the largest eigenvalue).
+    worst_rotation_axis, worst_translation_axis : ndarray, shape (3,)
+        Those directions (unit vectors, child and parent frame).
+    verdict : str
+        ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
+        ``"undetermined (...)"``.
+    """
+
+    sigma_rotation_deg: NDArray[np.float64]
+    sigma_translation: NDArray[np.float64]
+    worst_rotation_deg: float
+    worst_translation: float
+    worst_rotation_axis: NDArray[np.float64]
+    worst_translation_axis: NDArray[np.float64]
+    verdict: str
+
+
+# ----------------------------------------------------------------------------- model
+
+
+def _inverse_right_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``d log(exp(phi) exp(xi)) / d xi`` at ``xi = 0``, (n, 3) -> (n, 3, 3)."""
+    theta = np.linalg.norm(phi, axis=-1)
+    small = theta < 1e-4
+    safe = np.where(small, 1.0, theta)
+    coef = np.where(
+        small,
+        1.0 / 12.0 + theta**2 / 720.0,
+        1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+    )
+    K = skew(phi)
+    return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
+
+
+def _residuals(
+    R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray, P: NDArray, Q: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """``r_r`` (n, 3), ``r_t`` (n, 3), ``R_hat`` (n, 3, 3) and ``v = R_N t_Q + t_N``."""
+    R_P, t_P, R_Q, t_Q = P[:3, :3], P[:3, 3], Q[:3, :3], Q[:3, 3]
+    R_hat = R_P @ R_N @ R_Q
+    v = R_N @ t_Q + t_N
+    r_r = _log_small(R_M @ np.swapaxes(R_hat, 1, 2))
+    r_t = t_M - v @ R_P.T - t_P
+    return r_r, r_t, R_hat, v
+
+
+def _jacobian(r_r: NDArray, R_hat: NDArray, v: NDArray, R_N: NDArray, P: NDArray) -> NDArray:
+    """Jacobian (n, 6, 12) of ``(r_r, r_t)`` in ``(dphi_P, dt_P, dphi_Q, dt_Q)``."""
+    n = len(r_r)
+    R_P = P[:3, :3]
+    Jinv = _inverse_right_jacobian(r_r)
+    J = np.zeros((n, 6, 12))
+    J[:, :3, 0:3] = -Jinv @ R_P
+    J[:, :3, 6:9] = -Jinv @ R_hat
+    J[:, 3:, 0:3] = R_P @ skew(v)
+    J[:, 3:, 3:6] = -np.eye(3)
+    J[:, 3:, 9:12] = -(R_P @ R_N)
+    return J
+
+
+def _update(T: NDArray, dphi: NDArray, dt: NDArray) -> NDArray:
+    """``(R exp(dphi), t + dt)`` for one transform (Rodrigues, scalar arithmetic)."""
+    theta = float(np.sqrt(dphi @ dphi))
+    K = np.array([[0.0, -dphi[2], dphi[1]], [dphi[2], 0.0, -dphi[0]], [-dphi[1], dphi[0], 0.0]])
+    if theta < 1e-8:
+        a, b = 1.0 - theta**2 / 6.0, 0.5 - theta**2 / 24.0
+    else:
+        a, b = np.sin(theta) / theta, (1.0 - np.cos(theta)) / theta**2
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3] @ (np.eye(3) + a * K + b * (K @ K))
+    out[:3, 3] = T[:3, 3] + dt
+    return out
+
+
+def _log_small(R: NDArray) -> NDArray:
+    """Rotation vectors of rotations (n, 3, 3), fast when all are below ~170 deg (the
+    residuals); otherwise :func:`kinfw.transforms.rotation_vector_from_matrix`."""
+    v = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1
+    )
+    s = np.sqrt(np.einsum("ni,ni->n", v, v))
+    c = 0.5 * (R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0)
+    if np.any(c < -0.98):
+        return rotation_vector_from_matrix(R)
+    theta = np.arctan2(s, c)
+    factor = np.where(s < 1e-8, 1.0 + theta**2 / 6.0, theta / np.where(s < 1e-8, 1.0, s))
+    return v * factor[:, None]
+
+
+class _Data:
+    """The poses split into rotations and translations, and the scene's length scale."""
+
+    def __init__(self, M: NDArray, N: NDArray) -> None:
+        self.R_M, self.t_M = M[:, :3, :3], M[:, :3, 3]
+        self.R_N, self.t_N = N[:, :3, :3], N[:, :3, 3]
+        self.n = len(M)
+        length = float(np.sqrt(np.mean(np.sum(self.t_M**2, axis=1))))
+        if length == 0.0:
+            length = float(np.sqrt(np.mean(np.sum(self.t_N**2, axis=1))))
+        self.length = length if length > 0.0 else 1.0
+
+    def residuals(self, P: NDArray, Q: NDArray):
+        return _residuals(self.R_M, self.t_M, self.R_N, self.t_N, P, Q)
+
+
+def _bounded_sigmas(s_r: float, s_t: float, length: float) -> tuple[float, float]:
+    """Keep ``s_t / (s_r L)`` within ``_RATIO_BOUNDS`` and both positive."""
+    tiny = 1e-15
+    s_r, s_t = max(s_r, tiny), max(s_t, tiny * length)
+    lo, hi = _RATIO_BOUNDS
+    ratio = s_t / (s_r * length)
+    if ratio < lo:
+        s_t = lo * s_r * length
+    elif ratio > hi:
+        s_r = s_t / (hi * length)
+    return s_r, s_t
+
+
+def _robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, float]:
+    """Noise scales from the median residual norms (3-D isotropic Gaussian)."""
+    s_r = float(np.sqrt(np.median(np.sum(r_r**2, axis=1)) / _CHI2_3_MEDIAN))
+    s_t = float(np.sqrt(np.median(np.sum(r_t**2, axis=1)) / _CHI2_3_MEDIAN))
+    return _bounded_sigmas(s_r, s_t, length)
+
+
+def _step_size(delta: NDArray, length: float) -> float:
+    """Largest rotation (rad) or translation (relative to ``length``) of a step."""
+    return max(
+        float(np.abs(delta[[0, 1, 2, 6, 7, 8]]).max()),
+        float(np.abs(delta[[3, 4, 5, 9, 10, 11]]).max()) / length,
+    )
+
+
+def _normal_matrices(
+    data: _Data, P: NDArray, Q: NDArray, weights: NDArray, w_r: float, w_t: float
+) -> tuple[NDArray, NDArray]:
+    """The rotation and translation parts of ``J^T W J`` at ``P, Q``."""
+    r_r, _, R_hat, v = data.residuals(P, Q)
+    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(weights)[:, None, None]
+    H_r = w_r * np.einsum("nki,nkj->ij", J[:, :3], J[:, :3])
+    H_t = w_t * np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:])
+    return H_r, H_t
+
+
+@dataclass(frozen=True, slots=True)
+class _Fit:
+    P: NDArray
+    Q: NDArray
+    s_r: float
+    s_t: float
+    H: NDArray  # J^T W J at the end, inliers only, no Huber weights
+    chi2: NDArray  # squared whitened residual of every pose
+    steps: int
+    converged: bool
+
+
+def _fit(
+    data: _Data,
+    P: NDArray,
+    Q: NDArray,
+    mask: NDArray,
+    s_r: float,
+    s_t: float,
+    *,
+    huber: bool = False,
+    max_steps: int = LM_MAX_STEPS,
+) -> _Fit:
+    """Levenberg-Marquardt on ``sum_i c_i (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over the
+    poses in ``mask``, the noise scales re-estimated after every step (variance
+    components: each group's weighted residual sum over its redundancy) and, with
+    ``huber``, ``c_i`` Huber's weights of the whitened residual norms (IRLS).
+
+    Re-estimating the scales each step is Gauss-Newton on ``sum_g red_g log RSS_g``: it
+    converges with the parameters instead of in outer rounds. With little redundancy
+    (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
+    the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
+    they come. Converged: a step below 1e-13 (radians, or relative to the scene's
+    length) with the scales settled to 1e-10.
+    """
+    n_in = float(np.count_nonzero(mask))
+    update_scales = n_in >= 4
+    maskf = mask.astype(float)
+    r_r, r_t, R_hat, v = data.residuals(P, Q)
+    lam = 1e-6
+    steps = 0
+    converged = False
+    while steps < max_steps:
+        steps += 1
+        e2_r, e2_t = np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)
+        if huber:
+            e = np.sqrt(e2_r / s_r**2 + e2_t / s_t**2)
+            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(e, 1e-300))
+        else:
+            c = maskf
+        cost = float(c @ (e2_r / s_r**2 + e2_t / s_t**2))
+        J = _jacobian(r_r, R_hat, v, data.R_N, P)
+        cJ = J * c[:, None, None]
+        H_r = np.einsum("nki,nkj->ij", cJ[:, :3], J[:, :3]) / s_r**2
+        H_t = np.einsum("nki,nkj->ij", cJ[:, 3:], J[:, 3:]) / s_t**2
+        g = (
+            np.einsum("nki,nk->i", cJ[:, :3], r_r) / s_r**2
+            + np.einsum("nki,nk->i", cJ[:, 3:], r_t) / s_t**2
+        )
+        H = H_r + H_t
+        D = np.diag(np.maximum(np.diag(H), 1e-300))
+        while True:
+            try:
+                delta = -np.linalg.solve(H + lam * D, g)
+            except np.linalg.LinAlgError:
+                delta = -np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
+            P_new = _update(P, delta[0:3], delta[3:6])
+            Q_new = _update(Q, delta[6:9], delta[9:12])
+            n_r, n_t, n_R, n_v = data.residuals(P_new, Q_new)
+            new_cost = float(
+                c @ (np.sum(n_r**2, axis=1) / s_r**2 + np.sum(n_t**2, axis=1) / s_t**2)
+            )
+            size = _step_size(delta, data.length)
+            if new_cost <= cost or size < 1e-7:
+                break
+            lam *= 10.0
+            if lam > 1e12:
+                break
+        if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
+            converged = True
+            break
+        lam = max(lam / 10.0, 1e-12)
+        P, Q, r_r, r_t, R_hat, v = P_new, Q_new, n_r, n_t, n_R, n_v
+        change = 0.0
+        if update_scales:
+            try:
+                Hinv = np.linalg.inv(H)
+            except np.linalg.LinAlgError:
+                Hinv = np.linalg.pinv(H)
+            red_r = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_r.T))
+            red_t = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_t.T))
+            ss_r = float(c @ np.sum(r_r**2, axis=1))
+            ss_t = float(c @ np.sum(r_t**2, axis=1))
+            new_r = np.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+            new_t = np.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+            new_r, new_t = _bounded_sigmas(new_r, new_t, data.length)
+            change = max(abs(np.log(new_r / s_r)), abs(np.log(new_t / s_t)))
+            s_r, s_t = new_r, new_t
+        if (size < 1e-13 and change < 1e-10) or new_cost == 0.0:
+            converged = True
+            break
+    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(maskf)[:, None, None]
+    H = (
+        np.einsum("nki,nkj->ij", J[:, :3], J[:, :3]) / s_r**2
+        + np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:]) / s_t**2
+    )
+    chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+    return _Fit(P, Q, s_r, s_t, H, chi2, steps, converged)
+
+
+# ------------------------------------------------------------------------ closed form
+
+
+def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
+    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration)."""
+    from identification.axb_iteration import _left_product_matrix_xyzw, _right_product_matrix_xyzw
+
+    conj = np.array([-1.0, -1.0, -1.0, 1.0])
+    return (_left_product_matrix_xyzw(q_M) @ _right_product_matrix_xyzw(q_N * conj)) * conj
+
+
+def _closed_form_batch(
+    K: NDArray, R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray
+) -> tuple[NDArray, NDArray]:
+    """Closed-form P, Q for a batch of subsets: ``K`` (s, m, 4, 4), poses (s, m, ...).
+
+    Rotations: top singular pair of ``mean K`` (Hirsh's fixed point, Shah's closed form
+    in quaternions; no singularity at any angle). Translations: linear least squares of
+    ``t_P + R_P R_N t_Q = t_M - R_P t_N`` (6 unknowns), by the normal equations.
+    """
+    from identification.axb_iteration import rotation_from_quat_xyzw
+
+    U, _, Vt = np.linalg.svd(K.mean(axis=1))
+    R_P = rotation_from_quat_xyzw(U[:, :, 0])
+    R_Q = rotation_from_quat_xyzw(Vt[:, 0, :])
+    s, m = R_M.shape[:2]
+    C = np.concatenate([np.broadcast_to(np.eye(3), (s, m, 3, 3)), R_P[:, None] @ R_N], axis=3)
+    rhs = t_M - np.einsum("sij,smj->smi", R_P, t_N)
+    C = C.reshape(s, 3 * m, 6)
+    CtC = (
+        np.swapaxes(C, 1, 2) @ C
+        + 1e-12 * np.eye(6) * np.trace(np.swapaxes(C, 1, 2) @ C, axis1=1, axis2=2)[:, None, None]
+    )
+    sol = np.linalg.solve(CtC, np.einsum("ski,sk->si", C, rhs.reshape(s, 3 * m))[..., None])[..., 0]
+    P = transform_from_rotation_translation(R_P, sol[:, :3])
+    Q = transform_from_rotation_translation(R_Q, sol[:, 3:])
+    return P, Q
+
+
+def _consistent_quats(R_M: NDArray, R_N: NDArray) -> tuple[NDArray, NDArray]:
+    from identification.axb_iteration import consistent_quats_xyzw
+
+    return consistent_quats_xyzw(R_M, R_N)
+
+
+def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
+    """Closed-form ``P, Q`` of ``M[i] ≈ P N[i] Q`` from all poses (see
+    :func:`_closed_form_batch`); valid at every rotation angle, order-independent."""
+    q_M, q_N = _consistent_quats(M[:, :3, :3], N[:, :3, :3])
+    K = _product_matrices(q_M, q_N)
+    P, Q = _closed_form_batch(
+        K[None], M[None, :, :3, :3], M[None, :, :3, 3], N[None, :, :3, :3], N[None, :, :3, 3]
+    )
+    return P[0], Q[0]
+
+
+def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
+    """Best closed form over minimal subsets of 3 poses, scored by the median residuals
+    of all poses (the product of the rotation and translation medians: unit-free)."""
+    q_M, q_N = _consistent_quats(data.R_M, data.R_N)
+    K = _product_matrices(q_M, q_N)
+    subsets = np.array(list(combinations(range(data.n), 3)))
+    if len(subsets) > CONSENSUS_MAX_SUBSETS:
+        pick = np.linspace(0, len(subsets) - 1, CONSENSUS_MAX_SUBSETS).astype(int)
+        subsets = subsets[pick]
+    P, Q = _closed_form_batch(
+        K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
+    )
+    R_hat = P[:, None, :3, :3] @ data.R_N[None] @ Q[:, None, :3, :3]
+    t_hat = (
+        np.einsum(
+            "sij,snj->sni",
+            P[:, :3, :3],
+            np.einsum("nij,sj->sni", data.R_N, Q[:, :3, 3]) + data.t_N[None],
+        )
+        + P[:, None, :3, 3]
+    )
+    ang = np.linalg.norm(
+        rotation_vector_from_matrix(data.R_M[None] @ np.swapaxes(R_hat, 2, 3)), axis=2
+    )
+    dist = np.linalg.norm(data.t_M[None] - t_hat, axis=2)
+    score = np.log(np.median(ang, axis=1) + 1e-300) + np.log(np.median(dist, axis=1) + 1e-300)
+    k = int(np.argmin(score))
+    return P[k], Q[k]
+
+
+# ------------------------------------------------------------------------------- fit
+
+
+def _robust_fit(data: _Data, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[_Fit, int]:
+    """Huber IRLS, then rejection above ``CHI2_6_999`` and plain refits; total steps."""
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
+    everything = np.ones(data.n, dtype=bool)
+    fit = _fit(data, P, Q, everything, s_r, s_t, huber=True)
+    total = fit.steps
+    inliers = everything
+    for _ in range(4):
+        new_inliers = fit.chi2 <= CHI2_6_999
+        if np.count_nonzero(new_inliers) < min_inliers:  # reject only the worst
+            new_inliers = np.zeros(data.n, dtype=bool)
+            new_inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
+        if np.array_equal(new_inliers, inliers) and total > fit.steps:
+            break
+        inliers = new_inliers
+        fit = _fit(data, fit.P, fit.Q, inliers, fit.s_r, fit.s_t)
+        total += fit.steps
+    return fit, total
+
+
+def _score(data: _Data, P: NDArray, Q: NDArray) -> float:
+    """Unit-free robust score of a start: log median rotation + log median translation
+    residual (the concentrated likelihood, with medians)."""
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    return float(
+        np.log(np.median(np.sum(r_r**2, axis=1)) + 1e-300)
+        + np.log(np.median(np.sum(r_t**2, axis=1)) + 1e-300)
+    )
+
+
+def fit_absolute(
+    M: NDArray,
+    N: NDArray,
+    starts: Sequence[Start],
+    *,
+    robust: bool = True,
+    min_inliers: int | None = None,
+) -> PoseFit:
+    """Maximum-likelihood ``P, Q`` of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
+
+    Parameters
+    ----------
+    M : ndarray, shape (n, 4, 4)
+        Measured camera poses (``camera_T_target``), rigid, any length unit.
+    N : ndarray, shape (n, 4, 4)
+        Known robot poses, same unit.
+    starts : sequence of callables
+        Each returns a candidate ``(P, Q)``; the closed form of all poses is always added.
+        The candidate with the best robust score starts the fit.
+    robust : bool
+        Huber IRLS, rejection and (when a pose stays off) the consensus start.
+    min_inliers : int, optional
+        Fewest poses kept; default: at most 5 % of the poses are rejected, at least one
+        may be (the worst ones), and never fewer than 3 kept.
+
+    Returns
+    -------
+    PoseFit
+    """
+    data = _Data(M, N)
+    if min_inliers is None:
+        min_inliers = max(3, data.n - max(1, data.n // 20))
+    candidates = [closed_form_start(M, N)]
+    for start in starts:
+        try:
+            P0, Q0 = start()
+        except ValueError:
+            continue
+        candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
+    scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
+    P, Q = candidates[int(np.argmin(scores))]
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
+    everything = np.ones(data.n, dtype=bool)
+    fit = _fit(data, P, Q, everything, s_r, s_t)
+    steps = fit.steps
+    inliers = everything
+    if robust and data.n > 3 and np.any(fit.chi2 > CHI2_6_999):
+        fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
+        steps += more
+        inliers = _inlier_mask(fit, data, min_inliers)
+        if not inliers.all() and data.n >= 5:
+            # a pose stays off: the start may have been pulled by it; try a consensus start
+            P1, Q1 = _consensus_start(data, M, N)
+            alt, more = _robust_fit(data, P1, Q1, min_inliers)
+            steps += more
+            alt_inliers = _inlier_mask(alt, data, min_inliers)
+            n_fit, n_alt = np.count_nonzero(inliers), np.count_nonzero(alt_inliers)
+            if n_alt > n_fit or (
+                n_alt == n_fit
+                and _concentrated(data, alt.P, alt.Q, alt_inliers)
+                < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
+            ):
+                fit, inliers = alt, alt_inliers
+    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    try:
+        covariance = np.linalg.inv(fit.H)
+    except np.linalg.LinAlgError:
+        covariance = np.linalg.pinv(fit.H)
+    return PoseFit(
+        P=fit.P,
+        Q=fit.Q,
+        covariance=covariance,
+        sigma_rotation_rad=float(fit.s_r),
+        sigma_translation=float(fit.s_t),
+        rotation_residuals=r_r,
+        translation_residuals=r_t,
+        inliers=inliers,
+        iterations=int(steps),
+        converged=bool(fit.converged),
+    )
+
+
+def _inlier_mask(fit: _Fit, data: _Data, min_inliers: int) -> NDArray[np.bool_]:
+    """The poses the final refit of :func:`_robust_fit` used (its H is over them)."""
+    inliers = fit.chi2 <= CHI2_6_999
+    if np.count_nonzero(inliers) < min_inliers:
+        inliers = np.zeros(data.n, dtype=bool)
+        inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
+    return inliers
+
+
+def _concentrated(data: _Data, P: NDArray, Q: NDArray, inliers: NDArray) -> float:
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    return float(
+        np.log(np.sum(r_r[inliers] ** 2) + 1e-300) + np.log(np.sum(r_t[inliers] ** 2) + 1e-300)
+    )
+
+
+def assess(M: NDArray, N: NDArray, P: NDArray, Q: NDArray) -> PoseFit:
+    """A :class:`PoseFit` at given ``P, Q`` (not moved): noise scales from the residuals
+    (variance components) and the covariance the maximum-likelihood fit would have there."""
+    data = _Data(M, N)
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
+    ones = np.ones(data.n)
+    for _ in range(3):
+        H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+        Hinv = np.linalg.pinv(H_r + H_t)
+        red_r = 3.0 * data.n - float(np.trace(Hinv @ H_r))
+        red_t = 3.0 * data.n - float(np.trace(Hinv @ H_t))
+        s_r = np.sqrt(np.sum(r_r**2) / red_r) if red_r > 1e-9 else s_r
+        s_t = np.sqrt(np.sum(r_t**2) / red_t) if red_t > 1e-9 else s_t
+        s_r, s_t = _bounded_sigmas(s_r, s_t, data.length)
+    H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+    return PoseFit(
+        P=P,
+        Q=Q,
+        covariance=np.linalg.pinv(H_r + H_t),
+        sigma_rotation_rad=float(s_r),
+        sigma_translation=float(s_t),
+        rotation_residuals=r_r,
+        translation_residuals=r_t,
+        inliers=np.ones(data.n, dtype=bool),
+        iterations=0,
+        converged=True,
+    )
+
+
+# ----------------------------------------------------------------------- uncertainty
+
+
+def combined_verdict(named: Sequence[tuple[str, Uncertainty]]) -> str:
+    """One verdict for several transforms: ``"determined"`` when all are, else the worst
+    one's, naming the transform (e.g. ``"poorly determined (camera_T_hand: sigma ...)"``)."""
+    rank = {"determined": 0, "poorly": 1, "undetermined": 2}
+    worst_name, worst = max(named, key=lambda item: rank[item[1].verdict.split(" ")[0]])
+    if worst.verdict == "determined":
+        return "determined"
+    head, _, rest = worst.verdict.partition("(")
+    return f"{head}({worst_name}: {rest}"
+
+
+def uncertainty(
+    covariance: NDArray, length: float, *, unit: str = "", frame: str = "the child frame"
+) -> Uncertainty:
+    """Per-axis and worst 1-sigma of a transform and the conditioning verdict.
+
+    Parameters
+    ----------
+    covariance : ndarray, shape (6, 6)
+        Of ``(dphi, dt)``: rotation right-perturbed (radians), translation (length).
+    length : float
+        The scene's length scale (RMS camera-target distance), for the translation
+        thresholds ``POOR_TRANSLATION_FRACTION`` and ``UNDETERMINED_TRANSLATION_FRACTION``.
+    unit : str
+        Name of the length unit for the verdict (e.g. ``"m"``); empty: "input unit".
+    frame : str
+        Name of the rotation's frame, for the verdict.
+    """
+    C_r, C_t = covariance[:3, :3], covariance[3:, 3:]
+    ev_r, V_r = np.linalg.eigh(0.5 * (C_r + C_r.T))
+    ev_t, V_t = np.linalg.eigh(0.5 * (C_t + C_t.T))
+    worst_r = float(np.degrees(np.sqrt(max(ev_r[-1], 0.0))))
+    worst_t = float(np.sqrt(max(ev_t[-1], 0.0)))
+    axis_r, axis_t = V_r[:, -1], V_t[:, -1]
+    axis_r = axis_r * np.sign(axis_r[np.argmax(np.abs(axis_r))])
+    axis_t = axis_t * np.sign(axis_t[np.argmax(np.abs(axis_t))])
+    if unit == "m":
+        t_text = f"{1000.0 * worst_t:.3g} mm"
+    else:
+        t_text = f"{worst_t:.3g} {unit or 'input length units'}"
+    finite = np.all(np.isfinite(covariance))
+    if not finite or worst_r > UNDETERMINED_ROTATION_DEG:
+        verdict = (
+            f"undetermined (rotation about {np.round(axis_r, 3).tolist()} in {frame}: "
+            f"sigma {worst_r:.3g} deg)"
+        )
+    elif worst_t > UNDETERMINED_TRANSLATION_FRACTION * length:
+        verdict = f"undetermined (translation along {np.round(axis_t, 3).tolist()}: sigma {t_text})"
+    elif worst_r > POOR_ROTATION_DEG or worst_t > POOR_TRANSLATION_FRACTION * length:
+        verdict = f"poorly determined (sigma {worst_r:.3g} deg, {t_text})"
+    else:
+        verdict = "determined"
+    return Uncertainty(
+        sigma_rotation_deg=np.degrees(np.sqrt(np.maximum(np.diag(C_r), 0.0))),
+        sigma_translation=np.sqrt(np.maximum(np.diag(C_t), 0.0)),
+        worst_rotation_deg=worst_r,
+        worst_translation=worst_t,
+        worst_rotation_axis=axis_r,
+        worst_translation_axis=axis_t,
+        verdict=verdict,
+    )
+
+
+def inverse_covariance_map(P: NDArray) -> NDArray:
+    """Linear map (6, 6) from ``(dphi_P, dt_P)`` to the same coordinates of ``P^-1``.
+
+    ``P^-1 = (R_P^T, -R_P^T t_P)``: ``dphi -> -R_P dphi``,
+    ``dt -> [t_X]_x dphi - R_P^T dt`` with ``t_X = -R_P^T t_P``.
+    """
+    R_P, t_P = P[:3, :3], P[:3, 3]
+    t_X = -R_P.T @ t_P
+    G = np.zeros((6, 6))
+    G[:3, :3] = -R_P
+    G[3:, :3] = skew(t_X)
+    G[3:, 3:] = -R_P.T
+    return G
