@@ -1,5 +1,7 @@
 """Stage 2: hand-eye of every camera and the target pose, on simulated data."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -111,3 +113,35 @@ def test_a_camera_without_a_fixed_mount_is_refused():
     ):
         camera_mount(robot, "flange")
     assert camera_mount(robot, "camera") == ("camera_joint", "flange")
+
+
+def test_a_hand_eye_the_motions_barely_determine_is_warned_with_its_sigma():
+    """Issue 13, "never silently wrong": the same arm turned by at most ~1 deg between
+    views, with 0.5 deg + 1 mm camera noise: the mount comes with a warning that it is
+    poorly determined, with its sigma; well-spread views of the same camera give none."""
+    nominal = load_robot(ARM_WITH_CAMERA)
+    names = nominal.joint_names
+    lower, upper = nominal.joint_limits(names)
+
+    def views(fraction, seed):
+        rng = np.random.default_rng(seed)
+        qs = random_configurations(lower, upper, 10, rng, fraction=fraction)
+        w_T_target = default_target_pose(nominal, qs, names, ("camera",))
+        data = simulate(
+            nominal,
+            qs,
+            names,
+            cameras=("camera",),
+            rng=rng,
+            w_T_target=w_T_target,
+            noise_m=1e-3,
+            noise_rad=np.radians(0.5),
+        )
+        return data
+
+    poorly = r"camera 'camera': hand-eye poorly determined \(camera_T_hand: sigma"
+    with pytest.warns(UserWarning, match=poorly):
+        calibrate_cameras(nominal, views(0.01, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        calibrate_cameras(nominal, views(0.8, 2))
