@@ -46,6 +46,7 @@ in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import combinations
@@ -81,6 +82,10 @@ _CHI2_3_MEDIAN = 2.365974
 CONSENSUS_MAX_SUBSETS = 400
 #: Levenberg-Marquardt: most steps per fit.
 LM_MAX_STEPS = 40
+#: Levenberg-Marquardt: converged when a step is below this (radians, or relative to the
+#: scene's length) and the noise scales changed by less than ``LM_SCALE_TOL`` (relative).
+LM_STEP_TOL = 1e-13
+LM_SCALE_TOL = 1e-10
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
@@ -302,6 +307,97 @@ class _Fit:
     converged: bool
 
 
+def _exp_update(T: NDArray, d: NDArray) -> NDArray:
+    """``(R exp(d[:3]), t + d[3:])`` for one transform (Rodrigues in scalar arithmetic:
+    ``K^2 = d d^T - theta^2 I``)."""
+    x, y, z, dx, dy, dz = d.tolist()
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    E = np.array(
+        [
+            [1.0 - b * (y * y + z * z), -a * z + b * x * y, a * y + b * x * z],
+            [a * z + b * x * y, 1.0 - b * (x * x + z * z), -a * x + b * y * z],
+            [-a * y + b * x * z, a * x + b * y * z, 1.0 - b * (x * x + y * y)],
+        ]
+    )
+    out = np.empty((4, 4))
+    out[:3, :3] = T[:3, :3] @ E
+    out[:3, 3] = T[:3, 3] + (dx, dy, dz)
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+_I, _J = np.array([2, 0, 1]), np.array([1, 2, 0])
+_DIAG = np.arange(3)
+#: Off-diagonal entries of skew(w): rows, columns, source component and sign.
+_SK_ROW = np.array([0, 0, 1, 1, 2, 2])
+_SK_COL = np.array([1, 2, 0, 2, 0, 1])
+_SK_SRC = np.array([2, 1, 2, 0, 1, 0])
+_SK_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+class _Lean:
+    """Residuals (n, 6) and Jacobian (n, 6, 12) of the model with few numpy calls: the
+    LM's inner loop (same quantities as :func:`_residuals` and :func:`_jacobian`)."""
+
+    def __init__(self, data: _Data) -> None:
+        self.d = data
+        self.J = np.zeros((data.n, 6, 12))
+        self.J[:, 3:, 3:6] = -np.eye(3)
+        self.K = np.zeros((data.n, 3, 3))  # skew-symmetric scratch
+
+    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        d = self.d
+        R_P = P[:3, :3]
+        RPN = R_P @ d.R_N
+        R_hat = RPN @ Q[:3, :3]
+        v = d.R_N @ Q[:3, 3] + d.t_N
+        r = np.empty((d.n, 6))
+        E = d.R_M @ np.swapaxes(R_hat, 1, 2)
+        c = 0.5 * (np.einsum("nii->n", E) - 1.0)
+        if c.min() < -0.98:
+            r[:, :3] = rotation_vector_from_matrix(E)
+        else:  # as _log_small
+            vec = 0.5 * (E[:, _I, _J] - E[:, _J, _I])
+            s = np.sqrt(np.einsum("ni,ni->n", vec, vec))
+            theta = np.arctan2(s, c)
+            tiny = s < 1e-8
+            r[:, :3] = (
+                vec * np.where(tiny, 1.0 + theta**2 / 6.0, theta / np.where(tiny, 1.0, s))[:, None]
+            )
+        r[:, 3:] = d.t_M - v @ R_P.T - P[:3, 3]
+        return r, RPN, R_hat, v
+
+    def jacobian(self, r: NDArray, RPN: NDArray, R_hat: NDArray, v: NDArray, P: NDArray):
+        J = self.J
+        R_P = P[:3, :3]
+        phi = r[:, :3]
+        th2 = np.einsum("ni,ni->n", phi, phi)
+        theta = np.sqrt(th2)
+        small = theta < 1e-4
+        safe = np.where(small, 1.0, theta)
+        coef = np.where(
+            small,
+            1.0 / 12.0 + th2 / 720.0,
+            1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+        )
+        # as _inverse_right_jacobian: I + K / 2 + coef K^2, K^2 = phi phi^T - theta^2 I
+        K = self.K
+        K[:, _SK_ROW, _SK_COL] = phi[:, _SK_SRC] * _SK_SIGN
+        Jinv = 0.5 * K + coef[:, None, None] * (phi[:, :, None] * phi[:, None, :])
+        Jinv[:, _DIAG, _DIAG] += (1.0 - coef * th2)[:, None]
+        J[:, :3, 0:3] = -Jinv @ R_P
+        J[:, :3, 6:9] = -Jinv @ R_hat
+        K[:, _SK_ROW, _SK_COL] = v[:, _SK_SRC] * _SK_SIGN
+        J[:, 3:, 0:3] = R_P @ K
+        J[:, 3:, 9:12] = -RPN
+        return J
+
+
 def _fit(
     data: _Data,
     P: NDArray,
@@ -322,47 +418,51 @@ def _fit(
     converges with the parameters instead of in outer rounds. With little redundancy
     (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
     the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
-    they come. Converged: a step below 1e-13 (radians, or relative to the scene's
-    length) with the scales settled to 1e-10.
+    they come. Converged: a step below ``LM_STEP_TOL`` (radians, or relative to the
+    scene's length) with the scales settled to ``LM_SCALE_TOL`` (relative).
     """
+    lean = _Lean(data)
+    n = data.n
     n_in = float(np.count_nonzero(mask))
     update_scales = n_in >= 4
     maskf = mask.astype(float)
-    r_r, r_t, R_hat, v = data.residuals(P, Q)
+    r, RPN, R_hat, v = lean.residuals(P, Q)
     lam = 1e-6
     steps = 0
     converged = False
+    size = change = 0.0
+    new_cost = 1.0
+    length = data.length
     while steps < max_steps:
         steps += 1
-        e2_r, e2_t = np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)
+        r2 = r * r
+        e2 = r2.reshape(n, 2, 3).sum(axis=2)  # (n, 2): |r_r|^2, |r_t|^2
+        chi = e2 @ (1.0 / s_r**2, 1.0 / s_t**2)
+        c = maskf
         if huber:
-            e = np.sqrt(e2_r / s_r**2 + e2_t / s_t**2)
-            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(e, 1e-300))
-        else:
-            c = maskf
-        cost = float(c @ (e2_r / s_r**2 + e2_t / s_t**2))
-        J = _jacobian(r_r, R_hat, v, data.R_N, P)
-        cJ = J * c[:, None, None]
-        H_r = np.einsum("nki,nkj->ij", cJ[:, :3], J[:, :3]) / s_r**2
-        H_t = np.einsum("nki,nkj->ij", cJ[:, 3:], J[:, 3:]) / s_t**2
-        g = (
-            np.einsum("nki,nk->i", cJ[:, :3], r_r) / s_r**2
-            + np.einsum("nki,nk->i", cJ[:, 3:], r_t) / s_t**2
-        )
+            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
+        cost = float(c @ chi)
+        J = lean.jacobian(r, RPN, R_hat, v, P)
+        sc = np.sqrt(c)[:, None]
+        Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
+        Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
+        H_r = Jr.T @ Jr
+        H_t = Jt.T @ Jt
+        g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
         H = H_r + H_t
-        D = np.diag(np.maximum(np.diag(H), 1e-300))
+        D = np.maximum(H.diagonal(), 1e-300)
+        w = (1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_t**2, 1.0 / s_t**2, 1.0 / s_t**2)
         while True:
             try:
-                delta = -np.linalg.solve(H + lam * D, g)
+                delta = -np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
-                delta = -np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-            P_new = _update(P, delta[0:3], delta[3:6])
-            Q_new = _update(Q, delta[6:9], delta[9:12])
-            n_r, n_t, n_R, n_v = data.residuals(P_new, Q_new)
-            new_cost = float(
-                c @ (np.sum(n_r**2, axis=1) / s_r**2 + np.sum(n_t**2, axis=1) / s_t**2)
-            )
-            size = _step_size(delta, data.length)
+                delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
+            P_new = _exp_update(P, delta[0:6])
+            Q_new = _exp_update(Q, delta[6:12])
+            n_r, n_RPN, n_R, n_v = lean.residuals(P_new, Q_new)
+            new_cost = float(c @ ((n_r * n_r) @ w))
+            dl = np.abs(delta).tolist()
+            size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / length)
             if new_cost <= cost or size < 1e-7:
                 break
             lam *= 10.0
@@ -372,31 +472,31 @@ def _fit(
             converged = True
             break
         lam = max(lam / 10.0, 1e-12)
-        P, Q, r_r, r_t, R_hat, v = P_new, Q_new, n_r, n_t, n_R, n_v
+        P, Q, r, RPN, R_hat, v = P_new, Q_new, n_r, n_RPN, n_R, n_v
         change = 0.0
         if update_scales:
             try:
                 Hinv = np.linalg.inv(H)
             except np.linalg.LinAlgError:
                 Hinv = np.linalg.pinv(H)
-            red_r = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_r.T))
-            red_t = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_t.T))
-            ss_r = float(c @ np.sum(r_r**2, axis=1))
-            ss_t = float(c @ np.sum(r_t**2, axis=1))
-            new_r = np.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
-            new_t = np.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
-            new_r, new_t = _bounded_sigmas(new_r, new_t, data.length)
-            change = max(abs(np.log(new_r / s_r)), abs(np.log(new_t / s_t)))
+            csum = 3.0 * float(c.sum())
+            red_r = csum - float(np.sum(Hinv * H_r.T))
+            red_t = csum - float(np.sum(Hinv * H_t.T))
+            ss_r, ss_t = (c @ (r * r).reshape(n, 2, 3).sum(axis=2)).tolist()
+            new_r = math.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+            new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+            new_r, new_t = _bounded_sigmas(new_r, new_t, length)
+            change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
             s_r, s_t = new_r, new_t
-        if (size < 1e-13 and change < 1e-10) or new_cost == 0.0:
+        if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
             converged = True
             break
-    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(maskf)[:, None, None]
-    H = (
-        np.einsum("nki,nkj->ij", J[:, :3], J[:, :3]) / s_r**2
-        + np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:]) / s_t**2
-    )
-    chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+    J = lean.jacobian(r, RPN, R_hat, v, P)
+    sm = np.sqrt(maskf)[:, None]
+    Jr = (J[:, :3] * (sm / s_r)[:, :, None]).reshape(-1, 12)
+    Jt = (J[:, 3:] * (sm / s_t)[:, :, None]).reshape(-1, 12)
+    H = Jr.T @ Jr + Jt.T @ Jt
+    chi2 = (r * r).reshape(n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
     return _Fit(P, Q, s_r, s_t, H, chi2, steps, converged)
 
 
