@@ -72,7 +72,14 @@ from identification.axb_iteration import (
     translation_iteration,
 )
 from identification.axb_refinement import translations_least_squares
-from identification.handeye_ml import assess, combined_verdict, fit_absolute, uncertainty
+from identification.handeye_ml import (
+    PoseFit,
+    assess,
+    combined_verdict,
+    fit_absolute,
+    uncertainty,
+)
+from identification.handeye_starts import candidate_starts
 from kinfw.transforms import (
     check_transform,
     project_to_rotation,
@@ -461,7 +468,20 @@ def solve_axyb(
         Y = transform_from_rotation_translation(R_Y, t_Y)
     if refine:
         starts = [(lambda X=X, Y=Y: (X, Y))] if run_paper else []
-        fit = fit_absolute(As, Bs, starts)
+        length_A = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
+
+        def determined(f: PoseFit) -> bool:
+            unc = [
+                uncertainty(f.covariance[:6, :6], length_A),
+                uncertainty(f.covariance[6:, 6:], length_A),
+            ]
+            return all(u.verdict == "determined" for u in unc)
+
+        def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+            """Shah's and Li's closed forms (X, Y)."""
+            return list(candidate_starts(As, Bs, problem="axyb").values())
+
+        fit = fit_absolute(As, Bs, starts, fallback_starts=fallback_starts, accept=determined)
         X, Y, converged = fit.P, fit.Q, fit.converged
         if not converged:
             log.warning("the maximum-likelihood refinement did not converge")

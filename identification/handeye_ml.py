@@ -121,6 +121,8 @@ class PoseFit:
         Levenberg-Marquardt steps over all stages.
     converged : bool
         Whether the final fit stopped on its tolerance.
+    fallback_starts_tried : int
+        How many fallback starts were fitted (0: the first fit was clean, or none given).
     """
 
     P: NDArray[np.float64]
@@ -133,6 +135,7 @@ class PoseFit:
     inliers: NDArray[np.bool_]
     iterations: int
     converged: bool
+    fallback_starts_tried: int = 0
 
     @property
     def rejected(self) -> tuple[int, ...]:
@@ -627,6 +630,8 @@ def fit_absolute(
     *,
     robust: bool = True,
     min_inliers: int | None = None,
+    fallback_starts: Callable[[], Sequence[tuple[NDArray, NDArray]]] | None = None,
+    accept: Callable[[PoseFit], bool] | None = None,
 ) -> PoseFit:
     """Maximum-likelihood ``P, Q`` of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
 
@@ -644,6 +649,14 @@ def fit_absolute(
     min_inliers : int, optional
         Fewest poses kept; default: at most 5 % of the poses are rejected, at least one
         may be (the worst ones), and never fewer than 3 kept.
+    fallback_starts : callable, optional
+        Returns more candidate ``(P, Q)`` (e.g. other closed forms); called only when the
+        first fit is not clean -- poses rejected, not converged, or ``accept`` says no.
+        Each candidate is fitted the same way and the best fit is kept: more poses kept,
+        then the lower cost over them at the first fit's noise scales. A
+        ``ValueError`` from it means no fallback.
+    accept : callable, optional
+        Whether a fit is clean beyond the above (e.g. its verdict is "determined").
 
     Returns
     -------
@@ -661,6 +674,53 @@ def fit_absolute(
         candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
     scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
     P, Q = candidates[int(np.argmin(scores))]
+    fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers)
+    result = _pose_fit(data, fit, inliers, steps)
+    if fallback_starts is None or (
+        result.converged and inliers.all() and (accept is None or accept(result))
+    ):
+        return result
+    # Not clean (poses rejected, not converged or not accepted): the closed forms of
+    # ``fallback_starts`` may lead elsewhere; keep the best fit (more poses kept, then
+    # the lower cost over them at the first fit's noise scales).
+    s_r, s_t = fit.s_r, fit.s_t
+    try:
+        fallbacks = list(fallback_starts())
+    except ValueError:
+        fallbacks = []
+    for P0, Q0 in fallbacks:
+        alt, alt_inliers, more = _fit_from(
+            data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers
+        )
+        steps += more
+        if _better(data, alt, alt_inliers, fit, inliers, s_r, s_t):
+            fit, inliers = alt, alt_inliers
+    return _pose_fit(data, fit, inliers, steps, fallback=len(fallbacks))
+
+
+def _better(
+    data: _Data, a: _Fit, a_inliers: NDArray, b: _Fit, b_inliers: NDArray, s_r: float, s_t: float
+) -> bool:
+    """Whether fit ``a`` beats ``b``: more poses kept, or as many with a lower cost
+    ``sum (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over them at the same noise scales."""
+    n_a, n_b = np.count_nonzero(a_inliers), np.count_nonzero(b_inliers)
+    if n_a != n_b:
+        return bool(n_a > n_b)
+    return _weighted_cost(data, a, a_inliers, s_r, s_t) < _weighted_cost(
+        data, b, b_inliers, s_r, s_t
+    ) * (1.0 - 1e-9)
+
+
+def _weighted_cost(data: _Data, fit: _Fit, inliers: NDArray, s_r: float, s_t: float) -> float:
+    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    return float(np.sum(r_r[inliers] ** 2) / s_r**2 + np.sum(r_t[inliers] ** 2) / s_t**2)
+
+
+def _fit_from(
+    data: _Data, M: NDArray, N: NDArray, P: NDArray, Q: NDArray, robust: bool, min_inliers: int
+) -> tuple[_Fit, NDArray[np.bool_], int]:
+    """The fit from one start: plain, then (``robust``, a pose off) Huber, rejection and
+    the consensus start; the fit, its inliers and its steps."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
     everything = np.ones(data.n, dtype=bool)
@@ -684,6 +744,10 @@ def fit_absolute(
                 < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
             ):
                 fit, inliers = alt, alt_inliers
+    return fit, inliers, steps
+
+
+def _pose_fit(data: _Data, fit: _Fit, inliers: NDArray, steps: int, fallback: int = 0) -> PoseFit:
     r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
     try:
         covariance = np.linalg.inv(fit.H)
@@ -700,6 +764,7 @@ def fit_absolute(
         inliers=inliers,
         iterations=int(steps),
         converged=bool(fit.converged),
+        fallback_starts_tried=fallback,
     )
 
 
