@@ -49,6 +49,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -559,15 +560,36 @@ def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     return P[0], Q[0]
 
 
+@lru_cache(maxsize=16)
+def _subsets(n: int) -> NDArray[np.intp]:
+    """The minimal subsets the consensus start scores: all 3-subsets of ``n`` poses in
+    lexicographic order, or ``CONSENSUS_MAX_SUBSETS`` of them evenly spaced in that order
+    (picked while enumerating, not listed)."""
+    total = math.comb(n, 3)
+    if total <= CONSENSUS_MAX_SUBSETS:
+        out = np.array(list(combinations(range(n), 3)), dtype=np.intp).reshape(-1, 3)
+    else:
+        pick = np.linspace(0, total - 1, CONSENSUS_MAX_SUBSETS).astype(int).tolist()
+        wanted = iter(pick)
+        nxt = next(wanted)
+        rows = []
+        for k, c in enumerate(combinations(range(n), 3)):
+            while k == nxt:  # repeated ranks (none when total > the cap) kept as is
+                rows.append(c)
+                nxt = next(wanted, -1)
+            if nxt < 0:
+                break
+        out = np.array(rows, dtype=np.intp)
+    out.setflags(write=False)
+    return out
+
+
 def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     """Best closed form over minimal subsets of 3 poses, scored by the median residuals
     of all poses (the product of the rotation and translation medians: unit-free)."""
     q_M, q_N = _consistent_quats(data.R_M, data.R_N)
     K = _product_matrices(q_M, q_N)
-    subsets = np.array(list(combinations(range(data.n), 3)))
-    if len(subsets) > CONSENSUS_MAX_SUBSETS:
-        pick = np.linspace(0, len(subsets) - 1, CONSENSUS_MAX_SUBSETS).astype(int)
-        subsets = subsets[pick]
+    subsets = _subsets(data.n)
     P, Q = _closed_form_batch(
         K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
     )
@@ -674,7 +696,8 @@ def fit_absolute(
         candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
     scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
     P, Q = candidates[int(np.argmin(scores))]
-    fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers)
+    memo: dict = {}
+    fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers, memo)
     result = _pose_fit(data, fit, inliers, steps)
     if fallback_starts is None or (
         result.converged and inliers.all() and (accept is None or accept(result))
@@ -690,7 +713,7 @@ def fit_absolute(
         fallbacks = []
     for P0, Q0 in fallbacks:
         alt, alt_inliers, more = _fit_from(
-            data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers
+            data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers, memo
         )
         steps += more
         if _better(data, alt, alt_inliers, fit, inliers, s_r, s_t):
@@ -717,7 +740,14 @@ def _weighted_cost(data: _Data, fit: _Fit, inliers: NDArray, s_r: float, s_t: fl
 
 
 def _fit_from(
-    data: _Data, M: NDArray, N: NDArray, P: NDArray, Q: NDArray, robust: bool, min_inliers: int
+    data: _Data,
+    M: NDArray,
+    N: NDArray,
+    P: NDArray,
+    Q: NDArray,
+    robust: bool,
+    min_inliers: int,
+    memo: dict,
 ) -> tuple[_Fit, NDArray[np.bool_], int]:
     """The fit from one start: plain, then (``robust``, a pose off) Huber, rejection and
     the consensus start; the fit, its inliers and its steps."""
@@ -726,6 +756,13 @@ def _fit_from(
     everything = np.ones(data.n, dtype=bool)
     fit = _fit(data, P, Q, everything, s_r, s_t)
     steps = fit.steps
+    for plain, result in memo.get("plain", []):
+        # an earlier start's plain fit ended here too: the rest is the same
+        if np.abs(plain.P - fit.P).max() < 1e-11 * max(1.0, data.length) and (
+            np.abs(plain.Q - fit.Q).max() < 1e-11 * max(1.0, data.length)
+        ):
+            return result[0], result[1], steps
+    first_plain = fit
     inliers = everything
     if robust and data.n > 3 and np.any(fit.chi2 > CHI2_6_999):
         fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
@@ -733,10 +770,13 @@ def _fit_from(
         inliers = _inlier_mask(fit, data, min_inliers)
         if not inliers.all() and data.n >= 5:
             # a pose stays off: the start may have been pulled by it; try a consensus start
-            P1, Q1 = _consensus_start(data, M, N)
-            alt, more = _robust_fit(data, P1, Q1, min_inliers)
-            steps += more
-            alt_inliers = _inlier_mask(alt, data, min_inliers)
+            # (it depends on the data only: computed once per fit_absolute)
+            if "consensus" not in memo:
+                P1, Q1 = _consensus_start(data, M, N)
+                alt, more = _robust_fit(data, P1, Q1, min_inliers)
+                memo["consensus"] = (alt, _inlier_mask(alt, data, min_inliers))
+                steps += more
+            alt, alt_inliers = memo["consensus"]
             n_fit, n_alt = np.count_nonzero(inliers), np.count_nonzero(alt_inliers)
             if n_alt > n_fit or (
                 n_alt == n_fit
@@ -744,6 +784,7 @@ def _fit_from(
                 < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
             ):
                 fit, inliers = alt, alt_inliers
+    memo.setdefault("plain", []).append((first_plain, (fit, inliers)))
     return fit, inliers, steps
 
 
