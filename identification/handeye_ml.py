@@ -85,8 +85,8 @@ CONSENSUS_MAX_SUBSETS = 400
 LM_MAX_STEPS = 40
 #: Levenberg-Marquardt: converged when a step is below this (radians, or relative to the
 #: scene's length) and the noise scales changed by less than ``LM_SCALE_TOL`` (relative).
-LM_STEP_TOL = 1e-13
-LM_SCALE_TOL = 1e-10
+LM_STEP_TOL = 1e-9
+LM_SCALE_TOL = 1e-7
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
@@ -419,7 +419,8 @@ def _fit(
     ``huber``, ``c_i`` Huber's weights of the whitened residual norms (IRLS).
 
     Re-estimating the scales each step is Gauss-Newton on ``sum_g red_g log RSS_g``: it
-    converges with the parameters instead of in outer rounds. With little redundancy
+    converges with the parameters instead of in outer rounds; linearly, so the ratio of
+    the scales is extrapolated (Aitken) from two successive changes. With little redundancy
     (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
     the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
     they come. Converged: a step below ``LM_STEP_TOL`` (radians, or relative to the
@@ -435,6 +436,7 @@ def _fit(
     steps = 0
     converged = False
     size = change = 0.0
+    last_du: float | None = None
     new_cost = 1.0
     length = data.length
     while steps < max_steps:
@@ -491,6 +493,17 @@ def _fit(
             new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
             new_r, new_t = _bounded_sigmas(new_r, new_t, length)
             change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
+            # The scales' ratio converges linearly (factor rho ~ 0.1): Aitken's
+            # extrapolation of log(s_t / s_r) from two successive changes.
+            du = math.log(new_t / new_r) - math.log(s_t / s_r)
+            if last_du is not None and last_du != 0.0 and 0.0 < du / last_du < 0.8:
+                rho = du / last_du
+                jump = du * rho / (1.0 - rho)
+                new_t *= math.exp(jump)
+                change = max(change, abs(jump))
+                last_du = None
+            else:
+                last_du = du
             s_r, s_t = new_r, new_t
         if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
             converged = True
