@@ -273,10 +273,20 @@ def _bounded_sigmas(s_r: float, s_t: float, length: float) -> tuple[float, float
     return s_r, s_t
 
 
+def _medians(a: NDArray, b: NDArray) -> tuple[float, float]:
+    """``np.median`` of two vectors of one length (n,), in one sort."""
+    s = np.sort(np.stack([a, b]), axis=1)
+    m = s.shape[1] // 2
+    if s.shape[1] % 2:
+        return float(s[0, m]), float(s[1, m])
+    return float(0.5 * (s[0, m - 1] + s[0, m])), float(0.5 * (s[1, m - 1] + s[1, m]))
+
+
 def _robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, float]:
     """Noise scales from the median residual norms (3-D isotropic Gaussian)."""
-    s_r = float(np.sqrt(np.median(np.sum(r_r**2, axis=1)) / _CHI2_3_MEDIAN))
-    s_t = float(np.sqrt(np.median(np.sum(r_t**2, axis=1)) / _CHI2_3_MEDIAN))
+    m_r, m_t = _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1))
+    s_r = math.sqrt(m_r / _CHI2_3_MEDIAN)
+    s_t = math.sqrt(m_t / _CHI2_3_MEDIAN)
     return _bounded_sigmas(s_r, s_t, length)
 
 
@@ -520,12 +530,23 @@ def _fit(
 # ------------------------------------------------------------------------ closed form
 
 
-def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
-    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration)."""
+@lru_cache(maxsize=1)
+def _product_tensor() -> NDArray:
+    """``T[a, b]`` = ``K`` of the basis quaternions ``e_a``, ``e_b``: ``K`` is bilinear in
+    ``(q_M, q_N)``, so ``K_i = sum_ab q_M[i, a] q_N[i, b] T[a, b]`` (one einsum)."""
     from identification.axb_iteration import _left_product_matrix_xyzw, _right_product_matrix_xyzw
 
     conj = np.array([-1.0, -1.0, -1.0, 1.0])
-    return (_left_product_matrix_xyzw(q_M) @ _right_product_matrix_xyzw(q_N * conj)) * conj
+    E = np.eye(4)
+    T = (_left_product_matrix_xyzw(E)[:, None] @ _right_product_matrix_xyzw(E * conj)[None]) * conj
+    T.setflags(write=False)
+    return T
+
+
+def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
+    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration):
+    ``L(q_M) R(q_N^-1) diag(-1, -1, -1, 1)``."""
+    return np.einsum("na,nb,abjk->njk", q_M, q_N, _product_tensor(), optimize=False)
 
 
 def _closed_form_batch(
@@ -557,9 +578,16 @@ def _closed_form_batch(
 
 
 def _consistent_quats(R_M: NDArray, R_N: NDArray) -> tuple[NDArray, NDArray]:
-    from identification.axb_iteration import consistent_quats_xyzw
+    """:func:`identification.axb_iteration.consistent_quats_xyzw`, both batches'
+    quaternions in one call."""
+    from kinfw.transforms import quat_xyzw_from_matrix
 
-    return consistent_quats_xyzw(R_M, R_N)
+    n = len(R_M)
+    q = quat_xyzw_from_matrix(np.concatenate([R_M, R_N]))
+    q_M, q_N = q[:n], q[n:]
+    Z = (q_M[:, :, None] * q_N[:, None, :]).reshape(n, 16)
+    v = np.linalg.eigh(Z.T @ Z)[1][:, -1]
+    return np.where((Z @ v < 0.0)[:, None], -q_M, q_M), q_N
 
 
 def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
@@ -653,8 +681,7 @@ def _score(data: _Data, P: NDArray, Q: NDArray) -> float:
     residual (the concentrated likelihood, with medians)."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     return float(
-        np.log(np.median(np.sum(r_r**2, axis=1)) + 1e-300)
-        + np.log(np.median(np.sum(r_t**2, axis=1)) + 1e-300)
+        sum(math.log(m + 1e-300) for m in _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)))
     )
 
 
