@@ -43,7 +43,10 @@ Refinement (``refine=True``, the default) adds, measured in the notes of
 2. then the maximum-likelihood X and Y on SE(3) with the camera pose ``A`` noisy in
    rotation and translation, both weighted by noise scales estimated from the residuals
    (free of the length unit), robust to outlying poses, with the covariance of X and Y
-   and a verdict (:func:`identification.handeye_ml.fit_absolute`). The former
+   and a verdict (:func:`identification.handeye_ml.fit_absolute`); when that fit is not
+   clean (poses rejected, not converged, verdict not "determined"), Shah's and Li's
+   closed forms (:mod:`identification.handeye_starts`) start fits too and the best is
+   kept. The former
    refinement (Gauss-Newton on the rotations alone, then least squares for the
    translations) ignored what the translations say about the rotations: on Tabb DS1
    X moves from 0.545 to 0.175 deg of Tabb's reference, at motions <= 15 deg (1 deg +
