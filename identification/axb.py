@@ -43,7 +43,10 @@ Refinement (``refine=True``, the default) adds, measured in the notes of
 2. then the maximum-likelihood X and Y on SE(3) with the camera pose ``A`` noisy in
    rotation and translation, both weighted by noise scales estimated from the residuals
    (free of the length unit), robust to outlying poses, with the covariance of X and Y
-   and a verdict (:func:`identification.handeye_ml.fit_absolute`). The former
+   and a verdict (:func:`identification.handeye_ml.fit_absolute`); when that fit is not
+   clean (poses rejected, not converged, verdict not "determined"), Shah's and Li's
+   closed forms (:mod:`identification.handeye_starts`) start fits too and the best is
+   kept. The former
    refinement (Gauss-Newton on the rotations alone, then least squares for the
    translations) ignored what the translations say about the rotations: on Tabb DS1
    X moves from 0.545 to 0.175 deg of Tabb's reference, at motions <= 15 deg (1 deg +
@@ -72,7 +75,14 @@ from identification.axb_iteration import (
     translation_iteration,
 )
 from identification.axb_refinement import translations_least_squares
-from identification.handeye_ml import assess, combined_verdict, fit_absolute, uncertainty
+from identification.handeye_ml import (
+    PoseFit,
+    assess,
+    combined_verdict,
+    fit_absolute,
+    uncertainty,
+)
+from identification.handeye_starts import candidate_starts
 from kinfw.transforms import (
     check_transform,
     project_to_rotation,
@@ -461,7 +471,20 @@ def solve_axyb(
         Y = transform_from_rotation_translation(R_Y, t_Y)
     if refine:
         starts = [(lambda X=X, Y=Y: (X, Y))] if run_paper else []
-        fit = fit_absolute(As, Bs, starts)
+        length_A = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
+
+        def determined(f: PoseFit) -> bool:
+            unc = [
+                uncertainty(f.covariance[:6, :6], length_A),
+                uncertainty(f.covariance[6:, 6:], length_A),
+            ]
+            return all(u.verdict == "determined" for u in unc)
+
+        def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+            """Shah's and Li's closed forms (X, Y)."""
+            return list(candidate_starts(As, Bs, problem="axyb").values())
+
+        fit = fit_absolute(As, Bs, starts, fallback_starts=fallback_starts, accept=determined)
         X, Y, converged = fit.P, fit.Q, fit.converged
         if not converged:
             log.warning("the maximum-likelihood refinement did not converge")

@@ -35,10 +35,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from identification.handeye_ml import (
+    PoseFit,
+    Uncertainty,
     fit_absolute,
     inverse_covariance_map,
     uncertainty,
 )
+from identification.handeye_starts import candidate_starts
 from kinfw.transforms import (
     average_transform,
     check_transform,
@@ -248,7 +251,11 @@ def solve_axxb(
     :func:`identification.handeye_ml.fit_absolute`, started from the better of Tsai &
     Lenz and the quaternion closed form (no singularity at a half turn), robust to
     outlying poses (Huber, then rejection at the 99.9 % quantile of chi^2_6, named in
-    ``rejected``; a consensus start of minimal subsets when a pose stays off). Its
+    ``rejected``; a consensus start of minimal subsets when a pose stays off; when that
+    fit is not clean -- poses rejected, not converged, or a verdict other than
+    "determined" -- Park's, Andreff's and Daniilidis' closed forms
+    (:func:`identification.handeye_starts.candidate_starts`) start fits too and the best
+    is kept). Its
     covariance gives ``sigma_rotation_deg``, ``sigma_translation`` and ``verdict``.
     Measured (1 deg + 2 mm on the camera pose, 10 views, 300 trials, motions <= 15 deg):
     X's rotation error median 0.22 deg, p90 0.39 deg (Tsai & Lenz alone: 2.7 / 4.6 deg);
@@ -315,13 +322,30 @@ def solve_axxb(
         )
         return inverse_transform(X0), average_transform(base_T_hands @ X0 @ eye_T_targets)
 
-    # Maximum likelihood on the absolute poses: B[i] = X^-1 A[i]^-1 Y, noise in B.
-    fit = fit_absolute(eye_T_targets, inverse_transform(base_T_hands), [tsai_start])
-    hand_T_eye = inverse_transform(fit.P)
-    G = inverse_covariance_map(fit.P)
-    covariance = G @ fit.covariance[:6, :6] @ G.T
     length = float(np.sqrt(np.mean(np.sum(eye_T_targets[:, :3, 3] ** 2, axis=1))))
-    unc = uncertainty(covariance, length, frame="the camera frame")
+
+    def x_uncertainty(fit: PoseFit) -> tuple[NDArray[np.float64], Uncertainty]:
+        """X's covariance (from P = X^-1's) and its verdict."""
+        G = inverse_covariance_map(fit.P)
+        covariance = G @ fit.covariance[:6, :6] @ G.T
+        return covariance, uncertainty(covariance, length, frame="the camera frame")
+
+    def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Park, Andreff and Daniilidis as (P, Q) = (X^-1, base_T_target)."""
+        found = candidate_starts(base_T_hands, eye_T_targets, problem="axxb")
+        return [(inverse_transform(X0), Y0) for X0, Y0 in found.values()]
+
+    # Maximum likelihood on the absolute poses: B[i] = X^-1 A[i]^-1 Y, noise in B; when
+    # that fit is not clean, the other closed forms start it too.
+    fit = fit_absolute(
+        eye_T_targets,
+        inverse_transform(base_T_hands),
+        [tsai_start],
+        fallback_starts=fallback_starts,
+        accept=lambda f: x_uncertainty(f)[1].verdict == "determined",
+    )
+    hand_T_eye = inverse_transform(fit.P)
+    covariance, unc = x_uncertainty(fit)
 
     # Residuals of A_ij X = X B_ij over the motions between poses kept.
     keep = fit.inliers[i] & fit.inliers[j]

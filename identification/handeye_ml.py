@@ -46,8 +46,10 @@ in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -81,6 +83,10 @@ _CHI2_3_MEDIAN = 2.365974
 CONSENSUS_MAX_SUBSETS = 400
 #: Levenberg-Marquardt: most steps per fit.
 LM_MAX_STEPS = 40
+#: Levenberg-Marquardt: converged when a step is below this (radians, or relative to the
+#: scene's length) and the noise scales changed by less than ``LM_SCALE_TOL`` (relative).
+LM_STEP_TOL = 1e-9
+LM_SCALE_TOL = 1e-7
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
@@ -116,6 +122,8 @@ class PoseFit:
         Levenberg-Marquardt steps over all stages.
     converged : bool
         Whether the final fit stopped on its tolerance.
+    fallback_starts_tried : int
+        How many fallback starts were fitted (0: the first fit was clean, or none given).
     """
 
     P: NDArray[np.float64]
@@ -128,6 +136,7 @@ class PoseFit:
     inliers: NDArray[np.bool_]
     iterations: int
     converged: bool
+    fallback_starts_tried: int = 0
 
     @property
     def rejected(self) -> tuple[int, ...]:
@@ -264,10 +273,20 @@ def _bounded_sigmas(s_r: float, s_t: float, length: float) -> tuple[float, float
     return s_r, s_t
 
 
+def _medians(a: NDArray, b: NDArray) -> tuple[float, float]:
+    """``np.median`` of two vectors of one length (n,), in one sort."""
+    s = np.sort(np.stack([a, b]), axis=1)
+    m = s.shape[1] // 2
+    if s.shape[1] % 2:
+        return float(s[0, m]), float(s[1, m])
+    return float(0.5 * (s[0, m - 1] + s[0, m])), float(0.5 * (s[1, m - 1] + s[1, m]))
+
+
 def _robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, float]:
     """Noise scales from the median residual norms (3-D isotropic Gaussian)."""
-    s_r = float(np.sqrt(np.median(np.sum(r_r**2, axis=1)) / _CHI2_3_MEDIAN))
-    s_t = float(np.sqrt(np.median(np.sum(r_t**2, axis=1)) / _CHI2_3_MEDIAN))
+    m_r, m_t = _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1))
+    s_r = math.sqrt(m_r / _CHI2_3_MEDIAN)
+    s_t = math.sqrt(m_t / _CHI2_3_MEDIAN)
     return _bounded_sigmas(s_r, s_t, length)
 
 
@@ -302,6 +321,97 @@ class _Fit:
     converged: bool
 
 
+def _exp_update(T: NDArray, d: NDArray) -> NDArray:
+    """``(R exp(d[:3]), t + d[3:])`` for one transform (Rodrigues in scalar arithmetic:
+    ``K^2 = d d^T - theta^2 I``)."""
+    x, y, z, dx, dy, dz = d.tolist()
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    E = np.array(
+        [
+            [1.0 - b * (y * y + z * z), -a * z + b * x * y, a * y + b * x * z],
+            [a * z + b * x * y, 1.0 - b * (x * x + z * z), -a * x + b * y * z],
+            [-a * y + b * x * z, a * x + b * y * z, 1.0 - b * (x * x + y * y)],
+        ]
+    )
+    out = np.empty((4, 4))
+    out[:3, :3] = T[:3, :3] @ E
+    out[:3, 3] = T[:3, 3] + (dx, dy, dz)
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+_I, _J = np.array([2, 0, 1]), np.array([1, 2, 0])
+_DIAG = np.arange(3)
+#: Off-diagonal entries of skew(w): rows, columns, source component and sign.
+_SK_ROW = np.array([0, 0, 1, 1, 2, 2])
+_SK_COL = np.array([1, 2, 0, 2, 0, 1])
+_SK_SRC = np.array([2, 1, 2, 0, 1, 0])
+_SK_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+class _Lean:
+    """Residuals (n, 6) and Jacobian (n, 6, 12) of the model with few numpy calls: the
+    LM's inner loop (same quantities as :func:`_residuals` and :func:`_jacobian`)."""
+
+    def __init__(self, data: _Data) -> None:
+        self.d = data
+        self.J = np.zeros((data.n, 6, 12))
+        self.J[:, 3:, 3:6] = -np.eye(3)
+        self.K = np.zeros((data.n, 3, 3))  # skew-symmetric scratch
+
+    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        d = self.d
+        R_P = P[:3, :3]
+        RPN = R_P @ d.R_N
+        R_hat = RPN @ Q[:3, :3]
+        v = d.R_N @ Q[:3, 3] + d.t_N
+        r = np.empty((d.n, 6))
+        E = d.R_M @ np.swapaxes(R_hat, 1, 2)
+        c = 0.5 * (np.einsum("nii->n", E) - 1.0)
+        if c.min() < -0.98:
+            r[:, :3] = rotation_vector_from_matrix(E)
+        else:  # as _log_small
+            vec = 0.5 * (E[:, _I, _J] - E[:, _J, _I])
+            s = np.sqrt(np.einsum("ni,ni->n", vec, vec))
+            theta = np.arctan2(s, c)
+            tiny = s < 1e-8
+            r[:, :3] = (
+                vec * np.where(tiny, 1.0 + theta**2 / 6.0, theta / np.where(tiny, 1.0, s))[:, None]
+            )
+        r[:, 3:] = d.t_M - v @ R_P.T - P[:3, 3]
+        return r, RPN, R_hat, v
+
+    def jacobian(self, r: NDArray, RPN: NDArray, R_hat: NDArray, v: NDArray, P: NDArray):
+        J = self.J
+        R_P = P[:3, :3]
+        phi = r[:, :3]
+        th2 = np.einsum("ni,ni->n", phi, phi)
+        theta = np.sqrt(th2)
+        small = theta < 1e-4
+        safe = np.where(small, 1.0, theta)
+        coef = np.where(
+            small,
+            1.0 / 12.0 + th2 / 720.0,
+            1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+        )
+        # as _inverse_right_jacobian: I + K / 2 + coef K^2, K^2 = phi phi^T - theta^2 I
+        K = self.K
+        K[:, _SK_ROW, _SK_COL] = phi[:, _SK_SRC] * _SK_SIGN
+        Jinv = 0.5 * K + coef[:, None, None] * (phi[:, :, None] * phi[:, None, :])
+        Jinv[:, _DIAG, _DIAG] += (1.0 - coef * th2)[:, None]
+        J[:, :3, 0:3] = -Jinv @ R_P
+        J[:, :3, 6:9] = -Jinv @ R_hat
+        K[:, _SK_ROW, _SK_COL] = v[:, _SK_SRC] * _SK_SIGN
+        J[:, 3:, 0:3] = R_P @ K
+        J[:, 3:, 9:12] = -RPN
+        return J
+
+
 def _fit(
     data: _Data,
     P: NDArray,
@@ -319,50 +429,56 @@ def _fit(
     ``huber``, ``c_i`` Huber's weights of the whitened residual norms (IRLS).
 
     Re-estimating the scales each step is Gauss-Newton on ``sum_g red_g log RSS_g``: it
-    converges with the parameters instead of in outer rounds. With little redundancy
+    converges with the parameters instead of in outer rounds; linearly, so the ratio of
+    the scales is extrapolated (Aitken) from two successive changes. With little redundancy
     (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
     the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
-    they come. Converged: a step below 1e-13 (radians, or relative to the scene's
-    length) with the scales settled to 1e-10.
+    they come. Converged: a step below ``LM_STEP_TOL`` (radians, or relative to the
+    scene's length) with the scales settled to ``LM_SCALE_TOL`` (relative).
     """
+    lean = _Lean(data)
+    n = data.n
     n_in = float(np.count_nonzero(mask))
     update_scales = n_in >= 4
     maskf = mask.astype(float)
-    r_r, r_t, R_hat, v = data.residuals(P, Q)
+    r, RPN, R_hat, v = lean.residuals(P, Q)
     lam = 1e-6
     steps = 0
     converged = False
+    size = change = 0.0
+    last_du: float | None = None
+    new_cost = 1.0
+    length = data.length
     while steps < max_steps:
         steps += 1
-        e2_r, e2_t = np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)
+        r2 = r * r
+        e2 = r2.reshape(n, 2, 3).sum(axis=2)  # (n, 2): |r_r|^2, |r_t|^2
+        chi = e2 @ (1.0 / s_r**2, 1.0 / s_t**2)
+        c = maskf
         if huber:
-            e = np.sqrt(e2_r / s_r**2 + e2_t / s_t**2)
-            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(e, 1e-300))
-        else:
-            c = maskf
-        cost = float(c @ (e2_r / s_r**2 + e2_t / s_t**2))
-        J = _jacobian(r_r, R_hat, v, data.R_N, P)
-        cJ = J * c[:, None, None]
-        H_r = np.einsum("nki,nkj->ij", cJ[:, :3], J[:, :3]) / s_r**2
-        H_t = np.einsum("nki,nkj->ij", cJ[:, 3:], J[:, 3:]) / s_t**2
-        g = (
-            np.einsum("nki,nk->i", cJ[:, :3], r_r) / s_r**2
-            + np.einsum("nki,nk->i", cJ[:, 3:], r_t) / s_t**2
-        )
+            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
+        cost = float(c @ chi)
+        J = lean.jacobian(r, RPN, R_hat, v, P)
+        sc = np.sqrt(c)[:, None]
+        Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
+        Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
+        H_r = Jr.T @ Jr
+        H_t = Jt.T @ Jt
+        g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
         H = H_r + H_t
-        D = np.diag(np.maximum(np.diag(H), 1e-300))
+        D = np.maximum(H.diagonal(), 1e-300)
+        w = (1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_t**2, 1.0 / s_t**2, 1.0 / s_t**2)
         while True:
             try:
-                delta = -np.linalg.solve(H + lam * D, g)
+                delta = -np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
-                delta = -np.linalg.lstsq(H + lam * D, g, rcond=None)[0]
-            P_new = _update(P, delta[0:3], delta[3:6])
-            Q_new = _update(Q, delta[6:9], delta[9:12])
-            n_r, n_t, n_R, n_v = data.residuals(P_new, Q_new)
-            new_cost = float(
-                c @ (np.sum(n_r**2, axis=1) / s_r**2 + np.sum(n_t**2, axis=1) / s_t**2)
-            )
-            size = _step_size(delta, data.length)
+                delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
+            P_new = _exp_update(P, delta[0:6])
+            Q_new = _exp_update(Q, delta[6:12])
+            n_r, n_RPN, n_R, n_v = lean.residuals(P_new, Q_new)
+            new_cost = float(c @ ((n_r * n_r) @ w))
+            dl = np.abs(delta).tolist()
+            size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / length)
             if new_cost <= cost or size < 1e-7:
                 break
             lam *= 10.0
@@ -372,43 +488,65 @@ def _fit(
             converged = True
             break
         lam = max(lam / 10.0, 1e-12)
-        P, Q, r_r, r_t, R_hat, v = P_new, Q_new, n_r, n_t, n_R, n_v
+        P, Q, r, RPN, R_hat, v = P_new, Q_new, n_r, n_RPN, n_R, n_v
         change = 0.0
         if update_scales:
             try:
                 Hinv = np.linalg.inv(H)
             except np.linalg.LinAlgError:
                 Hinv = np.linalg.pinv(H)
-            red_r = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_r.T))
-            red_t = 3.0 * float(c.sum()) - float(np.sum(Hinv * H_t.T))
-            ss_r = float(c @ np.sum(r_r**2, axis=1))
-            ss_t = float(c @ np.sum(r_t**2, axis=1))
-            new_r = np.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
-            new_t = np.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
-            new_r, new_t = _bounded_sigmas(new_r, new_t, data.length)
-            change = max(abs(np.log(new_r / s_r)), abs(np.log(new_t / s_t)))
+            csum = 3.0 * float(c.sum())
+            red_r = csum - float(np.sum(Hinv * H_r.T))
+            red_t = csum - float(np.sum(Hinv * H_t.T))
+            ss_r, ss_t = (c @ (r * r).reshape(n, 2, 3).sum(axis=2)).tolist()
+            new_r = math.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+            new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+            new_r, new_t = _bounded_sigmas(new_r, new_t, length)
+            change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
+            # The scales' ratio converges linearly (factor rho ~ 0.1): Aitken's
+            # extrapolation of log(s_t / s_r) from two successive changes.
+            du = math.log(new_t / new_r) - math.log(s_t / s_r)
+            if last_du is not None and last_du != 0.0 and 0.0 < du / last_du < 0.8:
+                rho = du / last_du
+                jump = du * rho / (1.0 - rho)
+                new_t *= math.exp(jump)
+                change = max(change, abs(jump))
+                last_du = None
+            else:
+                last_du = du
             s_r, s_t = new_r, new_t
-        if (size < 1e-13 and change < 1e-10) or new_cost == 0.0:
+        if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
             converged = True
             break
-    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(maskf)[:, None, None]
-    H = (
-        np.einsum("nki,nkj->ij", J[:, :3], J[:, :3]) / s_r**2
-        + np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:]) / s_t**2
-    )
-    chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+    J = lean.jacobian(r, RPN, R_hat, v, P)
+    sm = np.sqrt(maskf)[:, None]
+    Jr = (J[:, :3] * (sm / s_r)[:, :, None]).reshape(-1, 12)
+    Jt = (J[:, 3:] * (sm / s_t)[:, :, None]).reshape(-1, 12)
+    H = Jr.T @ Jr + Jt.T @ Jt
+    chi2 = (r * r).reshape(n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
     return _Fit(P, Q, s_r, s_t, H, chi2, steps, converged)
 
 
 # ------------------------------------------------------------------------ closed form
 
 
-def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
-    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration)."""
+@lru_cache(maxsize=1)
+def _product_tensor() -> NDArray:
+    """``T[a, b]`` = ``K`` of the basis quaternions ``e_a``, ``e_b``: ``K`` is bilinear in
+    ``(q_M, q_N)``, so ``K_i = sum_ab q_M[i, a] q_N[i, b] T[a, b]`` (one einsum)."""
     from identification.axb_iteration import _left_product_matrix_xyzw, _right_product_matrix_xyzw
 
     conj = np.array([-1.0, -1.0, -1.0, 1.0])
-    return (_left_product_matrix_xyzw(q_M) @ _right_product_matrix_xyzw(q_N * conj)) * conj
+    E = np.eye(4)
+    T = (_left_product_matrix_xyzw(E)[:, None] @ _right_product_matrix_xyzw(E * conj)[None]) * conj
+    T.setflags(write=False)
+    return T
+
+
+def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
+    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration):
+    ``L(q_M) R(q_N^-1) diag(-1, -1, -1, 1)``."""
+    return np.einsum("na,nb,abjk->njk", q_M, q_N, _product_tensor(), optimize=False)
 
 
 def _closed_form_batch(
@@ -440,9 +578,16 @@ def _closed_form_batch(
 
 
 def _consistent_quats(R_M: NDArray, R_N: NDArray) -> tuple[NDArray, NDArray]:
-    from identification.axb_iteration import consistent_quats_xyzw
+    """:func:`identification.axb_iteration.consistent_quats_xyzw`, both batches'
+    quaternions in one call."""
+    from kinfw.transforms import quat_xyzw_from_matrix
 
-    return consistent_quats_xyzw(R_M, R_N)
+    n = len(R_M)
+    q = quat_xyzw_from_matrix(np.concatenate([R_M, R_N]))
+    q_M, q_N = q[:n], q[n:]
+    Z = (q_M[:, :, None] * q_N[:, None, :]).reshape(n, 16)
+    v = np.linalg.eigh(Z.T @ Z)[1][:, -1]
+    return np.where((Z @ v < 0.0)[:, None], -q_M, q_M), q_N
 
 
 def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
@@ -456,15 +601,36 @@ def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     return P[0], Q[0]
 
 
+@lru_cache(maxsize=16)
+def _subsets(n: int) -> NDArray[np.intp]:
+    """The minimal subsets the consensus start scores: all 3-subsets of ``n`` poses in
+    lexicographic order, or ``CONSENSUS_MAX_SUBSETS`` of them evenly spaced in that order
+    (picked while enumerating, not listed)."""
+    total = math.comb(n, 3)
+    if total <= CONSENSUS_MAX_SUBSETS:
+        out = np.array(list(combinations(range(n), 3)), dtype=np.intp).reshape(-1, 3)
+    else:
+        pick = np.linspace(0, total - 1, CONSENSUS_MAX_SUBSETS).astype(int).tolist()
+        wanted = iter(pick)
+        nxt = next(wanted)
+        rows = []
+        for k, c in enumerate(combinations(range(n), 3)):
+            while k == nxt:  # repeated ranks (none when total > the cap) kept as is
+                rows.append(c)
+                nxt = next(wanted, -1)
+            if nxt < 0:
+                break
+        out = np.array(rows, dtype=np.intp)
+    out.setflags(write=False)
+    return out
+
+
 def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     """Best closed form over minimal subsets of 3 poses, scored by the median residuals
     of all poses (the product of the rotation and translation medians: unit-free)."""
     q_M, q_N = _consistent_quats(data.R_M, data.R_N)
     K = _product_matrices(q_M, q_N)
-    subsets = np.array(list(combinations(range(data.n), 3)))
-    if len(subsets) > CONSENSUS_MAX_SUBSETS:
-        pick = np.linspace(0, len(subsets) - 1, CONSENSUS_MAX_SUBSETS).astype(int)
-        subsets = subsets[pick]
+    subsets = _subsets(data.n)
     P, Q = _closed_form_batch(
         K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
     )
@@ -515,8 +681,7 @@ def _score(data: _Data, P: NDArray, Q: NDArray) -> float:
     residual (the concentrated likelihood, with medians)."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     return float(
-        np.log(np.median(np.sum(r_r**2, axis=1)) + 1e-300)
-        + np.log(np.median(np.sum(r_t**2, axis=1)) + 1e-300)
+        sum(math.log(m + 1e-300) for m in _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)))
     )
 
 
@@ -527,6 +692,8 @@ def fit_absolute(
     *,
     robust: bool = True,
     min_inliers: int | None = None,
+    fallback_starts: Callable[[], Sequence[tuple[NDArray, NDArray]]] | None = None,
+    accept: Callable[[PoseFit], bool] | None = None,
 ) -> PoseFit:
     """Maximum-likelihood ``P, Q`` of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
 
@@ -544,6 +711,14 @@ def fit_absolute(
     min_inliers : int, optional
         Fewest poses kept; default: at most 5 % of the poses are rejected, at least one
         may be (the worst ones), and never fewer than 3 kept.
+    fallback_starts : callable, optional
+        Returns more candidate ``(P, Q)`` (e.g. other closed forms); called only when the
+        first fit is not clean -- poses rejected, not converged, or ``accept`` says no.
+        Each candidate is fitted the same way and the best fit is kept: more poses kept,
+        then the lower cost over them at the first fit's noise scales. A
+        ``ValueError`` from it means no fallback.
+    accept : callable, optional
+        Whether a fit is clean beyond the above (e.g. its verdict is "determined").
 
     Returns
     -------
@@ -561,11 +736,73 @@ def fit_absolute(
         candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
     scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
     P, Q = candidates[int(np.argmin(scores))]
+    memo: dict = {}
+    fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers, memo)
+    result = _pose_fit(data, fit, inliers, steps)
+    if fallback_starts is None or (
+        result.converged and inliers.all() and (accept is None or accept(result))
+    ):
+        return result
+    # Not clean (poses rejected, not converged or not accepted): the closed forms of
+    # ``fallback_starts`` may lead elsewhere; keep the best fit (more poses kept, then
+    # the lower cost over them at the first fit's noise scales).
+    s_r, s_t = fit.s_r, fit.s_t
+    try:
+        fallbacks = list(fallback_starts())
+    except ValueError:
+        fallbacks = []
+    for P0, Q0 in fallbacks:
+        alt, alt_inliers, more = _fit_from(
+            data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers, memo
+        )
+        steps += more
+        if _better(data, alt, alt_inliers, fit, inliers, s_r, s_t):
+            fit, inliers = alt, alt_inliers
+    return _pose_fit(data, fit, inliers, steps, fallback=len(fallbacks))
+
+
+def _better(
+    data: _Data, a: _Fit, a_inliers: NDArray, b: _Fit, b_inliers: NDArray, s_r: float, s_t: float
+) -> bool:
+    """Whether fit ``a`` beats ``b``: more poses kept, or as many with a lower cost
+    ``sum (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over them at the same noise scales."""
+    n_a, n_b = np.count_nonzero(a_inliers), np.count_nonzero(b_inliers)
+    if n_a != n_b:
+        return bool(n_a > n_b)
+    return _weighted_cost(data, a, a_inliers, s_r, s_t) < _weighted_cost(
+        data, b, b_inliers, s_r, s_t
+    ) * (1.0 - 1e-9)
+
+
+def _weighted_cost(data: _Data, fit: _Fit, inliers: NDArray, s_r: float, s_t: float) -> float:
+    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    return float(np.sum(r_r[inliers] ** 2) / s_r**2 + np.sum(r_t[inliers] ** 2) / s_t**2)
+
+
+def _fit_from(
+    data: _Data,
+    M: NDArray,
+    N: NDArray,
+    P: NDArray,
+    Q: NDArray,
+    robust: bool,
+    min_inliers: int,
+    memo: dict,
+) -> tuple[_Fit, NDArray[np.bool_], int]:
+    """The fit from one start: plain, then (``robust``, a pose off) Huber, rejection and
+    the consensus start; the fit, its inliers and its steps."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
     everything = np.ones(data.n, dtype=bool)
     fit = _fit(data, P, Q, everything, s_r, s_t)
     steps = fit.steps
+    for plain, result in memo.get("plain", []):
+        # an earlier start's plain fit ended here too: the rest is the same
+        if np.abs(plain.P - fit.P).max() < 1e-11 * max(1.0, data.length) and (
+            np.abs(plain.Q - fit.Q).max() < 1e-11 * max(1.0, data.length)
+        ):
+            return result[0], result[1], steps
+    first_plain = fit
     inliers = everything
     if robust and data.n > 3 and np.any(fit.chi2 > CHI2_6_999):
         fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
@@ -573,10 +810,13 @@ def fit_absolute(
         inliers = _inlier_mask(fit, data, min_inliers)
         if not inliers.all() and data.n >= 5:
             # a pose stays off: the start may have been pulled by it; try a consensus start
-            P1, Q1 = _consensus_start(data, M, N)
-            alt, more = _robust_fit(data, P1, Q1, min_inliers)
-            steps += more
-            alt_inliers = _inlier_mask(alt, data, min_inliers)
+            # (it depends on the data only: computed once per fit_absolute)
+            if "consensus" not in memo:
+                P1, Q1 = _consensus_start(data, M, N)
+                alt, more = _robust_fit(data, P1, Q1, min_inliers)
+                memo["consensus"] = (alt, _inlier_mask(alt, data, min_inliers))
+                steps += more
+            alt, alt_inliers = memo["consensus"]
             n_fit, n_alt = np.count_nonzero(inliers), np.count_nonzero(alt_inliers)
             if n_alt > n_fit or (
                 n_alt == n_fit
@@ -584,6 +824,11 @@ def fit_absolute(
                 < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
             ):
                 fit, inliers = alt, alt_inliers
+    memo.setdefault("plain", []).append((first_plain, (fit, inliers)))
+    return fit, inliers, steps
+
+
+def _pose_fit(data: _Data, fit: _Fit, inliers: NDArray, steps: int, fallback: int = 0) -> PoseFit:
     r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
     try:
         covariance = np.linalg.inv(fit.H)
@@ -600,6 +845,7 @@ def fit_absolute(
         inliers=inliers,
         iterations=int(steps),
         converged=bool(fit.converged),
+        fallback_starts_tried=fallback,
     )
 
 
