@@ -56,7 +56,9 @@ __all__ = [
     "TranslationRun",
     "consistent_quats_xyzw",
     "iteration_matrix",
+    "left_product_matrix_xyzw",
     "normalise",
+    "right_product_matrix_xyzw",
     "rotation_from_quat_xyzw",
     "rotation_iteration",
     "translation_iteration",
@@ -102,7 +104,7 @@ def rotation_from_quat_xyzw(quat_xyzw: NDArray[np.float64]) -> NDArray[np.float6
     return transform_from_xyz_quat_xyzw(np.zeros(3), quat_xyzw)[..., :3, :3]
 
 
-def _left_product_matrix_xyzw(p: NDArray[np.float64]) -> NDArray[np.float64]:
+def left_product_matrix_xyzw(p: NDArray[np.float64]) -> NDArray[np.float64]:
     """``L(p)`` with ``p * q = L(p) q`` (Hamilton product, section 2.2 property 2)."""
     pv, pw = p[..., :3], p[..., 3]
     out = np.zeros((*p.shape[:-1], 4, 4))
@@ -113,7 +115,7 @@ def _left_product_matrix_xyzw(p: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def _right_product_matrix_xyzw(q: NDArray[np.float64]) -> NDArray[np.float64]:
+def right_product_matrix_xyzw(q: NDArray[np.float64]) -> NDArray[np.float64]:
     """``R(q)`` with ``p * q = R(q) p``."""
     qv, qw = q[..., :3], q[..., 3]
     out = np.zeros((*q.shape[:-1], 4, 4))
@@ -145,7 +147,7 @@ def iteration_matrix(q_As: NDArray, q_Bs: NDArray) -> NDArray[np.float64]:
     """``N`` with ``mean_i q_A[i] q_Y^-1 q_B[i]^-1 = N q_Y`` and
     ``mean_i q_B[i]^-1 q_X^-1 q_A[i] = N^T q_X`` (module docstring)."""
     M = np.mean(
-        _left_product_matrix_xyzw(q_As) @ _right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0
+        left_product_matrix_xyzw(q_As) @ right_product_matrix_xyzw(q_Bs * _CONJUGATE), axis=0
     )
     return M * _CONJUGATE  # right-multiplied by diag(-1, -1, -1, 1): q_Y -> q_Y^-1
 

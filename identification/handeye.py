@@ -34,14 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.handeye_ml import (
-    PoseFit,
-    Uncertainty,
-    fit_absolute,
-    inverse_covariance_map,
-    uncertainty,
-)
+from identification.handeye_ml import PoseFit, fit_absolute
 from identification.handeye_starts import candidate_starts
+from identification.handeye_uncertainty import Uncertainty, inverse_covariance_map, uncertainty
 from kinfw.transforms import (
     average_transform,
     check_transform,
@@ -124,7 +119,7 @@ class HandEyeResult:
     verdict : str
         ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
         ``"undetermined (<worst direction>)"``
-        (:func:`identification.handeye_ml.uncertainty`).
+        (:func:`identification.handeye_uncertainty.uncertainty`).
     rejected : tuple of int
         Indices of the poses rejected as outliers (whitened residual above the 99.9 %
         quantile of chi^2 with 6 degrees of freedom).

@@ -55,22 +55,18 @@ from itertools import combinations
 import numpy as np
 from numpy.typing import NDArray
 
+from identification.handeye_quaternion import (
+    closed_form_batch,
+    closed_form_start,
+    consistent_quats,
+    product_matrices,
+)
 from kinfw.transforms import (
     rotation_vector_from_matrix,
     skew,
-    transform_from_rotation_translation,
 )
 
-__all__ = [
-    "CHI2_6_999",
-    "PoseFit",
-    "Uncertainty",
-    "assess",
-    "closed_form_start",
-    "combined_verdict",
-    "fit_absolute",
-    "uncertainty",
-]
+__all__ = ["CHI2_6_999", "PoseFit", "assess", "fit_absolute"]
 
 #: 99.9 % quantile of chi^2 with 6 degrees of freedom: the rejection threshold of a pose's
 #: squared whitened residual.
@@ -90,12 +86,6 @@ LM_SCALE_TOL = 1e-7
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
-#: Verdict thresholds (1-sigma, worst direction): rotation in degrees, translation as a
-#: fraction of the RMS camera-target distance (so it does not depend on the unit).
-POOR_ROTATION_DEG = 1.0
-UNDETERMINED_ROTATION_DEG = 10.0
-POOR_TRANSLATION_FRACTION = 0.02
-UNDETERMINED_TRANSLATION_FRACTION = 0.2
 
 Start = Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
 
@@ -142,34 +132,6 @@ class PoseFit:
     def rejected(self) -> tuple[int, ...]:
         """Indices of the poses left out as outliers."""
         return tuple(int(k) for k in np.flatnonzero(~self.inliers))
-
-
-@dataclass(frozen=True, slots=True)
-class Uncertainty:
-    """1-sigma uncertainty of one rigid transform and the verdict on it.
-
-    Attributes
-    ----------
-    sigma_rotation_deg : ndarray, shape (3,)
-        Per axis of the transform's child frame (right perturbation), degrees.
-    sigma_translation : ndarray, shape (3,)
-        Per axis of the parent frame, input length unit.
-    worst_rotation_deg, worst_translation : float
-        Along the worst direction (square root of the largest eigenvalue).
-    worst_rotation_axis, worst_translation_axis : ndarray, shape (3,)
-        Those directions (unit vectors, child and parent frame).
-    verdict : str
-        ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
-        ``"undetermined (...)"``.
-    """
-
-    sigma_rotation_deg: NDArray[np.float64]
-    sigma_translation: NDArray[np.float64]
-    worst_rotation_deg: float
-    worst_translation: float
-    worst_rotation_axis: NDArray[np.float64]
-    worst_translation_axis: NDArray[np.float64]
-    verdict: str
 
 
 # ----------------------------------------------------------------------------- model
@@ -527,80 +489,6 @@ def _fit(
     return _Fit(P, Q, s_r, s_t, H, chi2, steps, converged)
 
 
-# ------------------------------------------------------------------------ closed form
-
-
-@lru_cache(maxsize=1)
-def _product_tensor() -> NDArray:
-    """``T[a, b]`` = ``K`` of the basis quaternions ``e_a``, ``e_b``: ``K`` is bilinear in
-    ``(q_M, q_N)``, so ``K_i = sum_ab q_M[i, a] q_N[i, b] T[a, b]`` (one einsum)."""
-    from identification.axb_iteration import _left_product_matrix_xyzw, _right_product_matrix_xyzw
-
-    conj = np.array([-1.0, -1.0, -1.0, 1.0])
-    E = np.eye(4)
-    T = (_left_product_matrix_xyzw(E)[:, None] @ _right_product_matrix_xyzw(E * conj)[None]) * conj
-    T.setflags(write=False)
-    return T
-
-
-def _product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
-    """Per pose ``K_i`` with ``q_P = (mean_i K_i) q_Q`` at a fit (see axb_iteration):
-    ``L(q_M) R(q_N^-1) diag(-1, -1, -1, 1)``."""
-    return np.einsum("na,nb,abjk->njk", q_M, q_N, _product_tensor(), optimize=False)
-
-
-def _closed_form_batch(
-    K: NDArray, R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray
-) -> tuple[NDArray, NDArray]:
-    """Closed-form P, Q for a batch of subsets: ``K`` (s, m, 4, 4), poses (s, m, ...).
-
-    Rotations: top singular pair of ``mean K`` (Hirsh's fixed point, Shah's closed form
-    in quaternions; no singularity at any angle). Translations: linear least squares of
-    ``t_P + R_P R_N t_Q = t_M - R_P t_N`` (6 unknowns), by the normal equations.
-    """
-    from identification.axb_iteration import rotation_from_quat_xyzw
-
-    U, _, Vt = np.linalg.svd(K.mean(axis=1))
-    R_P = rotation_from_quat_xyzw(U[:, :, 0])
-    R_Q = rotation_from_quat_xyzw(Vt[:, 0, :])
-    s, m = R_M.shape[:2]
-    C = np.concatenate([np.broadcast_to(np.eye(3), (s, m, 3, 3)), R_P[:, None] @ R_N], axis=3)
-    rhs = t_M - np.einsum("sij,smj->smi", R_P, t_N)
-    C = C.reshape(s, 3 * m, 6)
-    CtC = (
-        np.swapaxes(C, 1, 2) @ C
-        + 1e-12 * np.eye(6) * np.trace(np.swapaxes(C, 1, 2) @ C, axis1=1, axis2=2)[:, None, None]
-    )
-    sol = np.linalg.solve(CtC, np.einsum("ski,sk->si", C, rhs.reshape(s, 3 * m))[..., None])[..., 0]
-    P = transform_from_rotation_translation(R_P, sol[:, :3])
-    Q = transform_from_rotation_translation(R_Q, sol[:, 3:])
-    return P, Q
-
-
-def _consistent_quats(R_M: NDArray, R_N: NDArray) -> tuple[NDArray, NDArray]:
-    """:func:`identification.axb_iteration.consistent_quats_xyzw`, both batches'
-    quaternions in one call."""
-    from kinfw.transforms import quat_xyzw_from_matrix
-
-    n = len(R_M)
-    q = quat_xyzw_from_matrix(np.concatenate([R_M, R_N]))
-    q_M, q_N = q[:n], q[n:]
-    Z = (q_M[:, :, None] * q_N[:, None, :]).reshape(n, 16)
-    v = np.linalg.eigh(Z.T @ Z)[1][:, -1]
-    return np.where((Z @ v < 0.0)[:, None], -q_M, q_M), q_N
-
-
-def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
-    """Closed-form ``P, Q`` of ``M[i] ≈ P N[i] Q`` from all poses (see
-    :func:`_closed_form_batch`); valid at every rotation angle, order-independent."""
-    q_M, q_N = _consistent_quats(M[:, :3, :3], N[:, :3, :3])
-    K = _product_matrices(q_M, q_N)
-    P, Q = _closed_form_batch(
-        K[None], M[None, :, :3, :3], M[None, :, :3, 3], N[None, :, :3, :3], N[None, :, :3, 3]
-    )
-    return P[0], Q[0]
-
-
 @lru_cache(maxsize=16)
 def _subsets(n: int) -> NDArray[np.intp]:
     """The minimal subsets the consensus start scores: all 3-subsets of ``n`` poses in
@@ -628,10 +516,10 @@ def _subsets(n: int) -> NDArray[np.intp]:
 def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     """Best closed form over minimal subsets of 3 poses, scored by the median residuals
     of all poses (the product of the rotation and translation medians: unit-free)."""
-    q_M, q_N = _consistent_quats(data.R_M, data.R_N)
-    K = _product_matrices(q_M, q_N)
+    q_M, q_N = consistent_quats(data.R_M, data.R_N)
+    K = product_matrices(q_M, q_N)
     subsets = _subsets(data.n)
-    P, Q = _closed_form_batch(
+    P, Q = closed_form_batch(
         K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
     )
     R_hat = P[:, None, :3, :3] @ data.R_N[None] @ Q[:, None, :3, :3]
@@ -893,84 +781,3 @@ def assess(M: NDArray, N: NDArray, P: NDArray, Q: NDArray) -> PoseFit:
         iterations=0,
         converged=True,
     )
-
-
-# ----------------------------------------------------------------------- uncertainty
-
-
-def combined_verdict(named: Sequence[tuple[str, Uncertainty]]) -> str:
-    """One verdict for several transforms: ``"determined"`` when all are, else the worst
-    one's, naming the transform (e.g. ``"poorly determined (camera_T_hand: sigma ...)"``)."""
-    rank = {"determined": 0, "poorly": 1, "undetermined": 2}
-    worst_name, worst = max(named, key=lambda item: rank[item[1].verdict.split(" ")[0]])
-    if worst.verdict == "determined":
-        return "determined"
-    head, _, rest = worst.verdict.partition("(")
-    return f"{head}({worst_name}: {rest}"
-
-
-def uncertainty(
-    covariance: NDArray, length: float, *, unit: str = "", frame: str = "the child frame"
-) -> Uncertainty:
-    """Per-axis and worst 1-sigma of a transform and the conditioning verdict.
-
-    Parameters
-    ----------
-    covariance : ndarray, shape (6, 6)
-        Of ``(dphi, dt)``: rotation right-perturbed (radians), translation (length).
-    length : float
-        The scene's length scale (RMS camera-target distance), for the translation
-        thresholds ``POOR_TRANSLATION_FRACTION`` and ``UNDETERMINED_TRANSLATION_FRACTION``.
-    unit : str
-        Name of the length unit for the verdict (e.g. ``"m"``); empty: "input unit".
-    frame : str
-        Name of the rotation's frame, for the verdict.
-    """
-    C_r, C_t = covariance[:3, :3], covariance[3:, 3:]
-    ev_r, V_r = np.linalg.eigh(0.5 * (C_r + C_r.T))
-    ev_t, V_t = np.linalg.eigh(0.5 * (C_t + C_t.T))
-    worst_r = float(np.degrees(np.sqrt(max(ev_r[-1], 0.0))))
-    worst_t = float(np.sqrt(max(ev_t[-1], 0.0)))
-    axis_r, axis_t = V_r[:, -1], V_t[:, -1]
-    axis_r = axis_r * np.sign(axis_r[np.argmax(np.abs(axis_r))])
-    axis_t = axis_t * np.sign(axis_t[np.argmax(np.abs(axis_t))])
-    if unit == "m":
-        t_text = f"{1000.0 * worst_t:.3g} mm"
-    else:
-        t_text = f"{worst_t:.3g} {unit or 'input length units'}"
-    finite = np.all(np.isfinite(covariance))
-    if not finite or worst_r > UNDETERMINED_ROTATION_DEG:
-        verdict = (
-            f"undetermined (rotation about {np.round(axis_r, 3).tolist()} in {frame}: "
-            f"sigma {worst_r:.3g} deg)"
-        )
-    elif worst_t > UNDETERMINED_TRANSLATION_FRACTION * length:
-        verdict = f"undetermined (translation along {np.round(axis_t, 3).tolist()}: sigma {t_text})"
-    elif worst_r > POOR_ROTATION_DEG or worst_t > POOR_TRANSLATION_FRACTION * length:
-        verdict = f"poorly determined (sigma {worst_r:.3g} deg, {t_text})"
-    else:
-        verdict = "determined"
-    return Uncertainty(
-        sigma_rotation_deg=np.degrees(np.sqrt(np.maximum(np.diag(C_r), 0.0))),
-        sigma_translation=np.sqrt(np.maximum(np.diag(C_t), 0.0)),
-        worst_rotation_deg=worst_r,
-        worst_translation=worst_t,
-        worst_rotation_axis=axis_r,
-        worst_translation_axis=axis_t,
-        verdict=verdict,
-    )
-
-
-def inverse_covariance_map(P: NDArray) -> NDArray:
-    """Linear map (6, 6) from ``(dphi_P, dt_P)`` to the same coordinates of ``P^-1``.
-
-    ``P^-1 = (R_P^T, -R_P^T t_P)``: ``dphi -> -R_P dphi``,
-    ``dt -> [t_X]_x dphi - R_P^T dt`` with ``t_X = -R_P^T t_P``.
-    """
-    R_P, t_P = P[:3, :3], P[:3, 3]
-    t_X = -R_P.T @ t_P
-    G = np.zeros((6, 6))
-    G[:3, :3] = -R_P
-    G[3:, :3] = skew(t_X)
-    G[3:, 3:] = -R_P.T
-    return G

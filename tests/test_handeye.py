@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from identification.handeye import HandEyeError, HandEyeResult, solve_axxb
+from tests.pin_se3 import inverse, rotation, transform
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -19,25 +20,9 @@ DATA = Path(__file__).resolve().parent / "data"
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
 
 
-def _rotation(rotvec):
-    return pin.exp3(np.asarray(rotvec, dtype=float))
-
-
-def _transform(R, p):
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
-
-
-def _inv(T):
-    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
-        np.shape(T)
-    )
-
-
 def _random_rotation(rng, max_angle=np.pi):
     axis = rng.normal(size=3)
-    return _rotation(axis / np.linalg.norm(axis) * rng.uniform(0.0, max_angle))
+    return rotation(axis / np.linalg.norm(axis) * rng.uniform(0.0, max_angle))
 
 
 def _half_turn(axis):
@@ -50,12 +35,14 @@ def _setup(rng, n, hand_R_eye=None, scale=1.0):
     axes) and the camera extrinsics of a fixed target: B[i] = X^-1 A[i]^-1 base_T_target."""
     if hand_R_eye is None:
         hand_R_eye = _random_rotation(rng)
-    hand_T_eye = _transform(hand_R_eye, rng.normal(scale=0.1 * scale, size=3))
-    base_T_target = _transform(_random_rotation(rng), rng.normal(scale=scale, size=3))
+    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1 * scale, size=3))
+    base_T_target = transform(_random_rotation(rng), rng.normal(scale=scale, size=3))
     base_T_hands = np.stack(
-        [_transform(_random_rotation(rng), rng.normal(scale=0.5 * scale, size=3)) for _ in range(n)]
+        [transform(_random_rotation(rng), rng.normal(scale=0.5 * scale, size=3)) for _ in range(n)]
     )
-    eye_T_targets = np.stack([_inv(hand_T_eye) @ _inv(A) @ base_T_target for A in base_T_hands])
+    eye_T_targets = np.stack(
+        [inverse(hand_T_eye) @ inverse(A) @ base_T_target for A in base_T_hands]
+    )
     return hand_T_eye, base_T_hands, eye_T_targets
 
 
@@ -65,7 +52,7 @@ def _perturb_rotations(T, rng, sigma_rad):
     for k in range(len(T)):
         axis = rng.normal(size=3)
         out[k, :3, :3] = (
-            _rotation(axis / np.linalg.norm(axis) * rng.normal(scale=sigma_rad)) @ T[k, :3, :3]
+            rotation(axis / np.linalg.norm(axis) * rng.normal(scale=sigma_rad)) @ T[k, :3, :3]
         )
     return out
 
@@ -92,7 +79,7 @@ def _data_file(relative):
 
 X_ROTATIONS = {
     "random": None,
-    "near-180deg": _rotation(
+    "near-180deg": rotation(
         np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]) * (np.pi - 1e-4)
     ),
     "180deg-random-axis": _half_turn([0.3, -0.5, 0.8]),
@@ -143,10 +130,10 @@ def test_half_turn_motions_of_the_hand_are_used_with_the_right_sign():
     """Wrist flips (relative motions of exactly 180 deg, whose axis sign is arbitrary)."""
     rng = np.random.default_rng(4)
     X_true, A, _ = _setup(rng, 6)
-    flip = _transform(_half_turn([0.0, 0.0, 1.0]), [0.0, 0.0, 0.05])
+    flip = transform(_half_turn([0.0, 0.0, 1.0]), [0.0, 0.0, 0.05])
     A = np.concatenate([A, A @ flip])
-    base_T_target = _transform(_random_rotation(rng), [0.2, 0.1, 0.9])
-    B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
+    base_T_target = transform(_random_rotation(rng), [0.2, 0.1, 0.9])
+    B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
     result = solve_axxb(A, B)
     rot, trans = _errors(result.hand_T_camera, X_true)
     assert rot < 1e-9 and trans < 1e-9
@@ -159,11 +146,11 @@ def test_eye_to_hand_is_solved_with_inverted_robot_poses():
     """A fixed camera seeing a target on the hand: inv(base_T_hand) X cam_T_target = const
     with X = base_T_cam, as the inconsistency message advises."""
     rng = np.random.default_rng(7)
-    base_T_cam = _transform(_random_rotation(rng), [1.0, 0.2, 0.8])
-    hand_T_target = _transform(_random_rotation(rng), [0.0, 0.05, 0.1])
+    base_T_cam = transform(_random_rotation(rng), [1.0, 0.2, 0.8])
+    hand_T_target = transform(_random_rotation(rng), [0.0, 0.05, 0.1])
     _, base_T_hands, _ = _setup(rng, 10)
-    cam_T_targets = np.stack([_inv(base_T_cam) @ A @ hand_T_target for A in base_T_hands])
-    result = solve_axxb(_inv(base_T_hands), cam_T_targets)
+    cam_T_targets = np.stack([inverse(base_T_cam) @ A @ hand_T_target for A in base_T_hands])
+    result = solve_axxb(inverse(base_T_hands), cam_T_targets)
     rot, trans = _errors(result.hand_T_camera, base_T_cam)
     assert rot < 1e-9 and trans < 1e-9
 
@@ -247,7 +234,7 @@ def test_rotation_error_grows_linearly_with_noise_and_stays_far_below_it():
 def _brute_force_axis_spread(A):
     """Largest angle between the axes (lines) of all relative motions, pair by pair."""
     i, j = np.triu_indices(len(A), 1)
-    axes = np.array([pin.log3((_inv(A[b]) @ A[a])[:3, :3]) for a, b in zip(i, j, strict=True)])
+    axes = np.array([pin.log3((inverse(A[b]) @ A[a])[:3, :3]) for a, b in zip(i, j, strict=True)])
     axes /= np.linalg.norm(axes, axis=1, keepdims=True)
     return float(np.arccos(min(np.abs(axes @ axes.T).min(), 1.0)))
 
@@ -264,14 +251,14 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
     wobbles = np.radians([0.0, 1.5, -1.0, 0.5, 1.2, -1.5])
     base_T_hands = np.stack(
         [
-            _transform(
-                _rotation([w, 0.0, 0.0]) @ _rotation([0.0, 0.0, q]), rng.normal(scale=0.3, size=3)
+            transform(
+                rotation([w, 0.0, 0.0]) @ rotation([0.0, 0.0, q]), rng.normal(scale=0.3, size=3)
             )
             for q, w in zip(qs, wobbles, strict=True)
         ]
     )
-    base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
-    B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in base_T_hands])
+    base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
+    B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in base_T_hands])
     narrow = solve_axxb(base_T_hands, B)
     spread = _brute_force_axis_spread(base_T_hands)
     assert narrow.axis_spread_rad == pytest.approx(spread, abs=1e-9)
@@ -327,18 +314,18 @@ def test_pure_translations_are_not_informative():
     rng = np.random.default_rng(1)
     X_true, A, _ = _setup(rng, 6)
     A[:, :3, :3] = A[0, :3, :3]
-    base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
-    B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
+    base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
+    B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
     with pytest.raises(HandEyeError, match="no informative motion"):
         solve_axxb(A, B)
     # small rotations, below the threshold, are no better
     A_small = np.stack(
         [
-            _transform(_rotation([0.0, np.radians(0.5 * k), 0.0]) @ A[0, :3, :3], A[k, :3, 3])
+            transform(rotation([0.0, np.radians(0.5 * k), 0.0]) @ A[0, :3, :3], A[k, :3, 3])
             for k in range(6)
         ]
     )
-    B_small = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A_small])
+    B_small = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A_small])
     with pytest.raises(HandEyeError, match=r"no informative motion.*below min_angle_rad = 4 deg"):
         solve_axxb(A_small, B_small, min_angle_rad=np.radians(4.0))
 
@@ -349,12 +336,12 @@ def test_motions_about_one_axis_are_refused():
     base_R_hand0 = _random_rotation(rng)
     A = np.stack(
         [
-            _transform(base_R_hand0 @ _rotation([0.0, 0.0, q]), rng.normal(size=3))
+            transform(base_R_hand0 @ rotation([0.0, 0.0, q]), rng.normal(size=3))
             for q in np.radians([0.0, 15.0, 40.0, 90.0, 170.0])
         ]
     )
-    base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
-    B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
+    base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
+    B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
     with pytest.raises(
         HandEyeError,
         match=r"all relative rotations are about one axis \(\[.*\] in the hand "
@@ -380,7 +367,7 @@ def test_one_inverted_pose_list_is_refused(mistake):
     become conjugates of inverse motions), so it is caught by the rotation residual of
     A X = X B, not by the angles."""
     _, A, B = _setup(np.random.default_rng(6), 8)
-    A, B = {"A inverted": (_inv(A), B), "B inverted": (A, _inv(B))}[mistake]
+    A, B = {"A inverted": (inverse(A), B), "B inverted": (A, inverse(B))}[mistake]
     with pytest.raises(
         HandEyeError,
         match=r"no single X relates the motions of A and B.*"
@@ -394,11 +381,11 @@ def test_swapped_or_both_inverted_poses_are_consistent_and_answer_the_target_pos
     B (target_T_base) A = X^-1 and A^-1 (base_T_target) B^-1 = X."""
     rng = np.random.default_rng(6)
     X_true, A, _ = _setup(rng, 8)
-    base_T_target = _transform(_random_rotation(rng), [0.1, 0.2, 1.0])
-    B = np.stack([_inv(X_true) @ _inv(a) @ base_T_target for a in A])
-    rot, trans = _errors(solve_axxb(B, A).hand_T_camera, _inv(base_T_target))
+    base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
+    B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
+    rot, trans = _errors(solve_axxb(B, A).hand_T_camera, inverse(base_T_target))
     assert rot < 1e-9 and trans < 1e-9
-    rot, trans = _errors(solve_axxb(_inv(A), _inv(B)).hand_T_camera, base_T_target)
+    rot, trans = _errors(solve_axxb(inverse(A), inverse(B)).hand_T_camera, base_T_target)
     assert rot < 1e-9 and trans < 1e-9
 
 
@@ -416,7 +403,7 @@ def test_opencv_regression_24871_is_exact():
     data = json.loads(_data_file("opencv_regression_24871/regression_24871.json").read_text())
     base_T_grippers = np.stack(
         [
-            _transform(R, t)
+            transform(R, t)
             for R, t in zip(
                 data["R_gripper2base"], np.reshape(data["t_gripper2base"], (-1, 3)), strict=True
             )
@@ -424,7 +411,7 @@ def test_opencv_regression_24871_is_exact():
     )
     cam_T_targets = np.stack(
         [
-            _transform(R, t)
+            transform(R, t)
             for R, t in zip(
                 data["R_target2cam"], np.reshape(data["t_target2cam"], (-1, 3)), strict=True
             )
@@ -441,7 +428,7 @@ def _tabb_ds1():
     gripper_T_bases = np.array(data["T_base2gripper (B_i = gTb, from robot_cali.txt)"])
     cam_T_worlds = np.array(data["T_world2cam (A_i = cTw, from cali.txt)"])
     cam_T_gripper = np.array(data["reference_rwhe_AA_RPI"]["Z = cTg (gripper2cam)"])
-    return _inv(gripper_T_bases), cam_T_worlds, _inv(cam_T_gripper)
+    return inverse(gripper_T_bases), cam_T_worlds, inverse(cam_T_gripper)
 
 
 def test_tabb_ds1_meets_opencvs_acceptance():
@@ -472,31 +459,31 @@ def test_tabb_ds1_meets_opencvs_acceptance():
 
 def test_an_inconsistency_with_small_motions_names_both_causes():
     rng = np.random.default_rng(0)
-    X = _transform(_random_rotation(rng), [0.05, 0.02, 0.1])
-    base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
+    X = transform(_random_rotation(rng), [0.05, 0.02, 0.1])
+    base_T_target = transform(_random_rotation(rng), [0.5, 0.2, 0.3])
     A = np.stack(
         [
-            _transform(_random_rotation(rng, np.radians(12.0)), rng.uniform(-0.25, 0.25, 3))
+            transform(_random_rotation(rng, np.radians(12.0)), rng.uniform(-0.25, 0.25, 3))
             for _ in range(10)
         ]
     )
-    B = np.stack([_inv(a @ X) @ base_T_target for a in A])
+    B = np.stack([inverse(a @ X) @ base_T_target for a in A])
     with pytest.raises(
         HandEyeError,
         match=r"motions are small \(median relative rotation "
         r"[\d.]+ deg\).*A or B may be inverted",
     ):
-        solve_axxb(A, np.stack([_inv(b) for b in B]))
+        solve_axxb(A, np.stack([inverse(b) for b in B]))
 
 
 def test_motions_mostly_about_one_axis_are_warned_about(caplog):
     rng = np.random.default_rng(3)
-    X = _transform(_random_rotation(rng), [0.01, -0.02, 0.05])
-    base_T_target = _transform(_random_rotation(rng), [0.5, 0.2, 0.3])
+    X = transform(_random_rotation(rng), [0.01, -0.02, 0.05])
+    base_T_target = transform(_random_rotation(rng), [0.5, 0.2, 0.3])
     A = np.stack(
         [
-            _transform(
-                _rotation(
+            transform(
+                rotation(
                     [rng.uniform(-1.0, 1.0), rng.uniform(-0.02, 0.02), rng.uniform(-0.02, 0.02)]
                 ),
                 rng.uniform(-0.2, 0.2, 3),
@@ -504,7 +491,7 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
             for _ in range(20)
         ]
     )
-    B = np.stack([_inv(a @ X) @ base_T_target for a in A])
+    B = np.stack([inverse(a @ X) @ base_T_target for a in A])
     with caplog.at_level("WARNING", logger="identification.handeye"):
         result = solve_axxb(A, B)
     assert result.rotation_condition < 0.05

@@ -9,29 +9,9 @@ import pytest
 import identification.handeye as handeye
 from identification.axb import solve_axyb
 from identification.handeye import HandEyeError, solve_axxb
+from tests.pin_se3 import inverse, random_axis, rotation, transform
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
-
-
-def _rotation(rotvec):
-    return pin.exp3(np.asarray(rotvec, dtype=float))
-
-
-def _transform(R, p):
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
-
-
-def _inv(T):
-    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
-        np.shape(T)
-    )
-
-
-def _random_axis(rng):
-    a = rng.normal(size=3)
-    return a / np.linalg.norm(a)
 
 
 AXIS = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
@@ -44,30 +24,30 @@ def _scene(rng, n, max_motion_deg=180.0, hand_R_camera=None, noise=(0.0, 0.0), s
     camera's noise: a rotation by ``noise[0]`` deg about a random axis and ``noise[1]``
     (length) per axis."""
     if hand_R_camera is None:
-        hand_R_camera = _rotation(_random_axis(rng) * rng.uniform(0.0, np.pi))
-    X = _transform(hand_R_camera, rng.normal(scale=0.05 * scale, size=3))
-    R0 = _rotation(_random_axis(rng) * rng.uniform(0.0, np.pi))
+        hand_R_camera = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
+    X = transform(hand_R_camera, rng.normal(scale=0.05 * scale, size=3))
+    R0 = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
     A = np.stack(
         [
-            _transform(
-                R0 @ _rotation(_random_axis(rng) * rng.uniform(0, np.radians(max_motion_deg))),
+            transform(
+                R0 @ rotation(random_axis(rng) * rng.uniform(0, np.radians(max_motion_deg))),
                 rng.normal(scale=0.2 * scale, size=3),
             )
             for _ in range(n)
         ]
     )
-    Y = A[0] @ X @ _transform(_rotation(_random_axis(rng) * 0.3), [0.0, 0.0, 0.5 * scale])
-    B = np.stack([_inv(X) @ _inv(a) @ Y for a in A])
+    Y = A[0] @ X @ transform(rotation(random_axis(rng) * 0.3), [0.0, 0.0, 0.5 * scale])
+    B = np.stack([inverse(X) @ inverse(a) @ Y for a in A])
     for k in range(n):
-        B[k, :3, :3] = _rotation(_random_axis(rng) * np.radians(noise[0])) @ B[k, :3, :3]
+        B[k, :3, :3] = rotation(random_axis(rng) * np.radians(noise[0])) @ B[k, :3, :3]
     B[:, :3, 3] += rng.normal(scale=noise[1] * scale, size=(n, 3))
     return X, Y, A, B
 
 
 def _axyb_x(A, B):
     """hand_T_camera by solve_axyb: camera_T_target = camera_T_hand hand_T_base Y."""
-    result = solve_axyb(B, _inv(A))
-    return _inv(result.camera_T_hand), result
+    result = solve_axyb(B, inverse(A))
+    return inverse(result.camera_T_hand), result
 
 
 def _error(X_est, X_true):
@@ -81,7 +61,7 @@ def _error(X_est, X_true):
 
 X_ROTATIONS = {
     "random": None,
-    "179.9deg": _rotation(AXIS * np.radians(179.9)),
+    "179.9deg": rotation(AXIS * np.radians(179.9)),
     "180deg": 2.0 * np.outer(AXIS, AXIS) - np.eye(3),
     "180deg-about-z": np.diag([-1.0, -1.0, 1.0]),
 }
@@ -151,7 +131,7 @@ def test_reported_covariance_matches_the_errors_and_beats_tsai_on_small_motions(
 
     def recording_fit(M, N, start_list, **kw):
         P0, _ = start_list[0]()  # Tsai & Lenz: P = X^-1
-        starts.append(_inv(P0))
+        starts.append(inverse(P0))
         return real_fit(M, N, start_list, **kw)
 
     monkeypatch.setattr(handeye, "fit_absolute", recording_fit)
@@ -196,7 +176,7 @@ def test_one_pose_off_by_20_degrees_is_rejected_and_named(seed):
     rng = np.random.default_rng(seed)
     X, _, A, B = _scene(rng, 10, 180.0, noise=(1.0, 2e-3))
     bad = int(rng.integers(10))
-    B[bad, :3, :3] = _rotation(_random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
+    B[bad, :3, :3] = rotation(random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
     keep = np.arange(10) != bad
     for solve in (solve_axxb, lambda a, b: _axyb_x(a, b)[1]):
         with_outlier, without = solve(A, B), solve(A[keep], B[keep])
@@ -217,7 +197,7 @@ def test_x_near_a_half_turn_with_noise_never_raises(angle_deg):
         X, _, A, B = _scene(
             np.random.default_rng(seed),
             10,
-            hand_R_camera=_rotation(AXIS * np.radians(angle_deg)),
+            hand_R_camera=rotation(AXIS * np.radians(angle_deg)),
             noise=(1.0, 2e-3),
         )
         result = solve_axxb(A, B)
@@ -230,24 +210,22 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
     """tests/test_handeye.py's generator at seed 1199 (12 views, 0.5 deg on A and B): Tsai
     & Lenz's first estimate lands far off and the old solver raised 'no single X'."""
     rng = np.random.default_rng(1199)
-    hand_R_eye = _rotation(_random_axis(rng) * rng.uniform(0.0, np.pi))
-    hand_T_eye = _transform(hand_R_eye, rng.normal(scale=0.1, size=3))
-    base_T_target = _transform(
-        _rotation(_random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(size=3)
+    hand_R_eye = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
+    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1, size=3))
+    base_T_target = transform(
+        rotation(random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(size=3)
     )
     A = np.stack(
         [
-            _transform(
-                _rotation(_random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(0, 0.5, 3)
-            )
+            transform(rotation(random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(0, 0.5, 3))
             for _ in range(12)
         ]
     )
-    B = np.stack([_inv(hand_T_eye) @ _inv(a) @ base_T_target for a in A])
+    B = np.stack([inverse(hand_T_eye) @ inverse(a) @ base_T_target for a in A])
     for T in (B, A):  # the same draws as tests/test_handeye.py::_noisy_setup
         for k in range(12):
             T[k, :3, :3] = (
-                _rotation(_random_axis(rng) * rng.normal(scale=np.radians(0.5))) @ T[k, :3, :3]
+                rotation(random_axis(rng) * rng.normal(scale=np.radians(0.5))) @ T[k, :3, :3]
             )
         if T is B:
             B[:, :3, 3] += rng.normal(scale=1e-3, size=(12, 3))
@@ -259,9 +237,9 @@ def test_motions_about_one_axis_still_raise_naming_why():
     rng = np.random.default_rng(2)
     X, _, A, _ = _scene(rng, 5)
     A = np.stack(
-        [_transform(A[0, :3, :3] @ _rotation([0.0, 0.0, q]), rng.normal(size=3)) for q in range(5)]
+        [transform(A[0, :3, :3] @ rotation([0.0, 0.0, q]), rng.normal(size=3)) for q in range(5)]
     )
-    B = np.stack([_inv(X) @ _inv(a) @ A[0] for a in A])
+    B = np.stack([inverse(X) @ inverse(a) @ A[0] for a in A])
     with pytest.raises(HandEyeError, match="about one axis"):
         solve_axxb(A, B)
     with pytest.raises(HandEyeError, match="at least 3 poses"):
@@ -308,12 +286,12 @@ def test_a_rejected_pose_makes_both_solvers_try_the_closed_forms_and_keep_the_be
     rng = np.random.default_rng(100 + seed)
     X, _, A, B = _scene(rng, 10, 180.0, noise=(0.5, 1e-3))
     bad = int(rng.integers(10))
-    B[bad, :3, :3] = _rotation(_random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
+    B[bad, :3, :3] = rotation(random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
     result = solve_axxb(A, B)
     _, axyb = _axyb_x(A, B)
     assert calls == ["axxb", "axyb"]
     assert result.rejected == axyb.rejected == (bad,)
-    for X_est in (result.hand_T_camera, _inv(axyb.camera_T_hand)):
+    for X_est in (result.hand_T_camera, inverse(axyb.camera_T_hand)):
         err = _error(X_est, X)
         assert np.degrees(np.linalg.norm(err[:3])) < 1.0
         assert np.linalg.norm(err[3:]) < 5e-3
@@ -321,10 +299,10 @@ def test_a_rejected_pose_makes_both_solvers_try_the_closed_forms_and_keep_the_be
     # the same fit through fit_absolute, with and without the fallback (M = B, N = A^-1)
     from identification.handeye_starts import candidate_starts
 
-    M, N = B, _inv(A)
+    M, N = B, inverse(A)
 
     def fallback():
-        return [(_inv(x), y) for x, y in candidate_starts(A, B).values()]
+        return [(inverse(x), y) for x, y in candidate_starts(A, B).values()]
 
     plain = fit_absolute(M, N, [])
     both = fit_absolute(M, N, [], fallback_starts=fallback)
@@ -349,17 +327,17 @@ def test_a_fit_from_a_bad_start_that_does_not_converge_is_rescued_by_a_fallback(
     import identification.handeye_ml as ml
 
     X, Y, A, B = _scene(np.random.default_rng(4), 6, 180.0, noise=(0.5, 1e-3))
-    M, N = B, _inv(A)
+    M, N = B, inverse(A)
     closed_form = ml.closed_form_start(M, N)
     off = (
-        _transform(_rotation([0.0, 0.0, 3.0]), [1.0, 2.0, 3.0]) @ _inv(X),
-        _transform(_rotation([3.0, 0.0, 0.0]), [0.0, 0.0, 0.0]) @ Y,
+        transform(rotation([0.0, 0.0, 3.0]), [1.0, 2.0, 3.0]) @ inverse(X),
+        transform(rotation([3.0, 0.0, 0.0]), [0.0, 0.0, 0.0]) @ Y,
     )
     monkeypatch.setattr(ml, "closed_form_start", lambda M, N: off)
     alone = ml.fit_absolute(M, N, [])
     rescued = ml.fit_absolute(M, N, [], fallback_starts=lambda: [closed_form])
     assert not alone.converged
-    assert np.degrees(np.linalg.norm(_error(_inv(alone.P), X)[:3])) > 10.0
+    assert np.degrees(np.linalg.norm(_error(inverse(alone.P), X)[:3])) > 10.0
     assert rescued.fallback_starts_tried == 1 and rescued.converged
-    err = _error(_inv(rescued.P), X)
+    err = _error(inverse(rescued.P), X)
     assert np.degrees(np.linalg.norm(err[:3])) < 1.0 and np.linalg.norm(err[3:]) < 5e-3

@@ -4,7 +4,6 @@ inputs, and OpenCV's implementations of the same methods (when OpenCV, the ``ben
 extra, is installed)."""
 
 import numpy as np
-import pinocchio as pin
 import pytest
 
 from identification.handeye_starts import (
@@ -19,39 +18,15 @@ from identification.handeye_starts import (
     rank_starts,
     shah_axyb,
 )
+from tests.pin_se3 import angle, inverse, random_axis, rotation, transform
 
 ALL = {**AXXB_STARTS, **AXYB_STARTS}
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
 
 
-def _rotation(rotvec):
-    return pin.exp3(np.asarray(rotvec, dtype=float))
-
-
-def _angle(R):
-    return float(np.linalg.norm(pin.log3(np.asarray(R))))
-
-
-def _transform(R, p):
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, p
-    return T
-
-
-def _inv(T):
-    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
-        np.shape(T)
-    )
-
-
-def _random_axis(rng):
-    axis = rng.normal(size=3)
-    return axis / np.linalg.norm(axis)
-
-
 def _random_rotation(rng, max_angle=np.pi):
-    return _rotation(_random_axis(rng) * rng.uniform(0.0, max_angle))
+    return rotation(random_axis(rng) * rng.uniform(0.0, max_angle))
 
 
 def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0):
@@ -65,24 +40,24 @@ def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0
     """
     if hand_R_eye is None:
         hand_R_eye = _random_rotation(rng)
-    X = _transform(hand_R_eye, rng.normal(scale=0.05, size=3))
-    base_T_ref = _transform(_random_rotation(rng), rng.uniform(-0.5, 0.5, size=3))
+    X = transform(hand_R_eye, rng.normal(scale=0.05, size=3))
+    base_T_ref = transform(_random_rotation(rng), rng.uniform(-0.5, 0.5, size=3))
     # target 0.6 m along the camera's z axis at the reference pose
-    Y = base_T_ref @ X @ _transform(_random_rotation(rng), [0.0, 0.0, 0.6])
+    Y = base_T_ref @ X @ transform(_random_rotation(rng), [0.0, 0.0, 0.6])
     A = np.stack(
         [
             base_T_ref
-            @ _transform(
+            @ transform(
                 _random_rotation(rng, np.radians(max_deg)), rng.uniform(-0.25, 0.25, size=3)
             )
             for _ in range(n)
         ]
     )
-    B = np.stack([_inv(X) @ _inv(a) @ Y for a in A])
+    B = np.stack([inverse(X) @ inverse(a) @ Y for a in A])
     deg, mm = noise
     if deg or mm:
         for k in range(n):
-            dR = _rotation(_random_axis(rng) * np.radians(deg))
+            dR = rotation(random_axis(rng) * np.radians(deg))
             B[k, :3, :3] = B[k, :3, :3] @ dR
             B[k, :3, 3] += rng.normal(scale=mm * 1e-3, size=3)
     for T in (X, Y, A, B):
@@ -93,7 +68,7 @@ def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0
 def _axyb(X, Y, A, B):
     """The same setup as ``A' = X' B' Y'``: A' = camera_T_target = B, B' = hand_T_root =
     inv(A), X' = camera_T_hand = inv(X), Y' = root_T_target = Y."""
-    return _inv(X), Y, B, _inv(A)
+    return inverse(X), Y, B, inverse(A)
 
 
 def _data(name, rng, n, **kw):
@@ -104,7 +79,7 @@ def _data(name, rng, n, **kw):
 def _errors(T, T_true):
     """Rotation error (deg) and translation error (input unit) of ``T`` against truth."""
     return (
-        np.degrees(_angle(T_true[:3, :3].T @ T[:3, :3])),
+        np.degrees(angle(T_true[:3, :3].T @ T[:3, :3])),
         float(np.linalg.norm(T[:3, 3] - T_true[:3, 3])),
     )
 
@@ -128,9 +103,9 @@ def test_noise_free_poses_give_the_true_x_and_y(name, n):
 def test_x_near_a_half_turn_is_recovered_exactly(name, angle_deg):
     rng = np.random.default_rng(int(angle_deg * 100))
     for _ in range(5):
-        axis = _random_axis(rng)
+        axis = random_axis(rng)
         R = 2.0 * np.outer(axis, axis) - np.eye(3) if angle_deg == 180.0 else None
-        R = _rotation(axis * np.radians(angle_deg)) if R is None else R
+        R = rotation(axis * np.radians(angle_deg)) if R is None else R
         X, Y, A, B = _data(name, rng, 10, hand_R_eye=R)
         X_hat, Y_hat = ALL[name](A, B)
         np.testing.assert_allclose(X_hat, X, atol=1e-9)
@@ -217,12 +192,12 @@ def test_motions_about_one_axis_are_refused(solve):
     """Hand turning about its z axis only: X's rotation about z and its translation
     along z are not determined."""
     rng = np.random.default_rng(2)
-    X = _transform(_random_rotation(rng), [0.01, 0.02, 0.03])
-    Y = _transform(_random_rotation(rng), [0.3, 0.1, 0.5])
+    X = transform(_random_rotation(rng), [0.01, 0.02, 0.03])
+    Y = transform(_random_rotation(rng), [0.3, 0.1, 0.5])
     A = np.stack(
-        [_transform(_rotation([0.0, 0.0, a]), rng.uniform(-0.2, 0.2, 3)) for a in (0, 0.5, 1, 2)]
+        [transform(rotation([0.0, 0.0, a]), rng.uniform(-0.2, 0.2, 3)) for a in (0, 0.5, 1, 2)]
     )
-    B = np.stack([_inv(X) @ _inv(a) @ Y for a in A])
+    B = np.stack([inverse(X) @ inverse(a) @ Y for a in A])
     with pytest.raises(StartError, match=r"axis|do not determine|rank-deficient"):
         solve(A, B)
 
@@ -230,10 +205,10 @@ def test_motions_about_one_axis_are_refused(solve):
 @pytest.mark.parametrize("solve", [shah_axyb, li_axyb])
 def test_a_robot_that_does_not_turn_is_refused(solve):
     rng = np.random.default_rng(3)
-    X = _transform(_random_rotation(rng), [0.01, 0.02, 0.03])
-    Y = _transform(_random_rotation(rng), [0.3, 0.1, 0.5])
+    X = transform(_random_rotation(rng), [0.01, 0.02, 0.03])
+    Y = transform(_random_rotation(rng), [0.3, 0.1, 0.5])
     R = _random_rotation(rng)
-    B = np.stack([_transform(R, rng.uniform(-0.2, 0.2, 3)) for _ in range(5)])
+    B = np.stack([transform(R, rng.uniform(-0.2, 0.2, 3)) for _ in range(5)])
     A = X @ B @ Y
     with pytest.raises(StartError, match="rotations of B"):
         solve(A, B)
@@ -248,7 +223,7 @@ def test_rank_starts_puts_a_wrong_candidate_last_in_any_unit():
     starts = candidate_starts(A, B)
     assert set(starts) == set(AXXB_STARTS)
     X_bad = X.copy()
-    X_bad[:3, :3] = X[:3, :3] @ _rotation([0.0, np.radians(10.0), 0.0])
+    X_bad[:3, :3] = X[:3, :3] @ rotation([0.0, np.radians(10.0), 0.0])
     starts["wrong"] = (X_bad, Y)
     ranked = rank_starts(A, B, starts)
     assert [r.name for r in ranked][-1] == "wrong"
@@ -319,14 +294,14 @@ def _opencv(cv2, name, A, B):
         R_w, t_w, R_g, t_g = cv2.calibrateRobotWorldHandEye(
             A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], method=method
         )
-        return _transform(R_g, t_g.ravel()), _inv(_transform(R_w, t_w.ravel()))
+        return transform(R_g, t_g.ravel()), inverse(transform(R_w, t_w.ravel()))
     method = {
         "park": cv2.CALIB_HAND_EYE_PARK,
         "andreff": cv2.CALIB_HAND_EYE_ANDREFF,
         "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
     }[name]
     R, t = cv2.calibrateHandEye(A[:, :3, :3], A[:, :3, 3], B[:, :3, :3], B[:, :3, 3], method=method)
-    return _transform(R, t.ravel()), None
+    return transform(R, t.ravel()), None
 
 
 @pytest.mark.parametrize("name", list(ALL))
@@ -348,7 +323,7 @@ def _rms_scale(name, A, B):
         t = np.concatenate([A[:, :3, 3], B[:, :3, 3]])
     else:
         i, j = np.triu_indices(len(A), 1)
-        t = np.concatenate([(_inv(A[j]) @ A[i])[:, :3, 3], (B[j] @ _inv(B[i]))[:, :3, 3]])
+        t = np.concatenate([(inverse(A[j]) @ A[i])[:, :3, 3], (B[j] @ inverse(B[i]))[:, :3, 3]])
     return float(np.sqrt(np.mean(np.sum(t**2, axis=1))))
 
 
@@ -409,8 +384,8 @@ def test_the_band_179_to_180_deg_with_noise_is_solved(name):
     rng = np.random.default_rng(24)
     worst = 0.0
     for angle_deg in np.linspace(179.0, 180.0, 40):
-        axis = _random_axis(rng)
-        R = _rotation(axis * np.radians(angle_deg))
+        axis = random_axis(rng)
+        R = rotation(axis * np.radians(angle_deg))
         X, _, A, B = _data(name, rng, 10, hand_R_eye=R, noise=(1.0, 2.0))
         worst = max(worst, _errors(ALL[name](A, B)[0], X)[0])
     assert worst < 3.0

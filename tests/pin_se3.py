@@ -1,0 +1,38 @@
+"""SE(3) helpers for the hand-eye tests, computed with Pinocchio (independent of
+:mod:`kinfw.transforms`, which the solvers use)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+
+def rotation(rotvec: ArrayLike) -> NDArray[np.float64]:
+    """The rotation matrix of a rotation vector (rad), by ``pin.exp3``."""
+    return pin.exp3(np.asarray(rotvec, dtype=float))
+
+
+def angle(R: ArrayLike) -> float:
+    """Rotation angle of a matrix (rad), by ``pin.log3``."""
+    return float(np.linalg.norm(pin.log3(np.asarray(R))))
+
+
+def transform(R: ArrayLike, p: ArrayLike) -> NDArray[np.float64]:
+    """4x4 rigid transform from a rotation and a translation."""
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def inverse(T: ArrayLike) -> NDArray[np.float64]:
+    """Inverse of one (4, 4) or a batch (..., 4, 4) of rigid transforms, by ``pin.SE3``."""
+    return np.stack([pin.SE3(t).inverse().homogeneous for t in np.reshape(T, (-1, 4, 4))]).reshape(
+        np.shape(T)
+    )
+
+
+def random_axis(rng: np.random.Generator) -> NDArray[np.float64]:
+    """A uniformly random unit vector."""
+    axis = rng.normal(size=3)
+    return axis / np.linalg.norm(axis)
