@@ -76,7 +76,7 @@ from identification.axb_iteration import (
 )
 from identification.axb_refinement import translations_least_squares
 from identification.handeye_ml import PoseFit, assess, fit_absolute
-from identification.handeye_starts import candidate_starts
+from identification.handeye_starts import ORTHONORMAL_TOL, candidate_starts, check_pose_pairs
 from identification.handeye_uncertainty import combined_verdict, uncertainty
 from kinfw.transforms import (
     check_transform,
@@ -94,15 +94,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-#: Fewest poses: two give a single relative motion, i.e. one axis (paper section 4).
-MIN_POSES = 3
-
-
-#: Orthonormality accepted in the inputs (text files with 6 significant digits are off by
-#: ~1.2e-6, Tabb DS1); the rotation blocks are then projected onto SO(3).
-INPUT_ORTHONORMAL_TOL = 1e-5
 
 
 #: Off-axis rotation spread of ``B`` (rad) below which X and Y are called undetermined.
@@ -213,39 +204,12 @@ class AXYBResult:
 # ------------------------------------------------------------------------ checks
 
 
-def _check_inputs(A: ArrayLike, B: ArrayLike) -> tuple[NDArray, NDArray]:
-    As = np.asarray(A, dtype=float)
-    Bs = np.asarray(B, dtype=float)
-    for name, T in (("A", As), ("B", Bs)):
-        if T.ndim != 3 or T.shape[1:] != (4, 4):
-            raise AXYBError(f"{name}: expected shape (n, 4, 4), got {T.shape}")
-    if As.shape != Bs.shape:
-        raise AXYBError(
-            f"A and B must pair up pose by pose: A has shape {As.shape}, B has shape {Bs.shape}"
-        )
-    if len(As) < MIN_POSES:
-        raise AXYBError(
-            f"A = X B Y needs at least {MIN_POSES} poses (two give one relative motion, "
-            f"whose axis leaves a rotation of X and Y undetermined; Hirsh et al. section 4), "
-            f"got {len(As)}"
-        )
-    try:
-        As = check_transform(As, "A", tol=INPUT_ORTHONORMAL_TOL)
-        Bs = check_transform(Bs, "B", tol=INPUT_ORTHONORMAL_TOL)
-    except ValueError as err:
-        raise AXYBError(str(err)) from err
-    As, Bs = As.copy(), Bs.copy()
-    As[:, :3, :3] = project_to_rotation(As[:, :3, :3])
-    Bs[:, :3, :3] = project_to_rotation(Bs[:, :3, :3])
-    return As, Bs
-
-
 def _check_start(T: ArrayLike, name: str) -> NDArray[np.float64]:
     T = np.asarray(T, dtype=float)
     if T.shape != (4, 4):
         raise AXYBError(f"{name}: expected shape (4, 4), got {T.shape}")
     try:
-        T = check_transform(T, name, tol=INPUT_ORTHONORMAL_TOL).copy()
+        T = check_transform(T, name, tol=ORTHONORMAL_TOL).copy()
     except ValueError as err:
         raise AXYBError(str(err)) from err
     T[:3, :3] = project_to_rotation(T[:3, :3])
@@ -304,7 +268,13 @@ def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
     A, B : array_like, shape (n, 4, 4)
         As for :func:`solve_axyb`.
     """
-    As, Bs = _check_inputs(A, B)
+    As, Bs = check_pose_pairs(
+        A,
+        B,
+        error=AXYBError,
+        why="two give one relative motion, whose axis leaves a rotation of X and Y "
+        "undetermined; Hirsh et al. section 4",
+    )
     q_As, q_Bs = consistent_quats_xyzw(As[:, :3, :3], Bs[:, :3, :3])
     s = np.linalg.svd(iteration_matrix(q_As, q_Bs), compute_uv=False)
     return float((s[1] / s[0]) ** 2)
@@ -409,7 +379,13 @@ def solve_axyb(
     M. Shah, "Solving the robot-world/hand-eye calibration problem using the Kronecker
     product", J. Mechanisms Robotics 5(3), 2013 (the closed form, here in quaternions).
     """
-    As, Bs = _check_inputs(A, B)
+    As, Bs = check_pose_pairs(
+        A,
+        B,
+        error=AXYBError,
+        why="two give one relative motion, whose axis leaves a rotation of X and Y "
+        "undetermined; Hirsh et al. section 4",
+    )
     if X0 is not None and Y0 is not None:
         raise AXYBError(
             "give X0 or Y0, not both: the iteration starts from one guess "

@@ -35,14 +35,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from identification.handeye_ml import PoseFit, fit_absolute
-from identification.handeye_starts import candidate_starts
+from identification.handeye_starts import candidate_starts, check_pose_pairs
 from identification.handeye_uncertainty import Uncertainty, inverse_covariance_map, uncertainty
 from kinfw.transforms import (
     average_transform,
-    check_transform,
     inverse_transform,
     matrix_from_rotation_vector,
-    project_to_rotation,
     rotation_angle,
     rotation_vector_from_matrix,
     skew,
@@ -56,9 +54,6 @@ log = logging.getLogger(__name__)
 #: Below this rotation condition (smallest / largest singular value) a warning is logged.
 POOR_CONDITION = 0.05
 
-#: Accepted orthonormality error of input rotations. Real data printed with six significant
-#: digits is off by ~1e-6 (Tabb DS1: 1.2e-6); accepted rotations are re-orthonormalised.
-ORTHONORMAL_TOL = 1e-5
 #: Motions whose rotation axes all lie within this angle of each other are "about one axis".
 PARALLEL_AXES_RAD = np.radians(1.0)
 #: An RMS difference between the rotation angles of A_ij and B_ij, or an RMS rotation
@@ -266,7 +261,7 @@ def solve_axxb(
     Binocular System Using Stereo Vision", TR-92-007, Academia Sinica, 1992, section 5,
     eqs. (68)-(71).
     """
-    base_T_hands, eye_T_targets = _check_poses(A, B)
+    base_T_hands, eye_T_targets = check_pose_pairs(A, B, error=HandEyeError)
     n = len(base_T_hands)
     if not 0.0 <= min_angle_rad < np.pi:
         raise HandEyeError(f"min_angle_rad must be in [0, pi), got {min_angle_rad!r}")
@@ -403,34 +398,6 @@ def solve_axxb(
         noise_translation=fit.sigma_translation,
         iterations=fit.iterations,
     )
-
-
-def _check_poses(A: ArrayLike, B: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Validate both pose batches; return them with re-orthonormalised rotations."""
-    out = []
-    for name, T in (("A", A), ("B", B)):
-        T = np.asarray(T, dtype=float)
-        if T.ndim != 3 or T.shape[1:] != (4, 4):
-            raise HandEyeError(f"{name}: expected shape (n, 4, 4), got {T.shape}")
-        try:
-            T = check_transform(T, name=name, tol=ORTHONORMAL_TOL)
-        except ValueError as err:
-            raise HandEyeError(str(err)) from err
-        out.append(
-            transform_from_rotation_translation(project_to_rotation(T[:, :3, :3]), T[:, :3, 3])
-        )
-    base_T_hands, eye_T_targets = out
-    if base_T_hands.shape != eye_T_targets.shape:
-        raise HandEyeError(
-            f"A and B must hold the same number of poses, got A "
-            f"{base_T_hands.shape} and B {eye_T_targets.shape}"
-        )
-    if len(base_T_hands) < 3:
-        raise HandEyeError(
-            f"at least 3 poses are needed (two motions about different axes), "
-            f"got {len(base_T_hands)}"
-        )
-    return base_T_hands, eye_T_targets
 
 
 def _check_angles_agree(

@@ -49,19 +49,23 @@ from kinfw.transforms import (
     check_transform,
     inverse_transform,
     project_to_rotation,
+    quat_xyzw_from_matrix,
     rotation_angle,
     rotation_vector_from_matrix,
     skew,
     transform_from_rotation_translation,
+    transform_from_xyz_quat_xyzw,
 )
 
 __all__ = [
     "AXXB_STARTS",
     "AXYB_STARTS",
+    "ORTHONORMAL_TOL",
     "RankedStart",
     "StartError",
     "andreff_axxb",
     "candidate_starts",
+    "check_pose_pairs",
     "daniilidis_axxb",
     "li_axyb",
     "park_axxb",
@@ -73,7 +77,9 @@ log = logging.getLogger(__name__)
 
 #: Relative singular value below which a linear system is taken as rank-deficient.
 RANK_TOL = 1e-10
-#: Accepted orthonormality error of input rotations (as ``solve_axxb``'s).
+#: Accepted orthonormality error of input rotations of every hand-eye solver: real data
+#: printed with six significant digits is off by ~1e-6 (Tabb DS1: 1.2e-6); accepted
+#: rotations are re-orthonormalised.
 ORTHONORMAL_TOL = 1e-5
 
 Pose = NDArray[np.float64]
@@ -86,27 +92,36 @@ class StartError(ValueError):
 # -- input ---------------------------------------------------------------------------------
 
 
-def _check_pair(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose]:
-    """Validate both pose batches (n, 4, 4), n >= 3; return them as float arrays.
+def check_pose_pairs(
+    A: ArrayLike,
+    B: ArrayLike,
+    *,
+    error: type[ValueError] = ValueError,
+    prefix: str = "",
+    why: str = "two motions about different axes",
+) -> tuple[Pose, Pose]:
+    """Validate two pose batches (n, 4, 4) paired pose by pose, n >= 3: the inputs of
+    every hand-eye solver here, in :mod:`identification.handeye` and in
+    :mod:`identification.axb`.
 
     The checks of :func:`kinfw.transforms.check_transform`, on both batches in one pass
-    (this is the hot path of a 3-view solve); rotations off by more than 1e-12 are
-    re-orthonormalised (real data printed with six digits is off by ~1e-6).
+    (the hot path of a 3-view solve); rotations off by more than 1e-12 are
+    re-orthonormalised (real data printed with six digits is off by ~1e-6). Errors are
+    raised as ``error`` with ``prefix`` (e.g. ``"park_axxb: "``), naming the batch and
+    the index; ``why`` says what three poses are needed for.
     """
     T_A, T_B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
     for name, T in (("A", T_A), ("B", T_B)):
         if T.ndim != 3 or T.shape[1:] != (4, 4):
-            raise StartError(f"{method}: {name}: expected shape (n, 4, 4), got {T.shape}")
+            raise error(f"{prefix}{name}: expected shape (n, 4, 4), got {T.shape}")
     if T_A.shape != T_B.shape:
-        raise StartError(
-            f"{method}: A and B must hold the same number of poses, got A {T_A.shape} "
+        raise error(
+            f"{prefix}A and B must hold the same number of poses, got A {T_A.shape} "
             f"and B {T_B.shape}"
         )
     n = len(T_A)
     if n < 3:
-        raise StartError(
-            f"{method}: at least 3 poses are needed (two motions about different axes), got {n}"
-        )
+        raise error(f"{prefix}at least 3 poses are needed ({why}), got {n}")
     T = np.concatenate([T_A, T_B])
     R = T[:, :3, :3]
     err = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2))
@@ -116,15 +131,20 @@ def _check_pair(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose]:
         k = int(np.argmax(bad))
         name, idx = ("A", k) if k < n else ("B", k - n)
         try:
-            check_transform(T[k], name=f"{method}: {name}[{idx}]", tol=ORTHONORMAL_TOL)
+            check_transform(T[k], name=f"{prefix}{name}[{idx}]", tol=ORTHONORMAL_TOL)
         except ValueError as e:
-            raise StartError(str(e)) from e
-        raise StartError(f"{method}: {name}[{idx}]: not a rigid transform")  # pragma: no cover
+            raise error(str(e)) from e
+        raise error(f"{prefix}{name}[{idx}]: not a rigid transform")  # pragma: no cover
     off = err > 1e-12
     if np.any(off):
         T = T.copy()
         T[off, :3, :3] = project_to_rotation(R[off])
     return T[:n], T[n:]
+
+
+def _check_pair(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose]:
+    """:func:`check_pose_pairs` for the closed forms (:class:`StartError`, named)."""
+    return check_pose_pairs(A, B, error=StartError, prefix=f"{method}: ")
 
 
 @lru_cache(maxsize=64)
@@ -360,43 +380,6 @@ def _nearest_rotation(M: NDArray[np.float64], method: str) -> NDArray[np.float64
     return project_to_rotation(np.sign(det) * M)
 
 
-def _quat_matrix_coefficients() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``C`` (16, 9) and ``c`` (16,) with ``4 q q^T = (C vec(R) + c).reshape(4, 4)`` for
-    the unit quaternion ``q = (w, x, y, z)`` of ``R`` (row-major ``vec``)."""
-    C, c = np.zeros((4, 4, 3, 3)), np.zeros((4, 4))
-    c[np.diag_indices(4)] = 1.0
-    for k, signs in enumerate([(1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)]):
-        C[k, k][np.diag_indices(3)] = signs
-    for (r, col), (a, b), sgn in [
-        ((0, 1), (2, 1), -1),
-        ((0, 2), (0, 2), -1),
-        ((0, 3), (1, 0), -1),
-        ((1, 2), (0, 1), 1),
-        ((1, 3), (0, 2), 1),
-        ((2, 3), (1, 2), 1),
-    ]:
-        for rr, cc in ((r, col), (col, r)):
-            C[rr, cc, a, b] = 1.0
-            C[rr, cc, b, a] = sgn
-    return C.reshape(16, 9), c.reshape(16)
-
-
-_QUAT_C, _QUAT_c = _quat_matrix_coefficients()
-
-
-def _quat_wxyz(R: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Unit quaternions ``(w, x, y, z)``, ``w >= 0``, of rotations (m, 3, 3).
-
-    Shepperd's method in one product: ``4 q q^T`` is linear in ``R``; its row with the
-    largest diagonal entry ``4 q_k^2`` is ``4 q_k q`` (as ``quat_xyzw_from_matrix``).
-    """
-    K = (R.reshape(-1, 9) @ _QUAT_C.T + _QUAT_c).reshape(-1, 4, 4)
-    k = np.argmax(np.diagonal(K, axis1=1, axis2=2), axis=1)
-    q = K[np.arange(len(K)), k]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q * np.where(q[:, :1] < 0.0, -1.0, 1.0)
-
-
 #: Levi-Civita symbol: ``cross(a, b)_i = EPS[i, j, k] a_j b_k``.
 _EPS = np.zeros((3, 3, 3))
 _EPS[0, 1, 2] = _EPS[1, 2, 0] = _EPS[2, 0, 1] = 1.0
@@ -423,7 +406,9 @@ def _pair_dual_quats(
     eq. (7)). The pairs' ``q`` are products of the poses' quaternions (2n conversions
     instead of n(n-1)), with the sign that makes ``w >= 0``."""
     n = len(base_T_hands)
-    q = _quat_wxyz(np.concatenate([base_T_hands[:, :3, :3], eye_T_targets[:, :3, :3]]))
+    # (w, x, y, z) with w >= 0
+    q = quat_xyzw_from_matrix(np.concatenate([base_T_hands[:, :3, :3], eye_T_targets[:, :3, :3]]))
+    q = q[:, [3, 0, 1, 2]]
     conj = q * (1.0, -1.0, -1.0, -1.0)
     i, j = _pairs(n)
     out = []
@@ -518,24 +503,12 @@ def _daniilidis(
     x = (ell[0] * v7 + ell[1] * v8) / max(norms)
     q, q_d = x[:4], x[4:]
     q_d = q_d - (q @ q_d) * q  # exact orthogonality against rounding
-    hand_R_eye = _matrix_from_quat_wxyz(q)
+    hand_R_eye = transform_from_xyz_quat_xyzw(np.zeros(3), q[[1, 2, 3, 0]])[:3, :3]
     # t = 2 q' q*: vector part.
     w, v, w_d, v_d = q[0], q[1:], q_d[0], q_d[1:]
     hand_p_eye = 2.0 * (w * v_d - w_d * v - np.cross(v_d, v)) * scale
     X = transform_from_rotation_translation(hand_R_eye, hand_p_eye)
     return X, _target_from_hand_eye(base_T_hands, X, eye_T_targets)
-
-
-def _matrix_from_quat_wxyz(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrix of a quaternion ``(w, x, y, z)`` (normalised here)."""
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 # -- A = X B Y -----------------------------------------------------------------------------

@@ -233,7 +233,7 @@ def test_fewer_than_three_poses_is_an_error():
 
 def test_mismatched_shapes_are_an_error():
     _, _, B, A = _problem(seed=0, n=5)
-    with pytest.raises(AXYBError, match="pair up"):
+    with pytest.raises(AXYBError, match="same number of poses"):
         solve_axyb(A, B[:4])
     with pytest.raises(AXYBError, match=r"A: expected shape \(n, 4, 4\)"):
         solve_axyb(A[:, :3], B)
