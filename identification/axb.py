@@ -43,10 +43,10 @@ Refinement (``refine=True``, the default) adds, measured in the notes of
 2. then the maximum-likelihood X and Y on SE(3) with the camera pose ``A`` noisy in
    rotation and translation, both weighted by noise scales estimated from the residuals
    (free of the length unit), robust to outlying poses, with the covariance of X and Y
-   and a verdict (:func:`identification.handeye_ml.fit_absolute`); when that fit is not
-   clean (poses rejected, not converged, verdict not "determined"), Shah's and Li's
-   closed forms (:mod:`identification.handeye_starts`) start fits too and the best is
-   kept. The former
+   and a verdict (:func:`identification.handeye_ml.fit_absolute`), started from the
+   closed form of 1.; when that fit is not clean (poses rejected among fewer than 30,
+   not converged, verdict not "determined"), Shah's and Li's closed forms
+   (:mod:`identification.handeye_starts`) start fits too and the best is kept. The former
    refinement (Gauss-Newton on the rotations alone, then least squares for the
    translations) ignored what the translations say about the rotations: on Tabb DS1
    X moves from 0.545 to 0.175 deg of Tabb's reference, at motions <= 15 deg (1 deg +
@@ -149,8 +149,9 @@ class AXYBResult:
         ``"determined"`` or the worse of X's and Y's ``"poorly determined (...)"`` /
         ``"undetermined (...)"``, naming the transform.
     rejected : tuple of int
-        Poses rejected as outliers (whitened residual above the 99.9 % quantile of
-        chi^2 with 6 degrees of freedom); empty for ``refine=False``.
+        Poses rejected as outliers (squared whitened residual above
+        :func:`identification.handeye_ml.rejection_threshold`: chi^2_6's quantile at
+        ``1 - 0.01 / n``, at least its 99.9 % quantile); empty for ``refine=False``.
     noise_rotation_rad, noise_translation : float
         The camera pose's noise scales per axis estimated from the residuals.
 

@@ -21,9 +21,11 @@ For two poses ``i, j`` this becomes (eqs. 70-71; the paper's ``k, j`` are our ``
 in the eye frame. Both are conjugate, so their rotation angles agree; their axes are
 related by ``a = X_R b``.
 
-The solver uses every pair of poses, in both orders (``A_ji = inv(A_ij)``), so the result
-does not depend on the order of the samples; pairs whose hand rotation is below
-``min_angle_rad`` carry no information on the rotation and are left out.
+The start uses every pair of poses (up to ``ALL_PAIRS_UP_TO`` poses; beyond, a fixed
+number of pairs per pose, :func:`motion_pairs`), in both orders (``A_ji = inv(A_ij)``);
+pairs whose hand rotation is below ``min_angle_rad`` carry no information on the
+rotation and are left out. The answer is the maximum-likelihood fit of the absolute
+poses, which does not depend on the order of the samples.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from kinfw.transforms import (
     transform_from_rotation_translation,
 )
 
-__all__ = ["HandEyeError", "HandEyeResult", "solve_axxb"]
+__all__ = ["HandEyeError", "HandEyeResult", "motion_pairs", "solve_axxb"]
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +71,10 @@ HALF_TURN_BAND_RAD = np.radians(3.0)
 _RANK_TOL = 1e-10
 #: The axis spread is reported exactly unless it is within this of pi/2 (its maximum).
 _SPREAD_ATOL = 1e-3
+#: Up to this many poses every pair gives a relative motion; beyond, ``MOTION_STRIDES``
+#: pairs per pose (:func:`motion_pairs`), so the start costs O(n), not O(n^2).
+ALL_PAIRS_UP_TO = 25
+MOTION_STRIDES = 6
 
 
 class HandEyeError(ValueError):
@@ -116,8 +122,9 @@ class HandEyeResult:
         ``"undetermined (<worst direction>)"``
         (:func:`identification.handeye_uncertainty.uncertainty`).
     rejected : tuple of int
-        Indices of the poses rejected as outliers (whitened residual above the 99.9 %
-        quantile of chi^2 with 6 degrees of freedom).
+        Indices of the poses rejected as outliers (squared whitened residual above
+        :func:`identification.handeye_ml.rejection_threshold`: chi^2_6's quantile at
+        ``1 - 0.01 / n``, at least its 99.9 % quantile).
     noise_rotation_rad, noise_translation : float
         The camera pose's noise scales per axis estimated from the residuals (radians,
         input unit).
@@ -200,9 +207,11 @@ def solve_axxb(
 
     Notes
     -----
-    Pairs ``i < j`` give ``A_ij X = X B_ij`` (Shih et al. eqs. 70-71); both orders of
-    each pair are stacked (the second is the inverse motion), which leaves the rotation
-    system unchanged and makes the translation system exactly invariant to sample order.
+    Pairs ``i < j`` (:func:`motion_pairs`: all of them up to ``ALL_PAIRS_UP_TO`` poses)
+    give ``A_ij X = X B_ij`` (Shih et al. eqs. 70-71); both orders of each pair are
+    stacked (the second is the inverse motion), which leaves the rotation system
+    unchanged and, with all pairs, makes the translation system exactly invariant to
+    sample order.
 
     Rotation (Tsai & Lenz 1989, eqs. 12 and 14): with the modified Rodrigues
     vector ``P = 2 sin(theta/2) u`` of a rotation by ``theta`` about the unit axis ``u``
@@ -238,15 +247,15 @@ def solve_axxb(
     ``base_T_target`` of the absolute poses ``B[i] = X^-1 A[i]^-1 base_T_target`` with
     the camera's pose noisy (rotation and translation, weighted by noise scales
     estimated from the residuals, so the answer does not depend on the length unit):
-    :func:`identification.handeye_ml.fit_absolute`, started from the better of Tsai &
-    Lenz and the quaternion closed form (no singularity at a half turn), robust to
-    outlying poses (Huber, then rejection at the 99.9 % quantile of chi^2_6, named in
-    ``rejected``; a consensus start of minimal subsets when a pose stays off; when that
-    fit is not clean -- poses rejected, not converged, or a verdict other than
-    "determined" -- Park's, Andreff's and Daniilidis' closed forms
-    (:func:`identification.handeye_starts.candidate_starts`) start fits too and the best
-    is kept). Its
-    covariance gives ``sigma_rotation_deg``, ``sigma_translation`` and ``verdict``.
+    :func:`identification.handeye_ml.fit_absolute`, started from the quaternion closed
+    form (no singularity at a half turn), robust to outlying poses (Huber, then
+    rejection beyond :func:`identification.handeye_ml.rejection_threshold`, named in
+    ``rejected``; a consensus start of minimal subsets when a pose stays off among few);
+    when that fit is not clean -- poses rejected among fewer than 30, not converged, or
+    a verdict other than "determined" -- Tsai & Lenz's, Park's, Andreff's and
+    Daniilidis' closed forms (:func:`identification.handeye_starts.candidate_starts`)
+    start fits too and the best is kept. Its covariance gives ``sigma_rotation_deg``,
+    ``sigma_translation`` and ``verdict``.
     Measured (1 deg + 2 mm on the camera pose, 10 views, 300 trials, motions <= 15 deg):
     X's rotation error median 0.22 deg, p90 0.39 deg (Tsai & Lenz alone: 2.7 / 4.6 deg);
     the errors whitened by the reported covariance have mean squared norm 6.5 (6 for an
@@ -266,8 +275,8 @@ def solve_axxb(
     if not 0.0 <= min_angle_rad < np.pi:
         raise HandEyeError(f"min_angle_rad must be in [0, pi), got {min_angle_rad!r}")
 
-    # Relative motions of every unordered pair i < j (Shih et al. eq. 71).
-    i, j = np.triu_indices(n, 1)
+    # Relative motions of pose pairs i < j (Shih et al. eq. 71).
+    i, j = motion_pairs(n)
     A_ijs = inverse_transform(base_T_hands[j]) @ base_T_hands[i]
     B_ijs = eye_T_targets[j] @ inverse_transform(eye_T_targets[i])
     angles_A = rotation_angle(A_ijs[:, :3, :3])
@@ -398,6 +407,25 @@ def solve_axxb(
         noise_translation=fit.sigma_translation,
         iterations=fit.iterations,
     )
+
+
+def motion_pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Pose pairs ``(i, j)``, ``i < j``, whose relative motions start the solve.
+
+    Every pair up to ``ALL_PAIRS_UP_TO`` poses. Beyond, each pose is paired with the poses
+    ``MOTION_STRIDES`` strides ahead (cyclically), the strides evenly spread over
+    ``1 .. n // 2``: about ``MOTION_STRIDES * n`` pairs, every pose in ``2 *
+    MOTION_STRIDES`` of them, and pairs far apart in the recording (large motions) as
+    well as neighbours. The maximum-likelihood fit uses the absolute poses, so the pairs
+    only choose its start and the consistency checks.
+    """
+    if n <= ALL_PAIRS_UP_TO:
+        return np.triu_indices(n, 1)
+    strides = np.unique(np.round(np.linspace(1, n // 2, MOTION_STRIDES)).astype(np.intp))
+    first = np.tile(np.arange(n), len(strides))
+    second = (first + np.repeat(strides, n)) % n
+    key = np.unique(np.minimum(first, second) * n + np.maximum(first, second))
+    return key // n, key % n
 
 
 def _check_angles_agree(

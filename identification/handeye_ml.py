@@ -33,12 +33,14 @@ poses. The rotation parametrisation has no singularity (a half turn is an ordina
 point).
 
 Robustness: Huber IRLS on the whitened per-pose residual, then rejection of poses whose
-squared whitened residual exceeds the 99.9 % quantile of chi^2 with 6 degrees of
-freedom (at most 5 % of the poses, at least one: the worst), and a plain refit of the
-others (repeated while the set changes). When a pose
-stays far off, a consensus start is tried as well: the closed form on every minimal
-subset of 3 poses (at most ``CONSENSUS_MAX_SUBSETS``), scored by the median residual of
-all poses.
+squared whitened residual exceeds :func:`rejection_threshold` (the quantile of chi^2
+with 6 degrees of freedom at ``1 - 0.01 / n``, and at least the 99.9 % quantile: a
+false rejection in 1 % of clean data sets of any size; at most 5 % of the poses, at
+least one: the worst), and a plain refit of the others (repeated while the set
+changes). When a pose stays off and could have pulled the start (fewer than
+``CONSENSUS_MAX_POSES`` poses, or more outliers than may be rejected), a consensus start
+is tried as well: the closed form on every minimal subset of 3 poses (at most
+``CONSENSUS_MAX_SUBSETS``), scored by the median residual of all poses.
 
 Covariance: ``(J^T W J)^-1`` at the optimum with the estimated ``sigma_r``, ``sigma_t``,
 in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
@@ -46,6 +48,7 @@ in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -66,7 +69,7 @@ from kinfw.transforms import (
     skew,
 )
 
-__all__ = ["CHI2_6_999", "PoseFit", "assess", "fit_absolute"]
+__all__ = ["CHI2_6_999", "PoseFit", "assess", "fit_absolute", "rejection_threshold"]
 
 #: 99.9 % quantile of chi^2 with 6 degrees of freedom: the rejection threshold of a pose's
 #: squared whitened residual.
@@ -77,6 +80,11 @@ HUBER_K = 3.5485
 _CHI2_3_MEDIAN = 2.365974
 #: Most minimal subsets scored by the consensus start.
 CONSENSUS_MAX_SUBSETS = 400
+#: From this many poses on, one outlier cannot pull the start far: the consensus start
+#: runs only when more poses are off than may be rejected.
+CONSENSUS_MAX_POSES = 30
+#: Family-wise false-rejection rate of :func:`rejection_threshold` on clean data.
+REJECTION_ALPHA = 0.01
 #: Levenberg-Marquardt: most steps per fit.
 LM_MAX_STEPS = 40
 #: Levenberg-Marquardt: converged when a step is below this (radians, or relative to the
@@ -86,6 +94,28 @@ LM_SCALE_TOL = 1e-7
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
+
+
+@lru_cache(maxsize=64)
+def rejection_threshold(n: int) -> float:
+    """Squared whitened residual above which one of ``n`` poses is an outlier.
+
+    The quantile of chi^2 with 6 degrees of freedom at ``1 - REJECTION_ALPHA / n``
+    (Bonferroni: a clean data set of any size loses a pose with probability at most
+    ``REJECTION_ALPHA``), and never below ``CHI2_6_999`` (the 99.9 % quantile, which it
+    equals at ``n = 10``). Solved by bisection on chi^2_6's survival function
+    ``exp(-x/2) (1 + x/2 + x^2/8)``.
+    """
+    p = REJECTION_ALPHA / max(n, 1)
+    lo, hi = 0.0, 400.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if math.exp(-mid / 2.0) * (1.0 + mid / 2.0 + mid * mid / 8.0) > p:
+            lo = mid
+        else:
+            hi = mid
+    return max(CHI2_6_999, hi)
+
 
 Start = Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
 
@@ -113,7 +143,8 @@ class PoseFit:
     converged : bool
         Whether the final fit stopped on its tolerance.
     fallback_starts_tried : int
-        How many fallback starts were fitted (0: the first fit was clean, or none given).
+        How many other starts were fitted (0: the first fit, from the closed form, was
+        clean, or none were given).
     """
 
     P: NDArray[np.float64]
@@ -515,26 +546,25 @@ def _subsets(n: int) -> NDArray[np.intp]:
 
 def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     """Best closed form over minimal subsets of 3 poses, scored by the median residuals
-    of all poses (the product of the rotation and translation medians: unit-free)."""
+    of all poses (the product of the rotation and translation medians: unit-free).
+
+    A residual's rotation angle is ``2 acos |q_P^T K_i q_Q|`` (quaternions, see
+    :func:`identification.handeye_quaternion.closed_form_batch`) and its translation
+    ``|R_P^T (t_M - t_P) - R_N t_Q - t_N|``: no rotation matrix per subset and pose.
+    """
     q_M, q_N = consistent_quats(data.R_M, data.R_N)
     K = product_matrices(q_M, q_N)
     subsets = _subsets(data.n)
-    P, Q = closed_form_batch(
+    P, Q, q_P, q_Q = closed_form_batch(
         K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
     )
-    R_hat = P[:, None, :3, :3] @ data.R_N[None] @ Q[:, None, :3, :3]
-    t_hat = (
-        np.einsum(
-            "sij,snj->sni",
-            P[:, :3, :3],
-            np.einsum("nij,sj->sni", data.R_N, Q[:, :3, 3]) + data.t_N[None],
-        )
-        + P[:, None, :3, 3]
-    )
-    ang = np.linalg.norm(
-        rotation_vector_from_matrix(data.R_M[None] @ np.swapaxes(R_hat, 2, 3)), axis=2
-    )
-    dist = np.linalg.norm(data.t_M[None] - t_hat, axis=2)
+    n, s = data.n, len(P)
+    # matmul, not einsum: these are BLAS products (einsum's loops are ~10x slower here)
+    qPK = (q_P @ K.transpose(1, 0, 2).reshape(4, 4 * n)).reshape(s, n, 4)
+    ang = 2.0 * np.arccos(np.minimum(np.abs(np.sum(qPK * q_Q[:, None], axis=2)), 1.0))
+    in_P = (data.t_M[None] - P[:, None, :3, 3]) @ P[:, :3, :3]
+    R_N_t_Q = (data.R_N.reshape(3 * n, 3) @ Q[:, :3, 3].T).reshape(n, 3, s).transpose(2, 0, 1)
+    dist = np.linalg.norm(in_P - R_N_t_Q - data.t_N[None], axis=2)
     score = np.log(np.median(ang, axis=1) + 1e-300) + np.log(np.median(dist, axis=1) + 1e-300)
     k = int(np.argmin(score))
     return P[k], Q[k]
@@ -544,7 +574,8 @@ def _consensus_start(data: _Data, M: NDArray, N: NDArray) -> tuple[NDArray, NDAr
 
 
 def _robust_fit(data: _Data, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[_Fit, int]:
-    """Huber IRLS, then rejection above ``CHI2_6_999`` and plain refits; total steps."""
+    """Huber IRLS, then rejection above :func:`rejection_threshold` and plain refits;
+    total steps."""
     r_r, r_t, _, _ = data.residuals(P, Q)
     s_r, s_t = _robust_sigmas(r_r, r_t, data.length)
     everything = np.ones(data.n, dtype=bool)
@@ -552,25 +583,13 @@ def _robust_fit(data: _Data, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[
     total = fit.steps
     inliers = everything
     for _ in range(4):
-        new_inliers = fit.chi2 <= CHI2_6_999
-        if np.count_nonzero(new_inliers) < min_inliers:  # reject only the worst
-            new_inliers = np.zeros(data.n, dtype=bool)
-            new_inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True
+        new_inliers = _inlier_mask(fit, data, min_inliers)
         if np.array_equal(new_inliers, inliers) and total > fit.steps:
             break
         inliers = new_inliers
         fit = _fit(data, fit.P, fit.Q, inliers, fit.s_r, fit.s_t)
         total += fit.steps
     return fit, total
-
-
-def _score(data: _Data, P: NDArray, Q: NDArray) -> float:
-    """Unit-free robust score of a start: log median rotation + log median translation
-    residual (the concentrated likelihood, with medians)."""
-    r_r, r_t, _, _ = data.residuals(P, Q)
-    return float(
-        sum(math.log(m + 1e-300) for m in _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1)))
-    )
 
 
 def fit_absolute(
@@ -592,79 +611,84 @@ def fit_absolute(
     N : ndarray, shape (n, 4, 4)
         Known robot poses, same unit.
     starts : sequence of callables
-        Each returns a candidate ``(P, Q)``; the closed form of all poses is always added.
-        The candidate with the best robust score starts the fit.
+        Each returns a candidate ``(P, Q)`` (e.g. Tsai & Lenz, Hirsh's iteration). The
+        fit starts from the closed form of all poses; only when that fit is not clean --
+        poses rejected (with fewer than ``CONSENSUS_MAX_POSES`` poses), not converged,
+        or ``accept`` says no -- are these candidates, and then those of
+        ``fallback_starts``, fitted too, and the best fit is kept: at the first fit's
+        noise scales, more poses within the rejection threshold, then the lower cost over
+        them. A ``ValueError`` from a start means no candidate.
     robust : bool
         Huber IRLS, rejection and (when a pose stays off) the consensus start.
     min_inliers : int, optional
         Fewest poses kept; default: at most 5 % of the poses are rejected, at least one
         may be (the worst ones), and never fewer than 3 kept.
     fallback_starts : callable, optional
-        Returns more candidate ``(P, Q)`` (e.g. other closed forms); called only when the
-        first fit is not clean -- poses rejected, not converged, or ``accept`` says no.
-        Each candidate is fitted the same way and the best fit is kept: more poses kept,
-        then the lower cost over them at the first fit's noise scales. A
-        ``ValueError`` from it means no fallback.
+        Returns more candidates (e.g. other closed forms), tried after ``starts`` when
+        the first fit is not clean; a ``ValueError`` from it means none.
     accept : callable, optional
         Whether a fit is clean beyond the above (e.g. its verdict is "determined").
 
     Returns
     -------
     PoseFit
+
+    Notes
+    -----
+    The closed form is the fixed point of Hirsh's iteration and equals the truth on
+    noise-free data at every rotation angle; the other starts cost time (Tsai & Lenz's
+    pairs are O(n^2)) and change the answer only where the likelihood has more than
+    one basin, which a clean fit rules out in practice.
     """
     data = _Data(M, N)
     if min_inliers is None:
         min_inliers = max(3, data.n - max(1, data.n // 20))
-    candidates = [closed_form_start(M, N)]
-    for start in starts:
-        try:
-            P0, Q0 = start()
-        except ValueError:
-            continue
-        candidates.append((np.asarray(P0, float), np.asarray(Q0, float)))
-    scores = [_score(data, P0, Q0) for P0, Q0 in candidates]
-    P, Q = candidates[int(np.argmin(scores))]
+    P, Q = closed_form_start(M, N)
     memo: dict = {}
     fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers, memo)
     result = _pose_fit(data, fit, inliers, steps)
-    if fallback_starts is None or (
-        result.converged and inliers.all() and (accept is None or accept(result))
-    ):
+    clean = result.converged and (inliers.all() or data.n >= CONSENSUS_MAX_POSES)
+    if clean and (accept is None or accept(result)):
         return result
-    # Not clean (poses rejected, not converged or not accepted): the closed forms of
-    # ``fallback_starts`` may lead elsewhere; keep the best fit (more poses kept, then
-    # the lower cost over them at the first fit's noise scales).
+    # Not clean: the other starts may lead elsewhere; keep the best fit at the first
+    # fit's noise scales (_better).
     s_r, s_t = fit.s_r, fit.s_t
-    try:
-        fallbacks = list(fallback_starts())
-    except ValueError:
-        fallbacks = []
-    for P0, Q0 in fallbacks:
+    alternatives = []
+    for start in starts:
+        try:
+            alternatives.append(start())
+        except ValueError:
+            continue
+    if fallback_starts is not None:
+        with contextlib.suppress(ValueError):
+            alternatives.extend(fallback_starts())
+    for P0, Q0 in alternatives:
         alt, alt_inliers, more = _fit_from(
             data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers, memo
         )
         steps += more
-        if _better(data, alt, alt_inliers, fit, inliers, s_r, s_t):
+        if _better(data, alt, fit, s_r, s_t):
             fit, inliers = alt, alt_inliers
-    return _pose_fit(data, fit, inliers, steps, fallback=len(fallbacks))
+    return _pose_fit(data, fit, inliers, steps, fallback=len(alternatives))
 
 
-def _better(
-    data: _Data, a: _Fit, a_inliers: NDArray, b: _Fit, b_inliers: NDArray, s_r: float, s_t: float
-) -> bool:
-    """Whether fit ``a`` beats ``b``: more poses kept, or as many with a lower cost
-    ``sum (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over them at the same noise scales."""
-    n_a, n_b = np.count_nonzero(a_inliers), np.count_nonzero(b_inliers)
+def _better(data: _Data, a: _Fit, b: _Fit, s_r: float, s_t: float) -> bool:
+    """Whether fit ``a`` beats ``b`` at the same noise scales ``s_r, s_t``: more poses
+    within :func:`rejection_threshold`, or as many with a lower cost ``sum (|r_r|^2 /
+    s_r^2 + |r_t|^2 / s_t^2)`` over them. (Each fit's own inliers are not comparable: a
+    fit in a wrong basin estimates huge noise scales and keeps every pose.)"""
+    n_a, cost_a = _kept_and_cost(data, a, s_r, s_t)
+    n_b, cost_b = _kept_and_cost(data, b, s_r, s_t)
     if n_a != n_b:
-        return bool(n_a > n_b)
-    return _weighted_cost(data, a, a_inliers, s_r, s_t) < _weighted_cost(
-        data, b, b_inliers, s_r, s_t
-    ) * (1.0 - 1e-9)
+        return n_a > n_b
+    return cost_a < cost_b * (1.0 - 1e-9)
 
 
-def _weighted_cost(data: _Data, fit: _Fit, inliers: NDArray, s_r: float, s_t: float) -> float:
+def _kept_and_cost(data: _Data, fit: _Fit, s_r: float, s_t: float) -> tuple[int, float]:
     r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
-    return float(np.sum(r_r[inliers] ** 2) / s_r**2 + np.sum(r_t[inliers] ** 2) / s_t**2)
+    chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
+    kept = chi2 <= rejection_threshold(data.n)
+    return int(np.count_nonzero(kept)), float(chi2[kept].sum())
 
 
 def _fit_from(
@@ -692,12 +716,16 @@ def _fit_from(
             return result[0], result[1], steps
     first_plain = fit
     inliers = everything
-    if robust and data.n > 3 and np.any(fit.chi2 > CHI2_6_999):
+    threshold = rejection_threshold(data.n)
+    if robust and data.n > 3 and np.any(fit.chi2 > threshold):
         fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
         steps += more
         inliers = _inlier_mask(fit, data, min_inliers)
-        if not inliers.all() and data.n >= 5:
-            # a pose stays off: the start may have been pulled by it; try a consensus start
+        if not inliers.all() and (
+            5 <= data.n < CONSENSUS_MAX_POSES
+            or np.count_nonzero(fit.chi2 > threshold) > data.n - min_inliers
+        ):
+            # a pose stays off and may have pulled the start: try a consensus start
             # (it depends on the data only: computed once per fit_absolute)
             if "consensus" not in memo:
                 P1, Q1 = _consensus_start(data, M, N)
@@ -739,7 +767,7 @@ def _pose_fit(data: _Data, fit: _Fit, inliers: NDArray, steps: int, fallback: in
 
 def _inlier_mask(fit: _Fit, data: _Data, min_inliers: int) -> NDArray[np.bool_]:
     """The poses the final refit of :func:`_robust_fit` used (its H is over them)."""
-    inliers = fit.chi2 <= CHI2_6_999
+    inliers = fit.chi2 <= rejection_threshold(data.n)
     if np.count_nonzero(inliers) < min_inliers:
         inliers = np.zeros(data.n, dtype=bool)
         inliers[np.argsort(fit.chi2, kind="stable")[:min_inliers]] = True

@@ -45,12 +45,16 @@ def product_matrices(q_M: NDArray, q_N: NDArray) -> NDArray:
 
 def closed_form_batch(
     K: NDArray, R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray
-) -> tuple[NDArray, NDArray]:
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Closed-form P, Q for a batch of subsets: ``K`` (s, m, 4, 4), poses (s, m, ...).
 
     Rotations: top singular pair of ``mean K`` (Hirsh's fixed point, Shah's closed form
     in quaternions; no singularity at any angle). Translations: linear least squares of
     ``t_P + R_P R_N t_Q = t_M - R_P t_N`` (6 unknowns), by the normal equations.
+
+    Returns ``P``, ``Q`` (s, 4, 4) and their rotations' quaternions ``q_P``, ``q_Q``
+    (s, 4), xyzw: for a pose with product matrix ``K_i``, ``|q_P^T K_i q_Q|`` is the
+    cosine of half its residual rotation angle.
     """
     from identification.axb_iteration import rotation_from_quat_xyzw
 
@@ -59,16 +63,15 @@ def closed_form_batch(
     R_Q = rotation_from_quat_xyzw(Vt[:, 0, :])
     s, m = R_M.shape[:2]
     C = np.concatenate([np.broadcast_to(np.eye(3), (s, m, 3, 3)), R_P[:, None] @ R_N], axis=3)
-    rhs = t_M - np.einsum("sij,smj->smi", R_P, t_N)
+    rhs = t_M - t_N @ np.swapaxes(R_P, 1, 2)
     C = C.reshape(s, 3 * m, 6)
-    CtC = (
-        np.swapaxes(C, 1, 2) @ C
-        + 1e-12 * np.eye(6) * np.trace(np.swapaxes(C, 1, 2) @ C, axis1=1, axis2=2)[:, None, None]
-    )
-    sol = np.linalg.solve(CtC, np.einsum("ski,sk->si", C, rhs.reshape(s, 3 * m))[..., None])[..., 0]
+    Ct = np.swapaxes(C, 1, 2)
+    CtC = Ct @ C
+    CtC += 1e-12 * np.eye(6) * np.trace(CtC, axis1=1, axis2=2)[:, None, None]
+    sol = np.linalg.solve(CtC, Ct @ rhs.reshape(s, 3 * m, 1))[..., 0]
     P = transform_from_rotation_translation(R_P, sol[:, :3])
     Q = transform_from_rotation_translation(R_Q, sol[:, 3:])
-    return P, Q
+    return P, Q, U[:, :, 0], Vt[:, 0, :]
 
 
 def consistent_quats(R_M: NDArray, R_N: NDArray) -> tuple[NDArray, NDArray]:
@@ -89,7 +92,7 @@ def closed_form_start(M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
     :func:`closed_form_batch`); valid at every rotation angle, order-independent."""
     q_M, q_N = consistent_quats(M[:, :3, :3], N[:, :3, :3])
     K = product_matrices(q_M, q_N)
-    P, Q = closed_form_batch(
+    P, Q, _, _ = closed_form_batch(
         K[None], M[None, :, :3, :3], M[None, :, :3, 3], N[None, :, :3, :3], N[None, :, :3, 3]
     )
     return P[0], Q[0]

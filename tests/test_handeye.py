@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from identification.handeye import HandEyeError, HandEyeResult, solve_axxb
+from identification.handeye import HandEyeError, HandEyeResult, motion_pairs, solve_axxb
 from tests.pin_se3 import inverse, rotation, transform
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -99,7 +99,9 @@ def test_noise_free_poses_give_the_true_x(n, kind):
         assert np.linalg.norm(result.hand_T_camera[:3, :3] - X_true[:3, :3]) < 1e-9, (kind, seed)
         assert np.linalg.norm(result.hand_T_camera[:3, 3] - X_true[:3, 3]) < 1e-9, (kind, seed)
         np.testing.assert_array_equal(result.hand_T_camera[3], [0.0, 0.0, 0.0, 1.0])
-        assert result.n_pairs == n * (n - 1) // 2
+        # every pair up to 25 poses; beyond, 6 strides per pose (5 distinct at n = 30:
+        # strides 1, 4, 7, 9, 12, 15, and stride 15 pairs each pose twice)
+        assert result.n_pairs == (n * (n - 1) // 2 if n <= 25 else 5 * 30 + 15)
         assert result.rms_rotation_rad < 1e-9 and result.rms_translation < 1e-9
         assert 0.0 < result.rotation_condition <= 1.0
 
@@ -497,3 +499,19 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
     assert result.rotation_condition < 0.05
     assert "mostly about one axis" in caplog.text
     np.testing.assert_allclose(result.hand_T_camera, X, atol=1e-9)  # noise-free: still exact
+
+
+@pytest.mark.parametrize("n", [3, 25, 26, 30, 101, 1000])
+def test_motion_pairs_cover_every_pose_in_linear_count(n):
+    """All pairs up to 25 poses; beyond, O(n) distinct pairs i < j in which every pose
+    appears, with strides from 1 (neighbours) to n // 2 (far apart in the recording)."""
+    i, j = motion_pairs(n)
+    assert np.all(i < j) and np.all(j < n)
+    assert len(set(zip(i.tolist(), j.tolist(), strict=True))) == len(i)
+    if n <= 25:
+        assert len(i) == n * (n - 1) // 2
+        return
+    assert len(i) <= 6 * n
+    assert np.all(np.bincount(np.concatenate([i, j]), minlength=n) >= 2)
+    gaps = np.minimum(j - i, n - (j - i))
+    assert gaps.min() == 1 and gaps.max() == n // 2
