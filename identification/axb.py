@@ -75,8 +75,9 @@ from identification.axb_iteration import (
     translation_iteration,
 )
 from identification.axb_refinement import translations_least_squares
+from identification.handeye_checks import ORTHONORMAL_TOL, check_pose_pairs
 from identification.handeye_ml import PoseFit, assess, fit_absolute
-from identification.handeye_starts import ORTHONORMAL_TOL, candidate_starts, check_pose_pairs
+from identification.handeye_starts import candidate_starts
 from identification.handeye_uncertainty import combined_verdict, uncertainty
 from kinfw.transforms import (
     check_transform,

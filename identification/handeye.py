@@ -36,8 +36,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identification.handeye_checks import check_pose_pairs
 from identification.handeye_ml import PoseFit, fit_absolute
-from identification.handeye_starts import candidate_starts, check_pose_pairs
+from identification.handeye_starts import candidate_starts
 from identification.handeye_uncertainty import Uncertainty, inverse_covariance_map, uncertainty
 from kinfw.transforms import (
     average_transform,
