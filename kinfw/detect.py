@@ -16,24 +16,32 @@ choice, and it differs between the two detectors and with the board's parity:
 
 - when ``cols`` and ``rows`` have different parity (9 x 6, 7 x 4), the board looks
   different turned by 180 degrees (the square beside corner 0 and the one beside the last
-  corner have opposite colours). OpenCV then starts from a corner of a given colour —
+  corner have opposite colours). OpenCV then starts from a corner of a given colour --
   ``findChessboardCorners`` from one colour, ``findChessboardCornersSB`` from the other
-  (measured on rendered images, ``tests/test_detect.py``). kinfw does not rely on either:
-  it reads the colours itself. Through the homography of the found corners it samples the
-  image at the centres of the ``(cols-1) x (rows-1)`` squares between the inner corners,
-  and keeps the numbering in which the square between corners ``0, 1, cols, cols+1`` is
-  black (:mod:`kinfw.boards`), turning it by 180 degrees otherwise. Too little contrast
-  between the two colour classes (less than a quarter of the grey range seen) is reported
-  as ambiguous.
+  (measured on rendered images with OpenCV 4.14). kinfw relies on neither: it reads the
+  colours itself (below) and keeps the numbering in which the square between corners
+  ``0, 1, cols, cols+1`` is black (:mod:`kinfw.boards`), turning OpenCV's by 180 degrees
+  otherwise.
 - when ``cols`` and ``rows`` have the same parity (8 x 6, 7 x 5, any square board), the
   board turned by 180 degrees (a square one also by 90) is the same picture, and OpenCV
   orders the corners by their position **in the image** (``findChessboardCorners``:
   corner 0 above the last row's first corner), so the numbering follows the camera, not
-  the board: a board seen upside down in some images gets the numbering of a board turned
-  by 180 degrees. No image can tell; every such image is reported ``ambiguous`` unless
+  the board: a board seen upside down gets the numbering of a board turned by 180
+  degrees. No image can tell; every such image is reported ``ambiguous`` unless
   ``allow_symmetric=True`` (the user vouches that the board is never seen turned by more
-  than 90 degrees). Then, of the numberings the symmetry allows, the one whose x axis
+  than 90 degrees). Then, of the numberings with the right colours, the one whose x axis
   (corner 0 to corner ``cols - 1``) points most to the image's right is kept.
+
+The colours: through the homography of the found corners (grid indices to pixels), the
+image is sampled at the centres of the ``(cols-1) x (rows-1)`` squares between the inner
+corners, for each numbering the grid's shape allows (as found, turned by 180 degrees,
+for a square grid by 90 and 270); a numbering is right when its should-be-white squares
+are brighter than its should-be-black ones by at least :data:`MIN_COLOUR_CONTRAST` of
+the grey range (none right: ``ambiguous``). Then the ring of the board's outer squares
+around the inner corners, where it is in the image, must have the chessboard's colours
+too: otherwise the corners are not the board's inner corners (``findChessboardCornersSB``
+returns, for a board cut by the image border, a grid shifted by one square onto the white
+margin; ``tests/test_detect.py``) and the image is ``not found``.
 
 In every case a numbering that is mirrored in the image (x cross y pointing towards the
 camera; a printed board seen from its front has x, y right-handed in the image, as u, v)
@@ -183,18 +191,26 @@ class Detector:
         grid = uv.reshape(board.rows, board.cols, 2)
         if _mirrored(grid):
             grid = grid[:, ::-1]
-        if not board.symmetric:
-            contrast = _colour_contrast(image, grid)
-            if abs(contrast) < MIN_COLOUR_CONTRAST:
-                return Detection(
-                    label,
-                    "ambiguous",
-                    f"black and white squares differ by only {abs(contrast):.0%} of the grey "
-                    f"range: cannot tell the board's orientation",
-                )
-            if contrast < 0:  # the square beside corner 0 is white: OpenCV began at the end
-                grid = grid[::-1, ::-1]
-        elif not self.allow_symmetric:
+        greys = _SquareGreys(image, grid)
+        contrasts = [greys.contrast(turn) for turn in range(greys.turns)]
+        right = [turn for turn, c in enumerate(contrasts) if c >= MIN_COLOUR_CONTRAST]
+        if not right:
+            return Detection(
+                label,
+                "ambiguous",
+                f"black and white squares differ by only {max(np.abs(contrasts)):.0%} of the "
+                f"grey range: cannot tell the board's orientation",
+            )
+        wrong = greys.wrong_border_squares(right[0])
+        if wrong:
+            return Detection(
+                label,
+                "not found",
+                f"the {board.cols}x{board.rows} corners found are not the board's inner corners: "
+                f"{wrong} of the squares around them have the wrong colour (a board cut by the "
+                f"image border, or its outer squares hidden?)",
+            )
+        if len(right) > 1 and not self.allow_symmetric:
             return Detection(
                 label,
                 "ambiguous",
@@ -203,8 +219,7 @@ class Detector:
                 f"(use a board with one odd and one even count, a ChArUco board, or "
                 f"--allow-symmetric)",
             )
-        else:
-            grid = _most_upright(grid)
+        grid = _most_upright([greys.turned(turn) for turn in right])
         ids = np.arange(board.count, dtype=np.int64)
         return Detection(label, "found", "", grid.reshape(-1, 2).copy(), ids, board.points)
 
@@ -260,42 +275,90 @@ def _mirrored(grid: NDArray[np.float64]) -> bool:
     return bool(cross < 0.0)
 
 
-def _colour_contrast(image: NDArray[np.uint8], grid: NDArray[np.float64]) -> float:
-    """Mean grey of the squares that should be white minus that of those that should be
-    black in this numbering (the square between corners 0, 1, cols, cols+1 black), as a
-    fraction of the grey range of the square centres: near +1 right, near -1 turned."""
-    import cv2
+class _SquareGreys:
+    """Grey levels at the centres of a found chessboard's squares, for each numbering the
+    grid's shape allows (turn 0: as found; 1: turned by 180 degrees; for a square grid,
+    2 and 3: turned by 90 and 270 degrees).
 
-    rows, cols = grid.shape[:2]
-    j, i = np.mgrid[0:rows, 0:cols]
-    board_xy = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float64)
-    H, _ = cv2.findHomography(board_xy, grid.reshape(-1, 2), 0)
-    if H is None:
-        return 0.0
-    cj, ci = np.mgrid[0 : rows - 1, 0 : cols - 1]
-    centres = np.stack([ci.ravel() + 0.5, cj.ravel() + 0.5, np.ones(ci.size)], axis=1) @ H.T
-    uv = centres[:, :2] / centres[:, 2:]
-    blurred = cv2.blur(image, (3, 3)).astype(np.float64)
-    u = np.clip(np.rint(uv[:, 0]).astype(int), 0, image.shape[1] - 1)
-    v = np.clip(np.rint(uv[:, 1]).astype(int), 0, image.shape[0] - 1)
-    grey = blurred[v, u]
-    black = ((ci + cj).ravel() % 2) == 0
-    spread = grey.max() - grey.min()
-    if spread <= 0.0:
-        return 0.0
-    return float((grey[~black].mean() - grey[black].mean()) / spread)
+    The square centres are mapped through the homography of the found corners (grid
+    indices to pixels); greys from the image blurred by 3 x 3. A square ``(i, j)`` is the
+    one between corners ``(i, j)`` and ``(i + 1, j + 1)`` (column, row); it should be
+    black when ``i + j`` is even (:mod:`kinfw.boards`).
+    """
+
+    def __init__(self, image: NDArray[np.uint8], grid: NDArray[np.float64]) -> None:
+        import cv2
+
+        self.grid = grid
+        rows, cols = grid.shape[:2]
+        self.turns = 4 if rows == cols else 2
+        j, i = np.mgrid[0:rows, 0:cols]
+        board_xy = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float64)
+        H, _ = cv2.findHomography(board_xy, grid.reshape(-1, 2), 0)
+        # all the printed squares: i in -1 .. cols-1, j in -1 .. rows-1
+        sj, si = np.mgrid[-1:rows, -1:cols]
+        centres = np.stack([si.ravel() + 0.5, sj.ravel() + 0.5, np.ones(si.size)], axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uvw = centres @ (H.T if H is not None else np.full((3, 3), np.nan))
+            uv = uvw[:, :2] / uvw[:, 2:]
+        h, w = image.shape
+        inside = (uv[:, 0] >= 1) & (uv[:, 0] <= w - 2) & (uv[:, 1] >= 1) & (uv[:, 1] <= h - 2)
+        blurred = cv2.blur(image, (3, 3)).astype(np.float64)
+        greys = np.full(len(uv), np.nan)
+        u = np.rint(uv[inside, 0]).astype(int)
+        v = np.rint(uv[inside, 1]).astype(int)
+        greys[inside] = blurred[v, u]
+        self.greys = greys.reshape(rows + 1, cols + 1)  # [j + 1, i + 1]
+
+    def _turned_greys(self, turn: int) -> NDArray[np.float64]:
+        g = self.greys
+        if turn >= 2:
+            g = np.transpose(g)[:, ::-1]
+        return g[::-1, ::-1] if turn % 2 else g
+
+    def turned(self, turn: int) -> NDArray[np.float64]:
+        """The grid of corners, shape (rows, cols, 2), in numbering ``turn``."""
+        g = self.grid
+        if turn >= 2:
+            g = np.transpose(g, (1, 0, 2))[:, ::-1]
+        return g[::-1, ::-1] if turn % 2 else g
+
+    def _black(self, shape: tuple[int, int]) -> NDArray[np.bool_]:
+        a, b = np.mgrid[0 : shape[0], 0 : shape[1]]  # a = j + 1, b = i + 1
+        return (a + b) % 2 == 0  # black: i + j even
+
+    def contrast(self, turn: int) -> float:
+        """Mean grey of the inner squares that should be white minus that of those that
+        should be black in numbering ``turn``, as a fraction of their grey range: near +1
+        right, near -1 wrong (NaN-free; 0 without contrast)."""
+        g = self._turned_greys(turn)
+        inner = g[1:-1, 1:-1]
+        black = self._black(g.shape)[1:-1, 1:-1]
+        spread = np.nanmax(inner) - np.nanmin(inner) if np.isfinite(inner).any() else 0.0
+        if not spread > 0.0 or not np.isfinite(inner).all():
+            return 0.0
+        return float((inner[~black].mean() - inner[black].mean()) / spread)
+
+    def wrong_border_squares(self, turn: int) -> int:
+        """How many of the squares around the inner corners (the printed board's outer
+        squares) that are in the image have the wrong colour in numbering ``turn``, judged
+        against the middle of the inner squares' two grey levels."""
+        g = self._turned_greys(turn)
+        black = self._black(g.shape)
+        inner, inner_black = g[1:-1, 1:-1], black[1:-1, 1:-1]
+        threshold = 0.5 * (inner[inner_black].mean() + inner[~inner_black].mean())
+        ring = np.ones(g.shape, dtype=bool)
+        ring[1:-1, 1:-1] = False
+        seen = ring & np.isfinite(g)
+        return int(np.sum((g[seen] < threshold) != black[seen]))
 
 
-def _most_upright(grid: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Of the numberings a symmetric board allows (turned by 180 degrees; a square one also
-    by 90), the one whose x axis points most to the image's right."""
-    candidates = [grid, grid[::-1, ::-1]]
-    if grid.shape[0] == grid.shape[1]:
-        turned = np.transpose(grid, (1, 0, 2))[:, ::-1]  # turned by 90 degrees
-        candidates += [turned, turned[::-1, ::-1]]
+def _most_upright(grids: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Of the numberings a symmetric board allows, the one whose x axis (corner 0 to
+    corner ``cols - 1``) points most to the image's right."""
 
     def rightness(g: NDArray[np.float64]) -> float:
         x_axis = (g[:, -1] - g[:, 0]).mean(axis=0)
         return float(x_axis[0] / (np.linalg.norm(x_axis) + 1e-12))
 
-    return max(candidates, key=rightness)
+    return max(grids, key=rightness)

@@ -162,6 +162,30 @@ def test_board_out_of_view_is_not_found(board):
     assert detection.uv.shape == (0, 2) and detection.ids.shape == (0,)
 
 
+def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
+    """A pose (found by benchmarks/bench_detect.py) where two corners fall below the image
+    and OpenCV's findChessboardCornersSB returns a 9x6 grid shifted by one square (its
+    corner 0 ~40 px from the true one): the squares around the grid are checked and the
+    image is reported not found instead of numbered wrongly."""
+    import kinfw.detect as kd
+
+    camera = CameraIntrinsics(
+        640, 480, 500.0, 500.0, 322.0, 237.0, k1=-0.25, k2=0.08, p1=0.001, p2=-0.001
+    )
+    camera_T_board = np.eye(4)
+    camera_T_board[:3, :3] = Rotation.from_rotvec([-0.1521, -0.6884, -0.2899]).as_matrix()
+    camera_T_board[:3, 3] = [-0.2124, 0.0465, 0.3175]
+    image = render_board(CHESS, camera, camera_T_board)
+    truth = true_corners(CHESS, camera, camera_T_board)
+    assert (truth[:, 1] > camera.height).sum() == 2
+    raw = kd._find_chessboard(image, (9, 6))
+    if raw is not None:  # the OpenCV behaviour this guards against (4.14)
+        assert min(rms(raw, truth), rms(raw[::-1], truth)) > 10.0
+    detection = Detector(CHESS).detect(image, "cut.png")
+    assert detection.status == "not found"
+    assert "squares around them have the wrong colour" in detection.reason
+
+
 @pytest.mark.parametrize("board", [Chessboard(8, 6, 0.03), Chessboard(7, 5, 0.03)])
 def test_symmetric_chessboard_is_ambiguous_unless_allowed(board):
     upright = board_pose(board, [0.2, -0.2, 0.0], 0.3)
