@@ -186,7 +186,9 @@ def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
     assert "squares around them have the wrong colour" in detection.reason
 
 
-@pytest.mark.parametrize("board", [Chessboard(8, 6, 0.03), Chessboard(7, 5, 0.03)])
+@pytest.mark.parametrize(
+    "board", [Chessboard(8, 6, 0.03), Chessboard(7, 5, 0.03), Chessboard(5, 5, 0.04)]
+)
 def test_symmetric_chessboard_is_ambiguous_unless_allowed(board):
     upright = board_pose(board, [0.2, -0.2, 0.0], 0.3)
     turned = board_pose(board, [0.2, -0.2, 0.0], 0.3 + np.pi)
