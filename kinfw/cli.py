@@ -37,6 +37,7 @@ from kinfw.cli_commands import (
     cmd_view,
     default_sidecar_path,
 )
+from kinfw.cli_detect import add_detect_parser, detect_inputs
 from kinfw.cli_fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.files import check_output_dir, check_outputs
 
@@ -84,6 +85,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_dir(args.out, label="--out")
     elif command == "import-csv":
         check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "csv": args.csv})
+    elif command == "detect":
+        check_outputs({"--out": args.out}, inputs=detect_inputs(args))
 
 
 # -- numbers on the command line -----------------------------------------------------------
@@ -446,6 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
     p.set_defaults(func=cmd_import_csv)
+
+    add_detect_parser(sub, _number(int, low=4))
     return parser
 
 
