@@ -393,7 +393,9 @@ def _fit(
     )
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
-    sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
+    sigma = (
+        noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
+    )
     k = thresholds(problem.obs_components, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False

@@ -7,8 +7,9 @@ checks against a robot are in :mod:`kinfw.measurement_checks`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -51,6 +52,9 @@ class Measurements:
         File path (or ``"<memory>"``) used in messages.
     others : tuple
         Groups of registered kinds other than the three built-in ones, first-seen order.
+    cameras : mapping of str to CameraIntrinsics
+        Camera intrinsics by camera frame (the file's ``"cameras"`` section; frames that
+        no observation uses are kept), read-only.
     """
 
     joint_names: tuple[str, ...]
@@ -60,9 +64,11 @@ class Measurements:
     points: tuple[PointObservations, ...] = ()
     source: str = "<memory>"
     others: tuple[Any, ...] = ()
+    cameras: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         src = self.source
+        object.__setattr__(self, "cameras", MappingProxyType(dict(self.cameras)))
         names = tuple(self.joint_names)
         if isinstance(self.joint_names, str) or not all(isinstance(n, str) for n in names):
             raise DatasetError(f"{src}: joint_names: expected a sequence of strings")
@@ -128,6 +134,13 @@ class Measurements:
         """Every observation group, kind by kind in registry order."""
         for kind in kinds():
             yield from self.groups(kind.name)
+
+    def with_cameras(self, cameras: Mapping[str, Any]) -> Measurements:
+        """The dataset with camera intrinsics added or replaced (by camera frame), in
+        :attr:`cameras` and in the groups that use them."""
+        merged = {**self.cameras, **cameras}
+        groups = [kind_of(g).with_cameras(g, merged) for g in self.all_groups()]
+        return self.with_groups(groups, cameras=merged)
 
     def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
         """The dataset with other observation groups (of any registered kinds), and
@@ -277,4 +290,5 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
         groups,
         qs=np.concatenate([p.q_of(names) for p in parts]),
         source=" + ".join(dict.fromkeys(p.source for p in parts)),
+        cameras={k: v for p in parts for k, v in p.cameras.items()},
     )
