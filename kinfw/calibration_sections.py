@@ -358,6 +358,7 @@ def _observation_dict(row: Any) -> dict[str, Any]:
         "marker": row.marker,
         "position_residual_mm": row.position_residual_mm,
         "rotation_residual_deg": row.rotation_residual_deg,
+        **({} if row.pixel_residual_px is None else {"pixel_residual_px": row.pixel_residual_px}),
     }
 
 
@@ -373,19 +374,26 @@ def _observation_fields(doc: Any, r: DocReader, at: str, *, position_optional: b
     )
 
 
+def _pixel_field(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
+    """The optional ``pixel_residual_px`` (a ``pixels`` observation's reprojection error)."""
+    return {"pixel_residual_px": r.number(doc, "pixel_residual_px", at, optional=True)}
+
+
 @dataclass(frozen=True, slots=True)
 class DownweightedRow:
     """An observation the robust loss down-weighted: ``sample`` (index into the data
     file's samples, from 0), kind, frame (camera for targets), marker, residual norms
-    (mm; deg, None without orientation) and the weight it got (1 = full)."""
+    (mm, None for a kind without lengths; deg, None without orientation; px for an
+    image point, else None) and the weight it got (1 = full)."""
 
     sample: int
     kind: str
     frame: str
     marker: str | None
-    position_residual_mm: float
+    position_residual_mm: float | None
     rotation_residual_deg: float | None
     weight: float
+    pixel_residual_px: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "weight": self.weight}
@@ -394,8 +402,9 @@ class DownweightedRow:
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> DownweightedRow:
         doc = r.obj(doc, at)
         return cls(
-            *_observation_fields(doc, r, at, position_optional=False),
+            *_observation_fields(doc, r, at, position_optional=True),
             r.number(doc, "weight", at),
+            **_pixel_field(doc, r, at),
         )
 
 
@@ -404,8 +413,9 @@ class RejectedRow:
     """An observation excluded from the fit as a gross error
     (:class:`identification.refine.RejectedObservation`): ``sample`` (index into the
     data file's samples, from 0), kind, frame (camera for targets), marker, residual
-    norms against the calibration (mm; deg, None without orientation), and how far
-    beyond the rejection threshold its whitened norm was (``excess``, > 1)."""
+    norms against the calibration (mm; deg, None without orientation; px for an image
+    point), and how far beyond the rejection threshold its whitened norm was
+    (``excess``, > 1)."""
 
     sample: int
     kind: str
@@ -414,6 +424,7 @@ class RejectedRow:
     position_residual_mm: float | None
     rotation_residual_deg: float | None
     excess: float
+    pixel_residual_px: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "excess": self.excess}
@@ -424,6 +435,7 @@ class RejectedRow:
         return cls(
             *_observation_fields(doc, r, at, position_optional=True),
             r.number(doc, "excess", at),
+            **_pixel_field(doc, r, at),
         )
 
 

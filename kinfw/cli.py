@@ -185,6 +185,27 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--prior-deg", type=_POSITIVE_DEG, help="... and of angles, deg")
 
 
+def _frame_file(text: str) -> tuple[str, Path]:
+    """``FRAME=FILE`` of ``--camera``."""
+    frame, sep, file = text.partition("=")
+    if not sep or not frame or not file:
+        raise argparse.ArgumentTypeError(f"expected FRAME=FILE, got {text!r}")
+    return frame, Path(file)
+
+
+def _add_camera_option(p: argparse.ArgumentParser) -> None:
+    """``--camera FRAME=FILE`` (repeatable): intrinsics for ``pixels`` observations."""
+    p.add_argument(
+        "--camera",
+        action="append",
+        type=_frame_file,
+        metavar="FRAME=FILE",
+        help="intrinsics of the camera frame FRAME for 'pixels' observations, from a ROS "
+        "camera_info / OpenCV YAML or JSON file; overrides or adds to the data file's "
+        '"cameras" section (repeatable)',
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="kinfw", description="Calibrate robot kinematics from measurements.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
@@ -266,6 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="ignore the sidecar: fit nuisance frames to these data",
     )
+    _add_camera_option(p)
     p.add_argument(
         "--json", action="store_true", help="print the report as JSON, with per-sample errors"
     )
@@ -299,6 +321,7 @@ def build_parser() -> argparse.ArgumentParser:
         "those joints' CPC parameters)",
     )
     _add_fit_options(p)
+    _add_camera_option(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate)
 
@@ -336,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
         "held-out scores (and list them)",
     )
     _add_fit_options(p)
+    _add_camera_option(p)
     p.add_argument(
         "--jobs",
         type=_COUNT,

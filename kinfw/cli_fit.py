@@ -17,7 +17,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from kinfw.cli_commands import format_table, progress_printer
+from kinfw.cli_commands import format_table, progress_printer, read_data
 
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
@@ -84,13 +84,12 @@ def _noise_arg(args: argparse.Namespace):
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from kinfw.calibration_report import write_report
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.report import calibrate_to_files
 
     nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
-    held_out = read_measurements(args.holdout) if args.holdout else None
+    data = read_data(args.data, args)
+    held_out = read_data(args.holdout, args) if args.holdout else None
     noise, prior = _noise_arg(args), _prior_arg(args)
     choice = None
     parameters = "full" if args.params == "auto" else _params_arg(args.params)
@@ -172,8 +171,9 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     noise = ref.noise
     print(
         f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
-        f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component"
+        + ("" if noise.of("pixel") is None else f", {noise.of('pixel'):.3g} px")
+        + f" ({'estimated' if noise.estimated else 'given'}); reduced chi-square "
         f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
     )
     print(
@@ -186,7 +186,11 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
         sizes = [
             f"{v:.3g} {unit}"
-            for v, unit in ((row.position_residual_mm, "mm"), (row.rotation_residual_deg, "deg"))
+            for v, unit in (
+                (row.position_residual_mm, "mm"),
+                (row.rotation_residual_deg, "deg"),
+                (row.pixel_residual_px, "px"),
+            )
             if v is not None
         ]
         print(
@@ -200,12 +204,18 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
     for row in down[:5]:
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        rotation = (
-            "" if row.rotation_residual_deg is None else f", {row.rotation_residual_deg:.3g} deg"
-        )
+        sizes = [
+            f"{v:.3g} {unit}"
+            for v, unit in (
+                (row.position_residual_mm, "mm"),
+                (row.rotation_residual_deg, "deg"),
+                (row.pixel_residual_px, "px"),
+            )
+            if v is not None
+        ]
         print(
             f"    samples[{row.sample}] {where} ({row.kind}): residual "
-            f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}"
+            f"{', '.join(sizes)}, weight {row.weight:.2g}"
         )
     if len(down) > 5:
         print(
@@ -257,13 +267,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_crossval(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.crossval import BASELINES, crossvalidate
     from verification.studies import executor_for_jobs
 
     nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
+    data = read_data(args.data, args)
     sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
     prior = _prior_arg(args)
     watch = progress_printer()

@@ -237,3 +237,34 @@ def test_noise_free_pixels_recover_a_perturbed_arm_exactly():
     assert dp < 1e-9 and dr < 1e-9
     start = inverse_transform(nominal.frame_poses(q_test, "flange", NAMES)) @ w_T_board
     assert pose_discrepancy(start, true)[0] > 1e-3  # the nominal was off
+
+
+# -- the command line ----------------------------------------------------------------------
+
+
+def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path, capsys):
+    from kinfw.calibration_file import read_sidecar
+    from kinfw.cli import main
+
+    _, truth, w_T_board, data = _scene(30, seed=6)
+    write_measurements(tmp_path / "px.json", data)
+    doc = json.loads((tmp_path / "px.json").read_text())
+    del doc["cameras"]  # the intrinsics come from --camera
+    (tmp_path / "nocam.json").write_text(json.dumps(doc))
+    (tmp_path / "cam.json").write_text(json.dumps(CAMERA.to_dict()))
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    args = ["calibrate", str(tmp_path / "nocam.json"), "--urdf", str(tmp_path / "arm.urdf")]
+    args += ["--out", str(tmp_path / "cal.urdf"), "--params", "full", "--loss", "linear"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "kinfw calibrate: error: " in err and "camera 'flange' has no intrinsics" in err
+    assert main([*args, "--camera", f"flange={tmp_path / 'cam.json'}"]) == 0
+    out = capsys.readouterr().out
+    assert "px (estimated)" in out
+    calibrated = load_robot(tmp_path / "cal.urdf")
+    w_T_b = read_sidecar(tmp_path / "cal.kinfw.json").known_frames()[("target", "board")]
+    q_test = Q0 + np.random.default_rng(60).uniform(-0.35, 0.35, size=(50, 6))
+    c_T_b = inverse_transform(calibrated.frame_poses(q_test, "flange", NAMES)) @ w_T_b
+    true = inverse_transform(truth.frame_poses(q_test, "flange", NAMES)) @ w_T_board
+    dp, dr = pose_discrepancy(c_T_b, true)
+    assert dp < 1e-8 and dr < 1e-8

@@ -48,6 +48,7 @@ __all__ = [
     "PixelKind",
     "PixelObservations",
     "pnp_camera_T_targets",
+    "target_observations_from_pixels",
 ]
 
 PIXEL = NoiseComponent("pixel", 2, "px")
@@ -241,6 +242,18 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
         R, _ = cv2.Rodrigues(rvec)
         out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
     return samples, out
+
+
+def target_observations_from_pixels(group: PixelObservations) -> Any:
+    """The group's images as ``target`` observations: per image the PnP pose
+    (:func:`pnp_camera_T_targets`), for the hand-eye stage (A = X B Y) and for
+    comparing the pixel path with the pose path on the same detections."""
+    from kinfw.observations.target import TargetObservations
+
+    samples, camera_T_targets = pnp_camera_T_targets(group)
+    return TargetObservations(
+        camera=group.camera, sample=samples, camera_T_target=camera_T_targets, target=group.target
+    )
 
 
 def _project(params: NDArray[np.float64], camera_ps: NDArray[np.float64]) -> NDArray[np.float64]:
