@@ -89,6 +89,7 @@ def calibrate(
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
+    refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
@@ -123,6 +124,9 @@ def calibrate(
     progress : callable, optional
         Called with a one-line message after each stage (the command line prints them);
         the library itself stays quiet.
+    refine_intrinsics : bool or tuple of str
+        Cameras of ``pixels`` observations whose intrinsics the refinement estimates
+        too (True: all; :func:`identification.refine.refine`).
 
     Checks, before any estimation (each raises a :class:`DatasetError` naming the
     file, the joints or frames and the fix):
@@ -168,7 +172,13 @@ def calibrate(
         if parameters == "full":
             smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
         check_redundancy(
-            build_problem(nominal, data, parameters=parameters, prior=prior),
+            build_problem(
+                nominal,
+                data,
+                parameters=parameters,
+                prior=prior,
+                refine_intrinsics=refine_intrinsics,
+            ),
             noise_given=noise is not None,
             n_samples=data.n_samples,
             source=data.source,
@@ -218,6 +228,7 @@ def calibrate(
             loss=loss,
             parameters=parameters,
             prior=prior,
+            refine_intrinsics=refine_intrinsics,
         )
         # a smaller set, or a prior, is a deliberately restricted model (baselines, the
         # model choice's candidates): its residuals are expected to show what it leaves out

@@ -322,6 +322,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_fit_options(p)
     _add_camera_option(p)
+    p.add_argument(
+        "--refine-intrinsics",
+        nargs="*",
+        metavar="FRAME",
+        help="also estimate the intrinsics (fx fy cx cy k1 k2 p1 p2 k3) of these cameras "
+        "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
+        "the report says which the images do not determine",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate)
 

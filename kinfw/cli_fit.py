@@ -111,6 +111,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         held_out=held_out,
         progress=progress_printer(),
         reason="given" if choice is None else choice.reason,
+        refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
     )
     if choice is not None:  # the choice goes to the report's notes (and the sidecar)
         report = dataclasses.replace(
@@ -140,6 +141,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:
+    """``--refine-intrinsics``: absent (), given without frames True (every camera)."""
+    if frames is None:
+        return ()
+    return tuple(frames) if frames else True
 
 
 def _choice_table(choice) -> str:

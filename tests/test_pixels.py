@@ -47,10 +47,10 @@ def _board_pose(robot) -> np.ndarray:
     return w_T_c @ tilt
 
 
-def _in_view(robot, w_T_board, qs):
+def _in_view(robot, w_T_board, qs, board=BOARD_P):
     """The configurations whose camera sees every board point (in the image, 20 px in)."""
     c_T_b = inverse_transform(robot.frame_poses(qs, "flange", NAMES)) @ w_T_board
-    c_p = np.einsum("nij,kj->nki", c_T_b[:, :3, :3], BOARD_P) + c_T_b[:, None, :3, 3]
+    c_p = np.einsum("nij,kj->nki", c_T_b[:, :3, :3], board) + c_T_b[:, None, :3, 3]
     return qs[CAMERA.in_view(c_p, margin_px=20).all(axis=1)]
 
 
@@ -70,18 +70,19 @@ def _template(n: int, board=BOARD_P, intrinsics=CAMERA) -> PixelObservations:
     )
 
 
-def _scene(n: int, seed: int, spread: float = 0.35, sigma_px: float = 0.0):
+def _scene(n: int, seed: int, spread: float = 0.35, sigma_px: float = 0.0, board=BOARD_P):
     nominal = load_robot(ARM_6R)
     rng = np.random.default_rng(seed)
     truth = load_robot(perturb_robot(nominal, rng))
     w_T_board = _board_pose(truth)
-    qs = _in_view(truth, w_T_board, Q0 + rng.uniform(-spread, spread, size=(20 * n, 6)))[:n]
+    qs = Q0 + rng.uniform(-spread, spread, size=(20 * n, 6))
+    qs = _in_view(truth, w_T_board, qs, board)[:n]
     assert len(qs) == n
     data = simulate(
         truth,
         qs,
         NAMES,
-        groups=[_template(n)],
+        groups=[_template(n, board)],
         unknowns={BlockKey("target", "board"): w_T_board},
         rng=rng,
         sigmas={"pixel": sigma_px},
@@ -268,3 +269,72 @@ def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path,
     true = inverse_transform(truth.frame_poses(q_test, "flange", NAMES)) @ w_T_board
     dp, dr = pose_discrepancy(c_T_b, true)
     assert dp < 1e-8 and dr < 1e-8
+
+
+# -- intrinsics as a parameter block -------------------------------------------------------
+
+
+def test_freed_intrinsics_are_recovered_from_a_wrong_start_with_the_arm():
+    nominal, truth, w_T_board, data = _scene(40, seed=7)
+    wrong = CAMERA.with_parameters(
+        CAMERA.parameters * [1.02, 1, 1, 1, 1, 1, 1, 1, 1] + [0, 0, 0, 0, 0.03, 0, 0, 0, 0]
+    )
+    data = data.with_cameras({"flange": wrong})  # the pixels were simulated with CAMERA
+    noise = NoiseModel(sigmas={"pixel": 0.1})
+    fixed = refine(nominal, data, noise=noise)
+    assert np.abs(fixed.residuals[0].component("pixel")).max() > 0.1  # the wrong K shows
+    result = refine(nominal, data, noise=noise, refine_intrinsics=("flange",))
+    (res,) = result.residuals
+    assert np.abs(res.component("pixel")).max() < 1e-7
+    found = {(u.kind, u.name): u.value for u in result.unknowns}
+    ident = result.identifiability
+    # no null direction of the Jacobian involves them (the rank test); their
+    # uncertainty under 0.1 px noise is a separate verdict (next test)
+    names = [
+        ":".join(p)
+        for params, why in ident.unidentifiable
+        if not why.startswith("the images do not determine")
+        for p in params
+    ]
+    assert not any(n.startswith("intrinsics:") for n in names)
+    np.testing.assert_allclose(
+        found[("intrinsics", "flange")], CAMERA.parameters, rtol=0, atol=1e-7
+    )
+    q_test = Q0 + np.random.default_rng(70).uniform(-0.35, 0.35, size=(50, 6))
+    model_q = q_test[:, [NAMES.index(j) for j in result.model.topology.joint_names]]
+    c_T_b = (
+        inverse_transform(result.model.frame_poses(model_q, "flange")) @ found[("target", "board")]
+    )
+    true = inverse_transform(truth.frame_poses(q_test, "flange", NAMES)) @ w_T_board
+    dp, dr = pose_discrepancy(c_T_b, true)
+    assert dp < 1e-9 and dr < 1e-9
+
+
+def test_refine_intrinsics_of_a_camera_without_pixels_is_named():
+    nominal, _, _, data = _scene(8, seed=8)
+    with pytest.raises(DatasetError, match="no 'pixels' observations of camera 'left'"):
+        refine(nominal, data, refine_intrinsics=("left",))
+
+
+def test_intrinsics_the_images_cannot_determine_are_reported():
+    # a small board (9 mm squares) that stays near the image centre: the distortion's
+    # high orders act only far from the centre, where no point is seen
+    nominal, _, _, data = _scene(40, seed=9, spread=0.05, sigma_px=0.3, board=0.3 * BOARD_P)
+    radius = np.linalg.norm(data.groups("pixels")[0].uv - [CAMERA.cx, CAMERA.cy], axis=1)
+    assert radius.max() < 120  # of a 400 px half-diagonal
+    noise = NoiseModel(sigmas={"pixel": 0.3})
+    result = refine(nominal, data, noise=noise, loss="linear", refine_intrinsics=True)
+    poor = {
+        params[0][1]: why
+        for params, why in result.identifiability.unidentifiable
+        if params[0][0] == "intrinsics:flange"
+    }
+    assert {"k2", "k3"} <= set(poor) and "the images do not determine it" in poor["k3"]
+    # the same uncertainty from the covariance: k3's std times its effect at the border
+    names = [tuple(n) for n in result.parameter_names]
+    k3_std = np.sqrt(
+        result.covariance[names.index(("intrinsics:flange", "k3"))][
+            names.index(("intrinsics:flange", "k3"))
+        ]
+    )
+    assert f"{k3_std:.3g} unitless" in poor["k3"]

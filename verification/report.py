@@ -482,6 +482,7 @@ def calibrate_to_files(
     held_out: Measurements | None = None,
     progress=None,
     reason: str = "given",
+    refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> tuple[CalibrationReport, Calibration]:
     """Calibrate (:func:`identification.pipeline.calibrate`), then write the calibrated
     URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
@@ -508,6 +509,7 @@ def calibrate_to_files(
         parameters=parameters,
         prior=prior,
         progress=progress,
+        refine_intrinsics=refine_intrinsics,
     )
     report = calibration_report(
         nominal,
