@@ -152,6 +152,7 @@ def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
 def accuracy_table(report_dict: dict) -> str:
     """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
     rows = []
+    has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
     for g in report_dict["groups"]:
         mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
         rows.append(
@@ -165,6 +166,7 @@ def accuracy_table(report_dict: dict) -> str:
                 f"{g['rotation_rms_deg']:.4f}",
                 f"{g['rotation_max_deg']:.4f}",
                 " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+                *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
             ]
         )
     header = [
@@ -177,6 +179,7 @@ def accuracy_table(report_dict: dict) -> str:
         "rot RMS deg",
         "rot max deg",
         "|e| x y z mean/std mm (Table 4)",
+        *(["pixel RMS px"] if has_px else []),
     ]
     return format_table(rows, header)
 

@@ -135,12 +135,30 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
         _print_refine(report.refine, has_report=bool(args.report))
+    if report.reprojection is not None:
+        _print_reprojection(report.reprojection)
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def _print_reprojection(rep) -> None:
+    """Reprojection RMS per camera and the worst images (px, in-sample)."""
+    print("reprojection error on the calibration data (in-sample), px:")
+    rows = [
+        [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
+        for c in rep.cameras
+    ]
+    print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+    print(
+        "  worst images (RMS px): "
+        + ", ".join(
+            f"{i.image} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}" for i in rep.worst[:5]
+        )
+    )
 
 
 def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -23,6 +22,34 @@ from kinfw.observations.reader import DatasetError
 from kinfw.observations.target import TargetObservations
 
 __all__ = ["Measurements", "concatenate_measurements", "first_uses", "merge_same_key"]
+
+
+class FrozenMapping(Mapping[str, Any]):
+    """A read-only mapping (a copy of the given one) that pickles, unlike
+    ``types.MappingProxyType`` (datasets go to worker processes)."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, items: Mapping[str, Any] | None = None) -> None:
+        self._items = dict(items or {})
+
+    def __getitem__(self, key: str) -> Any:
+        return self._items[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"FrozenMapping({self._items!r})"
+
+    def __getstate__(self) -> dict[str, Any]:
+        return self._items
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self._items = dict(state)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -68,7 +95,7 @@ class Measurements:
 
     def __post_init__(self) -> None:
         src = self.source
-        object.__setattr__(self, "cameras", MappingProxyType(dict(self.cameras)))
+        object.__setattr__(self, "cameras", FrozenMapping(self.cameras))
         names = tuple(self.joint_names)
         if isinstance(self.joint_names, str) or not all(isinstance(n, str) for n in names):
             raise DatasetError(f"{src}: joint_names: expected a sequence of strings")

@@ -338,3 +338,54 @@ def test_intrinsics_the_images_cannot_determine_are_reported():
         ]
     )
     assert f"{k3_std:.3g} unitless" in poor["k3"]
+
+
+# -- reports in pixels ---------------------------------------------------------------------
+
+
+def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_worst(tmp_path):
+    import cv2
+
+    from kinfw.calibration_report import read_report, write_report
+    from verification.report import calibrate_to_files
+
+    nominal, _, _, data = _scene(30, seed=10, sigma_px=0.2)
+    (g,) = data.groups("pixels")
+    bad = g.sample == 17  # one image off by 3 px (a wrong detection), still below rejection
+    data = data.with_groups([kind_of(g).with_data(g, kind_of(g).data(g) + 3.0 * bad[:, None])])
+    with pytest.warns(UserWarning, match="pixel residuals of pixels 'flange' follow"):
+        report, calibration = calibrate_to_files(
+            nominal, data, tmp_path / "cal.urdf", method="refine", loss="linear", parameters="full"
+        )
+    rep = report.reprojection
+    assert rep.worst[0].sample == 17 and rep.worst[0].image == "img_017.png"
+    assert rep.worst[0].rms_px > 2.0 and rep.worst[1].rms_px < 0.5 * rep.worst[0].rms_px
+    # independent truth: OpenCV's projection at the calibrated camera poses
+    calibrated = load_robot(tmp_path / "cal.urdf")
+    found = {(u.kind, u.name): u.value for u in calibration.refined.unknowns}
+    c_T_b = (
+        inverse_transform(calibrated.frame_poses(data.qs, "flange", NAMES))
+        @ found[("target", "board")]
+    )
+    errs = []
+    for i in range(data.n_samples):
+        rvec, _ = cv2.Rodrigues(c_T_b[i, :3, :3])
+        uv, _ = cv2.projectPoints(BOARD_P, rvec, c_T_b[i, :3, 3], CAMERA.matrix, CAMERA.distortion)
+        e = np.linalg.norm(data.groups("pixels")[0].uv[g.sample == i] - uv.reshape(-1, 2), axis=1)
+        errs.append(e)
+        image = next(im for im in rep.images if im.sample == i)
+        assert image.rms_px == pytest.approx(np.sqrt(np.mean(e**2)), rel=1e-6)
+    (cam,) = rep.cameras
+    all_e = np.concatenate(errs)
+    assert cam.camera == "flange" and cam.n_images == 30 and cam.n_points == len(all_e)
+    assert cam.rms_px == pytest.approx(np.sqrt(np.mean(all_e**2)), rel=1e-6)
+    # the stage table is in px for image points (its target pose refitted in closed
+    # form, as for 'target' observations: near the calibrated one); the file reads back
+    (after,) = report.errors_after
+    assert after.pixel_rms_px == pytest.approx(cam.rms_px, rel=0.05)
+    assert dict(report.position_rms_by_stage[-1].position_rms_mm) == {
+        "flange (pixels) [px]": after.pixel_rms_px
+    }
+    write_report(tmp_path / "report.json", report)
+    back = read_report(tmp_path / "report.json")
+    assert back.reprojection == rep and back.errors_after[0].pixel_rms_px == after.pixel_rms_px

@@ -47,6 +47,7 @@ from kinfw.measurements import DatasetError, Measurements
 from kinfw.observations import kind_named
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
+from verification.reprojection import reprojection_section
 
 __all__ = [
     "before_after_rows",
@@ -369,6 +370,9 @@ def calibration_report(
             tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3]))) for link, T in export.link_shifts),
         ),
         errors_held_out=None if held_out is None else held_out_rows,
+        reprojection=None
+        if calibration.refined is None
+        else reprojection_section(calibrated, data, calibration.refined.unknowns),
     )
 
 
