@@ -389,3 +389,21 @@ def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_wo
     write_report(tmp_path / "report.json", report)
     back = read_report(tmp_path / "report.json")
     assert back.reprojection == rep and back.errors_after[0].pixel_rms_px == after.pixel_rms_px
+
+
+def test_the_drawing_puts_the_board_points_where_the_truth_has_them():
+    _, truth, w_T_board, data = _scene(3, seed=11)
+    (g,) = data.groups("pixels")
+    kind = kind_of(g)
+    moved = kind.with_data(g, kind.data(g) + np.array([2.0, 0.0, 0, 0, 0]))
+    ctx = NumericContext.from_robot(truth, data.qs, NAMES, {BlockKey("target", "board"): w_T_board})
+    w_p_board = np.tile(BOARD_P @ w_T_board[:3, :3].T + w_T_board[:3, 3], (3, 1))
+    exact = kind.drawing(g, ctx)
+    np.testing.assert_allclose(exact.w_p_predicted, w_p_board, atol=1e-12)
+    np.testing.assert_allclose(exact.w_p_measured, w_p_board, atol=1e-9)
+    # 2 px off in u: the measured ray at the point's depth z is about 2 z / fx away
+    # (distortion changes the scale by a few per cent)
+    drawn = kind.drawing(moved, ctx)
+    gap = np.linalg.norm(drawn.w_p_measured - drawn.w_p_predicted, axis=1)
+    z = kind.camera_points(g, ctx)[:, 2]
+    np.testing.assert_allclose(gap, 2.0 * z / CAMERA.fx, rtol=0.2)
