@@ -403,6 +403,12 @@ def _fit(
     )
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
+    for c in {c for g in problem.groups for c in g.components} if given else ():
+        try:
+            noise.sigma(c)
+        except KeyError as exc:  # a user's noise model that misses a component of the data
+            hint = "; on the command line --sigma-px" if c.unit == "px" else ""
+            raise ValueError(f"{measurements.source}: {exc.args[0]}{hint}") from None
     sigma = (
         noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
     )

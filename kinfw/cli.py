@@ -130,6 +130,7 @@ _MM = _number(float, low=0.0, unit="(mm)")
 _DEG = _number(float, low=0.0, unit="(deg)")
 _POSITIVE_MM = _number(float, low=0.0, low_open=True, unit="(mm)")
 _POSITIVE_DEG = _number(float, low=0.0, low_open=True, unit="(deg)")
+_POSITIVE_PX = _number(float, low=0.0, low_open=True, unit="(px)")
 _COUNT = _number(int, low=1)
 _SEED = _number(int, low=0)
 
@@ -168,6 +169,12 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         "--sigma-deg",
         type=_POSITIVE_DEG,
         help="orientation noise: angle sigma about a random axis, deg (default: estimated)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        type=_POSITIVE_PX,
+        help="pixel noise sigma per image coordinate of 'pixels' observations, px "
+        "(default: estimated)",
     )
     p.add_argument(
         "--loss",

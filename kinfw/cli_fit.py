@@ -71,15 +71,19 @@ def _prior_arg(args: argparse.Namespace):
 def _noise_arg(args: argparse.Namespace):
     from identification.refine import NoiseModel
 
+    sigma_px = getattr(args, "sigma_px", None)
+    pixel = {} if sigma_px is None else {"pixel": sigma_px}
     if args.sigma_mm is None and args.sigma_deg is None:
-        return None
+        return NoiseModel(sigmas=pixel) if pixel else None
     if args.sigma_mm is None or args.sigma_deg is None:
         raise ValueError(
             "give both --sigma-mm and --sigma-deg, or neither (then the noise "
             "is estimated from the residuals)"
         )
     # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
-    return NoiseModel(args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0))
+    return NoiseModel(
+        args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0), sigmas=pixel
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

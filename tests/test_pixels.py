@@ -259,7 +259,13 @@ def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path,
     assert main(args) == 2
     err = capsys.readouterr().err
     assert "kinfw calibrate: error: " in err and "camera 'flange' has no intrinsics" in err
-    assert main([*args, "--camera", f"flange={tmp_path / 'cam.json'}"]) == 0
+    camera = ["--camera", f"flange={tmp_path / 'cam.json'}"]
+    assert main([*args, *camera, "--sigma-mm", "1", "--sigma-deg", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert "no sigma for component 'pixel'" in err and "--sigma-px" in err
+    assert main([*args, *camera, "--sigma-px", "0.5"]) == 0
+    assert "0.5 px (given)" in capsys.readouterr().out
+    assert main([*args, *camera]) == 0
     out = capsys.readouterr().out
     assert "px (estimated)" in out
     calibrated = load_robot(tmp_path / "cal.urdf")
