@@ -28,7 +28,13 @@ from kinfw.measurements import DatasetError, Measurements, TargetObservations
 from kinfw.robot import Robot
 from kinfw.transforms import average_transform, inverse_transform, rotation_angle
 
-__all__ = ["CameraCalibration", "CamerasResult", "calibrate_cameras", "camera_mount"]
+__all__ = [
+    "CameraCalibration",
+    "CamerasResult",
+    "calibrate_cameras",
+    "camera_mount",
+    "target_views",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,6 +131,17 @@ def _solve_one(
     )
 
 
+def target_views(measurements: Measurements) -> tuple[TargetObservations, ...]:
+    """The ``target`` groups, and each ``pixels`` group as the target poses of its
+    images from PnP (:func:`kinfw.observations.pixels.target_observations_from_pixels`)."""
+    from kinfw.observations.pixels import target_observations_from_pixels
+
+    return (
+        *measurements.targets,
+        *(target_observations_from_pixels(g) for g in measurements.groups("pixels")),
+    )
+
+
 def calibrate_cameras(
     robot: Robot, measurements: Measurements, *, rng: np.random.Generator | None = None
 ) -> CamerasResult:
@@ -135,22 +152,26 @@ def calibrate_cameras(
     robot : Robot
         Kinematics to trust (the stage-1 calibrated URDF, or the nominal one).
     measurements : Measurements
-        ``target`` observations (``camera_T_target``); other kinds are ignored.
+        ``target`` observations (``camera_T_target``) and ``pixels`` observations (their
+        images' PnP poses, :func:`target_views`); other kinds are ignored.
     rng : numpy.random.Generator, optional
         For the solver's random restarts (reproducible by default).
 
     Raises
     ------
     DatasetError
-        No target observations, or a camera without a fixed mount; the solver's
+        No target or pixel observations, or a camera without a fixed mount; the solver's
         :class:`identification.axb.AXYBError` (a ``ValueError``) for too few or
         degenerate views, naming the camera.
     """
-    if not measurements.targets:
-        raise DatasetError(f"{measurements.source}: no 'target' observations for stage 2")
+    views = target_views(measurements)
+    if not views:
+        raise DatasetError(
+            f"{measurements.source}: no 'target' or 'pixels' observations for stage 2"
+        )
     rng = np.random.default_rng(0) if rng is None else rng
     cameras = []
-    for group in measurements.targets:
+    for group in views:
         try:
             cameras.append(_solve_one(robot, group, measurements, rng))
         except ValueError as exc:

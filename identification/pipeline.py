@@ -89,13 +89,15 @@ def calibrate(
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
     progress: Callable[[str], None] | None = None,
+    refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
     1. Closed form (Shih et al. section 4) when the data has one-joint-at-a-time
        ``pose`` observations in the root frame; it rewrites the joints on their paths.
-    2. Hand-eye (section 5; Hirsh et al.) when it has ``target`` observations: each
-       camera's fixed mount and the target pose, on the kinematics so far.
+    2. Hand-eye (section 5; Hirsh et al.) when it has ``target`` or ``pixels``
+       observations (these through each image's PnP pose): each camera's fixed mount
+       and the target pose, on the kinematics so far.
     3. With ``method="refine"``: the joint nonlinear least squares over every unknown and
        every observation (:func:`identification.refine.refine`), started from 1-2 (or
        from the nominal URDF when they could not run), then exported.
@@ -122,6 +124,9 @@ def calibrate(
     progress : callable, optional
         Called with a one-line message after each stage (the command line prints them);
         the library itself stays quiet.
+    refine_intrinsics : bool or tuple of str
+        Cameras of ``pixels`` observations whose intrinsics the refinement estimates
+        too (True: all; :func:`identification.refine.refine`).
 
     Checks, before any estimation (each raises a :class:`DatasetError` naming the
     file, the joints or frames and the fix):
@@ -162,12 +167,18 @@ def calibrate(
         # every joint on a measured path must move, or its geometry is not observed
         if parameters in ("full", "offsets"):
             check_joint_motion(data, observed_joints(data, nominal))
-        cameras_seen = {g.camera for g in data.targets}
+        cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
         smaller = None
         if parameters == "full":
             smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
         check_redundancy(
-            build_problem(nominal, data, parameters=parameters, prior=prior),
+            build_problem(
+                nominal,
+                data,
+                parameters=parameters,
+                prior=prior,
+                refine_intrinsics=refine_intrinsics,
+            ),
             noise_given=noise is not None,
             n_samples=data.n_samples,
             source=data.source,
@@ -193,7 +204,7 @@ def calibrate(
                 f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
                 f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm"
             )
-    if data.targets and parameters != "none":
+    if (data.targets or data.groups("pixels")) and parameters != "none":
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
         mounts: dict[str, list[NDArray]] = {}
         for c in cameras.cameras:  # a camera that saw several targets: average its mounts
@@ -217,6 +228,7 @@ def calibrate(
             loss=loss,
             parameters=parameters,
             prior=prior,
+            refine_intrinsics=refine_intrinsics,
         )
         # a smaller set, or a prior, is a deliberately restricted model (baselines, the
         # model choice's candidates): its residuals are expected to show what it leaves out

@@ -118,6 +118,7 @@ def refine(
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
     known: tuple[Unknown, ...] = (),
+    refine_intrinsics: bool | tuple[str, ...] = (),
     reject: float | None = REJECT_Z,
     max_reject_fraction: float = MAX_REJECT_FRACTION,
     max_reject_rounds: int = 5,
@@ -167,6 +168,12 @@ def refine(
     known : tuple of Unknown
         Start values of extra unknowns (targets, frames, markers, offsets) instead of
         estimating them from these data.
+    refine_intrinsics : bool or tuple of str
+        Cameras (frames) of ``pixels`` observations whose 9 intrinsics (fx, fy, cx, cy,
+        k1, k2, p1, p2, k3) are estimated too, started from the data's; True: every
+        camera; default none (the intrinsics are known). What the images cannot
+        determine (k3 with the board always near the image centre) is reported as
+        unidentifiable and left at its start.
     reject : float or None
         With a robust loss: the rejection quantile, as a standard-normal ``z`` (default
         3.09, the 99.9 % quantile); observations whose whitened residual norm is beyond
@@ -242,6 +249,7 @@ def refine(
             parameters=parameters,
             prior=prior,
             known=known,
+            refine_intrinsics=refine_intrinsics,
         )
 
     result, problem, r = fit(measurements)
@@ -378,6 +386,7 @@ def _fit(
     parameters: str | tuple[str, ...],
     prior: tuple[float, float] | None,
     known: tuple[Unknown, ...],
+    refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> tuple[RefineResult, LeastSquaresProblem, NDArray]:
     """One robust fit of every observation of ``measurements`` (see :func:`refine`):
     the result, the problem and the final whitened residuals."""
@@ -390,10 +399,19 @@ def _fit(
         parameters=parameters,
         prior=prior,
         known=known,
+        refine_intrinsics=refine_intrinsics,
     )
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
-    sigma = noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True)
+    for c in {c for g in problem.groups for c in g.components} if given else ():
+        try:
+            noise.sigma(c)
+        except KeyError as exc:  # a user's noise model that misses a component of the data
+            hint = "; on the command line --sigma-px" if c.unit == "px" else ""
+            raise ValueError(f"{measurements.source}: {exc.args[0]}{hint}") from None
+    sigma = (
+        noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
+    )
     k = thresholds(problem.obs_components, loss_scale)
     x = np.zeros(P)
     iterations, converged = 0, False
@@ -429,6 +447,15 @@ def _fit(
     covariance, ident = covariance_and_identifiability(
         Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements, problem.model0
     )
+    # blocks that know when a full-rank estimate is still not determined (intrinsics)
+    poor = tuple(
+        item
+        for b, s in zip(problem.blocks, problem.slices, strict=True)
+        if b.free.any()
+        for item in b.undetermined(x[s], covariance[s, s])
+    )
+    if poor:
+        ident = replace(ident, unidentifiable=(*ident.unidentifiable, *poor))
     flagged = observation_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
     residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma, flagged)
     result = RefineResult(

@@ -133,6 +133,15 @@ class Block:
     def describe(self) -> str:
         return f"{self.key.kind} {self.key.name!r}"
 
+    def undetermined(
+        self, d: NDArray[np.float64], covariance: NDArray[np.float64]
+    ) -> tuple[tuple[tuple[ParameterName, ...], str], ...]:
+        """Entries the fit left poorly determined though the Jacobian has full rank
+        (``d`` the estimate's chart coordinates, ``covariance`` the block's (size, size)
+        covariance): ``((names, why), ...)``, added to the identifiability report.
+        None by default (the rank test of the diagnostics decides)."""
+        return ()
+
 
 @dataclass(frozen=True, slots=True)
 class RigidFrameBlock(Block):

@@ -11,6 +11,7 @@ so (the report is for people). Parameter units come from the parameter blocks
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -34,6 +35,7 @@ from kinfw.calibration_sections import (
     ParameterRow,
     RefineSection,
     RejectedRow,
+    ReprojectionSection,
     TargetEstimate,
 )
 from kinfw.files import write_text_atomic
@@ -71,7 +73,9 @@ class GroupErrorSummary:
     """Errors of a model on one observation group (see
     :meth:`verification.accuracy.GroupErrors.summary`): position norm mean, RMS and max
     (mm), rotation mean, RMS and max (deg, NaN without orientation), and the mean and
-    std of ``|error|`` per axis x, y, z (mm, Shih et al. Table 4)."""
+    std of ``|error|`` per axis x, y, z (mm, Shih et al. Table 4); for image points
+    (``pixels``: positions NaN, the per-axis arrays null in the file) the RMS and max
+    pixel error (px)."""
 
     frame: str
     kind: str
@@ -85,6 +89,8 @@ class GroupErrorSummary:
     rotation_max_deg: float
     abs_mean_xyz_mm: tuple[float, float, float]
     abs_std_xyz_mm: tuple[float, float, float]
+    pixel_rms_px: float | None = None
+    pixel_max_px: float | None = None
 
     _NUMBERS: ClassVar[tuple[str, ...]] = (
         "position_mean_mm",
@@ -106,29 +112,45 @@ class GroupErrorSummary:
         return f"{self.frame}{marker} ({self.kind})"
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready; a per-axis array that does not apply (NaN: image points) is null."""
+        pixels = (
+            {}
+            if self.pixel_rms_px is None
+            else {"pixel_rms_px": self.pixel_rms_px, "pixel_max_px": self.pixel_max_px}
+        )
         return {
             "frame": self.frame,
             "kind": self.kind,
             "marker": self.marker,
             "n": self.n,
             **{k: getattr(self, k) for k in self._NUMBERS},
-            "abs_mean_xyz_mm": list(self.abs_mean_xyz_mm),
-            "abs_std_xyz_mm": list(self.abs_std_xyz_mm),
+            **{
+                k: None if any(math.isnan(v) for v in getattr(self, k)) else list(getattr(self, k))
+                for k in ("abs_mean_xyz_mm", "abs_std_xyz_mm")
+            },
+            **pixels,
         }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> GroupErrorSummary:
         doc = r.obj(doc, at)
+
+        def xyz(k: str) -> tuple[float, ...]:
+            value = r.value(doc, k, at, optional=True)
+            if value is None:
+                return (math.nan,) * 3
+            return tuple(r.array(value, r.path(at, k), (3,)).tolist())
+
         return cls(
             r.string(doc, "frame", at),
             r.string(doc, "kind", at),
             r.string(doc, "marker", at, optional=True),
             r.integer(doc, "n", at),
             *(r.number(doc, k, at) for k in cls._NUMBERS),
-            *(
-                tuple(r.array(r.value(doc, k, at), r.path(at, k), (3,)).tolist())
-                for k in ("abs_mean_xyz_mm", "abs_std_xyz_mm")
-            ),
+            xyz("abs_mean_xyz_mm"),
+            xyz("abs_std_xyz_mm"),
+            r.number(doc, "pixel_rms_px", at, optional=True),
+            r.number(doc, "pixel_max_px", at, optional=True),
         )
 
 
@@ -161,7 +183,17 @@ class StageErrors:
 
     @classmethod
     def of(cls, stage: str, errors: tuple[GroupErrorSummary, ...]) -> StageErrors:
-        return cls(stage, tuple((g.group, g.position_rms_mm) for g in errors))
+        """Per group its position RMS (mm); image points (``pixels``) their pixel RMS,
+        labelled ``"... [px]"``."""
+        return cls(
+            stage,
+            tuple(
+                (g.group, g.position_rms_mm)
+                if g.pixel_rms_px is None
+                else (f"{g.group} [px]", g.pixel_rms_px)
+                for g in errors
+            ),
+        )
 
 
 def _stages_to_dict(stages: tuple[StageErrors, ...]) -> dict[str, dict[str, float]]:
@@ -204,6 +236,9 @@ class CalibrationReport:
         Path of the sidecar written with the calibrated URDF (set by the command line).
     errors_vs_truth_held_out, position_rms_vs_truth_held_out_by_stage : optional
         Against the noise-free true robot, in a simulation (``kinfw demo``).
+    reprojection : ReprojectionSection or None
+        Reprojection errors (px) of ``pixels`` observations per camera and image, the
+        worst images named, against the calibration.
     """
 
     created: str
@@ -223,6 +258,7 @@ class CalibrationReport:
     sidecar: str | None = None
     errors_vs_truth_held_out: tuple[BeforeAfter, ...] | None = None
     position_rms_vs_truth_held_out_by_stage: tuple[StageErrors, ...] | None = None
+    reprojection: ReprojectionSection | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration-report"
     VERSION: ClassVar[int] = 1
@@ -261,6 +297,8 @@ class CalibrationReport:
             doc["position_rms_mm_vs_truth_held_out_by_stage"] = _stages_to_dict(
                 self.position_rms_vs_truth_held_out_by_stage
             )
+        if self.reprojection is not None:
+            doc["reprojection_px"] = self.reprojection.to_dict()
         return doc
 
     @classmethod
@@ -301,6 +339,7 @@ class CalibrationReport:
             r.string(doc, "sidecar", "", optional=True),
             rows("errors_vs_truth_held_out"),
             _stages_from(doc, truth_key, r) if truth_key in doc else None,
+            section("reprojection_px", ReprojectionSection),
         )
 
 

@@ -14,16 +14,19 @@ from kinfw.calibration_file import CalibratedUnknown, DocReader, NoiseSummary
 
 __all__ = [
     "CameraMount",
+    "CameraReprojection",
     "ClosedFormSection",
     "Correlation",
     "DownweightedRow",
     "ExportSection",
     "HandEyeSection",
     "IdentifiabilitySummary",
+    "ImageReprojection",
     "KinematicValue",
     "NotIdentifiable",
     "ParameterRow",
     "RefineSection",
+    "ReprojectionSection",
     "TargetEstimate",
 ]
 
@@ -358,6 +361,7 @@ def _observation_dict(row: Any) -> dict[str, Any]:
         "marker": row.marker,
         "position_residual_mm": row.position_residual_mm,
         "rotation_residual_deg": row.rotation_residual_deg,
+        **({} if row.pixel_residual_px is None else {"pixel_residual_px": row.pixel_residual_px}),
     }
 
 
@@ -373,19 +377,26 @@ def _observation_fields(doc: Any, r: DocReader, at: str, *, position_optional: b
     )
 
 
+def _pixel_field(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
+    """The optional ``pixel_residual_px`` (a ``pixels`` observation's reprojection error)."""
+    return {"pixel_residual_px": r.number(doc, "pixel_residual_px", at, optional=True)}
+
+
 @dataclass(frozen=True, slots=True)
 class DownweightedRow:
     """An observation the robust loss down-weighted: ``sample`` (index into the data
     file's samples, from 0), kind, frame (camera for targets), marker, residual norms
-    (mm; deg, None without orientation) and the weight it got (1 = full)."""
+    (mm, None for a kind without lengths; deg, None without orientation; px for an
+    image point, else None) and the weight it got (1 = full)."""
 
     sample: int
     kind: str
     frame: str
     marker: str | None
-    position_residual_mm: float
+    position_residual_mm: float | None
     rotation_residual_deg: float | None
     weight: float
+    pixel_residual_px: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "weight": self.weight}
@@ -394,8 +405,9 @@ class DownweightedRow:
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> DownweightedRow:
         doc = r.obj(doc, at)
         return cls(
-            *_observation_fields(doc, r, at, position_optional=False),
+            *_observation_fields(doc, r, at, position_optional=True),
             r.number(doc, "weight", at),
+            **_pixel_field(doc, r, at),
         )
 
 
@@ -404,8 +416,9 @@ class RejectedRow:
     """An observation excluded from the fit as a gross error
     (:class:`identification.refine.RejectedObservation`): ``sample`` (index into the
     data file's samples, from 0), kind, frame (camera for targets), marker, residual
-    norms against the calibration (mm; deg, None without orientation), and how far
-    beyond the rejection threshold its whitened norm was (``excess``, > 1)."""
+    norms against the calibration (mm; deg, None without orientation; px for an image
+    point), and how far beyond the rejection threshold its whitened norm was
+    (``excess``, > 1)."""
 
     sample: int
     kind: str
@@ -414,6 +427,7 @@ class RejectedRow:
     position_residual_mm: float | None
     rotation_residual_deg: float | None
     excess: float
+    pixel_residual_px: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "excess": self.excess}
@@ -424,6 +438,7 @@ class RejectedRow:
         return cls(
             *_observation_fields(doc, r, at, position_optional=True),
             r.number(doc, "excess", at),
+            **_pixel_field(doc, r, at),
         )
 
 
@@ -548,3 +563,106 @@ class ExportSection:
             m = r.obj(m, m_at)
             moved.append((r.string(m, "link", m_at), r.number(m, "shift_mm", m_at)))
         return cls(r.array(r.value(doc, "w_T_root", at), f"{at}.w_T_root", (4, 4)), tuple(moved))
+
+
+# -- reprojection (pixels) ---------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class ImageReprojection:
+    """One image's reprojection error against the calibration: the camera and target,
+    ``sample`` (index into the data file's samples, from 0), the image's label (its
+    file name, or ``"sample i"``), its points, and the RMS and max of the points' error
+    norms (px)."""
+
+    camera: str
+    target: str
+    sample: int
+    image: str
+    n_points: int
+    rms_px: float
+    max_px: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "camera": self.camera,
+            "target": self.target,
+            "sample": self.sample,
+            "image": self.image,
+            "n_points": self.n_points,
+            "rms_px": self.rms_px,
+            "max_px": self.max_px,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, r: DocReader, at: str) -> ImageReprojection:
+        doc = r.obj(doc, at)
+        return cls(
+            r.string(doc, "camera", at),
+            r.string(doc, "target", at),
+            r.integer(doc, "sample", at),
+            r.string(doc, "image", at),
+            r.integer(doc, "n_points", at),
+            r.number(doc, "rms_px", at),
+            r.number(doc, "max_px", at),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class CameraReprojection:
+    """A camera's reprojection error over all its images: RMS and max of the points'
+    error norms (px), and the largest RMS of one image (px)."""
+
+    camera: str
+    n_images: int
+    n_points: int
+    rms_px: float
+    max_px: float
+    worst_image_rms_px: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "camera": self.camera,
+            "n_images": self.n_images,
+            "n_points": self.n_points,
+            "rms_px": self.rms_px,
+            "max_px": self.max_px,
+            "worst_image_rms_px": self.worst_image_rms_px,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, r: DocReader, at: str) -> CameraReprojection:
+        doc = r.obj(doc, at)
+        return cls(
+            r.string(doc, "camera", at),
+            r.integer(doc, "n_images", at),
+            r.integer(doc, "n_points", at),
+            r.number(doc, "rms_px", at),
+            r.number(doc, "max_px", at),
+            r.number(doc, "worst_image_rms_px", at),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class ReprojectionSection:
+    """Reprojection errors of ``pixels`` observations against the calibration (the
+    calibrated kinematics, target poses and intrinsics), in pixels: per camera, per
+    image, and the worst images by RMS (worst first)."""
+
+    cameras: tuple[CameraReprojection, ...]
+    images: tuple[ImageReprojection, ...]
+    worst: tuple[ImageReprojection, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "cameras": [c.to_dict() for c in self.cameras],
+            "worst_images": [i.to_dict() for i in self.worst],
+            "images": [i.to_dict() for i in self.images],
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, r: DocReader, at: str) -> ReprojectionSection:
+        doc = r.obj(doc, at)
+        return cls(
+            _rows(CameraReprojection, doc, "cameras", r, at),
+            _rows(ImageReprojection, doc, "images", r, at),
+            _rows(ImageReprojection, doc, "worst_images", r, at),
+        )

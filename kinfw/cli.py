@@ -133,6 +133,7 @@ _MM = _number(float, low=0.0, unit="(mm)")
 _DEG = _number(float, low=0.0, unit="(deg)")
 _POSITIVE_MM = _number(float, low=0.0, low_open=True, unit="(mm)")
 _POSITIVE_DEG = _number(float, low=0.0, low_open=True, unit="(deg)")
+_POSITIVE_PX = _number(float, low=0.0, low_open=True, unit="(px)")
 _COUNT = _number(int, low=1)
 _SEED = _number(int, low=0)
 
@@ -173,6 +174,12 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         help="orientation noise: angle sigma about a random axis, deg (default: estimated)",
     )
     p.add_argument(
+        "--sigma-px",
+        type=_POSITIVE_PX,
+        help="pixel noise sigma per image coordinate of 'pixels' observations, px "
+        "(default: estimated)",
+    )
+    p.add_argument(
         "--loss",
         choices=("huber", "linear", "cauchy"),
         default="huber",
@@ -186,6 +193,27 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         "the nominal: sigma of lengths, mm (for small datasets)",
     )
     p.add_argument("--prior-deg", type=_POSITIVE_DEG, help="... and of angles, deg")
+
+
+def _frame_file(text: str) -> tuple[str, Path]:
+    """``FRAME=FILE`` of ``--camera``."""
+    frame, sep, file = text.partition("=")
+    if not sep or not frame or not file:
+        raise argparse.ArgumentTypeError(f"expected FRAME=FILE, got {text!r}")
+    return frame, Path(file)
+
+
+def _add_camera_option(p: argparse.ArgumentParser) -> None:
+    """``--camera FRAME=FILE`` (repeatable): intrinsics for ``pixels`` observations."""
+    p.add_argument(
+        "--camera",
+        action="append",
+        type=_frame_file,
+        metavar="FRAME=FILE",
+        help="intrinsics of the camera frame FRAME for 'pixels' observations, from a ROS "
+        "camera_info / OpenCV YAML or JSON file; overrides or adds to the data file's "
+        '"cameras" section (repeatable)',
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -269,6 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="ignore the sidecar: fit nuisance frames to these data",
     )
+    _add_camera_option(p)
     p.add_argument(
         "--json", action="store_true", help="print the report as JSON, with per-sample errors"
     )
@@ -302,6 +331,15 @@ def build_parser() -> argparse.ArgumentParser:
         "those joints' CPC parameters)",
     )
     _add_fit_options(p)
+    _add_camera_option(p)
+    p.add_argument(
+        "--refine-intrinsics",
+        nargs="*",
+        metavar="FRAME",
+        help="also estimate the intrinsics (fx fy cx cy k1 k2 p1 p2 k3) of these cameras "
+        "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
+        "the report says which the images do not determine",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate)
 
@@ -339,6 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
         "held-out scores (and list them)",
     )
     _add_fit_options(p)
+    _add_camera_option(p)
     p.add_argument(
         "--jobs",
         type=_COUNT,

@@ -18,7 +18,7 @@ import logging
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from kinfw.files import write_text_atomic
 
@@ -152,6 +152,7 @@ def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
 def accuracy_table(report_dict: dict) -> str:
     """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
     rows = []
+    has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
     for g in report_dict["groups"]:
         mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
         rows.append(
@@ -165,6 +166,7 @@ def accuracy_table(report_dict: dict) -> str:
                 f"{g['rotation_rms_deg']:.4f}",
                 f"{g['rotation_max_deg']:.4f}",
                 " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+                *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
             ]
         )
     header = [
@@ -177,18 +179,33 @@ def accuracy_table(report_dict: dict) -> str:
         "rot RMS deg",
         "rot max deg",
         "|e| x y z mean/std mm (Table 4)",
+        *(["pixel RMS px"] if has_px else []),
     ]
     return format_table(rows, header)
 
 
+def read_data(path: Path, args: argparse.Namespace) -> Any:
+    """The measurement file ``path`` with the intrinsics of ``--camera FRAME=FILE``
+    (override or add to its ``"cameras"`` section)."""
+    from kinfw.camera_model import CameraError, read_camera
+    from kinfw.measurements import DatasetError, read_measurements
+
+    cameras = {}
+    for frame, file in getattr(args, "camera", None) or ():
+        try:
+            cameras[frame] = read_camera(file)
+        except CameraError as exc:
+            raise DatasetError(f"--camera {frame}={file}: {exc}") from None
+    return read_measurements(path, cameras=cameras)
+
+
 def cmd_verify(args: argparse.Namespace) -> int:
     from kinfw.calibration_file import read_sidecar
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.accuracy import evaluate_model
 
     robot = load_robot(args.model)
-    data = read_measurements(args.data)
+    data = read_data(args.data, args)
     sidecar_path = args.sidecar or default_sidecar_path(args.model)
     sidecar = None
     if Path(sidecar_path).is_file() and not args.no_sidecar:
@@ -234,7 +251,6 @@ def default_sidecar_path(out: Path) -> Path:
 def cmd_view(args: argparse.Namespace) -> int:
 
     from kinfw.calibration_file import read_sidecar
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
 
@@ -242,7 +258,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         raise ValueError(f"--sample {args.sample}: give --data, the measurements to draw")
     nominal = load_robot(args.nominal)
     calibrated = load_robot(args.calibrated) if args.calibrated else None
-    data = read_measurements(args.data) if args.data else None
+    data = read_data(args.data, args) if args.data else None
     if args.sample is not None and not 0 <= args.sample < data.n_samples:
         raise ValueError(
             f"--sample {args.sample}: out of range, {args.data} has "

@@ -17,7 +17,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from kinfw.cli_commands import format_table, progress_printer
+from kinfw.cli_commands import format_table, progress_printer, read_data
 
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
@@ -71,26 +71,29 @@ def _prior_arg(args: argparse.Namespace):
 def _noise_arg(args: argparse.Namespace):
     from identification.refine import NoiseModel
 
+    sigma_px = getattr(args, "sigma_px", None)
+    pixel = {} if sigma_px is None else {"pixel": sigma_px}
     if args.sigma_mm is None and args.sigma_deg is None:
-        return None
+        return NoiseModel(sigmas=pixel) if pixel else None
     if args.sigma_mm is None or args.sigma_deg is None:
         raise ValueError(
             "give both --sigma-mm and --sigma-deg, or neither (then the noise "
             "is estimated from the residuals)"
         )
     # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
-    return NoiseModel(args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0))
+    return NoiseModel(
+        args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0), sigmas=pixel
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from kinfw.calibration_report import write_report
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.report import calibrate_to_files
 
     nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
-    held_out = read_measurements(args.holdout) if args.holdout else None
+    data = read_data(args.data, args)
+    held_out = read_data(args.holdout, args) if args.holdout else None
     noise, prior = _noise_arg(args), _prior_arg(args)
     choice = None
     parameters = "full" if args.params == "auto" else _params_arg(args.params)
@@ -112,6 +115,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         held_out=held_out,
         progress=progress_printer(),
         reason="given" if choice is None else choice.reason,
+        refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
     )
     if choice is not None:  # the choice goes to the report's notes (and the sidecar)
         report = dataclasses.replace(
@@ -135,12 +139,37 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
         _print_refine(report.refine, has_report=bool(args.report))
+    if report.reprojection is not None:
+        _print_reprojection(report.reprojection)
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def _print_reprojection(rep) -> None:
+    """Reprojection RMS per camera and the worst images (px, in-sample)."""
+    print("reprojection error on the calibration data (in-sample), px:")
+    rows = [
+        [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
+        for c in rep.cameras
+    ]
+    print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+    print(
+        "  worst images (RMS px): "
+        + ", ".join(
+            f"{i.image} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}" for i in rep.worst[:5]
+        )
+    )
+
+
+def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:
+    """``--refine-intrinsics``: absent (), given without frames True (every camera)."""
+    if frames is None:
+        return ()
+    return tuple(frames) if frames else True
 
 
 def _choice_table(choice) -> str:
@@ -172,8 +201,9 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     noise = ref.noise
     print(
         f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component "
-        f"({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component"
+        + ("" if noise.of("pixel") is None else f", {noise.of('pixel'):.3g} px")
+        + f" ({'estimated' if noise.estimated else 'given'}); reduced chi-square "
         f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
     )
     print(
@@ -186,7 +216,11 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
         sizes = [
             f"{v:.3g} {unit}"
-            for v, unit in ((row.position_residual_mm, "mm"), (row.rotation_residual_deg, "deg"))
+            for v, unit in (
+                (row.position_residual_mm, "mm"),
+                (row.rotation_residual_deg, "deg"),
+                (row.pixel_residual_px, "px"),
+            )
             if v is not None
         ]
         print(
@@ -200,12 +234,18 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
     for row in down[:5]:
         where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        rotation = (
-            "" if row.rotation_residual_deg is None else f", {row.rotation_residual_deg:.3g} deg"
-        )
+        sizes = [
+            f"{v:.3g} {unit}"
+            for v, unit in (
+                (row.position_residual_mm, "mm"),
+                (row.rotation_residual_deg, "deg"),
+                (row.pixel_residual_px, "px"),
+            )
+            if v is not None
+        ]
         print(
             f"    samples[{row.sample}] {where} ({row.kind}): residual "
-            f"{row.position_residual_mm:.3g} mm{rotation}, weight {row.weight:.2g}"
+            f"{', '.join(sizes)}, weight {row.weight:.2g}"
         )
     if len(down) > 5:
         print(
@@ -257,13 +297,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_crossval(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.measurements import read_measurements
     from kinfw.robot import load_robot
     from verification.crossval import BASELINES, crossvalidate
     from verification.studies import executor_for_jobs
 
     nominal = load_robot(args.urdf)
-    data = read_measurements(args.data)
+    data = read_data(args.data, args)
     sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
     prior = _prior_arg(args)
     watch = progress_printer()

@@ -11,13 +11,14 @@ from __future__ import annotations
 import json
 import logging
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw.camera_model import CameraError, CameraIntrinsics, intrinsics_from_dict
 from kinfw.files import write_text_atomic
 from kinfw.measurement_set import Measurements
 from kinfw.observations import kind_named, kind_of, kinds
@@ -55,13 +56,18 @@ def _columns_to_si(qs: NDArray[np.float64], units: Sequence[str]) -> NDArray[np.
     return out
 
 
-def read_measurements(path: str | Path) -> Measurements:
+def read_measurements(
+    path: str | Path, *, cameras: Mapping[str, CameraIntrinsics] | None = None
+) -> Measurements:
     """Read a ``kinfw-measurements`` JSON file (see the module docstring).
 
     Parameters
     ----------
     path : str or Path
         The file.
+    cameras : mapping of str to CameraIntrinsics, optional
+        Camera intrinsics by camera frame that override or add to the file's
+        ``"cameras"`` section (the CLI's ``--camera FRAME=FILE``).
 
     Returns
     -------
@@ -94,10 +100,31 @@ def read_measurements(path: str | Path) -> Measurements:
         raise DatasetError(
             f"{source}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
         ) from None
-    return measurements_from_dict(doc, source=source)
+    return measurements_from_dict(doc, source=source, cameras=cameras)
 
 
-def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Measurements:
+def _read_cameras(
+    p: ObservationReader, doc: dict[str, Any], given: Mapping[str, CameraIntrinsics] | None
+) -> dict[str, CameraIntrinsics]:
+    """The ``"cameras"`` section (frame -> intrinsics), updated by ``given``."""
+    out: dict[str, CameraIntrinsics] = {}
+    if doc.get("cameras") is not None:
+        section = p.obj(doc["cameras"], "cameras")
+        for frame, entry in section.items():
+            try:
+                out[frame] = intrinsics_from_dict(entry, f"{p.source}: cameras.{frame}")
+            except CameraError as exc:
+                raise DatasetError(str(exc)) from None
+    out.update(given or {})
+    return out
+
+
+def measurements_from_dict(
+    doc: dict[str, Any],
+    source: str = "<memory>",
+    *,
+    cameras: Mapping[str, CameraIntrinsics] | None = None,
+) -> Measurements:
     """Validate a parsed ``kinfw-measurements`` document and convert it to SI.
 
     Parameters
@@ -106,6 +133,8 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
         The JSON document (as from ``json.load``).
     source : str, optional
         Name of the file, for messages.
+    cameras : mapping of str to CameraIntrinsics, optional
+        Intrinsics that override or add to the document's ``"cameras"`` section.
 
     Returns
     -------
@@ -170,6 +199,7 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
 
     samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
     reader = ObservationReader(source, length_unit, default_measured_in)
+    reader.cameras = _read_cameras(p, doc, cameras)
     names = tuple(k.name for k in kinds())
     expected_kind = (
         ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
@@ -180,7 +210,7 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     # One entry per observation, flat; arrays are built once per group at the end.
     obs_group: list[int] = []
     obs_sample: list[int] = []
-    rows: list[list[float]] = []
+    rows: list[Any] = []
     group_of_key: dict[tuple[Any, ...], int] = {}
     marker_home: dict[str, tuple[str, str]] = {}  # marker -> (frame, where first seen)
 
@@ -239,9 +269,9 @@ def measurements_from_dict(doc: dict[str, Any], source: str = "<memory>") -> Mea
     sample_ids = np.array(obs_sample, dtype=np.int64)
     groups = []
     for (kind_name, key), members in zip(group_of_key, rows_of_group, strict=True):
-        data = np.array([rows[r] for r in members], dtype=float)
-        groups.append(kind_named(kind_name).group_from_rows(key, sample_ids[members], data))
-    out = Measurements(joint_names, qs, source=source).with_groups(groups)
+        parsed = [rows[r] for r in members]
+        groups.append(kind_named(kind_name).group_from_parsed(key, sample_ids[members], parsed))
+    out = Measurements(joint_names, qs, source=source, cameras=reader.cameras).with_groups(groups)
     logger.debug(
         "%s: %d samples, %d observations in %d groups",
         source,
@@ -283,9 +313,11 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     per_sample: list[list[dict[str, Any]]] = [[] for _ in range(m.n_samples)]
     frames_in = {kind_of(g).measured_in(g) for g in m.all_groups() if kind_of(g).has_measured_in}
     top_measured_in = next(iter(frames_in)) if len(frames_in) == 1 else None
+    cameras = dict(m.cameras)
     for g in m.all_groups():
-        for s, obs in zip(g.sample.tolist(), kind_of(g).to_dicts(g, top_measured_in), strict=True):
+        for s, obs in kind_of(g).sample_dicts(g, top_measured_in):
             per_sample[s].append(obs)
+        cameras.update(kind_of(g).cameras(g))
 
     empty = [i for i, obs in enumerate(per_sample) if not obs]
     if empty:
@@ -301,6 +333,8 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     }
     if top_measured_in is not None:
         doc["measured_in"] = top_measured_in
+    if cameras:
+        doc["cameras"] = {frame: c.to_dict() for frame, c in cameras.items()}
     doc["samples"] = [
         {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
     ]

@@ -7,8 +7,8 @@ checks against a robot are in :mod:`kinfw.measurement_checks`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,34 @@ from kinfw.observations.reader import DatasetError
 from kinfw.observations.target import TargetObservations
 
 __all__ = ["Measurements", "concatenate_measurements", "first_uses", "merge_same_key"]
+
+
+class FrozenMapping(Mapping[str, Any]):
+    """A read-only mapping (a copy of the given one) that pickles, unlike
+    ``types.MappingProxyType`` (datasets go to worker processes)."""
+
+    __slots__ = ("_items",)
+
+    def __init__(self, items: Mapping[str, Any] | None = None) -> None:
+        self._items = dict(items or {})
+
+    def __getitem__(self, key: str) -> Any:
+        return self._items[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __repr__(self) -> str:
+        return f"FrozenMapping({self._items!r})"
+
+    def __getstate__(self) -> dict[str, Any]:
+        return self._items
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self._items = dict(state)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -51,6 +79,9 @@ class Measurements:
         File path (or ``"<memory>"``) used in messages.
     others : tuple
         Groups of registered kinds other than the three built-in ones, first-seen order.
+    cameras : mapping of str to CameraIntrinsics
+        Camera intrinsics by camera frame (the file's ``"cameras"`` section; frames that
+        no observation uses are kept), read-only.
     """
 
     joint_names: tuple[str, ...]
@@ -60,9 +91,11 @@ class Measurements:
     points: tuple[PointObservations, ...] = ()
     source: str = "<memory>"
     others: tuple[Any, ...] = ()
+    cameras: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         src = self.source
+        object.__setattr__(self, "cameras", FrozenMapping(self.cameras))
         names = tuple(self.joint_names)
         if isinstance(self.joint_names, str) or not all(isinstance(n, str) for n in names):
             raise DatasetError(f"{src}: joint_names: expected a sequence of strings")
@@ -128,6 +161,13 @@ class Measurements:
         """Every observation group, kind by kind in registry order."""
         for kind in kinds():
             yield from self.groups(kind.name)
+
+    def with_cameras(self, cameras: Mapping[str, Any]) -> Measurements:
+        """The dataset with camera intrinsics added or replaced (by camera frame), in
+        :attr:`cameras` and in the groups that use them."""
+        merged = {**self.cameras, **cameras}
+        groups = [kind_of(g).with_cameras(g, merged) for g in self.all_groups()]
+        return self.with_groups(groups, cameras=merged)
 
     def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
         """The dataset with other observation groups (of any registered kinds), and
@@ -277,4 +317,5 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
         groups,
         qs=np.concatenate([p.q_of(names) for p in parts]),
         source=" + ".join(dict.fromkeys(p.source for p in parts)),
+        cameras={k: v for p in parts for k, v in p.cameras.items()},
     )

@@ -562,13 +562,14 @@ ERROR_CASES = [
         (*OBS, "kind"),
         "posture",
         "samples[1].observations[0].kind: expected one of 'pose', 'target', 'point', "
-        "'plane', got 'posture'",
+        "'plane', 'pixels', got 'posture'",
         id="kind",
     ),
     pytest.param(
         (*OBS, "kind"),
         DELETE,
-        "samples[1].observations[0].kind: missing; expected 'pose', 'target', 'point' or 'plane'",
+        "samples[1].observations[0].kind: missing; expected 'pose', 'target', 'point', "
+        "'plane' or 'pixels'",
         id="kind-missing",
     ),
     pytest.param(

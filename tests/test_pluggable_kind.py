@@ -294,7 +294,8 @@ def test_without_the_kind_registered_the_file_is_refused(tmp_path):
     from kinfw.measurements import DatasetError
 
     with pytest.raises(
-        DatasetError, match="kind: expected one of 'pose', 'target', 'point', 'plane', got 'sphere'"
+        DatasetError,
+        match="kind: expected one of 'pose', 'target', 'point', 'plane', 'pixels', got 'sphere'",
     ):
         read_measurements(path)
 

@@ -49,6 +49,9 @@ class GroupErrors:
         frame for ``target``).
     rotation_error_rad : ndarray, shape (m,)
         Rotation angle between measured and predicted orientation, rad; NaN for points.
+    pixel_error_px : ndarray, shape (m, 2), or None
+        Measured minus predicted pixels of image points (``pixels``), None for the
+        other kinds (their position and rotation errors are NaN).
     """
 
     frame: str
@@ -57,6 +60,7 @@ class GroupErrors:
     sample: NDArray[np.int64]
     position_error_m: NDArray[np.float64]
     rotation_error_rad: NDArray[np.float64]
+    pixel_error_px: NDArray[np.float64] | None = None
 
     @property
     def n(self) -> int:
@@ -74,11 +78,19 @@ class GroupErrors:
 
     def summary(self) -> dict[str, float | list[float]]:
         """Mean, RMS and max of the position norm (mm) and rotation (deg), and the
-        paper's Table 4 statistics: mean and std of ``|error|`` per axis x, y, z (mm)."""
+        paper's Table 4 statistics: mean and std of ``|error|`` per axis x, y, z (mm);
+        for image points also the RMS and max of the pixel error norm (px)."""
         p = self.position_norm_mm
         r = self.rotation_deg
         abs_axis = 1e3 * np.abs(self.position_error_m)
         has_rot = self.kind != "point"
+        pixels = {}
+        if self.pixel_error_px is not None:
+            e = np.linalg.norm(self.pixel_error_px, axis=1)
+            pixels = {
+                "pixel_rms_px": float(np.sqrt(np.mean(e**2))),
+                "pixel_max_px": float(e.max()),
+            }
         return {
             "n": self.n,
             "position_mean_mm": float(p.mean()),
@@ -89,6 +101,7 @@ class GroupErrors:
             "rotation_max_deg": float(r.max()) if has_rot else float("nan"),
             "abs_mean_xyz_mm": abs_axis.mean(axis=0).tolist(),
             "abs_std_xyz_mm": abs_axis.std(axis=0).tolist(),
+            **pixels,
         }
 
 
@@ -187,6 +200,7 @@ def evaluate_model(
         m = len(g.sample)
         position = np.full((m, 3), np.nan)
         rotation = np.full(m, np.nan)
+        pixel = None
         c0 = 0
         for c in g.components:
             rows = r[:, c0 : c0 + c.rows]
@@ -194,6 +208,10 @@ def evaluate_model(
                 position = rows
             elif c.name == "rotation":
                 rotation = c.magnitude(rows)
+            elif c.unit == "px":
+                pixel = rows
             c0 += c.rows
-        groups.append(GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position, rotation))
+        groups.append(
+            GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position, rotation, pixel)
+        )
     return AccuracyReport(tuple(groups), tuple(fitted))

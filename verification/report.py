@@ -47,6 +47,7 @@ from kinfw.measurements import DatasetError, Measurements
 from kinfw.observations import kind_named
 from kinfw.robot import Robot
 from verification.accuracy import evaluate_model
+from verification.reprojection import reprojection_section
 
 __all__ = [
     "before_after_rows",
@@ -165,8 +166,9 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
         observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
         measured minus predicted position; for a kind without positions, of its rows in
         metres, e.g. a plane contact's distance), ``rotation_residual_deg`` (angle between
-        measured and predicted orientation; None for points) and ``weight`` (the robust
-        loss's weight, 1 = full). Sorted by weight, then sample.
+        measured and predicted orientation; None for points), ``weight`` (the robust
+        loss's weight, 1 = full) and ``pixel_residual_px`` (an image point's
+        reprojection error, px; None for other kinds). Sorted by weight, then sample.
     """
     rows = []
     for g in result.residuals:
@@ -174,7 +176,9 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
         # a kind without positions (a plane contact's distance): its rows in metres
         units = {c.name: c.unit for c in kind_named(g.kind).components}
         lengths = [v for n, v in g.components if units[n] == "m"]
-        position_mm = 1e3 * np.linalg.norm(np.hstack(lengths)[rows_g], axis=1)
+        position_mm = 1e3 * np.linalg.norm(np.hstack(lengths)[rows_g], axis=1) if lengths else None
+        pixels = [v for n, v in g.components if units[n] == "px"]
+        pixel_px = np.linalg.norm(np.hstack(pixels)[rows_g], axis=1) if pixels else None
         rotation_deg = (
             None
             if g.rotation_rad is None
@@ -188,9 +192,10 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
                 g.kind,
                 g.frame,
                 g.marker,
-                float(position_mm[c]),
+                None if position_mm is None else float(position_mm[c]),
                 None if rotation_deg is None else float(rotation_deg[c]),
                 float(g.weight[k]),
+                None if pixel_px is None else float(pixel_px[c]),
             )
             for c, k in enumerate(rows_g)
         ]
@@ -224,6 +229,7 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
         p = o.residual("position")
         p = float(np.linalg.norm(lengths)) if p is None and lengths else p
         rot = o.residual("rotation")
+        pixels = [v for _, unit, v in o.residuals if unit == "px"]
         rows.append(
             RejectedRow(
                 o.sample,
@@ -233,6 +239,7 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
                 None if p is None else 1e3 * p,
                 None if rot is None else float(np.degrees(rot)),
                 o.excess,
+                float(np.linalg.norm(pixels)) if pixels else None,
             )
         )
     rows.sort(key=lambda row: (-row.excess, row.sample))
@@ -363,6 +370,9 @@ def calibration_report(
             tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3]))) for link, T in export.link_shifts),
         ),
         errors_held_out=None if held_out is None else held_out_rows,
+        reprojection=None
+        if calibration.refined is None
+        else reprojection_section(calibrated, data, calibration.refined.unknowns),
     )
 
 
@@ -476,6 +486,7 @@ def calibrate_to_files(
     held_out: Measurements | None = None,
     progress=None,
     reason: str = "given",
+    refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> tuple[CalibrationReport, Calibration]:
     """Calibrate (:func:`identification.pipeline.calibrate`), then write the calibrated
     URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
@@ -502,6 +513,7 @@ def calibrate_to_files(
         parameters=parameters,
         prior=prior,
         progress=progress,
+        refine_intrinsics=refine_intrinsics,
     )
     report = calibration_report(
         nominal,

@@ -286,7 +286,7 @@ def simulate(
     sigmas : mapping of str to float, optional
         Standard deviation per noise component name (``"position"``, ``"rotation"``, a
         kind's own), SI; a component not named takes ``noise_m`` (unit m) or
-        ``noise_rad`` (unit rad).
+        ``noise_rad`` (unit rad), or no noise (another unit: ``"pixel"`` in px).
 
     Returns
     -------
@@ -363,10 +363,8 @@ def simulate(
                     )
                 )
                 continue
-            noise = {
-                c.name: sigmas.get(c.name, noise_m if c.unit == "m" else noise_rad)
-                for c in kind.components
-            }
+            default = {"m": noise_m, "rad": noise_rad}
+            noise = {c.name: sigmas.get(c.name, default.get(c.unit, 0.0)) for c in kind.components}
             out.append(kind.simulate(g, truth, rng, noise))
         except MissingValue as exc:
             raise ValueError(

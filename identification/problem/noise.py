@@ -30,7 +30,7 @@ __all__ = [
 ]
 
 #: The component whose sigma a noise model uses for a component it does not name, by unit.
-DEFAULT_COMPONENT = {"m": "position", "rad": "rotation"}
+DEFAULT_COMPONENT = {"m": "position", "rad": "rotation", "px": "pixel"}
 
 
 @dataclass(frozen=True, slots=True, init=False)

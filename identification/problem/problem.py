@@ -23,7 +23,12 @@ from numpy.typing import NDArray
 from kinfw.blocks import Block, BlockKey, ParameterName
 from kinfw.chart import rigid_from_chart
 from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.measurements import Measurements, check_against_robot, robot_measurement_frames
+from kinfw.measurements import (
+    DatasetError,
+    Measurements,
+    check_against_robot,
+    robot_measurement_frames,
+)
 from kinfw.observations import ObservationKind, StartContext, kind_of
 from kinfw.observations.base import NoiseComponent
 from kinfw.robot import Robot
@@ -386,6 +391,27 @@ class LeastSquaresProblem:
         )
 
 
+def _free_intrinsics(
+    blocks: list[Block], cameras: bool | Sequence[str], source: str
+) -> list[Block]:
+    """``blocks`` with the intrinsics blocks of ``cameras`` (True: all) freed."""
+    have = {b.key.name for b in blocks if b.key.kind == "intrinsics"}
+    names = have if cameras is True else set(cameras or ())
+    missing = sorted(names - have)
+    if missing:
+        seen = ", ".join(repr(c) for c in sorted(have)) or "none"
+        raise DatasetError(
+            f"{source}: refine_intrinsics: no 'pixels' observations of camera "
+            f"{missing[0]!r} (cameras with pixels: {seen})"
+        )
+    return [
+        b.with_free(np.ones(b.size, bool))
+        if b.key.kind == "intrinsics" and b.key.name in names
+        else b
+        for b in blocks
+    ]
+
+
 def build_problem(
     robot: Robot,
     measurements: Measurements,
@@ -395,12 +421,15 @@ def build_problem(
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
     known: tuple[Unknown, ...] = (),
+    refine_intrinsics: bool | Sequence[str] = (),
 ) -> LeastSquaresProblem:
     """Assemble the least-squares problem (see :func:`identification.refine.refine`).
 
     ``known`` gives start values for unknown blocks (e.g. a previous calibration's target
     pose and markers) instead of estimating them from these data; ``targets`` gives
-    target poses ``root_T_target`` the same way.
+    target poses ``root_T_target`` the same way. ``refine_intrinsics`` frees the
+    intrinsics blocks (``BlockKey("intrinsics", camera)``, fixed by default) of the
+    named cameras, or of every camera when True.
     """
     measurements = check_against_robot(measurements, robot)
     start = robot if start is None else start
@@ -433,6 +462,7 @@ def build_problem(
                 (BlockKey("frame", model_frame), f"pose of the root link in {model_frame!r}")
             )
     unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
+    unknown = _free_intrinsics(unknown, refine_intrinsics, measurements.source)
     blocks = (
         *robot_blocks(model0, robot, groups, model_frame, parameters, with_prior=prior is not None),
         *unknown,

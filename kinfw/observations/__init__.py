@@ -1,9 +1,10 @@
 """The registry of observation kinds.
 
-Every kind of observation (``pose``, ``target``, ``point``, ``plane``, and any kind registered by an
-application or a test) is one :class:`~kinfw.observations.base.ObservationKind`. The
-measurement files, the estimation problem and verification look kinds up here and
-loop over :func:`kinds`; none of them branches on a kind's name.
+Every kind of observation (``pose``, ``target``, ``point``, ``plane``, ``pixels``, and any
+kind registered by an application or a test) is one
+:class:`~kinfw.observations.base.ObservationKind`. The measurement files, the estimation
+problem and verification look kinds up here and loop over :func:`kinds`; none of them
+branches on a kind's name.
 
 Adding a kind: write its group dataclass and its :class:`ObservationKind` subclass
 (see ``docs/architecture.md`` for a worked example), then ``register_kind(MyKind())``.
@@ -20,6 +21,7 @@ from kinfw.observations.base import (
     SymbolicContext,
     UnknownRequest,
 )
+from kinfw.observations.pixels import PixelKind, PixelObservations
 from kinfw.observations.plane import PlaneContacts, PlaneKind
 from kinfw.observations.point import PointKind, PointObservations
 from kinfw.observations.pose import PoseKind, PoseObservations
@@ -31,6 +33,7 @@ __all__ = [
     "NoiseComponent",
     "ObservationKind",
     "ObservationReader",
+    "PixelObservations",
     "PlaneContacts",
     "PointObservations",
     "PoseObservations",
@@ -73,7 +76,8 @@ def unregister_kind(name: str) -> None:
 
 
 def kinds() -> tuple[ObservationKind, ...]:
-    """Every registered kind, built-ins first (``pose``, ``target``, ``point``, ``plane``)."""
+    """Every registered kind, built-ins first (``pose``, ``target``, ``point``, ``plane``,
+    ``pixels``)."""
     return tuple(_REGISTRY.values())
 
 
@@ -97,6 +101,6 @@ def kind_of(group: Any) -> ObservationKind:
     return kind
 
 
-for _kind in (PoseKind(), TargetKind(), PointKind(), PlaneKind()):
+for _kind in (PoseKind(), TargetKind(), PointKind(), PlaneKind(), PixelKind()):
     register_kind(_kind)
 _BUILT_IN = frozenset(_REGISTRY)

@@ -333,10 +333,34 @@ class ObservationKind:
         """The group of observations with one key: rows (m, width) from :meth:`parse`."""
         raise NotImplementedError
 
+    def group_from_parsed(
+        self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], parsed: list[Any]
+    ) -> Any:
+        """The group of the file observations with one key: ``parsed`` what :meth:`parse`
+        returned for each (``sample`` (k,) their samples). Default: the rows stacked into
+        (k, width) for :meth:`group_from_rows`; a kind whose file observation is several
+        rows (an image of many points: ``pixels``) returns its own row objects from
+        :meth:`parse` and builds the group here."""
+        return self.group_from_rows(key, sample, np.array(parsed, dtype=float))
+
     def to_dicts(self, group: Any, top_measured_in: str | None) -> list[dict[str, Any]]:
         """One JSON-ready dict per row (SI), in row order; ``top_measured_in`` is the
         file's top-level ``measured_in`` (leave it out of the dicts that have it)."""
         raise NotImplementedError
+
+    def sample_dicts(self, group: Any, top_measured_in: str | None) -> list[tuple[int, Any]]:
+        """``(sample, dict)`` per file observation: what the writer lists under each
+        sample. Default: :meth:`to_dicts` with each row's sample (one row, one dict)."""
+        return list(zip(group.sample.tolist(), self.to_dicts(group, top_measured_in), strict=True))
+
+    def cameras(self, group: Any) -> dict[str, Any]:
+        """Camera intrinsics the group uses, by camera frame (written to the file's
+        ``"cameras"`` section); none by default."""
+        return {}
+
+    def with_cameras(self, group: Any, cameras: Mapping[str, Any]) -> Any:
+        """The group with the intrinsics of ``cameras`` (by frame) where it uses them."""
+        return group
 
     def marker(self, key: tuple[tuple[str, Any], ...]) -> tuple[str, str] | None:
         """``(marker, frame)`` of a group key, for the one-frame-per-marker rule."""

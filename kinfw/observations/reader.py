@@ -70,6 +70,8 @@ class ObservationReader:
         #: quaternions read, and the norm deviations of those that were rounded
         self.quaternions = 0
         self.rounded: list[float] = []
+        #: camera intrinsics by frame (the file's "cameras" section and any given)
+        self.cameras: dict[str, Any] = {}
 
     def error(self, where: str, what: str) -> DatasetError:
         return DatasetError(
