@@ -4,7 +4,7 @@ robot's joint values, as ``pixels`` observations of a ``kinfw-measurements`` fil
 ::
 
     kinfw detect IMAGES... --board SPEC --joints JOINTS.csv --camera CAM.yaml
-                 [--frame CAMERA_FRAME] [--target NAME] [--allow-symmetric]
+                 --frame CAMERA_FRAME [--target NAME] [--allow-symmetric]
                  [--min-corners N] [--angle-unit rad|deg] --out DATA.json
 
 ``JOINTS.csv``: a header of joint names and one row of joint values per image, either in
@@ -69,8 +69,8 @@ def add_detect_parser(sub: Any, count_type: Any) -> None:
     )
     p.add_argument(
         "--frame",
-        default=None,
-        help="URDF frame of the camera's optical frame (default: the camera's name in --camera)",
+        required=True,
+        help="URDF frame of the camera's optical frame (z forward, x right, y down)",
     )
     p.add_argument("--target", default="board", help="the board's target name (default board)")
     p.add_argument(
@@ -202,7 +202,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
 
     board = parse_board(args.board)
     camera = read_camera(args.camera)
-    frame = args.frame if args.frame is not None else camera.name
+    frame = args.frame
     if not frame.strip():
         raise ValueError("--frame: empty camera frame name")
     if not args.target.strip():

@@ -22,6 +22,7 @@ from kinfw.camera_model import CameraIntrinsics
 from kinfw.cli import main
 from kinfw.cli_detect import read_joint_rows
 from kinfw.detect import Detector
+from kinfw.measurements import measurements_to_dict, read_measurements
 from verification.board_images import render_board, true_corners
 
 CAMERA = CameraIntrinsics(
@@ -293,6 +294,11 @@ def test_detect_command_end_to_end(tmp_path, capsys, board):
         camera_T_board = poses[k]
         reprojected = CAMERA.project(points @ camera_T_board[:3, :3].T + camera_T_board[:3, 3])
         assert rms(uv, reprojected) < 0.1
+    # the pixels kind reads it: cameras, points and pixels as written, one image per sample
+    data = read_measurements(out)
+    assert dict(data.cameras) == {"left_camera": CAMERA}
+    assert data.joint_names == ("tilt", "pan") and len(data.qs) == 3
+    assert measurements_to_dict(data) == doc
 
 
 def test_detect_command_errors(tmp_path, capsys):
@@ -306,7 +312,7 @@ def test_detect_command_errors(tmp_path, capsys):
         board = CHESS.spec() if board is None else board
         code = main(
             ["detect", *map(str, images), "--board", board, "--joints", str(joints),
-             "--camera", str(camera_file), "--out", str(out), *extra]
+             "--camera", str(camera_file), "--frame", "cam", "--out", str(out), *extra]
         )  # fmt: skip
         return code, capsys.readouterr().err
 
