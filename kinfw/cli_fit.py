@@ -22,6 +22,7 @@ from kinfw.cli_commands import format_table, progress_printer, read_data
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
     from kinfw.calibration_report import RefineSection, StageErrors
+    from kinfw.calibration_sections import DownweightedRow, RejectedRow
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
@@ -213,19 +214,10 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
     for row in ref.rejected or ():
-        where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        sizes = [
-            f"{v:.3g} {unit}"
-            for v, unit in (
-                (row.position_residual_mm, "mm"),
-                (row.rotation_residual_deg, "deg"),
-                (row.pixel_residual_px, "px"),
-            )
-            if v is not None
-        ]
         print(
-            f"  rejected as a gross error: samples[{row.sample}] {where} ({row.kind}): "
-            f"residual {', '.join(sizes)}, {row.excess:.3g} x the threshold (refitted without it)"
+            f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
+            f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold "
+            "(refitted without it)"
         )
     if ref.rejection_note:
         print(f"  warning: {ref.rejection_note}")
@@ -233,19 +225,9 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     if down:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
     for row in down[:5]:
-        where = row.frame + (f" marker {row.marker}" if row.marker else "")
-        sizes = [
-            f"{v:.3g} {unit}"
-            for v, unit in (
-                (row.position_residual_mm, "mm"),
-                (row.rotation_residual_deg, "deg"),
-                (row.pixel_residual_px, "px"),
-            )
-            if v is not None
-        ]
         print(
-            f"    samples[{row.sample}] {where} ({row.kind}): residual "
-            f"{', '.join(sizes)}, weight {row.weight:.2g}"
+            f"    samples[{row.sample}] {_observed(row)}: residual {_residual_sizes(row)}, "
+            f"weight {row.weight:.2g}"
         )
     if len(down) > 5:
         print(
@@ -372,3 +354,21 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             f"{cv.whitened(cv.selected):.3g}"
         )
     return 0
+
+
+def _observed(row: DownweightedRow | RejectedRow) -> str:
+    """``frame [marker m] (kind)`` of a down-weighted or rejected observation."""
+    return row.frame + (f" marker {row.marker}" if row.marker else "") + f" ({row.kind})"
+
+
+def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:
+    """The residual's sizes that apply to the observation's kind: mm, deg, px."""
+    return ", ".join(
+        f"{v:.3g} {unit}"
+        for v, unit in (
+            (row.position_residual_mm, "mm"),
+            (row.rotation_residual_deg, "deg"),
+            (row.pixel_residual_px, "px"),
+        )
+        if v is not None
+    )
