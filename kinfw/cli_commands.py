@@ -113,7 +113,7 @@ def _pixel_summary(data, args) -> dict:
             {
                 "camera": g.camera,
                 "images": len(g.images()[0]),
-                "points": int(len(g.sample)),
+                "points": len(g.sample),
                 "default": g.camera in args.default_cameras,
             }
             for g in data.groups("pixels")
