@@ -280,6 +280,29 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
+    p.add_argument(
+        "--pixels",
+        action="store_true",
+        help="stage 2 as images: the corners of a fixed --board seen by each camera "
+        "('pixels' observations; a corner is seen when in front of the camera, within 60 "
+        "deg of its axis and 5 px inside the image; an image is dropped when the board is "
+        "seen more than 70 deg from its normal, or with fewer than 4 corners, all of a "
+        "chessboard's, or corners on one line; configurations where no camera sees the "
+        "board are drawn again)",
+    )
+    p.add_argument(
+        "--pixel-sigma",
+        type=_number(float, low=0.0, unit="px"),
+        default=0.5,
+        help="with --pixels: pixel noise sigma per image coordinate, px (default 0.5)",
+    )
+    p.add_argument(
+        "--board",
+        default=None,
+        help="with --pixels: the board, chessboard:COLSxROWS:SQUARE_M or "
+        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default chessboard:9x6:0.04)",
+    )
+    _add_camera_option(p)
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_simulate)
@@ -348,6 +371,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)"
     )
     p.add_argument("--seed", type=_SEED, default=0)
+    p.add_argument(
+        "--pixels",
+        action="store_true",
+        help="stage 2 from images: each camera (640x480, fx = fy = 600 px) sees the corners "
+        "of a fixed chessboard (pixel noise 0.5 px); calibrated on reprojection error",
+    )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_demo)
 

@@ -62,6 +62,65 @@ def _frames_arg(
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
+def _simulate_pixels(args, truth, cameras, names, lower, upper, rng):
+    """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
+    from kinfw.boards import Chessboard, parse_board
+    from kinfw.camera_model import CameraError, read_camera
+    from verification.simulate import (
+        DEFAULT_BOARD,
+        MIN_CORNERS,
+        default_intrinsics,
+        pixel_views,
+    )
+
+    board = parse_board(args.board or DEFAULT_BOARD)
+    given = {}
+    for frame, file in args.camera or ():
+        if frame not in cameras:
+            raise ValueError(
+                f"--camera {frame}={file}: {frame!r} is not a stage 2 camera "
+                f"(cameras: {', '.join(cameras)})"
+            )
+        try:
+            given[frame] = read_camera(file)
+        except CameraError as exc:
+            raise ValueError(f"--camera {frame}={file}: {exc}") from None
+    intrinsics = {c: given.get(c) or default_intrinsics(c) for c in cameras}
+    data, _ = pixel_views(
+        truth,
+        names,
+        lower,
+        upper,
+        args.stage2_samples,
+        rng,
+        cameras=intrinsics,
+        board_p=board.points,
+        sigma_px=args.pixel_sigma,
+        fraction=args.fraction,
+        min_corners=board.count if isinstance(board, Chessboard) else MIN_CORNERS,
+    )
+    args.board_spec = board.spec()
+    args.default_cameras = sorted(set(cameras) - set(given))
+    return data
+
+
+def _pixel_summary(data, args) -> dict:
+    """The board and the images and corners per camera of ``--pixels`` data."""
+    return {
+        "board": args.board_spec,
+        "sigma_px": args.pixel_sigma,
+        "cameras": [
+            {
+                "camera": g.camera,
+                "images": len(g.images()[0]),
+                "points": len(g.sample),
+                "default": g.camera in args.default_cameras,
+            }
+            for g in data.groups("pixels")
+        ],
+    }
+
+
 def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -99,7 +158,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     if frames:
         qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
         parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
-    if cameras:
+    if cameras and args.pixels:
+        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng))
+    elif cameras:
         qs = random_configurations(lower, upper, args.stage2_samples, rng, fraction=args.fraction)
         w_T_target = default_target_pose(truth, qs, names, cameras)
         parts.append(
@@ -108,10 +169,12 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     data = concatenate_measurements(*parts)
     write_measurements(args.out, data)
     write_text_atomic(args.truth_out, truth_xml)
+    pixels = _pixel_summary(data, args) if args.pixels and cameras else None
     if args.json:
         print(
             json.dumps(
                 {
+                    "pixels": pixels,
                     "data": str(args.out),
                     "truth": str(args.truth_out),
                     "n_samples": data.n_samples,
@@ -133,6 +196,15 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
         + ")"
     )
+    if pixels is not None:
+        print(
+            f"  stage 2 as images of {pixels['board']} (pixel noise {args.pixel_sigma:g} px): "
+            + "; ".join(
+                f"{c['camera']}: {c['images']} images, {c['points']} corners"
+                + (" (default intrinsics: 640x480, fx = fy = 600 px)" if c["default"] else "")
+                for c in pixels["cameras"]
+            )
+        )
     print(
         f"wrote {args.truth_out}: the true robot (nominal with errors of "
         f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"

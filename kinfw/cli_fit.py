@@ -238,9 +238,10 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
 
 # -- kinfw demo --------------------------------------------------------------------------
 def cmd_demo(args: argparse.Namespace) -> int:
-    from verification.demo import NOISE_DEG, NOISE_MM, run_demo
+    from verification.demo import NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
 
-    demo = run_demo(args.out, seed=args.seed, progress=progress_printer())
+    pixels = bool(getattr(args, "pixels", False))
+    demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
     report = demo.report
     if args.json:
         print(json.dumps(report.to_dict(), indent=2))
@@ -250,20 +251,50 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(
         f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
         f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
-        "the stereo rig; stage 2: both cameras see a fixed target in 30 random "
-        f"configurations; noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
-        "A = X B Y, then the joint least squares; 100 held-out configurations"
+        "the stereo rig; stage 2: "
+        + (
+            "each camera (640x480, fx = fy = 600 px) sees the corners of a fixed 9x6 "
+            f"chessboard in 30 random configurations where it is in view, pixel noise "
+            f"{PIXEL_SIGMA:g} px; "
+            if pixels
+            else "both cameras see a fixed target in 30 random configurations; "
+        )
+        + f"noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
+        "A = X B Y, then the joint least squares"
+        + (" on reprojection error" if pixels else "")
+        + "; 100 held-out configurations"
     )
     print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
     print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
     print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
     print(_before_after_table(report.errors_held_out))
     noise = report.refine.noise
-    print(
-        f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
-        f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
-        f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)"
-    )
+    if pixels:
+        print()
+        _print_reprojection(report.reprojection)
+        held = demo.held_out_pixels
+        print("reprojection error on 30 held-out images (fresh configurations), px:")
+        rows = [
+            [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
+            for c in held.cameras
+        ]
+        print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+        print(
+            "  worst held-out images (RMS px): "
+            + ", ".join(f"{i.image} ({i.camera}) {i.rms_px:.3g}" for i in held.worst[:5])
+        )
+        print(
+            f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+            f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation component, "
+            f"{noise.of('pixel'):.3f} px (true: {NOISE_MM:g} mm, "
+            f"{NOISE_DEG / math.sqrt(3.0):.3f} deg, {PIXEL_SIGMA:g} px)"
+        )
+    else:
+        print(
+            f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+            f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
+            f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)"
+        )
     print(
         f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
         f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})"

@@ -30,8 +30,14 @@ camera always looks at, with ``up`` along the display's z axis. Paths below
     measured/targets/<camera>/<target>       triad of a target where the camera saw it
     residuals/poses/<frame>[@<marker>]       residual line; also residuals/points/...
     residuals/targets/<camera>/<target>        and residuals/targets/...
+    measured/pixels/<camera>/<target>/<k>    an image's point k: the measured pixel's
+                                             ray at the predicted point's depth (a ball)
+    predicted/pixels/<camera>/<target>/<k>   ... where the model puts the point
+    residuals/pixels/<camera>/<target>/<k>   ... and the residual line between them
     targets/<target>                         a fixed target: board and triad
     cameras/<camera>                         triad of a camera frame
+    cameras/<camera>/frustum/{ray,edge}<k>   the frustum of a camera with intrinsics:
+                                             the image's corners at 0.2 m
 
 A residual line's node has the transform ``[R | root_p_predicted]`` with R's y axis along
 the error; its child ``stick`` is a cylinder of height ``residual_scale * |measured -
@@ -78,6 +84,7 @@ __all__ = [
     "SOLID_RGBA",
     "OfflineWindow",
     "external_urls",
+    "frustum_corners",
     "residual_color",
     "scene",
     "targets_from_sidecar",
@@ -121,6 +128,14 @@ CAMERA_FOV_DEG = 30.0
 """Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
 BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
 """Background gradient (top, bottom)."""
+FRUSTUM_DEPTH = 0.2
+"""Depth of a camera's drawn frustum (the image's corners), metres."""
+FRUSTUM_RADIUS = 0.0006
+"""Radius of a frustum's cylinders, metres."""
+FRUSTUM_RGB = (0.2, 0.2, 0.25)
+"""Colour of a camera's frustum."""
+PREDICTED_RGB = (0.0, 0.55, 0.75)
+"""Colour of the small ball where the model predicts a point of an image."""
 
 
 # -- small helpers -----------------------------------------------------------------------
@@ -465,8 +480,12 @@ def _draw_observations(
         except NotImplementedError as exc:
             logger.info("%s: %s", data.source, exc)
             continue
-        for k in range(len(rows)):
-            node = root["measured/" + drawing.node]
+        # one row per observation (a pose, a point): the group's node; many (an
+        # image's points): one child node per row, <node>/<k>
+        many = len(drawing.w_p_measured) > 1
+        for k in range(len(drawing.w_p_measured)):
+            path = drawing.node + (f"/{k}" if many else "")
+            node = root["measured/" + path]
             w_p = drawing.w_p_measured[k]
             if drawing.w_R_measured is not None:
                 w_T = np.eye(4)
@@ -487,7 +506,13 @@ def _draw_observations(
                 )
                 continue
             w_p_pred = drawing.w_p_predicted[k]
-            _residual_line(root["residuals/" + drawing.node], w_p_pred, w_p, residual_scale)
+            _residual_line(root["residuals/" + path], w_p_pred, w_p, residual_scale)
+            if drawing.w_R_measured is None and many:
+                # the predicted point too: a small ball (where the model puts the point)
+                root["predicted/" + path].set_object(
+                    _overlay_object(mg.Sphere(0.5 * POINT_RADIUS), PREDICTED_RGB)
+                )
+                root["predicted/" + path].set_transform(_translation(w_p_pred))
             if drawing.focus:
                 drawn.append(w_p_pred)
     return np.array(drawn).reshape(-1, 3)
@@ -537,17 +562,47 @@ def _draw_cameras(
         cameras.update(
             dict.fromkeys(c for g in data.all_groups() for c in kind_of(g).camera_frames(g))
         )
+    intrinsics = {} if data is None else dict(data.cameras)
+    if data is not None:
+        for g in data.all_groups():
+            intrinsics.update(kind_of(g).cameras(g))
     drawn = []
     for camera in cameras:
         root_T_camera = model.frame_poses(q, camera, joint_names)
-        _triad(
-            root["cameras/" + _node_name(camera, None)],
-            root_T_camera,
-            length=CAMERA_TRIAD_LENGTH,
-            radius=0.7 * STICK_RADIUS,
-        )
+        node = root["cameras/" + _node_name(camera, None)]
+        _triad(node, root_T_camera, length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
         drawn.append(root_T_camera[:3, 3])
+        if camera in intrinsics:
+            corners = frustum_corners(intrinsics[camera])
+            for k, (a, b) in enumerate(zip(corners, np.roll(corners, -1, axis=0), strict=True)):
+                _stick(node[f"frustum/ray{k}"], np.zeros(3), a, FRUSTUM_RADIUS, FRUSTUM_RGB)
+                _stick(node[f"frustum/edge{k}"], a, b - a, FRUSTUM_RADIUS, FRUSTUM_RGB)
     return np.array(drawn).reshape(-1, 3)
+
+
+def frustum_corners(intrinsics: Any, depth_m: float = FRUSTUM_DEPTH) -> NDArray[np.float64]:
+    """The image's corners (pixel centres of the corner pixels, OpenCV's model inverted)
+    at a depth ``depth_m`` along the optical axis, in the camera's optical frame.
+
+    Parameters
+    ----------
+    intrinsics : CameraIntrinsics
+    depth_m : float
+        Metres.
+
+    Returns
+    -------
+    ndarray, shape (4, 3)
+        Top-left, top-right, bottom-right, bottom-left (image order), metres.
+    """
+    import cv2
+
+    w, h = intrinsics.width - 1.0, intrinsics.height - 1.0
+    uv = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+    xy = cv2.undistortPoints(
+        uv.reshape(-1, 1, 2), intrinsics.matrix, intrinsics.distortion
+    ).reshape(-1, 2)
+    return depth_m * np.concatenate([xy, np.ones((4, 1))], axis=1)
 
 
 # -- files -------------------------------------------------------------------------------

@@ -285,6 +285,11 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
                 f"{int(samples[k])} ({len(r)} points)"
             )
         rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+            raise ValueError(
+                f"pixels: camera {group.camera!r}: PnP found no pose for the image of "
+                f"sample {int(samples[k])} ({len(r)} points; are they on one line?)"
+            )
         R, _ = cv2.Rodrigues(rvec)
         out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
     return samples, out
