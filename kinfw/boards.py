@@ -62,7 +62,8 @@ class Chessboard:
     Attributes
     ----------
     cols, rows : int
-        Inner corners along x and along y (OpenCV's ``patternSize = (cols, rows)``), >= 2.
+        Inner corners along x and along y (OpenCV's ``patternSize = (cols, rows)``), >= 3
+        (OpenCV's detectors refuse fewer).
     square_m : float
         Side of a square, metres.
     """
@@ -72,7 +73,7 @@ class Chessboard:
     square_m: float
 
     def __post_init__(self) -> None:
-        _check_size("chessboard", self.cols, self.rows, 2, "inner corners")
+        _check_size("chessboard", self.cols, self.rows, 3, "inner corners; OpenCV needs 3")
         _check_length("chessboard", "square_m", self.square_m)
 
     @property

@@ -99,7 +99,7 @@ def detect_inputs(args: argparse.Namespace) -> dict[str, Path]:
     """The input files of ``kinfw detect``, keyed by how the user gave them (for the
     check that ``--out`` overwrites none)."""
     inputs = {"--joints": args.joints, "--camera": args.camera}
-    inputs.update({f"image {path}": path for path in args.images})
+    inputs.update({f"IMAGES[{k}]": path for k, path in enumerate(args.images)})
     return inputs
 
 
@@ -234,8 +234,15 @@ def cmd_detect(args: argparse.Namespace) -> int:
         for d in group:
             print(f"  {title}: {d.image}: {d.reason}")
     if not found:
+        why = (
+            f"it was ambiguous in {len(ambiguous)} (a symmetric chessboard: use a board whose "
+            "corner counts differ in parity, or --allow-symmetric if it is never turned by "
+            "more than 90 degrees)"
+            if ambiguous
+            else "check --board (inner corners for a chessboard) and the images"
+        )
         raise ValueError(
-            f"the board {board.spec()} was found in none of the images; nothing written"
+            f"the board {board.spec()} was found in none of the images; {why}; nothing written"
         )
     doc = {
         "format": "kinfw-measurements",

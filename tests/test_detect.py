@@ -88,7 +88,8 @@ def test_parse_board_specs():
         ("chessboard:9x6:abc", "SQUARE_M 'abc' is not a number"),
         ("charuco:7x5:0.04", "wrong number of ':' fields"),
         ("chessboard:9x6:25", "more than 2 m"),
-        ("chessboard:1x6:0.02", "cols must be an integer >= 2"),
+        ("chessboard:1x6:0.02", "cols must be an integer >= 3"),
+        ("chessboard:2x2:0.04", "cols must be an integer >= 3"),
         ("charuco:7x5:0.04:0.05", "marker_m .* must be smaller than square_m"),
         ("charuco:7x5:0.04:0.03:FOO", "unknown ArUco dictionary 'FOO'"),
     ],
@@ -323,7 +324,7 @@ def test_detect_command_errors(tmp_path, capsys):
     code, err = run(out=images[0])
     assert code == 2 and "refusing to overwrite an input" in err
     code, err = run(board="chessboard:8x6:0.03")
-    assert code == 2 and "found in none of the images; nothing written" in err
+    assert code == 2 and "found in none of the images; check --board" in err
     assert not (tmp_path / "o.json").exists()
     code, err = run("--min-corners", "3", board=CHARUCO.spec())
     assert code == 2 and "--min-corners" in err
@@ -335,3 +336,24 @@ def test_detect_command_errors(tmp_path, capsys):
     camera_file.write_text(json.dumps(small.to_dict()))
     code, err = run()
     assert code == 2 and "image is 480x360 pixels, the camera" in err
+
+
+def test_detect_command_when_every_image_is_ambiguous_says_why(tmp_path, capsys):
+    board = Chessboard(8, 6, 0.03)
+    images = _write_images(tmp_path, board, [board_pose(board, [0.2, -0.2, 0.0], 0.3)])
+    (tmp_path / "cam.json").write_text(json.dumps(CAMERA.to_dict()))
+    (tmp_path / "q.csv").write_text("pan\n0.1\n")
+    out = tmp_path / "o.json"
+    code = main(
+        ["detect", str(images[0]), "--board", board.spec(), "--joints", str(tmp_path / "q.csv"),
+         "--camera", str(tmp_path / "cam.json"), "--frame", "cam", "--out", str(out)]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "it was ambiguous in 1 (a symmetric chessboard" in err
+    assert "--allow-symmetric" in err and not out.exists()
+    code = main(
+        ["detect", str(images[0]), "--board", board.spec(), "--joints", str(tmp_path / "q.csv"),
+         "--camera", str(tmp_path / "cam.json"), "--frame", "cam", "--out", str(images[0])]
+    )  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and f"same file as IMAGES[0] {images[0]}:" in err
