@@ -218,3 +218,15 @@ def test_plan_errors(capsys):
     assert main(["plan", "--within-limits", "0"]) == 2
     assert main(["plan", "--n", "50", "--candidates", "20"]) == 2
     assert "only 20 candidates" in capsys.readouterr().err
+
+
+def test_target_gives_the_smallest_greedy_n(head):
+    robot, setup, names, pool, test = head
+    info = candidate_information(robot, setup, pool, names, None)
+    A = held_out(robot, setup, test, names, None, info).A_position
+    _, values = greedy(info, A, 40)
+    target = float(np.sqrt(values[24]))  # reached by the 25th greedy pick
+    plan = plan_configurations(
+        robot, setup, pool, 1, joint_names=names, test_qs=test, target_m=target * (1 + 1e-9)
+    )
+    assert len(plan.qs) == 25 and plan.position_rms_m <= target * (1 + 1e-6)

@@ -108,7 +108,7 @@ def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | No
     except Exception as exc:  # no coal/hpp-fcl, or meshes not found
         log.warning("%s: no self-collision check (%s)", robot.source, exc)
         return None
-    full = robot.full_configurations(np.atleast_2d(qs), names)
+    full = robot.pin_configurations(np.atleast_2d(qs), tuple(names))
     ok = np.empty(len(full), bool)
     for k, q in enumerate(full):
         ok[k] = not pin.computeCollisions(robot.model, data, geom, gdata, q, True)
@@ -304,8 +304,13 @@ def plan_configurations(
 def _greedy_to(ctx: _Context, A, target_m: float):
     """Greedy picks until the position RMS is below ``target_m`` (ValueError if never)."""
     N = ctx.info.factors.shape[0]
-    order, values = greedy(ctx.info, A, N)
-    below = np.flatnonzero(np.sqrt(values) <= target_m)
+    k = 16
+    while True:  # the greedy prefix is the same whatever its length: grow it by doubling
+        k = min(2 * k, N)
+        order, values = greedy(ctx.info, A, k)
+        below = np.flatnonzero(np.sqrt(values) <= target_m)
+        if len(below) or k == N:
+            break
     if not len(below):
         raise ValueError(
             f"--target-mm {target_m * 1e3:g}: even all {N} candidates predict "

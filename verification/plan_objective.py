@@ -382,9 +382,9 @@ def greedy(
         i = int(np.argmax(gain))
         chosen.append(i)
         available[i] = False
-        if groups is not None and quota is not None:
-            if np.sum(groups[chosen] == groups[i]) >= quota:
-                available[groups == groups[i]] = False
+        full = groups is not None and quota is not None
+        if full and np.sum(groups[chosen] == groups[i]) >= quota:
+            available[groups == groups[i]] = False
         M = M + info.factors[i].T @ info.factors[i]
         values.append(float(np.trace(A @ _inverse(M))))
     return np.array(chosen, np.int64), np.array(values)
