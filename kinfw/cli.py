@@ -39,6 +39,7 @@ from kinfw.cli_commands import (
 )
 from kinfw.cli_detect import add_detect_parser, detect_inputs
 from kinfw.cli_fit import cmd_calibrate, cmd_crossval, cmd_demo
+from kinfw.cli_plan import add_plan_parser
 from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["main"]
@@ -59,7 +60,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
     command = args.command
     if command == "simulate":
         check_outputs(
-            {"--out": args.out, "--truth-out": args.truth_out}, inputs={"--urdf": args.urdf}
+            {"--out": args.out, "--truth-out": args.truth_out},
+            inputs={"--urdf": args.urdf, "--plan": args.plan},
         )
     elif command == "calibrate":
         check_outputs(
@@ -85,6 +87,11 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_dir(args.out, label="--out")
     elif command == "import-csv":
         check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "csv": args.csv})
+    elif command == "plan":
+        check_outputs(
+            {"--out": args.out, "--plot": args.plot},
+            inputs={"--urdf": args.urdf, "--pool": args.pool},
+        )
     elif command == "detect":
         check_outputs({"--out": args.out}, inputs=detect_inputs(args))
 
@@ -303,6 +310,13 @@ def build_parser() -> argparse.ArgumentParser:
         "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default chessboard:9x6:0.04)",
     )
     _add_camera_option(p)
+    p.add_argument(
+        "--plan",
+        type=Path,
+        default=None,
+        help="a plan file (kinfw plan --out): measure at its configurations, in its order "
+        "(stage 1 and stage 2), instead of one joint at a time / random",
+    )
     p.add_argument("--seed", type=_SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_simulate)
@@ -519,6 +533,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_import_csv)
 
     add_detect_parser(sub, _number(int, low=4))
+    add_plan_parser(sub, _number)
     return parser
 
 

@@ -62,15 +62,17 @@ def _frames_arg(
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
-def _simulate_pixels(args, truth, cameras, names, lower, upper, rng):
+def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=None):
     """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
     from kinfw.boards import Chessboard, parse_board
     from kinfw.camera_model import CameraError, read_camera
     from verification.simulate import (
         DEFAULT_BOARD,
         MIN_CORNERS,
+        board_pose_facing,
         default_intrinsics,
         pixel_views,
+        simulate_pixels,
     )
 
     board = parse_board(args.board or DEFAULT_BOARD)
@@ -86,6 +88,23 @@ def _simulate_pixels(args, truth, cameras, names, lower, upper, rng):
         except CameraError as exc:
             raise ValueError(f"--camera {frame}={file}: {exc}") from None
     intrinsics = {c: given.get(c) or default_intrinsics(c) for c in cameras}
+    min_corners = board.count if isinstance(board, Chessboard) else MIN_CORNERS
+    if planned is not None:  # the plan's configurations; those where no camera sees dropped
+        w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
+        data, _ = simulate_pixels(
+            truth,
+            planned,
+            names,
+            cameras=intrinsics,
+            board_p=board.points,
+            w_T_board=w_T_board,
+            rng=rng,
+            sigma_px=args.pixel_sigma,
+            min_corners=min_corners,
+        )
+        args.board_spec = board.spec()
+        args.default_cameras = sorted(set(cameras) - set(given))
+        return data
     data, _ = pixel_views(
         truth,
         names,
@@ -97,7 +116,7 @@ def _simulate_pixels(args, truth, cameras, names, lower, upper, rng):
         board_p=board.points,
         sigma_px=args.pixel_sigma,
         fraction=args.fraction,
-        min_corners=board.count if isinstance(board, Chessboard) else MIN_CORNERS,
+        min_corners=min_corners,
     )
     args.board_spec = board.spec()
     args.default_cameras = sorted(set(cameras) - set(given))
@@ -154,14 +173,23 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
     if args.stereo_mm is not None:
         noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
+    planned = _plan_qs(args.plan, names) if args.plan is not None else None
     parts = []
-    if frames:
+    if frames and planned is not None:
+        parts.append(simulate(truth, planned, names, frames=frames, rng=rng, **noise))
+    elif frames:
         qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
         parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
     if cameras and args.pixels:
-        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng))
+        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned))
     elif cameras:
-        qs = random_configurations(lower, upper, args.stage2_samples, rng, fraction=args.fraction)
+        qs = (
+            planned
+            if planned is not None
+            else random_configurations(
+                lower, upper, args.stage2_samples, rng, fraction=args.fraction
+            )
+        )
         w_T_target = default_target_pose(truth, qs, names, cameras)
         parts.append(
             simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
@@ -210,6 +238,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
     )
     return 0
+
+
+def _plan_qs(path: Path, names: Sequence[str]) -> Any:
+    """The configurations of a plan file in ``names`` order (every joint named)."""
+    from verification.plan import read_plan
+
+    plan_names, qs = read_plan(path)
+    missing = [j for j in names if j not in plan_names]
+    if missing:
+        raise ValueError(f'{path}: "joint_names": missing the joints {missing}')
+    return qs[:, [plan_names.index(j) for j in names]]
 
 
 # -- kinfw verify ------------------------------------------------------------------------
