@@ -175,6 +175,8 @@ class Plan:
     greedy_ms, exchanged_ms : float
         ``trace(A M^-1)`` (position, scaled) after greedy and after exchange.
     curve : list of (n, planned_position_rms_m, random_position_rms_m)
+        Predicted errors against ``n``: the greedy prefix of that length (the plan itself,
+        greedy + exchange, at the plan's own ``n``) and random pool configurations.
     seconds : float
         Time of the selection (greedy + exchange), s.
     """
@@ -273,17 +275,14 @@ def plan_configurations(
     chosen, final, swaps = exchange(ctx.info, A, order[:n])
     seconds = time.perf_counter() - t0
     log.info("plan: %d of %d candidates in %.2f s (%d swaps)", n, N, seconds, swaps)
+    random_ms = _random_ms(ctx, A, n, rng, random_draws)
     curve = []
     for k in curve_ns:
         if k <= len(values) and k <= N:
-            planned = mean_square(ctx.info, A, order[:k])
-            curve.append(
-                (
-                    int(k),
-                    float(np.sqrt(planned)),
-                    float(np.sqrt(_random_ms(ctx, A, k, rng, random_draws))),
-                )
-            )
+            # the greedy prefix (no exchange) except at the plan's own n, which is the plan
+            planned = mean_square(ctx.info, A, chosen if k == n else order[:k])
+            random_k = random_ms if k == n else _random_ms(ctx, A, k, rng, random_draws)
+            curve.append((int(k), float(np.sqrt(planned)), float(np.sqrt(random_k))))
     lower, upper = robot.joint_limits(names)
     qs = pool_qs[chosen][short_path(pool_qs[chosen], lower, upper)]
     return Plan(
@@ -291,7 +290,7 @@ def plan_configurations(
         qs=qs,
         position_rms_m=float(np.sqrt(mean_square(ctx.info, A, chosen))),
         rotation_rms_rad=float(np.sqrt(mean_square(ctx.info, ctx.heldout.A_rotation, chosen))),
-        random_position_rms_m=float(np.sqrt(_random_ms(ctx, A, n, rng, random_draws))),
+        random_position_rms_m=float(np.sqrt(random_ms)),
         greedy_ms=float(values[n - 1]),
         exchanged_ms=float(final),
         curve=curve,
