@@ -52,19 +52,36 @@ USER_ERRORS = (ValueError, OSError)
 
 
 # -- outputs -----------------------------------------------------------------------------
+def _camera_inputs(args: argparse.Namespace) -> dict[str, Path]:
+    """The ``--camera FRAME=FILE`` files, keyed ``--camera FRAME=`` (for the message)."""
+    given = getattr(args, "camera", None)
+    if not isinstance(given, list):  # detect's --camera is one file, checked by detect_inputs
+        return {}
+    return {f"--camera {frame}=": file for frame, file in given}
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path of the command before any work: its directory exists and
     is writable, it is not a directory, no two outputs are one file, and no output is an
-    input (symlinks resolved). Raises :class:`kinfw.files.OutputPathError`."""
+    input (``--urdf``, the data file, ``--holdout``, ``--camera`` files; symlinks
+    resolved). Raises :class:`kinfw.files.OutputPathError` naming both options and the
+    path."""
     command = args.command
+    cameras = _camera_inputs(args)
     if command == "simulate":
         check_outputs(
-            {"--out": args.out, "--truth-out": args.truth_out}, inputs={"--urdf": args.urdf}
+            {"--out": args.out, "--truth-out": args.truth_out},
+            inputs={"--urdf": args.urdf, **cameras},
         )
     elif command == "calibrate":
         check_outputs(
             {"--out": args.out, "sidecar": default_sidecar_path(args.out), "--report": args.report},
-            inputs={"--urdf": args.urdf, "data file": args.data, "--holdout": args.holdout},
+            inputs={
+                "--urdf": args.urdf,
+                "data file": args.data,
+                "--holdout": args.holdout,
+                **cameras,
+            },
         )
     elif command == "demo":
         from verification.demo import DEMO_FILES

@@ -36,7 +36,11 @@ class OutputPathError(ValueError):
 
 
 def _label(path: PathLike, label: str | None) -> str:
-    return f"{label} {os.fspath(path)}" if label else os.fspath(path)
+    """``--out c.urdf``; a label ending in ``=`` is joined without a space
+    (``--camera left=left.yaml``)."""
+    if not label:
+        return os.fspath(path)
+    return f"{label}{os.fspath(path)}" if label.endswith("=") else f"{label} {os.fspath(path)}"
 
 
 def _same_file(a: Path, b: Path) -> bool:
