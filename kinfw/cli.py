@@ -288,7 +288,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.8,
         help="fraction of each joint range used (default 0.8)",
     )
-    p.add_argument("--stage", choices=("1", "2", "both"), default="1")
+    p.add_argument(
+        "--stage",
+        choices=("1", "2", "both"),
+        default=None,
+        help="stage 1 (one joint at a time), 2 (random configurations seen by the cameras) "
+        "or both (default 1; with --pixels: both, and 1 is an error)",
+    )
     p.add_argument(
         "--stage2-samples",
         type=_COUNT,

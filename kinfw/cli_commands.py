@@ -136,6 +136,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     nominal = load_robot(args.urdf)
     rng = np.random.default_rng(args.seed)
+    if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
+        args.stage = "both" if args.pixels else "1"
+    elif args.pixels and args.stage == "1":
+        raise ValueError(
+            "--pixels --stage 1: --pixels makes stage 2 images; give --stage 2 or both "
+            "(the default with --pixels)"
+        )
     stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
     frames = (
         _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()

@@ -99,6 +99,16 @@ def test_kinfw_simulate_pixels_writes_only_seen_whole_boards(tmp_path, capsys):
         assert (g.uv >= 5 - 0.5).all()
         assert (g.uv[:, 0] <= intr.width - 0.5 - 5).all()
         assert (g.uv[:, 1] <= intr.height - 0.5 - 5).all()
+    # --pixels without --stage: stage 1 poses and stage 2 images; --stage 1 is an error
+    both = ["simulate", "--pixels", "--stage2-samples", "12", "--seed", "3"]
+    both += ["--out", str(tmp_path / "both.json"), "--truth-out", str(truth)]
+    assert main(both) == 0
+    capsys.readouterr()
+    both_data = read_measurements(tmp_path / "both.json")
+    assert both_data.groups("pixels") and both_data.groups("pose")
+    assert main([*both, "--stage", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kinfw simulate: error: --pixels --stage 1:"), err
     # a --camera for a frame that is not a stage 2 camera is a one-line error
     bad = [*args[:-2], "--camera", f"left_plate={cam}"]
     assert main(bad) == 2
