@@ -229,7 +229,8 @@ def _add_camera_option(p: argparse.ArgumentParser) -> None:
         metavar="FRAME=FILE",
         help="intrinsics of the camera frame FRAME for 'pixels' observations, from a ROS "
         "camera_info / OpenCV YAML or JSON file; overrides or adds to the data file's "
-        '"cameras" section (repeatable)',
+        '"cameras" section (and, for verify, the sidecar\'s); a FRAME no observation uses '
+        "is an error (repeatable)",
     )
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import logging
 import sys
@@ -270,12 +271,26 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
     from kinfw.measurements import DatasetError, read_measurements
 
     cameras = {}
-    for frame, file in getattr(args, "camera", None) or ():
+    given = getattr(args, "camera", None) or ()
+    for frame, file in given:
         try:
             cameras[frame] = read_camera(file)
         except CameraError as exc:
             raise DatasetError(f"--camera {frame}={file}: {exc}") from None
-    return read_measurements(path, cameras=cameras)
+    data = read_measurements(path, cameras=cameras)
+    used = list(dict.fromkeys(g.camera for g in data.groups("pixels")))
+    for frame, file in given:
+        if frame not in used:
+            has = (
+                f"the camera frames of its 'pixels' observations: {', '.join(used)}"
+                if used
+                else "it has no 'pixels' observations"
+            )
+            raise DatasetError(
+                f"--camera {frame}={file}: no observation of {path} uses camera frame "
+                f"{frame!r} ({has})"
+            )
+    return data
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -291,6 +306,20 @@ def cmd_verify(args: argparse.Namespace) -> int:
         sidecar = read_sidecar(sidecar_path)
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
+    overridden = []
+    if sidecar is not None:  # --camera given explicitly wins over the sidecar's intrinsics
+        given = {frame for frame, _ in args.camera or ()}
+        overridden = [
+            u.name for u in sidecar.unknowns if u.kind == "intrinsics" and u.name in given
+        ]
+        sidecar = dataclasses.replace(
+            sidecar,
+            unknowns=tuple(
+                u
+                for u in sidecar.unknowns
+                if (u.kind, u.name) not in {("intrinsics", f) for f in overridden}
+            ),
+        )
     report = evaluate_model(robot, data, sidecar=sidecar)
     used = str(sidecar_path) if sidecar is not None else None
     if args.json:
@@ -300,6 +329,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
                     "model": str(args.model),
                     "data": str(args.data),
                     "sidecar": used,
+                    "intrinsics_from_camera_option": overridden,
                     **report.to_dict(per_sample=True),
                 },
                 indent=2,
@@ -316,6 +346,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
             "as calibrated, not refitted)"
         )
     print(accuracy_table(report.to_dict()))
+    for frame in overridden:
+        file = next(f for c, f in args.camera if c == frame)
+        print(
+            f"note: intrinsics of camera {frame!r} from --camera {frame}={file}, not the sidecar's"
+        )
     for note in report.fitted:
         print(f"note: fitted from the data: {note}")
     return 0

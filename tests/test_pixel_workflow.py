@@ -45,14 +45,20 @@ def px(tmp_path_factory) -> Path:
     return root
 
 
-def test_stage_table_uses_the_refined_intrinsics(px, capsys):
+@pytest.fixture(scope="module")
+def refined(px) -> Path:
+    """``kinfw calibrate`` of ``px.json`` from the wrong intrinsics with
+    ``--refine-intrinsics``: ``ri.urdf``, its sidecar and report ``ri.json``."""
+    argv = ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "ri.urdf"]
+    argv += ["--camera", f"left_camera={px / 'wrong.json'}", "--refine-intrinsics"]
+    assert main([str(a) for a in [*argv, "--report", px / "ri.json"]]) == 0
+    return px / "ri.urdf"
+
+
+def test_stage_table_uses_the_refined_intrinsics(px, refined):
     """With --refine-intrinsics from fx 8 % off, the refine column of the stage table is
     the reprojection RMS of the calibrated model (as the reprojection section computes it
     from the refined unknowns), not the error under the start intrinsics."""
-    argv = ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "ri.urdf"]
-    argv += ["--camera", f"left_camera={px / 'wrong.json'}", "--refine-intrinsics"]
-    code, _, err = _run([*argv, "--report", px / "ri.json"], capsys)
-    assert code == 0, err
     report = json.loads((px / "ri.json").read_text())
     stages = report["position_rms_mm_by_stage"]
     by_camera = {c["camera"]: c["rms_px"] for c in report["reprojection_px"]["cameras"]}
@@ -63,3 +69,45 @@ def test_stage_table_uses_the_refined_intrinsics(px, capsys):
         assert refine < 1.0  # 0.5 px noise, 2 coordinates: 0.71 px expected
     # the start intrinsics are wrong: the hand-eye stage (before the refinement) is not
     assert stages["hand-eye"]["left_camera (pixels) [px]"] > 2.0
+
+
+def _pixel_rms(text: str, camera: str) -> float:
+    row = next(line for line in text.splitlines() if line.strip().startswith(camera))
+    return float(row.split()[-1])
+
+
+def test_verify_camera_overrides_the_sidecar_and_says_so(px, refined, capsys):
+    """The sidecar holds the refined intrinsics (near the truth): the images reproject
+    to the noise level; --camera with fx 8 % off must be used instead (tens of px at the
+    board's 0.1-0.2 m offsets from the axis at 0.8 m: ~ 0.08 * 150 px), with a note."""
+    code, out, err = _run(["verify", refined, px / "px.json"], capsys)
+    assert code == 0, err
+    assert _pixel_rms(out, "left_camera") < 1.0
+    assert "intrinsics" not in out  # the sidecar's are used, not fitted
+    wrong = f"left_camera={px / 'wrong.json'}"
+    code, out, err = _run(["verify", refined, px / "px.json", "--camera", wrong], capsys)
+    assert code == 0, err
+    assert _pixel_rms(out, "left_camera") > 5.0
+    assert _pixel_rms(out, "right_camera") < 1.0  # not overridden: the sidecar's
+    assert (
+        f"note: intrinsics of camera 'left_camera' from --camera {wrong}, not the sidecar's" in out
+    )
+    code, out, err = _run(["verify", refined, px / "px.json", "--camera", wrong, "--json"], capsys)
+    assert json.loads(out)["intrinsics_from_camera_option"] == ["left_camera"]
+
+
+@pytest.mark.parametrize("command", ["calibrate", "verify", "crossval"])
+def test_camera_option_for_a_frame_no_observation_uses_is_an_error(px, command, capsys):
+    cam = f"left_plate={px / 'right.json'}"
+    argv = {
+        "calibrate": ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "x.urdf"],
+        "verify": ["verify", HEAD, px / "px.json"],
+        "crossval": ["crossval", px / "px.json", "--urdf", HEAD],
+    }[command]
+    code, out, err = _run([*argv, "--camera", cam], capsys)
+    assert code == 2 and out == ""
+    assert err == (
+        f"kinfw {command}: error: --camera {cam}: no observation of {px / 'px.json'} uses "
+        "camera frame 'left_plate' (the camera frames of its 'pixels' observations: "
+        "right_camera, left_camera)\n"
+    )

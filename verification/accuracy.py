@@ -194,7 +194,8 @@ def evaluate_model(
     groups: list[GroupErrors] = []
     for g in problem.groups:
         requests = [req for req in g.kind.unknowns(g.group, start) if req.key not in known_keys]
-        fitted += [req.description for req in requests]
+        # intrinsics are the file's (or --camera's), fixed: not fitted to these data
+        fitted += [req.description for req in requests if req.key.kind != "intrinsics"]
         own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
         r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
         m = len(g.sample)
