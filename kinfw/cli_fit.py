@@ -347,23 +347,51 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         "offsets": "offsets+frames",
         "full": "calibrated",
     }
+    px = cv.has_pixels
+    pose = any(not np.isnan(s.position_rms_mm) for s in cv.scores)
+    units = [
+        u for u, has in (("position mm / orientation deg", pose), ("reprojection px", px)) if has
+    ]
     print(
         f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
-        f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg"
+        f"by sample{', images whole' if px else ''}, seed {args.seed}): held-out RMS, "
+        + " | ".join(units)
     )
 
-    def cell(position_mm: float, rotation_deg: float) -> str:
-        rot = "-" if np.isnan(rotation_deg) else f"{rotation_deg:.3f}"
-        return f"{position_mm:.3f} / {rot}"
+    def number(value: float, fmt: str) -> str:
+        return "-" if np.isnan(value) else format(value, fmt)
+
+    def cell(position_mm: float, rotation_deg: float, pixel_px: float) -> str:
+        parts = []
+        if pose:
+            parts.append(f"{number(position_mm, '.3f')} / {number(rotation_deg, '.3f')}")
+        if px:
+            parts.append(number(pixel_px, ".3f"))
+        return " | ".join(parts)
 
     rows = []
     for fold in range(args.k):
         row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
         for p in sets:
             sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
-            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg))
+            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg, sc.pixel_rms_px))
         rows.append(row)
-    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg")) for p in sets)])
+    rows.append(
+        [
+            "mean",
+            "",
+            *(
+                cell(
+                    cv.mean(p),
+                    cv.mean(p, "rotation_rms_deg"),
+                    np.nanmean([s.pixel_rms_px for s in cv.scores if s.parameters == p])
+                    if px
+                    else float("nan"),
+                )
+                for p in sets
+            ),
+        ]
+    )
     print(format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
     if args.exclude_flagged:
         print(

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from kinfw.cli import main
@@ -111,3 +112,44 @@ def test_camera_option_for_a_frame_no_observation_uses_is_an_error(px, command, 
         "camera frame 'left_plate' (the camera frames of its 'pixels' observations: "
         "right_camera, left_camera)\n"
     )
+
+
+def test_pnp_skips_images_with_fewer_than_4_points_and_names_failures(px):
+    """A rejection of gross errors can leave an image with < 4 corners: the PnP start
+    skips it (the others still give the pose); none left is a DatasetError naming the
+    camera, never a cv2.error."""
+    from kinfw.measurements import DatasetError, read_measurements
+    from kinfw.observations import kind_of
+    from kinfw.observations.pixels import pnp_camera_T_targets
+
+    (g, *_) = read_measurements(px / "px.json").groups("pixels")
+    kind = kind_of(g)
+    _, rows = g.images()
+    full_samples, full_poses = pnp_camera_T_targets(g)
+    # the first image keeps 3 of its corners
+    keep = np.concatenate([rows[0][:3], *rows[1:]])
+    cut = kind.take(g, keep, g.sample[keep])
+    cut_samples, cut_poses = pnp_camera_T_targets(cut)
+    np.testing.assert_array_equal(cut_samples, full_samples[1:])
+    np.testing.assert_allclose(cut_poses, full_poses[1:], atol=1e-9)
+    only = kind.take(g, rows[0][:3], g.sample[rows[0][:3]])
+    with pytest.raises(DatasetError, match=rf"camera '{g.camera}': none of its 1 images has 4"):
+        pnp_camera_T_targets(only)
+
+
+def test_crossval_on_pixel_data_scores_held_out_images_in_px(px):
+    """Folds by sample keep images whole; the held-out images are scored by their RMS
+    reprojection error under the fold's model and training-fold target pose. Truth: the
+    simulated noise, 0.5 px per coordinate, so the norm's RMS is 0.5 sqrt(2) = 0.71 px
+    (a little more held out); the pose groups keep their mm scores, with no NaN."""
+    from kinfw.measurements import read_measurements
+    from kinfw.robot import load_robot
+    from verification.crossval import crossvalidate
+
+    data = read_measurements(px / "px.json")
+    cv = crossvalidate(load_robot(HEAD), data, k=2, sets=("full",))
+    doc = _strict_json(json.dumps(cv.to_dict(), allow_nan=False))
+    for fold in doc["folds"]:
+        assert 0.65 < fold["pixel_rms_px"] < 0.85, fold
+        assert 0.5 < fold["position_rms_mm"] < 1.5, fold  # 0.5 mm per axis: 0.87 mm
+    assert cv.scores[0].n_test + cv.scores[1].n_test == data.n_samples
