@@ -38,7 +38,7 @@ from kinfw.calibration_sections import (
     ReprojectionSection,
     TargetEstimate,
 )
-from kinfw.files import write_text_atomic
+from kinfw.files import json_text, write_text_atomic
 
 __all__ = [
     "CalibrationReport",
@@ -358,4 +358,4 @@ def read_report(path: str | Path) -> CalibrationReport:
 
 def write_report(path: str | Path, report: CalibrationReport) -> Path:
     """Write ``report`` as indented JSON, atomically."""
-    return write_text_atomic(path, json.dumps(report.to_dict(), indent=2) + "\n")
+    return write_text_atomic(path, json_text(report.to_dict()) + "\n")

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from kinfw.files import write_text_atomic
+from kinfw.files import json_text, write_text_atomic
 
 if TYPE_CHECKING:
     from kinfw.robot import Robot
@@ -233,19 +233,26 @@ def accuracy_table(report_dict: dict) -> str:
     """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
     rows = []
     has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
+
+    def num(value, fmt: str) -> str:  # an undefined number (NaN, null) is "-"
+        return "-" if value is None or value != value else format(value, fmt)
+
     for g in report_dict["groups"]:
         mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
+        table4 = " ".join(
+            f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True) if m == m and s == s
+        )
         rows.append(
             [
                 g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""),
                 g["kind"],
                 g["n"],
-                f"{g['position_mean_mm']:.3f}",
-                f"{g['position_rms_mm']:.3f}",
-                f"{g['position_max_mm']:.3f}",
-                f"{g['rotation_rms_deg']:.4f}",
-                f"{g['rotation_max_deg']:.4f}",
-                " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+                num(g["position_mean_mm"], ".3f"),
+                num(g["position_rms_mm"], ".3f"),
+                num(g["position_max_mm"], ".3f"),
+                num(g["rotation_rms_deg"], ".4f"),
+                num(g["rotation_max_deg"], ".4f"),
+                table4 or "-",
                 *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
             ]
         )
@@ -324,7 +331,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
     used = str(sidecar_path) if sidecar is not None else None
     if args.json:
         print(
-            json.dumps(
+            json_text(
                 {
                     "model": str(args.model),
                     "data": str(args.data),

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from kinfw.cli_commands import format_table, progress_printer, read_data
+from kinfw.files import json_text
 
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
@@ -125,7 +125,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         write_report(args.report, report)
     if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
+        print(json_text(report.to_dict()))
         return 0
     print(
         f"calibrated {args.urdf} with {args.method} from {args.data} "
@@ -244,7 +244,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
     report = demo.report
     if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
+        print(json_text(report.to_dict()))
         return 0
     out = demo.out
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
@@ -339,7 +339,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         if executor is not None:
             executor.shutdown()
     if args.json:
-        print(json.dumps(cv.to_dict(), indent=2))
+        print(json_text(cv.to_dict()))
         return 0
     label = {
         "none": "nominal",

@@ -60,7 +60,7 @@ def test_stage_table_uses_the_refined_intrinsics(px, refined):
     """With --refine-intrinsics from fx 8 % off, the refine column of the stage table is
     the reprojection RMS of the calibrated model (as the reprojection section computes it
     from the refined unknowns), not the error under the start intrinsics."""
-    report = json.loads((px / "ri.json").read_text())
+    report = _strict_json((px / "ri.json").read_text())
     stages = report["position_rms_mm_by_stage"]
     by_camera = {c["camera"]: c["rms_px"] for c in report["reprojection_px"]["cameras"]}
     for camera, rms in by_camera.items():
@@ -94,7 +94,7 @@ def test_verify_camera_overrides_the_sidecar_and_says_so(px, refined, capsys):
         f"note: intrinsics of camera 'left_camera' from --camera {wrong}, not the sidecar's" in out
     )
     code, out, err = _run(["verify", refined, px / "px.json", "--camera", wrong, "--json"], capsys)
-    assert json.loads(out)["intrinsics_from_camera_option"] == ["left_camera"]
+    assert _strict_json(out)["intrinsics_from_camera_option"] == ["left_camera"]
 
 
 @pytest.mark.parametrize("command", ["calibrate", "verify", "crossval"])
@@ -153,3 +153,33 @@ def test_crossval_on_pixel_data_scores_held_out_images_in_px(px):
         assert 0.65 < fold["pixel_rms_px"] < 0.85, fold
         assert 0.5 < fold["position_rms_mm"] < 1.5, fold  # 0.5 mm per axis: 0.87 mm
     assert cv.scores[0].n_test + cv.scores[1].n_test == data.n_samples
+
+
+def test_reports_are_strict_json_and_verify_carries_pixel_residuals(px, refined, capsys):
+    """report.json, the sidecar and verify --json parse with a strict parser (an
+    undefined number is null) and read back; verify's per-point entries of an image
+    group carry the pixel error, whose RMS is the group's; the text table prints '-'
+    for the undefined position and rotation of image points, never 'nan'."""
+    from kinfw.calibration_file import read_sidecar
+    from kinfw.calibration_report import read_report
+
+    _strict_json((px / "ri.json").read_text())
+    _strict_json(refined.with_suffix(".kinfw.json").read_text())
+    report = read_report(px / "ri.json")
+    read_sidecar(refined.with_suffix(".kinfw.json"))
+    pixel_groups = [g for g in report.errors_after if g.kind == "pixels"]
+    assert pixel_groups and all(np.isnan(g.position_rms_mm) for g in pixel_groups)
+    code, out, err = _run(["verify", refined, px / "px.json", "--json"], capsys)
+    assert code == 0, err
+    doc = _strict_json(out)
+    groups = [g for g in doc["groups"] if g["kind"] == "pixels"]
+    assert groups
+    for g in groups:
+        assert g["position_rms_mm"] is None and len(g["samples"]) == g["n"]
+        e = np.array([s["pixel_px"] for s in g["samples"]])
+        uv = np.array([s["pixel_uv_px"] for s in g["samples"]])
+        np.testing.assert_allclose(e, np.linalg.norm(uv, axis=1), rtol=1e-12)
+        assert np.sqrt(np.mean(e**2)) == pytest.approx(g["pixel_rms_px"], rel=1e-12)
+    code, out, err = _run(["verify", refined, px / "px.json"], capsys)
+    assert "nan" not in out.lower()
+    assert "fitted from the data: intrinsics" not in out
