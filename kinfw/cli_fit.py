@@ -187,8 +187,21 @@ def _choice_table(choice) -> str:
     return "\n".join(rows)
 
 
-def _sigma(value: float | None, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
+def _noise_text(noise) -> str:
+    """The sigma of each noise component the data has: ``0.5 mm, 0.29 deg per
+    component, 0.5 px`` (position, rotation, pixels; other components in their SI
+    unit)."""
+    parts = []
+    for name, sigma in noise.sigmas:
+        if name == "position":
+            parts.append(f"{1e3 * sigma:.3g} mm")
+        elif name == "rotation":
+            parts.append(f"{math.degrees(sigma):.3g} deg per component")
+        elif name == "pixel":
+            parts.append(f"{sigma:.3g} px")
+        else:
+            parts.append(f"{name} {sigma:.3g}")
+    return ", ".join(parts) or "-"
 
 
 def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
@@ -199,12 +212,9 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         condition = f"condition {ident.condition:.3g}"
     else:  # null in the report: no free parameters, or a rank-deficient problem
         condition = "condition undefined" if not ident.n_parameters else "condition inf"
-    noise = ref.noise
     print(
-        f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component"
-        + ("" if noise.of("pixel") is None else f", {noise.of('pixel'):.3g} px")
-        + f" ({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+        f"refine: noise sigma {_noise_text(ref.noise)}"
+        + f" ({'estimated' if ref.noise.estimated else 'given'}); reduced chi-square "
         f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
     )
     print(

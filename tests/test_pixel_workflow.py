@@ -183,3 +183,28 @@ def test_reports_are_strict_json_and_verify_carries_pixel_residuals(px, refined,
     code, out, err = _run(["verify", refined, px / "px.json"], capsys)
     assert "nan" not in out.lower()
     assert "fitted from the data: intrinsics" not in out
+
+
+@pytest.fixture(scope="module")
+def px_only(tmp_path_factory) -> Path:
+    """Stage 2 images only (no poses): 30 configurations of the IIS-head, 0.5 px."""
+    root = tmp_path_factory.mktemp("px_only")
+    argv = ["simulate", "--pixels", "--stage", "2", "--seed", "2", "--out", root / "p2.json"]
+    assert main([str(a) for a in [*argv, "--truth-out", root / "true.urdf"]]) == 0
+    return root / "p2.json"
+
+
+def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
+    """Pixel-only data: the noise line and the report give the pixel sigma alone, near
+    the simulated 0.5 px; no default 1 mm / 0.5 deg of components without rows."""
+    out_urdf = px_only.with_name("c2.urdf")
+    argv = ["calibrate", px_only, "--urdf", HEAD, "--out", out_urdf, "--params", "full"]
+    code, out, err = _run([*argv, "--report", px_only.with_name("r2.json")], capsys)
+    assert code == 0, err
+    line = next(x for x in out.splitlines() if x.startswith("refine: noise sigma"))
+    assert " mm" not in line and " deg" not in line, line
+    sigma = float(line.split("noise sigma ")[1].split(" px")[0])
+    assert 0.45 < sigma < 0.55, line
+    noise = _strict_json(px_only.with_name("r2.json").read_text())["refine"]["noise"]
+    assert list(noise["sigma_per_component"]) == ["pixel"]
+    assert noise["position_sigma_mm"] is None

@@ -247,7 +247,12 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
 
 
 def _noise_summary(result: RefineResult) -> NoiseSummary:
-    return NoiseSummary(tuple(result.noise.sigmas), result.noise.estimated)
+    """The noise of the components the data has (a default sigma of a component without
+    rows, the 1 mm position of pixel-only data, whitened nothing and is not reported)."""
+    present = {name for g in result.residuals for name, _ in g.components}
+    return NoiseSummary(
+        tuple((k, v) for k, v in result.noise.sigmas if k in present), result.noise.estimated
+    )
 
 
 def _unknowns(result: RefineResult) -> tuple[CalibratedUnknown, ...]:
