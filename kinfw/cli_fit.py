@@ -26,6 +26,9 @@ if TYPE_CHECKING:
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
+#: Rejected observations listed one per line; the others are counted.
+MAX_LINES = 10
+
 
 # -- kinfw calibrate ---------------------------------------------------------------------
 def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
@@ -139,7 +142,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print("position RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
-        _print_refine(report.refine, has_report=bool(args.report))
+        _print_refine(
+            report.refine,
+            has_report=bool(args.report),
+            n_pixel_points=sum(len(g.sample) for g in data.groups("pixels")),
+        )
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
     if report.errors_held_out is not None:
@@ -204,7 +211,7 @@ def _noise_text(noise) -> str:
     return ", ".join(parts) or "-"
 
 
-def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
+def _print_refine(ref: RefineSection, *, has_report: bool, n_pixel_points: int = 0) -> None:
     """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
     the worst down-weighted observations."""
     ident = ref.identifiability
@@ -223,14 +230,21 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
-    for row in ref.rejected or ():
+    rejected = ref.rejected or ()
+    for row in rejected[:MAX_LINES]:
         print(
             f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
             f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold "
             "(refitted without it)"
         )
-    if ref.rejection_note:
-        print(f"  warning: {ref.rejection_note}")
+    if len(rejected) > MAX_LINES:
+        print(
+            f"  ... and {len(rejected) - MAX_LINES} more rejected "
+            f"({len(rejected)} in all; "
+            + ("see the report)" if has_report else "write them with --report)")
+        )
+    # the rejection note (data inconsistent with the model) is a warning, printed once
+    # on stderr by the command's warning printer
     down = ref.downweighted
     if down:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
@@ -244,6 +258,29 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
             f"    ... and {len(down) - 5} more "
             f"({'see the report' if has_report else 'write them with --report'})"
         )
+    hint = _intrinsics_hint(ref, n_pixel_points)
+    if hint:
+        print(f"  warning: {hint}")
+
+
+def _intrinsics_hint(ref: RefineSection, n_points: int) -> str | None:
+    """When the pixel residuals are large and structured (more than 5 % of the image
+    points rejected or down-weighted, or an estimated pixel noise over 2 px), the
+    intrinsics are a likely cause: say so, unless they were refined. ``n_points``: the
+    image points of the calibration data."""
+    px_rows = [r for r in (*(ref.rejected or ()), *ref.downweighted) if r.kind == "pixels"]
+    sigma = ref.noise.of("pixel")
+    refined = any(p.owner.startswith("intrinsics") and not p.fixed for p in ref.parameters)
+    if sigma is None or refined:
+        return None
+    many = n_points > 0 and len(px_rows) > 0.05 * n_points
+    if not (many or (ref.noise.estimated and sigma > 2.0)):
+        return None
+    return (
+        f"the image points' residuals are large and structured ({len(px_rows)} rejected or "
+        f"down-weighted, estimated pixel noise {sigma:.3g} px): the camera intrinsics may "
+        "be wrong; try --refine-intrinsics (or check the --camera files)"
+    )
 
 
 # -- kinfw demo --------------------------------------------------------------------------
@@ -426,8 +463,14 @@ def cmd_crossval(args: argparse.Namespace) -> int:
 
 
 def _observed(row: DownweightedRow | RejectedRow) -> str:
-    """``frame [marker m] (kind)`` of a down-weighted or rejected observation."""
-    return row.frame + (f" marker {row.marker}" if row.marker else "") + f" ({row.kind})"
+    """``frame [marker m] (kind) [image LABEL corner ID]`` of a down-weighted or
+    rejected observation."""
+    return (
+        row.frame
+        + (f" marker {row.marker}" if row.marker else "")
+        + f" ({row.kind})"
+        + (f" {row.where}" if row.where else "")
+    )
 
 
 def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:

@@ -4,6 +4,7 @@ calibrate, verify and crossval on the file, with wrong or overriding intrinsics.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -208,3 +209,41 @@ def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
     noise = _strict_json(px_only.with_name("r2.json").read_text())["refine"]["noise"]
     assert list(noise["sigma_per_component"]) == ["pixel"]
     assert noise["position_sigma_mm"] is None
+
+
+def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, capsys):
+    """fx, fy 8 % too large on one camera: many corners are rejected. At most 10 lines
+    (each naming the image label and corner id, which exist in the data at that sample)
+    and a count; the inconsistency warning once; a hint at the intrinsics. With the
+    true intrinsics: no hint."""
+    from kinfw.calibration_report import read_report
+    from kinfw.measurements import read_measurements
+
+    argv = ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "w.urdf"]
+    argv += ["--params", "full", "--report", px / "w.json"]
+    code, out, err = _run([*argv, "--camera", f"left_camera={px / 'wrong.json'}"], capsys)
+    assert code == 0, err
+    lines = [x for x in out.splitlines() if "rejected as a gross error" in x]
+    rejected = read_report(px / "w.json").refine.rejected
+    assert len(rejected) > 20 and len(lines) == 10
+    assert f"... and {len(rejected) - 10} more rejected ({len(rejected)} in all" in out
+    assert all(re.search(r"\(pixels\) image left_camera_\d+ corner \d+: ", x) for x in lines)
+    # every rejected corner is where the report says: that image, that corner, that sample
+    data = read_measurements(px / "px.json")
+    where = {
+        (str(im), int(pid)): int(s)
+        for g in data.groups("pixels")
+        for im, pid, s in zip(g.image, g.point_id, g.sample, strict=True)
+    }
+    assert any(row.kind == "pixels" for row in rejected)
+    for row in rejected:
+        if row.kind != "pixels":
+            assert row.where is None
+            continue
+        _, label, _, corner = row.where.split()
+        assert where[(label, int(corner))] == row.sample, row
+    assert (out + err).count("observations lie beyond the") == 1
+    assert "the camera intrinsics may be wrong; try --refine-intrinsics" in out
+    code, out, err = _run([*argv, "--camera", f"left_camera={px / 'right.json'}"], capsys)
+    assert code == 0, err
+    assert "intrinsics may be wrong" not in out

@@ -196,6 +196,7 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
                 None if rotation_deg is None else float(rotation_deg[c]),
                 float(g.weight[k]),
                 None if pixel_px is None else float(pixel_px[c]),
+                None if g.labels is None else g.labels[k],
             )
             for c, k in enumerate(rows_g)
         ]
@@ -240,6 +241,7 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
                 None if rot is None else float(np.degrees(rot)),
                 o.excess,
                 float(np.linalg.norm(pixels)) if pixels else None,
+                o.where,
             )
         )
     rows.sort(key=lambda row: (-row.excess, row.sample))
