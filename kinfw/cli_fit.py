@@ -49,11 +49,13 @@ def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
 
 
 def _stage_table(stages: Sequence[StageErrors]) -> str:
+    """Per group its RMS after each stage: position mm, image groups (``[px]``) px."""
     rms = {s.stage: dict(s.position_rms_mm) for s in stages}
     groups = [g for g, _ in stages[0].position_rms_mm]
+    px = any(g.endswith(" [px]") for g in groups)
     return format_table(
         [[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
-        ["position RMS mm", *rms],
+        ["RMS: position mm, images px" if px else "position RMS mm", *rms],
     )
 
 
@@ -139,7 +141,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if choice is not None and choice.candidates:
         print(f"model choice: {choice.k}-fold held-out error of each candidate:")
         print(_choice_table(choice))
-    print("position RMS on the calibration data after each stage (in-sample):")
+    print("RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
         _print_refine(
@@ -285,7 +287,7 @@ def _intrinsics_hint(ref: RefineSection, n_points: int) -> str | None:
 
 # -- kinfw demo --------------------------------------------------------------------------
 def cmd_demo(args: argparse.Namespace) -> int:
-    from verification.demo import NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
+    from verification.demo import N_STAGE2, NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
 
     pixels = bool(getattr(args, "pixels", False))
     demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
@@ -294,17 +296,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print(json_text(report.to_dict()))
         return 0
     out = demo.out
+    seen = ""
+    if pixels:  # the images each camera has: a camera does not see the board everywhere
+        seen = ", ".join(f"{c.camera} {c.n_images}" for c in report.reprojection.cameras)
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
     print(
         f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
         f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
         "the stereo rig; stage 2: "
         + (
-            "each camera (640x480, fx = fy = 600 px) sees the corners of a fixed 9x6 "
-            f"chessboard in 30 random configurations where it is in view, pixel noise "
-            f"{PIXEL_SIGMA:g} px; "
+            "the cameras (640x480, fx = fy = 600 px) see the corners of a fixed 9x6 "
+            f"chessboard in {N_STAGE2} random configurations (images: {seen}), pixel "
+            f"noise {PIXEL_SIGMA:g} px; "
             if pixels
-            else "both cameras see a fixed target in 30 random configurations; "
+            else f"both cameras see a fixed target in {N_STAGE2} random configurations; "
         )
         + f"noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
         "A = X B Y, then the joint least squares"
@@ -320,7 +325,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print()
         _print_reprojection(report.reprojection)
         held = demo.held_out_pixels
-        print("reprojection error on 30 held-out images (fresh configurations), px:")
+        n_images = sum(c.n_images for c in held.cameras)
+        print(
+            f"reprojection error on {n_images} held-out images ({N_STAGE2} fresh "
+            "configurations), px:"
+        )
         rows = [
             [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
             for c in held.cameras

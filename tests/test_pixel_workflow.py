@@ -62,15 +62,17 @@ def test_stage_table_uses_the_refined_intrinsics(px, refined):
     the reprojection RMS of the calibrated model (as the reprojection section computes it
     from the refined unknowns), not the error under the start intrinsics."""
     report = _strict_json((px / "ri.json").read_text())
-    stages = report["position_rms_mm_by_stage"]
+    # px groups under their own key with the unit, not in the mm table
+    assert not any("pixels" in g for g in report["position_rms_mm_by_stage"]["refine"])
+    stages = report["pixel_rms_px_by_stage"]
     by_camera = {c["camera"]: c["rms_px"] for c in report["reprojection_px"]["cameras"]}
     for camera, rms in by_camera.items():
-        refine = stages["refine"][f"{camera} (pixels) [px]"]
+        refine = stages["refine"][f"{camera} (pixels)"]
         # the stage table refits each image's target pose: within 5 % of the calibrated one
         assert refine == pytest.approx(rms, rel=0.05), (camera, refine, rms)
         assert refine < 1.0  # 0.5 px noise, 2 coordinates: 0.71 px expected
     # the start intrinsics are wrong: the hand-eye stage (before the refinement) is not
-    assert stages["hand-eye"]["left_camera (pixels) [px]"] > 2.0
+    assert stages["hand-eye"]["left_camera (pixels)"] > 2.0
 
 
 def _pixel_rms(text: str, camera: str) -> float:
