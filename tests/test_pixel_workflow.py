@@ -249,3 +249,26 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     code, out, err = _run([*argv, "--camera", f"left_camera={px / 'right.json'}"], capsys)
     assert code == 0, err
     assert "intrinsics may be wrong" not in out
+
+
+def test_model_choice_on_few_images_says_once_it_fits_full(px_only, capsys):
+    """Three configurations seen by both cameras (< 10 residual rows per parameter):
+    the automatic choice cannot rank candidates on pixels; it says so once and fits
+    full, with no candidate table and no fold warning."""
+    from kinfw.measurements import read_measurements, write_measurements
+    from kinfw.robot import load_robot
+    from verification.model_choice import ROWS_PER_PARAMETER, rows_per_parameter
+
+    data = read_measurements(px_only)
+    left, right = ({int(s) for s in g.sample} for g in data.groups("pixels"))
+    small_data = data.subset(np.array(sorted(left & right)[:3]))
+    assert rows_per_parameter(load_robot(HEAD), small_data) < ROWS_PER_PARAMETER
+    small = px_only.with_name("small.json")
+    write_measurements(small, small_data)
+    argv = ["calibrate", small, "--urdf", HEAD, "--out", px_only.with_name("s.urdf")]
+    code, out, err = _run(argv, capsys)
+    assert code == 0, err
+    assert (out + err).count("cannot score image points") == 1
+    assert "note: parameters: full (" in out
+    assert "model choice:" not in out and "nan" not in out.lower()
+    assert "fold" not in err and "training" not in err, err  # no cross-validation ran
