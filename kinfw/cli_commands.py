@@ -198,11 +198,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             )
         )
         return 0
+    poses = bool(frames) or (bool(cameras) and not args.pixels)
     print(
-        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
-        f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
-        + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-        + ")"
+        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
+        + (
+            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
+            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
+            + ")"
+            if poses
+            else ""
+        )
     )
     if pixels is not None:
         print(

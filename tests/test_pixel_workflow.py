@@ -197,6 +197,16 @@ def px_only(tmp_path_factory) -> Path:
     return root / "p2.json"
 
 
+def test_simulate_pixels_only_prints_no_pose_noise(tmp_path, capsys):
+    argv = ["simulate", "--pixels", "--stage", "2", "--stage2-samples", "4"]
+    argv += ["--out", tmp_path / "a.json", "--truth-out", tmp_path / "t.urdf"]
+    code, out, err = _run(argv, capsys)
+    assert code == 0, err
+    first = out.splitlines()[0]
+    assert " mm" not in first and " deg" not in first, first
+    assert "pixel noise 0.5 px" in out
+
+
 def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
     """Pixel-only data: the noise line and the report give the pixel sigma alone, near
     the simulated 0.5 px; no default 1 mm / 0.5 deg of components without rows."""
