@@ -29,7 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.files import write_text_atomic
+from kinfw.files import json_text, write_text_atomic
 
 __all__ = [
     "BeforeAfter",
@@ -103,10 +103,11 @@ class DocReader:
     def number(
         self, doc: dict[str, Any], key: str, at: str, *, optional: bool = False
     ) -> float | None:
-        """A number (NaN allowed: the reports write NaN for a point's rotation)."""
+        """A number; null is NaN (the reports write an undefined number, a point's
+        rotation, as null), or None with ``optional``."""
         v = self.value(doc, key, at, optional=optional)
-        if v is None and optional:
-            return None
+        if v is None:
+            return None if optional else math.nan
         if isinstance(v, bool) or not isinstance(v, int | float):
             raise self.fail(self.path(at, key), "a number" + (" or null" if optional else ""), v)
         return float(v)
@@ -576,4 +577,4 @@ def read_sidecar(path: str | Path) -> CalibrationSidecar:
 
 def write_sidecar(path: str | Path, sidecar: CalibrationSidecar) -> Path:
     """Write ``sidecar`` as JSON (indented, atomically: :func:`kinfw.files.write_text_atomic`)."""
-    return write_text_atomic(path, json.dumps(sidecar.to_dict(), indent=2) + "\n")
+    return write_text_atomic(path, json_text(sidecar.to_dict()) + "\n")

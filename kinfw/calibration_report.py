@@ -38,7 +38,7 @@ from kinfw.calibration_sections import (
     ReprojectionSection,
     TargetEstimate,
 )
-from kinfw.files import write_text_atomic
+from kinfw.files import json_text, write_text_atomic
 
 __all__ = [
     "CalibrationReport",
@@ -196,17 +196,41 @@ class StageErrors:
         )
 
 
-def _stages_to_dict(stages: tuple[StageErrors, ...]) -> dict[str, dict[str, float]]:
-    return {s.stage: dict(s.position_rms_mm) for s in stages}
+_PX = " [px]"
 
 
-def _stages_from(doc: dict, key: str, r: DocReader) -> tuple[StageErrors, ...]:
+def _stages_to_dict(
+    stages: tuple[StageErrors, ...], *, pixels: bool = False
+) -> dict[str, dict[str, float]]:
+    """Per stage the mm groups, or with ``pixels`` the px groups (labels without the
+    ``" [px]"``): the two go to keys with their unit."""
+    return {
+        s.stage: {
+            (g[: -len(_PX)] if pixels else g): v
+            for g, v in s.position_rms_mm
+            if g.endswith(_PX) == pixels
+        }
+        for s in stages
+    }
+
+
+def _stages_from(
+    doc: dict, key: str, r: DocReader, pixel_key: str | None = None
+) -> tuple[StageErrors, ...]:
+    """Read :func:`_stages_to_dict`'s mm groups of ``key`` and px groups of
+    ``pixel_key`` (optional; older files had px groups in ``key``, labelled ``[px]``)."""
     stages = r.obj(r.value(doc, key, ""), key)
+    pixel = r.obj(doc[pixel_key], pixel_key) if pixel_key and pixel_key in doc else {}
     out = []
     for stage, groups in stages.items():
         at = f"{key}.{stage}"
         groups = r.obj(groups, at)
-        out.append(StageErrors(stage, tuple((g, r.number(groups, g, at)) for g in groups)))
+        rows = [(g, r.number(groups, g, at)) for g in groups]
+        if stage in pixel:
+            p_at = f"{pixel_key}.{stage}"
+            p_groups = r.obj(pixel[stage], p_at)
+            rows += [(g + _PX, r.number(p_groups, g, p_at)) for g in p_groups]
+        out.append(StageErrors(stage, tuple(rows)))
     return tuple(out)
 
 
@@ -239,6 +263,12 @@ class CalibrationReport:
     reprojection : ReprojectionSection or None
         Reprojection errors (px) of ``pixels`` observations per camera and image, the
         worst images named, against the calibration.
+    reprojection_held_out : ReprojectionSection or None
+        The same on held-out images (``kinfw demo --pixels``: fresh configurations).
+
+    In the file, the stage tables' image groups (labelled ``"... [px]"`` in
+    :attr:`position_rms_by_stage`) are under ``pixel_rms_px_by_stage``, the others
+    under ``position_rms_mm_by_stage``.
     """
 
     created: str
@@ -259,6 +289,7 @@ class CalibrationReport:
     errors_vs_truth_held_out: tuple[BeforeAfter, ...] | None = None
     position_rms_vs_truth_held_out_by_stage: tuple[StageErrors, ...] | None = None
     reprojection: ReprojectionSection | None = None
+    reprojection_held_out: ReprojectionSection | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration-report"
     VERSION: ClassVar[int] = 1
@@ -276,6 +307,11 @@ class CalibrationReport:
             "notes": list(self.notes),
             "errors_in_sample": [row.to_dict() for row in self.errors_in_sample],
             "position_rms_mm_by_stage": _stages_to_dict(self.position_rms_by_stage),
+            **(
+                {"pixel_rms_px_by_stage": px}
+                if any((px := _stages_to_dict(self.position_rms_by_stage, pixels=True)).values())
+                else {}
+            ),
             "errors_before": {g.group: g.to_dict() for g in self.errors_before},
             "errors_after": {g.group: g.to_dict() for g in self.errors_after},
         }
@@ -299,6 +335,8 @@ class CalibrationReport:
             )
         if self.reprojection is not None:
             doc["reprojection_px"] = self.reprojection.to_dict()
+        if self.reprojection_held_out is not None:
+            doc["reprojection_px_held_out"] = self.reprojection_held_out.to_dict()
         return doc
 
     @classmethod
@@ -328,7 +366,7 @@ class CalibrationReport:
             DataProvenance.from_dict(r.value(doc, "data", ""), r, "data"),
             r.strings(doc, "notes", ""),
             rows("errors_in_sample") or (),
-            _stages_from(doc, "position_rms_mm_by_stage", r),
+            _stages_from(doc, "position_rms_mm_by_stage", r, "pixel_rms_px_by_stage"),
             errors("errors_before"),
             errors("errors_after"),
             section("kinematics", ClosedFormSection),
@@ -340,6 +378,7 @@ class CalibrationReport:
             rows("errors_vs_truth_held_out"),
             _stages_from(doc, truth_key, r) if truth_key in doc else None,
             section("reprojection_px", ReprojectionSection),
+            section("reprojection_px_held_out", ReprojectionSection),
         )
 
 
@@ -358,4 +397,4 @@ def read_report(path: str | Path) -> CalibrationReport:
 
 def write_report(path: str | Path, report: CalibrationReport) -> Path:
     """Write ``report`` as indented JSON, atomically."""
-    return write_text_atomic(path, json.dumps(report.to_dict(), indent=2) + "\n")
+    return write_text_atomic(path, json_text(report.to_dict()) + "\n")

@@ -362,6 +362,7 @@ def _observation_dict(row: Any) -> dict[str, Any]:
         "position_residual_mm": row.position_residual_mm,
         "rotation_residual_deg": row.rotation_residual_deg,
         **({} if row.pixel_residual_px is None else {"pixel_residual_px": row.pixel_residual_px}),
+        **({} if row.where is None else {"where": row.where}),
     }
 
 
@@ -378,8 +379,12 @@ def _observation_fields(doc: Any, r: DocReader, at: str, *, position_optional: b
 
 
 def _pixel_field(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
-    """The optional ``pixel_residual_px`` (a ``pixels`` observation's reprojection error)."""
-    return {"pixel_residual_px": r.number(doc, "pixel_residual_px", at, optional=True)}
+    """The optional ``pixel_residual_px`` (a ``pixels`` observation's reprojection error)
+    and ``where`` (its image and corner)."""
+    return {
+        "pixel_residual_px": r.number(doc, "pixel_residual_px", at, optional=True),
+        "where": r.string(doc, "where", at, optional=True),
+    }
 
 
 @dataclass(frozen=True, slots=True)
@@ -397,6 +402,7 @@ class DownweightedRow:
     rotation_residual_deg: float | None
     weight: float
     pixel_residual_px: float | None = None
+    where: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "weight": self.weight}
@@ -428,6 +434,7 @@ class RejectedRow:
     rotation_residual_deg: float | None
     excess: float
     pixel_residual_px: float | None = None
+    where: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "excess": self.excess}

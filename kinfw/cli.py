@@ -53,20 +53,36 @@ USER_ERRORS = (ValueError, OSError)
 
 
 # -- outputs -----------------------------------------------------------------------------
+def _camera_inputs(args: argparse.Namespace) -> dict[str, Path]:
+    """The ``--camera FRAME=FILE`` files, keyed ``--camera FRAME=`` (for the message)."""
+    given = getattr(args, "camera", None)
+    if not isinstance(given, list):  # detect's --camera is one file, checked by detect_inputs
+        return {}
+    return {f"--camera {frame}=": file for frame, file in given}
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path of the command before any work: its directory exists and
     is writable, it is not a directory, no two outputs are one file, and no output is an
-    input (symlinks resolved). Raises :class:`kinfw.files.OutputPathError`."""
+    input (``--urdf``, the data file, ``--holdout``, ``--camera`` files; symlinks
+    resolved). Raises :class:`kinfw.files.OutputPathError` naming both options and the
+    path."""
     command = args.command
+    cameras = _camera_inputs(args)
     if command == "simulate":
         check_outputs(
             {"--out": args.out, "--truth-out": args.truth_out},
-            inputs={"--urdf": args.urdf, "--plan": args.plan},
+            inputs={"--urdf": args.urdf, "--plan": args.plan, **cameras},
         )
     elif command == "calibrate":
         check_outputs(
             {"--out": args.out, "sidecar": default_sidecar_path(args.out), "--report": args.report},
-            inputs={"--urdf": args.urdf, "data file": args.data, "--holdout": args.holdout},
+            inputs={
+                "--urdf": args.urdf,
+                "data file": args.data,
+                "--holdout": args.holdout,
+                **cameras,
+            },
         )
     elif command == "demo":
         from verification.demo import DEMO_FILES
@@ -219,7 +235,8 @@ def _add_camera_option(p: argparse.ArgumentParser) -> None:
         metavar="FRAME=FILE",
         help="intrinsics of the camera frame FRAME for 'pixels' observations, from a ROS "
         "camera_info / OpenCV YAML or JSON file; overrides or adds to the data file's "
-        '"cameras" section (repeatable)',
+        '"cameras" section (and, for verify, the sidecar\'s); a FRAME no observation uses '
+        "is an error (repeatable)",
     )
 
 
@@ -278,7 +295,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.8,
         help="fraction of each joint range used (default 0.8)",
     )
-    p.add_argument("--stage", choices=("1", "2", "both"), default="1")
+    p.add_argument(
+        "--stage",
+        choices=("1", "2", "both"),
+        default=None,
+        help="stage 1 (one joint at a time), 2 (random configurations seen by the cameras) "
+        "or both (default 1; with --pixels: both, and 1 is an error)",
+    )
     p.add_argument(
         "--stage2-samples",
         type=_COUNT,

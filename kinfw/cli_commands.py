@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import json
 import logging
 import sys
@@ -20,7 +21,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from kinfw.files import write_text_atomic
+from kinfw.files import json_text, write_text_atomic
 
 if TYPE_CHECKING:
     from kinfw.robot import Robot
@@ -155,6 +156,13 @@ def cmd_simulate(args: argparse.Namespace) -> int:
 
     nominal = load_robot(args.urdf)
     rng = np.random.default_rng(args.seed)
+    if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
+        args.stage = "both" if args.pixels else "1"
+    elif args.pixels and args.stage == "1":
+        raise ValueError(
+            "--pixels --stage 1: --pixels makes stage 2 images; give --stage 2 or both "
+            "(the default with --pixels)"
+        )
     stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
     frames = (
         _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
@@ -218,11 +226,16 @@ def cmd_simulate(args: argparse.Namespace) -> int:
             )
         )
         return 0
+    poses = bool(frames) or (bool(cameras) and not args.pixels)
     print(
-        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)} "
-        f"(noise {args.noise_mm} mm, {args.noise_deg} deg"
-        + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-        + ")"
+        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
+        + (
+            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
+            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
+            + ")"
+            if poses
+            else ""
+        )
     )
     if pixels is not None:
         print(
@@ -264,19 +277,26 @@ def accuracy_table(report_dict: dict) -> str:
     """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
     rows = []
     has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
+
+    def num(value, fmt: str) -> str:  # an undefined number (NaN, null) is "-"
+        return "-" if value is None or value != value else format(value, fmt)
+
     for g in report_dict["groups"]:
         mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
+        table4 = " ".join(
+            f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True) if m == m and s == s
+        )
         rows.append(
             [
                 g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""),
                 g["kind"],
                 g["n"],
-                f"{g['position_mean_mm']:.3f}",
-                f"{g['position_rms_mm']:.3f}",
-                f"{g['position_max_mm']:.3f}",
-                f"{g['rotation_rms_deg']:.4f}",
-                f"{g['rotation_max_deg']:.4f}",
-                " ".join(f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True)),
+                num(g["position_mean_mm"], ".3f"),
+                num(g["position_rms_mm"], ".3f"),
+                num(g["position_max_mm"], ".3f"),
+                num(g["rotation_rms_deg"], ".4f"),
+                num(g["rotation_max_deg"], ".4f"),
+                table4 or "-",
                 *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
             ]
         )
@@ -302,12 +322,26 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
     from kinfw.measurements import DatasetError, read_measurements
 
     cameras = {}
-    for frame, file in getattr(args, "camera", None) or ():
+    given = getattr(args, "camera", None) or ()
+    for frame, file in given:
         try:
             cameras[frame] = read_camera(file)
         except CameraError as exc:
             raise DatasetError(f"--camera {frame}={file}: {exc}") from None
-    return read_measurements(path, cameras=cameras)
+    data = read_measurements(path, cameras=cameras)
+    used = list(dict.fromkeys(g.camera for g in data.groups("pixels")))
+    for frame, file in given:
+        if frame not in used:
+            has = (
+                f"the camera frames of its 'pixels' observations: {', '.join(used)}"
+                if used
+                else "it has no 'pixels' observations"
+            )
+            raise DatasetError(
+                f"--camera {frame}={file}: no observation of {path} uses camera frame "
+                f"{frame!r} ({has})"
+            )
+    return data
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -323,15 +357,30 @@ def cmd_verify(args: argparse.Namespace) -> int:
         sidecar = read_sidecar(sidecar_path)
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
+    overridden = []
+    if sidecar is not None:  # --camera given explicitly wins over the sidecar's intrinsics
+        given = {frame for frame, _ in args.camera or ()}
+        overridden = [
+            u.name for u in sidecar.unknowns if u.kind == "intrinsics" and u.name in given
+        ]
+        sidecar = dataclasses.replace(
+            sidecar,
+            unknowns=tuple(
+                u
+                for u in sidecar.unknowns
+                if (u.kind, u.name) not in {("intrinsics", f) for f in overridden}
+            ),
+        )
     report = evaluate_model(robot, data, sidecar=sidecar)
     used = str(sidecar_path) if sidecar is not None else None
     if args.json:
         print(
-            json.dumps(
+            json_text(
                 {
                     "model": str(args.model),
                     "data": str(args.data),
                     "sidecar": used,
+                    "intrinsics_from_camera_option": overridden,
                     **report.to_dict(per_sample=True),
                 },
                 indent=2,
@@ -348,6 +397,11 @@ def cmd_verify(args: argparse.Namespace) -> int:
             "as calibrated, not refitted)"
         )
     print(accuracy_table(report.to_dict()))
+    for frame in overridden:
+        file = next(f for c, f in args.camera if c == frame)
+        print(
+            f"note: intrinsics of camera {frame!r} from --camera {frame}={file}, not the sidecar's"
+        )
     for note in report.fitted:
         print(f"note: fitted from the data: {note}")
     return 0

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from kinfw.cli_commands import format_table, progress_printer, read_data
+from kinfw.files import json_text
 
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
@@ -25,6 +25,9 @@ if TYPE_CHECKING:
     from kinfw.calibration_sections import DownweightedRow, RejectedRow
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
+
+#: Rejected observations listed one per line; the others are counted.
+MAX_LINES = 10
 
 
 # -- kinfw calibrate ---------------------------------------------------------------------
@@ -46,11 +49,13 @@ def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
 
 
 def _stage_table(stages: Sequence[StageErrors]) -> str:
+    """Per group its RMS after each stage: position mm, image groups (``[px]``) px."""
     rms = {s.stage: dict(s.position_rms_mm) for s in stages}
     groups = [g for g, _ in stages[0].position_rms_mm]
+    px = any(g.endswith(" [px]") for g in groups)
     return format_table(
         [[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
-        ["position RMS mm", *rms],
+        ["RMS: position mm, images px" if px else "position RMS mm", *rms],
     )
 
 
@@ -125,7 +130,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         write_report(args.report, report)
     if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
+        print(json_text(report.to_dict()))
         return 0
     print(
         f"calibrated {args.urdf} with {args.method} from {args.data} "
@@ -136,10 +141,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if choice is not None and choice.candidates:
         print(f"model choice: {choice.k}-fold held-out error of each candidate:")
         print(_choice_table(choice))
-    print("position RMS on the calibration data after each stage (in-sample):")
+    print("RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.position_rms_by_stage))
     if report.refine is not None:
-        _print_refine(report.refine, has_report=bool(args.report))
+        _print_refine(
+            report.refine,
+            has_report=bool(args.report),
+            n_pixel_points=sum(len(g.sample) for g in data.groups("pixels")),
+        )
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
     if report.errors_held_out is not None:
@@ -187,11 +196,24 @@ def _choice_table(choice) -> str:
     return "\n".join(rows)
 
 
-def _sigma(value: float | None, fmt: str) -> str:
-    return "-" if value is None else format(value, fmt)
+def _noise_text(noise) -> str:
+    """The sigma of each noise component the data has: ``0.5 mm, 0.29 deg per
+    component, 0.5 px`` (position, rotation, pixels; other components in their SI
+    unit)."""
+    parts = []
+    for name, sigma in noise.sigmas:
+        if name == "position":
+            parts.append(f"{1e3 * sigma:.3g} mm")
+        elif name == "rotation":
+            parts.append(f"{math.degrees(sigma):.3g} deg per component")
+        elif name == "pixel":
+            parts.append(f"{sigma:.3g} px")
+        else:
+            parts.append(f"{name} {sigma:.3g}")
+    return ", ".join(parts) or "-"
 
 
-def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
+def _print_refine(ref: RefineSection, *, has_report: bool, n_pixel_points: int = 0) -> None:
     """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
     the worst down-weighted observations."""
     ident = ref.identifiability
@@ -199,12 +221,9 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         condition = f"condition {ident.condition:.3g}"
     else:  # null in the report: no free parameters, or a rank-deficient problem
         condition = "condition undefined" if not ident.n_parameters else "condition inf"
-    noise = ref.noise
     print(
-        f"refine: noise sigma {_sigma(noise.position_sigma_mm, '.3g')} mm, "
-        f"{_sigma(noise.rotation_sigma_deg_per_component, '.3g')} deg per component"
-        + ("" if noise.of("pixel") is None else f", {noise.of('pixel'):.3g} px")
-        + f" ({'estimated' if noise.estimated else 'given'}); reduced chi-square "
+        f"refine: noise sigma {_noise_text(ref.noise)}"
+        + f" ({'estimated' if ref.noise.estimated else 'given'}); reduced chi-square "
         f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
     )
     print(
@@ -213,14 +232,21 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     )
     for item in ident.not_identifiable:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
-    for row in ref.rejected or ():
+    rejected = ref.rejected or ()
+    for row in rejected[:MAX_LINES]:
         print(
             f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
             f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold "
             "(refitted without it)"
         )
-    if ref.rejection_note:
-        print(f"  warning: {ref.rejection_note}")
+    if len(rejected) > MAX_LINES:
+        print(
+            f"  ... and {len(rejected) - MAX_LINES} more rejected "
+            f"({len(rejected)} in all; "
+            + ("see the report)" if has_report else "write them with --report)")
+        )
+    # the rejection note (data inconsistent with the model) is a warning, printed once
+    # on stderr by the command's warning printer
     down = ref.downweighted
     if down:
         print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
@@ -234,30 +260,56 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
             f"    ... and {len(down) - 5} more "
             f"({'see the report' if has_report else 'write them with --report'})"
         )
+    hint = _intrinsics_hint(ref, n_pixel_points)
+    if hint:
+        print(f"  warning: {hint}")
+
+
+def _intrinsics_hint(ref: RefineSection, n_points: int) -> str | None:
+    """When the pixel residuals are large and structured (more than 5 % of the image
+    points rejected or down-weighted, or an estimated pixel noise over 2 px), the
+    intrinsics are a likely cause: say so, unless they were refined. ``n_points``: the
+    image points of the calibration data."""
+    px_rows = [r for r in (*(ref.rejected or ()), *ref.downweighted) if r.kind == "pixels"]
+    sigma = ref.noise.of("pixel")
+    refined = any(p.owner.startswith("intrinsics") and not p.fixed for p in ref.parameters)
+    if sigma is None or refined:
+        return None
+    many = n_points > 0 and len(px_rows) > 0.05 * n_points
+    if not (many or (ref.noise.estimated and sigma > 2.0)):
+        return None
+    return (
+        f"the image points' residuals are large and structured ({len(px_rows)} rejected or "
+        f"down-weighted, estimated pixel noise {sigma:.3g} px): the camera intrinsics may "
+        "be wrong; try --refine-intrinsics (or check the --camera files)"
+    )
 
 
 # -- kinfw demo --------------------------------------------------------------------------
 def cmd_demo(args: argparse.Namespace) -> int:
-    from verification.demo import NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
+    from verification.demo import N_STAGE2, NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
 
     pixels = bool(getattr(args, "pixels", False))
     demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
     report = demo.report
     if args.json:
-        print(json.dumps(report.to_dict(), indent=2))
+        print(json_text(report.to_dict()))
         return 0
     out = demo.out
+    seen = ""
+    if pixels:  # the images each camera has: a camera does not see the board everywhere
+        seen = ", ".join(f"{c.camera} {c.n_images}" for c in report.reprojection.cameras)
     print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
     print(
         f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
         f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
         "the stereo rig; stage 2: "
         + (
-            "each camera (640x480, fx = fy = 600 px) sees the corners of a fixed 9x6 "
-            f"chessboard in 30 random configurations where it is in view, pixel noise "
-            f"{PIXEL_SIGMA:g} px; "
+            "the cameras (640x480, fx = fy = 600 px) see the corners of a fixed 9x6 "
+            f"chessboard in {N_STAGE2} random configurations (images: {seen}), pixel "
+            f"noise {PIXEL_SIGMA:g} px; "
             if pixels
-            else "both cameras see a fixed target in 30 random configurations; "
+            else f"both cameras see a fixed target in {N_STAGE2} random configurations; "
         )
         + f"noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
         "A = X B Y, then the joint least squares"
@@ -273,7 +325,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
         print()
         _print_reprojection(report.reprojection)
         held = demo.held_out_pixels
-        print("reprojection error on 30 held-out images (fresh configurations), px:")
+        n_images = sum(c.n_images for c in held.cameras)
+        print(
+            f"reprojection error on {n_images} held-out images ({N_STAGE2} fresh "
+            "configurations), px:"
+        )
         rows = [
             [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
             for c in held.cameras
@@ -339,7 +395,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         if executor is not None:
             executor.shutdown()
     if args.json:
-        print(json.dumps(cv.to_dict(), indent=2))
+        print(json_text(cv.to_dict()))
         return 0
     label = {
         "none": "nominal",
@@ -347,23 +403,51 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         "offsets": "offsets+frames",
         "full": "calibrated",
     }
+    px = cv.has_pixels
+    pose = any(not np.isnan(s.position_rms_mm) for s in cv.scores)
+    units = [
+        u for u, has in (("position mm / orientation deg", pose), ("reprojection px", px)) if has
+    ]
     print(
         f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
-        f"by sample, seed {args.seed}): held-out RMS, position mm / orientation deg"
+        f"by sample{', images whole' if px else ''}, seed {args.seed}): held-out RMS, "
+        + " | ".join(units)
     )
 
-    def cell(position_mm: float, rotation_deg: float) -> str:
-        rot = "-" if np.isnan(rotation_deg) else f"{rotation_deg:.3f}"
-        return f"{position_mm:.3f} / {rot}"
+    def number(value: float, fmt: str) -> str:
+        return "-" if np.isnan(value) else format(value, fmt)
+
+    def cell(position_mm: float, rotation_deg: float, pixel_px: float) -> str:
+        parts = []
+        if pose:
+            parts.append(f"{number(position_mm, '.3f')} / {number(rotation_deg, '.3f')}")
+        if px:
+            parts.append(number(pixel_px, ".3f"))
+        return " | ".join(parts)
 
     rows = []
     for fold in range(args.k):
         row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
         for p in sets:
             sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
-            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg))
+            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg, sc.pixel_rms_px))
         rows.append(row)
-    rows.append(["mean", "", *(cell(cv.mean(p), cv.mean(p, "rotation_rms_deg")) for p in sets)])
+    rows.append(
+        [
+            "mean",
+            "",
+            *(
+                cell(
+                    cv.mean(p),
+                    cv.mean(p, "rotation_rms_deg"),
+                    np.nanmean([s.pixel_rms_px for s in cv.scores if s.parameters == p])
+                    if px
+                    else float("nan"),
+                )
+                for p in sets
+            ),
+        ]
+    )
     print(format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
     if args.exclude_flagged:
         print(
@@ -388,8 +472,14 @@ def cmd_crossval(args: argparse.Namespace) -> int:
 
 
 def _observed(row: DownweightedRow | RejectedRow) -> str:
-    """``frame [marker m] (kind)`` of a down-weighted or rejected observation."""
-    return row.frame + (f" marker {row.marker}" if row.marker else "") + f" ({row.kind})"
+    """``frame [marker m] (kind) [image LABEL corner ID]`` of a down-weighted or
+    rejected observation."""
+    return (
+        row.frame
+        + (f" marker {row.marker}" if row.marker else "")
+        + f" ({row.kind})"
+        + (f" {row.where}" if row.where else "")
+    )
 
 
 def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:

@@ -15,6 +15,8 @@ This module uses the standard library only (the command line imports it at start
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -25,6 +27,7 @@ __all__ = [
     "check_output_dir",
     "check_outputs",
     "check_writable",
+    "json_text",
     "write_text_atomic",
 ]
 
@@ -36,7 +39,11 @@ class OutputPathError(ValueError):
 
 
 def _label(path: PathLike, label: str | None) -> str:
-    return f"{label} {os.fspath(path)}" if label else os.fspath(path)
+    """``--out c.urdf``; a label ending in ``=`` is joined without a space
+    (``--camera left=left.yaml``)."""
+    if not label:
+        return os.fspath(path)
+    return f"{label}{os.fspath(path)}" if label.endswith("=") else f"{label} {os.fspath(path)}"
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -194,3 +201,20 @@ def write_text_atomic(
         f.flush()
         os.fsync(f.fileno())
     return path
+
+
+def _finite_or_null(value):
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite_or_null(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite_or_null(v) for v in value]
+    return value
+
+
+def json_text(value, *, indent: int | None = 2) -> str:
+    """``value`` as strict JSON (RFC 8259): a NaN or infinite float (an undefined
+    number: a point's rotation, an image point's position) is written ``null``, never
+    the ``NaN`` token most JSON parsers refuse."""
+    return json.dumps(_finite_or_null(value), indent=indent, allow_nan=False)

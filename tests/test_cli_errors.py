@@ -159,6 +159,18 @@ SIM = ["simulate", "--urdf", "head.urdf"]
             [*SIM, "--out", "x.json", "--truth-out", "missing_dir/t.urdf"],
             r"--truth-out missing_dir/t\.urdf: directory 'missing_dir' does not exist",
         ),
+        (
+            [*CAL, "--out", "c.urdf", "--camera", "left=r.json", "--report", "r.json"],
+            r"--report r\.json is the same file as --camera left=r\.json: refusing",
+        ),
+        (
+            [*CAL, "--out", "c.urdf", "--camera", "left=c.urdf"],
+            r"--out c\.urdf is the same file as --camera left=c\.urdf: refusing",
+        ),
+        (
+            [*SIM, "--out", "a.json", "--truth-out", "t.urdf", "--camera", "left=a.json"],
+            r"--out a\.json is the same file as --camera left=a\.json: refusing",
+        ),
         (["demo", "--out", "notes.txt"], r"--out notes\.txt: exists and is not a directory"),
         (
             ["view", "head.urdf", "--html", "head.urdf"],

@@ -99,6 +99,16 @@ def test_kinfw_simulate_pixels_writes_only_seen_whole_boards(tmp_path, capsys):
         assert (g.uv >= 5 - 0.5).all()
         assert (g.uv[:, 0] <= intr.width - 0.5 - 5).all()
         assert (g.uv[:, 1] <= intr.height - 0.5 - 5).all()
+    # --pixels without --stage: stage 1 poses and stage 2 images; --stage 1 is an error
+    both = ["simulate", "--pixels", "--stage2-samples", "12", "--seed", "3"]
+    both += ["--out", str(tmp_path / "both.json"), "--truth-out", str(truth)]
+    assert main(both) == 0
+    capsys.readouterr()
+    both_data = read_measurements(tmp_path / "both.json")
+    assert both_data.groups("pixels") and both_data.groups("pose")
+    assert main([*both, "--stage", "1"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kinfw simulate: error: --pixels --stage 1:"), err
     # a --camera for a frame that is not a stage 2 camera is a one-line error
     bad = [*args[:-2], "--camera", f"left_plate={cam}"]
     assert main(bad) == 2
@@ -124,10 +134,26 @@ def test_kinfw_demo_pixels_reports_reprojection_per_camera_and_image(tmp_path, c
     assert main(["demo", "--pixels", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "reprojection error on the calibration data" in text
-    assert "reprojection error on 30 held-out images" in text
     assert "held-out position RMS against the true robot" in text
-    report = json.loads((tmp_path / "report.json").read_text())
+
+    def refuse(token):
+        raise ValueError(f"not strict JSON: {token}")
+
+    report = json.loads((tmp_path / "report.json").read_text(), parse_constant=refuse)
     rep = report["reprojection_px"]
+    # the images counted, not the configurations: per camera in the header, held out in
+    # the report's reprojection_px_held_out
+    held_px = report["reprojection_px_held_out"]
+    n_held = sum(c["n_images"] for c in held_px["cameras"])
+    assert len(held_px["images"]) == n_held > 0
+    assert f"reprojection error on {n_held} held-out images (30 fresh configurations)" in text
+    seen = ", ".join(f"{c['camera']} {c['n_images']}" for c in rep["cameras"])
+    assert f"in 30 random configurations (images: {seen})" in text
+    for c in held_px["cameras"]:
+        assert 0.5 < c["rms_px"] < 0.9
+    # px groups have their own stage table key
+    assert "pixel_rms_px_by_stage" in report
+    assert not any("pixels" in g for g in report["position_rms_mm_by_stage"]["refine"])
     assert {c["camera"] for c in rep["cameras"]} == {"left_camera", "right_camera"}
     assert sum(c["n_images"] for c in rep["cameras"]) == len(rep["images"]) > 20
     # the noise is 0.5 px per coordinate: a point's error norm has RMS ~ 0.5 sqrt(2)

@@ -122,11 +122,23 @@ class AccuracyReport:
     def to_dict(self, *, per_sample: bool = False) -> dict:
         """JSON-ready summary (SI inside, mm and degrees in the field names); with
         ``per_sample`` each group also lists every sample's position error (mm, norm and
-        x, y, z) and rotation error (deg)."""
+        x, y, z) and rotation error (deg), or for image points (``pixels``) every
+        point's pixel error (px, norm and u, v). Undefined numbers are NaN: write the
+        dict with :func:`kinfw.files.json_text` (null)."""
         groups = []
         for g in self.groups:
             entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
-            if per_sample:
+            if per_sample and g.pixel_error_px is not None:
+                # one entry per image point: its pixel error (no position or rotation)
+                entry["samples"] = [
+                    {
+                        "sample": int(k),
+                        "pixel_px": float(np.hypot(*e)),
+                        "pixel_uv_px": e.tolist(),
+                    }
+                    for k, e in zip(g.sample, g.pixel_error_px, strict=True)
+                ]
+            elif per_sample:
                 entry["samples"] = [
                     {
                         "sample": int(k),
@@ -194,7 +206,8 @@ def evaluate_model(
     groups: list[GroupErrors] = []
     for g in problem.groups:
         requests = [req for req in g.kind.unknowns(g.group, start) if req.key not in known_keys]
-        fitted += [req.description for req in requests]
+        # intrinsics are the file's (or --camera's), fixed: not fitted to these data
+        fitted += [req.description for req in requests if req.key.kind != "intrinsics"]
         own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
         r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
         m = len(g.sample)

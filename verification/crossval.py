@@ -14,6 +14,9 @@ other folds with several parameter sets and scored on the held-out one:
 Held-out errors are predictions with the trained frames (targets, markers, the root's pose
 in an external frame) held fixed: nothing is refitted to the test fold. Position errors are
 per-sample error vector norms (mm); orientation errors the small-angle rotation (deg).
+Images (``pixels`` observations) are split by sample, whole, and scored by their RMS
+reprojection error (px) under the fold's model and the target pose fitted on the
+training folds; they have no position or orientation score (NaN, null in JSON).
 
 Selection (``select``) ranks the sets by the held-out error whitened by the noise the
 full-data fit estimates (or the given one): position and orientation together, each in
@@ -41,7 +44,14 @@ from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import Robot
 from verification.studies import run_trials
 
-__all__ = ["BASELINES", "CrossValidation", "FoldScore", "crossvalidate", "held_out_errors"]
+__all__ = [
+    "BASELINES",
+    "CrossValidation",
+    "FoldScore",
+    "crossvalidate",
+    "held_out_error_sizes",
+    "held_out_errors",
+]
 
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
 BASELINES = ("none", "frames", "full")
@@ -66,6 +76,10 @@ class FoldScore:
         Condition number of the trained fit (poor excitation when large).
     n_parameters, n_residuals : int
         Estimated parameters and training residuals.
+    pixel_rms_px : float
+        Held-out RMS reprojection error of the test images' points, px (the norm of each
+        point's (u, v) error); NaN without ``pixels`` observations. Position and rotation
+        scores are over the other kinds only (NaN when there are none).
     """
 
     fold: int
@@ -79,6 +93,7 @@ class FoldScore:
     condition: float
     n_parameters: int
     n_residuals: int
+    pixel_rms_px: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +127,12 @@ class CrossValidation:
     selected: str | None
     noise: tuple[float, float] | None = None
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
+    pixel_sigma_px: float | None = None
+
+    @property
+    def has_pixels(self) -> bool:
+        """Whether any held-out fold has images (a pixel score)."""
+        return any(not np.isnan(s.pixel_rms_px) for s in self.scores)
 
     def mean(self, parameters: str, field: str = "position_rms_mm") -> float:
         """Mean over folds of a score field for one parameter set."""
@@ -137,19 +158,35 @@ class CrossValidation:
             if s.parameters != parameters:
                 continue
             rot = 0.0 if np.isnan(s.rotation_rms_deg) else np.radians(s.rotation_rms_deg) / sr
-            out.append((1e-3 * s.position_rms_mm / sp) ** 2 + rot**2)
+            pos = 0.0 if np.isnan(s.position_rms_mm) else 1e-3 * s.position_rms_mm / sp
+            px = 0.0
+            if not np.isnan(s.pixel_rms_px) and self.pixel_sigma_px:
+                px = s.pixel_rms_px / self.pixel_sigma_px  # (u, v): 2 components
+            out.append(pos**2 + rot**2 + px**2)
         return float(np.mean(out))
 
     def to_dict(self) -> dict:
+        """Strict-JSON-ready: an undefined score (NaN: no such observations) is None."""
+
+        def num(value):
+            return None if value is None or not np.isfinite(value) else value
+
         return {
             "k": self.k,
             "seed": self.seed,
             "sets": list(self.sets),
-            "folds": [{f: getattr(s, f) for f in FoldScore.__slots__} for s in self.scores],
-            "mean_position_rms_mm": {p: self.mean(p) for p in self.sets},
-            "mean_rotation_rms_deg": {p: self.mean(p, "rotation_rms_deg") for p in self.sets},
+            "folds": [
+                {
+                    f: num(getattr(s, f)) if f not in ("fold", "parameters") else getattr(s, f)
+                    for f in FoldScore.__slots__
+                }
+                for s in self.scores
+            ],
+            "mean_position_rms_mm": {p: num(self.mean(p)) for p in self.sets},
+            "mean_rotation_rms_deg": {p: num(self.mean(p, "rotation_rms_deg")) for p in self.sets},
+            "mean_pixel_rms_px": {p: num(self.mean(p, "pixel_rms_px")) for p in self.sets},
             "mean_whitened": (
-                None if self.noise is None else {p: self.whitened(p) for p in self.sets}
+                None if self.noise is None else {p: num(self.whitened(p)) for p in self.sets}
             ),
             "noise": None
             if self.noise is None
@@ -168,22 +205,43 @@ def held_out_errors(
     """Per-observation held-out position errors (m), rotation errors (rad, NaN for
     points) and sample indices of ``test``, predicted by a calibrated URDF and its frames.
     """
+    sizes, samples = held_out_error_sizes(nominal, model_urdf, unknowns, test)
+    return sizes["position"], sizes["rotation"], samples
+
+
+def held_out_error_sizes(
+    nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
+) -> tuple[dict[str, NDArray], NDArray]:
+    """Per observation row of ``test`` (a pose, a point, an image's corner) the size of
+    its held-out error per noise component, predicted by a calibrated URDF and its
+    frames: ``{"position": m, "rotation": rad, "pixel": px, ...}``, each (n,), NaN where
+    the row has no such component; and the rows' sample indices (n,)."""
     problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"), known=unknowns)
-    pos, rot, samples = [], [], []
+    names = dict.fromkeys(
+        [POSITION.name, ROTATION.name, *(c.name for g in problem.groups for c in g.components)]
+    )
+    sizes: dict[str, list[NDArray]] = {name: [] for name in names}
+    samples = []
     for g, (r, _) in zip(
         problem.groups,
         problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False),
         strict=True,
     ):
-        size = {c.name: np.full(len(g.sample), np.nan) for c in (POSITION, ROTATION)}
+        size = {name: np.full(len(g.sample), np.nan) for name in names}
         c0 = 0
-        for c in g.components:  # error sizes per noise component (m, rad)
+        for c in g.components:  # error sizes per noise component (m, rad, px)
             size[c.name] = c.magnitude(r[:, c0 : c0 + c.rows])
             c0 += c.rows
-        pos.append(size["position"])
-        rot.append(size["rotation"])
+        for name in names:
+            sizes[name].append(size[name])
         samples.append(g.sample)
-    return np.concatenate(pos), np.concatenate(rot), np.concatenate(samples)
+    return {k: np.concatenate(v) for k, v in sizes.items()}, np.concatenate(samples)
+
+
+def _rms(values: NDArray) -> float:
+    """RMS of the finite values; NaN when there are none."""
+    finite = values[np.isfinite(values)]
+    return float(np.sqrt(np.mean(finite**2))) if len(finite) else float("nan")
 
 
 def _score(
@@ -210,23 +268,26 @@ def _score(
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:  # the root's pose in the external frame
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    pos, rot, samples = held_out_errors(nominal, result.urdf_xml, unknowns, test)
-    worst = int(np.argmax(pos))
+    sizes, samples = held_out_error_sizes(nominal, result.urdf_xml, unknowns, test)
+    pos, rot = sizes["position"], sizes["rotation"]
+    pixel = sizes.get("pixel", np.full(len(samples), np.nan))
+    # the worst held-out sample by position, else (images only) by pixel error
+    worst_of = pos if np.isfinite(pos).any() else pixel
+    worst = int(np.nanargmax(worst_of)) if np.isfinite(worst_of).any() else 0
     ident = result.refined.identifiability
     return FoldScore(
         fold=fold,
         parameters=parameters,
         n_train=train.n_samples,
         n_test=test.n_samples,
-        position_rms_mm=1e3 * float(np.sqrt(np.mean(pos**2))),
-        rotation_rms_deg=float(np.degrees(np.sqrt(np.nanmean(rot**2))))
-        if np.any(np.isfinite(rot))
-        else float("nan"),
+        position_rms_mm=1e3 * _rms(pos),
+        rotation_rms_deg=float(np.degrees(_rms(rot))),
         worst_sample=int(test_ids[samples[worst]]),
         worst_mm=1e3 * float(pos[worst]),
         condition=ident.condition,
         n_parameters=ident.n_parameters,
         n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals),
+        pixel_rms_px=_rms(pixel),
     )
 
 
@@ -342,10 +403,11 @@ def crossvalidate(
             for parameters in sets
         ]
     scores = run_trials(_score, tasks, executor=executor, progress=progress)
-    selected, sigma = None, None
+    selected, sigma, sigma_px = None, None, None
     if select:
         used = noise if noise is not None else reference.refined.noise
         sigma = (float(used.position_m), float(used.rotation_rad))
+        sigma_px = dict(used.sigmas).get("pixel")
     cv = CrossValidation(
         k,
         seed,
@@ -355,6 +417,7 @@ def crossvalidate(
         None,
         sigma,
         excluded,
+        sigma_px,
     )
     if select:
         selected = min(sets, key=cv.whitened)

@@ -68,6 +68,8 @@ NOISE_MM = 0.5
 NOISE_DEG = 0.5
 #: Simulated pixel noise of ``pixels=True``, px per image coordinate.
 PIXEL_SIGMA = 0.5
+#: Stage 2 random configurations; with ``pixels=True`` also the held-out image ones.
+N_STAGE2 = 30
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,8 +87,9 @@ class DemoResult:
     out : Path
         The output directory (:meth:`file`: the path of one of :data:`DEMO_FILES`).
     held_out_pixels : ReprojectionSection or None
-        With ``pixels=True``: the reprojection error (px) of the calibration on 30 fresh
-        images at other configurations (per camera, per image, the worst named).
+        With ``pixels=True``: the reprojection error (px) of the calibration on the
+        images of :data:`N_STAGE2` fresh configurations (per camera, per image, the
+        worst named; also the report's ``reprojection_held_out``).
     """
 
     report: CalibrationReport
@@ -141,11 +144,11 @@ def run_demo(
         board = parse_board(DEFAULT_BOARD)
         views = {"cameras": intrinsics, "board_p": board.points, "min_corners": board.count}
         stage2, w_T_target = pixel_views(
-            truth, names, lower, upper, 30, rng, sigma_px=PIXEL_SIGMA, **views
+            truth, names, lower, upper, N_STAGE2, rng, sigma_px=PIXEL_SIGMA, **views
         )
         target = "board"
     else:  # (this order of the draws reproduces the README's numbers)
-        qs2 = random_configurations(lower, upper, 30, rng, fraction=0.8)
+        qs2 = random_configurations(lower, upper, N_STAGE2, rng, fraction=0.8)
         w_T_target = default_target_pose(truth, qs2, names, cameras)
         stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
         stage2 = simulate(
@@ -159,7 +162,15 @@ def run_demo(
     held_out_pixels = None
     if pixels:
         held_out_pixels, _ = pixel_views(
-            truth, names, lower, upper, 30, rng, sigma_px=PIXEL_SIGMA, w_T_board=w_T_target, **views
+            truth,
+            names,
+            lower,
+            upper,
+            N_STAGE2,
+            rng,
+            sigma_px=PIXEL_SIGMA,
+            w_T_board=w_T_target,
+            **views,
         )
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
@@ -187,9 +198,10 @@ def run_demo(
         ),
         position_rms_vs_truth_held_out_by_stage=tuple(truth_rms),
     )
-    write_report(out / "report.json", report)
     if held_out_pixels is not None:
         held_out_pixels = reprojection_section(calibrated, held_out_pixels, result.refined.unknowns)
+        report = replace(report, reprojection_held_out=held_out_pixels)
+    write_report(out / "report.json", report)
     plot_stage_errors(
         report.position_rms_vs_truth_held_out_by_stage,
         out / "errors.png",

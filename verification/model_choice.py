@@ -210,6 +210,20 @@ def choose_parameters(
             ratio,
             0,
         )
+    if data.groups("pixels"):
+        # the candidates are ranked by held-out position and orientation errors; image
+        # points have neither (their held-out score is in px): no ranking, the full set
+        return ModelChoice(
+            "full",
+            prior,
+            f"{ratio:.1f} residual rows per free parameter (< {ROWS_PER_PARAMETER:g}), but "
+            "the held-out model choice cannot score image points (pixels): the full set; "
+            "give --params (frames, offsets) or a prior (--prior-mm, --prior-deg) to "
+            "estimate fewer",
+            (),
+            ratio,
+            0,
+        )
     k = min(k, data.n_samples)
     if k < 2:
         raise ValueError(

@@ -196,6 +196,7 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
                 None if rotation_deg is None else float(rotation_deg[c]),
                 float(g.weight[k]),
                 None if pixel_px is None else float(pixel_px[c]),
+                None if g.labels is None else g.labels[k],
             )
             for c, k in enumerate(rows_g)
         ]
@@ -240,6 +241,7 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
                 None if rot is None else float(np.degrees(rot)),
                 o.excess,
                 float(np.linalg.norm(pixels)) if pixels else None,
+                o.where,
             )
         )
     rows.sort(key=lambda row: (-row.excess, row.sample))
@@ -247,7 +249,12 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
 
 
 def _noise_summary(result: RefineResult) -> NoiseSummary:
-    return NoiseSummary(tuple(result.noise.sigmas), result.noise.estimated)
+    """The noise of the components the data has (a default sigma of a component without
+    rows, the 1 mm position of pixel-only data, whitened nothing and is not reported)."""
+    present = {name for g in result.residuals for name, _ in g.components}
+    return NoiseSummary(
+        tuple((k, v) for k, v in result.noise.sigmas if k in present), result.noise.estimated
+    )
 
 
 def _unknowns(result: RefineResult) -> tuple[CalibratedUnknown, ...]:
@@ -300,6 +307,21 @@ def _finite_or_none(value: float) -> float | None:
     return float(value) if np.isfinite(value) else None
 
 
+def _with_refined_intrinsics(data: Measurements, calibration: Calibration) -> Measurements:
+    """``data`` with the intrinsics the refinement estimated (unknowns of kind
+    ``"intrinsics"``, named by camera) in place of the start ones; ``data`` itself when
+    none were estimated."""
+    refined = calibration.refined
+    if refined is None:
+        return data
+    cameras = {
+        u.name: data.cameras[u.name].with_parameters(u.value)
+        for u in refined.unknowns
+        if u.kind == "intrinsics" and u.name in data.cameras
+    }
+    return data.with_cameras(cameras) if cameras else data
+
+
 def calibration_report(
     nominal: Robot,
     calibrated: Robot,
@@ -332,17 +354,22 @@ def calibration_report(
     CalibrationReport
         ``to_dict()`` is the JSON of ``kinfw calibrate --report``.
     """
-    after = errors_by_group(calibrated, data)
+    # the refined intrinsics (--refine-intrinsics) for the calibrated model's errors;
+    # the start ones (the file's) for the nominal and the stages before the refinement
+    refined_data = _with_refined_intrinsics(data, calibration)
+    after = errors_by_group(calibrated, refined_data)
     notes = list(calibration.notes)
     before = _errors_or_unavailable(nominal, data, after, notes)
     held_out_rows = None
     if held_out is not None:
-        after_held = errors_by_group(calibrated, held_out)
+        after_held = errors_by_group(calibrated, _with_refined_intrinsics(held_out, calibration))
         before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
         held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
     stage_rms += [
-        StageErrors.of(name, errors_by_group(Robot(xml, name), data))
+        StageErrors.of(
+            name, errors_by_group(Robot(xml, name), refined_data if name == "refine" else data)
+        )
         for name, xml in calibration.stages
     ]
     export = calibration.export

@@ -73,6 +73,9 @@ class GroupResiduals:
         Robust-loss weight of each observation (1 = full weight).
     downweighted : ndarray of bool, shape (m,)
         Observations beyond the robust loss's threshold (all False for least squares).
+    labels : tuple of str, or None
+        Per observation, where it is in its sample when a sample has many (an image's
+        corners: ``"image LABEL corner ID"``); None for the other kinds.
     """
 
     kind: str
@@ -82,6 +85,7 @@ class GroupResiduals:
     components: tuple[tuple[str, NDArray[np.float64]], ...]
     weight: NDArray[np.float64]
     downweighted: NDArray[np.bool_]
+    labels: tuple[str, ...] | None = None
 
     def component(self, name: str) -> NDArray[np.float64] | None:
         """The rows of one component, None if the kind has no such component."""
@@ -125,6 +129,9 @@ class RejectedObservation:
         Norm of its whitened residual (by that fit's noise).
     threshold : float
         The rejection threshold of that norm (the clean residual norm's quantile).
+    where : str or None
+        Where in the sample, when a sample has many observations of the group: an
+        image point's ``"image LABEL corner ID"``; None otherwise.
     """
 
     kind: str
@@ -134,6 +141,7 @@ class RejectedObservation:
     residuals: tuple[tuple[str, str, float], ...]
     whitened_norm: float
     threshold: float
+    where: str | None = None
 
     @property
     def excess(self) -> float:
@@ -143,6 +151,19 @@ class RejectedObservation:
     def residual(self, component: str) -> float | None:
         """The residual size of one component (SI), None if the kind has no such one."""
         return next((v for n, _, v in self.residuals if n == component), None)
+
+
+def observation_labels(grp: Any) -> list[str] | None:
+    """Per observation of a residual group, where it is in its sample when a sample has
+    many (an image's corners: ``"image LABEL corner ID"``); None for the other kinds."""
+    data = getattr(grp, "group", None)
+    image, point_id = getattr(data, "image", None), getattr(data, "point_id", None)
+    if image is None or point_id is None:
+        return None
+    return [
+        f"image {str(im) or f'of sample {int(s)}'} corner {int(pid)}"
+        for im, pid, s in zip(image, point_id, data.sample, strict=True)
+    ]
 
 
 def rejected_observations(
@@ -160,6 +181,7 @@ def rejected_observations(
     for grp in groups:
         m, rows = len(grp.sample), grp.rows
         block = r[k : k + m * rows].reshape(m, rows)
+        labels = observation_labels(grp)
         for i in np.flatnonzero(rejected[o : o + m]):
             sizes, c0 = [], 0
             for c in grp.components:
@@ -175,6 +197,7 @@ def rejected_observations(
                     tuple(sizes),
                     float(norms[o + i]),
                     float(threshold[o + i]),
+                    None if labels is None else labels[i],
                 )
             )
         k += m * rows
@@ -287,6 +310,7 @@ def group_residuals(
                 tuple(comps),
                 weight,
                 flagged[o : o + m].copy(),
+                None if (labels := observation_labels(grp)) is None else tuple(labels),
             )
         )
         down += [

@@ -259,36 +259,63 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
     then ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the group's
     intrinsics).
 
+    Images with fewer than 4 points (left by a rejection of gross errors, or a held-out
+    split) are skipped: PnP needs 4.
+
     Returns
     -------
     samples : ndarray of int64, shape (k,)
-        The sample of each image (the order of :meth:`PixelObservations.images`).
+        The sample of each image with at least 4 points (the order of
+        :meth:`PixelObservations.images`).
     camera_T_targets : ndarray, shape (k, 4, 4)
         Pose of the target in the camera's optical frame, metres.
+
+    Raises
+    ------
+    DatasetError
+        Naming the camera (and the image and sample): no image has 4 points, or PnP
+        fails on an image.
     """
     import cv2
 
+    from kinfw.observations.reader import DatasetError
+
     K, dist = group.intrinsics.matrix, group.intrinsics.distortion
-    samples, rows = group.images()
+    all_samples, all_rows = group.images()
+    labels = group.image_labels()
+    keep = [k for k, r in enumerate(all_rows) if len(r) >= _MIN_POINTS]
+    if not keep:
+        raise DatasetError(
+            f"pixels: camera {group.camera!r}: none of its {len(all_rows)} images has "
+            f"{_MIN_POINTS} points (PnP needs {_MIN_POINTS})"
+        )
+    samples = all_samples[keep]
+    rows = [all_rows[k] for k in keep]
+    labels = [labels[k] for k in keep]
     out = np.empty((len(rows), 4, 4))
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-15)
     for k, r in enumerate(rows):
         obj = np.ascontiguousarray(group.target_p[r], dtype=np.float64)
         img = np.ascontiguousarray(group.uv[r], dtype=np.float64)
         flag = cv2.SOLVEPNP_IPPE if _is_planar(obj) else cv2.SOLVEPNP_SQPNP
-        ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=flag)
+        where = f"image {labels[k]} (sample {int(samples[k])}, {len(r)} points)"
+        try:
+            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=flag)
+            if not ok:
+                ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
+            if ok:
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+        except cv2.error as exc:
+            raise DatasetError(
+                f"pixels: camera {group.camera!r}: PnP failed on {where}: "
+                + " ".join(str(exc.err or exc).split())
+            ) from None
         if not ok:
-            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
-        if not ok:
-            raise ValueError(
-                f"pixels: camera {group.camera!r}: PnP failed on the image of sample "
-                f"{int(samples[k])} ({len(r)} points)"
-            )
-        rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+            raise DatasetError(f"pixels: camera {group.camera!r}: PnP failed on {where}")
         if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
-            raise ValueError(
-                f"pixels: camera {group.camera!r}: PnP found no pose for the image of "
-                f"sample {int(samples[k])} ({len(r)} points; are they on one line?)"
+            raise DatasetError(
+                f"pixels: camera {group.camera!r}: PnP found no pose for {where} "
+                "(are the points on one line?)"
             )
         R, _ = cv2.Rodrigues(rvec)
         out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
