@@ -131,7 +131,8 @@ def socp_weights(info_matrices: NDArray) -> tuple[NDArray, float, int]:
 
 def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]:
     """Per design label: sqrt of the mean over seeds of the held-out mean square 3D
-    position error (m) of a calibration from noisy simulated data. ``designs`` maps a
+    position error (m) of a calibration from noisy simulated data, and how many seeds
+    gave a calibrated model that could not be evaluated (left out of the mean). ``designs`` maps a
     label to a function seed -> configurations."""
     from identification.refine import NoiseModel, refine
     from kinfw.robot import load_robot
@@ -139,6 +140,7 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
     from verification.simulate import simulate
 
     ms: dict[str, list[float]] = {k: [] for k in designs}
+    failed: dict[str, int] = {}
     for seed in seeds:
         rng = np.random.default_rng(1000 + seed)
         truth = load_robot(perturb_robot(robot, rng))
@@ -163,11 +165,17 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
             if tuple(model.topology.joint_names) != tuple(names):
                 raise RuntimeError(f"{model.topology.joint_names} != {names}")
             err = []
-            for f in setup.frames:
-                got = model.frame_poses(test, f)[:, :3, 3]
-                err.append(np.sum((got - truth.frame_poses(test, f, names)[:, :3, 3]) ** 2, 1))
+            try:
+                for f in setup.frames:
+                    got = model.frame_poses(test, f)[:, :3, 3]
+                    true = truth.frame_poses(test, f, names)[:, :3, 3]
+                    err.append(np.sum((got - true) ** 2, 1))
+            except ValueError as exc:  # a kinfw bug, counted and reported (see README)
+                failed[label] = failed.get(label, 0) + 1
+                log(f"{label}, seed {seed}: calibrated model not evaluable: {exc}")
+                continue
             ms[label].append(float(np.mean(err)))
-    return {k: float(np.sqrt(np.mean(v))) for k, v in ms.items()}
+    return {k: float(np.sqrt(np.mean(v))) for k, v in ms.items()}, failed
 
 
 def run_case(case: Case, ns, seeds, out, n_pool: int = POOL) -> None:
@@ -258,7 +266,7 @@ def run_case(case: Case, ns, seeds, out, n_pool: int = POOL) -> None:
             designs["protocol"] = lambda s, n=n: protocols[n]
             pred["protocol"] = mean_square(info, A, pidx)
         t0 = time.perf_counter()
-        sim = simulated_rms(robot, setup, names, designs, test, seeds)
+        sim, failed = simulated_rms(robot, setup, names, designs, test, seeds)
         log(f"{case.name}: N = {n} simulated in {time.perf_counter() - t0:.1f} s")
         for label in designs:
             rows.append(
@@ -267,9 +275,11 @@ def run_case(case: Case, ns, seeds, out, n_pool: int = POOL) -> None:
                     label,
                     f"{np.sqrt(pred[label]) * 1e3:.4f}",
                     f"{sim[label] * 1e3:.4f}",
+                    f"{failed.get(label, 0)}",
                 ]
             )
-    out(format_table(["N", "design", "predicted mm", f"simulated mm ({len(seeds)} seeds)"], rows))
+    headers = ["N", "design", "predicted mm", f"simulated mm ({len(seeds)} seeds)", "failed"]
+    out(format_table(headers, rows))
     rand30 = np.sqrt(random30) * 1e3
     needed = f"{n_needed}" if n_needed else f"> {n_curve}"
     out(
