@@ -230,3 +230,38 @@ def test_target_gives_the_smallest_greedy_n(head):
         robot, setup, pool, 1, joint_names=names, test_qs=test, target_m=target * (1 + 1e-9)
     )
     assert len(plan.qs) == 25 and plan.position_rms_m <= target * (1 + 1e-6)
+
+
+_BOX = '<collision><origin xyz="{} 0 0"/><geometry><box size="{}"/></geometry></collision>'
+_JOINT = (
+    '<joint name="{}" type="revolute"><parent link="{}"/><child link="{}"/>'
+    '<origin xyz="{} 0 0"/><axis xyz="0 0 1"/>'
+    '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>'
+)
+FOLDING_ARM = (
+    '<?xml version="1.0"?><robot name="fold">'
+    f'<link name="base">{_BOX.format(0.15, "0.3 0.1 0.1")}</link>'
+    f'<link name="l1">{_BOX.format(0.25, "0.5 0.05 0.05")}</link>'
+    f'<link name="l2">{_BOX.format(0.25, "0.5 0.05 0.05")}</link>'
+    + _JOINT.format("j1", "base", "l1", 0.3)
+    + _JOINT.format("j2", "l1", "l2", 0.5)
+    + "</robot>"
+)
+
+
+def test_self_collision_by_hand_geometry():
+    """A planar 2-link arm on a base box (x in [0, 0.3] m, |y| <= 0.05 m): links touching
+    at their joint are not collisions; the second link folded back onto the base is. By
+    hand: q = (1.5, 2.9) puts l2's tip at (0.18, 0.03) m, inside the base box; the others
+    keep l2 clear of it (its tip at x = 0.315 m for q = (0, 2.9))."""
+    from kinfw.robot import Robot
+    from verification.plan import collision_free
+
+    robot = Robot(FOLDING_ARM)
+    qs = np.array([[0.0, 0.0], [2.9, 0.0], [0.0, 2.9], [1.5, 2.9], [-1.5, -2.9]])
+    free = collision_free(robot, qs, ("j1", "j2"))
+    assert free.tolist() == [True, True, True, False, False]
+    tip = np.array(
+        [0.3 + 0.5 * np.cos(1.5) + 0.5 * np.cos(4.4), 0.5 * np.sin(1.5) + 0.5 * np.sin(4.4)]
+    )
+    assert 0.0 < tip[0] < 0.3 and abs(tip[1]) < 0.05  # the hand check of the docstring

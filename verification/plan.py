@@ -96,7 +96,12 @@ def _facing(robot, setup, qs, names) -> NDArray[np.bool_]:
 
 def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | None:
     """Which configurations are free of self-collision (Pinocchio + coal/hpp-fcl), or
-    None when the URDF has no collision geometry or the collision module is missing."""
+    None when the URDF has no collision geometry or the collision module is missing.
+
+    Pairs that cannot tell a collision are left out, as MoveIt's setup assistant does:
+    geometries on one joint's link or on adjacent links (touching at their joint), and
+    pairs already in contact at the middle of the joint ranges (overlapping meshes).
+    """
     import pinocchio as pin
 
     if "<collision" not in robot.urdf_xml:
@@ -108,6 +113,17 @@ def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | No
     except Exception as exc:  # no coal/hpp-fcl, or meshes not found
         log.warning("%s: no self-collision check (%s)", robot.source, exc)
         return None
+    parents = robot.model.parents
+    lower, upper = robot.joint_limits(tuple(names))
+    middle = robot.pin_configurations((0.5 * (lower + upper))[None], tuple(names))[0]
+    pin.computeCollisions(robot.model, data, geom, gdata, middle, False)
+    for k in reversed(range(len(geom.collisionPairs))):
+        pair = geom.collisionPairs[k]
+        a = geom.geometryObjects[pair.first].parentJoint
+        b = geom.geometryObjects[pair.second].parentJoint
+        if a == b or parents[a] == b or parents[b] == a or gdata.collisionResults[k].isCollision():
+            geom.removeCollisionPair(pair)
+    gdata = pin.GeometryData(geom)
     full = robot.pin_configurations(np.atleast_2d(qs), tuple(names))
     ok = np.empty(len(full), bool)
     for k, q in enumerate(full):
