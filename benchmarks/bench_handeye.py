@@ -49,6 +49,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -56,13 +57,6 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-try:
-    import cv2
-except ImportError as err:  # pragma: no cover - the message is the point
-    sys.exit(
-        'bench_handeye.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
-        f"(the 'bench' extra of kinfw; wheels before 4.10 do not load with NumPy 2): {err}"
-    )
 
 from benchmarks import handeye_regimes as hr  # noqa: E402
 from benchmarks.common import (  # noqa: E402

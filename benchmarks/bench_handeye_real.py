@@ -58,6 +58,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -65,13 +66,6 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-try:
-    import cv2
-except ImportError as err:  # pragma: no cover - the message is the point
-    sys.exit(
-        'bench_handeye_real.py needs OpenCV 4: pip install "opencv-python-headless>=4.10,<5" '
-        f"(the 'bench' extra of kinfw): {err}"
-    )
 
 from benchmarks import handeye_regimes as hr  # noqa: E402
 from benchmarks.bench_handeye import git_head, silence_opencv_log, solver_digests  # noqa: E402
