@@ -67,7 +67,7 @@ def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=Non
     """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
     from kinfw.boards import Chessboard, parse_board
     from kinfw.camera_model import CameraError, read_camera
-    from verification.simulate import (
+    from verification.simulate_pixels import (
         DEFAULT_BOARD,
         MIN_CORNERS,
         board_pose_facing,

@@ -12,7 +12,7 @@ import pytest
 
 from kinfw.cli import main
 from kinfw.robot import builtin_head_urdf
-from verification.simulate import default_intrinsics
+from verification.simulate_pixels import default_intrinsics
 
 HEAD = builtin_head_urdf()
 

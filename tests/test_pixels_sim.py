@@ -25,7 +25,7 @@ from verification.pixel_study import (
     pose_path_data,
     target_pose,
 )
-from verification.simulate import DEFAULT_CAMERA, visible_points
+from verification.simulate_pixels import DEFAULT_CAMERA, visible_points
 
 BOARD = Chessboard(9, 6, 0.04)
 CAMERA = CameraIntrinsics(640, 480, 600.0, 600.0, 319.5, 239.5, name="flange")

@@ -8,9 +8,9 @@ calibration runs closed form, A = X B Y and the joint least squares; 100 held-ou
 configurations score it against noisy measurements and against the noise-free truth.
 
 With ``pixels=True`` stage 2 is images instead: each camera (default intrinsics,
-:func:`verification.simulate.default_intrinsics`: 640 x 480, fx = fy = 600 px) sees the
-corners of a fixed chessboard (:data:`verification.simulate.DEFAULT_BOARD`) in 30 random
-configurations where it is in view (:func:`verification.simulate.pixel_views`), pixel
+:func:`verification.simulate_pixels.default_intrinsics`: 640 x 480, fx = fy = 600 px) sees the
+corners of a fixed chessboard (:data:`verification.simulate_pixels.DEFAULT_BOARD`) in 30 random
+configurations where it is in view (:func:`verification.simulate_pixels.pixel_views`), pixel
 noise :data:`PIXEL_SIGMA` px; the calibration minimises the reprojection error jointly
 with the kinematics. The held-out tables are the same (camera_T_target of the board at
 100 configurations, from the noise-free truth and with pose noise); the held-out
@@ -40,15 +40,13 @@ from verification.report import (
 )
 from verification.reprojection import reprojection_section
 from verification.simulate import (
-    DEFAULT_BOARD,
-    default_intrinsics,
     default_target_pose,
     one_joint_at_a_time,
     perturb_robot,
-    pixel_views,
     random_configurations,
     simulate,
 )
+from verification.simulate_pixels import DEFAULT_BOARD, default_intrinsics, pixel_views
 
 __all__ = ["DEMO_FILES", "NOISE_DEG", "NOISE_MM", "PIXEL_SIGMA", "DemoResult", "run_demo"]
 

@@ -2,7 +2,7 @@
 
 One trial (:func:`pixel_trial`): a true robot (the nominal with random geometric errors),
 a fixed chessboard, cameras on the robot that see it at random configurations
-(:func:`verification.simulate.pixel_views`; the exact projection plus Gaussian pixel
+(:func:`verification.simulate_pixels.pixel_views`; the exact projection plus Gaussian pixel
 noise, or with ``images=True`` rendered images and ``kinfw.detect``'s corners), and the
 calibration of the same detections two ways (:func:`identification.pipeline.calibrate`,
 linear loss, noise estimated):
@@ -39,13 +39,12 @@ from kinfw.observations.pixels import target_observations_from_pixels
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import inverse_transform, rotation_angle
 from verification.simulate import (
-    default_intrinsics,
     one_joint_at_a_time,
     perturb_robot,
-    pixel_views,
     random_configurations,
     simulate,
 )
+from verification.simulate_pixels import default_intrinsics, pixel_views
 
 __all__ = [
     "PixelExperiment",

@@ -15,7 +15,7 @@ its rounding for small ``n`` is itself a heuristic.
 
 The pool (:func:`candidate_pool`) is the user's recorded joint states or random
 configurations inside the joint limits, filtered by the constraints: the target in view
-of a camera (the visibility rules of :func:`verification.simulate.visible_points`), the
+of a camera (the visibility rules of :func:`verification.simulate_pixels.visible_points`), the
 measured frames facing the tracker, and optionally no self-collision.
 """
 
@@ -73,7 +73,7 @@ class Pool:
 
 
 def _visible(robot, setup, qs, names, w_T_target) -> NDArray[np.bool_]:
-    from verification.simulate import visible_points
+    from verification.simulate_pixels import visible_points
 
     board_p = setup.board_points()
     seen = np.zeros(len(qs), bool)

@@ -58,12 +58,12 @@ class Setup:
     pixels : bool
         Stage 2 as the board's corners in pixels (else the board's pose, PnP).
     intrinsics : mapping of str to CameraIntrinsics
-        Per camera (default :func:`verification.simulate.default_intrinsics`).
+        Per camera (default :func:`verification.simulate_pixels.default_intrinsics`).
     board : str
         The target board (:func:`kinfw.boards.parse_board` spec).
     w_T_target : ndarray (4, 4) or None
         The board's pose in the root frame; None: facing the cameras at the middle of
-        the joint ranges (:func:`verification.simulate.board_pose_facing`).
+        the joint ranges (:func:`verification.simulate_pixels.board_pose_facing`).
     noise_m, noise_rad : float
         Position noise per axis (m) and rotation noise angle (rad) of poses and points.
     pixel_sigma : float
@@ -111,7 +111,7 @@ class Setup:
         return NoiseModel(self.noise_m, self.noise_rad, sigmas={"pixel": self.pixel_sigma})
 
     def camera_intrinsics(self) -> dict[str, CameraIntrinsics]:
-        from verification.simulate import default_intrinsics
+        from verification.simulate_pixels import default_intrinsics
 
         return {c: self.intrinsics.get(c) or default_intrinsics(c) for c in self.cameras}
 
@@ -124,7 +124,7 @@ class Setup:
         """``w_T_target``: the given one, or the board facing the cameras at ``q_mid``."""
         if self.w_T_target is not None:
             return np.asarray(self.w_T_target, dtype=float)
-        from verification.simulate import board_pose_facing
+        from verification.simulate_pixels import board_pose_facing
 
         return board_pose_facing(robot, q_mid, joint_names, self.cameras, self.board_points())
 
@@ -133,7 +133,8 @@ def _simulate(
     robot: Robot, setup: Setup, qs: NDArray, names, w_T_target, *, as_poses: bool = False
 ):
     """Noise-free observations at ``qs`` (every sample kept) and the true unknowns."""
-    from verification.simulate import simulate, simulate_pixels
+    from verification.simulate import simulate
+    from verification.simulate_pixels import simulate_pixels
 
     rng = np.random.default_rng(0)
     parts = []
