@@ -1,0 +1,175 @@
+"""Bounded Gauss-Newton / Levenberg-Marquardt on joint values: the engine of
+:mod:`kinfw.control.gaze` and :mod:`kinfw.control.reach`.
+
+Both solve ``min_x 1/2 |r(x)|^2`` over the values ``x`` (rad, m) of a few joints within
+their limits, where ``r`` comes from Pinocchio's kinematics with its exact Jacobian.
+
+Each step is the damped, truncated least-squares step (Nocedal & Wright 2006, §10.3)::
+
+    J = U S V^T,    dx = -V_k diag(s_k / (s_k^2 + lambda)) U_k^T r,
+
+over the singular values ``s_k > rcond * s_max`` only: a direction the joints barely move
+the residual in (a redundant or singular direction) is left alone instead of swung
+through the whole joint range for a negligible gain. ``lambda`` starts at zero (pure
+Gauss-Newton: quadratic convergence on a reachable target) and grows tenfold after a
+step that does not lower the cost (Levenberg-Marquardt). A joint at a limit whose
+gradient pushes it outward is held there (active set), and every step is clipped to the
+limits, so the answer always respects them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.robot import Robot, RobotModelError
+
+__all__ = [
+    "BoundedSolution",
+    "Residual",
+    "check_configuration",
+    "middle_configuration",
+    "solve_bounded",
+]
+
+#: ``residual(x, jacobian)`` -> ``(r, J)``: ``r`` (m,), ``J`` (m, k) when ``jacobian`` is
+#: true (else None), or ``(None, None)`` where the residual is not defined (e.g. a point
+#: behind the camera): such a step is rejected like one that raises the cost.
+Residual = Callable[
+    [NDArray[np.float64], bool],
+    tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+]
+
+
+@dataclass(frozen=True, slots=True)
+class BoundedSolution:
+    """The minimiser found by :func:`solve_bounded`.
+
+    Attributes
+    ----------
+    x : ndarray, shape (k,)
+        Joint values (rad, m), within the bounds.
+    residual : ndarray, shape (m,)
+        ``r(x)``.
+    iterations : int
+        Jacobian evaluations.
+    converged : bool
+        The last step was below ``step_tolerance`` (or the cost stopped falling); False
+        when ``max_iterations`` ran out first.
+    at_bound : ndarray of bool, shape (k,)
+        Joints held at a limit at the answer.
+    """
+
+    x: NDArray[np.float64]
+    residual: NDArray[np.float64]
+    iterations: int
+    converged: bool
+    at_bound: NDArray[np.bool_]
+
+
+def solve_bounded(
+    residual: Residual,
+    x_start: ArrayLike,
+    lower: ArrayLike,
+    upper: ArrayLike,
+    *,
+    rcond: float = 1e-6,
+    max_iterations: int = 50,
+    step_tolerance: float = 1e-12,
+    max_step: float = np.inf,
+) -> BoundedSolution:
+    """Minimise ``1/2 |residual(x)|^2`` for ``lower <= x <= upper`` (module docstring).
+
+    Parameters
+    ----------
+    residual : Residual
+        The residual and its Jacobian (see :data:`Residual`); must be defined at the
+        start.
+    x_start : array_like, shape (k,)
+        Start values; clipped to the bounds.
+    lower, upper : array_like, shape (k,)
+        Bounds (``-inf`` / ``inf`` where unbounded).
+    rcond : float
+        Singular values below ``rcond`` times the largest are left out of the step.
+    max_iterations : int
+        Jacobian evaluations at most.
+    step_tolerance : float
+        Converged when a step's largest component is below this (rad, m).
+    max_step : float
+        A step whose largest component is longer is shortened to it (rad, m): a trust
+        region for residuals far from linear over the joint range (reaching).
+
+    Raises
+    ------
+    ValueError
+        When the residual is not defined at the (clipped) start.
+    """
+    lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    x = np.clip(np.asarray(x_start, dtype=float), lower, upper)
+    r, jac = residual(x, True)
+    if r is None or jac is None or not np.all(np.isfinite(r)):
+        raise ValueError("the residual is not defined at the start values")
+    cost = float(r @ r)
+    damping = 0.0
+    converged = False
+    iterations = 1
+    at_bound = np.zeros(len(x), dtype=bool)
+    while iterations <= max_iterations:
+        gradient = jac.T @ r
+        at_bound = ((x <= lower) & (gradient > 0.0)) | ((x >= upper) & (gradient < 0.0))
+        step = np.zeros(len(x))
+        if not at_bound.all():
+            u, s, vt = np.linalg.svd(jac[:, ~at_bound], full_matrices=False)
+            keep = s > rcond * s[0] if s[0] > 0.0 else np.zeros(len(s), dtype=bool)
+            gain = s[keep] / (s[keep] ** 2 + damping)
+            step[~at_bound] = -vt[keep].T @ (gain * (u[:, keep].T @ r))
+        longest = np.max(np.abs(step), initial=0.0)
+        if longest < step_tolerance:
+            converged = True
+            break
+        if longest > max_step:
+            step *= max_step / longest
+        x_new = np.clip(x + step, lower, upper)
+        r_new, _ = residual(x_new, False)
+        cost_new = float(r_new @ r_new) if r_new is not None else np.inf
+        if not cost_new < cost:  # also NaN
+            scale = float(s[0] ** 2) if not at_bound.all() else 1.0
+            damping = max(10.0 * damping, 1e-3 * scale)
+            if damping > 1e12 * scale:  # no descent left: a (constrained) minimum
+                converged = True
+                break
+            continue
+        damping = 0.0 if damping < 1e-9 else 0.1 * damping
+        small_change = cost - cost_new <= 1e-15 * cost
+        x = x_new
+        r, jac = residual(x, True)
+        cost = float(r @ r)
+        iterations += 1
+        if small_change:
+            converged = True
+            break
+    return BoundedSolution(x, r, iterations, converged, at_bound)
+
+
+def middle_configuration(robot: Robot) -> NDArray[np.float64]:
+    """All movable joints at the middle of their ranges (zero where a limit is
+    infinite), :attr:`Robot.joint_names` order (rad, m): the default start."""
+    lower, upper = robot.joint_limits()
+    both = np.isfinite(lower) & np.isfinite(upper)
+    return np.where(both, 0.5 * (np.where(both, lower, 0.0) + np.where(both, upper, 0.0)), 0.0)
+
+
+def check_configuration(robot: Robot, q: ArrayLike, name: str = "q_start") -> NDArray[np.float64]:
+    """``q`` as a fresh float array of all movable joints' values; raises
+    :class:`RobotModelError` naming ``name`` and the joints on a wrong shape or a
+    non-finite value."""
+    names = robot.joint_names
+    out = np.array(q, dtype=float)
+    if out.shape != (len(names),) or not np.all(np.isfinite(out)):
+        raise RobotModelError(
+            f"{name}: expected {len(names)} finite values ({list(names)}), got {out.tolist()}"
+        )
+    return out
