@@ -310,24 +310,6 @@ class Robot:
                 out[:, i] = qs[:, col]
         return out
 
-    def joint_values(
-        self, configurations: ArrayLike, joint_names: tuple[str, ...] | None = None
-    ) -> NDArray[np.float64]:
-        """URDF joint values (n, k) of Pinocchio configuration vectors (n, nq): the inverse
-        of :meth:`pin_configurations` (a continuous joint's angle is ``atan2(sin, cos)``,
-        in (-pi, pi]). One configuration (nq,) gives one row (k,)."""
-        names = self.joint_names if joint_names is None else tuple(joint_names)
-        qs = np.asarray(configurations, dtype=float)
-        batch = np.atleast_2d(qs)
-        out = np.empty((len(batch), len(names)))
-        for col, name in enumerate(names):
-            if name not in self._q_slot:
-                self.joint(name)  # raises for an unknown name
-                raise RobotModelError(f"{self.source}: joint {name!r} is not movable")
-            i, continuous = self._q_slot[name]
-            out[:, col] = np.arctan2(batch[:, i + 1], batch[:, i]) if continuous else batch[:, i]
-        return out[0] if qs.ndim == 1 else out
-
     def velocity_index(self, name: str) -> int:
         """Index of movable joint ``name`` in Pinocchio's velocity vector (Jacobian column)."""
         if name not in self._q_slot:
