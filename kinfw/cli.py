@@ -2,7 +2,8 @@
 verification together.
 
 Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and where,
-never a traceback for a user error), 1 on an unexpected internal error. Warnings (Python
+never a traceback for a user error), 1 on an unexpected internal error, 3 when ``gaze``
+does not fixate or ``reach`` does not reach (:mod:`kinfw.cli_control`). Warnings (Python
 warnings and logged ones) are printed once each, as one line ``kinfw CMD: warning: ...``.
 
 Every output path is checked before any work (:func:`_check_outputs`) and every file is
@@ -37,6 +38,7 @@ from kinfw.cli_commands import (
     cmd_view,
     default_sidecar_path,
 )
+from kinfw.cli_control import add_control_parsers
 from kinfw.cli_detect import add_detect_parser, detect_inputs
 from kinfw.cli_fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.cli_plan import add_plan_parser
@@ -110,6 +112,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         )
     elif command == "detect":
         check_outputs({"--out": args.out}, inputs=detect_inputs(args))
+    elif command == "gaze" and args.html is not None:
+        check_outputs({"--html": args.html}, inputs={"model": args.model, **cameras})
 
 
 # -- numbers on the command line -----------------------------------------------------------
@@ -557,6 +561,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_detect_parser(sub, _number(int, low=4))
     add_plan_parser(sub, _number)
+    add_control_parsers(sub, _number, _frame_file)
     return parser
 
 
