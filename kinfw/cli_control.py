@@ -57,6 +57,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--free",
+        metavar="J1,J2,...",
         help="joints to solve for, comma-separated (default: see the command's description)",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -115,6 +116,7 @@ def add_control_parsers(
     p.add_argument(
         "--html",
         type=Path,
+        metavar="SCENE.html",
         help="write a Meshcat scene (self-contained HTML): the robot at the solution, each "
         "camera's aimed ray to the point's distance, and the point",
     )
