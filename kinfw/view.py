@@ -72,6 +72,17 @@ from kinfw.observations import kind_of
 from kinfw.observations.numeric import MissingValue, NumericContext
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import check_transform
+from kinfw.view_draw import (
+    STICK_RADIUS,
+    TRIAD_LENGTH,
+    node_name,
+    overlay_object,
+    rgb_int,
+    stick,
+    transform_from_translation,
+    triad,
+    up_direction,
+)
 from kinfw.view_html import OfflineWindow, external_urls, write_html
 from kinfw.view_robot import display_frame, draw_robot, set_camera
 
@@ -82,6 +93,7 @@ __all__ = [
     "GHOST_RGBA",
     "RESIDUAL_COLOR_STOPS_MM",
     "SOLID_RGBA",
+    "TRIAD_LENGTH",
     "OfflineWindow",
     "external_urls",
     "frustum_corners",
@@ -106,24 +118,18 @@ RESIDUAL_COLOR_STOPS_MM = (
 )
 """Residual line colour against the error (before scaling), mm: green at 0 mm, orange at
 2 mm, magenta at 10 mm and more, linear in between."""
-TRIAD_LENGTH = 0.03
-"""Length of a measured pose's triad, metres (a fixed target's is twice as long)."""
 TARGET_SIZE = (0.16, 0.12, 0.004)
 """Size of a fixed target's box along its x, y, z axes, metres (z: the target normal)."""
 POINT_RADIUS = 0.004
 """Radius of a measured point's sphere, metres."""
 POINT_RGB = (0.45, 0.1, 0.6)
 """Colour of a measured point's sphere."""
-STICK_RADIUS = 0.0012
-"""Radius of the cylinders that draw triad axes, metres."""
 RESIDUAL_RADIUS = 0.0015
 """Radius of a residual line's cylinder, metres (its tip is a ball 1.6 times wider)."""
 CAMERA_TRIAD_LENGTH = 0.02
 """Length of a camera frame's triad, metres (thinner and shorter than a measurement's)."""
 MEASURED_RGB = (0.1, 0.1, 0.1)
 """Colour of the ball at the origin of a measured pose's triad."""
-OVERLAY_RENDER_ORDER = 10
-"""three.js renderOrder of triads and residual lines (drawn after the robots)."""
 CAMERA_FOV_DEG = 30.0
 """Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
 BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
@@ -149,11 +155,6 @@ def _as_robot(robot: Robot | str | Path, name: str) -> Robot:
     raise TypeError(f"{name}: expected a kinfw.Robot or a URDF path, got {type(robot).__name__}")
 
 
-def _rgb_int(rgb: Sequence[float]) -> int:
-    r, g, b = (round(255 * min(max(float(c), 0.0), 1.0)) for c in rgb[:3])
-    return (r << 16) | (g << 8) | b
-
-
 def residual_color(error_m: float) -> tuple[float, float, float]:
     """RGB of a residual line for an error of ``error_m`` metres (see
     :data:`RESIDUAL_COLOR_STOPS_MM`)."""
@@ -166,91 +167,6 @@ def residual_color(error_m: float) -> tuple[float, float, float]:
             t = (e - e0) / (e1 - e0)
             return tuple(float(a + t * (b - a)) for a, b in zip(c0, c1, strict=True))
     return stops[-1][1]
-
-
-def _overlay_material(rgb: Sequence[float]) -> Any:
-    """Unlit colour drawn over everything (no depth test, rendered last), so that
-    triads inside a link's visual and residuals behind the ghost stay visible."""
-    import meshcat.geometry as mg
-
-    return mg.MeshBasicMaterial(
-        color=_rgb_int(rgb), transparent=True, opacity=1.0, depthTest=False, depthWrite=False
-    )
-
-
-def _overlay_object(geometry: Any, rgb: Sequence[float]) -> Any:
-    import meshcat.geometry as mg
-
-    class OverlayMesh(mg.Mesh):
-        def lower(self) -> dict[str, Any]:
-            data = super().lower()
-            data["object"]["renderOrder"] = OVERLAY_RENDER_ORDER
-            return data
-
-    return OverlayMesh(geometry, _overlay_material(rgb))
-
-
-def _rotation_y_onto(direction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """A rotation whose y axis (meshcat's cylinder axis) is the unit ``direction``."""
-    norm = np.linalg.norm(direction)
-    if norm == 0.0:
-        return np.eye(3)
-    y = direction / norm
-    x = np.cross(y, np.eye(3)[np.argmin(np.abs(y))])
-    x /= np.linalg.norm(x)
-    return np.column_stack([x, y, np.cross(x, y)])
-
-
-def _stick(
-    node: meshcat.Visualizer,
-    origin: ArrayLike,
-    vector: ArrayLike,
-    radius: float,
-    rgb: Sequence[float],
-) -> None:
-    """A thin cylinder from ``origin`` to ``origin + vector`` (coordinates of the node's
-    parent). ``node`` gets the transform ``[R | origin]``, R taking y onto ``vector``;
-    its child ``stick`` holds the cylinder of height ``|vector|``."""
-    import meshcat.geometry as mg
-
-    vector = np.asarray(vector, dtype=float)
-    length = float(np.linalg.norm(vector))
-    parent_T_node = np.eye(4)
-    parent_T_node[:3, :3] = _rotation_y_onto(vector)
-    parent_T_node[:3, 3] = origin
-    node.set_transform(parent_T_node)
-    node["stick"].set_object(_overlay_object(mg.Cylinder(length, radius), rgb))
-    node["stick"].set_transform(_translation([0.0, 0.5 * length, 0.0]))
-
-
-def _triad(
-    node: meshcat.Visualizer,
-    parent_T_frame: NDArray[np.float64],
-    *,
-    length: float = TRIAD_LENGTH,
-    radius: float = STICK_RADIUS,
-    origin_rgb: Sequence[float] | None = None,
-) -> None:
-    """Axes x (red), y (green), z (blue) of a frame: children ``x``, ``y``, ``z`` (and
-    ``origin``, a small ball, when ``origin_rgb`` is given)."""
-    import meshcat.geometry as mg
-
-    node.set_transform(parent_T_frame)
-    for axis, name in enumerate("xyz"):
-        _stick(node[name], np.zeros(3), length * np.eye(3)[axis], radius, np.eye(3)[axis])
-    if origin_rgb is not None:
-        node["origin"].set_object(_overlay_object(mg.Sphere(2.0 * radius), origin_rgb))
-
-
-def _translation(p: ArrayLike) -> NDArray[np.float64]:
-    T = np.eye(4)
-    T[:3, 3] = p
-    return T
-
-
-def _node_name(frame: str, marker: str | None) -> str:
-    name = frame if marker is None else f"{frame}@{marker}"
-    return name.replace("/", "_")
 
 
 # -- the scene ---------------------------------------------------------------------------
@@ -369,7 +285,7 @@ def scene(
         (str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
         for name, T in targets
     )
-    up = _up_hint(model) if up is None else np.asarray(up, dtype=float)
+    up = up_direction(model) if up is None else np.asarray(up, dtype=float)
     if up.shape != (3,) or not np.linalg.norm(up) > 0:
         raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
     dirs = tuple(Path(d) for d in package_dirs) + tuple(
@@ -439,10 +355,6 @@ def _known_values(
     return values
 
 
-def _up_hint(robot: Robot) -> NDArray[np.float64]:
-    return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
-
-
 def _draw_observations(
     root: meshcat.Visualizer,
     model: Robot,
@@ -490,10 +402,10 @@ def _draw_observations(
             if drawing.w_R_measured is not None:
                 w_T = np.eye(4)
                 w_T[:3, :3], w_T[:3, 3] = drawing.w_R_measured[k], w_p
-                _triad(node, w_T, origin_rgb=MEASURED_RGB)
+                triad(node, w_T, origin_rgb=MEASURED_RGB)
             else:
-                node.set_object(_overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
-                node.set_transform(_translation(w_p))
+                node.set_object(overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
+                node.set_transform(transform_from_translation(w_p))
             if drawing.focus:
                 drawn.append(w_p)
             if drawing.w_p_predicted is None:
@@ -510,9 +422,9 @@ def _draw_observations(
             if drawing.w_R_measured is None and many:
                 # the predicted point too: a small ball (where the model puts the point)
                 root["predicted/" + path].set_object(
-                    _overlay_object(mg.Sphere(0.5 * POINT_RADIUS), PREDICTED_RGB)
+                    overlay_object(mg.Sphere(0.5 * POINT_RADIUS), PREDICTED_RGB)
                 )
-                root["predicted/" + path].set_transform(_translation(w_p_pred))
+                root["predicted/" + path].set_transform(transform_from_translation(w_p_pred))
             if drawing.focus:
                 drawn.append(w_p_pred)
     return np.array(drawn).reshape(-1, 3)
@@ -526,10 +438,10 @@ def _residual_line(
 
     error = root_p_meas - root_p_pred
     rgb = residual_color(float(np.linalg.norm(error)))
-    _stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
-    node["tip"].set_object(_overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
+    stick(node, root_p_pred, residual_scale * error, RESIDUAL_RADIUS, rgb)
+    node["tip"].set_object(overlay_object(mg.Sphere(1.6 * RESIDUAL_RADIUS), rgb))
     node["tip"].set_transform(
-        _translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0])
+        transform_from_translation([0.0, residual_scale * float(np.linalg.norm(error)), 0.0])
     )
 
 
@@ -539,13 +451,13 @@ def _draw_targets(
     import meshcat.geometry as mg
 
     for name, root_T_target in targets:
-        node = root["targets/" + _node_name(name, None)]
+        node = root["targets/" + node_name(name, None)]
         material = mg.MeshLambertMaterial(
-            color=_rgb_int(TARGET_RGBA), opacity=TARGET_RGBA[3], transparent=True
+            color=rgb_int(TARGET_RGBA), opacity=TARGET_RGBA[3], transparent=True
         )
         node["board"].set_object(mg.Box(TARGET_SIZE), material)
-        node["board"].set_transform(_translation([0.0, 0.0, -0.5 * TARGET_SIZE[2]]))
-        _triad(node["triad"], np.eye(4), length=2 * TRIAD_LENGTH)
+        node["board"].set_transform(transform_from_translation([0.0, 0.0, -0.5 * TARGET_SIZE[2]]))
+        triad(node["triad"], np.eye(4), length=2 * TRIAD_LENGTH)
         node.set_transform(root_T_target)
     return np.array([T[:3, 3] for _, T in targets]).reshape(-1, 3)
 
@@ -569,14 +481,14 @@ def _draw_cameras(
     drawn = []
     for camera in cameras:
         root_T_camera = model.frame_poses(q, camera, joint_names)
-        node = root["cameras/" + _node_name(camera, None)]
-        _triad(node, root_T_camera, length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
+        node = root["cameras/" + node_name(camera, None)]
+        triad(node, root_T_camera, length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
         drawn.append(root_T_camera[:3, 3])
         if camera in intrinsics:
             corners = frustum_corners(intrinsics[camera])
             for k, (a, b) in enumerate(zip(corners, np.roll(corners, -1, axis=0), strict=True)):
-                _stick(node[f"frustum/ray{k}"], np.zeros(3), a, FRUSTUM_RADIUS, FRUSTUM_RGB)
-                _stick(node[f"frustum/edge{k}"], a, b - a, FRUSTUM_RADIUS, FRUSTUM_RGB)
+                stick(node[f"frustum/ray{k}"], np.zeros(3), a, FRUSTUM_RADIUS, FRUSTUM_RGB)
+                stick(node[f"frustum/edge{k}"], a, b - a, FRUSTUM_RADIUS, FRUSTUM_RGB)
     return np.array(drawn).reshape(-1, 3)
 
 

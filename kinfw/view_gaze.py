@@ -36,18 +36,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.robot import Robot
-from kinfw.view import (
-    BACKGROUND_RGB,
-    CAMERA_FOV_DEG,
-    CAMERA_TRIAD_LENGTH,
-    SOLID_RGBA,
+from kinfw.view import BACKGROUND_RGB, CAMERA_FOV_DEG, CAMERA_TRIAD_LENGTH, SOLID_RGBA
+from kinfw.view_draw import (
     STICK_RADIUS,
-    _node_name,
-    _overlay_object,
-    _stick,
-    _translation,
-    _triad,
-    _up_hint,
+    node_name,
+    overlay_object,
+    stick,
+    transform_from_translation,
+    triad,
+    up_direction,
 )
 from kinfw.view_robot import display_frame, draw_robot, set_camera
 
@@ -124,7 +121,7 @@ def gaze_scene(
     import meshcat
     import meshcat.geometry as mg
 
-    up = _up_hint(robot) if up is None else np.asarray(up, dtype=float)
+    up = up_direction(robot) if up is None else np.asarray(up, dtype=float)
     if up.shape != (3,) or not np.linalg.norm(up) > 0:
         raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
     dirs = tuple(Path(d) for d in package_dirs) + tuple(
@@ -137,20 +134,20 @@ def gaze_scene(
     centres, ends = gaze_rays(robot, fixation)
     rgb = FIXATED_RGB if fixation.fixated else MISSED_RGB
     for camera, centre, end in zip(fixation.cameras, centres, ends, strict=True):
-        name = _node_name(camera, None)
+        name = node_name(camera, None)
         root_T_camera = robot.frame_poses(fixation.q, camera, fixation.joint_names)
-        _triad(
+        triad(
             root["cameras/" + name],
             root_T_camera,
             length=CAMERA_TRIAD_LENGTH,
             radius=0.7 * STICK_RADIUS,
         )
-        _stick(root["gaze/rays/" + name], centre, end - centre, RAY_RADIUS, rgb)
+        stick(root["gaze/rays/" + name], centre, end - centre, RAY_RADIUS, rgb)
         if not fixation.fixated:
             toward = fixation.root_p_point - centre
-            _stick(root["gaze/to_point/" + name], centre, toward, 0.4 * RAY_RADIUS, TO_POINT_RGB)
-    root["gaze/point"].set_object(_overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
-    root["gaze/point"].set_transform(_translation(fixation.root_p_point))
+            stick(root["gaze/to_point/" + name], centre, toward, 0.4 * RAY_RADIUS, TO_POINT_RGB)
+    root["gaze/point"].set_object(overlay_object(mg.Sphere(POINT_RADIUS), POINT_RGB))
+    root["gaze/point"].set_transform(transform_from_translation(fixation.root_p_point))
 
     focus = np.concatenate([robot_ps, centres, fixation.root_p_point[None]])
     display_T_root, camera_offset = display_frame(focus, up, fov_deg=CAMERA_FOV_DEG)
