@@ -221,7 +221,7 @@ def test_iis_head_closest_fixation_is_a_local_minimum(head, distance_m):
     x = fix.q[free]
     h = 1e-6
     jac = np.column_stack([(r(x + h * e) - r(x - h * e)) / (2 * h) for e in np.eye(len(x))])
-    u, s, vt = np.linalg.svd(jac)
+    _, s, vt = np.linalg.svd(jac)
     kept = vt[s > 1e-2 * s[0]]  # the solver's rcond: the directions it optimises
     gradient = jac.T @ r(x)
     assert np.all(np.abs(kept @ gradient) < 1e-8 * (1 + np.linalg.norm(r(x)))), kept @ gradient
@@ -269,7 +269,7 @@ def test_iis_head_fixates_exactly_where_it_can(head):
         fit = least_squares(gap, [0.76, 4.0, 4.0], xtol=1e-15, ftol=1e-15, gtol=1e-15)
         assert np.linalg.norm(fit.fun) < 1e-12 and 2.0 < fit.x[1] < 8.0
         q[5] = fit.x[0]
-        point, t, _ = axes_intersection(camera_poses(head, q))
+        point, _, _ = axes_intersection(camera_poses(head, q))
         fix = solver.fixate(point)
         measured = fk_errors_rad(head, fix.q, point)
         np.testing.assert_allclose(fix.error_rad, measured, rtol=1e-9, atol=1e-15)
@@ -377,7 +377,7 @@ def test_bad_inputs_are_clear_errors(ideal, pan_camera):
         fixate(ideal, [1.0, np.nan, 2.0])
     with pytest.raises(RobotModelError, match=r"camera_rays: expected shape \(2, 3\)"):
         fixate(ideal, [2.0, 0.0, 0.5], camera_rays=[[0, 0, 1]])
-    with pytest.raises(RobotModelError, match="'right_camera'.*does not point forward"):
+    with pytest.raises(RobotModelError, match=r"'right_camera'.*does not point forward"):
         fixate(ideal, [2.0, 0.0, 0.5], camera_rays=[[0, 0, 1], [0.1, 0, -1]])
     with pytest.raises(RobotModelError, match="q_start: expected 5 finite values"):
         fixate(ideal, [2.0, 0.0, 0.5], q_start=np.zeros(4))
