@@ -162,7 +162,6 @@ def test_moving_the_root_moves_nothing(xyz, rpy):
     )
     moved = Robot(moved_xml)
     assert moved.root_link == "new_root"
-    head = _head()
     new_root_T_world = moved.frame_poses(np.zeros(6), "world")
     for world_p in ([0.6, 0.4, 1.1], [1.5, 1.2, 0.5]):
         fix = _head_solver().fixate(world_p)
@@ -170,7 +169,6 @@ def test_moving_the_root_moves_nothing(xyz, rpy):
         fix_moved = fixate(moved, moved_p)
         np.testing.assert_allclose(fix_moved.q, fix.q, atol=1e-9)
         np.testing.assert_allclose(fix_moved.error_rad, fix.error_rad, atol=1e-10)
-    assert head.root_link == "world"
 
 
 @functools.cache

@@ -133,3 +133,13 @@ def test_bad_inputs_are_clear_errors(arm):
     bad[:3, :3] *= 2.0
     with pytest.raises(RobotModelError, match="target"):
         reach(arm, "flange", bad)
+
+
+def test_one_joint_robot():
+    """A one-joint model (Pinocchio hands back its Jacobian as a (6,) vector): the
+    stretched 0.8 m arm reaches the point at angle 0.3 rad with j1 = 0.3 (by hand)."""
+    robot = Robot(PLANAR_2R.replace('name="j2" type="revolute"', 'name="j2" type="fixed"'))
+    assert robot.joint_names == ("j1",)
+    result = reach(robot, "tool", [0.8 * math.cos(0.3), 0.8 * math.sin(0.3), 0.0])
+    assert result.reached
+    assert result.q[0] == pytest.approx(0.3, abs=1e-12)
