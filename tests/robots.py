@@ -6,6 +6,13 @@
   anti-parallel to the previous one, a continuous joint and a pitch = pi/2 origin.
 - ``PRISMATIC_TREE``: two prismatic joints (one tilted) under a pan joint that carries
   three branches (R-R, a fixed camera, P-R).
+- ``IDEAL_HEAD``: a binocular head (slide, pan, tilt, two vergences) whose optical centres
+  sit on the tilt axis and on parallel vergence axes, so any point in front of both
+  cameras and off the baseline can be fixated exactly.
+- ``PAN_CAMERA``: one camera on a pan joint (range -1 .. 1 rad), its optical centre on
+  the pan axis 0.3 m above the root, looking horizontally along the pan link's x.
+- ``PLANAR_2R``: a planar arm, links 0.5 m and 0.3 m, joint axes along z, ``j1`` within
+  -0.5 .. 0.5 rad, ``j2`` within -3 .. 3 rad; its tool frame is the tip.
 """
 
 from pathlib import Path
@@ -115,5 +122,85 @@ PRISMATIC_TREE = """<?xml version="1.0"?>
     <parent link="wrist_link"/><child link="tool_b"/><origin xyz="0.03 0 0.04" rpy="0.1 0.2 0.3"/>
   </joint>
   <link name="tool_b"/>
+</robot>
+"""
+
+#: rpy of an optical frame (z forward, x right, y down) on a link whose x is forward, z up
+_OPTICAL_RPY = "-1.5707963267948966 0 -1.5707963267948966"
+
+IDEAL_HEAD = f"""<?xml version="1.0"?>
+<robot name="ideal_head">
+  <kinfw cameras="left_camera right_camera"/>
+  <link name="world"/>
+  <joint name="slide" type="prismatic">
+    <parent link="world"/><child link="carriage"/><axis xyz="1 0 0"/>
+    <limit lower="0" upper="0.5" effort="1" velocity="1"/>
+  </joint>
+  <link name="carriage"/>
+  <joint name="pan" type="revolute">
+    <parent link="carriage"/><child link="pan_link"/><origin xyz="0 0 0.4" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="1" velocity="1"/>
+  </joint>
+  <link name="pan_link"/>
+  <joint name="tilt" type="revolute">
+    <parent link="pan_link"/><child link="tilt_link"/><origin xyz="0 0 0.1" rpy="0 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+  <link name="tilt_link"/>
+  <joint name="vergence_left" type="revolute">
+    <parent link="tilt_link"/><child link="left_link"/><origin xyz="0 0.1 0" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-0.7" upper="0.7" effort="1" velocity="1"/>
+  </joint>
+  <link name="left_link"/>
+  <joint name="left_camera_joint" type="fixed">
+    <parent link="left_link"/><child link="left_camera"/>
+    <origin xyz="0 0 0" rpy="{_OPTICAL_RPY}"/>
+  </joint>
+  <link name="left_camera"/>
+  <joint name="vergence_right" type="revolute">
+    <parent link="tilt_link"/><child link="right_link"/><origin xyz="0 -0.1 0" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-0.7" upper="0.7" effort="1" velocity="1"/>
+  </joint>
+  <link name="right_link"/>
+  <joint name="right_camera_joint" type="fixed">
+    <parent link="right_link"/><child link="right_camera"/>
+    <origin xyz="0 0 0" rpy="{_OPTICAL_RPY}"/>
+  </joint>
+  <link name="right_camera"/>
+</robot>
+"""
+
+PAN_CAMERA = f"""<?xml version="1.0"?>
+<robot name="pan_camera">
+  <link name="world"/>
+  <joint name="pan" type="revolute">
+    <parent link="world"/><child link="pan_link"/><origin xyz="0 0 0.3" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>
+  </joint>
+  <link name="pan_link"/>
+  <joint name="camera_joint" type="fixed">
+    <parent link="pan_link"/><child link="camera"/><origin xyz="0 0 0" rpy="{_OPTICAL_RPY}"/>
+  </joint>
+  <link name="camera"/>
+</robot>
+"""
+
+PLANAR_2R = """<?xml version="1.0"?>
+<robot name="planar_2r">
+  <link name="world"/>
+  <joint name="j1" type="revolute">
+    <parent link="world"/><child link="l1"/><axis xyz="0 0 1"/>
+    <limit lower="-0.5" upper="0.5" effort="1" velocity="1"/>
+  </joint>
+  <link name="l1"/>
+  <joint name="j2" type="revolute">
+    <parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0" rpy="0 0 0"/>
+    <axis xyz="0 0 1"/><limit lower="-3" upper="3" effort="1" velocity="1"/>
+  </joint>
+  <link name="l2"/>
+  <joint name="tool_joint" type="fixed">
+    <parent link="l2"/><child link="tool"/><origin xyz="0.3 0 0" rpy="0 0 0"/>
+  </joint>
+  <link name="tool"/>
 </robot>
 """

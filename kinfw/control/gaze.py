@@ -62,6 +62,10 @@ __all__ = ["Fixation", "GazeSolver", "default_free_joints", "fixate", "ray_error
 FIXATED_RAD = 1e-6
 #: Singular values below this fraction of the largest are left out of a step.
 RCOND = 1e-2
+#: A solve that leaves between 1e-12 rad and this is polished without truncation (an
+#: exact fixation may need the left-out directions), in at most POLISH_ITERATIONS.
+POLISH_BELOW_RAD = 1e-3
+POLISH_ITERATIONS = 10
 
 
 @dataclass(frozen=True, slots=True)
@@ -266,8 +270,20 @@ class GazeSolver:
                 f"point {point.tolist()}: at a camera's optical centre or exactly behind it "
                 "at the start configuration; give another q_start"
             ) from None
+        errors = _angles(solution.residual)
+        iterations = solution.iterations
+        if 1e-12 < errors.max() < POLISH_BELOW_RAD:
+            # The left-out directions may be the ones an exact fixation needs (the IIS
+            # head near its 4 m curve stops at 1e-7 - 1e-5 rad without them): a short
+            # polish with all directions, kept only when it fixates more closely.
+            polish = solve_bounded(
+                residual, solution.x, self.lower, self.upper, max_iterations=POLISH_ITERATIONS
+            )
+            polished = _angles(polish.residual)
+            if polished.max() < min(errors.max(), FIXATED_RAD):
+                solution, errors = polish, polished
+                iterations += polish.iterations
         q[self.free_columns] = solution.x
-        errors = 2.0 * np.arctan(0.5 * np.linalg.norm(solution.residual.reshape(-1, 2), axis=1))
         at_limit = (solution.x <= self.lower) | (solution.x >= self.upper)
         return Fixation(
             joint_names=self.robot.joint_names,
@@ -279,7 +295,7 @@ class GazeSolver:
             error_rad=errors,
             fixated=bool(np.all(errors < FIXATED_RAD)),
             at_limits=tuple(n for n, b in zip(self.free_joints, at_limit, strict=True) if b),
-            iterations=solution.iterations,
+            iterations=iterations,
         )
 
     def _rays(self, camera_rays: ArrayLike | None) -> NDArray[np.float64]:
@@ -344,7 +360,8 @@ class _GazeResidual:
             r_k = r[2 * k : 2 * k + 2]
             r_k[:] = 2.0 * s[:2] / denominator
             if jacobian:
-                local = pin.getFrameJacobian(model, data, fid, pin.LOCAL)[:, self.s.v_columns]
+                local = pin.getFrameJacobian(model, data, fid, pin.LOCAL).reshape(6, -1)
+                local = local[:, self.s.v_columns]
                 d_s = pin.skew(camera_p) @ local[3:] - local[:3]
                 if self.ray_Rs is not None:
                     d_s = self.ray_Rs[k].T @ d_s
@@ -362,9 +379,9 @@ class _GazeResidual:
         for _ in range(sweeps):
             for j in np.flatnonzero(s.revolute):
                 pin.computeJointJacobians(s.model, s.data, self.configuration(x))
-                axis = pin.getJointJacobian(s.model, s.data, s.joint_ids[j], pin.WORLD)[
-                    3:, s.v_columns[j]
-                ]
+                # reshape: Pinocchio returns a (6,) vector for a one-joint model
+                jacobian = pin.getJointJacobian(s.model, s.data, s.joint_ids[j], pin.WORLD)
+                axis = jacobian.reshape(6, -1)[3:, s.v_columns[j]]
                 axis = axis / math.sqrt(axis @ axis)
                 num = den = 0.0
                 for k in np.flatnonzero(s.moves[j]):
@@ -379,6 +396,11 @@ class _GazeResidual:
                     den += d_perp @ w / w_norm
                 x[j] = min(max(x[j] + math.atan2(num, den), s.lower[j]), s.upper[j])
         return x
+
+
+def _angles(residual: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each camera's angle (rad) from its stereographic coordinates (length 2 tan(a/2))."""
+    return 2.0 * np.arctan(0.5 * np.linalg.norm(residual.reshape(-1, 2), axis=1))
 
 
 def _frame_with_z(ray: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -148,7 +148,8 @@ def reach(
             r = position
         if not jacobian:
             return r, None
-        local = pin.getFrameJacobian(robot.model, data, frame_id, pin.LOCAL)[:, v_columns]
+        local = pin.getFrameJacobian(robot.model, data, frame_id, pin.LOCAL)
+        local = local.reshape(6, -1)[:, v_columns]  # (6,) for a one-joint model
         jac = root_M_frame.rotation @ local[:3]
         if is_pose:
             jac_rotation = pin.Jlog3(target_M.rotation.T @ root_M_frame.rotation) @ local[3:]
