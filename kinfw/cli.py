@@ -502,9 +502,10 @@ def build_parser() -> argparse.ArgumentParser:
         "measurements per joint and noise); table4: their Table 4 protocol; "
         "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
         "the joint refinement against the Cramer-Rao bound; robust: with 5 % "
-        "gross outliers, per robust loss.",
+        "gross outliers, per robust loss; gaze: fixation, triangulation and reaching "
+        "with the nominal vs calibrated model, on simulated true heads and UR10s.",
     )
-    p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust"))
+    p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust", "gaze"))
     p.add_argument(
         "--out",
         type=Path,

@@ -467,13 +467,15 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     import contextlib
     import io
 
-    from verification import head_studies, hirsh_figures, shih_figures
+    from verification import gaze_study, head_studies, hirsh_figures, shih_figures
 
     argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":
         run, written = (lambda: hirsh_figures.main(argv)), "hirsh.json"
+    elif args.study == "gaze":
+        run, written = (lambda: gaze_study.main(argv)), "gaze.json"
     elif args.study in ("crlb", "robust"):
         run, written = (lambda: head_studies.main([args.study, *argv])), f"{args.study}.json"
     else:
