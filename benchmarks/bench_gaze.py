@@ -77,8 +77,9 @@ RESTARTS = 20
 
 @dataclass(frozen=True, slots=True)
 class Run:
-    """One method on every point: per-point seconds, iterations, errors (rad)."""
+    """One method on the points ``index``: per-point seconds, iterations, errors."""
 
+    index: NDArray[np.intp]  # the points (poses) it ran on
     seconds: NDArray[np.float64]
     iterations: NDArray[np.float64]
     error: NDArray[np.float64]  # the worse camera (gaze) or position m (reach)
@@ -161,7 +162,10 @@ def clik_fixation(residual: _GazeResidual, x: NDArray, lower: NDArray, upper: ND
     return x, IT_MAX
 
 
-def gaze_runs(robot: Robot, points: NDArray[np.float64]) -> dict[str, Run]:
+def gaze_runs(
+    robot: Robot, points: NDArray[np.float64], subset: NDArray[np.intp]
+) -> dict[str, Run]:
+    """Every method on the IIS head; the CLIK baselines on ``points[subset]`` only."""
     solver = GazeSolver(robot)
     q0 = solver.q_middle
     configuration0 = robot.pin_configurations(q0)[0]
@@ -183,8 +187,10 @@ def gaze_runs(robot: Robot, points: NDArray[np.float64]) -> dict[str, Run]:
         return res, *clik_fixation(res, x0, solver.lower, solver.upper, dt)
 
     runs: dict[str, Run] = {}
+    every = np.arange(len(points))
     seconds, fixations = timed([lambda p=p: solver.fixate(p) for p in points])
     runs["kinfw GazeSolver.fixate"] = Run(
+        every,
         seconds,
         np.array([f.iterations for f in fixations], dtype=float),
         np.array([f.error_rad.max() for f in fixations]),
@@ -193,6 +199,7 @@ def gaze_runs(robot: Robot, points: NDArray[np.float64]) -> dict[str, Run]:
     )
     seconds, fixations = timed([lambda p=p: fixate(robot, p) for p in points])
     runs["kinfw fixate() (solver built per point)"] = Run(
+        every,
         seconds,
         np.array([f.iterations for f in fixations], dtype=float),
         np.array([f.error_rad.max() for f in fixations]),
@@ -203,12 +210,13 @@ def gaze_runs(robot: Robot, points: NDArray[np.float64]) -> dict[str, Run]:
     errors = np.array([camera_errors(res, x) for res, x in starts])
     at_limits = np.array([limits(x) for _, x in starts])
     runs["closed-form start alone (aim)"] = Run(
-        seconds, np.zeros(len(points)), errors, errors < FIXATED_RAD, at_limits
+        every, seconds, np.zeros(len(points)), errors, errors < FIXATED_RAD, at_limits
     )
     for dt in DTS:
-        seconds, results = timed([lambda p=p, dt=dt: clik(p, dt) for p in points])
+        seconds, results = timed([lambda p=p, dt=dt: clik(p, dt) for p in points[subset]])
         errors = np.array([camera_errors(res, x) for res, x, _ in results])
         runs[f"CLIK damp 1e-6, dt {dt:g}"] = Run(
+            subset,
             seconds,
             np.array([it for _, _, it in results], dtype=float),
             errors,
@@ -224,20 +232,21 @@ def gaze_table(runs: dict[str, Run]) -> str:
     for name, run in runs.items():
         finite = np.isfinite(run.error)
         error_deg = np.degrees(run.error)
+        ref_seconds, ref_error = reference.seconds[run.index], reference.error[run.index]
         rows.append(
             [
-                name,
+                f"{name} ({len(run.index)} points)",
                 f"{ms(run.seconds, 50):.3f}",
                 f"{ms(run.seconds, 95):.3f}",
-                f"{np.median(run.seconds) / np.median(reference.seconds):.2f}",
+                f"{np.median(run.seconds) / np.median(ref_seconds):.2f}",
                 f"{np.median(run.iterations):.0f} / {np.max(run.iterations):.0f}",
                 f"{run.ok.mean():.1%}",
                 f"{np.mean(run.extra > 0):.1%} / {np.mean(run.extra == 4):.1%}",
                 f"{np.median(error_deg):.3g}",
                 f"{np.percentile(error_deg, 95):.3g}",
-                f"{np.median(run.error / reference.error):.3g}"
+                f"{np.median(run.error / ref_error):.3g}"
                 if finite.all()
-                else f"{np.median(run.error[finite] / reference.error[finite]):.3g} "
+                else f"{np.median(run.error[finite] / ref_error[finite]):.3g} "
                 f"({(~finite).sum()} undefined)",
             ]
         )
@@ -245,13 +254,13 @@ def gaze_table(runs: dict[str, Run]) -> str:
         "method",
         "ms median",
         "ms p95",
-        "time / kinfw",
+        "time / kinfw (same points, medians)",
         "iterations median / max",
         "fixated",
         "a joint / all 4 at a limit",
         "error deg median",
         "error deg p95",
-        "error / kinfw (median)",
+        "error / kinfw (median of per-point ratios)",
     ]
     return markdown(headers, rows)
 
@@ -265,6 +274,7 @@ def band_table(points: NDArray, centre: NDArray, runs_by_model: dict[str, dict[s
         clik = runs[f"CLIK damp 1e-6, dt {DTS[0]:g}"]
         for lo, hi in bands:
             inside = (distances >= lo) & (distances < hi)
+            clik_inside = inside[clik.index]
             rows.append(
                 [
                     model,
@@ -274,7 +284,8 @@ def band_table(points: NDArray, centre: NDArray, runs_by_model: dict[str, dict[s
                     f"{np.degrees(np.median(run.error[inside])):.3g}",
                     f"{np.degrees(np.percentile(run.error[inside], 95)):.3g}",
                     f"{np.degrees(np.median(start.error[inside])):.3g}",
-                    f"{np.degrees(np.median(clik.error[inside])):.3g}",
+                    f"{np.degrees(np.median(clik.error[clik_inside])):.3g} "
+                    f"({clik.ok[clik_inside].mean():.0%} of {clik_inside.sum()} fixated)",
                 ]
             )
     headers = [
@@ -285,7 +296,7 @@ def band_table(points: NDArray, centre: NDArray, runs_by_model: dict[str, dict[s
         "kinfw error deg median",
         "p95",
         "aim alone error deg median",
-        f"CLIK dt {DTS[0]:g} error deg median",
+        f"CLIK dt {DTS[0]:g} error deg median (subset)",
     ]
     return markdown(headers, rows)
 
@@ -339,7 +350,11 @@ def pose_errors(model, data, configuration, frame_id, target: pin.SE3) -> tuple[
     return position, rotation
 
 
-def reach_runs(robot: Robot, frame: str, n: int, rng: np.random.Generator) -> dict[str, Run]:
+def reach_runs(
+    robot: Robot, frame: str, n: int, n_baseline: int, rng: np.random.Generator
+) -> dict[str, Run]:
+    """kinfw ``reach`` on ``n`` random reachable poses, the CLIK baselines on the first
+    ``n_baseline`` of them."""
     free = robot.movable_path(frame)
     lower, upper = robot.joint_limits(free)
     qs = np.array([random_x(rng, lower, upper) for _ in range(n)])
@@ -349,6 +364,7 @@ def reach_runs(robot: Robot, frame: str, n: int, rng: np.random.Generator) -> di
     runs: dict[str, Run] = {}
     seconds, results = timed([lambda T=T: reach(robot, frame, T) for T in root_T_targets])
     runs["kinfw reach (20 restarts)"] = Run(
+        np.arange(n),
         seconds,
         np.zeros(n),
         np.array([r.position_error_m for r in results]),
@@ -358,7 +374,8 @@ def reach_runs(robot: Robot, frame: str, n: int, rng: np.random.Generator) -> di
     # the baseline's starts: the middle configuration, then 20 uniform draws (seeded per pose)
     middle = robot.pin_configurations(middle_configuration(robot))[0]
     start_sets = []
-    for k in range(n):
+    subset = np.arange(min(n, n_baseline))
+    for k in subset:
         draws = np.random.default_rng([k, 1])
         start_sets.append(
             [middle]
@@ -367,7 +384,7 @@ def reach_runs(robot: Robot, frame: str, n: int, rng: np.random.Generator) -> di
                 for _ in range(RESTARTS)
             ]
         )
-    targets = [pin.SE3(T[:3, :3], T[:3, 3]) for T in root_T_targets]
+    targets = [pin.SE3(T[:3, :3], T[:3, 3]) for T in root_T_targets[subset]]
     for dt in DTS:
         seconds, results = timed(
             [
@@ -382,6 +399,7 @@ def reach_runs(robot: Robot, frame: str, n: int, rng: np.random.Generator) -> di
             ]
         )
         runs[f"CLIK damp 1e-6, dt {dt:g}, 20 restarts"] = Run(
+            subset,
             seconds,
             np.array([it for _, _, it in results], dtype=float),
             errors[:, 0],
@@ -397,11 +415,11 @@ def reach_table(runs: dict[str, Run]) -> str:
     for name, run in runs.items():
         rows.append(
             [
-                name,
-                f"{run.ok.mean():.1%}",
+                f"{name} ({len(run.index)} poses)",
+                f"{run.ok.mean():.1%} (kinfw {reference.ok[run.index].mean():.1%})",
                 f"{ms(run.seconds, 50):.2f}",
                 f"{ms(run.seconds, 95):.2f}",
-                f"{np.median(run.seconds) / np.median(reference.seconds):.2f}",
+                f"{np.median(run.seconds) / np.median(reference.seconds[run.index]):.2f}",
                 f"{np.mean(run.extra):.2f} / {np.max(run.extra):.0f}",
                 f"{np.median(run.iterations):.0f}" if run.iterations.any() else "-",
                 f"{np.median(run.error[run.ok]) * 1e3:.2g}" if run.ok.any() else "-",
@@ -409,10 +427,10 @@ def reach_table(runs: dict[str, Run]) -> str:
         )
     headers = [
         "method",
-        "reached",
+        "reached (kinfw, same poses)",
         "ms median",
         "ms p95",
-        "time / kinfw",
+        "time / kinfw (same poses, medians)",
         "starts mean / max",
         "CLIK iterations median",
         "position error mm (reached, median)",
@@ -424,17 +442,24 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=None, help="head points (1000; quick 100)")
     parser.add_argument("--poses", type=int, default=None, help="poses per arm (500; quick 50)")
+    parser.add_argument(
+        "--baseline", type=int, default=None, help="points / poses for CLIK (200; quick 50)"
+    )
     parser.add_argument("--seed", type=int, default=0, help="seed of every random draw")
     parser.add_argument("--quick", action="store_true", help="fewer points and poses")
     args = parser.parse_args(argv)
     n_points = args.points or (100 if args.quick else 1000)
     n_poses = args.poses or (50 if args.quick else 500)
-    if n_points < 10 or n_poses < 1:
-        parser.error("--points: at least 10; --poses: at least 1")
+    n_baseline = args.baseline or (50 if args.quick else 200)
+    if n_points < 10 or n_poses < 1 or n_baseline < 1:
+        parser.error("--points: at least 10; --poses, --baseline: at least 1")
     started = time.perf_counter()
     print(machine_info([("pinocchio", pin.__version__)]))
     print(f"command    {' '.join(['python', *sys.argv])}")
-    print(f"mode       points {n_points}, poses {n_poses}, seed {args.seed}, gc off while timing")
+    print(
+        f"mode       points {n_points}, poses {n_poses}, CLIK baseline on {n_baseline} of "
+        f"them, seed {args.seed}, gc off while timing"
+    )
 
     rng = np.random.default_rng(args.seed)
     nominal = load_robot(HEAD_URDF)
@@ -442,10 +467,12 @@ def main(argv: list[str] | None = None) -> int:
     points = head_points(nominal, n_points, rng)
     q = middle_configuration(nominal)
     centre = np.mean([nominal.frame_poses(q, c)[:3, 3] for c in nominal.default_cameras], axis=0)
+    # the baselines' points: evenly spread over the list (the far points are its last 10 %)
+    subset = np.unique(np.linspace(0, n_points - 1, min(n_points, n_baseline)).round().astype(int))
     runs_by_model = {}
     for model, robot in (("nominal", nominal), ("perturbed (2 mm / 0.5 deg)", perturbed)):
         print(f"\n## 1. Fixation, IIS head, {model} model: {n_points} points\n")
-        runs_by_model[model] = gaze_runs(robot, points)
+        runs_by_model[model] = gaze_runs(robot, points, subset)
         print(gaze_table(runs_by_model[model]))
         sys.stdout.flush()
     print("\n### Fixation error by distance (worse camera, deg)\n")
@@ -460,7 +487,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"\n(UR10 skipped: {error})")
     for name, urdf, frame in arms:
         print(f"\n## 2. Reach, {name}, frame {frame}: {n_poses} random reachable poses\n")
-        print(reach_table(reach_runs(load_robot(urdf), frame, n_poses, rng)))
+        print(reach_table(reach_runs(load_robot(urdf), frame, n_poses, n_baseline, rng)))
         sys.stdout.flush()
     print(wall_time_line(started))
     return 0
