@@ -81,6 +81,7 @@ class Run:
 
     index: NDArray[np.intp]  # the points (poses) it ran on
     seconds: NDArray[np.float64]
+    cpu_seconds: NDArray[np.float64]
     iterations: NDArray[np.float64]
     error: NDArray[np.float64]  # the worse camera (gaze) or position m (reach)
     ok: NDArray[np.bool_]
@@ -98,16 +99,18 @@ def ms(seconds: NDArray[np.float64], q: float) -> float:
 
 def timed(calls: list[Callable[[], object]], warmup: int = 20) -> tuple[NDArray, list[tuple]]:
     """Each call once, timed alone (gc off) after ``warmup`` untimed calls of the first
-    ones; returns the seconds and the calls' results."""
+    ones; returns the wall-clock and CPU seconds (shape (n,) each) and the results. On a
+    loaded machine the wall-clock tail includes time the process waited for a core."""
     for call in calls[:warmup]:
         call()
-    seconds, results = np.empty(len(calls)), []
+    seconds, cpu_seconds, results = np.empty(len(calls)), np.empty(len(calls)), []
     with gc_disabled():
         for k, call in enumerate(calls):
-            start = time.perf_counter()
+            start, cpu_start = time.perf_counter(), time.process_time()
             results.append(call())
             seconds[k] = time.perf_counter() - start
-    return seconds, results
+            cpu_seconds[k] = time.process_time() - cpu_start
+    return seconds, cpu_seconds, results
 
 
 # -- fixation ------------------------------------------------------------------------------
@@ -188,36 +191,39 @@ def gaze_runs(
 
     runs: dict[str, Run] = {}
     every = np.arange(len(points))
-    seconds, fixations = timed([lambda p=p: solver.fixate(p) for p in points])
+    seconds, cpu, fixations = timed([lambda p=p: solver.fixate(p) for p in points])
     runs["kinfw GazeSolver.fixate"] = Run(
         every,
         seconds,
+        cpu,
         np.array([f.iterations for f in fixations], dtype=float),
         np.array([f.error_rad.max() for f in fixations]),
         np.array([f.fixated for f in fixations]),
         np.array([len(f.at_limits) for f in fixations], dtype=float),
     )
-    seconds, fixations = timed([lambda p=p: fixate(robot, p) for p in points])
+    seconds, cpu, fixations = timed([lambda p=p: fixate(robot, p) for p in points])
     runs["kinfw fixate() (solver built per point)"] = Run(
         every,
         seconds,
+        cpu,
         np.array([f.iterations for f in fixations], dtype=float),
         np.array([f.error_rad.max() for f in fixations]),
         np.array([f.fixated for f in fixations]),
         np.array([len(f.at_limits) for f in fixations], dtype=float),
     )
-    seconds, starts = timed([lambda p=p: aim(p) for p in points])
+    seconds, cpu, starts = timed([lambda p=p: aim(p) for p in points])
     errors = np.array([camera_errors(res, x) for res, x in starts])
     at_limits = np.array([limits(x) for _, x in starts])
     runs["closed-form start alone (aim)"] = Run(
-        every, seconds, np.zeros(len(points)), errors, errors < FIXATED_RAD, at_limits
+        every, seconds, cpu, np.zeros(len(points)), errors, errors < FIXATED_RAD, at_limits
     )
     for dt in DTS:
-        seconds, results = timed([lambda p=p, dt=dt: clik(p, dt) for p in points[subset]])
+        seconds, cpu, results = timed([lambda p=p, dt=dt: clik(p, dt) for p in points[subset]])
         errors = np.array([camera_errors(res, x) for res, x, _ in results])
         runs[f"CLIK damp 1e-6, dt {dt:g}"] = Run(
             subset,
             seconds,
+            cpu,
             np.array([it for _, _, it in results], dtype=float),
             errors,
             errors < FIXATED_RAD,
@@ -238,6 +244,7 @@ def gaze_table(runs: dict[str, Run]) -> str:
                 f"{name} ({len(run.index)} points)",
                 f"{ms(run.seconds, 50):.3f}",
                 f"{ms(run.seconds, 95):.3f}",
+                f"{ms(run.cpu_seconds, 50):.3f} / {ms(run.cpu_seconds, 95):.3f}",
                 f"{np.median(run.seconds) / np.median(ref_seconds):.2f}",
                 f"{np.median(run.iterations):.0f} / {np.max(run.iterations):.0f}",
                 f"{run.ok.mean():.1%}",
@@ -254,6 +261,7 @@ def gaze_table(runs: dict[str, Run]) -> str:
         "method",
         "ms median",
         "ms p95",
+        "CPU ms median / p95",
         "time / kinfw (same points, medians)",
         "iterations median / max",
         "fixated",
@@ -362,10 +370,11 @@ def reach_runs(
     frame_id = robot.frame_id(frame)
     model, data = robot.model, robot.model.createData()
     runs: dict[str, Run] = {}
-    seconds, results = timed([lambda T=T: reach(robot, frame, T) for T in root_T_targets])
+    seconds, cpu, results = timed([lambda T=T: reach(robot, frame, T) for T in root_T_targets])
     runs["kinfw reach (20 restarts)"] = Run(
         np.arange(n),
         seconds,
+        cpu,
         np.zeros(n),
         np.array([r.position_error_m for r in results]),
         np.array([r.reached for r in results]),
@@ -386,7 +395,7 @@ def reach_runs(
         )
     targets = [pin.SE3(T[:3, :3], T[:3, 3]) for T in root_T_targets[subset]]
     for dt in DTS:
-        seconds, results = timed(
+        seconds, cpu, results = timed(
             [
                 lambda t=t, s=s, dt=dt: clik_reach(robot, frame_id, t, s, dt)
                 for t, s in zip(targets, start_sets, strict=True)
@@ -401,6 +410,7 @@ def reach_runs(
         runs[f"CLIK damp 1e-6, dt {dt:g}, 20 restarts"] = Run(
             subset,
             seconds,
+            cpu,
             np.array([it for _, _, it in results], dtype=float),
             errors[:, 0],
             (errors[:, 0] <= REACHED_M) & (errors[:, 1] <= REACHED_RAD),
