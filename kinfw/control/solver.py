@@ -55,7 +55,7 @@ class BoundedSolution:
     residual : ndarray, shape (m,)
         ``r(x)``.
     iterations : int
-        Jacobian evaluations.
+        Accepted steps plus one (the start).
     converged : bool
         The last step was below ``step_tolerance`` (or the cost stopped falling); False
         when ``max_iterations`` ran out first.
@@ -95,7 +95,7 @@ def solve_bounded(
     rcond : float
         Singular values below ``rcond`` times the largest are left out of the step.
     max_iterations : int
-        Jacobian evaluations at most.
+        ``iterations`` at most.
     step_tolerance : float
         Converged when a step's largest component is below this (rad, m).
     max_step : float
@@ -133,7 +133,8 @@ def solve_bounded(
         if longest > max_step:
             step *= max_step / longest
         x_new = np.clip(x + step, lower, upper)
-        r_new, _ = residual(x_new, False)
+        # with its Jacobian: most trial steps are accepted, and then it is needed
+        r_new, jac_new = residual(x_new, True)
         cost_new = float(r_new @ r_new) if r_new is not None else np.inf
         if not cost_new < cost:  # also NaN
             scale = float(s[0] ** 2) if not at_bound.all() else 1.0
@@ -144,9 +145,7 @@ def solve_bounded(
             continue
         damping = 0.0 if damping < 1e-9 else 0.1 * damping
         small_change = cost - cost_new <= 1e-15 * cost
-        x = x_new
-        r, jac = residual(x, True)
-        cost = float(r @ r)
+        x, r, jac, cost = x_new, r_new, jac_new, cost_new
         iterations += 1
         if small_change:
             converged = True
