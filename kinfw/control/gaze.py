@@ -53,7 +53,12 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.control.solver import check_configuration, middle_configuration, solve_bounded
+from kinfw.control.solver import (
+    check_configuration,
+    middle_configuration,
+    solve_bounded,
+    solve_weak_directions,
+)
 from kinfw.robot import Robot, RobotModelError
 
 __all__ = ["Fixation", "GazeSolver", "default_free_joints", "fixate", "ray_errors_rad"]
@@ -62,10 +67,9 @@ __all__ = ["Fixation", "GazeSolver", "default_free_joints", "fixate", "ray_error
 FIXATED_RAD = 1e-6
 #: Singular values below this fraction of the largest are left out of a step.
 RCOND = 1e-2
-#: A solve that leaves between 1e-12 rad and this is polished without truncation (an
-#: exact fixation may need the left-out directions), in at most POLISH_ITERATIONS.
+#: A solve that leaves between 1e-12 rad and this may be an exact fixation that needs the
+#: left-out directions: it is continued along them (``solve_weak_directions``).
 POLISH_BELOW_RAD = 1e-3
-POLISH_ITERATIONS = 10
 
 
 @dataclass(frozen=True, slots=True)
@@ -273,16 +277,13 @@ class GazeSolver:
         errors = _angles(solution.residual)
         iterations = solution.iterations
         if 1e-12 < errors.max() < POLISH_BELOW_RAD:
-            # The left-out directions may be the ones an exact fixation needs (the IIS
-            # head near its 4 m curve stops at 1e-7 - 1e-5 rad without them): a short
-            # polish with all directions, kept only when it fixates more closely.
-            polish = solve_bounded(
-                residual, solution.x, self.lower, self.upper, max_iterations=POLISH_ITERATIONS
-            )
+            # near the IIS head's 4 m curve the truncated solve stops at 1e-7 - 1e-5 rad:
+            # follow the left-out directions, kept only when that fixates
+            polish = solve_weak_directions(residual, solution, self.lower, self.upper, rcond=RCOND)
             polished = _angles(polish.residual)
-            if polished.max() < min(errors.max(), FIXATED_RAD):
+            if polished.max() < FIXATED_RAD:
                 solution, errors = polish, polished
-                iterations += polish.iterations
+            iterations = polish.iterations
         q[self.free_columns] = solution.x
         at_limit = (solution.x <= self.lower) | (solution.x >= self.upper)
         return Fixation(
