@@ -191,26 +191,20 @@ def gaze_runs(
 
     runs: dict[str, Run] = {}
     every = np.arange(len(points))
-    seconds, cpu, fixations = timed([lambda p=p: solver.fixate(p) for p in points])
-    runs["kinfw GazeSolver.fixate"] = Run(
-        every,
-        seconds,
-        cpu,
-        np.array([f.iterations for f in fixations], dtype=float),
-        np.array([f.error_rad.max() for f in fixations]),
-        np.array([f.fixated for f in fixations]),
-        np.array([len(f.at_limits) for f in fixations], dtype=float),
-    )
-    seconds, cpu, fixations = timed([lambda p=p: fixate(robot, p) for p in points])
-    runs["kinfw fixate() (solver built per point)"] = Run(
-        every,
-        seconds,
-        cpu,
-        np.array([f.iterations for f in fixations], dtype=float),
-        np.array([f.error_rad.max() for f in fixations]),
-        np.array([f.fixated for f in fixations]),
-        np.array([len(f.at_limits) for f in fixations], dtype=float),
-    )
+    for name, call in (
+        ("kinfw GazeSolver.fixate", solver.fixate),
+        ("kinfw fixate() (solver built per point)", lambda p: fixate(robot, p)),
+    ):
+        seconds, cpu, fixations = timed([lambda p=p, call=call: call(p) for p in points])
+        runs[name] = Run(
+            every,
+            seconds,
+            cpu,
+            np.array([f.iterations for f in fixations], dtype=float),
+            np.array([f.error_rad.max() for f in fixations]),
+            np.array([f.fixated for f in fixations]),
+            np.array([len(f.at_limits) for f in fixations], dtype=float),
+        )
     seconds, cpu, starts = timed([lambda p=p: aim(p) for p in points])
     errors = np.array([camera_errors(res, x) for res, x in starts])
     at_limits = np.array([limits(x) for _, x in starts])

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "angle_between",
     "average_transform",
     "check_rotation",
     "check_transform",
@@ -116,6 +117,24 @@ def matrix_from_rotation_vector(rotvec: ArrayLike) -> NDArray[np.float64]:
     a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(safe) / safe)
     b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
     return np.eye(3) + a * K + b * (K @ K)
+
+
+def angle_between(u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+    """Angle between vectors (any length, broadcast), ``atan2(|u x v|, u . v)``: accurate
+    near 0 and pi, where ``arccos`` of the normalised dot product is not.
+
+    Parameters
+    ----------
+    u, v : array_like, shape (..., 3)
+
+    Returns
+    -------
+    ndarray, shape (...)
+        Angles in [0, pi] (rad).
+    """
+    u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
+    cross = np.linalg.norm(np.cross(u, v), axis=-1)
+    return np.arctan2(cross, np.einsum("...i,...i->...", u, v))
 
 
 def rotation_angle(a_R_b: ArrayLike) -> NDArray[np.float64]:

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import itertools
 import logging
-import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -75,6 +74,7 @@ from kinfw.transforms import check_transform
 from kinfw.view_draw import (
     STICK_RADIUS,
     TRIAD_LENGTH,
+    mesh_dirs,
     node_name,
     overlay_object,
     rgb_int,
@@ -84,7 +84,7 @@ from kinfw.view_draw import (
     up_direction,
 )
 from kinfw.view_html import OfflineWindow, external_urls, write_html
-from kinfw.view_robot import display_frame, draw_robot, set_camera
+from kinfw.view_robot import draw_robot, frame_scene
 
 if TYPE_CHECKING:
     import meshcat
@@ -130,10 +130,6 @@ CAMERA_TRIAD_LENGTH = 0.02
 """Length of a camera frame's triad, metres (thinner and shorter than a measurement's)."""
 MEASURED_RGB = (0.1, 0.1, 0.1)
 """Colour of the ball at the origin of a measured pose's triad."""
-CAMERA_FOV_DEG = 30.0
-"""Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
-BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
-"""Background gradient (top, bottom)."""
 FRUSTUM_DEPTH = 0.2
 """Depth of a camera's drawn frustum (the image's corners), metres."""
 FRUSTUM_RADIUS = 0.0006
@@ -285,12 +281,8 @@ def scene(
         (str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
         for name, T in targets
     )
-    up = up_direction(model) if up is None else np.asarray(up, dtype=float)
-    if up.shape != (3,) or not np.linalg.norm(up) > 0:
-        raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
-    dirs = tuple(Path(d) for d in package_dirs) + tuple(
-        Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d
-    )
+    up = up_direction(model, up)
+    dirs = mesh_dirs(package_dirs)
 
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     root = vis["kinfw"]
@@ -326,13 +318,7 @@ def scene(
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
 
-    display_T_root, camera_offset = display_frame(focus, up, fov_deg=CAMERA_FOV_DEG)
-    root.set_transform(display_T_root)
-    set_camera(vis, camera_offset, CAMERA_FOV_DEG)
-    vis["/Axes"].set_property("visible", False)
-    vis["/Grid"].set_property("visible", False)
-    vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
-    vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))
+    frame_scene(vis, root, focus, up)
     return vis
 
 

@@ -5,7 +5,9 @@ functions."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -20,6 +22,7 @@ __all__ = [
     "OVERLAY_RENDER_ORDER",
     "STICK_RADIUS",
     "TRIAD_LENGTH",
+    "mesh_dirs",
     "node_name",
     "overlay_material",
     "overlay_object",
@@ -134,6 +137,19 @@ def node_name(frame: str, marker: str | None) -> str:
     return name.replace("/", "_")
 
 
-def up_direction(robot: Robot) -> NDArray[np.float64]:
-    """The root frame's "up" for viewers: the URDF's ``<kinfw up>`` hint, else z."""
-    return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
+def up_direction(robot: Robot, up: ArrayLike | None = None) -> NDArray[np.float64]:
+    """The root frame's "up" for viewers: ``up`` when given (checked), else the URDF's
+    ``<kinfw up>`` hint, else z."""
+    if up is None:
+        return np.array([0.0, 0.0, 1.0]) if robot.default_up is None else robot.default_up
+    up = np.asarray(up, dtype=float)
+    if up.shape != (3,) or not np.linalg.norm(up) > 0:
+        raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
+    return up
+
+
+def mesh_dirs(package_dirs: Sequence[str | Path]) -> tuple[Path, ...]:
+    """Where ``package://`` meshes are looked for: ``package_dirs``, then the
+    directories of ``ROS_PACKAGE_PATH``."""
+    ros = os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep)
+    return tuple(Path(d) for d in package_dirs) + tuple(Path(d) for d in ros if d)

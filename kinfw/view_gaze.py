@@ -27,7 +27,6 @@ imported inside the functions.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -36,9 +35,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.robot import Robot
-from kinfw.view import BACKGROUND_RGB, CAMERA_FOV_DEG, CAMERA_TRIAD_LENGTH, SOLID_RGBA
+from kinfw.view import CAMERA_TRIAD_LENGTH, SOLID_RGBA
 from kinfw.view_draw import (
     STICK_RADIUS,
+    mesh_dirs,
     node_name,
     overlay_object,
     stick,
@@ -46,7 +46,7 @@ from kinfw.view_draw import (
     triad,
     up_direction,
 )
-from kinfw.view_robot import display_frame, draw_robot, set_camera
+from kinfw.view_robot import draw_robot, frame_scene
 
 if TYPE_CHECKING:
     import meshcat
@@ -121,12 +121,8 @@ def gaze_scene(
     import meshcat
     import meshcat.geometry as mg
 
-    up = up_direction(robot) if up is None else np.asarray(up, dtype=float)
-    if up.shape != (3,) or not np.linalg.norm(up) > 0:
-        raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
-    dirs = tuple(Path(d) for d in package_dirs) + tuple(
-        Path(d) for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d
-    )
+    up = up_direction(robot, up)
+    dirs = mesh_dirs(package_dirs)
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     root = vis["kinfw"]
     pin_q = robot.pin_configurations(fixation.q, fixation.joint_names)[0]
@@ -150,13 +146,7 @@ def gaze_scene(
     root["gaze/point"].set_transform(transform_from_translation(fixation.root_p_point))
 
     focus = np.concatenate([robot_ps, centres, fixation.root_p_point[None]])
-    display_T_root, camera_offset = display_frame(focus, up, fov_deg=CAMERA_FOV_DEG)
-    root.set_transform(display_T_root)
-    set_camera(vis, camera_offset, CAMERA_FOV_DEG)
-    vis["/Axes"].set_property("visible", False)
-    vis["/Grid"].set_property("visible", False)
-    vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
-    vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))
+    frame_scene(vis, root, focus, up)
     return vis
 
 

@@ -26,9 +26,21 @@ from kinfw.robot import Robot
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = ["display_frame", "draw_robot", "set_camera"]
+__all__ = [
+    "BACKGROUND_RGB",
+    "CAMERA_FOV_DEG",
+    "display_frame",
+    "draw_robot",
+    "frame_scene",
+    "set_camera",
+]
 
 logger = logging.getLogger("kinfw.view")
+
+CAMERA_FOV_DEG = 30.0
+"""Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
+BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
+"""Background gradient (top, bottom)."""
 
 
 # -- robot geometry ----------------------------------------------------------------------
@@ -211,3 +223,21 @@ def set_camera(
     camera = vis["/Cameras/default/rotated/<object>"]
     camera.set_property("position", [x, z, -y])
     camera.set_property("fov", fov_deg)
+
+
+def frame_scene(
+    vis: meshcat.Visualizer,
+    root: meshcat.Visualizer,
+    root_ps: NDArray[np.float64],
+    up: NDArray[np.float64],
+) -> None:
+    """Frame a scene drawn under ``root`` (root-link coordinates) on the points
+    ``root_ps`` (n, 3) with ``up`` up (:func:`display_frame`, :func:`set_camera`), hide
+    meshcat's axes and grid, and set the background gradient."""
+    display_T_root, camera_offset = display_frame(root_ps, up, fov_deg=CAMERA_FOV_DEG)
+    root.set_transform(display_T_root)
+    set_camera(vis, camera_offset, CAMERA_FOV_DEG)
+    vis["/Axes"].set_property("visible", False)
+    vis["/Grid"].set_property("visible", False)
+    vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
+    vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))

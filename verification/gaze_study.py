@@ -49,7 +49,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.control.gaze import camera_points
 from kinfw.robot import Robot, builtin_head_urdf, load_robot
+from kinfw.transforms import angle_between
 from verification.studies import (
     FieldsJSON,
     Progress,
@@ -145,12 +147,6 @@ def triangulate(root_p_origins: ArrayLike, root_directions: ArrayLike) -> NDArra
     return 0.5 * (closest0 + closest1)
 
 
-def _camera_p(root_T_cameras: NDArray, root_p_point: NDArray) -> NDArray[np.float64]:
-    """The point in each camera's frame: ``camera_T_root @ root_p``, shape (..., 3)."""
-    toward = root_p_point - root_T_cameras[..., :3, 3]
-    return np.einsum("...ji,...j->...i", root_T_cameras[..., :3, :3], toward)
-
-
 def pointing_errors_rad(
     model_root_T_cameras: ArrayLike, true_root_T_cameras: ArrayLike, root_p_point: ArrayLike
 ) -> NDArray[np.float64]:
@@ -170,10 +166,8 @@ def pointing_errors_rad(
         Angles in [0, pi] (rad).
     """
     point = np.asarray(root_p_point, dtype=float)
-    model = _camera_p(np.asarray(model_root_T_cameras, dtype=float), point)
-    true = _camera_p(np.asarray(true_root_T_cameras, dtype=float), point)
-    cross = np.linalg.norm(np.cross(model, true), axis=-1)
-    return np.arctan2(cross, np.einsum("...i,...i->...", model, true))
+    model = camera_points(model_root_T_cameras, point)
+    return angle_between(model, camera_points(true_root_T_cameras, point))
 
 
 def triangulation_errors_m(
@@ -199,7 +193,7 @@ def triangulation_errors_m(
     """
     point = np.asarray(root_p_point, dtype=float)
     model = np.asarray(model_root_T_cameras, dtype=float)
-    camera_rays = _camera_p(np.asarray(true_root_T_cameras, dtype=float), point[..., None, :])
+    camera_rays = camera_points(true_root_T_cameras, point[..., None, :])
     root_rays = np.einsum("...ij,...j->...i", model[..., :3, :3], camera_rays)
     estimate = triangulate(model[..., :3, 3], root_rays)
     return np.linalg.norm(estimate - point, axis=-1)

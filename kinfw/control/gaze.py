@@ -60,8 +60,16 @@ from kinfw.control.solver import (
     solve_weak_directions,
 )
 from kinfw.robot import Robot, RobotModelError
+from kinfw.transforms import angle_between
 
-__all__ = ["Fixation", "GazeSolver", "default_free_joints", "fixate", "ray_errors_rad"]
+__all__ = [
+    "Fixation",
+    "GazeSolver",
+    "camera_points",
+    "default_free_joints",
+    "fixate",
+    "ray_errors_rad",
+]
 
 #: A point is fixated when every camera's remaining angle is below this (rad).
 FIXATED_RAD = 1e-6
@@ -127,6 +135,26 @@ def default_free_joints(robot: Robot, cameras: tuple[str, ...]) -> tuple[str, ..
     return tuple(n for n in on_paths if n in chosen)
 
 
+def camera_points(root_T_cameras: ArrayLike, root_p_point: ArrayLike) -> NDArray[np.float64]:
+    """A point in each camera's frame, ``camera_T_root @ root_p``.
+
+    Parameters
+    ----------
+    root_T_cameras : array_like, shape (..., 4, 4)
+        Camera poses in the root frame (m).
+    root_p_point : array_like, shape (..., 3)
+        The point in the root frame (m), broadcast against the cameras.
+
+    Returns
+    -------
+    ndarray, shape (..., 3)
+        ``camera_p`` (m).
+    """
+    root_T = np.asarray(root_T_cameras, dtype=float)
+    toward = np.asarray(root_p_point, dtype=float) - root_T[..., :3, 3]
+    return np.einsum("...ji,...j->...i", root_T[..., :3, :3], toward)
+
+
 def ray_errors_rad(
     root_T_cameras: ArrayLike, camera_rays: ArrayLike, root_p_point: ArrayLike
 ) -> NDArray[np.float64]:
@@ -146,12 +174,7 @@ def ray_errors_rad(
     ndarray, shape (...)
         Angles in [0, pi] (rad).
     """
-    root_T = np.asarray(root_T_cameras, dtype=float)
-    rays = np.asarray(camera_rays, dtype=float)
-    toward = np.asarray(root_p_point, dtype=float) - root_T[..., :3, 3]
-    camera_p = np.einsum("...ji,...j->...i", root_T[..., :3, :3], toward)
-    cross = np.linalg.norm(np.cross(rays, camera_p), axis=-1)
-    return np.arctan2(cross, np.einsum("...i,...i->...", rays, camera_p))
+    return angle_between(camera_rays, camera_points(root_T_cameras, root_p_point))
 
 
 def fixate(
