@@ -154,8 +154,8 @@ def add_control_parsers(
     p.add_argument(
         "--restarts",
         type=number(int, low=0),
-        default=20,
-        help="random starts after the first at most (default 20)",
+        default=50,
+        help="random starts after the first at most (default 50)",
     )
     p.add_argument("--seed", type=number(int, low=0), default=0, help="seed of the starts")
     p.set_defaults(func=cmd_reach)

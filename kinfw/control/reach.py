@@ -11,7 +11,9 @@ takes the smallest step from ``q_start`` (the damped pseudo-inverse's minimum no
 
 Inverse kinematics has several solutions and local minima: when the start does not
 reach the target, up to ``restarts`` random configurations within the limits (seeded)
-are tried in turn; the answer is the first that reaches it, else the closest.
+are tried in turn; the answer is the first that reaches it, else the closest. With the
+default 50, 300 of 300 random reachable UR10 poses and 299 of 300 of the 6R test arm's
+are reached (20: 300 and 296); an unreachable target costs all 51 starts.
 """
 
 from __future__ import annotations
@@ -84,7 +86,7 @@ def reach(
     q_start: ArrayLike | None = None,
     free_joints: tuple[str, ...] | None = None,
     rotation_weight_m: float = 0.1,
-    restarts: int = 20,
+    restarts: int = 50,
     seed: int = 0,
     max_iterations: int = 100,
 ) -> Reach:
