@@ -12,14 +12,9 @@ from erd import urdf_path
 from kinfw.cli import main as kinfw_main
 from kinfw.control.gaze import GazeSolver
 from kinfw.robot import Robot, builtin_head_urdf, load_robot
-from verification.gaze_study import (
-    HEAD_DISTANCE_M,
-    head_points,
-    pointing_errors_rad,
-    triangulate,
-    triangulation_errors_m,
-    ur10_urdf,
-)
+from verification.dh_robots import ur10_urdf
+from verification.gaze_metrics import pointing_errors_rad, triangulate, triangulation_errors_m
+from verification.gaze_study import HEAD_DISTANCE_M, head_points
 from verification.perturb import perturb_robot
 
 

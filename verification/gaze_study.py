@@ -17,20 +17,22 @@ and by the calibrated model; at each commanded ``q`` the true head gives, per ca
   (:func:`kinfw.control.gaze.ray_errors_rad`): it includes the head's own fixation floor
   (the IIS head cannot fixate one point with both cameras closer than ~4 m, a vertical
   disparity of 1-8 deg at 0.5-2 m that no joint removes);
-- the pointing error (:func:`pointing_errors_rad`): the angle between the direction in
-  which the true camera sees the point and the one the model meant (the model's
-  direction of the point in its camera frame at ``q``): the model's error alone; equal to
-  the raw angle when the model fixates exactly;
-- the triangulation error (:func:`triangulation_errors_m`): the true rays to the point,
-  in each camera's frame (what the cameras see), put in the root frame by the model's
-  camera poses at ``q`` and intersected (:func:`triangulate`): distance to the point.
+- the pointing error (:func:`verification.gaze_metrics.pointing_errors_rad`): the angle
+  between the direction in which the true camera sees the point and the one the model
+  meant (the model's direction of the point in its camera frame at ``q``): the model's
+  error alone; equal to the raw angle when the model fixates exactly;
+- the triangulation error (:func:`verification.gaze_metrics.triangulation_errors_m`): the
+  true rays to the point, in each camera's frame (what the cameras see), put in the root
+  frame by the model's camera poses at ``q`` and intersected
+  (:func:`verification.gaze_metrics.triangulate`): distance to the point.
 
-Arm (a UR10 from Universal Robots' published DH parameters, :func:`ur10_urdf`). Each
-trial perturbs it as the demo does (5 mm / 1 deg), simulates :data:`ARM_POSES` poses of
-``tool0`` in random configurations (central 80 % of the ranges) with 0.5 mm / 0.5 deg
-noise (:func:`verification.simulate.simulate`), calibrates (``method="refine"``), then
-reaches held-out ``tool0`` poses of the true arm (:func:`kinfw.control.reach.reach`,
-starting 0.1 rad from the configuration that made the pose) with each model; the
+Arm (a UR10 from Universal Robots' published DH parameters,
+:func:`verification.dh_robots.ur10_urdf`). Each trial perturbs it as the demo does
+(5 mm / 1 deg), simulates :data:`ARM_POSES` poses of ``tool0`` in random configurations
+(central 80 % of the ranges) with 0.5 mm / 0.5 deg noise
+(:func:`verification.simulate.simulate`), calibrates (``method="refine"``), then reaches
+held-out ``tool0`` poses of the true arm (:func:`kinfw.control.reach.reach`, starting
+0.1 rad from the configuration that made the pose) with each model; the
 errors are those of the true arm at the commanded ``q``.
 """
 
@@ -47,11 +49,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from kinfw.control.gaze import camera_points
 from kinfw.robot import Robot, builtin_head_urdf, load_robot
-from kinfw.transforms import angle_between
+from verification.dh_robots import ur10_urdf
+from verification.gaze_metrics import pointing_errors_rad, triangulation_errors_m
 from verification.studies import (
     FieldsJSON,
     Progress,
@@ -70,19 +72,13 @@ __all__ = [
     "ARM_NOISE_MM",
     "ARM_POSES",
     "HEAD_DISTANCE_M",
-    "UR10_DH",
     "GazeSetup",
     "GazeStudy",
-    "dh_urdf",
     "format_gaze",
     "gaze_study",
     "head_points",
     "main",
-    "pointing_errors_rad",
     "run_gaze",
-    "triangulate",
-    "triangulation_errors_m",
-    "ur10_urdf",
 ]
 
 #: Distance of the held-out points from the cameras' midpoint (m).
@@ -93,159 +89,6 @@ ARM_NOISE_MM = 0.5
 ARM_NOISE_DEG = 0.5
 #: The true robots' errors (as the demo's): origin mm, origin deg, axis deg.
 TRUTH_ERRORS = {"origin_mm": 5.0, "origin_deg": 1.0, "axis_deg": 1.0}
-#: Universal Robots' DH parameters of the UR10 (standard DH), per joint:
-#: ``(d, a, alpha)`` in m, m, rad ("DH parameters for calculations of kinematics and
-#: dynamics", Universal Robots support article).
-UR10_DH = (
-    (0.1273, 0.0, math.pi / 2),
-    (0.0, -0.612, 0.0),
-    (0.0, -0.5723, 0.0),
-    (0.163941, 0.0, math.pi / 2),
-    (0.1157, 0.0, -math.pi / 2),
-    (0.0922, 0.0, 0.0),
-)
-UR10_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
-
-
-# -- geometry ------------------------------------------------------------------------------
-
-
-def triangulate(root_p_origins: ArrayLike, root_directions: ArrayLike) -> NDArray[np.float64]:
-    """Midpoint of the common perpendicular of two lines.
-
-    Parameters
-    ----------
-    root_p_origins : array_like, shape (..., 2, 3)
-        A point of each line (m).
-    root_directions : array_like, shape (..., 2, 3)
-        Each line's direction (any length, not parallel).
-
-    Returns
-    -------
-    ndarray, shape (..., 3)
-        The point midway between the lines' closest points (m).
-    """
-    p = np.asarray(root_p_origins, dtype=float)
-    d = np.asarray(root_directions, dtype=float)
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    w = p[..., 0, :] - p[..., 1, :]
-    b = np.einsum("...i,...i->...", d[..., 0, :], d[..., 1, :])
-    e0 = np.einsum("...i,...i->...", d[..., 0, :], w)
-    e1 = np.einsum("...i,...i->...", d[..., 1, :], w)
-    denominator = 1.0 - b * b  # > 0 unless parallel
-    t0 = (b * e1 - e0) / denominator
-    t1 = (e1 - b * e0) / denominator
-    closest0 = p[..., 0, :] + t0[..., None] * d[..., 0, :]
-    closest1 = p[..., 1, :] + t1[..., None] * d[..., 1, :]
-    return 0.5 * (closest0 + closest1)
-
-
-def pointing_errors_rad(
-    model_root_T_cameras: ArrayLike, true_root_T_cameras: ArrayLike, root_p_point: ArrayLike
-) -> NDArray[np.float64]:
-    """Angle between the direction of the point in the true camera's frame and in the
-    model's (both at the same commanded joints): the model's pointing error.
-
-    Parameters
-    ----------
-    model_root_T_cameras, true_root_T_cameras : array_like, shape (..., 4, 4)
-        Camera poses by the model and by the true robot, in the root frame (m).
-    root_p_point : array_like, shape (..., 3)
-        The point in the root frame (m).
-
-    Returns
-    -------
-    ndarray, shape (...)
-        Angles in [0, pi] (rad).
-    """
-    point = np.asarray(root_p_point, dtype=float)
-    model = camera_points(model_root_T_cameras, point)
-    return angle_between(model, camera_points(true_root_T_cameras, point))
-
-
-def triangulation_errors_m(
-    model_root_T_cameras: ArrayLike, true_root_T_cameras: ArrayLike, root_p_point: ArrayLike
-) -> NDArray[np.float64]:
-    """Triangulation of a point seen by two true cameras, with the model's camera poses.
-
-    Each true camera sees the point along ``camera_p / |camera_p|`` (its frame); the
-    model puts that ray at its own camera pose; the two rays are intersected
-    (:func:`triangulate`).
-
-    Parameters
-    ----------
-    model_root_T_cameras, true_root_T_cameras : array_like, shape (..., 2, 4, 4)
-        The two cameras' poses by the model and by the true robot, root frame (m).
-    root_p_point : array_like, shape (..., 3)
-        The point (m).
-
-    Returns
-    -------
-    ndarray, shape (...)
-        Distance from the triangulated point to the point (m).
-    """
-    point = np.asarray(root_p_point, dtype=float)
-    model = np.asarray(model_root_T_cameras, dtype=float)
-    camera_rays = camera_points(true_root_T_cameras, point[..., None, :])
-    root_rays = np.einsum("...ij,...j->...i", model[..., :3, :3], camera_rays)
-    estimate = triangulate(model[..., :3, 3], root_rays)
-    return np.linalg.norm(estimate - point, axis=-1)
-
-
-# -- robots --------------------------------------------------------------------------------
-
-
-def dh_urdf(
-    name: str,
-    dh: Sequence[tuple[float, float, float]],
-    joints: Sequence[str],
-    *,
-    limit_rad: float = 2 * math.pi,
-) -> str:
-    """URDF of a serial revolute arm from standard DH rows ``(d, a, alpha)``: joint ``i``
-    turns about z of frame ``i - 1``, then ``Trans_z(d) Trans_x(a) Rot_x(alpha)`` leads to
-    frame ``i`` (the next joint's origin); links ``world``, ``base_link`` (frame 0,
-    through a fixed joint), ``link_1`` ... and ``tool0`` (frame n); limits
-    ``+-limit_rad``."""
-    lines = [
-        '<?xml version="1.0"?>',
-        f'<robot name="{name}">',
-        '  <link name="world"/>',
-        '  <joint name="world_joint" type="fixed"><parent link="world"/>'
-        '<child link="base_link"/><origin xyz="0 0 0" rpy="0 0 0"/></joint>',
-        '  <link name="base_link"/>',
-    ]
-    parent, origin = "base_link", (0.0, 0.0, 0.0)
-    for i, (joint, (d, a, alpha)) in enumerate(zip(joints, dh, strict=True), 1):
-        xyz, rpy = f"{origin[0]!r} 0 {origin[1]!r}", f"{origin[2]!r} 0 0"
-        lines += [
-            f'  <joint name="{joint}" type="revolute"><parent link="{parent}"/>'
-            f'<child link="link_{i}"/><origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="0 0 1"/>'
-            f'<limit lower="{-limit_rad!r}" upper="{limit_rad!r}" effort="1" velocity="1"/>'
-            "</joint>",
-            f'  <link name="link_{i}"/>',
-        ]
-        parent, origin = f"link_{i}", (float(a), float(d), float(alpha))
-    lines += [
-        f'  <joint name="tool0_joint" type="fixed"><parent link="{parent}"/>'
-        f'<child link="tool0"/><origin xyz="{origin[0]!r} 0 {origin[1]!r}" '
-        f'rpy="{origin[2]!r} 0 0"/></joint>',
-        '  <link name="tool0"/>',
-        "</robot>",
-    ]
-    return "\n".join(lines) + "\n"
-
-
-def ur10_urdf() -> str:
-    """The UR10 from :data:`UR10_DH` (:func:`dh_urdf`; joint limits +-2 pi as shipped)."""
-    return dh_urdf("ur10", UR10_DH, UR10_JOINTS)
 
 
 # -- the study -----------------------------------------------------------------------------
