@@ -349,7 +349,7 @@ def _read_filestorage(path: Path, text: str) -> CameraIntrinsics:
         text = "%YAML:1.0\n" + text  # ROS writes plain YAML; FileStorage wants the header
     try:
         fs = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except cv2.error:
+    except (cv2.error, SystemError):  # a parse error surfaces as either
         fs = None
     if fs is None or not fs.isOpened():
         raise CameraError(

@@ -165,7 +165,7 @@ _COUNT = _number(int, low=1)
 _SEED = _number(int, low=0)
 
 
-def _up_arg(text: str) -> list[float]:
+def up_arg(text: str) -> list[float]:
     """``"x y z"`` (or ``x,y,z``): three finite numbers, not all zero."""
     try:
         up = [float(v) for v in text.replace(",", " ").split()]
@@ -482,7 +482,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--up",
-        type=_up_arg,
+        type=up_arg,
         help='"x y z": up direction of the root frame '
         "(default: the URDF's <kinfw up> hint, else z)",
     )

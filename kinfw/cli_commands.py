@@ -36,6 +36,7 @@ __all__ = [
     "cmd_view",
     "default_sidecar_path",
     "format_table",
+    "frames_arg",
     "progress_printer",
 ]
 
@@ -49,9 +50,12 @@ def progress_printer():
     return None
 
 
-def _frames_arg(
+def frames_arg(
     value: str | None, default: tuple[str, ...], flag: str, robot: Robot
 ) -> tuple[str, ...]:
+    """The frames of a ``--frames`` / ``--cameras`` option (comma- or space-separated),
+    else the URDF hint ``default``; ValueError naming ``flag`` and the links when
+    neither is there."""
     if value:
         return tuple(v for v in value.replace(",", " ").split() if v)
     if default:
@@ -165,10 +169,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         )
     stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
     frames = (
-        _frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
+        frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
     )
     cameras = (
-        _frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal)
+        frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal)
         if 2 in stages
         else ()
     )
@@ -496,7 +500,7 @@ def cmd_crosscheck(args: argparse.Namespace) -> int:
     from verification.crosscheck import crosscheck_cpc
 
     robot = load_robot(args.urdf)
-    frames = _frames_arg(
+    frames = frames_arg(
         args.frames, (*robot.default_frames, *robot.default_cameras), "--frames", robot
     )
     result = crosscheck_cpc(robot, frames, n=args.n, rng=np.random.default_rng(args.seed))

@@ -23,6 +23,9 @@ log = logging.getLogger("kinfw")
 
 #: Exit code when the point is not fixated / the target not reached (output printed).
 NOT_MET = 3
+#: ``gaze`` warns about a point farther than this from the root frame (m): a head looks at
+#: things metres away; a point kilometres away is usually millimetres given as metres.
+GAZE_PLAUSIBLE_M = 100.0
 
 _UNIT_M = {"m": 1.0, "mm": 1e-3}
 _JOINT_SUFFIXES = {"deg": ("revolute", math.pi / 180.0), "mm": ("prismatic", 1e-3)}
@@ -170,9 +173,13 @@ def parse_joint_values(robot, given: list[tuple[str, str]]):
 
     q = middle_configuration(robot)
     names = robot.joint_names
+    seen: set[str] = set()
     for name, text in given:
         if name not in names:
             raise ValueError(f"--q {name}={text}: no movable joint {name!r}; joints: {list(names)}")
+        if name in seen:
+            raise ValueError(f"--q {name}={text}: joint {name!r} is given twice")
+        seen.add(name)
         kind = "revolute" if robot.joint(name).is_revolute else "prismatic"
         scale, number = 1.0, text
         for suffix, (suffix_kind, suffix_scale) in _JOINT_SUFFIXES.items():
@@ -208,7 +215,26 @@ def _free_arg(robot, text: str | None) -> tuple[str, ...] | None:
             f"--free: no movable joint {', '.join(map(repr, unknown))}; joints: "
             f"{list(robot.joint_names)}"
         )
+    twice = sorted({n for n in free if free.count(n) > 1})
+    if twice:
+        raise ValueError(f"--free: joint {', '.join(map(repr, twice))} given twice")
     return free
+
+
+def _check_distance(where: str, position_m, plausible_m: float, unit: str) -> None:
+    """Refuse a target more than 1,000 km from the root frame (not a length in metres)
+    and warn beyond ``plausible_m``: usually millimetres given as metres."""
+    import numpy as np
+
+    hint = "; were millimetres given as metres? (--unit mm)" if unit == "m" else ""
+    largest = float(np.max(np.abs(position_m)))
+    distance_m = (
+        largest * float(np.linalg.norm(np.asarray(position_m) / largest)) if largest else 0.0
+    )
+    if distance_m > 1e6:
+        raise ValueError(f"{where} is {distance_m:.3g} m from the root frame{hint}")
+    if distance_m > plausible_m:
+        log.warning("%s is %.4g m from the root frame%s", where, distance_m, hint)
 
 
 def _joint_rows(robot, q, free: tuple[str, ...], at_limits: tuple[str, ...]) -> list[dict]:
@@ -273,6 +299,8 @@ def _camera_rays(args, cameras: tuple[str, ...]):
         return None
     intrinsics = {}
     for frame, file in given:
+        if frame in intrinsics:
+            raise ValueError(f"--camera {frame}={file}: camera {frame!r} is given twice")
         if frame not in cameras:
             raise ValueError(
                 f"--camera {frame}={file}: {frame!r} is not one of the cameras {list(cameras)}"
@@ -304,19 +332,20 @@ def _camera_rays(args, cameras: tuple[str, ...]):
 def cmd_gaze(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.cli_commands import _frames_arg
+    from kinfw.cli_commands import frames_arg
     from kinfw.control.gaze import GazeSolver
     from kinfw.files import json_text
     from kinfw.robot import load_robot
 
     robot = load_robot(args.model)
-    cameras = _frames_arg(args.cameras, robot.default_cameras, "--cameras", robot)
+    cameras = frames_arg(args.cameras, robot.default_cameras, "--cameras", robot)
     for c in cameras:
         robot.frame_id(c)  # an unknown frame: one line naming the links
     q_start = parse_joint_values(robot, args.q)
     free = _free_arg(robot, args.free)
     rays = _camera_rays(args, cameras)
     point = np.array(args.point, dtype=float) * _UNIT_M[args.unit]
+    _check_distance("--point", point, GAZE_PLAUSIBLE_M, args.unit)
     solver = GazeSolver(robot, cameras, free_joints=free)
     fix = solver.fixate(point, camera_rays=rays, q_start=q_start)
     rows = _joint_rows(robot, fix.q, fix.free_joints, fix.at_limits)
@@ -360,10 +389,9 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     print(f"fixated: {'yes' if fix.fixated else 'no'}")
     print(f"at limits: {', '.join(fix.at_limits) or 'none'}")
     if not fix.fixated:
-        why = "joints at a limit" if fix.at_limits else "the cameras' geometry"
         print(
             f"closest achievable fixation: no joint values put the point on every ray "
-            f"(limited by {why}); these leave {max(errors_deg):.4f} deg at most "
+            f"({_why_not_fixated(fix)}); these leave {max(errors_deg):.4f} deg at most "
             "(see docs/control.md)"
         )
     if args.html is not None:
@@ -371,7 +399,41 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     return 0 if fix.fixated else NOT_MET
 
 
+def _why_not_fixated(fix) -> str:
+    """Why a fixation is only the closest achievable, from its joints at limits and the
+    rank of the rays' motion (:attr:`kinfw.control.gaze.Fixation.rank`)."""
+    needed = 2 * len(fix.cameras)
+    if fix.at_limits:
+        return f"{', '.join(fix.at_limits)} at a limit"
+    if len(fix.free_joints) < needed:
+        return (
+            f"{len(fix.free_joints)} free joint(s) for {len(fix.cameras)} camera(s): "
+            f"aiming needs {needed} (--free)"
+        )
+    if fix.rank < needed:
+        return (
+            f"the free joints turn the rays in only {fix.rank} of {needed} directions, and "
+            "this point needs another: the cameras' geometry (on the IIS head, a vertical "
+            "disparity no joint removes) or a joint that does not aim (a roll about an "
+            "optical axis)"
+        )
+    return "out of reach from this start: try another --q start"
+
+
 # -- kinfw reach -------------------------------------------------------------------------
+def _reach_bound_m(robot, frame: str) -> float:
+    """An upper bound of the distance from the root frame the origin of ``frame`` can
+    reach: the joint origins' offsets on its path plus the prismatic joints' travel (m)."""
+    import numpy as np
+
+    bound = 0.0
+    for joint in robot.path_joints(frame):
+        bound += float(np.linalg.norm(joint.parent_T_child[:3, 3]))
+        if joint.type == "prismatic":
+            bound += max(abs(joint.lower), abs(joint.upper))
+    return bound
+
+
 def _reach_target(args):
     """``root_T_target`` (4, 4) from ``--pose`` or ``root_p_target`` (3,) from ``--point``
     (metres)."""
@@ -405,6 +467,13 @@ def cmd_reach(args: argparse.Namespace) -> int:
     robot = load_robot(args.model)
     robot.frame_id(args.frame)  # an unknown frame: one line naming the links
     target = _reach_target(args)
+    position = target if target.shape == (3,) else target[:3, 3]
+    _check_distance(
+        f"--{'point' if args.point is not None else 'pose'} position",
+        position,
+        2.0 * _reach_bound_m(robot, args.frame),
+        args.unit,
+    )
     q_start = parse_joint_values(robot, args.q)
     free = _free_arg(robot, args.free)
     result = reach(

@@ -59,7 +59,7 @@ def _stage_table(stages: Sequence[StageErrors]) -> str:
     )
 
 
-def _params_arg(text: str) -> str | tuple[str, ...]:
+def params_arg(text: str) -> str | tuple[str, ...]:
     """``full``, ``offsets``, ``frames``, ``none``, or a comma-separated mask."""
     if text in ("full", "offsets", "frames", "none"):
         return text
@@ -102,7 +102,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     held_out = read_data(args.holdout, args) if args.holdout else None
     noise, prior = _noise_arg(args), _prior_arg(args)
     choice = None
-    parameters = "full" if args.params == "auto" else _params_arg(args.params)
+    parameters = "full" if args.params == "auto" else params_arg(args.params)
     if args.params == "auto" and args.method == "refine":
         from verification.model_choice import choose_parameters
 

@@ -94,25 +94,25 @@ def read_pool(path: Path, joint_names) -> object:
 def _setup(args, robot):
     import numpy as np
 
-    from kinfw.cli_commands import _frames_arg
-    from kinfw.cli_fit import _params_arg
+    from kinfw.cli_commands import frames_arg
+    from kinfw.cli_fit import params_arg
     from verification.plan_objective import Setup
 
     if not (args.frames or args.cameras):
         frames = robot.default_frames  # default: stage 1, else stage 2
         cameras = () if frames else robot.default_cameras
         if not (frames or cameras):
-            _frames_arg(None, (), "--frames or --cameras", robot)  # raises the hint
+            frames_arg(None, (), "--frames or --cameras", robot)  # raises the hint
     else:
-        frames = _frames_arg(args.frames, (), "--frames", robot) if args.frames else ()
-        cameras = _frames_arg(args.cameras, (), "--cameras", robot) if args.cameras else ()
+        frames = frames_arg(args.frames, (), "--frames", robot) if args.frames else ()
+        cameras = frames_arg(args.cameras, (), "--cameras", robot) if args.cameras else ()
     for f in (*frames, *cameras):
         robot.frame_id(f)  # an unknown frame: one-line error naming the links
     tracker = None
     if args.tracker is not None:
-        from kinfw.cli import _up_arg
+        from kinfw.cli import up_arg
 
-        tracker = np.array(_up_arg(args.tracker))
+        tracker = np.array(up_arg(args.tracker))
     return Setup(
         frames=tuple(frames),
         frame_kind="point" if args.points else "pose",
@@ -122,7 +122,7 @@ def _setup(args, robot):
         noise_m=args.noise_mm * 1e-3,
         noise_rad=math.radians(args.noise_deg),
         pixel_sigma=args.pixel_sigma,
-        parameters=_params_arg(args.params),
+        parameters=params_arg(args.params),
         tracker_p=tracker,
         max_facing_deg=args.max_facing_deg,
     )

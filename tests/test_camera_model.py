@@ -163,3 +163,16 @@ def test_missing_file_is_a_camera_error(tmp_path):
         read_camera(tmp_path / "nope.yaml")
     with pytest.raises(CameraError, match="expected a JSON object"):
         intrinsics_from_dict([1, 2], "x.json")
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["garbage: [\n", '<?xml version="1.0"?>\n<robot name="r"><link name="a"/></robot>\n'],
+)
+def test_unparsable_camera_file_is_a_camera_error(tmp_path, text):
+    """A YAML syntax error or a URDF given as a camera file: OpenCV raises (cv2.error or
+    a SystemError wrapping it); kinfw names the file instead of a traceback."""
+    path = tmp_path / "cam.yaml"
+    path.write_text(text)
+    with pytest.raises(CameraError, match=r"cam\.yaml: not a camera file OpenCV can read"):
+        read_camera(path)

@@ -270,6 +270,41 @@ def test_reach_out_of_range_exits_3_with_the_closest_configuration(arm_urdf, cap
             "expected a unit quaternion",
         ),
         (["reach", "ARM", "--frame", "flange", "--pose", 0, 0, 0, 0, 0, 1], "expected 7 arguments"),
+        # a held joint outside its limits (250 m of a 1 m table: mm given as m)
+        (
+            [
+                "gaze",
+                HEAD_URDF,
+                "--point",
+                *POINT,
+                "--cameras",
+                "left_camera",
+                "--q",
+                "x_table=250",
+            ],
+            "joint 'x_table' is held (not solved for) at 250000 mm, outside its limits [0, 1000]",
+        ),
+        (
+            [
+                "reach",
+                "ARM",
+                "--frame",
+                "flange",
+                "--free",
+                "j2,j3",
+                "--q",
+                "j1=20",
+                "--point",
+                0,
+                0,
+                0,
+            ],
+            "joint 'j1' is held (not solved for) at 1145.92 deg",
+        ),
+        (["gaze", HEAD_URDF, "--point", *POINT, "--free", "pan,pan"], "'pan' given twice"),
+        (["gaze", HEAD_URDF, "--point", *POINT, "--q", "pan=1", "--q", "pan=2"], "given twice"),
+        (["gaze", HEAD_URDF, "--point", 1e200, 0, 0], "1e+200 m from the root frame"),
+        (["reach", "ARM", "--frame", "flange", "--point", 0, 0, 2e6], "2e+06 m from the root"),
     ],
 )
 def test_user_errors_exit_2_with_one_line(argv, message, arm_urdf, capsys):
@@ -287,3 +322,41 @@ def test_gaze_camera_without_pixel_or_for_another_frame_is_an_error(camera_file,
     assert code == 2 and "only used with --pixel" in err
     code, _, err = _run([*base, "--pixel", 3, 4, "--camera", f"right_camera={camera_file}"], capsys)
     assert code == 2 and "'right_camera' is not one of the cameras ['left_camera']" in err
+
+
+def test_repeated_camera_is_an_error(camera_file, capsys):
+    argv = ["gaze", HEAD_URDF, "--point", *POINT, "--cameras", "left_camera", "--pixel", 3, 4]
+    code, _, err = _run(
+        [*argv, "--camera", f"left_camera={camera_file}", "--camera", f"left_camera={camera_file}"],
+        capsys,
+    )
+    assert code == 2 and "camera 'left_camera' is given twice" in err
+
+
+def test_far_targets_warn_about_millimetres(arm_urdf, capsys):
+    """A point 1.3 km from the head or a target 750 m from a 1 m arm: solved, with one
+    warning that names the likely slip."""
+    code, _, err = _run(["gaze", HEAD_URDF, "--point", 754, 503, 897], capsys)
+    assert code == 3
+    assert "warning: --point is 1275 m from the root frame; were millimetres given" in err
+    code, _, err = _run(
+        ["reach", arm_urdf, "--frame", "flange", "--point", 600, 200, 400, "--restarts", 0], capsys
+    )
+    assert code == 3 and "--point position is 748.3 m from the root frame" in err
+    code, _, err = _run(["reach", arm_urdf, "--frame", "flange", "--point", 0.3, 0.2, 0.4], capsys)
+    assert "warning" not in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "reason"),
+    [
+        (["--cameras", "left_camera", "--free", "pan"], "1 free joint(s) for 1 camera(s)"),
+        ([], "turn the rays in only 3 of 4 directions"),
+    ],
+)
+def test_gaze_says_why_a_point_is_not_fixated(extra, reason, capsys):
+    """Too few free joints, or (the IIS head with both cameras) joints that move the rays
+    in 3 directions only (Fixation.rank) for 4 needed."""
+    code, out, _ = _run(["gaze", HEAD_URDF, "--point", *POINT, *extra], capsys)
+    assert code == 3
+    assert reason in out

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from kinfw.camera_model import CameraIntrinsics
 from kinfw.control.gaze import GazeSolver, fixate, ray_errors_rad
-from kinfw.robot import Robot, RobotModelError, UnknownFrameError
+from kinfw.robot import Robot, RobotModelError, UnknownFrameError, load_robot
 from tests.robots import HEAD_URDF, IDEAL_HEAD, PAN_CAMERA
 
 CAMERAS = ("left_camera", "right_camera")
@@ -415,3 +415,27 @@ def test_rays_invert_opencv_projection_with_strong_distortion():
     )
     np.testing.assert_allclose(reprojected.reshape(-1, 2), uv, atol=1e-9)
     assert camera.rays(uv[:400].reshape(20, 20, 2)).shape == (20, 20, 3)
+
+
+def test_rank_counts_the_directions_the_joints_turn_the_rays(ideal, pan_camera):
+    """Fixation.rank: 3 for two cameras on one tilt (their elevations move together),
+    which the ideal head still fixates exactly (its cameras are at one height, so the
+    two elevations agree) and the IIS head cannot (the vertical disparity); 1 on a pan
+    camera (one joint), 2 for one camera of the IIS head (its tilt and vergence)."""
+    _, point = ideal_fixation_points(ideal, 1, seed=3)[0]
+    fix = GazeSolver(ideal).fixate(point)
+    assert fix.rank == 3 and fix.fixated
+    head = load_robot(HEAD_URDF)
+    fix = GazeSolver(head).fixate([0.754, 0.503, 0.897])
+    assert fix.rank == 3 and not fix.fixated
+    assert fixate(pan_camera, [2.0, 0.5, 0.3], cameras=("camera",)).rank == 1
+    fix = GazeSolver(head, ("left_camera",)).fixate([0.754, 0.503, 0.897])
+    assert fix.rank == 2 and fix.fixated
+
+
+def test_held_joint_outside_its_limits_is_an_error():
+    """The IIS head's x table held at 250 (mm typed as m) is refused before solving."""
+    head = load_robot(HEAD_URDF)
+    q = np.array([250.0, 0.25, 1.5, 0.5, 0.7, 0.7])
+    with pytest.raises(RobotModelError, match=r"'x_table' is held .* 250000 mm"):
+        fixate(head, [0.754, 0.503, 0.897], q_start=q)

@@ -143,3 +143,45 @@ def test_one_joint_robot():
     result = reach(robot, "tool", [0.8 * math.cos(0.3), 0.8 * math.sin(0.3), 0.0])
     assert result.reached
     assert result.q[0] == pytest.approx(0.3, abs=1e-12)
+
+
+def test_ur10_answer_is_the_turn_nearest_the_start():
+    """The UR10's joints range over +-2 pi, so every pose has equivalents a whole turn
+    apart: from the zero start the answer is the one within [-pi, pi] (the smallest
+    motion), and it still reaches the pose by FK."""
+    ur10 = load_robot(urdf_path("ur_description/urdf/ur10_robot.urdf"))
+    q_true = np.array([6.0, -5.8, 1.0, 4.0, -4.5, 5.9])  # wound up: several near 2 pi
+    target = ur10.frame_poses(q_true, "tool0")
+    res = reach(ur10, "tool0", target, q_start=np.zeros(6))
+    assert res.reached
+    assert np.all(np.abs(res.q) <= math.pi + 1e-9), res.q
+    assert max(pose_errors(ur10.frame_poses(res.q, "tool0"), target)) < 1e-9
+
+
+def test_nearest_turn_by_hand():
+    """Revolute values move by whole turns towards the reference within the limits; a
+    turn that would leave the limits is not taken; prismatic values never move."""
+    from kinfw.control.solver import nearest_turn
+
+    two_pi = 2 * math.pi
+    x = np.array([5.5, 3.0, -6.0, 5.5])
+    reference = np.array([0.0, -3.0, 6.0, 0.0])
+    lower = np.array([-7.0, -3.1, -7.0, -7.0])
+    upper = np.array([7.0, 3.1, 7.0, 7.0])
+    revolute = np.array([True, True, True, False])
+    np.testing.assert_allclose(
+        nearest_turn(x, reference, lower, upper, revolute),
+        [5.5 - two_pi, 3.0, -6.0 + 2 * two_pi, 5.5],
+        atol=1e-15,
+    )
+
+
+def test_held_joint_outside_its_limits_is_an_error(arm):
+    """A joint held at a value beyond its limits (20 rad: degrees typed as radians)
+    would make an answer outside the limits: refused, naming the joint in degrees."""
+    q = np.zeros(len(arm.joint_names))
+    q[0] = 20.0
+    with pytest.raises(RobotModelError, match=r"joint 'j1' is held .* at 1145\.92 deg"):
+        reach(arm, "flange", [0.3, 0.2, 0.4], q_start=q, free_joints=("j2", "j3", "j5"))
+    free = reach(arm, "flange", [0.3, 0.2, 0.4], q_start=q)  # j1 free: only a start, clipped
+    assert free.q[0] <= 3.0

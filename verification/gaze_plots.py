@@ -30,6 +30,8 @@ def plot_gaze(study: GazeStudy, path: str | Path) -> Path:
     """Four panels of CDFs: pointing error per camera, the raw optical-axis angle with
     the head's fixation floor, triangulation error, UR10 reach position error; nominal
     (red) vs calibrated (blue). Written to ``path`` (PNG)."""
+    from verification.gaze_study import count_noun
+
     s = study
     fig = new_figure((10.0, 7.0))
     axes = fig.subplots(2, 2)
@@ -50,9 +52,10 @@ def plot_gaze(study: GazeStudy, path: str | Path) -> Path:
     _cdf(
         axis,
         np.degrees(s.model_error_rad[:, :, 1]),
-        color="black",
+        color="0.55",
         linestyle=":",
-        linewidth=2,
+        linewidth=1.5,
+        zorder=1,
         label="fixation floor (calibrated model's own angle)",
     )
     pointing.set(
@@ -61,14 +64,16 @@ def plot_gaze(study: GazeStudy, path: str | Path) -> Path:
     axis.set(xlabel="angle, true optical axis to point (deg)", title="raw fixation angle")
     triangulation.set(xlabel="triangulation error (mm)", title="3D point from both cameras' rays")
     arm.set(xlabel="tool0 position error (mm)", title="UR10 reaching held-out poses")
+    # exact fixations (angles ~1e-15 deg) would stretch the log axis over 15 decades
+    axis.set_xlim(left=1e-3)
     for ax in axes.ravel():
         ax.set_xscale("log")
         ax.set_ylabel("fraction of points")
         ax.grid(True, which="both", alpha=0.3)
     fig.suptitle(
-        f"Using the calibration: {s.setup.trials} simulated true heads x {s.setup.points} "
-        f"points at {s.setup.distance_min_m:g}-{s.setup.distance_max_m:g} m, "
-        f"{s.setup.trials} true UR10s x {s.setup.targets} poses",
+        f"Using the calibration: {count_noun(s.setup.trials, 'simulated true head')} x "
+        f"{s.setup.points} points at {s.setup.distance_min_m:g}-{s.setup.distance_max_m:g} m, "
+        f"{count_noun(s.setup.trials, 'true UR10')} x {s.setup.targets} poses",
         fontsize=10,
     )
     shared_legend(fig, axes.ravel())

@@ -74,6 +74,7 @@ __all__ = [
     "HEAD_DISTANCE_M",
     "GazeSetup",
     "GazeStudy",
+    "count_noun",
     "format_gaze",
     "gaze_study",
     "head_points",
@@ -358,6 +359,11 @@ def gaze_study(
     return GazeStudy(setup=setup, **arrays)
 
 
+def count_noun(n: int, noun: str) -> str:
+    """``"1 true UR10"``, ``"10 true UR10s"``."""
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def format_gaze(study: GazeStudy) -> str:
     """Markdown table of the study: median / p95 per error, nominal vs calibrated."""
     s, summary = study.setup, study.summary()
@@ -378,10 +384,11 @@ def format_gaze(study: GazeStudy) -> str:
     ]
     floor, timing = summary["head_fixation_floor_deg"], summary["fixation_ms_calibrated"]
     lines = [
-        f"Using the calibration: {s.trials} true IIS heads (demo data, refine) x {s.points} "
-        f"held-out points at {s.distance_min_m:g}-{s.distance_max_m:g} m; {s.trials} true "
-        f"UR10s ({s.arm_poses} tool0 poses, {s.arm_noise_mm:g} mm / {s.arm_noise_deg:g} deg) "
-        f"x {s.targets} held-out poses. Errors on the true robot, median / p95.",
+        f"Using the calibration: {count_noun(s.trials, 'true IIS head')} (demo data, refine) "
+        f"x {s.points} held-out points at {s.distance_min_m:g}-{s.distance_max_m:g} m; "
+        f"{count_noun(s.trials, 'true UR10')} ({s.arm_poses} tool0 poses, "
+        f"{s.arm_noise_mm:g} mm / {s.arm_noise_deg:g} deg) x {s.targets} held-out poses. "
+        "Errors on the true robot, median / p95.",
         "",
         "| error on the true robot | nominal model | calibrated model |",
         "|---|---:|---:|",

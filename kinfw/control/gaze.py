@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.control.solver import (
     check_configuration,
+    check_held_joints,
     middle_configuration,
     solve_bounded,
     solve_weak_directions,
@@ -108,6 +109,14 @@ class Fixation:
         Free joints held at a limit.
     iterations : int
         Gauss-Newton iterations.
+    rank : int
+        Independent directions in which the free joints move the cameras' rays at the
+        answer (singular values of the residual's Jacobian above :data:`RCOND` times the
+        largest). Below two per camera, the joints cannot turn every ray in every
+        direction independently (too few free joints, a roll about an optical axis, two
+        cameras on one tilt: rank 3 of 4), so only points whose rays agree with that
+        coupling can be fixated exactly: a head with both cameras at one height fixates
+        everywhere, the IIS head (its vertical disparity) only near 4 m.
     """
 
     joint_names: tuple[str, ...]
@@ -120,6 +129,7 @@ class Fixation:
     fixated: bool
     at_limits: tuple[str, ...]
     iterations: int
+    rank: int
 
 
 def default_free_joints(robot: Robot, cameras: tuple[str, ...]) -> tuple[str, ...]:
@@ -286,6 +296,7 @@ class GazeSolver:
             raise RobotModelError(f"point: expected 3 finite numbers (m), got {point.tolist()}")
         rays = self._rays(camera_rays)
         q = self.q_middle.copy() if q_start is None else check_configuration(self.robot, q_start)
+        check_held_joints(self.robot, q, self.free_joints)
         residual = _GazeResidual(self, rays, point, self.robot.pin_configurations(q)[0])
         x = residual.aim(np.clip(q[self.free_columns], self.lower, self.upper))
         try:
@@ -320,6 +331,7 @@ class GazeSolver:
             fixated=bool(np.all(errors < FIXATED_RAD)),
             at_limits=tuple(n for n, b in zip(self.free_joints, at_limit, strict=True) if b),
             iterations=iterations,
+            rank=_rank(residual(solution.x, True)[1]),
         )
 
     def _rays(self, camera_rays: ArrayLike | None) -> NDArray[np.float64]:
@@ -420,6 +432,12 @@ class _GazeResidual:
                     den += d_perp @ w / w_norm
                 x[j] = min(max(x[j] + math.atan2(num, den), s.lower[j]), s.upper[j])
         return x
+
+
+def _rank(jacobian: NDArray[np.float64]) -> int:
+    """Singular values above :data:`RCOND` times the largest."""
+    s = np.linalg.svd(jacobian, compute_uv=False)
+    return int(np.sum(s > RCOND * s[0])) if s[0] > 0.0 else 0
 
 
 def _angles(residual: NDArray[np.float64]) -> NDArray[np.float64]:

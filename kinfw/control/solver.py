@@ -41,7 +41,9 @@ __all__ = [
     "BoundedSolution",
     "Residual",
     "check_configuration",
+    "check_held_joints",
     "middle_configuration",
+    "nearest_turn",
     "solve_bounded",
     "solve_weak_directions",
 ]
@@ -263,3 +265,43 @@ def check_configuration(robot: Robot, q: ArrayLike, name: str = "q_start") -> ND
             f"{name}: expected {len(names)} finite values ({list(names)}), got {out.tolist()}"
         )
     return out
+
+
+def check_held_joints(robot: Robot, q: NDArray[np.float64], free: tuple[str, ...]) -> None:
+    """Raise :class:`RobotModelError` when a joint that is held (not in ``free``) is
+    outside its URDF limits in ``q`` (all movable joints): the answer would not be within
+    the limits, and such a value is usually a unit slip (mm given as m, deg as rad). Free
+    joints are only started there, and clipped."""
+    lower, upper = robot.joint_limits()
+    for k, joint in enumerate(robot.joint_names):
+        if joint in free or lower[k] - 1e-9 <= q[k] <= upper[k] + 1e-9:
+            continue
+        revolute = robot.joint(joint).is_revolute
+        unit, scale = ("deg", np.degrees(1.0)) if revolute else ("mm", 1e3)
+        raise RobotModelError(
+            f"joint {joint!r} is held (not solved for) at {q[k] * scale:.6g} {unit}, outside "
+            f"its limits [{lower[k] * scale:.6g}, {upper[k] * scale:.6g}] {unit} (a unit "
+            f"slip? joint values are in {'rad' if revolute else 'm'})"
+        )
+
+
+def nearest_turn(
+    x: NDArray[np.float64],
+    reference: NDArray[np.float64],
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    revolute: NDArray[np.bool_],
+) -> NDArray[np.float64]:
+    """Each revolute value moved by whole turns (2 pi) as close to ``reference`` as its
+    limits allow: the same pose, the smallest motion (a UR10's pan of 352 deg is -8 deg
+    from a start at 0). Prismatic values are returned unchanged."""
+    turns = np.round((reference - x) / (2.0 * np.pi))
+    moved = x + 2.0 * np.pi * turns
+    # step back towards x until within the limits (at most the turns taken)
+    for _ in range(int(np.max(np.abs(turns), initial=0.0))):
+        outside = (moved < lower) | (moved > upper)
+        if not outside.any():
+            break
+        moved = np.where(outside, moved - 2.0 * np.pi * np.sign(turns), moved)
+    keep = revolute & (moved >= lower) & (moved <= upper)
+    return np.where(keep, moved, x)
