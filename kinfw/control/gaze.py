@@ -331,7 +331,7 @@ class GazeSolver:
             fixated=bool(np.all(errors < FIXATED_RAD)),
             at_limits=tuple(n for n, b in zip(self.free_joints, at_limit, strict=True) if b),
             iterations=iterations,
-            rank=_rank(residual(solution.x, True)[1]),
+            rank=_rank(solution.jacobian),
         )
 
     def _rays(self, camera_rays: ArrayLike | None) -> NDArray[np.float64]:

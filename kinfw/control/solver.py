@@ -76,6 +76,8 @@ class BoundedSolution:
         when ``max_iterations`` ran out first.
     at_bound : ndarray of bool, shape (k,)
         Joints held at a limit at the answer.
+    jacobian : ndarray, shape (m, k)
+        The residual's Jacobian at ``x``.
     """
 
     x: NDArray[np.float64]
@@ -83,6 +85,7 @@ class BoundedSolution:
     iterations: int
     converged: bool
     at_bound: NDArray[np.bool_]
+    jacobian: NDArray[np.float64]
 
 
 def solve_bounded(
@@ -165,7 +168,7 @@ def solve_bounded(
         if small_change:
             converged = True
             break
-    return BoundedSolution(x, r, iterations, converged, at_bound)
+    return BoundedSolution(x, r, iterations, converged, at_bound, jac)
 
 
 def solve_weak_directions(
