@@ -1,8 +1,10 @@
 """The estimation problem: parameter blocks, residual groups, solver, noise, diagnostics.
 
-- :mod:`.problem`: :func:`build_problem` assembles a :class:`LeastSquaresProblem` from a
+- :mod:`.build`: :func:`build_problem` assembles a :class:`LeastSquaresProblem` from a
   robot and measurements, looping over the observation kinds of :mod:`kinfw.observations`
   and the parameter blocks of :mod:`kinfw.blocks`;
+- :mod:`.problem`: the problem's data classes (:class:`LeastSquaresProblem`,
+  :class:`ResidualGroup`, :class:`Unknown`);
 - :mod:`.start`: the start values, in closed form (the kinds' estimators);
 - :mod:`.functions`: the CasADi residual functions, cached by structure;
 - :mod:`.gauge`: which robot parameters are free;
@@ -13,6 +15,7 @@
 :func:`identification.refine.refine` orchestrates them.
 """
 
+from .build import build_problem
 from .diagnostics import (
     GroupResiduals,
     Identifiability,
@@ -21,7 +24,7 @@ from .diagnostics import (
 )
 from .functions import GroupFunctions, clear_function_cache
 from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
-from .problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown, build_problem
+from .problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
 from .solver import LOSSES, levenberg_marquardt, observation_norms, row_weights, thresholds
 from .start import estimate_unknowns, express_in
 
