@@ -31,22 +31,21 @@ poses, which does not depend on the order of the samples.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from identification.handeye_checks import check_pose_pairs
 from identification.handeye_ml import PoseFit, fit_absolute
+from identification.handeye_result import HandEyeResult
 from identification.handeye_starts import candidate_starts
+from identification.handeye_tsai import PARALLEL_AXES_RAD, largest_line_angle, tsai_rotation
 from identification.handeye_uncertainty import Uncertainty, inverse_covariance_map, uncertainty
 from kinfw.transforms import (
     average_transform,
     inverse_transform,
-    matrix_from_rotation_vector,
     rotation_angle,
     rotation_vector_from_matrix,
-    skew,
     transform_from_rotation_translation,
 )
 
@@ -57,21 +56,10 @@ log = logging.getLogger(__name__)
 #: Below this rotation condition (smallest / largest singular value) a warning is logged.
 POOR_CONDITION = 0.05
 
-#: Motions whose rotation axes all lie within this angle of each other are "about one axis".
-PARALLEL_AXES_RAD = np.radians(1.0)
 #: An RMS difference between the rotation angles of A_ij and B_ij, or an RMS rotation
 #: residual of A_ij X = X B_ij, beyond this means the poses do not describe one rigid
 #: hand-eye setup.
 INCONSISTENT_RAD = np.radians(5.0)
-#: Above this rotation angle of X, Tsai's parameter tan(theta/2) u is re-solved in a
-#: pre-rotated frame (it is infinite at pi).
-PRE_ROTATE_ABOVE_RAD = np.radians(150.0)
-#: Relative motions this close to a half turn have a quaternion sign that noise can flip.
-HALF_TURN_BAND_RAD = np.radians(3.0)
-#: Relative singular value below which Tsai's rotation system is taken as rank-deficient.
-_RANK_TOL = 1e-10
-#: The axis spread is reported exactly unless it is within this of pi/2 (its maximum).
-_SPREAD_ATOL = 1e-3
 #: Up to this many poses every pair gives a relative motion; beyond, ``MOTION_STRIDES``
 #: pairs per pose (:func:`motion_pairs`), so the start costs O(n), not O(n^2).
 ALL_PAIRS_UP_TO = 25
@@ -80,89 +68,6 @@ MOTION_STRIDES = 6
 
 class HandEyeError(ValueError):
     """The poses cannot determine the hand-eye transform; the message says why."""
-
-
-@dataclass(frozen=True, slots=True)
-class HandEyeResult:
-    """Hand-eye transform and the quality of its fit.
-
-    Attributes
-    ----------
-    hand_T_camera : ndarray, shape (4, 4)
-        Pose of the camera (the eye) in the hand frame, in the input length unit: the
-        unknown ``X`` of ``A X = X B``.
-    n_pairs : int
-        Relative motions (unordered pose pairs) used.
-    rms_rotation_rad : float
-        RMS over the motions used of the angle of ``(A_ij X)^-1 X B_ij``, radians.
-    rms_translation : float
-        RMS over the motions used (both orders) of the translation residual of
-        ``A_ij X = X B_ij``, in the input length unit.
-    rotation_condition : float
-        Smallest over largest singular value of Tsai's stacked rotation system as finally
-        solved: 1 is ideal, towards 0 the rotation of X is poorly determined. It reflects
-        the spread of the motion axes, and also drops as X's own rotation grows towards
-        150 deg, beyond which the system is re-solved about the first estimate.
-    axis_spread_rad : float
-        Largest angle between the rotation axes (as lines) of the motions used, radians:
-        0 means all about one axis.
-    base_T_target : ndarray, shape (4, 4)
-        The target's pose in the robot base, estimated with X (``Y`` of
-        ``A[i] X B[i] = Y``), input length unit.
-    covariance : ndarray, shape (6, 6)
-        Covariance of X's error ``(dphi, dt)``: ``dphi`` the rotation vector of
-        ``X_true = X exp(dphi)`` in the camera frame (rad^2), ``dt`` the translation error
-        in the hand frame (input unit^2); from the maximum-likelihood fit with the noise
-        scales estimated from the residuals.
-    sigma_rotation_deg : ndarray, shape (3,)
-        1-sigma rotation uncertainty of X per camera axis, degrees.
-    sigma_translation : ndarray, shape (3,)
-        1-sigma translation uncertainty of X per hand axis, input length unit.
-    verdict : str
-        ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
-        ``"undetermined (<worst direction>)"``
-        (:func:`identification.handeye_uncertainty.uncertainty`).
-    rejected : tuple of int
-        Indices of the poses rejected as outliers (squared whitened residual above
-        :func:`identification.handeye_ml.rejection_threshold`: chi^2_6's quantile at
-        ``1 - 0.01 / n``, at least its 99.9 % quantile).
-    noise_rotation_rad, noise_translation : float
-        The camera pose's noise scales per axis estimated from the residuals (radians,
-        input unit).
-    iterations : int
-        Levenberg-Marquardt steps of the maximum-likelihood refinement.
-
-    Notes
-    -----
-    ``X`` is a read-only alias of ``hand_T_camera`` for readers of Tsai & Lenz and
-    Shih et al., who call the hand-eye transform ``X``.
-    """
-
-    hand_T_camera: NDArray[np.float64]
-    n_pairs: int
-    rms_rotation_rad: float
-    rms_translation: float
-    rotation_condition: float
-    axis_spread_rad: float
-    base_T_target: NDArray[np.float64]
-    covariance: NDArray[np.float64]
-    sigma_rotation_deg: NDArray[np.float64]
-    sigma_translation: NDArray[np.float64]
-    verdict: str
-    rejected: tuple[int, ...]
-    noise_rotation_rad: float
-    noise_translation: float
-    iterations: int
-
-    @property
-    def X(self) -> NDArray[np.float64]:
-        """Alias of :attr:`hand_T_camera`: the papers' ``X`` in ``A X = X B``."""
-        return self.hand_T_camera
-
-    @property
-    def Y(self) -> NDArray[np.float64]:
-        """Alias of :attr:`base_T_target`: ``A[i] X B[i] = Y``."""
-        return self.base_T_target
 
 
 def solve_axxb(
@@ -298,7 +203,7 @@ def solve_axxb(
     rotvecs_A = rotation_vector_from_matrix(A_ijs[:, :3, :3])
     rotvecs_B = rotation_vector_from_matrix(B_ijs[:, :3, :3])
     axes_A = rotvecs_A / angles_A[used, None]
-    spread = _largest_line_angle(axes_A)
+    spread = largest_line_angle(axes_A)
     if spread < PARALLEL_AXES_RAD:
         axis = np.linalg.eigh(np.einsum("ki,kj->ij", axes_A, axes_A))[1][:, -1]
         raise HandEyeError(
@@ -309,7 +214,7 @@ def solve_axxb(
             f"about another axis"
         )
 
-    hand_R_eye, singular_values = _rotation(rotvecs_A, rotvecs_B)
+    hand_R_eye, singular_values = tsai_rotation(rotvecs_A, rotvecs_B)
 
     def tsai_start() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Tsai & Lenz's X (translation by eq. 15 over both orders of every pair)."""
@@ -456,97 +361,3 @@ def _check_angles_agree(
             f"k, with the camera rigid on the hand: check the pairing and order of the samples "
             f"(inverting or swapping A and B does not change these angles)"
         )
-
-
-def _largest_line_angle(axes: NDArray[np.float64]) -> float:
-    """Largest angle between the lines spanned by unit vectors (m, 3), radians.
-
-    Exact (to ~1e-8 rad, the precision of ``arccos`` near 1), except that a value within
-    ``_SPREAD_ATOL`` of pi/2, the largest possible, is returned as found. With ``d`` the
-    angle between lines (a metric) and ``r`` the axes' principal direction, a lower bound
-    ``L`` comes from two farthest-point sweeps; a pair farther apart than ``L`` has
-    ``d(a, r) + d(b, r) > L``, so only axes with ``d(a, r) > L - max d(., r)`` are
-    compared pairwise (in blocks of rows). That keeps the O(m^2) part small both for
-    nearly parallel axes and for widely spread ones.
-    """
-    r = np.linalg.eigh(axes.T @ axes)[1][:, -1]
-    to_r = _line_angles(axes, r)
-    lower = 0.0
-    k = int(np.argmax(to_r))
-    for _ in range(2):
-        sweep = _line_angles(axes, axes[k])
-        k = int(np.argmax(sweep))
-        lower = max(lower, float(sweep[k]))
-    if lower >= np.pi / 2 - _SPREAD_ATOL:
-        return lower
-    candidates = axes[to_r >= lower - to_r.max() - 1e-7]
-    rows = max(1, (1 << 22) // len(candidates))
-    smallest = min(
-        float(np.abs(candidates[k : k + rows] @ candidates.T).min())
-        for k in range(0, len(candidates), rows)
-    )
-    return max(lower, float(np.arccos(min(smallest, 1.0))))
-
-
-def _line_angles(axes: NDArray[np.float64], axis: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Angles in [0, pi/2] between the lines of unit vectors (m, 3) and of ``axis``."""
-    return np.arccos(np.minimum(np.abs(axes @ axis), 1.0))
-
-
-def _rotation(
-    rotvecs_A: NDArray[np.float64], rotvecs_B: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``hand_R_eye`` by Tsai & Lenz with the half-turn safeguards; and the final system's
-    singular values (see :func:`solve_axxb`, Notes)."""
-    P_As, P_Bs = _modified_rodrigues(rotvecs_A), _modified_rodrigues(rotvecs_B)
-    half_turn = np.linalg.norm(rotvecs_A, axis=1) > np.pi - HALF_TURN_BAND_RAD
-    first = ~half_turn
-    if np.any(half_turn) and (
-        not np.any(first)
-        or _largest_line_angle(
-            rotvecs_A[first] / np.linalg.norm(rotvecs_A[first], axis=1, keepdims=True)
-        )
-        < PARALLEL_AXES_RAD
-    ):
-        first = np.ones_like(half_turn)
-    R0, singular_values = _tsai_rotation(P_As[first], P_Bs[first])
-    if not np.any(half_turn) and rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
-        return R0, singular_values  # the first estimate is final
-    # Signs of the half-turn motions: the ones that agree with the first estimate.
-    flip = half_turn & (np.einsum("ki,ij,kj->k", P_As, R0, P_Bs) < 0.0)
-    P_Bs = np.where(flip[:, None], -P_Bs, P_Bs)
-    if rotation_angle(R0) <= PRE_ROTATE_ABOVE_RAD:
-        R0 = np.eye(3)
-    else:
-        log.debug(
-            "X turns by %.1f deg: re-solving about the first estimate",
-            np.degrees(rotation_angle(R0)),
-        )
-    R_prime, singular_values = _tsai_rotation(P_As, P_Bs @ R0.T)
-    return R_prime @ R0, singular_values
-
-
-def _modified_rodrigues(rotvecs: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Tsai's ``P = 2 sin(theta/2) u`` from rotation vectors ``theta u`` (m, 3)."""
-    theta = np.linalg.norm(rotvecs, axis=1, keepdims=True)
-    return np.sinc(theta / (2.0 * np.pi)) * rotvecs  # sinc(x) = sin(pi x) / (pi x)
-
-
-def _tsai_rotation(
-    P_As: NDArray[np.float64], P_Bs: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Solve ``skew(P_A + P_B) P'_X = P_B - P_A`` (Tsai & Lenz eq. 12) by least squares.
-
-    Returns the rotation by ``2 atan(|P'_X|)`` about ``P'_X`` (eq. 14), or the half turn
-    about the null vector when the stacked system has lost rank (X turns by pi), and the
-    stacked system's singular values.
-    """
-    M = skew(P_As + P_Bs).reshape(-1, 3)
-    U, s, Vt = np.linalg.svd(M, full_matrices=False)
-    if s[-1] <= _RANK_TOL * s[0]:
-        return matrix_from_rotation_vector(np.pi * Vt[-1]), s
-    P_prime = Vt.T @ ((U.T @ (P_Bs - P_As).reshape(-1)) / s)
-    tan_half = np.linalg.norm(P_prime)
-    if tan_half == 0.0:
-        return np.eye(3), s
-    return matrix_from_rotation_vector(2.0 * np.arctan(tan_half) * P_prime / tan_half), s
