@@ -30,7 +30,8 @@ Quaternions here are kinfw's, scalar last ``(x, y, z, w)``; the paper's ``(s, v)
 is converted.
 
 The iteration itself, its quaternion signs and why it converges (it is the power
-iteration of one 4x4 matrix) are in :mod:`identification.axb_iteration`.
+iteration of one 4x4 matrix) are in :mod:`identification.axb_iteration`; the checks of
+the data and the iteration's start in :mod:`identification.axb_start`.
 
 Refinement (``refine=True``, the default) adds, measured in the notes of
 :func:`solve_axyb`:
@@ -69,23 +70,16 @@ from identification.axb_iteration import (
     AXYBError,
     consistent_quats_xyzw,
     iteration_matrix,
-    normalise,
     rotation_from_quat_xyzw,
     rotation_iteration,
     translation_iteration,
 )
-from identification.axb_refinement import translations_least_squares
-from identification.handeye_checks import ORTHONORMAL_TOL, check_pose_pairs
+from identification.axb_start import check_motion, start_of_y
+from identification.handeye_checks import check_pose_pairs
 from identification.handeye_ml import PoseFit, assess, fit_absolute
 from identification.handeye_starts import candidate_starts
 from identification.handeye_uncertainty import combined_verdict, uncertainty
-from kinfw.transforms import (
-    check_transform,
-    project_to_rotation,
-    quat_xyzw_from_matrix,
-    rotation_angle,
-    transform_from_rotation_translation,
-)
+from kinfw.transforms import rotation_angle, transform_from_rotation_translation
 
 __all__ = [
     "AXYBError",
@@ -95,14 +89,6 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
-
-
-#: Off-axis rotation spread of ``B`` (rad) below which X and Y are called undetermined.
-MIN_MOTION_RAD = 1e-3
-
-
-#: Below this spread (rad) X and Y are poorly determined: a warning is logged.
-WEAK_MOTION_RAD = np.radians(2.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,61 +187,6 @@ class AXYBResult:
     def history_Y(self) -> NDArray[np.float64] | None:
         """Alias of :attr:`root_T_target_history`."""
         return self.root_T_target_history
-
-
-# ------------------------------------------------------------------------ checks
-
-
-def _check_start(T: ArrayLike, name: str) -> NDArray[np.float64]:
-    T = np.asarray(T, dtype=float)
-    if T.shape != (4, 4):
-        raise AXYBError(f"{name}: expected shape (4, 4), got {T.shape}")
-    try:
-        T = check_transform(T, name, tol=ORTHONORMAL_TOL).copy()
-    except ValueError as err:
-        raise AXYBError(str(err)) from err
-    T[:3, :3] = project_to_rotation(T[:3, :3])
-    return T
-
-
-def _motion_check(R_Bs: NDArray[np.float64]) -> None:
-    """Raise when the rotations of ``B`` cannot determine X and Y.
-
-    X and Y are determined iff no unit ``v`` has ``R_B[i] v`` the same for every ``i``
-    (all relative rotations about one axis): with ``u = R_B[i] v``, ``X Rot(u, phi)``
-    and ``Rot(v, -phi) Y`` fit as well, and so do the translations moved by
-    ``(-lambda R_X u, lambda v)``. ``sigma``, the largest singular value of
-    ``mean_i R_B[i]``, is 1 exactly then; ``1 - sigma^2`` is the smallest eigenvalue, per
-    pose, of the Schur complement of the translation normal equations. The off-axis
-    spread ``2 asin(sqrt(1 - sigma^2))`` is the relative rotation angle for two poses.
-    """
-    U, S, Vt = np.linalg.svd(R_Bs.mean(axis=0))
-    spreads = 2.0 * np.arcsin(np.sqrt(np.clip(1.0 - S**2, 0.0, 1.0)))
-    if spreads[1] < MIN_MOTION_RAD:
-        raise AXYBError(
-            f"the rotations of B barely differ (spread {np.degrees(spreads[1]):.3g} deg, "
-            f"need {np.degrees(MIN_MOTION_RAD):.3g} deg): the poses determine neither the "
-            f"rotations nor the translations of X and Y, only their combination X B Y"
-        )
-    if spreads[0] < MIN_MOTION_RAD:
-        sense = np.sign(U[np.argmax(np.abs(U[:, 0])), 0])  # an axis has no sign
-        u, v = np.round(sense * U[:, 0], 4) + 0.0, np.round(sense * Vt[0], 4) + 0.0
-        raise AXYBError(
-            f"all rotations of B are about one axis (off-axis spread "
-            f"{np.degrees(spreads[0]):.3g} deg, need {np.degrees(MIN_MOTION_RAD):.3g} deg): "
-            f"the rotation of X about u = {u.tolist()} (in B's left frame), "
-            f"that of Y about v = {v.tolist()} (in B's right frame) and the "
-            f"translations along these axes are undetermined; add poses that rotate "
-            f"about another axis"
-        )
-    if spreads[0] < WEAK_MOTION_RAD:
-        log.warning(
-            "weak motion: the rotations of B spread only %.3g deg off their common axis; "
-            "X and Y will be poorly determined and the iteration slow (factor %.6f per "
-            "iteration)",
-            np.degrees(spreads[0]),
-            S[0] ** 2,
-        )
 
 
 def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
@@ -397,28 +328,11 @@ def solve_axyb(
         raise AXYBError(f"need tol > 0 and max_iterations >= 1, got {tol!r}, {max_iterations!r}")
     rng = np.random.default_rng(0) if rng is None else rng
     R_As, R_Bs = As[:, :3, :3], Bs[:, :3, :3]
-    _motion_check(R_Bs)
+    check_motion(R_Bs)
     q_As, q_Bs = consistent_quats_xyzw(R_As, R_Bs)
     N = iteration_matrix(q_As, q_Bs)
 
-    if Y0 is not None:
-        start = _check_start(Y0, "Y0")
-        q_Y0, t_Y0 = quat_xyzw_from_matrix(start[:3, :3]), start[:3, 3]
-    elif X0 is not None:
-        start = _check_start(X0, "X0")
-        q_Y0, _ = normalise(N.T @ quat_xyzw_from_matrix(start[:3, :3]))
-        t_Y0 = np.mean(
-            np.einsum(
-                "nji,nj->ni", R_Bs, (As[:, :3, 3] - start[:3, 3]) @ start[:3, :3] - Bs[:, :3, 3]
-            ),
-            axis=0,
-        )
-    elif refine:
-        U, _, Vt = np.linalg.svd(N)  # the iteration's fixed point in closed form
-        q_Y0 = Vt[0]
-        _, t_Y0 = translations_least_squares(As, Bs, rotation_from_quat_xyzw(U[:, 0]))
-    else:
-        q_Y0, t_Y0 = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
+    q_Y0, t_Y0 = start_of_y(As, Bs, N, X0=X0, Y0=Y0, closed_form=refine)
 
     run_paper = not refine or record_history or X0 is not None or Y0 is not None
     rot = tra = None
