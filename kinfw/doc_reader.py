@@ -128,6 +128,30 @@ class DocReader:
             raise self.fail(self.path(at, key), "a list of strings", v)
         return tuple(v)
 
+    def rows(self, cls: Any, doc: dict[str, Any], key: str, at: str) -> tuple:
+        """The list under ``key`` read item by item with ``cls.from_dict(item, self,
+        "at.key[k]")`` (a report section's rows).
+
+        Parameters
+        ----------
+        cls : type
+            A record with a classmethod ``from_dict(doc, reader, at)``.
+        doc : dict
+            The object holding the list.
+        key : str
+        at : str
+            The key path of ``doc``.
+
+        Returns
+        -------
+        tuple
+            One ``cls`` per item, in file order.
+        """
+        path = self.path(at, key)
+        return tuple(
+            cls.from_dict(d, self, f"{path}[{k}]") for k, d in enumerate(self.items(doc, key, at))
+        )
+
     def header(self, doc: Any, fmt: str, version: int) -> dict[str, Any]:
         doc = self.obj(doc, "")
         if doc.get("format") != fmt:

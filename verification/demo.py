@@ -28,9 +28,9 @@ import numpy as np
 from kinfw.blocks import BlockKey
 from kinfw.boards import parse_board
 from kinfw.calibration_report import CalibrationReport, StageErrors, write_report
-from kinfw.calibration_sections import ReprojectionSection
 from kinfw.files import write_text_atomic
 from kinfw.measurements import TargetObservations, concatenate_measurements, write_measurements
+from kinfw.reprojection_sections import ReprojectionSection
 from kinfw.robot import Robot, builtin_head_urdf, load_robot
 from verification.report import (
     before_after_rows,
