@@ -25,20 +25,22 @@ from kinfw.calibration_file import (
 from kinfw.calibration_sections import (
     CameraMount,
     ClosedFormSection,
-    Correlation,
-    DownweightedRow,
     ExportSection,
     HandEyeSection,
-    IdentifiabilitySummary,
     KinematicValue,
+    TargetEstimate,
+)
+from kinfw.files import json_text, write_text_atomic
+from kinfw.refine_sections import (
+    Correlation,
+    DownweightedRow,
+    IdentifiabilitySummary,
     NotIdentifiable,
     ParameterRow,
     RefineSection,
     RejectedRow,
-    ReprojectionSection,
-    TargetEstimate,
 )
-from kinfw.files import json_text, write_text_atomic
+from kinfw.reprojection_sections import ReprojectionSection
 
 __all__ = [
     "CalibrationReport",

@@ -22,7 +22,7 @@ from kinfw.files import json_text
 if TYPE_CHECKING:
     from kinfw.calibration_file import BeforeAfter
     from kinfw.calibration_report import RefineSection, StageErrors
-    from kinfw.calibration_sections import DownweightedRow, RejectedRow
+    from kinfw.refine_sections import DownweightedRow, RejectedRow
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
 

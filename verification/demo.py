@@ -28,16 +28,11 @@ import numpy as np
 from kinfw.blocks import BlockKey
 from kinfw.boards import parse_board
 from kinfw.calibration_report import CalibrationReport, StageErrors, write_report
-from kinfw.calibration_sections import ReprojectionSection
 from kinfw.files import write_text_atomic
 from kinfw.measurements import TargetObservations, concatenate_measurements, write_measurements
+from kinfw.reprojection_sections import ReprojectionSection
 from kinfw.robot import Robot, builtin_head_urdf, load_robot
-from verification.report import (
-    before_after_rows,
-    calibrate_to_files,
-    errors_by_group,
-    plot_stage_errors,
-)
+from verification.report import before_after_rows, calibrate_to_files, errors_by_group
 from verification.reprojection import reprojection_section
 from verification.simulate import (
     default_target_pose,
@@ -47,6 +42,7 @@ from verification.simulate import (
     simulate,
 )
 from verification.simulate_pixels import DEFAULT_BOARD, default_intrinsics, pixel_views
+from verification.stage_plot import plot_stage_errors
 
 __all__ = ["DEMO_FILES", "NOISE_DEG", "NOISE_MM", "PIXEL_SIGMA", "DemoResult", "run_demo"]
 

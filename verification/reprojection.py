@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 
 from kinfw.blocks import BlockKey
-from kinfw.calibration_sections import CameraReprojection, ImageReprojection, ReprojectionSection
 from kinfw.measurements import Measurements
 from kinfw.observations import kind_of
 from kinfw.observations.numeric import NumericContext
+from kinfw.reprojection_sections import CameraReprojection, ImageReprojection, ReprojectionSection
 from kinfw.robot import Robot
 
 __all__ = ["WORST_IMAGES", "reprojection_section"]
