@@ -11,7 +11,7 @@ configurations, noise 0.5 mm per position component and a rotation by an angle
 N(0, 0.5 deg) about a uniformly random axis (:func:`verification.simulate.perturb_poses`),
 so the true orientation sigma per component is 0.5 / sqrt(3) = 0.289 deg. With
 ``--outliers f`` a fraction ``f`` of the pose and target observations is moved by 20 mm
-and turned by 10 deg (:func:`verification.robust.plant_outliers`). ``refine`` starts from
+and turned by 10 deg (:func:`verification.outliers.plant_outliers`). ``refine`` starts from
 the nominal and estimates the noise (no ``noise`` given), once per loss.
 
 Prints, per loss, the estimated sigmas averaged over the seeds, their ratio to the truth
@@ -35,7 +35,7 @@ from benchmarks.common import format_table  # noqa: E402
 from identification.refine import LOSSES, refine  # noqa: E402
 from kinfw.measurements import Measurements, concatenate_measurements  # noqa: E402
 from kinfw.robot import Robot, builtin_head_urdf, load_robot  # noqa: E402
-from verification.robust import plant_outliers  # noqa: E402
+from verification.outliers import plant_outliers  # noqa: E402
 from verification.simulate import (  # noqa: E402
     default_target_pose,
     one_joint_at_a_time,

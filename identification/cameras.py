@@ -133,8 +133,8 @@ def _solve_one(
 
 def target_views(measurements: Measurements) -> tuple[TargetObservations, ...]:
     """The ``target`` groups, and each ``pixels`` group as the target poses of its
-    images from PnP (:func:`kinfw.observations.pixels.target_observations_from_pixels`)."""
-    from kinfw.observations.pixels import target_observations_from_pixels
+    images from PnP (:func:`kinfw.observations.pnp.target_observations_from_pixels`)."""
+    from kinfw.observations.pnp import target_observations_from_pixels
 
     return (
         *measurements.targets,

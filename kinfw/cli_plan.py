@@ -134,7 +134,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from kinfw.cli_commands import format_table
     from kinfw.robot import load_robot
     from verification.perturb import random_configurations
-    from verification.plan import candidate_pool, plan_configurations, plan_per_joint, write_plan
+    from verification.plan import plan_configurations, plan_per_joint, write_plan
+    from verification.plan_pool import candidate_pool
 
     if args.pool is not None and args.within_limits is not None:
         raise ValueError("give --pool or --within-limits, not both")

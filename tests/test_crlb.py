@@ -20,15 +20,12 @@ from verification.crlb import (
     predicted_position_rms,
     true_chart_coordinates,
 )
-from verification.crlb_study import CRLBStudy, crlb_study, format_crlb
+from verification.crlb_study import CRLBStudy, crlb_study
 from verification.head_studies import main
 from verification.head_study_plots import plot_crlb, plot_robustness
-from verification.robust import (
-    RobustStudy,
-    format_robustness,
-    plant_outliers,
-    robustness_study,
-)
+from verification.head_study_tables import format_crlb, format_robustness
+from verification.outliers import plant_outliers
+from verification.robust import RobustStudy, robustness_study
 from verification.simulate import (
     default_target_pose,
     one_joint_at_a_time,

@@ -11,7 +11,7 @@ from kinfw.observations.base import POSITION, ROTATION
 from kinfw.robot import load_robot
 from kinfw.transforms import rotation_vector_from_matrix
 from tests.robots import HEAD_URDF as HEAD
-from verification.robust import plant_outliers
+from verification.outliers import plant_outliers
 from verification.simulate import (
     default_target_pose,
     perturb_poses,

@@ -123,7 +123,7 @@ def test_pnp_skips_images_with_fewer_than_4_points_and_names_failures(px):
     camera, never a cv2.error."""
     from kinfw.measurements import DatasetError, read_measurements
     from kinfw.observations import kind_of
-    from kinfw.observations.pixels import pnp_camera_T_targets
+    from kinfw.observations.pnp import pnp_camera_T_targets
 
     (g, *_) = read_measurements(px / "px.json").groups("pixels")
     kind = kind_of(g)

@@ -19,7 +19,7 @@ from kinfw.measurements import (
 )
 from kinfw.observations import PixelObservations, kind_of
 from kinfw.observations.numeric import NumericContext
-from kinfw.observations.pixels import pnp_camera_T_targets
+from kinfw.observations.pnp import pnp_camera_T_targets
 from kinfw.robot import load_robot
 from kinfw.transforms import inverse_transform, transform_from_rotation_translation
 from tests.robots import ARM_6R

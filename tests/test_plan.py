@@ -13,7 +13,6 @@ from kinfw.measurements import read_measurements
 from kinfw.robot import load_robot
 from verification.perturb import random_configurations
 from verification.plan import (
-    candidate_pool,
     plan_configurations,
     plan_per_joint,
     predicted_error,
@@ -28,6 +27,7 @@ from verification.plan_objective import (
     held_out,
     mean_square,
 )
+from verification.plan_pool import candidate_pool
 from verification.simulate import simulate
 
 # one prismatic joint along z of a tilted frame: the measured frame's origin moves on a
@@ -255,7 +255,7 @@ def test_self_collision_by_hand_geometry():
     hand: q = (1.5, 2.9) puts l2's tip at (0.18, 0.03) m, inside the base box; the others
     keep l2 clear of it (its tip at x = 0.315 m for q = (0, 2.9))."""
     from kinfw.robot import Robot
-    from verification.plan import collision_free
+    from verification.plan_pool import collision_free
 
     robot = Robot(FOLDING_ARM)
     qs = np.array([[0.0, 0.0], [2.9, 0.0], [0.0, 2.9], [1.5, 2.9], [-1.5, -2.9]])

@@ -21,13 +21,8 @@ import pytest
 from identification.axb import solve_axyb
 from identification.handeye import HandEyeError, solve_axxb
 from kinfw.measurements import DatasetError
-from verification.streams import (
-    align_streams,
-    best_time_offset,
-    implied_target_spread,
-    interpolate_poses,
-    read_pose_csv,
-)
+from verification.streams import align_streams, interpolate_poses, read_pose_csv
+from verification.time_offset import best_time_offset, implied_target_spread
 
 ETH = Path(__file__).resolve().parent / "data" / "eth_asl_robot_arm"
 

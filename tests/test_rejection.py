@@ -15,7 +15,7 @@ from scipy.stats import binom
 from identification.refine import refine
 from kinfw.robot import load_robot
 from tests.test_crossval import PLATES, _data
-from verification.robust import plant_outliers
+from verification.outliers import plant_outliers
 from verification.simulate import perturb_robot, random_configurations
 
 

@@ -2,11 +2,11 @@
 
 Each trial of :func:`crlb_study` repeats the two-stage head experiment
 (:mod:`verification.head_experiment`), refines with the true noise given and again with
-the noise estimated, and records the held-out error of the refined model beside the
-error the Cramér-Rao bound implies (:mod:`verification.crlb`; their ratio should be 1),
-whether the reported covariance covers the truth (``|estimate - truth| <= k sigma`` for
-68.3 %, 95.4 % and 99.7 % of the parameters at ``k = 1, 2, 3``), and the estimated noise
-beside the true one. :func:`format_crlb` writes the tables,
+the noise estimated, and records the held-out error of the refined model beside the error
+the Cramér-Rao bound implies (:mod:`verification.crlb`; their ratio should be 1), whether
+the reported covariance covers the truth (``|estimate - truth| <= k sigma`` for 68.3 %,
+95.4 % and 99.7 % of the parameters at ``k = 1, 2, 3``), and the estimated noise beside
+the true one. :func:`verification.head_study_tables.format_crlb` writes the tables,
 :func:`verification.head_study_plots.plot_crlb` the figure.
 """
 
@@ -47,10 +47,9 @@ from verification.studies import (
     freeze,
     json_lists,
     run_trials,
-    sample_std,
 )
 
-__all__ = ["CRLBStudy", "crlb_study", "format_crlb"]
+__all__ = ["CRLBStudy", "crlb_study"]
 
 log = logging.getLogger(__name__)
 
@@ -430,86 +429,3 @@ def crlb_study(
     )
     freeze(*(getattr(result, name) for name in _CRLB_ARRAYS))
     return result
-
-
-# -- text tables ---------------------------------------------------------------------
-
-
-def format_crlb(study: CRLBStudy) -> str:
-    """Markdown tables of the CRLB study: errors per frame, coverage, noise (mm, deg)."""
-    s = study
-    frames = s.setup.frames
-    columns = (
-        ("start", s.start_rms_mm),
-        ("refined", s.refined_rms_mm),
-        ("estimated_noise", s.estimated_noise_rms_mm),
-        ("crlb", s.crlb_rms_mm),
-    )
-    lines = [
-        f"Cramér-Rao bound study: {s.trials} trials; held-out RMS position error against "
-        "the truth (mm), pooled over trials (sqrt of the mean square).",
-        s.setup.describe() + ".",
-        "",
-        "| frame | closed form + hand-eye | refined (σ given) | refined (σ estimated) "
-        "| CRLB | refined / CRLB |",
-        "|---|---:|---:|---:|---:|---:|",
-    ]
-    for e, frame in enumerate(frames):
-        cells = [f"{rms_over(v[:, e], 0):.3f}" for _, v in columns]
-        lines.append(
-            f"| {frame} | " + " | ".join(cells) + f" | {s.pooled_ratio_per_frame[e]:.3f} |"
-        )
-    cells = [f"{rms_over(s.trial_rms_mm(name), 0):.3f}" for name, _ in columns]
-    lines.append("| **all frames** | " + " | ".join(cells) + f" | {s.pooled_ratio():.3f} |")
-    ratio = s.ratio
-    lines += [
-        "",
-        f"refined / CRLB per trial: median {np.median(ratio):.3f}, min {ratio.min():.3f}, "
-        f"max {ratio.max():.3f}; {100 * s.within_band:.0f} % of the trials inside the 5-95 % "
-        f"band an efficient estimator would show (90 % expected; typical band "
-        f"{np.median(s.ratio_band[:, 0]):.2f}-{np.median(s.ratio_band[:, 1]):.2f}). Pooled "
-        f"{s.pooled_ratio():.3f} (target <= 1.05; σ estimated: "
-        f"{s.pooled_ratio('estimated_noise'):.3f}).",
-        "",
-        "Coverage: fraction of parameters with |estimate - truth| <= k σ (σ as refine "
-        f"reports it), {s.z.shape[1]} free parameters x {s.trials} trials:",
-        "",
-        "| k | normal | CPC model (σ given) | target pose (σ given) | all (σ given) "
-        "| all (σ estimated) |",
-        "|---:|---:|---:|---:|---:|---:|",
-    ]
-    for k, expected in NORMAL_COVERAGE.items():
-        cells = [
-            s.coverage(k, kind="model"),
-            s.coverage(k, kind="target"),
-            s.coverage(k),
-            s.coverage(k, estimated_noise=True),
-        ]
-        lines.append(
-            f"| {k:g} | {100 * expected:.1f} % | "
-            + " | ".join(f"{100 * c:.1f} %" for c in cells)
-            + " |"
-        )
-    z = s.z[np.isfinite(s.z)]
-    true = s.true_noise
-    est, ratio_n = s.noise_estimates, s.noise_ratio
-    lines += [
-        "",
-        f"RMS of (estimate - truth) / σ: {np.sqrt(np.mean(z**2)):.3f} (1 expected). "
-        f"NEES (x_hat - x)^T C^-1 (x_hat - x): mean {s.nees.mean():.1f} over {s.trials} "
-        f"trials (chi-square: {s.n_parameters} ± {np.sqrt(2.0 * s.n_parameters / s.trials):.1f})"
-        f"; reduced chi-square of the fit, σ given: mean {s.sigma_hat2.mean():.3f}.",
-        "",
-        "| noise (per component) | true | estimated, mean ± std | estimated / true: "
-        "mean, min, max |",
-        "|---|---:|---:|---:|",
-        f"| position (mm) | {1e3 * true[0]:.4f} | {1e3 * est[:, 0].mean():.4f} ± "
-        f"{1e3 * sample_std(est[:, 0]):.4f} | {ratio_n[:, 0].mean():.3f}, "
-        f"{ratio_n[:, 0].min():.3f}, {ratio_n[:, 0].max():.3f} |",
-        f"| orientation (deg) | {np.degrees(true[1]):.4f} | {np.degrees(est[:, 1].mean()):.4f}"
-        f" ± {np.degrees(sample_std(est[:, 1])):.4f} | {ratio_n[:, 1].mean():.3f}, "
-        f"{ratio_n[:, 1].min():.3f}, {ratio_n[:, 1].max():.3f} |",
-        "",
-        f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial).",
-    ]
-    return "\n".join(lines)

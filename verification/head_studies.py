@@ -13,9 +13,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from verification.crlb_study import CRLBStudy, crlb_study, format_crlb
+from verification.crlb_study import CRLBStudy, crlb_study
 from verification.head_study_plots import plot_crlb, plot_robustness
-from verification.robust import RobustStudy, format_robustness, robustness_study
+from verification.head_study_tables import format_crlb, format_robustness
+from verification.robust import RobustStudy, robustness_study
 from verification.studies import choice_main, run_on_head
 
 __all__ = ["main", "run_crlb", "run_robustness"]

@@ -9,7 +9,7 @@ linear loss, noise estimated):
 
 - ``pixels``: the joint refinement on reprojection error (``pixels`` observations);
 - ``pnp``: each image's PnP pose as a ``target`` observation
-  (:func:`kinfw.observations.pixels.target_observations_from_pixels`), the pose path.
+  (:func:`kinfw.observations.pnp.target_observations_from_pixels`), the pose path.
 
 The score (:func:`held_out_errors`): the error of ``camera_T_target`` (the board in each
 camera) at fresh configurations against the true robot, position (m) and rotation (rad,
@@ -35,7 +35,7 @@ from identification.refine import NoiseModel
 from kinfw.boards import Chessboard
 from kinfw.camera_model import CameraIntrinsics
 from kinfw.measurements import Measurements, concatenate_measurements
-from kinfw.observations.pixels import target_observations_from_pixels
+from kinfw.observations.pnp import target_observations_from_pixels
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import inverse_transform, rotation_angle
 from verification.simulate import (

@@ -13,10 +13,11 @@ removes most of that gap at the cost of a few vectorised passes; a convex relaxa
 (weights on the pool, then rounding) is the alternative, but it needs a conic solver and
 its rounding for small ``n`` is itself a heuristic.
 
-The pool (:func:`candidate_pool`) is the user's recorded joint states or random
-configurations inside the joint limits, filtered by the constraints: the target in view
-of a camera (the visibility rules of :func:`verification.simulate_pixels.visible_points`), the
-measured frames facing the tracker, and optionally no self-collision.
+The pool (:func:`verification.plan_pool.candidate_pool`) is the user's recorded joint
+states or random configurations inside the joint limits, filtered by the constraints: the
+target in view of a camera (the visibility rules of
+:func:`verification.simulate_pixels.visible_points`), the measured frames facing the
+tracker, and optionally no self-collision.
 """
 
 from __future__ import annotations
@@ -32,8 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.robot import Robot
-from kinfw.transforms import inverse_transform
-from verification.perturb import one_joint_at_a_time, random_configurations
+from verification.perturb import one_joint_at_a_time
 from verification.plan_objective import (
     CandidateInformation,
     HeldOut,
@@ -48,7 +48,6 @@ from verification.plan_objective import (
 __all__ = [
     "PLAN_FORMAT",
     "Plan",
-    "candidate_pool",
     "plan_configurations",
     "plan_per_joint",
     "predicted_error",
@@ -61,115 +60,6 @@ log = logging.getLogger(__name__)
 
 PLAN_FORMAT = "kinfw-plan"
 PLAN_VERSION = 1
-
-
-# -- the pool and its constraints -----------------------------------------------------
-@dataclass(frozen=True, eq=False)
-class Pool:
-    """Candidate configurations after the constraints, and how many each dropped."""
-
-    qs: NDArray[np.float64]
-    dropped: dict[str, int] = field(default_factory=dict)
-
-
-def _visible(robot, setup, qs, names, w_T_target) -> NDArray[np.bool_]:
-    from verification.simulate_pixels import visible_points
-
-    board_p = setup.board_points()
-    seen = np.zeros(len(qs), bool)
-    for camera, intr in setup.camera_intrinsics().items():
-        c_T_b = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_target
-        seen |= visible_points(intr, c_T_b, board_p).any(axis=1)
-    return seen
-
-
-def _facing(robot, setup, qs, names) -> NDArray[np.bool_]:
-    ok = np.ones(len(qs), bool)
-    cos_max = np.cos(np.radians(setup.max_facing_deg))
-    for frame in setup.frames:
-        T = robot.frame_poses(qs, frame, names)
-        d = np.asarray(setup.tracker_p, float) - T[:, :3, 3]
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        ok &= np.einsum("ni,ni->n", d, T[:, :3, 2]) >= cos_max
-    return ok
-
-
-def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | None:
-    """Which configurations are free of self-collision (Pinocchio + coal/hpp-fcl), or
-    None when the URDF has no collision geometry or the collision module is missing.
-
-    Pairs that cannot tell a collision are left out, as MoveIt's setup assistant does:
-    geometries on one joint's link or on adjacent links (touching at their joint), and
-    pairs already in contact at the middle of the joint ranges (overlapping meshes).
-    """
-    import pinocchio as pin
-
-    if "<collision" not in robot.urdf_xml:
-        return None
-    try:
-        geom = pin.buildGeomFromUrdfString(robot.model, robot.urdf_xml, pin.COLLISION)
-        geom.addAllCollisionPairs()
-        data, gdata = robot.model.createData(), pin.GeometryData(geom)
-    except Exception as exc:  # no coal/hpp-fcl, or meshes not found
-        log.warning("%s: no self-collision check (%s)", robot.source, exc)
-        return None
-    parents = robot.model.parents
-    lower, upper = robot.joint_limits(tuple(names))
-    middle = robot.pin_configurations((0.5 * (lower + upper))[None], tuple(names))[0]
-    pin.computeCollisions(robot.model, data, geom, gdata, middle, False)
-    for k in reversed(range(len(geom.collisionPairs))):
-        pair = geom.collisionPairs[k]
-        a = geom.geometryObjects[pair.first].parentJoint
-        b = geom.geometryObjects[pair.second].parentJoint
-        if a == b or parents[a] == b or parents[b] == a or gdata.collisionResults[k].isCollision():
-            geom.removeCollisionPair(pair)
-    gdata = pin.GeometryData(geom)
-    full = robot.pin_configurations(np.atleast_2d(qs), tuple(names))
-    ok = np.empty(len(full), bool)
-    for k, q in enumerate(full):
-        ok[k] = not pin.computeCollisions(robot.model, data, geom, gdata, q, True)
-    return ok
-
-
-def candidate_pool(
-    robot: Robot,
-    setup: Setup,
-    joint_names: Sequence[str],
-    w_T_target: NDArray | None,
-    *,
-    qs: ArrayLike | None = None,
-    within_limits: float | None = None,
-    n: int = 1000,
-    rng: np.random.Generator | None = None,
-    collisions: bool = False,
-) -> Pool:
-    """The candidate configurations: ``qs`` (recorded joint states) or ``n`` random
-    configurations in the centred ``within_limits`` fraction of each joint range, kept
-    when inside the joint limits, the board is seen (stage 2), the frames face the
-    tracker (``setup.tracker_p``) and, with ``collisions``, free of self-collision."""
-    lower, upper = robot.joint_limits(joint_names)
-    if qs is None:
-        if within_limits is None or rng is None:
-            raise ValueError("candidate_pool: give qs, or within_limits and rng")
-        qs = random_configurations(lower, upper, n, rng, fraction=within_limits)
-    qs = np.atleast_2d(np.asarray(qs, dtype=float))
-    dropped = {}
-    keep = np.all((qs >= lower - 1e-9) & (qs <= upper + 1e-9), axis=1)
-    dropped["outside the joint limits"] = int((~keep).sum())
-    if setup.cameras:
-        seen = _visible(robot, setup, qs, joint_names, w_T_target)
-        dropped["board not seen"] = int((keep & ~seen).sum())
-        keep &= seen
-    if setup.frames and setup.tracker_p is not None:
-        facing = _facing(robot, setup, qs, joint_names)
-        dropped["not facing the tracker"] = int((keep & ~facing).sum())
-        keep &= facing
-    if collisions:
-        free = collision_free(robot, qs, joint_names)
-        if free is not None:
-            dropped["self-collision"] = int((keep & ~free).sum())
-            keep &= free
-    return Pool(qs[keep], {k: v for k, v in dropped.items() if v})
 
 
 # -- the plan ------------------------------------------------------------------------------
@@ -251,7 +141,8 @@ def plan_configurations(
         Nominal robot.
     setup : Setup
     pool_qs : array_like, shape (N, J)
-        Candidates (already filtered: :func:`candidate_pool`), ``joint_names`` order.
+        Candidates (already filtered: :func:`verification.plan_pool.candidate_pool`),
+        ``joint_names`` order.
     n : int
         Configurations wanted (ignored with ``target_m``: the smallest ``n`` whose
         greedy design predicts a position RMS below it).

@@ -158,7 +158,7 @@ def _simulate(
         if len(kept) != len(qs):
             raise ValueError(
                 f"{len(qs) - len(kept)} of {len(qs)} configurations see no board; "
-                "filter the pool first (verification.plan.candidate_pool)"
+                "filter the pool first (verification.plan_pool.candidate_pool)"
             )
         parts.append(data)
     elif setup.cameras:

@@ -1,12 +1,13 @@
 """Robustness to outliers: refinement of the head experiment with planted gross errors.
 
 :func:`robustness_study` plants gross errors in a fraction of the observations of the
-two-stage head experiment (:mod:`verification.head_experiment`; :func:`plant_outliers`:
-a fixed distance in a random direction and a fixed angle about a random axis) and
-compares the held-out error of the linear, Huber and Cauchy losses with the result on
-the clean data, and counts how many planted outliers the robust loss down-weights
-(``refine``'s ``downweighted``: weight below 0.5) and how many clean observations it
-down-weights too. :func:`format_robustness` writes the table,
+two-stage head experiment (:mod:`verification.head_experiment`;
+:func:`verification.outliers.plant_outliers`: a fixed distance in a random direction and
+a fixed angle about a random axis) and compares the held-out error of the linear, Huber
+and Cauchy losses with the result on the clean data, and counts how many planted outliers
+the robust loss down-weights (``refine``'s ``downweighted``: weight below 0.5) and how
+many clean observations it down-weights too.
+:func:`verification.head_study_tables.format_robustness` writes the table,
 :func:`verification.head_study_plots.plot_robustness` the figure.
 
 References
@@ -20,7 +21,7 @@ import logging
 import time
 from collections.abc import Sequence
 from concurrent.futures import Executor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -28,9 +29,7 @@ from numpy.typing import NDArray
 
 from identification.refine import refine
 from kinfw.cpc import CPCModel, cpc_from_robot
-from kinfw.measurements import Measurements
 from kinfw.robot import Robot
-from kinfw.transforms import matrix_from_rotation_vector
 from verification.head_experiment import (
     ExperimentSetup,
     check_positive,
@@ -39,6 +38,7 @@ from verification.head_experiment import (
     setup_experiment,
     simulate_experiment,
 )
+from verification.outliers import plant_outliers
 from verification.studies import (
     Progress,
     arrays_from,
@@ -51,8 +51,6 @@ from verification.studies import (
 __all__ = [
     "ROBUST_VARIANTS",
     "RobustStudy",
-    "format_robustness",
-    "plant_outliers",
     "robustness_study",
 ]
 
@@ -205,62 +203,6 @@ class RobustStudy:
         )
 
 
-def _unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
-    v = rng.normal(size=(n, 3))
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def plant_outliers(
-    data: Measurements,
-    rng: np.random.Generator,
-    *,
-    fraction: float,
-    distance_m: float,
-    angle_rad: float,
-) -> tuple[Measurements, frozenset[tuple[str, str, int]]]:
-    """Corrupt a random ``fraction`` of the pose and target observations.
-
-    Each chosen observation (one sample of one pose or target group) has its position
-    moved by ``distance_m`` in a uniformly random direction (in the measurement frame)
-    and its orientation turned by ``angle_rad`` about a uniformly random axis (on the
-    measured frame's side).
-
-    Returns
-    -------
-    corrupted : Measurements
-    planted : frozenset of (kind, frame, sample)
-        The corrupted observations, keyed as ``refine``'s ``downweighted``.
-    """
-    if not 0.0 <= fraction <= 1.0:
-        raise ValueError(f"fraction: expected 0 <= fraction <= 1, got {fraction}")
-    groups = [("pose", g.frame, g.sample, g.meas_T_frame) for g in data.poses] + [
-        ("target", g.camera, g.sample, g.camera_T_target) for g in data.targets
-    ]
-    index = [(k, r) for k, (_, _, sample, _) in enumerate(groups) for r in range(len(sample))]
-    n = round(fraction * len(index)) if fraction > 0.0 else 0
-    n = max(n, 1) if fraction > 0.0 else 0
-    chosen = rng.choice(len(index), size=n, replace=False)
-    arrays = [T.copy() for _, _, _, T in groups]
-    dps = distance_m * _unit_vectors(rng, n)
-    dRs = matrix_from_rotation_vector(angle_rad * _unit_vectors(rng, n))
-    planted = set()
-    for c, dp, dR in zip(chosen, dps, dRs, strict=True):
-        k, r = index[c]
-        arrays[k][r, :3, 3] += dp
-        arrays[k][r, :3, :3] = arrays[k][r, :3, :3] @ dR
-        kind, frame, sample, _ = groups[k]
-        planted.add((kind, frame, int(sample[r])))
-    n_poses = len(data.poses)
-    poses = tuple(replace(g, meas_T_frame=arrays[k]) for k, g in enumerate(data.poses))
-    targets = tuple(
-        replace(g, camera_T_target=arrays[n_poses + k]) for k, g in enumerate(data.targets)
-    )
-    corrupted = replace(
-        data, poses=poses, targets=targets, source=f"{data.source} + {n} planted outliers"
-    )
-    return corrupted, frozenset(planted)
-
-
 def _robust_trial(
     nominal: Robot,
     setup: ExperimentSetup,
@@ -359,8 +301,8 @@ def robustness_study(
     Each trial takes the data of the same trial of
     :func:`verification.crlb_study.crlb_study`, refines the clean data (pipeline start,
     linear loss, true noise: the reference), then corrupts ``outlier_fraction`` of the
-    observations (:func:`plant_outliers`: ``outlier_mm`` in a random direction and
-    ``outlier_deg`` about a random axis), restarts the pipeline
+    observations (:func:`verification.outliers.plant_outliers`: ``outlier_mm`` in a random
+    direction and ``outlier_deg`` about a random axis), restarts the pipeline
     from the corrupted data and refines with each variant ``(loss, noise)``; it records
     the held-out RMS position error against the truth and which observations
     ``refine`` down-weighted.
@@ -464,51 +406,3 @@ def robustness_study(
     )
     freeze(*(getattr(result, name) for name in _ROBUST_ARRAYS))
     return result
-
-
-# -- text table ----------------------------------------------------------------------
-
-
-def format_robustness(study: RobustStudy) -> str:
-    """Markdown table of the robustness study: held-out errors and detection per variant."""
-    s = study
-    ratio = s.ratio_to_clean
-    lines = [
-        f"Robustness study: {s.trials} trials; {100 * s.outlier_fraction:g} % of the "
-        f"observations corrupted by {s.outlier_mm:g} mm and {s.outlier_deg:g} deg "
-        f"({int(s.n_planted.sum())} planted among {int(s.n_observations.sum())}). Held-out RMS "
-        "position error against the truth (mm), all frames.",
-        s.setup.describe() + ".",
-        "",
-        "| refinement | RMS error: median | max | / clean: median | max | planted "
-        "down-weighted | clean down-weighted |",
-        "|---|---:|---:|---:|---:|---:|---:|",
-        f"| clean data, linear (reference) | {np.median(s.clean_rms_mm):.3f} | "
-        f"{s.clean_rms_mm.max():.3f} | 1 | 1 | – | – |",
-        f"| start (closed form + hand-eye), corrupted | {np.median(s.start_rms_mm):.3f} | "
-        f"{s.start_rms_mm.max():.3f} | {np.median(s.start_rms_mm / s.clean_rms_mm):.2f} | "
-        f"{np.max(s.start_rms_mm / s.clean_rms_mm):.2f} | – | – |",
-    ]
-    for v, label in enumerate(s.labels):
-        lines.append(
-            f"| {label} | {np.median(s.rms_mm[:, v]):.3f} | {s.rms_mm[:, v].max():.3f} | "
-            f"{np.median(ratio[:, v]):.2f} | {ratio[:, v].max():.2f} | "
-            f"{100 * s.recall[v]:.0f} % | {100 * s.false_alarm_rate[v]:.1f} % |"
-        )
-    estimated = [v for v, (_, noise) in enumerate(s.variants) if noise == "estimated"]
-    if estimated:
-        sp = 1e3 * s.noise_used[:, estimated, 0]
-        lines += [
-            "",
-            f"Noise estimated with outliers: position {np.median(sp):.2f} mm per "
-            f"component (median; true {s.setup.sigma_mm:g} mm).",
-        ]
-    lines += [
-        "",
-        "Down-weighted: refine's `downweighted` (observations beyond the robust "
-        "loss's threshold: the 99 % quantile of a clean residual norm) or `rejected` "
-        "(beyond the 99.9 % quantile: excluded and the problem refitted).",
-        "",
-        f"{np.sum(s.seconds):.1f} s ({np.mean(s.seconds):.2f} s per trial).",
-    ]
-    return "\n".join(lines)

@@ -5,10 +5,10 @@ two streams share a clock but not their stamps (ETH ASL's robot-arm datasets: ro
 50 Hz, camera ~30 Hz). Hand-eye calibration needs *pairs* taken at one instant, so the
 hand stream is interpolated at the camera stamps -- linearly in position, by SLERP in
 rotation -- after shifting it by a time offset between the two clocks, which
-:func:`best_time_offset` estimates as the offset that makes the target's implied pose in
-the robot base the most constant. (Furrer et al. 2017 instead cross-correlate the two
-streams' angular speeds, which needs no hand-eye model; the criterion here uses the model
-and so scores the offset by what calibration needs.)
+:func:`verification.time_offset.best_time_offset` estimates as the offset that makes the
+target's implied pose in the robot base the most constant. (Furrer et al. 2017 instead
+cross-correlate the two streams' angular speeds, which needs no hand-eye model; the
+criterion here uses the model and so scores the offset by what calibration needs.)
 
 Time-offset convention
 ----------------------
@@ -38,33 +38,22 @@ K. Shoemake, "Animating rotation with quaternion curves", SIGGRAPH 1985 (SLERP).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from identification.handeye import HandEyeError, solve_axxb
 from kinfw.measurements import QUAT_NORM_TOL, DatasetError
 from kinfw.transforms import (
-    average_transform,
     check_transform,
     inverse_transform,
     matrix_from_rotation_vector,
-    rotation_angle,
     rotation_vector_from_matrix,
     transform_from_rotation_translation,
     transform_from_xyz_quat_xyzw,
 )
 
-__all__ = [
-    "TimeOffsetResult",
-    "align_streams",
-    "best_time_offset",
-    "implied_target_spread",
-    "interpolate_poses",
-    "read_pose_csv",
-]
+__all__ = ["align_streams", "check_stream", "interpolate_poses", "read_pose_csv"]
 
 log = logging.getLogger(__name__)
 
@@ -172,10 +161,31 @@ def read_pose_csv(
 # ------------------------------------------------------------------------ interpolation
 
 
-def _check_stream(
+def check_stream(
     t: ArrayLike, a_T_bs: ArrayLike, name: str
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Validate a stream: stamps (n,) finite and strictly increasing, poses (n, 4, 4)."""
+    """Validate a stream: stamps (n,) finite and strictly increasing, poses (n, 4, 4).
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        Stamps, seconds.
+    a_T_bs : array_like, shape (n, 4, 4)
+        Pose of ``b`` in ``a`` at each stamp, rigid transforms.
+    name : str
+        Name of the poses in error messages.
+
+    Returns
+    -------
+    t : ndarray, shape (n,)
+    a_T_bs : ndarray, shape (n, 4, 4)
+
+    Raises
+    ------
+    ValueError
+        Naming ``name``: a wrong shape, a stamp not finite or not strictly increasing
+        (with the two stamps), or a pose that is not a rigid transform.
+    """
     t = np.asarray(t, dtype=float)
     T = np.asarray(a_T_bs, dtype=float)
     if t.ndim != 1:
@@ -242,7 +252,7 @@ def interpolate_poses(
     fixed axis at a constant rate. It takes the shorter way round, so samples must be
     less than a half turn apart. A query equal to a stamp returns that sample exactly.
     """
-    t, T = _check_stream(t, a_T_bs, "a_T_bs")
+    t, T = check_stream(t, a_T_bs, "a_T_bs")
     if len(t) < 2:
         raise ValueError(f"a_T_bs: interpolation needs at least 2 samples, got {len(t)}")
     if max_gap_s is not None and not max_gap_s > 0.0:
@@ -328,8 +338,8 @@ def align_streams(
     Camera samples outside the shifted hand stream's range are dropped, not
     extrapolated; the counts of dropped samples are logged at INFO level.
     """
-    t_hand, base_T_hand = _check_stream(t_hand, base_T_hand, "base_T_hand")
-    t_eye, target_T_eye = _check_stream(t_eye, target_T_eye, "target_T_eye")
+    t_hand, base_T_hand = check_stream(t_hand, base_T_hand, "base_T_hand")
+    t_eye, target_T_eye = check_stream(t_eye, target_T_eye, "target_T_eye")
     if isinstance(step, bool) or not isinstance(step, (int, np.integer)) or step < 1:
         raise ValueError(f"step must be a positive integer, got {step!r}")
     t_eye, target_T_eye = t_eye[::step], target_T_eye[::step]
@@ -359,191 +369,3 @@ def align_streams(
             max_gap_s,
         )
     return base_T_hands[valid], eye_T_targets[valid]
-
-
-# --------------------------------------------------------------------- offset estimation
-
-
-def implied_target_spread(
-    base_T_hands: ArrayLike, hand_T_eye: ArrayLike, eye_T_targets: ArrayLike
-) -> tuple[float, float]:
-    """How constant the target's implied pose in the base is: median deviations.
-
-    Parameters
-    ----------
-    base_T_hands : array_like, shape (n, 4, 4)
-        Pose of the hand in the base at each sample.
-    hand_T_eye : array_like, shape (4, 4)
-        Hand-eye transform ``X``.
-    eye_T_targets : array_like, shape (n, 4, 4)
-        Pose of the target in the eye at the same samples.
-
-    Returns
-    -------
-    position : float
-        Median distance of ``base_T_hands[i] @ X @ eye_T_targets[i]``'s positions from
-        their coordinate-wise median, input length unit.
-    rotation_rad : float
-        Median angle of those poses' rotations from their chordal mean, radians.
-    """
-    base_T_targets = (
-        np.asarray(base_T_hands, dtype=float)
-        @ np.asarray(hand_T_eye, float)
-        @ np.asarray(eye_T_targets, dtype=float)
-    )
-    p = base_T_targets[:, :3, 3]
-    position = float(np.median(np.linalg.norm(p - np.median(p, axis=0), axis=1)))
-    mean_R = average_transform(base_T_targets)[:3, :3]
-    rotation = float(np.median(rotation_angle(mean_R.T @ base_T_targets[:, :3, :3])))
-    return position, rotation
-
-
-@dataclass(frozen=True, slots=True)
-class TimeOffsetResult:
-    """Time offset between a hand and an eye stream, and the fit at it.
-
-    Attributes
-    ----------
-    offset_s : float
-        Best offset, seconds, added to the hand stamps (module docstring).
-    position_spread : float
-        At ``offset_s``: median distance of the implied target positions in the base from
-        their median (:func:`implied_target_spread`), input length unit -- the objective.
-    rotation_spread_rad : float
-        At ``offset_s``: median angle of the implied target rotations from their mean.
-    hand_T_eye : ndarray, shape (4, 4)
-        :func:`identification.handeye.solve_axxb`'s ``X`` at ``offset_s``.
-    n_pairs : int
-        Hand-eye pairs (camera samples) used at ``offset_s``.
-    offsets_s : ndarray, shape (k,)
-        Every offset evaluated (coarse and fine grid), sorted.
-    position_spreads : ndarray, shape (k,)
-        The objective at each of them (inf where the hand-eye solve failed).
-    """
-
-    offset_s: float
-    position_spread: float
-    rotation_spread_rad: float
-    hand_T_eye: NDArray[np.float64]
-    n_pairs: int
-    offsets_s: NDArray[np.float64]
-    position_spreads: NDArray[np.float64]
-
-
-def best_time_offset(
-    t_hand: ArrayLike,
-    base_T_hand: ArrayLike,
-    t_eye: ArrayLike,
-    target_T_eye: ArrayLike,
-    *,
-    search_s: tuple[float, float] = (-0.1, 0.1),
-    coarse_step_s: float = 0.01,
-    fine_step_s: float = 0.001,
-    max_gap_s: float | None = 0.05,
-    step: int = 1,
-) -> TimeOffsetResult:
-    """Time offset that makes the target's implied pose in the base most constant.
-
-    At each candidate offset the streams are aligned (:func:`align_streams`), ``X`` is
-    solved by :func:`identification.handeye.solve_axxb`, and the objective is the median
-    distance of the implied target positions ``base_T_hand @ X @ eye_T_target`` from
-    their median. A coarse grid over ``search_s`` is followed by a fine grid of
-    ``fine_step_s`` within one coarse step either side of the coarse minimum.
-
-    Parameters
-    ----------
-    t_hand, base_T_hand, t_eye, target_T_eye : array_like
-        The two streams, as for :func:`align_streams`.
-    search_s : (float, float), keyword-only
-        Range of offsets searched, seconds.
-    coarse_step_s, fine_step_s : float, keyword-only
-        Grid spacings of the two stages, seconds.
-    max_gap_s : float or None, keyword-only
-        As for :func:`align_streams`.
-    step : int, keyword-only
-        Use every ``step``-th camera sample. ``solve_axxb`` uses all O(n^2) pairs, so
-        keep the pairs to a few hundred.
-
-    Returns
-    -------
-    TimeOffsetResult
-
-    Raises
-    ------
-    ValueError
-        Malformed streams or search parameters, or no camera sample that stays inside the
-        hand stream's range for every offset searched.
-    HandEyeError
-        The hand-eye solve failed at every offset.
-
-    Notes
-    -----
-    Only camera samples that fall inside the hand stream's range for *every* offset of
-    ``search_s`` are used, so that all offsets are judged on the same samples (a sample
-    can still drop out at some offsets for a gap). The median makes the objective robust
-    to a few bad camera poses; it is piecewise smooth, which a grid search does not mind.
-    """
-    t_hand, base_T_hand = _check_stream(t_hand, base_T_hand, "base_T_hand")
-    t_eye, target_T_eye = _check_stream(t_eye, target_T_eye, "target_T_eye")
-    lo, hi = (float(v) for v in search_s)
-    if not (lo <= hi and coarse_step_s > 0.0 and fine_step_s > 0.0):
-        raise ValueError(
-            f"need search_s = (lo, hi) with lo <= hi and positive steps, got "
-            f"{search_s!r}, {coarse_step_s!r}, {fine_step_s!r}"
-        )
-    common = (t_eye >= t_hand[0] + hi) & (t_eye <= t_hand[-1] + lo)
-    if not np.any(common):
-        raise ValueError(
-            f"no camera sample stays within the hand stream's time range for every offset "
-            f"in [{lo!r}, {hi!r}] s: camera [{float(t_eye[0])!r}, {float(t_eye[-1])!r}] s, hand "
-            f"[{float(t_hand[0])!r}, {float(t_hand[-1])!r}] s"
-        )
-    t_eye, target_T_eye = t_eye[common], target_T_eye[common]
-
-    evaluated: dict[float, tuple[float, float, NDArray[np.float64] | None, int]] = {}
-
-    def evaluate(offset: float) -> float:
-        offset = round(offset, 12)  # one key per grid point despite rounding of the grid
-        if offset not in evaluated:
-            A, B = align_streams(
-                t_hand,
-                base_T_hand,
-                t_eye,
-                target_T_eye,
-                offset_s=offset,
-                max_gap_s=max_gap_s,
-                step=step,
-            )
-            try:
-                hand_T_eye = solve_axxb(A, B).hand_T_camera
-            except HandEyeError as err:
-                log.info("best_time_offset: offset %.4f s: hand-eye solve failed (%s)", offset, err)
-                evaluated[offset] = (np.inf, np.inf, None, len(A))
-            else:
-                evaluated[offset] = (*implied_target_spread(A, hand_T_eye, B), hand_T_eye, len(A))
-        return evaluated[offset][0]
-
-    def grid(a: float, b: float, h: float) -> NDArray[np.float64]:
-        return a + h * np.arange(int(np.floor((b - a) / h + 1e-9)) + 1)
-
-    coarse = grid(lo, hi, coarse_step_s)
-    best = min(coarse, key=evaluate)
-    fine = grid(max(lo, best - coarse_step_s), min(hi, best + coarse_step_s), fine_step_s)
-    best = min([best, *fine], key=evaluate)
-    offsets = np.array(sorted(evaluated))
-    spreads = np.array([evaluated[o][0] for o in offsets])
-    position, rotation, hand_T_eye, n = evaluated[round(best, 12)]
-    if hand_T_eye is None:  # the minimum is inf: every solve failed
-        raise HandEyeError(
-            f"the hand-eye solve failed at every offset in [{lo!r}, {hi!r}] s "
-            f"(see the INFO log for each reason)"
-        )
-    return TimeOffsetResult(
-        offset_s=float(round(best, 12)),
-        position_spread=position,
-        rotation_spread_rad=rotation,
-        hand_T_eye=hand_T_eye,
-        n_pairs=n,
-        offsets_s=offsets,
-        position_spreads=spreads,
-    )

@@ -13,7 +13,8 @@ The camera's frame is its optical frame (z forward, x right, y down). Unknowns: 
 target's pose (``BlockKey("target", name)``, shared with the ``target`` kind: a pose
 target and a pixel target of one name are one unknown), started per image from
 ``cv2.solvePnP``; and the camera's intrinsics (``BlockKey("intrinsics", camera)``, 9
-numbers in OpenCV's order), known (fixed) unless the fit frees them.
+numbers in OpenCV's order, :class:`kinfw.observations.intrinsics_block.IntrinsicsBlock`),
+known (fixed) unless the fit frees them. The PnP start is :mod:`kinfw.observations.pnp`.
 """
 
 from __future__ import annotations
@@ -27,8 +28,8 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.blocks import Block, BlockKey, RigidFrameBlock
-from kinfw.camera_model import PARAMETER_NAMES, CameraIntrinsics, project_normalized
+from kinfw.blocks import BlockKey, RigidFrameBlock
+from kinfw.camera_model import CameraIntrinsics, project_normalized
 from kinfw.observations.base import (
     NoiseComponent,
     ObservationKind,
@@ -40,115 +41,17 @@ from kinfw.observations.base import (
     inverse_casadi,
     sample_array,
 )
+from kinfw.observations.intrinsics_block import IntrinsicsBlock
 from kinfw.observations.numeric import Drawing, NumericContext, node_name
-from kinfw.transforms import inverse_transform, transform_from_rotation_translation
+from kinfw.observations.pnp import PNP_MIN_POINTS, pnp_camera_T_targets
+from kinfw.transforms import inverse_transform
 
-__all__ = [
-    "PIXEL",
-    "UNDETERMINED_PX",
-    "IntrinsicsBlock",
-    "PixelKind",
-    "PixelObservations",
-    "pnp_camera_T_targets",
-    "target_observations_from_pixels",
-]
+__all__ = ["PIXEL", "PixelKind", "PixelObservations"]
 
 PIXEL = NoiseComponent("pixel", 2, "px")
 """The reprojection error of one point: (u, v) rows in pixels."""
 
 _DEFAULT_TARGET = "target"
-_MIN_POINTS = 4
-#: A freed intrinsic parameter whose 1-sigma uncertainty moves a point of the image's
-#: border by more than this many pixels is reported as not determined by the images.
-UNDETERMINED_PX = 1.0
-_PLANAR_TOL = 1e-9  # smallest/largest singular value of the centred points: planar
-
-
-@dataclass(frozen=True, slots=True)
-class IntrinsicsBlock(Block):
-    """A camera's 9 intrinsic parameters ``start + d`` in OpenCV's order
-    (:data:`kinfw.camera_model.PARAMETER_NAMES`: fx, fy, cx, cy in px, then k1, k2, p1,
-    p2, k3 unitless); fixed (known) unless freed.
-
-    Attributes
-    ----------
-    start : ndarray, shape (9,)
-    """
-
-    start: NDArray[np.float64] = dataclasses.field(default_factory=lambda: np.zeros(9))
-    width: int = 0
-    height: int = 0
-
-    @property
-    def fields(self) -> tuple[str, ...]:
-        return PARAMETER_NAMES
-
-    @property
-    def units(self) -> tuple[str, ...]:
-        return ("px",) * 4 + ("unitless",) * 5
-
-    @staticmethod
-    def from_estimates(
-        key: BlockKey, estimates: NDArray[np.float64], width: int = 0, height: int = 0
-    ) -> IntrinsicsBlock:
-        """The intrinsics (k, 9) of the camera's groups (all equal: the file's), fixed;
-        ``width``, ``height`` the image size (px) for :meth:`undetermined`."""
-        start = np.asarray(estimates, dtype=float).reshape(-1, 9).mean(axis=0)
-        return IntrinsicsBlock(key, free=np.zeros(9, bool), start=start, width=width, height=height)
-
-    def undetermined(self, d, covariance):
-        """Freed intrinsics whose 1-sigma uncertainty moves a point at the image's
-        border (corners and edge midpoints) by more than :data:`UNDETERMINED_PX`:
-        the images do not determine them (e.g. k3 when the board stays near the
-        image centre)."""
-        import cv2
-
-        if not self.width or not self.height:
-            return ()
-        params = self.start + d
-        std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-        w, h = self.width - 1.0, self.height - 1.0
-        border = np.array(
-            [[0, 0], [w, 0], [0, h], [w, h], [w / 2, 0], [w / 2, h], [0, h / 2], [w, h / 2]]
-        )
-        K = np.array([[params[0], 0, params[2]], [0, params[1], params[3]], [0, 0, 1.0]])
-        xy = cv2.undistortPoints(border.reshape(-1, 1, 2), K, params[4:9]).reshape(-1, 2)
-        out = []
-        for j in np.flatnonzero(self.free & (std > 0)):
-            step = np.zeros(9)
-            step[j] = 1e-6 * max(1.0, abs(params[j]))
-            up = np.stack(project_normalized(xy[:, 0], xy[:, 1], params + step), axis=1)
-            down = np.stack(project_normalized(xy[:, 0], xy[:, 1], params - step), axis=1)
-            moved_px = float(np.linalg.norm((up - down) / (2 * step[j]), axis=1).max() * std[j])
-            if moved_px > UNDETERMINED_PX:
-                out.append(
-                    (
-                        (self.names[j],),
-                        f"the images do not determine it: its 1-sigma uncertainty "
-                        f"{std[j]:.3g} {self.units[j]} moves the image border by "
-                        f"{moved_px:.3g} px (use views with the target near the image "
-                        "corners, or keep it fixed)",
-                    )
-                )
-        return tuple(out)
-
-    def constants(self) -> NDArray[np.float64]:
-        return np.asarray(self.start, dtype=float)
-
-    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
-        return self.start + d
-
-    def casadi_value(self, d: Any, c: Any = None) -> Any:
-        import casadi as ca
-
-        start = ca.DM(self.start) if c is None else c[0:9]
-        return start + d[0:9]
-
-    def coordinates(self, p: Any) -> NDArray[np.float64]:
-        return np.asarray(p, dtype=float) - self.start
-
-    def describe(self) -> str:
-        return f"intrinsics of camera {self.key.name!r}"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -247,93 +150,6 @@ def _read_points(reader, obs, at, key, width, what):
     return [reader.numbers(p, width, f"{at}.{key}[{i}]") for i, p in enumerate(raw)]
 
 
-def _is_planar(target_p: NDArray[np.float64]) -> bool:
-    s = np.linalg.svd(target_p - target_p.mean(axis=0), compute_uv=False)
-    return bool(s[0] > 0 and s[-1] <= _PLANAR_TOL * s[0])
-
-
-def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    """Per image, the target's pose in the camera from its pixels (OpenCV's PnP).
-
-    ``cv2.solvePnP`` with ``SOLVEPNP_IPPE`` for planar points, ``SOLVEPNP_SQPNP`` else,
-    then ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the group's
-    intrinsics).
-
-    Images with fewer than 4 points (left by a rejection of gross errors, or a held-out
-    split) are skipped: PnP needs 4.
-
-    Returns
-    -------
-    samples : ndarray of int64, shape (k,)
-        The sample of each image with at least 4 points (the order of
-        :meth:`PixelObservations.images`).
-    camera_T_targets : ndarray, shape (k, 4, 4)
-        Pose of the target in the camera's optical frame, metres.
-
-    Raises
-    ------
-    DatasetError
-        Naming the camera (and the image and sample): no image has 4 points, or PnP
-        fails on an image.
-    """
-    import cv2
-
-    from kinfw.observations.reader import DatasetError
-
-    K, dist = group.intrinsics.matrix, group.intrinsics.distortion
-    all_samples, all_rows = group.images()
-    labels = group.image_labels()
-    keep = [k for k, r in enumerate(all_rows) if len(r) >= _MIN_POINTS]
-    if not keep:
-        raise DatasetError(
-            f"pixels: camera {group.camera!r}: none of its {len(all_rows)} images has "
-            f"{_MIN_POINTS} points (PnP needs {_MIN_POINTS})"
-        )
-    samples = all_samples[keep]
-    rows = [all_rows[k] for k in keep]
-    labels = [labels[k] for k in keep]
-    out = np.empty((len(rows), 4, 4))
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-15)
-    for k, r in enumerate(rows):
-        obj = np.ascontiguousarray(group.target_p[r], dtype=np.float64)
-        img = np.ascontiguousarray(group.uv[r], dtype=np.float64)
-        flag = cv2.SOLVEPNP_IPPE if _is_planar(obj) else cv2.SOLVEPNP_SQPNP
-        where = f"image {labels[k]} (sample {int(samples[k])}, {len(r)} points)"
-        try:
-            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=flag)
-            if not ok:
-                ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
-            if ok:
-                rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
-        except cv2.error as exc:
-            raise DatasetError(
-                f"pixels: camera {group.camera!r}: PnP failed on {where}: "
-                + " ".join(str(exc.err or exc).split())
-            ) from None
-        if not ok:
-            raise DatasetError(f"pixels: camera {group.camera!r}: PnP failed on {where}")
-        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
-            raise DatasetError(
-                f"pixels: camera {group.camera!r}: PnP found no pose for {where} "
-                "(are the points on one line?)"
-            )
-        R, _ = cv2.Rodrigues(rvec)
-        out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
-    return samples, out
-
-
-def target_observations_from_pixels(group: PixelObservations) -> Any:
-    """The group's images as ``target`` observations: per image the PnP pose
-    (:func:`pnp_camera_T_targets`), for the hand-eye stage (A = X B Y) and for
-    comparing the pixel path with the pose path on the same detections."""
-    from kinfw.observations.target import TargetObservations
-
-    samples, camera_T_targets = pnp_camera_T_targets(group)
-    return TargetObservations(
-        camera=group.camera, sample=samples, camera_T_target=camera_T_targets, target=group.target
-    )
-
-
 def _project(params: NDArray[np.float64], camera_ps: NDArray[np.float64]) -> NDArray[np.float64]:
     z = camera_ps[..., 2]
     u, v = project_normalized(camera_ps[..., 0] / z, camera_ps[..., 1] / z, params)
@@ -373,9 +189,10 @@ class PixelKind(ObservationKind):
                 f"{at}.points",
                 f"expected {len(uv)} points (one per uv entry), got {len(points)}",
             )
-        if len(uv) < _MIN_POINTS:
+        if len(uv) < PNP_MIN_POINTS:
             raise reader.error(
-                f"{at}.uv", f"expected at least {_MIN_POINTS} points (PnP needs 4), got {len(uv)}"
+                f"{at}.uv",
+                f"expected at least {PNP_MIN_POINTS} points (PnP needs 4), got {len(uv)}",
             )
         ids = [-1] * len(uv)
         if obs.get("ids") is not None:
