@@ -71,7 +71,7 @@ def add_control_parsers(
     number: Callable[..., Callable[[str], float | int]],
     frame_file: Callable[[str], tuple[str, Path]],
 ) -> None:
-    """The ``gaze`` and ``reach`` sub-commands (``number``: :func:`kinfw.cli._number`,
+    """The ``gaze`` and ``reach`` sub-commands (``number``: :func:`kinfw.cli_args.number`,
     ``frame_file``: the ``FRAME=FILE`` parser of ``--camera``)."""
     real = number(float)
     p = sub.add_parser(
@@ -256,7 +256,7 @@ def _joint_rows(robot, q, free: tuple[str, ...], at_limits: tuple[str, ...]) -> 
 
 
 def _joint_table(rows: list[dict]) -> str:
-    from kinfw.cli_commands import format_table
+    from kinfw.cli_tables import format_table
 
     table = [
         [
@@ -332,7 +332,7 @@ def _camera_rays(args, cameras: tuple[str, ...]):
 def cmd_gaze(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.cli_commands import frames_arg
+    from kinfw.cli_args import frames_arg
     from kinfw.control.gaze import GazeSolver
     from kinfw.files import json_text
     from kinfw.robot import load_robot
