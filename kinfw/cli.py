@@ -16,7 +16,8 @@ and :func:`main`. Each command's sub-parser is defined beside the command: ``sim
 in :mod:`kinfw.cli_simulate`; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
 ``import-csv`` in :mod:`kinfw.cli_commands`; ``calibrate``, ``demo`` and ``crossval`` in
 :mod:`kinfw.cli_fit_parser` (commands in :mod:`kinfw.cli_fit`); ``detect``, ``plan``,
-``gaze`` and ``reach`` in their own modules. The argument types they share are in
+``gaze`` and ``reach`` in :mod:`kinfw.cli_detect`, :mod:`kinfw.cli_plan`,
+:mod:`kinfw.cli_gaze` and :mod:`kinfw.cli_reach`. The argument types they share are in
 :mod:`kinfw.cli_args`.
 """
 
@@ -31,7 +32,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from kinfw.cli_args import default_sidecar_path, frame_file, number
+from kinfw.cli_args import default_sidecar_path, number
 from kinfw.cli_commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -39,10 +40,11 @@ from kinfw.cli_commands import (
     add_verify_parser,
     add_view_parser,
 )
-from kinfw.cli_control import add_control_parsers
 from kinfw.cli_detect import add_detect_parser, detect_inputs
 from kinfw.cli_fit_parser import add_fit_parsers
+from kinfw.cli_gaze import add_gaze_parser
 from kinfw.cli_plan import add_plan_parser
+from kinfw.cli_reach import add_reach_parser
 from kinfw.cli_simulate import add_simulate_parser
 from kinfw.files import check_output_dir, check_outputs
 
@@ -140,7 +142,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_import_csv_parser(sub)
     add_detect_parser(sub, number(int, low=4))
     add_plan_parser(sub, number)
-    add_control_parsers(sub, number, frame_file)
+    add_gaze_parser(sub)
+    add_reach_parser(sub)
     return parser
 
 
