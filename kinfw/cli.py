@@ -116,6 +116,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         )
     elif command == "detect":
         check_outputs({"--out": args.out}, inputs=detect_inputs(args))
+    elif command == "gaze" and args.html is not None:
+        check_outputs({"--html": args.html}, inputs={"model": args.model, **cameras})
 
 
 class _Parser(argparse.ArgumentParser):
