@@ -1,6 +1,6 @@
-"""The commands of the ``kinfw`` command line that do not fit a model (the parser and
-:func:`kinfw.cli.main` are in :mod:`kinfw.cli`; ``calibrate``, ``demo`` and ``crossval``
-are in :mod:`kinfw.cli_fit`), and the helpers both command modules share.
+"""The ``kinfw`` commands that check or show a model and convert data, without fitting one:
+``verify``, ``view``, ``reproduce``, ``crosscheck`` and ``import-csv``, each its parser
+(``add_<name>_parser``) and its command (``cmd_<name>``).
 
 Each ``cmd_<name>(args)`` runs ``kinfw <name>`` on the parsed arguments and returns the
 exit code; user errors are raised (ValueError, OSError) and reported by
@@ -15,337 +15,56 @@ import argparse
 import contextlib
 import dataclasses
 import json
-import logging
-import sys
-from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
 
-from kinfw.files import json_text, write_text_atomic
-
-if TYPE_CHECKING:
-    from kinfw.robot import Robot
+from kinfw.cli_args import (
+    COUNT,
+    SEED,
+    add_camera_option,
+    default_sidecar_path,
+    frames_arg,
+    number,
+    read_data,
+    up_arg,
+)
+from kinfw.cli_tables import accuracy_table
+from kinfw.files import json_text
 
 __all__ = [
-    "accuracy_table",
+    "add_crosscheck_parser",
+    "add_import_csv_parser",
+    "add_reproduce_parser",
+    "add_verify_parser",
+    "add_view_parser",
     "cmd_crosscheck",
     "cmd_import_csv",
     "cmd_reproduce",
-    "cmd_simulate",
     "cmd_verify",
     "cmd_view",
-    "default_sidecar_path",
-    "format_table",
-    "frames_arg",
-    "progress_printer",
 ]
 
-log = logging.getLogger("kinfw")
 
-
-def progress_printer():
-    """Progress lines on stderr when a person is watching (a terminal, or --verbose)."""
-    if sys.stderr.isatty() or log.isEnabledFor(logging.INFO):
-        return lambda message: print(f"  {message}", file=sys.stderr, flush=True)
-    return None
-
-
-def frames_arg(
-    value: str | None, default: tuple[str, ...], flag: str, robot: Robot
-) -> tuple[str, ...]:
-    """The frames of a ``--frames`` / ``--cameras`` option (comma- or space-separated),
-    else the URDF hint ``default``; ValueError naming ``flag`` and the links when
-    neither is there."""
-    if value:
-        return tuple(v for v in value.replace(",", " ").split() if v)
-    if default:
-        return default
-    raise ValueError(
-        f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
-        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}'
+# -- kinfw verify -----------------------------------------------------------------------
+def add_verify_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``verify`` sub-command."""
+    p = sub.add_parser("verify", help="errors of a URDF model against measurements")
+    p.add_argument("model", type=Path, help="URDF to evaluate")
+    p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
+    p.add_argument(
+        "--sidecar",
+        type=Path,
+        help="calibration sidecar (default: MODEL.kinfw.json beside the model, used when present)",
     )
-
-
-# -- kinfw simulate ----------------------------------------------------------------------
-def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=None):
-    """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
-    from kinfw.boards import Chessboard, parse_board
-    from kinfw.camera_model import CameraError, read_camera
-    from verification.simulate_pixels import (
-        DEFAULT_BOARD,
-        MIN_CORNERS,
-        board_pose_facing,
-        default_intrinsics,
-        pixel_views,
-        simulate_pixels,
+    p.add_argument(
+        "--no-sidecar",
+        action="store_true",
+        help="ignore the sidecar: fit nuisance frames to these data",
     )
-
-    board = parse_board(args.board or DEFAULT_BOARD)
-    given = {}
-    for frame, file in args.camera or ():
-        if frame not in cameras:
-            raise ValueError(
-                f"--camera {frame}={file}: {frame!r} is not a stage 2 camera "
-                f"(cameras: {', '.join(cameras)})"
-            )
-        try:
-            given[frame] = read_camera(file)
-        except CameraError as exc:
-            raise ValueError(f"--camera {frame}={file}: {exc}") from None
-    intrinsics = {c: given.get(c) or default_intrinsics(c) for c in cameras}
-    min_corners = board.count if isinstance(board, Chessboard) else MIN_CORNERS
-    if planned is not None:  # the plan's configurations; those where no camera sees dropped
-        w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
-        data, _ = simulate_pixels(
-            truth,
-            planned,
-            names,
-            cameras=intrinsics,
-            board_p=board.points,
-            w_T_board=w_T_board,
-            rng=rng,
-            sigma_px=args.pixel_sigma,
-            min_corners=min_corners,
-        )
-        args.board_spec = board.spec()
-        args.default_cameras = sorted(set(cameras) - set(given))
-        return data
-    data, _ = pixel_views(
-        truth,
-        names,
-        lower,
-        upper,
-        args.stage2_samples,
-        rng,
-        cameras=intrinsics,
-        board_p=board.points,
-        sigma_px=args.pixel_sigma,
-        fraction=args.fraction,
-        min_corners=min_corners,
+    add_camera_option(p)
+    p.add_argument(
+        "--json", action="store_true", help="print the report as JSON, with per-sample errors"
     )
-    args.board_spec = board.spec()
-    args.default_cameras = sorted(set(cameras) - set(given))
-    return data
-
-
-def _pixel_summary(data, args) -> dict:
-    """The board and the images and corners per camera of ``--pixels`` data."""
-    return {
-        "board": args.board_spec,
-        "sigma_px": args.pixel_sigma,
-        "cameras": [
-            {
-                "camera": g.camera,
-                "images": len(g.images()[0]),
-                "points": len(g.sample),
-                "default": g.camera in args.default_cameras,
-            }
-            for g in data.groups("pixels")
-        ],
-    }
-
-
-def cmd_simulate(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from kinfw.measurements import concatenate_measurements, write_measurements
-    from kinfw.robot import load_robot
-    from verification.simulate import (
-        default_target_pose,
-        one_joint_at_a_time,
-        perturb_robot,
-        random_configurations,
-        simulate,
-    )
-
-    nominal = load_robot(args.urdf)
-    rng = np.random.default_rng(args.seed)
-    if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
-        args.stage = "both" if args.pixels else "1"
-    elif args.pixels and args.stage == "1":
-        raise ValueError(
-            "--pixels --stage 1: --pixels makes stage 2 images; give --stage 2 or both "
-            "(the default with --pixels)"
-        )
-    stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
-    frames = (
-        frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
-    )
-    cameras = (
-        frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal)
-        if 2 in stages
-        else ()
-    )
-    truth_xml = perturb_robot(
-        nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg, axis_deg=args.error_deg
-    )
-    truth = load_robot(truth_xml)
-    names = nominal.topology((*frames, *cameras)).joint_names
-    lower, upper = nominal.joint_limits(names)
-    noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
-    if args.stereo_mm is not None:
-        noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
-    planned = _plan_qs(args.plan, names) if args.plan is not None else None
-    parts = []
-    if frames and planned is not None:
-        parts.append(simulate(truth, planned, names, frames=frames, rng=rng, **noise))
-    elif frames:
-        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
-        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
-    if cameras and args.pixels:
-        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned))
-    elif cameras:
-        qs = (
-            planned
-            if planned is not None
-            else random_configurations(
-                lower, upper, args.stage2_samples, rng, fraction=args.fraction
-            )
-        )
-        w_T_target = default_target_pose(truth, qs, names, cameras)
-        parts.append(
-            simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
-        )
-    data = concatenate_measurements(*parts)
-    write_measurements(args.out, data)
-    write_text_atomic(args.truth_out, truth_xml)
-    pixels = _pixel_summary(data, args) if args.pixels and cameras else None
-    if args.json:
-        print(
-            json.dumps(
-                {
-                    "pixels": pixels,
-                    "data": str(args.out),
-                    "truth": str(args.truth_out),
-                    "n_samples": data.n_samples,
-                    "frames": list(data.observed_frames),
-                    "noise_mm": args.noise_mm,
-                    "noise_deg": args.noise_deg,
-                    "stereo_mm": args.stereo_mm,
-                    "error_mm": args.error_mm,
-                    "error_deg": args.error_deg,
-                    "seed": args.seed,
-                },
-                indent=2,
-            )
-        )
-        return 0
-    poses = bool(frames) or (bool(cameras) and not args.pixels)
-    print(
-        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
-        + (
-            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
-            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-            + ")"
-            if poses
-            else ""
-        )
-    )
-    if pixels is not None:
-        print(
-            f"  stage 2 as images of {pixels['board']} (pixel noise {args.pixel_sigma:g} px): "
-            + "; ".join(
-                f"{c['camera']}: {c['images']} images, {c['points']} corners"
-                + (" (default intrinsics: 640x480, fx = fy = 600 px)" if c["default"] else "")
-                for c in pixels["cameras"]
-            )
-        )
-    print(
-        f"wrote {args.truth_out}: the true robot (nominal with errors of "
-        f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
-    )
-    return 0
-
-
-def _plan_qs(path: Path, names: Sequence[str]) -> Any:
-    """The configurations of a plan file in ``names`` order (every joint named)."""
-    from verification.plan import read_plan
-
-    plan_names, qs = read_plan(path)
-    missing = [j for j in names if j not in plan_names]
-    if missing:
-        raise ValueError(f'{path}: "joint_names": missing the joints {missing}')
-    return qs[:, [plan_names.index(j) for j in names]]
-
-
-# -- kinfw verify ------------------------------------------------------------------------
-def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
-    """Plain-text table: the header and the rows, each column right-aligned."""
-    widths = [max(len(str(r[k])) for r in (header, *rows)) for k in range(len(header))]
-    lines = ["  ".join(str(h).rjust(w) for h, w in zip(header, widths, strict=True))]
-    lines += ["  ".join(str(c).rjust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-    return "\n".join(lines)
-
-
-def accuracy_table(report_dict: dict) -> str:
-    """Plain-text table of :meth:`verification.accuracy.AccuracyReport.to_dict`."""
-    rows = []
-    has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
-
-    def num(value, fmt: str) -> str:  # an undefined number (NaN, null) is "-"
-        return "-" if value is None or value != value else format(value, fmt)
-
-    for g in report_dict["groups"]:
-        mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
-        table4 = " ".join(
-            f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True) if m == m and s == s
-        )
-        rows.append(
-            [
-                g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""),
-                g["kind"],
-                g["n"],
-                num(g["position_mean_mm"], ".3f"),
-                num(g["position_rms_mm"], ".3f"),
-                num(g["position_max_mm"], ".3f"),
-                num(g["rotation_rms_deg"], ".4f"),
-                num(g["rotation_max_deg"], ".4f"),
-                table4 or "-",
-                *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
-            ]
-        )
-    header = [
-        "frame",
-        "kind",
-        "n",
-        "pos mean mm",
-        "pos RMS mm",
-        "pos max mm",
-        "rot RMS deg",
-        "rot max deg",
-        "|e| x y z mean/std mm (Table 4)",
-        *(["pixel RMS px"] if has_px else []),
-    ]
-    return format_table(rows, header)
-
-
-def read_data(path: Path, args: argparse.Namespace) -> Any:
-    """The measurement file ``path`` with the intrinsics of ``--camera FRAME=FILE``
-    (override or add to its ``"cameras"`` section)."""
-    from kinfw.camera_model import CameraError, read_camera
-    from kinfw.measurements import DatasetError, read_measurements
-
-    cameras = {}
-    given = getattr(args, "camera", None) or ()
-    for frame, file in given:
-        try:
-            cameras[frame] = read_camera(file)
-        except CameraError as exc:
-            raise DatasetError(f"--camera {frame}={file}: {exc}") from None
-    data = read_measurements(path, cameras=cameras)
-    used = list(dict.fromkeys(g.camera for g in data.groups("pixels")))
-    for frame, file in given:
-        if frame not in used:
-            has = (
-                f"the camera frames of its 'pixels' observations: {', '.join(used)}"
-                if used
-                else "it has no 'pixels' observations"
-            )
-            raise DatasetError(
-                f"--camera {frame}={file}: no observation of {path} uses camera frame "
-                f"{frame!r} ({has})"
-            )
-    return data
+    p.set_defaults(func=cmd_verify)
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
@@ -411,12 +130,48 @@ def cmd_verify(args: argparse.Namespace) -> int:
     return 0
 
 
-def default_sidecar_path(out: Path) -> Path:
-    """Where the calibration sidecar of the calibrated URDF ``out`` goes."""
-    return Path(out).with_suffix(".kinfw.json")
+# -- kinfw view -------------------------------------------------------------------------
+def add_view_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``view`` sub-command."""
+    p = sub.add_parser(
+        "view",
+        help="nominal and calibrated robots and measurements in 3D",
+        description="Meshcat view: the nominal robot as a grey ghost, the "
+        "calibrated one in colour, a sample's measured poses as triads and "
+        "lines from prediction to measurement (scaled), targets and cameras. "
+        "Live on 127.0.0.1, or one self-contained HTML file with --html.",
+    )
+    p.add_argument("nominal", type=Path, help="nominal URDF")
+    p.add_argument("--calibrated", type=Path, help="calibrated URDF")
+    p.add_argument("--data", type=Path, help="measurement file: draw one sample's observations")
+    p.add_argument(
+        "--sidecar",
+        type=Path,
+        help="calibration sidecar (default: CALIBRATED.kinfw.json beside --calibrated, if present)",
+    )
+    p.add_argument("--sample", type=number(int), default=None, help="sample to draw (default 0)")
+    p.add_argument(
+        "--residual-scale",
+        type=number(float, low=0.0, low_open=True),
+        default=10.0,
+        help="lengthen prediction-to-measurement lines by this factor (default 10)",
+    )
+    p.add_argument(
+        "--up",
+        type=up_arg,
+        help='"x y z": up direction of the root frame '
+        "(default: the URDF's <kinfw up> hint, else z)",
+    )
+    p.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="where package:// meshes live (repeatable)",
+    )
+    p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of serving")
+    p.set_defaults(func=cmd_view)
 
 
-# -- kinfw view --------------------------------------------------------------------------
 def cmd_view(args: argparse.Namespace) -> int:
 
     from kinfw.calibration_file import read_sidecar
@@ -466,7 +221,38 @@ def cmd_view(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- kinfw reproduce ---------------------------------------------------------------------
+# -- kinfw reproduce --------------------------------------------------------------------
+def add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``reproduce`` sub-command."""
+    p = sub.add_parser(
+        "reproduce",
+        help="reproduce a paper's experiment in simulation (PNG)",
+        description="fig11: Shih et al. Fig. 11 (positioning error vs "
+        "measurements per joint and noise); table4: their Table 4 protocol; "
+        "hirsh: Hirsh et al. Figs. 3-4 (A = X B Y error vs iteration); crlb: "
+        "the joint refinement against the Cramer-Rao bound; robust: with 5 % "
+        "gross outliers, per robust loss; gaze: fixation, triangulation and reaching "
+        "with the nominal vs calibrated model, on simulated true heads and UR10s.",
+    )
+    p.add_argument("study", choices=("fig11", "table4", "hirsh", "crlb", "robust", "gaze"))
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("reproduce_out"),
+        help="output directory (default reproduce_out)",
+    )
+    p.add_argument("--trials", type=COUNT, default=None, help="random trials per point")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument(
+        "--jobs",
+        type=COUNT,
+        default=1,
+        help="run the trials in N worker processes (default 1: in this process)",
+    )
+    p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
+    p.set_defaults(func=cmd_reproduce)
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     import contextlib
     import io
@@ -492,7 +278,18 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     return code
 
 
-# -- kinfw crosscheck --------------------------------------------------------------------
+# -- kinfw crosscheck -------------------------------------------------------------------
+def add_crosscheck_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``crosscheck`` sub-command."""
+    p = sub.add_parser("crosscheck", help="check the CPC model against Pinocchio FK")
+    p.add_argument("urdf", type=Path)
+    p.add_argument("--frames", help="end frames, comma-separated (default: URDF hint)")
+    p.add_argument("-n", type=COUNT, default=200, help="random configurations (default 200)")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_crosscheck)
+
+
 def cmd_crosscheck(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -537,7 +334,39 @@ def cmd_crosscheck(args: argparse.Namespace) -> int:
     return 0 if result.passed() else 1
 
 
-# -- kinfw import-csv --------------------------------------------------------------------
+# -- kinfw import-csv -------------------------------------------------------------------
+def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``import-csv`` sub-command."""
+    p = sub.add_parser(
+        "import-csv",
+        help="convert a FIGAROH calibration CSV into a measurement file",
+        description="Read a FIGAROH-style calibration CSV (marker columns x1, y1, z1 "
+        "[phix1, phiy1, phiz1], ...; one column per URDF joint) and write it as a "
+        "kinfw-measurements file: per marker, points (or poses with the phi columns) "
+        "of a marker of unknown offset on --frame.",
+    )
+    p.add_argument("csv", type=Path, help="FIGAROH CSV file")
+    p.add_argument("--urdf", type=Path, required=True, help="URDF naming the joint columns")
+    p.add_argument("--frame", required=True, help="URDF link or joint the markers are on")
+    p.add_argument(
+        "--measured-in",
+        default=None,
+        help="measurement frame, not in the URDF (default: the URDF root link)",
+    )
+    p.add_argument("--marker", default="marker", help="marker name prefix (default 'marker')")
+    p.add_argument(
+        "--target",
+        default=None,
+        help="read the 6D columns as the pose of a fixed target NAME seen by a camera on "
+        "--frame (camera_T_target: a camera on the flange seeing a board; the camera's mount "
+        "and the target's pose are estimated); excludes --measured-in",
+    )
+    p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
+    p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
+    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.set_defaults(func=cmd_import_csv)
+
+
 def cmd_import_csv(args: argparse.Namespace) -> int:
     """``kinfw import-csv``: a FIGAROH calibration CSV to a measurement file."""
     from kinfw.figaroh_csv import measurements_from_figaroh_csv

@@ -1,6 +1,7 @@
 """The commands of the ``kinfw`` command line that fit a model: ``calibrate``, ``demo``
 and ``crossval``, with their tables and printers (the other commands are in
-:mod:`kinfw.cli_commands`, the parser and :func:`kinfw.cli.main` in :mod:`kinfw.cli`).
+:mod:`kinfw.cli_commands`, their parsers in :mod:`kinfw.cli_fit_parser`, :func:`kinfw.cli.main`
+in :mod:`kinfw.cli`).
 
 Each ``cmd_<name>(args)`` runs ``kinfw <name>`` on the parsed arguments and returns the
 exit code; user errors are raised (ValueError, OSError) and reported by
@@ -16,7 +17,8 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from kinfw.cli_commands import format_table, progress_printer, read_data
+from kinfw.cli_args import read_data
+from kinfw.cli_tables import format_table, progress_printer
 from kinfw.files import json_text
 
 if TYPE_CHECKING:

@@ -14,7 +14,7 @@ __all__ = ["add_plan_parser", "cmd_plan", "read_pool"]
 
 
 def add_plan_parser(sub, number) -> None:
-    """The ``plan`` sub-command (``number``: :func:`kinfw.cli._number`)."""
+    """The ``plan`` sub-command (``number``: :func:`kinfw.cli_args.number`)."""
     positive = number(float, low=0.0, low_open=True)
     count = number(int, low=1)
     p = sub.add_parser(
@@ -94,7 +94,7 @@ def read_pool(path: Path, joint_names) -> object:
 def _setup(args, robot):
     import numpy as np
 
-    from kinfw.cli_commands import frames_arg
+    from kinfw.cli_args import frames_arg
     from kinfw.cli_fit import params_arg
     from verification.plan_objective import Setup
 
@@ -110,7 +110,7 @@ def _setup(args, robot):
         robot.frame_id(f)  # an unknown frame: one-line error naming the links
     tracker = None
     if args.tracker is not None:
-        from kinfw.cli import up_arg
+        from kinfw.cli_args import up_arg
 
         tracker = np.array(up_arg(args.tracker))
     return Setup(
@@ -131,7 +131,7 @@ def _setup(args, robot):
 def cmd_plan(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.cli_commands import format_table
+    from kinfw.cli_tables import format_table
     from kinfw.robot import load_robot
     from verification.perturb import random_configurations
     from verification.plan import plan_configurations, plan_per_joint, write_plan
