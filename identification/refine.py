@@ -57,6 +57,7 @@ from identification.problem import (
     estimate_noise,
     group_residuals,
     levenberg_marquardt,
+    negligible_columns,
     observation_norms,
     row_weights,
     thresholds,
@@ -414,12 +415,19 @@ def _fit(
     )
     k = thresholds(problem.obs_components, loss_scale)
     x = np.zeros(P)
+    # what the data do not see at the start stays there for every round: once the other
+    # parameters have moved, a structurally redundant one (a joint's axis tilt when the
+    # only observed point lies on that axis) gets a small column again and would drift
+    # along its redundancy; the diagnostics still report it (with the full free mask)
+    _, J0 = problem.evaluate(x, sigma, True, only_free=True)
+    moving = free.copy()
+    moving[free] = ~negligible_columns(J0[:, free])
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         x, its, converged = levenberg_marquardt(
             lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True),
             x,
-            free,
+            moving,
             obs_sizes,
             loss,
             k,

@@ -25,7 +25,14 @@ from .diagnostics import (
 from .functions import GroupFunctions, clear_function_cache
 from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
 from .problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
-from .solver import LOSSES, levenberg_marquardt, observation_norms, row_weights, thresholds
+from .solver import (
+    LOSSES,
+    levenberg_marquardt,
+    negligible_columns,
+    observation_norms,
+    row_weights,
+    thresholds,
+)
 from .start import estimate_unknowns, express_in
 
 __all__ = [
@@ -47,6 +54,7 @@ __all__ = [
     "express_in",
     "group_residuals",
     "levenberg_marquardt",
+    "negligible_columns",
     "noise_shape",
     "observation_norms",
     "row_weights",

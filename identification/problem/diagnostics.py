@@ -16,6 +16,8 @@ from numpy.typing import NDArray
 from kinfw.cpc import CPCModel
 from kinfw.measurements import Measurements
 
+from .solver import scaled_columns
+
 __all__ = [
     "GroupResiduals",
     "Identifiability",
@@ -221,10 +223,13 @@ def covariance_and_identifiability(
     """
     P = len(names)
     Jf = Jw[:, free]
-    c = np.linalg.norm(Jf, axis=0)
-    c[c == 0.0] = 1.0
-    _, s, Vt = np.linalg.svd(Jf / c, full_matrices=False)
-    rank = int(np.sum(s > s[0] * 1e-8)) if len(s) else 0
+    Js, c = scaled_columns(Jf)
+    _, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    if len(s) < Js.shape[1]:  # fewer rows than parameters: the rest is null too
+        Q, _ = np.linalg.qr(Vt.T, mode="complete")
+        Vt = np.vstack([Vt, Q[:, len(s) :].T])
+        s = np.concatenate([s, np.zeros(Js.shape[1] - len(s))])
+    rank = int(np.sum(s > s[0] * 1e-8)) if len(s) and s[0] > 0 else 0
     V = Vt[:rank].T
     cov_free = (V / s[:rank] ** 2) @ V.T / np.outer(c, c) * sigma_hat2
     covariance = np.zeros((P, P))

@@ -20,16 +20,50 @@ from .noise import norm2_cdf, quantile
 
 __all__ = [
     "LOSSES",
+    "NEGLIGIBLE_COLUMN",
     "levenberg_marquardt",
+    "negligible_columns",
     "observation_norms",
     "robust_loss",
     "row_weights",
+    "scaled_columns",
     "thresholds",
 ]
 
 LOSSES = ("linear", "huber", "cauchy")
 
 ObsSizes = Sequence[tuple[int, int]]
+
+#: Relative norm (to the largest column) below which a column of the whitened Jacobian
+#: is numerically zero: rounding, not information (a joint's axis tilt when the only
+#: observed point lies on that axis has a column ~1e-12 of the others).
+NEGLIGIBLE_COLUMN = 1e-10
+
+
+def scaled_columns(J: NDArray) -> tuple[NDArray, NDArray]:
+    """``J`` (N, P) with unit-norm columns, and the column norms ``c`` (P,).
+
+    Columns below :data:`NEGLIGIBLE_COLUMN` of the largest norm are set to zero (with
+    ``c = 1``) rather than scaled up: scaling rounding noise to unit norm would make a
+    direction the data do not see look as determined as any other, and a solver step
+    along it ``1 / c`` times too long (an axis walked to its chart's singularity).
+
+    Returns
+    -------
+    Js : ndarray, shape (N, P)
+    c : ndarray, shape (P,)
+    """
+    c = np.linalg.norm(J, axis=0)
+    tiny = negligible_columns(J, c)
+    c = np.where(tiny, 1.0, c)
+    return np.where(tiny, 0.0, J / c), c
+
+
+def negligible_columns(J: NDArray, norms: NDArray | None = None) -> NDArray[np.bool_]:
+    """Columns of ``J`` (N, P) whose norm is at most :data:`NEGLIGIBLE_COLUMN` of the
+    largest (exact zeros included): parameters the data do not see, shape (P,)."""
+    c = np.linalg.norm(J, axis=0) if norms is None else norms
+    return c <= NEGLIGIBLE_COLUMN * (c.max() if c.size else 0.0)
 
 
 def observation_norms(r: NDArray, obs_sizes: ObsSizes) -> NDArray:
@@ -99,7 +133,8 @@ def levenberg_marquardt(
     """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
 
     Steps solve ``(Js^T Js + lam I) y = -Js^T r`` with unit-norm columns ``Js``: no
-    component along directions the Jacobian does not see (they stay at the start).
+    component along directions the Jacobian does not see (they stay at the start),
+    numerically zero columns included (:func:`scaled_columns`).
 
     Parameters
     ----------
@@ -132,10 +167,7 @@ def levenberg_marquardt(
     it = 0
     for it in range(1, max_iterations + 1):
         w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        Jf = J[:, free] * w[:, None]
-        c = np.linalg.norm(Jf, axis=0)
-        c[c == 0.0] = 1.0
-        Js = Jf / c
+        Js, c = scaled_columns(J[:, free] * w[:, None])
         g = Js.T @ (r * w)
         H = Js.T @ Js
         while True:
