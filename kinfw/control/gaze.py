@@ -295,8 +295,11 @@ class GazeSolver:
         if point.shape != (3,) or not np.all(np.isfinite(point)):
             raise RobotModelError(f"point: expected 3 finite numbers (m), got {point.tolist()}")
         rays = self._rays(camera_rays)
-        q = self.q_middle.copy() if q_start is None else check_configuration(self.robot, q_start)
-        check_held_joints(self.robot, q, self.free_joints)
+        if q_start is None:
+            q = self.q_middle.copy()  # within the limits
+        else:
+            q = check_configuration(self.robot, q_start)
+            check_held_joints(self.robot, q, self.free_joints)
         residual = _GazeResidual(self, rays, point, self.robot.pin_configurations(q)[0])
         x = residual.aim(np.clip(q[self.free_columns], self.lower, self.upper))
         try:
@@ -384,7 +387,7 @@ class _GazeResidual:
         else:
             pin.forwardKinematics(model, data, self.configuration(x))
         r = np.empty(2 * len(self.rays))
-        jac = np.empty((len(r), len(x))) if jacobian else None
+        jac = np.empty((len(r), model.nv)) if jacobian else None  # all joints' columns
         for k, fid in enumerate(self.s.frame_ids):
             root_M_camera = pin.updateFramePlacement(model, data, fid)
             camera_p = (self.point - root_M_camera.translation) @ root_M_camera.rotation
@@ -397,15 +400,14 @@ class _GazeResidual:
             r_k[:] = 2.0 * s[:2] / denominator
             if jacobian:
                 local = pin.getFrameJacobian(model, data, fid, pin.LOCAL).reshape(6, -1)
-                local = local[:, self.s.v_columns]
                 d_s = pin.skew(camera_p) @ local[3:] - local[:3]
                 if self.ray_Rs is not None:
                     d_s = self.ray_Rs[k].T @ d_s
                 d_denominator = (s @ d_s) / norm + d_s[2]
                 jac[2 * k : 2 * k + 2] = (
-                    2.0 * d_s[:2] - np.outer(r_k, d_denominator)
+                    2.0 * d_s[:2] - r_k[:, None] * d_denominator
                 ) / denominator
-        return r, jac
+        return r, (jac[:, self.s.v_columns] if jacobian else None)
 
     def aim(self, x: NDArray[np.float64], sweeps: int = 1) -> NDArray[np.float64]:
         """The closed-form start (module docstring): each free revolute joint, root

@@ -140,7 +140,8 @@ def solve_bounded(
         at_bound = ((x <= lower) & (gradient > 0.0)) | ((x >= upper) & (gradient < 0.0))
         step = np.zeros(len(x))
         if not at_bound.all():
-            u, s, vt = np.linalg.svd(jac[:, ~at_bound], full_matrices=False)
+            free_jac = jac if not at_bound.any() else jac[:, ~at_bound]
+            u, s, vt = np.linalg.svd(free_jac, full_matrices=False)
             keep = s > rcond * s[0] if s[0] > 0.0 else np.zeros(len(s), dtype=bool)
             gain = s[keep] / (s[keep] ** 2 + damping)
             step[~at_bound] = -vt[keep].T @ (gain * (u[:, keep].T @ r))
