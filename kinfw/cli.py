@@ -118,6 +118,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_outputs({"--out": args.out}, inputs=detect_inputs(args))
     elif command == "gaze" and args.html is not None:
         check_outputs({"--html": args.html}, inputs={"model": args.model, **cameras})
+    elif command == "reach" and args.html is not None:
+        check_outputs({"--html": args.html}, inputs={"model": args.model})
 
 
 class _Parser(argparse.ArgumentParser):

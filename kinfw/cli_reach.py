@@ -8,6 +8,7 @@ Like the other command modules, only the standard library is imported at start-u
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from kinfw.cli_args import number
 from kinfw.cli_control import (
@@ -65,6 +66,14 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         help="random starts after the first at most (default 50)",
     )
     p.add_argument("--seed", type=number(int, low=0), default=0, help="seed of the starts")
+    p.add_argument(
+        "--html",
+        type=Path,
+        metavar="SCENE.html",
+        help="write a Meshcat scene (self-contained HTML): the robot at the answer, the "
+        "target (a triad for a pose, a sphere for a point), the frame's triad, and a line "
+        "from the frame to the target when not reached",
+    )
     p.set_defaults(func=cmd_reach)
 
 
@@ -137,6 +146,10 @@ def cmd_reach(args: argparse.Namespace) -> int:
     rotation_deg = (
         None if result.rotation_error_rad is None else math.degrees(result.rotation_error_rad)
     )
+    if args.html is not None:
+        from kinfw.view_reach import write_reach_html
+
+        write_reach_html(robot, result, args.html)
     if args.json:
         print(
             json_text(
@@ -155,6 +168,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
                     "reached": result.reached,
                     "at_limits": list(result.at_limits),
                     "starts": result.starts,
+                    "html": None if args.html is None else str(args.html),
                 }
             )
         )
@@ -173,4 +187,6 @@ def cmd_reach(args: argparse.Namespace) -> int:
             f"not reached: the closest configuration found is printed (exit code {NOT_MET}); "
             "more --restarts, another --q start, or the target is out of reach"
         )
+    if args.html is not None:
+        print(f"wrote {args.html}")
     return 0 if result.reached else NOT_MET

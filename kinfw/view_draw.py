@@ -1,7 +1,7 @@
-"""Drawing primitives of the Meshcat scenes (:mod:`kinfw.view`, :mod:`kinfw.view_gaze`):
-triads and thin cylinders drawn over everything (WebGL draws lines one pixel wide
-whatever their ``linewidth``), and small transforms. meshcat is imported inside the
-functions."""
+"""Drawing primitives of the Meshcat scenes (:mod:`kinfw.view`, :mod:`kinfw.view_gaze`,
+:mod:`kinfw.view_reach`): triads and thin cylinders drawn over everything (WebGL draws
+lines one pixel wide whatever their ``linewidth``), and small transforms. meshcat is
+imported inside the functions."""
 
 from __future__ import annotations
 

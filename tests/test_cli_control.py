@@ -253,6 +253,98 @@ def test_reach_out_of_range_exits_3_with_the_closest_configuration(arm_urdf, cap
     assert doc["position_error_mm"] == pytest.approx(1e3 * np.linalg.norm(fk - target), rel=1e-9)
 
 
+def _scene(html):
+    """The scene's objects and transforms (root-link coordinates: 4x4, row-major) by path."""
+    commands = _scene_commands(html.read_text(encoding="utf-8"))
+    objects = {c["path"]: c["object"] for c in commands if c["type"] == "set_object"}
+    transforms = {
+        c["path"]: np.array(c["matrix"]).reshape(4, 4).T
+        for c in commands
+        if c["type"] == "set_transform"
+    }
+    return objects, transforms
+
+
+# ARM_6R with a box on link l6, offset from the link frame: the drawn robot checked by FK
+L6_P_BOX = (0.01, 0.02, 0.03)
+L6_BOX = (
+    f'<link name="l6"><visual><origin xyz="{" ".join(map(str, L6_P_BOX))}"/>'
+    '<geometry><box size="0.02 0.02 0.02"/></geometry></visual></link>'
+)
+
+
+def test_reach_html_draws_the_target_pose_and_the_frame_where_fk_puts_it(
+    arm_target, tmp_path, capsys
+):
+    from kinfw.transforms import xyz_quat_xyzw_from_transform
+
+    arm, root_T_target = arm_target
+    arm_urdf = tmp_path / "arm_box.urdf"
+    arm_urdf.write_text(ARM_6R.replace('<link name="l6"/>', L6_BOX))
+    xyz, quat = xyz_quat_xyzw_from_transform(root_T_target)
+    html = tmp_path / "reach.html"
+    argv = ["reach", arm_urdf, "--frame", "flange", "--pose", *xyz, *quat, "--html", html]
+    code, out, err = _run([*argv, "--json"], capsys)
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["reached"] is True and doc["html"] == str(html)
+    objects, transforms = _scene(html)
+    base = "/meshcat/kinfw/reach"
+    q, joint_names = np.array(doc["q"]), tuple(doc["joint_names"])
+    box = transforms["/meshcat/kinfw/robot/visuals/l6_0"]  # the robot drawn at the answer
+    np.testing.assert_allclose(
+        box, arm.frame_poses(q, "l6", joint_names) @ _translation(L6_P_BOX), atol=1e-9
+    )
+    for axis in "xyz":  # both triads drawn, axis by axis, with a ball at their origins
+        assert f"{base}/target/{axis}/stick" in objects and f"{base}/frame/{axis}/stick" in objects
+    assert f"{base}/target/origin" in objects and f"{base}/frame/origin" in objects
+    np.testing.assert_allclose(transforms[f"{base}/target"], root_T_target, atol=1e-9)
+    root_T_flange = arm.frame_poses(q, "flange", joint_names)
+    np.testing.assert_allclose(transforms[f"{base}/frame"], root_T_flange, atol=1e-9)
+    # each triad axis is a stick along that axis of its frame (the node's y onto the axis)
+    for k, axis in enumerate("xyz"):
+        stick_T = transforms[f"{base}/target/{axis}"]
+        np.testing.assert_allclose(stick_T[:3, 1], np.eye(3)[k], atol=1e-12)
+    assert not any(p.startswith(f"{base}/to_target") for p in {**objects, **transforms})
+    # text output names the file
+    code, out, err = _run(argv, capsys)
+    assert code == 0 and f"wrote {html}" in out
+
+
+def test_reach_html_not_reached_draws_the_point_and_the_line_to_it(arm_urdf, tmp_path, capsys):
+    arm = load_robot(arm_urdf)
+    target = np.array([3.0, 2.0, 1.0])  # links total about 1.2 m
+    html = tmp_path / "miss.html"
+    argv = ["reach", arm_urdf, "--frame", "flange", "--point", *target, "--restarts", "1"]
+    code, out, err = _run([*argv, "--html", html, "--json"], capsys)
+    assert code == 3, err
+    doc = json.loads(out)
+    objects, transforms = _scene(html)
+    base = "/meshcat/kinfw/reach"
+    sphere = objects[f"{base}/target"]
+    assert any(g["type"] == "SphereGeometry" for g in sphere["geometries"])
+    assert f"{base}/target/x/stick" not in objects  # a point: no triad
+    np.testing.assert_allclose(transforms[f"{base}/target"], _translation(target), atol=1e-12)
+    root_T_flange = arm.frame_poses(np.array(doc["q"]), "flange", tuple(doc["joint_names"]))
+    np.testing.assert_allclose(transforms[f"{base}/frame"], root_T_flange, atol=1e-9)
+    # the line: from the flange's origin, its y axis toward the target, as long as the miss
+    line = transforms[f"{base}/to_target"]
+    toward = target - root_T_flange[:3, 3]
+    distance = np.linalg.norm(toward)
+    np.testing.assert_allclose(line[:3, 3], root_T_flange[:3, 3], atol=1e-9)
+    np.testing.assert_allclose(line[:3, 1], toward / distance, atol=1e-9)
+    stick = objects[f"{base}/to_target/stick"]
+    height = next(g for g in stick["geometries"] if g["type"] == "CylinderGeometry")["height"]
+    assert height == pytest.approx(distance, rel=1e-9)
+    assert 1e3 * distance == pytest.approx(doc["position_error_mm"], rel=1e-9)
+
+
+def _translation(p):
+    T = np.eye(4)
+    T[:3, 3] = p
+    return T
+
+
 # -- user errors ---------------------------------------------------------------------------
 @pytest.mark.parametrize(
     ("argv", "message"),
@@ -264,6 +356,10 @@ def test_reach_out_of_range_exits_3_with_the_closest_configuration(arm_urdf, cap
         (["gaze", HEAD_URDF, "--point", *POINT, "--q", "pan=2mm"], "'pan' is revolute"),
         (["gaze", HEAD_URDF, "--point", *POINT, "--html", HEAD_URDF], "refusing to overwrite"),
         (["reach", "ARM", "--frame", "hand", "--point", 0, 0, 0], "no frame 'hand'"),
+        (
+            ["reach", "ARM", "--frame", "flange", "--point", 0, 0, 0.5, "--html", "ARM"],
+            "refusing to overwrite",
+        ),
         (["reach", "ARM", "--frame", "flange", "--q", "j7=0", "--point", 0, 0, 0], "'j7'"),
         (
             ["reach", "ARM", "--frame", "flange", "--pose", 0, 0, 0, 0, 0, 0, 1.5],
