@@ -38,15 +38,13 @@ from kinfw.robot import Robot
 from kinfw.view import CAMERA_TRIAD_LENGTH, SOLID_RGBA
 from kinfw.view_draw import (
     STICK_RADIUS,
-    mesh_dirs,
     node_name,
     overlay_object,
     stick,
     transform_from_translation,
     triad,
-    up_direction,
 )
-from kinfw.view_robot import draw_robot, frame_scene
+from kinfw.view_robot import frame_scene, robot_scene
 
 if TYPE_CHECKING:
     import meshcat
@@ -118,15 +116,17 @@ def gaze_scene(
     -------
     meshcat.Visualizer
     """
-    import meshcat
     import meshcat.geometry as mg
 
-    up = up_direction(robot, up)
-    dirs = mesh_dirs(package_dirs)
-    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
-    root = vis["kinfw"]
-    pin_q = robot.pin_configurations(fixation.q, fixation.joint_names)[0]
-    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, SOLID_RGBA, dirs)
+    vis, root, up, robot_ps = robot_scene(
+        robot,
+        fixation.q,
+        fixation.joint_names,
+        SOLID_RGBA,
+        window=window,
+        up=up,
+        package_dirs=package_dirs,
+    )
     centres, ends = gaze_rays(robot, fixation)
     rgb = FIXATED_RGB if fixation.fixated else MISSED_RGB
     for camera, centre, end in zip(fixation.cameras, centres, ends, strict=True):

@@ -40,14 +40,12 @@ from kinfw.robot import Robot
 from kinfw.view import SOLID_RGBA
 from kinfw.view_draw import (
     STICK_RADIUS,
-    mesh_dirs,
     overlay_object,
     stick,
     transform_from_translation,
     triad,
-    up_direction,
 )
-from kinfw.view_robot import draw_robot, frame_scene
+from kinfw.view_robot import frame_scene, robot_scene
 
 if TYPE_CHECKING:
     import meshcat
@@ -103,15 +101,17 @@ def reach_scene(
     -------
     meshcat.Visualizer
     """
-    import meshcat
     import meshcat.geometry as mg
 
-    up = up_direction(robot, up)
-    dirs = mesh_dirs(package_dirs)
-    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
-    root = vis["kinfw"]
-    pin_q = robot.pin_configurations(result.q, result.joint_names)[0]
-    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, SOLID_RGBA, dirs)
+    vis, root, up, robot_ps = robot_scene(
+        robot,
+        result.q,
+        result.joint_names,
+        SOLID_RGBA,
+        window=window,
+        up=up,
+        package_dirs=package_dirs,
+    )
 
     root_p_target = result.root_T_target[:3, 3]
     if result.rotation_error_rad is None:  # a point: orientation free

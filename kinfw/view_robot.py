@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from kinfw.robot import Robot
 
@@ -32,6 +32,7 @@ __all__ = [
     "display_frame",
     "draw_robot",
     "frame_scene",
+    "robot_scene",
     "set_camera",
 ]
 
@@ -241,3 +242,37 @@ def frame_scene(
     vis["/Grid"].set_property("visible", False)
     vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
     vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))
+
+
+def robot_scene(
+    robot: Robot,
+    q: NDArray[np.float64],
+    joint_names: tuple[str, ...],
+    rgba: tuple[float, float, float, float],
+    *,
+    window: object | None,
+    up: ArrayLike | None,
+    package_dirs: Sequence[str | Path],
+) -> tuple[meshcat.Visualizer, meshcat.Visualizer, NDArray[np.float64], NDArray[np.float64]]:
+    """A meshcat scene with one robot drawn at the joint values ``q`` (``joint_names``
+    order), in ``rgba``, under ``/meshcat/kinfw/robot``: the start of the scenes of
+    :mod:`kinfw.view_gaze` and :mod:`kinfw.view_reach`.
+
+    Returns
+    -------
+    vis, root : meshcat.Visualizer
+        The scene and its ``kinfw`` node (root-link coordinates).
+    up : ndarray, shape (3,)
+        The checked up direction (:func:`kinfw.view_draw.up_direction`).
+    robot_ps : ndarray, shape (n, 3)
+        Points of the drawn robot, for :func:`frame_scene`.
+    """
+    import meshcat
+
+    from kinfw.view_draw import mesh_dirs, up_direction
+
+    up = up_direction(robot, up)
+    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
+    pin_q = robot.pin_configurations(q, joint_names)[0]
+    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, rgba, mesh_dirs(package_dirs))
+    return vis, vis["kinfw"], up, robot_ps
