@@ -202,7 +202,7 @@ def test_casadi_residual_numpy_prediction_and_cv2_project_points_agree():
     ((r, _),) = problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False)
     assert np.abs(r).max() < 1e-9
     # and equals measured - predicted when the pixels are moved
-    moved = kind.with_data(g, kind.data(g) + np.array([0.7, -1.1, 0, 0, 0]))
+    moved = kind.with_data(g, kind.data(g) + np.array([0.7, -1.1, 0, 0, 0, 0]))
     problem = build_problem(truth, data.with_groups([moved]), targets={"board": w_T_board})
     ((r, _),) = problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False)
     np.testing.assert_allclose(r, np.tile([0.7, -1.1], (len(g.sample), 1)), atol=1e-9)
@@ -401,7 +401,7 @@ def test_the_drawing_puts_the_board_points_where_the_truth_has_them():
     _, truth, w_T_board, data = _scene(3, seed=11)
     (g,) = data.groups("pixels")
     kind = kind_of(g)
-    moved = kind.with_data(g, kind.data(g) + np.array([2.0, 0.0, 0, 0, 0]))
+    moved = kind.with_data(g, kind.data(g) + np.array([2.0, 0.0, 0, 0, 0, 0]))
     ctx = NumericContext.from_robot(truth, data.qs, NAMES, {BlockKey("target", "board"): w_T_board})
     w_p_board = np.tile(BOARD_P @ w_T_board[:3, :3].T + w_T_board[:3, 3], (3, 1))
     exact = kind.drawing(g, ctx)

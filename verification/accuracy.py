@@ -210,6 +210,7 @@ def evaluate_model(
         fitted += [req.description for req in requests if req.key.kind != "intrinsics"]
         own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
         r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
+        r = r / g.kind.row_weights(g.group)[:, None]  # the errors, not their fit weights
         m = len(g.sample)
         position = np.full((m, 3), np.nan)
         rotation = np.full(m, np.nan)

@@ -228,6 +228,7 @@ def held_out_error_sizes(
         strict=True,
     ):
         size = {name: np.full(len(g.sample), np.nan) for name in names}
+        r = r / g.kind.row_weights(g.group)[:, None]  # the errors, not their fit weights
         c0 = 0
         for c in g.components:  # error sizes per noise component (m, rad, px)
             size[c.name] = c.magnitude(r[:, c0 : c0 + c.rows])

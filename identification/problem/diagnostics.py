@@ -183,6 +183,7 @@ def rejected_observations(
     for grp in groups:
         m, rows = len(grp.sample), grp.rows
         block = r[k : k + m * rows].reshape(m, rows)
+        block = block / grp.kind.row_weights(grp.group)[:, None]  # errors, not fit weights
         labels = observation_labels(grp)
         for i in np.flatnonzero(rejected[o : o + m]):
             sizes, c0 = [], 0
@@ -292,7 +293,8 @@ def covariance_and_identifiability(
 def group_residuals(
     groups: Sequence[Any], r: NDArray, w_rows: NDArray, noise: Any, flagged: NDArray
 ) -> tuple[tuple[GroupResiduals, ...], tuple]:
-    """Per-group residuals in SI, and the observations beyond the robust threshold.
+    """Per-group residuals in SI (measured minus predicted: the kinds' row weights
+    divided out), and the observations beyond the robust threshold.
 
     ``groups`` are the problem's residual groups, ``r`` the whitened residuals (group
     rows first), ``w_rows`` the robust weight of each row, ``flagged`` per observation.
@@ -301,6 +303,7 @@ def group_residuals(
     for grp in groups:
         m, rows = len(grp.sample), grp.rows
         block = r[k : k + m * rows].reshape(m, rows)
+        block = block / grp.kind.row_weights(grp.group)[:, None]  # errors, not fit weights
         weight = w_rows[k : k + m * rows : rows]
         comps, c0 = [], 0
         for c in grp.components:

@@ -335,6 +335,11 @@ class ObservationKind:
         """The unknown blocks the group needs, with closed-form start estimates."""
         return ()
 
+    def row_weights(self, group: Any) -> NDArray[np.float64]:
+        """The relative weight (m,) that :meth:`residual` multiplies each observation's
+        rows by (default 1); errors reported in the measurement's units divide it out."""
+        return np.ones(len(group.sample))
+
     def data(self, group: Any) -> NDArray[np.float64]:
         """The measured values the residual compares against, (m, width) per row."""
         raise NotImplementedError

@@ -46,7 +46,7 @@ from kinfw.observations.numeric import Drawing, NumericContext, node_name
 from kinfw.observations.pnp import PNP_MIN_POINTS, pnp_camera_T_targets
 from kinfw.transforms import inverse_transform
 
-__all__ = ["PIXEL", "PixelKind", "PixelObservations"]
+__all__ = ["PIXEL", "PixelKind", "PixelObservations", "pixel_weights"]
 
 PIXEL = NoiseComponent("pixel", 2, "px")
 """The reprojection error of one point: (u, v) rows in pixels."""
@@ -78,8 +78,9 @@ class PixelObservations:
     image : ndarray of object, shape (m,)
         The image's label (file name), ``""`` when none.
     sigma_px : ndarray, shape (m,)
-        The image's stated pixel sigma (NaN: none). Stored and reported; the fit
-        whitens by the noise component ``"pixel"`` (one sigma for all images).
+        The image's stated pixel sigma (NaN: none): a relative weight in the fit (each
+        image's residual rows times ``median(sigma_px) / sigma_px``, :func:`pixel_weights`)
+        before the noise component ``"pixel"`` whitens them all by one sigma.
     target : str
         Name of the fixed target (its pose in the world is unknown).
     """
@@ -143,6 +144,25 @@ class PixelObservations:
             str(self.image[r[0]]) or f"sample {int(s)}"
             for s, r in zip(samples.tolist(), rows, strict=True)
         ]
+
+
+def pixel_weights(group: PixelObservations) -> NDArray[np.float64]:
+    """Each row's relative weight from its image's stated pixel sigma, (m,).
+
+    ``median / sigma_px``, the median over the images that state one (each image counted
+    once); 1 for the rows of images that state none. All 1 when no image states a sigma
+    or all state the same: the stated sigmas only weigh the images against each other,
+    the noise component ``"pixel"`` (estimated, or given) scales them all.
+    """
+    sigma = group.sigma_px
+    given = np.isfinite(sigma)
+    weights = np.ones(len(sigma))
+    if given.any():
+        _, rows = group.images()
+        per_image = np.array([sigma[r[0]] for r in rows])
+        reference = float(np.median(per_image[np.isfinite(per_image)]))
+        weights[given] = reference / sigma[given]
+    return weights
 
 
 def _read_points(reader, obs, at, key, width, what):
@@ -311,10 +331,17 @@ class PixelKind(ObservationKind):
             ),
         )
 
+    def row_weights(self, group):
+        """:func:`pixel_weights`: the relative weight of each image's rows."""
+        return pixel_weights(group)
+
     def data(self, group):
-        return np.concatenate([group.uv, group.target_p], axis=1)
+        """Per point ``[u, v, x, y, z, w]``: pixels, target point (m), and the row's
+        relative weight (:func:`pixel_weights`), data so the cached graph is structural."""
+        return np.concatenate([group.uv, group.target_p, pixel_weights(group)[:, None]], axis=1)
 
     def residual(self, group, model: SymbolicContext, m):
+        """``w * (uv_measured - uv_predicted)``, pixels times the row's weight ``m[5]``."""
         ca = model.ca
         c_T_t = inverse_casadi(ca, model.w_T(group.camera)) @ model.value(
             BlockKey("target", group.target)
@@ -322,7 +349,7 @@ class PixelKind(ObservationKind):
         p = c_T_t[0:3, 0:3] @ m[2:5] + c_T_t[0:3, 3]
         params = model.value(BlockKey("intrinsics", group.camera))
         u, v = project_normalized(p[0] / p[2], p[1] / p[2], params)
-        return ca.vertcat(m[0] - u, m[1] - v)
+        return m[5] * ca.vertcat(m[0] - u, m[1] - v)
 
     # -- numpy prediction, simulation, drawing
     def _params(self, group, model: NumericContext) -> NDArray[np.float64]:
@@ -337,8 +364,10 @@ class PixelKind(ObservationKind):
         return np.einsum("mij,mj->mi", c_T_t[:, :3, :3], group.target_p) + c_T_t[:, :3, 3]
 
     def predict(self, group, model: NumericContext):
+        """Predicted rows in :meth:`data`'s layout: the pixels ``uv`` (unweighted,
+        ``[:, :2]``), the target points and the rows' weights."""
         uv = _project(self._params(group, model), self.camera_points(group, model))
-        return np.concatenate([uv, group.target_p], axis=1)
+        return np.concatenate([uv, group.target_p, pixel_weights(group)[:, None]], axis=1)
 
     def with_data(self, group, rows):
         return dataclasses.replace(group, uv=np.asarray(rows, dtype=float)[:, :2])
