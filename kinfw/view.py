@@ -71,8 +71,13 @@ from kinfw.observations import kind_of
 from kinfw.observations.numeric import MissingValue, NumericContext
 from kinfw.robot import Robot, load_robot
 from kinfw.transforms import check_transform
+from kinfw.view_cameras import (
+    CAMERA_TRIAD_LENGTH,
+    FRUSTUM_DEPTH,
+    draw_cameras,
+    frustum_corners,
+)
 from kinfw.view_draw import (
-    STICK_RADIUS,
     TRIAD_LENGTH,
     mesh_dirs,
     node_name,
@@ -90,6 +95,8 @@ if TYPE_CHECKING:
     import meshcat
 
 __all__ = [
+    "CAMERA_TRIAD_LENGTH",
+    "FRUSTUM_DEPTH",
     "GHOST_RGBA",
     "RESIDUAL_COLOR_STOPS_MM",
     "SOLID_RGBA",
@@ -126,16 +133,8 @@ POINT_RGB = (0.45, 0.1, 0.6)
 """Colour of a measured point's sphere."""
 RESIDUAL_RADIUS = 0.0015
 """Radius of a residual line's cylinder, metres (its tip is a ball 1.6 times wider)."""
-CAMERA_TRIAD_LENGTH = 0.02
-"""Length of a camera frame's triad, metres (thinner and shorter than a measurement's)."""
 MEASURED_RGB = (0.1, 0.1, 0.1)
 """Colour of the ball at the origin of a measured pose's triad."""
-FRUSTUM_DEPTH = 0.2
-"""Depth of a camera's drawn frustum (the image's corners), metres."""
-FRUSTUM_RADIUS = 0.0006
-"""Radius of a frustum's cylinders, metres."""
-FRUSTUM_RGB = (0.2, 0.2, 0.25)
-"""Colour of a camera's frustum."""
 PREDICTED_RGB = (0.0, 0.55, 0.75)
 """Colour of the small ball where the model predicts a point of an image."""
 
@@ -314,7 +313,7 @@ def scene(
         focus_ps.append(
             _draw_observations(root, model, data, sample, q, joint_names, values, residual_scale)
         )
-    focus_ps.append(_draw_cameras(root, model, data, q, joint_names))
+    focus_ps.append(draw_cameras(root, model, data, q, joint_names))
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
 
@@ -446,61 +445,6 @@ def _draw_targets(
         triad(node["triad"], np.eye(4), length=2 * TRIAD_LENGTH)
         node.set_transform(root_T_target)
     return np.array([T[:3, 3] for _, T in targets]).reshape(-1, 3)
-
-
-def _draw_cameras(
-    root: meshcat.Visualizer,
-    model: Robot,
-    data: Measurements | None,
-    q: NDArray,
-    joint_names: tuple[str, ...],
-) -> NDArray[np.float64]:
-    cameras = dict.fromkeys(model.default_cameras)
-    if data is not None:
-        cameras.update(
-            dict.fromkeys(c for g in data.all_groups() for c in kind_of(g).camera_frames(g))
-        )
-    intrinsics = {} if data is None else dict(data.cameras)
-    if data is not None:
-        for g in data.all_groups():
-            intrinsics.update(kind_of(g).cameras(g))
-    drawn = []
-    for camera in cameras:
-        root_T_camera = model.frame_poses(q, camera, joint_names)
-        node = root["cameras/" + node_name(camera, None)]
-        triad(node, root_T_camera, length=CAMERA_TRIAD_LENGTH, radius=0.7 * STICK_RADIUS)
-        drawn.append(root_T_camera[:3, 3])
-        if camera in intrinsics:
-            corners = frustum_corners(intrinsics[camera])
-            for k, (a, b) in enumerate(zip(corners, np.roll(corners, -1, axis=0), strict=True)):
-                stick(node[f"frustum/ray{k}"], np.zeros(3), a, FRUSTUM_RADIUS, FRUSTUM_RGB)
-                stick(node[f"frustum/edge{k}"], a, b - a, FRUSTUM_RADIUS, FRUSTUM_RGB)
-    return np.array(drawn).reshape(-1, 3)
-
-
-def frustum_corners(intrinsics: Any, depth_m: float = FRUSTUM_DEPTH) -> NDArray[np.float64]:
-    """The image's corners (pixel centres of the corner pixels, OpenCV's model inverted)
-    at a depth ``depth_m`` along the optical axis, in the camera's optical frame.
-
-    Parameters
-    ----------
-    intrinsics : CameraIntrinsics
-    depth_m : float
-        Metres.
-
-    Returns
-    -------
-    ndarray, shape (4, 3)
-        Top-left, top-right, bottom-right, bottom-left (image order), metres.
-    """
-    import cv2
-
-    w, h = intrinsics.width - 1.0, intrinsics.height - 1.0
-    uv = np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
-    xy = cv2.undistortPoints(
-        uv.reshape(-1, 1, 2), intrinsics.matrix, intrinsics.distortion
-    ).reshape(-1, 2)
-    return depth_m * np.concatenate([xy, np.ones((4, 1))], axis=1)
 
 
 # -- files -------------------------------------------------------------------------------

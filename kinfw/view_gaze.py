@@ -35,7 +35,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.robot import Robot
-from kinfw.view import CAMERA_TRIAD_LENGTH, SOLID_RGBA
+from kinfw.view import SOLID_RGBA
+from kinfw.view_cameras import CAMERA_TRIAD_LENGTH
 from kinfw.view_draw import (
     STICK_RADIUS,
     node_name,
