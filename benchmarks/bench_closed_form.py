@@ -8,7 +8,7 @@ Run from the repository root::
 
 Prints plain-text tables:
 
-1. :func:`identification.closed_form.identify_closed_form` on the paper's protocol (Shih
+1. :func:`kinfw.identification.identify_closed_form` on the paper's protocol (Shih
    et al. 1992, section 4.1: nine values per joint, 6 x 9 + 1 = 55 configurations, both
    plates): median and IQR over the repeats, and a per-step breakdown obtained by calling
    the module's public step functions in the order ``identify_closed_form`` calls them
@@ -40,10 +40,10 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-import pinocchio as pin  # noqa: E402
+import pinocchio as pin
 
-import identification.closed_form as cf  # noqa: E402
-from benchmarks.common import (  # noqa: E402
+import kinfw.identification._closed_form as cf
+from benchmarks.common import (
     Timings,
     format_table,
     gc_disabled,
@@ -54,16 +54,10 @@ from benchmarks.common import (  # noqa: E402
     time_interleaved,
     wall_time_line,
 )
-from identification.closed_form import one_joint_groups  # noqa: E402
-from kinfw.cpc import CPCModel, cpc_from_geometry, cpc_from_robot  # noqa: E402
-from kinfw.measurements import Measurements, check_against_robot  # noqa: E402
-from kinfw.robot import Robot, load_robot  # noqa: E402
-from verification.simulate import (  # noqa: E402
-    one_joint_at_a_time,
-    perturb_robot,
-    random_configurations,
-    simulate,
-)
+from kinfw.identification import one_joint_groups
+from kinfw.measurements import Measurements, check_against_robot
+from kinfw.model import CPCModel, Robot, cpc_from_geometry, cpc_from_robot, load_robot
+from kinfw.simulation import one_joint_at_a_time, perturb_robot, random_configurations, simulate
 
 HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
 FRAMES = ("left_plate", "right_plate")
@@ -98,7 +92,7 @@ def closed_form_by_steps(
 ) -> tuple[CPCModel, NDArray[np.float64]]:
     """``identify_closed_form(robot, measurements).model``, timing each step.
 
-    Calls the step functions of :mod:`identification.closed_form` in the order
+    Calls the step functions of :mod:`kinfw.identification` in the order
     ``identify_closed_form`` does. Returns the model and the seconds per step, shape
     ``(len(STEP_NAMES),)``.
     """
@@ -136,7 +130,7 @@ def time_steps(
         closed_form_by_steps(robot, datasets[0])
     except (AttributeError, TypeError, ValueError) as exc:
         print(
-            f"[per-step breakdown unavailable: identification.closed_form internals "
+            f"[per-step breakdown unavailable: kinfw.identification internals "
             f"changed ({type(exc).__name__}: {exc})]"
         )
         return None
@@ -246,9 +240,9 @@ def section_paper_protocol(nominal: Robot, case: Case, repeats: int) -> None:
             for a in ("b", "beta", "l", "sign", "tool_T")
         )
         print(
-            "Per-step times: identification.closed_form's steps collect_frame_data, "
+            "Per-step times: kinfw.identification's steps collect_frame_data, "
             "identify_axes,\nidentify_translations, geometry_at_zero and "
-            "kinfw.cpc.cpc_from_geometry called in identify_closed_form's order\n"
+            "kinfw.model.cpc_from_geometry called in identify_closed_form's order\n"
             "(identify_translations row includes the prismatic fix-up). Step-wise model == "
             "whole-call\nmodel (atol 1e-12): "
             f"{same}."

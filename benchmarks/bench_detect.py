@@ -9,7 +9,7 @@ and barrel distortion k1 = -0.25, k2 = 0.08, p1 = 0.001, p2 = -0.001) and each i
 level (Gaussian, sigma in grey levels of 0..255), N random poses: the board's centre
 0.35-1.0 m ahead, within the central 60 % of the field of view, tilted up to 45 degrees,
 turned by any angle about its normal. Images are rendered by
-``verification.board_images.render_board`` (3 x 3 supersampling).
+``kinfw.simulation.render_board`` (3 x 3 supersampling).
 
 Columns:
 
@@ -39,10 +39,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common import format_table, machine_info
 from scipy.spatial.transform import Rotation
 
-from kinfw.boards import Charuco, Chessboard
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.detect import Detector
-from verification.board_images import render_board, true_corners
+from kinfw.camera import CameraIntrinsics, Charuco, Chessboard, Detector
+from kinfw.simulation import render_board, true_corners
 
 CAMERAS = {
     "none": CameraIntrinsics(640, 480, 500.0, 500.0, 319.5, 239.5),

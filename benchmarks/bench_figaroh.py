@@ -14,14 +14,14 @@ by ``kinfw import-csv``, both in ``tests/data/tiago_figaroh/``), on the nominal
 
 1. k-fold cross-validation by sample, one split for both tools
    (``np.random.default_rng(seed).permutation(n)`` then ``np.array_split(., k)``, the
-   split of :func:`verification.crossval.crossvalidate`). Each row is trained on the
+   split of :func:`kinfw.verification.evaluation.crossvalidate`). Each row is trained on the
    training folds only and predicts the held-out fold with nothing refitted:
 
    - kinfw ``none`` (nominal joints; only what the URDF cannot know: the tracker frame
      and the marker offset) and ``frames`` (base and tool frames), ``offsets``, ``full``
-     (:func:`identification.pipeline.calibrate`, default Huber loss), and the default of
+     (:func:`kinfw.identification.calibrate`, default Huber loss), and the default of
      ``kinfw calibrate`` (``--params auto``): on each training fold,
-     :func:`verification.model_choice.choose_parameters` (its own inner
+     :func:`kinfw.verification.evaluation.choose_parameters` (its own inner
      cross-validation on that training fold only), then ``calibrate`` with the chosen set
      and prior; what each fold chose is printed;
    - FIGAROH ``BaseCalibration`` with its default estimation method (``structural``),
@@ -76,7 +76,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-from benchmarks.common import format_table, load_average, machine_info  # noqa: E402
+from benchmarks.common import format_table, load_average, machine_info
 
 DATA_DIR = REPO / "tests" / "data" / "tiago_figaroh"
 
@@ -290,10 +290,14 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     A fit that raises (a fold too small for it) is reported in the row's note, its
     held-out errors NaN (the row then prints no RMS).
     """
-    from identification.pipeline import calibrate
-    from identification.refine import Unknown
-    from verification.crossval import held_out_errors
-    from verification.model_choice import PRIOR_GRID_M, PRIOR_LEVERS_M, choose_parameters
+    from kinfw.identification import calibrate
+    from kinfw.identification.problem import Unknown
+    from kinfw.verification.evaluation import (
+        PRIOR_GRID_M,
+        PRIOR_LEVERS_M,
+        choose_parameters,
+        held_out_errors,
+    )
 
     def fit_predict(train, test, parameters, prior):
         result = calibrate(nominal, train, parameters=parameters, prior=prior)
@@ -395,8 +399,8 @@ def median(xs) -> float:
 
 def timing(urdf: Path, csv_json: Path, config: Path, robot, nominal, data, repeats: int) -> str:
     """Whole process (subprocesses) and fit alone (in process), medians and ratios."""
-    from identification.pipeline import calibrate
-    from verification.model_choice import choose_parameters
+    from kinfw.identification import calibrate
+    from kinfw.verification.evaluation import choose_parameters
 
     kinfw_exe = Path(sys.executable).with_name("kinfw")
     whole = {"kinfw": [], "figaroh": []}
@@ -503,7 +507,7 @@ def main(argv: list[str] | None = None) -> int:
     import pinocchio as pin
 
     from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
+    from kinfw.model import load_robot
     from tests.erd import urdf_path
 
     urdf = urdf_path(URDF_RELATIVE)

@@ -2,7 +2,7 @@
 the damped least squares of Pinocchio's inverse kinematics example, on the same residual.
 
 1. Fixation on the built-in IIS head, nominal and a perturbed head
-   (``verification.perturb.perturb_robot``, 2 mm / 0.5 deg per joint: a "calibrated-like"
+   (``kinfw.simulation.perturb_robot``, 2 mm / 0.5 deg per joint: a "calibrated-like"
    model). Seeded points in front of the head: directions within 25 deg of the mean
    optical axis at the middle configuration, from the cameras' midpoint; 90 % at
    0.5-3 m, 10 % at 3.8-4.2 m. Methods, each from the middle configuration:
@@ -21,7 +21,7 @@ the damped least squares of Pinocchio's inverse kinematics example, on the same 
    Error: the larger of the two cameras' angles between optical axis and point, by the
    model (deg); "fixated": both below 1e-6 rad. The nominal IIS head cannot fixate most
    points nearer than ~4 m exactly (its right camera sits 150 mm higher up the vergence
-   axis: a vertical disparity no joint removes; ``kinfw.control.gaze``): the error there
+   axis: a vertical disparity no joint removes; ``kinfw.control``): the error there
    is the closest achievable fixation's, and a method is judged by how close it gets.
 
 2. Reaching on the UR10 (example-robot-data, ``tool0``) and the 6R arm of
@@ -57,15 +57,22 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-import pinocchio as pin  # noqa: E402
+import pinocchio as pin
 
-from benchmarks.common import gc_disabled, machine_info, wall_time_line  # noqa: E402
-from kinfw.control.gaze import FIXATED_RAD, GazeSolver, _GazeResidual, fixate  # noqa: E402
-from kinfw.control.reach import REACHED_M, REACHED_RAD, reach  # noqa: E402
-from kinfw.control.solver import middle_configuration  # noqa: E402
-from kinfw.robot import Robot, load_robot  # noqa: E402
-from tests.robots import ARM_6R, HEAD_URDF  # noqa: E402
-from verification.perturb import perturb_robot  # noqa: E402
+from benchmarks.common import gc_disabled, machine_info, wall_time_line
+from kinfw.control import (
+    FIXATED_RAD,
+    REACHED_M,
+    REACHED_RAD,
+    GazeSolver,
+    fixate,
+    middle_configuration,
+    reach,
+)
+from kinfw.control._gaze import _GazeResidual
+from kinfw.model import Robot, load_robot
+from kinfw.simulation import perturb_robot
+from tests.robots import ARM_6R, HEAD_URDF
 
 #: The CLIK example's fixed damping and iteration cap; its steps dt.
 DAMP = 1e-6

@@ -58,19 +58,14 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
     sys.path.insert(0, str(REPO))
 
 
-from benchmarks import handeye_regimes as hr  # noqa: E402
-from benchmarks.common import (  # noqa: E402
+from benchmarks import handeye_regimes as hr
+from benchmarks.common import (
     format_table,
     machine_info,
     wall_time_line,
 )
-from identification.axb import solve_axyb  # noqa: E402
-from identification.handeye import solve_axxb  # noqa: E402
-from kinfw.transforms import (  # noqa: E402
-    inverse_transform,
-    rotation_angle,
-    transform_from_rotation_translation,
-)
+from kinfw.geometry import inverse_transform, rotation_angle, transform_from_rotation_translation
+from kinfw.identification.handeye import solve_axxb, solve_axyb
 
 TABB_JSON = REPO / "tests" / "data" / "tabb_ds1" / "tabb_ds1_pairs.json"  # README there
 TABB_A_KEY = "T_world2cam (A_i = cTw, from cali.txt)"
@@ -281,10 +276,10 @@ def solver_digests() -> list[tuple[str, str]]:
     """Short content hashes of the benchmarked modules (they may be uncommitted)."""
     out = []
     for rel in (
-        "identification/handeye.py",
-        "identification/axb.py",
-        "identification/axb_iteration.py",
-        "identification/axb_refinement.py",
+        "identification/handeye/_axxb.py",
+        "identification/handeye/_axyb.py",
+        "identification/handeye/_axyb_iteration.py",
+        "identification/handeye/_axyb_refinement.py",
     ):
         path = REPO / rel
         digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12] if path.exists() else "n/a"
@@ -679,7 +674,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.getLogger("identification").setLevel(logging.ERROR)
 
     started = time.perf_counter()
-    print("kinfw hand-eye benchmark: identification.handeye / identification.axb vs OpenCV")
+    print(
+        "kinfw hand-eye benchmark: solve_axxb / solve_axyb (kinfw.identification.handeye) vs OpenCV"
+    )
     print(
         machine_info(
             [("opencv", f"{cv2.__version__} (threads {cv2.getNumThreads()})")],

@@ -20,7 +20,7 @@ Data (``tests/data/``, each folder's README gives the source, licence and conven
   reference X and Y;
 * ETH ASL robot arm, real and simulated: the hand stream (50 Hz) interpolated at the
   camera stamps (every 8th / 5th camera pose as shipped) by
-  :func:`verification.streams.align_streams`, at fixed time offsets (``ETH_OFFSET_S``,
+  :func:`kinfw.measurements.align_streams`, at fixed time offsets (``ETH_OFFSET_S``,
   found by ``best_time_offset`` on master 6282c3d; fixed so that the pairs do not depend
   on the solvers benchmarked), metres;
 * OpenCV's ``regression_24871``: 4 exact eye-in-hand poses with a known X.
@@ -67,9 +67,9 @@ if str(REPO) not in sys.path:  # benchmark the code next to this script, install
     sys.path.insert(0, str(REPO))
 
 
-from benchmarks import handeye_regimes as hr  # noqa: E402
-from benchmarks.bench_handeye import git_head, silence_opencv_log, solver_digests  # noqa: E402
-from benchmarks.common import format_table, machine_info, wall_time_line  # noqa: E402
+from benchmarks import handeye_regimes as hr
+from benchmarks.bench_handeye import git_head, silence_opencv_log, solver_digests
+from benchmarks.common import format_table, machine_info, wall_time_line
 
 DATA = REPO / "tests" / "data"
 TABB_JSON = DATA / "tabb_ds1" / "tabb_ds1_pairs.json"
@@ -87,7 +87,7 @@ ETH_FILES = {
     ),
     "sim": ("sim/robot_arm_sim_hand.csv", "sim/robot_arm_sim_camera.csv"),
 }
-# Added to the hand stamps (verification.streams' sign); best_time_offset's answer on the
+# Added to the hand stamps (kinfw.measurements' sign); best_time_offset's answer on the
 # shipped streams at master 6282c3d (tests/data/eth_asl_robot_arm/README.md).
 ETH_OFFSET_S = {"real": 0.019, "sim": -0.001}
 FULL_SPLITS = 20
@@ -138,7 +138,7 @@ def load_tabb() -> Dataset:
 
 
 def load_eth(which: str) -> Dataset:
-    from verification.streams import align_streams, read_pose_csv
+    from kinfw.measurements import align_streams, read_pose_csv
 
     hand_csv, eye_csv = (_need(ETH / f) for f in ETH_FILES[which])
     t_hand, base_T_hand = read_pose_csv(hand_csv)
@@ -206,7 +206,7 @@ def _y_by_mean(solver: hr.Solver) -> Fit:
 
 
 def _kinfw_axyb(base_T_hand, camera_T_target):
-    from identification.axb import solve_axyb
+    from kinfw.identification.handeye import solve_axyb
 
     hand_T_base = hr.inv(base_T_hand)
 
@@ -528,7 +528,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.getLogger("verification").setLevel(logging.ERROR)
 
     started = time.perf_counter()
-    print("kinfw hand-eye on real data, held out: identification.handeye / .axb vs OpenCV")
+    print("kinfw hand-eye on real data, held out: kinfw.identification.handeye / .axb vs OpenCV")
     print(
         machine_info(
             [("opencv", f"{cv2.__version__} (threads {cv2.getNumThreads()})")],

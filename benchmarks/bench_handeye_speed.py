@@ -20,8 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import handeye_regimes as hr
 
-from identification.axb import solve_axyb
-from identification.handeye import solve_axxb
+from kinfw.identification.handeye import solve_axxb, solve_axyb
 
 
 def main() -> None:

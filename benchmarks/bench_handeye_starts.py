@@ -1,4 +1,4 @@
-"""Closed-form hand-eye starts (identification.handeye_starts) against OpenCV's same methods.
+"""Closed-form hand-eye starts (kinfw.identification.handeye) against OpenCV's same methods.
 
 Run from the repository root with the ``bench`` extra installed::
 
@@ -30,8 +30,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO), str(REPO / "tests")]
 
-import cv2  # noqa: E402
-from test_handeye_starts import ALL, AXYB_STARTS, _axyb, _errors, _opencv, _scene  # noqa: E402
+import cv2
+from test_handeye_starts import ALL, AXYB_STARTS, _axyb, _errors, _opencv, _scene
 
 
 def accuracy(trials: int, n: int, max_deg: float, seed: int) -> None:

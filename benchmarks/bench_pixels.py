@@ -14,16 +14,16 @@ Two experiments, each over N seeds (a new true robot, board views and noise per 
   pose where the whole board is in view; true robot 2 mm / 0.5 deg errors.
 
 Pixels: the exact projection plus Gaussian noise (sigma ``--sigma-px``, default 0.5 px),
-or with ``--images`` rendered images (``verification.board_images``, 2 grey levels of
+or with ``--images`` rendered images (``kinfw.simulation``, 2 grey levels of
 noise) and ``kinfw detect``'s corners (sigma: the detections' RMS error per coordinate).
 
-Both paths calibrate the same detections (``identification.pipeline.calibrate``, method
+Both paths calibrate the same detections (``kinfw.identification.calibrate``, method
 refine, linear loss, noise estimated): ``pixels`` on reprojection error, ``pnp`` on each
 image's PnP pose (``cv2.solvePnP`` + LM refinement) as ``target`` observations. Score:
 ``camera_T_target`` (the board in each camera) at 100 fresh configurations against the
 true robot, RMS position (mm) and rotation angle (deg), the RMS over the seeds
 (``sqrt(mean of the per-seed mean squares)``). ``CRLB``: the bound of the pixel path's
-held-out error at the known noise (``verification.pixel_study.crlb_held_out``), the same
+held-out error at the known noise (``kinfw.verification.studies.crlb_held_out``), the same
 RMS over seeds; ``px/CRLB`` the achieved pixel-path RMS over it.
 """
 
@@ -41,12 +41,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import format_table, machine_info
 
-from identification.pipeline import calibrate
-from kinfw.boards import Chessboard
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.robot import Robot, builtin_head_urdf, load_robot
-from tests.robots import ARM_6R
-from verification.pixel_study import (
+from kinfw.camera import CameraIntrinsics, Chessboard
+from kinfw.identification import calibrate
+from kinfw.model import Robot, builtin_head_urdf, load_robot
+from kinfw.verification.studies import (
     arm_experiment,
     crlb_held_out,
     head_experiment,
@@ -55,6 +53,7 @@ from verification.pixel_study import (
     rendered_detections,
     target_pose,
 )
+from tests.robots import ARM_6R
 
 BOARD = Chessboard(9, 6, 0.04)
 FLANGE_CAMERA = CameraIntrinsics(640, 480, 600.0, 600.0, 319.5, 239.5, name="flange")

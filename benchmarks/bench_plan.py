@@ -7,7 +7,7 @@ Three robots: the IIS head (stage 1, poses of both plates), UR10 (example-robot-
 ``tests/data/tiago_figaroh``). For each robot: one seeded pool of candidate
 configurations inside the centred 80 % of the joint ranges, one seeded test set, and
 the per-candidate Fisher information ``J_i^T J_i`` of kinfw's calibration problem
-(:func:`verification.plan_objective.candidate_information`). On that pool, at each N:
+(:func:`kinfw.identification.planning.candidate_information`). On that pool, at each N:
 
 - kinfw: greedy + Fedorov exchange minimising the predicted held-out position error;
 - random: N pool configurations (predicted: the root of the mean over 10 draws of the
@@ -22,9 +22,9 @@ the per-candidate Fisher information ``J_i^T J_i`` of kinfw's calibration proble
   > 1e-5 in decreasing weight order; at a fixed N its top N is what that ranking gives.
 
 Predicted = sqrt(trace(A M^-1)), the planner's objective (3D position RMS at the test
-configurations, mm). Simulated = calibrate (``identification.refine.refine``, reject
+configurations, mm). Simulated = calibrate (``kinfw.identification.refine``, reject
 off) from noisy simulated measurements of a perturbed "true" robot
-(``verification.perturb.perturb_robot``, a new truth per seed) at the design's
+(``kinfw.simulation.perturb_robot``, a new truth per seed) at the design's
 configurations, then the RMS 3D position error of the calibrated model against the truth
 at the test configurations; mean of the mean squares over 50 seeds (a new truth and
 noise each), root, mm.
@@ -51,7 +51,7 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-from benchmarks.common import format_table, load_average, machine_info  # noqa: E402
+from benchmarks.common import format_table, load_average, machine_info
 
 NOISE_M = 5e-4
 NOISE_RAD = float(np.radians(0.5))
@@ -92,8 +92,8 @@ def log(msg: str) -> None:
 
 
 def load_case(case: Case):
-    from kinfw.robot import load_robot
-    from verification.plan_objective import Setup
+    from kinfw.identification.planning import Setup
+    from kinfw.model import load_robot
 
     if case.urdf == "head":
         from tests.robots import HEAD_URDF
@@ -134,10 +134,10 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
     position error (m) of a calibration from noisy simulated data, and how many seeds
     gave a calibrated model that could not be evaluated (left out of the mean). ``designs`` maps a
     label to a function seed -> configurations."""
-    from identification.refine import NoiseModel, refine
-    from kinfw.robot import load_robot
-    from verification.perturb import perturb_robot
-    from verification.simulate import simulate
+    from kinfw.identification import refine
+    from kinfw.identification.problem import NoiseModel
+    from kinfw.model import load_robot
+    from kinfw.simulation import perturb_robot, simulate
 
     ms: dict[str, list[float]] = {k: [] for k in designs}
     failed: dict[str, int] = {}
@@ -179,14 +179,14 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
 
 
 def run_case(case: Case, ns, seeds, out, n_pool: int = POOL) -> None:
-    from verification.perturb import one_joint_at_a_time, random_configurations
-    from verification.plan_objective import (
+    from kinfw.identification.planning import (
         candidate_information,
         exchange,
         greedy,
         held_out,
         mean_square,
     )
+    from kinfw.simulation import one_joint_at_a_time, random_configurations
 
     robot, setup, names = load_case(case)
     lower, upper = robot.joint_limits(names)

@@ -1,4 +1,4 @@
-"""Speed of the joint nonlinear least squares (``identification.refine``) on the IIS-head.
+"""Speed of the joint nonlinear least squares (``kinfw.identification``) on the IIS-head.
 
 Run from the repository root::
 
@@ -11,7 +11,7 @@ Prints plain-text tables:
 1. Solvers on one problem (both stages of the head: 55 one-joint-at-a-time plate
    configurations + 30 camera views, noise 0.5 mm / 0.5 deg, noise model given), all
    started from the closed-form + hand-eye estimate on the same data:
-   kinfw's Levenberg-Marquardt (:func:`identification.refine.refine`, and its LM loop
+   kinfw's Levenberg-Marquardt (:func:`kinfw.identification.refine`, and its LM loop
    alone on the prebuilt problem), CasADi ``sqpmethod`` on ``f = 0.5 |r|^2`` with a
    Gauss-Newton ``hess_lag = J^T J`` (J by CasADi AD of the MX residual, J from the
    problem's own Jacobian functions, and the AD variant expanded to SX), and ipopt with
@@ -20,7 +20,7 @@ Prints plain-text tables:
    of each solve to the LM loop measured in the same repeats, and the held-out position
    RMS of each result against the true robot.
 2. The whole head calibration, stage by stage in the order of
-   :func:`identification.pipeline.calibrate` (closed form, export, hand-eye per camera,
+   :func:`kinfw.identification.calibrate` (closed form, export, hand-eye per camera,
    refine split into problem build / LM iterations / the rest, export).
 3. Scaling of ``refine`` with the number of samples (random configurations, both plates
    and both cameras observed in every sample, start = nominal slightly perturbed, no
@@ -52,11 +52,11 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-import casadi as ca  # noqa: E402
-import pinocchio as pin  # noqa: E402
+import casadi as ca
+import pinocchio as pin
 
-import identification.refine as rf  # noqa: E402
-from benchmarks.common import (  # noqa: E402
+import kinfw.identification._refine as rf
+from benchmarks.common import (
     format_table,
     gc_disabled,
     machine_info,
@@ -66,33 +66,31 @@ from benchmarks.common import (  # noqa: E402
     time_interleaved,
     wall_time_line,
 )
-from identification.cameras import CamerasResult, calibrate_cameras  # noqa: E402
-from identification.closed_form import identify_closed_form  # noqa: E402
-from identification.pipeline import calibrate  # noqa: E402
-from identification.problem import (  # noqa: E402
+from kinfw.geometry import average_transform
+from kinfw.identification import calibrate, identify_closed_form, refine
+from kinfw.identification.handeye import CamerasResult, calibrate_cameras
+from kinfw.identification.problem import (
+    NoiseModel,
+    build_problem,
     estimate_unknowns,
     levenberg_marquardt,
     thresholds,
 )
-from identification.refine import NoiseModel, build_problem, refine  # noqa: E402
-from kinfw.blocks import BlockKey  # noqa: E402
-from kinfw.cpc import cpc_from_robot, geometry_from_cpc  # noqa: E402
-from kinfw.measurements import (  # noqa: E402
+from kinfw.measurements import (
     Measurements,
     check_against_robot,
     check_joint_motion,
     concatenate_measurements,
 )
-from kinfw.robot import Robot, load_robot  # noqa: E402
-from kinfw.transforms import average_transform  # noqa: E402
-from kinfw.urdf_export import edit_urdf, export_urdf  # noqa: E402
-from verification.simulate import (  # noqa: E402
+from kinfw.model import BlockKey, Robot, cpc_from_robot, geometry_from_cpc, load_robot
+from kinfw.simulation import (
     default_target_pose,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
     simulate,
 )
+from kinfw.urdf import edit_urdf, export_urdf
 
 HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")

@@ -68,11 +68,12 @@ def environment(tree: Path) -> dict[str, str]:
 
 
 def imported_files(env: dict[str, str], cwd: Path) -> str:
-    """Where ``kinfw.cli``, the built-in URDF, ``identification.refine`` and
-    ``verification.crossval`` come from."""
+    """Where ``kinfw.cli``, the built-in URDF, ``kinfw.identification`` and
+    ``kinfw.verification.evaluation`` come from."""
     code = (
-        "import kinfw.cli, kinfw.robot as k, identification.refine as r, "
-        "verification.crossval as c; print(kinfw.cli.__file__, k.builtin_head_urdf(), "
+        "import kinfw.cli, kinfw.model as k, kinfw.identification as r, "
+        "kinfw.verification.evaluation as c; "
+        "print(kinfw.cli._main.__file__, k.builtin_head_urdf(), "
         "r.__file__, c.__file__)"
     )
     return subprocess.run(

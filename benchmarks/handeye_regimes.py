@@ -187,13 +187,13 @@ class Solver:
 
 
 def _kinfw_axxb(base_T_hand, camera_T_target):
-    from identification.handeye import solve_axxb
+    from kinfw.identification.handeye import solve_axxb
 
     return lambda: solve_axxb(base_T_hand, camera_T_target).hand_T_camera
 
 
 def _kinfw_axyb(base_T_hand, camera_T_target):
-    from identification.axb import solve_axyb
+    from kinfw.identification.handeye import solve_axyb
 
     hand_T_base = inv(base_T_hand)
     return lambda: inv(solve_axyb(camera_T_target, hand_T_base).camera_T_hand)
@@ -259,8 +259,7 @@ SOLVERS = (
 
 def kinfw_errors() -> tuple[type[BaseException], ...]:
     """The solvers' documented refusals (counted as raises, like any other exception)."""
-    from identification.axb_iteration import AXYBError
-    from identification.handeye import HandEyeError
+    from kinfw.identification.handeye import AXYBError, HandEyeError
 
     return HandEyeError, AXYBError
 

@@ -6,7 +6,7 @@ Run from the repository root (needs example-robot-data, a test dependency)::
     python benchmarks/study_model_choice.py --trials 2   # a quick look
 
 Five regimes modelled on the real datasets of issue 12, each a "true" robot perturbed
-from the nominal URDF (:func:`verification.simulate.perturb_robot`: origin translations
+from the nominal URDF (:func:`kinfw.simulation.perturb_robot`: origin translations
 and rotations, axis tilts) and measured with noise:
 
 - ``A``: TIAGo torso + arm, one mocap marker of unknown offset in an unknown frame, small
@@ -44,15 +44,15 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # study the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-from benchmarks.common import format_table, machine_info  # noqa: E402
-from identification.pipeline import calibrate  # noqa: E402
-from identification.refine import Unknown  # noqa: E402
-from kinfw.measurements import Measurements  # noqa: E402
-from kinfw.robot import Robot, load_robot  # noqa: E402
-from kinfw.transforms import matrix_from_rotation_vector  # noqa: E402
-from tests.erd import urdf_path  # noqa: E402
-from verification.crossval import crossvalidate, held_out_errors  # noqa: E402
-from verification.simulate import perturb_robot, random_configurations, simulate  # noqa: E402
+from benchmarks.common import format_table, machine_info
+from kinfw.geometry import matrix_from_rotation_vector
+from kinfw.identification import calibrate
+from kinfw.identification.problem import Unknown
+from kinfw.measurements import Measurements
+from kinfw.model import Robot, load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.verification.evaluation import crossvalidate, held_out_errors
+from tests.erd import urdf_path
 
 #: (URDF in example-robot-data, observed frame, "marker" or "camera")
 ROBOTS = {

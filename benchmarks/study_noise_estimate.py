@@ -8,10 +8,10 @@ Run from the repository root::
 Data as ``kinfw demo``: the IIS-head with 5 mm / 1 deg errors, stage 1 plates one joint
 at a time (9 values per joint), stage 2 both cameras on a fixed target in 30 random
 configurations, noise 0.5 mm per position component and a rotation by an angle
-N(0, 0.5 deg) about a uniformly random axis (:func:`verification.simulate.perturb_poses`),
+N(0, 0.5 deg) about a uniformly random axis (:func:`kinfw.simulation.perturb_poses`),
 so the true orientation sigma per component is 0.5 / sqrt(3) = 0.289 deg. With
 ``--outliers f`` a fraction ``f`` of the pose and target observations is moved by 20 mm
-and turned by 10 deg (:func:`verification.outliers.plant_outliers`). ``refine`` starts from
+and turned by 10 deg (:func:`kinfw.simulation.plant_outliers`). ``refine`` starts from
 the nominal and estimates the noise (no ``noise`` given), once per loss.
 
 Prints, per loss, the estimated sigmas averaged over the seeds, their ratio to the truth
@@ -31,15 +31,16 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:  # study the code next to this script, installed or not
     sys.path.insert(0, str(REPO))
 
-from benchmarks.common import format_table  # noqa: E402
-from identification.refine import LOSSES, refine  # noqa: E402
-from kinfw.measurements import Measurements, concatenate_measurements  # noqa: E402
-from kinfw.robot import Robot, builtin_head_urdf, load_robot  # noqa: E402
-from verification.outliers import plant_outliers  # noqa: E402
-from verification.simulate import (  # noqa: E402
+from benchmarks.common import format_table
+from kinfw.identification import refine
+from kinfw.identification.problem import LOSSES
+from kinfw.measurements import Measurements, concatenate_measurements
+from kinfw.model import Robot, builtin_head_urdf, load_robot
+from kinfw.simulation import (
     default_target_pose,
     one_joint_at_a_time,
     perturb_robot,
+    plant_outliers,
     random_configurations,
     simulate,
 )

@@ -1,9 +1,9 @@
 """kinfw: calibrate robot kinematics from measurements.
 
-The kinematics framework: a URDF robot in Pinocchio (:mod:`kinfw.robot`), rigid
-transforms (:mod:`kinfw.transforms`), the tree CPC model (:mod:`kinfw.cpc`, CasADi version
-in :mod:`kinfw.cpc_casadi`), measurement files (:mod:`kinfw.measurements`) and exact
-calibrated-URDF export (:mod:`kinfw.urdf_export`). Estimators live in ``identification``,
+The kinematics framework: a URDF robot in Pinocchio (:mod:`kinfw.model`), rigid
+transforms (:mod:`kinfw.geometry`), the tree CPC model (:mod:`kinfw.model`, CasADi version
+in :mod:`kinfw.model`), measurement files (:mod:`kinfw.measurements`) and exact
+calibrated-URDF export (:mod:`kinfw.urdf`). Estimators live in ``identification``,
 checks in ``verification``; ``kinfw.cli`` wires them together.
 
 ``import kinfw`` loads neither CasADi nor meshcat; the names below are imported on
@@ -16,55 +16,56 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from kinfw.cpc import CPCModel, ZeroGeometry, cpc_from_robot, geometry_from_cpc
-    from kinfw.measurements import (
-        DatasetError,
-        Measurements,
-        PointObservations,
-        PoseObservations,
-        TargetObservations,
-        read_measurements,
-        write_measurements,
-    )
-    from kinfw.robot import (
+    from kinfw.measurements import Measurements, read_measurements, write_measurements
+    from kinfw.model import (
+        CPCModel,
         Robot,
         RobotModelError,
         UnknownFrameError,
+        ZeroGeometry,
         builtin_head_urdf,
+        cpc_from_robot,
+        geometry_from_cpc,
         load_robot,
     )
-    from kinfw.urdf_export import ExportError, export_urdf, write_urdf
+    from kinfw.observations import (
+        DatasetError,
+        PointObservations,
+        PoseObservations,
+        TargetObservations,
+    )
+    from kinfw.urdf import ExportError, export_urdf, write_urdf
 
 #: Where each public name lives. They are imported on first use (PEP 562), so that
 #: ``import kinfw.cli`` (which runs this file) loads neither numpy nor Pinocchio and
 #: ``kinfw --help`` starts at once.
 _HOME = {
-    "CPCModel": "cpc",
-    "ZeroGeometry": "cpc",
-    "cpc_from_robot": "cpc",
-    "geometry_from_cpc": "cpc",
-    "DatasetError": "measurements",
+    "CPCModel": "model",
+    "ZeroGeometry": "model",
+    "cpc_from_robot": "model",
+    "geometry_from_cpc": "model",
+    "DatasetError": "observations",
     "Measurements": "measurements",
-    "PointObservations": "measurements",
-    "PoseObservations": "measurements",
-    "TargetObservations": "measurements",
+    "PointObservations": "observations",
+    "PoseObservations": "observations",
+    "TargetObservations": "observations",
     "read_measurements": "measurements",
     "write_measurements": "measurements",
-    "Robot": "robot",
-    "RobotModelError": "robot",
-    "UnknownFrameError": "robot",
-    "builtin_head_urdf": "robot",
-    "load_robot": "robot",
-    "ExportError": "urdf_export",
-    "export_urdf": "urdf_export",
-    "write_urdf": "urdf_export",
+    "Robot": "model",
+    "RobotModelError": "model",
+    "UnknownFrameError": "model",
+    "builtin_head_urdf": "model",
+    "load_robot": "model",
+    "ExportError": "urdf",
+    "export_urdf": "urdf",
+    "write_urdf": "urdf",
 }
 
-_SUBMODULES = ("cpc", "measurements", "robot", "transforms", "urdf_export")
+_SUBMODULES = ("geometry", "measurements", "model", "urdf")
 
 
 def __getattr__(name: str) -> Any:
-    if name in _SUBMODULES:  # ``import kinfw; kinfw.robot`` as before the lazy loading
+    if name in _SUBMODULES:  # ``import kinfw; kinfw.model`` as before the lazy loading
         return importlib.import_module(f"kinfw.{name}")
     home = _HOME.get(name)
     if home is None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from hypothesis import settings
 
-from kinfw.robot import Robot, load_robot
+from kinfw.model import Robot, load_robot
 from tests.robots import HEAD_URDF
 
 settings.register_profile("kinfw", derandomize=True, deadline=None)

@@ -1,5 +1,5 @@
 """SE(3) helpers for the hand-eye tests, computed with Pinocchio (independent of
-:mod:`kinfw.transforms`, which the solvers use)."""
+:mod:`kinfw.geometry`, which the solvers use)."""
 
 from __future__ import annotations
 

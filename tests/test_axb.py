@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from identification.axb import AXYBError, solve_axyb
+from kinfw.identification.handeye import AXYBError, solve_axyb
 
 TABB = Path(__file__).resolve().parent / "data" / "tabb_ds1" / "tabb_ds1_pairs.json"
 
@@ -294,7 +294,7 @@ def test_weak_motion_is_warned_about(caplog):
             for a, t in zip(rng.uniform(-2.0, 2.0, 8), tilts, strict=True)
         ]
     )
-    with caplog.at_level(logging.WARNING, logger="identification.axb"):
+    with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
         result = solve_axyb(X @ B @ Y, B)
     assert "weak motion" in caplog.text
     np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)  # noise-free: exact
@@ -316,7 +316,7 @@ def test_two_starting_guesses_are_an_error():
 def test_running_out_of_iterations_is_reported_not_raised(caplog):
     _, Y, B, A = _problem(seed=10, n=5, rotation_noise_deg=1.0)
     Y0 = pin.SE3(pin.exp3(np.array([0.1, 0.1, 0.0])) @ Y[:3, :3], np.zeros(3)).homogeneous
-    with caplog.at_level(logging.WARNING, logger="identification.axb"):
+    with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
         result = solve_axyb(A, B, Y0=Y0, refine=False, max_iterations=3)
     assert not result.converged and result.iterations == 6
     assert "did not converge within 3 iterations" in caplog.text
@@ -367,7 +367,7 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     # the paper's algorithm alone: factor 0.993 per iteration, so 1000 iterations stop
     # short (reported, not raised), yet within the acceptance; its rotations ignore what
     # the translations say, so it stays 0.54 deg from the maximum-likelihood X
-    with caplog.at_level(logging.WARNING, logger="identification.axb"):
+    with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
         paper = solve_axyb(A, B, refine=False)
     assert not paper.converged and "did not converge" in caplog.text
     x_rot, x_t = _errors(paper.camera_T_hand, cam_T_gripper)

@@ -10,16 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinfw.calibration_file import (
+from kinfw.reports import (
     CalibratedUnknown,
     CalibrationFileError,
+    CalibrationReport,
     CalibrationSidecar,
+    read_report,
     read_sidecar,
+    write_report,
     write_sidecar,
 )
-from kinfw.calibration_report import CalibrationReport, read_report, write_report
+from kinfw.verification.evaluation import known_frames
 from kinfw.view import targets_from_sidecar
-from verification.accuracy import known_frames
 
 LEGACY = Path(__file__).resolve().parent / "data" / "calibration_v1"
 SIDECAR = LEGACY / "calibrated.kinfw.json"
@@ -178,14 +180,14 @@ def test_a_bad_report_names_the_file_and_the_key(tmp_path):
 
 
 def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
-    from kinfw.cli import main
+    from kinfw.cli._main import main
 
     bad = tmp_path / "c.kinfw.json"
     bad.write_text(json.dumps({"format": "kinfw-calibration", "version": 1}))
     head = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
     from kinfw.measurements import write_measurements
-    from kinfw.robot import load_robot
-    from verification.simulate import random_configurations, simulate
+    from kinfw.model import load_robot
+    from kinfw.simulation import random_configurations, simulate
 
     robot = load_robot(head)
     names = robot.topology(("left_plate",)).joint_names

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from kinfw.camera_model import (
+from kinfw.camera import (
     PARAMETER_NAMES,
     CameraError,
     CameraIntrinsics,

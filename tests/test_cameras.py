@@ -5,20 +5,21 @@ import warnings
 import numpy as np
 import pytest
 
-from identification.cameras import calibrate_cameras, camera_mount
-from identification.pipeline import calibrate
-from kinfw.measurements import DatasetError, concatenate_measurements
-from kinfw.robot import load_robot
-from kinfw.urdf_export import edit_urdf
-from tests.robots import HEAD_URDF as HEAD
-from verification.crosscheck import pose_discrepancy, random_joint_values
-from verification.simulate import (
+from kinfw.identification import calibrate
+from kinfw.identification.handeye import calibrate_cameras, camera_mount
+from kinfw.measurements import concatenate_measurements
+from kinfw.model import load_robot
+from kinfw.observations import DatasetError
+from kinfw.simulation import (
     default_target_pose,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
     simulate,
 )
+from kinfw.urdf import edit_urdf
+from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
+from tests.robots import HEAD_URDF as HEAD
 
 CAMERAS = ("left_camera", "right_camera")
 

@@ -3,13 +3,14 @@
 import casadi as ca
 import numpy as np
 
-from kinfw.chart import (
+from kinfw.geometry import (
     cayley_rotation,
     chart_from_rigid,
+    matrix_from_rotation_vector,
     rigid_from_chart,
     rigid_from_chart_casadi,
+    transform_from_rotation_translation,
 )
-from kinfw.transforms import matrix_from_rotation_vector, transform_from_rotation_translation
 
 
 def _start(rng):

@@ -10,7 +10,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.cli import main
+from kinfw.cli._main import main
 from kinfw.measurements import read_measurements
 from tests.robots import ARM_6R
 

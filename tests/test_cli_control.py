@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import umsgpack
 
-from kinfw.camera_model import read_camera
-from kinfw.cli import main
-from kinfw.robot import load_robot
+from kinfw.camera import read_camera
+from kinfw.cli._main import main
+from kinfw.model import load_robot
 from tests.robots import ARM_6R, HEAD_URDF
 
 # A point the left camera of the IIS head can fixate (about 1 m in front of it).
@@ -209,7 +209,7 @@ def arm_target(arm_urdf):
 
 
 def test_reach_pose_reaches_the_target_by_fk(arm_target, arm_urdf, capsys):
-    from kinfw.transforms import xyz_quat_xyzw_from_transform
+    from kinfw.geometry import xyz_quat_xyzw_from_transform
 
     arm, root_T_target = arm_target
     xyz, quat = xyz_quat_xyzw_from_transform(root_T_target)
@@ -276,7 +276,7 @@ L6_BOX = (
 def test_reach_html_draws_the_target_pose_and_the_frame_where_fk_puts_it(
     arm_target, tmp_path, capsys
 ):
-    from kinfw.transforms import xyz_quat_xyzw_from_transform
+    from kinfw.geometry import xyz_quat_xyzw_from_transform
 
     arm, root_T_target = arm_target
     arm_urdf = tmp_path / "arm_box.urdf"

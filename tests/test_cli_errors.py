@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from kinfw.cli import main
+from kinfw.cli._main import main
 from kinfw.files import (
     OutputPathError,
     atomic_path,
@@ -198,11 +198,11 @@ SIM = ["simulate", "--urdf", "head.urdf"]
 def test_bad_output_fails_before_any_work_and_changes_no_file(
     argv, message, workdir, capsys, monkeypatch
 ):
-    import identification.pipeline
-    import verification.simulate
+    import kinfw.identification._pipeline
+    import kinfw.simulation._simulate
 
-    monkeypatch.setattr(identification.pipeline, "calibrate", _no_solving)
-    monkeypatch.setattr(verification.simulate, "simulate", _no_solving)
+    monkeypatch.setattr(kinfw.identification._pipeline, "calibrate", _no_solving)
+    monkeypatch.setattr(kinfw.simulation._simulate, "simulate", _no_solving)
     before = _snapshot(workdir)
     code, out, err = _run(argv, capsys)
     assert code == 2
@@ -381,7 +381,7 @@ MISSING_PARENT = """<robot name="r">
     ],
 )
 def test_a_urdf_with_an_undeclared_link_names_the_joint_and_the_link(xml, message):
-    from kinfw.robot import RobotModelError, load_robot
+    from kinfw.model import RobotModelError, load_robot
 
     with pytest.raises(RobotModelError, match=message):
         load_robot(xml)
@@ -403,7 +403,7 @@ def test_a_missing_parent_link_is_one_line_and_urdfdom_prints_nothing(tmp_path, 
 def test_urdfdom_errors_become_the_message_not_stderr_lines(capfd):
     """A URDF that only urdfdom refuses (a revolute joint without limits): its reason is
     in the one error, nothing else reaches the terminal."""
-    from kinfw.robot import RobotModelError, load_robot
+    from kinfw.model import RobotModelError, load_robot
 
     xml = MISSING_PARENT.replace('"bse"', '"base"').replace(
         '<limit lower="-1" upper="1" effort="1" velocity="1"/>', ""
@@ -453,7 +453,7 @@ def test_the_joint_limit_warning_is_attributed_to_one_place(simulated, tmp_path)
     """Every pipeline stage checks the data from its own line: Python's default filter
     must still show the warning once (it keys on text and place)."""
     from kinfw.measurements import check_against_robot, read_measurements
-    from kinfw.robot import load_robot
+    from kinfw.model import load_robot
 
     robot = load_robot(_narrow_pan(tmp_path))
     data = read_measurements(simulated / "d.json")
@@ -497,7 +497,7 @@ def test_warnings_and_logged_warnings_are_printed_once_each(capsys):
     DeprecationWarning (pyzmq under meshcat) is not the user's and is not shown."""
     import logging
 
-    from kinfw.cli import _warnings_printed_once
+    from kinfw.cli._main import _warnings_printed_once
 
     with _warnings_printed_once("demo", verbose=False):
         for _ in range(2):

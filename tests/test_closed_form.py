@@ -5,15 +5,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.closed_form import ProtocolError, identify_closed_form, one_joint_groups
-from kinfw.cpc import cpc_from_robot
+from kinfw.identification import ProtocolError, identify_closed_form, one_joint_groups
 from kinfw.measurements import Measurements
-from kinfw.robot import load_robot
-from kinfw.urdf_export import export_urdf
+from kinfw.model import cpc_from_robot, load_robot
+from kinfw.simulation import one_joint_at_a_time, perturb_robot, simulate
+from kinfw.urdf import export_urdf
+from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.robots import ARM_6R, PRISMATIC_TREE
 from tests.robots import HEAD_URDF as HEAD
-from verification.crosscheck import pose_discrepancy, random_joint_values
-from verification.simulate import one_joint_at_a_time, perturb_robot, simulate
 
 CASES = [
     pytest.param(HEAD, ("left_plate", "right_plate"), id="iis-head"),

@@ -5,16 +5,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinfw.cpc import (
+from kinfw.geometry import rotation_angle, rotation_vector_from_matrix
+from kinfw.model import (
+    cpc_fk_function,
     cpc_from_geometry,
     cpc_from_robot,
     geometry_from_cpc,
     geometry_from_robot,
+    load_robot,
     rotation_from_axis,
 )
-from kinfw.cpc_casadi import cpc_fk_function
-from kinfw.robot import load_robot
-from kinfw.transforms import rotation_angle, rotation_vector_from_matrix
 from tests.robots import ARM_6R, PRISMATIC_TREE
 from tests.robots import HEAD_URDF as HEAD
 

@@ -1,5 +1,5 @@
-"""Tests of the Cramér-Rao bound (verification.crlb), the CRLB study and the robustness
-study (verification.crlb_study, verification.robust, verification.head_studies)."""
+"""Tests of the Cramér-Rao bound (kinfw.verification.evaluation), the CRLB study and the robustness
+study (kinfw.verification.studies, kinfw.verification.studies, kinfw.verification.studies)."""
 
 from __future__ import annotations
 
@@ -8,31 +8,36 @@ import json
 import numpy as np
 import pytest
 
-from identification.refine import NoiseModel, build_problem
-from kinfw.cpc import cpc_from_robot
+from kinfw.geometry import matrix_from_rotation_vector, rotation_angle
+from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import concatenate_measurements
-from kinfw.robot import load_robot
-from kinfw.transforms import matrix_from_rotation_vector, rotation_angle
-from tests.robots import HEAD_URDF as IIS_HEAD
-from verification.crlb import (
+from kinfw.model import cpc_from_robot, load_robot
+from kinfw.simulation import (
+    default_target_pose,
+    one_joint_at_a_time,
+    perturb_robot,
+    plant_outliers,
+    random_configurations,
+    simulate,
+)
+from kinfw.verification.evaluation import (
     cramer_rao,
     position_jacobians,
     predicted_position_rms,
     true_chart_coordinates,
 )
-from verification.crlb_study import CRLBStudy, crlb_study
-from verification.head_studies import main
-from verification.head_study_plots import plot_crlb, plot_robustness
-from verification.head_study_tables import format_crlb, format_robustness
-from verification.outliers import plant_outliers
-from verification.robust import RobustStudy, robustness_study
-from verification.simulate import (
-    default_target_pose,
-    one_joint_at_a_time,
-    perturb_robot,
-    random_configurations,
-    simulate,
+from kinfw.verification.studies import (
+    CRLBStudy,
+    RobustStudy,
+    crlb_study,
+    format_crlb,
+    format_robustness,
+    plot_crlb,
+    plot_robustness,
+    robustness_study,
 )
+from kinfw.verification.studies import head_studies_main as main
+from tests.robots import HEAD_URDF as IIS_HEAD
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")

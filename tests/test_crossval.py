@@ -5,13 +5,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.pipeline import calibrate
-from kinfw.cpc import cpc_from_robot
-from kinfw.robot import load_robot
+from kinfw.identification import calibrate
+from kinfw.model import cpc_from_robot, load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.verification.evaluation import crossvalidate
+from kinfw.verification.reporting import calibration_report
 from tests.robots import HEAD_URDF as HEAD
-from verification.crossval import crossvalidate
-from verification.report import calibration_report
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 PLATES = ("left_plate", "right_plate")
 
@@ -110,7 +109,7 @@ def test_parameter_masks_by_joint_and_field(head):
         )
     )
     data = _data(truth, 40, 8)
-    from identification.refine import refine
+    from kinfw.identification import refine
 
     masked = refine(nominal, data, parameters=("pan", "tilt:l_x"))
     free = {
@@ -219,7 +218,8 @@ def _held_out_error_m(model, truth):
 
 
 def test_cached_functions_fit_like_fresh_ones_and_recover_the_truth():
-    from identification.refine import NoiseModel, clear_function_cache, refine
+    from kinfw.identification import refine
+    from kinfw.identification.problem import NoiseModel, clear_function_cache
 
     nominal, truth, data = _noise_free_case()
     # a start that is neither the nominal nor the truth: its numbers must reach the
@@ -242,8 +242,8 @@ def test_cached_functions_fit_like_fresh_ones_and_recover_the_truth():
 
 
 def test_the_function_cache_is_keyed_by_structure_and_bounded(monkeypatch):
-    import identification.problem.functions as functions_module
-    from identification.refine import NoiseModel, build_problem, clear_function_cache
+    import kinfw.identification.problem._functions as functions_module
+    from kinfw.identification.problem import NoiseModel, build_problem, clear_function_cache
 
     nominal, _, data = _noise_free_case()
     noise = NoiseModel(1e-3, 1e-2)
@@ -266,7 +266,7 @@ def test_the_function_cache_is_keyed_by_structure_and_bounded(monkeypatch):
 
 
 def test_free_column_jacobian_equals_the_full_one():
-    from identification.refine import NoiseModel, build_problem
+    from kinfw.identification.problem import NoiseModel, build_problem
 
     nominal, _, data = _noise_free_case()
     noise = NoiseModel(1e-3, 1e-2)
@@ -327,7 +327,7 @@ def test_exclude_flagged_leaves_the_rejected_observation_out_of_scoring(head):
 def test_selection_weighs_position_and_orientation_by_the_noise():
     """By hand: 'offsets' is 10 % better in position but 0.2 deg worse in orientation on
     0.1 deg noise; whitened, 'full' wins (position alone would pick 'offsets')."""
-    from verification.crossval import CrossValidation, FoldScore
+    from kinfw.verification.evaluation import CrossValidation, FoldScore
 
     def score(fold, p, mm, deg):
         return FoldScore(fold, p, 30, 10, mm, deg, 0, mm, 10.0, 20, 300)
@@ -346,7 +346,8 @@ def test_selection_weighs_position_and_orientation_by_the_noise():
 
 
 def test_the_outlier_advice_names_huber_only_when_it_is_not_in_use():
-    from verification.crossval import FoldScore, _warnings
+    from kinfw.verification.evaluation import FoldScore
+    from kinfw.verification.evaluation._crossval import _warnings
 
     scores = [
         FoldScore(0, "frames", 30, 10, 1.0, 0.1, 3, 2.0, 10.0, 12, 300),

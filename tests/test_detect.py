@@ -2,7 +2,7 @@
 projection of the board's corners, the symmetric-board ambiguity, the joints CSV and the
 command end to end.
 
-Truth: the images are rendered by verification.board_images from a known camera (with
+Truth: the images are rendered by kinfw.simulation from a known camera (with
 distortion) and a known camera_T_board; the true corner pixels are
 CameraIntrinsics.project(camera_T_board @ board.points) (tested against cv2.projectPoints
 in test_camera_model.py). "RMS error" below is the root mean square over the corners of
@@ -17,13 +17,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from kinfw.boards import BoardError, Charuco, Chessboard, parse_board
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.cli import main
-from kinfw.cli_detect import read_joint_rows
-from kinfw.detect import Detector
+from kinfw.camera import BoardError, CameraIntrinsics, Charuco, Chessboard, Detector, parse_board
+from kinfw.cli._detect import read_joint_rows
+from kinfw.cli._main import main
 from kinfw.measurements import measurements_to_dict, read_measurements
-from verification.board_images import render_board, true_corners
+from kinfw.simulation import render_board, true_corners
 
 CAMERA = CameraIntrinsics(
     480, 360, 400.0, 404.0, 241.3, 178.9, k1=-0.18, k2=0.04, p1=0.0008, p2=-0.0005, k3=0.0,
@@ -169,7 +167,7 @@ def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
     and OpenCV's findChessboardCornersSB returns a 9x6 grid shifted by one square (its
     corner 0 ~40 px from the true one): the squares around the grid are checked and the
     image is reported not found instead of numbered wrongly."""
-    import kinfw.detect as kd
+    import kinfw.camera._detect as kd
 
     camera = CameraIntrinsics(
         640, 480, 500.0, 500.0, 322.0, 237.0, k1=-0.25, k2=0.08, p1=0.001, p2=-0.001

@@ -4,7 +4,7 @@ Truths: the CSV itself read independently (``numpy.loadtxt``: rows, joint values
 marker positions equal to the file's, bit for bit); Pinocchio's own ``rpyToMatrix`` for
 FIGAROH's ``phix, phiy, phiz``; and the nominal TIAGo's forward kinematics (Pinocchio),
 which must explain the real Vicon marker up to one rigid transform (tracker frame) and one
-marker offset, fitted here by alternating :func:`kinfw.registration.register_points` and a
+marker offset, fitted here by alternating :func:`kinfw.geometry.register_points` and a
 linear least squares for the offset -- at the centimetre level a real uncalibrated TIAGo
 shows, not the metres a wrong joint column, unit or frame would give.
 """
@@ -17,16 +17,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.cli import main
-from kinfw.figaroh_csv import matrix_from_figaroh_rpy, measurements_from_figaroh_csv
-from kinfw.measurements import DatasetError, read_measurements
-from kinfw.registration import register_points
-from kinfw.robot import load_robot
-from kinfw.transforms import (
-    average_transform,
-    inverse_transform,
-    rotation_angle,
+from kinfw.cli._main import main
+from kinfw.geometry import average_transform, inverse_transform, register_points, rotation_angle
+from kinfw.measurements import (
+    matrix_from_figaroh_rpy,
+    measurements_from_figaroh_csv,
+    read_measurements,
 )
+from kinfw.model import load_robot
+from kinfw.observations import DatasetError
 from tests.erd import urdf_path
 
 DATA = Path(__file__).parent / "data" / "tiago_figaroh"
@@ -257,12 +256,12 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
     """``--target board``: the 6D columns are the board's pose in a camera on the flange
     (mount and board unknown). Noise-free data of a perturbed 6R arm: calibrated, the
     board's pose in the camera at new configurations is the truth's (Pinocchio) to 1e-8."""
-    from identification.pipeline import calibrate
-    from identification.problem.problem import Unknown
-    from kinfw.transforms import matrix_from_rotation_vector
+    from kinfw.geometry import matrix_from_rotation_vector
+    from kinfw.identification import calibrate
+    from kinfw.identification.problem import Unknown
+    from kinfw.simulation import perturb_robot, random_configurations
+    from kinfw.verification.evaluation import held_out_errors
     from tests.robots import ARM_6R
-    from verification.crossval import held_out_errors
-    from verification.simulate import perturb_robot, random_configurations
 
     nominal = load_robot(ARM_6R)
     truth = load_robot(perturb_robot(nominal, np.random.default_rng(5)))

@@ -1,5 +1,5 @@
 """After the fit: residuals that follow the joint values are warned about, with the joint
-and frame named; clean data gives no warning (identification.fit_checks)."""
+and frame named; clean data gives no warning (kinfw.identification.checks)."""
 
 import warnings
 from dataclasses import replace
@@ -7,13 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.fit_checks import fit_warnings, residual_structure
-from identification.pipeline import calibrate
-from identification.refine import NoiseModel, refine
-from identification.units import UnitError
-from kinfw.robot import load_robot
+from kinfw.identification import calibrate, refine
+from kinfw.identification.checks import UnitError, fit_warnings, residual_structure
+from kinfw.identification.problem import NoiseModel
+from kinfw.model import load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
 from tests.robots import ARM_6R
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 
 def _arm_data(frame_seen, label, n=80, seed=3, noise_m=1e-4, noise_rad=1e-3, flange_z=0.05):

@@ -1,4 +1,4 @@
-"""kinfw.control.gaze against independent truth: points built by Pinocchio FK (the
+"""kinfw.control against independent truth: points built by Pinocchio FK (the
 intersection of both optical axes of a configuration), hand geometry of a pan camera,
 brute-force searches over joint ranges, finite differences, and OpenCV's projection."""
 
@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.control.gaze import GazeSolver, fixate, ray_errors_rad
-from kinfw.robot import Robot, RobotModelError, UnknownFrameError, load_robot
+from kinfw.camera import CameraIntrinsics
+from kinfw.control import GazeSolver, fixate, ray_errors_rad
+from kinfw.model import Robot, RobotModelError, UnknownFrameError, load_robot
 from tests.robots import HEAD_URDF, IDEAL_HEAD, PAN_CAMERA
 
 CAMERAS = ("left_camera", "right_camera")

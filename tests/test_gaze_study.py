@@ -1,4 +1,4 @@
-"""The value-of-calibration study (verification.gaze_study, ``kinfw reproduce gaze``):
+"""The value-of-calibration study (kinfw.verification.studies, ``kinfw reproduce gaze``):
 its geometry against hand computations, its UR10 against the shipped URDF, and a small
 run through the command line."""
 
@@ -9,13 +9,18 @@ import numpy as np
 import pytest
 from erd import urdf_path
 
-from kinfw.cli import main as kinfw_main
-from kinfw.control.gaze import GazeSolver
-from kinfw.robot import Robot, builtin_head_urdf, load_robot
-from verification.dh_robots import ur10_urdf
-from verification.gaze_metrics import pointing_errors_rad, triangulate, triangulation_errors_m
-from verification.gaze_study import HEAD_DISTANCE_M, head_points
-from verification.perturb import perturb_robot
+from kinfw.cli._main import main as kinfw_main
+from kinfw.control import GazeSolver
+from kinfw.model import Robot, builtin_head_urdf, load_robot
+from kinfw.simulation import perturb_robot
+from kinfw.verification.studies import (
+    HEAD_DISTANCE_M,
+    head_points,
+    pointing_errors_rad,
+    triangulate,
+    triangulation_errors_m,
+    ur10_urdf,
+)
 
 
 @pytest.fixture(scope="module")

@@ -11,13 +11,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from identification.handeye import HandEyeError, HandEyeResult, motion_pairs, solve_axxb
+from kinfw.identification.handeye import HandEyeError, HandEyeResult, motion_pairs, solve_axxb
 from tests.pin_se3 import inverse, rotation, transform
 
 DATA = Path(__file__).resolve().parent / "data"
 
 
-# -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
+# -- independent helpers (Pinocchio and plain numpy, not kinfw.geometry) ----------------
 
 
 def _random_rotation(rng, max_angle=np.pi):
@@ -494,7 +494,7 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
         ]
     )
     B = np.stack([inverse(a @ X) @ base_T_target for a in A])
-    with caplog.at_level("WARNING", logger="identification.handeye"):
+    with caplog.at_level("WARNING", logger="kinfw.identification.handeye"):
         result = solve_axxb(A, B)
     assert result.rotation_condition < 0.05
     assert "mostly about one axis" in caplog.text

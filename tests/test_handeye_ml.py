@@ -1,4 +1,4 @@
-"""Maximum-likelihood hand-eye (identification.handeye_ml) through both solvers, against
+"""Maximum-likelihood hand-eye (kinfw.identification.handeye) through both solvers, against
 independent truth: setups built from a known X with Pinocchio, exact recovery from
 noise-free data, invariances, and error statistics against known noise."""
 
@@ -6,12 +6,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import identification.handeye as handeye
-from identification.axb import solve_axyb
-from identification.handeye import HandEyeError, solve_axxb
+import kinfw.identification.handeye._axxb as handeye
+from kinfw.identification.handeye import HandEyeError, solve_axxb, solve_axyb
 from tests.pin_se3 import inverse, random_axis, rotation, transform
 
-# -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
+# -- independent helpers (Pinocchio and plain numpy, not kinfw.geometry) ----------------
 
 
 AXIS = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
@@ -251,8 +250,8 @@ def test_motions_about_one_axis_still_raise_naming_why():
 
 def _spy_candidate_starts(monkeypatch):
     """Count the calls of candidate_starts made by both solvers."""
-    import identification.axb as axb
-    import identification.handeye_starts as starts
+    import kinfw.identification.handeye._axyb as axb
+    import kinfw.identification.handeye._starts as starts
 
     calls = []
 
@@ -280,7 +279,7 @@ def test_a_rejected_pose_makes_both_solvers_try_the_closed_forms_and_keep_the_be
     """One pose off by 20 deg: the first fit rejects it, so Park/Andreff/Daniilidis
     (A X = X B) and Shah/Li (A = X B Y) start fits too; the kept fit is at least as good
     at the same noise scales as the fit without them, and near the truth."""
-    from identification.handeye_ml import fit_absolute, rejection_threshold
+    from kinfw.identification.handeye import fit_absolute, rejection_threshold
 
     calls = _spy_candidate_starts(monkeypatch)
     rng = np.random.default_rng(100 + seed)
@@ -297,7 +296,7 @@ def test_a_rejected_pose_makes_both_solvers_try_the_closed_forms_and_keep_the_be
         assert np.linalg.norm(err[3:]) < 5e-3
 
     # the same fit through fit_absolute, with and without the fallback (M = B, N = A^-1)
-    from identification.handeye_starts import candidate_starts
+    from kinfw.identification.handeye import candidate_starts
 
     M, N = B, inverse(A)
 
@@ -327,7 +326,7 @@ def test_a_fit_from_a_bad_start_that_does_not_converge_is_rescued_by_a_fallback(
     """The first start ~170 deg off (closed form replaced): the fit does not converge and
     ends far from the truth; with the true closed form as the fallback start, the kept fit
     is the one near the truth (0.5 deg + 1 mm noise, 6 views)."""
-    import identification.handeye_ml as ml
+    import kinfw.identification.handeye._ml as ml
 
     X, Y, A, B = _scene(np.random.default_rng(4), 6, 180.0, noise=(0.5, 1e-3))
     M, N = B, inverse(A)
@@ -352,7 +351,7 @@ def test_a_start_in_a_wrong_basin_does_not_win_by_keeping_every_pose(monkeypatch
     (so it keeps all 10 poses); judged at the first fit's scales it keeps fewer, and the
     answer stays the first fit (the bench case that raised 'no single X', seed 0 trial
     187 of the outlier regime)."""
-    import identification.handeye_ml as ml
+    import kinfw.identification.handeye._ml as ml
 
     rng = np.random.default_rng(7)
     X, Y, A, B = _scene(rng, 10, 180.0, noise=(0.5, 1e-3))
@@ -380,7 +379,7 @@ def test_rejection_threshold_is_chi2_6_at_one_percent_over_n():
     """Against tabulated chi^2_6 quantiles (e.g. Abramowitz & Stegun table 26.8): 99.9 %
     22.458 (also the floor below 10 poses), 99.99 % 27.856 (n = 100), 99.999 % 33.107
     (n = 1000)."""
-    from identification.handeye_ml import rejection_threshold
+    from kinfw.identification.handeye import rejection_threshold
 
     assert rejection_threshold(3) == pytest.approx(22.458, abs=1e-3)
     assert rejection_threshold(10) == pytest.approx(22.458, abs=1e-3)

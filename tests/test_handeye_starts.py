@@ -6,15 +6,23 @@ extra, is installed)."""
 import numpy as np
 import pytest
 
-from identification.handeye_checks import StartError
-from identification.handeye_starts import AXXB_STARTS, AXYB_STARTS, candidate_starts, rank_starts
-from identification.handeye_starts_axxb import andreff_axxb, daniilidis_axxb, park_axxb
-from identification.handeye_starts_axyb import li_axyb, shah_axyb
+from kinfw.identification.handeye import (
+    AXXB_STARTS,
+    AXYB_STARTS,
+    StartError,
+    andreff_axxb,
+    candidate_starts,
+    daniilidis_axxb,
+    li_axyb,
+    park_axxb,
+    rank_starts,
+    shah_axyb,
+)
 from tests.pin_se3 import angle, inverse, random_axis, rotation, transform
 
 ALL = {**AXXB_STARTS, **AXYB_STARTS}
 
-# -- independent helpers (Pinocchio and plain numpy, not kinfw.transforms) ----------------
+# -- independent helpers (Pinocchio and plain numpy, not kinfw.geometry) ----------------
 
 
 def _random_rotation(rng, max_angle=np.pi):

@@ -1,4 +1,4 @@
-"""Tests of verification.hirsh_experiments: Hirsh, DeSouza & Kak (2001) Figs. 3 and 4."""
+"""Tests of kinfw.verification.papers: Hirsh, DeSouza & Kak (2001) Figs. 3 and 4."""
 
 from __future__ import annotations
 
@@ -9,16 +9,22 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from identification.axb import AXYBError, solve_axyb
-from verification import hirsh_experiments
-from verification.hirsh_experiments import CONVERGED_DEG, HirshResult, hirsh_study
-from verification.hirsh_figures import format_hirsh, load_hirsh, main, plot_hirsh, run_hirsh
-from verification.hirsh_problem import (
+from kinfw.identification.handeye import AXYBError, solve_axyb
+from kinfw.verification.papers import (
+    CONVERGED_DEG,
+    HirshResult,
+    format_hirsh,
+    hirsh_study,
+    load_hirsh,
+    plot_hirsh,
     quaternion_angle,
     random_problem,
     rotate_about_random_axes,
     rotations_about_random_axes,
+    run_hirsh,
 )
+from kinfw.verification.papers import _hirsh_experiments as hirsh_experiments
+from kinfw.verification.papers._hirsh_figures import hirsh_figures_main as main
 
 VIEWS = (3, 5, 10)
 
@@ -26,7 +32,7 @@ VIEWS = (3, 5, 10)
 @pytest.fixture(autouse=True)
 def _quiet_solver(caplog):
     # Slow trials end unconverged at the solver's cap by design; its warning is expected.
-    caplog.set_level(logging.ERROR, logger="identification.axb")
+    caplog.set_level(logging.ERROR, logger="kinfw.identification.handeye")
 
 
 @pytest.fixture(scope="module")

@@ -13,26 +13,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kinfw.blocks import BlockKey
+from kinfw.geometry import (
+    inverse_transform,
+    matrix_from_rotation_vector,
+    rotation_angle,
+    transform_from_rotation_translation,
+)
+from kinfw.model import BlockKey
 from kinfw.observations import (
+    MissingValue,
+    NumericContext,
     PointObservations,
     PoseObservations,
     SymbolicContext,
     TargetObservations,
     kind_of,
-)
-from kinfw.observations.numeric import (
-    MissingValue,
-    NumericContext,
     node_name,
+    offset_key,
     random_small_rotations,
-)
-from kinfw.observations.point import offset_key
-from kinfw.transforms import (
-    inverse_transform,
-    matrix_from_rotation_vector,
-    rotation_angle,
-    transform_from_rotation_translation,
 )
 
 N = 7  # samples
@@ -178,7 +176,7 @@ def test_simulated_noise_has_the_requested_statistics():
 
 
 def test_pose_noise_is_drawn_as_perturb_poses_draws_it():
-    """The stream of verification.simulate.perturb_poses: dp (n, 3), axes (n, 3),
+    """The stream of kinfw.simulation.perturb_poses: dp (n, 3), axes (n, 3),
     angles (n,), in that order (written out here by hand)."""
     rng_hand, rng_kind = np.random.default_rng(9), np.random.default_rng(9)
     w_T = _random_poses(np.random.default_rng(1), 5)

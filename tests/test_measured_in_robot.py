@@ -21,20 +21,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from identification.problem import build_problem
-from identification.refine import refine
-from kinfw.cli import main
-from kinfw.measurement_checks import observed_joints
-from kinfw.measurements import DatasetError, Measurements, PoseObservations, read_measurements
-from kinfw.observations import kind_of
-from kinfw.observations.numeric import NumericContext
-from kinfw.robot import load_robot
-from kinfw.transforms import average_transform, inverse_transform, rotation_angle
+from kinfw.cli._main import main
+from kinfw.geometry import average_transform, inverse_transform, rotation_angle
+from kinfw.identification import refine
+from kinfw.identification.problem import build_problem
+from kinfw.measurements import Measurements, observed_joints, read_measurements
+from kinfw.model import load_robot
+from kinfw.observations import DatasetError, NumericContext, PoseObservations, kind_of
+from kinfw.simulation import perturb_robot, simulate
+from kinfw.verification.evaluation import evaluate_model
 from tests.erd import urdf_path
 from tests.robots import ARM_6R
-from verification.accuracy import evaluate_model
-from verification.perturb import perturb_robot
-from verification.simulate import simulate
 
 # the 6R arm of tests/robots.py on a turning torso (j0), and a pan-tilt head with a camera
 # on the same torso: j0 is above both branches, so relative poses never see it
@@ -154,7 +151,7 @@ def test_noise_free_relative_poses_are_recovered_exactly(nominal, truth_urdf, ca
     rng = np.random.default_rng(3)
     names, qs = _configurations(nominal, 60, rng)
     data = _relative_data(names, qs, _pinocchio_relative(truth_urdf, names, qs, "camera", "flange"))
-    with caplog.at_level(logging.INFO, logger="identification.problem"):
+    with caplog.at_level(logging.INFO, logger="kinfw.identification.problem"):
         result = refine(nominal, data)
     # the shared torso joint j0 never enters a relative pose: fixed, not left singular
     fixed = next(r.getMessage() for r in caplog.records if "do not determine" in r.getMessage())
@@ -256,9 +253,9 @@ def test_real_401_sample_eye_hand_session_predicts_unseen_poses_better():
     predicted at about half the nominal robot's error (nominal joints: 25 mm / 4.3 deg;
     calibrated: 12-14 mm / 2.7 deg, 5-fold in the README). Both predictions come from the
     same held-out scoring (only the board and camera mounts fitted for the nominal)."""
-    from identification.pipeline import calibrate
-    from kinfw.figaroh_csv import measurements_from_figaroh_csv
-    from verification.crossval import held_out_errors
+    from kinfw.identification import calibrate
+    from kinfw.measurements import measurements_from_figaroh_csv
+    from kinfw.verification.evaluation import held_out_errors
 
     tiago = load_robot(TIAGO)
     data = measurements_from_figaroh_csv(

@@ -17,12 +17,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose, assert_array_equal
 
+from kinfw.geometry import transform_from_xyz_quat_xyzw
 from kinfw.measurements import (
-    DatasetError,
     Measurements,
-    PointObservations,
-    PoseObservations,
-    TargetObservations,
     check_against_robot,
     check_joint_motion,
     concatenate_measurements,
@@ -31,8 +28,8 @@ from kinfw.measurements import (
     read_measurements,
     write_measurements,
 )
-from kinfw.robot import load_robot
-from kinfw.transforms import transform_from_xyz_quat_xyzw
+from kinfw.model import load_robot
+from kinfw.observations import DatasetError, PointObservations, PoseObservations, TargetObservations
 
 S = math.sqrt(0.5)  # cos(45 deg) = sin(45 deg): quaternions of 90-degree rotations
 

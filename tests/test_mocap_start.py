@@ -7,16 +7,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.problem import build_problem
-from identification.refine import NoiseModel, refine
-from kinfw.cpc import geometry_from_cpc
-from kinfw.measurements import DatasetError, Measurements
-from kinfw.robot import load_robot
-from kinfw.transforms import inverse_transform, matrix_from_rotation_vector
-from kinfw.urdf_export import export_urdf
+from kinfw.geometry import inverse_transform, matrix_from_rotation_vector
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.measurements import Measurements
+from kinfw.model import geometry_from_cpc, load_robot
+from kinfw.observations import DatasetError
+from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.urdf import export_urdf
+from kinfw.verification.evaluation import random_joint_values
 from tests.robots import ARM_6R, HEAD_URDF
-from verification.crosscheck import random_joint_values
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 SIGMA = NoiseModel(0.5e-3, np.radians(0.5))
 MOCAP_T_ROOT = np.eye(4)
@@ -153,7 +153,8 @@ def test_too_few_samples_name_the_undetermined_quantities():
 def test_the_report_says_not_available_when_the_nominal_cannot_be_placed():
     """The report's "before" errors do not crash on data the nominal cannot be evaluated on
     (issue 12 bullet 3): NaN numbers and a note that names the reason."""
-    from verification.report import _errors_or_unavailable, errors_by_group
+    from kinfw.verification.reporting import errors_by_group
+    from kinfw.verification.reporting._report import _errors_or_unavailable
 
     nominal, _, frame, names = _robots("arm")
     good = errors_by_group(nominal, _one_marker(nominal, frame, names, 30))

@@ -6,17 +6,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import verification.model_choice as model_choice
-from identification.pipeline import calibrate
-from kinfw.calibration_file import read_sidecar
-from kinfw.cli import main
-from kinfw.cpc import cpc_from_robot
-from kinfw.measurement_file import write_measurements
-from kinfw.robot import load_robot
+import kinfw.verification.evaluation._model_choice as model_choice
+from kinfw.cli._main import main
+from kinfw.identification import calibrate
+from kinfw.measurements import write_measurements
+from kinfw.model import cpc_from_robot, load_robot
+from kinfw.reports import read_sidecar
+from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.verification.evaluation import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
+from kinfw.verification.reporting import sidecar_path
 from tests.robots import HEAD_URDF as HEAD
-from verification.model_choice import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
-from verification.report import sidecar_path
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 PLATES = ("left_plate", "right_plate")
 
@@ -145,7 +144,7 @@ def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
     (unscored it dominates that fold: > 10 mm on 1 mm noise)."""
     from dataclasses import replace
 
-    from verification.crossval import crossvalidate
+    from kinfw.verification.evaluation import crossvalidate
 
     _, clean = mounts_only
     poses = list(clean.poses)
@@ -190,10 +189,10 @@ def test_a_candidate_no_training_fold_can_fit_is_skipped_not_fatal():
     whole choice (`kinfw calibrate` exited 2). Now that candidate is listed as not fitted
     and the others compete; the chosen model predicts the 5 unseen samples better than
     the nominal joints do."""
-    from identification.refine import Unknown
+    from kinfw.identification.problem import Unknown
     from kinfw.measurements import read_measurements
+    from kinfw.verification.evaluation import held_out_errors
     from tests.erd import urdf_path
-    from verification.crossval import held_out_errors
 
     tiago = load_robot(urdf_path("tiago_description/robots/tiago_no_hand.urdf"))
     data = read_measurements(

@@ -5,20 +5,20 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from identification.problem import estimate_noise, noise_shape
-from identification.refine import NoiseModel, refine
-from kinfw.observations.base import POSITION, ROTATION
-from kinfw.robot import load_robot
-from kinfw.transforms import rotation_vector_from_matrix
-from tests.robots import HEAD_URDF as HEAD
-from verification.outliers import plant_outliers
-from verification.simulate import (
+from kinfw.geometry import rotation_vector_from_matrix
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel, estimate_noise, noise_shape
+from kinfw.model import load_robot
+from kinfw.observations import POSITION, ROTATION
+from kinfw.simulation import (
     default_target_pose,
     perturb_poses,
     perturb_robot,
+    plant_outliers,
     random_configurations,
     simulate,
 )
+from tests.robots import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kinfw.cli import main
-from kinfw.robot import builtin_head_urdf
-from verification.simulate_pixels import default_intrinsics
+from kinfw.cli._main import main
+from kinfw.model import builtin_head_urdf
+from kinfw.simulation import default_intrinsics
 
 HEAD = builtin_head_urdf()
 
@@ -121,9 +121,8 @@ def test_pnp_skips_images_with_fewer_than_4_points_and_names_failures(px):
     """A rejection of gross errors can leave an image with < 4 corners: the PnP start
     skips it (the others still give the pose); none left is a DatasetError naming the
     camera, never a cv2.error."""
-    from kinfw.measurements import DatasetError, read_measurements
-    from kinfw.observations import kind_of
-    from kinfw.observations.pnp import pnp_camera_T_targets
+    from kinfw.measurements import read_measurements
+    from kinfw.observations import DatasetError, kind_of, pnp_camera_T_targets
 
     (g, *_) = read_measurements(px / "px.json").groups("pixels")
     kind = kind_of(g)
@@ -146,8 +145,8 @@ def test_crossval_on_pixel_data_scores_held_out_images_in_px(px):
     simulated noise, 0.5 px per coordinate, so the norm's RMS is 0.5 sqrt(2) = 0.71 px
     (a little more held out); the pose groups keep their mm scores, with no NaN."""
     from kinfw.measurements import read_measurements
-    from kinfw.robot import load_robot
-    from verification.crossval import crossvalidate
+    from kinfw.model import load_robot
+    from kinfw.verification.evaluation import crossvalidate
 
     data = read_measurements(px / "px.json")
     cv = crossvalidate(load_robot(HEAD), data, k=2, sets=("full",))
@@ -163,8 +162,7 @@ def test_reports_are_strict_json_and_verify_carries_pixel_residuals(px, refined,
     undefined number is null) and read back; verify's per-point entries of an image
     group carry the pixel error, whose RMS is the group's; the text table prints '-'
     for the undefined position and rotation of image points, never 'nan'."""
-    from kinfw.calibration_file import read_sidecar
-    from kinfw.calibration_report import read_report
+    from kinfw.reports import read_report, read_sidecar
 
     _strict_json((px / "ri.json").read_text())
     _strict_json(refined.with_suffix(".kinfw.json").read_text())
@@ -228,8 +226,8 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     (each naming the image label and corner id, which exist in the data at that sample)
     and a count; the inconsistency warning once; a hint at the intrinsics. With the
     true intrinsics: no hint."""
-    from kinfw.calibration_report import read_report
     from kinfw.measurements import read_measurements
+    from kinfw.reports import read_report
 
     argv = ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "w.urdf"]
     argv += ["--params", "full", "--report", px / "w.json"]
@@ -266,8 +264,8 @@ def test_model_choice_on_few_images_says_once_it_fits_full(px_only, capsys):
     the automatic choice cannot rank candidates on pixels; it says so once and fits
     full, with no candidate table and no fold warning."""
     from kinfw.measurements import read_measurements, write_measurements
-    from kinfw.robot import load_robot
-    from verification.model_choice import ROWS_PER_PARAMETER, rows_per_parameter
+    from kinfw.model import load_robot
+    from kinfw.verification.evaluation import ROWS_PER_PARAMETER, rows_per_parameter
 
     data = read_measurements(px_only)
     left, right = ({int(s) for s in g.sample} for g in data.groups("pixels"))

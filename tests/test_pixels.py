@@ -7,24 +7,22 @@ import json
 import numpy as np
 import pytest
 
-from identification.problem import build_problem
-from identification.refine import NoiseModel, refine
-from kinfw.blocks import BlockKey
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.measurements import (
+from kinfw.camera import CameraIntrinsics
+from kinfw.geometry import inverse_transform, transform_from_rotation_translation
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.measurements import measurements_from_dict, read_measurements, write_measurements
+from kinfw.model import BlockKey, load_robot
+from kinfw.observations import (
     DatasetError,
-    measurements_from_dict,
-    read_measurements,
-    write_measurements,
+    NumericContext,
+    PixelObservations,
+    kind_of,
+    pnp_camera_T_targets,
 )
-from kinfw.observations import PixelObservations, kind_of
-from kinfw.observations.numeric import NumericContext
-from kinfw.observations.pnp import pnp_camera_T_targets
-from kinfw.robot import load_robot
-from kinfw.transforms import inverse_transform, transform_from_rotation_translation
+from kinfw.simulation import perturb_robot, simulate
+from kinfw.verification.evaluation import pose_discrepancy
 from tests.robots import ARM_6R
-from verification.crosscheck import pose_discrepancy
-from verification.simulate import perturb_robot, simulate
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
 Q0 = np.array([0.3, -0.4, 0.9, 0.2, 0.7, -0.3])
@@ -244,8 +242,8 @@ def test_noise_free_pixels_recover_a_perturbed_arm_exactly():
 
 
 def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path, capsys):
-    from kinfw.calibration_file import read_sidecar
-    from kinfw.cli import main
+    from kinfw.cli._main import main
+    from kinfw.reports import read_sidecar
 
     _, truth, w_T_board, data = _scene(30, seed=6)
     write_measurements(tmp_path / "px.json", data)
@@ -352,8 +350,8 @@ def test_intrinsics_the_images_cannot_determine_are_reported():
 def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_worst(tmp_path):
     import cv2
 
-    from kinfw.calibration_report import read_report, write_report
-    from verification.report import calibrate_to_files
+    from kinfw.reports import read_report, write_report
+    from kinfw.verification.reporting import calibrate_to_files
 
     nominal, _, _, data = _scene(30, seed=10, sigma_px=0.2)
     (g,) = data.groups("pixels")

@@ -9,16 +9,14 @@ import json
 import cv2
 import numpy as np
 
-from kinfw.boards import Chessboard
-from kinfw.calibration_file import read_sidecar
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.cli import main
-from kinfw.robot import load_robot
-from kinfw.transforms import inverse_transform, transform_from_rotation_translation
+from kinfw.camera import CameraIntrinsics, Chessboard
+from kinfw.cli._main import main
+from kinfw.geometry import inverse_transform, transform_from_rotation_translation
+from kinfw.model import load_robot
+from kinfw.reports import read_sidecar
+from kinfw.simulation import perturb_robot, render_board
+from kinfw.verification.evaluation import pose_discrepancy
 from tests.robots import ARM_6R
-from verification.board_images import render_board
-from verification.crosscheck import pose_discrepancy
-from verification.simulate import perturb_robot
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
 Q0 = np.array([0.3, -0.4, 0.9, 0.2, 0.7, -0.3])

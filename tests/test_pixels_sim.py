@@ -9,23 +9,22 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from identification.pipeline import calibrate
-from kinfw.boards import Chessboard
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.cli import main
+from kinfw.camera import CameraIntrinsics, Chessboard
+from kinfw.cli._main import main
+from kinfw.geometry import transform_from_rotation_translation
+from kinfw.identification import calibrate
 from kinfw.measurements import read_measurements
-from kinfw.robot import Robot, load_robot
-from kinfw.transforms import transform_from_rotation_translation
-from tests.robots import ARM_6R
-from verification.pixel_study import (
+from kinfw.model import Robot, load_robot
+from kinfw.simulation import DEFAULT_CAMERA, visible_points
+from kinfw.verification.studies import (
     arm_experiment,
+    camera_target_errors,
     crlb_held_out,
-    held_out_errors,
     pose_errors,
     pose_path_data,
     target_pose,
 )
-from verification.simulate_pixels import DEFAULT_CAMERA, visible_points
+from tests.robots import ARM_6R
 
 BOARD = Chessboard(9, 6, 0.04)
 CAMERA = CameraIntrinsics(640, 480, 600.0, 600.0, 319.5, 239.5, name="flange")
@@ -207,7 +206,7 @@ def test_the_pixel_path_beats_the_pose_path_on_the_same_images():
     for path, data in (("pixels", exp.data), ("pnp", pose_path_data(exp.data))):
         result = calibrate(exp.nominal, data, method="refine", loss="linear")
         robot = Robot(result.urdf_xml, path)
-        errors[path] = held_out_errors(exp, robot, target_pose(result.refined.unknowns))
+        errors[path] = camera_target_errors(exp, robot, target_pose(result.refined.unknowns))
     assert errors["pixels"][0] < 0.5 * errors["pnp"][0]  # position, m^2
     assert errors["pixels"][1] < errors["pnp"][1]  # rotation, rad^2
 

@@ -8,15 +8,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from identification.pipeline import calibrate
-from identification.problem import Unknown, build_problem
-from kinfw.boards import Chessboard
-from kinfw.camera_model import CameraIntrinsics
-from kinfw.observations.pixels import pixel_weights
-from kinfw.robot import Robot, load_robot
+from kinfw.camera import CameraIntrinsics, Chessboard
+from kinfw.identification import calibrate
+from kinfw.identification.problem import Unknown, build_problem
+from kinfw.model import Robot, load_robot
+from kinfw.observations import pixel_weights
+from kinfw.verification.evaluation import evaluate_model
+from kinfw.verification.studies import arm_experiment, camera_target_errors, target_pose
 from tests.robots import ARM_6R
-from verification.accuracy import evaluate_model
-from verification.pixel_study import arm_experiment, held_out_errors, target_pose
 
 BOARD = Chessboard(9, 6, 0.04)
 CAMERA = CameraIntrinsics(640, 480, 600.0, 600.0, 319.5, 239.5, name="flange")
@@ -78,7 +77,7 @@ def test_weighted_images_beat_unweighted_and_are_chi_square_consistent():
         for name, data in (("weighted", stated), ("unweighted", unstated)):
             result = calibrate(exp.nominal, data, method="refine", loss="linear")
             robot = Robot(result.urdf_xml, name)
-            errors[name] = held_out_errors(exp, robot, target_pose(result.refined.unknowns))
+            errors[name] = camera_target_errors(exp, robot, target_pose(result.refined.unknowns))
             if name == "weighted":
                 (g,) = stated.groups("pixels")
                 (res,) = result.refined.residuals

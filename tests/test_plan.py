@@ -1,4 +1,4 @@
-"""Measurement planning (verification.plan): against hand-derived optima, the empirical
+"""Measurement planning (kinfw.identification.planning): against hand-derived optima, the empirical
 held-out error of real calibrations, random designs, and the plan file round trip."""
 
 import json
@@ -7,28 +7,26 @@ import numpy as np
 import pytest
 from robots import HEAD_URDF
 
-from identification.refine import NoiseModel, refine
-from kinfw.cli import main
-from kinfw.measurements import read_measurements
-from kinfw.robot import load_robot
-from verification.perturb import random_configurations
-from verification.plan import (
+from kinfw.cli._main import main
+from kinfw.identification import refine
+from kinfw.identification.planning import (
+    Setup,
+    candidate_information,
+    candidate_pool,
+    exchange,
+    greedy,
+    held_out,
+    mean_square,
     plan_configurations,
     plan_per_joint,
     predicted_error,
     read_plan,
     short_path,
 )
-from verification.plan_objective import (
-    Setup,
-    candidate_information,
-    exchange,
-    greedy,
-    held_out,
-    mean_square,
-)
-from verification.plan_pool import candidate_pool
-from verification.simulate import simulate
+from kinfw.identification.problem import NoiseModel
+from kinfw.measurements import read_measurements
+from kinfw.model import load_robot
+from kinfw.simulation import random_configurations, simulate
 
 # one prismatic joint along z of a tilted frame: the measured frame's origin moves on a
 # line p(q) = p0 + q a, its orientation is constant
@@ -254,8 +252,8 @@ def test_self_collision_by_hand_geometry():
     at their joint are not collisions; the second link folded back onto the base is. By
     hand: q = (1.5, 2.9) puts l2's tip at (0.18, 0.03) m, inside the base box; the others
     keep l2 clear of it (its tip at x = 0.315 m for q = (0, 2.9))."""
-    from kinfw.robot import Robot
-    from verification.plan_pool import collision_free
+    from kinfw.identification.planning import collision_free
+    from kinfw.model import Robot
 
     robot = Robot(FOLDING_ARM)
     qs = np.array([[0.0, 0.0], [2.9, 0.0], [0.0, 2.9], [1.5, 2.9], [-1.5, -2.9]])

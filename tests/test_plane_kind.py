@@ -19,23 +19,26 @@ from functools import partial
 import numpy as np
 import pytest
 
-from identification.problem import build_problem
-from identification.refine import NoiseModel, refine
-from kinfw.measurements import (
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.measurements import Measurements, read_measurements, write_measurements
+from kinfw.model import load_robot
+from kinfw.observations import (
+    DISTANCE,
     DatasetError,
-    Measurements,
+    NumericContext,
+    PlaneBlock,
+    PlaneContacts,
     PointObservations,
-    read_measurements,
-    write_measurements,
+    fit_plane,
+    kind_of,
+    lifted_probe_offset,
+    offset_key,
+    plane_key,
 )
-from kinfw.observations import PlaneContacts, kind_of
-from kinfw.observations.numeric import NumericContext
-from kinfw.observations.plane import DISTANCE, PlaneBlock, fit_plane, lifted_probe_offset, plane_key
-from kinfw.observations.point import offset_key
-from kinfw.robot import load_robot
+from kinfw.simulation import perturb_robot, simulate
+from kinfw.verification.evaluation import random_joint_values
 from tests.robots import ARM_6R
-from verification.crosscheck import random_joint_values
-from verification.simulate import perturb_robot, simulate
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
 OFFSET = np.array([0.03, -0.02, 0.09])  # the probe on the flange, metres
@@ -364,7 +367,7 @@ def test_a_few_points_of_the_probe_fix_the_world_and_the_scale(scene):
 
 def test_simulated_distance_noise_is_estimated_within_10_percent(scene):
     """Contacts whose distances carry N(0, sigma) noise (simulated by the kind, through
-    ``verification.simulate``): the estimated sigma of "distance" is within 10 %."""
+    ``kinfw.simulation``): the estimated sigma of "distance" is within 10 %."""
     nominal, truth, planes, _ = scene
     rng = np.random.default_rng(8)
     contacts = {k: _contacts(truth, p, 300, rng) for k, p in planes.items()}
@@ -416,7 +419,7 @@ def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene,
     """The CLI end to end: contacts with N(0, 0.1 mm) noise and one 5 mm gross error, and 8
     tracked positions of the probe; the robust default fit flags the bad contact and the
     report lists it with its distance residual."""
-    from kinfw.cli import main
+    from kinfw.cli._main import main
 
     _, truth, planes, contacts = scene
     clean = _dataset(contacts, points=_points(truth, 8, 21))

@@ -6,7 +6,7 @@ probe to the ball's centre is the radius). Residual: ``radius - |w_p_probe - cen
 one row in metres. The kind is registered, written to and read from a
 ``kinfw-measurements`` file, and calibrates the 6R arm through the public ``refine``;
 with its numpy prediction and its drawing (and the default Gaussian simulation) it is
-simulated by ``verification.simulate.simulate`` and drawn by ``kinfw.view.scene``, whose
+simulated by ``kinfw.simulation.simulate`` and drawn by ``kinfw.view.scene``, whose
 code names no kind.
 
 Truth: contacts are simulated on a perturbed arm by solving for the joint angle that puts
@@ -25,22 +25,24 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from identification.refine import NoiseModel, refine
-from kinfw.blocks import BlockKey, PointBlock
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, read_measurements, write_measurements
+from kinfw.model import BlockKey, PointBlock, load_robot
 from kinfw.observations import (
+    Drawing,
     NoiseComponent,
     ObservationKind,
     UnknownRequest,
+    data_array,
+    node_name,
     register_kind,
+    sample_array,
     unregister_kind,
 )
-from kinfw.observations.base import data_array, sample_array
-from kinfw.observations.numeric import Drawing, node_name
-from kinfw.robot import load_robot
+from kinfw.simulation import perturb_robot, simulate
+from kinfw.verification.evaluation import random_joint_values
 from tests.robots import ARM_6R
-from verification.crosscheck import random_joint_values
-from verification.simulate import perturb_robot, simulate
 
 
 # -- the new kind: one group dataclass and one ObservationKind --------------------------
@@ -269,7 +271,7 @@ def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_k
     )
     path = tmp_path / "bad.json"
     path.write_text(doc)
-    from kinfw.measurements import DatasetError
+    from kinfw.observations import DatasetError
 
     with pytest.raises(
         DatasetError,
@@ -291,7 +293,7 @@ def test_without_the_kind_registered_the_file_is_refused(tmp_path):
         '"m", "angle": "rad"}, "joint_names": ["j1"], "samples": [{"q": [0], '
         '"observations": [{"frame": "f", "kind": "sphere", "radius": 1}]}]}'
     )
-    from kinfw.measurements import DatasetError
+    from kinfw.observations import DatasetError
 
     with pytest.raises(
         DatasetError,

@@ -6,15 +6,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from identification.problem import NoiseModel, build_problem, estimate_noise
-from identification.refine import parameter_unit
-from kinfw.blocks import BlockKey, PointBlock, RigidFrameBlock
-from kinfw.observations import NoiseComponent, kinds, register_kind
-from kinfw.observations.pose import PoseKind
-from kinfw.robot import load_robot
-from kinfw.transforms import matrix_from_rotation_vector, transform_from_rotation_translation
+from kinfw.geometry import matrix_from_rotation_vector, transform_from_rotation_translation
+from kinfw.identification import parameter_unit
+from kinfw.identification.problem import NoiseModel, build_problem, estimate_noise
+from kinfw.model import BlockKey, PointBlock, RigidFrameBlock, load_robot
+from kinfw.observations import NoiseComponent, PoseKind, kinds, register_kind
+from kinfw.simulation import default_target_pose, random_configurations, simulate
 from tests.robots import HEAD_URDF as HEAD
-from verification.simulate import default_target_pose, random_configurations, simulate
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")

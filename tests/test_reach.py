@@ -1,4 +1,4 @@
-"""kinfw.control.reach against independent truth: targets made by Pinocchio FK of random
+"""kinfw.control against independent truth: targets made by Pinocchio FK of random
 in-range configurations (verified again by FK, not by the result's fields), a planar
 2R arm's hand geometry and a brute-force grid."""
 
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from kinfw.control.reach import reach
-from kinfw.robot import Robot, RobotModelError, UnknownFrameError, load_robot
+from kinfw.control import reach
+from kinfw.model import Robot, RobotModelError, UnknownFrameError, load_robot
 from tests.erd import urdf_path
 from tests.robots import ARM_6R, PLANAR_2R
 
@@ -161,7 +161,7 @@ def test_ur10_answer_is_the_turn_nearest_the_start():
 def test_nearest_turn_by_hand():
     """Revolute values move by whole turns towards the reference within the limits; a
     turn that would leave the limits is not taken; prismatic values never move."""
-    from kinfw.control.solver import nearest_turn
+    from kinfw.control import nearest_turn
 
     two_pi = 2 * math.pi
     x = np.array([5.5, 3.0, -6.0, 5.5])

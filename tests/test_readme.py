@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from kinfw.cli import main
+from kinfw.cli._main import main
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

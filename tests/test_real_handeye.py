@@ -1,4 +1,4 @@
-"""Time alignment of asynchronous pose streams (verification.streams) and hand-eye
+"""Time alignment of asynchronous pose streams (kinfw.measurements) and hand-eye
 calibration on ETH ASL's real and simulated robot-arm streams.
 
 Synthetic truth is built with Pinocchio (``pin.exp3``, ``pin.SE3``, ``pin.Quaternion``),
@@ -18,11 +18,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from identification.axb import solve_axyb
-from identification.handeye import HandEyeError, solve_axxb
-from kinfw.measurements import DatasetError
-from verification.streams import align_streams, interpolate_poses, read_pose_csv
-from verification.time_offset import best_time_offset, implied_target_spread
+from kinfw.identification.handeye import (
+    HandEyeError,
+    best_time_offset,
+    implied_target_spread,
+    solve_axxb,
+    solve_axyb,
+)
+from kinfw.measurements import align_streams, interpolate_poses, read_pose_csv
+from kinfw.observations import DatasetError
 
 ETH = Path(__file__).resolve().parent / "data" / "eth_asl_robot_arm"
 
@@ -192,7 +196,7 @@ def test_read_pose_csv_sorts_and_drops_exact_duplicates(tmp_path, caplog):
     order = [0, 0, 2, 1, 2, 3, 3]  # duplicates and one line out of time order
     path = tmp_path / "hand.csv"
     path.write_text("".join(_line(stamps[k], poses[k]) for k in order))
-    with caplog.at_level(logging.INFO, logger="verification.streams"):
+    with caplog.at_level(logging.INFO, logger="kinfw.measurements"):
         t, a_T_bs = read_pose_csv(path)
     np.testing.assert_array_equal(t, stamps)
     np.testing.assert_allclose(a_T_bs, poses, atol=1e-15)
@@ -267,7 +271,7 @@ def synthetic_streams():
 
 def test_aligned_pairs_close_the_loop_at_the_true_offset(synthetic_streams, caplog):
     t_hand, base_T_hand, t_eye, target_T_eye = synthetic_streams
-    with caplog.at_level(logging.INFO, logger="verification.streams"):
+    with caplog.at_level(logging.INFO, logger="kinfw.measurements"):
         A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=DELAY_S)
     n_inside = np.count_nonzero((t_eye - DELAY_S >= 0.0) & (t_eye - DELAY_S <= t_hand[-1]))
     assert len(A) == len(B) == n_inside < len(t_eye)

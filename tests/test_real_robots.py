@@ -7,7 +7,7 @@ Meshes are ``package://`` files that are never resolved, and the joints off the 
 paths (mimic fingers, wheels, legs, the other arm) are ignored whatever their type.
 
 For each robot the truth is the nominal URDF with errors on every joint of the measured
-paths (1 mm, 0.2 deg; the data sees nothing else), and :func:`identification.refine.refine`
+paths (1 mm, 0.2 deg; the data sees nothing else), and :func:`kinfw.identification.refine`
 started from the nominal URDF must recover it from noise-free simulated data, checked
 independently of the CPC model: Pinocchio FK of the truth against Pinocchio FK of the
 exported calibrated URDF, at held-out configurations.
@@ -29,15 +29,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from identification.refine import NoiseModel, refine
-from kinfw.cpc import geometry_from_cpc
+from kinfw.geometry import matrix_from_rotation_vector, transform_from_rotation_translation
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements
-from kinfw.robot import Robot, load_robot
-from kinfw.transforms import matrix_from_rotation_vector, transform_from_rotation_translation
-from kinfw.urdf_export import export_urdf
+from kinfw.model import Robot, geometry_from_cpc, load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.urdf import export_urdf
+from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.erd import robots_dir, urdf_path
-from verification.crosscheck import pose_discrepancy, random_joint_values
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 if robots_dir() is None:  # a test dependency (the "test" extra): fail, never skip
     raise ImportError("example-robot-data is not installed: pip install -e '.[test]'")

@@ -6,21 +6,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.refine import NoiseModel, build_problem, refine
-from kinfw.cpc import cpc_from_robot, geometry_from_cpc
+from kinfw.geometry import inverse_transform, matrix_from_rotation_vector
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, concatenate_measurements
-from kinfw.robot import load_robot
-from kinfw.transforms import inverse_transform, matrix_from_rotation_vector
-from kinfw.urdf_export import export_urdf
+from kinfw.model import cpc_from_robot, geometry_from_cpc, load_robot
+from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate
+from kinfw.urdf import export_urdf
+from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.robots import ARM_6R
 from tests.robots import HEAD_URDF as HEAD
-from verification.crosscheck import pose_discrepancy, random_joint_values
-from verification.simulate import (
-    default_target_pose,
-    perturb_robot,
-    random_configurations,
-    simulate,
-)
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
@@ -247,8 +242,8 @@ def test_under_a_prior_joint_zero_offsets_are_estimated_as_offsets():
     of each correction (> 50 %) in the one offset angle rather than spreading it over
     every axis below the joint, and predicts the truth's flange at new configurations
     to 1e-6 m. Without a prior the offsets are redundant with the chart and not free."""
-    from kinfw.transforms import matrix_from_rotation_vector as rotvec
-    from kinfw.urdf_export import edit_urdf
+    from kinfw.geometry import matrix_from_rotation_vector as rotvec
+    from kinfw.urdf import edit_urdf
 
     nominal = load_robot(ARM_6R)
     offsets = {"j2": np.radians(1.0), "j4": np.radians(-2.0)}

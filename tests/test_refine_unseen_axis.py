@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.refine import NoiseModel, refine
-from kinfw.robot import load_robot
+from kinfw.identification import refine
+from kinfw.identification.problem import NoiseModel
+from kinfw.model import load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
 from tests.erd import urdf_path
-from verification.perturb import perturb_robot, random_configurations
-from verification.simulate import simulate
 
 FRAME = "arm_7_link"
 
@@ -30,7 +30,13 @@ def tiago():
 
 @pytest.mark.parametrize("seed", [27, 48])
 def test_unseen_axis_stays_at_nominal_and_model_predicts(tiago, seed):
-    from verification.plan_objective import Setup, candidate_information, exchange, greedy, held_out
+    from kinfw.identification.planning import (
+        Setup,
+        candidate_information,
+        exchange,
+        greedy,
+        held_out,
+    )
 
     robot, names = tiago
     lower, upper = robot.joint_limits(names)

@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinfw.registration import register_points
-from kinfw.transforms import (
+from kinfw.geometry import (
     matrix_from_rotation_vector,
+    register_points,
     rotation_angle,
     transform_from_rotation_translation,
 )

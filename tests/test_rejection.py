@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from identification.refine import refine
-from kinfw.robot import load_robot
+from kinfw.identification import refine
+from kinfw.model import load_robot
+from kinfw.simulation import perturb_robot, plant_outliers, random_configurations
 from tests.test_crossval import PLATES, _data
-from verification.outliers import plant_outliers
-from verification.simulate import perturb_robot, random_configurations
 
 
 @pytest.fixture(scope="module")
@@ -141,9 +140,9 @@ def test_least_squares_rejects_nothing_and_bad_options_are_refused(head, truth):
 
 
 def test_the_report_lists_rejected_apart_and_reads_back(head, truth, tmp_path):
-    from identification.pipeline import calibrate
-    from kinfw.calibration_report import read_report, write_report
-    from verification.report import calibration_report
+    from kinfw.identification import calibrate
+    from kinfw.reports import read_report, write_report
+    from kinfw.verification.reporting import calibration_report
 
     clean = _data(truth, 60, 9)
     bad = _with_bad_pose(clean, 4, np.array([0.0, 0.0, 0.07]))

@@ -10,25 +10,20 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.refine import build_problem, parameter_unit
-from kinfw.cli import main
-from kinfw.cpc import cpc_from_robot
+from kinfw.cli._main import main
+from kinfw.identification import parameter_unit
+from kinfw.identification.problem import build_problem
 from kinfw.measurements import read_measurements, write_measurements
-from kinfw.robot import load_robot
+from kinfw.model import cpc_from_robot, load_robot
+from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate
 from tests.robots import HEAD_URDF as HEAD
-from verification.simulate import (
-    default_target_pose,
-    perturb_robot,
-    random_configurations,
-    simulate,
-)
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 #: Gross position errors added to left_plate pose observations (mm), in file order.
 OUTLIERS_MM = (20.0, 70.0, 40.0, 80.0, 30.0, 60.0, 50.0)
 
-# Units by hand, from what each parameter is (docstrings of kinfw.cpc and refine).
+# Units by hand, from what each parameter is (docstrings of kinfw.model and refine).
 HAND_UNITS = {
     ("pan", "zero_offset"): "rad",  # revolute: an angle
     ("tilt", "zero_offset"): "rad",

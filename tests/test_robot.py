@@ -1,11 +1,11 @@
-"""kinfw.robot: loading, names, FK of continuous joints, topology, refused joints."""
+"""kinfw.model: loading, names, FK of continuous joints, topology, refused joints."""
 
 import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.robot import RobotModelError, UnknownFrameError, load_robot
-from kinfw.transforms import matrix_from_rotation_vector
+from kinfw.geometry import matrix_from_rotation_vector
+from kinfw.model import RobotModelError, UnknownFrameError, load_robot
 from tests.robots import ARM_6R, PRISMATIC_TREE
 
 MIXED = """<?xml version="1.0"?>

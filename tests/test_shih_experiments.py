@@ -1,4 +1,4 @@
-"""Tests of verification.shih_experiments: Shih et al. (1992) Fig. 11 and Table 4."""
+"""Tests of kinfw.verification.papers: Shih et al. (1992) Fig. 11 and Table 4."""
 
 from __future__ import annotations
 
@@ -8,27 +8,27 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.closed_form import identify_closed_form
-from kinfw.measurements import Measurements, PoseObservations
-from kinfw.robot import load_robot
-from tests.robots import HEAD_URDF as IIS_HEAD
-from verification.shih_experiments import Fig11Result, fig11_study
-from verification.shih_figures import (
+from kinfw.identification import identify_closed_form
+from kinfw.measurements import Measurements
+from kinfw.model import load_robot
+from kinfw.observations import PoseObservations
+from kinfw.simulation import one_joint_at_a_time, perturb_robot, random_configurations
+from kinfw.verification.papers import (
+    PAPER_TABLE4_MU_MM,
+    PAPER_TABLE4_SIGMA_MM,
+    Fig11Result,
+    Table4Result,
+    fig11_study,
     format_fig11,
     format_table4,
-    main,
     plot_fig11,
     plot_table4,
     run_fig11,
     run_table4,
-)
-from verification.shih_table4 import (
-    PAPER_TABLE4_MU_MM,
-    PAPER_TABLE4_SIGMA_MM,
-    Table4Result,
     table4_study,
 )
-from verification.simulate import one_joint_at_a_time, perturb_robot, random_configurations
+from kinfw.verification.papers._shih_figures import shih_figures_main as main
+from tests.robots import HEAD_URDF as IIS_HEAD
 
 FRAMES = ("left_plate", "right_plate")
 

@@ -1,4 +1,4 @@
-"""Tests of verification.simulate against independent Pinocchio forward kinematics."""
+"""Tests of kinfw.simulation against independent Pinocchio forward kinematics."""
 
 from __future__ import annotations
 
@@ -9,14 +9,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.measurements import Measurements, PoseObservations
-from kinfw.robot import load_robot
-from kinfw.transforms import (
-    inverse_transform,
-    rotation_angle,
-    rotation_vector_from_matrix,
-)
-from verification.simulate import (
+from kinfw.geometry import inverse_transform, rotation_angle, rotation_vector_from_matrix
+from kinfw.measurements import Measurements
+from kinfw.model import load_robot
+from kinfw.observations import PoseObservations
+from kinfw.simulation import (
     default_target_pose,
     nine_circle_plate,
     one_joint_at_a_time,

@@ -1,4 +1,4 @@
-"""kinfw.transforms against Pinocchio's SE3 / quaternion maths (independent truth)."""
+"""kinfw.geometry against Pinocchio's SE3 / quaternion maths (independent truth)."""
 
 import numpy as np
 import pinocchio as pin
@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from kinfw.transforms import (
+from kinfw.geometry import (
     check_rotation,
     check_transform,
     inverse_transform,

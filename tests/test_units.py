@@ -12,27 +12,29 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from identification.closed_form import JointScaleError
-from identification.pipeline import calibrate
-from identification.redundancy import InsufficientDataError, redundancy
-from identification.refine import NoiseModel, build_problem, refine
-from identification.units import UnitError, check_fit, check_units, unit_diagnostics
-from kinfw.cli import main
-from kinfw.measurements import (
-    DatasetError,
-    measurements_from_dict,
-    measurements_to_dict,
+from kinfw.cli._main import main
+from kinfw.identification import JointScaleError, calibrate, refine
+from kinfw.identification.checks import (
+    InsufficientDataError,
+    UnitError,
+    check_fit,
+    check_units,
+    redundancy,
+    unit_diagnostics,
 )
-from kinfw.robot import load_robot
-from tests.robots import ARM_6R
-from tests.robots import HEAD_URDF as HEAD
-from verification.simulate import (
+from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.measurements import measurements_from_dict, measurements_to_dict
+from kinfw.model import load_robot
+from kinfw.observations import DatasetError
+from kinfw.simulation import (
     default_target_pose,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
     simulate,
 )
+from tests.robots import ARM_6R
+from tests.robots import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")

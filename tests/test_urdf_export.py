@@ -17,10 +17,15 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from lxml import etree
 
-from kinfw.cpc import ZeroGeometry, cpc_from_robot, geometry_from_cpc, geometry_from_robot
-from kinfw.robot import load_robot
-from kinfw.transforms import inverse_transform, rotation_angle
-from kinfw.urdf_export import ExportError, ExportResult, edit_urdf, export_urdf, write_urdf
+from kinfw.geometry import inverse_transform, rotation_angle
+from kinfw.model import (
+    ZeroGeometry,
+    cpc_from_robot,
+    geometry_from_cpc,
+    geometry_from_robot,
+    load_robot,
+)
+from kinfw.urdf import ExportError, ExportResult, edit_urdf, export_urdf, write_urdf
 
 PI_2 = 1.5707963267948966
 

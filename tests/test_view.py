@@ -23,7 +23,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from kinfw.robot import builtin_head_urdf, load_robot
+from kinfw.model import builtin_head_urdf, load_robot
+from kinfw.simulation import perturb_robot, random_configurations, simulate
 from kinfw.view import (
     GHOST_RGBA,
     SOLID_RGBA,
@@ -34,7 +35,6 @@ from kinfw.view import (
     targets_from_sidecar,
     write_html,
 )
-from verification.simulate import perturb_robot, random_configurations, simulate
 
 HEAD = builtin_head_urdf()
 KINFW = "/meshcat/kinfw"
@@ -316,8 +316,9 @@ def test_missing_meshes_are_skipped_with_a_warning(caplog):
 def test_points_and_frames_measured_elsewhere_are_drawn_through_their_kinds(head, caplog):
     """Points are balls, with a residual line when their offset is known (or given in
     ``unknowns``); observations made in another frame need ``meas_T_root``."""
-    from kinfw.blocks import BlockKey
-    from kinfw.measurements import Measurements, PointObservations, PoseObservations
+    from kinfw.measurements import Measurements
+    from kinfw.model import BlockKey
+    from kinfw.observations import PointObservations, PoseObservations
 
     names = head.joint_names
     q = np.linspace(0.1, 0.3, len(names))
@@ -404,7 +405,7 @@ def test_import_kinfw_does_not_load_meshcat():
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     """``kinfw demo`` output: nominal, calibrated URDF + sidecar, data."""
-    from kinfw.cli import main
+    from kinfw.cli._main import main
 
     out = tmp_path_factory.mktemp("demo")
     with contextlib.redirect_stdout(io.StringIO()):

@@ -2,7 +2,7 @@
 
 - :mod:`.build`: :func:`build_problem` assembles a :class:`LeastSquaresProblem` from a
   robot and measurements, looping over the observation kinds of :mod:`kinfw.observations`
-  and the parameter blocks of :mod:`kinfw.blocks`;
+  and the parameter blocks of :mod:`kinfw.model`;
 - :mod:`.problem`: the problem's data classes (:class:`LeastSquaresProblem`,
   :class:`ResidualGroup`, :class:`Unknown`);
 - :mod:`.start`: the start values, in closed form (the kinds' estimators);
@@ -12,51 +12,92 @@
 - :mod:`.noise`: :class:`NoiseModel` and variance-component estimation;
 - :mod:`.diagnostics`: covariance, identifiability, per-group residuals.
 
-:func:`identification.refine.refine` orchestrates them.
+:func:`kinfw.identification.refine` orchestrates them.
 """
 
-from .build import build_problem
-from .diagnostics import (
+from kinfw.identification.problem._build import build_problem
+from kinfw.identification.problem._diagnostics import (
     GroupResiduals,
     Identifiability,
+    RejectedObservation,
     covariance_and_identifiability,
     group_residuals,
+    rejected_observations,
 )
-from .functions import GroupFunctions, clear_function_cache
-from .noise import NoiseModel, NoiseShape, estimate_noise, noise_shape
-from .problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
-from .solver import (
+from kinfw.identification.problem._functions import (
+    GroupFunctions,
+    build_functions,
+    clear_function_cache,
+    group_functions,
+)
+from kinfw.identification.problem._gauge import STRUCTURAL_RANK_TOL, relative_gauge, robot_blocks
+from kinfw.identification.problem._noise import (
+    NoiseModel,
+    NoiseShape,
+    chi2_cdf,
+    estimate_noise,
+    noise_shape,
+    norm2_cdf,
+    quantile,
+)
+from kinfw.identification.problem._problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
+from kinfw.identification.problem._solver import (
     LOSSES,
+    NEGLIGIBLE_COLUMN,
     levenberg_marquardt,
     negligible_columns,
     observation_norms,
+    robust_loss,
     row_weights,
+    scaled_columns,
     thresholds,
 )
-from .start import estimate_unknowns, express_in
+from kinfw.identification.problem._start import (
+    MARKER_RANK_TOL,
+    estimate_unknowns,
+    express_in,
+    frame_from_markers,
+    start_context,
+)
 
 __all__ = [
     "LOSSES",
+    "MARKER_RANK_TOL",
+    "NEGLIGIBLE_COLUMN",
     "PRIOR",
+    "STRUCTURAL_RANK_TOL",
     "GroupFunctions",
     "GroupResiduals",
     "Identifiability",
     "LeastSquaresProblem",
     "NoiseModel",
     "NoiseShape",
+    "RejectedObservation",
     "ResidualGroup",
     "Unknown",
+    "build_functions",
     "build_problem",
+    "chi2_cdf",
     "clear_function_cache",
     "covariance_and_identifiability",
     "estimate_noise",
     "estimate_unknowns",
     "express_in",
+    "frame_from_markers",
+    "group_functions",
     "group_residuals",
     "levenberg_marquardt",
     "negligible_columns",
     "noise_shape",
+    "norm2_cdf",
     "observation_norms",
+    "quantile",
+    "rejected_observations",
+    "relative_gauge",
+    "robot_blocks",
+    "robust_loss",
     "row_weights",
+    "scaled_columns",
+    "start_context",
     "thresholds",
 ]

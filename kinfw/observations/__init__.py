@@ -2,7 +2,7 @@
 
 Every kind of observation (``pose``, ``target``, ``point``, ``plane``, ``pixels``, and any
 kind registered by an application or a test) is one
-:class:`~kinfw.observations.base.ObservationKind`. The measurement files, the estimation
+:class:`~kinfw.observations.ObservationKind`. The measurement files, the estimation
 problem and verification look kinds up here and loop over :func:`kinds`; none of them
 branches on a kind's name.
 
@@ -14,36 +14,108 @@ from __future__ import annotations
 
 from typing import Any
 
-from kinfw.observations.base import (
+from kinfw.observations._base import (
+    POSITION,
+    ROTATION,
     NoiseComponent,
     ObservationKind,
-    StartContext,
-    SymbolicContext,
     UnknownRequest,
+    data_array,
+    frozen_array,
+    sample_array,
 )
-from kinfw.observations.pixels import PixelKind, PixelObservations
-from kinfw.observations.plane import PlaneContacts, PlaneKind
-from kinfw.observations.point import PointKind, PointObservations
-from kinfw.observations.pose import PoseKind, PoseObservations
-from kinfw.observations.reader import DatasetError, ObservationReader
-from kinfw.observations.target import TargetKind, TargetObservations
+from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._intrinsics_block import UNDETERMINED_PX, IntrinsicsBlock
+from kinfw.observations._numeric import (
+    Drawing,
+    MissingValue,
+    NumericContext,
+    gaussian_rows,
+    node_name,
+    perturb_transforms,
+    predicted_or_missing,
+    random_small_rotations,
+    random_unit_vectors,
+    transforms_from_pose_rows,
+)
+from kinfw.observations._pixels import PIXEL, PixelKind, PixelObservations, pixel_weights
+from kinfw.observations._plane import (
+    DISTANCE,
+    PlaneBlock,
+    PlaneContacts,
+    PlaneKind,
+    fit_plane,
+    lifted_probe_offset,
+    plane_key,
+)
+from kinfw.observations._pnp import (
+    PNP_MIN_POINTS,
+    pnp_camera_T_targets,
+    target_observations_from_pixels,
+)
+from kinfw.observations._point import PointKind, PointObservations, offset_key
+from kinfw.observations._pose import (
+    QUAT_NORM_TOL,
+    QUAT_ROUNDED_TOL,
+    PoseKind,
+    PoseObservations,
+    read_quaternion,
+)
+from kinfw.observations._reader import DatasetError, ObservationReader, describe
+from kinfw.observations._rigid import RigidTransformKind
+from kinfw.observations._target import DEFAULT_TARGET, TargetKind, TargetObservations
 
 __all__ = [
+    "DEFAULT_TARGET",
+    "DISTANCE",
+    "PIXEL",
+    "PNP_MIN_POINTS",
+    "POSITION",
+    "QUAT_NORM_TOL",
+    "QUAT_ROUNDED_TOL",
+    "ROTATION",
+    "UNDETERMINED_PX",
     "DatasetError",
+    "Drawing",
+    "IntrinsicsBlock",
+    "MissingValue",
     "NoiseComponent",
+    "NumericContext",
     "ObservationKind",
     "ObservationReader",
     "PixelObservations",
+    "PlaneBlock",
     "PlaneContacts",
     "PointObservations",
     "PoseObservations",
+    "RigidTransformKind",
     "StartContext",
     "SymbolicContext",
     "TargetObservations",
     "UnknownRequest",
+    "data_array",
+    "describe",
+    "fit_plane",
+    "frozen_array",
+    "gaussian_rows",
+    "inverse_casadi",
     "kind_of",
     "kinds",
+    "lifted_probe_offset",
+    "node_name",
+    "offset_key",
+    "perturb_transforms",
+    "pixel_weights",
+    "plane_key",
+    "pnp_camera_T_targets",
+    "predicted_or_missing",
+    "random_small_rotations",
+    "random_unit_vectors",
+    "read_quaternion",
     "register_kind",
+    "sample_array",
+    "target_observations_from_pixels",
+    "transforms_from_pose_rows",
     "unregister_kind",
 ]
 

@@ -1,0 +1,269 @@
+"""The calibration pipeline: closed form, hand-eye, joint refinement, as the data allows.
+
+This is the Python API behind ``kinfw calibrate``::
+
+    from kinfw.model import load_robot
+    from kinfw.measurements import read_measurements
+    from kinfw.identification._pipeline import calibrate
+
+    result = calibrate(load_robot("nominal.urdf"), read_measurements("data.json"))
+    open("calibrated.urdf", "w").write(result.urdf_xml)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.geometry import average_transform
+from kinfw.identification._closed_form import ClosedFormResult, ProtocolError, identify_closed_form
+from kinfw.identification._refine import refine
+from kinfw.identification._refine_result import RefineResult
+from kinfw.identification.checks import (
+    UnitError,
+    check_fit,
+    check_redundancy,
+    check_units,
+    fit_warnings,
+)
+from kinfw.identification.handeye import CamerasResult, calibrate_cameras
+from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.measurements import Measurements, check_joint_motion, observed_joints
+from kinfw.model import Robot, geometry_from_cpc
+from kinfw.observations import DatasetError
+from kinfw.urdf import ExportResult, edit_urdf, export_urdf
+
+__all__ = ["METHODS", "Calibration", "calibrate"]
+
+log = logging.getLogger(__name__)
+
+#: ``closed-form``: Shih et al.'s closed form and the hand-eye step only;
+#: ``refine``: then the joint nonlinear least squares over everything (default).
+METHODS = ("refine", "closed-form")
+
+
+@dataclass(frozen=True, slots=True)
+class Calibration:
+    """A calibrated URDF and the stages that produced it.
+
+    Attributes
+    ----------
+    urdf_xml : str
+        The calibrated URDF: the nominal one with only joint origins and axes changed.
+    stages : tuple of (str, str)
+        ``(stage name, URDF text after it)`` for every stage that ran, in order
+        (``"closed form"``, ``"hand-eye"``, ``"refine"``), for before/after reports.
+    closed_form : ClosedFormResult or None
+        Stage 1, when the data has one-joint-at-a-time ``pose`` observations.
+    export : ExportResult or None
+        The last export (measurement-frame pose ``w_T_root``, moved link frames).
+    cameras : CamerasResult or None
+        The hand-eye step, when the data has ``target`` observations.
+    refined : RefineResult or None
+        The joint refinement (method ``refine``).
+    notes : tuple of str
+        Stages skipped and why.
+    """
+
+    urdf_xml: str
+    stages: tuple[tuple[str, str], ...]
+    closed_form: ClosedFormResult | None
+    export: ExportResult | None
+    cameras: CamerasResult | None
+    refined: RefineResult | None
+    notes: tuple[str, ...]
+
+    @property
+    def w_T_root(self) -> NDArray[np.float64]:
+        """Pose of the URDF root in the measurement frame (identity when the root is it)."""
+        return np.eye(4) if self.export is None else self.export.w_T_root
+
+
+def calibrate(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    method: str = "refine",
+    noise: NoiseModel | None = None,
+    loss: str = "huber",
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    progress: Callable[[str], None] | None = None,
+    refine_intrinsics: bool | tuple[str, ...] = (),
+) -> Calibration:
+    """Calibrate ``nominal`` from ``data``.
+
+    1. Closed form (Shih et al. section 4) when the data has one-joint-at-a-time
+       ``pose`` observations in the root frame; it rewrites the joints on their paths.
+    2. Hand-eye (section 5; Hirsh et al.) when it has ``target`` or ``pixels``
+       observations (these through each image's PnP pose): each camera's fixed mount
+       and the target pose, on the kinematics so far.
+    3. With ``method="refine"``: the joint nonlinear least squares over every unknown and
+       every observation (:func:`kinfw.identification.refine`), started from 1-2 (or
+       from the nominal URDF when they could not run), then exported.
+
+    Parameters
+    ----------
+    nominal : Robot
+    data : Measurements
+    method : {"refine", "closed-form"}
+    noise : NoiseModel, optional
+        Measurement noise for the refinement; default estimated.
+    loss : {"huber", "linear", "cauchy"}
+        Robust loss of the refinement (default Huber: a gross outlier is down-weighted
+        whatever the parameter set; on clean data it costs little, its threshold being the
+        99 % quantile of a clean residual).
+    parameters : str or tuple of joint names
+        Parameter set of the refinement (:func:`kinfw.identification.refine`):
+        ``"full"``, ``"offsets"``, ``"frames"``, ``"none"`` or joint names.
+    prior : (sigma_m, sigma_rad), optional
+        Gaussian prior on deviations from the nominal geometry. A deliberately
+        restricted model, like a smaller ``parameters`` set: its residuals are neither
+        refused nor warned about (a too strong prior just predicts badly; the model
+        choice scores it so).
+    progress : callable, optional
+        Called with a one-line message after each stage (the command line prints them);
+        the library itself stays quiet.
+    refine_intrinsics : bool or tuple of str
+        Cameras of ``pixels`` observations whose intrinsics the refinement estimates
+        too (True: all; :func:`kinfw.identification.refine`).
+
+    Checks, before any estimation (each raises a :class:`DatasetError` naming the
+    file, the joints or frames and the fix):
+
+    - units (:func:`kinfw.identification.checks.check_units`): joint values or lengths in
+      another unit than the one they were read in (degrees read as radians, mm as m);
+      a closed-form unit refusal (a joint that turns 0.0175 rad per unit of its value)
+      is a refusal too, in every method;
+    - with ``method="refine"``: every joint on a measured path moves, and the residuals
+      determine the free parameters with redundancy
+      (:func:`kinfw.identification.checks.check_redundancy`; with ``parameters="full"``
+      the message says whether ``"frames"`` would be determined);
+    - after the refinement over every parameter (without a prior), that it fits
+      (:func:`kinfw.identification.checks.check_fit`).
+
+    After the refinement over every parameter without a prior, residuals that follow the
+    joint values or exceed a plausible noise are warned about (``UserWarning``, one line
+    each, naming the frame, the joint and the likely cause:
+    :func:`kinfw.identification.checks.fit_warnings`).
+
+    Raises
+    ------
+    DatasetError
+        When no stage can use the data, or a check or stage refuses it (with the reason).
+    """
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+    say = progress or (lambda message: None)
+    clock = time.perf_counter()
+
+    def done(message: str) -> None:
+        nonlocal clock
+        say(f"{message} ({time.perf_counter() - clock:.2f} s)")
+        clock = time.perf_counter()
+
+    check_units(nominal, data)
+    if method == "refine":
+        # every joint on a measured path must move, or its geometry is not observed
+        if parameters in ("full", "offsets"):
+            check_joint_motion(data, observed_joints(data, nominal))
+        cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
+        smaller = None
+        if parameters == "full":
+            smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
+        check_redundancy(
+            build_problem(
+                nominal,
+                data,
+                parameters=parameters,
+                prior=prior,
+                refine_intrinsics=refine_intrinsics,
+            ),
+            noise_given=noise is not None,
+            n_samples=data.n_samples,
+            source=data.source,
+            cameras=cameras_seen,
+            smaller=smaller,
+        )
+    closed_form = export = cameras = refined = None
+    stages: list[tuple[str, str]] = []
+    notes: list[str] = []
+    xml = nominal.urdf_xml
+    if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
+        try:
+            closed_form = identify_closed_form(nominal, data)
+        except ProtocolError as exc:
+            if method == "closed-form" or isinstance(exc, UnitError):
+                raise
+            notes.append(f"closed form skipped: {exc}")
+        else:
+            export = export_urdf(nominal, closed_form.geometry)
+            xml = export.urdf_xml
+            stages.append(("closed form", xml))
+            done(
+                f"closed form: {len(closed_form.model.topology.joint_names)} joints, "
+                f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm"
+            )
+    if (data.targets or data.groups("pixels")) and parameters != "none":
+        cameras = calibrate_cameras(Robot(xml, nominal.source), data)
+        mounts: dict[str, list[NDArray]] = {}
+        for c in cameras.cameras:  # a camera that saw several targets: average its mounts
+            mounts.setdefault(c.joint, []).append(c.hand_T_camera)
+        xml = edit_urdf(
+            xml,
+            joint_origins={
+                joint: average_transform(np.stack(poses)) for joint, poses in mounts.items()
+            },
+        )
+        stages.append(("hand-eye", xml))
+        done(f"hand-eye: {len(cameras.cameras)} camera(s)")
+    if method == "refine":
+        targets = dict(cameras.root_T_targets) if cameras is not None else None
+        refined = refine(
+            nominal,
+            data,
+            start=Robot(xml, nominal.source),
+            targets=targets,
+            noise=noise,
+            loss=loss,
+            parameters=parameters,
+            prior=prior,
+            refine_intrinsics=refine_intrinsics,
+        )
+        # a smaller set, or a prior, is a deliberately restricted model (baselines, the
+        # model choice's candidates): its residuals are expected to show what it leaves out
+        unrestricted = parameters == "full" and prior is None
+        found = fit_warnings(refined, data) if unrestricted else ()
+        if unrestricted:
+            try:
+                check_fit(refined, data.source)
+            except UnitError as exc:  # the residuals' structure names a likelier cause
+                raise UnitError(" ".join((str(exc), *(f"Also: {w}" for w in found)))) from None
+        for warning in found:
+            warnings.warn(f"{data.source}: {warning}", UserWarning, stacklevel=2)
+        export = export_urdf(
+            nominal,
+            geometry_from_cpc(refined.model),
+            root_is_measurement_frame=refined.model_frame is None,
+        )
+        xml = export.urdf_xml
+        stages.append(("refine", xml))
+        done(
+            f"refine: {refined.identifiability.n_parameters} free parameters, "
+            f"{refined.iterations} iterations, reduced chi-square {refined.sigma_hat2:.3g}"
+        )
+    if not stages:
+        raise DatasetError(
+            f"{data.source}: nothing to calibrate: the closed form needs one-joint-at-a-time "
+            "'pose' observations in the root frame and the hand-eye step 'target' "
+            "observations; use the default method 'refine' for any other data"
+        )
+    for note in notes:
+        log.info(note)
+    return Calibration(xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes))

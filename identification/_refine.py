@@ -1,0 +1,499 @@
+"""Joint nonlinear least squares over every unknown at once (CasADi + Levenberg-Marquardt).
+
+One problem holds the identifiable CPC parameters of the whole tree (the chart of
+:meth:`kinfw.model.CPCModel.perturbed`), each target's pose, the pose of the root in every
+external measurement frame, every marker's pose and every unknown point offset, and uses
+every ``pose``, ``target`` and ``point`` observation together. It is the nonlinear
+identification the paper sets aside (Shih et al. eq. 23), started from the closed form
+and the hand-eye solution (or from the nominal URDF).
+
+Residuals are whitened by the measurement noise: ``(measured - predicted) / sigma_p`` for
+positions and ``0.5 vee(R_pred^T R_meas - R_meas^T R_pred) / sigma_r`` for orientations
+(the sine of the error angle about its axis: smooth at zero error, unlike a log), and
+each further observation kind's rows by the sigma of its own noise component. With
+``sigma`` not given they are estimated from the residuals (variance components: each
+component's sum of squares over its share of the degrees of freedom, iterated).
+
+The problem is assembled by :mod:`kinfw.identification.problem` from parameter blocks
+(:mod:`kinfw.model`) and the observation kinds of the registry
+(:mod:`kinfw.observations`): CasADi builds each observation group's residual and its
+exact Jacobian from the CPC model (:func:`kinfw.model.cpc_fk_function`) and maps
+them over the samples; the solver is Levenberg-Marquardt on those functions (numpy,
+:mod:`kinfw.identification.problem`), with an optional Huber or Cauchy loss by
+iteratively reweighted least squares; the noise is estimated per noise component
+(:mod:`kinfw.identification.problem`); covariance and identifiability come from
+:mod:`kinfw.identification.problem`. Directions of the parameter space the data
+does not determine are left at the start (minimum-norm steps) and reported. This module
+orchestrates them.
+
+Gauge (:mod:`kinfw.identification.problem`). The CPC chart is minimal for poses of end
+frames in the measurement frame. Two more redundancies are fixed: when every observation
+is in one external frame (``measured_in``), the model is expressed in that frame (the
+root's pose in it comes from the export's registration, not from a separate unknown);
+and an end frame observed only through markers or points of unknown offset keeps its
+nominal tool transform (the markers carry the freedom).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.identification._refine_result import RefineResult, parameter_unit
+from kinfw.identification.problem import (
+    LOSSES,
+    GroupResiduals,
+    Identifiability,
+    LeastSquaresProblem,
+    NoiseModel,
+    RejectedObservation,
+    Unknown,
+    build_problem,
+    clear_function_cache,
+    covariance_and_identifiability,
+    estimate_noise,
+    group_residuals,
+    levenberg_marquardt,
+    negligible_columns,
+    observation_norms,
+    rejected_observations,
+    row_weights,
+    thresholds,
+)
+from kinfw.measurements import Measurements
+from kinfw.model import Robot
+from kinfw.observations import DatasetError, kind_of
+
+__all__ = [
+    "LOSSES",
+    "REJECT_Z",
+    "GroupResiduals",
+    "Identifiability",
+    "LeastSquaresProblem",
+    "NoiseModel",
+    "RefineResult",
+    "RejectedObservation",
+    "Unknown",
+    "build_problem",
+    "clear_function_cache",
+    "information_matrix",
+    "parameter_unit",
+    "refine",
+]
+
+log = logging.getLogger(__name__)
+
+#: Default rejection quantile of :func:`refine`, as a standard-normal ``z``: Phi(3.09) =
+#: 0.999, so 0.1 % of clean observations are rejected.
+REJECT_Z = 3.09
+#: Default largest fraction of the observations :func:`refine` rejects.
+MAX_REJECT_FRACTION = 0.05
+
+
+def information_matrix(problem: LeastSquaresProblem, noise: NoiseModel) -> NDArray[np.float64]:
+    """Fisher information ``J^T J`` of the whitened residuals at the problem's start.
+
+    Built around the *true* model and frames, its inverse is the Cramer-Rao bound on the
+    covariance of any unbiased estimate of the chart coordinates (free entries only).
+    """
+    _, J = problem.evaluate(np.zeros(problem.n_parameters), noise, True)
+    Jf = J[:, problem.free]
+    return Jf.T @ Jf
+
+
+def refine(
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    start: Robot | None = None,
+    targets: dict[str, NDArray] | None = None,
+    noise: NoiseModel | None = None,
+    loss: str = "linear",
+    loss_scale: float = 2.33,
+    max_iterations: int = 100,
+    noise_rounds: int = 5,
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    known: tuple[Unknown, ...] = (),
+    refine_intrinsics: bool | tuple[str, ...] = (),
+    reject: float | None = REJECT_Z,
+    max_reject_fraction: float = MAX_REJECT_FRACTION,
+    max_reject_rounds: int = 5,
+) -> RefineResult:
+    """Refine every unknown jointly by whitened nonlinear least squares.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal URDF: topology, joint types, and the tool transforms kept for frames
+        observed only through markers.
+    measurements : Measurements
+        ``pose``, ``target`` and ``point`` observations (any mix).
+    start : Robot, optional
+        Start geometry (e.g. the closed-form + hand-eye URDF); default ``robot``.
+    targets : dict of str to ndarray (4, 4), optional
+        Start poses ``root_T_target`` (e.g. from the hand-eye step); default estimated.
+    noise : NoiseModel, optional
+        Measurement noise; default estimated from the residuals (starting from 1 mm and
+        0.5 deg).
+    loss : {"linear", "huber", "cauchy"}
+        Robust loss on each observation's whitened residual norm.
+    loss_scale : float
+        Where the robust loss departs from least squares, as a standard-normal quantile
+        ``z``: an observation's whitened residual norm is compared with the same quantile
+        of its clean distribution under the noise model of :class:`NoiseModel` (exact:
+        ``chi2(3) + 3 chi2(1)`` for poses and targets, ``chi2(3)`` for points), so 2.33
+        flags 1 % of clean observations.
+    max_iterations : int
+        Levenberg-Marquardt iterations per noise round.
+    noise_rounds : int
+        Re-estimations of the noise when it is not given.
+    parameters : {"full", "offsets", "frames", "none"} or tuple of joint names
+        What to estimate besides the targets, external frames, markers and offsets:
+        ``"full"`` every identifiable CPC parameter; ``"offsets"`` joint zero offsets,
+        the base frame and the end frames' tool transforms; ``"frames"`` the base and tool
+        frames only (nominal joints); ``"none"`` nothing of the robot (the nominal
+        baseline); a mask: ``"frames"`` plus the CPC parameters named by joint (all of
+        its parameters) or ``"joint:field"`` (``b_tilt_1``, ``b_tilt_2``, ``l_x``,
+        ``l_y``).
+    prior : (sigma_m, sigma_rad), optional
+        Gaussian prior on the robot parameters' deviations from the nominal URDF (from
+        the start when the model lives in an external frame), for small datasets. With
+        ``"full"``, the joint zero offsets are estimated too, under the same prior (a
+        zero offset is one angle where the CPC chart would spread it over every axis
+        below the joint: :func:`kinfw.identification.problem.robot_blocks`).
+    known : tuple of Unknown
+        Start values of extra unknowns (targets, frames, markers, offsets) instead of
+        estimating them from these data.
+    refine_intrinsics : bool or tuple of str
+        Cameras (frames) of ``pixels`` observations whose 9 intrinsics (fx, fy, cx, cy,
+        k1, k2, p1, p2, k3) are estimated too, started from the data's; True: every
+        camera; default none (the intrinsics are known). What the images cannot
+        determine (k3 with the board always near the image centre) is reported as
+        unidentifiable and left at its start.
+    reject : float or None
+        With a robust loss: the rejection quantile, as a standard-normal ``z`` (default
+        3.09, the 99.9 % quantile); observations whose whitened residual norm is beyond
+        that quantile of its clean distribution are excluded and the problem refitted
+        without them (see Notes). None keeps every observation (down-weighted only).
+        Ignored for ``loss="linear"``.
+    max_reject_fraction : float
+        At most this fraction of the observations is rejected (the worst; at least one
+        when the fraction is positive: a small dataset may hold one gross error); when more lie
+        beyond the threshold, :attr:`RefineResult.rejection_note` says so.
+    max_reject_rounds : int
+        Refits after rejection, at most.
+
+    Returns
+    -------
+    RefineResult
+
+    Raises
+    ------
+    DatasetError
+        When the data does not fit the robot or leaves an external frame unplaceable.
+
+    Notes
+    -----
+    Gross errors are rejected explicitly rather than by a redescending loss: a
+    redescending loss (Cauchy, Tukey) has local minima, its result depends on the start,
+    and an observation's influence never quite reaches zero (nor does the report say
+    which were dropped); explicit rejection refits exactly the problem without them, so
+    the result equals the fit of the data with those observations deleted.
+
+    The test, per observation: the norm ``s`` of its whitened residual, at the robust
+    fit (Huber or Cauchy by IRLS, whose noise estimate is robust: a median, then a
+    moment trimmed at the 99.9 % quantile, :func:`kinfw.identification.problem.estimate_noise`,
+    which gross errors do not inflate), against the ``Phi(reject)`` quantile of the
+    clean norm under the noise model of the kind's noise components (exact CDFs of
+    :func:`kinfw.identification.problem.norm2_cdf`: ``chi2(3)`` for a point,
+    ``chi2(3) + 3 chi2(1)`` for a pose or target). A clean observation is therefore
+    rejected with probability ``1 - Phi(reject)`` (0.1 % by default; a little less, as
+    fitted residuals are smaller than the noise by the leverage), a 70 mm error on
+    0.5 mm noise (a whitened norm of 140 against a threshold near 4.0) surely.
+
+    Rounds: fit, reject the observations beyond the threshold, refit without them
+    (from the same starts, noise re-estimated), and again until no new observation is
+    beyond the threshold or ``max_reject_rounds`` refits; a rejected observation is not
+    readmitted. More than ``max_reject_fraction`` of the observations (at least one)
+    beyond the threshold is not what a few gross errors look like (under the noise
+    model, 0.1 % is expected): only the worst that fraction allows are rejected and
+    ``rejection_note`` says the data may be inconsistent with the model. A rejection
+    that leaves the problem undetermined (:class:`DatasetError` on the refit) is undone
+    and noted.
+    """
+    if loss not in LOSSES:
+        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
+    if reject is not None and not reject > 0.0:
+        raise ValueError(f"reject: expected a positive z (e.g. 3.09) or None, got {reject!r}")
+    if not 0.0 <= max_reject_fraction < 1.0:
+        raise ValueError(
+            f"max_reject_fraction: expected 0 <= fraction < 1, got {max_reject_fraction!r}"
+        )
+    t0 = time.perf_counter()
+
+    def fit(data: Measurements):
+        return _fit(
+            robot,
+            data,
+            start=start,
+            targets=targets,
+            noise=noise,
+            loss=loss,
+            loss_scale=loss_scale,
+            max_iterations=max_iterations,
+            noise_rounds=noise_rounds,
+            parameters=parameters,
+            prior=prior,
+            known=known,
+            refine_intrinsics=refine_intrinsics,
+        )
+
+    result, problem, r = fit(measurements)
+    if loss == "linear" or reject is None:
+        return result
+    n_obs = sum(len(g.sample) for g in problem.groups)
+    # one gross error is what any dataset may hold, however small (a training fold of 16)
+    allowed = max(int(np.floor(max_reject_fraction * n_obs)), int(max_reject_fraction > 0))
+    rejected: list[RejectedObservation] = []
+    rounds: list[tuple[LeastSquaresProblem, NDArray, NDArray]] = []
+    note = None
+    data = measurements
+    for _ in range(max_reject_rounds):
+        groups = list(problem.groups)
+        m = sum(len(g.sample) for g in groups)
+        k = thresholds(problem.obs_components, reject)[:m]
+        norms = observation_norms(r, problem.obs_sizes)[:m]
+        beyond = norms > k
+        if not beyond.any():
+            break
+        room = allowed - len(rejected)
+        if beyond.sum() > room:
+            note = (
+                f"{int(beyond.sum()) + len(rejected)} of {n_obs} observations lie beyond the "
+                f"{100 * _phi(reject):.4g} % quantile of the clean residual (expected "
+                f"{100 * (1 - _phi(reject)):.2g} %); only the worst {allowed} "
+                f"(at most {100 * max_reject_fraction:.3g} %, at least one) are rejected: the "
+                "data may be inconsistent with the model (a missing parameter, a wrong frame "
+                "or noise model) rather than hold a few gross errors"
+            )
+            order = np.argsort(-(norms / k), kind="stable")
+            keep_worst = np.zeros(m, bool)
+            keep_worst[order[: max(room, 0)]] = True
+            beyond &= keep_worst
+            if not beyond.any():
+                break
+        new = rejected_observations(groups, r, result.noise, norms, k, beyond)
+        rounds.append((problem, k, beyond))
+        reduced = _without(data, groups, beyond)
+        try:
+            refit, refit_problem, refit_r = fit(reduced)
+        except DatasetError as exc:
+            note = (
+                f"{len(new)} observations beyond the rejection threshold were kept: "
+                f"without them {exc}"
+            )
+            break
+        rejected += new
+        data, result, problem, r = reduced, refit, refit_problem, refit_r
+        if note is not None:
+            break
+    # the rejected observations' residuals against the final fit, when the problems
+    # they were in have its layout (the same blocks: the functions take the model and
+    # the starts as inputs); else those at the fit that rejected them
+    final = []
+    for p_round, k, mask in rounds:
+        r_final = _residuals_with(p_round, problem, result.estimate, result.noise)
+        if r_final is None:
+            final = rejected
+            break
+        norms = observation_norms(r_final, [(len(g.sample), g.rows) for g in p_round.groups])
+        final += rejected_observations(p_round.groups, r_final, result.noise, norms, k, mask)
+    rejected = list(final)
+    rejected.sort(key=lambda o: -o.excess)
+    if rejected:
+        log.info(
+            "refine: %d observations rejected as gross errors (worst: %s %s sample %d, "
+            "%.3g times the threshold)",
+            len(rejected),
+            rejected[0].kind,
+            rejected[0].frame,
+            rejected[0].sample,
+            rejected[0].excess,
+        )
+    if note is not None:
+        log.warning("refine: %s", note)
+    return replace(
+        result,
+        rejected=tuple(rejected),
+        rejection_note=note,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _phi(z: float) -> float:
+    """The standard normal CDF."""
+    return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+
+
+def _residuals_with(
+    problem: LeastSquaresProblem, other: LeastSquaresProblem, x: NDArray, noise: NoiseModel
+) -> NDArray | None:
+    """The whitened residuals of ``problem``'s observations under ``other``'s model,
+    starts and estimate ``x`` (groups only, no prior rows); None when the two problems'
+    blocks differ (e.g. a group left empty by the rejection took its marker along)."""
+    layout = [(b.key, b.size) for b in problem.blocks]
+    if layout != [(b.key, b.size) for b in other.blocks] or not other.groups:
+        return None
+    const = other.groups[0].const
+    if len(const) != len(problem.groups[0].const):
+        return None
+    out = []
+    for g in problem.groups:
+        r, _ = replace(g, const=const).evaluate(x, False)
+        out.append(r / np.tile(g.row_sigma(noise), len(g.sample)))
+    return np.concatenate(out)
+
+
+def _without(data: Measurements, groups: list, drop: NDArray[np.bool_]) -> Measurements:
+    """``data`` without the observations marked in ``drop`` (per observation of the
+    problem's ``groups``, in order); samples keep their indices, empty groups go."""
+    kept, o = [], 0
+    for grp in groups:
+        m = len(grp.sample)
+        rows = np.flatnonzero(~drop[o : o + m])
+        if len(rows):
+            g = grp.group
+            kept.append(kind_of(g).take(g, rows, g.sample[rows]))
+        o += m
+    return data.with_groups(kept)
+
+
+def _fit(
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    start: Robot | None,
+    targets: dict[str, NDArray] | None,
+    noise: NoiseModel | None,
+    loss: str,
+    loss_scale: float,
+    max_iterations: int,
+    noise_rounds: int,
+    parameters: str | tuple[str, ...],
+    prior: tuple[float, float] | None,
+    known: tuple[Unknown, ...],
+    refine_intrinsics: bool | tuple[str, ...] = (),
+) -> tuple[RefineResult, LeastSquaresProblem, NDArray]:
+    """One robust fit of every observation of ``measurements`` (see :func:`refine`):
+    the result, the problem and the final whitened residuals."""
+    t0 = time.perf_counter()
+    problem = build_problem(
+        robot,
+        measurements,
+        start=start,
+        targets=targets,
+        parameters=parameters,
+        prior=prior,
+        known=known,
+        refine_intrinsics=refine_intrinsics,
+    )
+    P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
+    given = noise is not None
+    for c in {c for g in problem.groups for c in g.components} if given else ():
+        try:
+            noise.sigma(c)
+        except KeyError as exc:  # a user's noise model that misses a component of the data
+            hint = "; on the command line --sigma-px" if c.unit == "px" else ""
+            raise ValueError(f"{measurements.source}: {exc.args[0]}{hint}") from None
+    sigma = (
+        noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
+    )
+    k = thresholds(problem.obs_components, loss_scale)
+    x = np.zeros(P)
+    # what the data do not see at the start stays there for every round: once the other
+    # parameters have moved, a structurally redundant one (a joint's axis tilt when the
+    # only observed point lies on that axis) gets a small column again and would drift
+    # along its redundancy; the diagnostics still report it (with the full free mask)
+    _, J0 = problem.evaluate(x, sigma, True, only_free=True)
+    moving = free.copy()
+    moving[free] = ~negligible_columns(J0[:, free])
+    iterations, converged = 0, False
+    for round_ in range(1 if given else noise_rounds):
+        x, its, converged = levenberg_marquardt(
+            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True),
+            x,
+            moving,
+            obs_sizes,
+            loss,
+            k,
+            max_iterations,
+        )
+        iterations += its
+        if given:
+            break
+        r, J = problem.evaluate(x, sigma, True, only_free=True)
+        Q, _ = np.linalg.qr(J[:, free] * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None])
+        sigma = estimate_noise(
+            r,
+            problem.groups,
+            sigma,
+            np.sum(Q**2, axis=1),
+            robust=loss != "linear",
+            first=round_ == 0,
+        )
+    r, J = problem.evaluate(x, sigma, True, only_free=True)
+    w_rows = row_weights(r, obs_sizes, loss, k)
+    rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
+    dof = max(len(r) - int(free.sum()), 1)
+    sigma_hat2 = float(rw @ rw / dof)
+    # a given noise model is trusted; an estimated one is rescaled by the fit
+    covariance, ident = covariance_and_identifiability(
+        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements, problem.model0
+    )
+    # blocks that know when a full-rank estimate is still not determined (intrinsics)
+    poor = tuple(
+        item
+        for b, s in zip(problem.blocks, problem.slices, strict=True)
+        if b.free.any()
+        for item in b.undetermined(x[s], covariance[s, s])
+    )
+    if poor:
+        ident = replace(ident, unidentifiable=(*ident.unidentifiable, *poor))
+    flagged = observation_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
+    residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma, flagged)
+    result = RefineResult(
+        model=problem.model_at(x),
+        model_frame=problem.model_frame,
+        unknowns=problem.unknowns_at(x),
+        parameter_names=problem.names,
+        parameter_units=problem.units,
+        free=problem.free.copy(),
+        estimate=x,
+        covariance=covariance,
+        noise=sigma,
+        sigma_hat2=sigma_hat2,
+        residuals=residuals,
+        downweighted=downweighted,
+        identifiability=ident,
+        iterations=iterations,
+        converged=converged,
+        cost=0.5 * float(rw @ rw),
+        seconds=time.perf_counter() - t0,
+    )
+    log.info(
+        "refine: %d free parameters (%d before gauge fixing and the parameter set), "
+        "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
+        ident.n_parameters,
+        P,
+        len(r),
+        iterations,
+        sigma_hat2,
+        result.seconds,
+    )
+    return result, problem, r

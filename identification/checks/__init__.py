@@ -1,0 +1,58 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.identification.checks._fit_checks import (
+    CHI2_LIMIT,
+    PLAUSIBLE_NOISE_M,
+    PLAUSIBLE_NOISE_RAD,
+    STRUCTURE_R2,
+    ResidualStructure,
+    fit_warnings,
+    residual_structure,
+)
+from kinfw.identification.checks._redundancy import (
+    MIN_DOF_PER_KIND,
+    InsufficientDataError,
+    Redundancy,
+    check_redundancy,
+    redundancy,
+)
+from kinfw.identification.checks._units import UnitError, check_fit, check_joint_scale, check_units
+from kinfw.identification.checks._units_evidence import (
+    BAD_SCORE,
+    BETTER_FACTOR,
+    FLOOR_M,
+    FLOOR_RAD,
+    JointValues,
+    UnitDiagnostics,
+    UnitHypothesis,
+    unit_diagnostics,
+)
+
+__all__ = [
+    "BAD_SCORE",
+    "BETTER_FACTOR",
+    "CHI2_LIMIT",
+    "FLOOR_M",
+    "FLOOR_RAD",
+    "MIN_DOF_PER_KIND",
+    "PLAUSIBLE_NOISE_M",
+    "PLAUSIBLE_NOISE_RAD",
+    "STRUCTURE_R2",
+    "InsufficientDataError",
+    "JointValues",
+    "Redundancy",
+    "ResidualStructure",
+    "UnitDiagnostics",
+    "UnitError",
+    "UnitHypothesis",
+    "check_fit",
+    "check_joint_scale",
+    "check_redundancy",
+    "check_units",
+    "fit_warnings",
+    "redundancy",
+    "residual_structure",
+    "unit_diagnostics",
+]

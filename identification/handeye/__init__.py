@@ -1,0 +1,187 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.identification.handeye._axxb import HandEyeError, motion_pairs, solve_axxb
+from kinfw.identification.handeye._axyb import AXYBResult, convergence_factor, solve_axyb
+from kinfw.identification.handeye._axyb_iteration import (
+    AXYBError,
+    RotationRun,
+    TranslationRun,
+    consistent_quats_xyzw,
+    iteration_matrix,
+    left_product_matrix_xyzw,
+    normalise,
+    right_product_matrix_xyzw,
+    rotation_from_quat_xyzw,
+    rotation_iteration,
+    translation_iteration,
+)
+from kinfw.identification.handeye._axyb_refinement import translations_least_squares
+from kinfw.identification.handeye._axyb_start import (
+    MIN_MOTION_RAD,
+    WEAK_MOTION_RAD,
+    check_motion,
+    check_start,
+    start_of_y,
+)
+from kinfw.identification.handeye._cameras import (
+    CameraCalibration,
+    CamerasResult,
+    calibrate_cameras,
+    camera_mount,
+    target_views,
+)
+from kinfw.identification.handeye._checks import (
+    ORTHONORMAL_TOL,
+    RANK_TOL,
+    StartError,
+    check_pose_pairs,
+    check_start_poses,
+    length_scale,
+    nearest_rotation,
+    solve_normal,
+)
+from kinfw.identification.handeye._lm import (
+    LMFit,
+    PoseData,
+    fit_lm,
+    robust_sigmas,
+    variance_components,
+)
+from kinfw.identification.handeye._ml import (
+    CHI2_6_999,
+    PoseFit,
+    assess,
+    fit_absolute,
+    rejection_threshold,
+)
+from kinfw.identification.handeye._quaternion import (
+    closed_form_batch,
+    closed_form_start,
+    consistent_quats,
+    product_matrices,
+    product_tensor,
+)
+from kinfw.identification.handeye._result import HandEyeResult
+from kinfw.identification.handeye._starts import (
+    AXXB_STARTS,
+    AXYB_STARTS,
+    RankedStart,
+    candidate_starts,
+    rank_starts,
+)
+from kinfw.identification.handeye._starts_axxb import (
+    AXXB_FROM_MOTIONS,
+    andreff_axxb,
+    daniilidis_axxb,
+    park_axxb,
+    prepare_axxb,
+)
+from kinfw.identification.handeye._starts_axyb import AXYB_FROM_CHECKED, li_axyb, shah_axyb
+from kinfw.identification.handeye._time_offset import (
+    TimeOffsetResult,
+    best_time_offset,
+    implied_target_spread,
+)
+from kinfw.identification.handeye._tsai import (
+    HALF_TURN_BAND_RAD,
+    PARALLEL_AXES_RAD,
+    PRE_ROTATE_ABOVE_RAD,
+    largest_line_angle,
+    tsai_rotation,
+)
+from kinfw.identification.handeye._uncertainty import (
+    POOR_ROTATION_DEG,
+    POOR_TRANSLATION_FRACTION,
+    UNDETERMINED_ROTATION_DEG,
+    UNDETERMINED_TRANSLATION_FRACTION,
+    Uncertainty,
+    combined_verdict,
+    inverse_covariance_map,
+    uncertainty,
+)
+
+__all__ = [
+    "AXXB_FROM_MOTIONS",
+    "AXXB_STARTS",
+    "AXYB_FROM_CHECKED",
+    "AXYB_STARTS",
+    "CHI2_6_999",
+    "HALF_TURN_BAND_RAD",
+    "MIN_MOTION_RAD",
+    "ORTHONORMAL_TOL",
+    "PARALLEL_AXES_RAD",
+    "POOR_ROTATION_DEG",
+    "POOR_TRANSLATION_FRACTION",
+    "PRE_ROTATE_ABOVE_RAD",
+    "RANK_TOL",
+    "UNDETERMINED_ROTATION_DEG",
+    "UNDETERMINED_TRANSLATION_FRACTION",
+    "WEAK_MOTION_RAD",
+    "AXYBError",
+    "AXYBResult",
+    "CameraCalibration",
+    "CamerasResult",
+    "HandEyeError",
+    "HandEyeResult",
+    "LMFit",
+    "PoseData",
+    "PoseFit",
+    "RankedStart",
+    "RotationRun",
+    "StartError",
+    "TimeOffsetResult",
+    "TranslationRun",
+    "Uncertainty",
+    "andreff_axxb",
+    "assess",
+    "best_time_offset",
+    "calibrate_cameras",
+    "camera_mount",
+    "candidate_starts",
+    "check_motion",
+    "check_pose_pairs",
+    "check_start",
+    "check_start_poses",
+    "closed_form_batch",
+    "closed_form_start",
+    "combined_verdict",
+    "consistent_quats",
+    "consistent_quats_xyzw",
+    "convergence_factor",
+    "daniilidis_axxb",
+    "fit_absolute",
+    "fit_lm",
+    "implied_target_spread",
+    "inverse_covariance_map",
+    "iteration_matrix",
+    "largest_line_angle",
+    "left_product_matrix_xyzw",
+    "length_scale",
+    "li_axyb",
+    "motion_pairs",
+    "nearest_rotation",
+    "normalise",
+    "park_axxb",
+    "prepare_axxb",
+    "product_matrices",
+    "product_tensor",
+    "rank_starts",
+    "rejection_threshold",
+    "right_product_matrix_xyzw",
+    "robust_sigmas",
+    "rotation_from_quat_xyzw",
+    "rotation_iteration",
+    "shah_axyb",
+    "solve_axxb",
+    "solve_axyb",
+    "solve_normal",
+    "start_of_y",
+    "target_views",
+    "translation_iteration",
+    "translations_least_squares",
+    "tsai_rotation",
+    "uncertainty",
+    "variance_components",
+]

@@ -1,0 +1,191 @@
+"""Stage 2 of Shih et al. (section 5): the cameras' hand-eye transforms and the target pose.
+
+Each camera ``c`` on the robot observes a target fixed in the world at several
+configurations; with the kinematics known (stage 1, or a trusted nominal URDF), every
+observation is one equation of the form ``A = X B Y`` (Hirsh et al.; Shih et al. eq. 68):
+
+    camera_T_target(q_i) = camera_T_hand  @  hand_T_root(q_i)  @  root_T_target
+           A_i           =       X        @        B_i         @        Y
+
+where ``hand`` is the URDF link the camera's fixed joint hangs from (for the IIS-head, the
+plate: the paper's "camera mount coordinate system"). The camera's fixed joint origin
+``hand_T_camera = inv(camera_T_hand)`` is what the calibrated URDF changes;
+``root_T_target`` is the target's pose in the measurement frame, which belongs in the
+report, not the URDF.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.geometry import average_transform, inverse_transform, rotation_angle
+from kinfw.identification.handeye._axyb import AXYBResult, solve_axyb
+from kinfw.measurements import Measurements
+from kinfw.model import Robot, cpc_from_robot
+from kinfw.observations import DatasetError, TargetObservations
+
+__all__ = [
+    "CameraCalibration",
+    "CamerasResult",
+    "calibrate_cameras",
+    "camera_mount",
+    "target_views",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class CameraCalibration:
+    """The hand-eye result of one camera.
+
+    Attributes
+    ----------
+    camera, target : str
+        Camera frame and target name.
+    joint, hand : str
+        The camera's fixed joint and the link it hangs from.
+    hand_T_camera : ndarray, shape (4, 4)
+        Identified pose of the camera in the hand link (the new joint origin), metres.
+    root_T_target : ndarray, shape (4, 4)
+        Identified pose of the target in the measurement frame, from this camera alone.
+    n_views : int
+    solver : AXYBResult
+        The solver's record (iterations, restarts, residuals).
+    """
+
+    camera: str
+    target: str
+    joint: str
+    hand: str
+    hand_T_camera: NDArray[np.float64]
+    root_T_target: NDArray[np.float64]
+    n_views: int
+    solver: AXYBResult
+
+
+@dataclass(frozen=True, slots=True)
+class CamerasResult:
+    """Stage 2 for every camera.
+
+    Attributes
+    ----------
+    cameras : tuple of CameraCalibration
+    root_T_targets : tuple of (target, ndarray (4, 4)) pairs
+        Per target, the chordal mean of the cameras' estimates of its pose in the
+        measurement frame.
+    target_spread : tuple of (target, position_m, rotation_rad)
+        Per target, the largest distance between any camera's estimate and the mean:
+        cameras that see the same target must agree on where it is.
+    """
+
+    cameras: tuple[CameraCalibration, ...]
+    root_T_targets: tuple[tuple[str, NDArray[np.float64]], ...]
+    target_spread: tuple[tuple[str, float, float], ...]
+
+
+def camera_mount(robot: Robot, camera: str) -> tuple[str, str]:
+    """The fixed joint into ``camera`` and the link it hangs from.
+
+    Raises
+    ------
+    DatasetError
+        If ``camera`` is the root link or the child of a movable joint (then there is no
+        fixed mount to calibrate).
+    """
+    path = robot.path_joints(camera)
+    if not path or path[-1].type != "fixed" or path[-1].child != camera:
+        raise DatasetError(
+            f"{robot.source}: camera frame {camera!r} must be a link attached by a fixed "
+            "joint (its mount) to the robot; give the camera its own link and fixed joint"
+        )
+    return path[-1].name, path[-1].parent
+
+
+def _solve_one(
+    robot: Robot, group: TargetObservations, measurements: Measurements, rng: np.random.Generator
+) -> CameraCalibration:
+    joint, hand = camera_mount(robot, group.camera)
+    model = cpc_from_robot(robot, (hand,))
+    qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
+    root_T_hands = model.frame_poses(qs, hand)
+    result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hands), rng=rng)
+    if result.verdict != "determined":
+        warnings.warn(
+            f"camera {group.camera!r}: hand-eye {result.verdict} (lengths in m); "
+            f"add views with larger rotations about different axes",
+            UserWarning,
+            stacklevel=3,
+        )
+    return CameraCalibration(
+        camera=group.camera,
+        target=group.target,
+        joint=joint,
+        hand=hand,
+        hand_T_camera=inverse_transform(result.camera_T_hand),
+        root_T_target=result.root_T_target,
+        n_views=len(group.sample),
+        solver=result,
+    )
+
+
+def target_views(measurements: Measurements) -> tuple[TargetObservations, ...]:
+    """The ``target`` groups, and each ``pixels`` group as the target poses of its
+    images from PnP (:func:`kinfw.observations.target_observations_from_pixels`)."""
+    from kinfw.observations import target_observations_from_pixels
+
+    return (
+        *measurements.targets,
+        *(target_observations_from_pixels(g) for g in measurements.groups("pixels")),
+    )
+
+
+def calibrate_cameras(
+    robot: Robot, measurements: Measurements, *, rng: np.random.Generator | None = None
+) -> CamerasResult:
+    """Hand-eye transform of every camera with ``target`` observations, and the targets.
+
+    Parameters
+    ----------
+    robot : Robot
+        Kinematics to trust (the stage-1 calibrated URDF, or the nominal one).
+    measurements : Measurements
+        ``target`` observations (``camera_T_target``) and ``pixels`` observations (their
+        images' PnP poses, :func:`target_views`); other kinds are ignored.
+    rng : numpy.random.Generator, optional
+        For the solver's random restarts (reproducible by default).
+
+    Raises
+    ------
+    DatasetError
+        No target or pixel observations, or a camera without a fixed mount; the solver's
+        :class:`kinfw.identification.handeye.AXYBError` (a ``ValueError``) for too few or
+        degenerate views, naming the camera.
+    """
+    views = target_views(measurements)
+    if not views:
+        raise DatasetError(
+            f"{measurements.source}: no 'target' or 'pixels' observations for stage 2"
+        )
+    rng = np.random.default_rng(0) if rng is None else rng
+    cameras = []
+    for group in views:
+        try:
+            cameras.append(_solve_one(robot, group, measurements, rng))
+        except ValueError as exc:
+            raise type(exc)(f"{measurements.source}: camera {group.camera!r}: {exc}") from None
+    poses, spread = [], []
+    for target in dict.fromkeys(c.target for c in cameras):
+        estimates = np.stack([c.root_T_target for c in cameras if c.target == target])
+        mean = average_transform(estimates)
+        poses.append((target, mean))
+        spread.append(
+            (
+                target,
+                float(np.linalg.norm(estimates[:, :3, 3] - mean[:3, 3], axis=1).max()),
+                float(rotation_angle(mean[:3, :3].T @ estimates[:, :3, :3]).max()),
+            )
+        )
+    return CamerasResult(tuple(cameras), tuple(poses), tuple(spread))

@@ -1,0 +1,491 @@
+"""Maximum-likelihood model of the hand-eye on SE(3): residuals, Jacobian and the
+Levenberg-Marquardt fit with variance components.
+
+The model
+---------
+Both hand-eye problems are one absolute-pose model: the camera's measured pose
+``M[i]`` (``camera_T_target``) is the product of two unknown rigid transforms and the
+robot's known pose ``N[i]``::
+
+    M[i] ≈ P @ N[i] @ Q.
+
+``A = X B Y`` (:func:`kinfw.identification.handeye.solve_axyb`) is it with ``M = A``, ``N = B``,
+``P = X``, ``Q = Y``; ``A X = X B`` written for absolute poses (``A[i] X B[i] =
+base_T_target``, :func:`kinfw.identification.handeye.solve_axxb`) is it with ``M = B``,
+``N = A^-1``, ``P = X^-1`` and ``Q = base_T_target``.
+
+Noise model: the camera's pose is off by a rotation ``exp(e_r)`` and a translation
+``e_t``, both expressed in the camera's frame::
+
+    R_M = exp(e_r) R_P R_N R_Q,      t_M = t_P + R_P (R_N t_Q + t_N) + e_t,
+
+with ``e_r ~ N(0, sigma_r^2 I3)`` (radians) and ``e_t ~ N(0, sigma_t^2 I3)`` (length),
+independent over poses. The residuals ``r_r = log(R_M R_hat^T)`` and
+``r_t = t_M - t_hat`` are then exactly the noise, and the maximum-likelihood estimate
+minimises ``sum_i |r_r|^2 / sigma_r^2 + |r_t|^2 / sigma_t^2``. ``sigma_r`` and
+``sigma_t`` are not given: they are estimated from the residuals (variance components,
+each group's residual sum over its redundancy ``n_g - tr(H^-1 H_g)``), alternating with
+the fit. The weights therefore scale with the length unit and the estimate does not
+depend on it.
+
+Minimisation: Levenberg-Marquardt on the manifold, ``R_P <- R_P exp(dphi_P)``,
+``t_P <- t_P + dt_P`` (and the same for ``Q``), analytic Jacobians, vectorised over
+poses. The rotation parametrisation has no singularity (a half turn is an ordinary
+point). With ``huber=True`` the poses are weighted by Huber's IRLS weights of their
+whitened residual norms.
+
+Covariance: ``(J^T W J)^-1`` at the optimum with the estimated ``sigma_r``, ``sigma_t``,
+in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
+
+The robust stage, the starts and the result type are in :mod:`kinfw.identification.handeye`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.geometry import rotation_vector_from_matrix, skew
+
+__all__ = ["LMFit", "PoseData", "fit_lm", "robust_sigmas", "variance_components"]
+
+#: Huber's threshold on the whitened residual norm (sqrt of the 95 % quantile of chi^2_6).
+HUBER_K = 3.5485
+#: Median of chi^2 with 3 degrees of freedom (robust initial noise scales).
+_CHI2_3_MEDIAN = 2.365974
+#: Levenberg-Marquardt: most steps per fit.
+LM_MAX_STEPS = 40
+#: Levenberg-Marquardt: converged when a step is below this (radians, or relative to the
+#: scene's length) and the noise scales changed by less than ``LM_SCALE_TOL`` (relative).
+LM_STEP_TOL = 1e-9
+LM_SCALE_TOL = 1e-7
+#: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
+#: weights finite on noise-free data (rotation-only or translation-only noise).
+_RATIO_BOUNDS = (1e-6, 1e6)
+
+
+def _inverse_right_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``d log(exp(phi) exp(xi)) / d xi`` at ``xi = 0``, (n, 3) -> (n, 3, 3)."""
+    theta = np.linalg.norm(phi, axis=-1)
+    small = theta < 1e-4
+    safe = np.where(small, 1.0, theta)
+    coef = np.where(
+        small,
+        1.0 / 12.0 + theta**2 / 720.0,
+        1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+    )
+    K = skew(phi)
+    return np.eye(3) + 0.5 * K + coef[:, None, None] * (K @ K)
+
+
+def _residuals(
+    R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray, P: NDArray, Q: NDArray
+) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """``r_r`` (n, 3), ``r_t`` (n, 3), ``R_hat`` (n, 3, 3) and ``v = R_N t_Q + t_N``."""
+    R_P, t_P, R_Q, t_Q = P[:3, :3], P[:3, 3], Q[:3, :3], Q[:3, 3]
+    R_hat = R_P @ R_N @ R_Q
+    v = R_N @ t_Q + t_N
+    r_r = _log_small(R_M @ np.swapaxes(R_hat, 1, 2))
+    r_t = t_M - v @ R_P.T - t_P
+    return r_r, r_t, R_hat, v
+
+
+def _jacobian(r_r: NDArray, R_hat: NDArray, v: NDArray, R_N: NDArray, P: NDArray) -> NDArray:
+    """Jacobian (n, 6, 12) of ``(r_r, r_t)`` in ``(dphi_P, dt_P, dphi_Q, dt_Q)``."""
+    n = len(r_r)
+    R_P = P[:3, :3]
+    Jinv = _inverse_right_jacobian(r_r)
+    J = np.zeros((n, 6, 12))
+    J[:, :3, 0:3] = -Jinv @ R_P
+    J[:, :3, 6:9] = -Jinv @ R_hat
+    J[:, 3:, 0:3] = R_P @ skew(v)
+    J[:, 3:, 3:6] = -np.eye(3)
+    J[:, 3:, 9:12] = -(R_P @ R_N)
+    return J
+
+
+def _log_small(R: NDArray) -> NDArray:
+    """Rotation vectors of rotations (n, 3, 3), fast when all are below ~170 deg (the
+    residuals); otherwise :func:`kinfw.geometry.rotation_vector_from_matrix`."""
+    v = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], 1
+    )
+    s = np.sqrt(np.einsum("ni,ni->n", v, v))
+    c = 0.5 * (R[:, 0, 0] + R[:, 1, 1] + R[:, 2, 2] - 1.0)
+    if np.any(c < -0.98):
+        return rotation_vector_from_matrix(R)
+    theta = np.arctan2(s, c)
+    factor = np.where(s < 1e-8, 1.0 + theta**2 / 6.0, theta / np.where(s < 1e-8, 1.0, s))
+    return v * factor[:, None]
+
+
+class PoseData:
+    """The poses of ``M[i] ≈ P @ N[i] @ Q`` split into rotations and translations, and
+    the scene's length scale.
+
+    ``M`` (n, 4, 4) are the measured camera poses (``camera_T_target``), ``N`` (n, 4, 4)
+    the known robot poses, rigid, one length unit. Attributes: ``R_M``, ``R_N`` (n, 3, 3)
+    and ``t_M``, ``t_N`` (n, 3), views of them; ``n`` poses; ``length``, the RMS of
+    ``|t_M|`` (the camera-target distance; of ``|t_N|`` when all are zero; 1 when both
+    are), the scale of the step tolerance and of the bounds on the scales' ratio.
+    """
+
+    def __init__(self, M: NDArray, N: NDArray) -> None:
+        self.R_M, self.t_M = M[:, :3, :3], M[:, :3, 3]
+        self.R_N, self.t_N = N[:, :3, :3], N[:, :3, 3]
+        self.n = len(M)
+        length = float(np.sqrt(np.mean(np.sum(self.t_M**2, axis=1))))
+        if length == 0.0:
+            length = float(np.sqrt(np.mean(np.sum(self.t_N**2, axis=1))))
+        self.length = length if length > 0.0 else 1.0
+
+    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """Residuals of every pose at ``P, Q`` (each (4, 4)): ``r_r = log(R_M R_hat^T)``
+        (n, 3, radians) and ``r_t = t_M - t_hat`` (n, 3, input unit), both in the camera
+        frame; ``R_hat = R_P R_N R_Q`` (n, 3, 3) and ``v = R_N t_Q + t_N`` (n, 3)."""
+        return _residuals(self.R_M, self.t_M, self.R_N, self.t_N, P, Q)
+
+
+def _bounded_sigmas(s_r: float, s_t: float, length: float) -> tuple[float, float]:
+    """Keep ``s_t / (s_r L)`` within ``_RATIO_BOUNDS`` and both positive."""
+    tiny = 1e-15
+    s_r, s_t = max(s_r, tiny), max(s_t, tiny * length)
+    lo, hi = _RATIO_BOUNDS
+    ratio = s_t / (s_r * length)
+    if ratio < lo:
+        s_t = lo * s_r * length
+    elif ratio > hi:
+        s_r = s_t / (hi * length)
+    return s_r, s_t
+
+
+def _medians(a: NDArray, b: NDArray) -> tuple[float, float]:
+    """``np.median`` of two vectors of one length (n,), in one sort."""
+    s = np.sort(np.stack([a, b]), axis=1)
+    m = s.shape[1] // 2
+    if s.shape[1] % 2:
+        return float(s[0, m]), float(s[1, m])
+    return float(0.5 * (s[0, m - 1] + s[0, m])), float(0.5 * (s[1, m - 1] + s[1, m]))
+
+
+def robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, float]:
+    """Noise scales per axis ``(sigma_r, sigma_t)`` (radians, input unit) from the median
+    residual norms, as for a 3-D isotropic Gaussian: the start of the variance components.
+
+    ``r_r``, ``r_t`` are the (n, 3) residuals of :meth:`PoseData.residuals`; ``length``
+    is :attr:`PoseData.length`, which bounds ``sigma_t / (sigma_r length)`` to
+    ``[1e-6, 1e6]`` (finite weights on noise-free data).
+    """
+    m_r, m_t = _medians(np.sum(r_r**2, axis=1), np.sum(r_t**2, axis=1))
+    s_r = math.sqrt(m_r / _CHI2_3_MEDIAN)
+    s_t = math.sqrt(m_t / _CHI2_3_MEDIAN)
+    return _bounded_sigmas(s_r, s_t, length)
+
+
+def _normal_matrices(
+    data: PoseData, P: NDArray, Q: NDArray, weights: NDArray, w_r: float, w_t: float
+) -> tuple[NDArray, NDArray]:
+    """The rotation and translation parts of ``J^T W J`` at ``P, Q``."""
+    r_r, _, R_hat, v = data.residuals(P, Q)
+    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(weights)[:, None, None]
+    H_r = w_r * np.einsum("nki,nkj->ij", J[:, :3], J[:, :3])
+    H_t = w_t * np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:])
+    return H_r, H_t
+
+
+@dataclass(frozen=True, slots=True)
+class LMFit:
+    """One Levenberg-Marquardt fit (:func:`fit_lm`).
+
+    Attributes
+    ----------
+    P, Q : ndarray, shape (4, 4)
+        The estimates, input length unit.
+    s_r, s_t : float
+        Estimated noise scales per axis (radians, input unit).
+    H : ndarray, shape (12, 12)
+        ``J^T W J`` at the end over the fitted poses, without Huber's weights, in the
+        order ``(dphi_P, dt_P, dphi_Q, dt_Q)``: its inverse is the covariance.
+    chi2 : ndarray, shape (n,)
+        Squared whitened residual ``|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2`` of every pose
+        (fitted or not).
+    steps : int
+        Levenberg-Marquardt steps taken.
+    converged : bool
+        Whether the fit stopped on its tolerance.
+    """
+
+    P: NDArray
+    Q: NDArray
+    s_r: float
+    s_t: float
+    H: NDArray  # J^T W J at the end, inliers only, no Huber weights
+    chi2: NDArray  # squared whitened residual of every pose
+    steps: int
+    converged: bool
+
+
+def _exp_update(T: NDArray, d: NDArray) -> NDArray:
+    """``(R exp(d[:3]), t + d[3:])`` for one transform (Rodrigues in scalar arithmetic:
+    ``K^2 = d d^T - theta^2 I``)."""
+    x, y, z, dx, dy, dz = d.tolist()
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-16:
+        a, b = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0
+    else:
+        th = math.sqrt(th2)
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    E = np.array(
+        [
+            [1.0 - b * (y * y + z * z), -a * z + b * x * y, a * y + b * x * z],
+            [a * z + b * x * y, 1.0 - b * (x * x + z * z), -a * x + b * y * z],
+            [-a * y + b * x * z, a * x + b * y * z, 1.0 - b * (x * x + y * y)],
+        ]
+    )
+    out = np.empty((4, 4))
+    out[:3, :3] = T[:3, :3] @ E
+    out[:3, 3] = T[:3, 3] + (dx, dy, dz)
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+_I, _J = np.array([2, 0, 1]), np.array([1, 2, 0])
+_DIAG = np.arange(3)
+#: Off-diagonal entries of skew(w): rows, columns, source component and sign.
+_SK_ROW = np.array([0, 0, 1, 1, 2, 2])
+_SK_COL = np.array([1, 2, 0, 2, 0, 1])
+_SK_SRC = np.array([2, 1, 2, 0, 1, 0])
+_SK_SIGN = np.array([-1.0, 1.0, 1.0, -1.0, -1.0, 1.0])
+
+
+class _Lean:
+    """Residuals (n, 6) and Jacobian (n, 6, 12) of the model with few numpy calls: the
+    LM's inner loop (same quantities as :func:`_residuals` and :func:`_jacobian`)."""
+
+    def __init__(self, data: PoseData) -> None:
+        self.d = data
+        self.J = np.zeros((data.n, 6, 12))
+        self.J[:, 3:, 3:6] = -np.eye(3)
+        self.K = np.zeros((data.n, 3, 3))  # skew-symmetric scratch
+
+    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        d = self.d
+        R_P = P[:3, :3]
+        RPN = R_P @ d.R_N
+        R_hat = RPN @ Q[:3, :3]
+        v = d.R_N @ Q[:3, 3] + d.t_N
+        r = np.empty((d.n, 6))
+        E = d.R_M @ np.swapaxes(R_hat, 1, 2)
+        c = 0.5 * (np.einsum("nii->n", E) - 1.0)
+        if c.min() < -0.98:
+            r[:, :3] = rotation_vector_from_matrix(E)
+        else:  # as _log_small
+            vec = 0.5 * (E[:, _I, _J] - E[:, _J, _I])
+            s = np.sqrt(np.einsum("ni,ni->n", vec, vec))
+            theta = np.arctan2(s, c)
+            tiny = s < 1e-8
+            r[:, :3] = (
+                vec * np.where(tiny, 1.0 + theta**2 / 6.0, theta / np.where(tiny, 1.0, s))[:, None]
+            )
+        r[:, 3:] = d.t_M - v @ R_P.T - P[:3, 3]
+        return r, RPN, R_hat, v
+
+    def jacobian(self, r: NDArray, RPN: NDArray, R_hat: NDArray, v: NDArray, P: NDArray):
+        J = self.J
+        R_P = P[:3, :3]
+        phi = r[:, :3]
+        th2 = np.einsum("ni,ni->n", phi, phi)
+        theta = np.sqrt(th2)
+        small = theta < 1e-4
+        safe = np.where(small, 1.0, theta)
+        coef = np.where(
+            small,
+            1.0 / 12.0 + th2 / 720.0,
+            1.0 / safe**2 - (1.0 + np.cos(safe)) / (2.0 * safe * np.sin(safe)),
+        )
+        # as _inverse_right_jacobian: I + K / 2 + coef K^2, K^2 = phi phi^T - theta^2 I
+        K = self.K
+        K[:, _SK_ROW, _SK_COL] = phi[:, _SK_SRC] * _SK_SIGN
+        Jinv = 0.5 * K + coef[:, None, None] * (phi[:, :, None] * phi[:, None, :])
+        Jinv[:, _DIAG, _DIAG] += (1.0 - coef * th2)[:, None]
+        J[:, :3, 0:3] = -Jinv @ R_P
+        J[:, :3, 6:9] = -Jinv @ R_hat
+        K[:, _SK_ROW, _SK_COL] = v[:, _SK_SRC] * _SK_SIGN
+        J[:, 3:, 0:3] = R_P @ K
+        J[:, 3:, 9:12] = -RPN
+        return J
+
+
+def fit_lm(
+    data: PoseData,
+    P: NDArray,
+    Q: NDArray,
+    mask: NDArray,
+    s_r: float,
+    s_t: float,
+    *,
+    huber: bool = False,
+    max_steps: int = LM_MAX_STEPS,
+) -> LMFit:
+    """Levenberg-Marquardt on ``sum_i c_i (|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2)`` over the
+    poses in ``mask``, the noise scales re-estimated after every step (variance
+    components: each group's weighted residual sum over its redundancy) and, with
+    ``huber``, ``c_i`` Huber's weights of the whitened residual norms (IRLS).
+
+    Re-estimating the scales each step is Gauss-Newton on ``sum_g red_g log RSS_g``: it
+    converges with the parameters instead of in outer rounds; linearly, so the ratio of
+    the scales is extrapolated (Aitken) from two successive changes. With little redundancy
+    (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
+    the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
+    they come. Converged: a step below ``LM_STEP_TOL`` (radians, or relative to the
+    scene's length) with the scales settled to ``LM_SCALE_TOL`` (relative).
+
+    Parameters
+    ----------
+    data : PoseData
+        The poses ``M[i]``, ``N[i]``.
+    P, Q : ndarray, shape (4, 4)
+        The start, input length unit.
+    mask : ndarray of bool, shape (n,)
+        The poses fitted (the others get a ``chi2`` but no weight).
+    s_r, s_t : float
+        Starting noise scales per axis (radians, input unit), e.g. :func:`robust_sigmas`.
+    huber : bool, keyword-only
+        Huber's IRLS weights (threshold ``HUBER_K``) on the whitened residual norms.
+    max_steps : int, keyword-only
+        Most Levenberg-Marquardt steps.
+
+    Returns
+    -------
+    LMFit
+    """
+    lean = _Lean(data)
+    n = data.n
+    n_in = float(np.count_nonzero(mask))
+    update_scales = n_in >= 4
+    maskf = mask.astype(float)
+    r, RPN, R_hat, v = lean.residuals(P, Q)
+    lam = 1e-6
+    steps = 0
+    converged = False
+    size = change = 0.0
+    last_du: float | None = None
+    new_cost = 1.0
+    length = data.length
+    while steps < max_steps:
+        steps += 1
+        r2 = r * r
+        e2 = r2.reshape(n, 2, 3).sum(axis=2)  # (n, 2): |r_r|^2, |r_t|^2
+        chi = e2 @ (1.0 / s_r**2, 1.0 / s_t**2)
+        c = maskf
+        if huber:
+            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
+        cost = float(c @ chi)
+        J = lean.jacobian(r, RPN, R_hat, v, P)
+        sc = np.sqrt(c)[:, None]
+        Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
+        Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
+        H_r = Jr.T @ Jr
+        H_t = Jt.T @ Jt
+        g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
+        H = H_r + H_t
+        D = np.maximum(H.diagonal(), 1e-300)
+        w = (1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_t**2, 1.0 / s_t**2, 1.0 / s_t**2)
+        while True:
+            try:
+                delta = -np.linalg.solve(H + lam * np.diag(D), g)
+            except np.linalg.LinAlgError:
+                delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
+            P_new = _exp_update(P, delta[0:6])
+            Q_new = _exp_update(Q, delta[6:12])
+            n_r, n_RPN, n_R, n_v = lean.residuals(P_new, Q_new)
+            new_cost = float(c @ ((n_r * n_r) @ w))
+            dl = np.abs(delta).tolist()
+            size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / length)
+            if new_cost <= cost or size < 1e-7:
+                break
+            lam *= 10.0
+            if lam > 1e12:
+                break
+        if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
+            converged = True
+            break
+        lam = max(lam / 10.0, 1e-12)
+        P, Q, r, RPN, R_hat, v = P_new, Q_new, n_r, n_RPN, n_R, n_v
+        change = 0.0
+        if update_scales:
+            try:
+                Hinv = np.linalg.inv(H)
+            except np.linalg.LinAlgError:
+                Hinv = np.linalg.pinv(H)
+            csum = 3.0 * float(c.sum())
+            red_r = csum - float(np.sum(Hinv * H_r.T))
+            red_t = csum - float(np.sum(Hinv * H_t.T))
+            ss_r, ss_t = (c @ (r * r).reshape(n, 2, 3).sum(axis=2)).tolist()
+            new_r = math.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+            new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+            new_r, new_t = _bounded_sigmas(new_r, new_t, length)
+            change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
+            # The scales' ratio converges linearly (factor rho ~ 0.1): Aitken's
+            # extrapolation of log(s_t / s_r) from two successive changes.
+            du = math.log(new_t / new_r) - math.log(s_t / s_r)
+            if last_du is not None and last_du != 0.0 and 0.0 < du / last_du < 0.8:
+                rho = du / last_du
+                jump = du * rho / (1.0 - rho)
+                new_t *= math.exp(jump)
+                change = max(change, abs(jump))
+                last_du = None
+            else:
+                last_du = du
+            s_r, s_t = new_r, new_t
+        if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
+            converged = True
+            break
+    J = lean.jacobian(r, RPN, R_hat, v, P)
+    sm = np.sqrt(maskf)[:, None]
+    Jr = (J[:, :3] * (sm / s_r)[:, :, None]).reshape(-1, 12)
+    Jt = (J[:, 3:] * (sm / s_t)[:, :, None]).reshape(-1, 12)
+    H = Jr.T @ Jr + Jt.T @ Jt
+    chi2 = (r * r).reshape(n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
+    return LMFit(P, Q, s_r, s_t, H, chi2, steps, converged)
+
+
+def variance_components(
+    data: PoseData, P: NDArray, Q: NDArray
+) -> tuple[float, float, NDArray[np.float64]]:
+    """Noise scales and covariance at a given ``P, Q`` (not moved).
+
+    Parameters
+    ----------
+    data : PoseData
+        The poses ``M[i]``, ``N[i]``.
+    P, Q : ndarray, shape (4, 4)
+        The transforms of ``M[i] ≈ P @ N[i] @ Q``, input length unit.
+
+    Returns
+    -------
+    sigma_rotation_rad, sigma_translation : float
+        The noise scales per axis (radians, input unit): robust ones from the median
+        residuals, then three rounds of variance components (each group's residual sum
+        over its redundancy).
+    covariance : ndarray, shape (12, 12)
+        ``(J^T W J)^+`` at ``P, Q`` with those scales, in the order
+        ``(dphi_P, dt_P, dphi_Q, dt_Q)``: what the maximum-likelihood fit would report
+        there.
+    """
+    r_r, r_t, _, _ = data.residuals(P, Q)
+    s_r, s_t = robust_sigmas(r_r, r_t, data.length)
+    ones = np.ones(data.n)
+    for _ in range(3):
+        H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+        Hinv = np.linalg.pinv(H_r + H_t)
+        red_r = 3.0 * data.n - float(np.trace(Hinv @ H_r))
+        red_t = 3.0 * data.n - float(np.trace(Hinv @ H_t))
+        s_r = np.sqrt(np.sum(r_r**2) / red_r) if red_r > 1e-9 else s_r
+        s_t = np.sqrt(np.sum(r_t**2) / red_t) if red_t > 1e-9 else s_t
+        s_r, s_t = _bounded_sigmas(s_r, s_t, data.length)
+    H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+    return s_r, s_t, np.linalg.pinv(H_r + H_t)

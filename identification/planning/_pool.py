@@ -1,0 +1,136 @@
+"""The candidate pool of measurement planning, and its constraints.
+
+:func:`candidate_pool` takes the user's recorded joint states or random configurations
+inside the joint limits and keeps those that satisfy the constraints: the target in view
+of a camera (the visibility rules of :func:`kinfw.simulation.visible_points`),
+the measured frames facing the tracker, and optionally no self-collision
+(:func:`collision_free`). :mod:`kinfw.identification.planning` chooses the configurations from it.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.geometry import inverse_transform
+from kinfw.identification.planning._objective import Setup
+from kinfw.model import Robot
+from kinfw.simulation import random_configurations
+
+__all__ = ["Pool", "candidate_pool", "collision_free"]
+
+log = logging.getLogger(
+    "kinfw.identification.planning"
+)  # logged as the plan's, as before the split
+
+
+@dataclass(frozen=True, eq=False)
+class Pool:
+    """Candidate configurations after the constraints, and how many each dropped."""
+
+    qs: NDArray[np.float64]
+    dropped: dict[str, int] = field(default_factory=dict)
+
+
+def _visible(robot, setup, qs, names, w_T_target) -> NDArray[np.bool_]:
+    from kinfw.simulation import visible_points
+
+    board_p = setup.board_points()
+    seen = np.zeros(len(qs), bool)
+    for camera, intr in setup.camera_intrinsics().items():
+        c_T_b = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_target
+        seen |= visible_points(intr, c_T_b, board_p).any(axis=1)
+    return seen
+
+
+def _facing(robot, setup, qs, names) -> NDArray[np.bool_]:
+    ok = np.ones(len(qs), bool)
+    cos_max = np.cos(np.radians(setup.max_facing_deg))
+    for frame in setup.frames:
+        T = robot.frame_poses(qs, frame, names)
+        d = np.asarray(setup.tracker_p, float) - T[:, :3, 3]
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        ok &= np.einsum("ni,ni->n", d, T[:, :3, 2]) >= cos_max
+    return ok
+
+
+def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | None:
+    """Which configurations are free of self-collision (Pinocchio + coal/hpp-fcl), or
+    None when the URDF has no collision geometry or the collision module is missing.
+
+    Pairs that cannot tell a collision are left out, as MoveIt's setup assistant does:
+    geometries on one joint's link or on adjacent links (touching at their joint), and
+    pairs already in contact at the middle of the joint ranges (overlapping meshes).
+    """
+    import pinocchio as pin
+
+    if "<collision" not in robot.urdf_xml:
+        return None
+    try:
+        geom = pin.buildGeomFromUrdfString(robot.model, robot.urdf_xml, pin.COLLISION)
+        geom.addAllCollisionPairs()
+        data, gdata = robot.model.createData(), pin.GeometryData(geom)
+    except Exception as exc:  # no coal/hpp-fcl, or meshes not found
+        log.warning("%s: no self-collision check (%s)", robot.source, exc)
+        return None
+    parents = robot.model.parents
+    lower, upper = robot.joint_limits(tuple(names))
+    middle = robot.pin_configurations((0.5 * (lower + upper))[None], tuple(names))[0]
+    pin.computeCollisions(robot.model, data, geom, gdata, middle, False)
+    for k in reversed(range(len(geom.collisionPairs))):
+        pair = geom.collisionPairs[k]
+        a = geom.geometryObjects[pair.first].parentJoint
+        b = geom.geometryObjects[pair.second].parentJoint
+        if a == b or parents[a] == b or parents[b] == a or gdata.collisionResults[k].isCollision():
+            geom.removeCollisionPair(pair)
+    gdata = pin.GeometryData(geom)
+    full = robot.pin_configurations(np.atleast_2d(qs), tuple(names))
+    ok = np.empty(len(full), bool)
+    for k, q in enumerate(full):
+        ok[k] = not pin.computeCollisions(robot.model, data, geom, gdata, q, True)
+    return ok
+
+
+def candidate_pool(
+    robot: Robot,
+    setup: Setup,
+    joint_names: Sequence[str],
+    w_T_target: NDArray | None,
+    *,
+    qs: ArrayLike | None = None,
+    within_limits: float | None = None,
+    n: int = 1000,
+    rng: np.random.Generator | None = None,
+    collisions: bool = False,
+) -> Pool:
+    """The candidate configurations: ``qs`` (recorded joint states) or ``n`` random
+    configurations in the centred ``within_limits`` fraction of each joint range, kept
+    when inside the joint limits, the board is seen (stage 2), the frames face the
+    tracker (``setup.tracker_p``) and, with ``collisions``, free of self-collision."""
+    lower, upper = robot.joint_limits(joint_names)
+    if qs is None:
+        if within_limits is None or rng is None:
+            raise ValueError("candidate_pool: give qs, or within_limits and rng")
+        qs = random_configurations(lower, upper, n, rng, fraction=within_limits)
+    qs = np.atleast_2d(np.asarray(qs, dtype=float))
+    dropped = {}
+    keep = np.all((qs >= lower - 1e-9) & (qs <= upper + 1e-9), axis=1)
+    dropped["outside the joint limits"] = int((~keep).sum())
+    if setup.cameras:
+        seen = _visible(robot, setup, qs, joint_names, w_T_target)
+        dropped["board not seen"] = int((keep & ~seen).sum())
+        keep &= seen
+    if setup.frames and setup.tracker_p is not None:
+        facing = _facing(robot, setup, qs, joint_names)
+        dropped["not facing the tracker"] = int((keep & ~facing).sum())
+        keep &= facing
+    if collisions:
+        free = collision_free(robot, qs, joint_names)
+        if free is not None:
+            dropped["self-collision"] = int((keep & ~free).sum())
+            keep &= free
+    return Pool(qs[keep], {k: v for k, v in dropped.items() if v})

@@ -1,0 +1,160 @@
+"""Assembly of the least-squares problem: :func:`build_problem`.
+
+It lays the parameter vector out block by block (the robot's CPC chart, base and zero
+offsets, :mod:`~kinfw.identification.problem`; then every unknown the observation kinds
+ask for: external measurement frames, targets, markers, offsets, or a new kind's own),
+takes start values from the kinds' closed-form estimators
+(:mod:`~kinfw.identification.problem`), builds per group a CasADi residual and its exact
+Jacobian (:mod:`~kinfw.identification.problem`), and returns the
+:class:`~kinfw.identification.problem.LeastSquaresProblem`. There is no branch on an
+observation kind here.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.identification.problem._functions import group_functions
+from kinfw.identification.problem._gauge import relative_gauge, robot_blocks
+from kinfw.identification.problem._problem import LeastSquaresProblem, ResidualGroup, Unknown
+from kinfw.identification.problem._start import estimate_unknowns, express_in
+from kinfw.measurements import Measurements, check_against_robot, robot_measurement_frames
+from kinfw.model import Block, BlockKey, Robot, cpc_from_robot
+from kinfw.observations import DatasetError, kind_of
+
+logger = logging.getLogger("kinfw.identification.problem")
+
+__all__ = ["build_problem"]
+
+
+def _free_intrinsics(
+    blocks: list[Block], cameras: bool | Sequence[str], source: str
+) -> list[Block]:
+    """``blocks`` with the intrinsics blocks of ``cameras`` (True: all) freed."""
+    have = {b.key.name for b in blocks if b.key.kind == "intrinsics"}
+    names = have if cameras is True else set(cameras or ())
+    missing = sorted(names - have)
+    if missing:
+        seen = ", ".join(repr(c) for c in sorted(have)) or "none"
+        raise DatasetError(
+            f"{source}: refine_intrinsics: no 'pixels' observations of camera "
+            f"{missing[0]!r} (cameras with pixels: {seen})"
+        )
+    return [
+        b.with_free(np.ones(b.size, bool))
+        if b.key.kind == "intrinsics" and b.key.name in names
+        else b
+        for b in blocks
+    ]
+
+
+def build_problem(
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    start: Robot | None = None,
+    targets: dict[str, NDArray] | None = None,
+    parameters: str | tuple[str, ...] = "full",
+    prior: tuple[float, float] | None = None,
+    known: tuple[Unknown, ...] = (),
+    refine_intrinsics: bool | Sequence[str] = (),
+) -> LeastSquaresProblem:
+    """Assemble the least-squares problem (see :func:`kinfw.identification.refine`).
+
+    ``known`` gives start values for unknown blocks (e.g. a previous calibration's target
+    pose and markers) instead of estimating them from these data; ``targets`` gives
+    target poses ``root_T_target`` the same way. ``refine_intrinsics`` frees the
+    intrinsics blocks (``BlockKey("intrinsics", camera)``, fixed by default) of the
+    named cameras, or of every camera when True.
+    """
+    measurements = check_against_robot(measurements, robot)
+    start = robot if start is None else start
+    groups = list(measurements.all_groups())
+    # frames of the robot that observations are measured in (a head camera) are end
+    # frames of the model too: the prediction is inv(w_T_c) w_T_frame
+    robot_in = robot_measurement_frames(measurements, robot)
+    observed = tuple(dict.fromkeys((*measurements.observed_frames, *robot_in)))
+    in_frames = {kind_of(g).measured_in(g) for g in groups} - set(robot_in)
+    model_frame = None
+    if len(in_frames) == 1 and None not in in_frames and not robot_in:
+        model_frame = next(iter(in_frames))  # everything in one external frame
+    model0 = cpc_from_robot(start, observed)
+    q_all = measurements.q_of(model0.topology.joint_names)
+    given = {BlockKey(u.kind, u.name): u.value for u in known}
+    given.update(
+        {
+            BlockKey("target", n): T
+            for n, T in (targets or {}).items()
+            if BlockKey("target", n) not in given
+        }
+    )
+    fitted_frame = []
+    if model_frame is not None:
+        model0 = express_in(
+            model0, measurements, q_all, model_frame, given.get(BlockKey("frame", model_frame))
+        )
+        if BlockKey("frame", model_frame) not in given:
+            fitted_frame.append(
+                (BlockKey("frame", model_frame), f"pose of the root link in {model_frame!r}")
+            )
+    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
+    unknown = _free_intrinsics(unknown, refine_intrinsics, measurements.source)
+    blocks = (
+        *robot_blocks(model0, robot, groups, model_frame, parameters, with_prior=prior is not None),
+        *unknown,
+    )
+    P = sum(b.size for b in blocks)
+
+    # the CasADi functions: every number (reference model, block starts) is an input
+    const = np.concatenate([b.constants() for b in blocks])
+    functions = group_functions(model0, blocks, groups, model_frame, len(const))
+    residual_groups = [
+        ResidualGroup(
+            kind_of(g),
+            g,
+            q_all[g.sample].T,
+            np.asarray(kind_of(g).data(g), dtype=float).T,
+            fn,
+            const,
+        )
+        for g, fn in zip(groups, functions, strict=True)
+    ]
+
+    if robot_in:  # relative measurements: fix what they leave undetermined
+        lower, upper = robot.joint_limits(model0.topology.joint_names)
+        blocks, fixed = relative_gauge(tuple(blocks), residual_groups, lower, upper)
+        if fixed:
+            logger.info(
+                "%s: measured in the robot's %s: %d parameters the relative poses do not "
+                "determine are fixed at their start: %s",
+                measurements.source,
+                list(robot_in),
+                len(fixed),
+                ", ".join(fixed),
+            )
+
+    prior_sigma = np.full(P, np.inf)
+    prior_mean = np.zeros(P)
+    if prior is not None:
+        sigma_m, sigma_rad = prior
+        stop = sum(b.size for b in blocks[:3])
+        units = np.array([u for b in blocks[:3] for u in b.units])
+        prior_sigma[:stop] = np.where(units == "rad", sigma_rad, sigma_m)
+        if model_frame is None:  # deviations from the nominal, in the start's chart
+            from kinfw.model import cpc_from_geometry, geometry_from_robot
+
+            nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
+            prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
+    return LeastSquaresProblem(
+        model0,
+        model_frame,
+        tuple(blocks),
+        tuple(residual_groups),
+        prior_mean,
+        prior_sigma,
+        (*fitted_frame, *fitted),
+    )

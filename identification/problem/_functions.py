@@ -1,0 +1,158 @@
+"""The CasADi residual functions of a least-squares problem, and their cache.
+
+:func:`build_functions` builds, per observation group, the residual of
+:meth:`kinfw.observations.ObservationKind.residual` and its exact Jacobian as functions of
+``(q, m, theta, const)``: configuration, measured row, parameter vector and the blocks'
+constants. :func:`group_functions` caches them by the problem's structure, so
+cross-validation folds, parameter sets and Monte Carlo trials on one robot and
+observation layout build the graph once.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.model import Block, CPCModel, cpc_fk_function
+from kinfw.observations import SymbolicContext, kind_of
+
+__all__ = ["GroupFunctions", "build_functions", "clear_function_cache", "group_functions"]
+
+
+@dataclass(frozen=True, eq=False)
+class GroupFunctions:
+    """Per-observation CasADi functions of one group, all of ``(q, m, theta, const)``:
+    residual ``r``; residual and transposed dense Jacobian ``rj`` (one call, shared
+    subexpressions); Jacobian ``j``; and :meth:`rj_free`, the Jacobian's columns of the
+    estimated parameters only (cheaper for the small parameter sets). Unwhitened (SI).
+    """
+
+    r: Any
+    rj: Any
+    j: Any
+    args: list = field(repr=False)
+    residual_expr: Any = field(repr=False)
+    _by_free: dict = field(default_factory=dict, repr=False)
+
+    def rj_free(self, free: NDArray[np.bool_]):
+        """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
+        import casadi as ca
+
+        key = free.tobytes()
+        with _FUNCTION_CACHE_LOCK:
+            f = self._by_free.get(key)
+        if f is None:
+            theta = self.args[2]
+            cols = ca.vertcat(*[theta[int(i)] for i in np.flatnonzero(free)])
+            J = ca.jacobian(self.residual_expr, cols)
+            f = ca.Function("rjf", self.args, [self.residual_expr, ca.densify(J.T)])
+            with _FUNCTION_CACHE_LOCK:
+                if len(self._by_free) >= 8:  # bounded: a few parameter sets per structure
+                    self._by_free.pop(next(iter(self._by_free)))
+                self._by_free[key] = f
+        return f
+
+
+#: Compiled residual functions by problem structure (see :func:`group_functions`): a small
+#: LRU so that cross-validation folds, parameter sets and Monte Carlo trials on the same
+#: robot and observation layout build the CasADi graph once.
+_FUNCTION_CACHE: OrderedDict[tuple, tuple[GroupFunctions, ...]] = OrderedDict()
+
+_FUNCTION_CACHE_SIZE = 16
+
+_FUNCTION_CACHE_LOCK = threading.Lock()
+
+
+def clear_function_cache() -> None:
+    """Forget every cached CasADi residual function (they are rebuilt on demand)."""
+    with _FUNCTION_CACHE_LOCK:
+        _FUNCTION_CACHE.clear()
+
+
+def build_functions(
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    groups: list[Any],
+    model_frame: str | None,
+    n_const: int,
+) -> tuple[GroupFunctions, ...]:
+    """The CasADi residual functions of every group, of ``(q, m, theta, const)``.
+
+    ``const`` is the blocks' :meth:`~kinfw.model.Block.constants` one after the other
+    (the CPC block's: the reference model of :func:`kinfw.model.cpc_reference_vector`).
+    """
+    import casadi as ca
+
+    P = sum(b.size for b in blocks)
+    theta = ca.SX.sym("theta", P)
+    const = ca.SX.sym("const", n_const)
+    q = ca.SX.sym("q", model0.n_joints)
+    slices, consts, k, c = [], [], 0, 0
+    for b in blocks:
+        n = len(b.constants())
+        slices.append(slice(k, k + b.size))
+        consts.append(const[c : c + n])
+        k, c = k + b.size, c + n
+    fk = cpc_fk_function(model0, symbolic_reference=True)
+    T_frames = fk(q + theta[slices[2]], theta[slices[0]], consts[0])
+    T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
+    w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
+    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
+    values = {
+        b.key: b.casadi_value(theta[s], cs)
+        for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)
+    }
+    context = SymbolicContext(ca, frames, values, model_frame)
+    out = []
+    for g in groups:
+        kind = kind_of(g)
+        m_sym = ca.SX.sym("m", np.shape(kind.data(g))[1])
+        r = kind.residual(g, context, m_sym)
+        args = [q, m_sym, theta, const]
+        J = ca.jacobian(r, theta)
+        out.append(
+            GroupFunctions(
+                ca.Function("r", args, [r]),
+                ca.Function("rj", args, [r, ca.densify(J.T)]),
+                ca.Function("j", args, [J]),
+                args,
+                r,
+            )
+        )
+    return tuple(out)
+
+
+def group_functions(
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    groups: list[Any],
+    model_frame: str | None,
+    n_const: int,
+) -> tuple[GroupFunctions, ...]:
+    """:func:`build_functions`, cached by the problem's structure: every number
+    (reference model, block starts) is an input, so problems of one structure (topology,
+    blocks, groups' keys) share them."""
+    topo = model0.topology
+    key = (
+        (topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
+        tuple(float(v) for v in model0.sign),
+        model_frame,
+        tuple((type(b).__name__, b.key, b.size) for b in blocks),
+        tuple(kind_of(g).key(g) for g in groups),
+    )
+    with _FUNCTION_CACHE_LOCK:
+        functions = _FUNCTION_CACHE.get(key)
+        if functions is not None:
+            _FUNCTION_CACHE.move_to_end(key)
+    if functions is None:
+        functions = build_functions(model0, blocks, groups, model_frame, n_const)
+        with _FUNCTION_CACHE_LOCK:
+            _FUNCTION_CACHE[key] = functions
+            while len(_FUNCTION_CACHE) > _FUNCTION_CACHE_SIZE:
+                _FUNCTION_CACHE.popitem(last=False)
+    return functions

@@ -1,0 +1,377 @@
+"""The least-squares problem's data: its unknowns, residual groups and parameter layout.
+
+:class:`LeastSquaresProblem` holds the parameter blocks (the robot's CPC chart, base and
+zero offsets, then every unknown the observation kinds ask for), their start values and
+the :class:`ResidualGroup` of each observation group, whose CasADi residual and exact
+Jacobian are mapped over the samples. The built functions are unwhitened (SI):
+:meth:`LeastSquaresProblem.evaluate` whitens each row in numpy by the sigma of its noise
+component, so they do not depend on the noise.
+:func:`~kinfw.identification.problem.build_problem` assembles it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.geometry import rigid_from_chart
+from kinfw.identification.problem._functions import GroupFunctions
+from kinfw.identification.problem._start import start_context
+from kinfw.measurements import Measurements
+from kinfw.model import Block, BlockKey, CPCModel, ParameterName
+from kinfw.observations import NoiseComponent, ObservationKind, StartContext
+
+__all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown"]
+
+PRIOR = NoiseComponent("prior", 1, "m")
+"""The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Unknown:
+    """A rigid frame or point estimated besides the kinematics.
+
+    Attributes
+    ----------
+    kind : str
+        ``"target"`` (root_T_target), ``"frame"`` (meas_T_root of an external
+        measurement frame), ``"marker"`` (frame_T_marker), ``"offset"`` (frame_p_point,
+        3 numbers), or a new observation kind's own.
+    name : str
+        Target, measurement frame, marker or ``frame:marker`` name.
+    value : ndarray
+        The estimate: (4, 4) pose or (3,) point, metres.
+    """
+
+    kind: str
+    name: str
+    value: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class ResidualGroup:
+    """One observation group in the problem: its data and CasADi residual functions.
+
+    Attributes
+    ----------
+    kind : ObservationKind
+    group : object
+        The observation group (e.g. :class:`~kinfw.measurements.PoseObservations`).
+    qs : ndarray, shape (J, m)
+        Joint values of its samples, model joint order.
+    data : ndarray, shape (width, m)
+        Measured values, one column per observation.
+    functions : GroupFunctions
+        Shared (cached) by every problem of the same structure.
+    const : ndarray
+        This problem's numbers (reference CPC model, block starts), an input of the
+        functions.
+    """
+
+    kind: ObservationKind
+    group: Any
+    qs: NDArray[np.float64]
+    data: NDArray[np.float64]
+    functions: GroupFunctions
+    const: NDArray[np.float64]
+    _maps: dict = field(default_factory=dict, repr=False)
+    _q_rows: NDArray[np.float64] = field(init=False, repr=False)
+    _data_rows: NDArray[np.float64] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
+        object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
+        object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
+        object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
+
+    @property
+    def sample(self) -> NDArray[np.int64]:
+        return self.group.sample
+
+    @property
+    def rows(self) -> int:
+        """Residual rows per observation."""
+        return self.kind.rows
+
+    @property
+    def components(self) -> tuple[NoiseComponent, ...]:
+        return self.kind.components
+
+    @property
+    def frame(self) -> str:
+        return self.kind.frames(self.group)[0]
+
+    @property
+    def marker(self) -> str | None:
+        return getattr(self.group, "marker", None)
+
+    def row_sigma(self, noise: Any) -> NDArray[np.float64]:
+        """Per residual row of one observation, its noise sigma (SI)."""
+        return np.concatenate([np.full(c.rows, noise.sigma(c)) for c in self.components])
+
+    def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
+        key = (which, None if free is None else free.tobytes())
+        if key not in self._maps:
+            f = getattr(self.functions, which) if free is None else self.functions.rj_free(free)
+            self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
+        return self._maps[key]
+
+    @property
+    def residual(self):
+        """Unwhitened residuals ``(q (J, m), data (width, m), x) -> (rows, m)`` (CasADi;
+        numeric or symbolic arguments)."""
+        f = self._mapped("r")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    @property
+    def jacobian(self):
+        """Their Jacobian ``(q, data, x) -> (rows, m * P)`` (CasADi)."""
+        f = self._mapped("j")
+        return lambda qs, data, x: f(qs, data, x, self.const)
+
+    def evaluate(
+        self, x: NDArray, with_jacobian: bool, free: NDArray[np.bool_] | None = None
+    ) -> tuple[NDArray, NDArray | None]:
+        """Unwhitened residuals ``(m * rows,)`` (observation-major) and Jacobian
+        ``(m * rows, P)``, or only its ``free`` columns ``(m * rows, n_free)``, written by
+        CasADi straight into numpy arrays."""
+        m = len(self.sample)
+        n_cols = len(x) if free is None else int(free.sum())
+        fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
+        buf, call = fn.buffer()
+        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float), self.const)
+        for i, a in enumerate(args):
+            buf.set_arg(i, memoryview(a))
+        r = np.empty(m * self.rows)
+        buf.set_res(0, memoryview(r))
+        J = np.empty((m * self.rows, n_cols)) if with_jacobian else None
+        if J is not None:
+            buf.set_res(1, memoryview(J))
+        call()
+        return r, J
+
+
+@dataclass(frozen=True, slots=True)
+class LeastSquaresProblem:
+    """The assembled problem: parameter blocks, their start values, the residual groups.
+
+    ``x`` below is the vector of chart coordinates from the start (rad, m): the blocks'
+    entries one after the other, in the order of :attr:`names`; only the :attr:`free`
+    entries are estimated.
+
+    Attributes
+    ----------
+    model0 : CPCModel
+        The start model (end frames: every observed frame) in the model frame.
+    model_frame : str or None
+        None for the URDF root, else the one external measurement frame.
+    blocks : tuple of Block
+        CPC chart, base, zero offsets, then the unknowns (:attr:`n_robot_blocks` = 3).
+    groups : tuple of ResidualGroup
+    prior_mean, prior_sigma : ndarray, shape (P,)
+        Gaussian prior on ``x`` (sigma inf: none).
+    fitted : tuple of (BlockKey, str)
+        The unknowns whose start was estimated from these data, with a description.
+    """
+
+    model0: CPCModel
+    model_frame: str | None
+    blocks: tuple[Block, ...]
+    groups: tuple[ResidualGroup, ...]
+    prior_mean: NDArray[np.float64]
+    prior_sigma: NDArray[np.float64]
+    fitted: tuple[tuple[BlockKey, str], ...] = ()
+
+    n_robot_blocks = 3
+
+    @property
+    def slices(self) -> tuple[slice, ...]:
+        """The slice of ``x`` of each block."""
+        out, k = [], 0
+        for b in self.blocks:
+            out.append(slice(k, k + b.size))
+            k += b.size
+        return tuple(out)
+
+    def block(self, key: BlockKey) -> tuple[Block, slice]:
+        """A block and its slice of ``x`` by key (KeyError if absent)."""
+        for b, s in zip(self.blocks, self.slices, strict=True):
+            if b.key == key:
+                return b, s
+        raise KeyError(key)
+
+    @property
+    def unknown_blocks(self) -> tuple[Block, ...]:
+        """The blocks besides the robot's (targets, frames, markers, offsets...)."""
+        return self.blocks[self.n_robot_blocks :]
+
+    @property
+    def names(self) -> tuple[ParameterName, ...]:
+        return tuple(n for b in self.blocks for n in b.names)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """SI unit of each parameter (``"rad"`` or ``"m"``), from its block."""
+        return tuple(u for b in self.blocks for u in b.units)
+
+    @property
+    def free(self) -> NDArray[np.bool_]:
+        return np.concatenate([b.free for b in self.blocks])
+
+    @property
+    def robot_stop(self) -> int:
+        """End of the robot's entries in ``x`` (CPC, base, zero offsets)."""
+        return self.slices[self.n_robot_blocks - 1].stop
+
+    @property
+    def prior_rows(self) -> NDArray[np.int64]:
+        """Parameters with a prior (free, finite sigma): one residual row each."""
+        return np.flatnonzero(self.free & np.isfinite(self.prior_sigma))
+
+    @property
+    def n_parameters(self) -> int:
+        return sum(b.size for b in self.blocks)
+
+    @property
+    def obs_sizes(self) -> list[tuple[int, int]]:
+        """(observations, rows per observation) of each group, then one row per prior."""
+        sizes = [(len(g.sample), g.rows) for g in self.groups]
+        return sizes + ([(len(self.prior_rows), 1)] if len(self.prior_rows) else [])
+
+    @property
+    def obs_components(self) -> list[tuple[int, tuple[NoiseComponent, ...]]]:
+        """(observations, noise components) of each group, then the prior's rows (one
+        Gaussian row each): what :func:`kinfw.identification.problem.thresholds` needs."""
+        out = [(len(g.sample), g.components) for g in self.groups]
+        return out + ([(len(self.prior_rows), (PRIOR,))] if len(self.prior_rows) else [])
+
+    def raw_residuals(
+        self, x: NDArray, with_jacobian: bool = True
+    ) -> list[tuple[NDArray, NDArray | None]]:
+        """Per group the unwhitened residuals (m, rows) and Jacobian (m, rows, P) at x."""
+        out = []
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian)
+            m = len(g.sample)
+            out.append((r.reshape(m, g.rows), None if J is None else J.reshape(m, g.rows, len(x))))
+        return out
+
+    def evaluate(
+        self, x: NDArray, noise: Any, with_jacobian: bool = True, *, only_free: bool = False
+    ) -> tuple[NDArray, NDArray | None]:
+        """Whitened residuals (N,) and their Jacobian (N, P) at ``x``.
+
+        Rows are observation by observation (each observation's rows together), group
+        by group, then one row per prior entry; each row divided by its component's
+        sigma in ``noise`` (:class:`kinfw.identification._refine.NoiseModel`). With
+        ``only_free`` the columns of the fixed parameters are left at zero (not
+        computed: what the fit needs, cheaper for the small parameter sets).
+        """
+        P = self.n_parameters
+        free = self.free
+        no_columns = only_free and not free.any()
+        rs, Js = [], []
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian and not no_columns, free if only_free else None)
+            inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
+            rs.append(r * inv)
+            if with_jacobian:
+                if only_free:
+                    full = np.zeros((len(r), P))
+                    if J is not None:
+                        full[:, free] = J * inv[:, None]
+                    J = full
+                else:
+                    J *= inv[:, None]
+                Js.append(J)
+        k = self.prior_rows
+        if len(k):  # Gaussian prior: (x - mean) / sigma
+            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
+            if with_jacobian:
+                Jp = np.zeros((len(k), P))
+                Jp[np.arange(len(k)), k] = 1.0 / self.prior_sigma[k]
+                Js.append(Jp)
+        return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
+
+    def casadi_residual(self, noise: Any):
+        """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened
+        residual vector as an MX expression of it (data embedded), for CasADi solvers."""
+        import casadi as ca
+
+        x_free = ca.MX.sym("x", int(self.free.sum()))
+        x = self.full_x(x_free)
+        parts = []
+        for g in self.groups:
+            sig = np.tile(g.row_sigma(noise)[:, None], (1, len(g.sample)))
+            parts.append(ca.vec(g.residual(ca.DM(g.qs), ca.DM(g.data), x) / ca.DM(sig)))
+        return x_free, ca.vertcat(*parts)
+
+    def full_x(self, x_free):
+        """The whole chart vector (CasADi MX) from its free entries, fixed ones at zero."""
+        import casadi as ca
+
+        parts, k = [], 0
+        for f in self.free:
+            if f:
+                parts.append(x_free[k])
+                k += 1
+            else:
+                parts.append(ca.MX(0.0))
+        return ca.vertcat(*parts)
+
+    def model_at(self, x: NDArray) -> CPCModel:
+        """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
+        from kinfw.model import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
+
+        s_cpc, s_base, s_zero = self.slices[: self.n_robot_blocks]
+        model = self.model0.perturbed(x[s_cpc])
+        base = rigid_from_chart(np.eye(4), x[s_base])
+        zero = x[s_zero]
+        if not np.any(base != np.eye(4)) and not np.any(zero):
+            return model
+        # FK(q + zero) = FK with every joint pre-moved by its offset: the geometry at q = 0
+        # of the offset model is the original geometry at q = zero.
+        moved = model.joint_frames(zero)[0]
+        geo = geometry_from_cpc(model)
+        axes = moved[:, :3, 2] * model.sign[:, None]
+        shifted = ZeroGeometry(
+            geo.topology,
+            axes @ base[:3, :3].T,
+            moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
+            base @ model.frame_poses(zero),
+        )
+        return cpc_from_geometry(shifted, sign=model.sign)
+
+    def start_context(self, measurements: Measurements) -> StartContext:
+        """The start model's poses at the samples of ``measurements`` (those the problem
+        was built from) and the external frames' starts, for the kinds' estimators."""
+        q_all = measurements.q_of(self.model0.topology.joint_names)
+        meas_T_w = {b.key.name: b.start for b in self.unknown_blocks if b.key.kind == "frame"}
+        return start_context(self.model0, q_all, meas_T_w, self.model_frame)
+
+    def with_starts(self, group: ResidualGroup, blocks: Sequence[Block]) -> ResidualGroup:
+        """``group`` evaluated with other start values for some of the problem's unknown
+        blocks (same keys; e.g. each group's own closed-form fit): the functions take the
+        starts as inputs, so nothing is rebuilt."""
+        const = group.const.copy()
+        offsets, c = {}, 0
+        for b in self.blocks:
+            n = len(b.constants())
+            offsets[b.key] = slice(c, c + n)
+            c += n
+        for b in blocks:
+            const[offsets[b.key]] = b.constants()
+        return replace(group, const=const)
+
+    def unknowns_at(self, x: NDArray) -> tuple[Unknown, ...]:
+        """Every unknown block's value at ``x`` (targets, frames, markers, offsets...)."""
+        return tuple(
+            Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
+            for b, s in zip(
+                self.blocks[self.n_robot_blocks :], self.slices[self.n_robot_blocks :], strict=True
+            )
+        )

@@ -1,0 +1,190 @@
+"""Levenberg-Marquardt with robust losses by iteratively reweighted least squares.
+
+The solver sees only a function ``evaluate(x, with_jacobian) -> (r, J)`` of whitened
+residuals and the problem's ``obs_sizes``: ``(observations, rows per observation)`` per
+group (a robust loss weighs an observation by the norm of its rows).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.identification.problem._noise import norm2_cdf, quantile
+from kinfw.observations import NoiseComponent
+
+__all__ = [
+    "LOSSES",
+    "NEGLIGIBLE_COLUMN",
+    "levenberg_marquardt",
+    "negligible_columns",
+    "observation_norms",
+    "robust_loss",
+    "row_weights",
+    "scaled_columns",
+    "thresholds",
+]
+
+LOSSES = ("linear", "huber", "cauchy")
+
+ObsSizes = Sequence[tuple[int, int]]
+
+#: Relative norm (to the largest column) below which a column of the whitened Jacobian
+#: is numerically zero: rounding, not information (a joint's axis tilt when the only
+#: observed point lies on that axis has a column ~1e-12 of the others).
+NEGLIGIBLE_COLUMN = 1e-10
+
+
+def scaled_columns(J: NDArray) -> tuple[NDArray, NDArray]:
+    """``J`` (N, P) with unit-norm columns, and the column norms ``c`` (P,).
+
+    Columns below :data:`NEGLIGIBLE_COLUMN` of the largest norm are set to zero (with
+    ``c = 1``) rather than scaled up: scaling rounding noise to unit norm would make a
+    direction the data do not see look as determined as any other, and a solver step
+    along it ``1 / c`` times too long (an axis walked to its chart's singularity).
+
+    Returns
+    -------
+    Js : ndarray, shape (N, P)
+    c : ndarray, shape (P,)
+    """
+    c = np.linalg.norm(J, axis=0)
+    tiny = negligible_columns(J, c)
+    c = np.where(tiny, 1.0, c)
+    return np.where(tiny, 0.0, J / c), c
+
+
+def negligible_columns(J: NDArray, norms: NDArray | None = None) -> NDArray[np.bool_]:
+    """Columns of ``J`` (N, P) whose norm is at most :data:`NEGLIGIBLE_COLUMN` of the
+    largest (exact zeros included): parameters the data do not see, shape (P,)."""
+    c = np.linalg.norm(J, axis=0) if norms is None else norms
+    return c <= NEGLIGIBLE_COLUMN * (c.max() if c.size else 0.0)
+
+
+def observation_norms(r: NDArray, obs_sizes: ObsSizes) -> NDArray:
+    """The norm of each observation's rows of ``r``."""
+    out, k = [], 0
+    for m, rows in obs_sizes:
+        out.append(np.linalg.norm(r[k : k + m * rows].reshape(m, rows), axis=1))
+        k += m * rows
+    return np.concatenate(out)
+
+
+def _repeat_rows(per_obs: NDArray, obs_sizes: ObsSizes) -> NDArray:
+    out, k = [], 0
+    for m, rows in obs_sizes:
+        out.append(np.repeat(per_obs[k : k + m], rows))
+        k += m
+    return np.concatenate(out)
+
+
+def thresholds(observations: Sequence[tuple[int, Sequence[NoiseComponent]]], z: float) -> NDArray:
+    """Per observation, the ``Phi(z)`` quantile of the norm of its clean whitened residual.
+
+    ``observations`` lists, per group, its number of observations and its noise
+    components (:attr:`LeastSquaresProblem.obs_components`). Under the components' noise
+    models (:func:`kinfw.identification.problem.norm2_cdf`): a point's squared norm is
+    ``chi2(3)``, a pose's ``chi2(3) + 3 chi2(1)``, a prior row's ``chi2(1)``; exact
+    quantiles, so ``z = 2.33`` flags 1 % of clean observations of every kind.
+    """
+    per_obs = [
+        np.full(m, _threshold(tuple(components), float(z))) for m, components in observations
+    ]
+    return np.concatenate(per_obs) if per_obs else np.zeros(0)
+
+
+@functools.lru_cache(maxsize=64)
+def _threshold(components: tuple[NoiseComponent, ...], z: float) -> float:
+    """The threshold of :func:`thresholds` for one set of components (computed once: the
+    quadrature of a pose's distribution is not free)."""
+    p = 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+    return math.sqrt(quantile(norm2_cdf(components), p))
+
+
+def robust_loss(s: NDArray, loss: str, k: NDArray) -> tuple[NDArray, NDArray]:
+    """Loss rho(s) and IRLS weight rho'(s)/s of whitened residual norms ``s``."""
+    if loss == "huber":
+        # weight min(1, k / s), written without dividing by a zero residual
+        return np.where(s <= k, 0.5 * s**2, k * s - 0.5 * k**2), k / np.maximum(s, k)
+    if loss == "cauchy":
+        return 0.5 * k**2 * np.log1p((s / k) ** 2), 1.0 / (1.0 + (s / k) ** 2)
+    return 0.5 * s**2, np.ones_like(s)
+
+
+def row_weights(r: NDArray, obs_sizes: ObsSizes, loss: str, k: NDArray) -> NDArray:
+    """The IRLS weight of each row (its observation's weight)."""
+    return _repeat_rows(robust_loss(observation_norms(r, obs_sizes), loss, k)[1], obs_sizes)
+
+
+def levenberg_marquardt(
+    evaluate: Callable[[NDArray, bool], tuple[NDArray, NDArray | None]],
+    x: NDArray,
+    free: NDArray,
+    obs_sizes: ObsSizes,
+    loss: str,
+    k: NDArray,
+    max_iterations: int,
+) -> tuple[NDArray, int, bool]:
+    """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
+
+    Steps solve ``(Js^T Js + lam I) y = -Js^T r`` with unit-norm columns ``Js``: no
+    component along directions the Jacobian does not see (they stay at the start),
+    numerically zero columns included (:func:`scaled_columns`).
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``evaluate(x, with_jacobian) -> (r (N,), J (N, P) or None)``, whitened.
+    x : ndarray, shape (P,)
+        Start.
+    free : ndarray of bool, shape (P,)
+        Entries to move.
+    obs_sizes : sequence of (observations, rows)
+    loss : {"linear", "huber", "cauchy"}
+    k : ndarray
+        Per observation, the robust threshold (:func:`thresholds`).
+    max_iterations : int
+
+    Returns
+    -------
+    x : ndarray, shape (P,)
+    iterations : int
+    converged : bool
+    """
+
+    def cost_of(r):
+        return float(robust_loss(observation_norms(r, obs_sizes), loss, k)[0].sum())
+
+    r, J = evaluate(x, True)
+    cost = cost_of(r)
+    lam = 1e-6  # column-scaled: start close to Gauss-Newton
+    converged = False
+    it = 0
+    for it in range(1, max_iterations + 1):
+        w = np.sqrt(row_weights(r, obs_sizes, loss, k))
+        Js, c = scaled_columns(J[:, free] * w[:, None])
+        g = Js.T @ (r * w)
+        H = Js.T @ Js
+        while True:
+            y = -np.linalg.solve(H + lam * np.eye(len(H)), g)
+            x_new = x.copy()
+            x_new[free] += y / c
+            r_new, _ = evaluate(x_new, False)
+            cost_new = cost_of(r_new)
+            if cost_new <= cost:
+                break
+            lam *= 4.0
+            if lam > 1e12:
+                return x, it, converged
+        decrease = cost - cost_new
+        x, r, cost = x_new, r_new, cost_new
+        lam = max(lam / 3.0, 1e-12)
+        if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
+            converged = True
+            break
+        _, J = evaluate(x, True)
+    return x, it, converged

@@ -1,0 +1,32 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.camera._boards import DEFAULT_DICTIONARY, BoardError, Charuco, Chessboard, parse_board
+from kinfw.camera._detect import Detection, Detector, detect_corners, read_gray
+from kinfw.camera._intrinsics import (
+    PARAMETER_NAMES,
+    CameraError,
+    CameraIntrinsics,
+    intrinsics_from_dict,
+    project_normalized,
+    read_camera,
+)
+
+__all__ = [
+    "DEFAULT_DICTIONARY",
+    "PARAMETER_NAMES",
+    "BoardError",
+    "CameraError",
+    "CameraIntrinsics",
+    "Charuco",
+    "Chessboard",
+    "Detection",
+    "Detector",
+    "detect_corners",
+    "intrinsics_from_dict",
+    "parse_board",
+    "project_normalized",
+    "read_camera",
+    "read_gray",
+]

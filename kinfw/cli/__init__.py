@@ -1,0 +1,11 @@
+"""The ``kinfw`` command line (:func:`main`; ``python -m kinfw.cli`` runs it too).
+
+The only layer of kinfw that imports :mod:`kinfw.identification` and
+:mod:`kinfw.verification`. Each command is a thin layer over the library's verbs: it
+parses arguments, checks the outputs before any work, calls the verb and prints. Start-up
+imports only the standard library, so ``kinfw --help`` is immediate.
+"""
+
+from kinfw.cli._main import main
+
+__all__ = ["main"]

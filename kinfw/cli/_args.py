@@ -1,0 +1,187 @@
+"""Argument types and options shared by the ``kinfw`` command parsers, and reading what
+the options name: checked numbers, ``--camera FRAME=FILE``, ``--frames``, the measurement
+file with its ``--camera`` intrinsics and the calibration sidecar's path.
+
+Like :mod:`kinfw.cli`, this module imports only the standard library at start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from kinfw.model import Robot
+
+__all__ = [
+    "COUNT",
+    "DEG",
+    "MM",
+    "POSITIVE_DEG",
+    "POSITIVE_MM",
+    "POSITIVE_PX",
+    "SEED",
+    "add_camera_option",
+    "default_sidecar_path",
+    "frame_file",
+    "frames_arg",
+    "number",
+    "read_data",
+    "up_arg",
+]
+
+
+# -- numbers on the command line -----------------------------------------------------------
+def number(
+    kind: type,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    unit: str = "",
+) -> Callable[[str], float | int]:
+    """An argparse ``type``: ``kind`` (int or float) within ``[low, high]`` (``(low,
+    high]`` with ``low_open``); argparse names the flag in the error.
+
+    Parameters
+    ----------
+    kind : type
+        ``int`` or ``float``.
+    low, high : float, optional
+        Bounds of the value, in the option's unit (none: unbounded).
+    low_open : bool
+        Exclude ``low`` itself.
+    unit : str
+        The unit named in the error, e.g. ``"(mm)"``.
+
+    Returns
+    -------
+    callable
+        ``parse(text) -> kind``, raising :class:`argparse.ArgumentTypeError`.
+    """
+    if low is not None and high is not None:
+        want = f"{'>' if low_open else '>='} {low:g} and <= {high:g}"
+    elif low is not None:
+        want = f"{'>' if low_open else '>='} {low:g}"
+    else:
+        want = ""
+    noun = "an integer" if kind is int else "a number"
+    suffix = f" {unit}" if unit else ""
+
+    def parse(text: str) -> float | int:
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if (
+            value is None
+            or not math.isfinite(value)
+            or (low is not None and (value <= low if low_open else value < low))
+            or (high is not None and value > high)
+        ):
+            raise argparse.ArgumentTypeError(
+                f"expected {' '.join(filter(None, (noun, want)))}{suffix}, got {text!r}"
+            )
+        return value
+
+    parse.__name__ = kind.__name__  # argparse's own messages say "invalid int value"
+    return parse
+
+
+MM = number(float, low=0.0, unit="(mm)")
+DEG = number(float, low=0.0, unit="(deg)")
+POSITIVE_MM = number(float, low=0.0, low_open=True, unit="(mm)")
+POSITIVE_DEG = number(float, low=0.0, low_open=True, unit="(deg)")
+POSITIVE_PX = number(float, low=0.0, low_open=True, unit="(px)")
+COUNT = number(int, low=1)
+SEED = number(int, low=0)
+
+
+def up_arg(text: str) -> list[float]:
+    """``"x y z"`` (or ``x,y,z``): three finite numbers, not all zero."""
+    try:
+        up = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        up = []
+    if len(up) != 3 or not all(map(math.isfinite, up)) or not any(up):
+        raise argparse.ArgumentTypeError(
+            f'expected three numbers "x y z", not all zero, got {text!r}'
+        )
+    return up
+
+
+def frame_file(text: str) -> tuple[str, Path]:
+    """``FRAME=FILE`` of ``--camera``."""
+    frame, sep, file = text.partition("=")
+    if not sep or not frame or not file:
+        raise argparse.ArgumentTypeError(f"expected FRAME=FILE, got {text!r}")
+    return frame, Path(file)
+
+
+def add_camera_option(p: argparse.ArgumentParser) -> None:
+    """``--camera FRAME=FILE`` (repeatable): intrinsics for ``pixels`` observations."""
+    p.add_argument(
+        "--camera",
+        action="append",
+        type=frame_file,
+        metavar="FRAME=FILE",
+        help="intrinsics of the camera frame FRAME for 'pixels' observations, from a ROS "
+        "camera_info / OpenCV YAML or JSON file; overrides or adds to the data file's "
+        '"cameras" section (and, for verify, the sidecar\'s); a FRAME no observation uses '
+        "is an error (repeatable)",
+    )
+
+
+# -- what the options name --------------------------------------------------------------
+def frames_arg(
+    value: str | None, default: tuple[str, ...], flag: str, robot: Robot
+) -> tuple[str, ...]:
+    """The frames of a ``--frames`` / ``--cameras`` option (comma- or space-separated),
+    else the URDF hint ``default``; ValueError naming ``flag`` and the links when
+    neither is there."""
+    if value:
+        return tuple(v for v in value.replace(",", " ").split() if v)
+    if default:
+        return default
+    raise ValueError(
+        f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
+        f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}'
+    )
+
+
+def read_data(path: Path, args: argparse.Namespace) -> Any:
+    """The measurement file ``path`` with the intrinsics of ``--camera FRAME=FILE``
+    (override or add to its ``"cameras"`` section)."""
+    from kinfw.camera import CameraError, read_camera
+    from kinfw.measurements import read_measurements
+    from kinfw.observations import DatasetError
+
+    cameras = {}
+    given = getattr(args, "camera", None) or ()
+    for frame, file in given:
+        try:
+            cameras[frame] = read_camera(file)
+        except CameraError as exc:
+            raise DatasetError(f"--camera {frame}={file}: {exc}") from None
+    data = read_measurements(path, cameras=cameras)
+    used = list(dict.fromkeys(g.camera for g in data.groups("pixels")))
+    for frame, file in given:
+        if frame not in used:
+            has = (
+                f"the camera frames of its 'pixels' observations: {', '.join(used)}"
+                if used
+                else "it has no 'pixels' observations"
+            )
+            raise DatasetError(
+                f"--camera {frame}={file}: no observation of {path} uses camera frame "
+                f"{frame!r} ({has})"
+            )
+    return data
+
+
+def default_sidecar_path(out: Path) -> Path:
+    """Where the calibration sidecar of the calibrated URDF ``out`` goes."""
+    return Path(out).with_suffix(".kinfw.json")

@@ -1,0 +1,286 @@
+"""``kinfw detect``: find a board's corners in images and write them, paired with the
+robot's joint values, as ``pixels`` observations of a ``kinfw-measurements`` file.
+
+::
+
+    kinfw detect IMAGES... --board SPEC --joints JOINTS.csv --camera CAM.yaml
+                 --frame CAMERA_FRAME [--target NAME] [--allow-symmetric]
+                 [--min-corners N] [--angle-unit rad|deg] --out DATA.json
+
+``JOINTS.csv``: a header of joint names and one row of joint values per image, either in
+the order of ``IMAGES`` or, with a column named ``image``, keyed by the image's path as
+given or its file name (every image needs exactly one row, every row one image).
+
+The output (format: ``docs/measurements.md``, the ``pixels`` kind) has the camera's
+intrinsics under ``"cameras"`` and one sample per image where the board was found; the
+images where it was not found, or found ambiguously (:mod:`kinfw.camera`), are listed on
+stdout and left out. Like :mod:`kinfw.cli`, this module imports only the standard library
+at start-up; numpy and OpenCV are imported by the command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from kinfw.files import write_text_atomic
+
+__all__ = ["add_detect_parser", "cmd_detect", "read_joint_rows"]
+
+IMAGE_COLUMN = "image"
+
+
+def add_detect_parser(sub: Any, count_type: Any) -> None:
+    """Add ``kinfw detect`` to the command line's sub-parsers."""
+    p = sub.add_parser(
+        "detect",
+        help="find a board's corners in images and write pixel observations",
+        description="Find a chessboard's or ChArUco board's corners in each image (OpenCV), "
+        "pair each image with its row of joint values and write a kinfw-measurements file of "
+        "'pixels' observations, with the camera's intrinsics. Images where the board is not "
+        "found, or found ambiguously (a symmetric chessboard's corner 0 cannot be told), are "
+        "listed and skipped.",
+    )
+    p.add_argument("images", type=Path, nargs="+", metavar="IMAGE", help="image files")
+    p.add_argument(
+        "--board",
+        required=True,
+        help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
+        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares; DICT default DICT_5X5_100); "
+        "lengths in metres",
+    )
+    p.add_argument(
+        "--joints",
+        type=Path,
+        required=True,
+        help="CSV: a header of joint names, one row per image (in the images' order, or "
+        "keyed by an 'image' column)",
+    )
+    p.add_argument(
+        "--camera",
+        type=Path,
+        required=True,
+        help="the camera's intrinsics (ROS camera_info YAML, OpenCV YAML/XML or JSON)",
+    )
+    p.add_argument(
+        "--frame",
+        required=True,
+        help="URDF frame of the camera's optical frame (z forward, x right, y down)",
+    )
+    p.add_argument("--target", default="board", help="the board's target name (default board)")
+    p.add_argument(
+        "--allow-symmetric",
+        action="store_true",
+        help="accept a chessboard that looks the same turned by 180 degrees (both counts of "
+        "one parity): you vouch it is never seen turned by more than 90 degrees",
+    )
+    p.add_argument(
+        "--min-corners",
+        type=count_type,
+        default=6,
+        help="ChArUco: fewest corners for an image to count (default 6, at least 4)",
+    )
+    p.add_argument(
+        "--angle-unit",
+        choices=("rad", "deg"),
+        default="rad",
+        help="unit of the joint values in --joints (default rad; prismatic joints in m)",
+    )
+    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.set_defaults(func=cmd_detect)
+
+
+def detect_inputs(args: argparse.Namespace) -> dict[str, Path]:
+    """The input files of ``kinfw detect``, keyed by how the user gave them (for the
+    check that ``--out`` overwrites none)."""
+    inputs = {"--joints": args.joints, "--camera": args.camera}
+    inputs.update({f"IMAGES[{k}]": path for k, path in enumerate(args.images)})
+    return inputs
+
+
+def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list[list[float]]]:
+    """The joint names and one row of joint values per image, in the order of ``images``.
+
+    Raises
+    ------
+    ValueError
+        Naming the file, line and column: no header, an empty or repeated joint name, a
+        value that is not a finite number, a row of the wrong length; rows in order but
+        not as many as images; an ``image`` column naming an image twice, an image without
+        a row, or a row whose image was not given.
+    """
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise OSError(f"{path}: cannot read the joints CSV ({exc.strerror})") from None
+    lines = [row for row in csv.reader(text.splitlines()) if any(c.strip() for c in row)]
+    if not lines:
+        raise ValueError(f"{path}: empty; expected a header of joint names and one row per image")
+    header = [c.strip() for c in lines[0]]
+    if any(not name for name in header):
+        raise ValueError(f"{path}: line 1: an empty column name in the header {header}")
+    repeated = sorted({n for n in header if header.count(n) > 1})
+    if repeated:
+        raise ValueError(f"{path}: line 1: column(s) {repeated} appear twice in the header")
+    keyed = IMAGE_COLUMN in header
+    joints = [n for n in header if n != IMAGE_COLUMN]
+    if not joints:
+        raise ValueError(f"{path}: line 1: no joint columns in the header {header}")
+    rows: list[tuple[str, list[float]]] = []
+    for number, row in enumerate(lines[1:], start=2):
+        if len(row) != len(header):
+            raise ValueError(
+                f"{path}: line {number}: {len(row)} values, the header has {len(header)} columns"
+            )
+        values, name = [], ""
+        for column, cell in zip(header, row, strict=True):
+            if column == IMAGE_COLUMN:
+                name = cell.strip()
+                continue
+            try:
+                value = float(cell)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                raise ValueError(
+                    f"{path}: line {number}, column {column!r}: expected a finite number, "
+                    f"got {cell!r}"
+                )
+            values.append(value)
+        rows.append((name, values))
+    if not keyed:
+        if len(rows) != len(images):
+            raise ValueError(
+                f"{path}: {len(rows)} rows of joint values for {len(images)} images; give one "
+                f"row per image in the images' order, or an '{IMAGE_COLUMN}' column naming each "
+                f"row's image"
+            )
+        return joints, [values for _, values in rows]
+    by_name: dict[str, int] = {}
+    for index, (name, _) in enumerate(rows):
+        if not name:
+            raise ValueError(f"{path}: line {index + 2}: empty '{IMAGE_COLUMN}' cell")
+        if name in by_name:
+            raise ValueError(
+                f"{path}: lines {by_name[name] + 2} and {index + 2} both name image {name!r}"
+            )
+        by_name[name] = index
+    ordered, used = [], set()
+    for image in images:
+        index = by_name.get(str(image), by_name.get(image.name))
+        if index is None:
+            raise ValueError(
+                f"{path}: no row for image {str(image)!r} (its '{IMAGE_COLUMN}' column names "
+                f"neither {str(image)!r} nor {image.name!r})"
+            )
+        if index in used:
+            raise ValueError(
+                f"{path}: line {index + 2} ({rows[index][0]!r}) matches two of the images given"
+            )
+        used.add(index)
+        ordered.append(rows[index][1])
+    unused = [rows[i][0] for i in range(len(rows)) if i not in used]
+    if unused:
+        raise ValueError(
+            f"{path}: rows for images not given: {', '.join(unused[:5])}"
+            f"{' ...' if len(unused) > 5 else ''} (give those images too, or drop the rows)"
+        )
+    return joints, ordered
+
+
+def cmd_detect(args: argparse.Namespace) -> int:
+    import time
+
+    from kinfw.camera import Detector, parse_board, read_camera, read_gray
+
+    board = parse_board(args.board)
+    camera = read_camera(args.camera)
+    frame = args.frame
+    if not frame.strip():
+        raise ValueError("--frame: empty camera frame name")
+    if not args.target.strip():
+        raise ValueError("--target: empty target name")
+    joints, qs = read_joint_rows(args.joints, args.images)
+    for path in args.images:
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such image file")
+    detector = Detector(board, allow_symmetric=args.allow_symmetric, min_corners=args.min_corners)
+    start = time.perf_counter()
+    detections = []
+    for path in args.images:
+        image = read_gray(path)
+        if image.shape != (camera.height, camera.width):
+            raise ValueError(
+                f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, the camera "
+                f"{args.camera} is {camera.width}x{camera.height}"
+            )
+        detections.append(detector.detect(image, str(path)))
+    elapsed = time.perf_counter() - start
+    found = [(d, q) for d, q in zip(detections, qs, strict=True) if d.found]
+    missed = [d for d in detections if d.status == "not found"]
+    ambiguous = [d for d in detections if d.status == "ambiguous"]
+    print(
+        f"{len(detections)} images ({elapsed / len(detections) * 1e3:.0f} ms each): "
+        f"{len(found)} found, {len(missed)} not found, {len(ambiguous)} ambiguous"
+    )
+    for title, group in (("not found", missed), ("ambiguous", ambiguous)):
+        for d in group:
+            print(f"  {title}: {d.image}: {d.reason}")
+    if not found:
+        why = (
+            f"it was ambiguous in {len(ambiguous)} (a symmetric chessboard: use a board whose "
+            "corner counts differ in parity, or --allow-symmetric if it is never turned by "
+            "more than 90 degrees)"
+            if ambiguous
+            else "check --board (inner corners for a chessboard) and the images"
+        )
+        raise ValueError(
+            f"the board {board.spec()} was found in none of the images; {why}; nothing written"
+        )
+    doc = {
+        "format": "kinfw-measurements",
+        "version": 1,
+        "units": {"length": "m", "angle": args.angle_unit},
+        "joint_names": joints,
+        "cameras": {frame: camera.to_dict()},
+        "samples": [
+            {
+                "q": q,
+                "observations": [
+                    {
+                        "frame": frame,
+                        "kind": "pixels",
+                        "target": args.target,
+                        "image": d.image,
+                        "uv": d.uv.tolist(),
+                        "points": d.points.tolist(),
+                        "ids": d.ids.tolist(),
+                    }
+                ],
+            }
+            for d, q in found
+        ],
+    }
+    write_text_atomic(args.out, _dumps(doc))
+    corners = sum(len(d.ids) for d, _ in found)
+    print(
+        f"wrote {args.out}: {len(found)} samples, {corners} corners of target {args.target!r} "
+        f"seen by camera frame {frame!r}"
+    )
+    return 0
+
+
+def _dumps(doc: dict[str, Any]) -> str:
+    """JSON text with one sample per line."""
+
+    def dump(value: Any) -> str:
+        return json.dumps(value, allow_nan=False, ensure_ascii=False)
+
+    head = ",\n  ".join(f"{dump(k)}: {dump(v)}" for k, v in doc.items() if k != "samples")
+    samples = ",\n    ".join(dump(s) for s in doc["samples"])
+    return f'{{\n  {head},\n  "samples": [\n    {samples}\n  ]\n}}\n'

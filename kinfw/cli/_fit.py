@@ -1,0 +1,494 @@
+"""The commands of the ``kinfw`` command line that fit a model: ``calibrate``, ``demo``
+and ``crossval``, with their tables and printers (the other commands are in
+:mod:`kinfw.cli`, their parsers in :mod:`kinfw.cli`, :func:`kinfw.cli.main`
+in :mod:`kinfw.cli`).
+
+Each ``cmd_<name>(args)`` runs ``kinfw <name>`` on the parsed arguments and returns the
+exit code; user errors are raised (ValueError, OSError) and reported by
+:func:`kinfw.cli.main`. Like :mod:`kinfw.cli`, this module imports only the standard
+library at start-up: numpy, Pinocchio and CasADi are imported inside the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from kinfw.cli._args import read_data
+from kinfw.cli._tables import format_table, progress_printer
+from kinfw.files import json_text
+
+if TYPE_CHECKING:
+    from kinfw.reports import BeforeAfter, DownweightedRow, RefineSection, RejectedRow, StageErrors
+
+__all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
+
+#: Rejected observations listed one per line; the others are counted.
+MAX_LINES = 10
+
+
+# -- kinfw calibrate ---------------------------------------------------------------------
+def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
+    return format_table(
+        [
+            [
+                r.group,
+                r.n,
+                f"{r.before_position_rms_mm:.3f}",
+                f"{r.after_position_rms_mm:.3f}",
+                f"{r.before_rotation_rms_deg:.4f}",
+                f"{r.after_rotation_rms_deg:.4f}",
+            ]
+            for r in rows
+        ],
+        ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"],
+    )
+
+
+def _stage_table(stages: Sequence[StageErrors]) -> str:
+    """Per group its RMS after each stage: position mm, image groups (``[px]``) px."""
+    rms = {s.stage: dict(s.position_rms_mm) for s in stages}
+    groups = [g for g, _ in stages[0].position_rms_mm]
+    px = any(g.endswith(" [px]") for g in groups)
+    return format_table(
+        [[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
+        ["RMS: position mm, images px" if px else "position RMS mm", *rms],
+    )
+
+
+def params_arg(text: str) -> str | tuple[str, ...]:
+    """``full``, ``offsets``, ``frames``, ``none``, or a comma-separated mask."""
+    if text in ("full", "offsets", "frames", "none"):
+        return text
+    return tuple(t for t in text.replace(" ", "").split(",") if t)
+
+
+def _prior_arg(args: argparse.Namespace):
+    if args.prior_mm is None and args.prior_deg is None:
+        return None
+    if args.prior_mm is None or args.prior_deg is None:
+        raise ValueError("give both --prior-mm and --prior-deg")
+    return args.prior_mm * 1e-3, math.radians(args.prior_deg)
+
+
+def _noise_arg(args: argparse.Namespace):
+    from kinfw.identification.problem import NoiseModel
+
+    sigma_px = getattr(args, "sigma_px", None)
+    pixel = {} if sigma_px is None else {"pixel": sigma_px}
+    if args.sigma_mm is None and args.sigma_deg is None:
+        return NoiseModel(sigmas=pixel) if pixel else None
+    if args.sigma_mm is None or args.sigma_deg is None:
+        raise ValueError(
+            "give both --sigma-mm and --sigma-deg, or neither (then the noise "
+            "is estimated from the residuals)"
+        )
+    # an angle sigma about a random axis is sigma / sqrt(3) per orientation component
+    return NoiseModel(
+        args.sigma_mm * 1e-3, math.radians(args.sigma_deg) / math.sqrt(3.0), sigmas=pixel
+    )
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from kinfw.model import load_robot
+    from kinfw.reports import write_report
+    from kinfw.verification.reporting import calibrate_to_files
+
+    nominal = load_robot(args.urdf)
+    data = read_data(args.data, args)
+    held_out = read_data(args.holdout, args) if args.holdout else None
+    noise, prior = _noise_arg(args), _prior_arg(args)
+    choice = None
+    parameters = "full" if args.params == "auto" else params_arg(args.params)
+    if args.params == "auto" and args.method == "refine":
+        from kinfw.verification.evaluation import choose_parameters
+
+        choice = choose_parameters(nominal, data, noise=noise, loss=args.loss, prior=prior)
+        parameters, prior = choice.parameters, choice.prior
+    report, _ = calibrate_to_files(
+        nominal,
+        data,
+        args.out,
+        method=args.method,
+        noise=noise,
+        loss=args.loss,
+        parameters=parameters,
+        prior=prior,
+        data_path=args.data,
+        held_out=held_out,
+        progress=progress_printer(),
+        reason="given" if choice is None else choice.reason,
+        refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
+    )
+    if choice is not None:  # the choice goes to the report's notes (and the sidecar)
+        report = dataclasses.replace(
+            report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
+        )
+    if args.report:
+        write_report(args.report, report)
+    if args.json:
+        print(json_text(report.to_dict()))
+        return 0
+    print(
+        f"calibrated {args.urdf} with {args.method} from {args.data} "
+        f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})"
+    )
+    for note in report.notes:
+        print(f"note: {note}")
+    if choice is not None and choice.candidates:
+        print(f"model choice: {choice.k}-fold held-out error of each candidate:")
+        print(_choice_table(choice))
+    print("RMS on the calibration data after each stage (in-sample):")
+    print(_stage_table(report.position_rms_by_stage))
+    if report.refine is not None:
+        _print_refine(
+            report.refine,
+            has_report=bool(args.report),
+            n_pixel_points=sum(len(g.sample) for g in data.groups("pixels")),
+        )
+    if report.reprojection is not None:
+        _print_reprojection(report.reprojection)
+    if report.errors_held_out is not None:
+        print("held-out errors:")
+        print(_before_after_table(report.errors_held_out))
+    if args.report:
+        print(f"report: {args.report}")
+    return 0
+
+
+def _print_reprojection(rep) -> None:
+    """Reprojection RMS per camera and the worst images (px, in-sample)."""
+    print("reprojection error on the calibration data (in-sample), px:")
+    rows = [
+        [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
+        for c in rep.cameras
+    ]
+    print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+    print(
+        "  worst images (RMS px): "
+        + ", ".join(
+            f"{i.image} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}" for i in rep.worst[:5]
+        )
+    )
+
+
+def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:
+    """``--refine-intrinsics``: absent (), given without frames True (every camera)."""
+    if frames is None:
+        return ()
+    return tuple(frames) if frames else True
+
+
+def _choice_table(choice) -> str:
+    """The candidates of a model choice with their held-out scores, the chosen marked."""
+    head = f"  {'candidate':<32} {'whitened':>9} {'pos mm':>8} {'rot deg':>8}"
+    rows = [head]
+    for c in choice.candidates:
+        mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
+        if c.failed is not None:
+            rows.append(f"  {c.label:<32} not fitted on a training fold (too few residuals)")
+            continue
+        rot = "-" if math.isnan(c.rotation_rms_deg) else f"{c.rotation_rms_deg:.3g}"
+        rows.append(f"  {c.label:<32} {c.whitened:>9.3g} {c.position_rms_mm:>8.3g} {rot:>8}{mark}")
+    return "\n".join(rows)
+
+
+def _noise_text(noise) -> str:
+    """The sigma of each noise component the data has: ``0.5 mm, 0.29 deg per
+    component, 0.5 px`` (position, rotation, pixels; other components in their SI
+    unit)."""
+    parts = []
+    for name, sigma in noise.sigmas:
+        if name == "position":
+            parts.append(f"{1e3 * sigma:.3g} mm")
+        elif name == "rotation":
+            parts.append(f"{math.degrees(sigma):.3g} deg per component")
+        elif name == "pixel":
+            parts.append(f"{sigma:.3g} px")
+        else:
+            parts.append(f"{name} {sigma:.3g}")
+    return ", ".join(parts) or "-"
+
+
+def _print_refine(ref: RefineSection, *, has_report: bool, n_pixel_points: int = 0) -> None:
+    """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
+    the worst down-weighted observations."""
+    ident = ref.identifiability
+    if ident.condition is not None:
+        condition = f"condition {ident.condition:.3g}"
+    else:  # null in the report: no free parameters, or a rank-deficient problem
+        condition = "condition undefined" if not ident.n_parameters else "condition inf"
+    print(
+        f"refine: noise sigma {_noise_text(ref.noise)}"
+        + f" ({'estimated' if ref.noise.estimated else 'given'}); reduced chi-square "
+        f"{ref.reduced_chi_square:.3g}; rank {ident.rank}/{ident.n_parameters}, " + condition
+    )
+    print(
+        f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
+        "(not estimated; std null in the report)"
+    )
+    for item in ident.not_identifiable:
+        print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
+    rejected = ref.rejected or ()
+    for row in rejected[:MAX_LINES]:
+        print(
+            f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
+            f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold "
+            "(refitted without it)"
+        )
+    if len(rejected) > MAX_LINES:
+        print(
+            f"  ... and {len(rejected) - MAX_LINES} more rejected "
+            f"({len(rejected)} in all; "
+            + ("see the report)" if has_report else "write them with --report)")
+        )
+    # the rejection note (data inconsistent with the model) is a warning, printed once
+    # on stderr by the command's warning printer
+    down = ref.downweighted
+    if down:
+        print(f"  {len(down)} observations down-weighted by the {ref.loss} loss, worst first:")
+    for row in down[:5]:
+        print(
+            f"    samples[{row.sample}] {_observed(row)}: residual {_residual_sizes(row)}, "
+            f"weight {row.weight:.2g}"
+        )
+    if len(down) > 5:
+        print(
+            f"    ... and {len(down) - 5} more "
+            f"({'see the report' if has_report else 'write them with --report'})"
+        )
+    hint = _intrinsics_hint(ref, n_pixel_points)
+    if hint:
+        print(f"  warning: {hint}")
+
+
+def _intrinsics_hint(ref: RefineSection, n_points: int) -> str | None:
+    """When the pixel residuals are large and structured (more than 5 % of the image
+    points rejected or down-weighted, or an estimated pixel noise over 2 px), the
+    intrinsics are a likely cause: say so, unless they were refined. ``n_points``: the
+    image points of the calibration data."""
+    px_rows = [r for r in (*(ref.rejected or ()), *ref.downweighted) if r.kind == "pixels"]
+    sigma = ref.noise.of("pixel")
+    refined = any(p.owner.startswith("intrinsics") and not p.fixed for p in ref.parameters)
+    if sigma is None or refined:
+        return None
+    many = n_points > 0 and len(px_rows) > 0.05 * n_points
+    if not (many or (ref.noise.estimated and sigma > 2.0)):
+        return None
+    return (
+        f"the image points' residuals are large and structured ({len(px_rows)} rejected or "
+        f"down-weighted, estimated pixel noise {sigma:.3g} px): the camera intrinsics may "
+        "be wrong; try --refine-intrinsics (or check the --camera files)"
+    )
+
+
+# -- kinfw demo --------------------------------------------------------------------------
+def cmd_demo(args: argparse.Namespace) -> int:
+    from kinfw.verification.studies import N_STAGE2, NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
+
+    pixels = bool(getattr(args, "pixels", False))
+    demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
+    report = demo.report
+    if args.json:
+        print(json_text(report.to_dict()))
+        return 0
+    out = demo.out
+    seen = ""
+    if pixels:  # the images each camera has: a camera does not see the board everywhere
+        seen = ", ".join(f"{c.camera} {c.n_images}" for c in report.reprojection.cameras)
+    print("kinfw demo: the IIS-head experiment of Shih et al. (1992) in simulation")
+    print(
+        f"  true robot = built-in URDF with 5 mm / 1 deg errors (seed {args.seed}); stage 1: "
+        f"{demo.n_stage1} one-joint-at-a-time configurations (9 per joint), plate poses from "
+        "the stereo rig; stage 2: "
+        + (
+            "the cameras (640x480, fx = fy = 600 px) see the corners of a fixed 9x6 "
+            f"chessboard in {N_STAGE2} random configurations (images: {seen}), pixel "
+            f"noise {PIXEL_SIGMA:g} px; "
+            if pixels
+            else f"both cameras see a fixed target in {N_STAGE2} random configurations; "
+        )
+        + f"noise sigma {NOISE_MM:g} mm / {NOISE_DEG:g} deg; closed form, "
+        "A = X B Y, then the joint least squares"
+        + (" on reprojection error" if pixels else "")
+        + "; 100 held-out configurations"
+    )
+    print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
+    print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
+    print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
+    print(_before_after_table(report.errors_held_out))
+    noise = report.refine.noise
+    if pixels:
+        print()
+        _print_reprojection(report.reprojection)
+        held = demo.held_out_pixels
+        n_images = sum(c.n_images for c in held.cameras)
+        print(
+            f"reprojection error on {n_images} held-out images ({N_STAGE2} fresh "
+            "configurations), px:"
+        )
+        rows = [
+            [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
+            for c in held.cameras
+        ]
+        print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+        print(
+            "  worst held-out images (RMS px): "
+            + ", ".join(f"{i.image} ({i.camera}) {i.rms_px:.3g}" for i in held.worst[:5])
+        )
+        print(
+            f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+            f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation component, "
+            f"{noise.of('pixel'):.3f} px (true: {NOISE_MM:g} mm, "
+            f"{NOISE_DEG / math.sqrt(3.0):.3f} deg, {PIXEL_SIGMA:g} px)"
+        )
+    else:
+        print(
+            f"\nestimated noise: {noise.position_sigma_mm:.3f} mm per axis, "
+            f"{noise.rotation_sigma_deg_per_component:.3f} deg per orientation "
+            f"component (true: {NOISE_MM:g} mm, {NOISE_DEG / math.sqrt(3.0):.3f} deg)"
+        )
+    print(
+        f"wrote {out / 'calibrated.urdf'} (+ {report.sidecar}), {out / 'report.json'} "
+        f"and the data ({out / 'data.json'}, {out / 'held_out.json'}, {out / 'true.urdf'})"
+    )
+    print(
+        f"plot: {out / 'errors.png'}; 3D view (nominal grey, calibrated blue, residuals x30): "
+        f"{out / 'scene.html'} (open in any browser, no network needed)"
+    )
+    return 0
+
+
+# -- kinfw crossval ----------------------------------------------------------------------
+def cmd_crossval(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinfw.model import load_robot
+    from kinfw.verification.evaluation import BASELINES, crossvalidate, executor_for_jobs
+
+    nominal = load_robot(args.urdf)
+    data = read_data(args.data, args)
+    sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
+    prior = _prior_arg(args)
+    watch = progress_printer()
+    executor = executor_for_jobs(args.jobs)
+    try:
+        cv = crossvalidate(
+            nominal,
+            data,
+            k=args.k,
+            seed=args.seed,
+            sets=sets,
+            select=args.select,
+            noise=_noise_arg(args),
+            loss=args.loss,
+            prior=prior,
+            executor=executor,
+            progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
+            exclude_flagged=args.exclude_flagged,
+        )
+    finally:
+        if executor is not None:
+            executor.shutdown()
+    if args.json:
+        print(json_text(cv.to_dict()))
+        return 0
+    label = {
+        "none": "nominal",
+        "frames": "frames only",
+        "offsets": "offsets+frames",
+        "full": "calibrated",
+    }
+    px = cv.has_pixels
+    pose = any(not np.isnan(s.position_rms_mm) for s in cv.scores)
+    units = [
+        u for u, has in (("position mm / orientation deg", pose), ("reprojection px", px)) if has
+    ]
+    print(
+        f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
+        f"by sample{', images whole' if px else ''}, seed {args.seed}): held-out RMS, "
+        + " | ".join(units)
+    )
+
+    def number(value: float, fmt: str) -> str:
+        return "-" if np.isnan(value) else format(value, fmt)
+
+    def cell(position_mm: float, rotation_deg: float, pixel_px: float) -> str:
+        parts = []
+        if pose:
+            parts.append(f"{number(position_mm, '.3f')} / {number(rotation_deg, '.3f')}")
+        if px:
+            parts.append(number(pixel_px, ".3f"))
+        return " | ".join(parts)
+
+    rows = []
+    for fold in range(args.k):
+        row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
+        for p in sets:
+            sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
+            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg, sc.pixel_rms_px))
+        rows.append(row)
+    rows.append(
+        [
+            "mean",
+            "",
+            *(
+                cell(
+                    cv.mean(p),
+                    cv.mean(p, "rotation_rms_deg"),
+                    np.nanmean([s.pixel_rms_px for s in cv.scores if s.parameters == p])
+                    if px
+                    else float("nan"),
+                )
+                for p in sets
+            ),
+        ]
+    )
+    print(format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
+    if args.exclude_flagged:
+        print(
+            f"excluded from scoring: {len(cv.excluded)} observations the full-data fit "
+            f"rejected as gross errors" + (":" if cv.excluded else "")
+        )
+        for sample, kind, frame, marker in cv.excluded:
+            where = frame + (f" marker {marker}" if marker else "")
+            print(f"  samples[{sample}] {where} ({kind})")
+    for warning in cv.warnings:
+        print(f"warning: {warning}")
+    if cv.selected:
+        sp, sr = cv.noise
+        print(
+            f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
+            f"error whitened by the noise ({sp * 1e3:.3g} mm, {np.degrees(sr):.3g} deg per "
+            f"component): {cv.mean(cv.selected):.3f} mm / "
+            f"{cv.mean(cv.selected, 'rotation_rms_deg'):.3f} deg, whitened "
+            f"{cv.whitened(cv.selected):.3g}"
+        )
+    return 0
+
+
+def _observed(row: DownweightedRow | RejectedRow) -> str:
+    """``frame [marker m] (kind) [image LABEL corner ID]`` of a down-weighted or
+    rejected observation."""
+    return (
+        row.frame
+        + (f" marker {row.marker}" if row.marker else "")
+        + f" ({row.kind})"
+        + (f" {row.where}" if row.where else "")
+    )
+
+
+def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:
+    """The residual's sizes that apply to the observation's kind: mm, deg, px."""
+    return ", ".join(
+        f"{v:.3g} {unit}"
+        for v, unit in (
+            (row.position_residual_mm, "mm"),
+            (row.rotation_residual_deg, "deg"),
+            (row.pixel_residual_px, "px"),
+        )
+        if v is not None
+    )

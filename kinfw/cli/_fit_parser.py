@@ -1,0 +1,151 @@
+"""The parsers of the ``kinfw`` commands that fit a model: ``calibrate``, ``demo`` and
+``crossval`` (the commands are in :mod:`kinfw.cli`), with the refinement's options
+they share.
+
+Like :mod:`kinfw.cli`, this module imports only the standard library at start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from kinfw.cli._args import (
+    COUNT,
+    POSITIVE_DEG,
+    POSITIVE_MM,
+    POSITIVE_PX,
+    SEED,
+    add_camera_option,
+    number,
+)
+from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
+
+__all__ = ["add_fit_parsers"]
+
+
+def _add_fit_options(p: argparse.ArgumentParser) -> None:
+    """Noise, robust loss and prior of the refinement (calibrate and crossval)."""
+    p.add_argument(
+        "--sigma-mm",
+        type=POSITIVE_MM,
+        help="position noise sigma per axis, mm (default: estimated from the residuals)",
+    )
+    p.add_argument(
+        "--sigma-deg",
+        type=POSITIVE_DEG,
+        help="orientation noise: angle sigma about a random axis, deg (default: estimated)",
+    )
+    p.add_argument(
+        "--sigma-px",
+        type=POSITIVE_PX,
+        help="pixel noise sigma per image coordinate of 'pixels' observations, px "
+        "(default: estimated)",
+    )
+    p.add_argument(
+        "--loss",
+        choices=("huber", "linear", "cauchy"),
+        default="huber",
+        help="robust loss of the refinement (default huber: gross outliers are "
+        "down-weighted and listed)",
+    )
+    p.add_argument(
+        "--prior-mm",
+        type=POSITIVE_MM,
+        help="Gaussian prior on deviations from "
+        "the nominal: sigma of lengths, mm (for small datasets)",
+    )
+    p.add_argument("--prior-deg", type=POSITIVE_DEG, help="... and of angles, deg")
+
+
+def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
+    """The ``calibrate``, ``demo`` and ``crossval`` sub-commands."""
+    p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")
+    p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
+    p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
+    p.add_argument("--out", type=Path, required=True, help="calibrated URDF to write")
+    p.add_argument("--report", type=Path, help="write the report (JSON) here")
+    p.add_argument(
+        "--method",
+        choices=("refine", "closed-form"),
+        default="refine",
+        help="refine (default): closed form and hand-eye, then the joint "
+        "nonlinear least squares; closed-form: stop after closed form and hand-eye",
+    )
+    p.add_argument(
+        "--holdout",
+        type=Path,
+        help="measurement file not used for calibration; its errors go to the report and sidecar",
+    )
+    p.add_argument(
+        "--params",
+        default="auto",
+        help="what to estimate: auto (default: full when there are at least 10 residual "
+        "rows per parameter, else the set and prior with the lowest 5-fold held-out error "
+        "among frames, offsets, full and full with a prior of 1, 3 or 10 mm), full, "
+        "offsets (joint zero offsets + base and tool frames), frames (base and "
+        "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
+        "those joints' CPC parameters)",
+    )
+    _add_fit_options(p)
+    add_camera_option(p)
+    p.add_argument(
+        "--refine-intrinsics",
+        nargs="*",
+        metavar="FRAME",
+        help="also estimate the intrinsics (fx fy cx cy k1 k2 p1 p2 k3) of these cameras "
+        "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
+        "the report says which the images do not determine",
+    )
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
+    p.add_argument(
+        "--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)"
+    )
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument(
+        "--pixels",
+        action="store_true",
+        help="stage 2 from images: each camera (640x480, fx = fy = 600 px) sees the corners "
+        "of a fixed chessboard (pixel noise 0.5 px); calibrated on reprojection error",
+    )
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser(
+        "crossval",
+        help="k-fold cross-validation against baselines",
+        description="Held-out error of the calibration (folds by sample) next "
+        "to two baselines on the same folds: the nominal geometry and 'frames "
+        "only' (nominal joints; measurement frame, markers, target and tool / "
+        "hand-eye frames fitted). Warns when the calibration is worse than "
+        "frames only, with the likely cause.",
+    )
+    p.add_argument("data", type=Path, help="measurement file")
+    p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
+    p.add_argument("--k", type=number(int, low=2), default=5, help="folds (default 5)")
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument(
+        "--select",
+        action="store_true",
+        help="also try 'offsets' and pick the parameter set with the lowest held-out error, "
+        "position and orientation together (each whitened by the estimated noise)",
+    )
+    p.add_argument(
+        "--exclude-flagged",
+        action="store_true",
+        help="leave the observations the full-data fit rejects as gross errors out of the "
+        "held-out scores (and list them)",
+    )
+    _add_fit_options(p)
+    add_camera_option(p)
+    p.add_argument(
+        "--jobs",
+        type=COUNT,
+        default=1,
+        help="run the fits in N worker processes (default 1: in this process)",
+    )
+    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.set_defaults(func=cmd_crossval)

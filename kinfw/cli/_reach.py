@@ -1,0 +1,192 @@
+"""``kinfw reach``: use a (calibrated) model to put a frame at a pose or its origin at a
+point (:mod:`kinfw.control`); exit code 0 reached, :data:`kinfw.cli.NOT_MET`
+not.
+
+Like the other command modules, only the standard library is imported at start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from kinfw.cli._args import number
+from kinfw.cli._control import (
+    NOT_MET,
+    UNIT_M,
+    add_joint_options,
+    check_distance,
+    free_arg,
+    joint_rows,
+    joint_table,
+    joints_json,
+    parse_joint_values,
+)
+
+__all__ = ["add_reach_parser", "cmd_reach"]
+
+
+# -- parser -------------------------------------------------------------------------------
+def add_reach_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``reach`` sub-command."""
+    real = number(float)
+    p = sub.add_parser(
+        "reach",
+        help="joint values that put a frame at a pose or a point",
+        description="Joint values that put --frame at a pose (position and orientation) or "
+        "its origin at a point, by the model: damped least squares on Pinocchio's "
+        "Jacobian within the joint limits, from the start (--q) then from random starts "
+        "(--restarts, --seed) until one reaches. Default free joints: every movable joint "
+        f"on the path to the frame. Exit code 0 reached, {NOT_MET} not reached (the "
+        "closest configuration found is printed), 2 bad input.",
+    )
+    add_joint_options(p)
+    p.add_argument("--frame", required=True, help="the URDF link or joint that reaches")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument(
+        "--pose",
+        type=real,
+        nargs=7,
+        metavar=("X", "Y", "Z", "QX", "QY", "QZ", "QW"),
+        help="the target pose in the robot's root frame: position, metres (or --unit mm), "
+        "and unit quaternion, scalar last (as quat_xyzw in measurement files)",
+    )
+    target.add_argument(
+        "--point",
+        type=real,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="a target point for the frame's origin (orientation free), root frame, "
+        "metres (or --unit mm)",
+    )
+    p.add_argument(
+        "--restarts",
+        type=number(int, low=0),
+        default=50,
+        help="random starts after the first at most (default 50)",
+    )
+    p.add_argument("--seed", type=number(int, low=0), default=0, help="seed of the starts")
+    p.add_argument(
+        "--html",
+        type=Path,
+        metavar="SCENE.html",
+        help="write a Meshcat scene (self-contained HTML): the robot at the answer, the "
+        "target (a triad for a pose, a sphere for a point), the frame's triad, and a line "
+        "from the frame to the target when not reached",
+    )
+    p.set_defaults(func=cmd_reach)
+
+
+# -- kinfw reach -------------------------------------------------------------------------
+def _reach_bound_m(robot, frame: str) -> float:
+    """An upper bound of the distance from the root frame the origin of ``frame`` can
+    reach: the joint origins' offsets on its path plus the prismatic joints' travel (m)."""
+    import numpy as np
+
+    bound = 0.0
+    for joint in robot.path_joints(frame):
+        bound += float(np.linalg.norm(joint.parent_T_child[:3, 3]))
+        if joint.type == "prismatic":
+            bound += max(abs(joint.lower), abs(joint.upper))
+    return bound
+
+
+def _reach_target(args):
+    """``root_T_target`` (4, 4) from ``--pose`` or ``root_p_target`` (3,) from ``--point``
+    (metres)."""
+    import numpy as np
+
+    from kinfw.geometry import transform_from_xyz_quat_xyzw
+    from kinfw.observations import QUAT_NORM_TOL
+
+    scale = UNIT_M[args.unit]
+    if args.point is not None:
+        return np.array(args.point, dtype=float) * scale
+    xyz = np.array(args.pose[:3], dtype=float) * scale
+    quat = np.array(args.pose[3:], dtype=float)
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > QUAT_NORM_TOL:
+        raise ValueError(
+            f"--pose: the quaternion QX QY QZ QW = {' '.join(f'{v:g}' for v in quat)} has "
+            f"norm {norm:.6g}; expected a unit quaternion (within {QUAT_NORM_TOL:g}), "
+            "scalar last"
+        )
+    return transform_from_xyz_quat_xyzw(xyz, quat)
+
+
+def cmd_reach(args: argparse.Namespace) -> int:
+    import math
+
+    from kinfw.control import reach
+    from kinfw.files import json_text
+    from kinfw.model import load_robot
+
+    robot = load_robot(args.model)
+    robot.frame_id(args.frame)  # an unknown frame: one line naming the links
+    target = _reach_target(args)
+    position = target if target.shape == (3,) else target[:3, 3]
+    check_distance(
+        f"--{'point' if args.point is not None else 'pose'} position",
+        position,
+        2.0 * _reach_bound_m(robot, args.frame),
+        args.unit,
+    )
+    q_start = parse_joint_values(robot, args.q)
+    free = free_arg(robot, args.free)
+    result = reach(
+        robot,
+        args.frame,
+        target,
+        q_start=q_start,
+        free_joints=free,
+        restarts=args.restarts,
+        seed=args.seed,
+    )
+    rows = joint_rows(robot, result.q, result.free_joints, result.at_limits)
+    rotation_deg = (
+        None if result.rotation_error_rad is None else math.degrees(result.rotation_error_rad)
+    )
+    if args.html is not None:
+        from kinfw.view import write_reach_html
+
+        write_reach_html(robot, result, args.html)
+    if args.json:
+        print(
+            json_text(
+                {
+                    "model": str(args.model),
+                    "root_frame": robot.root_link,
+                    "frame": result.frame,
+                    "target": "pose" if args.pose is not None else "point",
+                    "root_T_target": result.root_T_target.tolist(),
+                    "joint_names": list(result.joint_names),
+                    "q": result.q.tolist(),
+                    "joints": joints_json(rows),
+                    "free_joints": list(result.free_joints),
+                    "position_error_mm": 1e3 * result.position_error_m,
+                    "rotation_error_deg": rotation_deg,
+                    "reached": result.reached,
+                    "at_limits": list(result.at_limits),
+                    "starts": result.starts,
+                    "html": None if args.html is None else str(args.html),
+                }
+            )
+        )
+        return 0 if result.reached else NOT_MET
+    what = "pose" if args.pose is not None else "point"
+    print(f"reaching a {what} with {result.frame!r} in {robot.root_link!r}, model {args.model}")
+    print(joint_table(rows))
+    print(f"position error: {1e3 * result.position_error_m:.6f} mm")
+    if rotation_deg is not None:
+        print(f"rotation error: {rotation_deg:.6f} deg")
+    print(f"reached: {'yes' if result.reached else 'no'}")
+    print(f"at limits: {', '.join(result.at_limits) or 'none'}")
+    print(f"starts used: {result.starts} of {args.restarts + 1}")
+    if not result.reached:
+        print(
+            f"not reached: the closest configuration found is printed (exit code {NOT_MET}); "
+            "more --restarts, another --q start, or the target is out of reach"
+        )
+    if args.html is not None:
+        print(f"wrote {args.html}")
+    return 0 if result.reached else NOT_MET

@@ -1,0 +1,323 @@
+"""``kinfw simulate``: perturb a nominal URDF into a "true" robot and simulate its
+measurements (stage 1 poses one joint at a time, stage 2 camera observations or images of a
+board, or a plan file's configurations), :mod:`kinfw.simulation`.
+
+Like the other command modules, only the standard library is imported at start-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from kinfw.cli._args import COUNT, DEG, MM, SEED, add_camera_option, frames_arg, number
+from kinfw.files import write_text_atomic
+
+__all__ = ["add_simulate_parser", "cmd_simulate"]
+
+
+# -- parser -------------------------------------------------------------------------------
+def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``simulate`` sub-command."""
+    p = sub.add_parser(
+        "simulate",
+        help="simulate measurements of a perturbed robot",
+        description="Perturb the nominal URDF into a 'true' robot and simulate "
+        "its measurements: stage 1 poses of --frames, one joint at a time "
+        "(Shih et al. section 4.1); stage 2 camera observations of a fixed "
+        "target at random configurations.",
+    )
+    p.add_argument(
+        "--urdf", type=Path, default=None, help="nominal URDF (default: the built-in IIS-head)"
+    )
+    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.add_argument("--truth-out", type=Path, required=True, help="true robot URDF to write")
+    p.add_argument(
+        "--per-joint",
+        type=COUNT,
+        default=9,
+        help="stage 1 measurements per joint (default 9, as the paper)",
+    )
+    p.add_argument(
+        "--noise-mm", type=MM, default=0.5, help="position noise sigma per axis, mm (default 0.5)"
+    )
+    p.add_argument(
+        "--noise-deg", type=DEG, default=0.5, help="rotation noise angle sigma, deg (default 0.5)"
+    )
+    p.add_argument(
+        "--stereo-mm",
+        type=MM,
+        default=None,
+        help="simulate the stereo rig: point noise sigma on the nine-circle "
+        "plate, mm (replaces --noise-mm/--noise-deg for stage 1 poses)",
+    )
+    p.add_argument(
+        "--error-mm",
+        type=MM,
+        default=2.0,
+        help="true robot: joint origin error sigma, mm (default 2)",
+    )
+    p.add_argument(
+        "--error-deg",
+        type=DEG,
+        default=0.5,
+        help="true robot: joint origin and axis error sigma, deg (default 0.5)",
+    )
+    p.add_argument(
+        "--fraction",
+        type=number(float, low=0.0, high=1.0, low_open=True),
+        default=0.8,
+        help="fraction of each joint range used (default 0.8)",
+    )
+    p.add_argument(
+        "--stage",
+        choices=("1", "2", "both"),
+        default=None,
+        help="stage 1 (one joint at a time), 2 (random configurations seen by the cameras) "
+        "or both (default 1; with --pixels: both, and 1 is an error)",
+    )
+    p.add_argument(
+        "--stage2-samples",
+        type=COUNT,
+        default=30,
+        help="stage 2 random configurations (default 30)",
+    )
+    p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
+    p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
+    p.add_argument(
+        "--pixels",
+        action="store_true",
+        help="stage 2 as images: the corners of a fixed --board seen by each camera "
+        "('pixels' observations; a corner is seen when in front of the camera, within 60 "
+        "deg of its axis and 5 px inside the image; an image is dropped when the board is "
+        "seen more than 70 deg from its normal, or with fewer than 4 corners, all of a "
+        "chessboard's, or corners on one line; configurations where no camera sees the "
+        "board are drawn again)",
+    )
+    p.add_argument(
+        "--pixel-sigma",
+        type=number(float, low=0.0, unit="px"),
+        default=0.5,
+        help="with --pixels: pixel noise sigma per image coordinate, px (default 0.5)",
+    )
+    p.add_argument(
+        "--board",
+        default=None,
+        help="with --pixels: the board, chessboard:COLSxROWS:SQUARE_M or "
+        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default chessboard:9x6:0.04)",
+    )
+    add_camera_option(p)
+    p.add_argument(
+        "--plan",
+        type=Path,
+        default=None,
+        help="a plan file (kinfw plan --out): measure at its configurations, in its order "
+        "(stage 1 and stage 2), instead of one joint at a time / random",
+    )
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=cmd_simulate)
+
+
+# -- kinfw simulate ----------------------------------------------------------------------
+def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=None):
+    """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
+    from kinfw.camera import CameraError, Chessboard, parse_board, read_camera
+    from kinfw.simulation import (
+        DEFAULT_BOARD,
+        MIN_CORNERS,
+        board_pose_facing,
+        default_intrinsics,
+        pixel_views,
+        simulate_pixels,
+    )
+
+    board = parse_board(args.board or DEFAULT_BOARD)
+    given = {}
+    for frame, file in args.camera or ():
+        if frame not in cameras:
+            raise ValueError(
+                f"--camera {frame}={file}: {frame!r} is not a stage 2 camera "
+                f"(cameras: {', '.join(cameras)})"
+            )
+        try:
+            given[frame] = read_camera(file)
+        except CameraError as exc:
+            raise ValueError(f"--camera {frame}={file}: {exc}") from None
+    intrinsics = {c: given.get(c) or default_intrinsics(c) for c in cameras}
+    min_corners = board.count if isinstance(board, Chessboard) else MIN_CORNERS
+    if planned is not None:  # the plan's configurations; those where no camera sees dropped
+        w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
+        data, _ = simulate_pixels(
+            truth,
+            planned,
+            names,
+            cameras=intrinsics,
+            board_p=board.points,
+            w_T_board=w_T_board,
+            rng=rng,
+            sigma_px=args.pixel_sigma,
+            min_corners=min_corners,
+        )
+        args.board_spec = board.spec()
+        args.default_cameras = sorted(set(cameras) - set(given))
+        return data
+    data, _ = pixel_views(
+        truth,
+        names,
+        lower,
+        upper,
+        args.stage2_samples,
+        rng,
+        cameras=intrinsics,
+        board_p=board.points,
+        sigma_px=args.pixel_sigma,
+        fraction=args.fraction,
+        min_corners=min_corners,
+    )
+    args.board_spec = board.spec()
+    args.default_cameras = sorted(set(cameras) - set(given))
+    return data
+
+
+def _pixel_summary(data, args) -> dict:
+    """The board and the images and corners per camera of ``--pixels`` data."""
+    return {
+        "board": args.board_spec,
+        "sigma_px": args.pixel_sigma,
+        "cameras": [
+            {
+                "camera": g.camera,
+                "images": len(g.images()[0]),
+                "points": len(g.sample),
+                "default": g.camera in args.default_cameras,
+            }
+            for g in data.groups("pixels")
+        ],
+    }
+
+
+def cmd_simulate(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from kinfw.measurements import concatenate_measurements, write_measurements
+    from kinfw.model import load_robot
+    from kinfw.simulation import (
+        default_target_pose,
+        one_joint_at_a_time,
+        perturb_robot,
+        random_configurations,
+        simulate,
+    )
+
+    nominal = load_robot(args.urdf)
+    rng = np.random.default_rng(args.seed)
+    if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
+        args.stage = "both" if args.pixels else "1"
+    elif args.pixels and args.stage == "1":
+        raise ValueError(
+            "--pixels --stage 1: --pixels makes stage 2 images; give --stage 2 or both "
+            "(the default with --pixels)"
+        )
+    stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
+    frames = (
+        frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
+    )
+    cameras = (
+        frames_arg(args.cameras, nominal.default_cameras, "--cameras", nominal)
+        if 2 in stages
+        else ()
+    )
+    truth_xml = perturb_robot(
+        nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg, axis_deg=args.error_deg
+    )
+    truth = load_robot(truth_xml)
+    names = nominal.topology((*frames, *cameras)).joint_names
+    lower, upper = nominal.joint_limits(names)
+    noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
+    if args.stereo_mm is not None:
+        noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
+    planned = _plan_qs(args.plan, names) if args.plan is not None else None
+    parts = []
+    if frames and planned is not None:
+        parts.append(simulate(truth, planned, names, frames=frames, rng=rng, **noise))
+    elif frames:
+        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
+        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
+    if cameras and args.pixels:
+        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned))
+    elif cameras:
+        qs = (
+            planned
+            if planned is not None
+            else random_configurations(
+                lower, upper, args.stage2_samples, rng, fraction=args.fraction
+            )
+        )
+        w_T_target = default_target_pose(truth, qs, names, cameras)
+        parts.append(
+            simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
+        )
+    data = concatenate_measurements(*parts)
+    write_measurements(args.out, data)
+    write_text_atomic(args.truth_out, truth_xml)
+    pixels = _pixel_summary(data, args) if args.pixels and cameras else None
+    if args.json:
+        print(
+            json.dumps(
+                {
+                    "pixels": pixels,
+                    "data": str(args.out),
+                    "truth": str(args.truth_out),
+                    "n_samples": data.n_samples,
+                    "frames": list(data.observed_frames),
+                    "noise_mm": args.noise_mm,
+                    "noise_deg": args.noise_deg,
+                    "stereo_mm": args.stereo_mm,
+                    "error_mm": args.error_mm,
+                    "error_deg": args.error_deg,
+                    "seed": args.seed,
+                },
+                indent=2,
+            )
+        )
+        return 0
+    poses = bool(frames) or (bool(cameras) and not args.pixels)
+    print(
+        f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
+        + (
+            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
+            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
+            + ")"
+            if poses
+            else ""
+        )
+    )
+    if pixels is not None:
+        print(
+            f"  stage 2 as images of {pixels['board']} (pixel noise {args.pixel_sigma:g} px): "
+            + "; ".join(
+                f"{c['camera']}: {c['images']} images, {c['points']} corners"
+                + (" (default intrinsics: 640x480, fx = fy = 600 px)" if c["default"] else "")
+                for c in pixels["cameras"]
+            )
+        )
+    print(
+        f"wrote {args.truth_out}: the true robot (nominal with errors of "
+        f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
+    )
+    return 0
+
+
+def _plan_qs(path: Path, names: Sequence[str]) -> Any:
+    """The configurations of a plan file in ``names`` order (every joint named)."""
+    from kinfw.identification.planning import read_plan
+
+    plan_names, qs = read_plan(path)
+    missing = [j for j in names if j not in plan_names]
+    if missing:
+        raise ValueError(f'{path}: "joint_names": missing the joints {missing}')
+    return qs[:, [plan_names.index(j) for j in names]]

@@ -1,0 +1,140 @@
+"""Measurement files (``kinfw-measurements``, version 1, JSON): read, validate, write.
+
+A measurement file lists samples; each sample is one robot configuration ``q`` and the
+observations made in it::
+
+    {
+      "format": "kinfw-measurements", "version": 1,
+      "units": {"length": "mm", "angle": "deg"},
+      "joint_names": ["pan", "tilt"],
+      "measured_in": "mocap",
+      "samples": [
+        {"q": [10.0, -5.0],
+         "observations": [
+           {"frame": "left_plate", "kind": "pose",
+            "xyz": [100.0, 200.0, 1400.0], "quat_xyzw": [0, 0, 0.7071067811865476,
+                                                         0.7071067811865476]},
+           {"frame": "left_camera", "kind": "target", "target": "checkerboard",
+            "xyz": [0.0, 50.0, 800.0], "quat_xyzw": [0, 0, 0, 1]},
+           {"frame": "flange", "kind": "point", "xyz": [310.0, 5.0, 920.0],
+            "offset": [0.0, 0.0, 25.0], "measured_in": "tracker"}
+         ]}
+      ]
+    }
+
+Observation kinds
+-----------------
+``"pose"``
+    ``xyz`` and ``quat_xyzw`` (scalar last) of URDF frame ``frame`` in the measurement
+    frame: ``meas_T_frame``. With ``"marker": "name"`` the pose is that of a rigid marker
+    on ``frame`` whose pose in ``frame`` is unknown (one unknown per marker name).
+``"target"``
+    ``xyz`` and ``quat_xyzw`` of a fixed target seen by the camera frame ``frame`` on the
+    robot: ``camera_T_target``. The optional ``"target"`` names the target (default
+    ``"target"``); the target's pose in the world is unknown. ``marker``, ``offset`` and
+    ``measured_in`` are not allowed on target observations.
+``"point"``
+    ``xyz`` only (no ``quat_xyzw``) of a point rigidly attached to ``frame``, in the
+    measurement frame: ``meas_p_point``. ``"offset": [x, y, z]`` gives its position in
+    ``frame`` when it is known; without it the offset is estimated. ``"marker"`` names a
+    marker whose offset is unknown, so ``marker`` and ``offset`` exclude each other.
+
+The measurement frame is the URDF root link unless ``"measured_in"`` names another frame
+(one that is *not* in the URDF, whose pose in the root link is then estimated). A
+top-level ``measured_in`` is the default for every ``pose`` and ``point`` observation
+of the file; an observation may override it (name the root link to measure in the root).
+
+Units
+-----
+``"units"`` is required: ``"length"`` is ``"m"`` or ``"mm"``, ``"angle"`` is ``"rad"`` or
+``"deg"``. The reader converts to SI: ``xyz`` and ``offset`` by the length unit, and
+*every* joint value by the angle unit (the file does not say which joints are
+prismatic; in a ``"rad"`` file prismatic values are therefore read as metres). A file
+with prismatic joints in millimetres, or mixed units, gives the optional top-level
+``"joint_units"``: one of ``"m"``, ``"mm"``, ``"rad"``, ``"deg"`` per entry of
+``joint_names``, which then wins over ``units.angle``. The writer always writes SI,
+``{"length": "m", "angle": "rad"}``, with floats written by ``repr`` (exact round trip).
+
+Rules
+-----
+``joint_names`` (non-empty, distinct) may list only the joints that moved; the others are
+held at zero (:meth:`Measurements.q_of`). Every sample has ``q`` (one finite number per
+joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-3
+of 1 and are renormalised (a file whose norms are off by more than 1e-6, as when written
+with 4 or 5 decimals, gets one warning saying how many and by how much). A marker name
+belongs to one frame. Extra keys are
+allowed and ignored; ``null`` for an optional key is the same as leaving it out. Every
+problem raises :class:`DatasetError` naming the file, the key path
+(``samples[7].observations[1].quat_xyzw``) and what was expected.
+
+Observations are grouped (:class:`PoseObservations`, :class:`TargetObservations`,
+:class:`PointObservations`, or the group of any kind registered in
+:mod:`kinfw.observations`) in first-seen order; each group holds arrays with the batch
+axis first and the sample index of every row. Parsing, writing, subsetting and merging
+go through the registry: each kind's class reads and writes its own observations.
+:func:`check_against_robot` checks a dataset against a URDF, :func:`check_joint_motion`
+that the joints move enough to be identified.
+
+The dataset is :class:`Measurements` (:mod:`kinfw.measurements`), the reader and
+writer are in :mod:`kinfw.measurements` and the checks in
+:mod:`kinfw.measurements`; this module re-exports their public names (the ones
+callers import from here).
+"""
+
+from kinfw.measurements._checks import (
+    DISTINCT_TOL,
+    check_against_robot,
+    check_joint_motion,
+    observed_joints,
+    robot_measurement_frames,
+)
+from kinfw.measurements._dataset import (
+    Measurements,
+    concatenate_measurements,
+    first_uses,
+    merge_same_key,
+)
+from kinfw.measurements._figaroh_csv import (
+    IGNORED_COLUMNS,
+    matrix_from_figaroh_rpy,
+    measurements_from_figaroh_csv,
+)
+from kinfw.measurements._file import (
+    FORMAT,
+    SUPPORTED_VERSIONS,
+    measurements_from_dict,
+    measurements_to_dict,
+    read_measurements,
+    write_measurements,
+)
+from kinfw.measurements._streams import (
+    align_streams,
+    check_stream,
+    interpolate_poses,
+    read_pose_csv,
+)
+
+__all__ = [
+    "DISTINCT_TOL",
+    "FORMAT",
+    "IGNORED_COLUMNS",
+    "SUPPORTED_VERSIONS",
+    "Measurements",
+    "align_streams",
+    "check_against_robot",
+    "check_joint_motion",
+    "check_stream",
+    "concatenate_measurements",
+    "first_uses",
+    "interpolate_poses",
+    "matrix_from_figaroh_rpy",
+    "measurements_from_dict",
+    "measurements_from_figaroh_csv",
+    "measurements_to_dict",
+    "merge_same_key",
+    "observed_joints",
+    "read_measurements",
+    "read_pose_csv",
+    "robot_measurement_frames",
+    "write_measurements",
+]

@@ -1,0 +1,276 @@
+"""Checks of a dataset: against a URDF robot, and that its joints move enough.
+
+:func:`check_against_robot` checks joint names, observed frames and measurement frames
+against the robot (and warns about joint values outside the limits);
+:func:`check_joint_motion` that each joint moves through enough distinct values.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+import warnings
+from collections.abc import Sequence
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from kinfw.measurements._dataset import Measurements, first_uses, merge_same_key
+from kinfw.observations import DatasetError, kind_of
+
+if TYPE_CHECKING:
+    from kinfw.model import Robot
+
+__all__ = [
+    "DISTINCT_TOL",
+    "check_against_robot",
+    "check_joint_motion",
+    "observed_joints",
+    "robot_measurement_frames",
+]
+
+logger = logging.getLogger("kinfw.measurements")
+
+DISTINCT_TOL = 1e-9
+"""Joint values closer than this (rad or m) count as one value in :func:`check_joint_motion`."""
+
+
+def check_against_robot(measurements: Measurements, robot: Robot) -> Measurements:
+    """Check a dataset against a URDF robot and normalise its measurement frames.
+
+    Checks that every entry of ``joint_names`` is a movable joint of the robot, that
+    every observed frame is a link or joint of the URDF whose path from the root has
+    only supported joints (:meth:`Robot.movable_path`), and that no observation is
+    measured in its own frame. A ``measured_in`` is the root link, a frame that is not
+    in the URDF (external: its pose in the root is estimated), or any other frame of the
+    URDF (it moves with the robot, e.g. a head camera: its path is checked like an
+    observed frame's, :func:`robot_measurement_frames`). Joint values outside the
+    URDF limits are warned about (one :class:`UserWarning` per joint), not rejected.
+
+    Parameters
+    ----------
+    measurements : Measurements
+    robot : Robot
+
+    Returns
+    -------
+    Measurements
+        ``measurements`` itself, or a copy in which ``measured_in`` equal to the root
+        link is replaced by None (groups that then coincide are merged).
+
+    Raises
+    ------
+    DatasetError
+        Naming the joint (and listing the robot's movable joints), or the frame and the
+        first sample that uses it.
+
+    Warns
+    -----
+    UserWarning
+        For each joint with values outside its limits: the joint, the number of samples,
+        the first sample index and value, and the limits.
+    """
+    from kinfw.model import RobotModelError
+
+    m = measurements
+    src = m.source
+    movable = tuple(robot.joint_names)
+    joint_types = {j.name: j.type for j in robot.joints}
+    for c, name in enumerate(m.joint_names):
+        if name in movable:
+            continue
+        if name in joint_types:
+            raise DatasetError(
+                f"{src}: joint_names[{c}]: joint {name!r} is a "
+                f"{joint_types[name]} joint in {robot.source}; only movable "
+                f"joints can be listed: {list(movable)}"
+            )
+        raise DatasetError(
+            f"{src}: joint_names[{c}]: joint {name!r} is not in "
+            f"{robot.source}; its movable joints are {list(movable)}"
+        )
+
+    root = robot.root_link
+    first_in: dict[str, int] = {}
+    for g in m.all_groups():
+        kind = kind_of(g)
+        frame_in = kind.measured_in(g)
+        if frame_in is None or not len(g.sample):
+            continue
+        first = int(g.sample.min())
+        first_in[frame_in] = min(first_in.get(frame_in, first), first)
+        if frame_in in kind.frames(g):
+            raise DatasetError(
+                f"{src}: samples[{first}]: a {kind.name} observation of frame {frame_in!r} "
+                f"is measured in {frame_in!r} itself; measured_in must be another frame "
+                f"(the root link, an external frame, or another frame of {robot.source})"
+            )
+    for frame_in, i in first_in.items():
+        close = (
+            []
+            if robot.has_frame(frame_in)
+            else difflib.get_close_matches(frame_in, robot.link_names, n=1, cutoff=0.85)
+        )
+        if close:  # an external frame, or a typo of a robot frame?
+            logger.warning(
+                "%s: samples[%d]: measured_in %r is not a frame of %s: it is taken as an "
+                "external frame whose pose is estimated; did you mean the robot frame %r?",
+                src,
+                i,
+                frame_in,
+                robot.source,
+                close[0],
+            )
+    uses = dict(first_uses(m))
+    for frame_in, i in first_in.items():
+        if frame_in != root and robot.has_frame(frame_in) and frame_in not in uses:
+            uses[frame_in] = (i, "measured_in")
+
+    used: set[str] = set()
+    for frame, (i, kind) in uses.items():
+        if not robot.has_frame(frame):
+            raise DatasetError(
+                f"{src}: samples[{i}]: frame {frame!r} ({kind} observation) is "
+                f"not a link or joint of {robot.source}; its links are "
+                f"{list(robot.link_names)}"
+            )
+        try:
+            used.update(robot.movable_path(frame))
+        except RobotModelError as exc:
+            raise DatasetError(
+                f"{src}: samples[{i}]: frame {frame!r} cannot be calibrated with this URDF: {exc}"
+            ) from None
+    idle = [n for n in m.joint_names if n not in used]
+    if idle:
+        logger.info("%s: joints %s are not on the path to any observed frame; ignored", src, idle)
+    held = [n for n in movable if n in used and n not in m.joint_names]
+    if held:
+        logger.info(
+            "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
+        )
+
+    _warn_limits(m, robot)
+    if root not in first_in:
+        return m
+    return m.with_groups(
+        merge_same_key(
+            replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
+            for g in m.all_groups()
+        )
+    )
+
+
+def robot_measurement_frames(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The ``measured_in`` frames that are frames of ``robot`` other than its root link.
+
+    Observations in such a frame ``c`` (a camera on the robot's head) are predicted as
+    ``inv(root_T_c(q)) @ root_T_frame(q)``: ``c`` is an end frame of the model like the
+    observed frames. In order of first appearance, no duplicates.
+    """
+    root = robot.root_link
+    names = (kind_of(g).measured_in(g) for g in measurements.all_groups())
+    return tuple(
+        dict.fromkeys(n for n in names if n is not None and n != root and robot.has_frame(n))
+    )
+
+
+def observed_joints(measurements: Measurements, robot: Robot) -> tuple[str, ...]:
+    """The movable joints whose geometry the observations see (robot order).
+
+    The joints on the paths from the root to the observed frames and to the robot
+    frames observations are measured in; when every observation is measured in a frame
+    of the robot (relative poses), without the joints above each pair's common ancestor,
+    which move both frames alike and never enter the data.
+    """
+    frames = (*measurements.observed_frames, *robot_measurement_frames(measurements, robot))
+    names = set(robot.topology(tuple(dict.fromkeys(frames))).joint_names)
+    root = robot.root_link
+
+    def path(frame: str) -> set[str]:
+        return {j.name for j in robot.path_joints(frame) if j.type != "fixed"}
+
+    shared: set[str] | None = None
+    for g in measurements.all_groups():
+        kind = kind_of(g)
+        inside = kind.measured_in(g)
+        if inside is None or inside == root or not robot.has_frame(inside):
+            return tuple(n for n in robot.joint_names if n in names)
+        for f in kind.frames(g):
+            common = path(f) & path(inside)
+            shared = common if shared is None else shared & common
+    return tuple(n for n in robot.joint_names if n in names - (shared or set()))
+
+
+def _warn_limits(m: Measurements, robot: Robot) -> None:
+    """One UserWarning per joint outside its limits.
+
+    The pipeline checks the same data in every stage (closed form, refinement, each
+    stage's errors), each from its own line. The warning is therefore attributed to one
+    place, the call in :func:`check_against_robot` (``stacklevel=2``), not to the
+    callers: Python's default filter, which shows a warning once per text and place,
+    then shows it once however many stages check the data.
+    """
+    lower, upper = robot.joint_limits(m.joint_names)
+    outside = (m.qs < lower) | (m.qs > upper)
+    for c in np.flatnonzero(outside.any(axis=0)):
+        name = m.joint_names[c]
+        rows = np.flatnonzero(outside[:, c])
+        i = int(rows[0])
+        unit = "rad" if robot.joint(name).is_revolute else "m"
+        warnings.warn(
+            f"{m.source}: joint {name!r} is outside its URDF limits [{lower[c]:.6g}, "
+            f"{upper[c]:.6g}] {unit} in {len(rows)} of {m.n_samples} samples (first: "
+            f"samples[{i}], value {m.qs[i, c]:.6g} {unit})",
+            UserWarning,
+            stacklevel=2,
+        )
+
+
+def check_joint_motion(
+    measurements: Measurements, joint_names: Sequence[str], *, min_distinct: int = 2
+) -> None:
+    """Check that each joint moves through enough distinct values to be identified.
+
+    Parameters
+    ----------
+    measurements : Measurements
+    joint_names : sequence of str
+        Joints to check (e.g. the movable joints on the paths to the observed frames). A
+        joint not in ``measurements.joint_names`` is held at zero: one value.
+    min_distinct : int, optional
+        Number of distinct values needed per joint (values closer than
+        :data:`DISTINCT_TOL` = 1e-9 rad or m count as one).
+
+    Raises
+    ------
+    DatasetError
+        Naming every joint with too few values, how many distinct values it has and
+        how many are needed.
+    """
+    if isinstance(joint_names, str):
+        raise TypeError("check_joint_motion: joint_names must be a sequence of names, not a string")
+    if min_distinct < 1:
+        raise ValueError(f"check_joint_motion: min_distinct must be >= 1, got {min_distinct}")
+    m = measurements
+    qs = m.q_of(joint_names)
+    problems = []
+    for c, name in enumerate(joint_names):
+        values = np.sort(qs[:, c]) + 0.0  # + 0.0 turns -0.0 into 0.0 for the message
+        distinct = (
+            values[np.concatenate(([True], np.diff(values) >= DISTINCT_TOL))]
+            if len(values)
+            else values
+        )
+        if len(distinct) >= min_distinct:
+            continue
+        shown = ", ".join(f"{v:.6g}" for v in distinct[:5]) + (", ..." if len(distinct) > 5 else "")
+        held = "" if name in m.joint_names else " (not in joint_names, so held at zero)"
+        plural = "" if len(distinct) == 1 else "s"
+        problems.append(
+            f"joint {name!r}{held} moves through {len(distinct)} distinct value{plural}"
+            f"{f' ({shown})' if shown else ''} in {m.n_samples} samples; at least "
+            f"{min_distinct} are needed to identify it"
+        )
+    if problems:
+        raise DatasetError(f"{m.source}: " + "; ".join(problems))

@@ -1,0 +1,383 @@
+"""Reading and writing ``kinfw-measurements`` files (the format: :mod:`kinfw.measurements`).
+
+:func:`read_measurements` / :func:`measurements_from_dict` validate a document and
+convert it to SI; :func:`measurements_to_dict` / :func:`write_measurements` write a
+dataset back in SI. Each observation is read and written by its kind
+(:mod:`kinfw.observations`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.camera import CameraError, CameraIntrinsics, intrinsics_from_dict
+from kinfw.files import write_text_atomic
+from kinfw.measurements._dataset import Measurements
+from kinfw.observations import DatasetError, ObservationReader, describe, kind_named, kind_of, kinds
+
+__all__ = [
+    "FORMAT",
+    "SUPPORTED_VERSIONS",
+    "measurements_from_dict",
+    "measurements_to_dict",
+    "read_measurements",
+    "write_measurements",
+]
+
+logger = logging.getLogger("kinfw.measurements")
+
+FORMAT = "kinfw-measurements"
+SUPPORTED_VERSIONS = (1,)
+
+_LENGTH_UNITS = ("m", "mm")
+_ANGLE_UNITS = ("rad", "deg")
+_JOINT_UNITS = ("m", "mm", "rad", "deg")
+
+
+# -- reading ---------------------------------------------------------------------------
+
+
+def _columns_to_si(qs: NDArray[np.float64], units: Sequence[str]) -> NDArray[np.float64]:
+    out = qs.copy()
+    for c, unit in enumerate(units):
+        if unit == "mm":
+            out[:, c] = qs[:, c] / 1000.0
+        elif unit == "deg":
+            out[:, c] = np.deg2rad(qs[:, c])
+    return out
+
+
+def read_measurements(
+    path: str | Path, *, cameras: Mapping[str, CameraIntrinsics] | None = None
+) -> Measurements:
+    """Read a ``kinfw-measurements`` JSON file (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    cameras : mapping of str to CameraIntrinsics, optional
+        Camera intrinsics by camera frame that override or add to the file's
+        ``"cameras"`` section (the CLI's ``--camera FRAME=FILE``).
+
+    Returns
+    -------
+    Measurements
+        In SI units, with ``source`` set to ``str(path)``.
+
+    Raises
+    ------
+    DatasetError
+        When the file cannot be read, is not valid JSON (the message gives line and
+        column) or breaks a rule of the format (the message gives the key path).
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetError(f"{source}: measurement file not found") from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(
+            f"{source}: not a UTF-8 text file ({exc.reason} at byte {exc.start})"
+        ) from None
+    except OSError as exc:
+        raise DatasetError(f"{source}: cannot read measurement file ({exc.strerror})") from None
+    if not text.strip():
+        raise DatasetError(f"{source}: the file is empty; expected a {FORMAT} JSON document")
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DatasetError(
+            f"{source}: invalid JSON at line {exc.lineno}, column {exc.colno}: {exc.msg}"
+        ) from None
+    return measurements_from_dict(doc, source=source, cameras=cameras)
+
+
+def _read_cameras(
+    p: ObservationReader, doc: dict[str, Any], given: Mapping[str, CameraIntrinsics] | None
+) -> dict[str, CameraIntrinsics]:
+    """The ``"cameras"`` section (frame -> intrinsics), updated by ``given``."""
+    out: dict[str, CameraIntrinsics] = {}
+    if doc.get("cameras") is not None:
+        section = p.obj(doc["cameras"], "cameras")
+        for frame, entry in section.items():
+            try:
+                out[frame] = intrinsics_from_dict(entry, f"{p.source}: cameras.{frame}")
+            except CameraError as exc:
+                raise DatasetError(str(exc)) from None
+    out.update(given or {})
+    return out
+
+
+def measurements_from_dict(
+    doc: dict[str, Any],
+    source: str = "<memory>",
+    *,
+    cameras: Mapping[str, CameraIntrinsics] | None = None,
+) -> Measurements:
+    """Validate a parsed ``kinfw-measurements`` document and convert it to SI.
+
+    Parameters
+    ----------
+    doc : dict
+        The JSON document (as from ``json.load``).
+    source : str, optional
+        Name of the file, for messages.
+    cameras : mapping of str to CameraIntrinsics, optional
+        Intrinsics that override or add to the document's ``"cameras"`` section.
+
+    Returns
+    -------
+    Measurements
+
+    Raises
+    ------
+    DatasetError
+        Naming ``source``, the key path and what was expected.
+    """
+    p = ObservationReader(source)
+    if not isinstance(doc, dict):
+        raise p.error("", f"expected a JSON object at the top level, got {describe(doc)}")
+    fmt = p.get(doc, "format", "", f"{FORMAT!r}")
+    if fmt != FORMAT:
+        raise p.error("format", f"expected {FORMAT!r}, got {describe(fmt)}")
+    version = p.get(doc, "version", "", "1")
+    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
+        supported = ", ".join(map(str, SUPPORTED_VERSIONS))
+        raise p.error(
+            "version",
+            f"unsupported version {describe(version)}; this reader supports version {supported}",
+        )
+    units = p.obj(
+        p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'), "units"
+    )
+    length_unit = p.choice(
+        p.get(units, "length", "units", '"m" or "mm"'), "units.length", _LENGTH_UNITS
+    )
+    angle_unit = p.choice(
+        p.get(units, "angle", "units", '"rad" or "deg"'), "units.angle", _ANGLE_UNITS
+    )
+
+    raw_names = p.list_of(
+        p.get(doc, "joint_names", "", "a list of joint names"), "joint_names", "joint names"
+    )
+    joint_names = tuple(p.string(x, f"joint_names[{c}]") for c, x in enumerate(raw_names))
+    seen: dict[str, int] = {}
+    for c, name in enumerate(joint_names):
+        if name in seen:
+            raise p.error(
+                f"joint_names[{c}]",
+                f"joint {name!r} is already joint_names[{seen[name]}]; names must be distinct",
+            )
+        seen[name] = c
+    k = len(joint_names)
+    joint_units: Sequence[str] = (angle_unit,) * k
+    if doc.get("joint_units") is not None:
+        raw_units = doc["joint_units"]
+        if not isinstance(raw_units, list) or len(raw_units) != k:
+            got = f"{len(raw_units)}" if isinstance(raw_units, list) else describe(raw_units)
+            raise p.error(
+                "joint_units",
+                f"expected a list of {k} units (one per joint_names entry), got {got}",
+            )
+        joint_units = [
+            p.choice(u, f"joint_units[{c}]", _JOINT_UNITS) for c, u in enumerate(raw_units)
+        ]
+    default_measured_in = None
+    if doc.get("measured_in") is not None:
+        default_measured_in = p.string(doc["measured_in"], "measured_in")
+
+    samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
+    reader = ObservationReader(source, length_unit, default_measured_in)
+    reader.cameras = _read_cameras(p, doc, cameras)
+    names = tuple(k.name for k in kinds())
+    expected_kind = (
+        ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
+        if len(names) > 1
+        else repr(names[0])
+    )
+    q_rows: list[list[float]] = []
+    # One entry per observation, flat; arrays are built once per group at the end.
+    obs_group: list[int] = []
+    obs_sample: list[int] = []
+    rows: list[Any] = []
+    group_of_key: dict[tuple[Any, ...], int] = {}
+    marker_home: dict[str, tuple[str, str]] = {}  # marker -> (frame, where first seen)
+
+    for i, raw_sample in enumerate(samples):
+        at = f"samples[{i}]"
+        sample = p.obj(raw_sample, at)
+        q_rows.append(
+            p.numbers(
+                p.get(sample, "q", at, f"a list of {k} joint values"),
+                k,
+                f"{at}.q",
+                "one per joint_names entry",
+            )
+        )
+        observations = p.list_of(
+            p.get(sample, "observations", at, "a non-empty list of observations"),
+            f"{at}.observations",
+            "observations",
+        )
+        for j, raw_obs in enumerate(observations):
+            at_obs = f"{at}.observations[{j}]"
+            obs = p.obj(raw_obs, at_obs)
+            frame = p.string(
+                p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame"
+            )
+            kind = kind_named(
+                p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names)
+            )
+            key, row = kind.parse(reader, obs, at_obs, frame)
+            marker = kind.marker(key)
+            if marker is not None:
+                home = marker_home.setdefault(marker[0], (marker[1], at_obs))
+                if home[0] != marker[1]:
+                    raise p.error(
+                        f"{at_obs}.marker",
+                        f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
+                        f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
+                        "attached to one frame",
+                    )
+            obs_group.append(group_of_key.setdefault((kind.name, key), len(group_of_key)))
+            obs_sample.append(i)
+            rows.append(row)
+
+    qs = _columns_to_si(np.array(q_rows, dtype=float).reshape(len(q_rows), k), joint_units)
+    if reader.rounded:
+        warnings.warn(
+            f"{source}: {len(reader.rounded)} of {reader.quaternions} quaternions had norms "
+            f"off by up to {max(reader.rounded):.2g} (rounded?); renormalised",
+            UserWarning,
+            stacklevel=2,
+        )
+    group_ids = np.array(obs_group)
+    rows_of_group = np.split(
+        np.argsort(group_ids, kind="stable"), np.cumsum(np.bincount(group_ids))[:-1]
+    )
+    sample_ids = np.array(obs_sample, dtype=np.int64)
+    groups = []
+    for (kind_name, key), members in zip(group_of_key, rows_of_group, strict=True):
+        parsed = [rows[r] for r in members]
+        groups.append(kind_named(kind_name).group_from_parsed(key, sample_ids[members], parsed))
+    out = Measurements(joint_names, qs, source=source, cameras=reader.cameras).with_groups(groups)
+    logger.debug(
+        "%s: %d samples, %d observations in %d groups",
+        source,
+        out.n_samples,
+        len(obs_group),
+        len(group_of_key),
+    )
+    return out
+
+
+# -- writing ---------------------------------------------------------------------------
+
+
+def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
+    """A ``kinfw-measurements`` version 1 document of a dataset, in SI units.
+
+    Observations of a sample are listed group by group (poses, targets, points). When
+    every pose and point group has the same non-root ``measured_in`` it is written once
+    at the top level.
+
+    Parameters
+    ----------
+    measurements : Measurements
+
+    Returns
+    -------
+    dict
+        JSON-ready (plain lists, floats and strings).
+
+    Raises
+    ------
+    DatasetError
+        If the dataset has no samples or a sample has no observations (the file
+        could not be read back).
+    """
+    m = measurements
+    if m.n_samples == 0:
+        raise DatasetError(f"{m.source}: cannot write a dataset with no samples")
+    per_sample: list[list[dict[str, Any]]] = [[] for _ in range(m.n_samples)]
+    frames_in = {kind_of(g).measured_in(g) for g in m.all_groups() if kind_of(g).has_measured_in}
+    top_measured_in = next(iter(frames_in)) if len(frames_in) == 1 else None
+    cameras = dict(m.cameras)
+    for g in m.all_groups():
+        for s, obs in kind_of(g).sample_dicts(g, top_measured_in):
+            per_sample[s].append(obs)
+        cameras.update(kind_of(g).cameras(g))
+
+    empty = [i for i, obs in enumerate(per_sample) if not obs]
+    if empty:
+        raise DatasetError(
+            f"{m.source}: samples[{empty[0]}]: has no observations; every "
+            "sample of a file needs at least one (use subset() to drop it)"
+        )
+    doc: dict[str, Any] = {
+        "format": FORMAT,
+        "version": SUPPORTED_VERSIONS[-1],
+        "units": {"length": "m", "angle": "rad"},
+        "joint_names": list(m.joint_names),
+    }
+    if top_measured_in is not None:
+        doc["measured_in"] = top_measured_in
+    if cameras:
+        doc["cameras"] = {frame: c.to_dict() for frame, c in cameras.items()}
+    doc["samples"] = [
+        {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
+    ]
+    return doc
+
+
+def _dumps(doc: dict[str, Any]) -> str:
+    """JSON text with one sample's ``q`` and one observation per line."""
+
+    def dump(value: Any) -> str:
+        return json.dumps(value, allow_nan=False, ensure_ascii=False)
+
+    lines = [f"  {dump(key)}: {dump(value)}" for key, value in doc.items() if key != "samples"]
+    samples = []
+    for sample in doc["samples"]:
+        extra = "".join(
+            f", {dump(key)}: {dump(value)}"
+            for key, value in sample.items()
+            if key not in ("q", "observations")
+        )
+        observations = ",\n".join(f"      {dump(obs)}" for obs in sample["observations"])
+        samples.append(
+            f'    {{"q": {dump(sample["q"])}{extra}, "observations": [\n{observations}\n    ]}}'
+        )
+    lines.append('  "samples": [\n' + ",\n".join(samples) + "\n  ]")
+    return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
+def write_measurements(path: str | Path, measurements: Measurements) -> None:
+    """Write a dataset as a ``kinfw-measurements`` version 1 file in SI units.
+
+    Floats are written with ``repr``, so :func:`read_measurements` gives back ``qs``,
+    positions and offsets exactly and transforms to rounding (~1e-16). The file is
+    written to a temporary file beside it and then renamed
+    (:func:`kinfw.files.write_text_atomic`), so a failed write leaves no half file and
+    the previous file, if any, intact.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    measurements : Measurements
+        The dataset (see :func:`measurements_to_dict` for what cannot be written).
+    """
+    path = Path(path)
+    write_text_atomic(path, _dumps(measurements_to_dict(measurements)))
+    logger.debug("wrote %d samples to %s", measurements.n_samples, path)

@@ -1,0 +1,72 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.model._blocks import (
+    Block,
+    BlockKey,
+    CPCBlock,
+    ParameterName,
+    PointBlock,
+    RigidFrameBlock,
+    ZeroOffsetBlock,
+)
+from kinfw.model._cpc import (
+    CPCModel,
+    ZeroGeometry,
+    cayley_coordinates,
+    cpc_from_geometry,
+    cpc_from_robot,
+    geometry_from_cpc,
+    geometry_from_robot,
+    perpendicular_basis,
+    rotation_from_axis,
+)
+from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
+from kinfw.model._robot import Robot, Topology, UnknownFrameError, builtin_head_urdf, load_robot
+from kinfw.model._urdf_read import (
+    MOVABLE_TYPES,
+    JointInfo,
+    RobotModelError,
+    captured_native_stderr,
+    check_urdf_xml,
+    parse_joints,
+    pinocchio_model,
+    up_vector,
+    xml_text,
+)
+
+__all__ = [
+    "MOVABLE_TYPES",
+    "Block",
+    "BlockKey",
+    "CPCBlock",
+    "CPCModel",
+    "JointInfo",
+    "ParameterName",
+    "PointBlock",
+    "RigidFrameBlock",
+    "Robot",
+    "RobotModelError",
+    "Topology",
+    "UnknownFrameError",
+    "ZeroGeometry",
+    "ZeroOffsetBlock",
+    "builtin_head_urdf",
+    "captured_native_stderr",
+    "cayley_coordinates",
+    "check_urdf_xml",
+    "cpc_fk_function",
+    "cpc_from_geometry",
+    "cpc_from_robot",
+    "cpc_reference_vector",
+    "geometry_from_cpc",
+    "geometry_from_robot",
+    "load_robot",
+    "parse_joints",
+    "perpendicular_basis",
+    "pinocchio_model",
+    "rotation_from_axis",
+    "up_vector",
+    "xml_text",
+]

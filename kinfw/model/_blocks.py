@@ -1,0 +1,323 @@
+"""Parameter blocks: the kinds of unknown an estimation problem is made of.
+
+A block is a frozen dataclass that knows its key, the name and SI unit of each entry,
+its start value, which entries are free, and its value at chart coordinates ``d`` (its
+slice of the problem's vector ``x``, zero at the start) in numpy and in CasADi:
+
+- :class:`CPCBlock`: the identifiable CPC parameters of the whole tree (axis tilts
+  ``b_tilt_1/2`` rad, offsets ``l_x/l_y`` m, tool ``rot_x..z`` rad and ``x..z`` m);
+- :class:`ZeroOffsetBlock`: one zero offset per joint (rad revolute, m prismatic);
+- :class:`RigidFrameBlock`: a rigid frame in the chart of :mod:`kinfw.geometry` (6 entries
+  ``rot_x..z`` rad, ``x..z`` m) - the base, a target, a marker, an external frame;
+- :class:`PointBlock`: a point (3 entries ``x, y, z`` m) - an unknown point offset.
+
+Parameters are named by typed keys (:class:`ParameterName`, :class:`BlockKey`); nothing
+parses a name back from a string.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.geometry import rigid_from_chart, rigid_from_chart_casadi
+
+if TYPE_CHECKING:
+    from kinfw.model._cpc import CPCModel
+
+__all__ = [
+    "Block",
+    "BlockKey",
+    "CPCBlock",
+    "ParameterName",
+    "PointBlock",
+    "RigidFrameBlock",
+    "ZeroOffsetBlock",
+]
+
+_RIGID_FIELDS = ("rot_x", "rot_y", "rot_z", "x", "y", "z")
+_RIGID_UNITS = ("rad", "rad", "rad", "m", "m", "m")
+
+
+class ParameterName(NamedTuple):
+    """One estimated number: its owner (a joint, an end frame, or a block such as
+    ``"target:board"``) and field (``"b_tilt_1"``, ``"rot_x"``, ``"zero_offset"``...).
+    Equal to the plain tuple ``(owner, field)``."""
+
+    owner: str
+    field: str
+
+
+@dataclass(frozen=True, slots=True)
+class BlockKey:
+    """Identity of a block: its kind (``"cpc"``, ``"base"``, ``"zero_offset"``,
+    ``"target"``, ``"frame"``, ``"marker"``, ``"offset"``, or a new kind's own) and name."""
+
+    kind: str
+    name: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.kind}:{self.name}" if self.name else self.kind
+
+
+def _free_mask(free: ArrayLike | None, size: int) -> NDArray[np.bool_]:
+    mask = np.ones(size, bool) if free is None else np.array(free, dtype=bool)
+    if mask.shape != (size,):
+        raise ValueError(f"free: expected shape ({size},), got {mask.shape}")
+    mask.flags.writeable = False
+    return mask
+
+
+@dataclass(frozen=True, slots=True)
+class Block:
+    """Base of all blocks (see the module docstring).
+
+    Attributes
+    ----------
+    key : BlockKey
+    free : ndarray of bool, shape (size,)
+        Entries estimated; the others stay at the start (gauge or user choice).
+    """
+
+    key: BlockKey
+    free: NDArray[np.bool_] = field(default=None)  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "free", _free_mask(self.free, self.size))
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        raise NotImplementedError
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        """SI unit of each entry (``"rad"`` or ``"m"``)."""
+        raise NotImplementedError
+
+    @property
+    def size(self) -> int:
+        return len(self.fields)
+
+    @property
+    def owner(self) -> str:
+        """Display owner of the entries (the key as ``kind:name``)."""
+        return str(self.key)
+
+    @property
+    def names(self) -> tuple[ParameterName, ...]:
+        return tuple(ParameterName(self.owner, f) for f in self.fields)
+
+    def with_free(self, free: ArrayLike) -> Block:
+        """The same block with another free mask."""
+        from dataclasses import replace
+
+        return replace(self, free=np.asarray(free, dtype=bool))
+
+    def constants(self) -> NDArray[np.float64]:
+        """The numbers of the block's start that its CasADi value takes as an input (so
+        that one graph serves every start); empty by default."""
+        return np.zeros(0)
+
+    def numpy_value(self, d: NDArray[np.float64]) -> Any:
+        """The block's value at chart coordinates ``d`` (size,)."""
+        raise NotImplementedError
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        """The same as a CasADi expression of ``d`` (SX or MX, size entries), with the
+        start from ``c`` (symbols of :meth:`constants`) or, when None, embedded."""
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        return f"{self.key.kind} {self.key.name!r}"
+
+    def undetermined(
+        self, d: NDArray[np.float64], covariance: NDArray[np.float64]
+    ) -> tuple[tuple[tuple[ParameterName, ...], str], ...]:
+        """Entries the fit left poorly determined though the Jacobian has full rank
+        (``d`` the estimate's chart coordinates, ``covariance`` the block's (size, size)
+        covariance): ``((names, why), ...)``, added to the identifiability report.
+        None by default (the rank test of the diagnostics decides)."""
+        return ()
+
+
+@dataclass(frozen=True, slots=True)
+class RigidFrameBlock(Block):
+    """A rigid frame ``start [cayley(d[:3] / 2) | d[3:]]`` (:mod:`kinfw.geometry`).
+
+    Attributes
+    ----------
+    start : ndarray, shape (4, 4)
+        Start pose (metres).
+    """
+
+    start: NDArray[np.float64] = field(default_factory=lambda: np.eye(4))
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return _RIGID_FIELDS
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        return _RIGID_UNITS
+
+    @staticmethod
+    def from_estimates(key: BlockKey, estimates: NDArray[np.float64]) -> RigidFrameBlock:
+        """The chordal mean of per-sample pose estimates (k, 4, 4) as the start."""
+        from kinfw.geometry import average_transform
+
+        return RigidFrameBlock(key, start=average_transform(estimates))
+
+    def constants(self) -> NDArray[np.float64]:
+        """The start's rotation (9, column-major) and position (3)."""
+        return np.concatenate([self.start[:3, :3].T.reshape(9), self.start[:3, 3]])
+
+    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return rigid_from_chart(self.start, d)
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        if c is None:
+            return rigid_from_chart_casadi(self.start, d)
+        import casadi as ca
+
+        return rigid_from_chart_casadi((ca.reshape(c[0:9], 3, 3), c[9:12]), d)
+
+    def coordinates(self, T: ArrayLike) -> NDArray[np.float64]:
+        """Chart coordinates (6,) of a pose ``T`` (4, 4): the inverse of the value."""
+        from kinfw.geometry import chart_from_rigid
+
+        return chart_from_rigid(self.start, T)
+
+
+@dataclass(frozen=True, slots=True)
+class PointBlock(Block):
+    """A point ``start + d`` (metres).
+
+    Attributes
+    ----------
+    start : ndarray, shape (3,)
+    """
+
+    start: NDArray[np.float64] = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return ("x", "y", "z")
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        return ("m", "m", "m")
+
+    @staticmethod
+    def from_estimates(key: BlockKey, estimates: NDArray[np.float64]) -> PointBlock:
+        """The mean of per-sample point estimates (k, 3) as the start."""
+        return PointBlock(key, start=np.asarray(estimates, dtype=float).mean(axis=0))
+
+    def constants(self) -> NDArray[np.float64]:
+        return np.asarray(self.start, dtype=float)
+
+    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.start + d
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        import casadi as ca
+
+        start = ca.DM(self.start) if c is None else c[0:3]
+        return start + ca.vertcat(d[0], d[1], d[2])
+
+    def coordinates(self, p: ArrayLike) -> NDArray[np.float64]:
+        return np.asarray(p, dtype=float) - self.start
+
+
+@dataclass(frozen=True, slots=True)
+class CPCBlock(Block):
+    """The identifiable CPC parameters of a tree (:meth:`kinfw.model.CPCModel.perturbed`).
+
+    Attributes
+    ----------
+    model : CPCModel
+        The chart's origin. Its value at ``d`` is ``model.perturbed(d)``; in CasADi the
+        FK of :func:`kinfw.model.cpc_fk_function` takes ``d`` directly.
+    """
+
+    model: CPCModel = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self.model is None:
+            raise ValueError("CPCBlock: model is required")
+        Block.__post_init__(self)
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return tuple(f for _, f in self.model.parameter_names)
+
+    @property
+    def names(self) -> tuple[ParameterName, ...]:
+        return tuple(ParameterName(o, f) for o, f in self.model.parameter_names)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        return tuple("rad" if f.startswith(("b_tilt", "rot")) else "m" for f in self.fields)
+
+    @property
+    def size(self) -> int:
+        return self.model.n_parameters
+
+    def constants(self) -> NDArray[np.float64]:
+        """The reference model's numbers (:func:`kinfw.model.cpc_reference_vector`)."""
+        from kinfw.model._cpc_casadi import cpc_reference_vector
+
+        return cpc_reference_vector(self.model)
+
+    def numpy_value(self, d: NDArray[np.float64]) -> CPCModel:
+        return self.model.perturbed(d)
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        """The chart coordinates themselves: the forward kinematics
+        (:func:`kinfw.model.cpc_fk_function`) takes them with the constants."""
+        return d
+
+    def describe(self) -> str:
+        return "CPC parameters"
+
+
+@dataclass(frozen=True, slots=True)
+class ZeroOffsetBlock(Block):
+    """One zero offset per joint: the model is evaluated at ``q + d``.
+
+    Attributes
+    ----------
+    joint_names : tuple of str
+    revolute : tuple of bool
+        Per joint: offsets in rad (revolute) or m (prismatic).
+    """
+
+    joint_names: tuple[str, ...] = ()
+    revolute: tuple[bool, ...] = ()
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return ("zero_offset",) * len(self.joint_names)
+
+    @property
+    def names(self) -> tuple[ParameterName, ...]:
+        return tuple(ParameterName(j, "zero_offset") for j in self.joint_names)
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        return tuple("rad" if r else "m" for r in self.revolute)
+
+    @property
+    def size(self) -> int:
+        return len(self.joint_names)
+
+    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(d, dtype=float)
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        return d
+
+    def describe(self) -> str:
+        return "joint zero offsets"

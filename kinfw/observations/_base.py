@@ -1,0 +1,411 @@
+"""What every observation kind provides, and the helpers the kinds share.
+
+An observation kind is one class (:class:`ObservationKind`) that knows everything about
+one ``"kind"`` of a ``kinfw-measurements`` file:
+
+- its group dataclass (frozen, batch-first arrays, a ``sample`` index per row);
+- the file edge: one observation dict -> (group key, row of SI numbers), rows -> group,
+  group -> dicts (:meth:`ObservationKind.parse`, :meth:`~ObservationKind.group_from_rows`,
+  :meth:`~ObservationKind.to_dicts`);
+- the URDF frames it observes and which of them it pins directly (gauge);
+- the unknown parameter blocks it needs (a target's pose, a marker, a point offset) with
+  their closed-form start estimates (:meth:`~ObservationKind.unknowns`, the one place for
+  start values);
+- its residual ``measured - predicted`` as a CasADi expression
+  (:meth:`~ObservationKind.residual`), in rows grouped by noise component
+  (:attr:`~ObservationKind.components`: e.g. position 3 rows in m, rotation 3 rows in rad);
+- the same prediction in numpy, its simulation (prediction plus its noise model) and what
+  the view draws of it (:meth:`~ObservationKind.predict`, :meth:`~ObservationKind.simulate`,
+  :meth:`~ObservationKind.drawing`; :mod:`kinfw.observations`).
+
+The estimation problem (:mod:`kinfw.identification.problem`), the measurement files
+(:mod:`kinfw.measurements`), verification, the simulation and the view loop over the registry
+(:mod:`kinfw.observations`) and never branch on a kind. Reading one observation's dict
+is :mod:`kinfw.observations` (:class:`ObservationReader`, :class:`DatasetError`,
+exported here too); the views of the model a kind's methods receive are
+:mod:`kinfw.observations` (:class:`StartContext`, :class:`SymbolicContext`,
+:func:`inverse_casadi`, exported here too).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.model import Block, BlockKey
+from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._numeric import Drawing, NumericContext, gaussian_rows
+from kinfw.observations._reader import DatasetError, ObservationReader, describe
+
+__all__ = [
+    "DatasetError",
+    "NoiseComponent",
+    "ObservationKind",
+    "ObservationReader",
+    "StartContext",
+    "SymbolicContext",
+    "UnknownRequest",
+    "data_array",
+    "describe",
+    "frozen_array",
+    "inverse_casadi",
+    "sample_array",
+]
+
+
+# -- array helpers for group dataclasses -------------------------------------------------
+
+
+def frozen_array(values: ArrayLike, dtype: type) -> NDArray[Any]:
+    """A read-only copy of ``values``: dataset arrays are shared, never mutated."""
+    arr = np.array(values, dtype=dtype, copy=True)
+    arr.flags.writeable = False
+    return arr
+
+
+def sample_array(values: ArrayLike, name: str) -> NDArray[np.int64]:
+    """Sample indices (m,) as read-only int64, checked (integers, >= 0)."""
+    arr = np.asarray(values)
+    if arr.ndim != 1:
+        raise ValueError(f"{name}: expected shape (m,), got {arr.shape}")
+    if arr.size and not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"{name}: expected integer sample indices, got dtype {arr.dtype}")
+    if arr.size and arr.min() < 0:
+        raise ValueError(f"{name}: sample indices must be >= 0, got {int(arr.min())}")
+    return frozen_array(arr, np.int64)
+
+
+def data_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
+    """Finite float data of an exact shape, read-only."""
+    arr = np.asarray(values, dtype=float)
+    if arr.shape != shape:
+        expected = "(" + ", ".join(map(str, shape)) + ("," if len(shape) == 1 else "") + ")"
+        raise ValueError(f"{name}: expected shape {expected}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise ValueError(f"{name}: all values must be finite")
+    return frozen_array(arr, np.float64)
+
+
+# -- noise components, start values, pose rows ---------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class NoiseComponent:
+    """A set of residual rows that share one noise standard deviation.
+
+    Attributes
+    ----------
+    name : str
+        ``"position"``, ``"rotation"``, or a kind's own (e.g. ``"distance"``); the key of
+        :class:`kinfw.identification._refine.NoiseModel`.
+    rows : int
+        Rows per observation.
+    unit : {"m", "rad"}
+        SI unit of the rows; also the fallback sigma of a noise model that does not name
+        this component (its ``position`` for ``m``, ``rotation`` for ``rad``).
+    sine : bool
+        The rows are ``sin(angle) u`` (an orientation error): the error angle is
+        ``arcsin`` of their norm.
+    distribution : {"gaussian", "angle"}
+        The noise model of the rows, for the robust constants and thresholds:
+        ``"gaussian"``, independent N(0, sigma) rows (whitened squared norm
+        ``chi2(rows)``); ``"angle"``, a rotation by an angle N(0, sqrt(3) sigma) about a
+        uniformly random axis (3 rows; whitened squared norm ``3 chi2(1)``; Shih et al.
+        1992, Fig. 10, as :func:`kinfw.simulation.perturb_poses` draws it).
+    """
+
+    name: str
+    rows: int
+    unit: str
+    sine: bool = False
+    distribution: str = "gaussian"
+
+    def magnitude(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Per observation, the error size in SI (m, or rad as an angle): rows (m, rows)."""
+        norm = np.linalg.norm(rows, axis=1)
+        return np.arcsin(np.clip(norm, 0.0, 1.0)) if self.sine else norm
+
+
+POSITION = NoiseComponent("position", 3, "m")
+ROTATION = NoiseComponent("rotation", 3, "rad", sine=True, distribution="angle")
+
+
+@dataclass(frozen=True, slots=True)
+class UnknownRequest:
+    """An unknown block a group needs, with per-sample closed-form estimates of it.
+
+    Requests with the same key from several groups are merged: their ``estimates`` are
+    concatenated and ``block`` builds the block from them (a chordal mean of poses, the
+    mean of points).
+
+    Attributes
+    ----------
+    key : BlockKey
+    estimates : ndarray, shape (k, ...)
+        Per-sample estimates of the block's value (start values).
+    block : callable
+        ``block(key, estimates) -> Block``.
+    description : str
+        Human-readable, e.g. ``"pose of target 'board' (seen by 'camera')"``.
+    """
+
+    key: BlockKey
+    estimates: NDArray[np.float64]
+    block: Callable[[BlockKey, NDArray[np.float64]], Block]
+    description: str
+
+
+def pose_residual(ca: Any, T_pred: Any, m: Any) -> Any:
+    """``(p_meas - p_pred, 0.5 vee(R_pred^T R_meas - R_meas^T R_pred))``: 6 rows (m, rad).
+
+    ``m`` is the measured pose as 12 numbers (rotation column-major, then position). The
+    orientation rows are ``sin(angle) u`` in the predicted frame: smooth at zero error.
+    """
+    Rm = ca.reshape(m[0:9], 3, 3)
+    Rp = T_pred[0:3, 0:3]
+    E = Rp.T @ Rm - Rm.T @ Rp
+    return ca.vertcat(m[9:12] - T_pred[0:3, 3], 0.5 * ca.vertcat(E[2, 1], E[0, 2], E[1, 0]))
+
+
+def pose_rows(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(m, 4, 4) poses as (m, 12) rows: rotation column-major, then position."""
+    return np.concatenate([np.swapaxes(T[:, :3, :3], 1, 2).reshape(len(T), 9), T[:, :3, 3]], axis=1)
+
+
+# -- the kind ------------------------------------------------------------------------------
+
+
+class ObservationKind:
+    """One kind of observation: its data, file edge, unknowns and residual.
+
+    Subclasses set the class attributes and implement :meth:`parse`,
+    :meth:`group_from_rows`, :meth:`to_dicts`, :meth:`frames`, :meth:`data` and
+    :meth:`residual`; the rest has defaults. Register an instance with
+    :func:`kinfw.observations.register_kind`.
+
+    Attributes
+    ----------
+    name : str
+        The file's ``"kind"``.
+    group_type : type
+        The frozen group dataclass; it has ``sample`` (m,) and the arrays of
+        :attr:`row_fields`, batch first.
+    row_fields : tuple of str
+        Group fields with one row per observation (taken by ``subset``, merged).
+    components : tuple of NoiseComponent
+        Residual rows per observation, in order.
+    measurements_field : str or None
+        For the built-in kinds, the :class:`~kinfw.measurements.Measurements` field that
+        holds their groups (``"poses"``); None for the others (held in ``others``).
+    has_measured_in : bool
+        Whether groups carry a ``measured_in`` frame (None: the URDF root).
+    """
+
+    name: ClassVar[str]
+    group_type: ClassVar[type]
+    row_fields: ClassVar[tuple[str, ...]]
+    components: ClassVar[tuple[NoiseComponent, ...]]
+    measurements_field: ClassVar[str | None] = None
+    has_measured_in: ClassVar[bool] = False
+
+    @property
+    def rows(self) -> int:
+        """Residual rows per observation."""
+        return sum(c.rows for c in self.components)
+
+    # -- file edge
+    def parse(
+        self, reader: ObservationReader, obs: dict[str, Any], at: str, frame: str
+    ) -> tuple[tuple[tuple[str, Any], ...], list[float]]:
+        """One observation dict -> (group key, row of numbers in SI).
+
+        The key is ``((field, value), ...)``: the group's constructor arguments besides
+        ``sample`` and the row fields (hashable; observations with equal keys form one
+        group). ``frame`` is the already-checked ``"frame"``.
+        """
+        raise NotImplementedError
+
+    def group_from_rows(
+        self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], rows: NDArray[np.float64]
+    ) -> Any:
+        """The group of observations with one key: rows (m, width) from :meth:`parse`."""
+        raise NotImplementedError
+
+    def group_from_parsed(
+        self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], parsed: list[Any]
+    ) -> Any:
+        """The group of the file observations with one key: ``parsed`` what :meth:`parse`
+        returned for each (``sample`` (k,) their samples). Default: the rows stacked into
+        (k, width) for :meth:`group_from_rows`; a kind whose file observation is several
+        rows (an image of many points: ``pixels``) returns its own row objects from
+        :meth:`parse` and builds the group here."""
+        return self.group_from_rows(key, sample, np.array(parsed, dtype=float))
+
+    def to_dicts(self, group: Any, top_measured_in: str | None) -> list[dict[str, Any]]:
+        """One JSON-ready dict per row (SI), in row order; ``top_measured_in`` is the
+        file's top-level ``measured_in`` (leave it out of the dicts that have it)."""
+        raise NotImplementedError
+
+    def sample_dicts(self, group: Any, top_measured_in: str | None) -> list[tuple[int, Any]]:
+        """``(sample, dict)`` per file observation: what the writer lists under each
+        sample. Default: :meth:`to_dicts` with each row's sample (one row, one dict)."""
+        return list(zip(group.sample.tolist(), self.to_dicts(group, top_measured_in), strict=True))
+
+    def cameras(self, group: Any) -> dict[str, Any]:
+        """Camera intrinsics the group uses, by camera frame (written to the file's
+        ``"cameras"`` section); none by default."""
+        return {}
+
+    def with_cameras(self, group: Any, cameras: Mapping[str, Any]) -> Any:
+        """The group with the intrinsics of ``cameras`` (by frame) where it uses them."""
+        return group
+
+    def marker(self, key: tuple[tuple[str, Any], ...]) -> tuple[str, str] | None:
+        """``(marker, frame)`` of a group key, for the one-frame-per-marker rule."""
+        k = dict(key)
+        return (k["marker"], k["frame"]) if k.get("marker") is not None else None
+
+    def key(self, group: Any) -> tuple[Any, ...]:
+        """Groups with equal keys observe the same thing (merged on concatenation)."""
+        out = [self.name]
+        for f in dataclasses.fields(group):
+            if f.name == "sample" or f.name in self.row_fields:
+                continue
+            value = getattr(group, f.name)
+            out.append(tuple(value.tolist()) if isinstance(value, np.ndarray) else value)
+        return tuple(out)
+
+    def take(self, group: Any, rows: NDArray[np.intp], sample: NDArray[np.int64]) -> Any:
+        """The group restricted to some rows, with new sample indices."""
+        return dataclasses.replace(
+            group, sample=sample, **{f: getattr(group, f)[rows] for f in self.row_fields}
+        )
+
+    def concatenate(self, parts: Sequence[Any]) -> Any:
+        """Groups of one key merged, rows sorted by sample."""
+        sample = np.concatenate([g.sample for g in parts])
+        order = np.argsort(sample, kind="stable")
+        return dataclasses.replace(
+            parts[0],
+            sample=sample[order],
+            **{f: np.concatenate([getattr(g, f) for g in parts])[order] for f in self.row_fields},
+        )
+
+    # -- structure
+    def frames(self, group: Any) -> tuple[str, ...]:
+        """URDF frames whose poses the observations depend on."""
+        raise NotImplementedError
+
+    def direct_frames(self, group: Any) -> tuple[str, ...]:
+        """Frames whose own pose the observations pin (no unknown offset in between);
+        an end frame observed only indirectly keeps its nominal tool transform."""
+        return ()
+
+    def measured_in(self, group: Any) -> str | None:
+        """The measurement frame of a group (None: the URDF root)."""
+        return getattr(group, "measured_in", None) if self.has_measured_in else None
+
+    def root_pose_estimates(self, group: Any, start: StartContext) -> NDArray[np.float64] | None:
+        """Per-sample estimates (k, 4, 4) of ``meas_T_w`` (model frame in the group's
+        measurement frame), when the group pins it alone; else None."""
+        return None
+
+    def marker_tracks(self, group: Any, start: StartContext) -> tuple[Any, ...] | None:
+        """A track that places an external frame seen only through markers or points of
+        unknown offset (:func:`kinfw.identification.problem.frame_from_markers`): the
+        frame's start poses ``w_T_frame`` (k, 4, 4), the measured positions (k, 3), the
+        known offset (3,) or None, the measured rotations (k, 3, 3) or None, and the
+        unknown's block key; None when the group has no such track."""
+        return None
+
+    def root_point_pairs(
+        self, group: Any, start: StartContext
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """Point pairs ``(w_p, meas_p)`` (k, 3) each that register the model frame in the
+        group's measurement frame; None when the group gives none."""
+        return None
+
+    # -- estimation
+    def unknowns(self, group: Any, start: StartContext) -> tuple[UnknownRequest, ...]:
+        """The unknown blocks the group needs, with closed-form start estimates."""
+        return ()
+
+    def row_weights(self, group: Any) -> NDArray[np.float64]:
+        """The relative weight (m,) that :meth:`residual` multiplies each observation's
+        rows by (default 1); errors reported in the measurement's units divide it out."""
+        return np.ones(len(group.sample))
+
+    def data(self, group: Any) -> NDArray[np.float64]:
+        """The measured values the residual compares against, (m, width) per row."""
+        raise NotImplementedError
+
+    def residual(self, group: Any, model: SymbolicContext, m: Any) -> Any:
+        """``measured - predicted`` for one observation as an SX column of
+        :attr:`rows` entries (unwhitened, SI), ``m`` the SX of one :meth:`data` row.
+
+        The graph is cached by the problem's structure, which includes :meth:`key` of
+        each group: a residual may embed numbers of the group's key (a known offset),
+        never of its rows (those enter through ``m``) nor start values (through
+        ``model``)."""
+        raise NotImplementedError
+
+    # -- numpy prediction, simulation and drawing (kinfw.observations) -----------
+    def predict(self, group: Any, model: NumericContext) -> NDArray[np.float64]:
+        """What the observations would measure, (m, width) in the layout of :meth:`data`.
+
+        The numpy twin of :meth:`residual`'s prediction, batched over ``group.sample``:
+        the residual of a predicted row is zero.
+        """
+        raise NotImplementedError(f"kind {self.name!r} has no numpy prediction")
+
+    def with_data(self, group: Any, rows: NDArray[np.float64]) -> Any:
+        """The group with other measured values, rows (m, width) in the layout of
+        :meth:`data`. Default: the one row field, reshaped."""
+        if len(self.row_fields) != 1:
+            raise NotImplementedError(f"kind {self.name!r}: with_data needs one row field")
+        field = self.row_fields[0]
+        rows = np.reshape(rows, np.shape(getattr(group, field)))
+        return dataclasses.replace(group, **{field: rows})
+
+    def simulate(
+        self,
+        group: Any,
+        model: NumericContext,
+        rng: np.random.Generator,
+        sigmas: Mapping[str, float],
+    ) -> Any:
+        """Simulated observations: the group's rows replaced by :meth:`predict` plus the
+        noise model, ``sigmas`` (SI) by noise component name.
+
+        Default: independent N(0, sigma) rows per component, for a kind whose data rows
+        are its residual rows (``measured - predicted``: a point, a distance); a kind
+        with another noise model (a pose's rotation) overrides it.
+        """
+        predicted = self.predict(group, model)
+        if predicted.shape[1] != self.rows or any(
+            c.distribution != "gaussian" for c in self.components
+        ):
+            raise NotImplementedError(
+                f"kind {self.name!r}: its noise is not Gaussian rows; it must define simulate"
+            )
+        return self.with_data(
+            group,
+            gaussian_rows(
+                predicted, rng, [(float(sigmas[c.name]), c.rows) for c in self.components]
+            ),
+        )
+
+    def drawing(self, group: Any, model: NumericContext) -> Drawing:
+        """What the view draws of the observations (measured and predicted positions, in
+        the model frame); raises :class:`~kinfw.observations.MissingValue` when
+        the measured positions need a value the view does not have."""
+        raise NotImplementedError(f"kind {self.name!r} has no drawing")
+
+    def camera_frames(self, group: Any) -> tuple[str, ...]:
+        """URDF frames that carry the sensor (a camera): the view draws their triads."""
+        return ()

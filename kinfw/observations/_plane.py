@@ -1,0 +1,410 @@
+"""``"plane"``: a point on the robot touches a fixed plane of unknown pose.
+
+A probe (a fingertip, a touch probe, a pointer) rigidly attached to URDF frame ``frame``
+touches a fixed plane (a table). The observation is the probe's signed distance from the
+plane, 0 for a contact; the residual is ``measured - predicted`` distance, one row in
+metres (noise component ``"distance"``).
+
+The plane is an unknown block (:class:`PlaneBlock`): a unit normal ``n`` and an offset
+``d``, the plane ``{x : n . x = d}`` in the model frame (the URDF root), the normal
+pointing towards the root's origin at the start (the root lies at the positive distance
+``-d``). The probe's offset in ``frame`` is given (``offset``) or estimated, one unknown
+per ``(frame, marker)``, the same block as a ``point`` observation of that marker
+(:func:`kinfw.observations.offset_key`): a tracked probe that also touches a table
+is one point.
+
+What plane contacts cannot determine
+-------------------------------------
+A rigid motion of the plane within itself (two translations, the rotation about its
+normal) changes no distance: the block has no such coordinates (3 entries, not a rigid
+frame's 6). With the robot's kinematics free, distances of 0 are also unchanged by
+
+- a rigid motion of the whole world (robot and planes together): 6 directions, the
+  same as for any data without an external reference;
+- a common scale of every length (the links, the probe offset and the planes' offsets):
+  a contact stays a contact, so plane contacts alone never fix the robot's size. One
+  known length fixes it: a ``point`` observation in the root frame, a given probe
+  ``offset``, a prismatic joint;
+- with the probe's orientation fixed over the contacts, the probe offset's components
+  that the frame's motion never turns towards the normal.
+
+The identifiability report counts these directions and lists the parameters each of its
+null vectors involves; it does not name them (its null basis mixes the world motion and
+the scale), so ``docs/measurements.md`` lists them for the user.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.model import Block, BlockKey, PointBlock
+from kinfw.observations._base import (
+    NoiseComponent,
+    ObservationKind,
+    UnknownRequest,
+    data_array,
+    sample_array,
+)
+from kinfw.observations._contexts import StartContext, SymbolicContext
+from kinfw.observations._numeric import Drawing, NumericContext, node_name
+from kinfw.observations._point import offset_key
+
+__all__ = ["DISTANCE", "PlaneBlock", "PlaneContacts", "PlaneKind", "plane_key"]
+
+DISTANCE = NoiseComponent("distance", 1, "m")
+
+
+def plane_key(name: str) -> BlockKey:
+    """The block of the plane ``name``."""
+    return BlockKey("plane", name)
+
+
+# -- the plane's parameter block -----------------------------------------------------------
+
+
+def tangent_basis(n: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Two unit vectors ``(u, v)`` with ``(u, v, n)`` a right-handed orthonormal basis.
+
+    Deterministic in ``n`` (3,) unit: ``u`` is the world axis least aligned with ``n``,
+    made orthogonal to it.
+    """
+    n = np.asarray(n, dtype=float)
+    a = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = a - (a @ n) * n
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+@dataclass(frozen=True, slots=True)
+class PlaneBlock(Block):
+    """A plane ``{x : n . x = d}``: value ``(n, d)`` (4,), ``n`` unit, ``d`` metres.
+
+    Chart (3 entries ``rot_x, rot_y`` rad, ``offset`` m): the normal is the start's
+    normal turned by the Cayley rotation of ``(rot_x, rot_y, 0) / 2`` in the start's
+    tangent basis ``(u, v, n0)`` (:func:`tangent_basis`), the offset ``d0 + offset``::
+
+        a = (rot_x, rot_y) / 2,  c = 2 / (1 + |a|^2)
+        n = c a_y u - c a_x v + (1 - c |a|^2) n0
+
+    ``n`` is a unit vector for every ``d`` (the stereographic projection from ``-n0``):
+    minimal, smooth and one to one on every normal but ``-n0``; at zero, ``(rot_x,
+    rot_y)`` is the small rotation of the normal about ``u`` and ``v`` (rad). The plane's
+    rotation about its normal and its translations within itself change no point's
+    distance from it: the chart has no coordinates for them (the gauge is fixed by
+    construction).
+
+    Attributes
+    ----------
+    start : ndarray, shape (4,)
+        Start ``(n0, d0)``: unit normal and offset (metres), in the model frame.
+    """
+
+    start: NDArray[np.float64] = field(default_factory=lambda: np.array([0.0, 0.0, 1.0, 0.0]))
+
+    def __post_init__(self) -> None:
+        start = data_array(self.start, (4,), f"PlaneBlock({self.key}).start")
+        norm = float(np.linalg.norm(start[:3]))
+        if abs(norm - 1.0) > 1e-9:
+            raise ValueError(f"PlaneBlock({self.key}).start: the normal must be a unit vector")
+        object.__setattr__(self, "start", start)
+        Block.__post_init__(self)
+
+    @property
+    def fields(self) -> tuple[str, ...]:
+        return ("rot_x", "rot_y", "offset")
+
+    @property
+    def units(self) -> tuple[str, ...]:
+        return ("rad", "rad", "m")
+
+    @staticmethod
+    def from_estimates(key: BlockKey, estimates: NDArray[np.float64]) -> PlaneBlock:
+        """The mean of per-group plane estimates ``(n, d)`` (k, 4), signs aligned with
+        the first, normalised."""
+        est = np.asarray(estimates, dtype=float).reshape(-1, 4)
+        est = est * np.where(est[:, :3] @ est[0, :3] < 0.0, -1.0, 1.0)[:, None]
+        mean = est.mean(axis=0)
+        return PlaneBlock(key, start=mean / np.linalg.norm(mean[:3]))
+
+    def constants(self) -> NDArray[np.float64]:
+        """The start's tangent basis ``u, v``, normal ``n0`` and offset ``d0`` (10)."""
+        u, v = tangent_basis(self.start[:3])
+        return np.concatenate([u, v, self.start])
+
+    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        c = self.constants()
+        return np.asarray(_plane_from_chart(c[0:3], c[3:6], c[6:9], c[9], d[0], d[1], d[2]))
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        import casadi as ca
+
+        c = ca.DM(self.constants()) if c is None else c
+        n, off = _plane_from_chart(c[0:3], c[3:6], c[6:9], c[9], d[0], d[1], d[2])
+        return ca.vertcat(n, off)
+
+    def coordinates(self, plane: ArrayLike) -> NDArray[np.float64]:
+        """Chart coordinates (3,) of a plane ``(n, d)`` (4,) (undefined at ``n = -n0``)."""
+        plane = np.asarray(plane, dtype=float)
+        n, off = plane[:3] / np.linalg.norm(plane[:3]), plane[3] / np.linalg.norm(plane[:3])
+        u, v = tangent_basis(self.start[:3])
+        k = 1.0 + n @ self.start[:3]  # = c = 2 / (1 + |a|^2)
+        return np.array([-2.0 * (n @ v) / k, 2.0 * (n @ u) / k, off - self.start[3]])
+
+    def describe(self) -> str:
+        return f"plane {self.key.name!r}"
+
+
+def _plane_from_chart(u: Any, v: Any, n0: Any, d0: Any, rx: Any, ry: Any, off: Any) -> Any:
+    """``(n, d)`` of the chart (numpy (3,) and float, or CasADi): see :class:`PlaneBlock`."""
+    ax, ay = 0.5 * rx, 0.5 * ry
+    r2 = ax * ax + ay * ay
+    c = 2.0 / (1.0 + r2)
+    n = (c * ay) * u - (c * ax) * v + (1.0 - c * r2) * n0
+    if isinstance(n, np.ndarray):
+        return np.append(n, d0 + off)
+    return n, d0 + off
+
+
+def fit_plane(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Total least-squares plane ``(n, d)`` (4,) through points (k, 3) (SVD), ``d <= 0``
+    (the origin on the normal's side)."""
+    centroid = points.mean(axis=0)
+    n = np.linalg.svd(points - centroid, full_matrices=False)[2][-1]
+    d = float(n @ centroid)
+    return np.append(n, d) * (-1.0 if d > 0.0 else 1.0)
+
+
+def lifted_probe_offset(
+    R: NDArray[np.float64], t: NDArray[np.float64]
+) -> NDArray[np.float64] | None:
+    """Probe offset ``o`` (3,) of contacts ``n . (R_i o + t_i) = d`` in closed form.
+
+    The constraint is linear in ``(n o^T, n, d)`` once ``n^T R_i o`` is written
+    ``<R_i, n o^T>``: 13 homogeneous unknowns, the null vector of the contacts' rows by
+    SVD, scaled to ``|n| = 1``; then ``o = (n o^T)^T n``. None when the rows leave more
+    than one null direction (fewer than 13 contacts, or the frame's orientation too
+    little varied to tell the offset from the plane).
+    """
+    A = np.concatenate([R.reshape(len(R), 9), t, -np.ones((len(R), 1))], axis=1)
+    if len(A) < 13:
+        return None
+    scale = np.linalg.norm(A, axis=0)
+    _, s, Vt = np.linalg.svd(A / scale, full_matrices=False)
+    if s[-2] <= 1e-6 * s[0]:
+        return None
+    z = Vt[-1] / scale
+    n = z[9:12]
+    if np.linalg.norm(n) == 0.0:
+        return None
+    M = z[:9].reshape(3, 3) / np.linalg.norm(n)
+    return M.T @ (n / np.linalg.norm(n))
+
+
+# -- the observations ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlaneContacts:
+    """``plane`` observations that share ``(frame, plane, offset, marker)``.
+
+    Attributes
+    ----------
+    frame : str
+        URDF frame the probe is rigidly attached to.
+    sample : ndarray of int64, shape (m,)
+        Index into :attr:`Measurements.qs` of each contact's sample.
+    distance_m : ndarray, shape (m,)
+        Measured signed distance of the probe from the plane, metres (0 for a contact).
+    plane : str
+        Name of the plane (one unknown per name).
+    offset : ndarray, shape (3,), or None
+        ``frame_p_probe`` in metres when given; None when estimated.
+    marker : str or None
+        Name of the probe (its offset is unknown; excludes ``offset``).
+    """
+
+    kind: ClassVar[str] = "plane"
+    frame: str
+    sample: NDArray[np.int64]
+    distance_m: NDArray[np.float64]
+    plane: str = "plane"
+    offset: NDArray[np.float64] | None = None
+    marker: str | None = None
+
+    def __post_init__(self) -> None:
+        name = f"PlaneContacts(frame={self.frame!r}, plane={self.plane!r})"
+        sample = sample_array(self.sample, f"{name}.sample")
+        object.__setattr__(self, "sample", sample)
+        object.__setattr__(
+            self, "distance_m", data_array(self.distance_m, (len(sample),), f"{name}.distance_m")
+        )
+        if self.offset is not None:
+            object.__setattr__(self, "offset", data_array(self.offset, (3,), f"{name}.offset"))
+        if self.offset is not None and self.marker is not None:
+            raise ValueError(f"{name}: an offset and a marker exclude each other")
+
+    def __repr__(self) -> str:
+        offset = None if self.offset is None else self.offset.tolist()
+        return (
+            f"PlaneContacts(frame={self.frame!r}, plane={self.plane!r}, marker="
+            f"{self.marker!r}, offset={offset}, m={len(self.sample)})"
+        )
+
+
+class PlaneKind(ObservationKind):
+    """``{"frame": f, "kind": "plane", "plane": name}``, optional ``offset`` or
+    ``marker`` and ``distance`` (default 0). Residual: signed distance (1, m)."""
+
+    name = "plane"
+    group_type = PlaneContacts
+    row_fields = ("distance_m",)
+    components = (DISTANCE,)
+
+    # -- file edge
+    def parse(self, reader, obs, at, frame):
+        for key in ("xyz", "quat_xyzw"):
+            reader.not_allowed(
+                obs, key, at, self.name, "a plane contact measures the distance 0, no position"
+            )
+        reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
+        reader.not_allowed(
+            obs,
+            "measured_in",
+            at,
+            self.name,
+            "the plane is estimated in the robot's root frame; no measurement frame",
+        )
+        distance = 0.0
+        if obs.get("distance") is not None:
+            distance = reader.number(
+                obs, "distance", at, "the probe's signed distance from the plane (a length)"
+            )
+        offset = None
+        if obs.get("offset") is not None:
+            offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
+        marker = reader.optional_string(obs, "marker", at)
+        if marker is not None and offset is not None:
+            raise reader.error(
+                f"{at}.offset",
+                f"an offset and a marker ({marker!r}) exclude each other: a marker's offset "
+                "is unknown and estimated; drop the marker to use a known offset",
+            )
+        plane = reader.optional_string(obs, "plane", at) or "plane"
+        key = (("frame", frame), ("plane", plane), ("offset", offset), ("marker", marker))
+        return key, reader.lengths([distance])
+
+    def group_from_rows(self, key, sample, rows):
+        return PlaneContacts(sample=sample, distance_m=rows[:, 0], **dict(key))
+
+    def to_dicts(self, group, top_measured_in):
+        more = {
+            k: v
+            for k, v in (
+                ("offset", None if group.offset is None else group.offset.tolist()),
+                ("marker", group.marker),
+            )
+            if v is not None
+        }
+        return [
+            {
+                "frame": group.frame,
+                "kind": "plane",
+                "plane": group.plane,
+                **more,
+                **({"distance": dist} if dist != 0.0 else {}),
+            }
+            for dist in group.distance_m.tolist()
+        ]
+
+    # -- structure
+    def frames(self, group):
+        return (group.frame,)
+
+    def direct_frames(self, group):
+        """With a given offset the frame's tool transform is estimated (it carries the
+        probe, as for a ``point`` of known offset); with an unknown one the offset does
+        and the tool stays nominal."""
+        return (group.frame,) if group.offset is not None else ()
+
+    # -- estimation
+    def unknowns(self, group, start: StartContext):
+        """Closed form: the probe offset of the lifted linear system
+        (:func:`lifted_probe_offset`; the frame's origin when it is not determined),
+        then the plane through the start model's probe points (SVD, :func:`fit_plane`)."""
+        T = start.w_T(group.frame, group.sample)
+        R, t = T[:, :3, :3], T[:, :3, 3]
+        requests = []
+        if group.offset is not None:
+            o = group.offset
+        else:
+            o = lifted_probe_offset(R, t)
+            o = np.zeros(3) if o is None else o
+            who = repr(group.marker) if group.marker else "probe"
+            requests.append(
+                UnknownRequest(
+                    offset_key(group.frame, group.marker),
+                    o[None],
+                    PointBlock.from_estimates,
+                    f"offset of {who} on {group.frame!r} (plane contacts)",
+                )
+            )
+        # the probe at its measured distance: shift along the first fit's normal
+        plane = fit_plane(R @ o + t)
+        points = R @ o + t - group.distance_m[:, None] * plane[:3]
+        requests.append(
+            UnknownRequest(
+                plane_key(group.plane),
+                fit_plane(points)[None],
+                PlaneBlock.from_estimates,
+                f"plane {group.plane!r} (touched by {group.frame!r})",
+            )
+        )
+        return tuple(requests)
+
+    def data(self, group):
+        return group.distance_m[:, None]
+
+    def residual(self, group, model: SymbolicContext, m):
+        ca = model.ca
+        T = model.w_T(group.frame)
+        o = (
+            ca.DM(group.offset)
+            if group.offset is not None
+            else model.value(offset_key(group.frame, group.marker))
+        )
+        p = T[0:3, 0:3] @ o + T[0:3, 3]
+        plane = model.value(plane_key(group.plane))
+        return m[0] - (ca.dot(plane[0:3], p) - plane[3])
+
+    # -- numpy prediction, simulation (the default: Gaussian distance noise), drawing
+    def _probe(self, group, model: NumericContext) -> NDArray[np.float64]:
+        T = model.w_T(group.frame, group.sample)
+        o = (
+            group.offset
+            if group.offset is not None
+            else model.value(offset_key(group.frame, group.marker))
+        )
+        return T[:, :3, :3] @ o + T[:, :3, 3]
+
+    def predict(self, group, model: NumericContext):
+        """Signed distance (m, 1) of the probe from the plane, metres."""
+        plane = model.value(plane_key(group.plane))
+        return (self._probe(group, model) @ plane[:3] - plane[3])[:, None]
+
+    def drawing(self, group, model: NumericContext):
+        """Measured: the point at the measured distance from the plane on the normal
+        through the predicted probe (the contact point on the plane for a distance 0);
+        predicted: the probe."""
+        plane = model.value(plane_key(group.plane))
+        p = self._probe(group, model)
+        predicted = p @ plane[:3] - plane[3]
+        return Drawing(
+            node_name("planes", group.frame, group.plane, marker=group.marker),
+            p + (group.distance_m - predicted)[:, None] * plane[:3],
+            None,
+            p,
+        )

@@ -1,0 +1,109 @@
+"""Start poses of the ``pixels`` kind: per image, the target's pose in the camera from
+OpenCV's PnP (:func:`pnp_camera_T_targets`), and the images as ``target`` observations
+(:func:`target_observations_from_pixels`) for the hand-eye stage.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from kinfw.geometry import transform_from_rotation_translation
+
+if TYPE_CHECKING:
+    from kinfw.observations._pixels import PixelObservations
+
+__all__ = ["PNP_MIN_POINTS", "pnp_camera_T_targets", "target_observations_from_pixels"]
+
+#: Fewest points of one image PnP needs.
+PNP_MIN_POINTS = 4
+_PLANAR_TOL = 1e-9  # smallest/largest singular value of the centred points: planar
+
+
+def _is_planar(target_p: NDArray[np.float64]) -> bool:
+    s = np.linalg.svd(target_p - target_p.mean(axis=0), compute_uv=False)
+    return bool(s[0] > 0 and s[-1] <= _PLANAR_TOL * s[0])
+
+
+def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """Per image, the target's pose in the camera from its pixels (OpenCV's PnP).
+
+    ``cv2.solvePnP`` with ``SOLVEPNP_IPPE`` for planar points, ``SOLVEPNP_SQPNP`` else,
+    then ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the group's
+    intrinsics).
+
+    Images with fewer than 4 points (left by a rejection of gross errors, or a held-out
+    split) are skipped: PnP needs 4.
+
+    Returns
+    -------
+    samples : ndarray of int64, shape (k,)
+        The sample of each image with at least 4 points (the order of
+        :meth:`PixelObservations.images`).
+    camera_T_targets : ndarray, shape (k, 4, 4)
+        Pose of the target in the camera's optical frame, metres.
+
+    Raises
+    ------
+    DatasetError
+        Naming the camera (and the image and sample): no image has 4 points, or PnP
+        fails on an image.
+    """
+    import cv2
+
+    from kinfw.observations._reader import DatasetError
+
+    K, dist = group.intrinsics.matrix, group.intrinsics.distortion
+    all_samples, all_rows = group.images()
+    labels = group.image_labels()
+    keep = [k for k, r in enumerate(all_rows) if len(r) >= PNP_MIN_POINTS]
+    if not keep:
+        raise DatasetError(
+            f"pixels: camera {group.camera!r}: none of its {len(all_rows)} images has "
+            f"{PNP_MIN_POINTS} points (PnP needs {PNP_MIN_POINTS})"
+        )
+    samples = all_samples[keep]
+    rows = [all_rows[k] for k in keep]
+    labels = [labels[k] for k in keep]
+    out = np.empty((len(rows), 4, 4))
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-15)
+    for k, r in enumerate(rows):
+        obj = np.ascontiguousarray(group.target_p[r], dtype=np.float64)
+        img = np.ascontiguousarray(group.uv[r], dtype=np.float64)
+        flag = cv2.SOLVEPNP_IPPE if _is_planar(obj) else cv2.SOLVEPNP_SQPNP
+        where = f"image {labels[k]} (sample {int(samples[k])}, {len(r)} points)"
+        try:
+            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=flag)
+            if not ok:
+                ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
+            if ok:
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+        except cv2.error as exc:
+            raise DatasetError(
+                f"pixels: camera {group.camera!r}: PnP failed on {where}: "
+                + " ".join(str(exc.err or exc).split())
+            ) from None
+        if not ok:
+            raise DatasetError(f"pixels: camera {group.camera!r}: PnP failed on {where}")
+        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+            raise DatasetError(
+                f"pixels: camera {group.camera!r}: PnP found no pose for {where} "
+                "(are the points on one line?)"
+            )
+        R, _ = cv2.Rodrigues(rvec)
+        out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
+    return samples, out
+
+
+def target_observations_from_pixels(group: PixelObservations) -> Any:
+    """The group's images as ``target`` observations: per image the PnP pose
+    (:func:`pnp_camera_T_targets`), for the hand-eye stage (A = X B Y) and for
+    comparing the pixel path with the pose path on the same detections."""
+    from kinfw.observations._target import TargetObservations
+
+    samples, camera_T_targets = pnp_camera_T_targets(group)
+    return TargetObservations(
+        camera=group.camera, sample=samples, camera_T_target=camera_T_targets, target=group.target
+    )

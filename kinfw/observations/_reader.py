@@ -1,0 +1,148 @@
+"""Reading one observation of a ``kinfw-measurements`` file: checks that name the culprit.
+
+:class:`ObservationReader` is what an observation kind's
+:meth:`~kinfw.observations.ObservationKind.parse` reads its dict with: every check
+raises a :class:`DatasetError` that names the file, the key path
+(``samples[7].observations[1].quat_xyzw``) and what was expected, and lengths are
+converted to metres from the file's unit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = ["DatasetError", "ObservationReader", "describe"]
+
+
+class DatasetError(ValueError):
+    """A measurement file or dataset that cannot be used.
+
+    The message names the file (``Measurements.source``), the sample index and key path
+    when relevant (``samples[7].observations[1].quat_xyzw``) and what was expected.
+    """
+
+
+def describe(value: Any) -> str:
+    """A short description of a JSON value for 'got ...' in messages."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    if isinstance(value, str):
+        return repr(value if len(value) <= 40 else value[:37] + "...")
+    if isinstance(value, list):
+        return f"a list of {len(value)} items"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+class ObservationReader:
+    """Validation helpers that raise :class:`DatasetError` naming the file and key path.
+
+    Attributes
+    ----------
+    source : str
+        File name used in messages.
+    length_unit : {"m", "mm"}
+        The file's length unit (:meth:`lengths` converts to metres).
+    default_measured_in : str or None
+        The file's top-level ``measured_in``.
+    quaternions, rounded : int, list of float
+        Quaternions read, and the norm deviations of the rounded ones (one warning per
+        file, by the reader of the file).
+    """
+
+    def __init__(
+        self, source: str, length_unit: str = "m", default_measured_in: str | None = None
+    ) -> None:
+        self.source = source
+        self.length_unit = length_unit
+        self.default_measured_in = default_measured_in
+        #: quaternions read, and the norm deviations of those that were rounded
+        self.quaternions = 0
+        self.rounded: list[float] = []
+        #: camera intrinsics by frame (the file's "cameras" section and any given)
+        self.cameras: dict[str, Any] = {}
+
+    def error(self, where: str, what: str) -> DatasetError:
+        return DatasetError(
+            f"{self.source}: {where}: {what}" if where else f"{self.source}: {what}"
+        )
+
+    def get(self, obj: dict[str, Any], key: str, where: str, expected: str) -> Any:
+        """A required key; JSON null is an error too."""
+        value = obj.get(key)
+        if value is None:
+            state = "missing" if key not in obj else "null"
+            raise self.error(_join(where, key), f"{state}; expected {expected}")
+        return value
+
+    def string(self, value: Any, where: str) -> str:
+        if not isinstance(value, str) or not value:
+            raise self.error(where, f"expected a non-empty string, got {describe(value)}")
+        return value
+
+    def optional_string(self, obj: dict[str, Any], key: str, where: str) -> str | None:
+        value = obj.get(key)
+        return None if value is None else self.string(value, _join(where, key))
+
+    def choice(self, value: Any, where: str, choices: tuple[str, ...]) -> str:
+        if not isinstance(value, str) or value not in choices:
+            options = ", ".join(repr(c) for c in choices)
+            raise self.error(where, f"expected one of {options}, got {describe(value)}")
+        return value
+
+    def numbers(self, value: Any, n: int, where: str, what: str = "") -> list[float]:
+        """A list of ``n`` finite numbers, as floats."""
+        what = f" ({what})" if what else ""
+        if not isinstance(value, list):
+            raise self.error(where, f"expected a list of {n} numbers{what}, got {describe(value)}")
+        if len(value) != n:
+            raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
+        out = []
+        for k, x in enumerate(value):
+            ok = isinstance(x, (int, float)) and not isinstance(x, bool)
+            try:
+                ok = ok and math.isfinite(float(x))
+            except OverflowError:  # an integer too large for a float
+                ok = False
+            if not ok:
+                raise self.error(f"{where}[{k}]", f"expected a finite number, got {describe(x)}")
+            out.append(float(x))
+        return out
+
+    def number(self, obj: dict[str, Any], key: str, where: str, expected: str) -> float:
+        """One required finite number."""
+        value = self.get(obj, key, where, expected)
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not ok or not math.isfinite(float(value)):
+            raise self.error(_join(where, key), f"expected {expected}, got {describe(value)}")
+        return float(value)
+
+    def lengths(self, values: Sequence[float]) -> list[float]:
+        """Lengths in the file's unit converted to metres."""
+        return [x / 1000.0 for x in values] if self.length_unit == "mm" else list(values)
+
+    def list_of(self, value: Any, where: str, what: str) -> list[Any]:
+        if not isinstance(value, list) or not value:
+            raise self.error(where, f"expected a non-empty list of {what}, got {describe(value)}")
+        return value
+
+    def obj(self, value: Any, where: str) -> dict[str, Any]:
+        if not isinstance(value, dict):
+            raise self.error(where, f"expected an object, got {describe(value)}")
+        return value
+
+    def not_allowed(self, obs: dict[str, Any], key: str, where: str, kind: str, why: str) -> None:
+        """Refuse a key that does not belong on this kind of observation."""
+        if obs.get(key) is not None:
+            raise self.error(_join(where, key), f"not allowed on a {kind!r} observation ({why})")

@@ -1,0 +1,76 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.reports._doc_reader import CalibrationFileError, DocReader
+from kinfw.reports._records import (
+    BeforeAfter,
+    CalibratedUnknown,
+    DataProvenance,
+    ModelSummary,
+    NoiseSummary,
+    read_only_array,
+)
+from kinfw.reports._refine import (
+    Correlation,
+    DownweightedRow,
+    IdentifiabilitySummary,
+    NotIdentifiable,
+    ParameterRow,
+    RefineSection,
+    RejectedRow,
+)
+from kinfw.reports._report import (
+    CalibrationReport,
+    GroupErrorSummary,
+    StageErrors,
+    before_after,
+    read_report,
+    write_report,
+)
+from kinfw.reports._reprojection import CameraReprojection, ImageReprojection, ReprojectionSection
+from kinfw.reports._sidecar import CalibrationSidecar, read_sidecar, write_sidecar
+from kinfw.reports._stages import (
+    CameraMount,
+    ClosedFormSection,
+    ExportSection,
+    HandEyeSection,
+    KinematicValue,
+    TargetEstimate,
+)
+
+__all__ = [
+    "BeforeAfter",
+    "CalibratedUnknown",
+    "CalibrationFileError",
+    "CalibrationReport",
+    "CalibrationSidecar",
+    "CameraMount",
+    "CameraReprojection",
+    "ClosedFormSection",
+    "Correlation",
+    "DataProvenance",
+    "DocReader",
+    "DownweightedRow",
+    "ExportSection",
+    "GroupErrorSummary",
+    "HandEyeSection",
+    "IdentifiabilitySummary",
+    "ImageReprojection",
+    "KinematicValue",
+    "ModelSummary",
+    "NoiseSummary",
+    "NotIdentifiable",
+    "ParameterRow",
+    "RefineSection",
+    "RejectedRow",
+    "ReprojectionSection",
+    "StageErrors",
+    "TargetEstimate",
+    "before_after",
+    "read_only_array",
+    "read_report",
+    "read_sidecar",
+    "write_report",
+    "write_sidecar",
+]

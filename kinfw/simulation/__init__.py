@@ -1,0 +1,53 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.simulation._board_images import board_texture, render_board, true_corners
+from kinfw.simulation._outliers import plant_outliers
+from kinfw.simulation._perturb import (
+    check_sigma,
+    one_joint_at_a_time,
+    perturb_robot,
+    random_configurations,
+)
+from kinfw.simulation._pixels import (
+    DEFAULT_BOARD,
+    DEFAULT_CAMERA,
+    MIN_CORNERS,
+    board_pose_facing,
+    default_intrinsics,
+    pixel_views,
+    simulate_pixels,
+    visible_points,
+)
+from kinfw.simulation._simulate import (
+    default_target_pose,
+    nine_circle_plate,
+    perturb_poses,
+    simulate,
+    stereo_measure,
+)
+
+__all__ = [
+    "DEFAULT_BOARD",
+    "DEFAULT_CAMERA",
+    "MIN_CORNERS",
+    "board_pose_facing",
+    "board_texture",
+    "check_sigma",
+    "default_intrinsics",
+    "default_target_pose",
+    "nine_circle_plate",
+    "one_joint_at_a_time",
+    "perturb_poses",
+    "perturb_robot",
+    "pixel_views",
+    "plant_outliers",
+    "random_configurations",
+    "render_board",
+    "simulate",
+    "simulate_pixels",
+    "stereo_measure",
+    "true_corners",
+    "visible_points",
+]

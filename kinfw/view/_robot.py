@@ -1,0 +1,278 @@
+"""Drawing a URDF robot in meshcat and framing the view (helpers of :func:`kinfw.view.scene`).
+
+:func:`draw_robot` draws a robot's visuals (meshes found from ``package://``,
+``file://`` or relative paths; missing or unreadable meshes are skipped with a logged
+warning) and returns the points to frame; :func:`display_frame` chooses the display
+frame and the camera position that frame them, :func:`set_camera` puts meshcat's orbit
+camera there.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import warnings
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike, NDArray
+
+from kinfw.model import Robot
+
+if TYPE_CHECKING:
+    import meshcat
+
+__all__ = [
+    "BACKGROUND_RGB",
+    "CAMERA_FOV_DEG",
+    "display_frame",
+    "draw_robot",
+    "frame_scene",
+    "robot_scene",
+    "set_camera",
+]
+
+logger = logging.getLogger("kinfw.view")
+
+CAMERA_FOV_DEG = 30.0
+"""Vertical field of view of the camera, degrees (meshcat's default, 75, distorts)."""
+BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
+"""Background gradient (top, bottom)."""
+
+
+# -- robot geometry ----------------------------------------------------------------------
+
+
+def _resolve_mesh(
+    filename: str, base_dir: Path | None, package_dirs: Sequence[Path]
+) -> Path | None:
+    """The existing file a URDF mesh ``filename`` names, or None."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://") :].partition("/")
+        candidates = []
+        for d in package_dirs:
+            candidates += [d / package / rest, d / rest]
+        if base_dir is not None:  # .../<package>/urdf/robot.urdf: look up the tree
+            candidates += [a / rest for a in (base_dir, *base_dir.parents) if a.name == package]
+    elif filename.startswith("file://"):
+        candidates = [Path(filename[len("file://") :])]
+    else:
+        path = Path(filename)
+        candidates = [path if path.is_absolute() or base_dir is None else base_dir / path]
+    return next((c.resolve() for c in candidates if c.is_file()), None)
+
+
+def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
+    """The robot's URDF with mesh paths made absolute and visuals whose mesh is missing
+    removed (each with a logged warning)."""
+    root = ET.fromstring(robot.urdf_xml)
+    source = Path(robot.source)
+    base_dir = source.resolve().parent if source.is_file() else None
+    changed = False
+    for link in root.iter("link"):
+        for visual in list(link.findall("visual")):
+            mesh = visual.find("geometry/mesh")
+            if mesh is None:
+                continue
+            filename = mesh.get("filename", "")
+            found = _resolve_mesh(filename, base_dir, package_dirs)
+            if found is None:
+                logger.warning(
+                    "%s: mesh %r of link %r not found (searched %s); that visual is not drawn",
+                    robot.source,
+                    filename,
+                    link.get("name"),
+                    [str(d) for d in package_dirs] or "no package_dirs",
+                )
+                link.remove(visual)
+            else:
+                mesh.set("filename", str(found))
+            changed = True
+    return ET.tostring(root, encoding="unicode") if changed else robot.urdf_xml
+
+
+def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryModel:
+    xml = _visual_urdf(robot, package_dirs)
+    try:
+        return pin.buildGeomFromUrdfString(robot.model, xml, pin.GeometryType.VISUAL)
+    except Exception as exc:  # a mesh that exists but cannot be read
+        logger.warning(
+            "%s: cannot load the visual geometry (%s); drawing primitives only", robot.source, exc
+        )
+        root = ET.fromstring(xml)
+        for link in root.iter("link"):
+            for visual in list(link.findall("visual")):
+                if visual.find("geometry/mesh") is not None:
+                    link.remove(visual)
+        return pin.buildGeomFromUrdfString(
+            robot.model, ET.tostring(root, encoding="unicode"), pin.GeometryType.VISUAL
+        )
+
+
+def draw_robot(
+    vis: meshcat.Visualizer,
+    robot: Robot,
+    node: str,
+    pin_q: NDArray,
+    rgba: Sequence[float] | None,
+    package_dirs: Sequence[Path],
+) -> NDArray[np.float64]:
+    """Draw ``robot`` at ``pin_q`` under ``node``; return the points to frame, (m, 3):
+    the centres of the visuals of its moving links (of all links if none moves; the link
+    frames' origins if it has no visuals)."""
+    from pinocchio.visualize import MeshcatVisualizer
+
+    visual_model = _visual_model(robot, package_dirs)
+    viz = MeshcatVisualizer(robot.model, None, visual_model)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        viz.initViewer(viewer=vis)
+        viz.loadViewerModel(rootNodeName=node, visual_color=None if rgba is None else list(rgba))
+        viz.display(pin_q)
+    for w in caught:
+        logger.warning("%s: %s", robot.source, w.message)
+    # Frame the moving part: the centres of the visuals behind a movable joint (Pinocchio
+    # merges fixed joints, so parentJoint 0 means rigidly attached to the root link).
+    placements = [
+        (g.parentJoint, oMg.translation)
+        for g, oMg in zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)
+    ]
+    if not placements:
+        pin.updateFramePlacements(viz.model, viz.data)
+        placements = [
+            (f.parentJoint, oMf.translation)
+            for f, oMf in zip(viz.model.frames, viz.data.oMf, strict=True)
+            if f.type == pin.FrameType.BODY
+        ]
+    moving = [p for joint, p in placements if joint > 0]
+    return np.array(moving or [p for _, p in placements]).reshape(-1, 3)
+
+
+# -- camera ------------------------------------------------------------------------------
+
+
+def display_frame(
+    points: NDArray[np.float64],
+    up: NDArray[np.float64],
+    *,
+    fov_deg: float,
+    aspect: float = 4.0 / 3.0,
+    pad: float = 0.08,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``display_T_root`` and the camera position in display coordinates.
+
+    The display frame has its origin at the centre of the points' bounding box and
+    ``up`` along z; its x axis points horizontally towards the root origin (the
+    measurement system when the root is the measurement frame), or along the points'
+    longest horizontal extent when the root origin is above or below the centre. The
+    camera looks at the origin from 35 deg to the side of x and 15 deg above the
+    horizon, just far enough that a ball of radius ``pad`` (metres) about every point
+    is inside 85 % of the field of view (``fov_deg`` vertically) of a window of
+    width / height ``aspect`` or wider.
+    """
+    up = up / np.linalg.norm(up)
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    x = -centre - (-centre @ up) * up
+    if np.linalg.norm(x) < 1e-3 and len(points) > 1:
+        flat = (points - centre) - np.outer((points - centre) @ up, up)
+        x = np.linalg.svd(flat, full_matrices=False)[2][0]
+        x = x - (x @ up) * up
+    if np.linalg.norm(x) < 1e-9:  # nothing horizontal: any horizontal axis
+        x = np.cross(up, np.eye(3)[np.argmin(np.abs(up))])
+    x /= np.linalg.norm(x)
+    root_R_display = np.column_stack([x, np.cross(up, x), up])
+    display_T_root = np.eye(4)
+    display_T_root[:3, :3] = root_R_display.T
+    display_T_root[:3, 3] = -root_R_display.T @ centre
+    display_ps = (points - centre) @ root_R_display
+
+    azimuth, elevation = math.radians(35.0), math.radians(15.0)
+    back = np.array(
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
+    )
+    right = np.cross([0.0, 0.0, 1.0], back)
+    right /= np.linalg.norm(right)
+    screen_up = np.cross(back, right)
+    tan_v = 0.85 * math.tan(math.radians(fov_deg / 2))
+    tan_h = aspect * tan_v
+    # A point p is in view from distance D when |p.right| <= (D - p.back) tan_h and
+    # |p.screen_up| <= (D - p.back) tan_v.
+    depth = display_ps @ back
+    need = np.maximum(
+        (np.abs(display_ps @ right) + pad) / tan_h, (np.abs(display_ps @ screen_up) + pad) / tan_v
+    )
+    distance = max(float(np.max(depth + need)), 0.3)
+    return display_T_root, distance * back
+
+
+def set_camera(
+    vis: meshcat.Visualizer, display_offset: NDArray[np.float64], fov_deg: float
+) -> None:
+    """Put meshcat's orbit camera at ``display_offset`` (it looks at the origin)."""
+    # The camera lives in /Cameras/default/rotated, which turns three.js' y-up frame
+    # into meshcat's z-up one: display (x, y, z) is three.js (x, z, -y).
+    x, y, z = (float(v) for v in display_offset)
+    vis["/Cameras/default"].set_transform(np.eye(4))
+    camera = vis["/Cameras/default/rotated/<object>"]
+    camera.set_property("position", [x, z, -y])
+    camera.set_property("fov", fov_deg)
+
+
+def frame_scene(
+    vis: meshcat.Visualizer,
+    root: meshcat.Visualizer,
+    root_ps: NDArray[np.float64],
+    up: NDArray[np.float64],
+) -> None:
+    """Frame a scene drawn under ``root`` (root-link coordinates) on the points
+    ``root_ps`` (n, 3) with ``up`` up (:func:`display_frame`, :func:`set_camera`), hide
+    meshcat's axes and grid, and set the background gradient."""
+    display_T_root, camera_offset = display_frame(root_ps, up, fov_deg=CAMERA_FOV_DEG)
+    root.set_transform(display_T_root)
+    set_camera(vis, camera_offset, CAMERA_FOV_DEG)
+    vis["/Axes"].set_property("visible", False)
+    vis["/Grid"].set_property("visible", False)
+    vis["/Background"].set_property("top_color", list(BACKGROUND_RGB[0]))
+    vis["/Background"].set_property("bottom_color", list(BACKGROUND_RGB[1]))
+
+
+def robot_scene(
+    robot: Robot,
+    q: NDArray[np.float64],
+    joint_names: tuple[str, ...],
+    rgba: tuple[float, float, float, float],
+    *,
+    window: object | None,
+    up: ArrayLike | None,
+    package_dirs: Sequence[str | Path],
+) -> tuple[meshcat.Visualizer, meshcat.Visualizer, NDArray[np.float64], NDArray[np.float64]]:
+    """A meshcat scene with one robot drawn at the joint values ``q`` (``joint_names``
+    order), in ``rgba``, under ``/meshcat/kinfw/robot``: the start of the scenes of
+    :mod:`kinfw.view` and :mod:`kinfw.view`.
+
+    Returns
+    -------
+    vis, root : meshcat.Visualizer
+        The scene and its ``kinfw`` node (root-link coordinates).
+    up : ndarray, shape (3,)
+        The checked up direction (:func:`kinfw.view.up_direction`).
+    robot_ps : ndarray, shape (n, 3)
+        Points of the drawn robot, for :func:`frame_scene`.
+    """
+    import meshcat
+
+    from kinfw.view._draw import mesh_dirs, up_direction
+
+    up = up_direction(robot, up)
+    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
+    pin_q = robot.pin_configurations(q, joint_names)[0]
+    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, rgba, mesh_dirs(package_dirs))
+    return vis, vis["kinfw"], up, robot_ps

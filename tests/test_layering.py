@@ -1,0 +1,144 @@
+"""The house's rules, read from the source: one installed namespace, layers that import
+downwards only, subpackage faces with one public import path per name.
+
+The truth here is the tree itself (parsed with :mod:`ast`, nothing imported but the
+faces): a rule broken by a new module fails with the file and the import that breaks it.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+import pytest
+import tomllib
+
+REPO = Path(__file__).resolve().parents[1]
+#: The founding folders and the names they install as.
+FOLDERS = {
+    "kinfw": "kinfw",
+    "identification": "kinfw.identification",
+    "verification": "kinfw.verification",
+}
+
+
+def _modules() -> dict[str, Path]:
+    """Every library module by its installed dotted name."""
+    out = {}
+    for folder, package in FOLDERS.items():
+        for path in sorted((REPO / folder).rglob("*.py")):
+            parts = list(path.relative_to(REPO / folder).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join([package, *parts])] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, module)`` of every absolute import in a file, function bodies included."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out.append((node.lineno, node.module))
+        elif isinstance(node, ast.Import):
+            out.extend((node.lineno, alias.name) for alias in node.names)
+    return out
+
+
+def _layer(module: str) -> str:
+    for layer in ("kinfw.identification", "kinfw.verification", "kinfw.cli"):
+        if module == layer or module.startswith(layer + "."):
+            return layer
+    return "kinfw"
+
+
+def test_the_packages_listed_for_installation_are_the_tree():
+    listed = set(
+        tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    )
+    packages = {name for name, path in MODULES.items() if path.name == "__init__.py"}
+    assert listed == packages | {"kinfw.robots"}
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_the_library_imports_only_its_one_namespace(name):
+    """No ``import identification`` / ``verification``: they exist only as kinfw.*."""
+    bare = [
+        f"{MODULES[name]}:{line}: {module}"
+        for line, module in _imports(MODULES[name])
+        if module.split(".")[0] in ("identification", "verification", "urdf")
+    ]
+    assert not bare
+
+
+# What each layer may import. The front door (kinfw/__init__.py) names the workflow verbs
+# of every layer, imported on first use; the command line sits on top of everything.
+ALLOWED = {
+    "kinfw": {"kinfw"},
+    "kinfw.identification": {"kinfw", "kinfw.identification"},
+    "kinfw.verification": {"kinfw", "kinfw.identification", "kinfw.verification"},
+    "kinfw.cli": {"kinfw", "kinfw.identification", "kinfw.verification", "kinfw.cli"},
+}
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n != "kinfw"))
+def test_layers_import_downwards_only(name):
+    upward = [
+        f"{MODULES[name]}:{line}: imports {module}"
+        for line, module in _imports(MODULES[name])
+        if module.startswith("kinfw") and _layer(module) not in ALLOWED[_layer(name)]
+    ]
+    assert not upward
+
+
+def _faces() -> dict[str, list[str]]:
+    """``__all__`` of every subpackage face (its ``__init__``)."""
+    return {
+        name: list(getattr(importlib.import_module(name), "__all__", ()))
+        for name, path in MODULES.items()
+        if path.name == "__init__.py" and name != "kinfw"
+    }
+
+
+def test_every_public_name_has_one_import_path():
+    """A name in two faces' ``__all__`` has two import paths; the front door ``kinfw`` is
+    the one documented exception (its verbs are aliases of their homes)."""
+    homes: dict[str, list[str]] = {}
+    for face, names in _faces().items():
+        for n in names:
+            homes.setdefault(n, []).append(face)
+    assert {n: f for n, f in homes.items() if len(f) > 1} == {}
+
+
+def test_faces_export_only_what_their_package_defines():
+    """A face re-exports its own private modules, never another package's names."""
+    foreign = {}
+    for face, names in _faces().items():
+        package = importlib.import_module(face)
+        for n in names:
+            home = getattr(getattr(package, n), "__module__", face) or face
+            if not callable(getattr(package, n)) or not home.startswith("kinfw"):
+                continue  # constants and type aliases: checked through their one face above
+            if not (home == face or home.startswith(face + ".")):
+                foreign[f"{face}.{n}"] = home
+    assert foreign == {}
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_no_private_module_is_imported_from_another_package(name):
+    """``from kinfw.geometry._transforms import x`` belongs inside kinfw.geometry only."""
+    path = MODULES[name]
+    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+    crossing = []
+    for line, module in _imports(path):
+        parts = module.split(".")
+        private = [i for i, p in enumerate(parts) if p.startswith("_")]
+        if module.startswith("kinfw") and private:
+            owner = ".".join(parts[: private[0]])
+            if owner != package:
+                crossing.append(f"{path}:{line}: {module}")
+    assert not crossing

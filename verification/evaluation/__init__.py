@@ -1,0 +1,88 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.verification.evaluation._accuracy import (
+    AccuracyReport,
+    GroupErrors,
+    evaluate_model,
+    known_frames,
+)
+from kinfw.verification.evaluation._crlb import (
+    CRLB,
+    NORMAL_COVERAGE,
+    cramer_rao,
+    position_jacobians,
+    predicted_position_ms,
+    predicted_position_rms,
+    true_chart_coordinates,
+)
+from kinfw.verification.evaluation._crosscheck import (
+    CrossCheck,
+    crosscheck_cpc,
+    pose_discrepancy,
+    random_joint_values,
+)
+from kinfw.verification.evaluation._crossval import (
+    BASELINES,
+    CrossValidation,
+    FoldScore,
+    crossvalidate,
+    held_out_error_sizes,
+    held_out_errors,
+)
+from kinfw.verification.evaluation._model_choice import (
+    PRIOR_GRID_M,
+    PRIOR_LEVERS_M,
+    ROWS_PER_PARAMETER,
+    Candidate,
+    ModelChoice,
+    choose_parameters,
+    rows_per_parameter,
+)
+from kinfw.verification.evaluation._reprojection import WORST_IMAGES, reprojection_section
+from kinfw.verification.evaluation._trials import (
+    Progress,
+    check_count,
+    executor_for_jobs,
+    run_trials,
+    stderr_progress,
+)
+
+__all__ = [
+    "BASELINES",
+    "CRLB",
+    "NORMAL_COVERAGE",
+    "PRIOR_GRID_M",
+    "PRIOR_LEVERS_M",
+    "ROWS_PER_PARAMETER",
+    "WORST_IMAGES",
+    "AccuracyReport",
+    "Candidate",
+    "CrossCheck",
+    "CrossValidation",
+    "FoldScore",
+    "GroupErrors",
+    "ModelChoice",
+    "Progress",
+    "check_count",
+    "choose_parameters",
+    "cramer_rao",
+    "crosscheck_cpc",
+    "crossvalidate",
+    "evaluate_model",
+    "executor_for_jobs",
+    "held_out_error_sizes",
+    "held_out_errors",
+    "known_frames",
+    "pose_discrepancy",
+    "position_jacobians",
+    "predicted_position_ms",
+    "predicted_position_rms",
+    "random_joint_values",
+    "reprojection_section",
+    "rows_per_parameter",
+    "run_trials",
+    "stderr_progress",
+    "true_chart_coordinates",
+]

@@ -1,0 +1,41 @@
+"""TODO face."""
+
+from __future__ import annotations
+
+from kinfw.verification.reporting._report import (
+    before_after_rows,
+    calibrate_to_files,
+    calibration_report,
+    errors_by_group,
+    file_sha256,
+    sidecar,
+    sidecar_path,
+)
+from kinfw.verification.reporting._sections import (
+    calibrated_unknowns,
+    closed_form_section,
+    downweighted_rows,
+    hand_eye_section,
+    noise_summary,
+    refine_section,
+    rejected_rows,
+)
+from kinfw.verification.reporting._stage_plot import plot_stage_errors
+
+__all__ = [
+    "before_after_rows",
+    "calibrate_to_files",
+    "calibrated_unknowns",
+    "calibration_report",
+    "closed_form_section",
+    "downweighted_rows",
+    "errors_by_group",
+    "file_sha256",
+    "hand_eye_section",
+    "noise_summary",
+    "plot_stage_errors",
+    "refine_section",
+    "rejected_rows",
+    "sidecar",
+    "sidecar_path",
+]

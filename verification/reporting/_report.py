@@ -1,0 +1,300 @@
+"""Calibration reports and sidecars built from the pipeline's result, as the typed
+:class:`kinfw.reports.CalibrationReport` and
+:class:`kinfw.reports.CalibrationSidecar` (dictionaries only when written), and
+the calibrated URDF and sidecar written together (:func:`calibrate_to_files`). The
+stages' sections are built by :mod:`kinfw.verification.reporting`, the errors-by-stage
+figure drawn by :mod:`kinfw.verification.reporting`."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from kinfw.identification import Calibration
+from kinfw.measurements import Measurements
+from kinfw.model import Robot
+from kinfw.observations import DatasetError
+from kinfw.reports import (
+    BeforeAfter,
+    CalibrationReport,
+    CalibrationSidecar,
+    DataProvenance,
+    ExportSection,
+    GroupErrorSummary,
+    ModelSummary,
+    StageErrors,
+    before_after,
+)
+from kinfw.verification.evaluation import evaluate_model, reprojection_section
+from kinfw.verification.reporting._sections import (
+    calibrated_unknowns,
+    closed_form_section,
+    hand_eye_section,
+    noise_summary,
+    refine_section,
+)
+
+__all__ = [
+    "before_after_rows",
+    "calibrate_to_files",
+    "calibration_report",
+    "errors_by_group",
+    "file_sha256",
+    "sidecar",
+    "sidecar_path",
+]
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes (provenance of the input data)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary, ...]:
+    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
+    each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
+    report = evaluate_model(robot, data)
+    return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary()) for g in report.groups)
+
+
+def _errors_or_unavailable(
+    robot: Robot, data: Measurements, like: tuple[GroupErrorSummary, ...], notes: list[str]
+) -> tuple[GroupErrorSummary, ...]:
+    """:func:`errors_by_group`, or, when ``robot`` cannot be evaluated on ``data`` (a
+    frame its geometry cannot place: :class:`DatasetError`), the groups of ``like`` with
+    every number NaN ("not available") and the reason added to ``notes``."""
+    try:
+        return errors_by_group(robot, data)
+    except DatasetError as e:
+        notes.append(f"errors of {robot.source or 'the nominal'} not available: {e}")
+        nan = float("nan")
+        return tuple(
+            replace(
+                g,
+                **{k: nan for k in GroupErrorSummary._NUMBERS},
+                abs_mean_xyz_mm=(nan, nan, nan),
+                abs_std_xyz_mm=(nan, nan, nan),
+            )
+            for g in like
+        )
+
+
+def before_after_rows(
+    before: tuple[GroupErrorSummary, ...], after: tuple[GroupErrorSummary, ...]
+) -> tuple[BeforeAfter, ...]:
+    """Per observation group: RMS position (mm) and rotation (deg) before and after."""
+    return before_after(before, after)
+
+
+def _with_refined_intrinsics(data: Measurements, calibration: Calibration) -> Measurements:
+    """``data`` with the intrinsics the refinement estimated (unknowns of kind
+    ``"intrinsics"``, named by camera) in place of the start ones; ``data`` itself when
+    none were estimated."""
+    refined = calibration.refined
+    if refined is None:
+        return data
+    cameras = {
+        u.name: data.cameras[u.name].with_parameters(u.value)
+        for u in refined.unknowns
+        if u.kind == "intrinsics" and u.name in data.cameras
+    }
+    return data.with_cameras(cameras) if cameras else data
+
+
+def calibration_report(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    calibration: Calibration,
+    *,
+    method: str,
+    loss: str = "huber",
+    data_path: str | Path | None = None,
+    held_out: Measurements | None = None,
+) -> CalibrationReport:
+    """Everything a user needs to trust (or not) a calibration.
+
+    Parameters
+    ----------
+    nominal, calibrated : Robot
+        The URDF before and after (the written file, re-loaded).
+    data : Measurements
+        The calibration data; the errors on it are in-sample.
+    calibration : Calibration
+        The pipeline's result (stages, their URDFs and diagnostics).
+    method, loss : str
+    data_path : path, optional
+        Recorded with its SHA-256.
+    held_out : Measurements, optional
+        Samples not used for calibration; their errors are the honest accuracy.
+
+    Returns
+    -------
+    CalibrationReport
+        ``to_dict()`` is the JSON of ``kinfw calibrate --report``.
+    """
+    # the refined intrinsics (--refine-intrinsics) for the calibrated model's errors;
+    # the start ones (the file's) for the nominal and the stages before the refinement
+    refined_data = _with_refined_intrinsics(data, calibration)
+    after = errors_by_group(calibrated, refined_data)
+    notes = list(calibration.notes)
+    before = _errors_or_unavailable(nominal, data, after, notes)
+    held_out_rows = None
+    if held_out is not None:
+        after_held = errors_by_group(calibrated, _with_refined_intrinsics(held_out, calibration))
+        before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
+        held_out_rows = before_after(before_held, after_held)
+    stage_rms = [StageErrors.of("nominal", before)]
+    stage_rms += [
+        StageErrors.of(
+            name, errors_by_group(Robot(xml, name), refined_data if name == "refine" else data)
+        )
+        for name, xml in calibration.stages
+    ]
+    export = calibration.export
+    return CalibrationReport(
+        created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        method=method,
+        nominal_urdf=nominal.source,
+        data=DataProvenance(
+            data.source, data.n_samples, file_sha256(data_path) if data_path else None
+        ),
+        notes=tuple(notes),
+        errors_in_sample=before_after(before, after),
+        position_rms_by_stage=tuple(stage_rms),
+        errors_before=before,
+        errors_after=after,
+        kinematics=None
+        if calibration.closed_form is None
+        else closed_form_section(calibration.closed_form),
+        hand_eye=None if calibration.cameras is None else hand_eye_section(calibration.cameras),
+        refine=None if calibration.refined is None else refine_section(calibration.refined, loss),
+        export=None
+        if export is None
+        else ExportSection(
+            export.w_T_root,
+            tuple((link, 1e3 * float(np.linalg.norm(T[:3, 3]))) for link, T in export.link_shifts),
+        ),
+        errors_held_out=None if held_out is None else held_out_rows,
+        reprojection=None
+        if calibration.refined is None
+        else reprojection_section(calibrated, data, calibration.refined.unknowns),
+    )
+
+
+def sidecar(
+    report: CalibrationReport,
+    calibration: Calibration,
+    *,
+    nominal_path: str | Path | None,
+    calibrated_path: str | Path,
+    model: ModelSummary | None = None,
+) -> CalibrationSidecar:
+    """The provenance written beside a calibrated URDF: what produced it and what is
+    needed to predict measurements that is not in the URDF (the root's pose in the
+    measurement frame, target poses, markers, noise), and the model the refinement
+    fitted (``model``; dropped without a refinement)."""
+    refined = calibration.refined
+    return CalibrationSidecar(
+        created=report.created,
+        kinfw_version=_kinfw_version(),
+        method=report.method,
+        calibrated_urdf=Path(calibrated_path).name,
+        nominal_urdf=str(nominal_path) if nominal_path else None,
+        nominal_urdf_sha256=file_sha256(nominal_path) if nominal_path else None,
+        data=report.data,
+        w_T_root=calibration.w_T_root,
+        measurement_frame=None if refined is None else refined.model_frame,
+        noise=None if refined is None else noise_summary(refined),
+        unknowns=() if refined is None else calibrated_unknowns(refined),
+        hand_eye_targets=()
+        if calibration.cameras is None
+        else tuple(calibration.cameras.root_T_targets),
+        errors_held_out=report.errors_held_out,
+        model=None if refined is None else model,
+    )
+
+
+def _kinfw_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("kinfw")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def sidecar_path(urdf_path: str | Path) -> Path:
+    """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
+    ``<stem>.kinfw.json`` beside it."""
+    return Path(urdf_path).with_suffix(".kinfw.json")
+
+
+def calibrate_to_files(
+    nominal: Robot,
+    data: Measurements,
+    out: str | Path,
+    *,
+    method: str,
+    noise=None,
+    loss: str = "huber",
+    parameters: str | tuple[str, ...] = "full",
+    prior=None,
+    data_path: str | Path | None = None,
+    held_out: Measurements | None = None,
+    progress=None,
+    reason: str = "given",
+    refine_intrinsics: bool | tuple[str, ...] = (),
+) -> tuple[CalibrationReport, Calibration]:
+    """Calibrate (:func:`kinfw.identification.calibrate`), then write the calibrated
+    URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
+    is computed. The sidecar records ``parameters`` and ``prior`` with ``reason`` (why
+    this model: ``"given"``, or the model choice's reason).
+
+    Returns
+    -------
+    report : CalibrationReport
+        With ``sidecar`` set to the sidecar's path.
+    calibration : Calibration
+    """
+
+    from kinfw.identification import calibrate
+    from kinfw.reports import write_sidecar
+    from kinfw.urdf import write_urdf
+
+    result = calibrate(
+        nominal,
+        data,
+        method=method,
+        noise=noise,
+        loss=loss,
+        parameters=parameters,
+        prior=prior,
+        progress=progress,
+        refine_intrinsics=refine_intrinsics,
+    )
+    report = calibration_report(
+        nominal,
+        Robot(result.urdf_xml, str(out)),
+        data,
+        result,
+        method=method,
+        loss=loss,
+        data_path=data_path,
+        held_out=held_out,
+    )
+    nominal_path = None if nominal.source.startswith("<") else nominal.source
+    model = ModelSummary(
+        (parameters,) if isinstance(parameters, str) else tuple(parameters),
+        None if prior is None else float(prior[0]),
+        None if prior is None else float(prior[1]),
+        reason,
+    )
+    side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out, model=model)
+    write_urdf(out, result.urdf_xml)
+    write_sidecar(sidecar_path(out), side)
+    return replace(report, sidecar=str(sidecar_path(out))), result

@@ -1,0 +1,307 @@
+"""The sections of a calibration report built from the pipeline's stage results: the
+closed form (:class:`kinfw.identification.ClosedFormResult`), the hand-eye step
+(:class:`kinfw.identification.handeye.CamerasResult`) and the joint refinement
+(:class:`kinfw.identification.RefineResult`), as the typed sections of
+:mod:`kinfw.reports` (:func:`kinfw.verification.reporting.calibration_report` puts
+them together)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kinfw.identification import ClosedFormResult, RefineResult, parameter_unit
+from kinfw.identification.handeye import CamerasResult
+from kinfw.observations import kind_named
+from kinfw.reports import (
+    CalibratedUnknown,
+    CameraMount,
+    ClosedFormSection,
+    Correlation,
+    DownweightedRow,
+    HandEyeSection,
+    IdentifiabilitySummary,
+    KinematicValue,
+    NoiseSummary,
+    NotIdentifiable,
+    ParameterRow,
+    RefineSection,
+    RejectedRow,
+    TargetEstimate,
+)
+
+__all__ = [
+    "calibrated_unknowns",
+    "closed_form_section",
+    "downweighted_rows",
+    "hand_eye_section",
+    "noise_summary",
+    "refine_section",
+    "rejected_rows",
+]
+
+
+def _kinematic_values(model) -> tuple[KinematicValue, ...]:
+    return tuple(
+        KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
+        for o, n, v in model.describe()
+    )
+
+
+def closed_form_section(result: ClosedFormResult) -> ClosedFormSection:
+    """The report's stage 1 section from Shih et al.'s closed form.
+
+    Parameters
+    ----------
+    result : ClosedFormResult
+
+    Returns
+    -------
+    ClosedFormSection
+        Per joint its samples, axis-fit residual (rad) and motion per unit joint value,
+        the position RMS (mm) and the canonical CPC parameters with their units.
+    """
+    model = result.model
+    return ClosedFormSection(
+        joint_names=tuple(model.topology.joint_names),
+        frames=tuple(model.topology.frames),
+        q0=tuple(result.q0.tolist()),
+        samples_per_joint=tuple(result.group_sizes.tolist()),
+        axis_residual_rad=tuple(float(v) for v in result.axis_residual_rad),
+        motion_per_unit_joint_value=tuple(result.motion_scale.tolist()),
+        position_rms_mm=1e3 * result.position_rms_m,
+        values=_kinematic_values(model),
+        n_identifiable=model.n_parameters,
+    )
+
+
+def hand_eye_section(result: CamerasResult) -> HandEyeSection:
+    """The report's stage 2 section from the hand-eye step.
+
+    Parameters
+    ----------
+    result : CamerasResult
+
+    Returns
+    -------
+    HandEyeSection
+        Every camera's ``hand_T_camera`` (m) with the solver's iterations and RMS
+        residuals (deg, mm), and every target's ``root_T_target`` (m) with how far the
+        cameras disagree on it (mm, deg).
+    """
+    return HandEyeSection(
+        cameras=tuple(
+            CameraMount(
+                c.camera,
+                c.target,
+                c.joint,
+                c.hand,
+                c.hand_T_camera,
+                c.n_views,
+                c.solver.iterations,
+                c.solver.restarts,
+                c.solver.converged,
+                float(np.degrees(c.solver.rms_rotation_rad)),
+                1e3 * c.solver.rms_translation,
+            )
+            for c in result.cameras
+        ),
+        targets=tuple(
+            TargetEstimate(t, T, 1e3 * dp, float(np.degrees(dr)))
+            for (t, T), (_, dp, dr) in zip(result.root_T_targets, result.target_spread, strict=True)
+        ),
+    )
+
+
+def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
+    """The observations the robust loss down-weighted, the worst (lowest weight) first.
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    tuple of DownweightedRow
+        One per down-weighted observation: ``sample`` (index into the data file's
+        ``samples``, from 0), ``kind``, ``frame`` (the camera for ``target``
+        observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
+        measured minus predicted position; for a kind without positions, of its rows in
+        metres, e.g. a plane contact's distance), ``rotation_residual_deg`` (angle between
+        measured and predicted orientation; None for points), ``weight`` (the robust
+        loss's weight, 1 = full) and ``pixel_residual_px`` (an image point's
+        reprojection error, px; None for other kinds). Sorted by weight, then sample.
+    """
+    rows = []
+    for g in result.residuals:
+        rows_g = np.flatnonzero(g.downweighted)
+        # a kind without positions (a plane contact's distance): its rows in metres
+        units = {c.name: c.unit for c in kind_named(g.kind).components}
+        lengths = [v for n, v in g.components if units[n] == "m"]
+        position_mm = 1e3 * np.linalg.norm(np.hstack(lengths)[rows_g], axis=1) if lengths else None
+        pixels = [v for n, v in g.components if units[n] == "px"]
+        pixel_px = np.linalg.norm(np.hstack(pixels)[rows_g], axis=1) if pixels else None
+        rotation_deg = (
+            None
+            if g.rotation_rad is None
+            else np.degrees(
+                np.arcsin(np.clip(np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))
+            )
+        )
+        rows += [
+            DownweightedRow(
+                int(g.sample[k]),
+                g.kind,
+                g.frame,
+                g.marker,
+                None if position_mm is None else float(position_mm[c]),
+                None if rotation_deg is None else float(rotation_deg[c]),
+                float(g.weight[k]),
+                None if pixel_px is None else float(pixel_px[c]),
+                None if g.labels is None else g.labels[k],
+            )
+            for c, k in enumerate(rows_g)
+        ]
+    rows.sort(key=lambda row: (row.weight, row.sample))
+    return tuple(rows)
+
+
+def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
+    """The observations rejected as gross errors, the worst (largest excess over the
+    rejection threshold) first.
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    tuple of RejectedRow
+        One per :attr:`RefineResult.rejected` entry: ``sample`` (index into the data
+        file's samples, from 0), ``kind``, ``frame``, ``marker``, the residual norms in
+        mm (for a kind without positions, of its rows in metres) and deg (None without
+        orientation) against the final fit,
+        and ``excess`` (its whitened norm over the threshold). Sorted by excess, largest
+        first, then sample.
+    """
+    rows = []
+    for o in result.rejected:
+        # a kind without positions (a plane contact's distance): its lengths, as for
+        # the down-weighted rows
+        lengths = [v for _, unit, v in o.residuals if unit == "m"]
+        p = o.residual("position")
+        p = float(np.linalg.norm(lengths)) if p is None and lengths else p
+        rot = o.residual("rotation")
+        pixels = [v for _, unit, v in o.residuals if unit == "px"]
+        rows.append(
+            RejectedRow(
+                o.sample,
+                o.kind,
+                o.frame,
+                o.marker,
+                None if p is None else 1e3 * p,
+                None if rot is None else float(np.degrees(rot)),
+                o.excess,
+                float(np.linalg.norm(pixels)) if pixels else None,
+                o.where,
+            )
+        )
+    rows.sort(key=lambda row: (-row.excess, row.sample))
+    return tuple(rows)
+
+
+def noise_summary(result: RefineResult) -> NoiseSummary:
+    """The noise of the components the data has (a default sigma of a component without
+    rows, the 1 mm position of pixel-only data, whitened nothing and is not reported).
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    NoiseSummary
+        ``(component, sigma)`` in SI of each component with rows, and whether estimated.
+    """
+    present = {name for g in result.residuals for name, _ in g.components}
+    return NoiseSummary(
+        tuple((k, v) for k, v in result.noise.sigmas if k in present), result.noise.estimated
+    )
+
+
+def calibrated_unknowns(result: RefineResult) -> tuple[CalibratedUnknown, ...]:
+    """The unknowns the refinement estimated (target poses, markers, point offsets,
+    external frames, ...), as written in the report and the sidecar.
+
+    Parameters
+    ----------
+    result : RefineResult
+
+    Returns
+    -------
+    tuple of CalibratedUnknown
+        ``(kind, name, value)``, value a (4, 4) pose or a (3,) point in metres, in the
+        result's order.
+    """
+    return tuple(CalibratedUnknown(u.kind, u.name, u.value) for u in result.unknowns)
+
+
+def refine_section(result: RefineResult, loss: str) -> RefineSection:
+    """The report's joint least squares section.
+
+    Parameters
+    ----------
+    result : RefineResult
+    loss : str
+        The robust loss the refinement used (``"huber"``, ...), as reported.
+
+    Returns
+    -------
+    RefineSection
+        Noise, reduced chi-square, convergence, every parameter's change and standard
+        deviation in its block's unit, the calibrated kinematics and unknowns,
+        identifiability (undefined or infinite numbers as None) and the down-weighted
+        and rejected observations.
+    """
+    ident = result.identifiability
+    return RefineSection(
+        loss=loss,
+        noise=noise_summary(result),
+        reduced_chi_square=result.sigma_hat2,
+        iterations=result.iterations,
+        converged=result.converged,
+        seconds=result.seconds,
+        model_frame=result.model_frame,
+        # units from the parameter blocks (RefineResult.parameter_units)
+        parameters=tuple(
+            ParameterRow(o, f, unit, not free, float(d), float(sd) if free else None)
+            for (o, f), unit, free, d, sd in zip(
+                result.parameter_names,
+                result.parameter_units,
+                result.free,
+                result.estimate,
+                result.std,
+                strict=True,
+            )
+        ),
+        kinematics=_kinematic_values(result.model),
+        unknowns=calibrated_unknowns(result),
+        identifiability=IdentifiabilitySummary(
+            rank=ident.rank,
+            n_parameters=ident.n_parameters,
+            # strict JSON: an undefined (no parameters) or infinite value is None (null)
+            condition=_finite_or_none(ident.condition),
+            observability_o1=_finite_or_none(ident.observability_o1),
+            not_identifiable=tuple(
+                NotIdentifiable(tuple(":".join(p) for p in params), why)
+                for params, why in ident.unidentifiable
+            ),
+            correlations=tuple(Correlation(a, b, r) for a, b, r in ident.correlations),
+        ),
+        downweighted=downweighted_rows(result),
+        rejected=rejected_rows(result),
+        rejection_note=result.rejection_note,
+    )
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
