@@ -351,16 +351,15 @@ def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_wo
     import cv2
 
     from kinfw.reports import read_report, write_report
-    from kinfw.verification.reporting import calibrate_to_files
+    from kinfw.verification.reporting import calibrate_and_report
 
     nominal, _, _, data = _scene(30, seed=10, sigma_px=0.2)
     (g,) = data.groups("pixels")
     bad = g.sample == 17  # one image off by 3 px (a wrong detection), still below rejection
     data = data.with_groups([kind_of(g).with_data(g, kind_of(g).data(g) + 3.0 * bad[:, None])])
     with pytest.warns(UserWarning, match="pixel residuals of pixels 'flange' follow"):
-        report, calibration = calibrate_to_files(
-            nominal, data, tmp_path / "cal.urdf", method="refine", loss="linear", parameters="full"
-        )
+        result = calibrate_and_report(nominal, data, loss="linear", parameters="full")
+    report, calibration = result.write(tmp_path / "cal.urdf"), result.calibration
     rep = report.reprojection
     assert rep.worst[0].sample == 17 and rep.worst[0].image == "img_017.png"
     assert rep.worst[0].rms_px > 2.0 and rep.worst[1].rms_px < 0.5 * rep.worst[0].rms_px

@@ -12,7 +12,6 @@ library at start-up: numpy, Pinocchio and CasADi are imported inside the command
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -23,6 +22,7 @@ from kinfw.files import json_text
 
 if TYPE_CHECKING:
     from kinfw.reports import BeforeAfter, DownweightedRow, RefineSection, RejectedRow, StageErrors
+    from kinfw.verification.evaluation import CrossValidation
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
@@ -95,38 +95,25 @@ def _noise_arg(args: argparse.Namespace):
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from kinfw.model import load_robot
     from kinfw.reports import write_report
-    from kinfw.verification.reporting import calibrate_to_files
+    from kinfw.verification.reporting import calibrate_and_report
 
     nominal = load_robot(args.urdf)
     data = read_data(args.data, args)
     held_out = read_data(args.holdout, args) if args.holdout else None
-    noise, prior = _noise_arg(args), _prior_arg(args)
-    choice = None
-    parameters = "full" if args.params == "auto" else params_arg(args.params)
-    if args.params == "auto" and args.method == "refine":
-        from kinfw.verification.evaluation import choose_parameters
-
-        choice = choose_parameters(nominal, data, noise=noise, loss=args.loss, prior=prior)
-        parameters, prior = choice.parameters, choice.prior
-    report, _ = calibrate_to_files(
+    result = calibrate_and_report(
         nominal,
         data,
-        args.out,
+        parameters="auto" if args.params == "auto" else params_arg(args.params),
         method=args.method,
-        noise=noise,
+        noise=_noise_arg(args),
         loss=args.loss,
-        parameters=parameters,
-        prior=prior,
-        data_path=args.data,
+        prior=_prior_arg(args),
         held_out=held_out,
-        progress=progress_printer(),
-        reason="given" if choice is None else choice.reason,
         refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
+        data_path=args.data,
+        progress=progress_printer(),
     )
-    if choice is not None:  # the choice goes to the report's notes (and the sidecar)
-        report = dataclasses.replace(
-            report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
-        )
+    report, choice = result.write(args.out), result.choice
     if args.report:
         write_report(args.report, report)
     if args.json:
@@ -364,38 +351,39 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw crossval ----------------------------------------------------------------------
 def cmd_crossval(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from kinfw.model import load_robot
-    from kinfw.verification.evaluation import BASELINES, crossvalidate, executor_for_jobs
+    from kinfw.verification.evaluation import crossvalidate
 
     nominal = load_robot(args.urdf)
     data = read_data(args.data, args)
-    sets = ("none", "frames", "offsets", "full") if args.select else BASELINES
     prior = _prior_arg(args)
     watch = progress_printer()
-    executor = executor_for_jobs(args.jobs)
-    try:
-        cv = crossvalidate(
-            nominal,
-            data,
-            k=args.k,
-            seed=args.seed,
-            sets=sets,
-            select=args.select,
-            noise=_noise_arg(args),
-            loss=args.loss,
-            prior=prior,
-            executor=executor,
-            progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
-            exclude_flagged=args.exclude_flagged,
-        )
-    finally:
-        if executor is not None:
-            executor.shutdown()
+    cv = crossvalidate(
+        nominal,
+        data,
+        k=args.k,
+        seed=args.seed,
+        select=args.select,
+        noise=_noise_arg(args),
+        loss=args.loss,
+        prior=prior,
+        jobs=args.jobs,
+        progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
+        exclude_flagged=args.exclude_flagged,
+    )
     if args.json:
         print(json_text(cv.to_dict()))
         return 0
+    _print_crossval(cv, args, data.n_samples)
+    return 0
+
+
+def _print_crossval(cv: CrossValidation, args: argparse.Namespace, n_samples: int) -> None:
+    """The table of ``kinfw crossval``: held-out RMS per fold and parameter set, the
+    excluded observations, the warnings and the selected set."""
+    import numpy as np
+
+    sets = cv.sets
     label = {
         "none": "nominal",
         "frames": "frames only",
@@ -408,7 +396,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         u for u, has in (("position mm / orientation deg", pose), ("reprojection px", px)) if has
     ]
     print(
-        f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
+        f"{args.k}-fold cross-validation of {args.data} ({n_samples} samples, folds "
         f"by sample{', images whole' if px else ''}, seed {args.seed}): held-out RMS, "
         + " | ".join(units)
     )
@@ -467,7 +455,6 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             f"{cv.mean(cv.selected, 'rotation_rms_deg'):.3f} deg, whitened "
             f"{cv.whitened(cv.selected):.3g}"
         )
-    return 0
 
 
 def _observed(row: DownweightedRow | RejectedRow) -> str:

@@ -123,19 +123,10 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
-def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=None):
-    """Stage 2 of ``kinfw simulate --pixels``: images of a fixed board by ``cameras``."""
-    from kinfw.camera import CameraError, Chessboard, parse_board, read_camera
-    from kinfw.simulation import (
-        DEFAULT_BOARD,
-        MIN_CORNERS,
-        board_pose_facing,
-        default_intrinsics,
-        pixel_views,
-        simulate_pixels,
-    )
+def _intrinsics(args, cameras: tuple[str, ...]) -> dict:
+    """The intrinsics of ``--camera FRAME=FILE``, each FRAME a stage 2 camera."""
+    from kinfw.camera import CameraError, read_camera
 
-    board = parse_board(args.board or DEFAULT_BOARD)
     given = {}
     for frame, file in args.camera or ():
         if frame not in cameras:
@@ -147,55 +138,22 @@ def _simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned=Non
             given[frame] = read_camera(file)
         except CameraError as exc:
             raise ValueError(f"--camera {frame}={file}: {exc}") from None
-    intrinsics = {c: given.get(c) or default_intrinsics(c) for c in cameras}
-    min_corners = board.count if isinstance(board, Chessboard) else MIN_CORNERS
-    if planned is not None:  # the plan's configurations; those where no camera sees dropped
-        w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
-        data, _ = simulate_pixels(
-            truth,
-            planned,
-            names,
-            cameras=intrinsics,
-            board_p=board.points,
-            w_T_board=w_T_board,
-            rng=rng,
-            sigma_px=args.pixel_sigma,
-            min_corners=min_corners,
-        )
-        args.board_spec = board.spec()
-        args.default_cameras = sorted(set(cameras) - set(given))
-        return data
-    data, _ = pixel_views(
-        truth,
-        names,
-        lower,
-        upper,
-        args.stage2_samples,
-        rng,
-        cameras=intrinsics,
-        board_p=board.points,
-        sigma_px=args.pixel_sigma,
-        fraction=args.fraction,
-        min_corners=min_corners,
-    )
-    args.board_spec = board.spec()
-    args.default_cameras = sorted(set(cameras) - set(given))
-    return data
+    return given
 
 
-def _pixel_summary(data, args) -> dict:
+def _pixel_summary(sim, sigma_px: float) -> dict:
     """The board and the images and corners per camera of ``--pixels`` data."""
     return {
-        "board": args.board_spec,
-        "sigma_px": args.pixel_sigma,
+        "board": sim.board,
+        "sigma_px": sigma_px,
         "cameras": [
             {
                 "camera": g.camera,
                 "images": len(g.images()[0]),
                 "points": len(g.sample),
-                "default": g.camera in args.default_cameras,
+                "default": g.camera in sim.default_cameras,
             }
-            for g in data.groups("pixels")
+            for g in sim.data.groups("pixels")
         ],
     }
 
@@ -203,18 +161,11 @@ def _pixel_summary(data, args) -> dict:
 def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.measurements import concatenate_measurements, write_measurements
+    from kinfw.measurements import write_measurements
     from kinfw.model import load_robot
-    from kinfw.simulation import (
-        default_target_pose,
-        one_joint_at_a_time,
-        perturb_robot,
-        random_configurations,
-        simulate,
-    )
+    from kinfw.simulation import simulate_measurements
 
     nominal = load_robot(args.urdf)
-    rng = np.random.default_rng(args.seed)
     if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
         args.stage = "both" if args.pixels else "1"
     elif args.pixels and args.stage == "1":
@@ -231,40 +182,37 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if 2 in stages
         else ()
     )
-    truth_xml = perturb_robot(
-        nominal, rng, origin_mm=args.error_mm, origin_deg=args.error_deg, axis_deg=args.error_deg
-    )
-    truth = load_robot(truth_xml)
     names = nominal.topology((*frames, *cameras)).joint_names
-    lower, upper = nominal.joint_limits(names)
-    noise = {"noise_m": args.noise_mm * 1e-3, "noise_rad": np.radians(args.noise_deg)}
-    if args.stereo_mm is not None:
-        noise["stereo_sigma_m"] = args.stereo_mm * 1e-3
-    planned = _plan_qs(args.plan, names) if args.plan is not None else None
-    parts = []
-    if frames and planned is not None:
-        parts.append(simulate(truth, planned, names, frames=frames, rng=rng, **noise))
-    elif frames:
-        qs, _ = one_joint_at_a_time(lower, upper, per_joint=args.per_joint, fraction=args.fraction)
-        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
-    if cameras and args.pixels:
-        parts.append(_simulate_pixels(args, truth, cameras, names, lower, upper, rng, planned))
-    elif cameras:
-        qs = (
-            planned
-            if planned is not None
-            else random_configurations(
-                lower, upper, args.stage2_samples, rng, fraction=args.fraction
-            )
-        )
-        w_T_target = default_target_pose(truth, qs, names, cameras)
-        parts.append(
-            simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
-        )
-    data = concatenate_measurements(*parts)
-    write_measurements(args.out, data)
-    write_text_atomic(args.truth_out, truth_xml)
-    pixels = _pixel_summary(data, args) if args.pixels and cameras else None
+    sim = simulate_measurements(
+        nominal,
+        stages=stages,
+        frames=frames,
+        cameras=cameras,
+        per_joint=args.per_joint,
+        stage2_samples=args.stage2_samples,
+        fraction=args.fraction,
+        noise_m=args.noise_mm * 1e-3,
+        noise_rad=np.radians(args.noise_deg),
+        stereo_sigma_m=None if args.stereo_mm is None else args.stereo_mm * 1e-3,
+        error_mm=args.error_mm,
+        error_deg=args.error_deg,
+        pixels=args.pixels,
+        pixel_sigma=args.pixel_sigma,
+        board=args.board,
+        intrinsics=_intrinsics(args, cameras) if args.pixels and cameras else None,
+        configurations=_plan_qs(args.plan, names) if args.plan is not None else None,
+        seed=args.seed,
+    )
+    write_measurements(args.out, sim.data)
+    write_text_atomic(args.truth_out, sim.truth_xml)
+    _print_simulated(args, sim)
+    return 0
+
+
+def _print_simulated(args: argparse.Namespace, sim) -> None:
+    """What ``kinfw simulate`` wrote: the JSON summary (``--json``) or two lines."""
+    data = sim.data
+    pixels = _pixel_summary(sim, args.pixel_sigma) if args.pixels and sim.cameras else None
     if args.json:
         print(
             json.dumps(
@@ -284,8 +232,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
                 indent=2,
             )
         )
-        return 0
-    poses = bool(frames) or (bool(cameras) and not args.pixels)
+        return
+    poses = bool(sim.frames) or (bool(sim.cameras) and not args.pixels)
     print(
         f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
         + (
@@ -309,7 +257,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         f"wrote {args.truth_out}: the true robot (nominal with errors of "
         f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
     )
-    return 0
 
 
 def _plan_qs(path: Path, names: Sequence[str]) -> Any:

@@ -90,6 +90,7 @@ from kinfw.measurements._checks import (
 )
 from kinfw.measurements._dataset import (
     Measurements,
+    check_measurements,
     concatenate_measurements,
     first_uses,
     merge_same_key,
@@ -123,6 +124,7 @@ __all__ = [
     "align_streams",
     "check_against_robot",
     "check_joint_motion",
+    "check_measurements",
     "check_stream",
     "concatenate_measurements",
     "first_uses",

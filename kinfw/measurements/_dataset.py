@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from os import PathLike
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,13 @@ from kinfw.observations import (
     kinds,
 )
 
-__all__ = ["Measurements", "concatenate_measurements", "first_uses", "merge_same_key"]
+__all__ = [
+    "Measurements",
+    "check_measurements",
+    "concatenate_measurements",
+    "first_uses",
+    "merge_same_key",
+]
 
 
 class FrozenMapping(Mapping[str, Any]):
@@ -297,6 +304,16 @@ def merge_same_key(groups: Iterable[Any]) -> tuple[Any, ...]:
         parts[0] if len(parts) == 1 else kind_of(parts[0]).concatenate(parts)
         for parts in by_key.values()
     )
+
+
+def check_measurements(data: object, name: str) -> Measurements:
+    """``data`` itself when it is a :class:`Measurements`; else a TypeError naming the
+    argument ``name`` (a path: read it with
+    :func:`kinfw.measurements.read_measurements`)."""
+    if isinstance(data, Measurements):
+        return data
+    hint = " (read it with kinfw.read_measurements)" if isinstance(data, str | PathLike) else ""
+    raise TypeError(f"{name}: expected Measurements, got {type(data).__name__} {data!r:.60}{hint}")
 
 
 def concatenate_measurements(*parts: Measurements) -> Measurements:

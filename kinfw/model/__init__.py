@@ -23,7 +23,14 @@ from kinfw.model._cpc import (
     rotation_from_axis,
 )
 from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
-from kinfw.model._robot import Robot, Topology, UnknownFrameError, builtin_head_urdf, load_robot
+from kinfw.model._robot import (
+    Robot,
+    Topology,
+    UnknownFrameError,
+    builtin_head_urdf,
+    check_robot,
+    load_robot,
+)
 from kinfw.model._urdf_read import (
     MOVABLE_TYPES,
     JointInfo,
@@ -55,6 +62,7 @@ __all__ = [
     "builtin_head_urdf",
     "captured_native_stderr",
     "cayley_coordinates",
+    "check_robot",
     "check_urdf_xml",
     "cpc_fk_function",
     "cpc_from_geometry",

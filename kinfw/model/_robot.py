@@ -40,6 +40,7 @@ __all__ = [
     "Topology",
     "UnknownFrameError",
     "builtin_head_urdf",
+    "check_robot",
     "load_robot",
 ]
 
@@ -388,3 +389,14 @@ def load_robot(urdf: str | Path) -> Robot:
     """
     xml, source = xml_text(urdf)
     return Robot(xml, source)
+
+
+def check_robot(robot: object, name: str) -> Robot:
+    """``robot`` itself when it is a :class:`Robot`; else a TypeError naming the
+    argument ``name`` (a path or URDF text: load it with :func:`load_robot`)."""
+    if isinstance(robot, Robot):
+        return robot
+    raise TypeError(
+        f"{name}: expected a Robot, got {type(robot).__name__} {robot!r:.60}"
+        + (" (load it with kinfw.load_robot)" if isinstance(robot, str | Path) else "")
+    )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from kinfw.simulation._board_images import board_texture, render_board, true_corners
+from kinfw.simulation._measurements import SimulatedMeasurements, simulate_measurements
 from kinfw.simulation._outliers import plant_outliers
 from kinfw.simulation._perturb import (
     check_sigma,
@@ -32,6 +33,7 @@ __all__ = [
     "DEFAULT_BOARD",
     "DEFAULT_CAMERA",
     "MIN_CORNERS",
+    "SimulatedMeasurements",
     "board_pose_facing",
     "board_texture",
     "check_sigma",
@@ -46,6 +48,7 @@ __all__ = [
     "random_configurations",
     "render_board",
     "simulate",
+    "simulate_measurements",
     "simulate_pixels",
     "stereo_measure",
     "true_corners",

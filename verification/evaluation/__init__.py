@@ -25,6 +25,7 @@ from kinfw.verification.evaluation._crosscheck import (
 )
 from kinfw.verification.evaluation._crossval import (
     BASELINES,
+    SELECTION_SETS,
     CrossValidation,
     FoldScore,
     crossvalidate,
@@ -56,6 +57,7 @@ __all__ = [
     "PRIOR_GRID_M",
     "PRIOR_LEVERS_M",
     "ROWS_PER_PARAMETER",
+    "SELECTION_SETS",
     "WORST_IMAGES",
     "AccuracyReport",
     "Candidate",

@@ -41,10 +41,11 @@ from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.observations import POSITION, ROTATION, kind_of
-from kinfw.verification.evaluation._trials import run_trials
+from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
 
 __all__ = [
     "BASELINES",
+    "SELECTION_SETS",
     "CrossValidation",
     "FoldScore",
     "crossvalidate",
@@ -54,6 +55,8 @@ __all__ = [
 
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
 BASELINES = ("none", "frames", "full")
+#: Parameter sets compared by default with ``select``: the baselines and offsets.
+SELECTION_SETS = ("none", "frames", "offsets", "full")
 
 
 @dataclass(frozen=True, slots=True)
@@ -336,13 +339,14 @@ def crossvalidate(
     *,
     k: int = 5,
     seed: int = 0,
-    sets: tuple[str, ...] = BASELINES,
+    sets: tuple[str, ...] | None = None,
     select: bool = False,
     noise: NoiseModel | None = None,
     loss: str = "huber",
     prior: tuple[float, float] | None = None,
     progress: Callable[[int, int], None] | None = None,
     executor: Executor | None = None,
+    jobs: int = 1,
     exclude_flagged: bool = False,
     reference: Calibration | None = None,
 ) -> CrossValidation:
@@ -355,8 +359,10 @@ def crossvalidate(
     k : int
         Folds (2 <= k <= samples); folds are a random partition of the samples (seeded).
     seed : int
-    sets : tuple of str
-        Parameter sets (see :func:`kinfw.identification.refine`).
+    sets : tuple of str, optional
+        Parameter sets (see :func:`kinfw.identification.refine`); default
+        :data:`BASELINES`, with ``select`` :data:`SELECTION_SETS` (``kinfw crossval
+        [--select]``).
     select : bool
         Pick the set with the lowest mean whitened held-out error
         (:meth:`CrossValidation.whitened`: position and orientation together, in units
@@ -367,6 +373,9 @@ def crossvalidate(
     executor : concurrent.futures.Executor, optional
         Run the fits (folds x sets) as tasks of this executor (a process pool, Dask's or
         Ray's); default serially in this process. The scores are the same either way.
+    jobs : int
+        Without an ``executor``: run the fits in a pool of ``jobs`` worker processes,
+        shut down at the end (1, the default: in this process).
     exclude_flagged : bool
         Leave the observations the full-data fit (``"full"``, this ``loss``) rejects as
         gross errors out of the held-out scores (:attr:`CrossValidation.excluded`);
@@ -377,6 +386,8 @@ def crossvalidate(
     """
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
+    if sets is None:
+        sets = SELECTION_SETS if select else BASELINES
     if reference is None and (exclude_flagged or (select and noise is None)):
         # the full-data fit: its noise whitens the selection, its rejections are flagged
         reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
@@ -392,17 +403,17 @@ def crossvalidate(
         )
         drop = {(o.kind, o.frame, o.marker, o.sample) for o in rejected}
         scored = _without_observations(data, drop)
-    order = np.random.default_rng(seed).permutation(data.n_samples)
-    tasks = []
-    for f, test_idx in enumerate(np.array_split(order, k)):
-        test_ids = np.sort(test_idx)
-        train = data.subset(np.sort(np.setdiff1d(order, test_idx)))
-        test = scored.subset(test_ids)
-        tasks += [
-            (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
-            for parameters in sets
-        ]
-    scores = run_trials(_score, tasks, executor=executor, progress=progress)
+    tasks = [
+        (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
+        for f, (train, test, test_ids) in enumerate(_folds(data, scored, k, seed))
+        for parameters in sets
+    ]
+    pool = executor_for_jobs(jobs) if executor is None else None
+    try:
+        scores = run_trials(_score, tasks, executor=executor or pool, progress=progress)
+    finally:
+        if pool is not None:
+            pool.shutdown()
     selected, sigma, sigma_px = None, None, None
     if select:
         used = noise if noise is not None else reference.refined.noise
@@ -422,6 +433,20 @@ def crossvalidate(
     if select:
         selected = min(sets, key=cv.whitened)
     return replace(cv, selected=selected)
+
+
+def _folds(
+    data: Measurements, scored: Measurements, k: int, seed: int
+) -> list[tuple[Measurements, Measurements, NDArray[np.int64]]]:
+    """``(train, test, test sample indices)`` of each of the ``k`` folds: a seeded random
+    partition of the samples; ``train`` from ``data``, ``test`` from ``scored``."""
+    order = np.random.default_rng(seed).permutation(data.n_samples)
+    folds = []
+    for test_idx in np.array_split(order, k):
+        test_ids = np.sort(test_idx)
+        train = data.subset(np.sort(np.setdiff1d(order, test_idx)))
+        folds.append((train, scored.subset(test_ids), test_ids))
+    return folds
 
 
 def _without_observations(

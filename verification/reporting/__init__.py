@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from kinfw.verification.reporting._calibrate import CalibrationResult, calibrate_and_report
 from kinfw.verification.reporting._report import (
     before_after_rows,
-    calibrate_to_files,
     calibration_report,
     errors_by_group,
     file_sha256,
@@ -23,8 +23,9 @@ from kinfw.verification.reporting._sections import (
 from kinfw.verification.reporting._stage_plot import plot_stage_errors
 
 __all__ = [
+    "CalibrationResult",
     "before_after_rows",
-    "calibrate_to_files",
+    "calibrate_and_report",
     "calibrated_unknowns",
     "calibration_report",
     "closed_form_section",

@@ -1,8 +1,8 @@
 """Calibration reports and sidecars built from the pipeline's result, as the typed
 :class:`kinfw.reports.CalibrationReport` and
-:class:`kinfw.reports.CalibrationSidecar` (dictionaries only when written), and
-the calibrated URDF and sidecar written together (:func:`calibrate_to_files`). The
-stages' sections are built by :mod:`kinfw.verification.reporting`, the errors-by-stage
+:class:`kinfw.reports.CalibrationSidecar` (dictionaries only when written; the
+workflow that writes them is :func:`kinfw.verification.reporting.calibrate_and_report`).
+The stages' sections are built by :mod:`kinfw.verification.reporting`, the errors-by-stage
 figure drawn by :mod:`kinfw.verification.reporting`."""
 
 from __future__ import annotations
@@ -40,7 +40,6 @@ from kinfw.verification.reporting._sections import (
 
 __all__ = [
     "before_after_rows",
-    "calibrate_to_files",
     "calibration_report",
     "errors_by_group",
     "file_sha256",
@@ -232,69 +231,3 @@ def sidecar_path(urdf_path: str | Path) -> Path:
     """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
     ``<stem>.kinfw.json`` beside it."""
     return Path(urdf_path).with_suffix(".kinfw.json")
-
-
-def calibrate_to_files(
-    nominal: Robot,
-    data: Measurements,
-    out: str | Path,
-    *,
-    method: str,
-    noise=None,
-    loss: str = "huber",
-    parameters: str | tuple[str, ...] = "full",
-    prior=None,
-    data_path: str | Path | None = None,
-    held_out: Measurements | None = None,
-    progress=None,
-    reason: str = "given",
-    refine_intrinsics: bool | tuple[str, ...] = (),
-) -> tuple[CalibrationReport, Calibration]:
-    """Calibrate (:func:`kinfw.identification.calibrate`), then write the calibrated
-    URDF ``out`` and its sidecar (:func:`sidecar_path`), each atomically once everything
-    is computed. The sidecar records ``parameters`` and ``prior`` with ``reason`` (why
-    this model: ``"given"``, or the model choice's reason).
-
-    Returns
-    -------
-    report : CalibrationReport
-        With ``sidecar`` set to the sidecar's path.
-    calibration : Calibration
-    """
-
-    from kinfw.identification import calibrate
-    from kinfw.reports import write_sidecar
-    from kinfw.urdf import write_urdf
-
-    result = calibrate(
-        nominal,
-        data,
-        method=method,
-        noise=noise,
-        loss=loss,
-        parameters=parameters,
-        prior=prior,
-        progress=progress,
-        refine_intrinsics=refine_intrinsics,
-    )
-    report = calibration_report(
-        nominal,
-        Robot(result.urdf_xml, str(out)),
-        data,
-        result,
-        method=method,
-        loss=loss,
-        data_path=data_path,
-        held_out=held_out,
-    )
-    nominal_path = None if nominal.source.startswith("<") else nominal.source
-    model = ModelSummary(
-        (parameters,) if isinstance(parameters, str) else tuple(parameters),
-        None if prior is None else float(prior[0]),
-        None if prior is None else float(prior[1]),
-        reason,
-    )
-    side = sidecar(report, result, nominal_path=nominal_path, calibrated_path=out, model=model)
-    write_urdf(out, result.urdf_xml)
-    write_sidecar(sidecar_path(out), side)
-    return replace(report, sidecar=str(sidecar_path(out))), result

@@ -44,7 +44,7 @@ from kinfw.simulation import (
 from kinfw.verification.evaluation import reprojection_section
 from kinfw.verification.reporting import (
     before_after_rows,
-    calibrate_to_files,
+    calibrate_and_report,
     errors_by_group,
     plot_stage_errors,
 )
@@ -174,15 +174,15 @@ def run_demo(
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     write_text_atomic(out / "true.urdf", truth_xml)
-    report, result = calibrate_to_files(
+    calibrated_run = calibrate_and_report(
         nominal,
         data,
-        out / "calibrated.urdf",
-        method="refine",
+        parameters="full",
         data_path=out / "data.json",
         held_out=held_out,
         progress=progress,
     )
+    report, result = calibrated_run.write(out / "calibrated.urdf"), calibrated_run.calibration
     calibrated = load_robot(out / "calibrated.urdf")
     nominal_errors = errors_by_group(nominal, exact)
     truth_rms = [StageErrors.of("nominal", nominal_errors)]
