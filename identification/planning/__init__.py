@@ -23,25 +23,41 @@ from kinfw.identification.planning._plan import (
     write_plan,
 )
 from kinfw.identification.planning._pool import Pool, candidate_pool, collision_free
+from kinfw.identification.planning._workflow import (
+    CURVE_NS,
+    EvaluationSet,
+    PoolTooSmallError,
+    evaluation_set,
+    plan_measurement,
+    plot_plan,
+    read_pool,
+)
 
 __all__ = [
+    "CURVE_NS",
     "PLAN_FORMAT",
     "CandidateInformation",
+    "EvaluationSet",
     "HeldOut",
     "Plan",
     "Pool",
+    "PoolTooSmallError",
     "Setup",
     "candidate_information",
     "candidate_pool",
     "collision_free",
+    "evaluation_set",
     "exchange",
     "greedy",
     "held_out",
     "mean_square",
     "plan_configurations",
+    "plan_measurement",
     "plan_per_joint",
+    "plot_plan",
     "predicted_error",
     "read_plan",
+    "read_pool",
     "short_path",
     "write_plan",
 ]

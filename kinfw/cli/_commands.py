@@ -173,10 +173,8 @@ def add_view_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-
     from kinfw.model import load_robot
-    from kinfw.reports import read_sidecar
-    from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
+    from kinfw.view import show
 
     if args.sample is not None and args.data is None:
         raise ValueError(f"--sample {args.sample}: give --data, the measurements to draw")
@@ -188,34 +186,24 @@ def cmd_view(args: argparse.Namespace) -> int:
             f"--sample {args.sample}: out of range, {args.data} has "
             f"{data.n_samples} samples (give 0 to {data.n_samples - 1})"
         )
-    sidecar_path = args.sidecar
-    if sidecar_path is None and args.calibrated:
-        guess = Path(args.calibrated).with_suffix(".kinfw.json")
-        sidecar_path = guess if guess.is_file() else None
-    extra = {}
-    if sidecar_path is not None:
-        sidecar = read_sidecar(sidecar_path)
-        extra = {"targets": targets_from_sidecar(sidecar), "meas_T_root": sidecar.w_T_root}
-    up = args.up
-    vis = scene(
+    shown = show(
         nominal,
         calibrated,
         data,
+        sidecar=args.sidecar,
         sample=args.sample,
         residual_scale=args.residual_scale,
-        up=up,
+        up=args.up,
         package_dirs=tuple(args.package_dir),
-        window=OfflineWindow() if args.html else None,
-        **extra,
+        html=args.html,
     )
     if args.html:
-        path = write_html(vis, args.html)
         print(
-            f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
+            f"wrote {shown} ({shown.stat().st_size / 1e6:.1f} MB, self-contained: open it in "
             "any browser, no network needed)"
         )
         return 0
-    print(f"meshcat is serving the scene at {vis.url()} (127.0.0.1); press Enter to stop")
+    print(f"meshcat is serving the scene at {shown.url()} (127.0.0.1); press Enter to stop")
     with contextlib.suppress(EOFError, KeyboardInterrupt):
         input()
     return 0

@@ -138,7 +138,7 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     import numpy as np
 
     from kinfw.cli._args import frames_arg
-    from kinfw.control import GazeSolver
+    from kinfw.control import fixate
     from kinfw.files import json_text
     from kinfw.model import load_robot
 
@@ -151,8 +151,7 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     rays = _camera_rays(args, cameras)
     point = np.array(args.point, dtype=float) * UNIT_M[args.unit]
     check_distance("--point", point, GAZE_PLAUSIBLE_M, args.unit)
-    solver = GazeSolver(robot, cameras, free_joints=free)
-    fix = solver.fixate(point, camera_rays=rays, q_start=q_start)
+    fix = fixate(robot, point, cameras=cameras, camera_rays=rays, q_start=q_start, free_joints=free)
     rows = joint_rows(robot, fix.q, fix.free_joints, fix.at_limits)
     errors_deg = np.degrees(fix.error_rad)
     if args.html is not None:

@@ -10,7 +10,7 @@ import json
 import math
 from pathlib import Path
 
-__all__ = ["add_plan_parser", "cmd_plan", "read_pool"]
+__all__ = ["add_plan_parser", "cmd_plan"]
 
 
 def add_plan_parser(sub, number) -> None:
@@ -58,39 +58,6 @@ def add_plan_parser(sub, number) -> None:
     p.set_defaults(func=cmd_plan)
 
 
-def read_pool(path: Path, joint_names) -> object:
-    """Candidate joint states (n, J) in ``joint_names`` order from a JSON file: a
-    ``kinfw-measurements`` file (its samples) or ``{"joint_names": [...],
-    "configurations": [[...], ...]}`` (a plan file is one)."""
-    import numpy as np
-
-    try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{path}: not JSON ({exc.msg} at line {exc.lineno})") from None
-    if isinstance(doc, dict) and doc.get("format") == "kinfw-measurements":
-        from kinfw.measurements import read_measurements
-
-        data = read_measurements(path)
-        names, qs = data.joint_names, data.qs
-    else:
-        names = doc.get("joint_names") if isinstance(doc, dict) else None
-        if not isinstance(names, list) or not all(isinstance(v, str) for v in names):
-            raise ValueError(f'{path}: "joint_names": expected a list of joint names')
-        try:
-            qs = np.array(doc.get("configurations"), dtype=float)
-        except (TypeError, ValueError):
-            qs = np.empty((0,))
-        if qs.ndim != 2 or qs.shape[1] != len(names) or not np.isfinite(qs).all():
-            raise ValueError(
-                f'{path}: "configurations": expected rows of {len(names)} finite joint values'
-            )
-    missing = [j for j in joint_names if j not in names]
-    if missing:
-        raise ValueError(f'{path}: "joint_names": missing the joints {missing}')
-    return qs[:, [list(names).index(j) for j in joint_names]]
-
-
 def _setup(args, robot):
     import numpy as np
 
@@ -129,94 +96,41 @@ def _setup(args, robot):
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from kinfw.cli._tables import format_table
-    from kinfw.identification.planning import (
-        candidate_pool,
-        plan_configurations,
-        plan_per_joint,
-        write_plan,
-    )
     from kinfw.model import load_robot
-    from kinfw.simulation import random_configurations
 
     if args.pool is not None and args.within_limits is not None:
         raise ValueError("give --pool or --within-limits, not both")
     robot = load_robot(args.urdf)
     setup = _setup(args, robot)
-    names = robot.topology(setup.observed).joint_names
-    lower, upper = robot.joint_limits(names)
-    rng = np.random.default_rng(args.seed)
-    fraction = args.within_limits or 0.8
-    w_T = setup.target_pose(robot, names, 0.5 * (lower + upper)) if setup.cameras else None
-    test = random_configurations(lower, upper, args.test, rng, fraction=fraction)
-    if setup.cameras:  # the held-out error where the board is seen
-        test = candidate_pool(robot, setup, names, w_T, qs=test).qs
     summary = {"urdf": str(args.urdf), "frames": list(setup.frames)}
     summary["cameras"] = list(setup.cameras)
     if args.protocol == "per-joint":
-        out = plan_per_joint(
-            robot, setup, args.per_joint, joint_names=names, test_qs=test, w_T_target=w_T
-        )
-        summary.update({k: v for k, v in out.items() if k != "qs"})
-        if args.json:
-            print(json.dumps(summary, indent=2))
-        else:
-            print(
-                f"per-joint protocol, {args.per_joint} values per joint ({out['n_planned']} "
-                f"configurations): predicted held-out position RMS "
-                f"{out['planned_position_rms_m'] * 1e3:.4f} mm planned, "
-                f"{out['even_position_rms_m'] * 1e3:.4f} mm evenly spaced; the paper's 9 "
-                f"evenly spaced ({out['n_paper']}): {out['paper_position_rms_m'] * 1e3:.4f} mm"
-            )
-        return 0
-    if args.pool is not None:
-        pool = candidate_pool(robot, setup, names, w_T, qs=read_pool(args.pool, names))
-    else:
-        pool = candidate_pool(
+        return _plan_per_joint(args, robot, setup, summary)
+    from kinfw.identification.planning import (
+        PoolTooSmallError,
+        plan_measurement,
+        plot_plan,
+        read_pool,
+        write_plan,
+    )
+
+    names = robot.topology(setup.observed).joint_names
+    try:
+        plan = plan_measurement(
             robot,
             setup,
-            names,
-            w_T,
-            within_limits=fraction,
-            n=args.candidates,
-            rng=rng,
+            args.n,
+            pool_qs=None if args.pool is None else read_pool(args.pool, names),
+            within_limits=args.within_limits,
+            candidates=args.candidates,
+            n_test=args.test,
             collisions=args.collisions,
+            target_m=None if args.target_mm is None else args.target_mm * 1e-3,
+            seed=args.seed,
         )
-    if len(pool.qs) < args.n and args.target_mm is None:
-        raise ValueError(
-            f"--n {args.n}: only {len(pool.qs)} candidates satisfy the constraints "
-            f"(dropped: {pool.dropped or 'none'})"
-        )
-    ns = sorted({k for k in (5, 10, 15, 20, 30, 40, 60, 100, args.n) if k <= len(pool.qs)})
-    plan = plan_configurations(
-        robot,
-        setup,
-        pool.qs,
-        args.n,
-        joint_names=names,
-        test_qs=test,
-        w_T_target=w_T,
-        rng=rng,
-        curve_ns=ns,
-        target_m=None if args.target_mm is None else args.target_mm * 1e-3,
-        dropped=pool.dropped,
-    )
-    summary.update(
-        {
-            "n": len(plan.qs),
-            "pool": plan.pool_size,
-            "dropped": plan.dropped,
-            "seconds": plan.seconds,
-            "position_rms_mm": plan.position_rms_m * 1e3,
-            "rotation_rms_deg": math.degrees(plan.rotation_rms_rad),
-            "random_position_rms_mm": plan.random_position_rms_m * 1e3,
-            "curve": [
-                {"n": k, "planned_mm": a * 1e3, "random_mm": b * 1e3} for k, a, b in plan.curve
-            ],
-        }
-    )
+    except PoolTooSmallError as exc:
+        raise ValueError(f"--n {args.n}: {exc.reason}") from None
+    summary.update(_plan_summary(plan))
     if args.out is not None:
         setup_doc = {k: summary[k] for k in ("urdf", "frames", "cameras")} | {
             "kind": setup.frame_kind,
@@ -229,10 +143,62 @@ def cmd_plan(args: argparse.Namespace) -> int:
         }
         write_plan(args.out, plan, setup_doc)
     if args.plot is not None:
-        _plot(args.plot, plan)
+        plot_plan(args.plot, plan)
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
+    _print_plan(args, plan)
+    return 0
+
+
+def _plan_per_joint(args: argparse.Namespace, robot, setup, summary: dict) -> int:
+    """``kinfw plan --protocol per-joint``: Shih et al.'s protocol, planned."""
+    import numpy as np
+
+    from kinfw.identification.planning import evaluation_set, plan_per_joint
+
+    rng = np.random.default_rng(args.seed)
+    tests = evaluation_set(robot, setup, args.test, rng, fraction=args.within_limits or 0.8)
+    out = plan_per_joint(
+        robot,
+        setup,
+        args.per_joint,
+        joint_names=tests.joint_names,
+        test_qs=tests.qs,
+        w_T_target=tests.w_T_target,
+    )
+    summary.update({k: v for k, v in out.items() if k != "qs"})
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(
+            f"per-joint protocol, {args.per_joint} values per joint ({out['n_planned']} "
+            f"configurations): predicted held-out position RMS "
+            f"{out['planned_position_rms_m'] * 1e3:.4f} mm planned, "
+            f"{out['even_position_rms_m'] * 1e3:.4f} mm evenly spaced; the paper's 9 "
+            f"evenly spaced ({out['n_paper']}): {out['paper_position_rms_m'] * 1e3:.4f} mm"
+        )
+    return 0
+
+
+def _plan_summary(plan) -> dict:
+    """The plan's numbers in the ``--json`` summary (mm, deg)."""
+    return {
+        "n": len(plan.qs),
+        "pool": plan.pool_size,
+        "dropped": plan.dropped,
+        "seconds": plan.seconds,
+        "position_rms_mm": plan.position_rms_m * 1e3,
+        "rotation_rms_deg": math.degrees(plan.rotation_rms_rad),
+        "random_position_rms_mm": plan.random_position_rms_m * 1e3,
+        "curve": [{"n": k, "planned_mm": a * 1e3, "random_mm": b * 1e3} for k, a, b in plan.curve],
+    }
+
+
+def _print_plan(args: argparse.Namespace, plan) -> None:
+    """The plan's predicted errors, and the table of them against N."""
+    from kinfw.cli._tables import format_table
+
     print(
         f"planned {len(plan.qs)} of {plan.pool_size} candidates in {plan.seconds:.2f} s"
         + (f" (dropped: {plan.dropped})" if plan.dropped else "")
@@ -244,26 +210,3 @@ def cmd_plan(args: argparse.Namespace) -> int:
     print(format_table(rows, ["N", "planned mm", "random mm"]))
     if args.out is not None:
         print(f"wrote {args.out}")
-    return 0
-
-
-def _plot(path: Path, plan) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    n = [c[0] for c in plan.curve]
-    fig, ax = plt.subplots(figsize=(5, 3.5))
-    ax.plot(n, [c[1] * 1e3 for c in plan.curve], "o-", label="planned")
-    ax.plot(n, [c[2] * 1e3 for c in plan.curve], "s--", label="random (mean)")
-    ax.set_xlabel("configurations N")
-    ax.set_ylabel("predicted held-out position RMS (mm)")
-    ax.set_yscale("log")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend()
-    fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
-    fig.savefig(tmp)
-    plt.close(fig)
-    tmp.replace(path)

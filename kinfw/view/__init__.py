@@ -44,6 +44,7 @@ from kinfw.view._scene import (
     scene,
     targets_from_sidecar,
 )
+from kinfw.view._show import show
 
 __all__ = [
     "BACKGROUND_RGB",
@@ -77,6 +78,7 @@ __all__ = [
     "rotation_y_onto",
     "scene",
     "set_camera",
+    "show",
     "stick",
     "targets_from_sidecar",
     "transform_from_translation",

@@ -139,7 +139,7 @@ def _as_robot(robot: Robot | str | Path, name: str) -> Robot:
         return robot
     if isinstance(robot, (str, Path)):
         return load_robot(robot)
-    raise TypeError(f"{name}: expected a kinfw.Robot or a URDF path, got {type(robot).__name__}")
+    raise TypeError(f"{name}: expected a Robot or a URDF path, got {type(robot).__name__}")
 
 
 def residual_color(error_m: float) -> tuple[float, float, float]:
