@@ -174,7 +174,7 @@ def run_demo(
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     write_text_atomic(out / "true.urdf", truth_xml)
-    calibrated_run = calibrate_and_report(
+    fitted = calibrate_and_report(
         nominal,
         data,
         parameters="full",
@@ -182,7 +182,7 @@ def run_demo(
         held_out=held_out,
         progress=progress,
     )
-    report, result = calibrated_run.write(out / "calibrated.urdf"), calibrated_run.calibration
+    report, result = fitted.write(out / "calibrated.urdf"), fitted.calibration
     calibrated = load_robot(out / "calibrated.urdf")
     nominal_errors = errors_by_group(nominal, exact)
     truth_rms = [StageErrors.of("nominal", nominal_errors)]
