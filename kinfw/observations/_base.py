@@ -323,13 +323,6 @@ class ObservationKind:
         unknown's block key; None when the group has no such track."""
         return None
 
-    def root_point_pairs(
-        self, group: Any, start: StartContext
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-        """Point pairs ``(w_p, meas_p)`` (k, 3) each that register the model frame in the
-        group's measurement frame; None when the group gives none."""
-        return None
-
     # -- estimation
     def unknowns(self, group: Any, start: StartContext) -> tuple[UnknownRequest, ...]:
         """The unknown blocks the group needs, with closed-form start estimates."""
