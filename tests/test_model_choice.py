@@ -8,13 +8,13 @@ import pytest
 
 import kinfw.verification.evaluation._model_choice as model_choice
 from kinfw.cli._main import main
+from kinfw.files import sidecar_path
 from kinfw.identification import calibrate
 from kinfw.measurements import write_measurements
 from kinfw.model import cpc_from_robot, load_robot
 from kinfw.reports import read_sidecar
 from kinfw.simulation import perturb_robot, random_configurations, simulate
 from kinfw.verification.evaluation import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
-from kinfw.verification.reporting import sidecar_path
 from tests.robots import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")

@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from kinfw.cli._args import default_sidecar_path, number
+from kinfw.cli._args import number
 from kinfw.cli._commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -46,7 +46,7 @@ from kinfw.cli._gaze import add_gaze_parser
 from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
-from kinfw.files import check_output_dir, check_outputs
+from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
 __all__ = ["main"]
 
@@ -82,7 +82,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         )
     elif command == "calibrate":
         check_outputs(
-            {"--out": args.out, "sidecar": default_sidecar_path(args.out), "--report": args.report},
+            {"--out": args.out, "sidecar": sidecar_path(args.out), "--report": args.report},
             inputs={
                 "--urdf": args.urdf,
                 "data file": args.data,
@@ -95,7 +95,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
         check_output_dir(args.out, label="--out", files=DEMO_FILES)
     elif command == "view" and args.html is not None:
-        sidecar = args.sidecar or (args.calibrated and default_sidecar_path(args.calibrated))
+        sidecar = args.sidecar or (args.calibrated and sidecar_path(args.calibrated))
         check_outputs(
             {"--html": args.html},
             inputs={

@@ -9,7 +9,6 @@ from kinfw.verification.reporting._report import (
     errors_by_group,
     file_sha256,
     sidecar,
-    sidecar_path,
 )
 from kinfw.verification.reporting._sections import (
     calibrated_unknowns,
@@ -37,5 +36,4 @@ __all__ = [
     "refine_section",
     "rejected_rows",
     "sidecar",
-    "sidecar_path",
 ]

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kinfw.files import sidecar_path
 from kinfw.identification import Calibration
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
@@ -45,7 +46,6 @@ __all__ = [
     "errors_by_group",
     "file_sha256",
     "sidecar",
-    "sidecar_path",
 ]
 
 
@@ -226,12 +226,6 @@ def _kinfw_version() -> str:
         return metadata.version("kinfw")
     except metadata.PackageNotFoundError:
         return "unknown (not installed)"
-
-
-def sidecar_path(urdf_path: str | Path) -> Path:
-    """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
-    ``<stem>.kinfw.json`` beside it."""
-    return Path(urdf_path).with_suffix(".kinfw.json")
 
 
 def calibrate_to_files(
