@@ -1,4 +1,7 @@
-"""TODO face."""
+"""Cameras and boards: intrinsics (pinhole with OpenCV's distortion), the boards' point
+models (chessboard, ChArUco) and corner detection numbered by the board (OpenCV, imported
+when used).
+"""
 
 from __future__ import annotations
 

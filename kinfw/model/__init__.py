@@ -1,4 +1,7 @@
-"""TODO face."""
+"""The robot model: a URDF robot in Pinocchio (:class:`Robot`, :func:`load_robot`), the tree
+CPC model (:class:`CPCModel`; numpy and CasADi forward kinematics) and the parameter blocks
+an estimation problem is made of (:class:`BlockKey`, :class:`CPCBlock`, ...).
+"""
 
 from __future__ import annotations
 

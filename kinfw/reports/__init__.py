@@ -1,4 +1,8 @@
-"""TODO face."""
+"""The files a calibration leaves, typed: the report (``report.json``,
+:class:`CalibrationReport`) and the sidecar beside the calibrated URDF
+(``CALIBRATED.kinfw.json``, :class:`CalibrationFile`), with readers that name the file and
+key of every error.
+"""
 
 from __future__ import annotations
 

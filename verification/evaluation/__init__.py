@@ -1,4 +1,7 @@
-"""TODO face."""
+"""How good is a model: its errors against measurements (:func:`evaluate_model`, what
+``kinfw verify`` reports), k-fold cross-validation of the whole pipeline, the default model
+choice, the Cramér-Rao bound, the CPC-vs-Pinocchio cross-check, and the trial runner.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""TODO face."""
+"""A calibration's report and sidecar built from the pipeline's results, the URDF and
+sidecar written together (:func:`calibrate_to_files`), and the errors-by-stage figure.
+"""
 
 from __future__ import annotations
 
