@@ -149,12 +149,21 @@ def test_the_wheel_installs_one_namespace(tmp_path):
     """``pip install .`` puts ``kinfw`` (and the built-in URDF) in site-packages and no
     top-level ``identification`` / ``verification`` / ``urdf``: read from the wheel pip
     builds from this tree."""
+    import shutil
     import subprocess
     import sys
     import zipfile
 
+    source = tmp_path / "source"  # a copy: setuptools writes build/ beside the sources
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(REPO / name, source / name)
+    for folder in (*FOLDERS, "urdf"):
+        shutil.copytree(
+            REPO / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__")
+        )
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(REPO)],
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(source)],
         check=True,
         capture_output=True,
     )

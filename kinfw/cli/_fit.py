@@ -1,6 +1,6 @@
 """The commands of the ``kinfw`` command line that fit a model: ``calibrate``, ``demo``
 and ``crossval``, with their tables and printers (the other commands are in
-:mod:`kinfw.cli`, their parsers in :mod:`kinfw.cli`, :func:`kinfw.cli.main`
+:mod:`kinfw.cli._commands`, their parsers in :mod:`kinfw.cli._fit_parser`, :func:`kinfw.cli.main`
 in :mod:`kinfw.cli`).
 
 Each ``cmd_<name>(args)`` runs ``kinfw <name>`` on the parsed arguments and returns the

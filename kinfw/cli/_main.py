@@ -13,12 +13,11 @@ start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pin
 
 This module holds the top-level parser, the checks of the outputs, the warning printer
 and :func:`main`. Each command's sub-parser is defined beside the command: ``simulate``
-in :mod:`kinfw.cli`; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
-``import-csv`` in :mod:`kinfw.cli`; ``calibrate``, ``demo`` and ``crossval`` in
-:mod:`kinfw.cli` (commands in :mod:`kinfw.cli`); ``detect``, ``plan``,
-``gaze`` and ``reach`` in :mod:`kinfw.cli`, :mod:`kinfw.cli`,
-:mod:`kinfw.cli` and :mod:`kinfw.cli`. The argument types they share are in
-:mod:`kinfw.cli`.
+in ``_simulate.py``; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
+``import-csv`` in ``_commands.py``; ``calibrate``, ``demo`` and ``crossval`` in
+``_fit_parser.py`` (commands in ``_fit.py``); ``detect``, ``plan``, ``gaze`` and ``reach``
+in ``_detect.py``, ``_plan.py``, ``_gaze.py`` and ``_reach.py``. The argument types they
+share are in ``_args.py``.
 """
 
 from __future__ import annotations
