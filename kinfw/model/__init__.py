@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 from kinfw.model._blocks import (
+    CPC_KEY,
+    BaseBlock,
     Block,
     BlockKey,
     CPCBlock,
     ParameterName,
     PointBlock,
     RigidFrameBlock,
+    RobotBlock,
     ZeroOffsetBlock,
 )
 from kinfw.model._cpc import (
@@ -37,7 +40,9 @@ from kinfw.model._urdf_read import (
 )
 
 __all__ = [
+    "CPC_KEY",
     "MOVABLE_TYPES",
+    "BaseBlock",
     "Block",
     "BlockKey",
     "CPCBlock",
@@ -47,6 +52,7 @@ __all__ = [
     "PointBlock",
     "RigidFrameBlock",
     "Robot",
+    "RobotBlock",
     "RobotModelError",
     "Topology",
     "UnknownFrameError",
