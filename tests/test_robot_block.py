@@ -133,3 +133,19 @@ def test_the_block_says_what_it_frees_per_parameter_set_and_takes_no_prior(geare
     assert np.isfinite(problem.prior_sigma[s_cpc]).all()  # the chart's rad and m entries
     with pytest.raises(ValueError, match="the key gear_scale:tilt is taken"):
         build_problem(nominal, data, extra_blocks=(GEAR, GEAR))
+
+
+def test_the_result_model_takes_the_joint_values_after_the_blocks_hook(geared):
+    """Every robot block moved at once (zero offsets too, free under a prior): the CasADi
+    predictions equal ``model_at``'s model at the scaled joint values ``(1 + s) q``."""
+    nominal, _, data, _, j = geared
+    problem = build_problem(nominal, data, prior=(1e-3, 1e-2), extra_blocks=(GEAR,))
+    x = np.random.default_rng(2).normal(scale=0.02, size=problem.n_parameters)
+    _, s = problem.block(GEAR.key)
+    model = problem.model_at(x)
+    q = data.q_of(model.topology.joint_names)
+    q[:, j] *= 1.0 + x[s][0]
+    for g, (r, _) in zip(problem.groups, problem.raw_residuals(x, False), strict=True):
+        predicted = g.group.meas_T_frame[:, :3, 3] - r[:, :3]  # position rows: meas - pred
+        T = model.frame_poses(q[g.sample], g.frame)
+        np.testing.assert_allclose(T[:, :3, 3], predicted, atol=1e-12, rtol=0)

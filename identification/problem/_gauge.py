@@ -105,8 +105,8 @@ def robot_blocks(
     with_prior: bool = False,
     extra: tuple[RobotBlock, ...] = (),
 ) -> tuple[RobotBlock, ...]:
-    """The robot's blocks with their free masks: CPC chart, base, joint zero offsets,
-    then the ``extra`` ones.
+    """The robot's blocks with their free masks: CPC chart, base, the ``extra`` ones,
+    joint zero offsets.
 
     Parameters
     ----------
@@ -162,14 +162,17 @@ def robot_blocks(
         joint_names=tuple(topo.joint_names),
         revolute=tuple(bool(r) for r in topo.revolute),
     )
-    out: tuple[RobotBlock, ...] = (cpc, base, zero)
+    more: tuple[RobotBlock, ...] = ()
     for b in extra:
         if not isinstance(b, RobotBlock):
             raise ValueError(f"extra_blocks: expected RobotBlock instances, got {type(b).__name__}")
-        if b.key in {o.key for o in out}:
+        if b.key in {o.key for o in (cpc, base, zero, *more)}:
             raise ValueError(f"extra_blocks: the key {b.key} is taken")
-        out += (b.with_free(b.free_for(parameters)),)
-    return out
+        more += (b.with_free(b.free_for(parameters)),)
+    # the extra blocks' joint hooks act on the readings before the zero offsets
+    # (q' = (1 + s) q + z for a scale), so that model_at's model, with the offsets
+    # folded in, takes the joint values after the extra hooks
+    return (cpc, base, *more, zero)
 
 
 #: Relative norm (columns scaled to unit norm) below which a parameter's Jacobian column

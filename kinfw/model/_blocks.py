@@ -170,8 +170,8 @@ class RobotBlock(Block):
     frames' poses at the joint readings ``q`` (model joint order) as
 
     1. ``q' = joint_values_k(... joint_values_1(q))``: :meth:`casadi_joint_values` of
-       every robot block, in the problem's order (a zero offset adds, a gear scale
-       multiplies);
+       every robot block, in the problem's order (the CPC chart, the base, the extra
+       blocks, the zero offsets: ``q' = (1 + s) q + z`` with a gear scale ``s``);
     2. ``w_T_e = FK(q')``: the CPC model of the :class:`CPCBlock` at its chart
        coordinates (:func:`kinfw.model.cpc_fk_function`);
     3. ``w_T_e = frame_poses_k(... frame_poses_1(w_T_e))``: :meth:`casadi_frame_poses`
