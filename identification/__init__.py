@@ -23,7 +23,7 @@ from kinfw.identification._closed_form import (
 )
 from kinfw.identification._pipeline import METHODS, Calibration, calibrate
 from kinfw.identification._refine import REJECT_Z, information_matrix, refine
-from kinfw.identification._refine_result import RefineResult, parameter_unit
+from kinfw.identification._refine_result import RefineResult
 
 __all__ = [
     "METHODS",
@@ -41,6 +41,5 @@ __all__ = [
     "identify_translations",
     "information_matrix",
     "one_joint_groups",
-    "parameter_unit",
     "refine",
 ]

@@ -6,12 +6,15 @@ an estimation problem is made of (:class:`BlockKey`, :class:`CPCBlock`, ...).
 from __future__ import annotations
 
 from kinfw.model._blocks import (
+    CPC_KEY,
+    BaseBlock,
     Block,
     BlockKey,
     CPCBlock,
     ParameterName,
     PointBlock,
     RigidFrameBlock,
+    RobotBlock,
     ZeroOffsetBlock,
 )
 from kinfw.model._cpc import (
@@ -40,7 +43,9 @@ from kinfw.model._urdf_read import (
 )
 
 __all__ = [
+    "CPC_KEY",
     "MOVABLE_TYPES",
+    "BaseBlock",
     "Block",
     "BlockKey",
     "CPCBlock",
@@ -50,6 +55,7 @@ __all__ = [
     "PointBlock",
     "RigidFrameBlock",
     "Robot",
+    "RobotBlock",
     "RobotModelError",
     "Topology",
     "UnknownFrameError",

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfw.identification import ClosedFormResult, RefineResult, parameter_unit
+from kinfw.identification import ClosedFormResult, RefineResult
 from kinfw.identification.handeye import CamerasResult
 from kinfw.observations import kind_named
 from kinfw.reports import (
@@ -41,10 +41,7 @@ __all__ = [
 
 
 def _kinematic_values(model) -> tuple[KinematicValue, ...]:
-    return tuple(
-        KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
-        for o, n, v in model.describe()
-    )
+    return tuple(KinematicValue(o, n, v, unit) for o, n, v, unit in model.describe())
 
 
 def closed_form_section(result: ClosedFormResult) -> ClosedFormSection:
