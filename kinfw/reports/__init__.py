@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
 from kinfw.reports._records import (
+    STATS,
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
+    ErrorValue,
     ModelSummary,
     NoiseSummary,
+    headline,
     read_only_array,
 )
 from kinfw.reports._refine import (
@@ -40,6 +43,7 @@ from kinfw.reports._stages import (
 )
 
 __all__ = [
+    "STATS",
     "BeforeAfter",
     "CalibratedUnknown",
     "CalibrationFileError",
@@ -52,6 +56,7 @@ __all__ = [
     "DataProvenance",
     "DocReader",
     "DownweightedRow",
+    "ErrorValue",
     "ExportSection",
     "GroupErrorSummary",
     "HandEyeSection",
@@ -68,6 +73,7 @@ __all__ = [
     "StageErrors",
     "TargetEstimate",
     "before_after",
+    "headline",
     "read_only_array",
     "read_report",
     "read_sidecar",
