@@ -464,4 +464,4 @@ def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene,
     # without it), the worst first
     worst = report["refine"]["rejected"][0]
     assert (worst["kind"], worst["sample"]) == ("plane", int(table.sample[3]))
-    assert abs(worst["position_residual_mm"] - 5.0) < 0.5
+    assert abs(worst["height_residual_mm"] - 5.0) < 0.5

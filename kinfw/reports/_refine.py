@@ -138,6 +138,10 @@ def _observation_dict(row: Any) -> dict[str, Any]:
     }
 
 
+def _residual(row: Any, name: str) -> float | None:
+    return next((v.value for v in row.residuals if v.name == name), None)
+
+
 def _observation_fields(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
     """Those shared fields read back: ``*_residual_*`` keys are the residuals."""
     return {
@@ -170,6 +174,10 @@ class DownweightedRow:
     weight: float
     where: str | None = None
 
+    def residual(self, name: str) -> float | None:
+        """The residual's size in the metric ``name`` (display unit), None if none."""
+        return _residual(self, name)
+
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "weight": self.weight}
 
@@ -195,6 +203,10 @@ class RejectedRow:
     residuals: tuple[ErrorValue, ...]
     excess: float
     where: str | None = None
+
+    def residual(self, name: str) -> float | None:
+        """The residual's size in the metric ``name`` (display unit), None if none."""
+        return _residual(self, name)
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "excess": self.excess}

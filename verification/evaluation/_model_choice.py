@@ -84,8 +84,8 @@ class Candidate:
         Per metric of the data the mean over folds of its held-out RMS (display unit).
     failed : str or None
         Why the candidate could not be scored (a training fold too small for its
-        parameters: :class:`kinfw.measurements.DatasetError`'s message); its scores are
-        then NaN and it is not chosen.
+        parameters or its cameras: the fit's error message); its scores are then NaN
+        and it is not chosen.
     """
 
     parameters: str
@@ -241,7 +241,9 @@ def choose_parameters(
                 exclude_flagged=True,
                 reference=reference,
             )
-        except DatasetError as exc:  # a training fold too small for these parameters
+        except ValueError as exc:
+            # the full data fit above: a training fold too small for these parameters
+            # (a DatasetError), or to place a camera (three views per hand-eye)
             candidates.append(Candidate(parameters, p, np.nan, failed=str(exc)))
             continue
         cv = replace(cv, noise=sigma)
