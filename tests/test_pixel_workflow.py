@@ -281,9 +281,9 @@ def test_model_choice_on_few_images_scores_them_and_asks_for_params(px_only, cap
     small = px_only.with_name("small.json")
     write_measurements(small, small_data)
     argv = ["calibrate", small, "--urdf", HEAD, "--out", px_only.with_name("s.urdf")]
-    code, out, err = _run(argv, capsys)
+    code, _, err = _run(argv, capsys)
     assert code != 0
     assert "no candidate can be fitted on a training fold" in err and "give --params" in err
     assert "at least 3 poses are needed" in err
-    code, out, err = _run([*argv, "--params", "full"], capsys)
+    code, _, err = _run([*argv, "--params", "full"], capsys)
     assert code == 0, err
