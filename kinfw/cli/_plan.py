@@ -209,9 +209,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
             "pool": plan.pool_size,
             "dropped": plan.dropped,
             "seconds": plan.seconds,
-            "position_rms_mm": plan.position_rms_m * 1e3,
-            "rotation_rms_deg": math.degrees(plan.rotation_rms_rad),
-            "random_position_rms_mm": plan.random_position_rms_m * 1e3,
+            **{m.headline: m.scale * v for m, v in plan.predicted},
+            f"random_{plan.objective.headline}": plan.objective.scale * plan.random_rms,
             "curve": [
                 {"n": k, "planned_mm": a * 1e3, "random_mm": b * 1e3} for k, a, b in plan.curve
             ],
@@ -236,9 +235,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     print(
         f"planned {len(plan.qs)} of {plan.pool_size} candidates in {plan.seconds:.2f} s"
         + (f" (dropped: {plan.dropped})" if plan.dropped else "")
-        + f": predicted held-out position RMS {plan.position_rms_m * 1e3:.4f} mm, rotation "
-        f"{math.degrees(plan.rotation_rms_rad):.4f} deg; random: "
-        f"{plan.random_position_rms_m * 1e3:.4f} mm"
+        + ": predicted held-out "
+        + ", ".join(f"{m.name} RMS {m.scale * v:.4f} {m.unit}" for m, v in plan.predicted)
+        + f"; random: {plan.objective.scale * plan.random_rms:.4f} {plan.objective.unit}"
     )
     rows = [[k, f"{a * 1e3:.4f}", f"{b * 1e3:.4f}"] for k, a, b in plan.curve]
     print(format_table(rows, ["N", "planned mm", "random mm"]))

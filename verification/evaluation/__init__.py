@@ -9,6 +9,7 @@ from kinfw.verification.evaluation._accuracy import (
     AccuracyReport,
     GroupErrors,
     evaluate_model,
+    group_errors,
     known_frames,
 )
 from kinfw.verification.evaluation._crlb import (
@@ -31,8 +32,8 @@ from kinfw.verification.evaluation._crossval import (
     CrossValidation,
     FoldScore,
     crossvalidate,
-    held_out_error_sizes,
     held_out_errors,
+    whitening_noise,
 )
 from kinfw.verification.evaluation._model_choice import (
     PRIOR_GRID_M,
@@ -75,7 +76,7 @@ __all__ = [
     "crossvalidate",
     "evaluate_model",
     "executor_for_jobs",
-    "held_out_error_sizes",
+    "group_errors",
     "held_out_errors",
     "known_frames",
     "pose_discrepancy",
@@ -88,4 +89,5 @@ __all__ = [
     "run_trials",
     "stderr_progress",
     "true_chart_coordinates",
+    "whitening_noise",
 ]
