@@ -304,7 +304,10 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
         unknowns = result.refined.unknowns
         if result.refined.model_frame is not None:  # the root's pose in the tracker frame
             unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-        pos, rot, samples = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+        held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+        pos, samples = held.values("position")
+        rot = held.values("rotation")[0]
+        rot = rot if len(rot) else np.full(len(pos), np.nan)  # points: no orientation
         order = np.argsort(samples, kind="stable")
         return pos[order], rot[order]
 

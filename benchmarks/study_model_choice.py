@@ -144,7 +144,7 @@ def truth_rms_mm(nominal: Robot, result, test: Measurements) -> float:
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    pos, _, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    pos, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test).values("position")
     return 1e3 * float(np.sqrt(np.mean(pos**2)))
 
 

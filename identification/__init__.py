@@ -1,4 +1,12 @@
-"""TODO face."""
+"""Estimation: the calibration pipeline (:func:`calibrate`: closed form, hand-eye, joint
+refinement), the CPC closed form (:func:`identify_closed_form`, Shih et al. 1992, section 4)
+and the joint nonlinear least squares (:func:`refine`).
+
+Subpackages: :mod:`kinfw.identification.problem` (the least-squares problem, solver, noise
+and diagnostics), :mod:`kinfw.identification.handeye` (``A X = X B`` and ``A = X B Y``),
+:mod:`kinfw.identification.checks` (units, redundancy, fit checks) and
+:mod:`kinfw.identification.planning` (which configurations to measure).
+"""
 
 from __future__ import annotations
 
@@ -15,7 +23,7 @@ from kinfw.identification._closed_form import (
 )
 from kinfw.identification._pipeline import METHODS, Calibration, calibrate
 from kinfw.identification._refine import REJECT_Z, information_matrix, refine
-from kinfw.identification._refine_result import RefineResult, parameter_unit
+from kinfw.identification._refine_result import RefineResult
 
 __all__ = [
     "METHODS",
@@ -33,6 +41,5 @@ __all__ = [
     "identify_translations",
     "information_matrix",
     "one_joint_groups",
-    "parameter_unit",
     "refine",
 ]

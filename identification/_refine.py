@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification._refine_result import RefineResult, parameter_unit
+from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.problem import (
     LOSSES,
     GroupResiduals,
@@ -66,7 +66,7 @@ from kinfw.identification.problem import (
     thresholds,
 )
 from kinfw.measurements import Measurements
-from kinfw.model import Robot
+from kinfw.model import Robot, RobotBlock
 from kinfw.observations import DatasetError, kind_of
 
 __all__ = [
@@ -82,7 +82,6 @@ __all__ = [
     "build_problem",
     "clear_function_cache",
     "information_matrix",
-    "parameter_unit",
     "refine",
 ]
 
@@ -121,6 +120,7 @@ def refine(
     prior: tuple[float, float] | None = None,
     known: tuple[Unknown, ...] = (),
     refine_intrinsics: bool | tuple[str, ...] = (),
+    extra_blocks: tuple[RobotBlock, ...] = (),
     reject: float | None = REJECT_Z,
     max_reject_fraction: float = MAX_REJECT_FRACTION,
     max_reject_rounds: int = 5,
@@ -176,6 +176,11 @@ def refine(
         camera; default none (the intrinsics are known). What the images cannot
         determine (k3 with the board always near the image centre) is reported as
         unidentifiable and left at its start.
+    extra_blocks : tuple of RobotBlock
+        Parameters of the robot model besides the CPC chart, base and joint zero offsets
+        (a joint's gear scale: :class:`kinfw.model.RobotBlock`, with its hooks into the
+        forward kinematics), free as their ``free_for(parameters)`` says; reported by
+        name and unit with the others.
     reject : float or None
         With a robust loss: the rejection quantile, as a standard-normal ``z`` (default
         3.09, the 99.9 % quantile); observations whose whitened residual norm is beyond
@@ -252,6 +257,7 @@ def refine(
             prior=prior,
             known=known,
             refine_intrinsics=refine_intrinsics,
+            extra_blocks=extra_blocks,
         )
 
     result, problem, r = fit(measurements)
@@ -388,7 +394,8 @@ def _fit(
     parameters: str | tuple[str, ...],
     prior: tuple[float, float] | None,
     known: tuple[Unknown, ...],
-    refine_intrinsics: bool | tuple[str, ...] = (),
+    refine_intrinsics: bool | tuple[str, ...],
+    extra_blocks: tuple[RobotBlock, ...],
 ) -> tuple[RefineResult, LeastSquaresProblem, NDArray]:
     """One robust fit of every observation of ``measurements`` (see :func:`refine`):
     the result, the problem and the final whitened residuals."""
@@ -402,6 +409,7 @@ def _fit(
         prior=prior,
         known=known,
         refine_intrinsics=refine_intrinsics,
+        extra_blocks=extra_blocks,
     )
     P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None

@@ -1,9 +1,5 @@
-"""The result of :func:`kinfw.identification.refine` and the units of its parameters.
-
-:class:`RefineResult` (the joint least-squares estimate and its quality) and
-:func:`parameter_unit` (the SI unit of a parameter or kinematic quantity by name), split
-from :mod:`kinfw.identification`, which re-exports both.
-"""
+"""The result of :func:`kinfw.identification.refine`: :class:`RefineResult`, the joint
+least-squares estimate and its quality (re-exported by :mod:`kinfw.identification`)."""
 
 from __future__ import annotations
 
@@ -19,71 +15,9 @@ from kinfw.identification.problem import (
     RejectedObservation,
     Unknown,
 )
-from kinfw.model import CPCModel, Topology
+from kinfw.model import CPCModel
 
-__all__ = ["RefineResult", "parameter_unit"]
-
-#: Fields whose values are angles (rad): chart tilts and rotations, CPC beta, URDF rpy.
-_ANGLE_FIELDS = frozenset(
-    {"b_tilt_1", "b_tilt_2", "rot_x", "rot_y", "rot_z", "beta", "roll", "pitch", "yaw"}
-)
-#: Fields whose values are lengths (m): CPC l, frame and point translations.
-_LENGTH_FIELDS = frozenset({"l_x", "l_y", "l_z", "x", "y", "z"})
-#: Fields without a unit: components of the CPC unit axis b, the motion sense.
-_UNITLESS_FIELDS = frozenset({"b_x", "b_y", "b_z", "sign"})
-
-
-def parameter_unit(owner: str, field: str, topology: Topology) -> str:
-    """SI unit of a parameter or kinematic quantity named ``(owner, field)``.
-
-    The parameters of a problem carry their units in their blocks
-    (:attr:`RefineResult.parameter_units`, :attr:`LeastSquaresProblem.units`); this
-    function names the units of the kinematic rows of :meth:`CPCModel.describe` and
-    agrees with the blocks on the parameters (tested).
-
-    Covers the names of :attr:`RefineResult.parameter_names` (the CPC chart of
-    :attr:`kinfw.model.CPCModel.parameter_names`, ``("base", ...)``, ``(joint,
-    "zero_offset")``, ``("target:name", ...)``, ``("frame:name", ...)``,
-    ``("marker:name", ...)``, ``("offset:frame:point", ...)``) and the rows of
-    :meth:`kinfw.model.CPCModel.describe`.
-
-    Parameters
-    ----------
-    owner, field : str
-        The parameter's name, e.g. ``("pan", "zero_offset")`` or ``("left_plate", "x")``.
-    topology : Topology
-        Joint names and types (``model.topology``): a revolute joint's ``zero_offset``
-        is an angle, a prismatic joint's a length.
-
-    Returns
-    -------
-    str
-        ``"rad"``, ``"m"`` or ``"unitless"``.
-
-    Raises
-    ------
-    ValueError
-        For a field this function does not know, or the ``zero_offset`` of a name that
-        is not a joint of ``topology``.
-    """
-    if field in _ANGLE_FIELDS:
-        return "rad"
-    if field in _LENGTH_FIELDS:
-        return "m"
-    if field in _UNITLESS_FIELDS:
-        return "unitless"
-    if field == "zero_offset":
-        if owner not in topology.joint_names:
-            raise ValueError(
-                f"parameter ({owner!r}, 'zero_offset'): {owner!r} is not a joint "
-                f"of the model; expected one of {list(topology.joint_names)}"
-            )
-        return "rad" if topology.revolute[topology.joint_names.index(owner)] else "m"
-    raise ValueError(
-        f"parameter ({owner!r}, {field!r}): unknown field; expected an angle "
-        f"{sorted(_ANGLE_FIELDS)}, a length {sorted(_LENGTH_FIELDS)}, unitless "
-        f"{sorted(_UNITLESS_FIELDS)} or 'zero_offset'"
-    )
+__all__ = ["RefineResult"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +29,10 @@ class RefineResult:
     model : CPCModel
         Refined kinematics (end frames: every observed frame), in the model frame
         ``w``: the URDF root, or the one external measurement frame when every
-        observation is in it (:attr:`model_frame`).
+        observation is in it (:attr:`model_frame`); the robot blocks folded in
+        (base, zero offsets: :meth:`kinfw.model.RobotBlock.moved_model`). A robot block
+        no CPC model holds (a joint's gear scale) is not in it: the model takes the joint
+        values after that block's hook, and its estimate is in :attr:`estimate`.
     model_frame : str or None
         None for the URDF root, else the external measurement frame's name.
     unknowns : tuple of Unknown
@@ -104,12 +41,14 @@ class RefineResult:
         Every estimated parameter ``(owner, field)``, in the order of ``estimate`` and
         ``covariance``.
     parameter_units : tuple of str
-        SI unit of each parameter (``"rad"`` or ``"m"``), from its parameter block.
+        SI unit of each parameter (``"rad"``, ``"m"``, or what a block declares, e.g.
+        ``"unitless"`` for a gear scale), from its parameter block
+        (:attr:`kinfw.model.Block.units`, the one source of the units).
     free : ndarray of bool, shape (P,)
         The parameters estimated; the others are fixed at the start (``estimate`` 0,
         ``std`` 0), e.g. the base and the joint zero offsets with ``parameters="full"``.
     estimate : ndarray, shape (P,)
-        Chart coordinates from the start (rad, m).
+        Chart coordinates from the start, each in its parameter's unit.
     covariance : ndarray, shape (P, P)
         ``sigma_hat^2 (J^T J)^+`` in SI units, on the identifiable subspace.
     noise : NoiseModel
@@ -159,5 +98,5 @@ class RefineResult:
 
     @property
     def std(self) -> NDArray[np.float64]:
-        """Standard deviation of each parameter (rad, m)."""
+        """Standard deviation of each parameter, in its unit."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))

@@ -28,6 +28,7 @@ __all__ = [
     "check_outputs",
     "check_writable",
     "json_text",
+    "sidecar_path",
     "write_text_atomic",
 ]
 
@@ -218,3 +219,9 @@ def json_text(value, *, indent: int | None = 2) -> str:
     number: a point's rotation, an image point's position) is written ``null``, never
     the ``NaN`` token most JSON parsers refuse."""
     return json.dumps(_finite_or_null(value), indent=indent, allow_nan=False)
+
+
+def sidecar_path(urdf_path: str | Path) -> Path:
+    """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
+    ``<stem>.kinfw.json`` beside it."""
+    return Path(urdf_path).with_suffix(".kinfw.json")

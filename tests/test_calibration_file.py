@@ -60,8 +60,12 @@ def test_a_sidecar_written_before_the_typed_reader_reads_field_by_field(legacy_d
         r["group"] for r in legacy_doc["errors_held_out"]
     ]
     assert (
-        s.errors_held_out[2].after_position_rms_mm
+        s.errors_held_out[2].of("position")[1]
         == legacy_doc["errors_held_out"][2]["after_position_rms_mm"]
+    )
+    assert s.errors_held_out[2].of("rotation") == (
+        legacy_doc["errors_held_out"][2]["before_rotation_rms_deg"],
+        legacy_doc["errors_held_out"][2]["after_rotation_rms_deg"],
     )
 
 
@@ -83,7 +87,7 @@ def test_the_report_written_before_the_typed_reader_round_trips_byte_for_byte(tm
         report.hand_eye.cameras[0].hand_T_camera,
         doc["hand_eye"]["cameras"][0]["hand_T_camera"]["matrix"],
     )
-    assert [s.stage for s in report.position_rms_vs_truth_held_out_by_stage] == list(
+    assert [s.stage for s in report.rms_vs_truth_held_out_by_stage] == list(
         doc["position_rms_mm_vs_truth_held_out_by_stage"]
     )
     assert write_report(tmp_path / "r.json", report).read_text() == REPORT.read_text()

@@ -95,7 +95,7 @@ def test_verify_of_the_nominal_shows_the_simulated_errors(noise_free, capsys):
 def test_verify_prints_a_table_in_mm_and_degrees(noise_free, capsys):
     code, out, _ = _run(["verify", noise_free / "true.urdf", noise_free / "data.json"], capsys)
     assert code == 0
-    assert "pos RMS mm" in out and "rot RMS deg" in out and "left_plate" in out
+    assert "position RMS mm" in out and "rotation RMS deg" in out and "left_plate" in out
 
 
 def test_crosscheck_of_the_head_passes(capsys):

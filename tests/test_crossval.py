@@ -95,7 +95,7 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust, method="refine")
     (entry,) = report.refine.rejected  # rejected, not merely down-weighted
     assert (entry.kind, entry.frame, entry.sample) == ("pose", pose.frame, int(pose.sample[17]))
-    assert 60.0 < entry.position_residual_mm < 80.0 and entry.excess > 10
+    assert 60.0 < entry.residual("position") < 80.0 and entry.excess > 10
     assert (pose.frame, int(pose.sample[17])) not in {
         (d.frame, d.sample) for d in report.refine.downweighted
     }
@@ -135,12 +135,11 @@ def test_parameter_masks_by_joint_and_field(head):
 def _fold_numbers(cv):
     return np.array(
         [
-            [
+            [s.of("position"), s.of("rotation")]
+            + [
                 getattr(s, f)
                 for f in (
-                    "position_rms_mm",
-                    "rotation_rms_deg",
-                    "worst_mm",
+                    "worst",
                     "condition",
                     "worst_sample",
                     "n_parameters",
@@ -308,18 +307,18 @@ def test_exclude_flagged_leaves_the_rejected_observation_out_of_scoring(head):
     scored = crossvalidate(head, bad, k=4, sets=("full",))
     assert scored.excluded == ()
     fold = next(s for s in scored.scores if s.worst_sample == sample)
-    assert 60.0 < fold.worst_mm < 80.0  # the bad pose, held out, scored
+    assert 60.0 < fold.worst < 80.0  # the bad pose, held out, scored (mm)
     cv = crossvalidate(head, bad, k=4, sets=("full",), exclude_flagged=True)
     assert cv.excluded == ((sample, "pose", pose.frame, None),)
     assert cv.to_dict()["excluded"] == [
         {"sample": sample, "kind": "pose", "frame": pose.frame, "marker": None}
     ]
-    assert max(s.worst_mm for s in cv.scores) < 5.0  # noise 0.5 mm: nothing gross scored
+    assert max(s.worst for s in cv.scores) < 5.0  # noise 0.5 mm: nothing gross scored
     # the same folds and fits: only the bad observation's fold changes
     changed = [
         a.fold
         for a, b in zip(scored.scores, cv.scores, strict=True)
-        if a.position_rms_mm != b.position_rms_mm
+        if a.of("position") != b.of("position")
     ]
     assert changed == [fold.fold]
 
@@ -327,10 +326,12 @@ def test_exclude_flagged_leaves_the_rejected_observation_out_of_scoring(head):
 def test_selection_weighs_position_and_orientation_by_the_noise():
     """By hand: 'offsets' is 10 % better in position but 0.2 deg worse in orientation on
     0.1 deg noise; whitened, 'full' wins (position alone would pick 'offsets')."""
+    from kinfw.observations import POSITION, ROTATION
     from kinfw.verification.evaluation import CrossValidation, FoldScore
 
     def score(fold, p, mm, deg):
-        return FoldScore(fold, p, 30, 10, mm, deg, 0, mm, 10.0, 20, 300)
+        errors = ((POSITION.display, mm), (ROTATION.display, deg))
+        return FoldScore(fold, p, 30, 10, errors, 0, mm, 10.0, 20, 300)
 
     scores = (
         score(0, "offsets", 0.9, 0.6),
@@ -338,7 +339,8 @@ def test_selection_weighs_position_and_orientation_by_the_noise():
         score(0, "full", 1.0, 0.4),
         score(1, "full", 1.0, 0.4),
     )
-    cv = CrossValidation(2, 0, ("offsets", "full"), scores, (), None, (1e-3, np.radians(0.1)))
+    noise = ((POSITION, 1e-3), (ROTATION, np.radians(0.1)))
+    cv = CrossValidation(2, 0, ("offsets", "full"), scores, (), None, noise)
     assert cv.whitened("offsets") == pytest.approx(0.9**2 + 6.0**2)
     assert cv.whitened("full") == pytest.approx(1.0**2 + 4.0**2)
     assert min(cv.sets, key=cv.whitened) == "full"
@@ -346,14 +348,18 @@ def test_selection_weighs_position_and_orientation_by_the_noise():
 
 
 def test_the_outlier_advice_names_huber_only_when_it_is_not_in_use():
+    from kinfw.observations import POSITION, ROTATION
     from kinfw.verification.evaluation import FoldScore
     from kinfw.verification.evaluation._crossval import _warnings
 
+    def errors(mm):
+        return ((POSITION.display, mm), (ROTATION.display, 0.1))
+
     scores = [
-        FoldScore(0, "frames", 30, 10, 1.0, 0.1, 3, 2.0, 10.0, 12, 300),
-        FoldScore(1, "frames", 30, 10, 1.0, 0.1, 4, 2.0, 10.0, 12, 300),
-        FoldScore(0, "full", 30, 10, 1.5, 0.1, 3, 2.0, 10.0, 20, 300),
-        FoldScore(1, "full", 30, 10, 2.0, 0.1, 4, 70.0, 10.0, 20, 300),
+        FoldScore(0, "frames", 30, 10, errors(1.0), 3, 2.0, 10.0, 12, 300),
+        FoldScore(1, "frames", 30, 10, errors(1.0), 4, 2.0, 10.0, 12, 300),
+        FoldScore(0, "full", 30, 10, errors(1.5), 3, 2.0, 10.0, 20, 300),
+        FoldScore(1, "full", 30, 10, errors(2.0), 4, 70.0, 10.0, 20, 300),
     ]
     (linear,) = _warnings(scores, ("frames", "full"), "linear")
     assert "sample 4: 70.0 mm" in linear and "try --loss huber" in linear

@@ -291,7 +291,8 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    pos, rot, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    pos, rot = held.values("position")[0], held.values("rotation")[0]
     assert pos.max() < 1e-8 and rot.max() < 1e-8
     # a target needs orientation columns, and is measured in the camera
     with pytest.raises(DatasetError, match="marker 1 has no phix1"):

@@ -161,9 +161,10 @@ def test_evaluate_of_the_true_robot_on_its_noise_free_data_is_zero(experiment):
     truth = kinfw.evaluate(sim.truth, data)
     assert {g.frame for g in truth.groups} == set(PLATES)
     for g in truth.groups:
-        assert g.position_norm_mm.max() < 1e-9 and g.rotation_deg.max() < 1e-9
+        assert [e.metric.name for e in g.errors] == ["position", "rotation"]
+        assert all(e.values.max() < 1e-12 for e in g.errors)  # m, rad
     off = kinfw.evaluate(nominal, data)
-    assert min(g.position_norm_mm.max() for g in off.groups) > 1.0  # mm: errors seen
+    assert min(g.of("position").values.max() for g in off.groups) > 1e-3  # m: errors seen
 
 
 def test_simulate_measures_the_true_robot_by_pinocchio(experiment):
@@ -208,20 +209,20 @@ def test_the_cli_plan_is_the_verb_s_plan(tmp_path, capsys):
     names, qs = read_plan(tmp_path / "plan.json")
     assert names == plan.joint_names
     np.testing.assert_array_equal(qs, plan.qs)
-    assert summary["position_rms_mm"] == plan.position_rms_m * 1e3
+    assert summary["position_rms_mm"] == 1e3 * plan.rms("position")
     # the plan: 6 distinct configurations inside the joint limits, better than random
     lower, upper = head.joint_limits(plan.joint_names)
     assert plan.qs.shape == (6, len(names)) and len(np.unique(plan.qs, axis=0)) == 6
     assert np.all((plan.qs >= lower) & (plan.qs <= upper))
-    assert plan.position_rms_m < plan.random_position_rms_m
+    assert plan.objective.name == "position" and plan.rms("position") < plan.random_rms
 
 
 def test_crossvalidate_of_noise_free_data_predicts_held_out_samples_exactly(experiment, capsys):
     d, _, _, data, _ = experiment
     cv = kinfw.crossvalidate(kinfw.load_robot(d / "nominal.urdf"), data, k=3, seed=1)
     assert cv.sets == ("none", "frames", "full")
-    assert max(s.position_rms_mm for s in cv.scores if s.parameters == "full") < 1e-6
-    assert min(s.position_rms_mm for s in cv.scores if s.parameters == "none") > 1.0
+    assert max(s.of("position") for s in cv.scores if s.parameters == "full") < 1e-6  # mm
+    assert min(s.of("position") for s in cv.scores if s.parameters == "none") > 1.0
     argv = ["crossval", d / "data.json", "--urdf", d / "nominal.urdf", "--k", "3"]
     assert main([str(a) for a in [*argv, "--seed", "1", "--jobs", "2", "--json"]]) == 0
     assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(cv.to_dict()))

@@ -142,3 +142,34 @@ def test_no_private_module_is_imported_from_another_package(name):
             if owner != package:
                 crossing.append(f"{path}:{line}: {module}")
     assert not crossing
+
+
+@pytest.mark.slow
+def test_the_wheel_installs_one_namespace(tmp_path):
+    """``pip install .`` puts ``kinfw`` (and the built-in URDF) in site-packages and no
+    top-level ``identification`` / ``verification`` / ``urdf``: read from the wheel pip
+    builds from this tree."""
+    import shutil
+    import subprocess
+    import sys
+    import zipfile
+
+    source = tmp_path / "source"  # a copy: setuptools writes build/ beside the sources
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy(REPO / name, source / name)
+    for folder in (*FOLDERS, "urdf"):
+        shutil.copytree(
+            REPO / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__")
+        )
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w", str(tmp_path), str(source)],
+        check=True,
+        capture_output=True,
+    )
+    (wheel,) = tmp_path.glob("kinfw-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert {n.split("/")[0] for n in names} == {"kinfw", wheel.name.split("-py")[0] + ".dist-info"}
+    assert "kinfw/robots/iis_head.urdf" in names
+    assert "kinfw/identification/_pipeline.py" in names
+    assert "kinfw/verification/evaluation/__init__.py" in names

@@ -158,8 +158,8 @@ def test_the_report_says_not_available_when_the_nominal_cannot_be_placed():
 
     nominal, _, frame, names = _robots("arm")
     good = errors_by_group(nominal, _one_marker(nominal, frame, names, 30))
-    assert good[0].position_rms_mm < 1e-6
+    assert good[0].rms("position") < 1e-6
     notes = []
     (row,) = _errors_or_unavailable(nominal, _one_marker(nominal, frame, names, 2), good, notes)
-    assert np.isnan(row.position_rms_mm) and row.group == good[0].group
+    assert np.isnan(row.rms("position")) and row.group == good[0].group
     assert len(notes) == 1 and "not available" in notes[0] and "'mocap'" in notes[0]

@@ -8,13 +8,13 @@ import pytest
 
 import kinfw.verification.evaluation._model_choice as model_choice
 from kinfw.cli._main import main
+from kinfw.files import sidecar_path
 from kinfw.identification import calibrate
 from kinfw.measurements import write_measurements
 from kinfw.model import cpc_from_robot, load_robot
 from kinfw.reports import read_sidecar
 from kinfw.simulation import perturb_robot, random_configurations, simulate
 from kinfw.verification.evaluation import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
-from kinfw.verification.reporting import sidecar_path
 from tests.robots import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")
@@ -160,8 +160,8 @@ def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
     (fold,) = [f for f, idx in enumerate(np.array_split(order, 4)) if sample in idx]
     for exclude in (False, True):
         cv = crossvalidate(head, bad, k=4, sets=("frames",), exclude_flagged=exclude)
-        hit = next(s.position_rms_mm for s in cv.scores if s.fold == fold)
-        others = [s.position_rms_mm for s in cv.scores if s.fold != fold]
+        hit = next(s.of("position") for s in cv.scores if s.fold == fold)
+        others = [s.of("position") for s in cv.scores if s.fold != fold]
         if exclude:
             assert hit < 2.0 * max(others)
         else:
@@ -208,7 +208,8 @@ def test_a_candidate_no_training_fold_can_fit_is_skipped_not_fatal():
     def unseen_rms_mm(parameters, prior):
         result = calibrate(tiago, train, parameters=parameters, prior=prior)
         frame = Unknown("frame", result.refined.model_frame, result.w_T_root)
-        pos, _, _ = held_out_errors(tiago, result.urdf_xml, (*result.refined.unknowns, frame), test)
+        held = held_out_errors(tiago, result.urdf_xml, (*result.refined.unknowns, frame), test)
+        pos = held.values("position")[0]
         return 1e3 * np.sqrt(np.mean(pos**2))
 
     assert unseen_rms_mm(choice.parameters, choice.prior) < 0.7 * unseen_rms_mm("frames", None)

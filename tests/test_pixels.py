@@ -385,13 +385,16 @@ def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_wo
     # the stage table is in px for image points (its target pose refitted in closed
     # form, as for 'target' observations: near the calibrated one); the file reads back
     (after,) = report.errors_after
-    assert after.pixel_rms_px == pytest.approx(cam.rms_px, rel=0.05)
-    assert dict(report.position_rms_by_stage[-1].position_rms_mm) == {
-        "flange (pixels) [px]": after.pixel_rms_px
-    }
+    assert after.rms("pixel") == pytest.approx(cam.rms_px, rel=0.05)
+    ((group, value),) = report.rms_by_stage[-1].rms
+    assert (group, value.key, value.value) == (
+        "flange (pixels)",
+        "pixel_rms_px",
+        after.rms("pixel"),
+    )
     write_report(tmp_path / "report.json", report)
     back = read_report(tmp_path / "report.json")
-    assert back.reprojection == rep and back.errors_after[0].pixel_rms_px == after.pixel_rms_px
+    assert back.reprojection == rep and back.errors_after[0].rms("pixel") == after.rms("pixel")
 
 
 def test_the_drawing_puts_the_board_points_where_the_truth_has_them():

@@ -108,7 +108,7 @@ def test_reported_pixel_errors_are_unweighted():
     (ge,) = evaluate_model(exp.truth, stated).groups
     sharp = g.sigma_px == SHARP_PX
     for rows in (sharp, ~sharp):
-        ratio = _rms(ge.pixel_error_px[rows]) / _rms(noise[rows])
+        ratio = _rms(ge.of("pixel").vectors[rows]) / _rms(noise[rows])
         assert 0.8 < ratio < 1.2, ratio
     # with the true board given, the fit's residual is the weighted noise exactly
     problem = build_problem(

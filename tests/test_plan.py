@@ -66,10 +66,10 @@ def test_line_fit_optimum_is_the_extremes(prismatic):
     # I-optimal for a straight line, distinct points: the three lowest and highest
     np.testing.assert_allclose(q, [-0.5, -0.475, -0.45, 0.45, 0.475, 0.5], atol=1e-12)
     expected = _line_fit_ms(q, test[:, 0], SIGMA_M)
-    assert plan.position_rms_m == pytest.approx(np.sqrt(expected), rel=1e-6)
+    assert plan.rms("position") == pytest.approx(np.sqrt(expected), rel=1e-6)
     # the same formula for an arbitrary design, through predicted_error
     design = np.array([[-0.3], [0.0], [0.1], [0.2], [0.4]])
-    pos, _ = predicted_error(robot, setup, design, test, joint_names=("j1",))
+    ((_, pos), *_) = predicted_error(robot, setup, design, test, joint_names=("j1",))
     assert pos == pytest.approx(np.sqrt(_line_fit_ms(design[:, 0], test[:, 0], SIGMA_M)), rel=1e-6)
 
 
@@ -90,7 +90,10 @@ def test_predicted_equals_empirical_held_out_error(prismatic):
         ms.append(np.mean(np.sum((got - true_p) ** 2, axis=1)))
     ms = np.array(ms)
     se = ms.std(ddof=1) / np.sqrt(len(ms))
-    assert abs(ms.mean() - plan.position_rms_m**2) < 3 * se, (ms.mean(), plan.position_rms_m**2)
+    assert abs(ms.mean() - plan.rms("position") ** 2) < 3 * se, (
+        ms.mean(),
+        plan.rms("position") ** 2,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -110,11 +113,11 @@ def test_planned_beats_random_and_exchange_never_worsens(head):
     plan = plan_configurations(
         robot, setup, pool, 30, joint_names=names, test_qs=test, random_draws=10
     )
-    assert plan.position_rms_m < 0.9 * plan.random_position_rms_m
+    assert plan.rms("position") < 0.9 * plan.random_rms
     assert plan.exchanged_ms <= plan.greedy_ms
     # exchange from random designs: never worse than where it starts
     info = candidate_information(robot, setup, pool, names, None)
-    A = held_out(robot, setup, test, names, None, info).A_position
+    A = held_out(robot, setup, test, names, None, info).of("position")
     rng = np.random.default_rng(0)
     for _ in range(3):
         start = rng.choice(len(pool), 30, replace=False)
@@ -221,13 +224,13 @@ def test_plan_errors(capsys):
 def test_target_gives_the_smallest_greedy_n(head):
     robot, setup, names, pool, test = head
     info = candidate_information(robot, setup, pool, names, None)
-    A = held_out(robot, setup, test, names, None, info).A_position
+    A = held_out(robot, setup, test, names, None, info).of("position")
     _, values = greedy(info, A, 40)
     target = float(np.sqrt(values[24]))  # reached by the 25th greedy pick
     plan = plan_configurations(
         robot, setup, pool, 1, joint_names=names, test_qs=test, target_m=target * (1 + 1e-9)
     )
-    assert len(plan.qs) == 25 and plan.position_rms_m <= target * (1 + 1e-6)
+    assert len(plan.qs) == 25 and plan.rms("position") <= target * (1 + 1e-6)
 
 
 _BOX = '<collision><origin xyz="{} 0 0"/><geometry><box size="{}"/></geometry></collision>'

@@ -464,4 +464,212 @@ def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene,
     # without it), the worst first
     worst = report["refine"]["rejected"][0]
     assert (worst["kind"], worst["sample"]) == ("plane", int(table.sample[3]))
-    assert abs(worst["position_residual_mm"] - 5.0) < 0.5
+    assert abs(worst["height_residual_mm"] - 5.0) < 0.5
+
+
+# -- errors as a person reads them: height (mm) per contact, tilt (deg) per plane ----------
+def _in_plane(n):
+    """An orthonormal basis (2, 3) of the plane with normal ``n`` (by SVD)."""
+    return np.linalg.svd(np.asarray(n, float)[None, :])[2][1:]
+
+
+def _height_and_tilt(robot, qs, distance_m, plane, offset=OFFSET):
+    """Hand geometry: each contact's height error (m: measured minus predicted distance)
+    and the angle (rad) between the plane and the plane the contacts lie on (the heights'
+    least-squares slope across the plane)."""
+    p = _probe(robot, qs, offset)
+    h = distance_m - (p @ plane[:3] - plane[3])
+    A = np.column_stack([np.ones(len(p)), p @ _in_plane(plane[:3]).T])
+    slope = np.linalg.lstsq(A, h, rcond=None)[0][1:]
+    return h, float(np.arctan(np.hypot(*slope)))
+
+
+def test_verify_reads_contacts_as_height_and_tilt_by_hand_geometry(scene, tmp_path, capsys):
+    """Contacts whose measured distances rise by tan(0.5 deg) across the calibration's
+    plane, 0.2 mm above it where the plane's coordinates are zero: verify (the sidecar's
+    plane, the given probe offset) reads each contact's height in mm and the contacts'
+    tilt as 0.5 deg, in the text and the JSON."""
+    from kinfw.cli._main import main
+    from kinfw.reports import CalibratedUnknown, CalibrationSidecar, DataProvenance, write_sidecar
+
+    nominal, _, planes, contacts = scene
+    qs, plane = contacts["table"], planes["table"]
+    p = _probe(nominal, qs)
+    theta, phi = np.radians(0.5), 0.7
+    uv = p @ _in_plane(plane[:3]).T
+    measured = (p @ plane[:3] - plane[3]) + 2e-4 + np.tan(theta) * uv @ [np.cos(phi), np.sin(phi)]
+    data = Measurements(
+        NAMES,
+        qs,
+        others=(PlaneContacts("flange", np.arange(len(qs)), measured, "table", OFFSET),),
+    )
+    h, tilt = _height_and_tilt(nominal, qs, measured, plane)
+    assert tilt == pytest.approx(theta, rel=1e-9)  # the hand geometry itself
+    write_measurements(tmp_path / "contacts.json", data)
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    side = CalibrationSidecar(
+        created="2025-01-01T00:00:00+00:00",
+        kinfw_version="test",
+        method="refine",
+        calibrated_urdf="arm.urdf",
+        nominal_urdf=None,
+        nominal_urdf_sha256=None,
+        data=DataProvenance("contacts.json", len(qs)),
+        w_T_root=np.eye(4),
+        unknowns=(CalibratedUnknown("plane", "table", plane),),
+    )
+    write_sidecar(tmp_path / "arm.kinfw.json", side)
+    argv = ["verify", str(tmp_path / "arm.urdf"), str(tmp_path / "contacts.json")]
+    assert main([*argv, "--json"]) == 0
+    (g,) = json.loads(capsys.readouterr().out)["groups"]
+    a = 1e3 * np.abs(h)
+    assert g["kind"] == "plane" and "position_rms_mm" not in g
+    assert g["height_mean_mm"] == pytest.approx(a.mean(), rel=1e-9)
+    assert g["height_rms_mm"] == pytest.approx(np.sqrt(np.mean(a**2)), rel=1e-9)
+    assert g["height_max_mm"] == pytest.approx(a.max(), rel=1e-9)
+    assert g["tilt_deg"] == pytest.approx(0.5, rel=1e-9)
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    head, row = (line for line in text.splitlines() if "tilt" in line or "flange" in line)
+    assert head.split()[-2:] == ["tilt", "deg"] and row.split()[-1] == "0.5000"
+    assert "nan" not in text.lower()
+
+
+@pytest.fixture(scope="module")
+def noisy_contacts(scene):
+    """The two planes' contacts with the given probe offset, 0.1 mm distance noise."""
+    _, truth, planes, contacts = scene
+    clean = _dataset(contacts, offset=OFFSET)
+    return simulate(
+        truth,
+        clean.qs,
+        NAMES,
+        groups=list(clean.others),
+        unknowns={plane_key(k): p for k, p in planes.items()},
+        rng=np.random.default_rng(8),
+        sigmas={"distance": 1e-4},
+    )
+
+
+def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy_contacts):
+    """Held out, the trained planes stay fixed: per fold the RMS height (mm) over the
+    test contacts and the RMS over the planes of their tilt (deg), equal to the hand
+    geometry with the fold's trained robot and planes; selection whitens the height by
+    the distance noise."""
+    from kinfw.identification import calibrate
+    from kinfw.verification.evaluation import crossvalidate
+
+    nominal = scene[0]
+    data = noisy_contacts
+    cv = crossvalidate(nominal, data, k=3, sets=("frames", "full"), select=True)
+    doc = cv.to_dict()
+    assert [m.headline for m in cv.metrics] == ["height_rms_mm", "tilt_deg"]
+    (sigma,) = doc["noise"].values()
+    for p in cv.sets:
+        folds = [f for f in doc["folds"] if f["parameters"] == p]
+        whitened = np.mean([(f["height_rms_mm"] * 1e-3 / sigma) ** 2 for f in folds])
+        assert doc["mean_whitened"][p] == pytest.approx(whitened, rel=1e-9)
+    assert cv.whitened("frames") != cv.whitened("full")
+    assert cv.selected == min(cv.sets, key=cv.whitened)
+    # fold 0 of "full" by hand
+    test_ids = np.sort(np.array_split(np.random.default_rng(0).permutation(data.n_samples), 3)[0])
+    result = calibrate(nominal, data.subset(np.setdiff1d(np.arange(data.n_samples), test_ids)))
+    trained = load_robot(result.urdf_xml)
+    found = {u.name: u.value for u in result.refined.unknowns if u.kind == "plane"}
+    heights, tilts = [], []
+    for g in data.groups("plane"):
+        keep = np.isin(g.sample, test_ids)
+        h, tilt = _height_and_tilt(
+            trained, data.qs[g.sample[keep]], g.distance_m[keep], found[g.plane]
+        )
+        heights.append(h)
+        tilts.append(tilt)
+    fold = next(s for s in cv.scores if (s.fold, s.parameters) == (0, "full"))
+    assert fold.of("height") == pytest.approx(
+        1e3 * np.sqrt(np.mean(np.concatenate(heights) ** 2)), rel=1e-6
+    )
+    assert fold.of("tilt") == pytest.approx(
+        np.degrees(np.sqrt(np.mean(np.square(tilts)))), rel=1e-5
+    )
+
+
+def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts, tmp_path, capsys):
+    """calibrate --holdout: the held-out height RMS and tilt before and after (the plane
+    fitted to the held-out contacts, as a target's pose: total least squares through the
+    probe points set back by their measured distances), equal to the hand geometry;
+    report.json carries them, and the in-sample errors in the same keys."""
+    from kinfw.cli._main import main
+
+    nominal = scene[0]
+    table = noisy_contacts.groups("plane")[0]
+    assert table.plane == "table"
+    data = noisy_contacts.with_groups([table]).subset(table.sample)
+    train, held = data.subset(np.arange(48)), data.subset(np.arange(48, 60))
+    write_measurements(tmp_path / "train.json", train)
+    write_measurements(tmp_path / "held.json", held)
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    argv = ["calibrate", tmp_path / "train.json", "--urdf", tmp_path / "arm.urdf"]
+    argv += [
+        "--out",
+        tmp_path / "out.urdf",
+        "--params",
+        "full",
+        "--holdout",
+        tmp_path / "held.json",
+    ]
+    assert main([str(a) for a in [*argv, "--report", tmp_path / "r.json"]]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "r.json").read_text())
+    (row,) = report["errors_held_out"]
+
+    def tls(points):  # the normal towards the root: d <= 0 (the kind's convention)
+        c = points.mean(axis=0)
+        n = np.linalg.svd(points - c)[2][-1]
+        return np.append(n, n @ c) * (-1.0 if n @ c > 0 else 1.0)
+
+    (g,) = held.groups("plane")
+    qs = held.qs[g.sample]
+    for robot, when in ((nominal, "before"), (load_robot(tmp_path / "out.urdf"), "after")):
+        p = _probe(robot, qs)
+        plane = tls(p - g.distance_m[:, None] * tls(p)[:3])
+        h, tilt = _height_and_tilt(robot, qs, g.distance_m, plane)
+        rms = 1e3 * np.sqrt(np.mean(h**2))
+        assert row[f"{when}_height_rms_mm"] == pytest.approx(rms, rel=1e-6), when
+        assert row[f"{when}_tilt_deg"] == pytest.approx(np.degrees(tilt), abs=1e-6), when
+    assert row["before_height_rms_mm"] > row["after_height_rms_mm"]
+    held_table = out.split("held-out errors:")[1]
+    assert "before RMS mm" in held_table and "after tilt deg" in held_table
+    (after,) = report["errors_after"].values()
+    assert list(after)[4:] == ["height_mean_mm", "height_rms_mm", "height_max_mm", "tilt_deg"]
+    assert "height_rms_mm_by_stage" in report and "position_rms_mm_by_stage" not in report
+
+
+def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, noisy_contacts):
+    """On plane contacts the candidates' held-out heights differ (no longer all 0): each
+    candidate's whitened score is the mean over folds of (height RMS / sigma)^2 under the
+    full fit's distance noise (checked on the 'frames' candidate by its own
+    cross-validation) and the choice is the simplest within 1 % of the lowest."""
+    from kinfw.verification.evaluation import choose_parameters, crossvalidate
+
+    nominal, prior = scene[0], (1e-3, 1e-2)
+    choice = choose_parameters(nominal, noisy_contacts, prior=prior)
+    assert choice.k == 5 and len(choice.candidates) == 3  # frames, offsets, full
+    whitened = [c.whitened for c in choice.candidates]
+    assert np.all(np.isfinite(whitened)) and len(set(whitened)) == 3 and min(whitened) > 0
+    for c in choice.candidates:
+        assert [m.headline for m, _ in c.errors] == ["height_rms_mm", "tilt_deg"]
+    best = min(whitened)
+    expected = next(c for c in choice.candidates if c.whitened <= 1.01 * best)  # simplest first
+    assert (choice.parameters, choice.prior) == (expected.parameters, expected.prior)
+    cv = crossvalidate(
+        nominal,
+        noisy_contacts,
+        k=5,
+        sets=("frames",),
+        select=True,
+        prior=prior,
+        exclude_flagged=True,
+    )
+    (sigma,) = (v for c, v in cv.noise if c.name == "distance")
+    by_hand = np.mean([(s.of("height") * 1e-3 / sigma) ** 2 for s in cv.scores])
+    assert choice.candidates[0].whitened == pytest.approx(by_hand, rel=1e-9)

@@ -18,6 +18,7 @@ probe-to-centre distance at held-out configurations (not on the sphere) to 1e-9 
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -71,6 +72,24 @@ def probe_key(frame: str) -> BlockKey:
     return BlockKey("probe", frame)
 
 
+def sphere_closed_form(w_T_frames: NDArray, radius_m: NDArray) -> NDArray:
+    """Probe offset (0:3) and centre (3:6) from |R_i o + t_i - c|^2 = r_i^2, linear in
+    (o, c, c o^T, |o|^2 + |c|^2) once c^T R_i o is written <R_i, c o^T>: 16 unknowns by
+    least squares."""
+    R, t = w_T_frames[:, :3, :3], w_T_frames[:, :3, 3]
+    A = np.concatenate(
+        [
+            2 * np.einsum("nji,nj->ni", R, t),
+            -2 * t,
+            -2 * R.reshape(len(R), 9),
+            np.ones((len(R), 1)),
+        ],
+        axis=1,
+    )
+    b = radius_m**2 - np.sum(t**2, axis=1)
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
 class SphereKind(ObservationKind):
     """``{"frame": f, "kind": "sphere", "sphere": name, "radius": r}``."""
 
@@ -97,21 +116,8 @@ class SphereKind(ObservationKind):
         return (group.frame,)
 
     def unknowns(self, group, start):
-        """Closed form: |R_i o + t_i - c|^2 = r_i^2 is linear in (o, c, c o^T, |o|^2 +
-        |c|^2) once c^T R_i o is written <R_i, c o^T>: 16 unknowns by least squares."""
-        T = start.w_T(group.frame, group.sample)
-        R, t = T[:, :3, :3], T[:, :3, 3]
-        A = np.concatenate(
-            [
-                2 * np.einsum("nji,nj->ni", R, t),
-                -2 * t,
-                -2 * R.reshape(len(R), 9),
-                np.ones((len(R), 1)),
-            ],
-            axis=1,
-        )
-        b = group.radius_m**2 - np.sum(t**2, axis=1)
-        sol = np.linalg.lstsq(A, b, rcond=None)[0]
+        """Closed form (:func:`sphere_closed_form`)."""
+        sol = sphere_closed_form(start.w_T(group.frame, group.sample), group.radius_m)
         return (
             UnknownRequest(
                 probe_key(group.frame),
@@ -390,3 +396,148 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     np.testing.assert_allclose(line[:3, 3], probe, rtol=0, atol=1e-12)
     np.testing.assert_allclose(height * line[:3, 1], 10.0 * (measured - probe), rtol=0, atol=1e-12)
     assert abs(height - 10.0 * (0.01 + error[2])) < 1e-9  # 10 x the radius error
+
+
+# -- its errors read in its own metric everywhere, with no library change for it ----------
+def _distance_errors(robot, qs, radius_m, offset, centre):
+    """Hand computation: measured radius minus the probe-to-centre distance (m), with
+    the robot's Pinocchio forward kinematics."""
+    return radius_m - np.linalg.norm(_probe(robot, qs, offset) - centre, axis=1)
+
+
+def _stats_mm(e):
+    a = 1e3 * np.abs(e)
+    return a.mean(), np.sqrt(np.mean(a**2)), a.max()
+
+
+@pytest.fixture
+def sphere_files(sphere_kind, tmp_path):
+    """A 6R arm (5 mm / 1 deg errors) whose probe touches a ball: 90 training contacts
+    and 30 held-out ones, the radii read with 0.1 mm noise."""
+    nominal = load_robot(ARM_6R)
+    rng = np.random.default_rng(21)
+    truth = load_robot(perturb_robot(nominal, rng))
+    offset = np.array([0.02, -0.01, 0.04])
+    centre = _probe(truth, np.full((1, 6), 0.3), offset)[0] + [0.05, 0.1, -0.05]
+    qs = _contacts(truth, offset, centre, 120, rng)
+    radius = RADIUS + rng.normal(0.0, 1e-4, len(qs))
+    paths = {}
+    for name, rows in (("train", slice(0, 90)), ("held", slice(90, 120))):
+        n = len(qs[rows])
+        group = SphereContacts("flange", np.arange(n), radius[rows], sphere="ball")
+        paths[name] = tmp_path / f"{name}.json"
+        write_measurements(paths[name], Measurements(NAMES, qs[rows], others=(group,)))
+    paths["urdf"] = tmp_path / "arm.urdf"
+    paths["urdf"].write_text(ARM_6R)
+    return paths, nominal, qs, radius
+
+
+def _cli(argv, capsys):
+    from kinfw.cli._main import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    return out
+
+
+def _row(text, start):
+    return next(line for line in text.splitlines() if line.strip().startswith(start)).split()
+
+
+def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_report(
+    sphere_files, tmp_path, capsys
+):
+    """verify (text, --json), calibrate --holdout and report.json give the sphere's
+    distance error in mm (its component's metric: no library code names it), equal to
+    the hand computation: radius minus |probe - centre| with Pinocchio FK, the probe and
+    centre from the sidecar (verify of the calibration) or from the kind's closed form on
+    the held-out contacts (the before / after table, as for a target's pose)."""
+    from kinfw.reports import read_report, read_sidecar
+
+    paths, nominal, qs, radius = sphere_files
+    out_urdf, report_path = tmp_path / "cal.urdf", tmp_path / "report.json"
+    argv = ["calibrate", paths["train"], "--urdf", paths["urdf"], "--out", out_urdf]
+    out = _cli(
+        [*argv, "--params", "full", "--holdout", paths["held"], "--report", report_path], capsys
+    )
+    calibrated = load_robot(out_urdf)
+    q_held, r_held = qs[90:], radius[90:]
+
+    # before / after on the held-out contacts: probe and centre by the closed form
+    def refitted(robot):
+        sol = sphere_closed_form(robot.frame_poses(q_held, "flange", NAMES), r_held)
+        return _distance_errors(robot, q_held, r_held, sol[0:3], sol[3:6])
+
+    before, after = _stats_mm(refitted(nominal)), _stats_mm(refitted(calibrated))
+    assert before[1] > 10 * after[1]  # the calibration helps
+    held_table = out.split("held-out errors:")[1]
+    assert "before RMS mm" in held_table.splitlines()[1]
+    row = _row(held_table, "flange (sphere)")
+    assert float(row[3]) == pytest.approx(before[1], abs=6e-4)
+    assert float(row[4]) == pytest.approx(after[1], abs=6e-4)
+    report = json.loads(report_path.read_text())
+    (held,) = report["errors_held_out"]
+    assert held["before_distance_rms_mm"] == pytest.approx(before[1], rel=1e-9)
+    assert held["after_distance_rms_mm"] == pytest.approx(after[1], rel=1e-9)
+    assert list(report["distance_rms_mm_by_stage"]) == ["nominal", "refine"]
+    assert read_report(report_path).errors_held_out[0].of("distance") == (
+        held["before_distance_rms_mm"],
+        held["after_distance_rms_mm"],
+    )
+    side = read_sidecar(out_urdf.with_suffix(".kinfw.json"))
+    assert side.errors_held_out[0].of("distance") == pytest.approx((before[1], after[1]), rel=1e-9)
+
+    # verify of the calibration on the held-out contacts: the sidecar's probe and centre
+    known = side.known_frames()
+    e = _distance_errors(
+        calibrated, q_held, r_held, known[("probe", "flange")], known[("sphere", "ball")]
+    )
+    doc = json.loads(_cli(["verify", out_urdf, paths["held"], "--json"], capsys))
+    (g,) = doc["groups"]
+    mean, rms, worst = _stats_mm(e)
+    assert g["kind"] == "sphere" and "position_rms_mm" not in g
+    for key, value in (("mean", mean), ("rms", rms), ("max", worst)):
+        assert g[f"distance_{key}_mm"] == pytest.approx(value, rel=1e-9), key
+    np.testing.assert_allclose(
+        [x["distance_mm"] for x in g["samples"]], 1e3 * np.abs(e), rtol=1e-9, atol=1e-12
+    )
+    text = _cli(["verify", out_urdf, paths["held"]], capsys)
+    assert "distance RMS mm" in text and "nan" not in text.lower()
+    assert float(_row(text, "flange")[4]) == pytest.approx(rms, abs=6e-4)
+
+
+def test_the_new_kind_is_scored_and_selected_by_crossval_in_its_own_metric(sphere_files, capsys):
+    """crossval --select scores the sphere's held-out distance (mm) per fold, equal to
+    the hand computation with the fold's trained model, and whitens it by the distance
+    noise (the whitened score of a set is the mean over folds of (RMS / sigma)^2)."""
+    from kinfw.identification import calibrate
+    from kinfw.measurements import read_measurements
+
+    paths, nominal, qs, radius = sphere_files
+    argv = ["crossval", paths["train"], "--urdf", paths["urdf"], "--k", "3", "--select"]
+    doc = json.loads(_cli([*argv, "--json"], capsys))
+    assert doc["selected"] in ("none", "frames", "offsets", "full")
+    (sigma,) = doc["noise"].values()
+    assert list(doc["noise"]) == ["distance_m"]
+    for p in doc["sets"]:
+        folds = [f for f in doc["folds"] if f["parameters"] == p]
+        whitened = np.mean([(f["distance_rms_mm"] * 1e-3 / sigma) ** 2 for f in folds])
+        assert doc["mean_whitened"][p] == pytest.approx(whitened, rel=1e-9)
+        mean = np.mean([f["distance_rms_mm"] for f in folds])
+        assert doc["mean_distance_rms_mm"][p] == pytest.approx(mean, rel=1e-12)
+    assert doc["selected"] == min(doc["sets"], key=doc["mean_whitened"].get)
+    # one fold by hand: train "full" on the other folds, predict the held-out contacts
+    data = read_measurements(paths["train"])
+    test_ids = np.sort(np.array_split(np.random.default_rng(0).permutation(90), 3)[0])
+    train = data.subset(np.setdiff1d(np.arange(90), test_ids))
+    result = calibrate(nominal, train, parameters="full")
+    found = {u.kind: u.value for u in result.refined.unknowns}
+    e = _distance_errors(
+        load_robot(result.urdf_xml), qs[test_ids], radius[test_ids], found["probe"], found["sphere"]
+    )
+    (fold,) = [f for f in doc["folds"] if (f["fold"], f["parameters"]) == (0, "full")]
+    assert fold["distance_rms_mm"] == pytest.approx(_stats_mm(e)[1], rel=1e-6)
+    text = _cli(argv, capsys)
+    assert "held-out RMS, distance mm" in text and "nan" not in text.lower()
+    assert "selected:" in text and "distance" in text.split("selected:")[1]

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from kinfw.geometry import matrix_from_rotation_vector, transform_from_rotation_translation
-from kinfw.identification import parameter_unit
 from kinfw.identification.problem import NoiseModel, build_problem, estimate_noise
 from kinfw.model import BlockKey, PointBlock, RigidFrameBlock, load_robot
 from kinfw.observations import NoiseComponent, PoseKind, kinds, register_kind
@@ -37,9 +36,30 @@ def test_block_units_agree_with_the_unit_of_each_name_and_joint_type():
     for (owner, field), unit in zip(problem.names, problem.units, strict=True):
         if field == "zero_offset":  # the URDF's joint type decides
             assert unit == ("rad" if head.joint(owner).is_revolute else "m"), owner
-        else:
-            assert unit == parameter_unit(owner, field, problem.model0.topology), (owner, field)
-    assert "m" in problem.units[problem.slices[2]]  # the head has prismatic joints
+        else:  # angles of the charts (axis tilts, rotations), else lengths
+            assert unit == ("rad" if field.startswith(("b_tilt", "rot_")) else "m"), field
+    _, zero = problem.block(BlockKey("zero_offset"))
+    assert "m" in problem.units[zero]  # the head has prismatic joints
+
+
+def test_the_robot_blocks_casadi_hooks_and_their_numeric_fold_predict_alike():
+    """Base, zero offsets and the CPC chart moved at once: the residual functions (the
+    blocks' CasADi hooks) and ``model_at`` (their ``moved_model``) predict the same poses."""
+    head = load_robot(HEAD)
+    rng = np.random.default_rng(3)
+    names = head.topology(PLATES).joint_names
+    qs = random_configurations(*head.joint_limits(names), 6, rng, fraction=0.8)
+    data = simulate(head, qs, names, frames=PLATES, rng=rng)
+    problem = build_problem(head, data, parameters="offsets")
+    x = rng.normal(scale=0.02, size=problem.n_parameters)
+    for key in (BlockKey("base"), BlockKey("zero_offset")):
+        assert np.any(x[problem.block(key)[1]] != 0)
+    model = problem.model_at(x)
+    q = data.q_of(model.topology.joint_names)
+    for g, (r, _) in zip(problem.groups, problem.raw_residuals(x, False), strict=True):
+        predicted = g.group.meas_T_frame[:, :3, 3] - r[:, :3]  # position rows: meas - pred
+        T = model.frame_poses(q[g.sample], g.frame)
+        np.testing.assert_allclose(T[:, :3, 3], predicted, atol=1e-12, rtol=0)
 
 
 def test_rigid_and_point_blocks_give_the_same_value_in_numpy_and_casadi():

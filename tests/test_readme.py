@@ -61,6 +61,9 @@ def test_the_python_api_example_runs(tmp_path, monkeypatch, capsys):
     runpy.run_path(str(script), run_name="__main__")
     out = capsys.readouterr().out
     assert "rank 50/50" in out
+    # pan's parameters with the units of their block: axis tilts in rad, offsets in m
+    units = dict(re.findall(r"  pan (\w+): \S+ \+- \S+ (\w+)", out))
+    assert units == {"b_tilt_1": "rad", "b_tilt_2": "rad", "l_x": "m", "l_y": "m"}
     held_out = [float(v) for v in re.findall(r"held out \w+: ([\d.]+) mm RMS", out)]
     assert len(held_out) == 4 and all(v < 1.5 for v in held_out)
     assert (tmp_path / "scene.html").stat().st_size > 900_000

@@ -46,7 +46,7 @@ def test_unseen_axis_stays_at_nominal_and_model_predicts(tiago, seed):
     test = random_configurations(lower, upper, 200, rng, fraction=0.8)
     setup = Setup(frames=(FRAME,), frame_kind="point", noise_m=5e-4, noise_rad=np.radians(0.5))
     info = candidate_information(robot, setup, pool, names, None)
-    A = held_out(robot, setup, test, names, None, info).A_position
+    A = held_out(robot, setup, test, names, None, info).of("position")
     order, _ = greedy(info, A, 10)
     qs = pool[exchange(info, A, order)[0]]
 

@@ -154,8 +154,9 @@ def test_the_report_lists_rejected_apart_and_reads_back(head, truth, tmp_path):
         (PLATES[0], int(bad.poses[0].sample[4])),  # 70 mm first
         (PLATES[1], int(bad.poses[1].sample[9])),  # then 40 mm
     ]
-    assert rows[0].position_residual_mm == pytest.approx(70.0, abs=3.0)
-    assert rows[1].position_residual_mm == pytest.approx(40.0, abs=3.0)
+    assert rows[0].residuals[0].key == "position_residual_mm"
+    assert rows[0].residual("position") == pytest.approx(70.0, abs=3.0)
+    assert rows[1].residual("position") == pytest.approx(40.0, abs=3.0)
     path = write_report(tmp_path / "report.json", report)
     assert read_report(path).refine.rejected == rows
 

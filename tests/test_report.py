@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from kinfw.cli._main import main
-from kinfw.identification import parameter_unit
 from kinfw.identification.problem import build_problem
 from kinfw.measurements import read_measurements, write_measurements
 from kinfw.model import cpc_from_robot, load_robot
@@ -38,11 +37,11 @@ HAND_UNITS = {
     ("left_plate", "z"): "m",
     ("base", "rot_x"): "rad",
     ("base", "x"): "m",
-    ("target:board", "rot_z"): "rad",
-    ("target:board", "y"): "m",
-    ("frame:tracker", "x"): "m",
-    ("marker:m1", "rot_x"): "rad",
-    ("offset:left_plate:point", "z"): "m",
+    ("target:target", "rot_z"): "rad",
+    ("target:target", "y"): "m",
+}
+# The kinematic rows of CPCModel.describe, by hand.
+HAND_KINEMATIC_UNITS = {
     ("pan", "b_x"): "unitless",  # component of the CPC unit axis b
     ("x_table", "b_z"): "unitless",
     ("pan", "beta"): "rad",
@@ -60,17 +59,7 @@ def head():
 
 
 @pytest.fixture(scope="module")
-def topology(head):
-    return head.topology((*PLATES, *CAMERAS))
-
-
-def test_parameter_units_of_the_head_match_the_hand_list(topology):
-    assert topology.revolute == (False, False, True, True, True, True)  # the URDF's types
-    for (owner, field), unit in HAND_UNITS.items():
-        assert parameter_unit(owner, field, topology) == unit, (owner, field)
-
-
-def test_every_problem_parameter_and_kinematic_row_has_the_unit_of_its_joint_type(head):
+def problem(head):
     rng = np.random.default_rng(0)
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = head.joint_limits(names)
@@ -84,32 +73,32 @@ def test_every_problem_parameter_and_kinematic_row_has_the_unit_of_its_joint_typ
         rng=rng,
         w_T_target=default_target_pose(head, qs, names, CAMERAS),
     )
-    problem = build_problem(head, data, parameters="offsets")
-    topo = problem.model0.topology
-    for owner, field in problem.names:
-        unit = parameter_unit(owner, field, topo)
-        if field == "zero_offset":  # the URDF joint itself says revolute or prismatic
-            assert unit == ("rad" if head.joint(owner).is_revolute else "m"), owner
-        else:
-            assert unit in ("rad", "m")
+    return build_problem(head, data, parameters="offsets")
+
+
+def test_parameter_units_of_the_head_match_the_hand_list(problem):
+    assert problem.model0.topology.revolute == (False, False, True, True, True, True)
+    unit = dict(zip(problem.names, problem.units, strict=True))
+    for name, expected in HAND_UNITS.items():
+        assert unit[name] == expected, name
+    assert set(problem.units) == {"rad", "m"}
+
+
+def test_every_zero_offset_has_the_unit_of_its_urdf_joint_type(head, problem):
+    offsets = [
+        (o, u) for (o, f), u in zip(problem.names, problem.units, strict=True) if f == "zero_offset"
+    ]
+    assert [o for o, _ in offsets] == list(problem.model0.topology.joint_names)
+    for owner, unit in offsets:  # the URDF joint itself says revolute or prismatic
+        assert unit == ("rad" if head.joint(owner).is_revolute else "m"), owner
+
+
+def test_the_kinematic_rows_carry_their_units(head):
     model = cpc_from_robot(head, (*PLATES, *CAMERAS))
-    assert {parameter_unit(o, n, model.topology) for o, n, _ in model.describe()} == {
-        "rad",
-        "m",
-        "unitless",
-    }
-
-
-@pytest.mark.parametrize(
-    ("owner", "field", "message"),
-    [
-        ("pan", "bogus", "parameter ('pan', 'bogus'): unknown field"),
-        ("left_plate", "zero_offset", "'left_plate' is not a joint of the model"),
-    ],
-)
-def test_an_unknown_parameter_is_refused(topology, owner, field, message):
-    with pytest.raises(ValueError, match=re.escape(message)):
-        parameter_unit(owner, field, topology)
+    unit = {(o, n): u for o, n, _, u in model.describe()}
+    for name, expected in HAND_KINEMATIC_UNITS.items():
+        assert unit[name] == expected, name
+    assert set(unit.values()) == {"rad", "m", "unitless"}
 
 
 @pytest.fixture(scope="module")

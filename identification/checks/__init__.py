@@ -1,4 +1,6 @@
-"""TODO face."""
+"""Checks around a fit: the data's units against the nominal robot, enough residual rows
+for the free parameters, and whether what is left after the fit is noise.
+"""
 
 from __future__ import annotations
 

@@ -26,7 +26,7 @@ import math
 from dataclasses import dataclass
 
 from kinfw.identification.problem import LeastSquaresProblem
-from kinfw.model import BlockKey
+from kinfw.model import BaseBlock, Block, RobotBlock
 from kinfw.observations import DatasetError
 
 __all__ = [
@@ -89,10 +89,11 @@ _UNKNOWN_LABELS = {
 }
 
 
-def _owner_label(key: BlockKey, owner: str, cameras: set[str], frames: tuple[str, ...]) -> str:
-    if key.kind == "base":
+def _owner_label(block: Block, owner: str, cameras: set[str], frames: tuple[str, ...]) -> str:
+    key = block.key
+    if isinstance(block, BaseBlock):
         return "base frame"
-    if key.kind not in ("cpc", "zero_offset"):  # an unknown of an observation kind
+    if not isinstance(block, RobotBlock):  # an unknown of an observation kind
         return _UNKNOWN_LABELS.get(key.kind, key.kind + " {!r}").format(key.name)
     if owner in cameras:
         return f"camera {owner!r} mount"
@@ -142,7 +143,7 @@ def redundancy(
     for block in problem.blocks:
         for (owner, _), free in zip(block.names, block.free, strict=True):
             if free:
-                label = _owner_label(block.key, owner, set(cameras), frames)
+                label = _owner_label(block, owner, set(cameras), frames)
                 by_owner[label] = by_owner.get(label, 0) + 1
     per_sample = data_rows / n_samples if n_samples else 0.0
     samples_needed = math.ceil((needed - prior) / per_sample) if per_sample else 0

@@ -1,4 +1,9 @@
-"""TODO face."""
+"""Hand-eye calibration: ``A X = X B`` (Tsai & Lenz 1989; :func:`solve_axxb`) and
+``A = X B Y`` (Hirsh, DeSouza & Kak 2001; :func:`solve_axyb`), each ending in maximum
+likelihood on SE(3) with covariance, verdict and outlier rejection; the closed forms of
+Park, Andreff, Daniilidis, Shah and Li as starts; stage 2 of Shih et al. per camera
+(:func:`calibrate_cameras`); the time offset between pose streams.
+"""
 
 from __future__ import annotations
 

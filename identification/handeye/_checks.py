@@ -1,8 +1,8 @@
 """Checks shared by the hand-eye solvers and their closed-form starts.
 
 :func:`check_pose_pairs` is the one input check of every hand-eye solver
-(:mod:`kinfw.identification.handeye`, :mod:`kinfw.identification.handeye` and the closed forms of
-:mod:`kinfw.identification.handeye` and :mod:`kinfw.identification.handeye`):
+(:func:`solve_axxb`, :func:`solve_axyb` and the closed forms of ``_starts_axxb.py`` and
+``_starts_axyb.py``):
 two batches of rigid poses paired pose by pose, rotations accepted within
 ``ORTHONORMAL_TOL`` and re-orthonormalised.
 

@@ -1,4 +1,6 @@
-"""TODO face."""
+"""Experiment design: which configurations to measure, and how many, chosen by the
+predicted held-out error of the calibration they would give (:func:`plan`).
+"""
 
 from __future__ import annotations
 

@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.camera import CameraIntrinsics
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.model import Robot
+from kinfw.observations import NoiseComponent
 
 __all__ = [
     "CandidateInformation",
@@ -251,15 +252,30 @@ def candidate_information(
 
 @dataclass(frozen=True, eq=False)
 class HeldOut:
-    """The prediction error weights ``A`` at the test configurations (scaled chart).
+    """The prediction error weights ``A`` at the test configurations (scaled chart), one
+    per noise component of the observed quantities.
 
-    ``trace(A_position C)`` is the mean over test observations of the squared position
-    error (m^2) of a calibration with covariance ``C`` (scaled coordinates); likewise
-    ``A_rotation`` (rad^2, absent quantities give zero matrices).
+    ``trace(A C)`` of a component is the mean over test observations of the squared size
+    of its error (SI: m^2 for a position, rad^2 for a rotation's small angle, ...) for a
+    calibration with covariance ``C`` (scaled coordinates).
+
+    Attributes
+    ----------
+    weights : tuple of (NoiseComponent, ndarray (p, p))
+        In the order of the observed kinds' components; the first is the planner's
+        objective (:attr:`objective`: a frame's position for every setup).
     """
 
-    A_position: NDArray[np.float64]
-    A_rotation: NDArray[np.float64]
+    weights: tuple[tuple[NoiseComponent, NDArray[np.float64]], ...]
+
+    @property
+    def objective(self) -> tuple[NoiseComponent, NDArray[np.float64]]:
+        """The component the planner minimises the error of, and its weights."""
+        return self.weights[0]
+
+    def of(self, name: str) -> NDArray[np.float64]:
+        """The weights of the component ``name`` (KeyError if it is not observed)."""
+        return next(A for c, A in self.weights if c.name == name)
 
 
 def held_out(
@@ -283,7 +299,7 @@ def held_out(
     problem = build_problem(robot, data, start=robot, targets=targets, parameters=setup.parameters)
     index = {n: k for k, n in enumerate(info.names)}
     p = len(info.names)
-    A = {"position": np.zeros((p, p)), "rotation": np.zeros((p, p))}
+    A: dict[NoiseComponent, NDArray[np.float64]] = {}
     count = 0
     x0 = np.zeros(problem.n_parameters)
     for g, (_, J) in zip(problem.groups, problem.raw_residuals(x0), strict=True):
@@ -292,13 +308,12 @@ def held_out(
         G[:, :, [c for _, c in cols]] = J[:, :, [k for k, _ in cols]]
         G /= info.scale
         row = 0
-        for c in g.components:
-            if c.name in A:
-                Gc = G[:, row : row + c.rows]
-                A[c.name] += np.einsum("mrp,mrq->pq", Gc, Gc)
+        for c in g.components:  # every component of the observed kinds
+            Gc = G[:, row : row + c.rows]
+            A[c] = A.get(c, np.zeros((p, p))) + np.einsum("mrp,mrq->pq", Gc, Gc)
             row += c.rows
         count += J.shape[0]
-    return HeldOut(A["position"] / count, A["rotation"] / count)
+    return HeldOut(tuple((c, a / count) for c, a in A.items()))
 
 
 def _inverse(M: NDArray[np.float64]) -> NDArray[np.float64]:

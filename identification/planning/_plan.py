@@ -43,6 +43,7 @@ from kinfw.identification.planning._objective import (
     mean_square,
 )
 from kinfw.model import Robot
+from kinfw.observations import Metric
 from kinfw.simulation import one_joint_at_a_time
 
 __all__ = [
@@ -72,15 +73,17 @@ class Plan:
     joint_names : tuple of str
     qs : ndarray, shape (n, J)
         The configurations in the order to measure them (:func:`short_path`), rad/m.
-    position_rms_m, rotation_rms_rad : float
-        Predicted held-out RMS errors of the calibrated model (3D position, rotation
-        angle) at the test configurations.
-    random_position_rms_m : float
-        The same for ``n`` random pool configurations (mean of the mean squares over
-        draws, then the root).
+    predicted : tuple of (Metric, float)
+        Per noise component of the observed quantities (:attr:`HeldOut.weights`: a
+        position, a rotation), in its metric, the predicted held-out RMS error of the
+        calibrated model at the test configurations, SI (m, rad); the first is the
+        objective, the error the plan minimises.
+    random_rms : float
+        The objective's for ``n`` random pool configurations (mean of the mean squares
+        over draws, then the root), SI.
     greedy_ms, exchanged_ms : float
-        ``trace(A M^-1)`` (position, scaled) after greedy and after exchange.
-    curve : list of (n, planned_position_rms_m, random_position_rms_m)
+        ``trace(A M^-1)`` (the objective, scaled) after greedy and after exchange.
+    curve : list of (n, planned_rms, random_rms)
         Predicted errors against ``n``: the greedy prefix of that length (the plan itself,
         greedy + exchange, at the plan's own ``n``) and random pool configurations.
     seconds : float
@@ -89,15 +92,23 @@ class Plan:
 
     joint_names: tuple[str, ...]
     qs: NDArray[np.float64]
-    position_rms_m: float
-    rotation_rms_rad: float
-    random_position_rms_m: float
+    predicted: tuple[tuple[Metric, float], ...]
+    random_rms: float
     greedy_ms: float
     exchanged_ms: float
     curve: list = field(default_factory=list)
     seconds: float = 0.0
     dropped: dict = field(default_factory=dict)
     pool_size: int = 0
+
+    @property
+    def objective(self) -> Metric:
+        """The metric of the error the plan minimises."""
+        return self.predicted[0][0]
+
+    def rms(self, name: str) -> float:
+        """The predicted held-out RMS in the metric ``name`` (SI)."""
+        return next(v for m, v in self.predicted if m.name == name)
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,7 +180,7 @@ def plan_configurations(
         lower, upper = robot.joint_limits(names)
         w_T_target = setup.target_pose(robot, names, 0.5 * (lower + upper))
     ctx = _context(robot, setup, pool_qs, test_qs, names, w_T_target)
-    A = ctx.heldout.A_position
+    A = ctx.heldout.objective[1]
     N = len(pool_qs)
     t0 = time.perf_counter()
     n_max = max([n, *curve_ns]) if target_m is None else N
@@ -195,15 +206,22 @@ def plan_configurations(
     return Plan(
         joint_names=names,
         qs=qs,
-        position_rms_m=float(np.sqrt(mean_square(ctx.info, A, chosen))),
-        rotation_rms_rad=float(np.sqrt(mean_square(ctx.info, ctx.heldout.A_rotation, chosen))),
-        random_position_rms_m=float(np.sqrt(random_ms)),
+        predicted=_predicted(ctx, chosen),
+        random_rms=float(np.sqrt(random_ms)),
         greedy_ms=float(values[n - 1]),
         exchanged_ms=float(final),
         curve=curve,
         seconds=seconds,
         dropped=dict(dropped or {}),
         pool_size=N,
+    )
+
+
+def _predicted(ctx: _Context, chosen) -> tuple[tuple[Metric, float], ...]:
+    """Per observed component its metric and predicted held-out RMS (SI) of ``chosen``."""
+    return tuple(
+        (c.display, float(np.sqrt(mean_square(ctx.info, A, chosen))))
+        for c, A in ctx.heldout.weights
     )
 
 
@@ -234,18 +252,15 @@ def predicted_error(
     *,
     joint_names: Sequence[str],
     w_T_target: NDArray | None = None,
-) -> tuple[float, float]:
-    """Predicted held-out RMS (position m, rotation rad) of a calibration from ``qs``."""
+) -> tuple[tuple[Metric, float], ...]:
+    """Predicted held-out RMS of a calibration from ``qs``: per observed noise component
+    its metric and the RMS in SI (position m, rotation rad), as :attr:`Plan.predicted`."""
     names = tuple(joint_names)
     if setup.cameras and w_T_target is None:
         lower, upper = robot.joint_limits(names)
         w_T_target = setup.target_pose(robot, names, 0.5 * (lower + upper))
     ctx = _context(robot, setup, qs, test_qs, names, w_T_target)
-    idx = np.arange(len(np.atleast_2d(qs)))
-    return (
-        float(np.sqrt(mean_square(ctx.info, ctx.heldout.A_position, idx))),
-        float(np.sqrt(mean_square(ctx.info, ctx.heldout.A_rotation, idx))),
-    )
+    return _predicted(ctx, np.arange(len(np.atleast_2d(qs))))
 
 
 def plan_per_joint(
@@ -278,7 +293,7 @@ def plan_per_joint(
     paper, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=fraction)
     pool = np.concatenate([fine, even, paper])
     ctx = _context(robot, setup, pool, test_qs, names, w_T_target)
-    A = ctx.heldout.A_position
+    A = ctx.heldout.objective[1]
     groups = np.concatenate([moved, np.full(len(even) + len(paper), -2)])
     allowed = groups >= 0
     start = np.flatnonzero(groups == -1)  # the initial configuration, always measured
@@ -351,9 +366,8 @@ def plan_to_dict(plan: Plan, setup: dict) -> dict:
         "units": "rad for revolute joints, m for prismatic joints",
         "configurations": plan.qs.tolist(),
         "predicted": {
-            "position_rms_mm": plan.position_rms_m * 1e3,
-            "rotation_rms_deg": float(np.degrees(plan.rotation_rms_rad)),
-            "random_position_rms_mm": plan.random_position_rms_m * 1e3,
+            **{m.headline: m.scale * v for m, v in plan.predicted},
+            f"random_{plan.objective.headline}": plan.objective.scale * plan.random_rms,
         },
         "setup": setup,
     }

@@ -1,8 +1,9 @@
 """Assembly of the least-squares problem: :func:`build_problem`.
 
-It lays the parameter vector out block by block (the robot's CPC chart, base and zero
-offsets, :mod:`~kinfw.identification.problem`; then every unknown the observation kinds
-ask for: external measurement frames, targets, markers, offsets, or a new kind's own),
+It lays the parameter vector out block by block (the robot's CPC chart, base, zero
+offsets and any extra robot block, :mod:`~kinfw.identification.problem`; then every
+unknown the observation kinds ask for: external measurement frames, targets, markers,
+offsets, or a new kind's own),
 takes start values from the kinds' closed-form estimators
 (:mod:`~kinfw.identification.problem`), builds per group a CasADi residual and its exact
 Jacobian (:mod:`~kinfw.identification.problem`), and returns the
@@ -23,7 +24,16 @@ from kinfw.identification.problem._gauge import relative_gauge, robot_blocks
 from kinfw.identification.problem._problem import LeastSquaresProblem, ResidualGroup, Unknown
 from kinfw.identification.problem._start import estimate_unknowns, express_in
 from kinfw.measurements import Measurements, check_against_robot, robot_measurement_frames
-from kinfw.model import Block, BlockKey, Robot, cpc_from_robot
+from kinfw.model import (
+    CPC_KEY,
+    Block,
+    BlockKey,
+    Robot,
+    RobotBlock,
+    cpc_from_geometry,
+    cpc_from_robot,
+    geometry_from_robot,
+)
 from kinfw.observations import DatasetError, kind_of
 
 logger = logging.getLogger("kinfw.identification.problem")
@@ -62,6 +72,7 @@ def build_problem(
     prior: tuple[float, float] | None = None,
     known: tuple[Unknown, ...] = (),
     refine_intrinsics: bool | Sequence[str] = (),
+    extra_blocks: tuple[RobotBlock, ...] = (),
 ) -> LeastSquaresProblem:
     """Assemble the least-squares problem (see :func:`kinfw.identification.refine`).
 
@@ -69,7 +80,8 @@ def build_problem(
     pose and markers) instead of estimating them from these data; ``targets`` gives
     target poses ``root_T_target`` the same way. ``refine_intrinsics`` frees the
     intrinsics blocks (``BlockKey("intrinsics", camera)``, fixed by default) of the
-    named cameras, or of every camera when True.
+    named cameras, or of every camera when True. ``extra_blocks`` are robot blocks
+    besides the CPC chart, base and zero offsets (:class:`kinfw.model.RobotBlock`).
     """
     measurements = check_against_robot(measurements, robot)
     start = robot if start is None else start
@@ -104,7 +116,15 @@ def build_problem(
     unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
     unknown = _free_intrinsics(unknown, refine_intrinsics, measurements.source)
     blocks = (
-        *robot_blocks(model0, robot, groups, model_frame, parameters, with_prior=prior is not None),
+        *robot_blocks(
+            model0,
+            robot,
+            groups,
+            model_frame,
+            parameters,
+            with_prior=prior is not None,
+            extra=tuple(extra_blocks),
+        ),
         *unknown,
     )
     P = sum(b.size for b in blocks)
@@ -139,16 +159,19 @@ def build_problem(
 
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
-    if prior is not None:
+    if prior is not None:  # on the robot blocks' entries in rad and m (other units: none)
         sigma_m, sigma_rad = prior
-        stop = sum(b.size for b in blocks[:3])
-        units = np.array([u for b in blocks[:3] for u in b.units])
-        prior_sigma[:stop] = np.where(units == "rad", sigma_rad, sigma_m)
-        if model_frame is None:  # deviations from the nominal, in the start's chart
-            from kinfw.model import cpc_from_geometry, geometry_from_robot
-
-            nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
-            prior_mean[: model0.n_parameters] = model0.chart_coordinates(nominal)
+        k = 0
+        for b in blocks:
+            s = slice(k, k + b.size)
+            k += b.size
+            if not isinstance(b, RobotBlock):
+                continue
+            units = np.array(b.units)
+            prior_sigma[s] = np.select([units == "rad", units == "m"], [sigma_rad, sigma_m], np.inf)
+            if b.key == CPC_KEY and model_frame is None:  # deviations from the nominal
+                nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
+                prior_mean[s] = model0.chart_coordinates(nominal)
     return LeastSquaresProblem(
         model0,
         model_frame,

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.model import Block, CPCModel, cpc_fk_function
+from kinfw.model import CPC_KEY, Block, CPCModel, RobotBlock, cpc_fk_function
 from kinfw.observations import SymbolicContext, kind_of
 
 __all__ = ["GroupFunctions", "build_functions", "clear_function_cache", "group_functions"]
@@ -85,6 +85,9 @@ def build_functions(
 
     ``const`` is the blocks' :meth:`~kinfw.model.Block.constants` one after the other
     (the CPC block's: the reference model of :func:`kinfw.model.cpc_reference_vector`).
+    The end frames' poses are the robot blocks' hooks around the CPC forward kinematics
+    (:class:`kinfw.model.RobotBlock`): the joint readings through every
+    ``casadi_joint_values``, the CPC block's FK, then every ``casadi_frame_poses``.
     """
     import casadi as ca
 
@@ -92,21 +95,23 @@ def build_functions(
     theta = ca.SX.sym("theta", P)
     const = ca.SX.sym("const", n_const)
     q = ca.SX.sym("q", model0.n_joints)
-    slices, consts, k, c = [], [], 0, 0
+    parts, k, c = [], 0, 0  # (block, its entries of theta, its constants)
     for b in blocks:
         n = len(b.constants())
-        slices.append(slice(k, k + b.size))
-        consts.append(const[c : c + n])
+        parts.append((b, theta[k : k + b.size], const[c : c + n]))
         k, c = k + b.size, c + n
-    fk = cpc_fk_function(model0, symbolic_reference=True)
-    T_frames = fk(q + theta[slices[2]], theta[slices[0]], consts[0])
+    robot = [p for p in parts if isinstance(p[0], RobotBlock)]
+    joint_names = tuple(model0.topology.joint_names)
+    q_model = q
+    for b, d, cs in robot:
+        q_model = b.casadi_joint_values(q_model, d, cs, joint_names)
+    (_, d_cpc, c_cpc) = next(p for p in robot if p[0].key == CPC_KEY)
+    T_frames = cpc_fk_function(model0, symbolic_reference=True)(q_model, d_cpc, c_cpc)
     T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
-    w_T_base = blocks[1].casadi_value(theta[slices[1]], consts[1])
-    frames = {f: w_T_base @ T_frames[i] for i, f in enumerate(model0.topology.frames)}
-    values = {
-        b.key: b.casadi_value(theta[s], cs)
-        for b, s, cs in zip(blocks[3:], slices[3:], consts[3:], strict=True)
-    }
+    frames = dict(zip(model0.topology.frames, T_frames, strict=True))
+    for b, d, cs in robot:
+        frames = b.casadi_frame_poses(frames, d, cs)
+    values = {b.key: b.casadi_value(d, cs) for b, d, cs in parts if not isinstance(b, RobotBlock)}
     context = SymbolicContext(ca, frames, values, model_frame)
     out = []
     for g in groups:
@@ -136,13 +141,13 @@ def group_functions(
 ) -> tuple[GroupFunctions, ...]:
     """:func:`build_functions`, cached by the problem's structure: every number
     (reference model, block starts) is an input, so problems of one structure (topology,
-    blocks, groups' keys) share them."""
+    blocks' types, keys and sizes, groups' keys) share them."""
     topo = model0.topology
     key = (
         (topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
         tuple(float(v) for v in model0.sign),
         model_frame,
-        tuple((type(b).__name__, b.key, b.size) for b in blocks),
+        tuple((type(b).__module__, type(b).__qualname__, b.key, b.size) for b in blocks),
         tuple(kind_of(g).key(g) for g in groups),
     )
     with _FUNCTION_CACHE_LOCK:

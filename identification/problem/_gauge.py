@@ -11,6 +11,8 @@ The CPC chart is minimal for poses of end frames in the measurement frame. Aroun
   base only when some observation is expressed in the model frame, a zero offset only
   where it is not redundant with a tool or the base;
 - ``parameters`` selects what else is free (see :func:`kinfw.identification.refine`);
+  an extra robot block (a joint's gear scale) says itself what it frees under each set
+  (:meth:`kinfw.model.RobotBlock.free_for`);
 - with observations measured in a frame of the robot (relative poses between two
   branches), what they leave undetermined (the joints above the branches' common
   ancestor, the base, a rigid motion of the branches) is fixed from the problem's
@@ -24,7 +26,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.model import BlockKey, CPCBlock, CPCModel, RigidFrameBlock, Robot, ZeroOffsetBlock
+from kinfw.model import (
+    CPC_KEY,
+    BaseBlock,
+    BlockKey,
+    CPCBlock,
+    CPCModel,
+    Robot,
+    RobotBlock,
+    ZeroOffsetBlock,
+)
 from kinfw.observations import kind_of
 
 __all__ = ["STRUCTURAL_RANK_TOL", "relative_gauge", "robot_blocks"]
@@ -92,8 +103,10 @@ def robot_blocks(
     parameters: str | tuple[str, ...],
     *,
     with_prior: bool = False,
-) -> tuple[CPCBlock, RigidFrameBlock, ZeroOffsetBlock]:
-    """The robot's blocks with their free masks: CPC chart, base, joint zero offsets.
+    extra: tuple[RobotBlock, ...] = (),
+) -> tuple[RobotBlock, ...]:
+    """The robot's blocks with their free masks: CPC chart, base, the ``extra`` ones,
+    joint zero offsets.
 
     Parameters
     ----------
@@ -113,16 +126,25 @@ def robot_blocks(
         prior (a zero offset turns every axis below the joint), but under a prior the
         one-parameter offset -- the encoder zero, often a real robot's largest error --
         costs one prior term where the chart would pay one per axis below.
+    extra : tuple of RobotBlock
+        Further robot blocks (e.g. a joint's gear scale), free as their
+        :meth:`~kinfw.model.RobotBlock.free_for` says under ``parameters``.
+
+    Raises
+    ------
+    ValueError
+        For an extra block that is not a :class:`~kinfw.model.RobotBlock` or whose key
+        is taken.
     """
     observed = model0.topology.frames
     cpc = CPCBlock(
-        BlockKey("cpc"), free=_cpc_free(model0, robot, groups, observed, parameters), model=model0
+        CPC_KEY, free=_cpc_free(model0, robot, groups, observed, parameters), model=model0
     )
     in_model_frame = any(
         kind_of(g).has_measured_in and kind_of(g).measured_in(g) == model_frame for g in groups
     )
     base_free = parameters not in ("full", "none") and in_model_frame
-    base = RigidFrameBlock(BlockKey("base"), free=np.full(6, base_free), start=np.eye(4))
+    base = BaseBlock(BlockKey("base"), free=np.full(6, base_free), start=np.eye(4))
     topo = model0.topology
     # a zero offset is redundant with a tool when the joint carries only end frames, and
     # with the base when only prismatic joints lie above it (a constant translation)
@@ -140,7 +162,17 @@ def robot_blocks(
         joint_names=tuple(topo.joint_names),
         revolute=tuple(bool(r) for r in topo.revolute),
     )
-    return cpc, base, zero
+    more: tuple[RobotBlock, ...] = ()
+    for b in extra:
+        if not isinstance(b, RobotBlock):
+            raise ValueError(f"extra_blocks: expected RobotBlock instances, got {type(b).__name__}")
+        if b.key in {o.key for o in (cpc, base, zero, *more)}:
+            raise ValueError(f"extra_blocks: the key {b.key} is taken")
+        more += (b.with_free(b.free_for(parameters)),)
+    # the extra blocks' joint hooks act on the readings before the zero offsets
+    # (q' = (1 + s) q + z for a scale), so that model_at's model, with the offsets
+    # folded in, takes the joint values after the extra hooks
+    return (cpc, base, *more, zero)
 
 
 #: Relative norm (columns scaled to unit norm) below which a parameter's Jacobian column
@@ -173,7 +205,7 @@ def relative_gauge(
     Parameters
     ----------
     blocks : tuple of Block
-        CPC, base, zero offsets, then the unknowns, as built.
+        The robot's blocks and the unknowns, as built.
     groups : list of ResidualGroup
         Their residual functions (the free masks are not part of them).
     lower, upper : ndarray, shape (J,)
@@ -206,23 +238,23 @@ def relative_gauge(
     J = np.concatenate(parts)
 
     starts = np.cumsum([0, *(b.size for b in blocks)])
-    cpc, _, zero = blocks[:3]
+    cpc = next(b for b in blocks if b.key == CPC_KEY)
     frames = set(cpc.model.topology.frames)
     topo = cpc.model.topology
     depth = {j: len(_ancestors(topo, k)) for k, j in enumerate(topo.joint_names)}
-    cpc_names = cpc.model.parameter_names
-
-    def rank_of(col: int) -> tuple[int, int]:
-        if col >= starts[3]:
-            return (0, col)  # unknown blocks first
-        if col < starts[1]:
-            owner = cpc_names[col][0]
-            if owner in frames:
-                return (1, col)
-            return (2, -depth.get(owner, 0) * 100000 + col)
-        if col >= starts[2]:
-            return (3, -col)
-        return (4, col)
+    rank: list[tuple[int, int]] = []  # per column of x, its place in the order
+    for b, start in zip(blocks, starts[:-1], strict=True):
+        for k, (owner, _) in enumerate(b.names):
+            col = int(start) + k
+            if not isinstance(b, RobotBlock):
+                rank.append((0, col))  # unknown blocks first
+            elif b.key == CPC_KEY:
+                joint = owner not in frames
+                rank.append((2, -depth.get(owner, 0) * 100000 + col) if joint else (1, col))
+            elif isinstance(b, BaseBlock):
+                rank.append((4, col))
+            else:  # zero offsets and any further robot block: after the joints' axes
+                rank.append((3, -col))
 
     free = np.concatenate([b.free for b in blocks])
     # joints above the common ancestor of every group's two frames (observed and
@@ -241,13 +273,12 @@ def relative_gauge(
             above_b = set() if pb < 0 else {pb, *_ancestors(topo, pb)}
             shared &= above_a & above_b
     shared_names = {topo.joint_names[j] for j in shared}
-    for k, (owner, _) in enumerate(cpc_names):
-        if owner in shared_names:
-            free[starts[0] + k] = False
-    for k, j in enumerate(zero.joint_names):
-        if j in shared_names:
-            free[starts[2] + k] = False
-    order = sorted(np.flatnonzero(free), key=rank_of)
+    for b, start in zip(blocks, starts[:-1], strict=True):
+        if isinstance(b, RobotBlock) and not isinstance(b, BaseBlock):
+            for k, (owner, _) in enumerate(b.names):
+                if owner in shared_names:
+                    free[start + k] = False
+    order = sorted(np.flatnonzero(free), key=lambda col: rank[col])
     norms = np.linalg.norm(J, axis=0)
     basis = np.zeros((J.shape[0], 0))
     keep = np.zeros(P, bool)

@@ -1,8 +1,9 @@
 """The least-squares problem's data: its unknowns, residual groups and parameter layout.
 
-:class:`LeastSquaresProblem` holds the parameter blocks (the robot's CPC chart, base and
-zero offsets, then every unknown the observation kinds ask for), their start values and
-the :class:`ResidualGroup` of each observation group, whose CasADi residual and exact
+:class:`LeastSquaresProblem` holds the parameter blocks (the robot's
+:class:`~kinfw.model.RobotBlock` s: CPC chart, base, zero offsets and any extra one; then
+every unknown the observation kinds ask for), their start values and the
+:class:`ResidualGroup` of each observation group, whose CasADi residual and exact
 Jacobian are mapped over the samples. The built functions are unwhitened (SI):
 :meth:`LeastSquaresProblem.evaluate` whitens each row in numpy by the sigma of its noise
 component, so they do not depend on the noise.
@@ -18,11 +19,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.geometry import rigid_from_chart
 from kinfw.identification.problem._functions import GroupFunctions
 from kinfw.identification.problem._start import start_context
 from kinfw.measurements import Measurements
-from kinfw.model import Block, BlockKey, CPCModel, ParameterName
+from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
 __all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown"]
@@ -170,7 +170,9 @@ class LeastSquaresProblem:
     model_frame : str or None
         None for the URDF root, else the one external measurement frame.
     blocks : tuple of Block
-        CPC chart, base, zero offsets, then the unknowns (:attr:`n_robot_blocks` = 3).
+        The robot's (:attr:`robot_blocks`: the CPC chart, base, zero offsets and any
+        extra one), then the unknowns (:attr:`unknown_blocks`); found by role and key
+        (:meth:`block`), never by position.
     groups : tuple of ResidualGroup
     prior_mean, prior_sigma : ndarray, shape (P,)
         Gaussian prior on ``x`` (sigma inf: none).
@@ -185,8 +187,6 @@ class LeastSquaresProblem:
     prior_mean: NDArray[np.float64]
     prior_sigma: NDArray[np.float64]
     fitted: tuple[tuple[BlockKey, str], ...] = ()
-
-    n_robot_blocks = 3
 
     @property
     def slices(self) -> tuple[slice, ...]:
@@ -205,9 +205,14 @@ class LeastSquaresProblem:
         raise KeyError(key)
 
     @property
+    def robot_blocks(self) -> tuple[RobotBlock, ...]:
+        """The robot's blocks (:class:`~kinfw.model.RobotBlock`), in the problem's order."""
+        return tuple(b for b in self.blocks if isinstance(b, RobotBlock))
+
+    @property
     def unknown_blocks(self) -> tuple[Block, ...]:
         """The blocks besides the robot's (targets, frames, markers, offsets...)."""
-        return self.blocks[self.n_robot_blocks :]
+        return tuple(b for b in self.blocks if not isinstance(b, RobotBlock))
 
     @property
     def names(self) -> tuple[ParameterName, ...]:
@@ -215,17 +220,13 @@ class LeastSquaresProblem:
 
     @property
     def units(self) -> tuple[str, ...]:
-        """SI unit of each parameter (``"rad"`` or ``"m"``), from its block."""
+        """SI unit of each parameter (``"rad"``, ``"m"``, ``"unitless"``...), from its
+        block (:attr:`kinfw.model.Block.units`)."""
         return tuple(u for b in self.blocks for u in b.units)
 
     @property
     def free(self) -> NDArray[np.bool_]:
         return np.concatenate([b.free for b in self.blocks])
-
-    @property
-    def robot_stop(self) -> int:
-        """End of the robot's entries in ``x`` (CPC, base, zero offsets)."""
-        return self.slices[self.n_robot_blocks - 1].stop
 
     @property
     def prior_rows(self) -> NDArray[np.int64]:
@@ -324,27 +325,16 @@ class LeastSquaresProblem:
         return ca.vertcat(*parts)
 
     def model_at(self, x: NDArray) -> CPCModel:
-        """The kinematics at ``x`` (base transform and joint zero offsets folded in)."""
-        from kinfw.model import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
-
-        s_cpc, s_base, s_zero = self.slices[: self.n_robot_blocks]
-        model = self.model0.perturbed(x[s_cpc])
-        base = rigid_from_chart(np.eye(4), x[s_base])
-        zero = x[s_zero]
-        if not np.any(base != np.eye(4)) and not np.any(zero):
-            return model
-        # FK(q + zero) = FK with every joint pre-moved by its offset: the geometry at q = 0
-        # of the offset model is the original geometry at q = zero.
-        moved = model.joint_frames(zero)[0]
-        geo = geometry_from_cpc(model)
-        axes = moved[:, :3, 2] * model.sign[:, None]
-        shifted = ZeroGeometry(
-            geo.topology,
-            axes @ base[:3, :3].T,
-            moved[:, :3, 3] @ base[:3, :3].T + base[:3, 3],
-            base @ model.frame_poses(zero),
-        )
-        return cpc_from_geometry(shifted, sign=model.sign)
+        """The kinematics at ``x``: the CPC block's model with every other robot block
+        folded in (:meth:`kinfw.model.RobotBlock.moved_model`: the base transform and the
+        joint zero offsets; a block no CPC model holds, such as a gear scale, stands
+        beside it)."""
+        cpc, s_cpc = self.block(CPC_KEY)
+        model = cpc.numpy_value(x[s_cpc])
+        for b, s in zip(self.blocks, self.slices, strict=True):
+            if isinstance(b, RobotBlock) and b.key != CPC_KEY:
+                model = b.moved_model(model, x[s])
+        return model
 
     def start_context(self, measurements: Measurements) -> StartContext:
         """The start model's poses at the samples of ``measurements`` (those the problem
@@ -371,7 +361,6 @@ class LeastSquaresProblem:
         """Every unknown block's value at ``x`` (targets, frames, markers, offsets...)."""
         return tuple(
             Unknown(b.key.kind, b.key.name, b.numpy_value(x[s]))
-            for b, s in zip(
-                self.blocks[self.n_robot_blocks :], self.slices[self.n_robot_blocks :], strict=True
-            )
+            for b, s in zip(self.blocks, self.slices, strict=True)
+            if not isinstance(b, RobotBlock)
         )

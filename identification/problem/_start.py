@@ -18,6 +18,7 @@ from kinfw.geometry import (
     matrix_from_rotation_vector,
     project_to_rotation,
     rotation_vector_from_matrix,
+    skew,
 )
 from kinfw.measurements import Measurements
 from kinfw.model import Block, BlockKey, CPCModel, RigidFrameBlock
@@ -260,7 +261,7 @@ def _gauss_newton(tracks, labels, R, t, offsets, rotations, iterations=50):
             v = T[:, :3, :3] @ m + T[:, :3, 3]
             r = p - (v @ R.T + t)
             J = np.zeros((n, 3, P))
-            J[:, :, :3] = R @ skew_batch(v)
+            J[:, :, :3] = R @ skew(v)
             J[:, :, 3:6] = -np.eye(3)
             if offset is None:
                 c = cols[label]
@@ -289,14 +290,6 @@ def _gauss_newton(tracks, labels, R, t, offsets, rotations, iterations=50):
         if np.linalg.norm(dx) < 1e-14:
             break
     return R, t, offsets, rotations, J, cols
-
-
-def skew_batch(v):
-    """``[v]x`` of each row of v (n, 3) -> (n, 3, 3)."""
-    out = np.zeros((len(v), 3, 3))
-    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return out
 
 
 def _undetermined(J, cols, rotations, name, describe):

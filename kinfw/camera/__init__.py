@@ -1,9 +1,12 @@
-"""TODO face."""
+"""Cameras and boards: intrinsics (pinhole with OpenCV's distortion), the boards' point
+models (chessboard, ChArUco) and corner detection numbered by the board (OpenCV, imported
+when used).
+"""
 
 from __future__ import annotations
 
 from kinfw.camera._boards import DEFAULT_DICTIONARY, BoardError, Charuco, Chessboard, parse_board
-from kinfw.camera._detect import Detection, Detector, detect_corners, read_gray
+from kinfw.camera._detect import Detection, Detector, read_gray
 from kinfw.camera._intrinsics import (
     PARAMETER_NAMES,
     CameraError,
@@ -23,7 +26,6 @@ __all__ = [
     "Chessboard",
     "Detection",
     "Detector",
-    "detect_corners",
     "intrinsics_from_dict",
     "parse_board",
     "project_normalized",

@@ -66,7 +66,7 @@ from numpy.typing import NDArray
 
 from kinfw.camera._boards import Charuco, Chessboard
 
-__all__ = ["Detection", "Detector", "detect_corners", "read_gray"]
+__all__ = ["Detection", "Detector", "read_gray"]
 
 log = logging.getLogger(__name__)
 
@@ -222,17 +222,6 @@ class Detector:
         grid = _most_upright([greys.turned(turn) for turn in right])
         ids = np.arange(board.count, dtype=np.int64)
         return Detection(label, "found", "", grid.reshape(-1, 2).copy(), ids, board.points)
-
-
-def detect_corners(
-    board: Chessboard | Charuco,
-    images: list[NDArray[np.uint8]],
-    labels: list[str],
-    **options: Any,
-) -> list[Detection]:
-    """:meth:`Detector.detect` for each image (``options``: see :class:`Detector`)."""
-    detector = Detector(board, **options)
-    return [detector.detect(image, label) for image, label in zip(images, labels, strict=True)]
 
 
 def _find_chessboard(image: NDArray[np.uint8], size: tuple[int, int]) -> NDArray[np.float64] | None:

@@ -25,7 +25,6 @@ __all__ = [
     "POSITIVE_PX",
     "SEED",
     "add_camera_option",
-    "default_sidecar_path",
     "frame_file",
     "frames_arg",
     "number",
@@ -180,8 +179,3 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
                 f"{frame!r} ({has})"
             )
     return data
-
-
-def default_sidecar_path(out: Path) -> Path:
-    """Where the calibration sidecar of the calibrated URDF ``out`` goes."""
-    return Path(out).with_suffix(".kinfw.json")

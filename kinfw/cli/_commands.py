@@ -21,14 +21,13 @@ from kinfw.cli._args import (
     COUNT,
     SEED,
     add_camera_option,
-    default_sidecar_path,
     frames_arg,
     number,
     read_data,
     up_arg,
 )
 from kinfw.cli._tables import accuracy_table
-from kinfw.files import json_text
+from kinfw.files import json_text, sidecar_path
 
 __all__ = [
     "add_crosscheck_parser",
@@ -74,10 +73,10 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
     robot = load_robot(args.model)
     data = read_data(args.data, args)
-    sidecar_path = args.sidecar or default_sidecar_path(args.model)
+    sidecar_file = args.sidecar or sidecar_path(args.model)
     sidecar = None
-    if Path(sidecar_path).is_file() and not args.no_sidecar:
-        sidecar = read_sidecar(sidecar_path)
+    if Path(sidecar_file).is_file() and not args.no_sidecar:
+        sidecar = read_sidecar(sidecar_file)
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
     overridden = []
@@ -95,7 +94,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
             ),
         )
     report = evaluate_model(robot, data, sidecar=sidecar)
-    used = str(sidecar_path) if sidecar is not None else None
+    used = str(sidecar_file) if sidecar is not None else None
     if args.json:
         print(
             json_text(

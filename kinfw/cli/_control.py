@@ -1,4 +1,4 @@
-"""What ``kinfw gaze`` (:mod:`kinfw.cli`) and ``kinfw reach`` (:mod:`kinfw.cli`)
+"""What ``kinfw gaze`` (:mod:`kinfw.cli._gaze`) and ``kinfw reach`` (:mod:`kinfw.cli._reach`)
 share: their common options (model, ``--unit``, ``--q``, ``--free``, ``--json``), the start
 configuration from ``--q``, the free joints from ``--free``, the check of a target's
 distance, and the table of the joint values they print.

@@ -1,6 +1,6 @@
 """The commands of the ``kinfw`` command line that fit a model: ``calibrate``, ``demo``
 and ``crossval``, with their tables and printers (the other commands are in
-:mod:`kinfw.cli`, their parsers in :mod:`kinfw.cli`, :func:`kinfw.cli.main`
+:mod:`kinfw.cli._commands`, their parsers in :mod:`kinfw.cli._fit_parser`, :func:`kinfw.cli.main`
 in :mod:`kinfw.cli`).
 
 Each ``cmd_<name>(args)`` runs ``kinfw <name>`` on the parsed arguments and returns the
@@ -17,11 +17,19 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from kinfw.cli._args import read_data
-from kinfw.cli._tables import format_table, progress_printer
+from kinfw.cli._tables import format_table, metric_format, number, progress_printer
 from kinfw.files import json_text
 
 if TYPE_CHECKING:
-    from kinfw.reports import BeforeAfter, DownweightedRow, RefineSection, RejectedRow, StageErrors
+    from kinfw.measurements import Measurements
+    from kinfw.reports import (
+        BeforeAfter,
+        DownweightedRow,
+        ErrorValue,
+        RefineSection,
+        RejectedRow,
+        StageErrors,
+    )
     from kinfw.verification.evaluation import CrossValidation
 
 __all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
@@ -31,31 +39,51 @@ MAX_LINES = 10
 
 
 # -- kinfw calibrate ---------------------------------------------------------------------
+def _labels(values: Sequence[ErrorValue]) -> list[str]:
+    """Column labels of error values: ``"RMS mm"`` where the unit alone tells the metric
+    apart from the others, else with the metric's name (``"height RMS mm"``)."""
+    units = [v.unit for v in values]
+    return [
+        v.label() if units.count(v.unit) > 1 or not v.stat else v.label().split(" ", 1)[1]
+        for v in values
+    ]
+
+
 def _before_after_table(rows: Sequence[BeforeAfter]) -> str:
-    return format_table(
-        [
-            [
-                r.group,
-                r.n,
-                f"{r.before_position_rms_mm:.3f}",
-                f"{r.after_position_rms_mm:.3f}",
-                f"{r.before_rotation_rms_deg:.4f}",
-                f"{r.after_rotation_rms_deg:.4f}",
-            ]
-            for r in rows
-        ],
-        ["frame", "n", "before RMS mm", "after RMS mm", "before RMS deg", "after RMS deg"],
-    )
+    """Per group its errors before and after, a pair of columns per metric of any group
+    (``-`` where a group's kind has none)."""
+    values = list({v.key: v for r in rows for v in r.before}.values())
+    cells = []
+    for r in rows:
+        row = [r.group, r.n]
+        for v in values:
+            pair = r.of(v.name)
+            fmt = metric_format(v.name, v.unit)
+            row += [number(x, fmt) for x in (pair if pair else (None, None))]
+        cells.append(row)
+    header = ["frame", "n"]
+    for label in _labels(values):
+        header += [f"before {label}", f"after {label}"]
+    return format_table(cells, header)
 
 
 def _stage_table(stages: Sequence[StageErrors]) -> str:
-    """Per group its RMS after each stage: position mm, image groups (``[px]``) px."""
-    rms = {s.stage: dict(s.position_rms_mm) for s in stages}
-    groups = [g for g, _ in stages[0].position_rms_mm]
-    px = any(g.endswith(" [px]") for g in groups)
+    """Per group the headline of its first metric after each stage (position RMS mm,
+    pixel RMS px, ...); the metric named per row when the groups differ."""
+    rms = {s.stage: {g: v for g, v in s.rms} for s in stages}
+    first = stages[0].rms
+    kinds = list({v.key: v for _, v in first}.values())
+    mixed = len(kinds) > 1
+    head = "RMS: " + ", ".join(f"{v.name} {v.unit}" for v in kinds) if mixed else kinds[0].label()
     return format_table(
-        [[g, *(f"{rms[s.stage][g]:.3f}" for s in stages)] for g in groups],
-        ["RMS: position mm, images px" if px else "position RMS mm", *rms],
+        [
+            [
+                f"{g} [{v.name} {v.unit}]" if mixed else g,
+                *(f"{rms[s.stage][g].value:.3f}" for s in stages),
+            ]
+            for g, v in first
+        ],
+        [head, *rms],
     )
 
 
@@ -129,7 +157,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"model choice: {choice.k}-fold held-out error of each candidate:")
         print(_choice_table(choice))
     print("RMS on the calibration data after each stage (in-sample):")
-    print(_stage_table(report.position_rms_by_stage))
+    print(_stage_table(report.rms_by_stage))
     if report.refine is not None:
         _print_refine(
             report.refine,
@@ -170,33 +198,38 @@ def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:
 
 
 def _choice_table(choice) -> str:
-    """The candidates of a model choice with their held-out scores, the chosen marked."""
-    head = f"  {'candidate':<32} {'whitened':>9} {'pos mm':>8} {'rot deg':>8}"
+    """The candidates of a model choice with their held-out scores (whitened, and the
+    mean RMS in each metric of the data), the chosen marked."""
+    metrics = list(dict.fromkeys(m for c in choice.candidates for m, _ in c.errors))
+    labels = [f"{m.name} {m.unit}" for m in metrics]
+    head = f"  {'candidate':<32} {'whitened':>9}" + "".join(f" {t:>8}" for t in labels)
     rows = [head]
     for c in choice.candidates:
         mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
         if c.failed is not None:
             rows.append(f"  {c.label:<32} not fitted on a training fold (too few residuals)")
             continue
-        rot = "-" if math.isnan(c.rotation_rms_deg) else f"{c.rotation_rms_deg:.3g}"
-        rows.append(f"  {c.label:<32} {c.whitened:>9.3g} {c.position_rms_mm:>8.3g} {rot:>8}{mark}")
+        mine = dict(c.errors)
+        cells = "".join(
+            f" {number(mine.get(m), '.3g'):>{max(8, len(t))}}"
+            for m, t in zip(metrics, labels, strict=True)
+        )
+        rows.append(f"  {c.label:<32} {c.whitened:>9.3g}{cells}{mark}")
     return "\n".join(rows)
 
 
 def _noise_text(noise) -> str:
-    """The sigma of each noise component the data has: ``0.5 mm, 0.29 deg per
-    component, 0.5 px`` (position, rotation, pixels; other components in their SI
-    unit)."""
+    """The sigma of each noise component the data has, in its metric's unit:
+    ``position 0.5 mm, rotation 0.289 deg, pixel 0.5 px`` (per row of the component)."""
+    from kinfw.observations import kinds
+
+    display = {c.name: c.display for k in kinds() for c in k.components}
     parts = []
     for name, sigma in noise.sigmas:
-        if name == "position":
-            parts.append(f"{1e3 * sigma:.3g} mm")
-        elif name == "rotation":
-            parts.append(f"{math.degrees(sigma):.3g} deg per component")
-        elif name == "pixel":
-            parts.append(f"{sigma:.3g} px")
-        else:
-            parts.append(f"{name} {sigma:.3g}")
+        m = display.get(name)
+        parts.append(
+            f"{name} {sigma:.3g}" if m is None else f"{name} {m.scale * sigma:.3g} {m.unit}"
+        )
     return ", ".join(parts) or "-"
 
 
@@ -304,7 +337,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         + "; 100 held-out configurations"
     )
     print("\nheld-out position RMS against the true robot (noise-free), mm, after each stage:")
-    print(_stage_table(report.position_rms_vs_truth_held_out_by_stage))
+    print(_stage_table(report.rms_vs_truth_held_out_by_stage))
     print("\nheld-out errors against noisy measurements (targets: camera_T_target):")
     print(_before_after_table(report.errors_held_out))
     noise = report.refine.noise
@@ -374,14 +407,14 @@ def cmd_crossval(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(cv.to_dict()))
         return 0
-    _print_crossval(cv, args, data.n_samples)
+    _print_crossval(cv, args, data)
     return 0
 
 
-def _print_crossval(cv: CrossValidation, args: argparse.Namespace, n_samples: int) -> None:
+def _print_crossval(cv: CrossValidation, args: argparse.Namespace, data: Measurements) -> None:
     """The table of ``kinfw crossval``: held-out RMS per fold and parameter set, the
     excluded observations, the warnings and the selected set."""
-    import numpy as np
+    from kinfw.observations import kind_of
 
     sets = cv.sets
     label = {
@@ -390,51 +423,25 @@ def _print_crossval(cv: CrossValidation, args: argparse.Namespace, n_samples: in
         "offsets": "offsets+frames",
         "full": "calibrated",
     }
-    px = cv.has_pixels
-    pose = any(not np.isnan(s.position_rms_mm) for s in cv.scores)
-    units = [
-        u for u, has in (("position mm / orientation deg", pose), ("reprojection px", px)) if has
-    ]
+    metrics = cv.metrics
+    images = any(kind_of(g).name == "pixels" for g in data.all_groups())
     print(
-        f"{args.k}-fold cross-validation of {args.data} ({n_samples} samples, folds "
-        f"by sample{', images whole' if px else ''}, seed {args.seed}): held-out RMS, "
-        + " | ".join(units)
+        f"{args.k}-fold cross-validation of {args.data} ({data.n_samples} samples, folds "
+        f"by sample{', images whole' if images else ''}, seed {args.seed}): held-out RMS, "
+        + " / ".join(f"{m.name} {m.unit}" for m in metrics)
     )
 
-    def number(value: float, fmt: str) -> str:
-        return "-" if np.isnan(value) else format(value, fmt)
-
-    def cell(position_mm: float, rotation_deg: float, pixel_px: float) -> str:
-        parts = []
-        if pose:
-            parts.append(f"{number(position_mm, '.3f')} / {number(rotation_deg, '.3f')}")
-        if px:
-            parts.append(number(pixel_px, ".3f"))
-        return " | ".join(parts)
+    def cell(value_of) -> str:
+        return " / ".join(number(value_of(m), m.fmt) for m in metrics)
 
     rows = []
     for fold in range(args.k):
         row = [fold, next(s.n_test for s in cv.scores if s.fold == fold)]
         for p in sets:
             sc = next(s for s in cv.scores if s.fold == fold and s.parameters == p)
-            row.append(cell(sc.position_rms_mm, sc.rotation_rms_deg, sc.pixel_rms_px))
+            row.append(cell(lambda m, sc=sc: sc.of(m.name)))
         rows.append(row)
-    rows.append(
-        [
-            "mean",
-            "",
-            *(
-                cell(
-                    cv.mean(p),
-                    cv.mean(p, "rotation_rms_deg"),
-                    np.nanmean([s.pixel_rms_px for s in cv.scores if s.parameters == p])
-                    if px
-                    else float("nan"),
-                )
-                for p in sets
-            ),
-        ]
-    )
+    rows.append(["mean", "", *(cell(lambda m, p=p: cv.mean(p, m.name)) for p in sets)])
     print(format_table(rows, ["fold", "n test", *(label[p] for p in sets)]))
     if args.exclude_flagged:
         print(
@@ -447,12 +454,15 @@ def _print_crossval(cv: CrossValidation, args: argparse.Namespace, n_samples: in
     for warning in cv.warnings:
         print(f"warning: {warning}")
     if cv.selected:
-        sp, sr = cv.noise
+        sigmas = ", ".join(
+            f"{c.name} {c.display.scale * sigma:.3g} {c.display.unit}" for c, sigma in cv.noise
+        )
+        errors = " / ".join(
+            f"{number(cv.mean(cv.selected, m.name), m.fmt)} {m.unit}" for m in metrics
+        )
         print(
             f"selected: {label[cv.selected]} ({cv.selected!r}), the lowest mean held-out "
-            f"error whitened by the noise ({sp * 1e3:.3g} mm, {np.degrees(sr):.3g} deg per "
-            f"component): {cv.mean(cv.selected):.3f} mm / "
-            f"{cv.mean(cv.selected, 'rotation_rms_deg'):.3f} deg, whitened "
+            f"error whitened by the noise ({sigmas}): {errors}, whitened "
             f"{cv.whitened(cv.selected):.3g}"
         )
 
@@ -469,13 +479,5 @@ def _observed(row: DownweightedRow | RejectedRow) -> str:
 
 
 def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:
-    """The residual's sizes that apply to the observation's kind: mm, deg, px."""
-    return ", ".join(
-        f"{v:.3g} {unit}"
-        for v, unit in (
-            (row.position_residual_mm, "mm"),
-            (row.rotation_residual_deg, "deg"),
-            (row.pixel_residual_px, "px"),
-        )
-        if v is not None
-    )
+    """The residual's size in each metric of the observation's kind: mm, deg, px, ..."""
+    return ", ".join(f"{v.value:.3g} {v.unit}" for v in row.residuals if v.value == v.value)

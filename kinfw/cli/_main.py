@@ -13,12 +13,11 @@ start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pin
 
 This module holds the top-level parser, the checks of the outputs, the warning printer
 and :func:`main`. Each command's sub-parser is defined beside the command: ``simulate``
-in :mod:`kinfw.cli`; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
-``import-csv`` in :mod:`kinfw.cli`; ``calibrate``, ``demo`` and ``crossval`` in
-:mod:`kinfw.cli` (commands in :mod:`kinfw.cli`); ``detect``, ``plan``,
-``gaze`` and ``reach`` in :mod:`kinfw.cli`, :mod:`kinfw.cli`,
-:mod:`kinfw.cli` and :mod:`kinfw.cli`. The argument types they share are in
-:mod:`kinfw.cli`.
+in ``_simulate.py``; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
+``import-csv`` in ``_commands.py``; ``calibrate``, ``demo`` and ``crossval`` in
+``_fit_parser.py`` (commands in ``_fit.py``); ``detect``, ``plan``, ``gaze`` and ``reach``
+in ``_detect.py``, ``_plan.py``, ``_gaze.py`` and ``_reach.py``. The argument types they
+share are in ``_args.py``.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
-from kinfw.cli._args import default_sidecar_path, number
+from kinfw.cli._args import number
 from kinfw.cli._commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -46,7 +45,7 @@ from kinfw.cli._gaze import add_gaze_parser
 from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
-from kinfw.files import check_output_dir, check_outputs
+from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
 __all__ = ["main"]
 
@@ -82,7 +81,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         )
     elif command == "calibrate":
         check_outputs(
-            {"--out": args.out, "sidecar": default_sidecar_path(args.out), "--report": args.report},
+            {"--out": args.out, "sidecar": sidecar_path(args.out), "--report": args.report},
             inputs={
                 "--urdf": args.urdf,
                 "data file": args.data,
@@ -95,7 +94,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
         check_output_dir(args.out, label="--out", files=DEMO_FILES)
     elif command == "view" and args.html is not None:
-        sidecar = args.sidecar or (args.calibrated and default_sidecar_path(args.calibrated))
+        sidecar = args.sidecar or (args.calibrated and sidecar_path(args.calibrated))
         check_outputs(
             {"--html": args.html},
             inputs={

@@ -182,15 +182,14 @@ def _plan_per_joint(args: argparse.Namespace, robot, setup, summary: dict) -> in
 
 
 def _plan_summary(plan) -> dict:
-    """The plan's numbers in the ``--json`` summary (mm, deg)."""
+    """The plan's numbers in the ``--json`` summary (display units)."""
     return {
         "n": len(plan.qs),
         "pool": plan.pool_size,
         "dropped": plan.dropped,
         "seconds": plan.seconds,
-        "position_rms_mm": plan.position_rms_m * 1e3,
-        "rotation_rms_deg": math.degrees(plan.rotation_rms_rad),
-        "random_position_rms_mm": plan.random_position_rms_m * 1e3,
+        **{m.headline: m.scale * v for m, v in plan.predicted},
+        f"random_{plan.objective.headline}": plan.objective.scale * plan.random_rms,
         "curve": [{"n": k, "planned_mm": a * 1e3, "random_mm": b * 1e3} for k, a, b in plan.curve],
     }
 
@@ -202,9 +201,9 @@ def _print_plan(args: argparse.Namespace, plan) -> None:
     print(
         f"planned {len(plan.qs)} of {plan.pool_size} candidates in {plan.seconds:.2f} s"
         + (f" (dropped: {plan.dropped})" if plan.dropped else "")
-        + f": predicted held-out position RMS {plan.position_rms_m * 1e3:.4f} mm, rotation "
-        f"{math.degrees(plan.rotation_rms_rad):.4f} deg; random: "
-        f"{plan.random_position_rms_m * 1e3:.4f} mm"
+        + ": predicted held-out "
+        + ", ".join(f"{m.name} RMS {m.scale * v:.4f} {m.unit}" for m, v in plan.predicted)
+        + f"; random: {plan.objective.scale * plan.random_rms:.4f} {plan.objective.unit}"
     )
     rows = [[k, f"{a * 1e3:.4f}", f"{b * 1e3:.4f}"] for k, a, b in plan.curve]
     print(format_table(rows, ["N", "planned mm", "random mm"]))

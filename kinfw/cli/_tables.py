@@ -10,7 +10,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
-__all__ = ["accuracy_table", "format_table", "progress_printer"]
+__all__ = ["accuracy_table", "format_table", "metric_format", "number", "progress_printer"]
 
 log = logging.getLogger("kinfw")
 
@@ -30,43 +30,44 @@ def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
+def metric_format(name: str, unit: str) -> str:
+    """The format spec of a metric's values in tables: the registered kinds' own
+    (:attr:`kinfw.observations.Metric.fmt`), ``".3g"`` for a metric none has."""
+    from kinfw.observations import kinds
+
+    return next(
+        (m.fmt for k in kinds() for m in k.metrics if (m.name, m.unit) == (name, unit)), ".3g"
+    )
+
+
+def number(value, fmt: str) -> str:
+    """A table cell: an undefined number (None, NaN) is ``-``."""
+    return "-" if value is None or value != value else format(value, fmt)
+
+
 def accuracy_table(report_dict: dict) -> str:
-    """Plain-text table of :meth:`kinfw.verification.evaluation.AccuracyReport.to_dict`."""
+    """Plain-text table of :meth:`kinfw.verification.evaluation.AccuracyReport.to_dict`:
+    a column per error key of any group (``position_rms_mm``, ``height_max_mm``,
+    ``tilt_deg``; ``-`` where a group's kind has no such metric), then per metric with
+    axes the mean/std of ``|error|`` per axis (Shih et al. Table 4)."""
+    from kinfw.reports import ErrorValue
+
+    fixed = ("frame", "kind", "marker", "n", "samples")
+    keys = dict.fromkeys(k for g in report_dict["groups"] for k in g if k not in fixed)
+    values = [ErrorValue.from_key(k, 0.0) for k in keys if not k.startswith("abs_")]
+    axes = dict.fromkeys(k.split("_", 2)[2] for k in keys if k.startswith("abs_mean_"))
     rows = []
-    has_px = any("pixel_rms_px" in g for g in report_dict["groups"])
-
-    def num(value, fmt: str) -> str:  # an undefined number (NaN, null) is "-"
-        return "-" if value is None or value != value else format(value, fmt)
-
     for g in report_dict["groups"]:
-        mu, sd = g["abs_mean_xyz_mm"], g["abs_std_xyz_mm"]
-        table4 = " ".join(
-            f"{m:.3f}/{s:.3f}" for m, s in zip(mu, sd, strict=True) if m == m and s == s
-        )
+        cells = [number(g.get(v.key), metric_format(v.name, v.unit)) for v in values]
+        for suffix in axes:
+            mu, sd = g.get(f"abs_mean_{suffix}"), g.get(f"abs_std_{suffix}")
+            pairs = [] if mu is None or sd is None else zip(mu, sd, strict=True)
+            cells.append(" ".join(f"{m:.3f}/{s:.3f}" for m, s in pairs) or "-")
         rows.append(
-            [
-                g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""),
-                g["kind"],
-                g["n"],
-                num(g["position_mean_mm"], ".3f"),
-                num(g["position_rms_mm"], ".3f"),
-                num(g["position_max_mm"], ".3f"),
-                num(g["rotation_rms_deg"], ".4f"),
-                num(g["rotation_max_deg"], ".4f"),
-                table4 or "-",
-                *([f"{g['pixel_rms_px']:.3g}"] if "pixel_rms_px" in g else ["-"] * has_px),
-            ]
+            [g["frame"] + (f" [{g['marker']}]" if g["marker"] else ""), g["kind"], g["n"], *cells]
         )
-    header = [
-        "frame",
-        "kind",
-        "n",
-        "pos mean mm",
-        "pos RMS mm",
-        "pos max mm",
-        "rot RMS deg",
-        "rot max deg",
-        "|e| x y z mean/std mm (Table 4)",
-        *(["pixel RMS px"] if has_px else []),
-    ]
+    header = ["frame", "kind", "n", *(v.label() for v in values)]
+    for suffix in axes:
+        names, unit = suffix.rsplit("_", 1)
+        header.append(f"|e| {' '.join(names)} mean/std {unit}")
     return format_table(rows, header)

@@ -1,3 +1,8 @@
+"""Using a calibration: fixating points with a head's cameras (:func:`fixate`,
+:class:`GazeSolver`) and reaching poses or points with any frame (:func:`reach`), both by
+bounded Gauss-Newton on Pinocchio's exact kinematics of any URDF, nominal or calibrated.
+"""
+
 from kinfw.control._gaze import (
     FIXATED_RAD,
     Fixation,

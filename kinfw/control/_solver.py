@@ -1,5 +1,5 @@
 """Bounded Gauss-Newton / Levenberg-Marquardt on joint values: the engine of
-:mod:`kinfw.control` and :mod:`kinfw.control`.
+:mod:`kinfw.control._gaze` and :mod:`kinfw.control._reach`.
 
 Both solve ``min_x 1/2 |r(x)|^2`` over the values ``x`` (rad, m) of a few joints within
 their limits, where ``r`` comes from Pinocchio's kinematics with its exact Jacobian.

@@ -1,4 +1,9 @@
-"""TODO face."""
+"""Rigid-body geometry: transforms and their conventions, the one chart of a rigid frame,
+and least-squares registration of point sets.
+
+``a_T_b`` maps coordinates in frame ``b`` to frame ``a`` (read right to left, so inner
+frames cancel); quaternions are ``xyzw``; SI units inside (docs/conventions.md).
+"""
 
 from __future__ import annotations
 

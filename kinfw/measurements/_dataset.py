@@ -1,7 +1,7 @@
 """The calibration dataset: :class:`Measurements`, its groups, subsets and merges.
 
 The file format it is read from and written to is described in
-:mod:`kinfw.measurements` (reader and writer in :mod:`kinfw.measurements`); the
+:mod:`kinfw.measurements` (reader and writer in :mod:`kinfw.measurements._file`); the
 checks against a robot are in :mod:`kinfw.measurements`.
 """
 

@@ -1,14 +1,20 @@
-"""TODO face."""
+"""The robot model: a URDF robot in Pinocchio (:class:`Robot`, :func:`load_robot`), the tree
+CPC model (:class:`CPCModel`; numpy and CasADi forward kinematics) and the parameter blocks
+an estimation problem is made of (:class:`BlockKey`, :class:`CPCBlock`, ...).
+"""
 
 from __future__ import annotations
 
 from kinfw.model._blocks import (
+    CPC_KEY,
+    BaseBlock,
     Block,
     BlockKey,
     CPCBlock,
     ParameterName,
     PointBlock,
     RigidFrameBlock,
+    RobotBlock,
     ZeroOffsetBlock,
 )
 from kinfw.model._cpc import (
@@ -44,7 +50,9 @@ from kinfw.model._urdf_read import (
 )
 
 __all__ = [
+    "CPC_KEY",
     "MOVABLE_TYPES",
+    "BaseBlock",
     "Block",
     "BlockKey",
     "CPCBlock",
@@ -54,6 +62,7 @@ __all__ = [
     "PointBlock",
     "RigidFrameBlock",
     "Robot",
+    "RobotBlock",
     "RobotModelError",
     "Topology",
     "UnknownFrameError",

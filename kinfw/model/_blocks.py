@@ -4,12 +4,23 @@ A block is a frozen dataclass that knows its key, the name and SI unit of each e
 its start value, which entries are free, and its value at chart coordinates ``d`` (its
 slice of the problem's vector ``x``, zero at the start) in numpy and in CasADi:
 
-- :class:`CPCBlock`: the identifiable CPC parameters of the whole tree (axis tilts
-  ``b_tilt_1/2`` rad, offsets ``l_x/l_y`` m, tool ``rot_x..z`` rad and ``x..z`` m);
-- :class:`ZeroOffsetBlock`: one zero offset per joint (rad revolute, m prismatic);
 - :class:`RigidFrameBlock`: a rigid frame in the chart of :mod:`kinfw.geometry` (6 entries
-  ``rot_x..z`` rad, ``x..z`` m) - the base, a target, a marker, an external frame;
+  ``rot_x..z`` rad, ``x..z`` m) - a target, a marker, an external frame;
 - :class:`PointBlock`: a point (3 entries ``x, y, z`` m) - an unknown point offset.
+
+Blocks of the robot's own kinematics are :class:`RobotBlock` s: besides their value they
+say how they enter the forward kinematics (hooks on the joint values before the CPC
+model, on the end-frame poses after it, and on a numeric CPC model), so the problem
+finds them by this role and key, never by position:
+
+- :class:`CPCBlock` (key :data:`CPC_KEY`): the identifiable CPC parameters of the whole
+  tree (axis tilts ``b_tilt_1/2`` rad, offsets ``l_x/l_y`` m, tool ``rot_x..z`` rad and
+  ``x..z`` m): the forward kinematics itself;
+- :class:`BaseBlock`: the base, a rigid frame before the whole model;
+- :class:`ZeroOffsetBlock`: one zero offset per joint (rad revolute, m prismatic), added
+  to the joint values;
+- any block an application defines (a joint's gear scale: ``tests/test_robot_block.py``),
+  passed to :func:`kinfw.identification.refine` (``extra_blocks``).
 
 Parameters are named by typed keys (:class:`ParameterName`, :class:`BlockKey`); nothing
 parses a name back from a string.
@@ -29,12 +40,15 @@ if TYPE_CHECKING:
     from kinfw.model._cpc import CPCModel
 
 __all__ = [
+    "CPC_KEY",
+    "BaseBlock",
     "Block",
     "BlockKey",
     "CPCBlock",
     "ParameterName",
     "PointBlock",
     "RigidFrameBlock",
+    "RobotBlock",
     "ZeroOffsetBlock",
 ]
 
@@ -61,6 +75,10 @@ class BlockKey:
 
     def __str__(self) -> str:
         return f"{self.kind}:{self.name}" if self.name else self.kind
+
+
+CPC_KEY = BlockKey("cpc")
+"""The key of the problem's :class:`CPCBlock`."""
 
 
 def _free_mask(free: ArrayLike | None, size: int) -> NDArray[np.bool_]:
@@ -94,7 +112,8 @@ class Block:
 
     @property
     def units(self) -> tuple[str, ...]:
-        """SI unit of each entry (``"rad"`` or ``"m"``)."""
+        """SI unit of each entry (``"rad"``, ``"m"``, ``"unitless"``...): the one source
+        of the parameters' units (:attr:`kinfw.identification.RefineResult.parameter_units`)."""
         raise NotImplementedError
 
     @property
@@ -141,6 +160,68 @@ class Block:
         covariance): ``((names, why), ...)``, added to the identifiability report.
         None by default (the rank test of the diagnostics decides)."""
         return ()
+
+
+@dataclass(frozen=True, slots=True)
+class RobotBlock(Block):
+    """A block of the robot's kinematics (not an unknown of an observation kind).
+
+    The problem finds robot blocks by this role and their key, and predicts the end
+    frames' poses at the joint readings ``q`` (model joint order) as
+
+    1. ``q' = joint_values_k(... joint_values_1(q))``: :meth:`casadi_joint_values` of
+       every robot block, in the problem's order (the CPC chart, the base, the extra
+       blocks, the zero offsets: ``q' = (1 + s) q + z`` with a gear scale ``s``);
+    2. ``w_T_e = FK(q')``: the CPC model of the :class:`CPCBlock` at its chart
+       coordinates (:func:`kinfw.model.cpc_fk_function`);
+    3. ``w_T_e = frame_poses_k(... frame_poses_1(w_T_e))``: :meth:`casadi_frame_poses`
+       of every robot block (the base multiplies on the left).
+
+    Every hook must be the identity at the block's start (``d = 0``), so that the start
+    model is the CPC block's. :meth:`moved_model` is the numeric side (the result's
+    model, :meth:`kinfw.identification.problem.LeastSquaresProblem.model_at`) and
+    :meth:`free_for` the free mask by parameter set. A hook may embed numbers of the
+    block's key (a joint's name) but takes its start values through ``c``
+    (:meth:`~Block.constants`): the CasADi graph is cached by the blocks' types, keys
+    and sizes.
+    """
+
+    def free_for(self, parameters: str | tuple[str, ...]) -> NDArray[np.bool_]:
+        """The entries estimated under a parameter set of
+        :func:`kinfw.identification.refine` (``"full"``, ``"offsets"``, ``"frames"``,
+        ``"none"`` or a mask of joints), for a block given to it (``extra_blocks``).
+
+        Default: the block's own :attr:`free` with ``"full"``, none with the smaller
+        sets (they keep the nominal joints). The built-in blocks' masks depend on the
+        data too; :func:`kinfw.identification.problem.robot_blocks` sets them.
+        """
+        return self.free.copy() if parameters == "full" else np.zeros(self.size, bool)
+
+    def casadi_joint_values(self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...]) -> Any:
+        """The joint values the forward kinematics takes: ``q`` (SX, (J,), rad and m,
+        in the order of ``joint_names``) changed by the block at chart coordinates
+        ``d`` (SX, (size,)) with its constants ``c``. Default: ``q`` unchanged."""
+        return q
+
+    def casadi_frame_poses(self, w_T_frames: dict[str, Any], d: Any, c: Any) -> dict[str, Any]:
+        """The end frames' poses after the forward kinematics (SX (4, 4) by frame name,
+        metres) changed by the block at ``d``. Default: unchanged."""
+        return w_T_frames
+
+    def moved_model(self, model: CPCModel, d: NDArray[np.float64]) -> CPCModel:
+        """The numeric CPC model ``model`` with the block at chart coordinates ``d``
+        (size,) folded in: its forward kinematics at the joint readings is the
+        problem's prediction through this block's hooks.
+
+        A block whose effect no CPC model holds (a joint's gear scale) returns
+        ``model``: the result's model is then the kinematics of the joint values after
+        its hook, and the block's estimate stands beside it (by name in
+        :attr:`kinfw.identification.RefineResult.parameter_names`).
+        """
+        raise NotImplementedError(
+            f"{type(self).__name__}: moved_model: fold the block into a CPC model, or "
+            "return the model unchanged when the block's effect is not a CPC geometry"
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,8 +313,10 @@ class PointBlock(Block):
 
 
 @dataclass(frozen=True, slots=True)
-class CPCBlock(Block):
-    """The identifiable CPC parameters of a tree (:meth:`kinfw.model.CPCModel.perturbed`).
+class CPCBlock(RobotBlock):
+    """The identifiable CPC parameters of a tree (:meth:`kinfw.model.CPCModel.perturbed`):
+    the forward kinematics of the problem (key :data:`CPC_KEY`), whose value at ``d`` is
+    the model the other robot blocks move (:meth:`RobotBlock.moved_model`).
 
     Attributes
     ----------
@@ -284,12 +367,13 @@ class CPCBlock(Block):
 
 
 @dataclass(frozen=True, slots=True)
-class ZeroOffsetBlock(Block):
+class ZeroOffsetBlock(RobotBlock):
     """One zero offset per joint: the model is evaluated at ``q + d``.
 
     Attributes
     ----------
     joint_names : tuple of str
+        The model's joints, in its order.
     revolute : tuple of bool
         Per joint: offsets in rad (revolute) or m (prismatic).
     """
@@ -319,5 +403,60 @@ class ZeroOffsetBlock(Block):
     def casadi_value(self, d: Any, c: Any = None) -> Any:
         return d
 
+    def _check_joints(self, joint_names: tuple[str, ...]) -> None:
+        if tuple(joint_names) != self.joint_names:
+            raise ValueError(
+                f"ZeroOffsetBlock: joints {list(self.joint_names)}, the model's are "
+                f"{list(joint_names)}"
+            )
+
+    def casadi_joint_values(self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...]) -> Any:
+        self._check_joints(joint_names)
+        return q + d
+
+    def moved_model(self, model: CPCModel, d: NDArray[np.float64]) -> CPCModel:
+        """FK(q + d) as a CPC model: every joint pre-moved by its offset (the geometry at
+        ``q = 0`` of the offset model is the original geometry at ``q = d``)."""
+        from kinfw.model._cpc import ZeroGeometry, cpc_from_geometry
+
+        self._check_joints(model.topology.joint_names)
+        if not np.any(d):
+            return model
+        moved = model.joint_frames(d)[0]
+        geometry = ZeroGeometry(
+            model.topology,
+            moved[:, :3, 2] * model.sign[:, None],
+            moved[:, :3, 3].copy(),
+            model.frame_poses(d),
+        )
+        return cpc_from_geometry(geometry, sign=model.sign)
+
     def describe(self) -> str:
         return "joint zero offsets"
+
+
+@dataclass(frozen=True, slots=True)
+class BaseBlock(RobotBlock, RigidFrameBlock):
+    """The base: a rigid frame ``w_T_base`` (chart of :class:`RigidFrameBlock`) before
+    the whole model, ``w_T_e = w_T_base FK(q)``."""
+
+    def casadi_frame_poses(self, w_T_frames: dict[str, Any], d: Any, c: Any) -> dict[str, Any]:
+        w_T_base = self.casadi_value(d, c)
+        return {f: w_T_base @ T for f, T in w_T_frames.items()}
+
+    def moved_model(self, model: CPCModel, d: NDArray[np.float64]) -> CPCModel:
+        """The model's screw axes and end frames moved by the base, canonical again."""
+        from kinfw.model._cpc import ZeroGeometry, cpc_from_geometry, geometry_from_cpc
+
+        w_T_base = self.numpy_value(d)
+        if np.array_equal(w_T_base, np.eye(4)):
+            return model
+        R, t = w_T_base[:3, :3], w_T_base[:3, 3]
+        geometry = geometry_from_cpc(model)
+        moved = ZeroGeometry(
+            geometry.topology,
+            geometry.axes @ R.T,
+            geometry.points @ R.T + t,
+            w_T_base @ geometry.w_T_frames,
+        )
+        return cpc_from_geometry(moved, sign=model.sign)

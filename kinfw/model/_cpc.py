@@ -338,24 +338,25 @@ class CPCModel:
             ) from None
 
     # -- reporting ---------------------------------------------------------------------
-    def describe(self) -> list[tuple[str, str, float]]:
-        """Paper-style parameter table: ``(owner, name, value)`` with lengths in m, angles
-        in rad: ``b_x, b_y, b_z, beta, l_x, l_y, l_z, sign`` per joint and
-        ``x, y, z, roll, pitch, yaw`` per end frame (``F_p'_T_e``, URDF rpy)."""
-        rows: list[tuple[str, str, float]] = []
+    def describe(self) -> list[tuple[str, str, float, str]]:
+        """Paper-style parameter table: ``(owner, name, value, unit)`` with lengths in
+        ``"m"``, angles in ``"rad"`` and the axis and sense ``"unitless"``: ``b_x, b_y,
+        b_z, beta, l_x, l_y, l_z, sign`` per joint and ``x, y, z, roll, pitch, yaw`` per
+        end frame (``F_p'_T_e``, URDF rpy)."""
+        rows: list[tuple[str, str, float, str]] = []
         for j, name in enumerate(self.topology.joint_names):
             for k, f in enumerate(("b_x", "b_y", "b_z")):
-                rows.append((name, f, float(self.b[j, k])))
-            rows.append((name, "beta", float(self.beta[j])))
+                rows.append((name, f, float(self.b[j, k]), "unitless"))
+            rows.append((name, "beta", float(self.beta[j]), "rad"))
             for k, f in enumerate(("l_x", "l_y", "l_z")):
-                rows.append((name, f, float(self.l[j, k])))
-            rows.append((name, "sign", float(self.sign[j])))
+                rows.append((name, f, float(self.l[j, k]), "m"))
+            rows.append((name, "sign", float(self.sign[j]), "unitless"))
         for e, frame in enumerate(self.topology.frames):
             rpy = pin.rpy.matrixToRpy(self.tool_T[e, :3, :3])
             for k, f in enumerate(("x", "y", "z")):
-                rows.append((frame, f, float(self.tool_T[e, k, 3])))
+                rows.append((frame, f, float(self.tool_T[e, k, 3]), "m"))
             for k, f in enumerate(("roll", "pitch", "yaw")):
-                rows.append((frame, f, float(rpy[k])))
+                rows.append((frame, f, float(rpy[k]), "rad"))
         return rows
 
 

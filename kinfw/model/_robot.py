@@ -86,10 +86,6 @@ class Topology:
         """Joints whose parent is joint ``i`` (``-1`` for the root)."""
         return tuple(k for k, p in enumerate(self.parent) if p == i)
 
-    def frames_after(self, i: int) -> tuple[int, ...]:
-        """Indices of the end frames whose last movable joint is ``i`` (``-1``: root)."""
-        return tuple(k for k, p in enumerate(self.frame_parent) if p == i)
-
     def chain(self, frame: str) -> tuple[int, ...]:
         """Joint indices from the root to ``frame``, root side first."""
         try:

@@ -14,6 +14,10 @@ one ``"kind"`` of a ``kinfw-measurements`` file:
 - its residual ``measured - predicted`` as a CasADi expression
   (:meth:`~ObservationKind.residual`), in rows grouped by noise component
   (:attr:`~ObservationKind.components`: e.g. position 3 rows in m, rotation 3 rows in rad);
+- how its errors read for a person (:attr:`~ObservationKind.metrics`,
+  :meth:`~ObservationKind.errors`: a :class:`Metric` per noise component, named with its
+  display unit, and a kind's own group summaries); verification, the reports, the
+  command line and the planner loop over them;
 - the same prediction in numpy, its simulation (prediction plus its noise model) and what
   the view draws of it (:meth:`~ObservationKind.predict`, :meth:`~ObservationKind.simulate`,
   :meth:`~ObservationKind.drawing`; :mod:`kinfw.observations`).
@@ -44,12 +48,15 @@ from kinfw.observations._reader import DatasetError, ObservationReader, describe
 
 __all__ = [
     "DatasetError",
+    "Metric",
+    "MetricErrors",
     "NoiseComponent",
     "ObservationKind",
     "ObservationReader",
     "StartContext",
     "SymbolicContext",
     "UnknownRequest",
+    "component_errors",
     "data_array",
     "describe",
     "frozen_array",
@@ -91,7 +98,73 @@ def data_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[
     return frozen_array(arr, np.float64)
 
 
-# -- noise components, start values, pose rows ---------------------------------------------
+# -- metrics, noise components, start values, pose rows ----------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Metric:
+    """How an error of an observation kind reads for a person: a name, a display unit and
+    the factor from SI (SI inside; this is the edge: tables, reports, files).
+
+    A metric is either a size per observation (the norm of a noise component's rows,
+    summarised over a group by its mean, RMS and max; the RMS is its headline) or one
+    number per group (``per_observation=False``: a kind's own summary of a group's
+    errors, e.g. the tilt of a plane's contacts).
+
+    Attributes
+    ----------
+    name : str
+        ``"position"``, ``"rotation"``, ``"pixel"``, ``"height"``, ``"tilt"``, a kind's
+        own (``"distance"``); the first word of its keys in tables and files.
+    unit : str
+        Display unit, e.g. ``"mm"``, ``"deg"``, ``"px"``; the last word of its keys.
+    scale : float
+        Display units per SI unit (1e3: m -> mm; 180 / pi: rad -> deg; 1: px).
+    fmt : str
+        Format spec of a value in tables (``".3f"``).
+    axes : str
+        Names of the rows when they are the axes of a vector (``"xyz"``, ``"uv"``): the
+        per-sample error vector and the mean and std of ``|error|`` per axis are
+        reported (Shih et al. 1992, Table 4); ``""`` for none.
+    per_observation : bool
+        A size per observation (True) or one number per group (False).
+
+    Examples
+    --------
+    >>> Metric("position", "mm", 1e3).key("rms")
+    'position_rms_mm'
+    >>> Metric("tilt", "deg", per_observation=False).headline
+    'tilt_deg'
+    """
+
+    name: str
+    unit: str
+    scale: float = 1.0
+    fmt: str = ".3f"
+    axes: str = ""
+    per_observation: bool = True
+
+    def key(self, stat: str = "") -> str:
+        """``name_stat_unit`` (``"position_rms_mm"``), ``name_unit`` without ``stat``."""
+        return "_".join(p for p in (self.name, stat, self.unit) if p)
+
+    @property
+    def headline(self) -> str:
+        """The key of the one number a group or a fold is summed up by: the RMS over the
+        observations (``"position_rms_mm"``), or the group's number (``"tilt_deg"``)."""
+        return self.key("rms" if self.per_observation else "")
+
+    def label(self, stat: str = "") -> str:
+        """A table header: ``"position RMS mm"``, ``"tilt deg"``."""
+        return " ".join(p for p in (self.name, stat.replace("rms", "RMS"), self.unit) if p)
+
+
+#: Display of a component that names no metric, by its SI unit: (unit, scale, fmt).
+_DISPLAY_OF_SI = {
+    "m": ("mm", 1e3, ".3f"),
+    "rad": ("deg", float(np.degrees(1.0)), ".4f"),
+    "px": ("px", 1.0, ".3f"),
+}
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,6 +190,10 @@ class NoiseComponent:
         ``chi2(rows)``); ``"angle"``, a rotation by an angle N(0, sqrt(3) sigma) about a
         uniformly random axis (3 rows; whitened squared norm ``3 chi2(1)``; Shih et al.
         1992, Fig. 10, as :func:`kinfw.simulation.perturb_poses` draws it).
+    metric : Metric or None
+        How the size of the rows (:meth:`magnitude`) reads for a person; None: named
+        after the component, in mm for ``m``, deg for ``rad``, px for ``px``, else in its
+        SI unit (:attr:`display`).
     """
 
     name: str
@@ -124,6 +201,15 @@ class NoiseComponent:
     unit: str
     sine: bool = False
     distribution: str = "gaussian"
+    metric: Metric | None = None
+
+    @property
+    def display(self) -> Metric:
+        """The metric of the rows' size: :attr:`metric`, or the default of the unit."""
+        if self.metric is not None:
+            return self.metric
+        unit, scale, fmt = _DISPLAY_OF_SI.get(self.unit, (self.unit, 1.0, ".3g"))
+        return Metric(self.name, unit, scale, fmt)
 
     def magnitude(self, rows: NDArray[np.float64]) -> NDArray[np.float64]:
         """Per observation, the error size in SI (m, or rad as an angle): rows (m, rows)."""
@@ -131,8 +217,80 @@ class NoiseComponent:
         return np.arcsin(np.clip(norm, 0.0, 1.0)) if self.sine else norm
 
 
-POSITION = NoiseComponent("position", 3, "m")
-ROTATION = NoiseComponent("rotation", 3, "rad", sine=True, distribution="angle")
+POSITION = NoiseComponent("position", 3, "m", metric=Metric("position", "mm", 1e3, axes="xyz"))
+ROTATION = NoiseComponent(
+    "rotation",
+    3,
+    "rad",
+    sine=True,
+    distribution="angle",
+    metric=Metric("rotation", "deg", float(np.degrees(1.0)), ".4f"),
+)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class MetricErrors:
+    """The errors of one observation group in one metric, SI.
+
+    Attributes
+    ----------
+    metric : Metric
+    values : ndarray, shape (m,) or ()
+        Per observation the error's size (``metric.per_observation``), or the group's
+        one number; SI (m, rad, px); NaN where it is undefined.
+    vectors : ndarray, shape (m, len(metric.axes)), or None
+        The signed error rows per observation when the metric has axes, SI.
+    """
+
+    metric: Metric
+    values: NDArray[np.float64]
+    vectors: NDArray[np.float64] | None = None
+
+    def shown(self) -> NDArray[np.float64]:
+        """:attr:`values` in the display unit."""
+        return self.metric.scale * np.asarray(self.values, dtype=float)
+
+    def summary(self) -> tuple[tuple[str, float], ...]:
+        """``(key, value)`` in the display unit: mean, RMS and max over the observations
+        (NaN when there is none), or the group's number."""
+        v = self.shown()
+        if not self.metric.per_observation:
+            return ((self.metric.headline, float(v)),)
+        v = v[np.isfinite(v)]
+        stats = (
+            (float(v.mean()), float(np.sqrt(np.mean(v**2))), float(v.max()))
+            if len(v)
+            else (np.nan,) * 3
+        )
+        return tuple(
+            (self.metric.key(s), x) for s, x in zip(("mean", "rms", "max"), stats, strict=True)
+        )
+
+    def axis_stats(self) -> tuple[tuple[str, list[float]], ...]:
+        """For a metric with axes, the mean and std of ``|error|`` per axis (display
+        unit): ``(("abs_mean_xyz_mm", [...]), ("abs_std_xyz_mm", [...]))``; else ()."""
+        if self.vectors is None or not self.metric.axes:
+            return ()
+        a = self.metric.scale * np.abs(self.vectors)
+        suffix = f"{self.metric.axes}_{self.metric.unit}"
+        return (
+            (f"abs_mean_{suffix}", a.mean(axis=0).tolist()),
+            (f"abs_std_{suffix}", a.std(axis=0).tolist()),
+        )
+
+
+def component_errors(
+    components: Sequence[NoiseComponent], rows: NDArray[np.float64]
+) -> tuple[MetricErrors, ...]:
+    """Per noise component the size of its rows (:meth:`NoiseComponent.magnitude`) in
+    its metric, from the residual rows (m, sum of rows) of a group (SI, unweighted)."""
+    out, c0 = [], 0
+    for c in components:
+        r = rows[:, c0 : c0 + c.rows]
+        metric = c.display
+        out.append(MetricErrors(metric, c.magnitude(r), r if metric.axes else None))
+        c0 += c.rows
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)
@@ -323,17 +481,40 @@ class ObservationKind:
         unknown's block key; None when the group has no such track."""
         return None
 
-    def root_point_pairs(
-        self, group: Any, start: StartContext
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
-        """Point pairs ``(w_p, meas_p)`` (k, 3) each that register the model frame in the
-        group's measurement frame; None when the group gives none."""
-        return None
-
     # -- estimation
     def unknowns(self, group: Any, start: StartContext) -> tuple[UnknownRequest, ...]:
         """The unknown blocks the group needs, with closed-form start estimates."""
         return ()
+
+    # -- errors as a person reads them
+    @property
+    def metrics(self) -> tuple[Metric, ...]:
+        """What :meth:`errors` returns, in order: by default one metric per noise
+        component (:attr:`NoiseComponent.display`)."""
+        return tuple(c.display for c in self.components)
+
+    def errors(
+        self, group: Any, rows: NDArray[np.float64], model: NumericContext
+    ) -> tuple[MetricErrors, ...]:
+        """The group's errors in each of :attr:`metrics`, from its residual rows.
+
+        Parameters
+        ----------
+        group : group dataclass
+        rows : ndarray, shape (m, rows)
+            ``measured - predicted`` per observation (:meth:`residual`'s rows, SI, the
+            :meth:`row_weights` divided out).
+        model : NumericContext
+            The model the rows were predicted by (the frames' poses at the group's
+            samples, the unknowns' values), for a metric that needs geometry; it may
+            lack a value (:class:`~kinfw.observations.MissingValue`).
+
+        Returns
+        -------
+        tuple of MetricErrors
+            Default: each component's size (:func:`component_errors`).
+        """
+        return component_errors(self.components, rows)
 
     def row_weights(self, group: Any) -> NDArray[np.float64]:
         """The relative weight (m,) that :meth:`residual` multiplies each observation's

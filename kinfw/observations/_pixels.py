@@ -32,6 +32,7 @@ from kinfw.camera import CameraIntrinsics, project_normalized
 from kinfw.geometry import inverse_transform
 from kinfw.model import BlockKey, RigidFrameBlock
 from kinfw.observations._base import (
+    Metric,
     NoiseComponent,
     ObservationKind,
     UnknownRequest,
@@ -46,8 +47,8 @@ from kinfw.observations._pnp import PNP_MIN_POINTS, pnp_camera_T_targets
 
 __all__ = ["PIXEL", "PixelKind", "PixelObservations", "pixel_weights"]
 
-PIXEL = NoiseComponent("pixel", 2, "px")
-"""The reprojection error of one point: (u, v) rows in pixels."""
+PIXEL = NoiseComponent("pixel", 2, "px", metric=Metric("pixel", "px", axes="uv"))
+"""The reprojection error of one point: (u, v) rows in pixels (its size: the norm, px)."""
 
 _DEFAULT_TARGET = "target"
 

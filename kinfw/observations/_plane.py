@@ -5,6 +5,10 @@ touches a fixed plane (a table). The observation is the probe's signed distance 
 plane, 0 for a contact; the residual is ``measured - predicted`` distance, one row in
 metres (noise component ``"distance"``).
 
+Errors read as the contact's ``height`` above or below the plane (mm, per contact) and a
+group's ``tilt`` (deg): the angle between the model's plane and the plane the contacts
+say it is, from the heights' slope across the plane (:meth:`PlaneKind.errors`).
+
 The plane is an unknown block (:class:`PlaneBlock`): a unit normal ``n`` and an offset
 ``d``, the plane ``{x : n . x = d}`` in the model frame (the URDF root), the normal
 pointing towards the root's origin at the start (the root lies at the positive distance
@@ -43,6 +47,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.model import Block, BlockKey, PointBlock
 from kinfw.observations._base import (
+    Metric,
+    MetricErrors,
     NoiseComponent,
     ObservationKind,
     UnknownRequest,
@@ -50,12 +56,16 @@ from kinfw.observations._base import (
     sample_array,
 )
 from kinfw.observations._contexts import StartContext, SymbolicContext
-from kinfw.observations._numeric import Drawing, NumericContext, node_name
+from kinfw.observations._numeric import Drawing, MissingValue, NumericContext, node_name
 from kinfw.observations._point import offset_key
 
-__all__ = ["DISTANCE", "PlaneBlock", "PlaneContacts", "PlaneKind", "plane_key"]
+__all__ = ["DISTANCE", "TILT", "PlaneBlock", "PlaneContacts", "PlaneKind", "plane_key"]
 
-DISTANCE = NoiseComponent("distance", 1, "m")
+DISTANCE = NoiseComponent("distance", 1, "m", metric=Metric("height", "mm", 1e3))
+"""A contact's signed distance error, m; it reads as its height off the plane, mm."""
+
+TILT = Metric("tilt", "deg", float(np.degrees(1.0)), ".4f", per_observation=False)
+"""A group's tilt (:meth:`PlaneKind.errors`), deg."""
 
 
 def plane_key(name: str) -> BlockKey:
@@ -379,6 +389,37 @@ class PlaneKind(ObservationKind):
         p = T[0:3, 0:3] @ o + T[0:3, 3]
         plane = model.value(plane_key(group.plane))
         return m[0] - (ca.dot(plane[0:3], p) - plane[3])
+
+    # -- errors: height per contact, the group's tilt
+    @property
+    def metrics(self):
+        return (DISTANCE.display, TILT)
+
+    def errors(self, group, rows, model: NumericContext):
+        """Each contact's height off the plane (the distance error's size, mm) and the
+        group's tilt (deg).
+
+        The tilt is the angle between the model's plane and the plane the contacts lie
+        on: with ``h_i`` the distance errors (``measured - predicted``) and ``(a_i,
+        b_i)`` the predicted probe points in the plane's tangent basis
+        (:func:`tangent_basis`), the least-squares plane ``h = h_0 + g_a a + g_b b``
+        tilts by ``arctan(|(g_a, g_b)|)``. NaN with fewer than 3 contacts, contacts on a
+        line, or a model without the plane's or the probe's value.
+        """
+        (height,) = super().errors(group, rows, model)
+        tilt = np.nan
+        try:
+            p = self._probe(group, model)
+            plane = model.value(plane_key(group.plane))
+        except MissingValue:
+            p = None
+        if p is not None and len(p) >= 3:
+            u, v = tangent_basis(plane[:3] / np.linalg.norm(plane[:3]))
+            A = np.column_stack([np.ones(len(p)), p @ u, p @ v])
+            if np.linalg.matrix_rank(A) == 3:
+                slope = np.linalg.lstsq(A, rows[:, 0], rcond=None)[0][1:]
+                tilt = float(np.arctan(np.linalg.norm(slope)))
+        return (height, MetricErrors(TILT, np.asarray(tilt)))
 
     # -- numpy prediction, simulation (the default: Gaussian distance noise), drawing
     def _probe(self, group, model: NumericContext) -> NDArray[np.float64]:

@@ -147,12 +147,6 @@ class PointKind(ObservationKind):
     def direct_frames(self, group):
         return (group.frame,) if group.offset is not None else ()
 
-    def root_point_pairs(self, group, start: StartContext):
-        if group.offset is None:
-            return None
-        T = start.w_T(group.frame, group.sample)
-        return (T @ np.append(group.offset, 1.0))[:, :3], group.meas_p_point
-
     def marker_tracks(self, group, start: StartContext):
         """For placing an external frame seen only through markers
         (:func:`kinfw.identification.problem.frame_from_markers`): the frame's start

@@ -1,14 +1,21 @@
-"""TODO face."""
+"""The files a calibration leaves, typed: the report (``report.json``,
+:class:`CalibrationReport`) and the sidecar beside the calibrated URDF
+(``CALIBRATED.kinfw.json``, :class:`CalibrationFile`), with readers that name the file and
+key of every error.
+"""
 
 from __future__ import annotations
 
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
 from kinfw.reports._records import (
+    STATS,
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
+    ErrorValue,
     ModelSummary,
     NoiseSummary,
+    headline,
     read_only_array,
 )
 from kinfw.reports._refine import (
@@ -40,6 +47,7 @@ from kinfw.reports._stages import (
 )
 
 __all__ = [
+    "STATS",
     "BeforeAfter",
     "CalibratedUnknown",
     "CalibrationFileError",
@@ -52,6 +60,7 @@ __all__ = [
     "DataProvenance",
     "DocReader",
     "DownweightedRow",
+    "ErrorValue",
     "ExportSection",
     "GroupErrorSummary",
     "HandEyeSection",
@@ -68,6 +77,7 @@ __all__ = [
     "StageErrors",
     "TargetEstimate",
     "before_after",
+    "headline",
     "read_only_array",
     "read_report",
     "read_sidecar",

@@ -1,12 +1,13 @@
 """The records the calibration sidecar (:mod:`kinfw.reports`) and the
 calibration report (:mod:`kinfw.reports`) share: :class:`DataProvenance`,
-:class:`ModelSummary`, :class:`NoiseSummary`, :class:`CalibratedUnknown` and
-:class:`BeforeAfter`, each with ``to_dict`` / ``from_dict`` (SI inside; a field name says
-``mm`` or ``deg`` where a value in the file is not SI)."""
+:class:`ModelSummary`, :class:`NoiseSummary`, :class:`CalibratedUnknown`,
+:class:`ErrorValue` and :class:`BeforeAfter`, each with ``to_dict`` / ``from_dict`` (SI
+inside; a field name says ``mm`` or ``deg`` where a value in the file is not SI)."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -16,11 +17,14 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.reports._doc_reader import DocReader
 
 __all__ = [
+    "STATS",
     "BeforeAfter",
     "CalibratedUnknown",
     "DataProvenance",
+    "ErrorValue",
     "ModelSummary",
     "NoiseSummary",
+    "headline",
     "read_only_array",
 ]
 
@@ -217,35 +221,107 @@ class CalibratedUnknown:
         )
 
 
+#: The statistics an error key may name between the metric and the unit.
+STATS = ("mean", "rms", "max", "residual")
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorValue:
+    """One number of an error in a metric's display unit, keyed ``name_stat_unit``
+    (``position_rms_mm``; ``tilt_deg`` without a statistic): what the files write for
+    every metric of every observation kind (:class:`kinfw.observations.Metric`).
+
+    Attributes
+    ----------
+    name : str
+        The metric (``"position"``, ``"rotation"``, ``"pixel"``, ``"height"``,
+        ``"tilt"``, a registered kind's own).
+    unit : str
+        Its display unit (``"mm"``, ``"deg"``, ``"px"``).
+    stat : str
+        One of :data:`STATS`, or ``""`` for a group's one number.
+    value : float
+        NaN when undefined (null in the file).
+    """
+
+    name: str
+    unit: str
+    stat: str
+    value: float
+
+    @property
+    def key(self) -> str:
+        return "_".join(p for p in (self.name, self.stat, self.unit) if p)
+
+    @property
+    def is_headline(self) -> bool:
+        """The number a group is summed up by: its RMS, or a group metric's value."""
+        return self.stat in ("rms", "")
+
+    def label(self) -> str:
+        """A table header: ``"position RMS mm"``, ``"tilt deg"``."""
+        stat = {"rms": "RMS", "residual": ""}.get(self.stat, self.stat)
+        return " ".join(p for p in (self.name, stat, self.unit) if p)
+
+    def with_value(self, value: float) -> ErrorValue:
+        return ErrorValue(self.name, self.unit, self.stat, value)
+
+    @classmethod
+    def from_key(cls, key: str, value: float) -> ErrorValue:
+        """Split ``name_stat_unit`` (or ``name_unit``); the name may hold ``_``."""
+        parts = key.split("_")
+        if len(parts) < 2:
+            raise ValueError(f"{key!r}: expected name_unit or name_stat_unit")
+        if len(parts) > 2 and parts[-2] in STATS:
+            return cls("_".join(parts[:-2]), parts[-1], parts[-2], value)
+        return cls("_".join(parts[:-1]), parts[-1], "", value)
+
+
+def headline(values: Sequence[ErrorValue], name: str | None = None) -> ErrorValue | None:
+    """The headline (:attr:`ErrorValue.is_headline`) of the metric ``name`` among
+    ``values``, or of the first metric; None if there is none."""
+    return next((v for v in values if v.is_headline and (name is None or v.name == name)), None)
+
+
 @dataclass(frozen=True, slots=True)
 class BeforeAfter:
-    """One observation group's RMS errors before and after calibration (NaN rotation for
-    groups without orientation)."""
+    """One observation group's errors before and after calibration: per metric of its
+    kind its headline (RMS over the group's observations, or a group metric's value) in
+    the display unit (``before_position_rms_mm``, ``after_position_rms_mm``, ...)."""
 
     group: str
     n: int
-    before_position_rms_mm: float
-    after_position_rms_mm: float
-    before_rotation_rms_deg: float
-    after_rotation_rms_deg: float
+    before: tuple[ErrorValue, ...]
+    after: tuple[ErrorValue, ...]
 
-    _KEYS: ClassVar[tuple[str, ...]] = (
-        "before_position_rms_mm",
-        "after_position_rms_mm",
-        "before_rotation_rms_deg",
-        "after_rotation_rms_deg",
-    )
+    def of(self, name: str) -> tuple[float, float] | None:
+        """``(before, after)`` in the metric ``name``, None if the group has none."""
+        b, a = headline(self.before, name), headline(self.after, name)
+        return None if b is None or a is None else (b.value, a.value)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"group": self.group, "n": self.n, **{k: getattr(self, k) for k in self._KEYS}}
+        doc: dict[str, Any] = {"group": self.group, "n": self.n}
+        for b, a in zip(self.before, self.after, strict=True):
+            doc[f"before_{b.key}"] = b.value
+            doc[f"after_{a.key}"] = a.value
+        return doc
 
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> BeforeAfter:
         doc = reader.obj(doc, at)
+        before, after = [], []
+        for key in doc:
+            for prefix, out in (("before_", before), ("after_", after)):
+                if key.startswith(prefix):
+                    value = reader.number(doc, key, at)
+                    out.append(ErrorValue.from_key(key[len(prefix) :], value))
+        if [v.key for v in before] != [v.key for v in after]:
+            raise reader.fail(at, "a before_ and an after_ key for each error")
         return cls(
             reader.string(doc, "group", at),
             reader.integer(doc, "n", at),
-            *(reader.number(doc, k, at) for k in cls._KEYS),
+            tuple(before),
+            tuple(after),
         )
 
     @classmethod

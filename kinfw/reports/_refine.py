@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from kinfw.reports._doc_reader import DocReader
-from kinfw.reports._records import CalibratedUnknown, NoiseSummary
+from kinfw.reports._records import CalibratedUnknown, ErrorValue, NoiseSummary
 from kinfw.reports._stages import KinematicValue
 
 __all__ = [
@@ -133,30 +133,27 @@ def _observation_dict(row: Any) -> dict[str, Any]:
         "kind": row.kind,
         "frame": row.frame,
         "marker": row.marker,
-        "position_residual_mm": row.position_residual_mm,
-        "rotation_residual_deg": row.rotation_residual_deg,
-        **({} if row.pixel_residual_px is None else {"pixel_residual_px": row.pixel_residual_px}),
+        **{v.key: v.value for v in row.residuals},
         **({} if row.where is None else {"where": row.where}),
     }
 
 
-def _observation_fields(doc: Any, r: DocReader, at: str, *, position_optional: bool) -> tuple:
-    """Those shared fields read back: (sample, kind, frame, marker, mm, deg)."""
-    return (
-        r.integer(doc, "sample", at),
-        r.string(doc, "kind", at),
-        r.string(doc, "frame", at),
-        r.string(doc, "marker", at, optional=True),
-        r.number(doc, "position_residual_mm", at, optional=position_optional),
-        r.number(doc, "rotation_residual_deg", at, optional=True),
-    )
+def _residual(row: Any, name: str) -> float | None:
+    return next((v.value for v in row.residuals if v.name == name), None)
 
 
-def _pixel_field(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
-    """The optional ``pixel_residual_px`` (a ``pixels`` observation's reprojection error)
-    and ``where`` (its image and corner)."""
+def _observation_fields(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
+    """Those shared fields read back: ``*_residual_*`` keys are the residuals."""
     return {
-        "pixel_residual_px": r.number(doc, "pixel_residual_px", at, optional=True),
+        "sample": r.integer(doc, "sample", at),
+        "kind": r.string(doc, "kind", at),
+        "frame": r.string(doc, "frame", at),
+        "marker": r.string(doc, "marker", at, optional=True),
+        "residuals": tuple(
+            ErrorValue.from_key(k, r.number(doc, k, at))
+            for k in doc
+            if k.count("_") >= 2 and k.split("_")[-2] == "residual"
+        ),
         "where": r.string(doc, "where", at, optional=True),
     }
 
@@ -164,19 +161,22 @@ def _pixel_field(doc: Any, r: DocReader, at: str) -> dict[str, Any]:
 @dataclass(frozen=True, slots=True)
 class DownweightedRow:
     """An observation the robust loss down-weighted: ``sample`` (index into the data
-    file's samples, from 0), kind, frame (camera for targets), marker, residual norms
-    (mm, None for a kind without lengths; deg, None without orientation; px for an
-    image point, else None) and the weight it got (1 = full)."""
+    file's samples, from 0), kind, frame (camera for targets), marker, the size of its
+    residual in each per-observation metric of its kind (``position_residual_mm``,
+    ``rotation_residual_deg``, ``pixel_residual_px``, ``height_residual_mm``, ...) and
+    the weight it got (1 = full); ``where`` in the sample (an image's corner) or None."""
 
     sample: int
     kind: str
     frame: str
     marker: str | None
-    position_residual_mm: float | None
-    rotation_residual_deg: float | None
+    residuals: tuple[ErrorValue, ...]
     weight: float
-    pixel_residual_px: float | None = None
     where: str | None = None
+
+    def residual(self, name: str) -> float | None:
+        """The residual's size in the metric ``name`` (display unit), None if none."""
+        return _residual(self, name)
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "weight": self.weight}
@@ -184,31 +184,29 @@ class DownweightedRow:
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> DownweightedRow:
         doc = r.obj(doc, at)
-        return cls(
-            *_observation_fields(doc, r, at, position_optional=True),
-            r.number(doc, "weight", at),
-            **_pixel_field(doc, r, at),
-        )
+        return cls(**_observation_fields(doc, r, at), weight=r.number(doc, "weight", at))
 
 
 @dataclass(frozen=True, slots=True)
 class RejectedRow:
     """An observation excluded from the fit as a gross error
-    (:class:`kinfw.identification._refine.RejectedObservation`): ``sample`` (index into the
-    data file's samples, from 0), kind, frame (camera for targets), marker, residual
-    norms against the calibration (mm; deg, None without orientation; px for an image
-    point), and how far beyond the rejection threshold its whitened norm was
-    (``excess``, > 1)."""
+    (:class:`kinfw.identification.problem.RejectedObservation`): ``sample`` (index into
+    the data file's samples, from 0), kind, frame (camera for targets), marker, the size
+    of its residual against the calibration in each per-observation metric of its kind
+    (as :class:`DownweightedRow`), and how far beyond the rejection threshold its
+    whitened norm was (``excess``, > 1)."""
 
     sample: int
     kind: str
     frame: str
     marker: str | None
-    position_residual_mm: float | None
-    rotation_residual_deg: float | None
+    residuals: tuple[ErrorValue, ...]
     excess: float
-    pixel_residual_px: float | None = None
     where: str | None = None
+
+    def residual(self, name: str) -> float | None:
+        """The residual's size in the metric ``name`` (display unit), None if none."""
+        return _residual(self, name)
 
     def to_dict(self) -> dict[str, Any]:
         return {**_observation_dict(self), "excess": self.excess}
@@ -216,11 +214,7 @@ class RejectedRow:
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> RejectedRow:
         doc = r.obj(doc, at)
-        return cls(
-            *_observation_fields(doc, r, at, position_optional=True),
-            r.number(doc, "excess", at),
-            **_pixel_field(doc, r, at),
-        )
+        return cls(**_observation_fields(doc, r, at), excess=r.number(doc, "excess", at))
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
 from kinfw.files import json_text, write_text_atomic
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._records import BeforeAfter, DataProvenance
+from kinfw.reports._records import BeforeAfter, DataProvenance, ErrorValue, headline
 from kinfw.reports._refine import (
     Correlation,
     DownweightedRow,
@@ -69,39 +70,19 @@ def _rows(cls, doc: dict, key: str, r: DocReader, at: str) -> tuple:
 @dataclass(frozen=True, slots=True)
 class GroupErrorSummary:
     """Errors of a model on one observation group (see
-    :meth:`kinfw.verification.evaluation.GroupErrors.summary`): position norm mean, RMS and max
-    (mm), rotation mean, RMS and max (deg, NaN without orientation), and the mean and
-    std of ``|error|`` per axis x, y, z (mm, Shih et al. Table 4); for image points
-    (``pixels``: positions NaN, the per-axis arrays null in the file) the RMS and max
-    pixel error (px)."""
+    :meth:`kinfw.verification.evaluation.GroupErrors.summary`), in the metrics of its kind:
+    per metric its mean, RMS and max over the observations (or a group metric's value)
+    in the display unit (``position_mean_mm``, ``rotation_rms_deg``, ``pixel_max_px``,
+    ``height_rms_mm``, ``tilt_deg``); for a metric with axes the mean and std of
+    ``|error|`` per axis (``abs_mean_xyz_mm``, Shih et al. Table 4; None in the file when
+    undefined)."""
 
     frame: str
     kind: str
     marker: str | None
     n: int
-    position_mean_mm: float
-    position_rms_mm: float
-    position_max_mm: float
-    rotation_mean_deg: float
-    rotation_rms_deg: float
-    rotation_max_deg: float
-    abs_mean_xyz_mm: tuple[float, float, float]
-    abs_std_xyz_mm: tuple[float, float, float]
-    pixel_rms_px: float | None = None
-    pixel_max_px: float | None = None
-
-    _NUMBERS: ClassVar[tuple[str, ...]] = (
-        "position_mean_mm",
-        "position_rms_mm",
-        "position_max_mm",
-        "rotation_mean_deg",
-        "rotation_rms_deg",
-        "rotation_max_deg",
-    )
-
-    def __post_init__(self) -> None:
-        for key in ("abs_mean_xyz_mm", "abs_std_xyz_mm"):
-            object.__setattr__(self, key, tuple(float(v) for v in getattr(self, key)))
+    values: tuple[ErrorValue, ...]
+    axes: tuple[tuple[str, tuple[float, ...] | None], ...] = ()
 
     @property
     def group(self) -> str:
@@ -109,127 +90,137 @@ class GroupErrorSummary:
         marker = f" [{self.marker}]" if self.marker else ""
         return f"{self.frame}{marker} ({self.kind})"
 
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready; a per-axis array that does not apply (NaN: image points) is null."""
-        pixels = (
-            {}
-            if self.pixel_rms_px is None
-            else {"pixel_rms_px": self.pixel_rms_px, "pixel_max_px": self.pixel_max_px}
+    @property
+    def headlines(self) -> tuple[ErrorValue, ...]:
+        """Per metric its headline: the RMS, or a group metric's value."""
+        return tuple(v for v in self.values if v.is_headline)
+
+    def rms(self, name: str) -> float | None:
+        """The headline in the metric ``name``, None if the group has none."""
+        v = headline(self.values, name)
+        return None if v is None else v.value
+
+    def unavailable(self) -> GroupErrorSummary:
+        """The same group with every number NaN (errors not available)."""
+        return replace(
+            self,
+            values=tuple(v.with_value(math.nan) for v in self.values),
+            axes=tuple((k, None) for k, _ in self.axes),
         )
+
+    @classmethod
+    def of(
+        cls, frame: str, kind: str, marker: str | None, summary: Mapping[str, Any]
+    ) -> GroupErrorSummary:
+        """From ``n`` and the keys of a summary (``name_stat_unit`` numbers, per-axis
+        lists or None)."""
+        values, axes = [], []
+        for key, v in summary.items():
+            if key == "n":
+                continue
+            if v is None or isinstance(v, list | tuple):
+                axes.append((key, None if v is None else tuple(float(x) for x in v)))
+            else:
+                values.append(ErrorValue.from_key(key, float(v)))
+        return cls(frame, kind, marker, int(summary["n"]), tuple(values), tuple(axes))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready; a per-axis array that does not apply (NaN) is null."""
         return {
             "frame": self.frame,
             "kind": self.kind,
             "marker": self.marker,
             "n": self.n,
-            **{k: getattr(self, k) for k in self._NUMBERS},
+            **{v.key: v.value for v in self.values},
             **{
-                k: None if any(math.isnan(v) for v in getattr(self, k)) else list(getattr(self, k))
-                for k in ("abs_mean_xyz_mm", "abs_std_xyz_mm")
+                k: None if a is None or any(math.isnan(x) for x in a) else list(a)
+                for k, a in self.axes
             },
-            **pixels,
         }
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> GroupErrorSummary:
         doc = r.obj(doc, at)
-
-        def xyz(k: str) -> tuple[float, ...]:
-            value = r.value(doc, k, at, optional=True)
-            if value is None:
-                return (math.nan,) * 3
-            return tuple(r.array(value, r.path(at, k), (3,)).tolist())
-
-        return cls(
+        summary: dict[str, Any] = {"n": r.integer(doc, "n", at)}
+        for key in doc:
+            if key in ("frame", "kind", "marker", "n"):
+                continue
+            if key.startswith("abs_"):  # per axis: a list, or null
+                value = r.value(doc, key, at)
+                summary[key] = None if value is None else r.array(value, r.path(at, key)).tolist()
+            else:
+                summary[key] = r.number(doc, key, at)
+        return cls.of(
             r.string(doc, "frame", at),
             r.string(doc, "kind", at),
             r.string(doc, "marker", at, optional=True),
-            r.integer(doc, "n", at),
-            *(r.number(doc, k, at) for k in cls._NUMBERS),
-            xyz("abs_mean_xyz_mm"),
-            xyz("abs_std_xyz_mm"),
-            r.number(doc, "pixel_rms_px", at, optional=True),
-            r.number(doc, "pixel_max_px", at, optional=True),
+            summary,
         )
 
 
 def before_after(
     before: tuple[GroupErrorSummary, ...], after: tuple[GroupErrorSummary, ...]
 ) -> tuple[BeforeAfter, ...]:
-    """Per group: RMS position (mm) and rotation (deg) before and after (matched by
-    group label)."""
+    """Per group: each metric's headline (RMS, or a group metric's value) before and
+    after (matched by group label)."""
     after_of = {g.group: g for g in after}
     return tuple(
-        BeforeAfter(
-            g.group,
-            g.n,
-            g.position_rms_mm,
-            after_of[g.group].position_rms_mm,
-            g.rotation_rms_deg,
-            after_of[g.group].rotation_rms_deg,
-        )
-        for g in before
+        BeforeAfter(g.group, g.n, g.headlines, after_of[g.group].headlines) for g in before
     )
 
 
 @dataclass(frozen=True, slots=True)
 class StageErrors:
-    """Position RMS (mm) per observation group after one stage (``"nominal"``,
-    ``"closed form"``, ``"hand-eye"``, ``"refine"``)."""
+    """Per observation group after one stage (``"nominal"``, ``"closed form"``,
+    ``"hand-eye"``, ``"refine"``) the headline of its kind's first metric: a pose's
+    position RMS (mm), an image point's pixel RMS (px), a plane contact's height RMS (mm).
+
+    Attributes
+    ----------
+    stage : str
+    rms : tuple of (str, ErrorValue)
+        ``(group label, headline)``.
+    """
 
     stage: str
-    position_rms_mm: tuple[tuple[str, float], ...]
+    rms: tuple[tuple[str, ErrorValue], ...]
 
     @classmethod
     def of(cls, stage: str, errors: tuple[GroupErrorSummary, ...]) -> StageErrors:
-        """Per group its position RMS (mm); image points (``pixels``) their pixel RMS,
-        labelled ``"... [px]"``."""
-        return cls(
-            stage,
-            tuple(
-                (g.group, g.position_rms_mm)
-                if g.pixel_rms_px is None
-                else (f"{g.group} [px]", g.pixel_rms_px)
-                for g in errors
-            ),
-        )
-
-
-_PX = " [px]"
+        return cls(stage, tuple((g.group, g.headlines[0]) for g in errors if g.headlines))
 
 
 def _stages_to_dict(
-    stages: tuple[StageErrors, ...], *, pixels: bool = False
-) -> dict[str, dict[str, float]]:
-    """Per stage the mm groups, or with ``pixels`` the px groups (labels without the
-    ``" [px]"``): the two go to keys with their unit."""
+    stages: tuple[StageErrors, ...], suffix: str
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Per headline key (``position_rms_mm``) the key ``key + suffix`` holding per stage
+    the groups with that headline: ``{"position_rms_mm_by_stage": {stage: {group:
+    value}}}``."""
+    keys = dict.fromkeys(v.key for s in stages for _, v in s.rms)
     return {
-        s.stage: {
-            (g[: -len(_PX)] if pixels else g): v
-            for g, v in s.position_rms_mm
-            if g.endswith(_PX) == pixels
-        }
-        for s in stages
+        key + suffix: {s.stage: {g: v.value for g, v in s.rms if v.key == key} for s in stages}
+        for key in keys
     }
 
 
-def _stages_from(
-    doc: dict, key: str, r: DocReader, pixel_key: str | None = None
-) -> tuple[StageErrors, ...]:
-    """Read :func:`_stages_to_dict`'s mm groups of ``key`` and px groups of
-    ``pixel_key`` (optional; older files had px groups in ``key``, labelled ``[px]``)."""
-    stages = r.obj(r.value(doc, key, ""), key)
-    pixel = r.obj(doc[pixel_key], pixel_key) if pixel_key and pixel_key in doc else {}
-    out = []
-    for stage, groups in stages.items():
-        at = f"{key}.{stage}"
-        groups = r.obj(groups, at)
-        rows = [(g, r.number(groups, g, at)) for g in groups]
-        if stage in pixel:
-            p_at = f"{pixel_key}.{stage}"
-            p_groups = r.obj(pixel[stage], p_at)
-            rows += [(g + _PX, r.number(p_groups, g, p_at)) for g in p_groups]
-        out.append(StageErrors(stage, tuple(rows)))
-    return tuple(out)
+def _stages_from(doc: dict, suffix: str, r: DocReader) -> tuple[StageErrors, ...] | None:
+    """Read :func:`_stages_to_dict`'s keys ending in ``suffix`` (none: None)."""
+    rows: dict[str, list[tuple[str, ErrorValue]]] = {}
+    for key in doc:
+        if not key.endswith(suffix) or (suffix == _BY_STAGE and key.endswith(_TRUTH)):
+            continue
+        headline_key = key[: -len(suffix)]
+        for stage, groups in r.obj(doc[key], key).items():
+            at = f"{key}.{stage}"
+            groups = r.obj(groups, at)
+            rows.setdefault(stage, []).extend(
+                (g, ErrorValue.from_key(headline_key, r.number(groups, g, at))) for g in groups
+            )
+    return tuple(StageErrors(s, tuple(v)) for s, v in rows.items()) if rows else None
+
+
+_BY_STAGE = "_by_stage"
+_TRUTH = "_vs_truth_held_out_by_stage"
 
 
 # -- the report -------------------------------------------------------------------------
@@ -246,7 +237,7 @@ class CalibrationReport:
         Stages skipped and why.
     errors_in_sample : tuple of BeforeAfter
         On the calibration data (optimistic).
-    position_rms_by_stage : tuple of StageErrors
+    rms_by_stage : tuple of StageErrors
         ``"nominal"`` and each stage, on the calibration data.
     errors_before, errors_after : tuple of GroupErrorSummary
         Of the nominal and calibrated URDF on the calibration data.
@@ -256,7 +247,7 @@ class CalibrationReport:
         On held-out data (the honest accuracy), when given.
     sidecar : str or None
         Path of the sidecar written with the calibrated URDF (set by the command line).
-    errors_vs_truth_held_out, position_rms_vs_truth_held_out_by_stage : optional
+    errors_vs_truth_held_out, rms_vs_truth_held_out_by_stage : optional
         Against the noise-free true robot, in a simulation (``kinfw demo``).
     reprojection : ReprojectionSection or None
         Reprojection errors (px) of ``pixels`` observations per camera and image, the
@@ -264,9 +255,11 @@ class CalibrationReport:
     reprojection_held_out : ReprojectionSection or None
         The same on held-out images (``kinfw demo --pixels``: fresh configurations).
 
-    In the file, the stage tables' image groups (labelled ``"... [px]"`` in
-    :attr:`position_rms_by_stage`) are under ``pixel_rms_px_by_stage``, the others
-    under ``position_rms_mm_by_stage``.
+    In the file, the stage tables are one key per headline metric: the groups whose
+    first metric is a position under ``position_rms_mm_by_stage``, image points under
+    ``pixel_rms_px_by_stage``, plane contacts under ``height_rms_mm_by_stage``, a
+    registered kind's under its own (``distance_rms_mm_by_stage``); the same with
+    ``_vs_truth_held_out_by_stage``.
     """
 
     created: str
@@ -275,7 +268,7 @@ class CalibrationReport:
     data: DataProvenance
     notes: tuple[str, ...]
     errors_in_sample: tuple[BeforeAfter, ...]
-    position_rms_by_stage: tuple[StageErrors, ...]
+    rms_by_stage: tuple[StageErrors, ...]
     errors_before: tuple[GroupErrorSummary, ...]
     errors_after: tuple[GroupErrorSummary, ...]
     kinematics: ClosedFormSection | None = None
@@ -285,7 +278,7 @@ class CalibrationReport:
     errors_held_out: tuple[BeforeAfter, ...] | None = None
     sidecar: str | None = None
     errors_vs_truth_held_out: tuple[BeforeAfter, ...] | None = None
-    position_rms_vs_truth_held_out_by_stage: tuple[StageErrors, ...] | None = None
+    rms_vs_truth_held_out_by_stage: tuple[StageErrors, ...] | None = None
     reprojection: ReprojectionSection | None = None
     reprojection_held_out: ReprojectionSection | None = None
 
@@ -304,12 +297,7 @@ class CalibrationReport:
             "data": self.data.to_dict(),
             "notes": list(self.notes),
             "errors_in_sample": [row.to_dict() for row in self.errors_in_sample],
-            "position_rms_mm_by_stage": _stages_to_dict(self.position_rms_by_stage),
-            **(
-                {"pixel_rms_px_by_stage": px}
-                if any((px := _stages_to_dict(self.position_rms_by_stage, pixels=True)).values())
-                else {}
-            ),
+            **_stages_to_dict(self.rms_by_stage, _BY_STAGE),
             "errors_before": {g.group: g.to_dict() for g in self.errors_before},
             "errors_after": {g.group: g.to_dict() for g in self.errors_after},
         }
@@ -327,10 +315,8 @@ class CalibrationReport:
             doc["sidecar"] = self.sidecar
         if self.errors_vs_truth_held_out is not None:
             doc["errors_vs_truth_held_out"] = [r.to_dict() for r in self.errors_vs_truth_held_out]
-        if self.position_rms_vs_truth_held_out_by_stage is not None:
-            doc["position_rms_mm_vs_truth_held_out_by_stage"] = _stages_to_dict(
-                self.position_rms_vs_truth_held_out_by_stage
-            )
+        if self.rms_vs_truth_held_out_by_stage is not None:
+            doc.update(_stages_to_dict(self.rms_vs_truth_held_out_by_stage, _TRUTH))
         if self.reprojection is not None:
             doc["reprojection_px"] = self.reprojection.to_dict()
         if self.reprojection_held_out is not None:
@@ -356,7 +342,6 @@ class CalibrationReport:
         def rows(key: str) -> tuple[BeforeAfter, ...] | None:
             return BeforeAfter.rows_from(doc[key], r, key) if key in doc else None
 
-        truth_key = "position_rms_mm_vs_truth_held_out_by_stage"
         return cls(
             r.string(doc, "created", ""),
             r.string(doc, "method", ""),
@@ -364,7 +349,7 @@ class CalibrationReport:
             DataProvenance.from_dict(r.value(doc, "data", ""), r, "data"),
             r.strings(doc, "notes", ""),
             rows("errors_in_sample") or (),
-            _stages_from(doc, "position_rms_mm_by_stage", r, "pixel_rms_px_by_stage"),
+            _stages_from(doc, _BY_STAGE, r) or (),
             errors("errors_before"),
             errors("errors_after"),
             section("kinematics", ClosedFormSection),
@@ -374,7 +359,7 @@ class CalibrationReport:
             rows("errors_held_out"),
             r.string(doc, "sidecar", "", optional=True),
             rows("errors_vs_truth_held_out"),
-            _stages_from(doc, truth_key, r) if truth_key in doc else None,
+            _stages_from(doc, _TRUTH, r),
             section("reprojection_px", ReprojectionSection),
             section("reprojection_px_held_out", ReprojectionSection),
         )

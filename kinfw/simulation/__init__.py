@@ -1,4 +1,7 @@
-"""TODO face."""
+"""Rehearsal data: a perturbed "true" robot, measurement protocols (one joint at a time,
+random configurations), simulated observations of every kind with Fig. 10 noise of Shih
+et al. (1992), board images, and planted outliers.
+"""
 
 from __future__ import annotations
 

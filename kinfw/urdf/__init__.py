@@ -1,4 +1,7 @@
-"""TODO face."""
+"""Writing a calibrated model back into the robot's own URDF text: every tag kept, joint
+origins and axes changed on measured paths, link frames re-expressed so nothing attached
+moves (:func:`export_urdf`, :func:`write_urdf`, :func:`edit_urdf`).
+"""
 
 from __future__ import annotations
 

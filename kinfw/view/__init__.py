@@ -1,4 +1,7 @@
-"""TODO face."""
+"""Meshcat scenes (imported when used): the nominal robot as a ghost beside the calibrated
+one with the data and residuals (:func:`scene`), fixations and reaches, live on 127.0.0.1
+or as one self-contained HTML file (:func:`write_html`).
+"""
 
 from __future__ import annotations
 

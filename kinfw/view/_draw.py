@@ -1,5 +1,5 @@
-"""Drawing primitives of the Meshcat scenes (:mod:`kinfw.view`, :mod:`kinfw.view`,
-:mod:`kinfw.view`): triads and thin cylinders drawn over everything (WebGL draws
+"""Drawing primitives of the Meshcat scenes (:mod:`kinfw.view._scene`, :mod:`kinfw.view._gaze`,
+:mod:`kinfw.view._reach`): triads and thin cylinders drawn over everything (WebGL draws
 lines one pixel wide whatever their ``linewidth``), and small transforms. meshcat is
 imported inside the functions."""
 

@@ -256,7 +256,7 @@ def robot_scene(
 ) -> tuple[meshcat.Visualizer, meshcat.Visualizer, NDArray[np.float64], NDArray[np.float64]]:
     """A meshcat scene with one robot drawn at the joint values ``q`` (``joint_names``
     order), in ``rgba``, under ``/meshcat/kinfw/robot``: the start of the scenes of
-    :mod:`kinfw.view` and :mod:`kinfw.view`.
+    :mod:`kinfw.view._gaze` and :mod:`kinfw.view._reach`.
 
     Returns
     -------

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from numpy.typing import ArrayLike
 
+from kinfw.files import sidecar_path
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.reports import CalibrationSidecar, read_sidecar
@@ -68,7 +69,7 @@ def show(
     """
     calibrated = None if calibrated is None else _as_robot(calibrated, "calibrated")
     if sidecar is None and calibrated is not None and not calibrated.source.startswith("<"):
-        guess = Path(calibrated.source).with_suffix(".kinfw.json")
+        guess = sidecar_path(calibrated.source)
         sidecar = guess if guess.is_file() else None
     extra: dict[str, Any] = {}
     if sidecar is not None:

@@ -1,4 +1,7 @@
-"""TODO face."""
+"""How good is a model: its errors against measurements (:func:`evaluate_model`, what
+``kinfw verify`` reports), k-fold cross-validation of the whole pipeline, the default model
+choice, the Cramér-Rao bound, the CPC-vs-Pinocchio cross-check, and the trial runner.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +9,7 @@ from kinfw.verification.evaluation._accuracy import (
     AccuracyReport,
     GroupErrors,
     evaluate_model,
+    group_errors,
     known_frames,
 )
 from kinfw.verification.evaluation._crlb import (
@@ -29,8 +33,8 @@ from kinfw.verification.evaluation._crossval import (
     CrossValidation,
     FoldScore,
     crossvalidate,
-    held_out_error_sizes,
     held_out_errors,
+    whitening_noise,
 )
 from kinfw.verification.evaluation._model_choice import (
     PRIOR_GRID_M,
@@ -74,7 +78,7 @@ __all__ = [
     "crossvalidate",
     "evaluate_model",
     "executor_for_jobs",
-    "held_out_error_sizes",
+    "group_errors",
     "held_out_errors",
     "known_frames",
     "pose_discrepancy",
@@ -87,4 +91,5 @@ __all__ = [
     "run_trials",
     "stderr_progress",
     "true_chart_coordinates",
+    "whitening_noise",
 ]

@@ -1,13 +1,16 @@
 """Errors of a robot model against measurements: what ``kinfw verify`` reports.
 
 For every group of observations (one frame, kind and marker) the model predicts the
-measurement and the error is *measured minus predicted*:
+measurement and the error is *measured minus predicted*, read in the metrics of the
+group's kind (:meth:`kinfw.observations.ObservationKind.errors`), e.g.:
 
-- ``pose``: position error vector in the measurement frame and the rotation angle of
-  ``predicted_R^T measured_R``;
+- ``pose``: position error vector in the measurement frame (mm) and the rotation angle
+  of ``predicted_R^T measured_R`` (deg);
 - ``target``: the same for ``camera_T_target``, with the position error in the camera
   frame;
-- ``point``: the position error vector only.
+- ``point``: the position error vector only;
+- ``pixels``: the reprojection error (px); ``plane``: each contact's height off the plane
+  (mm) and the contacts' tilt (deg); a registered kind: its own.
 
 Unknown rigid frames that are not in the URDF (the target's pose, a marker's pose or
 offset, the pose of the root link in a ``measured_in`` frame) are fitted in closed form
@@ -21,20 +24,22 @@ fit, slightly optimistic for few samples. Rotation errors are
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.measurements import Measurements
-from kinfw.model import BlockKey, Robot
+from kinfw.model import Block, BlockKey, Robot
+from kinfw.observations import Metric, MetricErrors, NumericContext
 from kinfw.reports import CalibrationSidecar
 
-__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "known_frames"]
+__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "group_errors", "known_frames"]
 
 
 @dataclass(frozen=True, slots=True)
 class GroupErrors:
-    """Errors of one observation group.
+    """Errors of one observation group, in the metrics of its kind.
 
     Attributes
     ----------
@@ -43,64 +48,39 @@ class GroupErrors:
     marker : str or None
     sample : ndarray of int, shape (m,)
         Sample indices of the rows.
-    position_error_m : ndarray, shape (m, 3)
-        Measured minus predicted position, metres, in the measurement frame (camera
-        frame for ``target``).
-    rotation_error_rad : ndarray, shape (m,)
-        Rotation angle between measured and predicted orientation, rad; NaN for points.
-    pixel_error_px : ndarray, shape (m, 2), or None
-        Measured minus predicted pixels of image points (``pixels``), None for the
-        other kinds (their position and rotation errors are NaN).
+    errors : tuple of MetricErrors
+        Per metric of the kind (:attr:`kinfw.observations.ObservationKind.metrics`: a
+        pose's position and rotation, a point's position, an image point's pixel error,
+        a plane contact's height and the contacts' tilt, a registered kind's own), SI.
     """
 
     frame: str
     kind: str
     marker: str | None
     sample: NDArray[np.int64]
-    position_error_m: NDArray[np.float64]
-    rotation_error_rad: NDArray[np.float64]
-    pixel_error_px: NDArray[np.float64] | None = None
+    errors: tuple[MetricErrors, ...]
 
     @property
     def n(self) -> int:
         return len(self.sample)
 
     @property
-    def position_norm_mm(self) -> NDArray[np.float64]:
-        """Per-sample position error norm, mm."""
-        return 1e3 * np.linalg.norm(self.position_error_m, axis=1)
+    def metrics(self) -> tuple[Metric, ...]:
+        return tuple(e.metric for e in self.errors)
 
-    @property
-    def rotation_deg(self) -> NDArray[np.float64]:
-        """Per-sample rotation error, degrees (NaN for points)."""
-        return np.degrees(self.rotation_error_rad)
+    def of(self, name: str) -> MetricErrors | None:
+        """The errors in the metric ``name`` (``"position"``), None if the kind has none."""
+        return next((e for e in self.errors if e.metric.name == name), None)
 
     def summary(self) -> dict[str, float | list[float]]:
-        """Mean, RMS and max of the position norm (mm) and rotation (deg), and the
-        paper's Table 4 statistics: mean and std of ``|error|`` per axis x, y, z (mm);
-        for image points also the RMS and max of the pixel error norm (px)."""
-        p = self.position_norm_mm
-        r = self.rotation_deg
-        abs_axis = 1e3 * np.abs(self.position_error_m)
-        has_rot = self.kind != "point"
-        pixels = {}
-        if self.pixel_error_px is not None:
-            e = np.linalg.norm(self.pixel_error_px, axis=1)
-            pixels = {
-                "pixel_rms_px": float(np.sqrt(np.mean(e**2))),
-                "pixel_max_px": float(e.max()),
-            }
+        """``n``, then per metric its mean, RMS and max over the observations (or the
+        group's number) in its display unit, keyed ``name_stat_unit``
+        (``position_rms_mm``); then for a metric with axes the paper's Table 4
+        statistics, the mean and std of ``|error|`` per axis (``abs_mean_xyz_mm``)."""
         return {
             "n": self.n,
-            "position_mean_mm": float(p.mean()),
-            "position_rms_mm": float(np.sqrt(np.mean(p**2))),
-            "position_max_mm": float(p.max()),
-            "rotation_mean_deg": float(r.mean()) if has_rot else float("nan"),
-            "rotation_rms_deg": float(np.sqrt(np.mean(r**2))) if has_rot else float("nan"),
-            "rotation_max_deg": float(r.max()) if has_rot else float("nan"),
-            "abs_mean_xyz_mm": abs_axis.mean(axis=0).tolist(),
-            "abs_std_xyz_mm": abs_axis.std(axis=0).tolist(),
-            **pixels,
+            **{k: v for e in self.errors for k, v in e.summary()},
+            **{k: v for e in self.errors for k, v in e.axis_stats()},
         }
 
 
@@ -118,43 +98,63 @@ class AccuracyReport:
     groups: tuple[GroupErrors, ...]
     fitted: tuple[str, ...]
 
+    @property
+    def metrics(self) -> tuple[Metric, ...]:
+        """Every metric of the groups, in order of first appearance."""
+        return tuple(dict.fromkeys(m for g in self.groups for m in g.metrics))
+
+    def values(self, name: str) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Per observation of the groups that have the per-observation metric ``name``
+        its error size (SI) and sample index, each (n,), in group order."""
+        found = [(e.values, g.sample) for g in self.groups if (e := g.of(name)) is not None]
+        if not found:
+            return np.zeros(0), np.zeros(0, np.int64)
+        return np.concatenate([v for v, _ in found]), np.concatenate([k for _, k in found])
+
     def to_dict(self, *, per_sample: bool = False) -> dict:
-        """JSON-ready summary (SI inside, mm and degrees in the field names); with
-        ``per_sample`` each group also lists every sample's position error (mm, norm and
-        x, y, z) and rotation error (deg), or for image points (``pixels``) every
-        point's pixel error (px, norm and u, v). Undefined numbers are NaN: write the
-        dict with :func:`kinfw.files.json_text` (null)."""
+        """JSON-ready summary (SI inside, the display unit in the key names:
+        :meth:`GroupErrors.summary`); with ``per_sample`` each group also lists every
+        observation's error in each per-observation metric (``position_mm``,
+        ``rotation_deg``, ``pixel_px``; with axes also the vector, ``position_xyz_mm``).
+        Undefined numbers are NaN: write the dict with :func:`kinfw.files.json_text`
+        (null)."""
         groups = []
         for g in self.groups:
             entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
-            if per_sample and g.pixel_error_px is not None:
-                # one entry per image point: its pixel error (no position or rotation)
+            if per_sample:
+                per = [e for e in g.errors if e.metric.per_observation]
                 entry["samples"] = [
-                    {
-                        "sample": int(k),
-                        "pixel_px": float(np.hypot(*e)),
-                        "pixel_uv_px": e.tolist(),
-                    }
-                    for k, e in zip(g.sample, g.pixel_error_px, strict=True)
-                ]
-            elif per_sample:
-                entry["samples"] = [
-                    {
-                        "sample": int(k),
-                        "position_mm": float(p),
-                        "position_xyz_mm": (1e3 * e).tolist(),
-                        "rotation_deg": None if np.isnan(r) else float(r),
-                    }
-                    for k, p, e, r in zip(
-                        g.sample,
-                        g.position_norm_mm,
-                        g.position_error_m,
-                        g.rotation_deg,
-                        strict=True,
-                    )
+                    {"sample": int(k)} | {k2: v for e in per for k2, v in _sample(e, row)}
+                    for row, k in enumerate(g.sample)
                 ]
             groups.append(entry)
         return {"fitted": list(self.fitted), "groups": groups}
+
+
+def _sample(e: MetricErrors, row: int) -> list[tuple[str, object]]:
+    """One observation's error in a per-observation metric: its size (None if
+    undefined) and, with axes, its vector, in the display unit."""
+    value = float(e.shown()[row])
+    out: list[tuple[str, object]] = [(e.metric.key(), None if np.isnan(value) else value)]
+    if e.vectors is not None:
+        axes = f"{e.metric.name}_{e.metric.axes}_{e.metric.unit}"
+        out.append((axes, (e.metric.scale * e.vectors[row]).tolist()))
+    return out
+
+
+def group_errors(group: Any, rows: NDArray[np.float64], model: NumericContext) -> GroupErrors:
+    """The errors of one residual group of a problem
+    (:class:`kinfw.identification.problem.ResidualGroup`) from its rows (m, rows), SI
+    and weighted as the problem weighs them (the kind's row weights are divided out
+    here), in its kind's metrics (:meth:`kinfw.observations.ObservationKind.errors`)."""
+    rows = rows / group.kind.row_weights(group.group)[:, None]  # the errors, not their weights
+    return GroupErrors(
+        group.frame,
+        group.kind.name,
+        group.marker,
+        group.sample,
+        tuple(group.kind.errors(group.group, rows, model)),
+    )
 
 
 def known_frames(sidecar: CalibrationSidecar | None) -> dict[tuple[str, str], NDArray]:
@@ -202,29 +202,24 @@ def evaluate_model(
     fitted = [text for key, text in problem.fitted if key.kind == "frame"]
     start = problem.start_context(measurements)
     x0 = np.zeros(problem.n_parameters)
+    # the model the errors are predicted by, for a metric that needs geometry: the
+    # robot at the samples, the known and the fitted unknowns' values
+    qs, names = measurements.qs, measurements.joint_names
+    values = {b.key: _value(b) for b in problem.unknown_blocks}
+    values.update({BlockKey(u.kind, u.name): u.value for u in known})
     groups: list[GroupErrors] = []
     for g in problem.groups:
         requests = [req for req in g.kind.unknowns(g.group, start) if req.key not in known_keys]
         # intrinsics are the file's (or --camera's), fixed: not fitted to these data
         fitted += [req.description for req in requests if req.key.kind != "intrinsics"]
-        own = problem.with_starts(g, [req.block(req.key, req.estimates) for req in requests])
+        blocks = [req.block(req.key, req.estimates) for req in requests]
+        own = problem.with_starts(g, blocks)
         r = own.evaluate(x0, False)[0].reshape(len(g.sample), g.rows)
-        r = r / g.kind.row_weights(g.group)[:, None]  # the errors, not their fit weights
-        m = len(g.sample)
-        position = np.full((m, 3), np.nan)
-        rotation = np.full(m, np.nan)
-        pixel = None
-        c0 = 0
-        for c in g.components:
-            rows = r[:, c0 : c0 + c.rows]
-            if c.name == "position":
-                position = rows
-            elif c.name == "rotation":
-                rotation = c.magnitude(rows)
-            elif c.unit == "px":
-                pixel = rows
-            c0 += c.rows
-        groups.append(
-            GroupErrors(g.frame, g.kind.name, g.marker, g.sample, position, rotation, pixel)
-        )
+        mine = {**values, **{b.key: _value(b) for b in blocks}}
+        groups.append(group_errors(g, r, NumericContext.from_robot(robot, qs, names, mine)))
     return AccuracyReport(tuple(groups), tuple(fitted))
+
+
+def _value(block: Block) -> NDArray[np.float64]:
+    """A block's value at its start (chart coordinates zero)."""
+    return block.numpy_value(np.zeros(block.size))

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.identification import information_matrix
 from kinfw.identification.problem import LeastSquaresProblem, NoiseModel, build_problem
 from kinfw.measurements import Measurements
-from kinfw.model import CPCModel, Robot, cpc_from_geometry, geometry_from_robot
+from kinfw.model import CPC_KEY, CPCModel, Robot, cpc_from_geometry, geometry_from_robot
 
 __all__ = [
     "CRLB",
@@ -92,10 +92,11 @@ class CRLB:
 
     @property
     def model_covariance(self) -> NDArray[np.float64]:
-        """The block of the CPC chart, shape (``model.n_parameters``,) * 2 (the marginal
-        bound: the target poses are nuisance parameters)."""
-        n = self.model.n_parameters
-        return self.covariance[:n, :n]
+        """The block of the CPC chart, shape (``model.n_parameters``,) * 2 in the order of
+        ``model.parameter_names`` (the marginal bound: the target poses are nuisance
+        parameters)."""
+        idx = [self.parameter_names.index(n) for n in self.model.parameter_names]
+        return self.covariance[np.ix_(idx, idx)]
 
 
 def _check_noise(noise: NoiseModel) -> NoiseModel:
@@ -304,8 +305,10 @@ def position_jacobians(
 
 
 def _check_bound_model(bound: CRLB, model: CPCModel) -> None:
-    n = bound.model.n_parameters
-    if model.topology != bound.model.topology or model.parameter_names != bound.parameter_names[:n]:
+    if (
+        model.topology != bound.model.topology
+        or model.parameter_names != bound.model.parameter_names
+    ):
         raise ValueError(
             "model: its CPC chart does not match the bound's (pass bound.model, "
             "the model the bound was computed around)"
@@ -375,8 +378,9 @@ def true_chart_coordinates(
         )
     truth = cpc_from_geometry(geometry_from_robot(truth_robot, m0.topology.frames), sign=m0.sign)
     x = np.zeros(problem.n_parameters)
-    x[: m0.n_parameters] = m0.chart_coordinates(truth)
-    for block, sl in zip(unknown, problem.slices[problem.n_robot_blocks :], strict=True):
+    x[problem.block(CPC_KEY)[1]] = m0.chart_coordinates(truth)
+    for block in unknown:
+        _, sl = problem.block(block.key)
         if block.key.name not in root_T_targets:
             raise ValueError(f"root_T_targets: missing the true pose of target {block.key.name!r}")
         x[sl] = block.coordinates(np.asarray(root_T_targets[block.key.name], dtype=float))

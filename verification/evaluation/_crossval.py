@@ -11,16 +11,18 @@ other folds with several parameter sets and scored on the held-out one:
 - ``"full"``: closed form, hand-eye and the joint refinement of every identifiable CPC
   parameter (kinfw's default).
 
-Held-out errors are predictions with the trained frames (targets, markers, the root's pose
-in an external frame) held fixed: nothing is refitted to the test fold. Position errors are
-per-sample error vector norms (mm); orientation errors the small-angle rotation (deg).
-Images (``pixels`` observations) are split by sample, whole, and scored by their RMS
-reprojection error (px) under the fold's model and the target pose fitted on the
-training folds; they have no position or orientation score (NaN, null in JSON).
+Held-out errors are predictions with the trained frames (targets, markers, planes, the
+root's pose in an external frame) held fixed: nothing is refitted to the test fold. Each
+fold is scored in the metrics of the observed kinds
+(:attr:`kinfw.observations.ObservationKind.metrics`): the RMS over the held-out
+observations of each per-observation metric (a pose's position error norm in mm and
+rotation angle in deg, an image point's reprojection error in px, a plane contact's
+height in mm, a registered kind's own), and of each group metric over the held-out
+groups (a plane's tilt, deg). Images (``pixels`` observations) are split by sample, whole.
 
 Selection (``select``) ranks the sets by the held-out error whitened by the noise the
-full-data fit estimates (or the given one): position and orientation together, each in
-units of its own noise, so a set that is better in millimetres but worse in degrees by
+full-data fit estimates (or the given one): every noise component's error together, each
+in units of its own noise, so a set that is better in millimetres but worse in degrees by
 more than the noise can tell is not chosen. With ``exclude_flagged`` the observations
 the full-data fit rejects as gross errors are left out of the held-out scores (they are
 still in the training folds, where each fit rejects them itself).
@@ -29,7 +31,7 @@ still in the training folds, where each fit rejects them itself).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
@@ -39,8 +41,9 @@ from numpy.typing import NDArray
 from kinfw.identification import Calibration, calibrate
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
-from kinfw.model import Robot
-from kinfw.observations import POSITION, ROTATION, kind_of
+from kinfw.model import BlockKey, Robot
+from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
+from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
 
 __all__ = [
@@ -49,8 +52,8 @@ __all__ = [
     "CrossValidation",
     "FoldScore",
     "crossvalidate",
-    "held_out_error_sizes",
     "held_out_errors",
+    "whitening_noise",
 ]
 
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
@@ -69,33 +72,56 @@ class FoldScore:
     parameters : str
     n_train, n_test : int
         Samples.
-    position_rms_mm, rotation_rms_deg : float
-        Held-out RMS (rotation NaN when only points are observed).
+    errors : tuple of (Metric, float)
+        Per metric of the held-out observations its RMS (display unit: mm, deg, px):
+        over the observations for a per-observation metric, over the groups for a
+        group metric (NaN when undefined).
     worst_sample : int
-        The held-out sample with the largest position error, and that error (mm).
-    worst_mm : float
+        The held-out sample with the largest error in the first per-observation metric,
+        and that error (its display unit).
+    worst : float
     condition : float
         Condition number of the trained fit (poor excitation when large).
     n_parameters, n_residuals : int
         Estimated parameters and training residuals.
-    pixel_rms_px : float
-        Held-out RMS reprojection error of the test images' points, px (the norm of each
-        point's (u, v) error); NaN without ``pixels`` observations. Position and rotation
-        scores are over the other kinds only (NaN when there are none).
     """
 
     fold: int
     parameters: str
     n_train: int
     n_test: int
-    position_rms_mm: float
-    rotation_rms_deg: float
+    errors: tuple[tuple[Metric, float], ...]
     worst_sample: int
-    worst_mm: float
+    worst: float
     condition: float
     n_parameters: int
     n_residuals: int
-    pixel_rms_px: float = float("nan")
+
+    def of(self, name: str) -> float:
+        """The held-out RMS in the metric ``name`` (NaN when the fold has none)."""
+        return next((v for m, v in self.errors if m.name == name), float("nan"))
+
+    def to_dict(self) -> dict:
+        """JSON-ready; each metric's RMS under its headline key (``position_rms_mm``),
+        the worst error under ``worst_<unit>``; undefined numbers None."""
+        unit = self.errors[0][0].unit if self.errors else ""
+        return {
+            "fold": self.fold,
+            "parameters": self.parameters,
+            "n_train": self.n_train,
+            "n_test": self.n_test,
+            **{m.headline: _num(v) for m, v in self.errors},
+            "worst_sample": self.worst_sample,
+            "_".join(p for p in ("worst", unit) if p): _num(self.worst),
+            "condition": _num(self.condition),
+            "n_parameters": self.n_parameters,
+            "n_residuals": self.n_residuals,
+        }
+
+
+def _num(value: float | None) -> float | None:
+    """Strict JSON: an undefined number (NaN, inf) is None."""
+    return None if value is None or not np.isfinite(value) else float(value)
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,9 +139,9 @@ class CrossValidation:
     selected : str or None
         With selection, the set with the lowest mean whitened held-out error
         (:meth:`whitened`).
-    noise : tuple of (float, float) or None
-        ``(position_m, rotation_rad)`` per component whitening the selection: the given
-        noise, else that of the full-data fit; None without selection.
+    noise : tuple of (NoiseComponent, float) or None
+        Per noise component of the data its sigma (SI) whitening the selection: the
+        given noise, else that of the full-data fit; None without selection.
     excluded : tuple of (int, str, str, str or None)
         Observations left out of the held-out scores as ``(sample, kind, frame,
         marker)``: those the full-data fit rejected (``exclude_flagged``).
@@ -127,72 +153,63 @@ class CrossValidation:
     scores: tuple[FoldScore, ...]
     warnings: tuple[str, ...]
     selected: str | None
-    noise: tuple[float, float] | None = None
+    noise: tuple[tuple[NoiseComponent, float], ...] | None = None
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
-    pixel_sigma_px: float | None = None
 
     @property
-    def has_pixels(self) -> bool:
-        """Whether any held-out fold has images (a pixel score)."""
-        return any(not np.isnan(s.pixel_rms_px) for s in self.scores)
+    def metrics(self) -> tuple[Metric, ...]:
+        """The metrics of the folds' scores, in order of first appearance."""
+        return tuple(dict.fromkeys(m for s in self.scores for m, _ in s.errors))
 
-    def mean(self, parameters: str, field: str = "position_rms_mm") -> float:
-        """Mean over folds of a score field for one parameter set."""
-        return float(
-            np.mean([getattr(s, field) for s in self.scores if s.parameters == parameters])
-        )
+    def mean(self, parameters: str, name: str | None = None) -> float:
+        """Mean over the folds that have it of the held-out RMS in the metric ``name``
+        (default: the first of :attr:`metrics`) for one parameter set; NaN if none."""
+        return _mean_of(self.scores, parameters, name)
 
     def whitened(self, parameters: str) -> float:
-        """Mean over folds of ``(position RMS / sigma_p)^2 + (rotation RMS /
-        sigma_r)^2`` for one set, with :attr:`noise`'s sigmas (per component, so a clean
-        prediction scores about 3 + 3 for poses, 3 for points); NaN without ``noise``.
+        """Mean over folds of ``sum_c (RMS_c / sigma_c)^2`` for one set: per noise
+        component ``c`` of :attr:`noise` the fold's held-out RMS of its error size in SI
+        (its metric's RMS over the display scale) over its sigma; NaN without ``noise``.
 
-        An observation's squared position error has mean ``3 sigma_p^2`` under the
-        noise and its squared rotation angle ``3 sigma_r^2``: each term counts its
-        component in units of what the noise can tell, position and orientation on one
-        scale.
+        An observation's squared error in a component of ``r`` rows has mean ``r
+        sigma^2`` under the noise (3 + 3 for a pose predicted to the noise, 3 for a point,
+        2 for an image point, 1 for a plane contact): each term counts its component in
+        units of what the noise can tell, so positions, angles, pixels and a registered
+        kind's errors mix on one scale. A fold with no error in a noise component's
+        metric (only group metrics) scores NaN.
         """
         if self.noise is None:
             return float("nan")
-        sp, sr = self.noise
+        sigma = {c.display: v for c, v in self.noise}
         out = []
         for s in self.scores:
             if s.parameters != parameters:
                 continue
-            rot = 0.0 if np.isnan(s.rotation_rms_deg) else np.radians(s.rotation_rms_deg) / sr
-            pos = 0.0 if np.isnan(s.position_rms_mm) else 1e-3 * s.position_rms_mm / sp
-            px = 0.0
-            if not np.isnan(s.pixel_rms_px) and self.pixel_sigma_px:
-                px = s.pixel_rms_px / self.pixel_sigma_px  # (u, v): 2 components
-            out.append(pos**2 + rot**2 + px**2)
-        return float(np.mean(out))
+            terms = [
+                (v / m.scale / sigma[m]) ** 2 for m, v in s.errors if m in sigma and np.isfinite(v)
+            ]
+            out.append(sum(terms) if terms else np.nan)  # nothing to whiten: undefined
+        return float(np.mean(out)) if out else float("nan")
 
     def to_dict(self) -> dict:
-        """Strict-JSON-ready: an undefined score (NaN: no such observations) is None."""
-
-        def num(value):
-            return None if value is None or not np.isfinite(value) else value
-
+        """Strict-JSON-ready: an undefined score (NaN: no such observations) is None;
+        per metric of :attr:`metrics` the mean over folds (``mean_position_rms_mm``);
+        the whitening noise per component in SI (``position_m``, ``rotation_rad``)."""
         return {
             "k": self.k,
             "seed": self.seed,
             "sets": list(self.sets),
-            "folds": [
-                {
-                    f: num(getattr(s, f)) if f not in ("fold", "parameters") else getattr(s, f)
-                    for f in FoldScore.__slots__
-                }
-                for s in self.scores
-            ],
-            "mean_position_rms_mm": {p: num(self.mean(p)) for p in self.sets},
-            "mean_rotation_rms_deg": {p: num(self.mean(p, "rotation_rms_deg")) for p in self.sets},
-            "mean_pixel_rms_px": {p: num(self.mean(p, "pixel_rms_px")) for p in self.sets},
+            "folds": [s.to_dict() for s in self.scores],
+            **{
+                f"mean_{m.headline}": {p: _num(self.mean(p, m.name)) for p in self.sets}
+                for m in self.metrics
+            },
             "mean_whitened": (
-                None if self.noise is None else {p: num(self.whitened(p)) for p in self.sets}
+                None if self.noise is None else {p: _num(self.whitened(p)) for p in self.sets}
             ),
             "noise": None
             if self.noise is None
-            else {"position_m": self.noise[0], "rotation_rad": self.noise[1]},
+            else {f"{c.name}_{c.unit}": sigma for c, sigma in self.noise},
             "excluded": [
                 {"sample": s, "kind": k, "frame": f, "marker": m} for s, k, f, m in self.excluded
             ],
@@ -201,44 +218,41 @@ class CrossValidation:
         }
 
 
+def _mean_of(scores: Sequence[FoldScore], parameters: str, name: str | None = None) -> float:
+    """Mean over the folds of ``parameters`` that have a finite RMS in metric ``name``
+    (default: the first metric of the first fold); NaN if none."""
+    mine = [s for s in scores if s.parameters == parameters]
+    if name is None:
+        name = next((s.errors[0][0].name for s in mine if s.errors), "")
+    values = [v for v in (s.of(name) for s in mine) if np.isfinite(v)]
+    return float(np.mean(values)) if values else float("nan")
+
+
+def whitening_noise(
+    noise: NoiseModel, data: Measurements
+) -> tuple[tuple[NoiseComponent, float], ...]:
+    """Per noise component of ``data``'s kinds (each name once) its sigma in ``noise``
+    (SI, :meth:`kinfw.identification.problem.NoiseModel.sigma`)."""
+    components = {c.name: c for g in data.all_groups() for c in kind_of(g).components}.values()
+    return tuple((c, float(noise.sigma(c))) for c in components)
+
+
 def held_out_errors(
     nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
-) -> tuple[NDArray, NDArray, NDArray]:
-    """Per-observation held-out position errors (m), rotation errors (rad, NaN for
-    points) and sample indices of ``test``, predicted by a calibrated URDF and its frames.
-    """
-    sizes, samples = held_out_error_sizes(nominal, model_urdf, unknowns, test)
-    return sizes["position"], sizes["rotation"], samples
-
-
-def held_out_error_sizes(
-    nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
-) -> tuple[dict[str, NDArray], NDArray]:
-    """Per observation row of ``test`` (a pose, a point, an image's corner) the size of
-    its held-out error per noise component, predicted by a calibrated URDF and its
-    frames: ``{"position": m, "rotation": rad, "pixel": px, ...}``, each (n,), NaN where
-    the row has no such component; and the rows' sample indices (n,)."""
-    problem = build_problem(nominal, test, start=Robot(model_urdf, "<trained>"), known=unknowns)
-    names = dict.fromkeys(
-        [POSITION.name, ROTATION.name, *(c.name for g in problem.groups for c in g.components)]
+) -> AccuracyReport:
+    """The errors of a calibrated URDF and its frames (``unknowns``: targets, markers,
+    planes, the root's pose in an external frame; nothing refitted) on ``test``, per
+    observation group in the metrics of its kind (:class:`AccuracyReport`)."""
+    model = Robot(model_urdf, "<trained>")
+    problem = build_problem(nominal, test, start=model, known=unknowns)
+    context = NumericContext.from_robot(
+        model, test.qs, test.joint_names, {BlockKey(u.kind, u.name): u.value for u in unknowns}
     )
-    sizes: dict[str, list[NDArray]] = {name: [] for name in names}
-    samples = []
-    for g, (r, _) in zip(
-        problem.groups,
-        problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False),
-        strict=True,
-    ):
-        size = {name: np.full(len(g.sample), np.nan) for name in names}
-        r = r / g.kind.row_weights(g.group)[:, None]  # the errors, not their fit weights
-        c0 = 0
-        for c in g.components:  # error sizes per noise component (m, rad, px)
-            size[c.name] = c.magnitude(r[:, c0 : c0 + c.rows])
-            c0 += c.rows
-        for name in names:
-            sizes[name].append(size[name])
-        samples.append(g.sample)
-    return {k: np.concatenate(v) for k, v in sizes.items()}, np.concatenate(samples)
+    rows = problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False)
+    return AccuracyReport(
+        tuple(group_errors(g, r, context) for g, (r, _) in zip(problem.groups, rows, strict=True)),
+        (),
+    )
 
 
 def _rms(values: NDArray) -> float:
@@ -271,44 +285,53 @@ def _score(
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:  # the root's pose in the external frame
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    sizes, samples = held_out_error_sizes(nominal, result.urdf_xml, unknowns, test)
-    pos, rot = sizes["position"], sizes["rotation"]
-    pixel = sizes.get("pixel", np.full(len(samples), np.nan))
-    # the worst held-out sample by position, else (images only) by pixel error
-    worst_of = pos if np.isfinite(pos).any() else pixel
-    worst = int(np.nanargmax(worst_of)) if np.isfinite(worst_of).any() else 0
+    held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    errors = []
+    for m in held.metrics:
+        found = [e for g in held.groups if (e := g.of(m.name)) is not None and e.metric == m]
+        values = np.concatenate([np.ravel(e.shown()) for e in found])
+        errors.append((m, _rms(values)))
+    # the worst held-out sample in the first per-observation metric
+    first = next((m for m in held.metrics if m.per_observation), None)
+    worst_sample, worst = 0, float("nan")
+    if first is not None:
+        sizes, samples = held.values(first.name)
+        if np.isfinite(sizes).any():
+            k = int(np.nanargmax(sizes))
+            worst_sample, worst = int(test_ids[samples[k]]), first.scale * float(sizes[k])
     ident = result.refined.identifiability
     return FoldScore(
         fold=fold,
         parameters=parameters,
         n_train=train.n_samples,
         n_test=test.n_samples,
-        position_rms_mm=1e3 * _rms(pos),
-        rotation_rms_deg=float(np.degrees(_rms(rot))),
-        worst_sample=int(test_ids[samples[worst]]),
-        worst_mm=1e3 * float(pos[worst]),
+        errors=tuple(errors),
+        worst_sample=worst_sample,
+        worst=worst,
         condition=ident.condition,
         n_parameters=ident.n_parameters,
         n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals),
-        pixel_rms_px=_rms(pixel),
     )
 
 
 def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...], loss: str) -> list[str]:
-    def mean(p, f="position_rms_mm"):
-        return float(np.mean([getattr(s, f) for s in cv_scores if s.parameters == p]))
+    """Why the full calibration predicts worse than frames only, in the first metric."""
+
+    def mean(p):
+        return _mean_of(cv_scores, p)
 
     out = []
     if "full" in sets and "frames" in sets and mean("full") > mean("frames"):
         full = [s for s in cv_scores if s.parameters == "full"]
+        unit = next((s.errors[0][0].unit for s in full if s.errors), "")
         causes = []
         ratio = np.mean([s.n_residuals / max(s.n_parameters, 1) for s in full])
         if ratio < 10:
             causes.append(
                 f"too many parameters for the data ({ratio:.1f} training residuals per parameter)"
             )
-        worst = max(full, key=lambda s: s.worst_mm)
-        if worst.worst_mm > 5 * np.median([s.position_rms_mm for s in full]):
+        worst = max(full, key=lambda s: s.worst if np.isfinite(s.worst) else -np.inf)
+        if worst.worst > 5 * np.median([s.errors[0][1] for s in full if s.errors]):
             advice = (
                 "try --loss huber"
                 if loss == "linear"
@@ -316,7 +339,7 @@ def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...], loss: str) -> l
                 "--exclude-flagged leaves those out of the scores"
             )
             causes.append(
-                f"an outlier (sample {worst.worst_sample}: {worst.worst_mm:.1f} mm "
+                f"an outlier (sample {worst.worst_sample}: {worst.worst:.1f} {unit} "
                 f"held out; {advice})"
             )
         cond = max(s.condition for s in full)
@@ -326,8 +349,8 @@ def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...], loss: str) -> l
                 "through more of their ranges)"
             )
         out.append(
-            f"the full calibration is worse held-out than frames only ({mean('full'):.3f} mm "
-            f"vs {mean('frames'):.3f} mm); likely cause: "
+            f"the full calibration is worse held-out than frames only ({mean('full'):.3f} "
+            f"{unit} vs {mean('frames'):.3f} {unit}); likely cause: "
             + ("; ".join(causes) if causes else "too many parameters for the data")
         )
     return out
@@ -365,8 +388,8 @@ def crossvalidate(
         [--select]``).
     select : bool
         Pick the set with the lowest mean whitened held-out error
-        (:meth:`CrossValidation.whitened`: position and orientation together, in units
-        of the given noise, else that of the full-data fit).
+        (:meth:`CrossValidation.whitened`: every noise component's error together, in
+        units of the given noise, else that of the full-data fit).
     noise, loss, prior
         As for :func:`kinfw.identification.calibrate`.
     progress : callable(done, total), optional
@@ -414,11 +437,9 @@ def crossvalidate(
     finally:
         if pool is not None:
             pool.shutdown()
-    selected, sigma, sigma_px = None, None, None
+    selected, sigma = None, None
     if select:
-        used = noise if noise is not None else reference.refined.noise
-        sigma = (float(used.position_m), float(used.rotation_rad))
-        sigma_px = dict(used.sigmas).get("pixel")
+        sigma = whitening_noise(noise if noise is not None else reference.refined.noise, data)
     cv = CrossValidation(
         k,
         seed,
@@ -428,7 +449,6 @@ def crossvalidate(
         None,
         sigma,
         excluded,
-        sigma_px,
     )
     if select:
         selected = min(sets, key=cv.whitened)

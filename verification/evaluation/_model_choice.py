@@ -6,8 +6,10 @@ residual rows per free parameter of the full set -- every parameter can be estim
 and ``"full"`` is chosen without cross-validation (fast: ``kinfw demo``'s 85 samples give
 about 20 rows per parameter). Otherwise the candidates are scored by k-fold
 cross-validation (:func:`kinfw.verification.evaluation.crossvalidate`) and the one with the
-lowest mean whitened held-out error wins (position and orientation together, each in
-units of its noise, :meth:`kinfw.verification.evaluation.CrossValidation.whitened`):
+lowest mean whitened held-out error wins (each observed kind's error in its own metric,
+every noise component in units of its noise, so poses, points, image points, plane
+contacts and registered kinds mix: :meth:`kinfw.verification.evaluation.CrossValidation.
+whitened`):
 
 - ``"frames"``: nominal joints, base and tool frames fitted;
 - ``"offsets"``: frames plus joint zero offsets;
@@ -35,8 +37,8 @@ from kinfw.identification import calibrate
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
-from kinfw.observations import DatasetError
-from kinfw.verification.evaluation._crossval import crossvalidate
+from kinfw.observations import DatasetError, Metric
+from kinfw.verification.evaluation._crossval import crossvalidate, whitening_noise
 
 __all__ = [
     "PRIOR_GRID_M",
@@ -77,20 +79,19 @@ class Candidate:
         ``(sigma_m, sigma_rad)`` of the Gaussian prior on deviations from the nominal.
     whitened : float
         Mean over folds of the whitened held-out error (about 6 for poses predicted to
-        the noise, 3 for points; lower is better).
-    position_rms_mm, rotation_rms_deg : float
-        Mean over folds of the held-out RMS (rotation NaN when only points are observed).
+        the noise, 3 for points, 1 for plane contacts; lower is better).
+    errors : tuple of (Metric, float)
+        Per metric of the data the mean over folds of its held-out RMS (display unit).
     failed : str or None
         Why the candidate could not be scored (a training fold too small for its
-        parameters: :class:`kinfw.measurements.DatasetError`'s message); its scores are
-        then NaN and it is not chosen.
+        parameters or its cameras: the fit's error message); its scores are then NaN
+        and it is not chosen.
     """
 
     parameters: str
     prior: tuple[float, float] | None
     whitened: float
-    position_rms_mm: float
-    rotation_rms_deg: float
+    errors: tuple[tuple[Metric, float], ...] = ()
     failed: str | None = None
 
     @property
@@ -138,7 +139,7 @@ class ModelChoice:
 
     @property
     def label(self) -> str:
-        return Candidate(self.parameters, self.prior, np.nan, np.nan, np.nan).label
+        return Candidate(self.parameters, self.prior, np.nan).label
 
     def to_dict(self) -> dict:
         return {
@@ -154,8 +155,7 @@ class ModelChoice:
                 {
                     "label": c.label,
                     "whitened": c.whitened,
-                    "position_rms_mm": c.position_rms_mm,
-                    "rotation_rms_deg": c.rotation_rms_deg,
+                    **{m.headline: v for m, v in c.errors},
                     "failed": c.failed,
                 }
                 for c in self.candidates
@@ -211,20 +211,6 @@ def choose_parameters(
             ratio,
             0,
         )
-    if data.groups("pixels"):
-        # the candidates are ranked by held-out position and orientation errors; image
-        # points have neither (their held-out score is in px): no ranking, the full set
-        return ModelChoice(
-            "full",
-            prior,
-            f"{ratio:.1f} residual rows per free parameter (< {ROWS_PER_PARAMETER:g}), but "
-            "the held-out model choice cannot score image points (pixels): the full set; "
-            "give --params (frames, offsets) or a prior (--prior-mm, --prior-deg) to "
-            "estimate fewer",
-            (),
-            ratio,
-            0,
-        )
     k = min(k, data.n_samples)
     if k < 2:
         raise ValueError(
@@ -235,8 +221,7 @@ def choose_parameters(
     # observations it rejects as gross errors are left out of every score (one 68 mm
     # sample in a fold moves its RMS more than the models differ)
     reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
-    used = reference.refined.noise if noise is None else noise
-    sigma = (float(used.position_m), float(used.rotation_rad))
+    sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
     runs = [(p, prior) for p in ("frames", "offsets", "full")]
     if prior is None:
         priors = [(s, s / lever) for s in PRIOR_GRID_M for lever in PRIOR_LEVERS_M]
@@ -256,8 +241,10 @@ def choose_parameters(
                 exclude_flagged=True,
                 reference=reference,
             )
-        except DatasetError as exc:  # a training fold too small for these parameters
-            candidates.append(Candidate(parameters, p, np.nan, np.nan, np.nan, str(exc)))
+        except ValueError as exc:
+            # the full data fit above: a training fold too small for these parameters
+            # (a DatasetError), or to place a camera (three views per hand-eye)
+            candidates.append(Candidate(parameters, p, np.nan, failed=str(exc)))
             continue
         cv = replace(cv, noise=sigma)
         excluded = cv.excluded
@@ -266,8 +253,7 @@ def choose_parameters(
                 parameters,
                 p,
                 cv.whitened(parameters),
-                cv.mean(parameters),
-                cv.mean(parameters, "rotation_rms_deg"),
+                tuple((m, cv.mean(parameters, m.name)) for m in cv.metrics),
             )
         )
     # simplest first: frames, offsets, full with the strongest prior ... full alone
@@ -281,12 +267,12 @@ def choose_parameters(
             f"cross-validation: no candidate can be fitted on a training fold "
             f"({failed[0].label}: {failed[0].failed}); give --params (e.g. frames)"
         )
-    if not scored:  # e.g. only plane contacts: no position or rotation error to score
+    if not scored:  # no noise component with a held-out error to whiten
         return ModelChoice(
             "full",
             prior,
             f"{k}-fold cross-validation could not score these observations (no held-out "
-            "position or orientation error): the full set, as before",
+            "error in a metric of the noise): the full set, as before",
             tuple(candidates),
             ratio,
             k,
@@ -301,9 +287,10 @@ def choose_parameters(
             "fitted on a training fold (too few residuals for its parameters)"
         )
     else:
+        (metric, mine), (_, theirs) = chosen.errors[0], full.errors[0]
         why = (
             f"lowest held-out error: {chosen.whitened:.3g} whitened vs {full.whitened:.3g} "
-            f"for full alone ({chosen.position_rms_mm:.3g} vs {full.position_rms_mm:.3g} mm)"
+            f"for full alone ({metric.name} {mine:.3g} vs {theirs:.3g} {metric.unit})"
         )
     if excluded:
         samples = ", ".join(str(e[0]) for e in excluded)

@@ -1,4 +1,6 @@
-"""TODO face."""
+"""The papers' experiments in simulation: Shih et al. (1992) Fig. 11 and Table 4, Hirsh,
+DeSouza & Kak (2001) Figs. 3 and 4.
+"""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Table, figure and command line of the Hirsh et al. (2001) study: Figs. 3 and 4.
 
-``python -m kinfw.verification.papers --out DIR`` (``kinfw reproduce hirsh``) runs
+``kinfw reproduce hirsh --out DIR`` runs
 :func:`kinfw.verification.papers.hirsh_study` without and with noise, writes the PNG
 and the JSON (:func:`run_hirsh`, read back by :func:`load_hirsh`) and prints the table
 (:func:`format_hirsh`: the paper's claims of section 5 beside our evidence).
@@ -340,10 +340,10 @@ def load_hirsh(path: str | Path) -> tuple[HirshResult, HirshResult]:
 
 
 def hirsh_figures_main(argv: Sequence[str] | None = None) -> int:
-    """``python -m kinfw.verification.papers --out DIR [--trials N] [--seed S]
+    """``kinfw reproduce hirsh --out DIR [--trials N] [--seed S]
     [--iterations K]``: run Figs. 3 and 4, write the PNG and the JSON, print the table."""
     parser = study_parser(
-        "python -m kinfw.verification.papers",
+        "kinfw reproduce hirsh",
         "Hirsh, DeSouza & Kak (2001) Figs. 3 and 4 in simulation.",
         trials_default=50,
         trials_help="random problems per number of views (default 50)",

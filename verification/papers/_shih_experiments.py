@@ -29,7 +29,7 @@ other cells of a study are run, so a small study reproduces the corresponding ce
 a large one exactly. Each trial draws a new true robot.
 
 This module holds the simulation both studies share and Fig. 11 (:func:`fig11_study`);
-:mod:`kinfw.verification.papers` holds Table 4, :mod:`kinfw.verification.papers` their
+``_shih_table4.py`` holds Table 4, ``_shih_figures.py`` their
 tables, figures and command line.
 
 Standard deviations over trials or pooled samples are sample standard deviations

@@ -1,7 +1,6 @@
 """Tables, figures and command line of the Shih et al. (1992) studies: Fig. 11 and Table 4.
 
-``python -m kinfw.verification.papers {fig11,table4} --out DIR`` (``kinfw reproduce
-fig11|table4``) runs :func:`kinfw.verification.papers.fig11_study` or
+``kinfw reproduce {fig11,table4} --out DIR`` runs :func:`kinfw.verification.papers.fig11_study` or
 :func:`kinfw.verification.papers.table4_study` on the built-in head, writes its PNG and
 JSON and prints its table.
 """
@@ -281,12 +280,12 @@ def run_table4(
 
 
 def shih_figures_main(argv: Sequence[str] | None = None) -> int:
-    """``python -m kinfw.verification.papers {fig11,table4} --out DIR [--trials N]
+    """``kinfw reproduce {fig11,table4} --out DIR [--trials N]
     [--seed S]``: run one study on the built-in head, write its PNG and JSON, print the
     table."""
     return choice_main(
         argv,
-        prog="python -m kinfw.verification.papers",
+        prog="kinfw reproduce",
         description="Shih et al. (1992) section 6 in simulation: Fig. 11 or Table 4.",
         trials_help="random trials (default: 10 per Fig. 11 point, 20 for Table 4)",
         studies={"fig11": (run_fig11, format_fig11), "table4": (run_table4, format_table4)},

@@ -1,4 +1,7 @@
-"""TODO face."""
+"""A calibration's report and sidecar built from the pipeline's results, the calibration
+workflow that makes them (:func:`calibrate_and_report`: model choice, pipeline, report;
+its result writes the URDF and sidecar together), and the errors-by-stage figure.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +12,6 @@ from kinfw.verification.reporting._report import (
     errors_by_group,
     file_sha256,
     sidecar,
-    sidecar_path,
 )
 from kinfw.verification.reporting._sections import (
     calibrated_unknowns,
@@ -38,5 +40,4 @@ __all__ = [
     "refine_section",
     "rejected_rows",
     "sidecar",
-    "sidecar_path",
 ]

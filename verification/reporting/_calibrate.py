@@ -14,14 +14,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from kinfw.files import check_outputs
+from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, check_measurements
 from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.verification.evaluation import ModelChoice
-from kinfw.verification.reporting._report import calibration_report, sidecar, sidecar_path
+from kinfw.verification.reporting._report import calibration_report, sidecar
 
 __all__ = ["CalibrationResult", "calibrate_and_report"]
 
@@ -64,7 +64,7 @@ class CalibrationResult:
 
     def write(self, path: str | Path) -> CalibrationReport:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
-        (``<stem>.kinfw.json``, :func:`sidecar_path`), each atomically
+        (``<stem>.kinfw.json``, :func:`kinfw.files.sidecar_path`), each atomically
         (:func:`kinfw.files.write_text_atomic`), after checking both paths.
 
         Returns

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +43,6 @@ __all__ = [
     "errors_by_group",
     "file_sha256",
     "sidecar",
-    "sidecar_path",
 ]
 
 
@@ -57,7 +55,9 @@ def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary
     """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
     each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
     report = evaluate_model(robot, data)
-    return tuple(GroupErrorSummary(g.frame, g.kind, g.marker, **g.summary()) for g in report.groups)
+    return tuple(
+        GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary()) for g in report.groups
+    )
 
 
 def _errors_or_unavailable(
@@ -70,22 +70,14 @@ def _errors_or_unavailable(
         return errors_by_group(robot, data)
     except DatasetError as e:
         notes.append(f"errors of {robot.source or 'the nominal'} not available: {e}")
-        nan = float("nan")
-        return tuple(
-            replace(
-                g,
-                **{k: nan for k in GroupErrorSummary._NUMBERS},
-                abs_mean_xyz_mm=(nan, nan, nan),
-                abs_std_xyz_mm=(nan, nan, nan),
-            )
-            for g in like
-        )
+        return tuple(g.unavailable() for g in like)
 
 
 def before_after_rows(
     before: tuple[GroupErrorSummary, ...], after: tuple[GroupErrorSummary, ...]
 ) -> tuple[BeforeAfter, ...]:
-    """Per observation group: RMS position (mm) and rotation (deg) before and after."""
+    """Per observation group: each metric's headline (RMS, or a group metric's value)
+    before and after."""
     return before_after(before, after)
 
 
@@ -164,7 +156,7 @@ def calibration_report(
         ),
         notes=tuple(notes),
         errors_in_sample=before_after(before, after),
-        position_rms_by_stage=tuple(stage_rms),
+        rms_by_stage=tuple(stage_rms),
         errors_before=before,
         errors_after=after,
         kinematics=None
@@ -225,9 +217,3 @@ def _kinfw_version() -> str:
         return metadata.version("kinfw")
     except metadata.PackageNotFoundError:
         return "unknown (not installed)"
-
-
-def sidecar_path(urdf_path: str | Path) -> Path:
-    """Where the calibration sidecar of the calibrated URDF ``urdf_path`` goes:
-    ``<stem>.kinfw.json`` beside it."""
-    return Path(urdf_path).with_suffix(".kinfw.json")

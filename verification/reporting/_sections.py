@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kinfw.identification import ClosedFormResult, RefineResult, parameter_unit
+from kinfw.identification import ClosedFormResult, RefineResult
 from kinfw.identification.handeye import CamerasResult
 from kinfw.observations import kind_named
 from kinfw.reports import (
@@ -18,6 +18,7 @@ from kinfw.reports import (
     ClosedFormSection,
     Correlation,
     DownweightedRow,
+    ErrorValue,
     HandEyeSection,
     IdentifiabilitySummary,
     KinematicValue,
@@ -41,10 +42,7 @@ __all__ = [
 
 
 def _kinematic_values(model) -> tuple[KinematicValue, ...]:
-    return tuple(
-        KinematicValue(o, n, v, parameter_unit(o, n, model.topology))
-        for o, n, v in model.describe()
-    )
+    return tuple(KinematicValue(o, n, v, unit) for o, n, v, unit in model.describe())
 
 
 def closed_form_section(result: ClosedFormResult) -> ClosedFormSection:
@@ -112,6 +110,17 @@ def hand_eye_section(result: CamerasResult) -> HandEyeSection:
     )
 
 
+def _residual_values(kind: str, sizes: dict[str, float]) -> tuple[ErrorValue, ...]:
+    """Per noise component of ``kind`` with a size in ``sizes`` (SI, by component
+    name), that size in the component's metric: ``position_residual_mm``, ..."""
+    out = []
+    for c in kind_named(kind).components:
+        if c.name in sizes:
+            m = c.display
+            out.append(ErrorValue(m.name, m.unit, "residual", m.scale * float(sizes[c.name])))
+    return tuple(out)
+
+
 def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
     """The observations the robust loss down-weighted, the worst (lowest weight) first.
 
@@ -124,39 +133,26 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
     tuple of DownweightedRow
         One per down-weighted observation: ``sample`` (index into the data file's
         ``samples``, from 0), ``kind``, ``frame`` (the camera for ``target``
-        observations), ``marker`` (None without one), ``position_residual_mm`` (norm of
-        measured minus predicted position; for a kind without positions, of its rows in
-        metres, e.g. a plane contact's distance), ``rotation_residual_deg`` (angle between
-        measured and predicted orientation; None for points), ``weight`` (the robust
-        loss's weight, 1 = full) and ``pixel_residual_px`` (an image point's
-        reprojection error, px; None for other kinds). Sorted by weight, then sample.
+        observations), ``marker`` (None without one), the size of its residual in the
+        metric of each noise component of its kind (a pose's position error norm, mm,
+        and rotation angle, deg; an image point's reprojection error, px; a plane
+        contact's height, mm; :meth:`kinfw.observations.NoiseComponent.magnitude`),
+        ``weight`` (the robust loss's weight, 1 = full) and ``where`` (an image's
+        corner). Sorted by weight, then sample.
     """
     rows = []
     for g in result.residuals:
         rows_g = np.flatnonzero(g.downweighted)
-        # a kind without positions (a plane contact's distance): its rows in metres
-        units = {c.name: c.unit for c in kind_named(g.kind).components}
-        lengths = [v for n, v in g.components if units[n] == "m"]
-        position_mm = 1e3 * np.linalg.norm(np.hstack(lengths)[rows_g], axis=1) if lengths else None
-        pixels = [v for n, v in g.components if units[n] == "px"]
-        pixel_px = np.linalg.norm(np.hstack(pixels)[rows_g], axis=1) if pixels else None
-        rotation_deg = (
-            None
-            if g.rotation_rad is None
-            else np.degrees(
-                np.arcsin(np.clip(np.linalg.norm(g.rotation_rad[rows_g], axis=1), 0.0, 1.0))
-            )
-        )
+        components = {c.name: c for c in kind_named(g.kind).components}
+        sizes = {n: components[n].magnitude(v[rows_g]) for n, v in g.components}
         rows += [
             DownweightedRow(
                 int(g.sample[k]),
                 g.kind,
                 g.frame,
                 g.marker,
-                None if position_mm is None else float(position_mm[c]),
-                None if rotation_deg is None else float(rotation_deg[c]),
+                _residual_values(g.kind, {n: v[c] for n, v in sizes.items()}),
                 float(g.weight[k]),
-                None if pixel_px is None else float(pixel_px[c]),
                 None if g.labels is None else g.labels[k],
             )
             for c, k in enumerate(rows_g)
@@ -177,34 +173,23 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
     -------
     tuple of RejectedRow
         One per :attr:`RefineResult.rejected` entry: ``sample`` (index into the data
-        file's samples, from 0), ``kind``, ``frame``, ``marker``, the residual norms in
-        mm (for a kind without positions, of its rows in metres) and deg (None without
-        orientation) against the final fit,
-        and ``excess`` (its whitened norm over the threshold). Sorted by excess, largest
-        first, then sample.
+        file's samples, from 0), ``kind``, ``frame``, ``marker``, the size of its
+        residual against the final fit in the metric of each noise component of its kind
+        (as :func:`downweighted_rows`), and ``excess`` (its whitened norm over the
+        threshold). Sorted by excess, largest first, then sample.
     """
-    rows = []
-    for o in result.rejected:
-        # a kind without positions (a plane contact's distance): its lengths, as for
-        # the down-weighted rows
-        lengths = [v for _, unit, v in o.residuals if unit == "m"]
-        p = o.residual("position")
-        p = float(np.linalg.norm(lengths)) if p is None and lengths else p
-        rot = o.residual("rotation")
-        pixels = [v for _, unit, v in o.residuals if unit == "px"]
-        rows.append(
-            RejectedRow(
-                o.sample,
-                o.kind,
-                o.frame,
-                o.marker,
-                None if p is None else 1e3 * p,
-                None if rot is None else float(np.degrees(rot)),
-                o.excess,
-                float(np.linalg.norm(pixels)) if pixels else None,
-                o.where,
-            )
+    rows = [
+        RejectedRow(
+            o.sample,
+            o.kind,
+            o.frame,
+            o.marker,
+            _residual_values(o.kind, {n: v for n, _, v in o.residuals}),
+            o.excess,
+            o.where,
         )
+        for o in result.rejected
+    ]
     rows.sort(key=lambda row: (-row.excess, row.sample))
     return tuple(rows)
 

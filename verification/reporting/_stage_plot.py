@@ -16,9 +16,11 @@ __all__ = ["plot_stage_errors"]
 def plot_stage_errors(
     stages: tuple[StageErrors, ...], path: str | Path, *, title: str = ""
 ) -> Path:
-    """Grouped bars: position RMS (mm, log scale) per observation group after each stage
-    (the report's ``position_rms_by_stage`` or ``..._vs_truth_held_out_by_stage``)."""
-    stage_rms = {s.stage: dict(s.position_rms_mm) for s in stages}
+    """Grouped bars: per observation group the headline of its first metric (position
+    RMS mm, pixel RMS px, ...; log scale) after each stage (the report's
+    ``rms_by_stage`` or ``rms_vs_truth_held_out_by_stage``)."""
+    stage_rms = {s.stage: {g: v.value for g, v in s.rms} for s in stages}
+    metrics = dict.fromkeys((v.name, v.unit) for _, v in stages[0].rms)
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -44,7 +46,8 @@ def plot_stage_errors(
         ax.bar_label(bars, labels=[f"{v:.2g}" for v in values], fontsize=7, padding=1)
     ax.set_yscale("log")
     ax.set_xticks(x, groups)
-    ax.set_ylabel("held-out position RMS (mm, log scale)")
+    what = ", ".join(f"{name} RMS ({unit}" for name, unit in metrics)
+    ax.set_ylabel(f"held-out {what}, log scale)")
     ax.grid(axis="y", which="both", alpha=0.3)
     ax.legend(
         title="after stage",

@@ -1,4 +1,7 @@
-"""TODO face."""
+"""Simulation studies: the demo, the Cramér-Rao and robustness studies on the IIS head,
+the pixel study, the value of calibration in use (gaze and reach), and their shared
+plumbing (``kinfw reproduce``).
+"""
 
 from __future__ import annotations
 

@@ -1,11 +1,11 @@
 """Plumbing shared by the simulation studies: arrays, JSON, figures, files, command line.
 
-The studies (:mod:`kinfw.verification.papers`, :mod:`kinfw.verification.papers`,
-:mod:`kinfw.verification.studies`, :mod:`kinfw.verification.studies`) each run random trials, keep
+The studies (the papers' experiments of :mod:`kinfw.verification.papers`, the CRLB and
+robustness studies of this package) each run random trials, keep
 the raw numbers in a frozen result with read-only arrays, and write the result as a PNG
-and a JSON side by side; a ``main`` (:mod:`kinfw.verification.papers`,
-:mod:`kinfw.verification.papers`, :mod:`kinfw.verification.studies`) runs a study with
-progress on stderr and prints its table. What they share
+and a JSON side by side; a ``*_main`` (:func:`~kinfw.verification.papers.shih_figures_main`,
+:func:`~kinfw.verification.papers.hirsh_figures_main`, :func:`head_studies_main`, behind
+``kinfw reproduce``) runs a study with progress on stderr and prints its table. What they share
 is here: argument checks and sample statistics, the array and dataclass conversions of
 their ``to_dict`` / ``from_dict``, matplotlib figures without pyplot, the output files,
 and the command-line scaffolding.

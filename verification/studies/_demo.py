@@ -80,7 +80,7 @@ class DemoResult:
     report : CalibrationReport
         The calibration report (``report.json``), with the held-out errors against the
         noise-free true robot (``errors_vs_truth_held_out``,
-        ``position_rms_vs_truth_held_out_by_stage``).
+        ``rms_vs_truth_held_out_by_stage``).
     n_stage1 : int
         One-joint-at-a-time configurations of stage 1.
     out : Path
@@ -195,14 +195,14 @@ def run_demo(
         errors_vs_truth_held_out=before_after_rows(
             nominal_errors, errors_by_group(calibrated, exact)
         ),
-        position_rms_vs_truth_held_out_by_stage=tuple(truth_rms),
+        rms_vs_truth_held_out_by_stage=tuple(truth_rms),
     )
     if held_out_pixels is not None:
         held_out_pixels = reprojection_section(calibrated, held_out_pixels, result.refined.unknowns)
         report = replace(report, reprojection_held_out=held_out_pixels)
     write_report(out / "report.json", report)
     plot_stage_errors(
-        report.position_rms_vs_truth_held_out_by_stage,
+        report.rms_vs_truth_held_out_by_stage,
         out / "errors.png",
         title="IIS-head demo: held-out error against the true robot",
     )

@@ -417,10 +417,10 @@ def run_gaze(out_dir: str | Path, **kwargs: Any) -> GazeStudy:
 
 
 def gaze_study_main(argv: Sequence[str] | None = None) -> int:
-    """``python -m kinfw.verification.studies --out DIR [--trials N] [--seed S] [--jobs J]``:
+    """``kinfw reproduce gaze --out DIR [--trials N] [--seed S] [--jobs J]``:
     run the study, write ``gaze.png`` and ``gaze.json``, print the table."""
     args = study_parser(
-        "python -m kinfw.verification.studies",
+        "kinfw reproduce gaze",
         "The value of calibration in use: a head fixating and an arm reaching with the "
         "nominal vs the calibrated model, errors on the simulated true robot.",
         trials_help="true heads and arms (default 10)",

@@ -1,8 +1,8 @@
 """Run the head studies on the built-in IIS-head: files and the command line.
 
-``python -m kinfw.verification.studies {crlb,robust} --out DIR`` runs
+``kinfw reproduce {crlb,robust} --out DIR`` runs
 :func:`kinfw.verification.studies.crlb_study` or
-:func:`kinfw.verification.studies.robustness_study` (``kinfw reproduce crlb|robust``), writes
+:func:`kinfw.verification.studies.robustness_study`, writes
 its PNG and JSON and prints its table.
 """
 
@@ -38,11 +38,11 @@ def run_robustness(
 
 
 def head_studies_main(argv: Sequence[str] | None = None) -> int:
-    """``python -m kinfw.verification.studies {crlb,robust} --out DIR [--trials N] [--seed S]``: run
+    """``kinfw reproduce {crlb,robust} --out DIR [--trials N] [--seed S]``: run
     one study on the built-in head, write its PNG and JSON, print the table."""
     return choice_main(
         argv,
-        prog="python -m kinfw.verification.studies",
+        prog="kinfw reproduce",
         description="crlb: refined calibration vs its Cramér-Rao bound; robust: refinement "
         "with planted outliers (linear, Huber, Cauchy losses).",
         trials_help="random trials (default: 30 for crlb, 20 for robust)",
