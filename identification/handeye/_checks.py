@@ -53,25 +53,27 @@ def check_pose_pairs(
     error: type[ValueError] = ValueError,
     prefix: str = "",
     why: str = "two motions about different axes",
+    names: tuple[str, str] = ("A", "B"),
 ) -> tuple[Pose, Pose]:
     """Validate two pose batches (n, 4, 4) paired pose by pose, n >= 3: the inputs of
-    every hand-eye solver here, in :mod:`kinfw.identification.handeye` and in
-    :mod:`kinfw.identification.handeye`.
+    every hand-eye solver and closed form.
 
     The checks of :func:`kinfw.geometry.check_transform`, on both batches in one pass
     (the hot path of a 3-view solve); rotations off by more than 1e-12 are
     re-orthonormalised (real data printed with six digits is off by ~1e-6). Errors are
-    raised as ``error`` with ``prefix`` (e.g. ``"park_axxb: "``), naming the batch and
+    raised as ``error`` with ``prefix`` (e.g. ``"park_axxb: "``), naming the batch (by
+    ``names``, e.g. the solver's keywords ``("base_T_hands", "camera_T_targets")``) and
     the index; ``why`` says what three poses are needed for.
     """
     T_A, T_B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
-    for name, T in (("A", T_A), ("B", T_B)):
+    name_A, name_B = names
+    for name, T in ((name_A, T_A), (name_B, T_B)):
         if T.ndim != 3 or T.shape[1:] != (4, 4):
             raise error(f"{prefix}{name}: expected shape (n, 4, 4), got {T.shape}")
     if T_A.shape != T_B.shape:
         raise error(
-            f"{prefix}A and B must hold the same number of poses, got A {T_A.shape} "
-            f"and B {T_B.shape}"
+            f"{prefix}{name_A} and {name_B} must hold the same number of poses, got "
+            f"{name_A} {T_A.shape} and {name_B} {T_B.shape}"
         )
     n = len(T_A)
     if n < 3:
@@ -83,7 +85,7 @@ def check_pose_pairs(
     bad |= ~(err <= ORTHONORMAL_TOL) | ~(np.linalg.det(R) > 0.0)
     if np.any(bad):
         k = int(np.argmax(bad))
-        name, idx = ("A", k) if k < n else ("B", k - n)
+        name, idx = (name_A, k) if k < n else (name_B, k - n)
         try:
             check_transform(T[k], name=f"{prefix}{name}[{idx}]", tol=ORTHONORMAL_TOL)
         except ValueError as e:
