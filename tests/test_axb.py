@@ -100,6 +100,17 @@ def test_result_is_named_by_frames_with_the_paper_names_as_read_only_aliases():
             setattr(result, name, np.eye(4))
 
 
+def _paper_from(A, B, Y0):
+    """The paper's iteration alone from the guess ``Y0``, every iterate recorded."""
+    return solve_axyb(
+        camera_T_targets=A,
+        hand_T_bases=B,
+        base_T_target_guess=Y0,
+        refine=False,
+        record_history=True,
+    )
+
+
 def test_a_start_given_as_the_camera_mount_also_works():
     X, Y, B, A = _problem(seed=7, n=6)
     X0 = pin.SE3(pin.exp3(np.array([0.4, -0.3, 0.2])) @ X[:3, :3], np.zeros(3))
@@ -121,13 +132,7 @@ def test_the_iteration_is_the_papers_per_pose_averaging():
     quaternions, then one Y per pose given that X, averaged."""
     _, Y, B, A = _problem(seed=3, n=8, rotation_noise_deg=2.0)
     Y0 = pin.SE3(pin.exp3(np.array([0.5, 0.2, -0.4])) @ Y[:3, :3], np.zeros(3)).homogeneous
-    result = solve_axyb(
-        camera_T_targets=A,
-        hand_T_bases=B,
-        base_T_target_guess=Y0,
-        refine=False,
-        record_history=True,
-    )
+    result = _paper_from(A, B, Y0)
     RX, RY = result.camera_T_hand_history[:, :3, :3], result.base_T_target_history[:, :3, :3]
     RA, RB = A[:, :3, :3], B[:, :3, :3]
 
@@ -166,13 +171,7 @@ def test_a_start_180_degrees_off_stalls_then_restarts_to_the_truth(seed):
     axis = np.random.default_rng(100 + seed).normal(size=3)
     flip = pin.exp3(np.pi * axis / np.linalg.norm(axis))
     Y0 = pin.SE3(flip @ Y[:3, :3], Y[:3, 3]).homogeneous
-    result = solve_axyb(
-        camera_T_targets=A,
-        hand_T_bases=B,
-        base_T_target_guess=Y0,
-        refine=False,
-        record_history=True,
-    )
+    result = _paper_from(A, B, Y0)
     assert result.restarts >= 1
     # the stall: the first estimates stay 180 degrees from the truth (section 4)
     assert _angle_deg(result.base_T_target_history[0, :3, :3], Y[:3, :3]) > 179.9

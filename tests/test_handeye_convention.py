@@ -117,12 +117,24 @@ def test_solve_axyb_takes_the_robot_poses_either_way_but_not_both():
         solve_axyb(base_T_hands=bad, camera_T_targets=camera_T_targets)
 
 
-@pytest.mark.parametrize("solve", [solve_axxb, solve_axyb])
-def test_positional_poses_are_refused(solve):
+@pytest.mark.parametrize(
+    ("solve", "keywords"),
+    [
+        (solve_axxb, r"\(base_T_hands=..., camera_T_targets=...\)"),
+        (solve_axyb, r"\(camera_T_targets=..., base_T_hands=...\)"),
+    ],
+)
+def test_positional_poses_are_refused_naming_the_keywords(solve, keywords):
     """The two batches mean different things in the two papers: no positional call."""
     _, _, base_T_hands, camera_T_targets = _eye_in_hand(np.random.default_rng(21))
-    with pytest.raises(TypeError, match="positional"):
+    with pytest.raises(
+        TypeError,
+        match=rf"{solve.__name__}\(\) takes the poses by keyword "
+        rf"only {keywords}; got 2 positional",
+    ):
         solve(base_T_hands, camera_T_targets)
+    with pytest.raises(TypeError, match="got 1 positional"):
+        solve(base_T_hands, camera_T_targets=camera_T_targets)
 
 
 def test_eye_to_hand_is_the_same_equation_with_base_and_hand_exchanged():

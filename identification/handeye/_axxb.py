@@ -43,7 +43,7 @@ from kinfw.geometry import (
     rotation_vector_from_matrix,
     transform_from_rotation_translation,
 )
-from kinfw.identification.handeye._checks import check_pose_pairs
+from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
 from kinfw.identification.handeye._ml import PoseFit, fit_absolute
 from kinfw.identification.handeye._result import HandEyeResult
 from kinfw.identification.handeye._starts import candidate_starts
@@ -76,6 +76,7 @@ class HandEyeError(ValueError):
     """The poses cannot determine the hand-eye transform; the message says why."""
 
 
+@_poses_by_keyword("base_T_hands", "camera_T_targets")
 def solve_axxb(
     *,
     base_T_hands: ArrayLike,
@@ -121,7 +122,8 @@ def solve_axxb(
         eye-in-hand, a camera that is not rigid on the hand). Poorly determined X (small
         motions) is not an error: see ``verdict`` and ``sigma_rotation_deg``.
     TypeError
-        A positional argument: the meaning of the batches is given by their names only.
+        A positional argument (the message names the keywords): the meaning of the
+        batches is given by their names only.
 
     Warnings
     --------

@@ -16,6 +16,10 @@ the length unit.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -44,6 +48,31 @@ Pose = NDArray[np.float64]
 
 class StartError(ValueError):
     """A closed form cannot determine ``X`` (and ``Y``) from these poses; says why."""
+
+
+_Solver = TypeVar("_Solver", bound=Callable[..., Any])
+
+
+def _poses_by_keyword(*names: str) -> Callable[[_Solver], _Solver]:
+    """Make a positional call of a hand-eye solver a ``TypeError`` that names the
+    keywords ``names``: the papers' ``A`` and ``B`` are other frames in ``A X = X B``
+    than in ``A = X B Y``, so a positional pair is ambiguous."""
+
+    def decorate(solve: _Solver) -> _Solver:
+        @functools.wraps(solve)
+        def keyword_only(*args: Any, **kwargs: Any) -> Any:
+            if args:
+                keywords = ", ".join(f"{name}=..." for name in names)
+                raise TypeError(
+                    f"{solve.__name__}() takes the poses by keyword only ({keywords}); got "
+                    f"{len(args)} positional argument(s): the papers' A and B are other "
+                    "frames in Tsai & Lenz's A X = X B than in Hirsh et al.'s A = X B Y"
+                )
+            return solve(**kwargs)
+
+        return cast(_Solver, keyword_only)
+
+    return decorate
 
 
 def check_pose_pairs(
