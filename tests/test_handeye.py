@@ -30,20 +30,20 @@ def _half_turn(axis):
     return 2.0 * np.outer(u, u) - np.eye(3)  # exactly symmetric: a rotation by exactly pi
 
 
-def _setup(rng, n, hand_R_eye=None, scale=1.0):
-    """Truth X = hand_T_eye, n random hand poses (uniformly random rotations, so varied
+def _setup(rng, n, hand_R_camera=None, scale=1.0):
+    """Truth X = hand_T_camera, n random hand poses (uniformly random rotations, so varied
     axes) and the camera extrinsics of a fixed target: B[i] = X^-1 A[i]^-1 base_T_target."""
-    if hand_R_eye is None:
-        hand_R_eye = _random_rotation(rng)
-    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1 * scale, size=3))
+    if hand_R_camera is None:
+        hand_R_camera = _random_rotation(rng)
+    hand_T_camera = transform(hand_R_camera, rng.normal(scale=0.1 * scale, size=3))
     base_T_target = transform(_random_rotation(rng), rng.normal(scale=scale, size=3))
     base_T_hands = np.stack(
         [transform(_random_rotation(rng), rng.normal(scale=0.5 * scale, size=3)) for _ in range(n)]
     )
-    eye_T_targets = np.stack(
-        [inverse(hand_T_eye) @ inverse(A) @ base_T_target for A in base_T_hands]
+    camera_T_targets = np.stack(
+        [inverse(hand_T_camera) @ inverse(A) @ base_T_target for A in base_T_hands]
     )
-    return hand_T_eye, base_T_hands, eye_T_targets
+    return hand_T_camera, base_T_hands, camera_T_targets
 
 
 def _perturb_rotations(T, rng, sigma_rad):

@@ -217,8 +217,8 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
     """tests/test_handeye.py's generator at seed 1199 (12 views, 0.5 deg on A and B): Tsai
     & Lenz's first estimate lands far off and the old solver raised 'no single X'."""
     rng = np.random.default_rng(1199)
-    hand_R_eye = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
-    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1, size=3))
+    hand_R_camera = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
+    hand_T_camera = transform(hand_R_camera, rng.normal(scale=0.1, size=3))
     base_T_target = transform(
         rotation(random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(size=3)
     )
@@ -228,7 +228,7 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
             for _ in range(12)
         ]
     )
-    B = np.stack([inverse(hand_T_eye) @ inverse(a) @ base_T_target for a in A])
+    B = np.stack([inverse(hand_T_camera) @ inverse(a) @ base_T_target for a in A])
     for T in (B, A):  # the same draws as tests/test_handeye.py::_noisy_setup
         for k in range(12):
             T[k, :3, :3] = (
@@ -237,7 +237,7 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
         if T is B:
             B[:, :3, 3] += rng.normal(scale=1e-3, size=(12, 3))
     result = solve_axxb(base_T_hands=A, camera_T_targets=B)
-    assert np.degrees(np.linalg.norm(_error(result.hand_T_camera, hand_T_eye)[:3])) < 1.0
+    assert np.degrees(np.linalg.norm(_error(result.hand_T_camera, hand_T_camera)[:3])) < 1.0
 
 
 def test_motions_about_one_axis_still_raise_naming_why():

@@ -29,18 +29,18 @@ def _random_rotation(rng, max_angle=np.pi):
     return rotation(random_axis(rng) * rng.uniform(0.0, max_angle))
 
 
-def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0):
+def _scene(rng, n, *, max_deg=75.0, hand_R_camera=None, noise=(0.0, 0.0), scale=1.0):
     """Truth and poses of one eye-in-hand setup, lengths in metres times ``scale``.
 
     The hand is a reference pose (camera 0.6 m from the target, looking at it) turned by
     U(0, max_deg) about a random axis and shifted U(-0.25, 0.25) m per axis. The camera
-    poses ``eye_T_target = X^-1 A^-1 base_T_target`` get ``noise = (deg, mm)``: a rotation
+    poses ``camera_T_target = X^-1 A^-1 base_T_target`` get ``noise = (deg, mm)``: a rotation
     by exactly ``deg`` about a random axis and N(0, mm) per axis.
-    Returns ``X = hand_T_eye, Y = base_T_target, A = base_T_hands, B = eye_T_targets``.
+    Returns ``X = hand_T_camera, Y = base_T_target, A = base_T_hands, B = camera_T_targets``.
     """
-    if hand_R_eye is None:
-        hand_R_eye = _random_rotation(rng)
-    X = transform(hand_R_eye, rng.normal(scale=0.05, size=3))
+    if hand_R_camera is None:
+        hand_R_camera = _random_rotation(rng)
+    X = transform(hand_R_camera, rng.normal(scale=0.05, size=3))
     base_T_ref = transform(_random_rotation(rng), rng.uniform(-0.5, 0.5, size=3))
     # target 0.6 m along the camera's z axis at the reference pose
     Y = base_T_ref @ X @ transform(_random_rotation(rng), [0.0, 0.0, 0.6])
@@ -106,7 +106,7 @@ def test_x_near_a_half_turn_is_recovered_exactly(name, angle_deg):
         axis = random_axis(rng)
         R = 2.0 * np.outer(axis, axis) - np.eye(3) if angle_deg == 180.0 else None
         R = rotation(axis * np.radians(angle_deg)) if R is None else R
-        X, Y, A, B = _data(name, rng, 10, hand_R_eye=R)
+        X, Y, A, B = _data(name, rng, 10, hand_R_camera=R)
         X_hat, Y_hat = ALL[name](A, B)
         np.testing.assert_allclose(X_hat, X, atol=1e-9)
         np.testing.assert_allclose(Y_hat, Y, atol=1e-9)
@@ -403,6 +403,6 @@ def test_the_band_179_to_180_deg_with_noise_is_solved(name):
     for angle_deg in np.linspace(179.0, 180.0, 40):
         axis = random_axis(rng)
         R = rotation(axis * np.radians(angle_deg))
-        X, _, A, B = _data(name, rng, 10, hand_R_eye=R, noise=(1.0, 2.0))
+        X, _, A, B = _data(name, rng, 10, hand_R_camera=R, noise=(1.0, 2.0))
         worst = max(worst, _errors(ALL[name](A, B)[0], X)[0])
     assert worst < 3.0
