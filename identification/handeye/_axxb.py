@@ -254,10 +254,10 @@ def solve_axxb(
         B2 = np.concatenate([B_ijs, inverse_transform(B_ijs)])
         lhs = (A2[:, :3, :3] - np.eye(3)).reshape(-1, 3)
         rhs = (np.einsum("ij,kj->ki", hand_R_camera, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
-        X0 = transform_from_rotation_translation(
+        tsai = transform_from_rotation_translation(
             hand_R_camera, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
         )
-        return inverse_transform(X0), average_transform(base_T_hands @ X0 @ camera_T_targets)
+        return inverse_transform(tsai), average_transform(base_T_hands @ tsai @ camera_T_targets)
 
     length = float(np.sqrt(np.mean(np.sum(camera_T_targets[:, :3, 3] ** 2, axis=1))))
 
@@ -271,7 +271,7 @@ def solve_axxb(
     def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
         """Park, Andreff and Daniilidis as ``(camera_T_hand, base_T_target)``."""
         found = candidate_starts(base_T_hands, camera_T_targets, problem="axxb")
-        return [(inverse_transform(X0), Y0) for X0, Y0 in found.values()]
+        return [(inverse_transform(X), Y) for X, Y in found.values()]
 
     # Maximum likelihood on the absolute poses, camera_T_target[i] = camera_T_hand @
     # hand_T_base[i] @ base_T_target with the noise in the camera's pose; when that fit
