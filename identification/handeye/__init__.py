@@ -94,6 +94,8 @@ from kinfw.identification.handeye._starts import (
     StartMethod,
     candidate_starts,
     rank_starts,
+    register_start,
+    unregister_start,
 )
 from kinfw.identification.handeye._starts_axxb import (
     andreff_axxb,
@@ -190,6 +192,7 @@ __all__ = [
     "product_matrices",
     "product_tensor",
     "rank_starts",
+    "register_start",
     "rejection_threshold",
     "right_product_matrix_xyzw",
     "robust_sigmas",
@@ -205,5 +208,6 @@ __all__ = [
     "translations_least_squares",
     "tsai_rotation",
     "uncertainty",
+    "unregister_start",
     "variance_components",
 ]

@@ -47,7 +47,15 @@ from kinfw.identification.handeye._starts_axxb import (
 )
 from kinfw.identification.handeye._starts_axyb import _li, _shah, li_axyb, shah_axyb
 
-__all__ = ["START_METHODS", "RankedStart", "StartMethod", "candidate_starts", "rank_starts"]
+__all__ = [
+    "START_METHODS",
+    "RankedStart",
+    "StartMethod",
+    "candidate_starts",
+    "rank_starts",
+    "register_start",
+    "unregister_start",
+]
 
 log = logging.getLogger(__name__)
 
@@ -73,28 +81,59 @@ class StartMethod:
     solve : callable
         ``solve(A, B) -> (X, Y)``: the public function (e.g.
         :func:`~kinfw.identification.handeye.park_axxb`), which checks its input.
-    solve_prepared : callable
+    solve_prepared : callable or None
         The same on the problem's prepared input
         (:func:`~kinfw.identification.handeye.prepare_axxb` for ``"axxb"``,
         :func:`~kinfw.identification.handeye.check_start_poses` for ``"axyb"``): what
-        :func:`candidate_starts` calls after one check for all methods.
+        :func:`candidate_starts` calls after one check for all methods. None (a start
+        added with :func:`register_start` may leave it out): ``solve`` is called on the
+        checked poses.
     """
 
     problem: str
     solve: Callable[[ArrayLike, ArrayLike], tuple[Pose, Pose]]
-    solve_prepared: Callable[..., tuple[Pose, Pose]]
+    solve_prepared: Callable[..., tuple[Pose, Pose]] | None = None
 
 
-#: Every closed-form start by name, in the order :func:`candidate_starts` tries them.
-START_METHODS: Mapping[str, StartMethod] = MappingProxyType(
-    {
-        "park": StartMethod("axxb", park_axxb, _park),
-        "andreff": StartMethod("axxb", andreff_axxb, _andreff),
-        "daniilidis": StartMethod("axxb", daniilidis_axxb, _daniilidis),
-        "shah": StartMethod("axyb", shah_axyb, _shah),
-        "li": StartMethod("axyb", li_axyb, _li),
-    }
-)
+_METHODS: dict[str, StartMethod] = {
+    "park": StartMethod("axxb", park_axxb, _park),
+    "andreff": StartMethod("axxb", andreff_axxb, _andreff),
+    "daniilidis": StartMethod("axxb", daniilidis_axxb, _daniilidis),
+    "shah": StartMethod("axyb", shah_axyb, _shah),
+    "li": StartMethod("axyb", li_axyb, _li),
+}
+_BUILT_IN = frozenset(_METHODS)
+
+#: Every closed-form start by name, in the order :func:`candidate_starts` tries them (a
+#: read-only view: add one with :func:`register_start`).
+START_METHODS: Mapping[str, StartMethod] = MappingProxyType(_METHODS)
+
+
+def register_start(name: str, method: StartMethod) -> StartMethod:
+    """Add a closed-form start under a new ``name``; returns it.
+
+    The solvers then fit from it too whenever they try the closed forms (a first fit
+    that is not clean: :func:`~kinfw.identification.handeye.solve_axxb`), and
+    :func:`candidate_starts` lists it after the built-ins. A ``method`` without
+    ``solve_prepared`` is called as ``method.solve(A, B)`` on the checked poses.
+
+    Raises
+    ------
+    ValueError
+        When ``name`` is taken or ``method.problem`` is not ``"axxb"`` or ``"axyb"``.
+    """
+    if name in _METHODS:
+        raise ValueError(f"register_start: a start named {name!r} is already registered")
+    _check_problem(method.problem)
+    _METHODS[name] = method
+    return method
+
+
+def unregister_start(name: str) -> None:
+    """Remove a start added by :func:`register_start` (the built-ins stay)."""
+    if name in _BUILT_IN:
+        raise ValueError(f"unregister_start: {name!r} is a built-in start")
+    _METHODS.pop(name, None)
 
 
 def candidate_starts(
@@ -113,7 +152,10 @@ def candidate_starts(
         if method.problem != problem:
             continue
         try:
-            out[name] = method.solve_prepared(*prepared)
+            if method.solve_prepared is None:
+                out[name] = method.solve(*prepared[:2])
+            else:
+                out[name] = method.solve_prepared(*prepared)
         except StartError as err:
             log.debug("candidate_starts: %s failed: %s", name, err)
             first = first or err
