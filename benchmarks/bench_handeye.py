@@ -140,7 +140,10 @@ def transform(R: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.floa
 
 
 def ours_axxb(v: Views) -> tuple[Callable[[], object], Callable[[object], Estimates]]:
-    return (lambda: solve_axxb(v.base_T_hands, v.cam_T_worlds)), (lambda r: (r.hand_T_camera,))
+    return (
+        (lambda: solve_axxb(base_T_hands=v.base_T_hands, camera_T_targets=v.cam_T_worlds)),
+        (lambda r: (r.hand_T_camera,)),
+    )
 
 
 def opencv_axxb(method: int) -> Prepare:
@@ -165,8 +168,12 @@ def opencv_axxb(method: int) -> Prepare:
 def ours_axyb(refine: bool) -> Prepare:
     def prepare(v: Views) -> tuple[Callable[[], object], Callable[[object], Estimates]]:
         return (
-            (lambda: solve_axyb(v.cam_T_worlds, v.hand_T_bases, refine=refine)),
-            (lambda r: (r.camera_T_hand, r.root_T_target)),
+            (
+                lambda: solve_axyb(
+                    camera_T_targets=v.cam_T_worlds, hand_T_bases=v.hand_T_bases, refine=refine
+                )
+            ),
+            (lambda r: (r.camera_T_hand, r.base_T_target)),
         )
 
     return prepare

@@ -6,11 +6,11 @@ Run from the repository root (OpenCV is the ``bench`` extra, not a kinfw depende
     python benchmarks/bench_handeye_real.py --quick      # 4 splits, a few seconds
     python benchmarks/bench_handeye_real.py --splits 50 --seed 3
 
-Solvers (nine, through their public API only): kinfw ``solve_axxb(A, B)`` and
-``solve_axyb(A, B)`` and OpenCV's ``calibrateHandEye`` (TSAI, PARK, HORAUD, ANDREFF,
-DANIILIDIS) and ``calibrateRobotWorldHandEye`` (SHAH, LI), by the wrappers of
+Solvers (nine, through their public API only): kinfw ``solve_axxb`` and ``solve_axyb``
+and OpenCV's ``calibrateHandEye`` (TSAI, PARK, HORAUD, ANDREFF, DANIILIDIS) and
+``calibrateRobotWorldHandEye`` (SHAH, LI), by the wrappers of
 :mod:`benchmarks.handeye_regimes` for X. Y = ``base_T_target`` is the solver's own where it
-has one (kinfw ``solve_axyb``'s ``root_T_target``, SHAH's and LI's ``base2world``
+has one (kinfw ``solve_axyb``'s ``base_T_target``, SHAH's and LI's ``base2world``
 inverted); for the others it is the chordal mean of ``base_T_hand[i] X camera_T_target[i]``
 over the fit half (rotation: SVD projection of the sum; translation: the mean).
 
@@ -211,8 +211,8 @@ def _kinfw_axyb(base_T_hand, camera_T_target):
     hand_T_base = hr.inv(base_T_hand)
 
     def fit() -> XY:
-        r = solve_axyb(camera_T_target, hand_T_base)
-        return hr.inv(r.camera_T_hand), r.root_T_target
+        r = solve_axyb(camera_T_targets=camera_T_target, hand_T_bases=hand_T_base)
+        return hr.inv(r.camera_T_hand), r.base_T_target
 
     return fit
 

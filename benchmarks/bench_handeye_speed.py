@@ -40,8 +40,8 @@ def main() -> None:
             R_g, t_g = list(A[:, :3, :3]), list(A[:, :3, 3])
             R_c, t_c = list(C[:, :3, :3]), list(C[:, :3, 3])
             calls = {
-                "axxb": lambda A=A, C=C: solve_axxb(A, C),
-                "axyb": lambda C=C, A_inv=A_inv: solve_axyb(C, A_inv),
+                "axxb": lambda A=A, C=C: solve_axxb(base_T_hands=A, camera_T_targets=C),
+                "axyb": lambda C=C, A_inv=A_inv: solve_axyb(camera_T_targets=C, hand_T_bases=A_inv),
             }
             for k, m in methods.items():
                 calls[k] = lambda m=m, a=(R_g, t_g, R_c, t_c): cv2.calibrateHandEye(*a, method=m)

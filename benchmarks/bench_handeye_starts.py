@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(REPO), str(REPO / "tests")]
 
 import cv2
-from test_handeye_starts import ALL, AXYB_STARTS, _axyb, _errors, _opencv, _scene
+from test_handeye_starts import ALL, AXYB_NAMES, _axyb, _errors, _opencv, _scene
 
 
 def accuracy(trials: int, n: int, max_deg: float, seed: int) -> None:
@@ -41,7 +41,7 @@ def accuracy(trials: int, n: int, max_deg: float, seed: int) -> None:
         X, Y, A, B = _scene(rng, n, max_deg=max_deg, noise=(1.0, 2.0))
         Xp, _, Ap, Bp = _axyb(X, Y, A, B)
         for name, solve in ALL.items():
-            truth, a, b = (Xp, Ap, Bp) if name in AXYB_STARTS else (X, A, B)
+            truth, a, b = (Xp, Ap, Bp) if name in AXYB_NAMES else (X, A, B)
             ours = _errors(solve(a, b)[0], truth)
             cv = _errors(_opencv(cv2, name, a, b)[0], truth)
             errs[name].append(ours + cv)
@@ -74,7 +74,7 @@ def _time(fn, args, reps: int) -> float:
 
 def _raw_opencv(name: str):
     """OpenCV's call alone, inputs prepared outside (R and t stacks)."""
-    if name in AXYB_STARTS:
+    if name in AXYB_NAMES:
         method = getattr(cv2, f"CALIB_ROBOT_WORLD_HAND_EYE_{name.upper()}")
         return lambda *a: cv2.calibrateRobotWorldHandEye(*a, method=method)
     method = getattr(cv2, f"CALIB_HAND_EYE_{name.upper()}")
@@ -91,7 +91,7 @@ def timing(seed: int) -> None:
         cells = []
         for n in views:
             X, Y, A, B = data[n]
-            if name in AXYB_STARTS:
+            if name in AXYB_NAMES:
                 _, _, A, B = _axyb(X, Y, A, B)
             A, B = np.ascontiguousarray(A), np.ascontiguousarray(B)
             reps = 200 if n <= 30 else 30

@@ -189,14 +189,18 @@ class Solver:
 def _kinfw_axxb(base_T_hand, camera_T_target):
     from kinfw.identification.handeye import solve_axxb
 
-    return lambda: solve_axxb(base_T_hand, camera_T_target).hand_T_camera
+    return lambda: (
+        solve_axxb(base_T_hands=base_T_hand, camera_T_targets=camera_T_target).hand_T_camera
+    )
 
 
 def _kinfw_axyb(base_T_hand, camera_T_target):
     from kinfw.identification.handeye import solve_axyb
 
     hand_T_base = inv(base_T_hand)
-    return lambda: inv(solve_axyb(camera_T_target, hand_T_base).camera_T_hand)
+    return lambda: inv(
+        solve_axyb(camera_T_targets=camera_T_target, hand_T_bases=hand_T_base).camera_T_hand
+    )
 
 
 def _rt(T):

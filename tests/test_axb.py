@@ -59,10 +59,10 @@ def _angle_deg(R, R_true):
 @pytest.mark.parametrize("refine", [True, False])
 def test_noise_free_poses_give_the_true_x_and_y(n, refine):
     X, Y, B, A = _problem(seed=n, n=n)
-    result = solve_axyb(A, B, refine=refine, max_iterations=100_000)
+    result = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=refine, max_iterations=100_000)
     assert result.converged
     np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.base_T_target, Y, rtol=0, atol=1e-9)
     assert result.rms_rotation_rad < 1e-9 and result.rms_translation < 1e-9
     assert result.restarts == 0
 
@@ -80,27 +80,48 @@ def test_result_is_named_by_frames_with_the_paper_names_as_read_only_aliases():
     camera_T_targets = np.array(
         [camera_T_hand @ pin.SE3(T).inverse().homogeneous @ root_T_target for T in root_T_hands]
     )
-    result = solve_axyb(camera_T_targets, hand_T_roots, refine=False, record_history=True)
+    result = solve_axyb(
+        camera_T_targets=camera_T_targets,
+        hand_T_bases=hand_T_roots,
+        refine=False,
+        record_history=True,
+    )
     np.testing.assert_allclose(result.camera_T_hand, camera_T_hand, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.root_T_target, root_T_target, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.base_T_target, root_T_target, rtol=0, atol=1e-9)
     assert result.X is result.camera_T_hand
-    assert result.Y is result.root_T_target
+    assert result.Y is result.base_T_target
     assert result.history_X is result.camera_T_hand_history
-    assert result.history_Y is result.root_T_target_history
+    assert result.history_Y is result.base_T_target_history
     for name in ("X", "Y", "history_X", "history_Y"):  # no setter (TypeError on CPython 3.11)
         with pytest.raises((AttributeError, TypeError)):
             setattr(result, name, np.eye(4))
-    for name in ("camera_T_hand", "root_T_target"):
+    for name in ("camera_T_hand", "base_T_target"):
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(result, name, np.eye(4))
 
 
-def test_a_start_given_as_x0_also_works():
+def _paper_from(A, B, Y0):
+    """The paper's iteration alone from the guess ``Y0``, every iterate recorded."""
+    return solve_axyb(
+        camera_T_targets=A,
+        hand_T_bases=B,
+        base_T_target_guess=Y0,
+        refine=False,
+        record_history=True,
+    )
+
+
+def test_a_start_given_as_the_camera_mount_also_works():
     X, Y, B, A = _problem(seed=7, n=6)
-    X0 = pin.SE3(pin.exp3(np.array([0.4, -0.3, 0.2])) @ X[:3, :3], np.zeros(3)).homogeneous
-    result = solve_axyb(A, B, X0=X0, refine=False)
+    X0 = pin.SE3(pin.exp3(np.array([0.4, -0.3, 0.2])) @ X[:3, :3], np.zeros(3))
+    result = solve_axyb(
+        camera_T_targets=A,
+        hand_T_bases=B,
+        hand_T_camera_guess=X0.inverse().homogeneous,  # X is camera_T_hand
+        refine=False,
+    )
     np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.base_T_target, Y, rtol=0, atol=1e-9)
 
 
 # ------------------------------------------------------------- the paper itself
@@ -111,8 +132,8 @@ def test_the_iteration_is_the_papers_per_pose_averaging():
     quaternions, then one Y per pose given that X, averaged."""
     _, Y, B, A = _problem(seed=3, n=8, rotation_noise_deg=2.0)
     Y0 = pin.SE3(pin.exp3(np.array([0.5, 0.2, -0.4])) @ Y[:3, :3], np.zeros(3)).homogeneous
-    result = solve_axyb(A, B, Y0=Y0, refine=False, record_history=True)
-    RX, RY = result.camera_T_hand_history[:, :3, :3], result.root_T_target_history[:, :3, :3]
+    result = _paper_from(A, B, Y0)
+    RX, RY = result.camera_T_hand_history[:, :3, :3], result.base_T_target_history[:, :3, :3]
     RA, RB = A[:, :3, :3], B[:, :3, :3]
 
     def average(Rs, near):  # paper section 2.2 property 4, signs aligned to `near`
@@ -133,15 +154,15 @@ def test_the_iteration_is_the_papers_per_pose_averaging():
 
 def test_history_holds_every_iteration_and_ends_at_the_result():
     _, Y, B, A = _problem(seed=4, n=5, rotation_noise_deg=1.0)
-    result = solve_axyb(A, B, refine=False, record_history=True)
-    history_X, history_Y = result.camera_T_hand_history, result.root_T_target_history
+    result = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=False, record_history=True)
+    history_X, history_Y = result.camera_T_hand_history, result.base_T_target_history
     assert history_X.shape == history_Y.shape == (result.iterations, 4, 4)
     np.testing.assert_allclose(history_X[-1], result.camera_T_hand, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(history_Y[-1], result.root_T_target, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(history_Y[-1], result.base_T_target, rtol=0, atol=1e-12)
     # the paper's Fig. 3/4 quantity: the rotation error of Y falls from the identity start
-    errors = [_angle_deg(H[:3, :3], Y[:3, :3]) for H in result.root_T_target_history]
+    errors = [_angle_deg(H[:3, :3], Y[:3, :3]) for H in result.base_T_target_history]
     assert errors[-1] < 1.0 < errors[0]
-    assert solve_axyb(A, B).camera_T_hand_history is None
+    assert solve_axyb(camera_T_targets=A, hand_T_bases=B).camera_T_hand_history is None
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -150,14 +171,14 @@ def test_a_start_180_degrees_off_stalls_then_restarts_to_the_truth(seed):
     axis = np.random.default_rng(100 + seed).normal(size=3)
     flip = pin.exp3(np.pi * axis / np.linalg.norm(axis))
     Y0 = pin.SE3(flip @ Y[:3, :3], Y[:3, 3]).homogeneous
-    result = solve_axyb(A, B, Y0=Y0, refine=False, record_history=True)
+    result = _paper_from(A, B, Y0)
     assert result.restarts >= 1
     # the stall: the first estimates stay 180 degrees from the truth (section 4)
-    assert _angle_deg(result.root_T_target_history[0, :3, :3], Y[:3, :3]) > 179.9
+    assert _angle_deg(result.base_T_target_history[0, :3, :3], Y[:3, :3]) > 179.9
     np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(result.root_T_target, Y, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(result.base_T_target, Y, rtol=0, atol=1e-9)
     # the closed-form start of refine=True does not stall at all
-    assert solve_axyb(A, B).restarts == 0
+    assert solve_axyb(camera_T_targets=A, hand_T_bases=B).restarts == 0
 
 
 # ----------------------------------------------------------------- invariances
@@ -169,24 +190,24 @@ def test_sample_order_does_not_matter(order):
     _, _, B, A = _problem(seed=11, n=12, rotation_noise_deg=1.0, translation_noise=0.005)
     order = np.array(order)
     for refine in (True, False):
-        ref = solve_axyb(A, B, refine=refine)
-        shuffled = solve_axyb(A[order], B[order], refine=refine)
+        ref = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=refine)
+        shuffled = solve_axyb(camera_T_targets=A[order], hand_T_bases=B[order], refine=refine)
         np.testing.assert_allclose(shuffled.camera_T_hand, ref.camera_T_hand, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(shuffled.root_T_target, ref.root_T_target, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(shuffled.base_T_target, ref.base_T_target, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("refine", [True, False])
 def test_the_length_unit_does_not_matter(refine):
     _, _, B, A = _problem(seed=12, n=10, rotation_noise_deg=1.0, translation_noise=0.005)
-    in_m = solve_axyb(A, B, refine=refine)
+    in_m = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=refine)
     A_mm, B_mm = A.copy(), B.copy()
     A_mm[:, :3, 3] *= 1000.0
     B_mm[:, :3, 3] *= 1000.0
-    in_mm = solve_axyb(A_mm, B_mm, refine=refine)
+    in_mm = solve_axyb(camera_T_targets=A_mm, hand_T_bases=B_mm, refine=refine)
     assert in_mm.iterations == in_m.iterations
     for T_mm, T_m in (
         (in_mm.camera_T_hand, in_m.camera_T_hand),
-        (in_mm.root_T_target, in_m.root_T_target),
+        (in_mm.base_T_target, in_m.base_T_target),
     ):
         np.testing.assert_allclose(T_mm[:3, :3], T_m[:3, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(T_mm[:3, 3], 1000.0 * T_m[:3, 3], rtol=0, atol=1e-9)
@@ -208,11 +229,11 @@ def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
     for seed in range(1000, 1200):
         X, Y, B, A = _problem(seed=seed, n=10, rotation_noise_deg=1.0)
         for refine in (True, False):
-            result = solve_axyb(A, B, refine=refine)
+            result = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=refine)
             assert result.converged and result.restarts == 0
             errors[refine] += [
                 _angle_deg(result.camera_T_hand[:3, :3], X[:3, :3]),
-                _angle_deg(result.root_T_target[:3, :3], Y[:3, :3]),
+                _angle_deg(result.base_T_target[:3, :3], Y[:3, :3]),
             ]
     for refine in (True, False):
         e = np.array(errors[refine])
@@ -228,31 +249,33 @@ def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
 def test_fewer_than_three_poses_is_an_error():
     _, _, B, A = _problem(seed=0, n=2)
     with pytest.raises(AXYBError, match="at least 3 poses"):
-        solve_axyb(A, B)
+        solve_axyb(camera_T_targets=A, hand_T_bases=B)
 
 
 def test_mismatched_shapes_are_an_error():
     _, _, B, A = _problem(seed=0, n=5)
-    with pytest.raises(AXYBError, match="same number of poses"):
-        solve_axyb(A, B[:4])
-    with pytest.raises(AXYBError, match=r"A: expected shape \(n, 4, 4\)"):
-        solve_axyb(A[:, :3], B)
+    with pytest.raises(
+        AXYBError, match="camera_T_targets and hand_T_bases must hold the same number of poses"
+    ):
+        solve_axyb(camera_T_targets=A, hand_T_bases=B[:4])
+    with pytest.raises(AXYBError, match=r"camera_T_targets: expected shape \(n, 4, 4\)"):
+        solve_axyb(camera_T_targets=A[:, :3], hand_T_bases=B)
 
 
 def test_non_rigid_matrices_are_named_with_their_index():
     _, _, B, A = _problem(seed=0, n=5)
     bad = A.copy()
     bad[2, :3, :3] *= 1.01
-    with pytest.raises(AXYBError, match=r"A\[2\]: not a rotation matrix"):
-        solve_axyb(bad, B)
+    with pytest.raises(AXYBError, match=r"camera_T_targets\[2\]: not a rotation matrix"):
+        solve_axyb(camera_T_targets=bad, hand_T_bases=B)
     bad = B.copy()
     bad[3, :3, :3] = bad[3, :3, :3] @ np.diag([1.0, 1.0, -1.0])
-    with pytest.raises(AXYBError, match=r"B\[3\]: not a rotation matrix"):
-        solve_axyb(A, bad)
+    with pytest.raises(AXYBError, match=r"hand_T_bases\[3\]: not a rotation matrix"):
+        solve_axyb(camera_T_targets=A, hand_T_bases=bad)
     bad = B.copy()
     bad[1, 3, 0] = 0.5
-    with pytest.raises(AXYBError, match=r"B\[1\]: last row"):
-        solve_axyb(A, bad)
+    with pytest.raises(AXYBError, match=r"hand_T_bases\[1\]: last row"):
+        solve_axyb(camera_T_targets=A, hand_T_bases=bad)
 
 
 def test_rotations_of_b_about_one_axis_are_an_error_that_names_the_axis():
@@ -273,7 +296,7 @@ def test_rotations_of_b_about_one_axis_are_an_error_that_names_the_axis():
         match=r"about one axis.*u = \[0\.0, 0\.0, 1\.0\]"
         r".*translations along these axes are undetermined",
     ):
-        solve_axyb(X @ B @ Y, B)
+        solve_axyb(camera_T_targets=X @ B @ Y, hand_T_bases=B)
 
 
 def test_b_without_rotation_is_an_error():
@@ -281,7 +304,7 @@ def test_b_without_rotation_is_an_error():
     X, Y = _random_transforms(rng, 2)
     B = np.array([pin.SE3(np.eye(3), rng.normal(size=3)).homogeneous for _ in range(6)])
     with pytest.raises(AXYBError, match=r"barely differ.*neither the rotations nor"):
-        solve_axyb(X @ B @ Y, B)
+        solve_axyb(camera_T_targets=X @ B @ Y, hand_T_bases=B)
 
 
 def test_weak_motion_is_warned_about(caplog):
@@ -295,7 +318,7 @@ def test_weak_motion_is_warned_about(caplog):
         ]
     )
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
-        result = solve_axyb(X @ B @ Y, B)
+        result = solve_axyb(camera_T_targets=X @ B @ Y, hand_T_bases=B)
     assert "weak motion" in caplog.text
     np.testing.assert_allclose(result.camera_T_hand, X, rtol=0, atol=1e-9)  # noise-free: exact
 
@@ -303,21 +326,36 @@ def test_weak_motion_is_warned_about(caplog):
 def test_inverted_b_is_an_error_not_an_answer():
     _, _, B, A = _problem(seed=9, n=10)
     B_inverse = np.array([pin.SE3(T).inverse().homogeneous for T in B])
-    with pytest.raises(AXYBError, match=r"no consistent X, Y.*A\[i\] = X @ B\[i\] @ Y"):
-        solve_axyb(A, B_inverse)
+    with pytest.raises(
+        AXYBError,
+        match=r"no consistent X, Y.*camera_T_target\[i\] = camera_T_hand @ hand_T_base\[i\] "
+        r"@ base_T_target \(A\[i\] = X @ B\[i\] @ Y\)",
+    ):
+        solve_axyb(camera_T_targets=A, hand_T_bases=B_inverse)
 
 
 def test_two_starting_guesses_are_an_error():
     _, _, B, A = _problem(seed=0, n=5)
-    with pytest.raises(AXYBError, match="X0 or Y0, not both"):
-        solve_axyb(A, B, X0=np.eye(4), Y0=np.eye(4))
+    with pytest.raises(AXYBError, match="hand_T_camera_guess or base_T_target_guess, not both"):
+        solve_axyb(
+            camera_T_targets=A,
+            hand_T_bases=B,
+            hand_T_camera_guess=np.eye(4),
+            base_T_target_guess=np.eye(4),
+        )
 
 
 def test_running_out_of_iterations_is_reported_not_raised(caplog):
     _, Y, B, A = _problem(seed=10, n=5, rotation_noise_deg=1.0)
     Y0 = pin.SE3(pin.exp3(np.array([0.1, 0.1, 0.0])) @ Y[:3, :3], np.zeros(3)).homogeneous
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
-        result = solve_axyb(A, B, Y0=Y0, refine=False, max_iterations=3)
+        result = solve_axyb(
+            camera_T_targets=A,
+            hand_T_bases=B,
+            base_T_target_guess=Y0,
+            refine=False,
+            max_iterations=3,
+        )
     assert not result.converged and result.iterations == 6
     assert "did not converge within 3 iterations" in caplog.text
 
@@ -354,10 +392,10 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     inliers: 0.367 deg / 3.98 mm (Tabb's own solution, which minimises reprojection error
     instead: 0.461 deg / 7.08 mm over all 88)."""
     A, B, world_T_base, cam_T_gripper = _tabb()
-    result = solve_axyb(A, B)
+    result = solve_axyb(camera_T_targets=A, hand_T_bases=B)
     assert result.converged
     x_rot, x_t = _errors(result.camera_T_hand, cam_T_gripper)
-    y_rot, y_t = _errors(np.linalg.inv(result.root_T_target), world_T_base)
+    y_rot, y_t = _errors(np.linalg.inv(result.base_T_target), world_T_base)
     assert x_rot < 1.0 and x_t < 50.0 and y_rot < 1.0 and y_t < 50.0
     assert (x_rot, x_t, y_rot, y_t) == pytest.approx((0.175, 26.40, 0.350, 26.63), abs=0.01)
     assert result.rejected == (76,)
@@ -368,7 +406,7 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     # short (reported, not raised), yet within the acceptance; its rotations ignore what
     # the translations say, so it stays 0.54 deg from the maximum-likelihood X
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.handeye"):
-        paper = solve_axyb(A, B, refine=False)
+        paper = solve_axyb(camera_T_targets=A, hand_T_bases=B, refine=False)
     assert not paper.converged and "did not converge" in caplog.text
     x_rot, x_t = _errors(paper.camera_T_hand, cam_T_gripper)
     assert x_rot < 1.0 and x_t < 50.0
@@ -377,10 +415,10 @@ def test_tabb_real_data_is_within_opencvs_acceptance_of_tabbs_solution(caplog):
     A_m, B_m = A.copy(), B.copy()
     A_m[:, :3, 3] /= 1000.0
     B_m[:, :3, 3] /= 1000.0
-    in_m = solve_axyb(A_m, B_m)
+    in_m = solve_axyb(camera_T_targets=A_m, hand_T_bases=B_m)
     np.testing.assert_allclose(
         in_m.camera_T_hand[:3, :3], result.camera_T_hand[:3, :3], rtol=0, atol=1e-12
     )
     np.testing.assert_allclose(
-        1000.0 * in_m.root_T_target[:3, 3], result.root_T_target[:3, 3], rtol=0, atol=1e-8
+        1000.0 * in_m.base_T_target[:3, 3], result.base_T_target[:3, 3], rtol=0, atol=1e-8
     )

@@ -30,20 +30,20 @@ def _half_turn(axis):
     return 2.0 * np.outer(u, u) - np.eye(3)  # exactly symmetric: a rotation by exactly pi
 
 
-def _setup(rng, n, hand_R_eye=None, scale=1.0):
-    """Truth X = hand_T_eye, n random hand poses (uniformly random rotations, so varied
+def _setup(rng, n, hand_R_camera=None, scale=1.0):
+    """Truth X = hand_T_camera, n random hand poses (uniformly random rotations, so varied
     axes) and the camera extrinsics of a fixed target: B[i] = X^-1 A[i]^-1 base_T_target."""
-    if hand_R_eye is None:
-        hand_R_eye = _random_rotation(rng)
-    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1 * scale, size=3))
+    if hand_R_camera is None:
+        hand_R_camera = _random_rotation(rng)
+    hand_T_camera = transform(hand_R_camera, rng.normal(scale=0.1 * scale, size=3))
     base_T_target = transform(_random_rotation(rng), rng.normal(scale=scale, size=3))
     base_T_hands = np.stack(
         [transform(_random_rotation(rng), rng.normal(scale=0.5 * scale, size=3)) for _ in range(n)]
     )
-    eye_T_targets = np.stack(
-        [inverse(hand_T_eye) @ inverse(A) @ base_T_target for A in base_T_hands]
+    camera_T_targets = np.stack(
+        [inverse(hand_T_camera) @ inverse(A) @ base_T_target for A in base_T_hands]
     )
-    return hand_T_eye, base_T_hands, eye_T_targets
+    return hand_T_camera, base_T_hands, camera_T_targets
 
 
 def _perturb_rotations(T, rng, sigma_rad):
@@ -94,7 +94,7 @@ def test_noise_free_poses_give_the_true_x(n, kind):
     for seed in range(5):
         rng = np.random.default_rng(seed)
         X_true, A, B = _setup(rng, n, X_ROTATIONS[kind])
-        result = solve_axxb(A, B)
+        result = solve_axxb(base_T_hands=A, camera_T_targets=B)
         assert isinstance(result, HandEyeResult)
         assert np.linalg.norm(result.hand_T_camera[:3, :3] - X_true[:3, :3]) < 1e-9, (kind, seed)
         assert np.linalg.norm(result.hand_T_camera[:3, 3] - X_true[:3, 3]) < 1e-9, (kind, seed)
@@ -112,7 +112,7 @@ def test_result_is_named_by_frames_with_x_as_a_read_only_alias():
     defining property, checked on the setup's own truth); ``X`` is the same array."""
     rng = np.random.default_rng(11)
     hand_T_camera, base_T_hands, camera_T_targets = _setup(rng, 6)
-    result = solve_axxb(base_T_hands, camera_T_targets)
+    result = solve_axxb(base_T_hands=base_T_hands, camera_T_targets=camera_T_targets)
     base_T_targets = base_T_hands @ result.hand_T_camera @ camera_T_targets
     np.testing.assert_allclose(
         base_T_targets, np.broadcast_to(base_T_targets[0], (6, 4, 4)), rtol=0, atol=1e-9
@@ -136,11 +136,11 @@ def test_half_turn_motions_of_the_hand_are_used_with_the_right_sign():
     A = np.concatenate([A, A @ flip])
     base_T_target = transform(_random_rotation(rng), [0.2, 0.1, 0.9])
     B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
-    result = solve_axxb(A, B)
+    result = solve_axxb(base_T_hands=A, camera_T_targets=B)
     rot, trans = _errors(result.hand_T_camera, X_true)
     assert rot < 1e-9 and trans < 1e-9
     # with 0.2 deg of rotation noise on the camera the flips do not spoil the answer
-    noisy = solve_axxb(A, _perturb_rotations(B, rng, np.radians(0.2)))
+    noisy = solve_axxb(base_T_hands=A, camera_T_targets=_perturb_rotations(B, rng, np.radians(0.2)))
     assert _errors(noisy.hand_T_camera, X_true)[0] < np.radians(0.2)
 
 
@@ -152,7 +152,7 @@ def test_eye_to_hand_is_solved_with_inverted_robot_poses():
     hand_T_target = transform(_random_rotation(rng), [0.0, 0.05, 0.1])
     _, base_T_hands, _ = _setup(rng, 10)
     cam_T_targets = np.stack([inverse(base_T_cam) @ A @ hand_T_target for A in base_T_hands])
-    result = solve_axxb(inverse(base_T_hands), cam_T_targets)
+    result = solve_axxb(base_T_hands=inverse(base_T_hands), camera_T_targets=cam_T_targets)
     rot, trans = _errors(result.hand_T_camera, base_T_cam)
     assert rot < 1e-9 and trans < 1e-9
 
@@ -173,8 +173,8 @@ def _noisy_setup(seed, n, sigma_deg=0.5, scale=1.0):
 def test_the_answer_does_not_depend_on_sample_order(seed, order):
     _, A, B = _noisy_setup(seed, 12)
     order = np.array(order)
-    reference = solve_axxb(A, B)
-    permuted = solve_axxb(A[order], B[order])
+    reference = solve_axxb(base_T_hands=A, camera_T_targets=B)
+    permuted = solve_axxb(base_T_hands=A[order], camera_T_targets=B[order])
     np.testing.assert_allclose(permuted.hand_T_camera, reference.hand_T_camera, rtol=0, atol=1e-12)
     assert permuted.n_pairs == reference.n_pairs
     np.testing.assert_allclose(permuted.rms_translation, reference.rms_translation, rtol=1e-9)
@@ -184,11 +184,11 @@ def test_the_answer_does_not_depend_on_sample_order(seed, order):
 @given(seed=st.integers(0, 2**20))
 def test_the_answer_does_not_depend_on_the_length_unit(seed):
     _, A, B = _noisy_setup(seed, 8)
-    in_m = solve_axxb(A, B)
+    in_m = solve_axxb(base_T_hands=A, camera_T_targets=B)
     A_mm, B_mm = A.copy(), B.copy()
     A_mm[:, :3, 3] *= 1000.0
     B_mm[:, :3, 3] *= 1000.0
-    in_mm = solve_axxb(A_mm, B_mm)
+    in_mm = solve_axxb(base_T_hands=A_mm, camera_T_targets=B_mm)
     X_mm, X_m = in_mm.hand_T_camera, in_m.hand_T_camera
     np.testing.assert_allclose(X_mm[:3, :3], X_m[:3, :3], rtol=0, atol=1e-12)
     np.testing.assert_allclose(
@@ -205,7 +205,9 @@ def _median_rotation_error(sigma_deg, n, trials=40):
     errors = []
     for seed in range(trials):
         X_true, A, B = _noisy_setup(seed, n, sigma_deg=sigma_deg)
-        errors.append(_errors(solve_axxb(A, B).hand_T_camera, X_true)[0])
+        errors.append(
+            _errors(solve_axxb(base_T_hands=A, camera_T_targets=B).hand_T_camera, X_true)[0]
+        )
     return float(np.degrees(np.median(errors)))
 
 
@@ -244,7 +246,7 @@ def _brute_force_axis_spread(A):
 def test_axis_spread_and_condition_report_the_motion_geometry():
     rng = np.random.default_rng(3)
     X_true, A, B = _setup(rng, 10)
-    result = solve_axxb(A, B)
+    result = solve_axxb(base_T_hands=A, camera_T_targets=B)
     assert result.axis_spread_rad == pytest.approx(_brute_force_axis_spread(A), abs=1e-9)
     assert result.axis_spread_rad > np.radians(80.0)
 
@@ -261,7 +263,7 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
     )
     base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in base_T_hands])
-    narrow = solve_axxb(base_T_hands, B)
+    narrow = solve_axxb(base_T_hands=base_T_hands, camera_T_targets=B)
     spread = _brute_force_axis_spread(base_T_hands)
     assert narrow.axis_spread_rad == pytest.approx(spread, abs=1e-9)
     assert np.radians(1.0) < spread < np.radians(10.0)
@@ -279,37 +281,45 @@ def test_axis_spread_and_condition_report_the_motion_geometry():
 def test_fewer_than_three_poses_are_refused():
     _, A, B = _setup(np.random.default_rng(0), 2)
     with pytest.raises(HandEyeError, match="at least 3 poses"):
-        solve_axxb(A, B)
+        solve_axxb(base_T_hands=A, camera_T_targets=B)
 
 
 def test_shapes_are_checked():
     _, A, B = _setup(np.random.default_rng(0), 5)
-    with pytest.raises(HandEyeError, match="same number of poses"):
-        solve_axxb(A, B[:4])
-    with pytest.raises(HandEyeError, match=r"A: expected shape \(n, 4, 4\), got \(4, 4\)"):
-        solve_axxb(A[0], B)
-    with pytest.raises(HandEyeError, match=r"B: expected shape \(n, 4, 4\), got \(5, 3, 4\)"):
-        solve_axxb(A, B[:, :3, :])
+    with pytest.raises(
+        HandEyeError, match="base_T_hands and camera_T_targets must hold the same number of poses"
+    ):
+        solve_axxb(base_T_hands=A, camera_T_targets=B[:4])
+    with pytest.raises(
+        HandEyeError, match=r"base_T_hands: expected shape \(n, 4, 4\), got \(4, 4\)"
+    ):
+        solve_axxb(base_T_hands=A[0], camera_T_targets=B)
+    with pytest.raises(
+        HandEyeError, match=r"camera_T_targets: expected shape \(n, 4, 4\), got \(5, 3, 4\)"
+    ):
+        solve_axxb(base_T_hands=A, camera_T_targets=B[:, :3, :])
 
 
 def test_a_matrix_that_is_not_a_rigid_transform_is_named():
     _, A, B = _setup(np.random.default_rng(0), 5)
     scaled = A.copy()
     scaled[3, :3, :3] *= 1.1
-    with pytest.raises(HandEyeError, match=r"A\[3\]: not a rotation matrix"):
-        solve_axxb(scaled, B)
+    with pytest.raises(HandEyeError, match=r"base_T_hands\[3\]: not a rotation matrix"):
+        solve_axxb(base_T_hands=scaled, camera_T_targets=B)
     mirrored = B.copy()
     mirrored[1, :3, 0] *= -1.0
-    with pytest.raises(HandEyeError, match=r"B\[1\]: not a rotation matrix"):
-        solve_axxb(A, mirrored)
+    with pytest.raises(HandEyeError, match=r"camera_T_targets\[1\]: not a rotation matrix"):
+        solve_axxb(base_T_hands=A, camera_T_targets=mirrored)
     bad_row = B.copy()
     bad_row[2, 3, 0] = 0.5
-    with pytest.raises(HandEyeError, match=r"B\[2\]: last row must be \[0, 0, 0, 1\]"):
-        solve_axxb(A, bad_row)
+    with pytest.raises(
+        HandEyeError, match=r"camera_T_targets\[2\]: last row must be \[0, 0, 0, 1\]"
+    ):
+        solve_axxb(base_T_hands=A, camera_T_targets=bad_row)
     not_finite = A.copy()
     not_finite[4, 0, 3] = np.nan
-    with pytest.raises(HandEyeError, match=r"A\[4\]"):
-        solve_axxb(not_finite, B)
+    with pytest.raises(HandEyeError, match=r"base_T_hands\[4\]"):
+        solve_axxb(base_T_hands=not_finite, camera_T_targets=B)
 
 
 def test_pure_translations_are_not_informative():
@@ -319,7 +329,7 @@ def test_pure_translations_are_not_informative():
     base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
     with pytest.raises(HandEyeError, match="no informative motion"):
-        solve_axxb(A, B)
+        solve_axxb(base_T_hands=A, camera_T_targets=B)
     # small rotations, below the threshold, are no better
     A_small = np.stack(
         [
@@ -329,7 +339,7 @@ def test_pure_translations_are_not_informative():
     )
     B_small = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A_small])
     with pytest.raises(HandEyeError, match=r"no informative motion.*below min_angle_rad = 4 deg"):
-        solve_axxb(A_small, B_small, min_angle_rad=np.radians(4.0))
+        solve_axxb(base_T_hands=A_small, camera_T_targets=B_small, min_angle_rad=np.radians(4.0))
 
 
 def test_motions_about_one_axis_are_refused():
@@ -350,17 +360,17 @@ def test_motions_about_one_axis_are_refused():
         r"frame.*the rotation of X about it and the translation of X along "
         r"it are not determined: add motions about another axis",
     ):
-        solve_axxb(A, B)
+        solve_axxb(base_T_hands=A, camera_T_targets=B)
 
 
 def test_mispaired_samples_are_refused():
     _, A, B = _setup(np.random.default_rng(5), 8)
     with pytest.raises(
         HandEyeError,
-        match=r"A and B motions are inconsistent.*worst: between "
+        match=r"the hand's and the camera's motions are inconsistent.*worst: between "
         r"poses \d+ and \d+.*pairing and order",
     ):
-        solve_axxb(A, B[::-1])
+        solve_axxb(base_T_hands=A, camera_T_targets=B[::-1])
 
 
 @pytest.mark.parametrize("mistake", ["A inverted", "B inverted"])
@@ -372,10 +382,10 @@ def test_one_inverted_pose_list_is_refused(mistake):
     A, B = {"A inverted": (inverse(A), B), "B inverted": (A, inverse(B))}[mistake]
     with pytest.raises(
         HandEyeError,
-        match=r"no single X relates the motions of A and B.*"
-        r"A or B may be inverted",
+        match=r"no single X relates the motions of the hand and the camera.*"
+        r"A batch may be inverted: base_T_hands must be",
     ):
-        solve_axxb(A, B)
+        solve_axxb(base_T_hands=A, camera_T_targets=B)
 
 
 def test_swapped_or_both_inverted_poses_are_consistent_and_answer_the_target_pose():
@@ -385,16 +395,21 @@ def test_swapped_or_both_inverted_poses_are_consistent_and_answer_the_target_pos
     X_true, A, _ = _setup(rng, 8)
     base_T_target = transform(_random_rotation(rng), [0.1, 0.2, 1.0])
     B = np.stack([inverse(X_true) @ inverse(a) @ base_T_target for a in A])
-    rot, trans = _errors(solve_axxb(B, A).hand_T_camera, inverse(base_T_target))
+    rot, trans = _errors(
+        solve_axxb(base_T_hands=B, camera_T_targets=A).hand_T_camera, inverse(base_T_target)
+    )
     assert rot < 1e-9 and trans < 1e-9
-    rot, trans = _errors(solve_axxb(inverse(A), inverse(B)).hand_T_camera, base_T_target)
+    rot, trans = _errors(
+        solve_axxb(base_T_hands=inverse(A), camera_T_targets=inverse(B)).hand_T_camera,
+        base_T_target,
+    )
     assert rot < 1e-9 and trans < 1e-9
 
 
 def test_min_angle_out_of_range_is_refused():
     _, A, B = _setup(np.random.default_rng(0), 4)
     with pytest.raises(HandEyeError, match="min_angle_rad must be in"):
-        solve_axxb(A, B, min_angle_rad=-0.1)
+        solve_axxb(base_T_hands=A, camera_T_targets=B, min_angle_rad=-0.1)
 
 
 # -- real and reference data ---------------------------------------------------------------
@@ -420,7 +435,7 @@ def test_opencv_regression_24871_is_exact():
         ]
     )
     gripper_T_cam = np.array(data["T_cam2gripper_true"], dtype=float)
-    result = solve_axxb(base_T_grippers, cam_T_targets)
+    result = solve_axxb(base_T_hands=base_T_grippers, camera_T_targets=cam_T_targets)
     assert np.linalg.norm(result.hand_T_camera[:3, :3] - gripper_T_cam[:3, :3]) < 1e-12
     assert np.linalg.norm(result.hand_T_camera[:3, 3] - gripper_T_cam[:3, 3]) < 1e-12
 
@@ -438,7 +453,7 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     its TSAI lands 0.62 deg / 45.8 mm (README). Measured here: 0.17 deg / 26.4 mm (Tsai &
     Lenz alone: 0.55 deg / 34.2 mm)."""
     base_T_grippers, cam_T_worlds, gripper_T_cam_ref = _tabb_ds1()
-    result = solve_axxb(base_T_grippers, cam_T_worlds)
+    result = solve_axxb(base_T_hands=base_T_grippers, camera_T_targets=cam_T_worlds)
     rot, trans = _errors(result.hand_T_camera, gripper_T_cam_ref)
     print(
         f"Tabb DS1: kinfw Tsai {np.degrees(rot):.2f} deg / {trans:.1f} mm from Tabb's "
@@ -453,7 +468,7 @@ def test_tabb_ds1_meets_opencvs_acceptance():
     # the same data in metres gives the same answer (OpenCV's Daniilidis does not)
     base_T_grippers[:, :3, 3] /= 1000.0
     cam_T_worlds[:, :3, 3] /= 1000.0
-    in_m = solve_axxb(base_T_grippers, cam_T_worlds)
+    in_m = solve_axxb(base_T_hands=base_T_grippers, camera_T_targets=cam_T_worlds)
     X_m, X_mm = in_m.hand_T_camera, result.hand_T_camera
     np.testing.assert_allclose(X_m[:3, :3], X_mm[:3, :3], rtol=0, atol=1e-12)
     np.testing.assert_allclose(1000.0 * X_m[:3, 3], X_mm[:3, 3], rtol=1e-9)
@@ -473,9 +488,9 @@ def test_an_inconsistency_with_small_motions_names_both_causes():
     with pytest.raises(
         HandEyeError,
         match=r"motions are small \(median relative rotation "
-        r"[\d.]+ deg\).*A or B may be inverted",
+        r"[\d.]+ deg\).*A batch may be inverted",
     ):
-        solve_axxb(A, np.stack([inverse(b) for b in B]))
+        solve_axxb(base_T_hands=A, camera_T_targets=np.stack([inverse(b) for b in B]))
 
 
 def test_motions_mostly_about_one_axis_are_warned_about(caplog):
@@ -495,7 +510,7 @@ def test_motions_mostly_about_one_axis_are_warned_about(caplog):
     )
     B = np.stack([inverse(a @ X) @ base_T_target for a in A])
     with caplog.at_level("WARNING", logger="kinfw.identification.handeye"):
-        result = solve_axxb(A, B)
+        result = solve_axxb(base_T_hands=A, camera_T_targets=B)
     assert result.rotation_condition < 0.05
     assert "mostly about one axis" in caplog.text
     np.testing.assert_allclose(result.hand_T_camera, X, atol=1e-9)  # noise-free: still exact

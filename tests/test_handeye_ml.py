@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 import kinfw.identification.handeye._axxb as handeye
-from kinfw.identification.handeye import HandEyeError, solve_axxb, solve_axyb
+from kinfw.identification.handeye import HandEyeError, Verdict, solve_axxb, solve_axyb
 from tests.pin_se3 import inverse, random_axis, rotation, transform
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.geometry) ----------------
@@ -44,9 +44,9 @@ def _scene(rng, n, max_motion_deg=180.0, hand_R_camera=None, noise=(0.0, 0.0), s
 
 
 def _axyb_x(A, B):
-    """hand_T_camera by solve_axyb: camera_T_target = camera_T_hand hand_T_base Y."""
-    result = solve_axyb(B, inverse(A))
-    return inverse(result.camera_T_hand), result
+    """hand_T_camera by solve_axyb from the same poses as solve_axxb's, and its result."""
+    result = solve_axyb(base_T_hands=A, camera_T_targets=B)
+    return result.hand_T_camera, result
 
 
 def _error(X_est, X_true):
@@ -71,12 +71,12 @@ X_ROTATIONS = {
 def test_noise_free_poses_give_the_true_x_and_target_by_both_solvers(n, kind):
     for seed in range(4):
         X, Y, A, B = _scene(np.random.default_rng(seed), n, hand_R_camera=X_ROTATIONS[kind])
-        axxb = solve_axxb(A, B)
+        axxb = solve_axxb(base_T_hands=A, camera_T_targets=B)
         X_axyb, axyb = _axyb_x(A, B)
         for X_est in (axxb.hand_T_camera, X_axyb):
             assert np.abs(X_est - X).max() < 1e-10, (kind, n, seed)
         assert np.abs(axxb.base_T_target - Y).max() < 1e-10
-        assert np.abs(axyb.root_T_target - Y).max() < 1e-10
+        assert np.abs(axyb.base_T_target - Y).max() < 1e-10
         assert axxb.rejected == () and axyb.rejected == ()
 
 
@@ -89,19 +89,17 @@ def test_the_length_unit_does_not_matter(seed):
     A_mm, B_mm = A.copy(), B.copy()
     A_mm[:, :3, 3] *= 1000.0
     B_mm[:, :3, 3] *= 1000.0
-    for solve in (solve_axxb, lambda a, b: _axyb_x(a, b)[1]):
-        in_m, in_mm = solve(A, B), solve(A_mm, B_mm)
-        X_m = getattr(in_m, "hand_T_camera", None)
-        X_mm = getattr(in_mm, "hand_T_camera", None)
-        if X_m is None:
-            X_m, X_mm = in_m.camera_T_hand, in_mm.camera_T_hand
+    for solve in (solve_axxb, solve_axyb):  # one convention: the same call for both
+        in_m = solve(base_T_hands=A, camera_T_targets=B)
+        in_mm = solve(base_T_hands=A_mm, camera_T_targets=B_mm)
+        X_m, X_mm = in_m.hand_T_camera, in_mm.hand_T_camera
         np.testing.assert_allclose(X_mm[:3, :3], X_m[:3, :3], rtol=0, atol=1e-12)
         np.testing.assert_allclose(X_mm[:3, 3], 1000.0 * X_m[:3, 3], rtol=0, atol=1e-9)
         np.testing.assert_allclose(in_mm.sigma_rotation_deg, in_m.sigma_rotation_deg, rtol=1e-8)
         np.testing.assert_allclose(
             in_mm.sigma_translation, 1000.0 * in_m.sigma_translation, rtol=1e-8
         )
-        assert in_mm.verdict.split(" ")[0] == in_m.verdict.split(" ")[0]
+        assert in_mm.verdict is in_m.verdict
         assert in_mm.rejected == in_m.rejected
 
 
@@ -110,7 +108,10 @@ def test_sample_order_does_not_matter(seed):
     rng = np.random.default_rng(seed)
     _, _, A, B = _scene(rng, 10, 20.0, noise=(1.0, 2e-3))
     order = rng.permutation(10)
-    ref, perm = solve_axxb(A, B), solve_axxb(A[order], B[order])
+    ref, perm = (
+        solve_axxb(base_T_hands=A, camera_T_targets=B),
+        solve_axxb(base_T_hands=A[order], camera_T_targets=B[order]),
+    )
     np.testing.assert_allclose(perm.hand_T_camera, ref.hand_T_camera, rtol=0, atol=1e-12)
     np.testing.assert_allclose(perm.covariance, ref.covariance, rtol=1e-6, atol=1e-18)
     X_ref, _ = _axyb_x(A, B)
@@ -128,16 +129,16 @@ def test_reported_covariance_matches_the_errors_and_beats_tsai_on_small_motions(
     starts = []
     real_fit = handeye.fit_absolute
 
-    def recording_fit(M, N, start_list, **kw):
-        P0, _ = start_list[0]()  # Tsai & Lenz: P = X^-1
-        starts.append(inverse(P0))
-        return real_fit(M, N, start_list, **kw)
+    def recording_fit(camera_T_targets, hand_T_bases, start_list, **kw):
+        camera_T_hand, _ = start_list[0]()  # Tsai & Lenz's, as the fit's camera_T_hand
+        starts.append(inverse(camera_T_hand))
+        return real_fit(camera_T_targets, hand_T_bases, start_list, **kw)
 
     monkeypatch.setattr(handeye, "fit_absolute", recording_fit)
     maha, err_ml, err_tsai = [], [], []
     for seed in range(300):
         X, _, A, B = _scene(np.random.default_rng(seed), 10, 15.0, noise=(1.0, 2e-3))
-        result = solve_axxb(A, B)
+        result = solve_axxb(base_T_hands=A, camera_T_targets=B)
         e = _error(result.hand_T_camera, X)
         maha.append(float(e @ np.linalg.solve(result.covariance, e)))
         err_ml.append(np.degrees(np.linalg.norm(e[:3])))
@@ -158,13 +159,15 @@ def test_verdict_reports_small_motions_as_poorly_determined():
     moved by ~0.2 m, target 0.5 m away) still fix X's rotation to ~0.15 deg, but not its
     translation; the verdict says so, and the reported sigma covers the true error."""
     X, _, A, B = _scene(np.random.default_rng(3), 10, 3.0, noise=(1.0, 2e-3))
-    result = solve_axxb(A, B, min_angle_rad=0.0)
-    assert result.verdict.startswith(("poorly determined (sigma", "undetermined ("))
+    result = solve_axxb(base_T_hands=A, camera_T_targets=B, min_angle_rad=0.0)
+    assert result.verdict in (Verdict.POORLY_DETERMINED, Verdict.UNDETERMINED)
+    assert result.verdict_message.startswith(("poorly determined (sigma", "undetermined ("))
     assert result.sigma_translation.max() > 0.01  # > 2 % of the 0.5 m camera distance
     e = _error(result.hand_T_camera, X)
     assert float(e @ np.linalg.solve(result.covariance, e)) < 22.46  # chi2_6 99.9 %
-    good = solve_axxb(*_scene(np.random.default_rng(3), 10, 180.0, noise=(1.0, 2e-3))[2:])
-    assert good.verdict == "determined"
+    _, _, A, B = _scene(np.random.default_rng(3), 10, 180.0, noise=(1.0, 2e-3))
+    good = solve_axxb(base_T_hands=A, camera_T_targets=B)
+    assert good.verdict is Verdict.DETERMINED and good.verdict_message == "determined"
 
 
 # -- outliers, near 180 deg, the old failures ----------------------------------------------
@@ -177,17 +180,22 @@ def test_one_pose_off_by_20_degrees_is_rejected_and_named(seed):
     bad = int(rng.integers(10))
     B[bad, :3, :3] = rotation(random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
     keep = np.arange(10) != bad
-    for solve in (solve_axxb, lambda a, b: _axyb_x(a, b)[1]):
-        with_outlier, without = solve(A, B), solve(A[keep], B[keep])
+    for solve in (solve_axxb, solve_axyb):
+        with_outlier = solve(base_T_hands=A, camera_T_targets=B)
+        without = solve(base_T_hands=A[keep], camera_T_targets=B[keep])
         assert with_outlier.rejected == (bad,)
         assert without.rejected == ()
-        X_with = getattr(with_outlier, "hand_T_camera", None)
-        if X_with is None:
-            X_with, X_without = with_outlier.camera_T_hand, without.camera_T_hand
-        else:
-            X_without = without.hand_T_camera
-        np.testing.assert_allclose(X_with, X_without, rtol=0, atol=1e-9)
-    assert np.degrees(np.linalg.norm(_error(solve_axxb(A, B).hand_T_camera, X)[:3])) < 1.0
+        np.testing.assert_allclose(
+            with_outlier.hand_T_camera, without.hand_T_camera, rtol=0, atol=1e-9
+        )
+    assert (
+        np.degrees(
+            np.linalg.norm(
+                _error(solve_axxb(base_T_hands=A, camera_T_targets=B).hand_T_camera, X)[:3]
+            )
+        )
+        < 1.0
+    )
 
 
 @pytest.mark.parametrize("angle_deg", [179.0, 179.5, 179.9, 180.0])
@@ -199,7 +207,7 @@ def test_x_near_a_half_turn_with_noise_never_raises(angle_deg):
             hand_R_camera=rotation(AXIS * np.radians(angle_deg)),
             noise=(1.0, 2e-3),
         )
-        result = solve_axxb(A, B)
+        result = solve_axxb(base_T_hands=A, camera_T_targets=B)
         assert np.degrees(np.linalg.norm(_error(result.hand_T_camera, X)[:3])) < 1.5, seed
         X_axyb, _ = _axyb_x(A, B)
         np.testing.assert_allclose(X_axyb, result.hand_T_camera, rtol=0, atol=1e-9)
@@ -209,8 +217,8 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
     """tests/test_handeye.py's generator at seed 1199 (12 views, 0.5 deg on A and B): Tsai
     & Lenz's first estimate lands far off and the old solver raised 'no single X'."""
     rng = np.random.default_rng(1199)
-    hand_R_eye = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
-    hand_T_eye = transform(hand_R_eye, rng.normal(scale=0.1, size=3))
+    hand_R_camera = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
+    hand_T_camera = transform(hand_R_camera, rng.normal(scale=0.1, size=3))
     base_T_target = transform(
         rotation(random_axis(rng) * rng.uniform(0.0, np.pi)), rng.normal(size=3)
     )
@@ -220,7 +228,7 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
             for _ in range(12)
         ]
     )
-    B = np.stack([inverse(hand_T_eye) @ inverse(a) @ base_T_target for a in A])
+    B = np.stack([inverse(hand_T_camera) @ inverse(a) @ base_T_target for a in A])
     for T in (B, A):  # the same draws as tests/test_handeye.py::_noisy_setup
         for k in range(12):
             T[k, :3, :3] = (
@@ -228,8 +236,8 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
             )
         if T is B:
             B[:, :3, 3] += rng.normal(scale=1e-3, size=(12, 3))
-    result = solve_axxb(A, B)
-    assert np.degrees(np.linalg.norm(_error(result.hand_T_camera, hand_T_eye)[:3])) < 1.0
+    result = solve_axxb(base_T_hands=A, camera_T_targets=B)
+    assert np.degrees(np.linalg.norm(_error(result.hand_T_camera, hand_T_camera)[:3])) < 1.0
 
 
 def test_motions_about_one_axis_still_raise_naming_why():
@@ -240,9 +248,9 @@ def test_motions_about_one_axis_still_raise_naming_why():
     )
     B = np.stack([inverse(X) @ inverse(a) @ A[0] for a in A])
     with pytest.raises(HandEyeError, match="about one axis"):
-        solve_axxb(A, B)
+        solve_axxb(base_T_hands=A, camera_T_targets=B)
     with pytest.raises(HandEyeError, match="at least 3 poses"):
-        solve_axxb(A[:2], B[:2])
+        solve_axxb(base_T_hands=A[:2], camera_T_targets=B[:2])
 
 
 # -- closed forms as fallback starts --------------------------------------------------------
@@ -267,7 +275,7 @@ def _spy_candidate_starts(monkeypatch):
 def test_a_clean_fit_does_not_try_the_closed_forms(monkeypatch):
     calls = _spy_candidate_starts(monkeypatch)
     _, _, A, B = _scene(np.random.default_rng(3), 10, 180.0, noise=(0.5, 1e-3))
-    assert solve_axxb(A, B).rejected == ()
+    assert solve_axxb(base_T_hands=A, camera_T_targets=B).rejected == ()
     assert _axyb_x(A, B)[1].rejected == ()
     assert calls == []
 
@@ -286,25 +294,25 @@ def test_a_rejected_pose_makes_both_solvers_try_the_closed_forms_and_keep_the_be
     X, _, A, B = _scene(rng, 10, 180.0, noise=(0.5, 1e-3))
     bad = int(rng.integers(10))
     B[bad, :3, :3] = rotation(random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
-    result = solve_axxb(A, B)
+    result = solve_axxb(base_T_hands=A, camera_T_targets=B)
     _, axyb = _axyb_x(A, B)
     assert calls == ["axxb", "axyb"]
     assert result.rejected == axyb.rejected == (bad,)
-    for X_est in (result.hand_T_camera, inverse(axyb.camera_T_hand)):
+    for X_est in (result.hand_T_camera, axyb.hand_T_camera):
         err = _error(X_est, X)
         assert np.degrees(np.linalg.norm(err[:3])) < 1.0
         assert np.linalg.norm(err[3:]) < 5e-3
 
-    # the same fit through fit_absolute, with and without the fallback (M = B, N = A^-1)
+    # the same fit through fit_absolute, with and without the fallback
     from kinfw.identification.handeye import candidate_starts
 
-    M, N = B, inverse(A)
+    cam_T_targets, hand_T_bases = B, inverse(A)
 
     def fallback():
         return [(inverse(x), y) for x, y in candidate_starts(A, B).values()]
 
-    plain = fit_absolute(M, N, [])
-    both = fit_absolute(M, N, [], fallback_starts=fallback)
+    plain = fit_absolute(cam_T_targets, hand_T_bases, [])
+    both = fit_absolute(cam_T_targets, hand_T_bases, [], fallback_starts=fallback)
     assert plain.fallback_starts_tried == 0 and both.fallback_starts_tried == 3
     # at the plain fit's noise scales, the kept fit has as many poses within the
     # rejection threshold and no higher cost over them (from the public residuals)
@@ -329,19 +337,21 @@ def test_a_fit_from_a_bad_start_that_does_not_converge_is_rescued_by_a_fallback(
     import kinfw.identification.handeye._ml as ml
 
     X, Y, A, B = _scene(np.random.default_rng(4), 6, 180.0, noise=(0.5, 1e-3))
-    M, N = B, inverse(A)
-    closed_form = ml.closed_form_start(M, N)
+    cam_T_targets, hand_T_bases = B, inverse(A)
+    closed_form = ml.closed_form_start(cam_T_targets, hand_T_bases)
     off = (
         transform(rotation([0.0, 0.0, 3.0]), [1.0, 2.0, 3.0]) @ inverse(X),
         transform(rotation([3.0, 0.0, 0.0]), [0.0, 0.0, 0.0]) @ Y,
     )
-    monkeypatch.setattr(ml, "closed_form_start", lambda M, N: off)
-    alone = ml.fit_absolute(M, N, [])
-    rescued = ml.fit_absolute(M, N, [], fallback_starts=lambda: [closed_form])
+    monkeypatch.setattr(ml, "closed_form_start", lambda *poses: off)
+    alone = ml.fit_absolute(cam_T_targets, hand_T_bases, [])
+    rescued = ml.fit_absolute(
+        cam_T_targets, hand_T_bases, [], fallback_starts=lambda: [closed_form]
+    )
     assert not alone.converged
-    assert np.degrees(np.linalg.norm(_error(inverse(alone.P), X)[:3])) > 10.0
+    assert np.degrees(np.linalg.norm(_error(inverse(alone.camera_T_hand), X)[:3])) > 10.0
     assert rescued.fallback_starts_tried == 1 and rescued.converged
-    err = _error(inverse(rescued.P), X)
+    err = _error(inverse(rescued.camera_T_hand), X)
     assert np.degrees(np.linalg.norm(err[:3])) < 1.0 and np.linalg.norm(err[3:]) < 5e-3
 
 
@@ -357,21 +367,21 @@ def test_a_start_in_a_wrong_basin_does_not_win_by_keeping_every_pose(monkeypatch
     X, Y, A, B = _scene(rng, 10, 180.0, noise=(0.5, 1e-3))
     bad = int(rng.integers(10))
     B[bad, :3, :3] = rotation(random_axis(rng) * np.radians(20.0)) @ B[bad, :3, :3]
-    M, N = B, inverse(A)
+    cam_T_targets, hand_T_bases = B, inverse(A)
     off = (
         transform(rotation([0.0, 0.0, 3.0]), [1.0, 2.0, 3.0]) @ inverse(X),
         transform(rotation([3.0, 0.0, 0.0]), [0.0, 0.0, 0.0]) @ Y,
     )
-    plain = ml.fit_absolute(M, N, [])
-    with_off = ml.fit_absolute(M, N, [lambda: off])
+    plain = ml.fit_absolute(cam_T_targets, hand_T_bases, [])
+    with_off = ml.fit_absolute(cam_T_targets, hand_T_bases, [lambda: off])
     with monkeypatch.context() as m:  # the fit from the off start alone
-        m.setattr(ml, "closed_form_start", lambda M, N: off)
-        wrong = ml.fit_absolute(M, N, [])
+        m.setattr(ml, "closed_form_start", lambda *poses: off)
+        wrong = ml.fit_absolute(cam_T_targets, hand_T_bases, [])
     assert plain.rejected == (bad,)
     assert wrong.rejected == () and np.degrees(wrong.sigma_rotation_rad) > 5.0
     assert with_off.fallback_starts_tried == 1
-    np.testing.assert_allclose(with_off.P, plain.P, atol=1e-12)
-    err = _error(inverse(with_off.P), X)
+    np.testing.assert_allclose(with_off.camera_T_hand, plain.camera_T_hand, atol=1e-12)
+    err = _error(inverse(with_off.camera_T_hand), X)
     assert np.degrees(np.linalg.norm(err[:3])) < 1.0
 
 
@@ -399,5 +409,5 @@ def test_a_clean_large_set_rarely_loses_a_pose():
         for k in range(100):
             B[k, :3, :3] = rotation(rng.normal(scale=np.radians(0.3), size=3)) @ B[k, :3, :3]
         B[:, :3, 3] += rng.normal(scale=1e-3, size=(100, 3))
-        lost += bool(solve_axxb(A, B).rejected)
+        lost += bool(solve_axxb(base_T_hands=A, camera_T_targets=B).rejected)
     assert lost <= 2

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from kinfw.identification.handeye import (
-    AXXB_STARTS,
-    AXYB_STARTS,
+    START_METHODS,
     StartError,
     andreff_axxb,
     candidate_starts,
@@ -20,7 +19,8 @@ from kinfw.identification.handeye import (
 )
 from tests.pin_se3 import angle, inverse, random_axis, rotation, transform
 
-ALL = {**AXXB_STARTS, **AXYB_STARTS}
+ALL = {name: method.solve for name, method in START_METHODS.items()}
+AXYB_NAMES = {name for name, method in START_METHODS.items() if method.problem == "axyb"}
 
 # -- independent helpers (Pinocchio and plain numpy, not kinfw.geometry) ----------------
 
@@ -29,18 +29,18 @@ def _random_rotation(rng, max_angle=np.pi):
     return rotation(random_axis(rng) * rng.uniform(0.0, max_angle))
 
 
-def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0):
+def _scene(rng, n, *, max_deg=75.0, hand_R_camera=None, noise=(0.0, 0.0), scale=1.0):
     """Truth and poses of one eye-in-hand setup, lengths in metres times ``scale``.
 
     The hand is a reference pose (camera 0.6 m from the target, looking at it) turned by
     U(0, max_deg) about a random axis and shifted U(-0.25, 0.25) m per axis. The camera
-    poses ``eye_T_target = X^-1 A^-1 base_T_target`` get ``noise = (deg, mm)``: a rotation
+    poses ``camera_T_target = X^-1 A^-1 base_T_target`` get ``noise = (deg, mm)``: a rotation
     by exactly ``deg`` about a random axis and N(0, mm) per axis.
-    Returns ``X = hand_T_eye, Y = base_T_target, A = base_T_hands, B = eye_T_targets``.
+    Returns ``X = hand_T_camera, Y = base_T_target, A = base_T_hands, B = camera_T_targets``.
     """
-    if hand_R_eye is None:
-        hand_R_eye = _random_rotation(rng)
-    X = transform(hand_R_eye, rng.normal(scale=0.05, size=3))
+    if hand_R_camera is None:
+        hand_R_camera = _random_rotation(rng)
+    X = transform(hand_R_camera, rng.normal(scale=0.05, size=3))
     base_T_ref = transform(_random_rotation(rng), rng.uniform(-0.5, 0.5, size=3))
     # target 0.6 m along the camera's z axis at the reference pose
     Y = base_T_ref @ X @ transform(_random_rotation(rng), [0.0, 0.0, 0.6])
@@ -66,14 +66,14 @@ def _scene(rng, n, *, max_deg=75.0, hand_R_eye=None, noise=(0.0, 0.0), scale=1.0
 
 
 def _axyb(X, Y, A, B):
-    """The same setup as ``A' = X' B' Y'``: A' = camera_T_target = B, B' = hand_T_root =
-    inv(A), X' = camera_T_hand = inv(X), Y' = root_T_target = Y."""
+    """The same setup as ``A' = X' B' Y'``: A' = camera_T_target = B, B' = hand_T_base =
+    inv(A), X' = camera_T_hand = inv(X), Y' = base_T_target = Y."""
     return inverse(X), Y, B, inverse(A)
 
 
 def _data(name, rng, n, **kw):
     X, Y, A, B = _scene(rng, n, **kw)
-    return _axyb(X, Y, A, B) if name in AXYB_STARTS else (X, Y, A, B)
+    return _axyb(X, Y, A, B) if name in AXYB_NAMES else (X, Y, A, B)
 
 
 def _errors(T, T_true):
@@ -106,7 +106,7 @@ def test_x_near_a_half_turn_is_recovered_exactly(name, angle_deg):
         axis = random_axis(rng)
         R = 2.0 * np.outer(axis, axis) - np.eye(3) if angle_deg == 180.0 else None
         R = rotation(axis * np.radians(angle_deg)) if R is None else R
-        X, Y, A, B = _data(name, rng, 10, hand_R_eye=R)
+        X, Y, A, B = _data(name, rng, 10, hand_R_camera=R)
         X_hat, Y_hat = ALL[name](A, B)
         np.testing.assert_allclose(X_hat, X, atol=1e-9)
         np.testing.assert_allclose(Y_hat, Y, atol=1e-9)
@@ -221,7 +221,7 @@ def test_rank_starts_puts_a_wrong_candidate_last_in_any_unit():
     rng = np.random.default_rng(4)
     X, Y, A, B = _scene(rng, 10, noise=(1.0, 2.0))
     starts = candidate_starts(A, B)
-    assert set(starts) == set(AXXB_STARTS)
+    assert set(starts) == set(ALL) - AXYB_NAMES == {"park", "andreff", "daniilidis"}
     X_bad = X.copy()
     X_bad[:3, :3] = X[:3, :3] @ rotation([0.0, np.radians(10.0), 0.0])
     starts["wrong"] = (X_bad, Y)
@@ -274,6 +274,23 @@ def test_candidate_starts_for_axyb_and_all_failing():
         candidate_starts(A[:2], B[:2], problem="axyb")
 
 
+@pytest.mark.parametrize("problem", ["axxb", "axyb"])
+def test_the_one_registry_gives_the_same_start_through_either_entry(problem):
+    """candidate_starts (one input check, the methods' prepared forms) returns, for every
+    method of START_METHODS of that problem, exactly what its public function returns."""
+    X, Y, A, B = _scene(np.random.default_rng(8), 7, noise=(0.5, 1.0))
+    if problem == "axyb":
+        X, Y, A, B = _axyb(X, Y, A, B)
+    found = candidate_starts(A, B, problem=problem)
+    assert list(found) == [k for k, m in START_METHODS.items() if m.problem == problem]
+    for name, (X_hat, Y_hat) in found.items():
+        X_pub, Y_pub = START_METHODS[name].solve(A, B)
+        np.testing.assert_array_equal(X_hat, X_pub)
+        np.testing.assert_array_equal(Y_hat, Y_pub)
+    with pytest.raises(ValueError, match="problem: expected 'axxb' or 'axyb', got 'ax'"):
+        candidate_starts(A, B, problem="ax")
+
+
 # -- OpenCV's implementations of the same methods (an independent truth; the test extra) ------
 
 
@@ -286,7 +303,7 @@ def cv2():
 
 def _opencv(cv2, name, A, B):
     """OpenCV's answer ``(X, Y)`` in our conventions (``Y`` is None for A X = X B)."""
-    if name in AXYB_STARTS:
+    if name in AXYB_NAMES:
         method = {
             "shah": cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH,
             "li": cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI,
@@ -319,7 +336,7 @@ def test_noise_free_answers_equal_opencvs(cv2, name):
 def _rms_scale(name, A, B):
     """The length scale the docstrings state: RMS over the relative motions' translations
     (A X = X B), or over the absolute translations (Li)."""
-    if name in AXYB_STARTS:
+    if name in AXYB_NAMES:
         t = np.concatenate([A[:, :3, 3], B[:, :3, 3]])
     else:
         i, j = np.triu_indices(len(A), 1)
@@ -386,6 +403,6 @@ def test_the_band_179_to_180_deg_with_noise_is_solved(name):
     for angle_deg in np.linspace(179.0, 180.0, 40):
         axis = random_axis(rng)
         R = rotation(axis * np.radians(angle_deg))
-        X, _, A, B = _data(name, rng, 10, hand_R_eye=R, noise=(1.0, 2.0))
+        X, _, A, B = _data(name, rng, 10, hand_R_camera=R, noise=(1.0, 2.0))
         worst = max(worst, _errors(ALL[name](A, B)[0], X)[0])
     assert worst < 3.0

@@ -142,15 +142,22 @@ def test_study_records_the_solver_history_against_the_truth():
     rng = np.random.default_rng([4, 1_000_000, 5, 2])
     X, Y, B, A = random_problem(rng, 5)
     A = rotate_about_random_axes(A, rng, np.radians(1.0))
-    res = solve_axyb(A, B, Y0=np.eye(4), refine=False, record_history=True, rng=rng)
-    k = min(40, len(res.root_T_target_history))
-    y_err = [_angle_deg(Y[:3, :3], T[:3, :3]) for T in res.root_T_target_history[:k]]
+    res = solve_axyb(
+        camera_T_targets=A,
+        hand_T_bases=B,
+        base_T_target_guess=np.eye(4),
+        refine=False,
+        record_history=True,
+        rng=rng,
+    )
+    k = min(40, len(res.base_T_target_history))
+    y_err = [_angle_deg(Y[:3, :3], T[:3, :3]) for T in res.base_T_target_history[:k]]
     x_err = [_angle_deg(X[:3, :3], T[:3, :3]) for T in res.camera_T_hand_history[:k]]
     np.testing.assert_allclose(result.y_error_deg[0, 2, :k], y_err, atol=1e-9)
     np.testing.assert_allclose(result.x_error_deg[0, 2, :k], x_err, atol=1e-9)
     np.testing.assert_allclose(result.initial_y_error_deg[0, 2], _angle_deg(np.eye(3), Y[:3, :3]))
     np.testing.assert_allclose(
-        result.solved_y_error_deg[0, 2], _angle_deg(Y[:3, :3], res.root_T_target[:3, :3])
+        result.solved_y_error_deg[0, 2], _angle_deg(Y[:3, :3], res.base_T_target[:3, :3])
     )
 
 

@@ -302,8 +302,8 @@ def test_best_time_offset_recovers_a_known_delay_and_x(synthetic_streams):
     result = best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye, step=8)
     assert result.offset_s == pytest.approx(DELAY_S, abs=1e-3 + 1e-9)
     assert result.position_spread < 1e-4
-    assert _angle(result.hand_T_eye[:3, :3], X_TRUE[:3, :3]) < np.radians(0.01)
-    assert np.linalg.norm(result.hand_T_eye[:3, 3] - X_TRUE[:3, 3]) < 1e-4
+    assert _angle(result.hand_T_camera[:3, :3], X_TRUE[:3, :3]) < np.radians(0.01)
+    assert np.linalg.norm(result.hand_T_camera[:3, 3] - X_TRUE[:3, 3]) < 1e-4
     # the objective grows away from the delay, in both directions
     spreads = dict(zip(np.round(result.offsets_s, 6), result.position_spreads, strict=True))
     assert spreads[-0.05] > spreads[0.0] > spreads[0.03] > result.position_spread
@@ -396,11 +396,10 @@ def _eth(name):
     t_eye, target_T_eye = read_pose_csv(_eth_file(case.eye_csv))
     best = best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye)
     A, B = align_streams(t_hand, base_T_hand, t_eye, target_T_eye, offset_s=best.offset_s)
-    axxb = solve_axxb(A, B)
+    axxb = solve_axxb(base_T_hands=A, camera_T_targets=B)
     A0, B0 = align_streams(t_hand, base_T_hand, t_eye, target_T_eye)
-    X0 = solve_axxb(A0, B0).hand_T_camera
-    # A[i] = X B[i] Y with A = eye_T_target, X = eye_T_hand, B = hand_T_base, Y = base_T_target
-    axyb = solve_axyb(B, _inv(A))
+    X0 = solve_axxb(base_T_hands=A0, camera_T_targets=B0).hand_T_camera
+    axyb = solve_axyb(base_T_hands=A, camera_T_targets=B)  # the same inputs as solve_axxb
     out = {
         "case": case,
         "best": best,
@@ -411,7 +410,7 @@ def _eth(name):
         "spread": implied_target_spread(A, axxb.hand_T_camera, B),
         "spread_at_zero": implied_target_spread(A0, X0, B0),
     }
-    hand_T_eye, hand_T_eye_axyb = axxb.hand_T_camera, _inv(axyb.camera_T_hand)
+    hand_T_eye, hand_T_eye_axyb = axxb.hand_T_camera, axyb.hand_T_camera
     t, t_axyb = hand_T_eye[:3, 3], hand_T_eye_axyb[:3, 3]
     print(
         f"\n[{name}] best offset {best.offset_s:+.3f} s, {len(A)} pairs: spread "
@@ -423,7 +422,7 @@ def _eth(name):
         f"  AXYB t = {np.round(t_axyb * 1e3, 1)} mm, "
         f"{np.degrees(_angle(hand_T_eye_axyb[:3, :3], hand_T_eye[:3, :3])):.3f} deg from "
         f"AXXB; Y t = "
-        f"{np.round(axyb.root_T_target[:3, 3] * 1e3, 1)} mm"
+        f"{np.round(axyb.base_T_target[:3, 3] * 1e3, 1)} mm"
     )
     return out
 
@@ -507,7 +506,7 @@ def _mean_rotation(Rs):
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_axyb_agrees_with_axxb(name):
     eth = _eth(name)
-    hand_T_eye = _inv(eth["axyb"].camera_T_hand)
+    hand_T_eye = eth["axyb"].hand_T_camera
     X = eth["axxb"].hand_T_camera
     weak_axis = eth["case"].weak_axis
     assert np.degrees(_angle(hand_T_eye[:3, :3], X[:3, :3])) < 1.0
@@ -522,7 +521,7 @@ def test_eth_axyb_agrees_with_axxb(name):
         assert abs(along) < 0.015
     # Y is the target in the base: the (median, mean) pose implied with AXYB's own X, and
     # with AXXB's X where the two X agree
-    Y = eth["axyb"].root_T_target
+    Y = eth["axyb"].base_T_target
     base_T_targets = eth["A"] @ hand_T_eye @ eth["B"]
     assert np.linalg.norm(Y[:3, 3] - np.median(base_T_targets[:, :3, 3], axis=0)) < 0.001
     assert np.degrees(_angle(Y[:3, :3], _mean_rotation(base_T_targets[:, :3, :3]))) < 0.1

@@ -1,24 +1,40 @@
 """Hand-eye calibration: ``A X = X B`` (Tsai & Lenz 1989; :func:`solve_axxb`) and
 ``A = X B Y`` (Hirsh, DeSouza & Kak 2001; :func:`solve_axyb`), each ending in maximum
 likelihood on SE(3) with covariance, verdict and outlier rejection; the closed forms of
-Park, Andreff, Daniilidis, Shah and Li as starts; stage 2 of Shih et al. per camera
-(:func:`calibrate_cameras`); the time offset between pose streams.
+Park, Andreff, Daniilidis, Shah and Li as starts (by name in :data:`START_METHODS`);
+stage 2 of Shih et al. per camera (:func:`calibrate_cameras`); the time offset between
+pose streams (:func:`best_time_offset`).
+
+One convention for every solver here (eye-in-hand): a camera rigidly mounted on the
+robot's *hand* (the link it hangs from: end effector, flange, the head's plate) looks at
+a *target* fixed in the world while the robot moves. Frames: ``base`` (the frame of the
+forward kinematics: the robot's base, or the URDF root), ``hand``, ``camera``,
+``target``; ``a_T_b`` is the pose of frame b in frame a. At every pose ``i``::
+
+    base_T_target = base_T_hands[i] @ hand_T_camera @ camera_T_targets[i]
+
+with the inputs ``base_T_hands`` (forward kinematics, OpenCV's ``gripper2base``) and
+``camera_T_targets`` (camera extrinsics, OpenCV's ``target2cam``), and the unknowns
+``hand_T_camera`` (the camera's mount, OpenCV's ``cam2gripper``) and ``base_T_target``.
+Both solvers take the poses by these names, keyword-only, and return results that name
+the transforms by them; the papers' ``X`` and ``Y`` are read-only aliases, and they
+differ: Tsai & Lenz's ``X`` is ``hand_T_camera``, Hirsh et al.'s ``X`` is its inverse
+``camera_T_hand``. Eye-to-hand (the camera fixed in the world, the target on the hand)
+is the same equation with base and hand exchanged (the solvers' Warnings sections).
+Quaternions are scalar last ``(x, y, z, w)`` throughout; the verdict is a
+:class:`Verdict` with a message for people.
 """
 
 from __future__ import annotations
 
 from kinfw.identification.handeye._axxb import HandEyeError, motion_pairs, solve_axxb
-from kinfw.identification.handeye._axyb import AXYBResult, convergence_factor, solve_axyb
+from kinfw.identification.handeye._axyb import convergence_factor, solve_axyb
 from kinfw.identification.handeye._axyb_iteration import (
     AXYBError,
     RotationRun,
     TranslationRun,
-    consistent_quats_xyzw,
     iteration_matrix,
-    left_product_matrix_xyzw,
     normalise,
-    right_product_matrix_xyzw,
-    rotation_from_quat_xyzw,
     rotation_iteration,
     translation_iteration,
 )
@@ -64,26 +80,30 @@ from kinfw.identification.handeye._ml import (
 from kinfw.identification.handeye._quaternion import (
     closed_form_batch,
     closed_form_start,
-    consistent_quats,
+    consistent_quats_xyzw,
+    left_product_matrix_xyzw,
     product_matrices,
     product_tensor,
+    right_product_matrix_xyzw,
+    rotation_from_quat_xyzw,
 )
-from kinfw.identification.handeye._result import HandEyeResult
+from kinfw.identification.handeye._result import AXYBResult, HandEyeResult
 from kinfw.identification.handeye._starts import (
-    AXXB_STARTS,
-    AXYB_STARTS,
+    START_METHODS,
     RankedStart,
+    StartMethod,
     candidate_starts,
     rank_starts,
+    register_start,
+    unregister_start,
 )
 from kinfw.identification.handeye._starts_axxb import (
-    AXXB_FROM_MOTIONS,
     andreff_axxb,
     daniilidis_axxb,
     park_axxb,
     prepare_axxb,
 )
-from kinfw.identification.handeye._starts_axyb import AXYB_FROM_CHECKED, li_axyb, shah_axyb
+from kinfw.identification.handeye._starts_axyb import li_axyb, shah_axyb
 from kinfw.identification.handeye._time_offset import (
     TimeOffsetResult,
     best_time_offset,
@@ -102,16 +122,13 @@ from kinfw.identification.handeye._uncertainty import (
     UNDETERMINED_ROTATION_DEG,
     UNDETERMINED_TRANSLATION_FRACTION,
     Uncertainty,
+    Verdict,
     combined_verdict,
     inverse_covariance_map,
     uncertainty,
 )
 
 __all__ = [
-    "AXXB_FROM_MOTIONS",
-    "AXXB_STARTS",
-    "AXYB_FROM_CHECKED",
-    "AXYB_STARTS",
     "CHI2_6_999",
     "HALF_TURN_BAND_RAD",
     "MIN_MOTION_RAD",
@@ -121,6 +138,7 @@ __all__ = [
     "POOR_TRANSLATION_FRACTION",
     "PRE_ROTATE_ABOVE_RAD",
     "RANK_TOL",
+    "START_METHODS",
     "UNDETERMINED_ROTATION_DEG",
     "UNDETERMINED_TRANSLATION_FRACTION",
     "WEAK_MOTION_RAD",
@@ -136,9 +154,11 @@ __all__ = [
     "RankedStart",
     "RotationRun",
     "StartError",
+    "StartMethod",
     "TimeOffsetResult",
     "TranslationRun",
     "Uncertainty",
+    "Verdict",
     "andreff_axxb",
     "assess",
     "best_time_offset",
@@ -152,7 +172,6 @@ __all__ = [
     "closed_form_batch",
     "closed_form_start",
     "combined_verdict",
-    "consistent_quats",
     "consistent_quats_xyzw",
     "convergence_factor",
     "daniilidis_axxb",
@@ -173,6 +192,7 @@ __all__ = [
     "product_matrices",
     "product_tensor",
     "rank_starts",
+    "register_start",
     "rejection_threshold",
     "right_product_matrix_xyzw",
     "robust_sigmas",
@@ -188,5 +208,6 @@ __all__ = [
     "translations_least_squares",
     "tsai_rotation",
     "uncertainty",
+    "unregister_start",
     "variance_components",
 ]

@@ -4,21 +4,22 @@ then maximum likelihood on SE(3) (:mod:`kinfw.identification.handeye`).
 The problem (Shih et al. 1992, section 5, eqs. 68-71)
 ------------------------------------------------------
 A camera (the *eye*) is rigidly mounted on the robot's end effector (the *hand*) and
-looks at a target fixed in the world. At pose ``i`` the robot's forward kinematics gives
+looks at a target fixed in the world (the package's convention,
+:mod:`kinfw.identification.handeye`). At pose ``i`` the robot's forward kinematics gives
 ``A[i] = base_T_hand`` and the camera's extrinsic calibration gives
-``B[i] = eye_T_target``. The target does not move, so (eqs. 68-69)::
+``B[i] = camera_T_target``. The target does not move, so (eqs. 68-69)::
 
-    base_T_target = A[i] @ X @ B[i]          for every i,   X = hand_T_eye.
+    base_T_target = A[i] @ X @ B[i]          for every i,   X = hand_T_camera.
 
-The result names it by its frames, :attr:`HandEyeResult.hand_T_camera`; ``X`` is kept as
-an alias.
+:func:`solve_axxb` takes the poses by these frame names and names the result by them,
+:attr:`HandEyeResult.hand_T_camera`; ``X`` is kept as an alias.
 
 For two poses ``i, j`` this becomes (eqs. 70-71; the paper's ``k, j`` are our ``i, j``)::
 
     A_ij X = X B_ij,   A_ij = inv(A[j]) @ A[i],   B_ij = B[j] @ inv(B[i]).
 
 ``A_ij`` is the hand's motion expressed in the hand frame, ``B_ij`` the same motion seen
-in the eye frame. Both are conjugate, so their rotation angles agree; their axes are
+in the camera frame. Both are conjugate, so their rotation angles agree; their axes are
 related by ``a = X_R b``.
 
 The start uses every pair of poses (up to ``ALL_PAIRS_UP_TO`` poses; beyond, a fixed
@@ -42,13 +43,14 @@ from kinfw.geometry import (
     rotation_vector_from_matrix,
     transform_from_rotation_translation,
 )
-from kinfw.identification.handeye._checks import check_pose_pairs
+from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
 from kinfw.identification.handeye._ml import PoseFit, fit_absolute
 from kinfw.identification.handeye._result import HandEyeResult
 from kinfw.identification.handeye._starts import candidate_starts
 from kinfw.identification.handeye._tsai import PARALLEL_AXES_RAD, largest_line_angle, tsai_rotation
 from kinfw.identification.handeye._uncertainty import (
     Uncertainty,
+    Verdict,
     inverse_covariance_map,
     uncertainty,
 )
@@ -74,28 +76,39 @@ class HandEyeError(ValueError):
     """The poses cannot determine the hand-eye transform; the message says why."""
 
 
+@_poses_by_keyword("base_T_hands", "camera_T_targets")
 def solve_axxb(
-    A: ArrayLike, B: ArrayLike, *, min_angle_rad: float = np.radians(2.0)
+    *,
+    base_T_hands: ArrayLike,
+    camera_T_targets: ArrayLike,
+    min_angle_rad: float = np.radians(2.0),
 ) -> HandEyeResult:
-    """Hand-eye transform ``X = hand_T_camera`` from absolute poses: maximum likelihood
-    started from Tsai & Lenz.
+    """Hand-eye transform ``hand_T_camera`` (Tsai & Lenz's ``X``) from absolute poses:
+    maximum likelihood started from Tsai & Lenz.
+
+    The package's convention (eye-in-hand, :mod:`kinfw.identification.handeye`): a camera
+    rigid on the robot's hand looks at a target fixed in the world, so that
+    ``base_T_hands[i] @ hand_T_camera @ camera_T_targets[i]`` is the same
+    ``base_T_target`` for every ``i``. Every argument is keyword-only.
 
     Parameters
     ----------
-    A : array_like, shape (n, 4, 4)
-        ``base_T_hand`` at each pose: the robot's forward kinematics (OpenCV's
-        ``gripper2base``). Any length unit, the same as ``B``'s.
-    B : array_like, shape (n, 4, 4)
-        ``eye_T_target`` at each pose: the camera's extrinsics (OpenCV's
-        ``target2cam``), so that ``A[i] @ X @ B[i]`` is the same for all ``i``.
-    min_angle_rad : float, keyword-only
+    base_T_hands : array_like, shape (n, 4, 4)
+        Pose of the hand in the robot's base at each pose: the forward kinematics
+        (OpenCV's ``gripper2base``; the paper's ``A[i]``). Any length unit, the same as
+        ``camera_T_targets``'.
+    camera_T_targets : array_like, shape (n, 4, 4)
+        Pose of the target in the camera at each pose: the camera's extrinsics (OpenCV's
+        ``target2cam``; the paper's ``B[i]``).
+    min_angle_rad : float
         Relative motions whose hand rotation is smaller than this are not used.
 
     Returns
     -------
     HandEyeResult
-        ``hand_T_camera`` (the papers' ``X``) in the input length unit, its
-        covariance and verdict, the rejected poses, and the fit's quality.
+        ``hand_T_camera`` (alias ``X``) and ``base_T_target`` (alias ``Y``) in the input
+        length unit, the covariance and verdict, the rejected poses, and the fit's
+        quality.
 
     Raises
     ------
@@ -103,17 +116,26 @@ def solve_axxb(
         Fewer than 3 poses, shapes that differ, a matrix that is not a rigid transform
         (names the argument and index), no motion with a rotation of at least
         ``min_angle_rad``, all motions about one axis (then the rotation of X about it and
-        its translation along it are not determined), or motions of A and B that no
-        single X relates even after outlying poses are rejected (mispaired samples, one of
-        A and B inverted, eye-to-hand data given as eye-in-hand, a camera that is not
-        rigid on the hand). Poorly determined X (small motions) is not an error: see
-        ``verdict`` and ``sigma_rotation_deg``.
+        its translation along it are not determined), or motions of the hand and the
+        camera that no single X relates even after outlying poses are rejected
+        (mispaired samples, one of the batches inverted, eye-to-hand data given as
+        eye-in-hand, a camera that is not rigid on the hand). Poorly determined X (small
+        motions) is not an error: see ``verdict`` and ``sigma_rotation_deg``.
+    TypeError
+        A positional argument (the message names the keywords): the meaning of the
+        batches is given by their names only.
 
     Warnings
     --------
     Two mistakes cannot be detected, because the data stay consistent: the loop
-    ``base -> hand -> eye -> target -> base`` is merely walked the other way. With A and B
-    swapped the answer is ``target_T_base``; with both inverted it is ``base_T_target``.
+    ``base -> hand -> camera -> target -> base`` is merely walked the other way. With the
+    two batches swapped the answer is ``target_T_base``; with both inverted it is
+    ``base_T_target``.
+
+    Eye-to-hand (a camera fixed in the world, the target on the hand) is the same
+    equation with base and hand exchanged: pass ``base_T_hands=inverse(base_T_hand)``
+    (the hand's forward kinematics inverted); ``hand_T_camera`` is then ``base_T_camera``
+    and ``base_T_target`` is ``hand_T_target``.
 
     Notes
     -----
@@ -180,7 +202,12 @@ def solve_axxb(
     Binocular System Using Stereo Vision", TR-92-007, Academia Sinica, 1992, section 5,
     eqs. (68)-(71).
     """
-    base_T_hands, eye_T_targets = check_pose_pairs(A, B, error=HandEyeError)
+    base_T_hands, camera_T_targets = check_pose_pairs(
+        base_T_hands,
+        camera_T_targets,
+        error=HandEyeError,
+        names=("base_T_hands", "camera_T_targets"),
+    )
     n = len(base_T_hands)
     if not 0.0 <= min_angle_rad < np.pi:
         raise HandEyeError(f"min_angle_rad must be in [0, pi), got {min_angle_rad!r}")
@@ -188,7 +215,7 @@ def solve_axxb(
     # Relative motions of pose pairs i < j (Shih et al. eq. 71).
     i, j = motion_pairs(n)
     A_ijs = inverse_transform(base_T_hands[j]) @ base_T_hands[i]
-    B_ijs = eye_T_targets[j] @ inverse_transform(eye_T_targets[i])
+    B_ijs = camera_T_targets[j] @ inverse_transform(camera_T_targets[i])
     angles_A = rotation_angle(A_ijs[:, :3, :3])
     angles_B = rotation_angle(B_ijs[:, :3, :3])
 
@@ -218,42 +245,45 @@ def solve_axxb(
             f"about another axis"
         )
 
-    hand_R_eye, singular_values = tsai_rotation(rotvecs_A, rotvecs_B)
+    hand_R_camera, singular_values = tsai_rotation(rotvecs_A, rotvecs_B)
 
     def tsai_start() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Tsai & Lenz's X (translation by eq. 15 over both orders of every pair)."""
+        """Tsai & Lenz's X (translation by eq. 15 over both orders of every pair), as
+        ``(camera_T_hand, base_T_target)``."""
         A2 = np.concatenate([A_ijs, inverse_transform(A_ijs)])
         B2 = np.concatenate([B_ijs, inverse_transform(B_ijs)])
         lhs = (A2[:, :3, :3] - np.eye(3)).reshape(-1, 3)
-        rhs = (np.einsum("ij,kj->ki", hand_R_eye, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
-        X0 = transform_from_rotation_translation(
-            hand_R_eye, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+        rhs = (np.einsum("ij,kj->ki", hand_R_camera, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
+        tsai = transform_from_rotation_translation(
+            hand_R_camera, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
         )
-        return inverse_transform(X0), average_transform(base_T_hands @ X0 @ eye_T_targets)
+        return inverse_transform(tsai), average_transform(base_T_hands @ tsai @ camera_T_targets)
 
-    length = float(np.sqrt(np.mean(np.sum(eye_T_targets[:, :3, 3] ** 2, axis=1))))
+    length = float(np.sqrt(np.mean(np.sum(camera_T_targets[:, :3, 3] ** 2, axis=1))))
 
     def x_uncertainty(fit: PoseFit) -> tuple[NDArray[np.float64], Uncertainty]:
-        """X's covariance (from P = X^-1's) and its verdict."""
-        G = inverse_covariance_map(fit.P)
+        """hand_T_camera's covariance (from that of its inverse, camera_T_hand) and its
+        verdict."""
+        G = inverse_covariance_map(fit.camera_T_hand)
         covariance = G @ fit.covariance[:6, :6] @ G.T
         return covariance, uncertainty(covariance, length, frame="the camera frame")
 
     def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Park, Andreff and Daniilidis as (P, Q) = (X^-1, base_T_target)."""
-        found = candidate_starts(base_T_hands, eye_T_targets, problem="axxb")
-        return [(inverse_transform(X0), Y0) for X0, Y0 in found.values()]
+        """Park, Andreff and Daniilidis as ``(camera_T_hand, base_T_target)``."""
+        found = candidate_starts(base_T_hands, camera_T_targets, problem="axxb")
+        return [(inverse_transform(X), Y) for X, Y in found.values()]
 
-    # Maximum likelihood on the absolute poses: B[i] = X^-1 A[i]^-1 Y, noise in B; when
-    # that fit is not clean, the other closed forms start it too.
+    # Maximum likelihood on the absolute poses, camera_T_target[i] = camera_T_hand @
+    # hand_T_base[i] @ base_T_target with the noise in the camera's pose; when that fit
+    # is not clean, the other closed forms start it too.
     fit = fit_absolute(
-        eye_T_targets,
+        camera_T_targets,
         inverse_transform(base_T_hands),
         [tsai_start],
         fallback_starts=fallback_starts,
-        accept=lambda f: x_uncertainty(f)[1].verdict == "determined",
+        accept=lambda f: x_uncertainty(f)[1].verdict is Verdict.DETERMINED,
     )
-    hand_T_eye = inverse_transform(fit.P)
+    hand_T_camera = inverse_transform(fit.camera_T_hand)
     covariance, unc = x_uncertainty(fit)
 
     # Residuals of A_ij X = X B_ij over the motions between poses kept.
@@ -263,8 +293,8 @@ def solve_axxb(
     A_k, B_k = A_ijs[keep], B_ijs[keep]
     A_k = np.concatenate([A_k, inverse_transform(A_k)])
     B_k = np.concatenate([B_k, inverse_transform(B_k)])
-    left = A_k @ hand_T_eye
-    right = hand_T_eye @ B_k
+    left = A_k @ hand_T_camera
+    right = hand_T_camera @ B_k
     rot_res = rotation_angle(np.swapaxes(left[:, :3, :3], 1, 2) @ right[:, :3, :3])
     trans_res = np.linalg.norm(left[:, :3, 3] - right[:, :3, 3], axis=1)
     rms_rotation = float(np.sqrt(np.mean(rot_res**2)))
@@ -282,13 +312,15 @@ def solve_axxb(
             else ""
         )
         raise HandEyeError(
-            f"no single X relates the motions of A and B: RMS rotation residual of "
+            f"no single X relates the motions of the hand and the camera: RMS rotation "
+            f"residual of "
             f"A_ij X = X B_ij is {np.degrees(rms_rotation):.3g} deg (worst: poses {ik} and "
             f"{jk}, {np.degrees(rot_res[k]):.3g} deg) > {np.degrees(INCONSISTENT_RAD):.3g} deg."
-            f"{small} A or B may be inverted: A must be base_T_hand (robot forward kinematics, "
-            f"OpenCV gripper2base) and B eye_T_target (camera extrinsics, OpenCV target2cam); "
-            f"for a camera fixed in the world looking at a target on the hand (eye-to-hand) "
-            f"pass A = inverse(base_T_hand), and X is then base_T_eye"
+            f"{small} A batch may be inverted: base_T_hands must be the robot's forward "
+            f"kinematics (OpenCV gripper2base) and camera_T_targets the camera's extrinsics "
+            f"(OpenCV target2cam); for a camera fixed in the world looking at a target on "
+            f"the hand (eye-to-hand) pass base_T_hands = inverse(base_T_hand), and "
+            f"hand_T_camera is then base_T_camera"
         )
     condition = float(singular_values[-1] / singular_values[0])
     if condition < POOR_CONDITION:
@@ -301,17 +333,18 @@ def solve_axxb(
     if fit.rejected:
         log.info("solve_axxb: poses %s rejected as outliers", list(fit.rejected))
     return HandEyeResult(
-        hand_T_camera=hand_T_eye,
+        hand_T_camera=hand_T_camera,
         n_pairs=int(np.count_nonzero(keep)),
         rms_rotation_rad=rms_rotation,
         rms_translation=float(np.sqrt(np.mean(trans_res**2))),
         rotation_condition=condition,
         axis_spread_rad=float(spread),
-        base_T_target=fit.Q,
+        base_T_target=fit.base_T_target,
         covariance=covariance,
         sigma_rotation_deg=unc.sigma_rotation_deg,
         sigma_translation=unc.sigma_translation,
         verdict=unc.verdict,
+        verdict_message=unc.message,
         rejected=fit.rejected,
         noise_rotation_rad=fit.sigma_rotation_rad,
         noise_translation=fit.sigma_translation,
@@ -344,7 +377,7 @@ def _check_angles_agree(
     i: NDArray[np.intp],
     j: NDArray[np.intp],
 ) -> None:
-    """A motion and its view from the eye are conjugate: their rotation angles agree.
+    """A motion and its view from the camera are conjugate: their rotation angles agree.
 
     The median difference is tested, so that pairs in the tail of the measurement noise
     or involving one outlying pose (rejected later) do not reject the data; the worst
@@ -356,12 +389,13 @@ def _check_angles_agree(
     if rms > INCONSISTENT_RAD:
         k = int(np.argmax(diff))
         raise HandEyeError(
-            f"A and B motions are inconsistent: the rotation angles of the hand's and the "
-            f"eye's relative motions differ by a median {np.degrees(rms):.3g} deg (> "
+            f"the hand's and the camera's motions are inconsistent: the rotation angles of "
+            f"their relative motions differ by a median {np.degrees(rms):.3g} deg (> "
             f"{np.degrees(INCONSISTENT_RAD):.3g} deg; {n_bad} of {len(diff)} pose pairs differ "
             f"by more); worst: between poses {i[k]} and "
-            f"{j[k]} the hand turns {np.degrees(angles_A[k]):.3g} deg but the eye "
-            f"{np.degrees(angles_B[k]):.3g} deg. A[k] and B[k] must be taken at the same pose "
-            f"k, with the camera rigid on the hand: check the pairing and order of the samples "
-            f"(inverting or swapping A and B does not change these angles)"
+            f"{j[k]} the hand turns {np.degrees(angles_A[k]):.3g} deg but the camera "
+            f"{np.degrees(angles_B[k]):.3g} deg. base_T_hands[k] and camera_T_targets[k] must "
+            f"be taken at the same pose k, with the camera rigid on the hand: check the "
+            f"pairing and order of the samples "
+            f"(inverting or swapping the batches does not change these angles)"
         )

@@ -10,9 +10,12 @@ Problem" (ICRA 2001). The paper's frames map onto the plain batches of
     Y    = b_T_w    (base-world: pose of the world in the base)
 
 so that eqs. (1)-(6) read ``A[i] = X @ B[i] @ Y`` (the paper's ``^aH_b`` is our ``a_T_b``).
-:class:`AXYBResult` names the unknowns by their frames, with the robot's hand (end
-effector ``e``) and root (base ``b``) and the target that defines the world ``w``:
-``camera_T_hand`` (``X``) and ``root_T_target`` (``Y``); ``X`` and ``Y`` stay as aliases.
+:func:`solve_axyb` takes and returns them by the frames of the package's convention
+(:mod:`kinfw.identification.handeye`), with the robot's hand (end effector ``e``) and
+base ``b`` and the target that defines the world ``w``: ``camera_T_targets`` (``A``),
+``base_T_hands`` (``B^-1``, or ``hand_T_bases`` = ``B``), and the result's
+``camera_T_hand`` (``X``, the inverse of ``hand_T_camera``) and ``base_T_target``
+(``Y``); ``X`` and ``Y`` stay as aliases.
 
 The algorithm (paper section 3)
     Rotations: from a guess of ``Y`` (the identity in the paper) every pose gives an
@@ -52,7 +55,7 @@ Refinement (``refine=True``, the default) adds, measured in the notes of
    translations) ignored what the translations say about the rotations: on Tabb DS1
    X moves from 0.545 to 0.175 deg of Tabb's reference, at motions <= 15 deg (1 deg +
    2 mm noise, 10 views) the median X error drops from 2.6 to 0.25 deg. The paper's
-   iteration runs first only when a start ``X0``/``Y0`` or the history is asked for.
+   iteration runs first only when a guess or the history is asked for.
 
 ``refine=False`` is the paper's algorithm alone, from the identity or the given guess.
 """
@@ -60,136 +63,41 @@ Refinement (``refine=True``, the default) adds, measured in the notes of
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.geometry import rotation_angle, transform_from_rotation_translation
+from kinfw.geometry import inverse_transform, rotation_angle, transform_from_rotation_translation
 from kinfw.identification.handeye._axyb_iteration import (
     STALL_RAD,
     AXYBError,
-    consistent_quats_xyzw,
     iteration_matrix,
-    rotation_from_quat_xyzw,
     rotation_iteration,
     translation_iteration,
 )
-from kinfw.identification.handeye._axyb_start import check_motion, start_of_y
-from kinfw.identification.handeye._checks import check_pose_pairs
+from kinfw.identification.handeye._axyb_start import check_motion, check_start, start_of_y
+from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
 from kinfw.identification.handeye._ml import PoseFit, assess, fit_absolute
+from kinfw.identification.handeye._quaternion import (
+    consistent_quats_xyzw,
+    rotation_from_quat_xyzw,
+)
+from kinfw.identification.handeye._result import AXYBResult
 from kinfw.identification.handeye._starts import candidate_starts
-from kinfw.identification.handeye._uncertainty import combined_verdict, uncertainty
+from kinfw.identification.handeye._uncertainty import Verdict, combined_verdict, uncertainty
 
-__all__ = [
-    "AXYBError",
-    "AXYBResult",
-    "convergence_factor",
-    "solve_axyb",
-]
+__all__ = ["AXYBError", "convergence_factor", "solve_axyb"]
 
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True, slots=True)
-class AXYBResult:
-    """Estimate of ``camera_T_target[i] ≈ camera_T_hand @ hand_T_root[i] @ root_T_target``
-    (``A[i] ≈ X @ B[i] @ Y``) and its quality.
-
-    Attributes
-    ----------
-    camera_T_hand : ndarray, shape (4, 4)
-        Pose of the hand (end effector) in the camera frame, input length unit: the left
-        unknown ``X``, the paper's hand-eye ``c_T_e``.
-    root_T_target : ndarray, shape (4, 4)
-        Pose of the target (the paper's world) in the robot's root (base) frame, input
-        length unit: the right unknown ``Y``, the paper's base-world ``b_T_w``.
-    iterations : int
-        Iterations of the paper's alternation, rotation plus translation phase (restarts
-        included; the refinement's Gauss-Newton steps are not counted).
-    converged : bool
-        Whether the final stage met the tolerance: the paper's iterations for
-        ``refine=False``, the Gauss-Newton refinement for ``refine=True``.
-    restarts : int
-        Random restarts after a stall of the rotation iteration (the paper's 180 degrees).
-    rms_rotation_rad : float
-        RMS over poses of the angle between ``X B[i] Y`` and ``A[i]``, radians.
-    rms_translation : float
-        RMS over poses of the distance between the translations of ``X B[i] Y`` and
-        ``A[i]``, input length unit.
-    camera_T_hand_history, root_T_target_history : ndarray, shape (iterations, 4, 4), or None
-        With ``record_history=True``: the estimates after each iteration of the paper's
-        alternation (before any refinement). During the rotation phase the translations
-        are those of the translation start: ``Y``'s starting translation, and for ``X``
-        the average of eqs. (4)-(6) given it and the current rotation.
-    covariance : ndarray, shape (12, 12)
-        Covariance of the errors ``(dphi_X, dt_X, dphi_Y, dt_Y)``: rotations as
-        ``X_true = X exp(dphi_X)`` (radians, in X's and Y's child frames: hand and
-        target), translations in the parent frames (camera and root), input unit; from
-        the maximum-likelihood fit with noise scales estimated from the residuals
-        (:mod:`kinfw.identification.handeye`; for ``refine=False`` evaluated at the paper's
-        estimate).
-    sigma_rotation_deg, sigma_translation : ndarray, shape (2, 3)
-        1-sigma per axis of X (row 0) and Y (row 1), degrees and input unit, in the
-        frames of ``covariance``.
-    verdict : str
-        ``"determined"`` or the worse of X's and Y's ``"poorly determined (...)"`` /
-        ``"undetermined (...)"``, naming the transform.
-    rejected : tuple of int
-        Poses rejected as outliers (squared whitened residual above
-        :func:`kinfw.identification.handeye.rejection_threshold`: chi^2_6's quantile at
-        ``1 - 0.01 / n``, at least its 99.9 % quantile); empty for ``refine=False``.
-    noise_rotation_rad, noise_translation : float
-        The camera pose's noise scales per axis estimated from the residuals.
-
-    Notes
-    -----
-    For readers of Hirsh et al., the paper's names are read-only aliases: ``X`` is
-    ``camera_T_hand``, ``Y`` is ``root_T_target``, ``history_X`` and ``history_Y`` are
-    ``camera_T_hand_history`` and ``root_T_target_history``. When the inputs are other
-    frames than the camera and robot ones (``A`` and ``B`` are any batches with
-    ``A[i] ≈ X @ B[i] @ Y``), the aliases are the neutral names.
-    """
-
-    camera_T_hand: NDArray[np.float64]
-    root_T_target: NDArray[np.float64]
-    iterations: int
-    converged: bool
-    restarts: int
-    rms_rotation_rad: float
-    rms_translation: float
-    camera_T_hand_history: NDArray[np.float64] | None
-    root_T_target_history: NDArray[np.float64] | None
-    covariance: NDArray[np.float64]
-    sigma_rotation_deg: NDArray[np.float64]
-    sigma_translation: NDArray[np.float64]
-    verdict: str
-    rejected: tuple[int, ...]
-    noise_rotation_rad: float
-    noise_translation: float
-
-    @property
-    def X(self) -> NDArray[np.float64]:
-        """Alias of :attr:`camera_T_hand`: the left unknown ``X`` of ``A = X B Y``."""
-        return self.camera_T_hand
-
-    @property
-    def Y(self) -> NDArray[np.float64]:
-        """Alias of :attr:`root_T_target`: the right unknown ``Y`` of ``A = X B Y``."""
-        return self.root_T_target
-
-    @property
-    def history_X(self) -> NDArray[np.float64] | None:
-        """Alias of :attr:`camera_T_hand_history`."""
-        return self.camera_T_hand_history
-
-    @property
-    def history_Y(self) -> NDArray[np.float64] | None:
-        """Alias of :attr:`root_T_target_history`."""
-        return self.root_T_target_history
-
-
-def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
+@_poses_by_keyword("camera_T_targets", "base_T_hands")
+def convergence_factor(
+    *,
+    camera_T_targets: ArrayLike,
+    base_T_hands: ArrayLike | None = None,
+    hand_T_bases: ArrayLike | None = None,
+) -> float:
     """Error shrink factor per iteration of the paper's rotation alternation.
 
     The alternation is a power iteration on the 4x4 matrix ``N`` (module docstring), so
@@ -198,52 +106,82 @@ def convergence_factor(A: ArrayLike, B: ArrayLike) -> float:
 
     Parameters
     ----------
-    A, B : array_like, shape (n, 4, 4)
-        As for :func:`solve_axyb`.
+    camera_T_targets, base_T_hands, hand_T_bases : array_like, shape (n, 4, 4), keyword-only
+        As for :func:`solve_axyb`: the camera poses and one of the two robot pose batches.
     """
-    As, Bs = check_pose_pairs(
-        A,
-        B,
-        error=AXYBError,
-        why="two give one relative motion, whose axis leaves a rotation of X and Y "
-        "undetermined; Hirsh et al. section 4",
-    )
+    As, Bs = _checked_poses(camera_T_targets, base_T_hands, hand_T_bases)
     q_As, q_Bs = consistent_quats_xyzw(As[:, :3, :3], Bs[:, :3, :3])
     s = np.linalg.svd(iteration_matrix(q_As, q_Bs), compute_uv=False)
     return float((s[1] / s[0]) ** 2)
 
 
+def _checked_poses(
+    camera_T_targets: ArrayLike, base_T_hands: ArrayLike | None, hand_T_bases: ArrayLike | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``A = camera_T_targets`` and ``B = hand_T_bases`` (given, or the inverses of
+    ``base_T_hands``), checked; exactly one of the robot pose batches must be given."""
+    if (base_T_hands is None) == (hand_T_bases is None):
+        raise AXYBError(
+            "give the robot's poses as base_T_hands (forward kinematics: the hand's pose in "
+            "the base) or as hand_T_bases (their inverses, Hirsh et al.'s B), exactly one "
+            f"of them; got {'both' if base_T_hands is not None else 'neither'}"
+        )
+    robot_name = "base_T_hands" if hand_T_bases is None else "hand_T_bases"
+    As, robot = check_pose_pairs(
+        camera_T_targets,
+        base_T_hands if hand_T_bases is None else hand_T_bases,
+        error=AXYBError,
+        names=("camera_T_targets", robot_name),
+        why="two give one relative motion, whose axis leaves a rotation of the hand-eye "
+        "and base-target transforms undetermined; Hirsh et al. section 4",
+    )
+    return As, robot if hand_T_bases is not None else inverse_transform(robot)
+
+
 # ---------------------------------------------------------------------- entry point
 
 
+@_poses_by_keyword("camera_T_targets", "base_T_hands")
 def solve_axyb(
-    A: ArrayLike,
-    B: ArrayLike,
     *,
-    X0: ArrayLike | None = None,
-    Y0: ArrayLike | None = None,
+    camera_T_targets: ArrayLike,
+    base_T_hands: ArrayLike | None = None,
+    hand_T_bases: ArrayLike | None = None,
+    hand_T_camera_guess: ArrayLike | None = None,
+    base_T_target_guess: ArrayLike | None = None,
     tol: float = 1e-12,
     max_iterations: int = 1000,
     rng: np.random.Generator | None = None,
     refine: bool = True,
     record_history: bool = False,
 ) -> AXYBResult:
-    """Solve ``A[i] ≈ X @ B[i] @ Y`` for the rigid transforms ``X`` and ``Y``.
+    """Hand-eye ``camera_T_hand`` and base-target ``base_T_target`` of
+    ``camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target`` (Hirsh et
+    al.'s ``A[i] ≈ X @ B[i] @ Y``).
+
+    The package's convention (eye-in-hand, :mod:`kinfw.identification.handeye`): a camera
+    rigid on the robot's hand looks at a target fixed in the world; the same inputs as
+    :func:`kinfw.identification.handeye.solve_axxb`, and the answer is the same camera
+    mount, ``result.hand_T_camera``. Every argument is keyword-only.
 
     Parameters
     ----------
-    A : array_like, shape (n, 4, 4)
-        Left-hand poses, e.g. ``camera_T_target`` from camera calibration (the paper's
-        ``c_iH_w``, the target defining the world), n >= 3. Any length unit; the result
-        uses the same.
-    B : array_like, shape (n, 4, 4)
-        Middle poses, e.g. ``hand_T_root`` from the robot's kinematics (``e_iH_b``:
-        the inverse of the hand's forward kinematics).
-    X0, Y0 : array_like, shape (4, 4), optional
-        Initial guess of one unknown (the paper starts from a guess of ``Y``, eq. 7); give
-        at most one. ``X0`` is turned into ``Y0`` by one averaging step. The translation
-        of ``Y0`` starts the translation alternation. Default: the identity for
-        ``refine=False`` (as the paper), the closed-form solution for ``refine=True``.
+    camera_T_targets : array_like, shape (n, 4, 4)
+        Pose of the target in the camera at each pose (camera extrinsics, OpenCV's
+        ``target2cam``; the paper's ``A[i] = c_iH_w``, the target defining the world),
+        n >= 3. Any length unit; the result uses the same.
+    base_T_hands : array_like, shape (n, 4, 4), optional
+        Pose of the hand in the robot's base at each pose (forward kinematics, OpenCV's
+        ``gripper2base``), the same length unit.
+    hand_T_bases : array_like, shape (n, 4, 4), optional
+        Instead of ``base_T_hands``: their inverses, the paper's ``B[i] = e_iH_b``
+        (OpenCV's ``base2gripper``), used as given. Exactly one of the two.
+    hand_T_camera_guess, base_T_target_guess : array_like, shape (4, 4), optional
+        A guess of one unknown (the paper starts from a guess of ``Y``, eq. 7); give at
+        most one. The camera mount is turned into ``Y``'s start by one averaging step.
+        The translation of ``base_T_target_guess`` starts the translation alternation.
+        Default: the identity ``Y`` for ``refine=False`` (as the paper), the closed-form
+        solution for ``refine=True``.
     tol : float
         Convergence: rotation updates below ``tol`` rad, translation updates below
         ``tol`` times the RMS length of the input translations, Gauss-Newton steps below
@@ -260,28 +198,41 @@ def solve_axyb(
         are evaluated at its estimate).
     record_history : bool
         Keep the estimates after each iteration in ``camera_T_hand_history`` /
-        ``root_T_target_history``.
+        ``base_T_target_history``.
 
     Returns
     -------
     AXYBResult
-        ``camera_T_hand`` (``X``) and ``root_T_target`` (``Y``) in the input length unit,
-        and the fit's quality.
+        ``camera_T_hand`` (``X``; its inverse ``hand_T_camera``) and ``base_T_target``
+        (``Y``) in the input length unit, and the fit's quality.
 
     Raises
     ------
     AXYBError
         Fewer than 3 poses, mismatched or non-rigid inputs (naming the argument and the
-        index), motions that cannot determine X and Y (rotations of ``B`` all about one
-        axis, or none: the message says which part is undetermined), both ``X0`` and
-        ``Y0`` given, or a final RMS rotation residual above ``STALL_RAD`` (the poses do
-        not follow ``A = X B Y``: check pairing and directions of ``A`` and ``B``). Not
-        converging within ``max_iterations`` with a sensible residual is not an error:
-        ``converged=False`` and a logged warning.
+        index), both or neither of ``base_T_hands`` and ``hand_T_bases``, motions that
+        cannot determine the transforms (rotations of the hand all about one axis, or
+        none: the message says which part is undetermined), both guesses given, or a
+        final RMS rotation residual above ``STALL_RAD`` (the poses do not follow the
+        model: check the pairing and directions of the poses). Not converging within
+        ``max_iterations`` with a sensible residual is not an error: ``converged=False``
+        and a logged warning.
+    TypeError
+        A positional argument (the message names the keywords): the meaning of the
+        batches is given by their names only.
+
+    Warnings
+    --------
+    Eye-to-hand (a camera fixed in the world, the target on the hand) is the same
+    equation with base and hand exchanged: pass the forward kinematics as
+    ``hand_T_bases``; ``camera_T_hand`` is then ``camera_T_base`` and ``base_T_target``
+    is ``hand_T_target``.
 
     Notes
     -----
-    Rotations, eqs. (1)-(3) and (7)-(10): alternate ``X <- avg_i A_i Y^-1 B_i^-1`` and
+    In the paper's letters ``A = camera_T_target``, ``B = hand_T_base``,
+    ``X = camera_T_hand``, ``Y = base_T_target``. Rotations, eqs. (1)-(3) and (7)-(10):
+    alternate ``X <- avg_i A_i Y^-1 B_i^-1`` and
     ``Y <- avg_i B_i^-1 X^-1 A_i`` (quaternion averages); translations, eqs. (4)-(6):
     alternate the averages of ``t_X = t_A - R_X (R_B t_Y + t_B)`` and
     ``t_Y = R_B^T (R_X^T (t_A - t_X) - t_B)``. Stall at 180 degrees (section 4, last
@@ -312,18 +263,17 @@ def solve_axyb(
     M. Shah, "Solving the robot-world/hand-eye calibration problem using the Kronecker
     product", J. Mechanisms Robotics 5(3), 2013 (the closed form, here in quaternions).
     """
-    As, Bs = check_pose_pairs(
-        A,
-        B,
-        error=AXYBError,
-        why="two give one relative motion, whose axis leaves a rotation of X and Y "
-        "undetermined; Hirsh et al. section 4",
-    )
-    if X0 is not None and Y0 is not None:
+    As, Bs = _checked_poses(camera_T_targets, base_T_hands, hand_T_bases)
+    if hand_T_camera_guess is not None and base_T_target_guess is not None:
         raise AXYBError(
-            "give X0 or Y0, not both: the iteration starts from one guess "
-            "(Hirsh et al. eq. 7) and derives the other"
+            "give hand_T_camera_guess or base_T_target_guess, not both: the iteration "
+            "starts from one guess (Hirsh et al. eq. 7) and derives the other"
         )
+    X0 = Y0 = None
+    if hand_T_camera_guess is not None:
+        X0 = inverse_transform(check_start(hand_T_camera_guess, "hand_T_camera_guess"))
+    if base_T_target_guess is not None:
+        Y0 = check_start(base_T_target_guess, "base_T_target_guess")
     if not tol > 0.0 or max_iterations < 1:
         raise AXYBError(f"need tol > 0 and max_iterations >= 1, got {tol!r}, {max_iterations!r}")
     rng = np.random.default_rng(0) if rng is None else rng
@@ -365,14 +315,14 @@ def solve_axyb(
                 uncertainty(f.covariance[:6, :6], length_A),
                 uncertainty(f.covariance[6:, 6:], length_A),
             ]
-            return all(u.verdict == "determined" for u in unc)
+            return all(u.verdict is Verdict.DETERMINED for u in unc)
 
         def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
             """Shah's and Li's closed forms (X, Y)."""
             return list(candidate_starts(As, Bs, problem="axyb").values())
 
         fit = fit_absolute(As, Bs, starts, fallback_starts=fallback_starts, accept=determined)
-        X, Y, converged = fit.P, fit.Q, fit.converged
+        X, Y, converged = fit.camera_T_hand, fit.base_T_target, fit.converged
         if not converged:
             log.warning("the maximum-likelihood refinement did not converge")
         if fit.rejected:
@@ -390,12 +340,13 @@ def solve_axyb(
         raise AXYBError(
             f"no consistent X, Y: RMS rotation residual {np.degrees(rms_rot):.3g} deg "
             f"after {iterations} rotation iterations and {restarts} restarts; check that "
-            f"A[i] and B[i] are paired and oriented as A[i] = X @ B[i] @ Y"
+            f"the poses are paired and oriented as camera_T_target[i] = camera_T_hand @ "
+            f"hand_T_base[i] @ base_T_target (A[i] = X @ B[i] @ Y)"
         )
     length = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
     unc_X = uncertainty(fit.covariance[:6, :6], length, frame="the hand frame")
     unc_Y = uncertainty(fit.covariance[6:, 6:], length, frame="the target frame")
-    verdict = combined_verdict([("camera_T_hand", unc_X), ("root_T_target", unc_Y)])
+    verdict, message = combined_verdict([("camera_T_hand", unc_X), ("base_T_target", unc_Y)])
 
     history_X = history_Y = None
     if record_history and rot is not None and tra is not None:
@@ -419,18 +370,19 @@ def solve_axyb(
 
     return AXYBResult(
         camera_T_hand=X,
-        root_T_target=Y,
+        base_T_target=Y,
         iterations=iterations,
         converged=bool(converged),
         restarts=restarts,
         rms_rotation_rad=rms_rot,
         rms_translation=rms_tra,
         camera_T_hand_history=history_X,
-        root_T_target_history=history_Y,
+        base_T_target_history=history_Y,
         covariance=fit.covariance,
         sigma_rotation_deg=np.stack([unc_X.sigma_rotation_deg, unc_Y.sigma_rotation_deg]),
         sigma_translation=np.stack([unc_X.sigma_translation, unc_Y.sigma_translation]),
         verdict=verdict,
+        verdict_message=message,
         rejected=fit.rejected,
         noise_rotation_rad=fit.sigma_rotation_rad,
         noise_translation=fit.sigma_translation,

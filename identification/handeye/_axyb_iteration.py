@@ -8,13 +8,14 @@ quaternions are kinfw's, scalar last ``(x, y, z, w)``.
 Signs. Section 4's argument needs the per-pose errors of eq. (10) to be conjugates of
 *one* quaternion, sign included. A rotation matrix fixes its quaternion only up to sign,
 so the quaternions of ``A`` and ``B`` are given consistent signs once, from the data
-(:func:`consistent_quats_xyzw`). Aligning each average's inputs to the current estimate
-instead makes errors beyond ~90 degrees grow to 180: measured on 200 noise-free problems
-with uniformly random rotations and the identity start, that variant needed restarts in
-61 % of the runs for n = 5 and 10 (36 % for n = 3) and ended at wrong answers with small
-residuals in 35 of 200 runs for n = 3 (3 and 4 for n = 5 and 10). With consistent signs:
-no restart and no wrong answer for n = 5 and 10; for n = 3 one restart, and 2 runs (both
-nearly degenerate) not converged within 3000 iterations.
+(:func:`kinfw.identification.handeye.consistent_quats_xyzw`). Aligning each average's
+inputs to the current estimate instead makes errors beyond ~90 degrees grow to 180:
+measured on 200 noise-free problems with uniformly random rotations and the identity
+start, that variant needed restarts in 61 % of the runs for n = 5 and 10 (36 % for n =
+3) and ended at wrong answers with small residuals in 35 of 200 runs for n = 3 (3 and 4
+for n = 5 and 10). With consistent signs: no restart and no wrong answer for n = 5 and
+10; for n = 3 one restart, and 2 runs (both nearly degenerate) not converged within 3000
+iterations.
 
 What the iteration is. Averaging is linear, so the average of the per-pose ``X``
 estimates is ``N q_Y^-1`` and that of the ``Y`` estimates ``N^T q_X^-1`` (after the
@@ -48,18 +49,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.geometry import quat_xyzw_from_matrix, skew, transform_from_xyz_quat_xyzw
+from kinfw.identification.handeye._quaternion import (
+    left_product_matrix_xyzw,
+    right_product_matrix_xyzw,
+)
 
 __all__ = [
     "AXYBError",
     "RotationRun",
     "TranslationRun",
-    "consistent_quats_xyzw",
     "iteration_matrix",
-    "left_product_matrix_xyzw",
     "normalise",
-    "right_product_matrix_xyzw",
-    "rotation_from_quat_xyzw",
     "rotation_iteration",
     "translation_iteration",
 ]
@@ -97,50 +97,6 @@ class AXYBError(ValueError):
 
 
 # ------------------------------------------------------------------- quaternions
-
-
-def rotation_from_quat_xyzw(quat_xyzw: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rotation matrices (..., 3, 3) of quaternions (..., 4), scalar last."""
-    return transform_from_xyz_quat_xyzw(np.zeros(3), quat_xyzw)[..., :3, :3]
-
-
-def left_product_matrix_xyzw(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``L(p)`` with ``p * q = L(p) q`` (Hamilton product, section 2.2 property 2)."""
-    pv, pw = p[..., :3], p[..., 3]
-    out = np.zeros((*p.shape[:-1], 4, 4))
-    out[..., :3, :3] = pw[..., None, None] * np.eye(3) + skew(pv)
-    out[..., :3, 3] = pv
-    out[..., 3, :3] = -pv
-    out[..., 3, 3] = pw
-    return out
-
-
-def right_product_matrix_xyzw(q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``R(q)`` with ``p * q = R(q) p``."""
-    qv, qw = q[..., :3], q[..., 3]
-    out = np.zeros((*q.shape[:-1], 4, 4))
-    out[..., :3, :3] = qw[..., None, None] * np.eye(3) - skew(qv)
-    out[..., :3, 3] = qv
-    out[..., 3, :3] = -qv
-    out[..., 3, 3] = qw
-    return out
-
-
-def consistent_quats_xyzw(R_As: NDArray, R_Bs: NDArray) -> tuple[NDArray, NDArray]:
-    """Quaternions of ``R_A[i]``, ``R_B[i]`` with signs such that ``q_A[i] = q_X q_B[i] q_Y``.
-
-    The scalar part of ``q_A[i] q_A[j]^-1`` is ``s_i s_j`` times that of
-    ``q_B[i] q_B[j]^-1`` (conjugation keeps it, Appendix A), so
-    ``S_ij = (q_A[i] . q_A[j]) (q_B[i] . q_B[j]) = s_i s_j c_ij^2`` with ``c_ij^2 >= 0``:
-    the signs ``s_i`` are those of the top eigenvector of ``S`` (Perron-Frobenius).
-    ``S = Z Z^T`` with ``Z[i] = q_A[i] kron q_B[i]``, so that eigenvector is ``Z v``,
-    ``v`` the top eigenvector of the 16x16 ``Z^T Z``. Sample order does not matter.
-    """
-    q_As = quat_xyzw_from_matrix(R_As)
-    q_Bs = quat_xyzw_from_matrix(R_Bs)
-    Z = np.einsum("ni,nj->nij", q_As, q_Bs).reshape(len(q_As), 16)
-    v = np.linalg.eigh(Z.T @ Z)[1][:, -1]
-    return np.where((Z @ v < 0.0)[:, None], -q_As, q_As), q_Bs
 
 
 def iteration_matrix(q_As: NDArray, q_Bs: NDArray) -> NDArray[np.float64]:

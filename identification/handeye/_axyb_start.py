@@ -1,7 +1,9 @@
-"""Data preparation of ``A = X B Y`` (:func:`kinfw.identification.handeye.solve_axyb`).
+"""Data preparation of ``A = X B Y`` (:func:`kinfw.identification.handeye.solve_axyb`;
+``A = camera_T_target``, ``B = hand_T_base``, ``X = camera_T_hand``,
+``Y = base_T_target``).
 
 :func:`check_motion` refuses rotations of ``B`` that cannot determine X and Y (and warns
-when they barely do), :func:`check_start` checks a guess ``X0``/``Y0``, and
+when they barely do), :func:`check_start` checks a guess of X or Y, and
 :func:`start_of_y` gives the paper's iteration its start: from a guess, the closed form,
 or the identity.
 """
@@ -14,13 +16,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform, project_to_rotation, quat_xyzw_from_matrix
-from kinfw.identification.handeye._axyb_iteration import (
-    AXYBError,
-    normalise,
-    rotation_from_quat_xyzw,
-)
+from kinfw.identification.handeye._axyb_iteration import AXYBError, normalise
 from kinfw.identification.handeye._axyb_refinement import translations_least_squares
 from kinfw.identification.handeye._checks import ORTHONORMAL_TOL
+from kinfw.identification.handeye._quaternion import rotation_from_quat_xyzw
 
 __all__ = ["MIN_MOTION_RAD", "WEAK_MOTION_RAD", "check_motion", "check_start", "start_of_y"]
 
@@ -39,7 +38,8 @@ def check_start(T: ArrayLike, name: str) -> NDArray[np.float64]:
     Parameters
     ----------
     T : array_like, shape (4, 4)
-        The guess (``X0`` or ``Y0`` of :func:`kinfw.identification.handeye.solve_axyb`).
+        The guess (``hand_T_camera_guess`` or ``base_T_target_guess`` of
+        :func:`kinfw.identification.handeye.solve_axyb`).
     name : str
         Its name, for the message.
 
@@ -122,8 +122,8 @@ def start_of_y(
     Bs: NDArray[np.float64],
     N: NDArray[np.float64],
     *,
-    X0: ArrayLike | None,
-    Y0: ArrayLike | None,
+    X0: NDArray[np.float64] | None,
+    Y0: NDArray[np.float64] | None,
     closed_form: bool,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The start of the paper's iteration: ``Y``'s rotation and translation.
@@ -135,9 +135,10 @@ def start_of_y(
     N : ndarray, shape (4, 4)
         The rotation iteration's matrix
         (:func:`~kinfw.identification.handeye.iteration_matrix`).
-    X0, Y0 : array_like, shape (4, 4), or None, keyword-only
-        A guess of one unknown (at most one given): ``Y0`` is used as it is, ``X0`` is
-        turned into ``Y``'s start by one averaging step (Hirsh et al. eqs. 3 and 6).
+    X0, Y0 : ndarray, shape (4, 4), or None, keyword-only
+        A guess of one unknown, ``camera_T_hand`` or ``base_T_target`` (at most one
+        given), checked by :func:`check_start`: ``Y0`` is used as it is, ``X0`` is turned
+        into ``Y``'s start by one averaging step (Hirsh et al. eqs. 3 and 6).
     closed_form : bool, keyword-only
         Without a guess: the iteration's fixed point in closed form (the top singular
         pair of ``N``) and the exact linear least squares for the translations; else the
@@ -149,23 +150,14 @@ def start_of_y(
         Rotation of ``Y``, quaternion ``(x, y, z, w)``.
     t_Y0 : ndarray, shape (3,)
         Translation of ``Y``, input length unit.
-
-    Raises
-    ------
-    AXYBError
-        A guess that is not a rigid transform of shape (4, 4).
     """
     R_Bs = Bs[:, :3, :3]
     if Y0 is not None:
-        start = check_start(Y0, "Y0")
-        q_Y0, t_Y0 = quat_xyzw_from_matrix(start[:3, :3]), start[:3, 3]
+        q_Y0, t_Y0 = quat_xyzw_from_matrix(Y0[:3, :3]), Y0[:3, 3]
     elif X0 is not None:
-        start = check_start(X0, "X0")
-        q_Y0, _ = normalise(N.T @ quat_xyzw_from_matrix(start[:3, :3]))
+        q_Y0, _ = normalise(N.T @ quat_xyzw_from_matrix(X0[:3, :3]))
         t_Y0 = np.mean(
-            np.einsum(
-                "nji,nj->ni", R_Bs, (As[:, :3, 3] - start[:3, 3]) @ start[:3, :3] - Bs[:, :3, 3]
-            ),
+            np.einsum("nji,nj->ni", R_Bs, (As[:, :3, 3] - X0[:3, 3]) @ X0[:3, :3] - Bs[:, :3, 3]),
             axis=0,
         )
     elif closed_form:

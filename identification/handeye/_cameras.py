@@ -2,16 +2,19 @@
 
 Each camera ``c`` on the robot observes a target fixed in the world at several
 configurations; with the kinematics known (stage 1, or a trusted nominal URDF), every
-observation is one equation of the form ``A = X B Y`` (Hirsh et al.; Shih et al. eq. 68):
+observation is one equation of the hand-eye convention of
+:mod:`kinfw.identification.handeye` with the URDF root as the base (Hirsh et al.'s
+``A = X B Y``; Shih et al. eq. 68):
 
     camera_T_target(q_i) = camera_T_hand  @  hand_T_root(q_i)  @  root_T_target
            A_i           =       X        @        B_i         @        Y
 
 where ``hand`` is the URDF link the camera's fixed joint hangs from (for the IIS-head, the
-plate: the paper's "camera mount coordinate system"). The camera's fixed joint origin
-``hand_T_camera = inv(camera_T_hand)`` is what the calibrated URDF changes;
-``root_T_target`` is the target's pose in the measurement frame, which belongs in the
-report, not the URDF.
+plate: the paper's "camera mount coordinate system"), solved by
+:func:`kinfw.identification.handeye.solve_axyb` with ``base_T_hands = root_T_hand(q_i)``.
+The camera's fixed joint origin ``hand_T_camera`` is what the calibrated URDF changes;
+``root_T_target`` (the solver's ``base_T_target``) is the target's pose in the
+measurement frame, which belongs in the report, not the URDF.
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.geometry import average_transform, inverse_transform, rotation_angle
-from kinfw.identification.handeye._axyb import AXYBResult, solve_axyb
+from kinfw.geometry import average_transform, rotation_angle
+from kinfw.identification.handeye._axyb import solve_axyb
+from kinfw.identification.handeye._result import AXYBResult
+from kinfw.identification.handeye._uncertainty import Verdict
 from kinfw.measurements import Measurements
 from kinfw.model import Robot, cpc_from_robot
 from kinfw.observations import DatasetError, TargetObservations
@@ -53,7 +58,7 @@ class CameraCalibration:
         Identified pose of the target in the measurement frame, from this camera alone.
     n_views : int
     solver : AXYBResult
-        The solver's record (iterations, restarts, residuals).
+        The solver's record (iterations, restarts, residuals, verdict).
     """
 
     camera: str
@@ -111,10 +116,10 @@ def _solve_one(
     model = cpc_from_robot(robot, (hand,))
     qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
     root_T_hands = model.frame_poses(qs, hand)
-    result = solve_axyb(group.camera_T_target, inverse_transform(root_T_hands), rng=rng)
-    if result.verdict != "determined":
+    result = solve_axyb(camera_T_targets=group.camera_T_target, base_T_hands=root_T_hands, rng=rng)
+    if result.verdict is not Verdict.DETERMINED:
         warnings.warn(
-            f"camera {group.camera!r}: hand-eye {result.verdict} (lengths in m); "
+            f"camera {group.camera!r}: hand-eye {result.verdict_message} (lengths in m); "
             f"add views with larger rotations about different axes",
             UserWarning,
             stacklevel=3,
@@ -124,8 +129,8 @@ def _solve_one(
         target=group.target,
         joint=joint,
         hand=hand,
-        hand_T_camera=inverse_transform(result.camera_T_hand),
-        root_T_target=result.root_T_target,
+        hand_T_camera=result.hand_T_camera,
+        root_T_target=result.base_T_target,
         n_views=len(group.sample),
         solver=result,
     )

@@ -16,6 +16,10 @@ the length unit.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -46,6 +50,31 @@ class StartError(ValueError):
     """A closed form cannot determine ``X`` (and ``Y``) from these poses; says why."""
 
 
+_Solver = TypeVar("_Solver", bound=Callable[..., Any])
+
+
+def _poses_by_keyword(*names: str) -> Callable[[_Solver], _Solver]:
+    """Make a positional call of a hand-eye solver a ``TypeError`` that names the
+    keywords ``names``: the papers' ``A`` and ``B`` are other frames in ``A X = X B``
+    than in ``A = X B Y``, so a positional pair is ambiguous."""
+
+    def decorate(solve: _Solver) -> _Solver:
+        @functools.wraps(solve)
+        def keyword_only(*args: Any, **kwargs: Any) -> Any:
+            if args:
+                keywords = ", ".join(f"{name}=..." for name in names)
+                raise TypeError(
+                    f"{solve.__name__}() takes the poses by keyword only ({keywords}); got "
+                    f"{len(args)} positional argument(s): the papers' A and B are other "
+                    "frames in Tsai & Lenz's A X = X B than in Hirsh et al.'s A = X B Y"
+                )
+            return solve(**kwargs)
+
+        return cast(_Solver, keyword_only)
+
+    return decorate
+
+
 def check_pose_pairs(
     A: ArrayLike,
     B: ArrayLike,
@@ -53,25 +82,27 @@ def check_pose_pairs(
     error: type[ValueError] = ValueError,
     prefix: str = "",
     why: str = "two motions about different axes",
+    names: tuple[str, str] = ("A", "B"),
 ) -> tuple[Pose, Pose]:
     """Validate two pose batches (n, 4, 4) paired pose by pose, n >= 3: the inputs of
-    every hand-eye solver here, in :mod:`kinfw.identification.handeye` and in
-    :mod:`kinfw.identification.handeye`.
+    every hand-eye solver and closed form.
 
     The checks of :func:`kinfw.geometry.check_transform`, on both batches in one pass
     (the hot path of a 3-view solve); rotations off by more than 1e-12 are
     re-orthonormalised (real data printed with six digits is off by ~1e-6). Errors are
-    raised as ``error`` with ``prefix`` (e.g. ``"park_axxb: "``), naming the batch and
+    raised as ``error`` with ``prefix`` (e.g. ``"park_axxb: "``), naming the batch (by
+    ``names``, e.g. the solver's keywords ``("base_T_hands", "camera_T_targets")``) and
     the index; ``why`` says what three poses are needed for.
     """
     T_A, T_B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
-    for name, T in (("A", T_A), ("B", T_B)):
+    name_A, name_B = names
+    for name, T in ((name_A, T_A), (name_B, T_B)):
         if T.ndim != 3 or T.shape[1:] != (4, 4):
             raise error(f"{prefix}{name}: expected shape (n, 4, 4), got {T.shape}")
     if T_A.shape != T_B.shape:
         raise error(
-            f"{prefix}A and B must hold the same number of poses, got A {T_A.shape} "
-            f"and B {T_B.shape}"
+            f"{prefix}{name_A} and {name_B} must hold the same number of poses, got "
+            f"{name_A} {T_A.shape} and {name_B} {T_B.shape}"
         )
     n = len(T_A)
     if n < 3:
@@ -83,7 +114,7 @@ def check_pose_pairs(
     bad |= ~(err <= ORTHONORMAL_TOL) | ~(np.linalg.det(R) > 0.0)
     if np.any(bad):
         k = int(np.argmax(bad))
-        name, idx = ("A", k) if k < n else ("B", k - n)
+        name, idx = (name_A, k) if k < n else (name_B, k - n)
         try:
             check_transform(T[k], name=f"{prefix}{name}[{idx}]", tol=ORTHONORMAL_TOL)
         except ValueError as e:

@@ -3,39 +3,41 @@ Levenberg-Marquardt fit with variance components.
 
 The model
 ---------
-Both hand-eye problems are one absolute-pose model: the camera's measured pose
-``M[i]`` (``camera_T_target``) is the product of two unknown rigid transforms and the
-robot's known pose ``N[i]``::
+Both hand-eye problems are one absolute-pose model in the package's frames (eye-in-hand,
+:mod:`kinfw.identification.handeye`): the camera's measured pose of the target is the
+product of two unknown rigid transforms and the robot's known pose::
 
-    M[i] ≈ P @ N[i] @ Q.
+    camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target.
 
-``A = X B Y`` (:func:`kinfw.identification.handeye.solve_axyb`) is it with ``M = A``, ``N = B``,
-``P = X``, ``Q = Y``; ``A X = X B`` written for absolute poses (``A[i] X B[i] =
-base_T_target``, :func:`kinfw.identification.handeye.solve_axxb`) is it with ``M = B``,
-``N = A^-1``, ``P = X^-1`` and ``Q = base_T_target``.
+In the code, the letters of Hirsh et al.'s ``A[i] ≈ X @ B[i] @ Y`` (the aliases of
+:class:`kinfw.identification.handeye.AXYBResult`): ``A = camera_T_target``,
+``B = hand_T_base``, ``X = camera_T_hand``, ``Y = base_T_target``.
+:func:`kinfw.identification.handeye.solve_axyb` fits it as it stands;
+:func:`kinfw.identification.handeye.solve_axxb` fits it too and reports
+``hand_T_camera = inv(camera_T_hand)`` (Tsai & Lenz's ``X``).
 
 Noise model: the camera's pose is off by a rotation ``exp(e_r)`` and a translation
 ``e_t``, both expressed in the camera's frame::
 
-    R_M = exp(e_r) R_P R_N R_Q,      t_M = t_P + R_P (R_N t_Q + t_N) + e_t,
+    R_A = exp(e_r) R_X R_B R_Y,      t_A = t_X + R_X (R_B t_Y + t_B) + e_t,
 
 with ``e_r ~ N(0, sigma_r^2 I3)`` (radians) and ``e_t ~ N(0, sigma_t^2 I3)`` (length),
-independent over poses. The residuals ``r_r = log(R_M R_hat^T)`` and
-``r_t = t_M - t_hat`` are then exactly the noise, and the maximum-likelihood estimate
+independent over poses. The residuals ``r_r = log(R_A R_hat^T)`` and
+``r_t = t_A - t_hat`` are then exactly the noise, and the maximum-likelihood estimate
 minimises ``sum_i |r_r|^2 / sigma_r^2 + |r_t|^2 / sigma_t^2``. ``sigma_r`` and
 ``sigma_t`` are not given: they are estimated from the residuals (variance components,
 each group's residual sum over its redundancy ``n_g - tr(H^-1 H_g)``), alternating with
 the fit. The weights therefore scale with the length unit and the estimate does not
 depend on it.
 
-Minimisation: Levenberg-Marquardt on the manifold, ``R_P <- R_P exp(dphi_P)``,
-``t_P <- t_P + dt_P`` (and the same for ``Q``), analytic Jacobians, vectorised over
+Minimisation: Levenberg-Marquardt on the manifold, ``R_X <- R_X exp(dphi_X)``,
+``t_X <- t_X + dt_X`` (and the same for ``Y``), analytic Jacobians, vectorised over
 poses. The rotation parametrisation has no singularity (a half turn is an ordinary
 point). With ``huber=True`` the poses are weighted by Huber's IRLS weights of their
 whitened residual norms.
 
 Covariance: ``(J^T W J)^-1`` at the optimum with the estimated ``sigma_r``, ``sigma_t``,
-in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
+in the order ``(dphi_X, dt_X, dphi_Y, dt_Y)`` (radians, input length unit).
 
 The robust stage, the starts and the result type are in :mod:`kinfw.identification.handeye`.
 """
@@ -82,28 +84,28 @@ def _inverse_right_jacobian(phi: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _residuals(
-    R_M: NDArray, t_M: NDArray, R_N: NDArray, t_N: NDArray, P: NDArray, Q: NDArray
+    R_A: NDArray, t_A: NDArray, R_B: NDArray, t_B: NDArray, X: NDArray, Y: NDArray
 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-    """``r_r`` (n, 3), ``r_t`` (n, 3), ``R_hat`` (n, 3, 3) and ``v = R_N t_Q + t_N``."""
-    R_P, t_P, R_Q, t_Q = P[:3, :3], P[:3, 3], Q[:3, :3], Q[:3, 3]
-    R_hat = R_P @ R_N @ R_Q
-    v = R_N @ t_Q + t_N
-    r_r = _log_small(R_M @ np.swapaxes(R_hat, 1, 2))
-    r_t = t_M - v @ R_P.T - t_P
+    """``r_r`` (n, 3), ``r_t`` (n, 3), ``R_hat`` (n, 3, 3) and ``v = R_B t_Y + t_B``."""
+    R_X, t_X, R_Y, t_Y = X[:3, :3], X[:3, 3], Y[:3, :3], Y[:3, 3]
+    R_hat = R_X @ R_B @ R_Y
+    v = R_B @ t_Y + t_B
+    r_r = _log_small(R_A @ np.swapaxes(R_hat, 1, 2))
+    r_t = t_A - v @ R_X.T - t_X
     return r_r, r_t, R_hat, v
 
 
-def _jacobian(r_r: NDArray, R_hat: NDArray, v: NDArray, R_N: NDArray, P: NDArray) -> NDArray:
-    """Jacobian (n, 6, 12) of ``(r_r, r_t)`` in ``(dphi_P, dt_P, dphi_Q, dt_Q)``."""
+def _jacobian(r_r: NDArray, R_hat: NDArray, v: NDArray, R_B: NDArray, X: NDArray) -> NDArray:
+    """Jacobian (n, 6, 12) of ``(r_r, r_t)`` in ``(dphi_X, dt_X, dphi_Y, dt_Y)``."""
     n = len(r_r)
-    R_P = P[:3, :3]
+    R_X = X[:3, :3]
     Jinv = _inverse_right_jacobian(r_r)
     J = np.zeros((n, 6, 12))
-    J[:, :3, 0:3] = -Jinv @ R_P
+    J[:, :3, 0:3] = -Jinv @ R_X
     J[:, :3, 6:9] = -Jinv @ R_hat
-    J[:, 3:, 0:3] = R_P @ skew(v)
+    J[:, 3:, 0:3] = R_X @ skew(v)
     J[:, 3:, 3:6] = -np.eye(3)
-    J[:, 3:, 9:12] = -(R_P @ R_N)
+    J[:, 3:, 9:12] = -(R_X @ R_B)
     return J
 
 
@@ -123,30 +125,34 @@ def _log_small(R: NDArray) -> NDArray:
 
 
 class PoseData:
-    """The poses of ``M[i] ≈ P @ N[i] @ Q`` split into rotations and translations, and
-    the scene's length scale.
+    """The poses of ``camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target``
+    split into rotations and translations, and the scene's length scale.
 
-    ``M`` (n, 4, 4) are the measured camera poses (``camera_T_target``), ``N`` (n, 4, 4)
-    the known robot poses, rigid, one length unit. Attributes: ``R_M``, ``R_N`` (n, 3, 3)
-    and ``t_M``, ``t_N`` (n, 3), views of them; ``n`` poses; ``length``, the RMS of
-    ``|t_M|`` (the camera-target distance; of ``|t_N|`` when all are zero; 1 when both
-    are), the scale of the step tolerance and of the bounds on the scales' ratio.
+    ``camera_T_targets`` (n, 4, 4) are the measured camera poses, ``hand_T_bases``
+    (n, 4, 4) the known robot poses, rigid, one length unit. Attributes, in Hirsh's
+    letters (module docstring): ``R_A``, ``R_B`` (n, 3, 3) and ``t_A``, ``t_B`` (n, 3),
+    views of them; ``n`` poses; ``length``, the RMS of ``|t_A|`` (the camera-target
+    distance; of ``|t_B|`` when all are zero; 1 when both are), the scale of the step
+    tolerance and of the bounds on the scales' ratio.
     """
 
-    def __init__(self, M: NDArray, N: NDArray) -> None:
-        self.R_M, self.t_M = M[:, :3, :3], M[:, :3, 3]
-        self.R_N, self.t_N = N[:, :3, :3], N[:, :3, 3]
-        self.n = len(M)
-        length = float(np.sqrt(np.mean(np.sum(self.t_M**2, axis=1))))
+    def __init__(self, camera_T_targets: NDArray, hand_T_bases: NDArray) -> None:
+        self.R_A, self.t_A = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3]
+        self.R_B, self.t_B = hand_T_bases[:, :3, :3], hand_T_bases[:, :3, 3]
+        self.n = len(camera_T_targets)
+        length = float(np.sqrt(np.mean(np.sum(self.t_A**2, axis=1))))
         if length == 0.0:
-            length = float(np.sqrt(np.mean(np.sum(self.t_N**2, axis=1))))
+            length = float(np.sqrt(np.mean(np.sum(self.t_B**2, axis=1))))
         self.length = length if length > 0.0 else 1.0
 
-    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
-        """Residuals of every pose at ``P, Q`` (each (4, 4)): ``r_r = log(R_M R_hat^T)``
-        (n, 3, radians) and ``r_t = t_M - t_hat`` (n, 3, input unit), both in the camera
-        frame; ``R_hat = R_P R_N R_Q`` (n, 3, 3) and ``v = R_N t_Q + t_N`` (n, 3)."""
-        return _residuals(self.R_M, self.t_M, self.R_N, self.t_N, P, Q)
+    def residuals(
+        self, camera_T_hand: NDArray, base_T_target: NDArray
+    ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        """Residuals of every pose at ``X = camera_T_hand``, ``Y = base_T_target`` (each
+        (4, 4)): ``r_r = log(R_A R_hat^T)`` (n, 3, radians) and ``r_t = t_A - t_hat``
+        (n, 3, input unit), both in the camera frame; ``R_hat = R_X R_B R_Y`` (n, 3, 3)
+        and ``v = R_B t_Y + t_B`` (n, 3)."""
+        return _residuals(self.R_A, self.t_A, self.R_B, self.t_B, camera_T_hand, base_T_target)
 
 
 def _bounded_sigmas(s_r: float, s_t: float, length: float) -> tuple[float, float]:
@@ -186,11 +192,11 @@ def robust_sigmas(r_r: NDArray, r_t: NDArray, length: float) -> tuple[float, flo
 
 
 def _normal_matrices(
-    data: PoseData, P: NDArray, Q: NDArray, weights: NDArray, w_r: float, w_t: float
+    data: PoseData, X: NDArray, Y: NDArray, weights: NDArray, w_r: float, w_t: float
 ) -> tuple[NDArray, NDArray]:
-    """The rotation and translation parts of ``J^T W J`` at ``P, Q``."""
-    r_r, _, R_hat, v = data.residuals(P, Q)
-    J = _jacobian(r_r, R_hat, v, data.R_N, P) * np.sqrt(weights)[:, None, None]
+    """The rotation and translation parts of ``J^T W J`` at ``X, Y``."""
+    r_r, _, R_hat, v = data.residuals(X, Y)
+    J = _jacobian(r_r, R_hat, v, data.R_B, X) * np.sqrt(weights)[:, None, None]
     H_r = w_r * np.einsum("nki,nkj->ij", J[:, :3], J[:, :3])
     H_t = w_t * np.einsum("nki,nkj->ij", J[:, 3:], J[:, 3:])
     return H_r, H_t
@@ -202,13 +208,13 @@ class LMFit:
 
     Attributes
     ----------
-    P, Q : ndarray, shape (4, 4)
-        The estimates, input length unit.
+    camera_T_hand, base_T_target : ndarray, shape (4, 4)
+        The estimates (Hirsh's ``X``, ``Y``), input length unit.
     s_r, s_t : float
         Estimated noise scales per axis (radians, input unit).
     H : ndarray, shape (12, 12)
         ``J^T W J`` at the end over the fitted poses, without Huber's weights, in the
-        order ``(dphi_P, dt_P, dphi_Q, dt_Q)``: its inverse is the covariance.
+        order ``(dphi_X, dt_X, dphi_Y, dt_Y)``: its inverse is the covariance.
     chi2 : ndarray, shape (n,)
         Squared whitened residual ``|r_r|^2 / s_r^2 + |r_t|^2 / s_t^2`` of every pose
         (fitted or not).
@@ -218,8 +224,8 @@ class LMFit:
         Whether the fit stopped on its tolerance.
     """
 
-    P: NDArray
-    Q: NDArray
+    camera_T_hand: NDArray
+    base_T_target: NDArray
     s_r: float
     s_t: float
     H: NDArray  # J^T W J at the end, inliers only, no Huber weights
@@ -271,14 +277,14 @@ class _Lean:
         self.J[:, 3:, 3:6] = -np.eye(3)
         self.K = np.zeros((data.n, 3, 3))  # skew-symmetric scratch
 
-    def residuals(self, P: NDArray, Q: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    def residuals(self, X: NDArray, Y: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         d = self.d
-        R_P = P[:3, :3]
-        RPN = R_P @ d.R_N
-        R_hat = RPN @ Q[:3, :3]
-        v = d.R_N @ Q[:3, 3] + d.t_N
+        R_X = X[:3, :3]
+        RXB = R_X @ d.R_B
+        R_hat = RXB @ Y[:3, :3]
+        v = d.R_B @ Y[:3, 3] + d.t_B
         r = np.empty((d.n, 6))
-        E = d.R_M @ np.swapaxes(R_hat, 1, 2)
+        E = d.R_A @ np.swapaxes(R_hat, 1, 2)
         c = 0.5 * (np.einsum("nii->n", E) - 1.0)
         if c.min() < -0.98:
             r[:, :3] = rotation_vector_from_matrix(E)
@@ -290,12 +296,12 @@ class _Lean:
             r[:, :3] = (
                 vec * np.where(tiny, 1.0 + theta**2 / 6.0, theta / np.where(tiny, 1.0, s))[:, None]
             )
-        r[:, 3:] = d.t_M - v @ R_P.T - P[:3, 3]
-        return r, RPN, R_hat, v
+        r[:, 3:] = d.t_A - v @ R_X.T - X[:3, 3]
+        return r, RXB, R_hat, v
 
-    def jacobian(self, r: NDArray, RPN: NDArray, R_hat: NDArray, v: NDArray, P: NDArray):
+    def jacobian(self, r: NDArray, RXB: NDArray, R_hat: NDArray, v: NDArray, X: NDArray):
         J = self.J
-        R_P = P[:3, :3]
+        R_X = X[:3, :3]
         phi = r[:, :3]
         th2 = np.einsum("ni,ni->n", phi, phi)
         theta = np.sqrt(th2)
@@ -311,18 +317,18 @@ class _Lean:
         K[:, _SK_ROW, _SK_COL] = phi[:, _SK_SRC] * _SK_SIGN
         Jinv = 0.5 * K + coef[:, None, None] * (phi[:, :, None] * phi[:, None, :])
         Jinv[:, _DIAG, _DIAG] += (1.0 - coef * th2)[:, None]
-        J[:, :3, 0:3] = -Jinv @ R_P
+        J[:, :3, 0:3] = -Jinv @ R_X
         J[:, :3, 6:9] = -Jinv @ R_hat
         K[:, _SK_ROW, _SK_COL] = v[:, _SK_SRC] * _SK_SIGN
-        J[:, 3:, 0:3] = R_P @ K
-        J[:, 3:, 9:12] = -RPN
+        J[:, 3:, 0:3] = R_X @ K
+        J[:, 3:, 9:12] = -RXB
         return J
 
 
 def fit_lm(
     data: PoseData,
-    P: NDArray,
-    Q: NDArray,
+    camera_T_hand: NDArray,
+    base_T_target: NDArray,
     mask: NDArray,
     s_r: float,
     s_t: float,
@@ -346,8 +352,8 @@ def fit_lm(
     Parameters
     ----------
     data : PoseData
-        The poses ``M[i]``, ``N[i]``.
-    P, Q : ndarray, shape (4, 4)
+        The poses ``camera_T_target[i]`` and ``hand_T_base[i]``.
+    camera_T_hand, base_T_target : ndarray, shape (4, 4)
         The start, input length unit.
     mask : ndarray of bool, shape (n,)
         The poses fitted (the others get a ``chi2`` but no weight).
@@ -362,12 +368,13 @@ def fit_lm(
     -------
     LMFit
     """
+    X, Y = camera_T_hand, base_T_target
     lean = _Lean(data)
     n = data.n
     n_in = float(np.count_nonzero(mask))
     update_scales = n_in >= 4
     maskf = mask.astype(float)
-    r, RPN, R_hat, v = lean.residuals(P, Q)
+    r, RXB, R_hat, v = lean.residuals(X, Y)
     lam = 1e-6
     steps = 0
     converged = False
@@ -384,7 +391,7 @@ def fit_lm(
         if huber:
             c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
         cost = float(c @ chi)
-        J = lean.jacobian(r, RPN, R_hat, v, P)
+        J = lean.jacobian(r, RXB, R_hat, v, X)
         sc = np.sqrt(c)[:, None]
         Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
         Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
@@ -399,9 +406,9 @@ def fit_lm(
                 delta = -np.linalg.solve(H + lam * np.diag(D), g)
             except np.linalg.LinAlgError:
                 delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
-            P_new = _exp_update(P, delta[0:6])
-            Q_new = _exp_update(Q, delta[6:12])
-            n_r, n_RPN, n_R, n_v = lean.residuals(P_new, Q_new)
+            X_new = _exp_update(X, delta[0:6])
+            Y_new = _exp_update(Y, delta[6:12])
+            n_r, n_RXB, n_R, n_v = lean.residuals(X_new, Y_new)
             new_cost = float(c @ ((n_r * n_r) @ w))
             dl = np.abs(delta).tolist()
             size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / length)
@@ -414,7 +421,7 @@ def fit_lm(
             converged = True
             break
         lam = max(lam / 10.0, 1e-12)
-        P, Q, r, RPN, R_hat, v = P_new, Q_new, n_r, n_RPN, n_R, n_v
+        X, Y, r, RXB, R_hat, v = X_new, Y_new, n_r, n_RXB, n_R, n_v
         change = 0.0
         if update_scales:
             try:
@@ -444,26 +451,26 @@ def fit_lm(
         if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
             converged = True
             break
-    J = lean.jacobian(r, RPN, R_hat, v, P)
+    J = lean.jacobian(r, RXB, R_hat, v, X)
     sm = np.sqrt(maskf)[:, None]
     Jr = (J[:, :3] * (sm / s_r)[:, :, None]).reshape(-1, 12)
     Jt = (J[:, 3:] * (sm / s_t)[:, :, None]).reshape(-1, 12)
     H = Jr.T @ Jr + Jt.T @ Jt
     chi2 = (r * r).reshape(n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
-    return LMFit(P, Q, s_r, s_t, H, chi2, steps, converged)
+    return LMFit(X, Y, s_r, s_t, H, chi2, steps, converged)
 
 
 def variance_components(
-    data: PoseData, P: NDArray, Q: NDArray
+    data: PoseData, camera_T_hand: NDArray, base_T_target: NDArray
 ) -> tuple[float, float, NDArray[np.float64]]:
-    """Noise scales and covariance at a given ``P, Q`` (not moved).
+    """Noise scales and covariance at given transforms (not moved).
 
     Parameters
     ----------
     data : PoseData
-        The poses ``M[i]``, ``N[i]``.
-    P, Q : ndarray, shape (4, 4)
-        The transforms of ``M[i] ≈ P @ N[i] @ Q``, input length unit.
+        The poses ``camera_T_target[i]`` and ``hand_T_base[i]``.
+    camera_T_hand, base_T_target : ndarray, shape (4, 4)
+        The transforms ``X``, ``Y`` of the model (module docstring), input length unit.
 
     Returns
     -------
@@ -472,20 +479,21 @@ def variance_components(
         residuals, then three rounds of variance components (each group's residual sum
         over its redundancy).
     covariance : ndarray, shape (12, 12)
-        ``(J^T W J)^+`` at ``P, Q`` with those scales, in the order
-        ``(dphi_P, dt_P, dphi_Q, dt_Q)``: what the maximum-likelihood fit would report
+        ``(J^T W J)^+`` there with those scales, in the order
+        ``(dphi_X, dt_X, dphi_Y, dt_Y)``: what the maximum-likelihood fit would report
         there.
     """
-    r_r, r_t, _, _ = data.residuals(P, Q)
+    X, Y = camera_T_hand, base_T_target
+    r_r, r_t, _, _ = data.residuals(X, Y)
     s_r, s_t = robust_sigmas(r_r, r_t, data.length)
     ones = np.ones(data.n)
     for _ in range(3):
-        H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+        H_r, H_t = _normal_matrices(data, X, Y, ones, 1.0 / s_r**2, 1.0 / s_t**2)
         Hinv = np.linalg.pinv(H_r + H_t)
         red_r = 3.0 * data.n - float(np.trace(Hinv @ H_r))
         red_t = 3.0 * data.n - float(np.trace(Hinv @ H_t))
         s_r = np.sqrt(np.sum(r_r**2) / red_r) if red_r > 1e-9 else s_r
         s_t = np.sqrt(np.sum(r_t**2) / red_t) if red_t > 1e-9 else s_t
         s_r, s_t = _bounded_sigmas(s_r, s_t, data.length)
-    H_r, H_t = _normal_matrices(data, P, Q, ones, 1.0 / s_r**2, 1.0 / s_t**2)
+    H_r, H_t = _normal_matrices(data, X, Y, ones, 1.0 / s_r**2, 1.0 / s_t**2)
     return s_r, s_t, np.linalg.pinv(H_r + H_t)

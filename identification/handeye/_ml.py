@@ -1,10 +1,13 @@
-"""Maximum-likelihood hand-eye on SE(3): one robust refinement for ``A X = X B`` and
-``A = X B Y``.
+"""Maximum-likelihood hand-eye on SE(3): one robust refinement for both solvers
+(Tsai & Lenz's ``A X = X B`` and Hirsh et al.'s ``A = X B Y``).
 
-Both problems are one absolute-pose model, ``M[i] ≈ P @ N[i] @ Q`` with the camera's
-measured pose ``M[i]`` and the robot's known pose ``N[i]``; the model, its noise model
-(rotation and translation noise in the camera frame, scales estimated by variance
-components) and the Levenberg-Marquardt fit are in :mod:`kinfw.identification.handeye`.
+Both problems are one absolute-pose model,
+``camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target`` with the
+camera's measured pose ``camera_T_target[i]`` and the robot's known pose
+``hand_T_base[i]`` (in the code Hirsh's letters ``A[i] ≈ X @ B[i] @ Y``); the model,
+its noise model (rotation and translation noise in the camera frame, scales estimated by
+variance components) and the Levenberg-Marquardt fit are in
+:mod:`kinfw.identification.handeye`.
 This module starts, robustifies and packs that fit (:func:`fit_absolute`) and evaluates
 it at given transforms (:func:`assess`).
 
@@ -24,7 +27,7 @@ is tried as well: the closed form on every minimal subset of 3 poses (at most
 ``CONSENSUS_MAX_SUBSETS``), scored by the median residual of all poses.
 
 Covariance: ``(J^T W J)^-1`` at the optimum with the estimated ``sigma_r``, ``sigma_t``,
-in the order ``(dphi_P, dt_P, dphi_Q, dt_Q)`` (radians, input length unit).
+in the order ``(dphi_X, dt_X, dphi_Y, dt_Y)`` (radians, input length unit).
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ from kinfw.identification.handeye._lm import (
 from kinfw.identification.handeye._quaternion import (
     closed_form_batch,
     closed_form_start,
-    consistent_quats,
+    consistent_quats_xyzw,
     product_matrices,
 )
 
@@ -93,19 +96,22 @@ Start = Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
 
 @dataclass(frozen=True, slots=True)
 class PoseFit:
-    """Maximum-likelihood fit of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
+    """Maximum-likelihood fit of
+    ``camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target`` (module
+    docstring).
 
     Attributes
     ----------
-    P, Q : ndarray, shape (4, 4)
-        The estimates, input length unit.
+    camera_T_hand, base_T_target : ndarray, shape (4, 4)
+        The estimates (Hirsh's ``X``, ``Y``), input length unit.
     covariance : ndarray, shape (12, 12)
-        Of ``(dphi_P, dt_P, dphi_Q, dt_Q)``: rotations right-perturbed (``R exp(dphi)``,
-        radians, in the child frame), translations in the parent frame (input unit).
+        Of ``(dphi_X, dt_X, dphi_Y, dt_Y)``: rotations right-perturbed (``R exp(dphi)``,
+        radians, in the child frames hand and target), translations in the parent frames
+        camera and base (input unit).
     sigma_rotation_rad, sigma_translation : float
         Estimated noise scales of the camera pose, per axis (radians, input unit).
     rotation_residuals, translation_residuals : ndarray, shape (n, 3)
-        ``log(R_M R_hat^T)`` and ``t_M - t_hat`` of every pose (rejected ones included),
+        ``log(R_A R_hat^T)`` and ``t_A - t_hat`` of every pose (rejected ones included),
         in the camera frame.
     inliers : ndarray of bool, shape (n,)
         Poses used by the final fit.
@@ -118,8 +124,8 @@ class PoseFit:
         clean, or none were given).
     """
 
-    P: NDArray[np.float64]
-    Q: NDArray[np.float64]
+    camera_T_hand: NDArray[np.float64]
+    base_T_target: NDArray[np.float64]
     covariance: NDArray[np.float64]
     sigma_rotation_rad: float
     sigma_translation: float
@@ -163,42 +169,42 @@ def _subsets(n: int) -> NDArray[np.intp]:
     return out
 
 
-def _consensus_start(data: PoseData, M: NDArray, N: NDArray) -> tuple[NDArray, NDArray]:
+def _consensus_start(data: PoseData) -> tuple[NDArray, NDArray]:
     """Best closed form over minimal subsets of 3 poses, scored by the median residuals
     of all poses (the product of the rotation and translation medians: unit-free).
 
-    A residual's rotation angle is ``2 acos |q_P^T K_i q_Q|`` (quaternions, see
+    A residual's rotation angle is ``2 acos |q_X^T K_i q_Y|`` (quaternions, see
     :func:`kinfw.identification.handeye.closed_form_batch`) and its translation
-    ``|R_P^T (t_M - t_P) - R_N t_Q - t_N|``: no rotation matrix per subset and pose.
+    ``|R_X^T (t_A - t_X) - R_B t_Y - t_B|``: no rotation matrix per subset and pose.
     """
-    q_M, q_N = consistent_quats(data.R_M, data.R_N)
-    K = product_matrices(q_M, q_N)
+    q_A, q_B = consistent_quats_xyzw(data.R_A, data.R_B)
+    K = product_matrices(q_A, q_B)
     subsets = _subsets(data.n)
-    P, Q, q_P, q_Q = closed_form_batch(
-        K[subsets], data.R_M[subsets], data.t_M[subsets], data.R_N[subsets], data.t_N[subsets]
+    X, Y, q_X, q_Y = closed_form_batch(
+        K[subsets], data.R_A[subsets], data.t_A[subsets], data.R_B[subsets], data.t_B[subsets]
     )
-    n, s = data.n, len(P)
+    n, s = data.n, len(X)
     # matmul, not einsum: these are BLAS products (einsum's loops are ~10x slower here)
-    qPK = (q_P @ K.transpose(1, 0, 2).reshape(4, 4 * n)).reshape(s, n, 4)
-    ang = 2.0 * np.arccos(np.minimum(np.abs(np.sum(qPK * q_Q[:, None], axis=2)), 1.0))
-    in_P = (data.t_M[None] - P[:, None, :3, 3]) @ P[:, :3, :3]
-    R_N_t_Q = (data.R_N.reshape(3 * n, 3) @ Q[:, :3, 3].T).reshape(n, 3, s).transpose(2, 0, 1)
-    dist = np.linalg.norm(in_P - R_N_t_Q - data.t_N[None], axis=2)
+    qXK = (q_X @ K.transpose(1, 0, 2).reshape(4, 4 * n)).reshape(s, n, 4)
+    ang = 2.0 * np.arccos(np.minimum(np.abs(np.sum(qXK * q_Y[:, None], axis=2)), 1.0))
+    in_X = (data.t_A[None] - X[:, None, :3, 3]) @ X[:, :3, :3]
+    R_B_t_Y = (data.R_B.reshape(3 * n, 3) @ Y[:, :3, 3].T).reshape(n, 3, s).transpose(2, 0, 1)
+    dist = np.linalg.norm(in_X - R_B_t_Y - data.t_B[None], axis=2)
     score = np.log(np.median(ang, axis=1) + 1e-300) + np.log(np.median(dist, axis=1) + 1e-300)
     k = int(np.argmin(score))
-    return P[k], Q[k]
+    return X[k], Y[k]
 
 
 # ------------------------------------------------------------------------------- fit
 
 
-def _robust_fit(data: PoseData, P: NDArray, Q: NDArray, min_inliers: int) -> tuple[LMFit, int]:
+def _robust_fit(data: PoseData, X: NDArray, Y: NDArray, min_inliers: int) -> tuple[LMFit, int]:
     """Huber IRLS, then rejection above :func:`rejection_threshold` and plain refits;
     total steps."""
-    r_r, r_t, _, _ = data.residuals(P, Q)
+    r_r, r_t, _, _ = data.residuals(X, Y)
     s_r, s_t = robust_sigmas(r_r, r_t, data.length)
     everything = np.ones(data.n, dtype=bool)
-    fit = fit_lm(data, P, Q, everything, s_r, s_t, huber=True)
+    fit = fit_lm(data, X, Y, everything, s_r, s_t, huber=True)
     total = fit.steps
     inliers = everything
     for _ in range(4):
@@ -206,14 +212,14 @@ def _robust_fit(data: PoseData, P: NDArray, Q: NDArray, min_inliers: int) -> tup
         if np.array_equal(new_inliers, inliers) and total > fit.steps:
             break
         inliers = new_inliers
-        fit = fit_lm(data, fit.P, fit.Q, inliers, fit.s_r, fit.s_t)
+        fit = fit_lm(data, fit.camera_T_hand, fit.base_T_target, inliers, fit.s_r, fit.s_t)
         total += fit.steps
     return fit, total
 
 
 def fit_absolute(
-    M: NDArray,
-    N: NDArray,
+    camera_T_targets: NDArray,
+    hand_T_bases: NDArray,
     starts: Sequence[Start],
     *,
     robust: bool = True,
@@ -221,22 +227,24 @@ def fit_absolute(
     fallback_starts: Callable[[], Sequence[tuple[NDArray, NDArray]]] | None = None,
     accept: Callable[[PoseFit], bool] | None = None,
 ) -> PoseFit:
-    """Maximum-likelihood ``P, Q`` of ``M[i] ≈ P @ N[i] @ Q`` (module docstring).
+    """Maximum-likelihood ``camera_T_hand`` and ``base_T_target`` of
+    ``camera_T_target[i] ≈ camera_T_hand @ hand_T_base[i] @ base_T_target`` (module
+    docstring).
 
     Parameters
     ----------
-    M : ndarray, shape (n, 4, 4)
-        Measured camera poses (``camera_T_target``), rigid, any length unit.
-    N : ndarray, shape (n, 4, 4)
-        Known robot poses, same unit.
+    camera_T_targets : ndarray, shape (n, 4, 4)
+        Measured camera poses (the target's pose in the camera), rigid, any length unit.
+    hand_T_bases : ndarray, shape (n, 4, 4)
+        Known robot poses (the base's pose in the hand), same unit.
     starts : sequence of callables
-        Each returns a candidate ``(P, Q)`` (e.g. Tsai & Lenz, Hirsh's iteration). The
-        fit starts from the closed form of all poses; only when that fit is not clean --
-        poses rejected (with fewer than ``CONSENSUS_MAX_POSES`` poses), not converged,
-        or ``accept`` says no -- are these candidates, and then those of
-        ``fallback_starts``, fitted too, and the best fit is kept: at the first fit's
-        noise scales, more poses within the rejection threshold, then the lower cost over
-        them. A ``ValueError`` from a start means no candidate.
+        Each returns a candidate ``(camera_T_hand, base_T_target)`` (e.g. Tsai & Lenz,
+        Hirsh's iteration). The fit starts from the closed form of all poses; only when
+        that fit is not clean -- poses rejected (with fewer than ``CONSENSUS_MAX_POSES``
+        poses), not converged, or ``accept`` says no -- are these candidates, and then
+        those of ``fallback_starts``, fitted too, and the best fit is kept: at the first
+        fit's noise scales, more poses within the rejection threshold, then the lower
+        cost over them. A ``ValueError`` from a start means no candidate.
     robust : bool
         Huber IRLS, rejection and (when a pose stays off) the consensus start.
     min_inliers : int, optional
@@ -259,12 +267,12 @@ def fit_absolute(
     pairs are O(n^2)) and change the answer only where the likelihood has more than
     one basin, which a clean fit rules out in practice.
     """
-    data = PoseData(M, N)
+    data = PoseData(camera_T_targets, hand_T_bases)
     if min_inliers is None:
         min_inliers = max(3, data.n - max(1, data.n // 20))
-    P, Q = closed_form_start(M, N)
+    X, Y = closed_form_start(camera_T_targets, hand_T_bases)
     memo: dict = {}
-    fit, inliers, steps = _fit_from(data, M, N, P, Q, robust, min_inliers, memo)
+    fit, inliers, steps = _fit_from(data, X, Y, robust, min_inliers, memo)
     result = _pose_fit(data, fit, inliers, steps)
     clean = result.converged and (inliers.all() or data.n >= CONSENSUS_MAX_POSES)
     if clean and (accept is None or accept(result)):
@@ -281,9 +289,9 @@ def fit_absolute(
     if fallback_starts is not None:
         with contextlib.suppress(ValueError):
             alternatives.extend(fallback_starts())
-    for P0, Q0 in alternatives:
+    for X0, Y0 in alternatives:
         alt, alt_inliers, more = _fit_from(
-            data, M, N, np.asarray(P0, float), np.asarray(Q0, float), robust, min_inliers, memo
+            data, np.asarray(X0, float), np.asarray(Y0, float), robust, min_inliers, memo
         )
         steps += more
         if _better(data, alt, fit, s_r, s_t):
@@ -304,7 +312,7 @@ def _better(data: PoseData, a: LMFit, b: LMFit, s_r: float, s_t: float) -> bool:
 
 
 def _kept_and_cost(data: PoseData, fit: LMFit, s_r: float, s_t: float) -> tuple[int, float]:
-    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    r_r, r_t, _, _ = data.residuals(fit.camera_T_hand, fit.base_T_target)
     chi2 = np.sum(r_r**2, axis=1) / s_r**2 + np.sum(r_t**2, axis=1) / s_t**2
     kept = chi2 <= rejection_threshold(data.n)
     return int(np.count_nonzero(kept)), float(chi2[kept].sum())
@@ -312,32 +320,32 @@ def _kept_and_cost(data: PoseData, fit: LMFit, s_r: float, s_t: float) -> tuple[
 
 def _fit_from(
     data: PoseData,
-    M: NDArray,
-    N: NDArray,
-    P: NDArray,
-    Q: NDArray,
+    X: NDArray,
+    Y: NDArray,
     robust: bool,
     min_inliers: int,
     memo: dict,
 ) -> tuple[LMFit, NDArray[np.bool_], int]:
     """The fit from one start: plain, then (``robust``, a pose off) Huber, rejection and
     the consensus start; the fit, its inliers and its steps."""
-    r_r, r_t, _, _ = data.residuals(P, Q)
+    r_r, r_t, _, _ = data.residuals(X, Y)
     s_r, s_t = robust_sigmas(r_r, r_t, data.length)
     everything = np.ones(data.n, dtype=bool)
-    fit = fit_lm(data, P, Q, everything, s_r, s_t)
+    fit = fit_lm(data, X, Y, everything, s_r, s_t)
     steps = fit.steps
+    same = 1e-11 * max(1.0, data.length)
     for plain, result in memo.get("plain", []):
         # an earlier start's plain fit ended here too: the rest is the same
-        if np.abs(plain.P - fit.P).max() < 1e-11 * max(1.0, data.length) and (
-            np.abs(plain.Q - fit.Q).max() < 1e-11 * max(1.0, data.length)
+        if (
+            np.abs(plain.camera_T_hand - fit.camera_T_hand).max() < same
+            and np.abs(plain.base_T_target - fit.base_T_target).max() < same
         ):
             return result[0], result[1], steps
     first_plain = fit
     inliers = everything
     threshold = rejection_threshold(data.n)
     if robust and data.n > 3 and np.any(fit.chi2 > threshold):
-        fit, more = _robust_fit(data, fit.P, fit.Q, min_inliers)
+        fit, more = _robust_fit(data, fit.camera_T_hand, fit.base_T_target, min_inliers)
         steps += more
         inliers = _inlier_mask(fit, data, min_inliers)
         if not inliers.all() and (
@@ -347,16 +355,16 @@ def _fit_from(
             # a pose stays off and may have pulled the start: try a consensus start
             # (it depends on the data only: computed once per fit_absolute)
             if "consensus" not in memo:
-                P1, Q1 = _consensus_start(data, M, N)
-                alt, more = _robust_fit(data, P1, Q1, min_inliers)
+                X1, Y1 = _consensus_start(data)
+                alt, more = _robust_fit(data, X1, Y1, min_inliers)
                 memo["consensus"] = (alt, _inlier_mask(alt, data, min_inliers))
                 steps += more
             alt, alt_inliers = memo["consensus"]
             n_fit, n_alt = np.count_nonzero(inliers), np.count_nonzero(alt_inliers)
             if n_alt > n_fit or (
                 n_alt == n_fit
-                and _concentrated(data, alt.P, alt.Q, alt_inliers)
-                < _concentrated(data, fit.P, fit.Q, inliers) - 1e-9
+                and _concentrated(data, alt.camera_T_hand, alt.base_T_target, alt_inliers)
+                < _concentrated(data, fit.camera_T_hand, fit.base_T_target, inliers) - 1e-9
             ):
                 fit, inliers = alt, alt_inliers
     memo.setdefault("plain", []).append((first_plain, (fit, inliers)))
@@ -366,14 +374,14 @@ def _fit_from(
 def _pose_fit(
     data: PoseData, fit: LMFit, inliers: NDArray, steps: int, fallback: int = 0
 ) -> PoseFit:
-    r_r, r_t, _, _ = data.residuals(fit.P, fit.Q)
+    r_r, r_t, _, _ = data.residuals(fit.camera_T_hand, fit.base_T_target)
     try:
         covariance = np.linalg.inv(fit.H)
     except np.linalg.LinAlgError:
         covariance = np.linalg.pinv(fit.H)
     return PoseFit(
-        P=fit.P,
-        Q=fit.Q,
+        camera_T_hand=fit.camera_T_hand,
+        base_T_target=fit.base_T_target,
         covariance=covariance,
         sigma_rotation_rad=float(fit.s_r),
         sigma_translation=float(fit.s_t),
@@ -395,22 +403,25 @@ def _inlier_mask(fit: LMFit, data: PoseData, min_inliers: int) -> NDArray[np.boo
     return inliers
 
 
-def _concentrated(data: PoseData, P: NDArray, Q: NDArray, inliers: NDArray) -> float:
-    r_r, r_t, _, _ = data.residuals(P, Q)
+def _concentrated(data: PoseData, X: NDArray, Y: NDArray, inliers: NDArray) -> float:
+    r_r, r_t, _, _ = data.residuals(X, Y)
     return float(
         np.log(np.sum(r_r[inliers] ** 2) + 1e-300) + np.log(np.sum(r_t[inliers] ** 2) + 1e-300)
     )
 
 
-def assess(M: NDArray, N: NDArray, P: NDArray, Q: NDArray) -> PoseFit:
-    """A :class:`PoseFit` at given ``P, Q`` (not moved): noise scales from the residuals
-    (variance components) and the covariance the maximum-likelihood fit would have there."""
-    data = PoseData(M, N)
-    r_r, r_t, _, _ = data.residuals(P, Q)
-    s_r, s_t, covariance = variance_components(data, P, Q)
+def assess(
+    camera_T_targets: NDArray, hand_T_bases: NDArray, camera_T_hand: NDArray, base_T_target: NDArray
+) -> PoseFit:
+    """A :class:`PoseFit` at given ``camera_T_hand`` and ``base_T_target`` (not moved):
+    noise scales from the residuals (variance components) and the covariance the
+    maximum-likelihood fit would have there. Poses as for :func:`fit_absolute`."""
+    data = PoseData(camera_T_targets, hand_T_bases)
+    r_r, r_t, _, _ = data.residuals(camera_T_hand, base_T_target)
+    s_r, s_t, covariance = variance_components(data, camera_T_hand, base_T_target)
     return PoseFit(
-        P=P,
-        Q=Q,
+        camera_T_hand=camera_T_hand,
+        base_T_target=base_T_target,
         covariance=covariance,
         sigma_rotation_rad=float(s_r),
         sigma_translation=float(s_t),

@@ -1,25 +1,27 @@
-"""Closed-form starts for hand-eye ``A X = X B`` and robot-world ``A = X B Y``: the
-methods by name, every one that succeeds on given poses, and their ranking.
+"""Closed-form starts for hand-eye ``A X = X B`` and robot-world ``A = X B Y``: the one
+registry of the methods by name (:data:`START_METHODS`), every one that succeeds on given
+poses, and their ranking.
 
 The methods are pure functions of the absolute poses, in the conventions of the solvers
 (:func:`~kinfw.identification.handeye.solve_axxb` and
-:func:`~kinfw.identification.handeye.solve_axyb`):
+:func:`~kinfw.identification.handeye.solve_axyb`; the frames of
+:mod:`kinfw.identification.handeye`), in the papers' letters:
 
-:mod:`kinfw.identification.handeye`
-    ``A X = X B`` (eye-in-hand): ``A[i] = base_T_hand``, ``B[i] = eye_T_target``,
-    ``X = hand_T_eye``, ``Y = base_T_target``; Park & Martin (1994), Andreff, Horaud &
-    Espiau (2001), Daniilidis (1999).
-:mod:`kinfw.identification.handeye`
+``problem="axxb"``
+    ``A X = X B`` (eye-in-hand): ``A[i] = base_T_hand``, ``B[i] = camera_T_target``,
+    ``X = hand_T_camera``, ``Y = base_T_target``; Park & Martin (1994), Andreff, Horaud
+    & Espiau (2001), Daniilidis (1999).
+``problem="axyb"``
     ``A = X B Y`` (robot-world and hand-eye): ``A[i] = camera_T_target``,
-    ``B[i] = hand_T_root``, ``X = camera_T_hand``, ``Y = root_T_target``; Shah (2013),
+    ``B[i] = hand_T_base``, ``X = camera_T_hand``, ``Y = base_T_target``; Shah (2013),
     Li, Wang & Wu (2010).
 
 Every method returns ``(X, Y)`` as ``(4, 4)`` arrays in the input length unit, exactly
 equivariant to that unit, or raises :class:`~kinfw.identification.handeye.StartError`
 (a ``ValueError``) when its system cannot determine the answer. Here:
-``AXXB_STARTS`` and ``AXYB_STARTS`` (the methods by name), :func:`candidate_starts`
-(every method that succeeds, after one input check) and :func:`rank_starts` (candidates
-scored by their absolute-pose residuals).
+:data:`START_METHODS` (:class:`StartMethod` by name), :func:`candidate_starts` (every
+method of a problem that succeeds, after one input check) and :func:`rank_starts`
+(candidates scored by their absolute-pose residuals).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -34,31 +37,103 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.geometry import check_transform, rotation_angle
 from kinfw.identification.handeye._checks import StartError, check_start_poses
 from kinfw.identification.handeye._starts_axxb import (
-    AXXB_FROM_MOTIONS,
+    _andreff,
+    _daniilidis,
+    _park,
     andreff_axxb,
     daniilidis_axxb,
     park_axxb,
     prepare_axxb,
 )
-from kinfw.identification.handeye._starts_axyb import AXYB_FROM_CHECKED, li_axyb, shah_axyb
+from kinfw.identification.handeye._starts_axyb import _li, _shah, li_axyb, shah_axyb
 
-__all__ = ["AXXB_STARTS", "AXYB_STARTS", "RankedStart", "candidate_starts", "rank_starts"]
+__all__ = [
+    "START_METHODS",
+    "RankedStart",
+    "StartMethod",
+    "candidate_starts",
+    "rank_starts",
+    "register_start",
+    "unregister_start",
+]
 
 log = logging.getLogger(__name__)
 
 Pose = NDArray[np.float64]
 
+#: The problems and how :func:`candidate_starts` checks their poses once for all methods:
+#: ``A X = X B``'s cores take the checked poses and their relative motions, ``A = X B
+#: Y``'s the checked poses.
+_PREPARE: Mapping[str, Callable[[ArrayLike, ArrayLike, str], tuple[Pose, ...]]] = {
+    "axxb": prepare_axxb,
+    "axyb": check_start_poses,
+}
 
-#: The closed forms by name, for ``A X = X B`` and ``A = X B Y``.
-AXXB_STARTS: Mapping[str, Callable[[ArrayLike, ArrayLike], tuple[Pose, Pose]]] = {
-    "park": park_axxb,
-    "andreff": andreff_axxb,
-    "daniilidis": daniilidis_axxb,
+
+@dataclass(frozen=True, slots=True)
+class StartMethod:
+    """One closed-form start.
+
+    Attributes
+    ----------
+    problem : {"axxb", "axyb"}
+        ``"axxb"``: ``A X = X B``; ``"axyb"``: ``A = X B Y`` (module docstring).
+    solve : callable
+        ``solve(A, B) -> (X, Y)``: the public function (e.g.
+        :func:`~kinfw.identification.handeye.park_axxb`), which checks its input.
+    solve_prepared : callable or None
+        The same on the problem's prepared input
+        (:func:`~kinfw.identification.handeye.prepare_axxb` for ``"axxb"``,
+        :func:`~kinfw.identification.handeye.check_start_poses` for ``"axyb"``): what
+        :func:`candidate_starts` calls after one check for all methods. None (a start
+        added with :func:`register_start` may leave it out): ``solve`` is called on the
+        checked poses.
+    """
+
+    problem: str
+    solve: Callable[[ArrayLike, ArrayLike], tuple[Pose, Pose]]
+    solve_prepared: Callable[..., tuple[Pose, Pose]] | None = None
+
+
+_METHODS: dict[str, StartMethod] = {
+    "park": StartMethod("axxb", park_axxb, _park),
+    "andreff": StartMethod("axxb", andreff_axxb, _andreff),
+    "daniilidis": StartMethod("axxb", daniilidis_axxb, _daniilidis),
+    "shah": StartMethod("axyb", shah_axyb, _shah),
+    "li": StartMethod("axyb", li_axyb, _li),
 }
-AXYB_STARTS: Mapping[str, Callable[[ArrayLike, ArrayLike], tuple[Pose, Pose]]] = {
-    "shah": shah_axyb,
-    "li": li_axyb,
-}
+_BUILT_IN = frozenset(_METHODS)
+
+#: Every closed-form start by name, in the order :func:`candidate_starts` tries them (a
+#: read-only view: add one with :func:`register_start`).
+START_METHODS: Mapping[str, StartMethod] = MappingProxyType(_METHODS)
+
+
+def register_start(name: str, method: StartMethod) -> StartMethod:
+    """Add a closed-form start under a new ``name``; returns it.
+
+    The solvers then fit from it too whenever they try the closed forms (a first fit
+    that is not clean: :func:`~kinfw.identification.handeye.solve_axxb`), and
+    :func:`candidate_starts` lists it after the built-ins. A ``method`` without
+    ``solve_prepared`` is called as ``method.solve(A, B)`` on the checked poses.
+
+    Raises
+    ------
+    ValueError
+        When ``name`` is taken or ``method.problem`` is not ``"axxb"`` or ``"axyb"``.
+    """
+    if name in _METHODS:
+        raise ValueError(f"register_start: a start named {name!r} is already registered")
+    _check_problem(method.problem)
+    _METHODS[name] = method
+    return method
+
+
+def unregister_start(name: str) -> None:
+    """Remove a start added by :func:`register_start` (the built-ins stay)."""
+    if name in _BUILT_IN:
+        raise ValueError(f"unregister_start: {name!r} is a built-in start")
+    _METHODS.pop(name, None)
 
 
 def candidate_starts(
@@ -66,21 +141,21 @@ def candidate_starts(
 ) -> dict[str, tuple[Pose, Pose]]:
     """Every closed form of ``problem`` that succeeds on these poses, by name.
 
-    A method that raises :class:`StartError` is left out (logged at debug level); when
-    all fail, the first method's error is raised.
+    ``A``, ``B`` (n, 4, 4) as the closed forms of ``problem`` take them (module
+    docstring). A method that raises :class:`StartError` is left out (logged at debug
+    level); when all fail, the first method's error is raised.
     """
-    cores: Mapping[str, Callable[..., tuple[Pose, Pose]]]
-    if _methods(problem) is AXXB_STARTS:
-        prepared = prepare_axxb(A, B, "candidate_starts")
-        cores = AXXB_FROM_MOTIONS
-    else:
-        prepared = check_start_poses(A, B, "candidate_starts")
-        cores = AXYB_FROM_CHECKED
+    prepared = _PREPARE[_check_problem(problem)](A, B, "candidate_starts")
     out: dict[str, tuple[Pose, Pose]] = {}
     first: StartError | None = None
-    for name, solve in cores.items():
+    for name, method in START_METHODS.items():
+        if method.problem != problem:
+            continue
         try:
-            out[name] = solve(*prepared)
+            if method.solve_prepared is None:
+                out[name] = method.solve(*prepared[:2])
+            else:
+                out[name] = method.solve_prepared(*prepared)
         except StartError as err:
             log.debug("candidate_starts: %s failed: %s", name, err)
             first = first or err
@@ -89,12 +164,10 @@ def candidate_starts(
     return out
 
 
-def _methods(problem: str) -> Mapping[str, Callable[[ArrayLike, ArrayLike], tuple[Pose, Pose]]]:
-    if problem == "axxb":
-        return AXXB_STARTS
-    if problem == "axyb":
-        return AXYB_STARTS
-    raise ValueError(f"problem: expected 'axxb' or 'axyb', got {problem!r}")
+def _check_problem(problem: str) -> str:
+    if problem not in _PREPARE:
+        raise ValueError(f"problem: expected 'axxb' or 'axyb', got {problem!r}")
+    return problem
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,7 +230,7 @@ def rank_starts(
     nor a choice of weight between radians and lengths decides the order. A median of
     zero (all exact) is replaced by the smallest positive value, or 1.
     """
-    _methods(problem)
+    _check_problem(problem)
     names = list(starts)
     if not names:
         raise ValueError("rank_starts: starts is empty: give at least one candidate (X, Y)")

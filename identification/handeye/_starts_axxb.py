@@ -1,8 +1,8 @@
 """Closed forms of hand-eye ``A X = X B``: Park & Martin (1994), Andreff, Horaud &
 Espiau (2001) and Daniilidis (1999), vectorised.
 
-``A[i] = base_T_hand`` (forward kinematics), ``B[i] = eye_T_target`` (camera
-extrinsics); ``X = hand_T_eye`` and ``Y = base_T_target = A[i] @ X @ B[i]`` for all ``i``
+``A[i] = base_T_hand`` (forward kinematics), ``B[i] = camera_T_target`` (camera
+extrinsics); ``X = hand_T_camera`` and ``Y = base_T_target = A[i] @ X @ B[i]`` for all ``i``
 (the conventions of :func:`kinfw.identification.handeye.solve_axxb`). The closed forms use the
 relative motions of every pair ``i < j``::
 
@@ -27,12 +27,12 @@ Andreff's rotation rows, Daniilidis' rows). Where they do not (the translation r
 Park and Andreff), both orders of every pair are used, as in ``solve_axxb``.
 
 :func:`kinfw.identification.handeye.candidate_starts` runs them all on one
-:func:`prepare_axxb` through ``AXXB_FROM_MOTIONS``.
+:func:`prepare_axxb`, through the one registry of starts,
+:data:`kinfw.identification.handeye.START_METHODS`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
 from functools import lru_cache
 
 import numpy as np
@@ -58,7 +58,6 @@ from kinfw.identification.handeye._checks import (
 )
 
 __all__ = [
-    "AXXB_FROM_MOTIONS",
     "andreff_axxb",
     "daniilidis_axxb",
     "park_axxb",
@@ -77,20 +76,21 @@ def _pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
 
 
 def prepare_axxb(A: ArrayLike, B: ArrayLike, method: str) -> tuple[Pose, Pose, Pose, Pose]:
-    """Checked poses ``A`` (``base_T_hand``), ``B`` (``eye_T_target``), each (n, 4, 4),
+    """Checked poses ``A`` (``base_T_hand``), ``B`` (``camera_T_target``), each (n, 4, 4),
     and their relative motions ``A_ij = inv(A[j]) A[i]``, ``B_ij = B[j] inv(B[i])``, each
     (n (n - 1) / 2, 4, 4) over the pairs ``i < j``: the arguments of
-    ``AXXB_FROM_MOTIONS``. Errors as :class:`StartError` prefixed with ``method``."""
-    base_T_hands, eye_T_targets = check_start_poses(A, B, method)
-    return base_T_hands, eye_T_targets, *_relative_motions(base_T_hands, eye_T_targets)
+    closed forms' cores (:data:`kinfw.identification.handeye.START_METHODS`). Errors as
+    :class:`StartError` prefixed with ``method``."""
+    base_T_hands, camera_T_targets = check_start_poses(A, B, method)
+    return base_T_hands, camera_T_targets, *_relative_motions(base_T_hands, camera_T_targets)
 
 
-def _relative_motions(base_T_hands: Pose, eye_T_targets: Pose) -> tuple[Pose, Pose]:
+def _relative_motions(base_T_hands: Pose, camera_T_targets: Pose) -> tuple[Pose, Pose]:
     """``A_ij = inv(A[j]) A[i]`` and ``B_ij = B[j] inv(B[i])`` for every pair ``i < j``."""
     i, j = _pairs(len(base_T_hands))
     A_inv = inverse_transform(base_T_hands)
-    B_inv = inverse_transform(eye_T_targets)
-    return A_inv[j] @ base_T_hands[i], eye_T_targets[j] @ B_inv[i]
+    B_inv = inverse_transform(camera_T_targets)
+    return A_inv[j] @ base_T_hands[i], camera_T_targets[j] @ B_inv[i]
 
 
 def _scaled(T: Pose, s: float) -> Pose:
@@ -100,13 +100,13 @@ def _scaled(T: Pose, s: float) -> Pose:
     return out
 
 
-def _target_from_hand_eye(base_T_hands: Pose, hand_T_eye: Pose, eye_T_targets: Pose) -> Pose:
+def _target_from_hand_eye(base_T_hands: Pose, hand_T_camera: Pose, camera_T_targets: Pose) -> Pose:
     """``Y = base_T_target``: chordal L2 mean of ``A[i] @ X @ B[i]`` over the poses."""
-    return average_transform(base_T_hands @ hand_T_eye @ eye_T_targets)
+    return average_transform(base_T_hands @ hand_T_camera @ camera_T_targets)
 
 
 def _translation_axxb(
-    A_ijs: Pose, B_ijs: Pose, hand_R_eye: NDArray[np.float64], method: str
+    A_ijs: Pose, B_ijs: Pose, hand_R_camera: NDArray[np.float64], method: str
 ) -> NDArray[np.float64]:
     """``t_X`` from ``(I - R_A) t_X = t_A - R_X t_B`` over both orders of every pair.
 
@@ -116,11 +116,11 @@ def _translation_axxb(
     """
     R_As, t_As, R_Bs, t_Bs = A_ijs[:, :3, :3], A_ijs[:, :3, 3], B_ijs[:, :3, :3], B_ijs[:, :3, 3]
     C = np.eye(3) - R_As
-    d = t_As - t_Bs @ hand_R_eye.T
+    d = t_As - t_Bs @ hand_R_camera.T
     # Reverse motions: R_A^T, -R_A^T t_A, -R_B^T t_B.
     C_rev = np.eye(3) - np.swapaxes(R_As, 1, 2)
     d_rev = -np.einsum("kji,kj->ki", R_As, t_As) + np.einsum(
-        "ij,kli,kl->kj", hand_R_eye.T, R_Bs, t_Bs
+        "ij,kli,kl->kj", hand_R_camera.T, R_Bs, t_Bs
     )
     N = 2.0 * np.einsum("kji,kjl->il", C, C)
     r = np.einsum("kji,kj->i", C, d) + np.einsum("kji,kj->i", C_rev, d_rev)
@@ -133,19 +133,19 @@ def _translation_axxb(
 
 
 def park_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
-    """``X = hand_T_eye`` and ``Y = base_T_target`` by Park & Martin (1994).
+    """``X = hand_T_camera`` and ``Y = base_T_target`` by Park & Martin (1994).
 
     Parameters
     ----------
     A : array_like, shape (n, 4, 4)
         ``base_T_hand`` at each pose (robot forward kinematics), any length unit.
     B : array_like, shape (n, 4, 4)
-        ``eye_T_target`` at each pose (camera extrinsics), the same unit as ``A``.
+        ``camera_T_target`` at each pose (camera extrinsics), the same unit as ``A``.
 
     Returns
     -------
     X : ndarray, shape (4, 4)
-        ``hand_T_eye``, in the input length unit.
+        ``hand_T_camera``, in the input length unit.
     Y : ndarray, shape (4, 4)
         ``base_T_target``, the chordal mean of ``A[i] @ X @ B[i]``.
 
@@ -180,7 +180,9 @@ def park_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     return _park(*prepare_axxb(A, B, "park_axxb"))
 
 
-def _park(base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose) -> tuple[Pose, Pose]:
+def _park(
+    base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
+) -> tuple[Pose, Pose]:
     """:func:`park_axxb` on checked poses and their relative motions."""
     method = "park_axxb"
     alphas = rotation_vector_from_matrix(A_ijs[:, :3, :3])
@@ -193,16 +195,16 @@ def _park(base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose) -> 
             f"span one direction (singular values of M {np.array2string(s, precision=3)}); "
             "add motions about another axis"
         )
-    hand_R_eye = project_to_rotation(Mt) if s[2] <= RANK_TOL * s[0] else U @ Vt
-    if np.linalg.det(hand_R_eye) < 0.0:
-        hand_R_eye = project_to_rotation(Mt)
-    hand_p_eye = _translation_axxb(A_ijs, B_ijs, hand_R_eye, method)
-    X = transform_from_rotation_translation(hand_R_eye, hand_p_eye)
-    return X, _target_from_hand_eye(base_T_hands, X, eye_T_targets)
+    hand_R_camera = project_to_rotation(Mt) if s[2] <= RANK_TOL * s[0] else U @ Vt
+    if np.linalg.det(hand_R_camera) < 0.0:
+        hand_R_camera = project_to_rotation(Mt)
+    hand_p_camera = _translation_axxb(A_ijs, B_ijs, hand_R_camera, method)
+    X = transform_from_rotation_translation(hand_R_camera, hand_p_camera)
+    return X, _target_from_hand_eye(base_T_hands, X, camera_T_targets)
 
 
 def andreff_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
-    """``X = hand_T_eye`` and ``Y = base_T_target`` by Andreff, Horaud & Espiau (2001).
+    """``X = hand_T_camera`` and ``Y = base_T_target`` by Andreff, Horaud & Espiau (2001).
 
     Parameters and returns as :func:`park_axxb`.
 
@@ -243,7 +245,7 @@ def andreff_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
 
 
 def _andreff(
-    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
+    base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
 ) -> tuple[Pose, Pose]:
     """:func:`andreff_axxb` on checked poses and their relative motions."""
     method = "andreff_axxb"
@@ -272,9 +274,9 @@ def _andreff(
         f"{method}: the linear system is rank-deficient: the motions turn about one axis, "
         "or nothing translates (the translations fix the scale of the rotation block)",
     )
-    hand_R_eye = nearest_rotation(x[:9].reshape(3, 3), method)
-    X = transform_from_rotation_translation(hand_R_eye, x[9:] * scale)
-    return X, _target_from_hand_eye(base_T_hands, X, eye_T_targets)
+    hand_R_camera = nearest_rotation(x[:9].reshape(3, 3), method)
+    X = transform_from_rotation_translation(hand_R_camera, x[9:] * scale)
+    return X, _target_from_hand_eye(base_T_hands, X, camera_T_targets)
 
 
 #: Levi-Civita symbol: ``cross(a, b)_i = EPS[i, j, k] a_j b_k``.
@@ -288,15 +290,17 @@ def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return np.einsum("ijk,mj,mk->mi", _EPS, a, b)
 
 
-def _qmul(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Row-wise Hamilton products of (m, 4) quaternions ``(w, x, y, z)``."""
+def _quat_wxyz_multiply(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise Hamilton products of (m, 4) quaternions scalar first, ``(w, x, y, z)``:
+    Daniilidis' layout, used only inside :func:`daniilidis_axxb` (the package's
+    quaternions are scalar last)."""
     pw, pv, qw, qv = p[:, :1], p[:, 1:], q[:, :1], q[:, 1:]
     w = pw * qw - np.sum(pv * qv, axis=1, keepdims=True)
     return np.concatenate([w, pw * qv + qw * pv + _cross(pv, qv)], axis=1)
 
 
-def _pair_dual_quats(
-    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose, scale: float
+def _pair_dual_quats_wxyz(
+    base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose, scale: float
 ) -> tuple[NDArray[np.float64], ...]:
     """Real and dual parts ``(q, q')``, each (m, 4) ``(w, x, y, z)``, of ``A_ij`` and
     ``B_ij`` with lengths divided by ``scale``: ``q' = 1/2 (0, t) q`` (Daniilidis 1999,
@@ -304,12 +308,17 @@ def _pair_dual_quats(
     instead of n(n-1)), with the sign that makes ``w >= 0``."""
     n = len(base_T_hands)
     # (w, x, y, z) with w >= 0
-    q = quat_xyzw_from_matrix(np.concatenate([base_T_hands[:, :3, :3], eye_T_targets[:, :3, :3]]))
+    q = quat_xyzw_from_matrix(
+        np.concatenate([base_T_hands[:, :3, :3], camera_T_targets[:, :3, :3]])
+    )
     q = q[:, [3, 0, 1, 2]]
     conj = q * (1.0, -1.0, -1.0, -1.0)
     i, j = _pairs(n)
     out = []
-    for q_ij, T_ijs in ((_qmul(conj[j], q[i]), A_ijs), (_qmul(q[n + j], conj[n + i]), B_ijs)):
+    for q_ij, T_ijs in (
+        (_quat_wxyz_multiply(conj[j], q[i]), A_ijs),
+        (_quat_wxyz_multiply(q[n + j], conj[n + i]), B_ijs),
+    ):
         q_ij *= np.where(q_ij[:, :1] < 0.0, -1.0, 1.0)
         t = T_ijs[:, :3, 3] / scale
         w, v = q_ij[:, :1], q_ij[:, 1:]
@@ -320,7 +329,7 @@ def _pair_dual_quats(
 
 
 def daniilidis_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
-    """``X = hand_T_eye`` and ``Y = base_T_target`` by Daniilidis (1999), dual quaternions.
+    """``X = hand_T_camera`` and ``Y = base_T_target`` by Daniilidis (1999), dual quaternions.
 
     Parameters and returns as :func:`park_axxb`.
 
@@ -362,12 +371,12 @@ def daniilidis_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
 
 
 def _daniilidis(
-    base_T_hands: Pose, eye_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
+    base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
 ) -> tuple[Pose, Pose]:
     """:func:`daniilidis_axxb` on checked poses and their relative motions."""
     method = "daniilidis_axxb"
     scale = length_scale(A_ijs[:, :3, 3], B_ijs[:, :3, 3])
-    qa, qa_d, qb, qb_d = _pair_dual_quats(base_T_hands, eye_T_targets, A_ijs, B_ijs, scale)
+    qa, qa_d, qb, qb_d = _pair_dual_quats_wxyz(base_T_hands, camera_T_targets, A_ijs, B_ijs, scale)
     a, b, a_d, b_d = qa[:, 1:], qb[:, 1:], qa_d[:, 1:], qb_d[:, 1:]
     m = len(a)
     S = np.zeros((m, 6, 8))
@@ -400,18 +409,10 @@ def _daniilidis(
     x = (ell[0] * v7 + ell[1] * v8) / max(norms)
     q, q_d = x[:4], x[4:]
     q_d = q_d - (q @ q_d) * q  # exact orthogonality against rounding
-    hand_R_eye = transform_from_xyz_quat_xyzw(np.zeros(3), q[[1, 2, 3, 0]])[:3, :3]
+    # wxyz -> xyzw at the boundary of the Daniilidis code
+    hand_R_camera = transform_from_xyz_quat_xyzw(np.zeros(3), q[[1, 2, 3, 0]])[:3, :3]
     # t = 2 q' q*: vector part.
     w, v, w_d, v_d = q[0], q[1:], q_d[0], q_d[1:]
-    hand_p_eye = 2.0 * (w * v_d - w_d * v - np.cross(v_d, v)) * scale
-    X = transform_from_rotation_translation(hand_R_eye, hand_p_eye)
-    return X, _target_from_hand_eye(base_T_hands, X, eye_T_targets)
-
-
-#: The ``A X = X B`` closed forms by name on the output of :func:`prepare_axxb`
-#: (checked poses and relative motions): one check for all of them.
-AXXB_FROM_MOTIONS: Mapping[str, Callable[[Pose, Pose, Pose, Pose], tuple[Pose, Pose]]] = {
-    "park": _park,
-    "andreff": _andreff,
-    "daniilidis": _daniilidis,
-}
+    hand_p_camera = 2.0 * (w * v_d - w_d * v - np.cross(v_d, v)) * scale
+    X = transform_from_rotation_translation(hand_R_camera, hand_p_camera)
+    return X, _target_from_hand_eye(base_T_hands, X, camera_T_targets)

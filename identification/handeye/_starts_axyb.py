@@ -1,8 +1,8 @@
 """Closed forms of robot-world and hand-eye ``A = X B Y``: Shah (2013) and Li, Wang &
 Wu (2010), vectorised.
 
-``A[i] = camera_T_target``, ``B[i] = hand_T_root``; ``X = camera_T_hand``,
-``Y = root_T_target`` with ``A[i] = X @ B[i] @ Y`` (the conventions of
+``A[i] = camera_T_target``, ``B[i] = hand_T_base``; ``X = camera_T_hand``,
+``Y = base_T_target`` with ``A[i] = X @ B[i] @ Y`` (the conventions of
 :func:`kinfw.identification.handeye.solve_axyb`). OpenCV's ``calibrateRobotWorldHandEye`` returns
 ``gripper2cam = X`` and ``base2world = inv(Y)``. Every method returns ``(X, Y)`` as
 ``(4, 4)`` arrays in the input length unit, or raises
@@ -17,8 +17,6 @@ after, which makes it exactly equivariant to the unit (OpenCV's is not).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -32,27 +30,27 @@ from kinfw.identification.handeye._checks import (
     solve_normal,
 )
 
-__all__ = ["AXYB_FROM_CHECKED", "li_axyb", "shah_axyb"]
+__all__ = ["li_axyb", "shah_axyb"]
 
 Pose = NDArray[np.float64]
 
 
 def shah_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
-    """``X = camera_T_hand`` and ``Y = root_T_target`` of ``A = X B Y`` by Shah (2013).
+    """``X = camera_T_hand`` and ``Y = base_T_target`` of ``A = X B Y`` by Shah (2013).
 
     Parameters
     ----------
     A : array_like, shape (n, 4, 4)
         ``camera_T_target`` at each pose (camera extrinsics), any length unit.
     B : array_like, shape (n, 4, 4)
-        ``hand_T_root`` at each pose (inverse forward kinematics), the same unit.
+        ``hand_T_base`` at each pose (inverse forward kinematics), the same unit.
 
     Returns
     -------
     X : ndarray, shape (4, 4)
         ``camera_T_hand`` (OpenCV's ``gripper2cam``), in the input length unit.
     Y : ndarray, shape (4, 4)
-        ``root_T_target`` (the inverse of OpenCV's ``base2world``).
+        ``base_T_target`` (the inverse of OpenCV's ``base2world``).
 
     Raises
     ------
@@ -84,11 +82,11 @@ def shah_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     return _shah(*check_start_poses(A, B, "shah_axyb"))
 
 
-def _shah(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
+def _shah(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
     """:func:`shah_axyb` on checked poses."""
     method = "shah_axyb"
     R_As, t_As = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3]
-    R_Bs, t_Bs = hand_T_roots[:, :3, :3], hand_T_roots[:, :3, 3]
+    R_Bs, t_Bs = hand_T_bases[:, :3, :3], hand_T_bases[:, :3, 3]
     n = len(R_As)
     K = np.einsum("mij,mkl->ikjl", R_As, R_Bs).reshape(9, 9)
     U, s, Vt = np.linalg.svd(K)
@@ -102,7 +100,7 @@ def _shah(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
     if np.linalg.det(x) < 0.0:
         x, y = -x, -y
     camera_R_hand = nearest_rotation(x, method)
-    root_R_target = nearest_rotation(y, method).T
+    base_R_target = nearest_rotation(y, method).T
     # [I, R_X R_B] (t_X, t_Y) = t_A - R_X t_B, normal equations in closed form.
     G = camera_R_hand @ R_Bs  # (n, 3, 3)
     d = t_As - t_Bs @ camera_R_hand.T
@@ -118,12 +116,12 @@ def _shah(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
         f"{method}: the translations are not determined: the rotations of B do not vary",
     )
     X = transform_from_rotation_translation(camera_R_hand, t[:3])
-    Y = transform_from_rotation_translation(root_R_target, t[3:])
+    Y = transform_from_rotation_translation(base_R_target, t[3:])
     return X, Y
 
 
 def li_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
-    """``X = camera_T_hand`` and ``Y = root_T_target`` of ``A = X B Y`` by Li et al. (2010).
+    """``X = camera_T_hand`` and ``Y = base_T_target`` of ``A = X B Y`` by Li et al. (2010).
 
     Parameters, returns and raises as :func:`shah_axyb`.
 
@@ -154,12 +152,12 @@ def li_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     return _li(*check_start_poses(A, B, "li_axyb"))
 
 
-def _li(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
+def _li(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
     """:func:`li_axyb` on checked poses."""
     method = "li_axyb"
-    scale = length_scale(camera_T_targets[:, :3, 3], hand_T_roots[:, :3, 3])
+    scale = length_scale(camera_T_targets[:, :3, 3], hand_T_bases[:, :3, 3])
     R_As, t_As = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3] / scale
-    R_Bs, t_Bs = hand_T_roots[:, :3, :3], hand_T_roots[:, :3, 3] / scale
+    R_Bs, t_Bs = hand_T_bases[:, :3, :3], hand_T_bases[:, :3, 3] / scale
     n = len(R_As)
     eye3 = np.eye(3)
     J = np.zeros((n, 12, 24))
@@ -176,16 +174,8 @@ def _li(camera_T_targets: Pose, hand_T_roots: Pose) -> tuple[Pose, Pose]:
             f"{method}: the linear system is rank-deficient (rank {rank} of 24): the "
             "rotations of B barely vary, or nothing translates"
         )
-    root_R_target = nearest_rotation(sol[:9].reshape(3, 3), method).T
+    base_R_target = nearest_rotation(sol[:9].reshape(3, 3), method).T
     camera_R_hand = nearest_rotation(sol[9:18].reshape(3, 3), method)
     X = transform_from_rotation_translation(camera_R_hand, sol[21:] * scale)
-    Y = transform_from_rotation_translation(root_R_target, -root_R_target @ sol[18:21] * scale)
+    Y = transform_from_rotation_translation(base_R_target, -base_R_target @ sol[18:21] * scale)
     return X, Y
-
-
-#: The ``A = X B Y`` closed forms by name on poses checked by
-#: :func:`~kinfw.identification.handeye.check_start_poses`: one check for all of them.
-AXYB_FROM_CHECKED: Mapping[str, Callable[[Pose, Pose], tuple[Pose, Pose]]] = {
-    "shah": _shah,
-    "li": _li,
-}

@@ -1,9 +1,10 @@
 """Time offset between a hand and an eye pose stream, by the most constant implied target.
 
 :func:`best_time_offset` aligns the streams (:func:`kinfw.measurements.align_streams`)
-at a grid of candidate offsets, solves the hand-eye ``X`` at each
+at a grid of candidate offsets, solves the hand-eye ``hand_T_camera`` at each
 (:func:`kinfw.identification.handeye.solve_axxb`), and keeps the offset at which the target's
-implied pose in the robot base, ``base_T_hand @ X @ eye_T_target``, spreads least
+implied pose in the robot base, ``base_T_hand @ hand_T_camera @ camera_T_target``,
+spreads least
 (:func:`implied_target_spread`). The offset's sign is that of
 :mod:`kinfw.measurements` (added to the hand stamps).
 
@@ -32,7 +33,7 @@ log = logging.getLogger("kinfw.measurements")  # logged as the alignment's, as b
 
 
 def implied_target_spread(
-    base_T_hands: ArrayLike, hand_T_eye: ArrayLike, eye_T_targets: ArrayLike
+    base_T_hands: ArrayLike, hand_T_camera: ArrayLike, camera_T_targets: ArrayLike
 ) -> tuple[float, float]:
     """How constant the target's implied pose in the base is: median deviations.
 
@@ -40,23 +41,24 @@ def implied_target_spread(
     ----------
     base_T_hands : array_like, shape (n, 4, 4)
         Pose of the hand in the base at each sample.
-    hand_T_eye : array_like, shape (4, 4)
-        Hand-eye transform ``X``.
-    eye_T_targets : array_like, shape (n, 4, 4)
-        Pose of the target in the eye at the same samples.
+    hand_T_camera : array_like, shape (4, 4)
+        Pose of the camera in the hand (the hand-eye transform).
+    camera_T_targets : array_like, shape (n, 4, 4)
+        Pose of the target in the camera at the same samples.
 
     Returns
     -------
     position : float
-        Median distance of ``base_T_hands[i] @ X @ eye_T_targets[i]``'s positions from
+        Median distance of ``base_T_hands[i] @ hand_T_camera @ camera_T_targets[i]``'s
+        positions from
         their coordinate-wise median, input length unit.
     rotation_rad : float
         Median angle of those poses' rotations from their chordal mean, radians.
     """
     base_T_targets = (
         np.asarray(base_T_hands, dtype=float)
-        @ np.asarray(hand_T_eye, float)
-        @ np.asarray(eye_T_targets, dtype=float)
+        @ np.asarray(hand_T_camera, float)
+        @ np.asarray(camera_T_targets, dtype=float)
     )
     p = base_T_targets[:, :3, 3]
     position = float(np.median(np.linalg.norm(p - np.median(p, axis=0), axis=1)))
@@ -78,8 +80,9 @@ class TimeOffsetResult:
         their median (:func:`implied_target_spread`), input length unit -- the objective.
     rotation_spread_rad : float
         At ``offset_s``: median angle of the implied target rotations from their mean.
-    hand_T_eye : ndarray, shape (4, 4)
-        :func:`kinfw.identification.handeye.solve_axxb`'s ``X`` at ``offset_s``.
+    hand_T_camera : ndarray, shape (4, 4)
+        :func:`kinfw.identification.handeye.solve_axxb`'s ``hand_T_camera`` at
+        ``offset_s``.
     n_pairs : int
         Hand-eye pairs (camera samples) used at ``offset_s``.
     offsets_s : ndarray, shape (k,)
@@ -91,7 +94,7 @@ class TimeOffsetResult:
     offset_s: float
     position_spread: float
     rotation_spread_rad: float
-    hand_T_eye: NDArray[np.float64]
+    hand_T_camera: NDArray[np.float64]
     n_pairs: int
     offsets_s: NDArray[np.float64]
     position_spreads: NDArray[np.float64]
@@ -113,7 +116,8 @@ def best_time_offset(
 
     At each candidate offset the streams are aligned (:func:`align_streams`), ``X`` is
     solved by :func:`kinfw.identification.handeye.solve_axxb`, and the objective is the median
-    distance of the implied target positions ``base_T_hand @ X @ eye_T_target`` from
+    distance of the implied target positions
+    ``base_T_hand @ hand_T_camera @ camera_T_target`` from
     their median. A coarse grid over ``search_s`` is followed by a fine grid of
     ``fine_step_s`` within one coarse step either side of the coarse minimum.
 
@@ -182,12 +186,16 @@ def best_time_offset(
                 step=step,
             )
             try:
-                hand_T_eye = solve_axxb(A, B).hand_T_camera
+                hand_T_camera = solve_axxb(base_T_hands=A, camera_T_targets=B).hand_T_camera
             except HandEyeError as err:
                 log.info("best_time_offset: offset %.4f s: hand-eye solve failed (%s)", offset, err)
                 evaluated[offset] = (np.inf, np.inf, None, len(A))
             else:
-                evaluated[offset] = (*implied_target_spread(A, hand_T_eye, B), hand_T_eye, len(A))
+                evaluated[offset] = (
+                    *implied_target_spread(A, hand_T_camera, B),
+                    hand_T_camera,
+                    len(A),
+                )
         return evaluated[offset][0]
 
     def grid(a: float, b: float, h: float) -> NDArray[np.float64]:
@@ -199,8 +207,8 @@ def best_time_offset(
     best = min([best, *fine], key=evaluate)
     offsets = np.array(sorted(evaluated))
     spreads = np.array([evaluated[o][0] for o in offsets])
-    position, rotation, hand_T_eye, n = evaluated[round(best, 12)]
-    if hand_T_eye is None:  # the minimum is inf: every solve failed
+    position, rotation, hand_T_camera, n = evaluated[round(best, 12)]
+    if hand_T_camera is None:  # the minimum is inf: every solve failed
         raise HandEyeError(
             f"the hand-eye solve failed at every offset in [{lo!r}, {hi!r}] s "
             f"(see the INFO log for each reason)"
@@ -209,7 +217,7 @@ def best_time_offset(
         offset_s=float(round(best, 12)),
         position_spread=position,
         rotation_spread_rad=rotation,
-        hand_T_eye=hand_T_eye,
+        hand_T_camera=hand_T_camera,
         n_pairs=n,
         offsets_s=offsets,
         position_spreads=spreads,

@@ -1,11 +1,14 @@
 """The uncertainty of a hand-eye transform and the verdict on it (issue 13: never a bare
-answer): per-axis and worst-direction 1-sigma from a covariance, and "determined",
-"poorly determined (sigma ...)" or "undetermined (...)" against thresholds that do not
-depend on the length unit. The covariances come from :mod:`kinfw.identification.handeye`.
+answer): per-axis and worst-direction 1-sigma from a covariance, and a :class:`Verdict`
+(determined, poorly determined, undetermined) against thresholds that do not depend on
+the length unit, with a message that says why ("poorly determined (sigma ...)"). Code
+reads the enum; the message is for people. The covariances come from
+:mod:`kinfw.identification.handeye`.
 """
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -20,6 +23,7 @@ __all__ = [
     "UNDETERMINED_ROTATION_DEG",
     "UNDETERMINED_TRANSLATION_FRACTION",
     "Uncertainty",
+    "Verdict",
     "combined_verdict",
     "inverse_covariance_map",
     "uncertainty",
@@ -31,6 +35,30 @@ POOR_ROTATION_DEG = 1.0
 UNDETERMINED_ROTATION_DEG = 10.0
 POOR_TRANSLATION_FRACTION = 0.02
 UNDETERMINED_TRANSLATION_FRACTION = 0.2
+
+
+class Verdict(enum.Enum):
+    """How well the data determine a hand-eye transform, from its worst 1-sigma.
+
+    The members are in order of severity; the value is the verdict's wording in
+    messages. ``DETERMINED``: rotation within ``POOR_ROTATION_DEG`` and translation
+    within ``POOR_TRANSLATION_FRACTION`` of the scene's length; ``POORLY_DETERMINED``:
+    beyond those, within ``UNDETERMINED_ROTATION_DEG`` and
+    ``UNDETERMINED_TRANSLATION_FRACTION``; ``UNDETERMINED``: beyond those, or a
+    covariance that is not finite.
+    """
+
+    DETERMINED = "determined"
+    POORLY_DETERMINED = "poorly determined"
+    UNDETERMINED = "undetermined"
+
+    @property
+    def severity(self) -> int:
+        """0 for ``DETERMINED``, 1 for ``POORLY_DETERMINED``, 2 for ``UNDETERMINED``."""
+        return _SEVERITY[self]
+
+
+_SEVERITY = {verdict: rank for rank, verdict in enumerate(Verdict)}
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,9 +75,11 @@ class Uncertainty:
         Along the worst direction (square root of the largest eigenvalue).
     worst_rotation_axis, worst_translation_axis : ndarray, shape (3,)
         Those directions (unit vectors, child and parent frame).
-    verdict : str
-        ``"determined"``, ``"poorly determined (sigma ... deg, ...)"`` or
-        ``"undetermined (...)"``.
+    verdict : Verdict
+        The verdict on the worst 1-sigma.
+    reason : str
+        What makes it so, for people: empty when determined, ``"sigma ... deg, ..."``
+        when poorly determined, the undetermined direction and its sigma otherwise.
     """
 
     sigma_rotation_deg: NDArray[np.float64]
@@ -58,18 +88,34 @@ class Uncertainty:
     worst_translation: float
     worst_rotation_axis: NDArray[np.float64]
     worst_translation_axis: NDArray[np.float64]
-    verdict: str
+    verdict: Verdict
+    reason: str
+
+    @property
+    def message(self) -> str:
+        """The verdict in words: ``"determined"``, ``"poorly determined (sigma ... deg,
+        ...)"`` or ``"undetermined (<worst direction>: sigma ...)"``."""
+        return _message(self.verdict, self.reason)
 
 
-def combined_verdict(named: Sequence[tuple[str, Uncertainty]]) -> str:
-    """One verdict for several transforms: ``"determined"`` when all are, else the worst
-    one's, naming the transform (e.g. ``"poorly determined (camera_T_hand: sigma ...)"``)."""
-    rank = {"determined": 0, "poorly": 1, "undetermined": 2}
-    worst_name, worst = max(named, key=lambda item: rank[item[1].verdict.split(" ")[0]])
-    if worst.verdict == "determined":
-        return "determined"
-    head, _, rest = worst.verdict.partition("(")
-    return f"{head}({worst_name}: {rest}"
+def _message(verdict: Verdict, reason: str) -> str:
+    return f"{verdict.value} ({reason})" if reason else verdict.value
+
+
+def combined_verdict(named: Sequence[tuple[str, Uncertainty]]) -> tuple[Verdict, str]:
+    """One verdict for several transforms: the worst one's (the first of equals) and its
+    message naming the transform, e.g. ``"poorly determined (camera_T_hand: sigma ...)"``;
+    ``"determined"`` when all are.
+
+    Parameters
+    ----------
+    named : sequence of (str, Uncertainty)
+        Each transform's name (e.g. ``"camera_T_hand"``) and uncertainty; not empty.
+    """
+    worst_name, worst = max(named, key=lambda item: item[1].verdict.severity)
+    if worst.verdict is Verdict.DETERMINED:
+        return worst.verdict, worst.verdict.value
+    return worst.verdict, _message(worst.verdict, f"{worst_name}: {worst.reason}")
 
 
 def uncertainty(
@@ -103,16 +149,18 @@ def uncertainty(
         t_text = f"{worst_t:.3g} {unit or 'input length units'}"
     finite = np.all(np.isfinite(covariance))
     if not finite or worst_r > UNDETERMINED_ROTATION_DEG:
-        verdict = (
-            f"undetermined (rotation about {np.round(axis_r, 3).tolist()} in {frame}: "
-            f"sigma {worst_r:.3g} deg)"
+        verdict = Verdict.UNDETERMINED
+        reason = (
+            f"rotation about {np.round(axis_r, 3).tolist()} in {frame}: sigma {worst_r:.3g} deg"
         )
     elif worst_t > UNDETERMINED_TRANSLATION_FRACTION * length:
-        verdict = f"undetermined (translation along {np.round(axis_t, 3).tolist()}: sigma {t_text})"
+        verdict = Verdict.UNDETERMINED
+        reason = f"translation along {np.round(axis_t, 3).tolist()}: sigma {t_text}"
     elif worst_r > POOR_ROTATION_DEG or worst_t > POOR_TRANSLATION_FRACTION * length:
-        verdict = f"poorly determined (sigma {worst_r:.3g} deg, {t_text})"
+        verdict = Verdict.POORLY_DETERMINED
+        reason = f"sigma {worst_r:.3g} deg, {t_text}"
     else:
-        verdict = "determined"
+        verdict, reason = Verdict.DETERMINED, ""
     return Uncertainty(
         sigma_rotation_deg=np.degrees(np.sqrt(np.maximum(np.diag(C_r), 0.0))),
         sigma_translation=np.sqrt(np.maximum(np.diag(C_t), 0.0)),
@@ -121,6 +169,7 @@ def uncertainty(
         worst_rotation_axis=axis_r,
         worst_translation_axis=axis_t,
         verdict=verdict,
+        reason=reason,
     )
 
 

@@ -360,7 +360,8 @@ def frame_from_markers(
         A[:, :3, :3], A[:, :3, 3], A[:, 3, 3] = RA, p, 1.0
         if len(T) >= 3:
             try:
-                res = solve_axyb(A, T)
+                # A = X B Y with camera = meas, hand = w, base = frame, target = marker
+                res = solve_axyb(camera_T_targets=A, hand_T_bases=T)
                 start = res.camera_T_hand[:3, :3], res.camera_T_hand[:3, 3]
             except (ValueError, np.linalg.LinAlgError):
                 start = None

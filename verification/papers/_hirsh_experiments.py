@@ -314,13 +314,13 @@ def _hirsh_trial(
     c_T_ws = p.c_T_ws
     if noise_deg > 0.0:
         c_T_ws = rotate_about_random_axes(c_T_ws, rng, np.radians(noise_deg))
-    factor = convergence_factor(c_T_ws, p.e_T_bs)
+    factor = convergence_factor(camera_T_targets=c_T_ws, hand_T_bases=p.e_T_bs)
     initial = np.degrees(quaternion_angle(np.eye(3), p.b_T_w[:3, :3]))
     try:
         res = solve_axyb(
-            c_T_ws,
-            p.e_T_bs,
-            Y0=np.eye(4),
+            camera_T_targets=c_T_ws,
+            hand_T_bases=p.e_T_bs,
+            base_T_target_guess=np.eye(4),
             refine=False,
             record_history=True,
             rng=rng,
@@ -334,16 +334,16 @@ def _hirsh_trial(
         initial,
         (
             _padded(
-                np.degrees(quaternion_angle(res.root_T_target_history[:, :3, :3], p.b_T_w[:3, :3])),
+                np.degrees(quaternion_angle(res.base_T_target_history[:, :3, :3], p.b_T_w[:3, :3])),
                 k,
             ),
             _padded(
                 np.degrees(quaternion_angle(res.camera_T_hand_history[:, :3, :3], p.c_T_e[:3, :3])),
                 k,
             ),
-            np.degrees(quaternion_angle(res.root_T_target[:3, :3], p.b_T_w[:3, :3])),
+            np.degrees(quaternion_angle(res.base_T_target[:3, :3], p.b_T_w[:3, :3])),
             np.degrees(quaternion_angle(res.camera_T_hand[:3, :3], p.c_T_e[:3, :3])),
-            np.linalg.norm(res.root_T_target[:3, 3] - p.b_T_w[:3, 3]),
+            np.linalg.norm(res.base_T_target[:3, 3] - p.b_T_w[:3, 3]),
             res.iterations,
             res.restarts,
             res.converged,
@@ -367,8 +367,9 @@ def hirsh_study(
 
     For each number of views, ``trials`` random problems (module docstring, steps 1-3);
     each is solved by the paper's iteration from the identity for ``Y``
-    (``solve_axyb(A, B, Y0=I, refine=False, record_history=True)``) and the error of each
-    iterate is recorded against the truth.
+    (``solve_axyb(camera_T_targets=A, hand_T_bases=B, base_T_target_guess=I,
+    refine=False, record_history=True)``) and the error of each iterate is recorded
+    against the truth.
 
     Parameters
     ----------
