@@ -217,6 +217,7 @@ def test_the_length_unit_does_not_matter(refine):
 # -------------------------------------------------------------- noise statistics
 
 
+@pytest.mark.slow
 def test_one_degree_noise_gives_errors_below_one_degree_for_ten_views():
     """The paper's Fig. 4 claim, over 200 trials of 10 views with each A rotated by
     exactly 1 degree about a random axis. Measured (seeds 1000-1199), the paper's

@@ -65,6 +65,7 @@ def test_a_camera_on_an_arm_with_trusted_kinematics_gives_its_mount_and_the_targ
     np.testing.assert_allclose(cam.root_T_target, w_T_target, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_both_stages_give_the_true_cameras_through_the_urdf():
     nominal = load_robot(HEAD)
     rng = np.random.default_rng(1)

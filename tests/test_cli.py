@@ -244,6 +244,7 @@ def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, 
     assert len(report["data"]["sha256"]) == 64
 
 
+@pytest.mark.slow
 def test_random_configurations_need_the_refinement(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
@@ -285,6 +286,7 @@ def test_random_configurations_need_the_refinement(tmp_path, capsys):
         assert rms < truth["nominal"][group] / 10
 
 
+@pytest.mark.slow
 def test_calibrate_target_only_data_on_trusted_kinematics(tmp_path, capsys):
     code, _, _ = _run(
         [
@@ -438,6 +440,7 @@ def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
     assert len(json.loads(out)["fitted"]) == 2
 
 
+@pytest.mark.slow
 def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0

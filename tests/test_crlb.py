@@ -249,6 +249,7 @@ def test_true_chart_coordinates_reproduce_the_truth(head, experiment):
 # -- the CRLB study --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_refined_error_reaches_the_bound(small_study):
     s = small_study
     assert s.crlb_rms_mm.shape == (4, 4)
@@ -315,6 +316,7 @@ def test_plant_outliers_moves_exactly_the_planted_observations(experiment):
     assert moved == planted
 
 
+@pytest.mark.slow
 def test_robust_losses_resist_planted_outliers(small_robust):
     s = small_robust
     clean = np.sqrt(np.mean(s.clean_rms_mm**2))
@@ -351,6 +353,7 @@ def test_robustness_study_rejects_unknown_losses(head):
         robustness_study(head, trials=1, outlier_fraction=1.5)
 
 
+@pytest.mark.slow
 def test_main_writes_png_and_json_and_trials_do_not_depend_on_the_count(
     tmp_path, capsys, small_study
 ):

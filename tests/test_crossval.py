@@ -22,6 +22,7 @@ def _data(truth, n, seed, noise_m=0.5e-3, noise_rad=0.005):
     return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad)
 
 
+@pytest.mark.slow
 def test_calibration_beats_both_baselines_when_the_joints_are_off(head):
     nominal = head
     truth = load_robot(
@@ -64,6 +65,7 @@ def test_overfitting_on_small_data_is_warned_about(head):
     assert "likely cause" in cv.warnings[0]
 
 
+@pytest.mark.slow
 def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     nominal = head
     truth = load_robot(
@@ -153,6 +155,7 @@ def _fold_numbers(cv):
     )
 
 
+@pytest.mark.slow
 def test_thread_and_process_executors_give_the_serial_scores(head):
     from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
@@ -294,6 +297,7 @@ def test_free_column_jacobian_equals_the_full_one():
 
 
 # -- gross errors out of scoring, whitened selection, advice that fits the loss ---------------
+@pytest.mark.slow
 def test_exclude_flagged_leaves_the_rejected_observation_out_of_scoring(head):
     truth = load_robot(
         perturb_robot(head, np.random.default_rng(4), origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)

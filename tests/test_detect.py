@@ -103,6 +103,7 @@ def test_charuco_dictionary_too_small():
 
 
 # -- the renderer ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_render_puts_squares_where_the_camera_model_projects_them():
     """Centres of squares of the chessboard, projected by CameraIntrinsics.project, land on
     dark pixels for black squares and bright ones for white squares."""
@@ -162,6 +163,7 @@ def test_board_out_of_view_is_not_found(board):
     assert detection.uv.shape == (0, 2) and detection.ids.shape == (0,)
 
 
+@pytest.mark.slow
 def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
     """A pose (found by benchmarks/bench_detect.py) where two corners fall below the image
     and OpenCV's findChessboardCornersSB returns a 9x6 grid shifted by one square (its
@@ -189,6 +191,7 @@ def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
 @pytest.mark.parametrize(
     "board", [Chessboard(8, 6, 0.03), Chessboard(7, 5, 0.03), Chessboard(5, 5, 0.04)]
 )
+@pytest.mark.slow
 def test_symmetric_chessboard_is_ambiguous_unless_allowed(board):
     upright = board_pose(board, [0.2, -0.2, 0.0], 0.3)
     turned = board_pose(board, [0.2, -0.2, 0.0], 0.3 + np.pi)
@@ -254,6 +257,7 @@ def _write_images(tmp_path, board, poses):
     return paths
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("board", [CHESS, CHARUCO])
 def test_detect_command_end_to_end(tmp_path, capsys, board):
     poses = [board_pose(board, tilt, roll) for tilt, roll in POSES[:3]]

@@ -198,6 +198,7 @@ def test_the_cli_simulate_writes_the_data_and_truth_of_the_verb(experiment, tmp_
     assert (tmp_path / "cli.json").read_text() == (d / "data.json").read_text()
 
 
+@pytest.mark.slow
 def test_the_cli_plan_is_the_verb_s_plan(tmp_path, capsys):
     head = kinfw.load_robot(HEAD_URDF)
     argv = ["plan", "--urdf", HEAD_URDF, "--n", "6", "--candidates", "60", "--test", "30"]
@@ -217,6 +218,7 @@ def test_the_cli_plan_is_the_verb_s_plan(tmp_path, capsys):
     assert plan.objective.name == "position" and plan.rms("position") < plan.random_rms
 
 
+@pytest.mark.slow
 def test_crossvalidate_of_noise_free_data_predicts_held_out_samples_exactly(experiment, capsys):
     d, _, _, data, _ = experiment
     cv = kinfw.crossvalidate(kinfw.load_robot(d / "nominal.urdf"), data, k=3, seed=1)

@@ -117,6 +117,7 @@ def test_ur10_from_dh_matches_the_shipped_ur10_urdf():
     np.testing.assert_allclose(ours.frame_poses(qs, "tool0"), base_T_tool, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_reproduce_gaze_small_run_shows_calibration_helps(tmp_path, capsys):
     code = kinfw_main(["reproduce", "gaze", "--out", str(tmp_path), "--trials", "1", "--seed", "2"])
     out = capsys.readouterr().out

@@ -122,6 +122,7 @@ def test_sample_order_does_not_matter(seed):
 # -- statistics against known noise --------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_reported_covariance_matches_the_errors_and_beats_tsai_on_small_motions(monkeypatch):
     """1 deg about a random axis + 2 mm per axis on the camera pose, 10 views, motions up
     to 15 deg. The X errors whitened by the reported covariance have mean squared norm

@@ -262,6 +262,7 @@ def test_plot_writes_a_png(noise_free, noisy, tmp_path):
     assert len(data) > 30_000
 
 
+@pytest.mark.slow
 def test_run_and_main_write_png_and_json(tmp_path, capsys):
     _, noisy = run_hirsh(tmp_path / "a", trials=2, iterations=15, views=(3, 6))
     assert (tmp_path / "a" / "hirsh_fig3_fig4.png").stat().st_size > 30_000

@@ -248,6 +248,7 @@ def test_real_tiago_eye_hand_session_converts_and_calibrates(tmp_path, capsys):
     assert fit_pos == pytest.approx(pos_fit, rel=0.05)
 
 
+@pytest.mark.slow
 def test_real_401_sample_eye_hand_session_predicts_unseen_poses_better():
     """FIGAROH's 401-sample TIAGo eye-hand session (head camera -> board on the hand, 6D):
     calibrated ("full") on the first 300 samples, the 101 unseen relative poses are

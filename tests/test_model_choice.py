@@ -60,6 +60,7 @@ def _held_out_vs_truth(nominal, truth, data, parameters, prior):
     return 1e3 * np.sqrt(np.mean(np.sum(d**2, axis=-1))), np.degrees(np.sqrt(np.mean(angle**2)))
 
 
+@pytest.mark.slow
 def test_small_data_is_not_given_the_full_set_and_predicts_the_truth_better(head, mounts_only):
     truth, data = mounts_only
     choice = choose_parameters(head, data, k=4)
@@ -101,6 +102,7 @@ def test_plentiful_data_gets_the_full_set_without_cross_validation(head, monkeyp
         choose_parameters(head, small)  # the small set does go to cross-validation
 
 
+@pytest.mark.slow
 def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys, mounts_only):
     _, data = mounts_only
     path = tmp_path / "data.json"
@@ -138,6 +140,7 @@ def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys,
     )
 
 
+@pytest.mark.slow
 def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
     """A 60 mm error planted in one plate pose: the full-data fit rejects it and the
     choice names it; scored without it, the fold that holds it scores like the others
@@ -168,6 +171,7 @@ def test_a_gross_error_is_left_out_of_every_score_and_named(head, mounts_only):
             assert hit > 10.0 > 2.0 * max(others)
 
 
+@pytest.mark.slow
 def test_a_prior_too_strong_for_the_robot_is_scored_not_refused(head):
     """A truth 30 mm / 3 deg from the nominal: with a 0.1 mm / 0.001 rad prior the fit
     stays near the nominal and leaves residuals the unrestricted check would refuse
@@ -183,6 +187,7 @@ def test_a_prior_too_strong_for_the_robot_is_scored_not_refused(head):
     assert pos_strong > 20.0 > 1.0 > pos_free  # mm
 
 
+@pytest.mark.slow
 def test_a_candidate_no_training_fold_can_fit_is_skipped_not_fatal():
     """The real TIAGo Vicon session cut to its first 16 samples: a 13-sample training
     fold has fewer residual rows than "full" has parameters, which used to fail the

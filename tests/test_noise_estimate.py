@@ -65,6 +65,7 @@ def _mean_ratios(results):
     )
 
 
+@pytest.mark.slow
 def test_robust_constants_match_the_simulated_noise_model():
     """Median, 99.9 % cut and trimmed moment of the whitened squared norms, sampled from
     the simulator's own noise (perturb_poses) rather than derived."""
@@ -112,6 +113,7 @@ def huber_results(datasets):
     return [refine(nominal, data, loss="huber") for nominal, data in datasets]
 
 
+@pytest.mark.slow
 def test_the_estimated_noise_is_the_simulated_one(datasets, huber_results):
     np.testing.assert_allclose(_mean_ratios(huber_results), 1.0, atol=0.05)
     linear = [refine(nominal, data, loss="linear") for nominal, data in datasets]
@@ -127,6 +129,7 @@ def test_huber_flags_one_percent_of_clean_observations(datasets, huber_results):
     assert 0.003 < flagged / n_obs < 0.02, (flagged, n_obs)
 
 
+@pytest.mark.slow
 def test_the_robust_noise_estimate_resists_5_percent_gross_outliers(datasets):
     results = []
     for seed, (nominal, data) in zip(SEEDS, datasets, strict=True):

@@ -57,6 +57,7 @@ def refined(px) -> Path:
     return px / "ri.urdf"
 
 
+@pytest.mark.slow
 def test_stage_table_uses_the_refined_intrinsics(px, refined):
     """With --refine-intrinsics from fx 8 % off, the refine column of the stage table is
     the reprojection RMS of the calibrated model (as the reprojection section computes it
@@ -143,6 +144,7 @@ def test_pnp_skips_images_with_fewer_than_4_points_and_names_failures(px):
         pnp_camera_T_targets(only)
 
 
+@pytest.mark.slow
 def test_crossval_on_pixel_data_scores_held_out_images_in_px(px):
     """Folds by sample keep images whole; the held-out images are scored by their RMS
     reprojection error under the fold's model and training-fold target pose. Truth: the
@@ -211,6 +213,7 @@ def test_simulate_pixels_only_prints_no_pose_noise(tmp_path, capsys):
     assert "pixel noise 0.5 px" in out
 
 
+@pytest.mark.slow
 def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
     """Pixel-only data: the noise line and the report give the pixel sigma alone, near
     the simulated 0.5 px; no default 1 mm / 0.5 deg of components without rows."""
@@ -227,6 +230,7 @@ def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
     assert noise["position_sigma_mm"] is None
 
 
+@pytest.mark.slow
 def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, capsys):
     """fx, fy 8 % too large on one camera: many corners are rejected. At most 10 lines
     (each naming the image label and corner id, which exist in the data at that sample)
@@ -265,6 +269,7 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     assert "intrinsics may be wrong" not in out
 
 
+@pytest.mark.slow
 def test_model_choice_on_few_images_scores_them_and_asks_for_params(px_only, capsys):
     """Three configurations seen by both cameras (< 10 residual rows per parameter): the
     automatic choice scores image points like any kind (no special case), but no

@@ -218,6 +218,7 @@ def test_pnp_gives_each_images_board_pose():
 # -- exact recovery ----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_noise_free_pixels_recover_a_perturbed_arm_exactly():
     nominal, truth, w_T_board, data = _scene(40, seed=4)
     result = refine(nominal, data, noise=NoiseModel(sigmas={"pixel": 0.1}))
@@ -241,6 +242,7 @@ def test_noise_free_pixels_recover_a_perturbed_arm_exactly():
 # -- the command line ----------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path, capsys):
     from kinfw.cli._main import main
     from kinfw.reports import read_sidecar
@@ -278,6 +280,7 @@ def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path,
 # -- intrinsics as a parameter block -------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_freed_intrinsics_are_recovered_from_a_wrong_start_with_the_arm():
     nominal, truth, w_T_board, data = _scene(40, seed=7)
     wrong = CAMERA.with_parameters(
@@ -320,6 +323,7 @@ def test_refine_intrinsics_of_a_camera_without_pixels_is_named():
         refine(nominal, data, refine_intrinsics=("left",))
 
 
+@pytest.mark.slow
 def test_intrinsics_the_images_cannot_determine_are_reported():
     # a small board (9 mm squares) that stays near the image centre: the distortion's
     # high orders act only far from the centre, where no point is seen

@@ -8,6 +8,7 @@ import json
 
 import cv2
 import numpy as np
+import pytest
 
 from kinfw.camera import CameraIntrinsics, Chessboard
 from kinfw.cli._main import main
@@ -38,6 +39,7 @@ def _in_view(robot, w_T_board, qs):
     return qs[CAMERA.in_view(c_p, margin_px=25).all(axis=1) & (tilt < 50.0)]
 
 
+@pytest.mark.slow
 def test_rendered_images_detected_and_calibrated_recover_the_arm(tmp_path, capsys):
     nominal = load_robot(ARM_6R)
     rng = np.random.default_rng(3)

@@ -129,6 +129,7 @@ def test_simulated_pixels_are_behind_no_camera_against_the_true_robot():
 # -- demo, view ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_kinfw_demo_pixels_reports_reprojection_per_camera_and_image(tmp_path, capsys):
     assert main(["demo", "--pixels", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
@@ -211,6 +212,7 @@ def test_the_pixel_path_beats_the_pose_path_on_the_same_images():
     assert errors["pixels"][1] < errors["pnp"][1]  # rotation, rad^2
 
 
+@pytest.mark.slow
 def test_the_pixel_estimate_reaches_the_cramer_rao_bound():
     """Over 20 seeds the error of a held-out camera_T_target (6 numbers) whitened by its
     bound has sum of squares ~ chi2(6 * 20) if the estimate is efficient and unbiased:

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from kinfw.camera import CameraIntrinsics, Chessboard
 from kinfw.identification import calibrate
@@ -66,6 +67,7 @@ def test_weights_against_hand_values():
     np.testing.assert_allclose(w[rows[2]], 1.0 / SHARP_PX, rtol=1e-15)
 
 
+@pytest.mark.slow
 def test_weighted_images_beat_unweighted_and_are_chi_square_consistent():
     """Over 5 seeds the held-out camera_T_target error with the stated sigmas is at
     least 1.5x smaller (median of the ratios of RMS position and rotation errors) than
@@ -118,6 +120,7 @@ def test_reported_pixel_errors_are_unweighted():
     np.testing.assert_allclose(r, pixel_weights(g)[:, None] * noise, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_equal_or_no_sigmas_change_nothing():
     exp, _, unstated, _ = _experiment(2)
     (g,) = unstated.groups("pixels")

@@ -108,6 +108,7 @@ def head():
     return robot, setup, names, pool, test
 
 
+@pytest.mark.slow
 def test_planned_beats_random_and_exchange_never_worsens(head):
     robot, setup, names, pool, test = head
     plan = plan_configurations(
@@ -137,6 +138,7 @@ def test_per_joint_protocol(head):
     assert out["planned_position_rms_m"] <= out["even_position_rms_m"]
 
 
+@pytest.mark.slow
 def test_visibility_of_planned_camera_configurations():
     robot = load_robot(HEAD_URDF)
     setup = Setup(cameras=robot.default_cameras, pixels=True)

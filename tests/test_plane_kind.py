@@ -365,6 +365,7 @@ def test_a_few_points_of_the_probe_fix_the_world_and_the_scale(scene):
     )
 
 
+@pytest.mark.slow
 def test_simulated_distance_noise_is_estimated_within_10_percent(scene):
     """Contacts whose distances carry N(0, sigma) noise (simulated by the kind, through
     ``kinfw.simulation``): the estimated sigma of "distance" is within 10 %."""
@@ -415,6 +416,7 @@ def test_the_contacts_are_drawn_on_the_plane(scene):
     np.testing.assert_allclose(drawing.w_p_measured @ plane[:3] - plane[3], 0.01, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene, tmp_path):
     """The CLI end to end: contacts with N(0, 0.1 mm) noise and one 5 mm gross error, and 8
     tracked positions of the probe; the robust default fit flags the bad contact and the
@@ -551,6 +553,7 @@ def noisy_contacts(scene):
     )
 
 
+@pytest.mark.slow
 def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy_contacts):
     """Held out, the trained planes stay fixed: per fold the RMS height (mm) over the
     test contacts and the RMS over the planes of their tilt (deg), equal to the hand
@@ -644,6 +647,7 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
     assert "height_rms_mm_by_stage" in report and "position_rms_mm_by_stage" not in report
 
 
+@pytest.mark.slow
 def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, noisy_contacts):
     """On plane contacts the candidates' held-out heights differ (no longer all 0): each
     candidate's whitened score is the mean over folds of (height RMS / sigma)^2 under the

@@ -218,6 +218,7 @@ def _contacts(truth, offset, centre, n, rng):
     return np.concatenate(out)[:n]
 
 
+@pytest.mark.slow
 def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, tmp_path):
     nominal = load_robot(ARM_6R)
     rng = np.random.default_rng(11)
@@ -308,6 +309,7 @@ def test_without_the_kind_registered_the_file_is_refused(tmp_path):
         read_measurements(path)
 
 
+@pytest.mark.slow
 def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     from kinfw.view import OfflineWindow, scene
 
@@ -445,6 +447,7 @@ def _row(text, start):
     return next(line for line in text.splitlines() if line.strip().startswith(start)).split()
 
 
+@pytest.mark.slow
 def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_report(
     sphere_files, tmp_path, capsys
 ):
@@ -507,6 +510,7 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     assert float(_row(text, "flange")[4]) == pytest.approx(rms, abs=6e-4)
 
 
+@pytest.mark.slow
 def test_the_new_kind_is_scored_and_selected_by_crossval_in_its_own_metric(sphere_files, capsys):
     """crossval --select scores the sphere's held-out distance (mm) per fold, equal to
     the hand computation with the fold's trained model, and whitens it by the distance

@@ -52,6 +52,7 @@ def test_the_demo_numbers_in_the_readme_are_what_the_demo_prints(tmp_path, capsy
     )
 
 
+@pytest.mark.slow
 def test_the_python_api_example_runs(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     _demo_report(tmp_path, capsys)

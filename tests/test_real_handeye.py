@@ -427,6 +427,7 @@ def _eth(name):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_best_offset_is_near_the_readmes(name):
     eth = _eth(name)
@@ -437,6 +438,7 @@ def test_eth_best_offset_is_near_the_readmes(name):
     assert eth["best"].position_spread == min(eth["best"].position_spreads)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_target_in_base_is_as_constant_as_the_readme_found(name):
     eth = _eth(name)

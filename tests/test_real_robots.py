@@ -241,6 +241,7 @@ def test_poses_in_the_root_recover_the_truth_through_the_exported_urdf(spec):
         assert dp < TOL and dr < TOL, ("urdf", frame, dp, dr)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec", REAL_ROBOTS, ids=lambda r: r.name)
 def test_mocap_markers_of_unknown_offset_in_an_unknown_frame_are_recovered(spec):
     frames = tuple(dict.fromkeys((*spec.frames, spec.known_frame)))

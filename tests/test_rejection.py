@@ -92,6 +92,7 @@ def test_a_70_mm_pose_is_rejected_named_and_the_refit_is_the_fit_without_it(head
     assert shift.max() > 1e-6  # m: Huber leaves it an influence that rejection removes
 
 
+@pytest.mark.slow
 def test_clean_data_rejects_no_more_than_the_quantile_says(head, truth):
     """At the default 99.9 % quantile: a binomial count, with its slack."""
     n_obs = rejected = 0

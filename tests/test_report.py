@@ -156,6 +156,7 @@ def outlier_run(tmp_path_factory, head):
     }
 
 
+@pytest.mark.slow
 def test_gross_errors_are_rejected_and_named_worst_first(outlier_run):
     rejected = outlier_run["report"]["refine"]["rejected"]
     excess = [row["excess"] for row in rejected]

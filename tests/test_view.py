@@ -428,6 +428,7 @@ def demo_html(demo, head, head_up):
     return write_html(vis, demo / "scene.html")
 
 
+@pytest.mark.slow
 def test_offline_html_is_self_contained(demo_html):
     html = demo_html.read_text(encoding="utf-8")
     urls = re.findall(r"https?://[^\s\"'<>)]*", html)
