@@ -13,7 +13,7 @@ import pytest
 from hypothesis import settings
 
 from kinfw.model import Robot, load_robot
-from tests.robots import HEAD_URDF
+from tests.paths import HEAD_URDF
 
 settings.register_profile("kinfw", derandomize=True, deadline=None)
 settings.load_profile("kinfw")

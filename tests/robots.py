@@ -1,6 +1,6 @@
 """Test robots shared by the tests (not fixtures: plain data; fixtures are in conftest.py).
 
-- ``HEAD_URDF``: path of the repository's built-in IIS-head URDF.
+- (the built-in IIS-head URDF's path is ``tests.paths.HEAD_URDF``).
 
 - ``ARM_6R``: a serial 6R arm with tilted axes, a ``0 0 -1`` axis, an axis exactly
   anti-parallel to the previous one, a continuous joint and a pitch = pi/2 origin.
@@ -14,10 +14,6 @@
 - ``PLANAR_2R``: a planar arm, links 0.5 m and 0.3 m, joint axes along z, ``j1`` within
   -0.5 .. 0.5 rad, ``j2`` within -3 .. 3 rad; its tool frame is the tip.
 """
-
-from pathlib import Path
-
-HEAD_URDF = Path(__file__).resolve().parents[1] / "urdf" / "iis_head.urdf"
 
 ARM_6R = """<?xml version="1.0"?>
 <robot name="arm6">

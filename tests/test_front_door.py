@@ -8,7 +8,6 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -20,10 +19,10 @@ from kinfw.files import OutputPathError
 from kinfw.identification.planning import Setup, read_plan
 from kinfw.reports import read_sidecar
 from kinfw.view import external_urls
-from tests.robots import HEAD_URDF, IDEAL_HEAD
-from tests.test_gaze import fk_errors_rad, ideal_fixation_points
+from tests.fixation import fk_errors_rad, ideal_fixation_points
+from tests.paths import HEAD_URDF, REPO
+from tests.robots import IDEAL_HEAD
 
-REPO = Path(__file__).resolve().parents[1]
 PLATES = ("left_plate", "right_plate")
 #: The verbs and their homes, as a reader of the docs would write them.
 HOMES = """

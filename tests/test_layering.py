@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 import tomllib
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.paths import REPO
+
 #: The founding folders and the names they install as.
 FOLDERS = {
     "kinfw": "kinfw",

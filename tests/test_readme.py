@@ -3,13 +3,13 @@
 import json
 import re
 import runpy
-from pathlib import Path
 
 import pytest
 
 from kinfw.cli._main import main
+from tests.paths import REPO
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+README = REPO / "README.md"
 
 
 def _demo_report(tmp_path, capsys) -> dict:
