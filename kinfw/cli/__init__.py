@@ -1,4 +1,5 @@
-"""The ``kinfw`` command line (:func:`main`; ``python -m kinfw.cli`` runs it too).
+"""The ``kinfw`` command line (:func:`main`; ``python -m kinfw.cli`` runs it too) and its
+table of commands (:data:`COMMANDS`: a new command is a module and one entry there).
 
 The only layer of kinfw that imports :mod:`kinfw.identification` and
 :mod:`kinfw.verification`. Each command is a thin layer over the library's verbs: it
@@ -6,6 +7,6 @@ parses arguments, checks the outputs before any work, calls the verb and prints.
 imports only the standard library, so ``kinfw --help`` is immediate.
 """
 
-from kinfw.cli._main import main
+from kinfw.cli._main import COMMANDS, main
 
-__all__ = ["main"]
+__all__ = ["COMMANDS", "main"]

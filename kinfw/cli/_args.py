@@ -25,6 +25,7 @@ __all__ = [
     "POSITIVE_PX",
     "SEED",
     "add_camera_option",
+    "camera_inputs",
     "frame_file",
     "frames_arg",
     "number",
@@ -179,3 +180,12 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
                 f"{frame!r} ({has})"
             )
     return data
+
+
+def camera_inputs(args: argparse.Namespace) -> dict[str, Path]:
+    """The ``--camera FRAME=FILE`` files, keyed ``--camera FRAME=`` (inputs an output must
+    not overwrite, named for the message)."""
+    given = getattr(args, "camera", None)
+    if not isinstance(given, list):  # detect's --camera is one file, checked by detect_inputs
+        return {}
+    return {f"--camera {frame}=": file for frame, file in given}

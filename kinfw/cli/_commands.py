@@ -27,7 +27,7 @@ from kinfw.cli._args import (
     up_arg,
 )
 from kinfw.cli._tables import accuracy_table
-from kinfw.files import json_text, sidecar_path
+from kinfw.files import check_output_dir, check_outputs, json_text, sidecar_path
 
 __all__ = [
     "add_crosscheck_parser",
@@ -168,7 +168,7 @@ def add_view_parser(sub: argparse._SubParsersAction) -> None:
         help="where package:// meshes live (repeatable)",
     )
     p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of serving")
-    p.set_defaults(func=cmd_view)
+    p.set_defaults(func=cmd_view, check_outputs=check_view_outputs)
 
 
 def cmd_view(args: argparse.Namespace) -> int:
@@ -237,7 +237,7 @@ def add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
         help="run the trials in N worker processes (default 1: in this process)",
     )
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
-    p.set_defaults(func=cmd_reproduce)
+    p.set_defaults(func=cmd_reproduce, check_outputs=check_reproduce_outputs)
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
@@ -352,7 +352,7 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
-    p.set_defaults(func=cmd_import_csv)
+    p.set_defaults(func=cmd_import_csv, check_outputs=check_import_csv_outputs)
 
 
 def cmd_import_csv(args: argparse.Namespace) -> int:
@@ -386,3 +386,29 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         f"{', '.join(measurements.joint_names)}; {kinds} on {args.frame!r}"
     )
     return 0
+
+
+def check_view_outputs(args: argparse.Namespace) -> None:
+    """``kinfw view --html``'s scene file, never one of the models, data or sidecar."""
+    if args.html is None:
+        return
+    sidecar = args.sidecar or (args.calibrated and sidecar_path(args.calibrated))
+    check_outputs(
+        {"--html": args.html},
+        inputs={
+            "nominal": args.nominal,
+            "--calibrated": args.calibrated,
+            "--data": args.data,
+            "sidecar": sidecar,
+        },
+    )
+
+
+def check_reproduce_outputs(args: argparse.Namespace) -> None:
+    """``kinfw reproduce``'s output directory."""
+    check_output_dir(args.out, label="--out")
+
+
+def check_import_csv_outputs(args: argparse.Namespace) -> None:
+    """``kinfw import-csv``'s measurement file, never the URDF or the CSV."""
+    check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "csv": args.csv})

@@ -28,14 +28,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from kinfw.files import write_text_atomic
+from kinfw.cli._args import number
+from kinfw.files import check_outputs, write_text_atomic
 
 __all__ = ["add_detect_parser", "cmd_detect", "read_joint_rows"]
 
 IMAGE_COLUMN = "image"
 
 
-def add_detect_parser(sub: Any, count_type: Any) -> None:
+def add_detect_parser(sub: Any) -> None:
     """Add ``kinfw detect`` to the command line's sub-parsers."""
     p = sub.add_parser(
         "detect",
@@ -81,7 +82,7 @@ def add_detect_parser(sub: Any, count_type: Any) -> None:
     )
     p.add_argument(
         "--min-corners",
-        type=count_type,
+        type=number(int, low=4),
         default=6,
         help="ChArUco: fewest corners for an image to count (default 6, at least 4)",
     )
@@ -92,7 +93,7 @@ def add_detect_parser(sub: Any, count_type: Any) -> None:
         help="unit of the joint values in --joints (default rad; prismatic joints in m)",
     )
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
-    p.set_defaults(func=cmd_detect)
+    p.set_defaults(func=cmd_detect, check_outputs=check_detect_outputs)
 
 
 def detect_inputs(args: argparse.Namespace) -> dict[str, Path]:
@@ -132,10 +133,11 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
     if not joints:
         raise ValueError(f"{path}: line 1: no joint columns in the header {header}")
     rows: list[tuple[str, list[float]]] = []
-    for number, row in enumerate(lines[1:], start=2):
+    for line_number, row in enumerate(lines[1:], start=2):
         if len(row) != len(header):
             raise ValueError(
-                f"{path}: line {number}: {len(row)} values, the header has {len(header)} columns"
+                f"{path}: line {line_number}: {len(row)} values, "
+                f"the header has {len(header)} columns"
             )
         values, name = [], ""
         for column, cell in zip(header, row, strict=True):
@@ -284,3 +286,8 @@ def _dumps(doc: dict[str, Any]) -> str:
     head = ",\n  ".join(f"{dump(k)}: {dump(v)}" for k, v in doc.items() if k != "samples")
     samples = ",\n    ".join(dump(s) for s in doc["samples"])
     return f'{{\n  {head},\n  "samples": [\n    {samples}\n  ]\n}}\n'
+
+
+def check_detect_outputs(args: argparse.Namespace) -> None:
+    """``kinfw detect``'s output, never one of its images or files."""
+    check_outputs({"--out": args.out}, inputs=detect_inputs(args))

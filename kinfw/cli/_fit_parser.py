@@ -17,9 +17,11 @@ from kinfw.cli._args import (
     POSITIVE_PX,
     SEED,
     add_camera_option,
+    camera_inputs,
     number,
 )
 from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
+from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
 __all__ = ["add_fit_parsers"]
 
@@ -98,7 +100,7 @@ def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
         "the report says which the images do not determine",
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.set_defaults(func=cmd_calibrate)
+    p.set_defaults(func=cmd_calibrate, check_outputs=check_calibrate_outputs)
 
     p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
     p.add_argument(
@@ -112,7 +114,7 @@ def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
         "of a fixed chessboard (pixel noise 0.5 px); calibrated on reprojection error",
     )
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.set_defaults(func=cmd_demo)
+    p.set_defaults(func=cmd_demo, check_outputs=check_demo_outputs)
 
     p = sub.add_parser(
         "crossval",
@@ -149,3 +151,23 @@ def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)
+
+
+def check_calibrate_outputs(args: argparse.Namespace) -> None:
+    """``kinfw calibrate``'s outputs (URDF, its sidecar, report), checked before any work."""
+    check_outputs(
+        {"--out": args.out, "sidecar": sidecar_path(args.out), "--report": args.report},
+        inputs={
+            "--urdf": args.urdf,
+            "data file": args.data,
+            "--holdout": args.holdout,
+            **camera_inputs(args),
+        },
+    )
+
+
+def check_demo_outputs(args: argparse.Namespace) -> None:
+    """``kinfw demo``'s output directory and the files it will hold."""
+    from kinfw.verification.studies import DEMO_FILES
+
+    check_output_dir(args.out, label="--out", files=DEMO_FILES)

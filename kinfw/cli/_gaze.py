@@ -10,7 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from kinfw.cli._args import frame_file, number
+from kinfw.cli._args import camera_inputs, frame_file, number
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -22,6 +22,7 @@ from kinfw.cli._control import (
     joints_json,
     parse_joint_values,
 )
+from kinfw.files import check_outputs
 
 __all__ = ["GAZE_PLAUSIBLE_M", "add_gaze_parser", "cmd_gaze"]
 
@@ -85,7 +86,7 @@ def add_gaze_parser(sub: argparse._SubParsersAction) -> None:
         help="write a Meshcat scene (self-contained HTML): the robot at the solution, each "
         "camera's aimed ray to the point's distance, and the point",
     )
-    p.set_defaults(func=cmd_gaze)
+    p.set_defaults(func=cmd_gaze, check_outputs=check_gaze_outputs)
 
 
 # -- kinfw gaze --------------------------------------------------------------------------
@@ -222,3 +223,9 @@ def _why_not_fixated(fix) -> str:
             "optical axis)"
         )
     return "out of reach from this start: try another --q start"
+
+
+def check_gaze_outputs(args: argparse.Namespace) -> None:
+    """``kinfw gaze --html``'s scene file."""
+    if args.html is not None:
+        check_outputs({"--html": args.html}, inputs={"model": args.model, **camera_inputs(args)})

@@ -6,7 +6,7 @@ never a traceback for a user error), 1 on an unexpected internal error, 3 when `
 does not fixate or ``reach`` does not reach (:mod:`kinfw.cli`). Warnings (Python
 warnings and logged ones) are printed once each, as one line ``kinfw CMD: warning: ...``.
 
-Every output path is checked before any work (:func:`_check_outputs`) and every file is
+Every output path is checked before any work (each command's ``check_outputs``) and every file is
 written atomically (:mod:`kinfw.files`). This module imports only the standard library at
 start-up, so that ``kinfw --help`` and argument errors are immediate: numpy, Pinocchio
 (through :mod:`kinfw.model`), CasADi, matplotlib and meshcat are imported by the commands.
@@ -28,10 +28,8 @@ import logging
 import sys
 import warnings
 from collections.abc import Callable, Sequence
-from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
-from kinfw.cli._args import number
 from kinfw.cli._commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -39,13 +37,12 @@ from kinfw.cli._commands import (
     add_verify_parser,
     add_view_parser,
 )
-from kinfw.cli._detect import add_detect_parser, detect_inputs
+from kinfw.cli._detect import add_detect_parser
 from kinfw.cli._fit_parser import add_fit_parsers
 from kinfw.cli._gaze import add_gaze_parser
 from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
-from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
 __all__ = ["main"]
 
@@ -55,70 +52,6 @@ log = logging.getLogger("kinfw")
 #: ``kinfw.measurements.DatasetError``, ``kinfw.model.RobotModelError`` and
 #: ``kinfw.files.OutputPathError`` are ValueErrors (caught here without importing them).
 USER_ERRORS = (ValueError, OSError)
-
-
-# -- outputs -----------------------------------------------------------------------------
-def _camera_inputs(args: argparse.Namespace) -> dict[str, Path]:
-    """The ``--camera FRAME=FILE`` files, keyed ``--camera FRAME=`` (for the message)."""
-    given = getattr(args, "camera", None)
-    if not isinstance(given, list):  # detect's --camera is one file, checked by detect_inputs
-        return {}
-    return {f"--camera {frame}=": file for frame, file in given}
-
-
-def _check_outputs(args: argparse.Namespace) -> None:
-    """Check every output path of the command before any work: its directory exists and
-    is writable, it is not a directory, no two outputs are one file, and no output is an
-    input (``--urdf``, the data file, ``--holdout``, ``--camera`` files; symlinks
-    resolved). Raises :class:`kinfw.files.OutputPathError` naming both options and the
-    path."""
-    command = args.command
-    cameras = _camera_inputs(args)
-    if command == "simulate":
-        check_outputs(
-            {"--out": args.out, "--truth-out": args.truth_out},
-            inputs={"--urdf": args.urdf, "--plan": args.plan, **cameras},
-        )
-    elif command == "calibrate":
-        check_outputs(
-            {"--out": args.out, "sidecar": sidecar_path(args.out), "--report": args.report},
-            inputs={
-                "--urdf": args.urdf,
-                "data file": args.data,
-                "--holdout": args.holdout,
-                **cameras,
-            },
-        )
-    elif command == "demo":
-        from kinfw.verification.studies import DEMO_FILES
-
-        check_output_dir(args.out, label="--out", files=DEMO_FILES)
-    elif command == "view" and args.html is not None:
-        sidecar = args.sidecar or (args.calibrated and sidecar_path(args.calibrated))
-        check_outputs(
-            {"--html": args.html},
-            inputs={
-                "nominal": args.nominal,
-                "--calibrated": args.calibrated,
-                "--data": args.data,
-                "sidecar": sidecar,
-            },
-        )
-    elif command == "reproduce":
-        check_output_dir(args.out, label="--out")
-    elif command == "import-csv":
-        check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "csv": args.csv})
-    elif command == "plan":
-        check_outputs(
-            {"--out": args.out, "--plot": args.plot},
-            inputs={"--urdf": args.urdf, "--pool": args.pool},
-        )
-    elif command == "detect":
-        check_outputs({"--out": args.out}, inputs=detect_inputs(args))
-    elif command == "gaze" and args.html is not None:
-        check_outputs({"--html": args.html}, inputs={"model": args.model, **cameras})
-    elif command == "reach" and args.html is not None:
-        check_outputs({"--html": args.html}, inputs={"model": args.model})
 
 
 class _Parser(argparse.ArgumentParser):
@@ -131,22 +64,34 @@ class _Parser(argparse.ArgumentParser):
 
 
 # -- parser -------------------------------------------------------------------------------
-def build_parser() -> argparse.ArgumentParser:
-    """The ``kinfw`` parser: one sub-command per command, each defined beside its command."""
+#: The commands, in the order ``kinfw --help`` lists them: each adds its sub-parser, whose
+#: defaults name the command (``func``) and, if it writes files, the check of its outputs
+#: before any work (``check_outputs``). A new command is a module and one entry here.
+COMMANDS: tuple[Callable[[Any], None], ...] = (
+    add_simulate_parser,
+    add_verify_parser,
+    add_fit_parsers,
+    add_view_parser,
+    add_reproduce_parser,
+    add_crosscheck_parser,
+    add_import_csv_parser,
+    add_detect_parser,
+    add_plan_parser,
+    add_gaze_parser,
+    add_reach_parser,
+)
+
+
+def build_parser(
+    commands: Sequence[Callable[[Any], None]] = COMMANDS,
+) -> argparse.ArgumentParser:
+    """The ``kinfw`` parser: one sub-command per entry of ``commands``, each defined
+    beside its command."""
     parser = _Parser(prog="kinfw", description="Calibrate robot kinematics from measurements.")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    add_simulate_parser(sub)
-    add_verify_parser(sub)
-    add_fit_parsers(sub)
-    add_view_parser(sub)
-    add_reproduce_parser(sub)
-    add_crosscheck_parser(sub)
-    add_import_csv_parser(sub)
-    add_detect_parser(sub, number(int, low=4))
-    add_plan_parser(sub, number)
-    add_gaze_parser(sub)
-    add_reach_parser(sub)
+    for add_parser in commands:
+        add_parser(sub)
     return parser
 
 
@@ -206,10 +151,13 @@ def _warnings_printed_once(command: str, verbose: bool):
         root.setLevel(level)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(
+    argv: Sequence[str] | None = None, *, commands: Sequence[Callable[[Any], None]] = COMMANDS
+) -> int:
     """Entry point of the ``kinfw`` command; returns the exit code (also for ``--help``,
-    0, and for an argument error, 2, which argparse signals with SystemExit)."""
-    parser = build_parser()
+    0, and for an argument error, 2, which argparse signals with SystemExit).
+    ``commands``: :data:`COMMANDS`, or more (a test's own command)."""
+    parser = build_parser(commands)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
@@ -221,7 +169,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                 from kinfw.model import builtin_head_urdf
 
                 args.urdf = builtin_head_urdf()
-            _check_outputs(args)
+            check = getattr(args, "check_outputs", None)
+            if check is not None:  # every output path, before any work
+                check(args)
             return func(args)
         except USER_ERRORS as exc:
             message = " ".join(str(exc).split())

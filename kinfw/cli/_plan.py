@@ -10,11 +10,14 @@ import json
 import math
 from pathlib import Path
 
+from kinfw.cli._args import number
+from kinfw.files import check_outputs
+
 __all__ = ["add_plan_parser", "cmd_plan"]
 
 
-def add_plan_parser(sub, number) -> None:
-    """The ``plan`` sub-command (``number``: :func:`kinfw.cli.number`)."""
+def add_plan_parser(sub) -> None:
+    """The ``plan`` sub-command."""
     positive = number(float, low=0.0, low_open=True)
     count = number(int, low=1)
     p = sub.add_parser(
@@ -55,7 +58,7 @@ def add_plan_parser(sub, number) -> None:
     p.add_argument("--plot", type=Path, help="error vs N plot to write (PNG/PDF/SVG)")
     p.add_argument("--seed", type=number(int, low=0), default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=cmd_plan)
+    p.set_defaults(func=cmd_plan, check_outputs=check_plan_outputs)
 
 
 def _setup(args, robot):
@@ -209,3 +212,11 @@ def _print_plan(args: argparse.Namespace, plan) -> None:
     print(format_table(rows, ["N", "planned mm", "random mm"]))
     if args.out is not None:
         print(f"wrote {args.out}")
+
+
+def check_plan_outputs(args: argparse.Namespace) -> None:
+    """``kinfw plan``'s outputs, checked before any work."""
+    check_outputs(
+        {"--out": args.out, "--plot": args.plot},
+        inputs={"--urdf": args.urdf, "--pool": args.pool},
+    )

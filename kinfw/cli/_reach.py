@@ -22,6 +22,7 @@ from kinfw.cli._control import (
     joints_json,
     parse_joint_values,
 )
+from kinfw.files import check_outputs
 
 __all__ = ["add_reach_parser", "cmd_reach"]
 
@@ -74,7 +75,7 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         "target (a triad for a pose, a sphere for a point), the frame's triad, and a line "
         "from the frame to the target when not reached",
     )
-    p.set_defaults(func=cmd_reach)
+    p.set_defaults(func=cmd_reach, check_outputs=check_reach_outputs)
 
 
 # -- kinfw reach -------------------------------------------------------------------------
@@ -190,3 +191,9 @@ def cmd_reach(args: argparse.Namespace) -> int:
     if args.html is not None:
         print(f"wrote {args.html}")
     return 0 if result.reached else NOT_MET
+
+
+def check_reach_outputs(args: argparse.Namespace) -> None:
+    """``kinfw reach --html``'s scene file."""
+    if args.html is not None:
+        check_outputs({"--html": args.html}, inputs={"model": args.model})

@@ -13,8 +13,17 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from kinfw.cli._args import COUNT, DEG, MM, SEED, add_camera_option, frames_arg, number
-from kinfw.files import write_text_atomic
+from kinfw.cli._args import (
+    COUNT,
+    DEG,
+    MM,
+    SEED,
+    add_camera_option,
+    camera_inputs,
+    frames_arg,
+    number,
+)
+from kinfw.files import check_outputs, write_text_atomic
 
 __all__ = ["add_simulate_parser", "cmd_simulate"]
 
@@ -119,7 +128,7 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=cmd_simulate)
+    p.set_defaults(func=cmd_simulate, check_outputs=check_simulate_outputs)
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
@@ -268,3 +277,11 @@ def _plan_qs(path: Path, names: Sequence[str]) -> Any:
     if missing:
         raise ValueError(f'{path}: "joint_names": missing the joints {missing}')
     return qs[:, [plan_names.index(j) for j in names]]
+
+
+def check_simulate_outputs(args: argparse.Namespace) -> None:
+    """``kinfw simulate``'s outputs, checked before any work."""
+    check_outputs(
+        {"--out": args.out, "--truth-out": args.truth_out},
+        inputs={"--urdf": args.urdf, "--plan": args.plan, **camera_inputs(args)},
+    )

@@ -1,0 +1,95 @@
+"""Adding a ``kinfw`` command: the extension recipe of docs/architecture.md, done here.
+
+A command is a function that adds its sub-parser, whose defaults name the command
+(``func``) and the check of its outputs (``check_outputs``); in the library it is one
+module and one entry of :data:`kinfw.cli.COMMANDS`. Here the command lives in this file
+and is passed to :func:`kinfw.cli.main` beside the built-in ones; the shared machinery
+(outputs checked before any work, one-line errors, exit codes) must hold for it. The truth
+is Pinocchio's forward kinematics of the built-in head.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+
+from kinfw.cli import COMMANDS, main
+from kinfw.files import check_outputs, write_text_atomic
+from tests.paths import HEAD_URDF
+
+CALLS: list[str] = []
+
+
+def add_distance_parser(sub) -> None:
+    """``kinfw distance MODEL A B --out FILE``: the distance between two frames at q = 0."""
+    p = sub.add_parser("distance", help="distance between two frames at the zero configuration")
+    p.add_argument("model")
+    p.add_argument("a")
+    p.add_argument("b")
+    p.add_argument("--out", required=True)
+    p.set_defaults(func=cmd_distance, check_outputs=check_distance_outputs)
+
+
+def check_distance_outputs(args) -> None:
+    check_outputs({"--out": args.out}, inputs={"model": args.model})
+
+
+def cmd_distance(args) -> int:
+    from kinfw.model import load_robot
+
+    CALLS.append(args.model)
+    robot = load_robot(args.model)
+    q = np.zeros(len(robot.joint_names))
+    d = robot.frame_poses(q, args.a)[:3, 3] - robot.frame_poses(q, args.b)[:3, 3]
+    write_text_atomic(args.out, json.dumps({"distance_m": float(np.linalg.norm(d))}))
+    return 0
+
+
+def _pinocchio_distance(a: str, b: str) -> float:
+    model = pin.buildModelFromUrdf(str(HEAD_URDF))
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    pa = data.oMf[model.getFrameId(a)].translation
+    pb = data.oMf[model.getFrameId(b)].translation
+    return float(np.linalg.norm(pa - pb))
+
+
+def test_a_command_added_beside_the_built_ins_runs_and_writes(tmp_path, capsys):
+    out = tmp_path / "d.json"
+    commands = (*COMMANDS, add_distance_parser)
+    assert main(["--help"], commands=commands) == 0
+    assert "distance" in capsys.readouterr().out
+    code = main(
+        ["distance", str(HEAD_URDF), "left_camera", "right_camera", "--out", str(out)],
+        commands=commands,
+    )
+    assert code == 0
+    expected = _pinocchio_distance("left_camera", "right_camera")
+    assert abs(json.loads(out.read_text())["distance_m"] - expected) < 1e-12
+
+
+def test_its_outputs_are_checked_before_any_work(tmp_path, capsys):
+    """Writing over its own input is refused with one line and exit code 2, and the
+    command itself never runs."""
+    model = tmp_path / "head.urdf"
+    model.write_text(HEAD_URDF.read_text())
+    CALLS.clear()
+    code = main(
+        ["distance", str(model), "left_camera", "right_camera", "--out", str(model)],
+        commands=(*COMMANDS, add_distance_parser),
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and not CALLS
+    assert err.startswith("kinfw distance: error:") and err.count("\n") == 1
+    assert model.read_text() == HEAD_URDF.read_text()
+
+
+def test_its_user_errors_are_one_line(tmp_path, capsys):
+    code = main(
+        ["distance", str(HEAD_URDF), "left_camera", "nowhere", "--out", str(tmp_path / "d.json")],
+        commands=(*COMMANDS, add_distance_parser),
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "nowhere" in err and err.count("\n") == 1
