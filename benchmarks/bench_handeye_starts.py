@@ -5,7 +5,8 @@ Run from the repository root with the ``bench`` extra installed::
     python benchmarks/bench_handeye_starts.py            # 200 trials, ~1 minute
     python benchmarks/bench_handeye_starts.py --trials 50
 
-Synthetic data (metres), the generator of ``tests/test_handeye_starts.py``: a random
+Synthetic data (metres), the generator of
+``tests/identification/handeye/test_handeye_starts.py``: a random
 ``hand_T_eye`` (rotation uniform, translation N(0, 5 cm) per axis), a reference hand pose
 with the target 0.6 m along the camera's z axis, hand poses = reference turned by
 U(0, max_deg) about a random axis and shifted U(-0.25, 0.25) m per axis; camera poses with

@@ -239,7 +239,8 @@ def solve_axyb(
     paragraph): restart from a random rotation.
 
     What the former ``refine=True`` (rotation-only Gauss-Newton) gained over the paper's
-    iteration, measured (seeded; the set-ups are in ``tests/test_axb.py``; the
+    iteration, measured (seeded; the set-ups are in
+    ``tests/identification/handeye/test_axb.py``; the
     maximum-likelihood refinement that replaced it is measured in the module docstring):
 
     * 10 views, each ``A`` rotated by 1 deg about a random axis, 200 trials: accuracy

@@ -28,7 +28,8 @@ the component of the estimate along it; the 180-degree stall is a start orthogon
 it; the convergence factor per iteration is ``(sigma_2 / sigma_1)^2`` of ``N`` (0.9929
 measured on Tabb's real data: 88 poses, median relative rotation 12.7 deg, so 1000
 iterations do not reach the default tolerance). The code computes the averages this way (O(1) per
-iteration after an O(n) set-up); ``tests/test_axb.py`` checks them against the explicit
+iteration after an O(n) set-up); ``tests/identification/handeye/test_axb.py`` checks them
+against the explicit
 per-pose averages. The translation alternation is block Gauss-Seidel on the linear least
 squares of eqs. (4)-(6) and converges to its exact solution, at the rate ``sigma^2``
 (0.9928 on Tabb),

@@ -41,7 +41,7 @@ the grey range (none right: ``ambiguous``). Then the ring of the board's outer s
 around the inner corners, where it is in the image, must have the chessboard's colours
 too: otherwise the corners are not the board's inner corners (``findChessboardCornersSB``
 returns, for a board cut by the image border, a grid shifted by one square onto the white
-margin; ``tests/test_detect.py``) and the image is ``not found``.
+margin; ``tests/kinfw/camera/test_detect.py``) and the image is ``not found``.
 
 In every case a numbering that is mirrored in the image (x cross y pointing towards the
 camera; a printed board seen from its front has x, y right-handed in the image, as u, v)

@@ -150,7 +150,7 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
                 value = math.nan
             if not math.isfinite(value):
                 raise ValueError(
-                    f"{path}: line {number}, column {column!r}: expected a finite number, "
+                    f"{path}: line {line_number}, column {column!r}: expected a finite number, "
                     f"got {cell!r}"
                 )
             values.append(value)

@@ -19,7 +19,8 @@ finds them by this role and key, never by position:
 - :class:`BaseBlock`: the base, a rigid frame before the whole model;
 - :class:`ZeroOffsetBlock`: one zero offset per joint (rad revolute, m prismatic), added
   to the joint values;
-- any block an application defines (a joint's gear scale: ``tests/test_robot_block.py``),
+- any block an application defines (a joint's gear scale:
+  ``tests/identification/problem/test_robot_block.py``),
   passed to :func:`kinfw.identification.refine` (``extra_blocks``).
 
 Parameters are named by typed keys (:class:`ParameterName`, :class:`BlockKey`); nothing

@@ -137,7 +137,7 @@ def test_gross_outliers_are_downweighted_by_the_robust_loss():
 
     clean = held_out_rms(refine(nominal, data, noise=SIGMA))
     linear = held_out_rms(refine(nominal, corrupt, noise=SIGMA))
-    # down-weighting alone (no rejection: tests/test_rejection.py)
+    # down-weighting alone (no rejection: tests/identification/test_rejection.py)
     robust = refine(nominal, corrupt, noise=SIGMA, loss="cauchy", reject=None)
     flagged = {
         s for kind, frame, s, _ in robust.downweighted if kind == "pose" and frame == pose.frame

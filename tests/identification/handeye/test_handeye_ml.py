@@ -215,7 +215,8 @@ def test_x_near_a_half_turn_with_noise_never_raises(angle_deg):
 
 
 def test_the_seed_1199_hypothesis_case_no_longer_raises():
-    """tests/test_handeye.py's generator at seed 1199 (12 views, 0.5 deg on A and B): Tsai
+    """tests/identification/handeye/test_handeye.py's generator at seed 1199 (12 views,
+    0.5 deg on A and B): Tsai
     & Lenz's first estimate lands far off and the old solver raised 'no single X'."""
     rng = np.random.default_rng(1199)
     hand_R_camera = rotation(random_axis(rng) * rng.uniform(0.0, np.pi))
@@ -230,7 +231,7 @@ def test_the_seed_1199_hypothesis_case_no_longer_raises():
         ]
     )
     B = np.stack([inverse(hand_T_camera) @ inverse(a) @ base_T_target for a in A])
-    for T in (B, A):  # the same draws as tests/test_handeye.py::_noisy_setup
+    for T in (B, A):  # the same draws as tests/identification/handeye/test_handeye.py::_noisy_setup
         for k in range(12):
             T[k, :3, :3] = (
                 rotation(random_axis(rng) * rng.normal(scale=np.radians(0.5))) @ T[k, :3, :3]

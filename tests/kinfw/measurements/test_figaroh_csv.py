@@ -226,7 +226,8 @@ def test_cli_user_error_exits_2_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("kinfw import-csv: error: ") and "column 'z1'" in err
     assert not out.exists()
-    # measured in the observed frame itself: refused (tests/test_measured_in_robot.py
+    # measured in the observed frame itself: refused
+    # (tests/kinfw/observations/test_measured_in_robot.py
     # converts the eye-hand session in the head camera, a frame of the URDF)
     eye_hand = ["import-csv", str(EYE_HAND_CSV), *argv[2:]]
     code = main([*eye_hand, "--measured-in", "arm_7_link", "--out", str(out)])

@@ -1075,7 +1075,8 @@ def test_check_against_robot_external_measured_in_is_kept(robot):
 
 def test_check_against_robot_keeps_a_robot_frame_as_measured_in_but_not_the_frame_itself(robot):
     # a frame of the URDF other than the root is a measurement frame that moves with the
-    # robot (tests/test_measured_in_robot.py); an observation in its own frame is refused
+    # robot (tests/kinfw/observations/test_measured_in_robot.py); an observation in its own
+    # frame is refused
     m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head", measured_in="base")))
     assert {g.measured_in for g in check_against_robot(m, robot).poses} == {None, "base"}
     m = robot_doc(sample([0, 0], pose("head")), sample([0, 0], pose("head", measured_in="head")))

@@ -30,7 +30,7 @@ def _data(truth, n, seed, noise_m, noise_rad):
 @pytest.fixture(scope="module")
 def mounts_only(head):
     """Truth differs from the nominal only in the plates' mounts (the case 'full' overfits
-    with 12 samples, tests/test_crossval.py)."""
+    with 12 samples, tests/verification/evaluation/test_crossval.py)."""
     truth = load_robot(
         perturb_robot(
             head,
