@@ -37,15 +37,15 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.geometry import check_transform, rotation_angle
 from kinfw.identification.handeye._checks import StartError, check_start_poses
 from kinfw.identification.handeye._starts_axxb import (
-    _andreff,
-    _daniilidis,
-    _park,
     andreff_axxb,
+    andreff_prepared,
     daniilidis_axxb,
+    daniilidis_prepared,
     park_axxb,
+    park_prepared,
     prepare_axxb,
 )
-from kinfw.identification.handeye._starts_axyb import _li, _shah, li_axyb, shah_axyb
+from kinfw.identification.handeye._starts_axyb import li_axyb, li_checked, shah_axyb, shah_checked
 
 __all__ = [
     "START_METHODS",
@@ -96,11 +96,11 @@ class StartMethod:
 
 
 _METHODS: dict[str, StartMethod] = {
-    "park": StartMethod("axxb", park_axxb, _park),
-    "andreff": StartMethod("axxb", andreff_axxb, _andreff),
-    "daniilidis": StartMethod("axxb", daniilidis_axxb, _daniilidis),
-    "shah": StartMethod("axyb", shah_axyb, _shah),
-    "li": StartMethod("axyb", li_axyb, _li),
+    "park": StartMethod("axxb", park_axxb, park_prepared),
+    "andreff": StartMethod("axxb", andreff_axxb, andreff_prepared),
+    "daniilidis": StartMethod("axxb", daniilidis_axxb, daniilidis_prepared),
+    "shah": StartMethod("axyb", shah_axyb, shah_checked),
+    "li": StartMethod("axyb", li_axyb, li_checked),
 }
 _BUILT_IN = frozenset(_METHODS)
 

@@ -177,10 +177,10 @@ def park_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     F. C. Park and B. J. Martin, "Robot sensor calibration: solving AX = XB on the
     Euclidean group", IEEE Trans. Robotics and Automation 10(5), 717-721, 1994.
     """
-    return _park(*prepare_axxb(A, B, "park_axxb"))
+    return park_prepared(*prepare_axxb(A, B, "park_axxb"))
 
 
-def _park(
+def park_prepared(
     base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
 ) -> tuple[Pose, Pose]:
     """:func:`park_axxb` on checked poses and their relative motions."""
@@ -241,10 +241,10 @@ def andreff_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     structure-from-motion", Int. J. Robotics Research 20(3), 228-248, 2001 (and "On-line
     hand-eye calibration", 3DIM 1999, which OpenCV cites).
     """
-    return _andreff(*prepare_axxb(A, B, "andreff_axxb"))
+    return andreff_prepared(*prepare_axxb(A, B, "andreff_axxb"))
 
 
-def _andreff(
+def andreff_prepared(
     base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
 ) -> tuple[Pose, Pose]:
     """:func:`andreff_axxb` on checked poses and their relative motions."""
@@ -367,10 +367,10 @@ def daniilidis_axxb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     K. Daniilidis, "Hand-eye calibration using dual quaternions", Int. J. Robotics
     Research 18(3), 286-298, 1999.
     """
-    return _daniilidis(*prepare_axxb(A, B, "daniilidis_axxb"))
+    return daniilidis_prepared(*prepare_axxb(A, B, "daniilidis_axxb"))
 
 
-def _daniilidis(
+def daniilidis_prepared(
     base_T_hands: Pose, camera_T_targets: Pose, A_ijs: Pose, B_ijs: Pose
 ) -> tuple[Pose, Pose]:
     """:func:`daniilidis_axxb` on checked poses and their relative motions."""

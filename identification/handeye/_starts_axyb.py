@@ -79,10 +79,10 @@ def shah_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     M. Shah, "Solving the robot-world/hand-eye calibration problem using the Kronecker
     product", J. Mechanisms and Robotics 5(3), 031007, 2013.
     """
-    return _shah(*check_start_poses(A, B, "shah_axyb"))
+    return shah_checked(*check_start_poses(A, B, "shah_axyb"))
 
 
-def _shah(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
+def shah_checked(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
     """:func:`shah_axyb` on checked poses."""
     method = "shah_axyb"
     R_As, t_As = camera_T_targets[:, :3, :3], camera_T_targets[:, :3, 3]
@@ -149,10 +149,10 @@ def li_axyb(A: ArrayLike, B: ArrayLike) -> tuple[Pose, Pose]:
     dual-quaternions and Kronecker product", Int. J. Physical Sciences 5(10), 1530-1536,
     2010.
     """
-    return _li(*check_start_poses(A, B, "li_axyb"))
+    return li_checked(*check_start_poses(A, B, "li_axyb"))
 
 
-def _li(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
+def li_checked(camera_T_targets: Pose, hand_T_bases: Pose) -> tuple[Pose, Pose]:
     """:func:`li_axyb` on checked poses."""
     method = "li_axyb"
     scale = length_scale(camera_T_targets[:, :3, 3], hand_T_bases[:, :3, 3])
