@@ -32,6 +32,7 @@ poses, which does not depend on the order of the samples.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -208,12 +209,99 @@ def solve_axxb(
         error=HandEyeError,
         names=("base_T_hands", "camera_T_targets"),
     )
-    n = len(base_T_hands)
     if not 0.0 <= min_angle_rad < np.pi:
         raise HandEyeError(f"min_angle_rad must be in [0, pi), got {min_angle_rad!r}")
+    motions = _informative_motions(base_T_hands, camera_T_targets, min_angle_rad)
+    hand_R_camera, singular_values = tsai_rotation(motions.rotvecs_A, motions.rotvecs_B)
+    length = float(np.sqrt(np.mean(np.sum(camera_T_targets[:, :3, 3] ** 2, axis=1))))
 
-    # Relative motions of pose pairs i < j (Shih et al. eq. 71).
-    i, j = motion_pairs(n)
+    def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Park, Andreff and Daniilidis as ``(camera_T_hand, base_T_target)``."""
+        found = candidate_starts(base_T_hands, camera_T_targets, problem="axxb")
+        return [(inverse_transform(X), Y) for X, Y in found.values()]
+
+    # Maximum likelihood on the absolute poses, camera_T_target[i] = camera_T_hand @
+    # hand_T_base[i] @ base_T_target with the noise in the camera's pose; when that fit
+    # is not clean, the other closed forms start it too.
+    fit = fit_absolute(
+        camera_T_targets,
+        inverse_transform(base_T_hands),
+        [lambda: _tsai_start(motions, hand_R_camera, base_T_hands, camera_T_targets)],
+        fallback_starts=fallback_starts,
+        accept=lambda f: _x_uncertainty(f, length)[1].verdict is Verdict.DETERMINED,
+    )
+    hand_T_camera = inverse_transform(fit.camera_T_hand)
+    covariance, unc = _x_uncertainty(fit, length)
+    keep, rms_rotation, rms_translation = _motion_residuals(motions, fit.inliers, hand_T_camera)
+    condition = float(singular_values[-1] / singular_values[0])
+    if condition < POOR_CONDITION:
+        log.warning(
+            "solve_axxb: the motions turn mostly about one axis (rotation condition "
+            "%.3g); X's rotation about it and its translation along it are poorly "
+            "determined: add motions about other axes",
+            condition,
+        )
+    if fit.rejected:
+        log.info("solve_axxb: poses %s rejected as outliers", list(fit.rejected))
+    return HandEyeResult(
+        hand_T_camera=hand_T_camera,
+        n_pairs=int(np.count_nonzero(keep)),
+        rms_rotation_rad=rms_rotation,
+        rms_translation=rms_translation,
+        rotation_condition=condition,
+        axis_spread_rad=float(motions.spread),
+        base_T_target=fit.base_T_target,
+        covariance=covariance,
+        sigma_rotation_deg=unc.sigma_rotation_deg,
+        sigma_translation=unc.sigma_translation,
+        verdict=unc.verdict,
+        verdict_message=unc.message,
+        rejected=fit.rejected,
+        noise_rotation_rad=fit.sigma_rotation_rad,
+        noise_translation=fit.sigma_translation,
+        iterations=fit.iterations,
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _Motions:
+    """The informative relative motions ``A_ij X = X B_ij`` of pose pairs ``i < j``
+    (Shih et al. eq. 71), those whose hand rotation is at least ``min_angle_rad``.
+
+    Attributes
+    ----------
+    i, j : ndarray of intp, shape (m,)
+        The poses of each pair.
+    A_ijs : ndarray, shape (m, 4, 4)
+        ``inv(base_T_hands[j]) @ base_T_hands[i]``: the hand's motion in the hand frame.
+    B_ijs : ndarray, shape (m, 4, 4)
+        ``camera_T_targets[j] @ inv(camera_T_targets[i])``: the same motion in the camera
+        frame.
+    rotvecs_A, rotvecs_B : ndarray, shape (m, 3)
+        Their rotation vectors, radians.
+    spread : float
+        Largest angle between the rotation axes of the ``A_ijs``, radians.
+    """
+
+    i: NDArray[np.intp]
+    j: NDArray[np.intp]
+    A_ijs: NDArray[np.float64]
+    B_ijs: NDArray[np.float64]
+    rotvecs_A: NDArray[np.float64]
+    rotvecs_B: NDArray[np.float64]
+    spread: float
+
+
+def _informative_motions(
+    base_T_hands: NDArray[np.float64],
+    camera_T_targets: NDArray[np.float64],
+    min_angle_rad: float,
+) -> _Motions:
+    """The relative motions of :func:`motion_pairs` that turn the hand by at least
+    ``min_angle_rad``, checked: there is one, the hand's and the camera's rotation angles
+    agree (:func:`_check_angles_agree`), and the axes are not all parallel (else
+    :class:`HandEyeError`)."""
+    i, j = motion_pairs(len(base_T_hands))
     A_ijs = inverse_transform(base_T_hands[j]) @ base_T_hands[i]
     B_ijs = camera_T_targets[j] @ inverse_transform(camera_T_targets[i])
     angles_A = rotation_angle(A_ijs[:, :3, :3])
@@ -244,53 +332,50 @@ def solve_axxb(
             f"of X about it and the translation of X along it are not determined: add motions "
             f"about another axis"
         )
+    return _Motions(i, j, A_ijs, B_ijs, rotvecs_A, rotvecs_B, spread)
 
-    hand_R_camera, singular_values = tsai_rotation(rotvecs_A, rotvecs_B)
 
-    def tsai_start() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Tsai & Lenz's X (translation by eq. 15 over both orders of every pair), as
-        ``(camera_T_hand, base_T_target)``."""
-        A2 = np.concatenate([A_ijs, inverse_transform(A_ijs)])
-        B2 = np.concatenate([B_ijs, inverse_transform(B_ijs)])
-        lhs = (A2[:, :3, :3] - np.eye(3)).reshape(-1, 3)
-        rhs = (np.einsum("ij,kj->ki", hand_R_camera, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
-        tsai = transform_from_rotation_translation(
-            hand_R_camera, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
-        )
-        return inverse_transform(tsai), average_transform(base_T_hands @ tsai @ camera_T_targets)
-
-    length = float(np.sqrt(np.mean(np.sum(camera_T_targets[:, :3, 3] ** 2, axis=1))))
-
-    def x_uncertainty(fit: PoseFit) -> tuple[NDArray[np.float64], Uncertainty]:
-        """hand_T_camera's covariance (from that of its inverse, camera_T_hand) and its
-        verdict."""
-        G = inverse_covariance_map(fit.camera_T_hand)
-        covariance = G @ fit.covariance[:6, :6] @ G.T
-        return covariance, uncertainty(covariance, length, frame="the camera frame")
-
-    def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-        """Park, Andreff and Daniilidis as ``(camera_T_hand, base_T_target)``."""
-        found = candidate_starts(base_T_hands, camera_T_targets, problem="axxb")
-        return [(inverse_transform(X), Y) for X, Y in found.values()]
-
-    # Maximum likelihood on the absolute poses, camera_T_target[i] = camera_T_hand @
-    # hand_T_base[i] @ base_T_target with the noise in the camera's pose; when that fit
-    # is not clean, the other closed forms start it too.
-    fit = fit_absolute(
-        camera_T_targets,
-        inverse_transform(base_T_hands),
-        [tsai_start],
-        fallback_starts=fallback_starts,
-        accept=lambda f: x_uncertainty(f)[1].verdict is Verdict.DETERMINED,
+def _tsai_start(
+    motions: _Motions,
+    hand_R_camera: NDArray[np.float64],
+    base_T_hands: NDArray[np.float64],
+    camera_T_targets: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Tsai & Lenz's X with rotation ``hand_R_camera`` (translation by eq. 15 over both
+    orders of every pair), as ``(camera_T_hand, base_T_target)``."""
+    A2 = np.concatenate([motions.A_ijs, inverse_transform(motions.A_ijs)])
+    B2 = np.concatenate([motions.B_ijs, inverse_transform(motions.B_ijs)])
+    lhs = (A2[:, :3, :3] - np.eye(3)).reshape(-1, 3)
+    rhs = (np.einsum("ij,kj->ki", hand_R_camera, B2[:, :3, 3]) - A2[:, :3, 3]).reshape(-1)
+    tsai = transform_from_rotation_translation(
+        hand_R_camera, np.linalg.lstsq(lhs, rhs, rcond=None)[0]
     )
-    hand_T_camera = inverse_transform(fit.camera_T_hand)
-    covariance, unc = x_uncertainty(fit)
+    return inverse_transform(tsai), average_transform(base_T_hands @ tsai @ camera_T_targets)
 
-    # Residuals of A_ij X = X B_ij over the motions between poses kept.
-    keep = fit.inliers[i] & fit.inliers[j]
+
+def _x_uncertainty(fit: PoseFit, length: float) -> tuple[NDArray[np.float64], Uncertainty]:
+    """hand_T_camera's covariance (from that of its inverse, camera_T_hand) and its
+    verdict; ``length`` is the RMS camera-target distance."""
+    G = inverse_covariance_map(fit.camera_T_hand)
+    covariance = G @ fit.covariance[:6, :6] @ G.T
+    return covariance, uncertainty(covariance, length, frame="the camera frame")
+
+
+def _motion_residuals(
+    motions: _Motions, inliers: NDArray[np.bool_], hand_T_camera: NDArray[np.float64]
+) -> tuple[NDArray[np.bool_], float, float]:
+    """Residuals of ``A_ij X = X B_ij`` over the motions between poses kept (``inliers``;
+    all motions when none is), both orders of each: the motions used, the RMS rotation
+    residual (radians) and the RMS translation residual (input unit).
+
+    Raises :class:`HandEyeError`, naming the worst pair, when the RMS rotation residual
+    exceeds ``INCONSISTENT_RAD``.
+    """
+    i, j = motions.i, motions.j
+    keep = inliers[i] & inliers[j]
     if not np.any(keep):
         keep = np.ones_like(keep)
-    A_k, B_k = A_ijs[keep], B_ijs[keep]
+    A_k, B_k = motions.A_ijs[keep], motions.B_ijs[keep]
     A_k = np.concatenate([A_k, inverse_transform(A_k)])
     B_k = np.concatenate([B_k, inverse_transform(B_k)])
     left = A_k @ hand_T_camera
@@ -322,34 +407,7 @@ def solve_axxb(
             f"the hand (eye-to-hand) pass base_T_hands = inverse(base_T_hand), and "
             f"hand_T_camera is then base_T_camera"
         )
-    condition = float(singular_values[-1] / singular_values[0])
-    if condition < POOR_CONDITION:
-        log.warning(
-            "solve_axxb: the motions turn mostly about one axis (rotation condition "
-            "%.3g); X's rotation about it and its translation along it are poorly "
-            "determined: add motions about other axes",
-            condition,
-        )
-    if fit.rejected:
-        log.info("solve_axxb: poses %s rejected as outliers", list(fit.rejected))
-    return HandEyeResult(
-        hand_T_camera=hand_T_camera,
-        n_pairs=int(np.count_nonzero(keep)),
-        rms_rotation_rad=rms_rotation,
-        rms_translation=float(np.sqrt(np.mean(trans_res**2))),
-        rotation_condition=condition,
-        axis_spread_rad=float(spread),
-        base_T_target=fit.base_T_target,
-        covariance=covariance,
-        sigma_rotation_deg=unc.sigma_rotation_deg,
-        sigma_translation=unc.sigma_translation,
-        verdict=unc.verdict,
-        verdict_message=unc.message,
-        rejected=fit.rejected,
-        noise_rotation_rad=fit.sigma_rotation_rad,
-        noise_translation=fit.sigma_translation,
-        iterations=fit.iterations,
-    )
+    return keep, rms_rotation, float(np.sqrt(np.mean(trans_res**2)))
 
 
 def motion_pairs(n: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:

@@ -71,13 +71,15 @@ from kinfw.geometry import inverse_transform, rotation_angle, transform_from_rot
 from kinfw.identification.handeye._axyb_iteration import (
     STALL_RAD,
     AXYBError,
+    RotationRun,
+    TranslationRun,
     iteration_matrix,
     rotation_iteration,
     translation_iteration,
 )
 from kinfw.identification.handeye._axyb_start import check_motion, check_start, start_of_y
 from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
-from kinfw.identification.handeye._ml import PoseFit, assess, fit_absolute
+from kinfw.identification.handeye._ml import PoseFit, Start, assess, fit_absolute
 from kinfw.identification.handeye._quaternion import (
     consistent_quats_xyzw,
     rotation_from_quat_xyzw,
@@ -265,16 +267,7 @@ def solve_axyb(
     product", J. Mechanisms Robotics 5(3), 2013 (the closed form, here in quaternions).
     """
     As, Bs = _checked_poses(camera_T_targets, base_T_hands, hand_T_bases)
-    if hand_T_camera_guess is not None and base_T_target_guess is not None:
-        raise AXYBError(
-            "give hand_T_camera_guess or base_T_target_guess, not both: the iteration "
-            "starts from one guess (Hirsh et al. eq. 7) and derives the other"
-        )
-    X0 = Y0 = None
-    if hand_T_camera_guess is not None:
-        X0 = inverse_transform(check_start(hand_T_camera_guess, "hand_T_camera_guess"))
-    if base_T_target_guess is not None:
-        Y0 = check_start(base_T_target_guess, "base_T_target_guess")
+    X0, Y0 = _checked_guesses(hand_T_camera_guess, base_T_target_guess)
     if not tol > 0.0 or max_iterations < 1:
         raise AXYBError(f"need tol > 0 and max_iterations >= 1, got {tol!r}, {max_iterations!r}")
     rng = np.random.default_rng(0) if rng is None else rng
@@ -290,53 +283,18 @@ def solve_axyb(
     iterations = restarts = 0
     converged = True
     if run_paper:
-        rot = rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
-        R_X, R_Y = rotation_from_quat_xyzw(rot.q_X), rotation_from_quat_xyzw(rot.q_Y)
-        tra = translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
-        t_X, t_Y = tra.t_X, tra.t_Y
+        rot, tra, X, Y = _paper_iteration(
+            As, Bs, N, q_Y0, t_Y0, tol=tol, max_iterations=max_iterations, rng=rng, refine=refine
+        )
         converged = rot.converged and tra.converged
         iterations, restarts = rot.iterations + tra.iterations, rot.restarts
-        if not converged:
-            (log.info if refine else log.warning)(
-                "the paper's iteration did not converge within %d iterations (rotation: %s, "
-                "translation: %s)%s",
-                max_iterations,
-                rot.converged,
-                tra.converged,
-                "; the refinement continues from its estimate" if refine else "",
-            )
-        X = transform_from_rotation_translation(R_X, t_X)
-        Y = transform_from_rotation_translation(R_Y, t_Y)
     if refine:
-        starts = [(lambda X=X, Y=Y: (X, Y))] if run_paper else []
-        length_A = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
-
-        def determined(f: PoseFit) -> bool:
-            unc = [
-                uncertainty(f.covariance[:6, :6], length_A),
-                uncertainty(f.covariance[6:, 6:], length_A),
-            ]
-            return all(u.verdict is Verdict.DETERMINED for u in unc)
-
-        def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-            """Shah's and Li's closed forms (X, Y)."""
-            return list(candidate_starts(As, Bs, problem="axyb").values())
-
-        fit = fit_absolute(As, Bs, starts, fallback_starts=fallback_starts, accept=determined)
+        fit = _refined_fit(As, Bs, [(lambda X=X, Y=Y: (X, Y))] if run_paper else [])
         X, Y, converged = fit.camera_T_hand, fit.base_T_target, fit.converged
-        if not converged:
-            log.warning("the maximum-likelihood refinement did not converge")
-        if fit.rejected:
-            log.info("solve_axyb: poses %s rejected as outliers", list(fit.rejected))
     else:
         fit = assess(As, Bs, X, Y)
-    inliers = fit.inliers
 
-    fit_T = X @ Bs[inliers] @ Y
-    rms_rot = float(
-        np.sqrt(np.mean(rotation_angle(np.swapaxes(R_As[inliers], 1, 2) @ fit_T[:, :3, :3]) ** 2))
-    )
-    rms_tra = float(np.sqrt(np.mean(np.sum((fit_T[:, :3, 3] - As[inliers, :3, 3]) ** 2, axis=1))))
+    rms_rot, rms_tra = _rms_residuals(As, Bs, X, Y, fit.inliers)
     if rms_rot > STALL_RAD:
         raise AXYBError(
             f"no consistent X, Y: RMS rotation residual {np.degrees(rms_rot):.3g} deg "
@@ -351,23 +309,7 @@ def solve_axyb(
 
     history_X = history_Y = None
     if record_history and rot is not None and tra is not None:
-        R_X_rot = rotation_from_quat_xyzw(rot.history_X)
-        R_Y_rot = rotation_from_quat_xyzw(rot.history_Y)
-        # rotation phase: Y's starting translation and the X translation it implies
-        t_X_rot = As[:, :3, 3].mean(axis=0) - R_X_rot @ (
-            R_Bs.mean(axis=0) @ t_Y0 + Bs[:, :3, 3].mean(axis=0)
-        )
-        k_tra = tra.iterations
-        R_X_final = rotation_from_quat_xyzw(rot.q_X)
-        R_Y_final = rotation_from_quat_xyzw(rot.q_Y)
-        history_X = transform_from_rotation_translation(
-            np.concatenate([R_X_rot, np.broadcast_to(R_X_final, (k_tra, 3, 3))]),
-            np.concatenate([t_X_rot, tra.history_X]),
-        )
-        history_Y = transform_from_rotation_translation(
-            np.concatenate([R_Y_rot, np.broadcast_to(R_Y_final, (k_tra, 3, 3))]),
-            np.concatenate([np.broadcast_to(t_Y0, (len(R_Y_rot), 3)), tra.history_Y]),
-        )
+        history_X, history_Y = _histories(rot, tra, As, Bs, t_Y0)
 
     return AXYBResult(
         camera_T_hand=X,
@@ -388,3 +330,129 @@ def solve_axyb(
         noise_rotation_rad=fit.sigma_rotation_rad,
         noise_translation=fit.sigma_translation,
     )
+
+
+def _checked_guesses(
+    hand_T_camera_guess: ArrayLike | None, base_T_target_guess: ArrayLike | None
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The starts ``X0 = camera_T_hand`` (the inverse of ``hand_T_camera_guess``) and
+    ``Y0 = base_T_target_guess``, checked, None where not given; at most one is given."""
+    if hand_T_camera_guess is not None and base_T_target_guess is not None:
+        raise AXYBError(
+            "give hand_T_camera_guess or base_T_target_guess, not both: the iteration "
+            "starts from one guess (Hirsh et al. eq. 7) and derives the other"
+        )
+    X0 = Y0 = None
+    if hand_T_camera_guess is not None:
+        X0 = inverse_transform(check_start(hand_T_camera_guess, "hand_T_camera_guess"))
+    if base_T_target_guess is not None:
+        Y0 = check_start(base_T_target_guess, "base_T_target_guess")
+    return X0, Y0
+
+
+def _paper_iteration(
+    As: NDArray[np.float64],
+    Bs: NDArray[np.float64],
+    N: NDArray[np.float64],
+    q_Y0: NDArray[np.float64],
+    t_Y0: NDArray[np.float64],
+    *,
+    tol: float,
+    max_iterations: int,
+    rng: np.random.Generator,
+    refine: bool,
+) -> tuple[RotationRun, TranslationRun, NDArray[np.float64], NDArray[np.float64]]:
+    """The paper's algorithm from ``Y``'s start ``(q_Y0, t_Y0)``: the rotation alternation
+    on the iteration matrix ``N``, then the translation alternation; both runs and the
+    estimates ``X``, ``Y`` (4, 4). Not converging is logged (a warning unless ``refine``
+    continues from the estimate)."""
+    rot = rotation_iteration(N, q_Y0, tol=tol, max_iterations=max_iterations, rng=rng)
+    R_X, R_Y = rotation_from_quat_xyzw(rot.q_X), rotation_from_quat_xyzw(rot.q_Y)
+    tra = translation_iteration(As, Bs, R_X, t_Y0, tol=tol, max_iterations=max_iterations)
+    if not (rot.converged and tra.converged):
+        (log.info if refine else log.warning)(
+            "the paper's iteration did not converge within %d iterations (rotation: %s, "
+            "translation: %s)%s",
+            max_iterations,
+            rot.converged,
+            tra.converged,
+            "; the refinement continues from its estimate" if refine else "",
+        )
+    X = transform_from_rotation_translation(R_X, tra.t_X)
+    Y = transform_from_rotation_translation(R_Y, tra.t_Y)
+    return rot, tra, X, Y
+
+
+def _refined_fit(As: NDArray[np.float64], Bs: NDArray[np.float64], starts: list[Start]) -> PoseFit:
+    """The robust maximum-likelihood fit of ``A = X B Y`` from the closed form and
+    ``starts``, Shah's and Li's closed forms as fallback starts, accepted when both X and
+    Y are determined; non-convergence and rejected poses are logged."""
+    length_A = float(np.sqrt(np.mean(np.sum(As[:, :3, 3] ** 2, axis=1))))
+
+    def determined(f: PoseFit) -> bool:
+        unc = [
+            uncertainty(f.covariance[:6, :6], length_A),
+            uncertainty(f.covariance[6:, 6:], length_A),
+        ]
+        return all(u.verdict is Verdict.DETERMINED for u in unc)
+
+    def fallback_starts() -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+        """Shah's and Li's closed forms (X, Y)."""
+        return list(candidate_starts(As, Bs, problem="axyb").values())
+
+    fit = fit_absolute(As, Bs, starts, fallback_starts=fallback_starts, accept=determined)
+    if not fit.converged:
+        log.warning("the maximum-likelihood refinement did not converge")
+    if fit.rejected:
+        log.info("solve_axyb: poses %s rejected as outliers", list(fit.rejected))
+    return fit
+
+
+def _rms_residuals(
+    As: NDArray[np.float64],
+    Bs: NDArray[np.float64],
+    X: NDArray[np.float64],
+    Y: NDArray[np.float64],
+    inliers: NDArray[np.bool_],
+) -> tuple[float, float]:
+    """RMS rotation (radians) and translation (input unit) residuals of
+    ``A[i] = X @ B[i] @ Y`` over the ``inliers``."""
+    fit_T = X @ Bs[inliers] @ Y
+    rms_rot = float(
+        np.sqrt(
+            np.mean(rotation_angle(np.swapaxes(As[inliers, :3, :3], 1, 2) @ fit_T[:, :3, :3]) ** 2)
+        )
+    )
+    rms_tra = float(np.sqrt(np.mean(np.sum((fit_T[:, :3, 3] - As[inliers, :3, 3]) ** 2, axis=1))))
+    return rms_rot, rms_tra
+
+
+def _histories(
+    rot: RotationRun,
+    tra: TranslationRun,
+    As: NDArray[np.float64],
+    Bs: NDArray[np.float64],
+    t_Y0: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The estimates of ``X`` and ``Y`` after each iteration of the paper's algorithm,
+    (k, 4, 4) each: during the rotation phase with ``Y``'s starting translation ``t_Y0``
+    and the ``X`` translation it implies, then the translation phase's translations with
+    the final rotations."""
+    R_X_rot = rotation_from_quat_xyzw(rot.history_X)
+    R_Y_rot = rotation_from_quat_xyzw(rot.history_Y)
+    # rotation phase: Y's starting translation and the X translation it implies
+    t_X_rot = As[:, :3, 3].mean(axis=0) - R_X_rot @ (
+        Bs[:, :3, :3].mean(axis=0) @ t_Y0 + Bs[:, :3, 3].mean(axis=0)
+    )
+    k_tra = tra.iterations
+    R_X_final = rotation_from_quat_xyzw(rot.q_X)
+    R_Y_final = rotation_from_quat_xyzw(rot.q_Y)
+    history_X = transform_from_rotation_translation(
+        np.concatenate([R_X_rot, np.broadcast_to(R_X_final, (k_tra, 3, 3))]),
+        np.concatenate([t_X_rot, tra.history_X]),
+    )
+    history_Y = transform_from_rotation_translation(
+        np.concatenate([R_Y_rot, np.broadcast_to(R_Y_final, (k_tra, 3, 3))]),
+        np.concatenate([np.broadcast_to(t_Y0, (len(R_Y_rot), 3)), tra.history_Y]),
+    )
+    return history_X, history_Y

@@ -370,94 +370,158 @@ def fit_lm(
     """
     X, Y = camera_T_hand, base_T_target
     lean = _Lean(data)
-    n = data.n
-    n_in = float(np.count_nonzero(mask))
-    update_scales = n_in >= 4
+    update_scales = float(np.count_nonzero(mask)) >= 4
     maskf = mask.astype(float)
     r, RXB, R_hat, v = lean.residuals(X, Y)
     lam = 1e-6
     steps = 0
     converged = False
-    size = change = 0.0
     last_du: float | None = None
-    new_cost = 1.0
-    length = data.length
     while steps < max_steps:
         steps += 1
-        r2 = r * r
-        e2 = r2.reshape(n, 2, 3).sum(axis=2)  # (n, 2): |r_r|^2, |r_t|^2
-        chi = e2 @ (1.0 / s_r**2, 1.0 / s_t**2)
-        c = maskf
-        if huber:
-            c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
-        cost = float(c @ chi)
-        J = lean.jacobian(r, RXB, R_hat, v, X)
+        c, cost = _irls_weights(r, maskf, s_r, s_t, huber=huber)
+        Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), c, s_r, s_t)
         sc = np.sqrt(c)[:, None]
-        Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
-        Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
         H_r = Jr.T @ Jr
         H_t = Jt.T @ Jt
         g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
         H = H_r + H_t
-        D = np.maximum(H.diagonal(), 1e-300)
-        w = (1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_t**2, 1.0 / s_t**2, 1.0 / s_t**2)
-        while True:
-            try:
-                delta = -np.linalg.solve(H + lam * np.diag(D), g)
-            except np.linalg.LinAlgError:
-                delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
-            X_new = _exp_update(X, delta[0:6])
-            Y_new = _exp_update(Y, delta[6:12])
-            n_r, n_RXB, n_R, n_v = lean.residuals(X_new, Y_new)
-            new_cost = float(c @ ((n_r * n_r) @ w))
-            dl = np.abs(delta).tolist()
-            size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / length)
-            if new_cost <= cost or size < 1e-7:
-                break
-            lam *= 10.0
-            if lam > 1e12:
-                break
+        lam, step = _damped_step(lean, X, Y, H, g, c, cost, lam, s_r, s_t)
         if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
             converged = True
             break
         lam = max(lam / 10.0, 1e-12)
-        X, Y, r, RXB, R_hat, v = X_new, Y_new, n_r, n_RXB, n_R, n_v
+        X, Y, r, RXB, R_hat, v = step.X, step.Y, step.r, step.RXB, step.R_hat, step.v
         change = 0.0
         if update_scales:
-            try:
-                Hinv = np.linalg.inv(H)
-            except np.linalg.LinAlgError:
-                Hinv = np.linalg.pinv(H)
-            csum = 3.0 * float(c.sum())
-            red_r = csum - float(np.sum(Hinv * H_r.T))
-            red_t = csum - float(np.sum(Hinv * H_t.T))
-            ss_r, ss_t = (c @ (r * r).reshape(n, 2, 3).sum(axis=2)).tolist()
-            new_r = math.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
-            new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
-            new_r, new_t = _bounded_sigmas(new_r, new_t, length)
-            change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
-            # The scales' ratio converges linearly (factor rho ~ 0.1): Aitken's
-            # extrapolation of log(s_t / s_r) from two successive changes.
-            du = math.log(new_t / new_r) - math.log(s_t / s_r)
-            if last_du is not None and last_du != 0.0 and 0.0 < du / last_du < 0.8:
-                rho = du / last_du
-                jump = du * rho / (1.0 - rho)
-                new_t *= math.exp(jump)
-                change = max(change, abs(jump))
-                last_du = None
-            else:
-                last_du = du
-            s_r, s_t = new_r, new_t
-        if (size < LM_STEP_TOL and change < LM_SCALE_TOL) or new_cost == 0.0:
+            s_r, s_t, change, last_du = _updated_scales(
+                H, H_r, H_t, c, r, s_r, s_t, data.length, last_du
+            )
+        if (step.size < LM_STEP_TOL and change < LM_SCALE_TOL) or step.cost == 0.0:
             converged = True
             break
-    J = lean.jacobian(r, RXB, R_hat, v, X)
-    sm = np.sqrt(maskf)[:, None]
-    Jr = (J[:, :3] * (sm / s_r)[:, :, None]).reshape(-1, 12)
-    Jt = (J[:, 3:] * (sm / s_t)[:, :, None]).reshape(-1, 12)
+    Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), maskf, s_r, s_t)
     H = Jr.T @ Jr + Jt.T @ Jt
-    chi2 = (r * r).reshape(n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
+    chi2 = (r * r).reshape(data.n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)
     return LMFit(X, Y, s_r, s_t, H, chi2, steps, converged)
+
+
+def _irls_weights(
+    r: NDArray, maskf: NDArray, s_r: float, s_t: float, *, huber: bool
+) -> tuple[NDArray, float]:
+    """The weights ``c`` (n,) of the poses (``maskf``, times Huber's IRLS weights of the
+    whitened residual norms with ``huber``) and the weighted cost ``sum c_i chi2_i`` at
+    the residuals ``r`` (n, 6)."""
+    r2 = r * r
+    e2 = r2.reshape(len(r), 2, 3).sum(axis=2)  # (n, 2): |r_r|^2, |r_t|^2
+    chi = e2 @ (1.0 / s_r**2, 1.0 / s_t**2)
+    c = maskf
+    if huber:
+        c = maskf * np.minimum(1.0, HUBER_K / np.maximum(np.sqrt(chi), 1e-300))
+    return c, float(c @ chi)
+
+
+def _whitened(J: NDArray, c: NDArray, s_r: float, s_t: float) -> tuple[NDArray, NDArray]:
+    """The rotation and translation rows of the Jacobian ``J`` (n, 6, 12), each scaled by
+    ``sqrt(c_i) / s``, stacked over the poses: (3 n, 12) each."""
+    sc = np.sqrt(c)[:, None]
+    Jr = (J[:, :3] * (sc / s_r)[:, :, None]).reshape(-1, 12)
+    Jt = (J[:, 3:] * (sc / s_t)[:, :, None]).reshape(-1, 12)
+    return Jr, Jt
+
+
+@dataclass(frozen=True, slots=True)
+class _Step:
+    """A Levenberg-Marquardt step's new estimates ``X``, ``Y`` (4, 4), the model there
+    (:meth:`_Lean.residuals`: ``r``, ``RXB``, ``R_hat``, ``v``), its weighted cost and its
+    size (the largest rotation step in radians or translation step over the length)."""
+
+    X: NDArray
+    Y: NDArray
+    r: NDArray
+    RXB: NDArray
+    R_hat: NDArray
+    v: NDArray
+    cost: float
+    size: float
+
+
+def _damped_step(
+    lean: _Lean,
+    X: NDArray,
+    Y: NDArray,
+    H: NDArray,
+    g: NDArray,
+    c: NDArray,
+    cost: float,
+    lam: float,
+    s_r: float,
+    s_t: float,
+) -> tuple[float, _Step]:
+    """The step of ``(H + lam diag(H)) delta = -g``, the damping ``lam`` raised tenfold
+    until the weighted cost (weights ``c``) does not exceed ``cost`` or the step is below
+    1e-7; returns the damping (above 1e12: no step lowers the cost) and the last step."""
+    D = np.maximum(H.diagonal(), 1e-300)
+    w = (1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_r**2, 1.0 / s_t**2, 1.0 / s_t**2, 1.0 / s_t**2)
+    while True:
+        try:
+            delta = -np.linalg.solve(H + lam * np.diag(D), g)
+        except np.linalg.LinAlgError:
+            delta = -np.linalg.lstsq(H + lam * np.diag(D), g, rcond=None)[0]
+        X_new = _exp_update(X, delta[0:6])
+        Y_new = _exp_update(Y, delta[6:12])
+        n_r, n_RXB, n_R, n_v = lean.residuals(X_new, Y_new)
+        new_cost = float(c @ ((n_r * n_r) @ w))
+        dl = np.abs(delta).tolist()
+        size = max(max(dl[0:3] + dl[6:9]), max(dl[3:6] + dl[9:12]) / lean.d.length)
+        if new_cost <= cost or size < 1e-7:
+            break
+        lam *= 10.0
+        if lam > 1e12:
+            break
+    return lam, _Step(X_new, Y_new, n_r, n_RXB, n_R, n_v, new_cost, size)
+
+
+def _updated_scales(
+    H: NDArray,
+    H_r: NDArray,
+    H_t: NDArray,
+    c: NDArray,
+    r: NDArray,
+    s_r: float,
+    s_t: float,
+    length: float,
+    last_du: float | None,
+) -> tuple[float, float, float, float | None]:
+    """Variance components after a step: each group's weighted residual sum (weights
+    ``c``, residuals ``r`` (n, 6)) over its redundancy ``3 sum c - tr(H^-1 H_g)``, bounded
+    (:func:`_bounded_sigmas`), the ratio extrapolated by Aitken when two successive
+    changes of ``log(s_t / s_r)`` contract. Returns the new ``s_r``, ``s_t``, the largest
+    relative change (log) and the change to remember for the next step (``last_du``)."""
+    try:
+        Hinv = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        Hinv = np.linalg.pinv(H)
+    csum = 3.0 * float(c.sum())
+    red_r = csum - float(np.sum(Hinv * H_r.T))
+    red_t = csum - float(np.sum(Hinv * H_t.T))
+    ss_r, ss_t = (c @ (r * r).reshape(len(r), 2, 3).sum(axis=2)).tolist()
+    new_r = math.sqrt(ss_r / red_r) if red_r > 1e-9 else s_r
+    new_t = math.sqrt(ss_t / red_t) if red_t > 1e-9 else s_t
+    new_r, new_t = _bounded_sigmas(new_r, new_t, length)
+    change = max(abs(math.log(new_r / s_r)), abs(math.log(new_t / s_t)))
+    # The scales' ratio converges linearly (factor rho ~ 0.1): Aitken's
+    # extrapolation of log(s_t / s_r) from two successive changes.
+    du = math.log(new_t / new_r) - math.log(s_t / s_r)
+    if last_du is not None and last_du != 0.0 and 0.0 < du / last_du < 0.8:
+        rho = du / last_du
+        jump = du * rho / (1.0 - rho)
+        new_t *= math.exp(jump)
+        change = max(change, abs(jump))
+        last_du = None
+    else:
+        last_du = du
+    return new_r, new_t, change, last_du
 
 
 def variance_components(

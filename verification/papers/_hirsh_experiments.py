@@ -351,6 +351,45 @@ def _hirsh_trial(
     )
 
 
+def _trial_arrays(
+    cells: Sequence[tuple[int, int]], results: Iterable[tuple], shape: tuple[int, int], k: int
+) -> dict[str, NDArray]:
+    """The per-trial arrays of :class:`HirshResult` (keyed as ``_TRIAL_ARRAYS``), shape
+    ``(V, T)`` or ``(V, T, k)``, filled from the outcomes of :func:`_hirsh_trial` at
+    ``cells`` (views index, trial); a failed trial keeps NaN errors and -1 iterations."""
+    a: dict[str, NDArray] = {
+        "initial_y_error_deg": np.full(shape, np.nan),
+        "y_error_deg": np.full((*shape, k), np.nan),
+        "x_error_deg": np.full((*shape, k), np.nan),
+        "solved_y_error_deg": np.full(shape, np.nan),
+        "solved_x_error_deg": np.full(shape, np.nan),
+        "solved_y_translation_error_m": np.full(shape, np.nan),
+        "solver_iterations": np.full(shape, -1, dtype=np.int64),
+        "converged": np.zeros(shape, dtype=bool),
+        "restarts": np.zeros(shape, dtype=np.int64),
+        "convergence_factors": np.full(shape, np.nan),
+        "failed": np.zeros(shape, dtype=bool),
+    }
+    solved_names = (
+        "y_error_deg",
+        "x_error_deg",
+        "solved_y_error_deg",
+        "solved_x_error_deg",
+        "solved_y_translation_error_m",
+        "solver_iterations",
+        "restarts",
+        "converged",
+    )
+    for (v, t), (factor, init, solved) in zip(cells, results, strict=True):
+        a["convergence_factors"][v, t], a["initial_y_error_deg"][v, t] = factor, init
+        if solved is None:
+            a["failed"][v, t] = True
+            continue
+        for name, value in zip(solved_names, solved, strict=True):
+            a[name][v, t] = value
+    return a
+
+
 def hirsh_study(
     *,
     views: Iterable[int] = PAPER_VIEWS,
@@ -408,15 +447,6 @@ def hirsh_study(
         raise ValueError(f"noise_deg: expected an angle in [0, 180] degrees, got {noise_deg}")
     trials = check_count(trials, "trials", 1)
     k = check_count(iterations, "iterations", 1)
-    shape = (len(vs), trials)
-    initial = np.full(shape, np.nan)
-    y_err, x_err = np.full((*shape, k), np.nan), np.full((*shape, k), np.nan)
-    solved_y, solved_x, solved_t = (np.full(shape, np.nan) for _ in range(3))
-    solver_its = np.full(shape, -1, dtype=np.int64)
-    restarts = np.zeros(shape, dtype=np.int64)
-    converged = np.zeros(shape, dtype=bool)
-    failed = np.zeros(shape, dtype=bool)
-    factors = np.full(shape, np.nan)
     cells = [(v, t) for v in range(len(vs)) for t in range(trials)]
     results = run_trials(
         _hirsh_trial,
@@ -427,58 +457,21 @@ def hirsh_study(
         executor=executor,
         progress=progress,
     )
-    for (v, t), (factor, init, solved) in zip(cells, results, strict=True):
-        factors[v, t], initial[v, t] = factor, init
-        if solved is None:
-            failed[v, t] = True
-            continue
-        (
-            y_err[v, t],
-            x_err[v, t],
-            solved_y[v, t],
-            solved_x[v, t],
-            solved_t[v, t],
-            solver_its[v, t],
-            restarts[v, t],
-            converged[v, t],
-        ) = solved
+    arrays = _trial_arrays(cells, results, (len(vs), trials), k)
     for v, n in enumerate(vs):
         log.info(
             "hirsh: noise %g deg, %d views: median Y error after %d iterations %.3g deg",
             noise_deg,
             n,
             k,
-            np.nanmedian(y_err[v, :, -1]),
+            np.nanmedian(arrays["y_error_deg"][v, :, -1]),
         )
-    freeze(
-        vs,
-        initial,
-        y_err,
-        x_err,
-        solved_y,
-        solved_x,
-        solved_t,
-        solver_its,
-        converged,
-        restarts,
-        factors,
-        failed,
-    )
+    freeze(vs, *arrays.values())
     return HirshResult(
         views=vs,
         noise_deg=noise_deg,
         seed=int(seed),
         hand_rotation_deg=float(hand_rotation_deg),
         hand_translation_m=float(hand_translation_m),
-        initial_y_error_deg=initial,
-        y_error_deg=y_err,
-        x_error_deg=x_err,
-        solved_y_error_deg=solved_y,
-        solved_x_error_deg=solved_x,
-        solved_y_translation_error_m=solved_t,
-        solver_iterations=solver_its,
-        converged=converged,
-        restarts=restarts,
-        convergence_factors=factors,
-        failed=failed,
+        **arrays,
     )
