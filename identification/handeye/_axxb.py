@@ -44,7 +44,7 @@ from kinfw.geometry import (
     rotation_vector_from_matrix,
     transform_from_rotation_translation,
 )
-from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
+from kinfw.identification.handeye._checks import check_pose_pairs, poses_by_keyword
 from kinfw.identification.handeye._ml import PoseFit, fit_absolute
 from kinfw.identification.handeye._result import HandEyeResult
 from kinfw.identification.handeye._starts import candidate_starts
@@ -77,7 +77,7 @@ class HandEyeError(ValueError):
     """The poses cannot determine the hand-eye transform; the message says why."""
 
 
-@_poses_by_keyword("base_T_hands", "camera_T_targets")
+@poses_by_keyword("base_T_hands", "camera_T_targets")
 def solve_axxb(
     *,
     base_T_hands: ArrayLike,

@@ -78,7 +78,7 @@ from kinfw.identification.handeye._axyb_iteration import (
     translation_iteration,
 )
 from kinfw.identification.handeye._axyb_start import check_motion, check_start, start_of_y
-from kinfw.identification.handeye._checks import _poses_by_keyword, check_pose_pairs
+from kinfw.identification.handeye._checks import check_pose_pairs, poses_by_keyword
 from kinfw.identification.handeye._ml import PoseFit, Start, assess, fit_absolute
 from kinfw.identification.handeye._quaternion import (
     consistent_quats_xyzw,
@@ -93,7 +93,7 @@ __all__ = ["AXYBError", "convergence_factor", "solve_axyb"]
 log = logging.getLogger(__name__)
 
 
-@_poses_by_keyword("camera_T_targets", "base_T_hands")
+@poses_by_keyword("camera_T_targets", "base_T_hands")
 def convergence_factor(
     *,
     camera_T_targets: ArrayLike,
@@ -143,7 +143,7 @@ def _checked_poses(
 # ---------------------------------------------------------------------- entry point
 
 
-@_poses_by_keyword("camera_T_targets", "base_T_hands")
+@poses_by_keyword("camera_T_targets", "base_T_hands")
 def solve_axyb(
     *,
     camera_T_targets: ArrayLike,

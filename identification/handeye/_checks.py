@@ -53,7 +53,7 @@ class StartError(ValueError):
 _Solver = TypeVar("_Solver", bound=Callable[..., Any])
 
 
-def _poses_by_keyword(*names: str) -> Callable[[_Solver], _Solver]:
+def poses_by_keyword(*names: str) -> Callable[[_Solver], _Solver]:
     """Make a positional call of a hand-eye solver a ``TypeError`` that names the
     keywords ``names``: the papers' ``A`` and ``B`` are other frames in ``A X = X B``
     than in ``A = X B Y``, so a positional pair is ambiguous."""
