@@ -169,39 +169,17 @@ def calibrate(
         clock = time.perf_counter()
 
     check_units(nominal, data)
+    options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
     if method == "refine":
-        # every joint on a measured path must move, or its geometry is not observed
-        if parameters in ("full", "offsets"):
-            check_joint_motion(data, observed_joints(data, nominal))
-        cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
-        smaller = None
-        if parameters == "full":
-            smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
-        check_redundancy(
-            build_problem(
-                nominal,
-                data,
-                parameters=parameters,
-                prior=prior,
-                refine_intrinsics=refine_intrinsics,
-            ),
-            noise_given=noise is not None,
-            n_samples=data.n_samples,
-            source=data.source,
-            cameras=cameras_seen,
-            smaller=smaller,
-        )
+        _check_refinable(nominal, data, options)
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
     xml = nominal.urdf_xml
     if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
-        try:
-            closed_form = identify_closed_form(nominal, data)
-        except ProtocolError as exc:
-            if method == "closed-form" or isinstance(exc, UnitError):
-                raise
-            notes.append(f"closed form skipped: {exc}")
+        closed_form, skipped = _try_closed_form(nominal, data, method)
+        if closed_form is None:
+            notes.append(skipped)
         else:
             export = export_urdf(nominal, closed_form.geometry)
             xml = export.urdf_xml
@@ -212,39 +190,13 @@ def calibrate(
             )
     if (data.targets or data.groups("pixels")) and parameters != "none":
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
-        mounts: dict[str, list[NDArray]] = {}
-        for c in cameras.cameras:  # a camera that saw several targets: average its mounts
-            mounts.setdefault(c.joint, []).append(c.hand_T_camera)
-        xml = edit_urdf(
-            xml,
-            joint_origins={
-                joint: average_transform(np.stack(poses)) for joint, poses in mounts.items()
-            },
-        )
+        xml = _with_camera_mounts(xml, cameras)
         stages.append(("hand-eye", xml))
         done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
-        targets = dict(cameras.root_T_targets) if cameras is not None else None
-        refined = refine(
-            nominal,
-            data,
-            start=Robot(xml, nominal.source),
-            targets=targets,
-            noise=noise,
-            loss=loss,
-            parameters=parameters,
-            prior=prior,
-            refine_intrinsics=refine_intrinsics,
+        refined, found = _refine_checked(
+            nominal, data, Robot(xml, nominal.source), cameras, options
         )
-        # a smaller set, or a prior, is a deliberately restricted model (baselines, the
-        # model choice's candidates): its residuals are expected to show what it leaves out
-        unrestricted = parameters == "full" and prior is None
-        found = fit_warnings(refined, data) if unrestricted else ()
-        if unrestricted:
-            try:
-                check_fit(refined, data.source)
-            except UnitError as exc:  # the residuals' structure names a likelier cause
-                raise UnitError(" ".join((str(exc), *(f"Also: {w}" for w in found)))) from None
         for warning in found:
             warnings.warn(f"{data.source}: {warning}", UserWarning, stacklevel=2)
         export = export_urdf(
@@ -267,3 +219,102 @@ def calibrate(
     for note in notes:
         log.info(note)
     return Calibration(xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes))
+
+
+@dataclass(frozen=True, slots=True)
+class _RefineOptions:
+    """The options of :func:`calibrate` that its refinement takes (see there)."""
+
+    noise: NoiseModel | None
+    loss: str
+    parameters: str | tuple[str, ...]
+    prior: tuple[float, float] | None
+    refine_intrinsics: bool | tuple[str, ...]
+
+
+def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> None:
+    """The checks of :func:`calibrate` before a refinement: every joint on a measured path
+    moves, and the residuals determine the free parameters with redundancy."""
+    parameters, prior = options.parameters, options.prior
+    # every joint on a measured path must move, or its geometry is not observed
+    if parameters in ("full", "offsets"):
+        check_joint_motion(data, observed_joints(data, nominal))
+    cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
+    smaller = None
+    if parameters == "full":
+        smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
+    check_redundancy(
+        build_problem(
+            nominal,
+            data,
+            parameters=parameters,
+            prior=prior,
+            refine_intrinsics=options.refine_intrinsics,
+        ),
+        noise_given=options.noise is not None,
+        n_samples=data.n_samples,
+        source=data.source,
+        cameras=cameras_seen,
+        smaller=smaller,
+    )
+
+
+def _try_closed_form(
+    nominal: Robot, data: Measurements, method: str
+) -> tuple[ClosedFormResult | None, str]:
+    """The closed form of :func:`calibrate`, or None and why it was skipped (a refusal
+    raises with ``method="closed-form"`` and for a unit error)."""
+    try:
+        return identify_closed_form(nominal, data), ""
+    except ProtocolError as exc:
+        if method == "closed-form" or isinstance(exc, UnitError):
+            raise
+        return None, f"closed form skipped: {exc}"
+
+
+def _with_camera_mounts(xml: str, cameras: CamerasResult) -> str:
+    """``xml`` with each camera's joint origin set to its hand-eye mount (a camera that
+    saw several targets: the average of its mounts)."""
+    mounts: dict[str, list[NDArray]] = {}
+    for c in cameras.cameras:
+        mounts.setdefault(c.joint, []).append(c.hand_T_camera)
+    return edit_urdf(
+        xml,
+        joint_origins={
+            joint: average_transform(np.stack(poses)) for joint, poses in mounts.items()
+        },
+    )
+
+
+def _refine_checked(
+    nominal: Robot,
+    data: Measurements,
+    start: Robot,
+    cameras: CamerasResult | None,
+    options: _RefineOptions,
+) -> tuple[RefineResult, tuple[str, ...]]:
+    """The refinement stage of :func:`calibrate` from ``start`` and the hand-eye's target
+    poses, its fit checked when the model is unrestricted; with the fit warnings to
+    issue."""
+    targets = dict(cameras.root_T_targets) if cameras is not None else None
+    refined = refine(
+        nominal,
+        data,
+        start=start,
+        targets=targets,
+        noise=options.noise,
+        loss=options.loss,
+        parameters=options.parameters,
+        prior=options.prior,
+        refine_intrinsics=options.refine_intrinsics,
+    )
+    # a smaller set, or a prior, is a deliberately restricted model (baselines, the
+    # model choice's candidates): its residuals are expected to show what it leaves out
+    unrestricted = options.parameters == "full" and options.prior is None
+    found = fit_warnings(refined, data) if unrestricted else ()
+    if unrestricted:
+        try:
+            check_fit(refined, data.source)
+        except UnitError as exc:  # the residuals' structure names a likelier cause
+            raise UnitError(" ".join((str(exc), *(f"Also: {w}" for w in found)))) from None
+    return refined, found

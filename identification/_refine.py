@@ -39,7 +39,8 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -232,14 +233,7 @@ def refine(
     that leaves the problem undetermined (:class:`DatasetError` on the refit) is undone
     and noted.
     """
-    if loss not in LOSSES:
-        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
-    if reject is not None and not reject > 0.0:
-        raise ValueError(f"reject: expected a positive z (e.g. 3.09) or None, got {reject!r}")
-    if not 0.0 <= max_reject_fraction < 1.0:
-        raise ValueError(
-            f"max_reject_fraction: expected 0 <= fraction < 1, got {max_reject_fraction!r}"
-        )
+    _check_loss_options(loss, reject, max_reject_fraction)
     t0 = time.perf_counter()
 
     def fit(data: Measurements):
@@ -263,11 +257,63 @@ def refine(
     result, problem, r = fit(measurements)
     if loss == "linear" or reject is None:
         return result
+    result, problem, rounds, rejected, note = _reject_gross_errors(
+        fit,
+        measurements,
+        result,
+        problem,
+        r,
+        reject=reject,
+        max_reject_fraction=max_reject_fraction,
+        max_reject_rounds=max_reject_rounds,
+    )
+    rejected = _rejected_at_final(rounds, rejected, problem, result)
+    _log_rejection(rejected, note)
+    return replace(
+        result,
+        rejected=tuple(rejected),
+        rejection_note=note,
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _check_loss_options(loss: str, reject: float | None, max_reject_fraction: float) -> None:
+    """Refuse a loss, rejection quantile or rejection fraction :func:`refine` cannot use."""
+    if loss not in LOSSES:
+        raise ValueError(f"loss: expected one of {LOSSES}, got {loss!r}")
+    if reject is not None and not reject > 0.0:
+        raise ValueError(f"reject: expected a positive z (e.g. 3.09) or None, got {reject!r}")
+    if not 0.0 <= max_reject_fraction < 1.0:
+        raise ValueError(
+            f"max_reject_fraction: expected 0 <= fraction < 1, got {max_reject_fraction!r}"
+        )
+
+
+#: One rejection round of :func:`refine`: the problem fitted, its thresholds and the mask
+#: of the observations it rejected.
+_Round = tuple[LeastSquaresProblem, NDArray, NDArray]
+
+
+def _reject_gross_errors(
+    fit: Callable[[Measurements], tuple[RefineResult, LeastSquaresProblem, NDArray]],
+    measurements: Measurements,
+    result: RefineResult,
+    problem: LeastSquaresProblem,
+    r: NDArray,
+    *,
+    reject: float,
+    max_reject_fraction: float,
+    max_reject_rounds: int,
+) -> tuple[RefineResult, LeastSquaresProblem, list[_Round], list[RejectedObservation], str | None]:
+    """The rejection rounds of :func:`refine` (see its Notes), from the robust fit
+    ``result`` of ``problem`` with whitened residuals ``r``: the last fit and its problem,
+    the rounds that rejected, the rejected observations (at the fits that rejected them)
+    and the rejection note."""
     n_obs = sum(len(g.sample) for g in problem.groups)
     # one gross error is what any dataset may hold, however small (a training fold of 16)
     allowed = max(int(np.floor(max_reject_fraction * n_obs)), int(max_reject_fraction > 0))
     rejected: list[RejectedObservation] = []
-    rounds: list[tuple[LeastSquaresProblem, NDArray, NDArray]] = []
+    rounds: list[_Round] = []
     note = None
     data = measurements
     for _ in range(max_reject_rounds):
@@ -280,13 +326,8 @@ def refine(
             break
         room = allowed - len(rejected)
         if beyond.sum() > room:
-            note = (
-                f"{int(beyond.sum()) + len(rejected)} of {n_obs} observations lie beyond the "
-                f"{100 * _phi(reject):.4g} % quantile of the clean residual (expected "
-                f"{100 * (1 - _phi(reject)):.2g} %); only the worst {allowed} "
-                f"(at most {100 * max_reject_fraction:.3g} %, at least one) are rejected: the "
-                "data may be inconsistent with the model (a missing parameter, a wrong frame "
-                "or noise model) rather than hold a few gross errors"
+            note = _too_many_note(
+                int(beyond.sum()) + len(rejected), n_obs, allowed, reject, max_reject_fraction
             )
             order = np.argsort(-(norms / k), kind="stable")
             keep_worst = np.zeros(m, bool)
@@ -309,9 +350,34 @@ def refine(
         data, result, problem, r = reduced, refit, refit_problem, refit_r
         if note is not None:
             break
-    # the rejected observations' residuals against the final fit, when the problems
-    # they were in have its layout (the same blocks: the functions take the model and
-    # the starts as inputs); else those at the fit that rejected them
+    return result, problem, rounds, rejected, note
+
+
+def _too_many_note(
+    n_beyond: int, n_obs: int, allowed: int, reject: float, max_reject_fraction: float
+) -> str:
+    """The rejection note when ``n_beyond`` of ``n_obs`` observations lie beyond the
+    threshold, more than the ``allowed`` rejections."""
+    return (
+        f"{n_beyond} of {n_obs} observations lie beyond the "
+        f"{100 * _phi(reject):.4g} % quantile of the clean residual (expected "
+        f"{100 * (1 - _phi(reject)):.2g} %); only the worst {allowed} "
+        f"(at most {100 * max_reject_fraction:.3g} %, at least one) are rejected: the "
+        "data may be inconsistent with the model (a missing parameter, a wrong frame "
+        "or noise model) rather than hold a few gross errors"
+    )
+
+
+def _rejected_at_final(
+    rounds: list[_Round],
+    rejected: list[RejectedObservation],
+    problem: LeastSquaresProblem,
+    result: RefineResult,
+) -> list[RejectedObservation]:
+    """The rejected observations, worst first, with their residuals against the final
+    fit (``result`` of ``problem``) when the problems they were in have its layout (the
+    same blocks: the functions take the model and the starts as inputs); else those at
+    the fit that rejected them."""
     final = []
     for p_round, k, mask in rounds:
         r_final = _residuals_with(p_round, problem, result.estimate, result.noise)
@@ -320,8 +386,13 @@ def refine(
             break
         norms = observation_norms(r_final, [(len(g.sample), g.rows) for g in p_round.groups])
         final += rejected_observations(p_round.groups, r_final, result.noise, norms, k, mask)
-    rejected = list(final)
-    rejected.sort(key=lambda o: -o.excess)
+    out = list(final)
+    out.sort(key=lambda o: -o.excess)
+    return out
+
+
+def _log_rejection(rejected: list[RejectedObservation], note: str | None) -> None:
+    """Log the rejected observations (info) and the rejection note (warning)."""
     if rejected:
         log.info(
             "refine: %d observations rejected as gross errors (worst: %s %s sample %d, "
@@ -334,12 +405,6 @@ def refine(
         )
     if note is not None:
         log.warning("refine: %s", note)
-    return replace(
-        result,
-        rejected=tuple(rejected),
-        rejection_note=note,
-        seconds=time.perf_counter() - t0,
-    )
 
 
 def _phi(z: float) -> float:
@@ -411,19 +476,91 @@ def _fit(
         refine_intrinsics=refine_intrinsics,
         extra_blocks=extra_blocks,
     )
-    P, free, obs_sizes = problem.n_parameters, problem.free, problem.obs_sizes
     given = noise is not None
-    for c in {c for g in problem.groups for c in g.components} if given else ():
-        try:
-            noise.sigma(c)
-        except KeyError as exc:  # a user's noise model that misses a component of the data
-            hint = "; on the command line --sigma-px" if c.unit == "px" else ""
-            raise ValueError(f"{measurements.source}: {exc.args[0]}{hint}") from None
+    if given:
+        _check_noise_covers(noise, problem, measurements.source)
     sigma = (
         noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
     )
     k = thresholds(problem.obs_components, loss_scale)
-    x = np.zeros(P)
+    solution = _solve(
+        problem,
+        sigma,
+        given=given,
+        loss=loss,
+        k=k,
+        max_iterations=max_iterations,
+        noise_rounds=noise_rounds,
+    )
+    x, sigma = solution.x, solution.noise
+    quality = _quality_at(problem, x, sigma, given=given, loss=loss, k=k, data=measurements)
+    result = RefineResult(
+        model=problem.model_at(x),
+        model_frame=problem.model_frame,
+        unknowns=problem.unknowns_at(x),
+        parameter_names=problem.names,
+        parameter_units=problem.units,
+        free=problem.free.copy(),
+        estimate=x,
+        covariance=quality.covariance,
+        noise=sigma,
+        sigma_hat2=quality.sigma_hat2,
+        residuals=quality.residuals,
+        downweighted=quality.downweighted,
+        identifiability=quality.identifiability,
+        iterations=solution.iterations,
+        converged=solution.converged,
+        cost=quality.cost,
+        seconds=time.perf_counter() - t0,
+    )
+    log.info(
+        "refine: %d free parameters (%d before gauge fixing and the parameter set), "
+        "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
+        quality.identifiability.n_parameters,
+        problem.n_parameters,
+        len(quality.r),
+        solution.iterations,
+        quality.sigma_hat2,
+        result.seconds,
+    )
+    return result, problem, quality.r
+
+
+def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source: str) -> None:
+    """Refuse a user's noise model that misses a noise component of the problem's data."""
+    for c in {c for g in problem.groups for c in g.components}:
+        try:
+            noise.sigma(c)
+        except KeyError as exc:
+            hint = "; on the command line --sigma-px" if c.unit == "px" else ""
+            raise ValueError(f"{source}: {exc.args[0]}{hint}") from None
+
+
+@dataclass(frozen=True, slots=True)
+class _Solution:
+    """The estimate ``x`` of the chart coordinates, the noise model it ends with, and the
+    Levenberg-Marquardt iterations (summed over the noise rounds) and convergence."""
+
+    x: NDArray[np.float64]
+    noise: NoiseModel
+    iterations: int
+    converged: bool
+
+
+def _solve(
+    problem: LeastSquaresProblem,
+    sigma: NoiseModel,
+    *,
+    given: bool,
+    loss: str,
+    k: NDArray,
+    max_iterations: int,
+    noise_rounds: int,
+) -> _Solution:
+    """Levenberg-Marquardt from the start, the noise re-estimated after each of the
+    ``noise_rounds`` rounds unless ``given`` (then one round under ``sigma``)."""
+    free, obs_sizes = problem.free, problem.obs_sizes
+    x = np.zeros(problem.n_parameters)
     # what the data do not see at the start stays there for every round: once the other
     # parameters have moved, a structurally redundant one (a joint's axis tilt when the
     # only observed point lies on that axis) gets a small column again and would drift
@@ -455,14 +592,45 @@ def _fit(
             robust=loss != "linear",
             first=round_ == 0,
         )
+    return _Solution(x, sigma, iterations, converged)
+
+
+@dataclass(frozen=True, slots=True)
+class _Quality:
+    """The fit's quality at its estimate: whitened residuals ``r`` (and per group, with
+    the observations the robust loss down-weighted), reduced chi-square, cost, covariance
+    and identifiability."""
+
+    r: NDArray[np.float64]
+    residuals: tuple[GroupResiduals, ...]
+    downweighted: tuple[tuple[str, str, int, float], ...]
+    sigma_hat2: float
+    cost: float
+    covariance: NDArray[np.float64]
+    identifiability: Identifiability
+
+
+def _quality_at(
+    problem: LeastSquaresProblem,
+    x: NDArray,
+    sigma: NoiseModel,
+    *,
+    given: bool,
+    loss: str,
+    k: NDArray,
+    data: Measurements,
+) -> _Quality:
+    """Residuals, covariance and identifiability of ``problem`` at ``x`` under ``sigma``
+    (a ``given`` noise model is trusted; an estimated one is rescaled by the fit); with
+    the robust ``loss``, observations beyond ``k`` are flagged."""
+    free = problem.free
     r, J = problem.evaluate(x, sigma, True, only_free=True)
-    w_rows = row_weights(r, obs_sizes, loss, k)
+    w_rows = row_weights(r, problem.obs_sizes, loss, k)
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
-    # a given noise model is trusted; an estimated one is rescaled by the fit
     covariance, ident = covariance_and_identifiability(
-        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, measurements, problem.model0
+        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, data, problem.model0
     )
     # blocks that know when a full-rank estimate is still not determined (intrinsics)
     poor = tuple(
@@ -473,35 +641,8 @@ def _fit(
     )
     if poor:
         ident = replace(ident, unidentifiable=(*ident.unidentifiable, *poor))
-    flagged = observation_norms(r, obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
+    flagged = (
+        observation_norms(r, problem.obs_sizes) > k if loss != "linear" else np.zeros(len(k), bool)
+    )
     residuals, downweighted = group_residuals(list(problem.groups), r, w_rows, sigma, flagged)
-    result = RefineResult(
-        model=problem.model_at(x),
-        model_frame=problem.model_frame,
-        unknowns=problem.unknowns_at(x),
-        parameter_names=problem.names,
-        parameter_units=problem.units,
-        free=problem.free.copy(),
-        estimate=x,
-        covariance=covariance,
-        noise=sigma,
-        sigma_hat2=sigma_hat2,
-        residuals=residuals,
-        downweighted=downweighted,
-        identifiability=ident,
-        iterations=iterations,
-        converged=converged,
-        cost=0.5 * float(rw @ rw),
-        seconds=time.perf_counter() - t0,
-    )
-    log.info(
-        "refine: %d free parameters (%d before gauge fixing and the parameter set), "
-        "%d residuals, %d iterations, sigma_hat^2 %.3g, %.3f s",
-        ident.n_parameters,
-        P,
-        len(r),
-        iterations,
-        sigma_hat2,
-        result.seconds,
-    )
-    return result, problem, r
+    return _Quality(r, residuals, downweighted, sigma_hat2, 0.5 * float(rw @ rw), covariance, ident)

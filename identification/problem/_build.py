@@ -28,6 +28,7 @@ from kinfw.model import (
     CPC_KEY,
     Block,
     BlockKey,
+    CPCModel,
     Robot,
     RobotBlock,
     cpc_from_geometry,
@@ -90,20 +91,10 @@ def build_problem(
     # frames of the model too: the prediction is inv(w_T_c) w_T_frame
     robot_in = robot_measurement_frames(measurements, robot)
     observed = tuple(dict.fromkeys((*measurements.observed_frames, *robot_in)))
-    in_frames = {kind_of(g).measured_in(g) for g in groups} - set(robot_in)
-    model_frame = None
-    if len(in_frames) == 1 and None not in in_frames and not robot_in:
-        model_frame = next(iter(in_frames))  # everything in one external frame
+    model_frame = _single_external_frame(groups, robot_in)
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
-    given = {BlockKey(u.kind, u.name): u.value for u in known}
-    given.update(
-        {
-            BlockKey("target", n): T
-            for n, T in (targets or {}).items()
-            if BlockKey("target", n) not in given
-        }
-    )
+    given = _given_starts(known, targets)
     fitted_frame = []
     if model_frame is not None:
         model0 = express_in(
@@ -128,11 +119,60 @@ def build_problem(
         *unknown,
     )
     P = sum(b.size for b in blocks)
+    residual_groups = _residual_groups(model0, blocks, groups, model_frame, q_all)
+    if robot_in:  # relative measurements: fix what they leave undetermined
+        blocks = _fix_relative_gauge(
+            robot, model0, blocks, residual_groups, robot_in, measurements.source
+        )
+    prior_mean, prior_sigma = _prior_rows(P, blocks, prior, robot, observed, model0, model_frame)
+    return LeastSquaresProblem(
+        model0,
+        model_frame,
+        tuple(blocks),
+        tuple(residual_groups),
+        prior_mean,
+        prior_sigma,
+        (*fitted_frame, *fitted),
+    )
 
-    # the CasADi functions: every number (reference model, block starts) is an input
+
+def _single_external_frame(groups: list, robot_in: Sequence[str]) -> str | None:
+    """The external frame every observation is measured in, if there is one and no
+    observation is measured in a frame of the robot; else None (the URDF root)."""
+    in_frames = {kind_of(g).measured_in(g) for g in groups} - set(robot_in)
+    if len(in_frames) == 1 and None not in in_frames and not robot_in:
+        return next(iter(in_frames))  # everything in one external frame
+    return None
+
+
+def _given_starts(
+    known: tuple[Unknown, ...], targets: dict[str, NDArray] | None
+) -> dict[BlockKey, NDArray]:
+    """Start values by block key: ``known`` first, then the ``targets`` poses it does not
+    give."""
+    given = {BlockKey(u.kind, u.name): u.value for u in known}
+    given.update(
+        {
+            BlockKey("target", n): T
+            for n, T in (targets or {}).items()
+            if BlockKey("target", n) not in given
+        }
+    )
+    return given
+
+
+def _residual_groups(
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    groups: list,
+    model_frame: str | None,
+    q_all: NDArray[np.float64],
+) -> list[ResidualGroup]:
+    """Per observation group its CasADi residual with the group's joint values and data;
+    every number (reference model, block starts) is an input of the functions."""
     const = np.concatenate([b.constants() for b in blocks])
     functions = group_functions(model0, blocks, groups, model_frame, len(const))
-    residual_groups = [
+    return [
         ResidualGroup(
             kind_of(g),
             g,
@@ -144,22 +184,46 @@ def build_problem(
         for g, fn in zip(groups, functions, strict=True)
     ]
 
-    if robot_in:  # relative measurements: fix what they leave undetermined
-        lower, upper = robot.joint_limits(model0.topology.joint_names)
-        blocks, fixed = relative_gauge(tuple(blocks), residual_groups, lower, upper)
-        if fixed:
-            logger.info(
-                "%s: measured in the robot's %s: %d parameters the relative poses do not "
-                "determine are fixed at their start: %s",
-                measurements.source,
-                list(robot_in),
-                len(fixed),
-                ", ".join(fixed),
-            )
 
+def _fix_relative_gauge(
+    robot: Robot,
+    model0: CPCModel,
+    blocks: tuple[Block, ...],
+    residual_groups: list[ResidualGroup],
+    robot_in: Sequence[str],
+    source: str,
+) -> tuple[Block, ...]:
+    """``blocks`` with what relative measurements (in the robot's frames ``robot_in``)
+    leave undetermined fixed at its start (:func:`relative_gauge`), logged."""
+    lower, upper = robot.joint_limits(model0.topology.joint_names)
+    blocks, fixed = relative_gauge(tuple(blocks), residual_groups, lower, upper)
+    if fixed:
+        logger.info(
+            "%s: measured in the robot's %s: %d parameters the relative poses do not "
+            "determine are fixed at their start: %s",
+            source,
+            list(robot_in),
+            len(fixed),
+            ", ".join(fixed),
+        )
+    return blocks
+
+
+def _prior_rows(
+    P: int,
+    blocks: tuple[Block, ...],
+    prior: tuple[float, float] | None,
+    robot: Robot,
+    observed: tuple[str, ...],
+    model0: CPCModel,
+    model_frame: str | None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Mean and sigma, shape (P,), of the Gaussian ``prior`` (sigma_m, sigma_rad) on the
+    robot blocks' entries in rad and m (other units and without a prior: inf sigma); its
+    mean on the CPC chart is the nominal URDF when the model is in the root frame."""
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
-    if prior is not None:  # on the robot blocks' entries in rad and m (other units: none)
+    if prior is not None:
         sigma_m, sigma_rad = prior
         k = 0
         for b in blocks:
@@ -172,12 +236,4 @@ def build_problem(
             if b.key == CPC_KEY and model_frame is None:  # deviations from the nominal
                 nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
                 prior_mean[s] = model0.chart_coordinates(nominal)
-    return LeastSquaresProblem(
-        model0,
-        model_frame,
-        tuple(blocks),
-        tuple(residual_groups),
-        prior_mean,
-        prior_sigma,
-        (*fitted_frame, *fitted),
-    )
+    return prior_mean, prior_sigma

@@ -221,6 +221,41 @@ def relative_gauge(
         The names (``owner:field``) of the parameters fixed here.
     """
     rng = np.random.default_rng(0) if rng is None else rng
+    J = _structure_jacobian(blocks, groups, lower, upper, rng)
+    starts = np.cumsum([0, *(b.size for b in blocks)])
+    cpc = next(b for b in blocks if b.key == CPC_KEY)
+    topo = cpc.model.topology
+    rank = _column_ranks(blocks, starts, topo)
+    free = np.concatenate([b.free for b in blocks])
+    shared_names = {topo.joint_names[j] for j in _shared_joints(groups, topo)}
+    for b, start in zip(blocks, starts[:-1], strict=True):
+        if isinstance(b, RobotBlock) and not isinstance(b, BaseBlock):
+            for k, (owner, _) in enumerate(b.names):
+                if owner in shared_names:
+                    free[start + k] = False
+    order = sorted(np.flatnonzero(free), key=lambda col: rank[col])
+    keep = _columns_adding_rank(J, order)
+    dropped = np.concatenate([b.free for b in blocks]) & ~keep
+    if not dropped.any():
+        return blocks, ()
+    names = [f"{n.owner}:{n.field}" for b in blocks for n in b.names]
+    out = tuple(
+        b.with_free(b.free & keep[s:e])
+        for b, s, e in zip(blocks, starts[:-1], starts[1:], strict=True)
+    )
+    return out, tuple(names[k] for k in np.flatnonzero(dropped))
+
+
+def _structure_jacobian(
+    blocks: tuple[Any, ...],
+    groups: list[Any],
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """The Jacobian, shape (rows, P), of every group at the start, at random
+    configurations within the joint limits (at most +-pi) and cycling through the
+    group's data (see :func:`relative_gauge`)."""
     lo = np.where(np.isfinite(lower), lower, -np.pi)
     hi = np.where(np.isfinite(upper), upper, np.pi)
     lo, hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)
@@ -235,14 +270,18 @@ def relative_gauge(
         f = g.functions.j.map("structure", "serial", n, [2, 3], [])
         J = np.asarray(f(qs, data, x, g.const))  # (rows, n * P)
         parts.append(J.reshape(g.rows, n, P).transpose(1, 0, 2).reshape(-1, P))
-    J = np.concatenate(parts)
+    return np.concatenate(parts)
 
-    starts = np.cumsum([0, *(b.size for b in blocks)])
-    cpc = next(b for b in blocks if b.key == CPC_KEY)
-    frames = set(cpc.model.topology.frames)
-    topo = cpc.model.topology
+
+def _column_ranks(
+    blocks: tuple[Any, ...], starts: NDArray[np.int_], topo: Any
+) -> list[tuple[int, int]]:
+    """Per column of the parameter vector its place in the order of
+    :func:`relative_gauge`: unknown blocks, tools, joints deepest first, zero offsets and
+    further robot blocks, base."""
+    frames = set(topo.frames)
     depth = {j: len(_ancestors(topo, k)) for k, j in enumerate(topo.joint_names)}
-    rank: list[tuple[int, int]] = []  # per column of x, its place in the order
+    rank: list[tuple[int, int]] = []
     for b, start in zip(blocks, starts[:-1], strict=True):
         for k, (owner, _) in enumerate(b.names):
             col = int(start) + k
@@ -255,33 +294,36 @@ def relative_gauge(
                 rank.append((4, col))
             else:  # zero offsets and any further robot block: after the joints' axes
                 rank.append((3, -col))
+    return rank
 
-    free = np.concatenate([b.free for b in blocks])
-    # joints above the common ancestor of every group's two frames (observed and
-    # measured in) move both alike: none of their parameters enters a relative pose
+
+def _shared_joints(groups: list[Any], topo: Any) -> set[int]:
+    """The joints above the common ancestor of every group's two frames (observed and
+    measured in): they move both alike, so none of their parameters enters a relative
+    pose (none when a group is measured in the root or an external frame)."""
+    frames = set(topo.frames)
     shared = set(range(len(topo.joint_names)))
     for g in groups:
         kind, group = g.kind, g.group
         inside = kind.measured_in(group)
         if inside not in frames:  # measured in the root or an external frame: pins all
-            shared = set()
-            break
+            return set()
         for f in kind.frames(group):
             a, b = topo.frames.index(f), topo.frames.index(inside)
             pa, pb = topo.frame_parent[a], topo.frame_parent[b]
             above_a = set() if pa < 0 else {pa, *_ancestors(topo, pa)}
             above_b = set() if pb < 0 else {pb, *_ancestors(topo, pb)}
             shared &= above_a & above_b
-    shared_names = {topo.joint_names[j] for j in shared}
-    for b, start in zip(blocks, starts[:-1], strict=True):
-        if isinstance(b, RobotBlock) and not isinstance(b, BaseBlock):
-            for k, (owner, _) in enumerate(b.names):
-                if owner in shared_names:
-                    free[start + k] = False
-    order = sorted(np.flatnonzero(free), key=lambda col: rank[col])
+    return shared
+
+
+def _columns_adding_rank(J: NDArray[np.float64], order: list[int]) -> NDArray[np.bool_]:
+    """Mask of the columns of ``J`` kept, in ``order``, while they add rank: each one's
+    part (unit-normed) orthogonal to those kept before exceeds
+    :data:`STRUCTURAL_RANK_TOL`."""
     norms = np.linalg.norm(J, axis=0)
     basis = np.zeros((J.shape[0], 0))
-    keep = np.zeros(P, bool)
+    keep = np.zeros(J.shape[1], bool)
     for col in order:
         if norms[col] == 0.0:
             continue
@@ -292,12 +334,4 @@ def relative_gauge(
         if size > STRUCTURAL_RANK_TOL:
             basis = np.column_stack([basis, v / size])
             keep[col] = True
-    dropped = np.concatenate([b.free for b in blocks]) & ~keep
-    if not dropped.any():
-        return blocks, ()
-    names = [f"{n.owner}:{n.field}" for b in blocks for n in b.names]
-    out = tuple(
-        b.with_free(b.free & keep[s:e])
-        for b, s, e in zip(blocks, starts[:-1], starts[1:], strict=True)
-    )
-    return out, tuple(names[k] for k in np.flatnonzero(dropped))
+    return keep

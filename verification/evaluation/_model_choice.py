@@ -33,7 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from kinfw.identification import calibrate
+from kinfw.identification import Calibration, calibrate
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
@@ -222,51 +222,25 @@ def choose_parameters(
     # sample in a fold moves its RMS more than the models differ)
     reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
-    runs = [(p, prior) for p in ("frames", "offsets", "full")]
-    if prior is None:
-        priors = [(s, s / lever) for s in PRIOR_GRID_M for lever in PRIOR_LEVERS_M]
-        runs += [("full", p) for p in sorted(priors)]  # strongest first
     candidates, excluded = [], ()
-    for parameters, p in runs:
-        try:
-            cv = crossvalidate(
-                nominal,
-                data,
-                k=k,
-                seed=seed,
-                sets=(parameters,),
-                noise=noise,
-                loss=loss,
-                prior=p,
-                exclude_flagged=True,
-                reference=reference,
-            )
-        except ValueError as exc:
-            # the full data fit above: a training fold too small for these parameters
-            # (a DatasetError), or to place a camera (three views per hand-eye)
-            candidates.append(Candidate(parameters, p, np.nan, failed=str(exc)))
-            continue
-        cv = replace(cv, noise=sigma)
-        excluded = cv.excluded
-        candidates.append(
-            Candidate(
-                parameters,
-                p,
-                cv.whitened(parameters),
-                tuple((m, cv.mean(parameters, m.name)) for m in cv.metrics),
-            )
+    for parameters, p in _runs(prior):
+        candidate, cv_excluded = _score(
+            nominal,
+            data,
+            parameters,
+            p,
+            k=k,
+            seed=seed,
+            noise=noise,
+            loss=loss,
+            reference=reference,
+            sigma=sigma,
         )
-    # simplest first: frames, offsets, full with the strongest prior ... full alone
-    order = [0, 1, *range(3, len(candidates)), 2]
+        candidates.append(candidate)
+        if cv_excluded is not None:
+            excluded = cv_excluded
+    _check_any_fitted(candidates, data.source, k)
     scored = [c.whitened for c in candidates if np.isfinite(c.whitened)]
-    full = candidates[2]
-    failed = [c for c in candidates if c.failed is not None]
-    if len(failed) == len(candidates):
-        raise DatasetError(
-            f"{data.source}: too few samples to choose the parameters by {k}-fold "
-            f"cross-validation: no candidate can be fitted on a training fold "
-            f"({failed[0].label}: {failed[0].failed}); give --params (e.g. frames)"
-        )
     if not scored:  # no noise component with a held-out error to whiten
         return ModelChoice(
             "full",
@@ -277,7 +251,92 @@ def choose_parameters(
             ratio,
             k,
         )
-    best = min(scored)
+    chosen, why = _simplest_best(candidates, min(scored))
+    if excluded:
+        samples = ", ".join(str(e[0]) for e in excluded)
+        why += f"; {len(excluded)} rejected observation(s) not scored (sample(s) {samples})"
+    return ModelChoice(
+        chosen.parameters,
+        chosen.prior,
+        f"{k}-fold cross-validation, {ratio:.1f} residual rows per free parameter of the "
+        f"full set (< {ROWS_PER_PARAMETER:g}): {why}",
+        tuple(candidates),
+        ratio,
+        k,
+        excluded,
+    )
+
+
+def _check_any_fitted(candidates: list[Candidate], source: str, k: int) -> None:
+    """Refuse data on which no candidate can be fitted on a training fold."""
+    failed = [c for c in candidates if c.failed is not None]
+    if len(failed) == len(candidates):
+        raise DatasetError(
+            f"{source}: too few samples to choose the parameters by {k}-fold "
+            f"cross-validation: no candidate can be fitted on a training fold "
+            f"({failed[0].label}: {failed[0].failed}); give --params (e.g. frames)"
+        )
+
+
+def _runs(prior: tuple[float, float] | None) -> list[tuple[str, tuple[float, float] | None]]:
+    """The candidates ``(parameters, prior)`` in the order tried: frames, offsets, full
+    (with the user's ``prior``), then, without one, full under each prior of the grid,
+    strongest first."""
+    runs = [(p, prior) for p in ("frames", "offsets", "full")]
+    if prior is None:
+        priors = [(s, s / lever) for s in PRIOR_GRID_M for lever in PRIOR_LEVERS_M]
+        runs += [("full", p) for p in sorted(priors)]  # strongest first
+    return runs
+
+
+def _score(
+    nominal: Robot,
+    data: Measurements,
+    parameters: str,
+    prior: tuple[float, float] | None,
+    *,
+    k: int,
+    seed: int,
+    noise: NoiseModel | None,
+    loss: str,
+    reference: Calibration,
+    sigma: NoiseModel,
+) -> tuple[Candidate, tuple[tuple[int, str, str, str | None], ...] | None]:
+    """One candidate scored by ``k``-fold cross-validation, whitened by ``sigma``, and the
+    observations left out of its scores (None when it failed)."""
+    try:
+        cv = crossvalidate(
+            nominal,
+            data,
+            k=k,
+            seed=seed,
+            sets=(parameters,),
+            noise=noise,
+            loss=loss,
+            prior=prior,
+            exclude_flagged=True,
+            reference=reference,
+        )
+    except ValueError as exc:
+        # the full data fit above: a training fold too small for these parameters
+        # (a DatasetError), or to place a camera (three views per hand-eye)
+        return Candidate(parameters, prior, np.nan, failed=str(exc)), None
+    cv = replace(cv, noise=sigma)
+    candidate = Candidate(
+        parameters,
+        prior,
+        cv.whitened(parameters),
+        tuple((m, cv.mean(parameters, m.name)) for m in cv.metrics),
+    )
+    return candidate, cv.excluded
+
+
+def _simplest_best(candidates: list[Candidate], best: float) -> tuple[Candidate, str]:
+    """The simplest candidate within 1 % of the ``best`` whitened error and why (against
+    full alone, the third of :func:`_runs`)."""
+    # simplest first: frames, offsets, full with the strongest prior ... full alone
+    order = [0, 1, *range(3, len(candidates)), 2]
+    full = candidates[2]
     chosen = next(candidates[i] for i in order if candidates[i].whitened <= 1.01 * best)
     if chosen is full:
         why = f"lowest held-out error ({chosen.whitened:.3g} whitened)"
@@ -292,16 +351,4 @@ def choose_parameters(
             f"lowest held-out error: {chosen.whitened:.3g} whitened vs {full.whitened:.3g} "
             f"for full alone ({metric.name} {mine:.3g} vs {theirs:.3g} {metric.unit})"
         )
-    if excluded:
-        samples = ", ".join(str(e[0]) for e in excluded)
-        why += f"; {len(excluded)} rejected observation(s) not scored (sample(s) {samples})"
-    return ModelChoice(
-        chosen.parameters,
-        chosen.prior,
-        f"{k}-fold cross-validation, {ratio:.1f} residual rows per free parameter of the "
-        f"full set (< {ROWS_PER_PARAMETER:g}): {why}",
-        tuple(candidates),
-        ratio,
-        k,
-        excluded,
-    )
+    return chosen, why
