@@ -62,6 +62,13 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
 
 def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
     """The ``calibrate``, ``demo`` and ``crossval`` sub-commands."""
+    _add_calibrate_parser(sub)
+    _add_demo_parser(sub)
+    _add_crossval_parser(sub)
+
+
+def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``calibrate`` sub-command."""
     p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
@@ -102,6 +109,9 @@ def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate, check_outputs=check_calibrate_outputs)
 
+
+def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``demo`` sub-command."""
     p = sub.add_parser("demo", help="simulate, calibrate and evaluate the built-in IIS-head")
     p.add_argument(
         "--out", type=Path, default=Path("demo_out"), help="output directory (default demo_out)"
@@ -116,6 +126,9 @@ def add_fit_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_demo, check_outputs=check_demo_outputs)
 
+
+def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
+    """The ``crossval`` sub-command."""
     p = sub.add_parser(
         "crossval",
         help="k-fold cross-validation against baselines",

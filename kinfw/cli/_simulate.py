@@ -50,6 +50,23 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         default=9,
         help="stage 1 measurements per joint (default 9, as the paper)",
     )
+    _add_noise_options(p)
+    _add_configuration_options(p)
+    _add_pixel_options(p)
+    p.add_argument(
+        "--plan",
+        type=Path,
+        default=None,
+        help="a plan file (kinfw plan --out): measure at its configurations, in its order "
+        "(stage 1 and stage 2), instead of one joint at a time / random",
+    )
+    p.add_argument("--seed", type=SEED, default=0)
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=cmd_simulate, check_outputs=check_simulate_outputs)
+
+
+def _add_noise_options(p: argparse.ArgumentParser) -> None:
+    """``simulate``: the measurement noise and the true robot's errors."""
     p.add_argument(
         "--noise-mm", type=MM, default=0.5, help="position noise sigma per axis, mm (default 0.5)"
     )
@@ -75,6 +92,10 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         default=0.5,
         help="true robot: joint origin and axis error sigma, deg (default 0.5)",
     )
+
+
+def _add_configuration_options(p: argparse.ArgumentParser) -> None:
+    """``simulate``: the stages, their configurations and the frames observed."""
     p.add_argument(
         "--fraction",
         type=number(float, low=0.0, high=1.0, low_open=True),
@@ -96,6 +117,10 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--frames", help="stage 1 frames, comma-separated (default: URDF hint)")
     p.add_argument("--cameras", help="stage 2 cameras, comma-separated (default: URDF hint)")
+
+
+def _add_pixel_options(p: argparse.ArgumentParser) -> None:
+    """``simulate``: stage 2 as images of a board (``--pixels``) and the cameras."""
     p.add_argument(
         "--pixels",
         action="store_true",
@@ -119,16 +144,6 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default chessboard:9x6:0.04)",
     )
     add_camera_option(p)
-    p.add_argument(
-        "--plan",
-        type=Path,
-        default=None,
-        help="a plan file (kinfw plan --out): measure at its configurations, in its order "
-        "(stage 1 and stage 2), instead of one joint at a time / random",
-    )
-    p.add_argument("--seed", type=SEED, default=0)
-    p.add_argument("--json", action="store_true", help="print a JSON summary")
-    p.set_defaults(func=cmd_simulate, check_outputs=check_simulate_outputs)
 
 
 # -- kinfw simulate ----------------------------------------------------------------------

@@ -27,6 +27,8 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.control._solver import (
+    BoundedSolution,
+    Residual,
     check_configuration,
     check_held_joints,
     middle_configuration,
@@ -139,6 +141,56 @@ def reach(
     lower, upper = robot.joint_limits(free)
     q = middle_configuration(robot) if q_start is None else check_configuration(robot, q_start)
     check_held_joints(robot, q, free)
+    residual = _frame_residual(
+        robot, frame_id, q, columns, v_columns, root_T_target, is_pose, rotation_weight_m
+    )
+    starts, solution, (position_error, rotation_error) = _best_start(
+        residual,
+        q[columns].copy(),
+        lower,
+        upper,
+        restarts,
+        seed,
+        max_iterations,
+        is_pose,
+        rotation_weight_m,
+    )
+    revolute = np.array([robot.joint(n).is_revolute for n in free])
+    x = nearest_turn(solution.x, starts[0], lower, upper, revolute)
+    q[columns] = x
+    at_limit = (x <= lower) | (x >= upper)
+    return Reach(
+        joint_names=robot.joint_names,
+        q=q,
+        frame=frame,
+        free_joints=free,
+        root_T_target=root_T_target,
+        position_error_m=position_error,
+        rotation_error_rad=rotation_error,
+        reached=position_error <= REACHED_M
+        and (rotation_error is None or rotation_error <= REACHED_RAD),
+        at_limits=tuple(n for n, b in zip(free, at_limit, strict=True) if b),
+        starts=len(starts),
+    )
+
+
+def _frame_residual(
+    robot: Robot,
+    frame_id: int,
+    q: NDArray[np.float64],
+    columns: NDArray[np.int_],
+    v_columns: NDArray[np.int_],
+    root_T_target: NDArray[np.float64],
+    is_pose: bool,
+    rotation_weight_m: float,
+) -> Residual:
+    """The residual of ``frame`` against the target as a function of the free joints.
+
+    ``residual(x, jacobian)`` writes ``x`` into ``q[columns]`` (``q`` is updated in
+    place) and returns the position error (m) and, for a pose, the rotation error
+    (``log3``, rad) times ``rotation_weight_m``, with the Jacobian in the free joints'
+    velocity columns ``v_columns`` if ``jacobian``.
+    """
     data = robot.model.createData()
     target_M = pin.SE3(root_T_target[:3, :3], root_T_target[:3, 3])
 
@@ -166,8 +218,28 @@ def reach(
             jac = np.vstack([jac, rotation_weight_m * jac_rotation])
         return r, jac
 
+    return residual
+
+
+def _best_start(
+    residual: Residual,
+    x_first: NDArray[np.float64],
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    restarts: int,
+    seed: int,
+    max_iterations: int,
+    is_pose: bool,
+    rotation_weight_m: float,
+) -> tuple[list[NDArray[np.float64]], BoundedSolution, tuple[float, float | None]]:
+    """Solve from ``x_first``, then from random starts, until one reaches the target.
+
+    Random starts are uniform in the joint ranges (an unbounded side at +-pi), at most
+    ``restarts`` of them. Returns the starts tried, the solution of least cost and its
+    (position m, rotation rad or None) errors.
+    """
     rng = np.random.default_rng(seed)
-    starts = [q[columns].copy()]
+    starts = [x_first]
     wide_lower = np.where(np.isfinite(lower), lower, -math.pi)
     wide_upper = np.where(np.isfinite(upper), upper, math.pi)
     best = None
@@ -184,24 +256,8 @@ def reach(
             best = (cost, solution, errors)
         if reached:
             break
-    _, solution, (position_error, rotation_error) = best
-    revolute = np.array([robot.joint(n).is_revolute for n in free])
-    x = nearest_turn(solution.x, starts[0], lower, upper, revolute)
-    q[columns] = x
-    at_limit = (x <= lower) | (x >= upper)
-    return Reach(
-        joint_names=robot.joint_names,
-        q=q,
-        frame=frame,
-        free_joints=free,
-        root_T_target=root_T_target,
-        position_error_m=position_error,
-        rotation_error_rad=rotation_error,
-        reached=position_error <= REACHED_M
-        and (rotation_error is None or rotation_error <= REACHED_RAD),
-        at_limits=tuple(n for n, b in zip(free, at_limit, strict=True) if b),
-        starts=start + 1,
-    )
+    _, solution, errors = best
+    return starts, solution, errors
 
 
 def _target(target: ArrayLike) -> tuple[NDArray[np.float64], bool]:

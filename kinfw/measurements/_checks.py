@@ -10,7 +10,7 @@ from __future__ import annotations
 import difflib
 import logging
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -71,9 +71,24 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
         For each joint with values outside its limits: the joint, the number of samples,
         the first sample index and value, and the limits.
     """
-    from kinfw.model import RobotModelError
-
     m = measurements
+    _check_joint_names(m, robot)
+    first_in = _first_measured_in(m, robot)
+    _check_observed_paths(m, robot, first_in)
+    _warn_limits(m, robot)
+    root = robot.root_link
+    if root not in first_in:
+        return m
+    return m.with_groups(
+        merge_same_key(
+            replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
+            for g in m.all_groups()
+        )
+    )
+
+
+def _check_joint_names(m: Measurements, robot: Robot) -> None:
+    """Raise unless every entry of ``m.joint_names`` is a movable joint of ``robot``."""
     src = m.source
     movable = tuple(robot.joint_names)
     joint_types = {j.name: j.type for j in robot.joints}
@@ -91,7 +106,14 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             f"{robot.source}; its movable joints are {list(movable)}"
         )
 
-    root = robot.root_link
+
+def _first_measured_in(m: Measurements, robot: Robot) -> dict[str, int]:
+    """The first sample that uses each ``measured_in`` frame.
+
+    Raises if an observation is measured in its own frame; logs a warning for a
+    ``measured_in`` that is not in the URDF but close to a link's name (a typo?).
+    """
+    src = m.source
     first_in: dict[str, int] = {}
     for g in m.all_groups():
         kind = kind_of(g)
@@ -122,6 +144,19 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
                 robot.source,
                 close[0],
             )
+    return first_in
+
+
+def _check_observed_paths(m: Measurements, robot: Robot, first_in: Mapping[str, int]) -> None:
+    """Raise unless every observed frame (and robot ``measured_in``) can be calibrated.
+
+    ``first_in`` gives the first sample of each ``measured_in`` frame. Logs the joints
+    on no observed path and those on a path but not in ``joint_names``.
+    """
+    from kinfw.model import RobotModelError
+
+    src = m.source
+    root = robot.root_link
     uses = dict(first_uses(m))
     for frame_in, i in first_in.items():
         if frame_in != root and robot.has_frame(frame_in) and frame_in not in uses:
@@ -144,21 +179,12 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     idle = [n for n in m.joint_names if n not in used]
     if idle:
         logger.info("%s: joints %s are not on the path to any observed frame; ignored", src, idle)
+    movable = tuple(robot.joint_names)
     held = [n for n in movable if n in used and n not in m.joint_names]
     if held:
         logger.info(
             "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
         )
-
-    _warn_limits(m, robot)
-    if root not in first_in:
-        return m
-    return m.with_groups(
-        merge_same_key(
-            replace(g, measured_in=None) if kind_of(g).measured_in(g) == root else g
-            for g in m.all_groups()
-        )
-    )
 
 
 def robot_measurement_frames(measurements: Measurements, robot: Robot) -> tuple[str, ...]:

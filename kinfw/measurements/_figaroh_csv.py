@@ -242,17 +242,58 @@ def measurements_from_figaroh_csv(
     header, rows = _read_table(path)
     markers = _markers(path, header)
     if target is not None:
-        if measured_in is not None:
-            raise ValueError(
-                "target and measured_in exclude each other: a target's pose is measured in "
-                "the camera on the frame"
+        _check_target_markers(path, markers, measured_in)
+    joint_columns = _joint_columns(path, header, markers, robot)
+    table = _numbers(path, header, rows)
+    length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
+    joint_names = [header[c] for c in joint_columns]
+    scales = np.array(
+        [length if robot.joint(n).type == "prismatic" else angle for n in joint_names]
+    )
+    qs = table[:, joint_columns] * scales
+    per_marker = [
+        _marker_observations(
+            table, i, dofs, len(markers), frame, marker, measured_in, target, length, angle
+        )
+        for i, dofs in sorted(markers.items())
+    ]
+    doc = {
+        "format": "kinfw-measurements",
+        "version": 1,
+        "units": {"length": "m", "angle": "rad"},
+        "joint_names": joint_names,
+        "samples": [
+            {"q": q, "observations": [obs[s] for obs in per_marker]}
+            for s, q in enumerate(qs.tolist())
+        ],
+    }
+    return measurements_from_dict(doc, source=str(path))
+
+
+def _check_target_markers(
+    path: Path, markers: dict[int, dict[str, int]], measured_in: str | None
+) -> None:
+    """Raise unless markers can be read as targets: no ``measured_in``, every ``phi`` column."""
+    if measured_in is not None:
+        raise ValueError(
+            "target and measured_in exclude each other: a target's pose is measured in "
+            "the camera on the frame"
+        )
+    for i, dofs in sorted(markers.items()):
+        if "phix" not in dofs:
+            raise DatasetError(
+                f"{path}: header: marker {i} has no phix{i}, phiy{i}, phiz{i} columns: a "
+                "target seen by a camera needs its orientation (6D poses)"
             )
-        for i, dofs in sorted(markers.items()):
-            if "phix" not in dofs:
-                raise DatasetError(
-                    f"{path}: header: marker {i} has no phix{i}, phiy{i}, phiz{i} columns: a "
-                    "target seen by a camera needs its orientation (6D poses)"
-                )
+
+
+def _joint_columns(
+    path: Path, header: list[str], markers: dict[int, dict[str, int]], robot: Robot
+) -> list[int]:
+    """Indices of the joint columns (neither marker, ignored nor unnamed), in file order.
+
+    Raises unless each names a movable joint of ``robot`` and there is at least one.
+    """
     marker_columns = {c for dofs in markers.values() for c in dofs.values()}
     joint_columns = [
         c
@@ -269,43 +310,40 @@ def measurements_from_figaroh_csv(
             )
     if not joint_columns:
         raise DatasetError(f"{path}: header: no joint columns (named by URDF joint)")
-    table = _numbers(path, header, rows)
-    length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
-    joint_names = [header[c] for c in joint_columns]
-    scales = np.array(
-        [length if robot.joint(n).type == "prismatic" else angle for n in joint_names]
-    )
-    qs = table[:, joint_columns] * scales
+    return joint_columns
 
-    per_marker: list[list[dict[str, Any]]] = []
-    for i, dofs in sorted(markers.items()):
-        xyz = table[:, [dofs[d] for d in _POSITION]] * length
-        common: dict[str, Any] = {"frame": frame, "marker": f"{marker}{i}"}
-        if target is not None:
-            name = target if len(markers) == 1 else f"{target}{i}"
-            common = {"frame": frame, "target": name}
-        if measured_in is not None:
-            common["measured_in"] = measured_in
-        if "phix" in dofs:
-            rpy = table[:, [dofs[d] for d in _ORIENTATION]] * angle
-            quats = quat_xyzw_from_matrix(matrix_from_figaroh_rpy(rpy))
-            kind = "pose" if target is None else "target"
-            per_marker.append(
-                [
-                    {**common, "kind": kind, "xyz": p, "quat_xyzw": q}
-                    for p, q in zip(xyz.tolist(), quats.tolist(), strict=True)
-                ]
-            )
-        else:
-            per_marker.append([{**common, "kind": "point", "xyz": p} for p in xyz.tolist()])
-    doc = {
-        "format": "kinfw-measurements",
-        "version": 1,
-        "units": {"length": "m", "angle": "rad"},
-        "joint_names": joint_names,
-        "samples": [
-            {"q": q, "observations": [obs[s] for obs in per_marker]}
-            for s, q in enumerate(qs.tolist())
-        ],
-    }
-    return measurements_from_dict(doc, source=str(path))
+
+def _marker_observations(
+    table: NDArray[np.float64],
+    i: int,
+    dofs: dict[str, int],
+    n_markers: int,
+    frame: str,
+    marker: str,
+    measured_in: str | None,
+    target: str | None,
+    length: float,
+    angle: float,
+) -> list[dict[str, Any]]:
+    """The observations of marker ``i`` (columns ``dofs``), one per row, in SI.
+
+    A ``point`` (``x, y, z`` only), a ``pose`` (with ``phix, phiy, phiz``), or with
+    ``target`` a ``target`` observation; ``length`` and ``angle`` scale the file's
+    units to m and rad.
+    """
+    xyz = table[:, [dofs[d] for d in _POSITION]] * length
+    common: dict[str, Any] = {"frame": frame, "marker": f"{marker}{i}"}
+    if target is not None:
+        name = target if n_markers == 1 else f"{target}{i}"
+        common = {"frame": frame, "target": name}
+    if measured_in is not None:
+        common["measured_in"] = measured_in
+    if "phix" not in dofs:
+        return [{**common, "kind": "point", "xyz": p} for p in xyz.tolist()]
+    rpy = table[:, [dofs[d] for d in _ORIENTATION]] * angle
+    quats = quat_xyzw_from_matrix(matrix_from_figaroh_rpy(rpy))
+    kind = "pose" if target is None else "target"
+    return [
+        {**common, "kind": kind, "xyz": p, "quat_xyzw": q}
+        for p, q in zip(xyz.tolist(), quats.tolist(), strict=True)
+    ]

@@ -12,6 +12,7 @@ import json
 import logging
 import warnings
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -118,6 +119,154 @@ def _read_cameras(
     return out
 
 
+def _read_units(p: ObservationReader, doc: dict[str, Any]) -> tuple[str, str]:
+    """Check ``format`` and ``version``; return the document's (length, angle) units."""
+    fmt = p.get(doc, "format", "", f"{FORMAT!r}")
+    if fmt != FORMAT:
+        raise p.error("format", f"expected {FORMAT!r}, got {describe(fmt)}")
+    version = p.get(doc, "version", "", "1")
+    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
+        supported = ", ".join(map(str, SUPPORTED_VERSIONS))
+        raise p.error(
+            "version",
+            f"unsupported version {describe(version)}; this reader supports version {supported}",
+        )
+    units = p.obj(
+        p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'), "units"
+    )
+    length_unit = p.choice(
+        p.get(units, "length", "units", '"m" or "mm"'), "units.length", _LENGTH_UNITS
+    )
+    angle_unit = p.choice(
+        p.get(units, "angle", "units", '"rad" or "deg"'), "units.angle", _ANGLE_UNITS
+    )
+    return length_unit, angle_unit
+
+
+def _read_joints(
+    p: ObservationReader, doc: dict[str, Any], angle_unit: str
+) -> tuple[tuple[str, ...], Sequence[str]]:
+    """Return the distinct ``joint_names`` and each joint's unit (default: the angle unit)."""
+    raw_names = p.list_of(
+        p.get(doc, "joint_names", "", "a list of joint names"), "joint_names", "joint names"
+    )
+    joint_names = tuple(p.string(x, f"joint_names[{c}]") for c, x in enumerate(raw_names))
+    seen: dict[str, int] = {}
+    for c, name in enumerate(joint_names):
+        if name in seen:
+            raise p.error(
+                f"joint_names[{c}]",
+                f"joint {name!r} is already joint_names[{seen[name]}]; names must be distinct",
+            )
+        seen[name] = c
+    k = len(joint_names)
+    joint_units: Sequence[str] = (angle_unit,) * k
+    if doc.get("joint_units") is not None:
+        raw_units = doc["joint_units"]
+        if not isinstance(raw_units, list) or len(raw_units) != k:
+            got = f"{len(raw_units)}" if isinstance(raw_units, list) else describe(raw_units)
+            raise p.error(
+                "joint_units",
+                f"expected a list of {k} units (one per joint_names entry), got {got}",
+            )
+        joint_units = [
+            p.choice(u, f"joint_units[{c}]", _JOINT_UNITS) for c, u in enumerate(raw_units)
+        ]
+    return joint_names, joint_units
+
+
+@dataclass(frozen=True, slots=True)
+class _ParsedObservations:
+    """The observations read so far, flat (one entry each); grouped once at the end."""
+
+    q_rows: list[list[float]] = field(default_factory=list)
+    obs_group: list[int] = field(default_factory=list)
+    obs_sample: list[int] = field(default_factory=list)
+    rows: list[Any] = field(default_factory=list)
+    group_of_key: dict[tuple[Any, ...], int] = field(default_factory=dict)
+    marker_home: dict[str, tuple[str, str]] = field(default_factory=dict)  # marker -> (frame, at)
+
+
+def _read_samples(
+    p: ObservationReader, reader: ObservationReader, samples: list[Any], k: int
+) -> _ParsedObservations:
+    """Read every sample's ``q`` (``k`` values, file units) and its observations."""
+    names = tuple(kind.name for kind in kinds())
+    expected_kind = (
+        ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
+        if len(names) > 1
+        else repr(names[0])
+    )
+    parsed = _ParsedObservations()
+    for i, raw_sample in enumerate(samples):
+        at = f"samples[{i}]"
+        sample = p.obj(raw_sample, at)
+        parsed.q_rows.append(
+            p.numbers(
+                p.get(sample, "q", at, f"a list of {k} joint values"),
+                k,
+                f"{at}.q",
+                "one per joint_names entry",
+            )
+        )
+        observations = p.list_of(
+            p.get(sample, "observations", at, "a non-empty list of observations"),
+            f"{at}.observations",
+            "observations",
+        )
+        for j, raw_obs in enumerate(observations):
+            _read_observation(
+                p, reader, raw_obs, f"{at}.observations[{j}]", i, names, expected_kind, parsed
+            )
+    return parsed
+
+
+def _read_observation(
+    p: ObservationReader,
+    reader: ObservationReader,
+    raw_obs: Any,
+    at_obs: str,
+    i: int,
+    names: tuple[str, ...],
+    expected_kind: str,
+    parsed: _ParsedObservations,
+) -> None:
+    """Read one observation of sample ``i`` (at ``at_obs``) by its kind into ``parsed``."""
+    obs = p.obj(raw_obs, at_obs)
+    frame = p.string(p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame")
+    kind = kind_named(p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names))
+    key, row = kind.parse(reader, obs, at_obs, frame)
+    marker = kind.marker(key)
+    if marker is not None:
+        home = parsed.marker_home.setdefault(marker[0], (marker[1], at_obs))
+        if home[0] != marker[1]:
+            raise p.error(
+                f"{at_obs}.marker",
+                f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
+                f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
+                "attached to one frame",
+            )
+    parsed.obs_group.append(
+        parsed.group_of_key.setdefault((kind.name, key), len(parsed.group_of_key))
+    )
+    parsed.obs_sample.append(i)
+    parsed.rows.append(row)
+
+
+def _groups(parsed: _ParsedObservations) -> list[Any]:
+    """Build one observation group per (kind, key), its rows in file order."""
+    group_ids = np.array(parsed.obs_group)
+    rows_of_group = np.split(
+        np.argsort(group_ids, kind="stable"), np.cumsum(np.bincount(group_ids))[:-1]
+    )
+    sample_ids = np.array(parsed.obs_sample, dtype=np.int64)
+    groups = []
+    for (kind_name, key), members in zip(parsed.group_of_key, rows_of_group, strict=True):
+        rows = [parsed.rows[r] for r in members]
+        groups.append(kind_named(kind_name).group_from_parsed(key, sample_ids[members], rows))
+    return groups
+
+
 def measurements_from_dict(
     doc: dict[str, Any],
     source: str = "<memory>",
@@ -147,51 +296,9 @@ def measurements_from_dict(
     p = ObservationReader(source)
     if not isinstance(doc, dict):
         raise p.error("", f"expected a JSON object at the top level, got {describe(doc)}")
-    fmt = p.get(doc, "format", "", f"{FORMAT!r}")
-    if fmt != FORMAT:
-        raise p.error("format", f"expected {FORMAT!r}, got {describe(fmt)}")
-    version = p.get(doc, "version", "", "1")
-    if isinstance(version, bool) or version not in SUPPORTED_VERSIONS:
-        supported = ", ".join(map(str, SUPPORTED_VERSIONS))
-        raise p.error(
-            "version",
-            f"unsupported version {describe(version)}; this reader supports version {supported}",
-        )
-    units = p.obj(
-        p.get(doc, "units", "", '{"length": "m" or "mm", "angle": "rad" or "deg"}'), "units"
-    )
-    length_unit = p.choice(
-        p.get(units, "length", "units", '"m" or "mm"'), "units.length", _LENGTH_UNITS
-    )
-    angle_unit = p.choice(
-        p.get(units, "angle", "units", '"rad" or "deg"'), "units.angle", _ANGLE_UNITS
-    )
-
-    raw_names = p.list_of(
-        p.get(doc, "joint_names", "", "a list of joint names"), "joint_names", "joint names"
-    )
-    joint_names = tuple(p.string(x, f"joint_names[{c}]") for c, x in enumerate(raw_names))
-    seen: dict[str, int] = {}
-    for c, name in enumerate(joint_names):
-        if name in seen:
-            raise p.error(
-                f"joint_names[{c}]",
-                f"joint {name!r} is already joint_names[{seen[name]}]; names must be distinct",
-            )
-        seen[name] = c
+    length_unit, angle_unit = _read_units(p, doc)
+    joint_names, joint_units = _read_joints(p, doc, angle_unit)
     k = len(joint_names)
-    joint_units: Sequence[str] = (angle_unit,) * k
-    if doc.get("joint_units") is not None:
-        raw_units = doc["joint_units"]
-        if not isinstance(raw_units, list) or len(raw_units) != k:
-            got = f"{len(raw_units)}" if isinstance(raw_units, list) else describe(raw_units)
-            raise p.error(
-                "joint_units",
-                f"expected a list of {k} units (one per joint_names entry), got {got}",
-            )
-        joint_units = [
-            p.choice(u, f"joint_units[{c}]", _JOINT_UNITS) for c, u in enumerate(raw_units)
-        ]
     default_measured_in = None
     if doc.get("measured_in") is not None:
         default_measured_in = p.string(doc["measured_in"], "measured_in")
@@ -199,60 +306,9 @@ def measurements_from_dict(
     samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
     reader = ObservationReader(source, length_unit, default_measured_in)
     reader.cameras = _read_cameras(p, doc, cameras)
-    names = tuple(k.name for k in kinds())
-    expected_kind = (
-        ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
-        if len(names) > 1
-        else repr(names[0])
-    )
-    q_rows: list[list[float]] = []
-    # One entry per observation, flat; arrays are built once per group at the end.
-    obs_group: list[int] = []
-    obs_sample: list[int] = []
-    rows: list[Any] = []
-    group_of_key: dict[tuple[Any, ...], int] = {}
-    marker_home: dict[str, tuple[str, str]] = {}  # marker -> (frame, where first seen)
+    parsed = _read_samples(p, reader, samples, k)
 
-    for i, raw_sample in enumerate(samples):
-        at = f"samples[{i}]"
-        sample = p.obj(raw_sample, at)
-        q_rows.append(
-            p.numbers(
-                p.get(sample, "q", at, f"a list of {k} joint values"),
-                k,
-                f"{at}.q",
-                "one per joint_names entry",
-            )
-        )
-        observations = p.list_of(
-            p.get(sample, "observations", at, "a non-empty list of observations"),
-            f"{at}.observations",
-            "observations",
-        )
-        for j, raw_obs in enumerate(observations):
-            at_obs = f"{at}.observations[{j}]"
-            obs = p.obj(raw_obs, at_obs)
-            frame = p.string(
-                p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame"
-            )
-            kind = kind_named(
-                p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names)
-            )
-            key, row = kind.parse(reader, obs, at_obs, frame)
-            marker = kind.marker(key)
-            if marker is not None:
-                home = marker_home.setdefault(marker[0], (marker[1], at_obs))
-                if home[0] != marker[1]:
-                    raise p.error(
-                        f"{at_obs}.marker",
-                        f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
-                        f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
-                        "attached to one frame",
-                    )
-            obs_group.append(group_of_key.setdefault((kind.name, key), len(group_of_key)))
-            obs_sample.append(i)
-            rows.append(row)
-
+    q_rows = parsed.q_rows
     qs = _columns_to_si(np.array(q_rows, dtype=float).reshape(len(q_rows), k), joint_units)
     if reader.rounded:
         warnings.warn(
@@ -261,22 +317,14 @@ def measurements_from_dict(
             UserWarning,
             stacklevel=2,
         )
-    group_ids = np.array(obs_group)
-    rows_of_group = np.split(
-        np.argsort(group_ids, kind="stable"), np.cumsum(np.bincount(group_ids))[:-1]
-    )
-    sample_ids = np.array(obs_sample, dtype=np.int64)
-    groups = []
-    for (kind_name, key), members in zip(group_of_key, rows_of_group, strict=True):
-        parsed = [rows[r] for r in members]
-        groups.append(kind_named(kind_name).group_from_parsed(key, sample_ids[members], parsed))
+    groups = _groups(parsed)
     out = Measurements(joint_names, qs, source=source, cameras=reader.cameras).with_groups(groups)
     logger.debug(
         "%s: %d samples, %d observations in %d groups",
         source,
         out.n_samples,
-        len(obs_group),
-        len(group_of_key),
+        len(parsed.obs_group),
+        len(parsed.group_of_key),
     )
     return out
 

@@ -303,10 +303,33 @@ def simulate(
     noise_m = check_sigma(noise_m, "noise_m")
     noise_rad = check_sigma(noise_rad, "noise_rad")
     sigmas = {str(k): check_sigma(v, f"sigmas[{k!r}]") for k, v in (sigmas or {}).items()}
-    sample = np.arange(len(qs))
     values = {k: np.asarray(v, dtype=float) for k, v in (unknowns or {}).items()}
+    templates = _templates(robot, qs, names, frames, cameras, markers, w_T_target, values)
+    _check_groups(groups, len(qs))
+    truth = NumericContext.from_robot(robot, qs, names, values)
+    default = {"m": noise_m, "rad": noise_rad}
+    out = [
+        _simulate_group(g, truth, rng, stereo_sigma_m, sigmas, default)
+        for g in (*templates, *groups)
+    ]
+    return Measurements(joint_names=names, qs=qs, source="<simulated>").with_groups(out)
 
-    # templates: what is observed, at which samples (the kinds fill in the values)
+
+def _templates(
+    robot: Robot,
+    qs: NDArray[np.float64],
+    names: tuple[str, ...],
+    frames: tuple[str, ...],
+    cameras: tuple[str, ...],
+    markers: tuple[tuple[Any, ...], ...],
+    w_T_target: ArrayLike | None,
+    values: dict[BlockKey, NDArray[np.float64]],
+) -> list[Any]:
+    """Groups saying what is observed at every sample (the kinds fill in the values).
+
+    Adds the true target pose and the unknown marker offsets to ``values``.
+    """
+    sample = np.arange(len(qs))
     templates: list[Any] = [
         PoseObservations(
             frame=frame, sample=sample, meas_T_frame=np.tile(np.eye(4), (len(qs), 1, 1))
@@ -338,35 +361,45 @@ def simulate(
                 marker=name,
             )
         )
+    return templates
+
+
+def _check_groups(groups: tuple[Any, ...], n: int) -> None:
+    """Raise unless every group is of a registered kind and its samples are among ``n``."""
     for g in groups:
         kind_of(g)  # a registered kind's group, else TypeError
-        if len(g.sample) and g.sample.max() >= len(qs):
+        if len(g.sample) and g.sample.max() >= n:
             raise ValueError(
                 f"simulate: groups: {g!r} refers to sample "
-                f"{int(g.sample.max())}, but qs has {len(qs)} rows"
+                f"{int(g.sample.max())}, but qs has {n} rows"
             )
-    truth = NumericContext.from_robot(robot, qs, names, values)
 
-    out = []
-    for g in (*templates, *groups):
-        kind = kind_of(g)
-        try:
-            if stereo_sigma_m is not None and isinstance(g, PoseObservations):
-                predicted = kind.with_data(g, kind.predict(g, truth))
-                out.append(
-                    replace(
-                        g, meas_T_frame=stereo_measure(predicted.meas_T_frame, rng, stereo_sigma_m)
-                    )
-                )
-                continue
-            default = {"m": noise_m, "rad": noise_rad}
-            noise = {c.name: sigmas.get(c.name, default.get(c.unit, 0.0)) for c in kind.components}
-            out.append(kind.simulate(g, truth, rng, noise))
-        except MissingValue as exc:
-            raise ValueError(
-                f"simulate: {g!r} needs the true value of {exc.key}; give it in unknowns"
-            ) from None
-    return Measurements(joint_names=names, qs=qs, source="<simulated>").with_groups(out)
+
+def _simulate_group(
+    g: Any,
+    truth: NumericContext,
+    rng: np.random.Generator,
+    stereo_sigma_m: float | None,
+    sigmas: Mapping[str, float],
+    default: Mapping[str, float],
+) -> Any:
+    """Group ``g`` with simulated measurements (stereo rig for poses if ``stereo_sigma_m``).
+
+    Each noise component takes ``sigmas[name]``, else ``default[unit]``, else 0.
+    """
+    kind = kind_of(g)
+    try:
+        if stereo_sigma_m is not None and isinstance(g, PoseObservations):
+            predicted = kind.with_data(g, kind.predict(g, truth))
+            return replace(
+                g, meas_T_frame=stereo_measure(predicted.meas_T_frame, rng, stereo_sigma_m)
+            )
+        noise = {c.name: sigmas.get(c.name, default.get(c.unit, 0.0)) for c in kind.components}
+        return kind.simulate(g, truth, rng, noise)
+    except MissingValue as exc:
+        raise ValueError(
+            f"simulate: {g!r} needs the true value of {exc.key}; give it in unknowns"
+        ) from None
 
 
 def _marker_spec(marker: Sequence[Any]) -> tuple[str, NDArray[np.float64], str | None]:

@@ -253,6 +253,41 @@ def scene(
     if joint_names is None:
         joint_names = data.joint_names if data is not None else nominal.joint_names
     joint_names = tuple(joint_names)
+    sample, q = _sample_and_configuration(data, joint_names, sample, q)
+    targets = tuple(
+        (str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
+        for name, T in targets
+    )
+    up = up_direction(model, up)
+    dirs = mesh_dirs(package_dirs)
+
+    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
+    root = vis["kinfw"]
+    robot_ps = _draw_robots(vis, nominal, calibrated, q, joint_names, ghost_rgba, solid_rgba, dirs)
+    focus_ps = []
+    if data is not None and sample is not None:
+        values = _known_values(data, targets, meas_T_root, unknowns)
+        focus_ps.append(
+            _draw_observations(root, model, data, sample, q, joint_names, values, residual_scale)
+        )
+    focus_ps.append(draw_cameras(root, model, data, q, joint_names))
+    _draw_targets(root, targets)
+    focus = np.concatenate([*robot_ps, *focus_ps])
+
+    frame_scene(vis, root, focus, up)
+    return vis
+
+
+def _sample_and_configuration(
+    data: Measurements | None,
+    joint_names: tuple[str, ...],
+    sample: int | None,
+    q: ArrayLike | None,
+) -> tuple[int | None, NDArray[np.float64]]:
+    """Check ``sample``; default ``q`` to its configuration (sample 0), else zeros.
+
+    Returns the sample whose observations are drawn (None: none) and ``q``, shape (k,).
+    """
     if sample is not None and (data is None or not 0 <= sample < data.n_samples):
         n = 0 if data is None else data.n_samples
         valid = f"0 to {n - 1}" if n else "no sample: there is no data"
@@ -268,15 +303,23 @@ def scene(
         raise ValueError(
             f"q: expected shape ({len(joint_names)},) for joints {list(joint_names)}, got {q.shape}"
         )
-    targets = tuple(
-        (str(name), check_transform(np.asarray(T, float), name=f"targets[{name!r}]"))
-        for name, T in targets
-    )
-    up = up_direction(model, up)
-    dirs = mesh_dirs(package_dirs)
+    return sample, q
 
-    vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
-    root = vis["kinfw"]
+
+def _draw_robots(
+    vis: meshcat.Visualizer,
+    nominal: Robot,
+    calibrated: Robot | None,
+    q: NDArray[np.float64],
+    joint_names: tuple[str, ...],
+    ghost_rgba: Sequence[float],
+    solid_rgba: Sequence[float] | None,
+    dirs: Sequence[Path],
+) -> list[NDArray[np.float64]]:
+    """Draw the nominal ghost (if there is a calibrated robot) and the solid robot at ``q``.
+
+    Returns the points to frame of each robot drawn (see :func:`draw_robot`).
+    """
     robot_ps = []
     if calibrated is not None:
         robot_ps.append(
@@ -289,6 +332,7 @@ def scene(
                 dirs,
             )
         )
+    model = calibrated if calibrated is not None else nominal
     robot_ps.append(
         draw_robot(
             vis,
@@ -299,18 +343,7 @@ def scene(
             dirs,
         )
     )
-    focus_ps = []
-    if data is not None and sample is not None:
-        values = _known_values(data, targets, meas_T_root, unknowns)
-        focus_ps.append(
-            _draw_observations(root, model, data, sample, q, joint_names, values, residual_scale)
-        )
-    focus_ps.append(draw_cameras(root, model, data, q, joint_names))
-    _draw_targets(root, targets)
-    focus = np.concatenate([*robot_ps, *focus_ps])
-
-    frame_scene(vis, root, focus, up)
-    return vis
+    return robot_ps
 
 
 def _known_values(

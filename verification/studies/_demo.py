@@ -137,24 +137,10 @@ def run_demo(
     # stage 1: plates seen by the stereo rig, one joint at a time; stage 2: the cameras
     # see a fixed target at random configurations.
     qs1, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=0.8)
-    if pixels:
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
-        intrinsics = {c: default_intrinsics(c) for c in cameras}
-        board = parse_board(DEFAULT_BOARD)
-        views = {"cameras": intrinsics, "board_p": board.points, "min_corners": board.count}
-        stage2, w_T_target = pixel_views(
-            truth, names, lower, upper, N_STAGE2, rng, sigma_px=PIXEL_SIGMA, **views
-        )
-        target = "board"
-    else:  # (this order of the draws reproduces the README's numbers)
-        qs2 = random_configurations(lower, upper, N_STAGE2, rng, fraction=0.8)
-        w_T_target = default_target_pose(truth, qs2, names, cameras)
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
-        stage2 = simulate(
-            truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise
-        )
-        target = "target"
-    data = concatenate_measurements(stage1, stage2)
+    views = _pixel_views_options(cameras) if pixels else None
+    data, w_T_target, target = _training_data(
+        truth, names, plates, cameras, qs1, lower, upper, rng, noise, views
+    )
     q_test = random_configurations(lower, upper, 100, rng, fraction=0.8)
     held_out = _held_out(truth, q_test, names, plates, cameras, target, w_T_target, rng, noise)
     exact = _held_out(truth, q_test, names, plates, cameras, target, w_T_target, rng, {})
@@ -184,19 +170,7 @@ def run_demo(
     )
     report, result = fitted.write(out / "calibrated.urdf"), fitted.calibration
     calibrated = load_robot(out / "calibrated.urdf")
-    nominal_errors = errors_by_group(nominal, exact)
-    truth_rms = [StageErrors.of("nominal", nominal_errors)]
-    truth_rms += [
-        StageErrors.of(name, errors_by_group(Robot(xml, name), exact))
-        for name, xml in result.stages
-    ]
-    report = replace(
-        report,
-        errors_vs_truth_held_out=before_after_rows(
-            nominal_errors, errors_by_group(calibrated, exact)
-        ),
-        rms_vs_truth_held_out_by_stage=tuple(truth_rms),
-    )
+    report = _with_errors_vs_truth(report, nominal, result.stages, calibrated, exact)
     if held_out_pixels is not None:
         held_out_pixels = reprojection_section(calibrated, held_out_pixels, result.refined.unknowns)
         report = replace(report, reprojection_held_out=held_out_pixels)
@@ -206,6 +180,59 @@ def run_demo(
         out / "errors.png",
         title="IIS-head demo: held-out error against the true robot",
     )
+    _write_scene(out, nominal, calibrated, data)
+    return DemoResult(report, len(qs1), out, held_out_pixels)
+
+
+def _pixel_views_options(cameras):
+    """Keyword arguments of :func:`pixel_views` for ``cameras`` seeing the default board."""
+    intrinsics = {c: default_intrinsics(c) for c in cameras}
+    board = parse_board(DEFAULT_BOARD)
+    return {"cameras": intrinsics, "board_p": board.points, "min_corners": board.count}
+
+
+def _training_data(truth, names, plates, cameras, qs1, lower, upper, rng, noise, views):
+    """Stage 1 (``plates`` at ``qs1``) and stage 2 (``cameras`` see a fixed target at
+    random configurations, from images if ``views``) simulated on ``truth``.
+
+    Returns the dataset, the target's pose ``w_T_target`` (4, 4) and its name.
+    """
+    if views is not None:
+        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage2, w_T_target = pixel_views(
+            truth, names, lower, upper, N_STAGE2, rng, sigma_px=PIXEL_SIGMA, **views
+        )
+        target = "board"
+    else:  # (this order of the draws reproduces the README's numbers)
+        qs2 = random_configurations(lower, upper, N_STAGE2, rng, fraction=0.8)
+        w_T_target = default_target_pose(truth, qs2, names, cameras)
+        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage2 = simulate(
+            truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise
+        )
+        target = "target"
+    return concatenate_measurements(stage1, stage2), w_T_target, target
+
+
+def _with_errors_vs_truth(report, nominal, stages, calibrated, exact):
+    """``report`` with the held-out errors against the truth (``exact``, noise-free):
+    before/after rows and the RMS of each calibration stage (``stages``: name, URDF)."""
+    nominal_errors = errors_by_group(nominal, exact)
+    truth_rms = [StageErrors.of("nominal", nominal_errors)]
+    truth_rms += [
+        StageErrors.of(name, errors_by_group(Robot(xml, name), exact)) for name, xml in stages
+    ]
+    return replace(
+        report,
+        errors_vs_truth_held_out=before_after_rows(
+            nominal_errors, errors_by_group(calibrated, exact)
+        ),
+        rms_vs_truth_held_out_by_stage=tuple(truth_rms),
+    )
+
+
+def _write_scene(out, nominal, calibrated, data):
+    """Write ``out/scene.html``: the nominal ghost, the calibrated robot and one sample."""
     from kinfw.view import OfflineWindow, scene, targets_from_sidecar, write_html
 
     # the drawn sample: the first with images (pixels), else the first
@@ -222,7 +249,6 @@ def run_demo(
         ),
         out / "scene.html",
     )
-    return DemoResult(report, len(qs1), out, held_out_pixels)
 
 
 def _held_out(truth, qs, names, plates, cameras, target, w_T_target, rng, noise):

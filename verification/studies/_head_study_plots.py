@@ -34,6 +34,21 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     s = study
     fig = new_figure((16.0, 5.6))
     ax, mx, bx = fig.subplots(1, 3, width_ratios=(1.1, 1.0, 0.9))
+    _plot_crlb_errors(ax, s)
+    _plot_crlb_ratios(mx, s)
+    _plot_crlb_coverage(bx, s)
+    fig.suptitle(
+        f"Refined calibration vs its Cramér-Rao bound: {s.trials} trials, new true head each; "
+        f"noise {s.setup.sigma_mm:g} mm, {s.setup.sigma_deg:g}°; {s.setup.per_joint} values "
+        f"per joint + {s.setup.stage2_views} target views; {s.setup.n_test} held-out "
+        "configurations",
+        fontsize=10,
+    )
+    return save_figure(fig, path)
+
+
+def _plot_crlb_errors(ax, s: CRLBStudy) -> None:
+    """Left panel of :func:`plot_crlb`: held-out RMS error vs the CRLB's, per trial and frame."""
     colors = ("tab:blue", "tab:green", "tab:red", "tab:purple", "tab:orange", "tab:brown")
     for e, frame in enumerate(s.setup.frames):
         color = colors[e % len(colors)]
@@ -77,6 +92,9 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     ax.legend(fontsize=7.5, loc="upper left")
     ax.set_title("per trial and end frame", fontsize=10)
 
+
+def _plot_crlb_ratios(mx, s: CRLBStudy) -> None:
+    """Middle panel of :func:`plot_crlb`: refined / CRLB RMS error per trial, in its band."""
     t = np.arange(1, s.trials + 1)
     mx.fill_between(
         t,
@@ -110,6 +128,9 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
         f"ratio per trial; NEES mean {s.nees.mean():.1f} (χ²: {s.n_parameters})", fontsize=10
     )
 
+
+def _plot_crlb_coverage(bx, s: CRLBStudy) -> None:
+    """Right panel of :func:`plot_crlb`: parameters within k reported sigma of the truth."""
     ks = list(NORMAL_COVERAGE)
     bars = (
         ("CPC model, σ given", [s.coverage(k, kind="model") for k in ks], "tab:blue"),
@@ -137,14 +158,6 @@ def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     bx.set_title(
         f"coverage, σ as reported: {s.n_parameters} parameters x {s.trials} trials", fontsize=10
     )
-    fig.suptitle(
-        f"Refined calibration vs its Cramér-Rao bound: {s.trials} trials, new true head each; "
-        f"noise {s.setup.sigma_mm:g} mm, {s.setup.sigma_deg:g}°; {s.setup.per_joint} values "
-        f"per joint + {s.setup.stage2_views} target views; {s.setup.n_test} held-out "
-        "configurations",
-        fontsize=10,
-    )
-    return save_figure(fig, path)
 
 
 def plot_robustness(study: RobustStudy, path: str | Path) -> Path:

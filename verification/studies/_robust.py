@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
@@ -336,30 +336,13 @@ def robustness_study(
         seed=seed,
     )
     trials = check_count(trials, "trials", 1)
-    variants = tuple((str(loss), str(noise)) for loss, noise in variants)
-    for loss, noise in variants:
-        if loss not in ("linear", "huber", "cauchy") or noise not in ("given", "estimated"):
-            raise ValueError(
-                f"variants: expected (loss, noise) with loss linear, huber or "
-                f"cauchy and noise given or estimated, got {(loss, noise)}"
-            )
-    if not variants:
-        raise ValueError("variants: give at least one (loss, noise)")
+    variants = _check_variants(variants)
     if not 0.0 <= float(outlier_fraction) <= 1.0:
         raise ValueError(f"outlier_fraction: expected 0 <= fraction <= 1, got {outlier_fraction}")
     outlier_mm = check_positive(outlier_mm, "outlier_mm")
     outlier_deg = float(outlier_deg)
     if not (np.isfinite(outlier_deg) and outlier_deg >= 0.0):
         raise ValueError(f"outlier_deg: expected a finite angle >= 0, got {outlier_deg}")
-    V = len(variants)
-    clean_ms, start_ms, seconds = np.empty(trials), np.empty(trials), np.empty(trials)
-    rms_ms = np.empty((trials, V))
-    n_obs, n_planted = np.empty(trials, np.int64), np.empty(trials, np.int64)
-    flagged_planted, flagged_clean = (
-        np.zeros((trials, V), np.int64),
-        np.zeros((trials, V), np.int64),
-    )
-    noise_used = np.empty((trials, V, 2))
     trial_results = run_trials(
         _robust_trial,
         [
@@ -369,6 +352,43 @@ def robustness_study(
         executor=executor,
         progress=progress,
     )
+    result = RobustStudy(
+        setup=setup,
+        outlier_fraction=float(outlier_fraction),
+        outlier_mm=outlier_mm,
+        outlier_deg=outlier_deg,
+        variants=variants,
+        **_stacked_trials(trial_results, trials, len(variants)),
+    )
+    freeze(*(getattr(result, name) for name in _ROBUST_ARRAYS))
+    return result
+
+
+def _check_variants(variants: Sequence[tuple[str, str]]) -> tuple[tuple[str, str], ...]:
+    """The ``(loss, noise)`` variants as strings; raise on an unknown or empty one."""
+    variants = tuple((str(loss), str(noise)) for loss, noise in variants)
+    for loss, noise in variants:
+        if loss not in ("linear", "huber", "cauchy") or noise not in ("given", "estimated"):
+            raise ValueError(
+                f"variants: expected (loss, noise) with loss linear, huber or "
+                f"cauchy and noise given or estimated, got {(loss, noise)}"
+            )
+    if not variants:
+        raise ValueError("variants: give at least one (loss, noise)")
+    return variants
+
+
+def _stacked_trials(trial_results: Iterable[Any], trials: int, V: int) -> dict[str, Any]:
+    """The per-trial results of :func:`_robust_trial` as :class:`RobustStudy` arrays
+    (RMS in mm), keyed by field."""
+    clean_ms, start_ms, seconds = np.empty(trials), np.empty(trials), np.empty(trials)
+    rms_ms = np.empty((trials, V))
+    n_obs, n_planted = np.empty(trials, np.int64), np.empty(trials, np.int64)
+    flagged_planted, flagged_clean = (
+        np.zeros((trials, V), np.int64),
+        np.zeros((trials, V), np.int64),
+    )
+    noise_used = np.empty((trials, V, 2))
     for t, res in enumerate(trial_results):
         (
             clean_ms[t],
@@ -381,21 +401,14 @@ def robustness_study(
             noise_used[t],
             seconds[t],
         ) = res
-    result = RobustStudy(
-        setup=setup,
-        outlier_fraction=float(outlier_fraction),
-        outlier_mm=outlier_mm,
-        outlier_deg=outlier_deg,
-        variants=variants,
-        clean_rms_mm=1e3 * np.sqrt(clean_ms),
-        start_rms_mm=1e3 * np.sqrt(start_ms),
-        rms_mm=1e3 * np.sqrt(rms_ms),
-        n_observations=n_obs,
-        n_planted=n_planted,
-        flagged_planted=flagged_planted,
-        flagged_clean=flagged_clean,
-        noise_used=noise_used,
-        seconds=seconds,
-    )
-    freeze(*(getattr(result, name) for name in _ROBUST_ARRAYS))
-    return result
+    return {
+        "clean_rms_mm": 1e3 * np.sqrt(clean_ms),
+        "start_rms_mm": 1e3 * np.sqrt(start_ms),
+        "rms_mm": 1e3 * np.sqrt(rms_ms),
+        "n_observations": n_obs,
+        "n_planted": n_planted,
+        "flagged_planted": flagged_planted,
+        "flagged_clean": flagged_clean,
+        "noise_used": noise_used,
+        "seconds": seconds,
+    }
