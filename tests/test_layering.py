@@ -174,3 +174,18 @@ def test_the_wheel_installs_one_namespace(tmp_path):
     assert "kinfw/robots/iis_head.urdf" in names
     assert "kinfw/identification/_pipeline.py" in names
     assert "kinfw/verification/evaluation/__init__.py" in names
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_no_private_name_is_imported_from_another_module(name):
+    """``from kinfw.x._m import _helper`` hides a shared helper under a private name: a
+    name used by two modules is a name of its package (without the underscore)."""
+    tree = ast.parse(MODULES[name].read_text())
+    private = [
+        f"{MODULES[name]}:{node.lineno}: {alias.name} from {node.module}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("kinfw")
+        for alias in node.names
+        if alias.name.startswith("_")
+    ]
+    assert not private

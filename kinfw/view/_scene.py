@@ -134,7 +134,7 @@ PREDICTED_RGB = (0.0, 0.55, 0.75)
 # -- small helpers -----------------------------------------------------------------------
 
 
-def _as_robot(robot: Robot | str | Path, name: str) -> Robot:
+def as_robot(robot: Robot | str | Path, name: str) -> Robot:
     if isinstance(robot, Robot):
         return robot
     if isinstance(robot, (str, Path)):
@@ -243,8 +243,8 @@ def scene(
     """
     import meshcat
 
-    nominal = _as_robot(nominal, "nominal")
-    calibrated = None if calibrated is None else _as_robot(calibrated, "calibrated")
+    nominal = as_robot(nominal, "nominal")
+    calibrated = None if calibrated is None else as_robot(calibrated, "calibrated")
     model = calibrated if calibrated is not None else nominal
     if not residual_scale > 0:
         raise ValueError(f"residual_scale: expected a positive number, got {residual_scale}")

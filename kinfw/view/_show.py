@@ -16,7 +16,7 @@ from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.reports import CalibrationSidecar, read_sidecar
 from kinfw.view._html import OfflineWindow, write_html
-from kinfw.view._scene import _as_robot, scene, targets_from_sidecar
+from kinfw.view._scene import as_robot, scene, targets_from_sidecar
 
 if TYPE_CHECKING:
     import meshcat
@@ -67,7 +67,7 @@ def show(
         The HTML file written; without ``html``, the visualizer serving the scene on
         127.0.0.1 (its ``url()``), for as long as this process runs.
     """
-    calibrated = None if calibrated is None else _as_robot(calibrated, "calibrated")
+    calibrated = None if calibrated is None else as_robot(calibrated, "calibrated")
     if sidecar is None and calibrated is not None and not calibrated.source.startswith("<"):
         guess = sidecar_path(calibrated.source)
         sidecar = guess if guess.is_file() else None
