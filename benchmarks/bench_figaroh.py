@@ -73,7 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:  # benchmark the code next to this script, installed or not
+if str(REPO) not in sys.path:  # for benchmarks.common (kinfw comes from pip install -e .)
     sys.path.insert(0, str(REPO))
 
 from benchmarks.common import format_table, load_average, machine_info
