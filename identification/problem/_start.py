@@ -296,7 +296,8 @@ def _undetermined(J, cols, rotations, name, describe):
     """The quantities along the null directions of the column-scaled Jacobian, or ()."""
     scale = np.linalg.norm(J, axis=0)
     scale[scale == 0.0] = 1.0
-    _, s, Vt = np.linalg.svd(J / scale, full_matrices=True)
+    # Vt is (P, P) either way; U is never used, so it is built (N, N) only when N < P
+    _, s, Vt = np.linalg.svd(J / scale, full_matrices=J.shape[0] < J.shape[1])
     rank = int(np.sum(s > MARKER_RANK_TOL * s[0])) if len(s) and s[0] > 0 else 0
     seen: dict[str, list[NDArray]] = {}  # quantity -> its directions in the null space
     for v in Vt[rank:] / scale:

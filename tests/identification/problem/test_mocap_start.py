@@ -164,3 +164,47 @@ def test_the_report_says_not_available_when_the_nominal_cannot_be_placed():
     (row,) = _errors_or_unavailable(nominal, _one_marker(nominal, frame, names, 2), good, notes)
     assert np.isnan(row.rms("position")) and row.group == good[0].group
     assert len(notes) == 1 and "not available" in notes[0] and "'mocap'" in notes[0]
+
+
+def _undetermined_both_ways(J, monkeypatch):
+    """``_undetermined`` on J (columns: mocap rotation, position, offset of 'm') as it is
+    and with every SVD forced to full matrices (the previous code), name -> answer."""
+    from kinfw.identification.problem import _start
+
+    args = ({"m": 6}, {}, "mocap", {"m": "the offset of 'm'"})
+    thin = _start._undetermined(J, *args)
+    svd = np.linalg.svd
+    with monkeypatch.context() as m:
+        m.setattr(_start.np.linalg, "svd", lambda a, **kw: svd(a, full_matrices=True))
+        full = _start._undetermined(J, *args)
+    return thin, full
+
+
+def test_undetermined_on_a_tall_jacobian_names_its_hand_built_null_direction(monkeypatch):
+    """40 x 9 with the offset's x column equal to the rotation's x column: the one null
+    direction is e_0 - e_6 (up to sign), as the full SVD gives."""
+    J = np.random.default_rng(3).normal(size=(40, 9))
+    J[:, 6] = J[:, 0]
+    thin, full = _undetermined_both_ways(J, monkeypatch)
+    assert thin == full
+    zeros = [n.replace("-0.00", "0.00") for n in thin]
+    assert zeros in [
+        [
+            f"the rotation of 'mocap' along [{a}1.00, 0.00, 0.00]",
+            f"the offset of 'm' along [{b}1.00, 0.00, 0.00]",
+        ]
+        for a, b in (("", "-"), ("-", ""))
+    ], thin
+
+
+def test_undetermined_on_a_wide_jacobian_keeps_every_null_direction(monkeypatch):
+    """5 x 9 with only the first five columns (rotation, position x, y) nonzero: the null
+    space is spanned by e_5 ... e_8 (position z, the offset), which a thin SVD would drop."""
+    J = np.zeros((5, 9))
+    J[:, :5] = np.random.default_rng(4).normal(size=(5, 5))
+    thin, full = _undetermined_both_ways(J, monkeypatch)
+    assert thin == full
+    assert sorted(n.replace("-", "") for n in thin) == [
+        "the offset of 'm' (3 directions)",
+        "the position of 'mocap' along [0.00, 0.00, 1.00]",
+    ]
