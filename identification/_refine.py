@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 
 from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.problem import (
+    LOSS_SCALE,
     LOSSES,
     GroupResiduals,
     Identifiability,
@@ -114,7 +115,7 @@ def refine(
     targets: dict[str, NDArray] | None = None,
     noise: NoiseModel | None = None,
     loss: str = "linear",
-    loss_scale: float = 2.33,
+    loss_scale: float = LOSS_SCALE,
     max_iterations: int = 100,
     noise_rounds: int = 5,
     parameters: str | tuple[str, ...] = "full",

@@ -42,6 +42,7 @@ from kinfw.identification.problem._noise import (
 )
 from kinfw.identification.problem._problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
 from kinfw.identification.problem._solver import (
+    LOSS_SCALE,
     LOSSES,
     NEGLIGIBLE_COLUMN,
     levenberg_marquardt,
@@ -62,6 +63,7 @@ from kinfw.identification.problem._start import (
 
 __all__ = [
     "LOSSES",
+    "LOSS_SCALE",
     "MARKER_RANK_TOL",
     "NEGLIGIBLE_COLUMN",
     "PRIOR",

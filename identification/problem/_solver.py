@@ -19,6 +19,7 @@ from kinfw.observations import NoiseComponent
 
 __all__ = [
     "LOSSES",
+    "LOSS_SCALE",
     "NEGLIGIBLE_COLUMN",
     "levenberg_marquardt",
     "negligible_columns",
@@ -30,6 +31,11 @@ __all__ = [
 ]
 
 LOSSES = ("linear", "huber", "cauchy")
+
+#: Where the robust losses depart from least squares by default, as a standard-normal
+#: quantile ``z`` of each observation's clean whitened norm (:func:`thresholds`): 2.33
+#: flags 1 % of clean observations.
+LOSS_SCALE = 2.33
 
 ObsSizes = Sequence[tuple[int, int]]
 

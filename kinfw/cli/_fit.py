@@ -154,7 +154,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     for note in report.notes:
         print(f"note: {note}")
     if choice is not None and choice.candidates:
-        print(f"model choice: {choice.k}-fold held-out error of each candidate:")
+        print("model choice: leave-one-out held-out error of each candidate (closed form):")
         print(_choice_table(choice))
     print("RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.rms_by_stage))

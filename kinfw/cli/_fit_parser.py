@@ -90,7 +90,7 @@ def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
         "--params",
         default="auto",
         help="what to estimate: auto (default: full when there are at least 10 residual "
-        "rows per parameter, else the set and prior with the lowest 5-fold held-out error "
+        "rows per parameter, else the set and prior with the lowest leave-one-out held-out error "
         "among frames, offsets, full and full with a prior of 1, 3 or 10 mm), full, "
         "offsets (joint zero offsets + base and tool frames), frames (base and "
         "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "

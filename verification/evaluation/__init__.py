@@ -1,6 +1,7 @@
 """How good is a model: its errors against measurements (:func:`evaluate_model`, what
-``kinfw verify`` reports), k-fold cross-validation of the whole pipeline, the default model
-choice, the Cramér-Rao bound, the CPC-vs-Pinocchio cross-check, and the trial runner.
+``kinfw verify`` reports), k-fold cross-validation of the whole pipeline, closed-form
+leave-one-out predictions, the default model choice, the Cramér-Rao bound, the
+CPC-vs-Pinocchio cross-check, and the trial runner.
 """
 
 from __future__ import annotations
@@ -34,8 +35,11 @@ from kinfw.verification.evaluation._crossval import (
     FoldScore,
     crossvalidate,
     held_out_errors,
+    metric_rms,
+    whitened_score,
     whitening_noise,
 )
+from kinfw.verification.evaluation._loo import LeaveOneOut, leave_one_out
 from kinfw.verification.evaluation._model_choice import (
     PRIOR_GRID_M,
     PRIOR_LEVERS_M,
@@ -69,6 +73,7 @@ __all__ = [
     "CrossValidation",
     "FoldScore",
     "GroupErrors",
+    "LeaveOneOut",
     "ModelChoice",
     "Progress",
     "check_count",
@@ -81,6 +86,8 @@ __all__ = [
     "group_errors",
     "held_out_errors",
     "known_frames",
+    "leave_one_out",
+    "metric_rms",
     "pose_discrepancy",
     "position_jacobians",
     "predicted_position_ms",
@@ -91,5 +98,6 @@ __all__ = [
     "run_trials",
     "stderr_progress",
     "true_chart_coordinates",
+    "whitened_score",
     "whitening_noise",
 ]

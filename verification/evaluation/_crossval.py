@@ -53,6 +53,8 @@ __all__ = [
     "FoldScore",
     "crossvalidate",
     "held_out_errors",
+    "metric_rms",
+    "whitened_score",
     "whitening_noise",
 ]
 
@@ -180,15 +182,9 @@ class CrossValidation:
         """
         if self.noise is None:
             return float("nan")
-        sigma = {c.display: v for c, v in self.noise}
-        out = []
-        for s in self.scores:
-            if s.parameters != parameters:
-                continue
-            terms = [
-                (v / m.scale / sigma[m]) ** 2 for m, v in s.errors if m in sigma and np.isfinite(v)
-            ]
-            out.append(sum(terms) if terms else np.nan)  # nothing to whiten: undefined
+        out = [
+            whitened_score(s.errors, self.noise) for s in self.scores if s.parameters == parameters
+        ]
         return float(np.mean(out)) if out else float("nan")
 
     def to_dict(self) -> dict:
@@ -226,6 +222,29 @@ def _mean_of(scores: Sequence[FoldScore], parameters: str, name: str | None = No
         name = next((s.errors[0][0].name for s in mine if s.errors), "")
     values = [v for v in (s.of(name) for s in mine) if np.isfinite(v)]
     return float(np.mean(values)) if values else float("nan")
+
+
+def whitened_score(
+    errors: Sequence[tuple[Metric, float]], noise: Sequence[tuple[NoiseComponent, float]]
+) -> float:
+    """``sum_c (RMS_c / sigma_c)^2`` over the noise components ``c`` of ``noise`` (SI
+    sigmas) that ``errors`` (per metric its RMS, display unit) has a finite value of; NaN
+    when none (see :meth:`CrossValidation.whitened`)."""
+    sigma = {c.display: v for c, v in noise}
+    terms = [(v / m.scale / sigma[m]) ** 2 for m, v in errors if m in sigma and np.isfinite(v)]
+    return float(sum(terms)) if terms else float("nan")  # nothing to whiten: undefined
+
+
+def metric_rms(held: AccuracyReport) -> tuple[tuple[Metric, float], ...]:
+    """Per metric of ``held`` the RMS of its finite values over every group (display
+    unit): over the observations for a per-observation metric, over the groups for a
+    group metric."""
+    errors = []
+    for m in held.metrics:
+        found = [e for g in held.groups if (e := g.of(m.name)) is not None and e.metric == m]
+        values = np.concatenate([np.ravel(e.shown()) for e in found])
+        errors.append((m, _rms(values)))
+    return tuple(errors)
 
 
 def whitening_noise(
@@ -286,11 +305,6 @@ def _score(
     if result.refined.model_frame is not None:  # the root's pose in the external frame
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
     held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
-    errors = []
-    for m in held.metrics:
-        found = [e for g in held.groups if (e := g.of(m.name)) is not None and e.metric == m]
-        values = np.concatenate([np.ravel(e.shown()) for e in found])
-        errors.append((m, _rms(values)))
     # the worst held-out sample in the first per-observation metric
     first = next((m for m in held.metrics if m.per_observation), None)
     worst_sample, worst = 0, float("nan")
@@ -305,7 +319,7 @@ def _score(
         parameters=parameters,
         n_train=train.n_samples,
         n_test=test.n_samples,
-        errors=tuple(errors),
+        errors=metric_rms(held),
         worst_sample=worst_sample,
         worst=worst,
         condition=ident.condition,
@@ -425,7 +439,7 @@ def crossvalidate(
             )
         )
         drop = {(o.kind, o.frame, o.marker, o.sample) for o in rejected}
-        scored = _without_observations(data, drop)
+        scored = without_observations(data, drop)
     tasks = [
         (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
         for f, (train, test, test_ids) in enumerate(_folds(data, scored, k, seed))
@@ -469,7 +483,7 @@ def _folds(
     return folds
 
 
-def _without_observations(
+def without_observations(
     data: Measurements, drop: set[tuple[str, str, str | None, int]]
 ) -> Measurements:
     """``data`` without the observations keyed ``(kind, frame, marker, sample)`` in

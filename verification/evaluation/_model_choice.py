@@ -4,12 +4,14 @@
 which model to fit. When the data is plentiful -- at least :data:`ROWS_PER_PARAMETER`
 residual rows per free parameter of the full set -- every parameter can be estimated
 and ``"full"`` is chosen without cross-validation (fast: ``kinfw demo``'s 85 samples give
-about 20 rows per parameter). Otherwise the candidates are scored by k-fold
-cross-validation (:func:`kinfw.verification.evaluation.crossvalidate`) and the one with the
-lowest mean whitened held-out error wins (each observed kind's error in its own metric,
-every noise component in units of its noise, so poses, points, image points, plane
-contacts and registered kinds mix: :meth:`kinfw.verification.evaluation.CrossValidation.
-whitened`):
+about 20 rows per parameter). Otherwise each candidate is fitted once on all the data and
+scored by leave-one-sample-out cross-validation in closed form, linearised at its fit
+(:func:`kinfw.verification.evaluation.leave_one_out`: every sample predicted by the fit
+without it, one Gauss-Newton step away, no refit and no random partition); the candidate
+with the lowest whitened held-out error wins (each observed kind's error in its own
+metric, every noise component in units of its noise, so poses, points, image points,
+plane contacts and registered kinds mix:
+:func:`kinfw.verification.evaluation.whitened_score`):
 
 - ``"frames"``: nominal joints, base and tool frames fitted;
 - ``"offsets"``: frames plus joint zero offsets;
@@ -18,9 +20,14 @@ whitened`):
   by the same cross-validation from :data:`PRIOR_GRID_M` (lengths, m) and
   :data:`PRIOR_LEVERS_M` (angles ``sigma / lever`` rad): 8 priors.
 
+Until issue 23 the candidates were scored by refitting 5-fold cross-validation (55
+calibrations for 11 candidates, 13.7 s on 35 TIAGo samples); its choice moved with the
+partition on the smallest sets (18-sample folds). The closed form costs the 11 fits, and
+the chosen fit is the calibration (:attr:`ModelChoice.fit`).
+
 The observations the robust full-data fit rejects as gross errors are left out of every
-score (they stay in the training folds, where each fit rejects them itself): one 68 mm
-sample in a fold of seven moves that fold's RMS more than the candidates differ.
+score (each candidate's fit rejects its own; those it did not train on are predicted by
+its full fit): one 68 mm sample moves an RMS more than the candidates differ.
 
 Ties (within 1 %) go to the simpler model, in the order above. Identification does not
 import this module; the CLI wires them.
@@ -29,7 +36,7 @@ import this module; the CLI wires them.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -38,7 +45,13 @@ from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.observations import DatasetError, Metric
-from kinfw.verification.evaluation._crossval import crossvalidate, whitening_noise
+from kinfw.verification.evaluation._crossval import (
+    metric_rms,
+    whitened_score,
+    whitening_noise,
+    without_observations,
+)
+from kinfw.verification.evaluation._loo import leave_one_out
 
 __all__ = [
     "PRIOR_GRID_M",
@@ -69,7 +82,7 @@ PRIOR_LEVERS_M = (0.1, 0.5)
 
 @dataclass(frozen=True, slots=True)
 class Candidate:
-    """One model scored by cross-validation.
+    """One model scored by leave-one-out cross-validation (closed form).
 
     Attributes
     ----------
@@ -78,13 +91,14 @@ class Candidate:
     prior : (float, float) or None
         ``(sigma_m, sigma_rad)`` of the Gaussian prior on deviations from the nominal.
     whitened : float
-        Mean over folds of the whitened held-out error (about 6 for poses predicted to
-        the noise, 3 for points, 1 for plane contacts; lower is better).
+        The whitened held-out error (about 6 for poses predicted to the noise, 3 for
+        points, 1 for plane contacts; lower is better):
+        :func:`kinfw.verification.evaluation.whitened_score` of :attr:`errors`.
     errors : tuple of (Metric, float)
-        Per metric of the data the mean over folds of its held-out RMS (display unit).
+        Per metric of the data its held-out RMS over every sample (display unit).
     failed : str or None
-        Why the candidate could not be scored (a training fold too small for its
-        parameters or its cameras: the fit's error message); its scores are then NaN
+        Why the candidate could not be scored (the data too small for its parameters or
+        its cameras, on all the data or without one sample); its scores are then NaN
         and it is not chosen.
     """
 
@@ -123,10 +137,14 @@ class ModelChoice:
     rows_per_parameter : float
         Residual rows per free parameter of the full set on all the data.
     k : int
-        Folds (0 when cross-validation was skipped).
+        Folds: the samples (leave-one-out); 0 when cross-validation was skipped.
     excluded : tuple of (sample, kind, frame, marker)
         Observations left out of every held-out score: those the full-data fit rejected
-        as gross errors (:attr:`kinfw.verification.evaluation.CrossValidation.excluded`).
+        as gross errors.
+    fit : Calibration or None
+        The chosen candidate's calibration on all the data (what
+        ``calibrate(nominal, data, parameters=..., prior=..., noise=..., loss=...)``
+        returns); None when cross-validation was skipped. Not serialised.
     """
 
     parameters: str
@@ -136,6 +154,7 @@ class ModelChoice:
     rows_per_parameter: float
     k: int
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
+    fit: Calibration | None = field(default=None, compare=False, repr=False)
 
     @property
     def label(self) -> str:
@@ -178,8 +197,6 @@ def choose_parameters(
     *,
     noise: NoiseModel | None = None,
     loss: str = "huber",
-    k: int = 5,
-    seed: int = 0,
     prior: tuple[float, float] | None = None,
 ) -> ModelChoice:
     """Choose the parameter set and prior that predict held-out data best.
@@ -191,8 +208,6 @@ def choose_parameters(
     noise, loss
         As for :func:`kinfw.identification.calibrate` (``noise`` also whitens the
         scores; default: the noise the full-data fit estimates).
-    k, seed : int
-        Folds (at most the samples) and the seed of their partition.
     prior : (sigma_m, sigma_rad), optional
         A prior given by the user: every set is scored with it and no prior scale is
         searched.
@@ -200,6 +215,12 @@ def choose_parameters(
     Returns
     -------
     ModelChoice
+
+    Raises
+    ------
+    ValueError
+        Fewer than 3 samples on small data (nothing to cross-validate), or no candidate
+        can be fitted on all the data (the calibration's own error).
     """
     ratio = rows_per_parameter(nominal, data)
     if ratio >= ROWS_PER_PARAMETER:
@@ -211,69 +232,102 @@ def choose_parameters(
             ratio,
             0,
         )
-    k = min(k, data.n_samples)
-    if k < 2:
+    if data.n_samples < 3:
         raise ValueError(
-            f"choosing the parameters needs at least 2 samples for cross-validation, got "
+            f"choosing the parameters needs at least 3 samples for cross-validation, got "
             f"{data.n_samples}; give --params"
         )
-    # the full-data fit: its noise whitens every score (the same scale for all), and the
-    # observations it rejects as gross errors are left out of every score (one 68 mm
-    # sample in a fold moves its RMS more than the models differ)
-    reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
+    runs = _runs(prior)
+    fits = [_fit(nominal, data, parameters, p, noise=noise, loss=loss) for parameters, p in runs]
+    reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
-    candidates, excluded = [], ()
-    for parameters, p in _runs(prior):
-        candidate, cv_excluded = _score(
-            nominal,
-            data,
-            parameters,
-            p,
-            k=k,
-            seed=seed,
-            noise=noise,
-            loss=loss,
-            reference=reference,
-            sigma=sigma,
-        )
-        candidates.append(candidate)
-        if cv_excluded is not None:
-            excluded = cv_excluded
-    _check_any_fitted(candidates, data.source, k)
-    scored = [c.whitened for c in candidates if np.isfinite(c.whitened)]
-    if not scored:  # no noise component with a held-out error to whiten
+    excluded = _rejected_keys(reference)
+    scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
+    candidates = [
+        _score(nominal, scored, parameters, p, fit, loss=loss, sigma=sigma)
+        for (parameters, p), fit in zip(runs, fits, strict=True)
+    ]
+    _check_any_fitted(candidates, data.source)
+    scores = [c.whitened for c in candidates if np.isfinite(c.whitened)]
+    if not scores:  # no noise component with a held-out error to whiten
         return ModelChoice(
             "full",
             prior,
-            f"{k}-fold cross-validation could not score these observations (no held-out "
-            "error in a metric of the noise): the full set, as before",
+            "leave-one-out cross-validation could not score these observations (no "
+            "held-out error in a metric of the noise): the full set, as before",
             tuple(candidates),
             ratio,
-            k,
+            data.n_samples,
+            fit=reference,
         )
-    chosen, why = _simplest_best(candidates, min(scored))
+    chosen, why = _simplest_best(candidates, min(scores))
     if excluded:
         samples = ", ".join(str(e[0]) for e in excluded)
         why += f"; {len(excluded)} rejected observation(s) not scored (sample(s) {samples})"
     return ModelChoice(
         chosen.parameters,
         chosen.prior,
-        f"{k}-fold cross-validation, {ratio:.1f} residual rows per free parameter of the "
-        f"full set (< {ROWS_PER_PARAMETER:g}): {why}",
+        f"leave-one-out cross-validation (closed form), {ratio:.1f} residual rows per free "
+        f"parameter of the full set (< {ROWS_PER_PARAMETER:g}): {why}",
         tuple(candidates),
         ratio,
-        k,
+        data.n_samples,
         excluded,
+        fit=fits[candidates.index(chosen)],
     )
 
 
-def _check_any_fitted(candidates: list[Candidate], source: str, k: int) -> None:
-    """Refuse data on which no candidate can be fitted on a training fold."""
+def _fit(
+    nominal: Robot,
+    data: Measurements,
+    parameters: str,
+    prior: tuple[float, float] | None,
+    *,
+    noise: NoiseModel | None,
+    loss: str,
+) -> Calibration | ValueError:
+    """One candidate's calibration on all the data, or the error that refused it (too
+    little data for its parameters, or to place a camera)."""
+    with warnings.catch_warnings():  # the data's warnings come once, from the calibration
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            return calibrate(
+                nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
+            )
+        except ValueError as exc:
+            return exc
+
+
+def _reference(fits: list[Calibration | ValueError]) -> Calibration:
+    """The fit whose noise whitens every score and whose rejections are left out of
+    them: full with the user's prior (the third of :func:`_runs`), else, when the data
+    cannot determine it, the most flexible candidate fitted (full under the weakest
+    prior ... frames); the first refusal when none is."""
+    order = [2, *range(len(fits) - 1, 2, -1), 1, 0]
+    fitted = [fits[i] for i in order if not isinstance(fits[i], ValueError)]
+    if not fitted:
+        raise fits[0]
+    return fitted[0]
+
+
+def _rejected_keys(fit: Calibration) -> tuple[tuple[int, str, str, str | None], ...]:
+    """The observations ``fit`` rejected as gross errors, ``(sample, kind, frame,
+    marker)``, sorted."""
+    return tuple(
+        sorted(
+            {(o.sample, o.kind, o.frame, o.marker) for o in fit.refined.rejected},
+            key=lambda e: (e[0], e[1], e[2], e[3] or ""),
+        )
+    )
+
+
+def _check_any_fitted(candidates: list[Candidate], source: str) -> None:
+    """Refuse data on which no candidate can be scored."""
     failed = [c for c in candidates if c.failed is not None]
     if len(failed) == len(candidates):
         raise DatasetError(
-            f"{source}: too few samples to choose the parameters by {k}-fold "
-            f"cross-validation: no candidate can be fitted on a training fold "
+            f"{source}: too few samples to choose the parameters by leave-one-out "
+            f"cross-validation: no candidate can be fitted without one sample "
             f"({failed[0].label}: {failed[0].failed}); give --params (e.g. frames)"
         )
 
@@ -291,44 +345,34 @@ def _runs(prior: tuple[float, float] | None) -> list[tuple[str, tuple[float, flo
 
 def _score(
     nominal: Robot,
-    data: Measurements,
+    scored: Measurements,
     parameters: str,
     prior: tuple[float, float] | None,
+    fit: Calibration | ValueError,
     *,
-    k: int,
-    seed: int,
-    noise: NoiseModel | None,
     loss: str,
-    reference: Calibration,
-    sigma: NoiseModel,
-) -> tuple[Candidate, tuple[tuple[int, str, str, str | None], ...] | None]:
-    """One candidate scored by ``k``-fold cross-validation, whitened by ``sigma``, and the
-    observations left out of its scores (None when it failed)."""
-    try:
-        cv = crossvalidate(
-            nominal,
-            data,
-            k=k,
-            seed=seed,
-            sets=(parameters,),
-            noise=noise,
-            loss=loss,
-            prior=prior,
-            exclude_flagged=True,
-            reference=reference,
-        )
-    except ValueError as exc:
-        # the full data fit above: a training fold too small for these parameters
-        # (a DatasetError), or to place a camera (three views per hand-eye)
-        return Candidate(parameters, prior, np.nan, failed=str(exc)), None
-    cv = replace(cv, noise=sigma)
-    candidate = Candidate(
-        parameters,
-        prior,
-        cv.whitened(parameters),
-        tuple((m, cv.mean(parameters, m.name)) for m in cv.metrics),
+    sigma: tuple,
+) -> Candidate:
+    """One candidate scored by closed-form leave-one-out on ``scored`` (the data without
+    the reference's rejections), whitened by ``sigma``."""
+    if isinstance(fit, ValueError):
+        return Candidate(parameters, prior, np.nan, failed=str(fit))
+    own = {(k, f, m, s) for s, k, f, m in _rejected_keys(fit)}
+    loo = leave_one_out(
+        nominal, scored, fit, parameters=parameters, prior=prior, loss=loss, trained_without=own
     )
-    return candidate, cv.excluded
+    if loo.undetermined:
+        samples = ", ".join(str(s) for s in loo.undetermined[:5])
+        more = "..." if len(loo.undetermined) > 5 else ""
+        return Candidate(
+            parameters,
+            prior,
+            np.nan,
+            failed=f"too little data: without sample {samples}{more} some of its "
+            "parameters are undetermined",
+        )
+    errors = metric_rms(loo.held)
+    return Candidate(parameters, prior, whitened_score(errors, sigma), errors)
 
 
 def _simplest_best(candidates: list[Candidate], best: float) -> tuple[Candidate, str]:
@@ -343,7 +387,8 @@ def _simplest_best(candidates: list[Candidate], best: float) -> tuple[Candidate,
     elif full.failed is not None:
         why = (
             f"lowest held-out error ({chosen.whitened:.3g} whitened); full alone cannot be "
-            "fitted on a training fold (too few residuals for its parameters)"
+            "fitted on these data, or without one sample (too few residuals for its "
+            "parameters)"
         )
     else:
         (metric, mine), (_, theirs) = chosen.errors[0], full.errors[0]

@@ -146,8 +146,8 @@ def calibrate_and_report(
     parameters : str or tuple of str
         ``"auto"`` (default, ``--params auto``): ``"full"`` when the data have at least
         :data:`kinfw.verification.evaluation.ROWS_PER_PARAMETER` residual rows per
-        parameter, else the set and prior with the lowest 5-fold held-out error
-        (:func:`kinfw.verification.evaluation.choose_parameters`; the choice goes to the
+        parameter, else the set and prior with the lowest leave-one-out held-out
+        error (:func:`kinfw.verification.evaluation.choose_parameters`; the choice goes to the
         report's notes and the sidecar). Or a set: ``"full"``, ``"offsets"``,
         ``"frames"``, ``"none"``, or a mask (see :func:`kinfw.identification.refine`).
     method : {"refine", "closed-form"}
@@ -188,17 +188,20 @@ def calibrate_and_report(
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
     )
-    result = calibrate(
-        nominal,
-        data,
-        method=method,
-        noise=noise,
-        loss=loss,
-        parameters=parameters,
-        prior=prior,
-        progress=progress,
-        refine_intrinsics=refine_intrinsics,
-    )
+    if choice is not None and choice.fit is not None and not refine_intrinsics:
+        result = choice.fit  # the chosen candidate, fitted on all the data with these options
+    else:
+        result = calibrate(
+            nominal,
+            data,
+            method=method,
+            noise=noise,
+            loss=loss,
+            parameters=parameters,
+            prior=prior,
+            progress=progress,
+            refine_intrinsics=refine_intrinsics,
+        )
     calibrated = Robot(result.urdf_xml, "<calibrated>")
     report = calibration_report(
         nominal,
