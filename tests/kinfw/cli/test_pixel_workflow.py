@@ -270,25 +270,44 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
 
 
 @pytest.mark.slow
-def test_model_choice_on_few_images_scores_them_and_asks_for_params(px_only, capsys):
+def test_model_choice_on_few_images_scores_them_in_pixels_or_asks_for_params(px_only, capsys):
     """Three configurations seen by both cameras (< 10 residual rows per parameter): the
-    automatic choice scores image points like any kind (no special case), but no
-    training fold of two images can place the cameras (three views per hand-eye): it
-    says so and asks for --params; with --params full the same data calibrates."""
+    automatic choice scores held-out image points in px like any kind (no special case;
+    the closed-form leave-one-out needs no refit from two images, which could not place
+    the cameras) and calibrates with the chosen fit: the same URDF as asking for that set
+    and prior. Two images are too few to cross-validate: it says so and asks for
+    --params."""
     from kinfw.measurements import read_measurements, write_measurements
     from kinfw.model import load_robot
     from kinfw.verification.evaluation import ROWS_PER_PARAMETER, rows_per_parameter
 
     data = read_measurements(px_only)
     left, right = ({int(s) for s in g.sample} for g in data.groups("pixels"))
-    small_data = data.subset(np.array(sorted(left & right)[:3]))
+    both = sorted(left & right)
+    small_data = data.subset(np.array(both[:3]))
     assert rows_per_parameter(load_robot(HEAD), small_data) < ROWS_PER_PARAMETER
     small = px_only.with_name("small.json")
     write_measurements(small, small_data)
-    argv = ["calibrate", small, "--urdf", HEAD, "--out", px_only.with_name("s.urdf")]
-    code, _, err = _run(argv, capsys)
-    assert code != 0
-    assert "no candidate can be fitted on a training fold" in err and "give --params" in err
-    assert "at least 3 poses are needed" in err
-    code, _, err = _run([*argv, "--params", "full"], capsys)
+    auto = px_only.with_name("auto.urdf")
+    code, out, err = _run(["calibrate", small, "--urdf", HEAD, "--out", auto], capsys)
     assert code == 0, err
+    assert "leave-one-out held-out error of each candidate" in out and "px" in out
+    (line,) = [x for x in out.splitlines() if x.endswith("<- chosen")]
+    note = next(x for x in out.splitlines() if x.startswith("note: parameters: "))
+    label = note.removeprefix("note: parameters: ").split(" (")[0]
+    given = ["--params", label.split(",")[0]]
+    if "prior" in label:
+        mm, deg = re.search(r"prior ([\d.]+) mm / ([\d.]+) deg", label).groups()
+        given += ["--prior-mm", mm, "--prior-deg", deg]
+    assert line.startswith(f"  {label} ")
+    forced = px_only.with_name("forced.urdf")
+    code, _, err = _run(["calibrate", small, "--urdf", HEAD, "--out", forced, *given], capsys)
+    assert code == 0, err
+    if "prior" not in label:  # a printed prior is rounded to 3 digits
+        assert forced.read_text() == auto.read_text()
+    two = px_only.with_name("two.json")
+    write_measurements(two, data.subset(np.array(both[:2])))
+    argv = ["calibrate", two, "--urdf", HEAD, "--out", px_only.with_name("t.urdf")]
+    code, _, err = _run(argv, capsys)
+    assert code != 0 and "at least 3 samples for cross-validation" in err
+    assert "give --params" in err
