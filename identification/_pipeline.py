@@ -15,12 +15,12 @@ from __future__ import annotations
 import logging
 import time
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.geometry import average_transform
 from kinfw.identification._closed_form import ClosedFormResult, ProtocolError, identify_closed_form
 from kinfw.identification._refine import refine
@@ -94,7 +94,6 @@ def calibrate(
     loss: str = "huber",
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
-    progress: Callable[[str], None] | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
 ) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
@@ -127,9 +126,6 @@ def calibrate(
         restricted model, like a smaller ``parameters`` set: its residuals are neither
         refused nor warned about (a too strong prior just predicts badly; the model
         choice scores it so).
-    progress : callable, optional
-        Called with a one-line message after each stage (the command line prints them);
-        the library itself stays quiet.
     refine_intrinsics : bool or tuple of str
         Cameras of ``pixels`` observations whose intrinsics the refinement estimates
         too (True: all; :func:`kinfw.identification.refine`).
@@ -148,6 +144,9 @@ def calibrate(
     - after the refinement over every parameter (without a prior), that it fits
       (:func:`kinfw.identification.checks.check_fit`).
 
+    Each stage is told to :mod:`kinfw.progress` as it begins (the refinement's
+    Levenberg-Marquardt iterations too) and logged (``INFO``) with what it found.
+
     After the refinement over every parameter without a prior, residuals that follow the
     joint values or exceed a plausible noise are warned about (``UserWarning``, one line
     each, naming the frame, the joint and the likely cause:
@@ -160,23 +159,25 @@ def calibrate(
     """
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
-    say = progress or (lambda message: None)
+    progress.stage("checking the units")
+    check_units(nominal, data)
+    options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
+    if method == "refine":
+        progress.stage("checking that the data determine the parameters (start values)")
+        _check_refinable(nominal, data, options)
     clock = time.perf_counter()
 
     def done(message: str) -> None:
         nonlocal clock
-        say(f"{message} ({time.perf_counter() - clock:.2f} s)")
+        log.info("%s (%.2f s)", message, time.perf_counter() - clock)
         clock = time.perf_counter()
 
-    check_units(nominal, data)
-    options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
-    if method == "refine":
-        _check_refinable(nominal, data, options)
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
     notes: list[str] = []
     xml = nominal.urdf_xml
     if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
+        progress.stage("closed form (Shih et al.)")
         closed_form, skipped = _try_closed_form(nominal, data, method)
         if closed_form is None:
             notes.append(skipped)
@@ -189,11 +190,13 @@ def calibrate(
                 f"position RMS {1e3 * closed_form.position_rms_m:.3f} mm"
             )
     if (data.targets or data.groups("pixels")) and parameters != "none":
+        progress.stage("hand-eye")
         cameras = calibrate_cameras(Robot(xml, nominal.source), data)
         xml = _with_camera_mounts(xml, cameras)
         stages.append(("hand-eye", xml))
         done(f"hand-eye: {len(cameras.cameras)} camera(s)")
     if method == "refine":
+        progress.stage("refine: joint least squares over every unknown")
         refined, found = _refine_checked(
             nominal, data, Robot(xml, nominal.source), cameras, options
         )

@@ -45,6 +45,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.problem import (
     LOSS_SCALE,
@@ -339,6 +340,7 @@ def _reject_gross_errors(
         new = rejected_observations(groups, r, result.noise, norms, k, beyond)
         rounds.append((problem, k, beyond))
         reduced = _without(data, groups, beyond)
+        progress.stage(f"refine: refit without {len(rejected) + len(new)} gross errors")
         try:
             refit, refit_problem, refit_r = fit(reduced)
         except DatasetError as exc:
@@ -466,6 +468,7 @@ def _fit(
     """One robust fit of every observation of ``measurements`` (see :func:`refine`):
     the result, the problem and the final whitened residuals."""
     t0 = time.perf_counter()
+    progress.stage(f"refine: start values ({measurements.n_samples} samples)")
     problem = build_problem(
         robot,
         measurements,
@@ -571,6 +574,8 @@ def _solve(
     moving[free] = ~negligible_columns(J0[:, free])
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
+        if not given:
+            progress.stage(f"refine: noise estimate, round {round_ + 1}/{noise_rounds}")
         x, its, converged = levenberg_marquardt(
             lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True),
             x,

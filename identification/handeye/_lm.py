@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.geometry import rotation_vector_from_matrix, skew
 
 __all__ = ["LMFit", "PoseData", "fit_lm", "robust_sigmas", "variance_components"]
@@ -347,7 +348,8 @@ def fit_lm(
     (fewer than 4 poses) the scales stay as given. Below ~1e-7 the cost's rounding hides
     the decrease: near the optimum the Gauss-Newton steps contract, so they are taken as
     they come. Converged: a step below ``LM_STEP_TOL`` (radians, or relative to the
-    scene's length) with the scales settled to ``LM_SCALE_TOL`` (relative).
+    scene's length) with the scales settled to ``LM_SCALE_TOL`` (relative). Each step's
+    weighted cost is told to :mod:`kinfw.progress`.
 
     Parameters
     ----------
@@ -377,29 +379,31 @@ def fit_lm(
     steps = 0
     converged = False
     last_du: float | None = None
-    while steps < max_steps:
-        steps += 1
-        c, cost = _irls_weights(r, maskf, s_r, s_t, huber=huber)
-        Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), c, s_r, s_t)
-        sc = np.sqrt(c)[:, None]
-        H_r = Jr.T @ Jr
-        H_t = Jt.T @ Jt
-        g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
-        H = H_r + H_t
-        lam, step = _damped_step(lean, X, Y, H, g, c, cost, lam, s_r, s_t)
-        if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
-            converged = True
-            break
-        lam = max(lam / 10.0, 1e-12)
-        X, Y, r, RXB, R_hat, v = step.X, step.Y, step.r, step.RXB, step.R_hat, step.v
-        change = 0.0
-        if update_scales:
-            s_r, s_t, change, last_du = _updated_scales(
-                H, H_r, H_t, c, r, s_r, s_t, data.length, last_du
-            )
-        if (step.size < LM_STEP_TOL and change < LM_SCALE_TOL) or step.cost == 0.0:
-            converged = True
-            break
+    with progress.task("hand-eye Levenberg-Marquardt", unit="step") as bar:
+        while steps < max_steps:
+            steps += 1
+            c, cost = _irls_weights(r, maskf, s_r, s_t, huber=huber)
+            Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), c, s_r, s_t)
+            sc = np.sqrt(c)[:, None]
+            H_r = Jr.T @ Jr
+            H_t = Jt.T @ Jt
+            g = Jr.T @ (r[:, :3] * (sc / s_r)).ravel() + Jt.T @ (r[:, 3:] * (sc / s_t)).ravel()
+            H = H_r + H_t
+            lam, step = _damped_step(lean, X, Y, H, g, c, cost, lam, s_r, s_t)
+            if lam > 1e12:  # no step lowers the cost: at the optimum to rounding
+                converged = True
+                break
+            lam = max(lam / 10.0, 1e-12)
+            X, Y, r, RXB, R_hat, v = step.X, step.Y, step.r, step.RXB, step.R_hat, step.v
+            bar.advance(1, f"cost {step.cost:.6g}")
+            change = 0.0
+            if update_scales:
+                s_r, s_t, change, last_du = _updated_scales(
+                    H, H_r, H_t, c, r, s_r, s_t, data.length, last_du
+                )
+            if (step.size < LM_STEP_TOL and change < LM_SCALE_TOL) or step.cost == 0.0:
+                converged = True
+                break
     Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), maskf, s_r, s_t)
     H = Jr.T @ Jr + Jt.T @ Jt
     chi2 = (r * r).reshape(data.n, 2, 3).sum(axis=2) @ (1.0 / s_r**2, 1.0 / s_t**2)

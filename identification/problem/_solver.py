@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.identification.problem._noise import norm2_cdf, quantile
 from kinfw.observations import NoiseComponent
 
@@ -160,13 +161,25 @@ def levenberg_marquardt(
     x : ndarray, shape (P,)
     iterations : int
     converged : bool
+
+    Notes
+    -----
+    Each iteration's cost, the sum of the robust loss over the observations
+    (:func:`robust_loss`), is told to :mod:`kinfw.progress` (iteration 0: the start).
     """
+    with progress.task("Levenberg-Marquardt", unit="iteration") as bar:
+        return _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar)
+
+
+def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar):
+    """:func:`levenberg_marquardt`, each cost told to ``bar``."""
 
     def cost_of(r):
         return float(robust_loss(observation_norms(r, obs_sizes), loss, k)[0].sum())
 
     r, J = evaluate(x, True)
     cost = cost_of(r)
+    bar.advance(0, f"cost {cost:.6g}")
     lam = 1e-6  # column-scaled: start close to Gauss-Newton
     converged = False
     it = 0
@@ -188,6 +201,7 @@ def levenberg_marquardt(
                 return x, it, converged
         decrease = cost - cost_new
         x, r, cost = x_new, r_new, cost_new
+        bar.advance(1, f"cost {cost:.6g}")
         lam = max(lam / 3.0, 1e-12)
         if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
             converged = True

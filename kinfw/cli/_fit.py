@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from kinfw.cli._args import read_data
-from kinfw.cli._tables import format_table, metric_format, number, progress_printer
+from kinfw.cli._tables import format_table, metric_format, number
 from kinfw.files import json_text
 
 if TYPE_CHECKING:
@@ -139,7 +139,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         held_out=held_out,
         refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
         data_path=args.data,
-        progress=progress_printer(),
     )
     report, choice = result.write(args.out), result.choice
     if args.report:
@@ -310,7 +309,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from kinfw.verification.studies import N_STAGE2, NOISE_DEG, NOISE_MM, PIXEL_SIGMA, run_demo
 
     pixels = bool(getattr(args, "pixels", False))
-    demo = run_demo(args.out, seed=args.seed, progress=progress_printer(), pixels=pixels)
+    demo = run_demo(args.out, seed=args.seed, pixels=pixels)
     report = demo.report
     if args.json:
         print(json_text(report.to_dict()))
@@ -390,7 +389,6 @@ def cmd_crossval(args: argparse.Namespace) -> int:
     nominal = load_robot(args.urdf)
     data = read_data(args.data, args)
     prior = _prior_arg(args)
-    watch = progress_printer()
     cv = crossvalidate(
         nominal,
         data,
@@ -401,7 +399,6 @@ def cmd_crossval(args: argparse.Namespace) -> int:
         loss=args.loss,
         prior=prior,
         jobs=args.jobs,
-        progress=(lambda d, t: watch(f"{d}/{t} fits")) if watch else None,
         exclude_flagged=args.exclude_flagged,
     )
     if args.json:

@@ -5,6 +5,9 @@ Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and whe
 never a traceback for a user error), 1 on an unexpected internal error, 3 when ``gaze``
 does not fixate or ``reach`` does not reach (:mod:`kinfw.cli`). Warnings (Python
 warnings and logged ones) are printed once each, as one line ``kinfw CMD: warning: ...``.
+Progress goes to stderr from the first second (:mod:`kinfw.progress`): a tqdm bar on a
+terminal, plain lines when stderr is piped, nothing with ``-q``; ``-v`` adds the logged
+information (what each stage found).
 
 Every output path is checked before any work (each command's ``check_outputs``) and every file is
 written atomically (:mod:`kinfw.files`). This module imports only the standard library at
@@ -30,6 +33,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
+from kinfw import progress
 from kinfw.cli._commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -88,7 +92,14 @@ def build_parser(
     """The ``kinfw`` parser: one sub-command per entry of ``commands``, each defined
     beside its command."""
     parser = _Parser(prog="kinfw", description="Calibrate robot kinematics from measurements.")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    talk = parser.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true", help="also log what each stage found")
+    talk.add_argument(
+        "-q",
+        "--quiet",
+        action="store_true",
+        help="no progress on stderr (warnings and errors still)",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add_parser in commands:
         add_parser(sub)
@@ -109,7 +120,7 @@ class _WarningPrinter(logging.Handler):
         text = " ".join(str(message).split())
         if text not in self.seen:
             self.seen.add(text)
-            print(f"kinfw {self.command}: warning: {text}", file=sys.stderr, flush=True)
+            progress.write(f"kinfw {self.command}: warning: {text}")
 
     def showwarning(self, message, category, filename, lineno, file=None, line=None) -> None:
         """Replacement of :func:`warnings.showwarning` (same signature)."""
@@ -120,11 +131,7 @@ class _WarningPrinter(logging.Handler):
             if record.levelno >= logging.WARNING:
                 self.warn(record.getMessage())
             else:
-                print(
-                    f"{record.levelname} {record.name}: {record.getMessage()}",
-                    file=sys.stderr,
-                    flush=True,
-                )
+                progress.write(f"{record.levelname} {record.name}: {record.getMessage()}")
         except Exception:
             self.handleError(record)
 
@@ -163,7 +170,9 @@ def main(
     except SystemExit as exc:
         return exc.code if isinstance(exc.code, int) else int(exc.code is not None)
     func: Callable[[argparse.Namespace], int] = args.func
-    with _warnings_printed_once(args.command, args.verbose):
+    # progress on stderr (kinfw.progress): a bar on a terminal, lines when piped, none -q
+    shown = progress.Reporter() if args.quiet else progress.stderr_reporter()
+    with _warnings_printed_once(args.command, args.verbose), progress.reporting(shown):
         try:
             if getattr(args, "urdf", "") is None:
                 from kinfw.model import builtin_head_urdf

@@ -1,25 +1,14 @@
 """Plain-text output of the ``kinfw`` commands: tables (:func:`format_table`, the
-accuracy report's :func:`accuracy_table`) and progress lines on stderr.
+accuracy report's :func:`accuracy_table`); progress on stderr is :mod:`kinfw.progress`'s.
 
 Like :mod:`kinfw.cli`, this module imports only the standard library at start-up.
 """
 
 from __future__ import annotations
 
-import logging
-import sys
 from collections.abc import Sequence
 
-__all__ = ["accuracy_table", "format_table", "metric_format", "number", "progress_printer"]
-
-log = logging.getLogger("kinfw")
-
-
-def progress_printer():
-    """Progress lines on stderr when a person is watching (a terminal, or --verbose)."""
-    if sys.stderr.isatty() or log.isEnabledFor(logging.INFO):
-        return lambda message: print(f"  {message}", file=sys.stderr, flush=True)
-    return None
+__all__ = ["accuracy_table", "format_table", "metric_format", "number"]
 
 
 def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:

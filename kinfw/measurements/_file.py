@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.camera import CameraError, CameraIntrinsics, intrinsics_from_dict
 from kinfw.files import write_text_atomic
 from kinfw.measurements._dataset import Measurements
@@ -82,6 +83,7 @@ def read_measurements(
     """
     path = Path(path)
     source = str(path)
+    progress.stage(f"reading the measurements {source}")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

@@ -23,6 +23,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw import progress
 from kinfw.model._urdf_read import (
     JointInfo,
     RobotModelError,
@@ -384,6 +385,7 @@ def load_robot(urdf: str | Path) -> Robot:
         Naming the file when it cannot be read or parsed.
     """
     xml, source = xml_text(urdf)
+    progress.stage(f"loading the URDF {source}")
     return Robot(xml, source)
 
 

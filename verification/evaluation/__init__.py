@@ -51,11 +51,9 @@ from kinfw.verification.evaluation._model_choice import (
 )
 from kinfw.verification.evaluation._reprojection import WORST_IMAGES, reprojection_section
 from kinfw.verification.evaluation._trials import (
-    Progress,
     check_count,
     executor_for_jobs,
     run_trials,
-    stderr_progress,
 )
 
 __all__ = [
@@ -75,7 +73,6 @@ __all__ = [
     "GroupErrors",
     "LeaveOneOut",
     "ModelChoice",
-    "Progress",
     "check_count",
     "choose_parameters",
     "cramer_rao",
@@ -96,7 +93,6 @@ __all__ = [
     "reprojection_section",
     "rows_per_parameter",
     "run_trials",
-    "stderr_progress",
     "true_chart_coordinates",
     "whitened_score",
     "whitening_noise",

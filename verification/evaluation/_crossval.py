@@ -31,7 +31,7 @@ still in the training folds, where each fit rejects them itself).
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass, replace
 
@@ -381,7 +381,6 @@ def crossvalidate(
     noise: NoiseModel | None = None,
     loss: str = "huber",
     prior: tuple[float, float] | None = None,
-    progress: Callable[[int, int], None] | None = None,
     executor: Executor | None = None,
     jobs: int = 1,
     exclude_flagged: bool = False,
@@ -406,10 +405,10 @@ def crossvalidate(
         units of the given noise, else that of the full-data fit).
     noise, loss, prior
         As for :func:`kinfw.identification.calibrate`.
-    progress : callable(done, total), optional
     executor : concurrent.futures.Executor, optional
         Run the fits (folds x sets) as tasks of this executor (a process pool, Dask's or
         Ray's); default serially in this process. The scores are the same either way.
+        The fits are a :func:`kinfw.progress.task`, a step as each finishes.
     jobs : int
         Without an ``executor``: run the fits in a pool of ``jobs`` worker processes,
         shut down at the end (1, the default: in this process).
@@ -447,7 +446,7 @@ def crossvalidate(
     ]
     pool = executor_for_jobs(jobs) if executor is None else None
     try:
-        scores = run_trials(_score, tasks, executor=executor or pool, progress=progress)
+        scores = run_trials(_score, tasks, executor=executor or pool, name="cross-validation fits")
     finally:
         if pool is not None:
             pool.shutdown()

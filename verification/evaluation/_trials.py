@@ -3,20 +3,18 @@
 Cross-validation folds and the studies' trials are independent tasks: :func:`run_trials`
 runs them serially or submits them to a :class:`concurrent.futures.Executor` (a process
 pool from :func:`executor_for_jobs`, or Dask's or Ray's executor) and returns the results
-in order either way.
+in order either way, telling :mod:`kinfw.progress` as they finish.
 """
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from typing import Any, TypeVar
+from typing import TypeVar
 
-__all__ = ["Progress", "check_count", "executor_for_jobs", "run_trials", "stderr_progress"]
+from kinfw import progress
 
-#: ``progress(done, total)``, called by a study after each trial.
-Progress = Callable[[int, int], Any]
+__all__ = ["check_count", "executor_for_jobs", "run_trials"]
 
 R = TypeVar("R")
 
@@ -34,29 +32,27 @@ def run_trials(
     args: Sequence[tuple],
     *,
     executor: Executor | None = None,
-    progress: Progress | None = None,
+    name: str = "trials",
 ) -> list[R]:
     """``[trial(*a) for a in args]``: in this process (``executor`` None) or submitted as
     tasks to any :class:`concurrent.futures.Executor` (a process pool, Dask's or Ray's
     executor); the results come back in the order of ``args`` either way.
 
     With an executor, ``trial`` must be a module-level function and ``args`` picklable
-    (a :class:`kinfw.model.Robot` pickles as its URDF text). ``progress(done, total)`` is
-    called as trials finish.
+    (a :class:`kinfw.model.Robot` pickles as its URDF text). The trials are a
+    :func:`kinfw.progress.task` called ``name``, a step as each finishes.
     """
-    total = len(args)
-    if executor is None:
-        out = []
-        for i, a in enumerate(args):
-            out.append(trial(*a))
-            if progress is not None:
-                progress(i + 1, total)
-        return out
-    futures = [executor.submit(trial, *a) for a in args]
-    for done, _ in enumerate(as_completed(futures), 1):
-        if progress is not None:
-            progress(done, total)
-    return [f.result() for f in futures]
+    with progress.task(name, total=len(args), unit="") as bar:
+        if executor is None:
+            out = []
+            for a in args:
+                out.append(trial(*a))
+                bar.advance()
+            return out
+        futures = [executor.submit(trial, *a) for a in args]
+        for _ in as_completed(futures):
+            bar.advance()
+        return [f.result() for f in futures]
 
 
 def executor_for_jobs(jobs: int) -> Executor | None:
@@ -64,11 +60,3 @@ def executor_for_jobs(jobs: int) -> Executor | None:
     workers (``ValueError`` for ``jobs < 1``)."""
     jobs = check_count(jobs, "--jobs", 1)
     return None if jobs == 1 else ProcessPoolExecutor(max_workers=jobs)
-
-
-def stderr_progress(done: int, total: int) -> None:
-    """A :data:`Progress` that keeps ``done/total trials`` on one line of stderr."""
-    sys.stderr.write(f"\r{done}/{total} trials")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()

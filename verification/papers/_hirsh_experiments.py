@@ -71,7 +71,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.identification.handeye import AXYBError, convergence_factor, solve_axyb
-from kinfw.verification.evaluation import Progress, check_count, run_trials
+from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.papers._hirsh_problem import (
     draw_problem,
     quaternion_angle,
@@ -399,7 +399,6 @@ def hirsh_study(
     seed: int = 0,
     hand_rotation_deg: float = 180.0,
     hand_translation_m: float = 0.5,
-    progress: Progress | None = None,
     executor: Executor | None = None,
 ) -> HirshResult:
     """Hirsh et al. (2001) Fig. 3 (``noise_deg = 0``) or Fig. 4 (``noise_deg = 1``).
@@ -429,8 +428,6 @@ def hirsh_study(
         spread of the hand rotations sets the speed of the iteration (module docstring).
     hand_translation_m : float, optional
         Half-width of the cube of hand positions, metres.
-    progress : callable, optional
-        Called as ``progress(done, total)`` after each trial.
     executor : concurrent.futures.Executor, optional
         Run the trials as its tasks (:func:`kinfw.verification.studies._common.run_trials`); default
         serially here. The numbers do not depend on it (each trial seeds its own).
@@ -455,7 +452,6 @@ def hirsh_study(
             for v, t in cells
         ],
         executor=executor,
-        progress=progress,
     )
     arrays = _trial_arrays(cells, results, (len(vs), trials), k)
     for v, n in enumerate(vs):

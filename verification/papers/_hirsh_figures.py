@@ -318,7 +318,7 @@ def run_hirsh(
     ``out_dir``.
 
     ``kwargs`` go to both studies (``views``, ``trials``, ``iterations``, ``seed``,
-    ``hand_rotation_deg``, ``hand_translation_m``, ``progress``, ``executor``). Returns
+    ``hand_rotation_deg``, ``hand_translation_m``, ``executor``). Returns
     the noise-free and the noisy result.
     """
     out = output_dir(out_dir)

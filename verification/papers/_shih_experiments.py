@@ -62,7 +62,7 @@ from kinfw.simulation import (
     perturb_robot,
     random_configurations,
 )
-from kinfw.verification.evaluation import Progress, check_count, run_trials
+from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.studies import FieldsJSON, freeze, sample_std
 
 __all__ = [
@@ -381,7 +381,6 @@ def fig11_study(
     fraction: float = 0.8,
     seed: int = 0,
     frames: Sequence[str] | None = None,
-    progress: Progress | None = None,
     executor: Executor | None = None,
 ) -> Fig11Result:
     """Shih et al. (1992) Fig. 11: positioning error vs measurements per joint and noise.
@@ -416,8 +415,6 @@ def fig11_study(
         Base seed (module docstring).
     frames : sequence of str, optional
         Measured end frames; default the URDF's ``<kinfw frames>`` hint (the plates).
-    progress : callable, optional
-        Called as ``progress(done, total)`` after each trial.
 
     Returns
     -------
@@ -455,7 +452,6 @@ def fig11_study(
             for s, k, t in cells
         ],
         executor=executor,
-        progress=progress,
     )
     for (s, k, t), error in zip(cells, results, strict=True):
         errors[s, k, t] = error

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from kinfw.model import Robot
 from kinfw.simulation import random_configurations
-from kinfw.verification.evaluation import Progress, check_count, run_trials
+from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.papers._shih_experiments import (
     PAPER_PER_JOINT,
     StudySetup,
@@ -205,7 +205,6 @@ def table4_study(
     fraction: float = 0.8,
     seed: int = 0,
     frames: Sequence[str] | None = None,
-    progress: Progress | None = None,
     executor: Executor | None = None,
 ) -> Table4Result:
     """Shih et al. (1992) Table 4's protocol in simulation.
@@ -231,7 +230,7 @@ def table4_study(
         Random trials; the statistics pool every trial's test configurations.
     n_test : int, optional
         Test configurations per trial (the paper: nine).
-    rot_per_mm_rad, error_mm, error_deg, fraction, seed, frames, progress
+    rot_per_mm_rad, error_mm, error_deg, fraction, seed, frames
         As for :func:`kinfw.verification.papers.fig11_study`.
 
     Returns
@@ -265,7 +264,6 @@ def table4_study(
         _table4_trial,
         [(nominal, setup, lower, upper, sigma, per_joint, t, n_test) for t in range(trials)],
         executor=executor,
-        progress=progress,
     )
     for t, (measured, truth) in enumerate(results):
         vs_measured[t], vs_truth[t] = measured, truth

@@ -10,10 +10,11 @@ calibrated URDF and its sidecar written together.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
 from kinfw.identification.problem import NoiseModel
@@ -115,6 +116,7 @@ def _model_choice(
         return "full", prior, None
     from kinfw.verification.evaluation import choose_parameters
 
+    progress.stage("model choice: the parameter set and prior")
     choice = choose_parameters(nominal, data, noise=noise, loss=loss, prior=prior)
     return choice.parameters, choice.prior, choice
 
@@ -131,7 +133,6 @@ def calibrate_and_report(
     held_out: Measurements | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
     data_path: str | Path | None = None,
-    progress: Callable[[str], None] | None = None,
 ) -> CalibrationResult:
     """Calibrate ``nominal`` from ``data`` as ``kinfw calibrate`` does (the same
     defaults), and report: :func:`kinfw.calibrate`.
@@ -165,8 +166,6 @@ def calibrate_and_report(
         Also estimate the intrinsics of these cameras (True: every camera).
     data_path : path, optional
         The file ``data`` was read from, recorded with its SHA-256.
-    progress : callable(str), optional
-        Called with a line per stage.
 
     Returns
     -------
@@ -199,10 +198,10 @@ def calibrate_and_report(
             loss=loss,
             parameters=parameters,
             prior=prior,
-            progress=progress,
             refine_intrinsics=refine_intrinsics,
         )
     calibrated = Robot(result.urdf_xml, "<calibrated>")
+    progress.stage("report: errors after each stage")
     report = calibration_report(
         nominal,
         calibrated,

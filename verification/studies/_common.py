@@ -5,7 +5,8 @@ robustness studies of this package) each run random trials, keep
 the raw numbers in a frozen result with read-only arrays, and write the result as a PNG
 and a JSON side by side; a ``*_main`` (:func:`~kinfw.verification.papers.shih_figures_main`,
 :func:`~kinfw.verification.papers.hirsh_figures_main`, :func:`head_studies_main`, behind
-``kinfw reproduce``) runs a study with progress on stderr and prints its table. What they share
+``kinfw reproduce``) runs a study (its trials told to :mod:`kinfw.progress`, which the
+command shows on stderr) and prints its table. What they share
 is here: argument checks and sample statistics, the array and dataclass conversions of
 their ``to_dict`` / ``from_dict``, matplotlib figures without pyplot, the output files,
 and the command-line scaffolding.
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import fields
@@ -27,10 +27,7 @@ from numpy.typing import NDArray
 
 from kinfw.files import atomic_path, write_text_atomic
 from kinfw.model import builtin_head_urdf, load_robot
-from kinfw.verification.evaluation import (
-    executor_for_jobs,
-    stderr_progress,
-)
+from kinfw.verification.evaluation import executor_for_jobs
 
 __all__ = [
     "FieldsJSON",
@@ -261,12 +258,9 @@ def study_parser(
 def run_and_print(
     label: str, run: Callable[..., str], kwargs: Mapping[str, Any], written: Sequence[Path]
 ) -> int:
-    """Call ``run(**kwargs)`` (a study that writes ``written`` and returns its table) with
-    :func:`stderr_progress` when stderr is a terminal; print the table, then one line with
+    """Call ``run(**kwargs)`` (a study that writes ``written`` and returns its table;
+    its trials are told to :mod:`kinfw.progress`); print the table, then one line with
     ``label``, the wall time and the files written. Returns 0, the exit status."""
-    kwargs = dict(kwargs)
-    if sys.stderr.isatty():
-        kwargs["progress"] = stderr_progress
     start = time.perf_counter()
     text = run(**kwargs)
     print(text)

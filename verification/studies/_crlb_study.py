@@ -27,7 +27,6 @@ from kinfw.identification.problem import build_problem
 from kinfw.model import Robot, cpc_from_robot
 from kinfw.verification.evaluation import (
     NORMAL_COVERAGE,
-    Progress,
     check_count,
     cramer_rao,
     position_jacobians,
@@ -328,7 +327,6 @@ def crlb_study(
     stage2_views: int = 30,
     n_test: int = 200,
     seed: int = 0,
-    progress: Progress | None = None,
     executor: Executor | None = None,
 ) -> CRLBStudy:
     """The refined two-stage calibration against its Cramér-Rao bound.
@@ -357,8 +355,6 @@ def crlb_study(
     n_test : int
         Held-out configurations per trial.
     seed : int
-    progress : callable, optional
-        ``progress(done, total)`` after each trial.
     executor : concurrent.futures.Executor, optional
         Run the trials as its tasks (:func:`kinfw.verification.studies._common.run_trials`); default
         serially here. The numbers do not depend on it (each trial seeds its own).
@@ -387,7 +383,6 @@ def crlb_study(
         _crlb_trial,
         [(nominal, setup, t) for t in range(trials)],
         executor=executor,
-        progress=progress,
     )
     for t, (res, trial_names) in enumerate(trial_results):
         (

@@ -19,12 +19,12 @@ reprojection error is measured on 30 fresh images (:attr:`DemoResult.held_out_pi
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from kinfw import progress
 from kinfw.camera import parse_board
 from kinfw.files import write_text_atomic
 from kinfw.measurements import concatenate_measurements, write_measurements
@@ -107,7 +107,6 @@ def run_demo(
     out: str | Path,
     *,
     seed: int = 0,
-    progress: Callable[[str], None] | None = None,
     pixels: bool = False,
 ) -> DemoResult:
     """Simulate, calibrate and evaluate the IIS-head; write :data:`DEMO_FILES` into ``out``
@@ -119,13 +118,12 @@ def run_demo(
         Output directory.
     seed : int
         Seed of the true robot's errors, the configurations and the noise.
-    progress : callable, optional
-        Called with a line after each calibration stage.
     pixels : bool
         Stage 2 from images of a chessboard (module docstring) instead of target poses.
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    progress.stage("simulating the IIS-head's measurements")
     nominal = load_robot(builtin_head_urdf())
     rng = np.random.default_rng(seed)
     truth_xml = perturb_robot(nominal, rng, origin_mm=5.0, origin_deg=1.0, axis_deg=1.0)
@@ -157,6 +155,7 @@ def run_demo(
             w_T_board=w_T_target,
             **views,
         )
+    progress.stage(f"writing the simulated data into {out}")
     write_measurements(out / "data.json", data)
     write_measurements(out / "held_out.json", held_out)
     write_text_atomic(out / "true.urdf", truth_xml)
@@ -166,7 +165,6 @@ def run_demo(
         parameters="full",
         data_path=out / "data.json",
         held_out=held_out,
-        progress=progress,
     )
     report, result = fitted.write(out / "calibrated.urdf"), fitted.calibration
     calibrated = load_robot(out / "calibrated.urdf")
@@ -180,6 +178,7 @@ def run_demo(
         out / "errors.png",
         title="IIS-head demo: held-out error against the true robot",
     )
+    progress.stage("the plot and the 3D scene")
     _write_scene(out, nominal, calibrated, data)
     return DemoResult(report, len(qs1), out, held_out_pixels)
 

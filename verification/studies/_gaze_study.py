@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.model import Robot, builtin_head_urdf, load_robot
-from kinfw.verification.evaluation import Progress, check_count, executor_for_jobs, run_trials
+from kinfw.verification.evaluation import check_count, executor_for_jobs, run_trials
 from kinfw.verification.studies._common import (
     FieldsJSON,
     freeze,
@@ -319,20 +319,19 @@ def gaze_study(
     targets: int = 50,
     seed: int = 0,
     executor: Executor | None = None,
-    progress: Progress | None = None,
 ) -> GazeStudy:
     """Run the study (module docstring): ``trials`` true heads and arms, ``points``
     held-out points per head and ``targets`` held-out poses per arm.
 
     Trials run in this process, or as tasks of ``executor``
-    (:func:`kinfw.verification.studies._common.run_trials`); ``progress(done, total)`` after each.
+    (:func:`kinfw.verification.evaluation.run_trials`, which tells :mod:`kinfw.progress`).
     """
     trials = check_count(trials, "trials", 1)
     points = check_count(points, "points", 1)
     targets = check_count(targets, "targets", 1)
     seeds = np.random.SeedSequence(seed).generate_state(trials)
     args = [(int(s), points, targets) for s in seeds]
-    results = run_trials(_trial, args, executor=executor, progress=progress)
+    results = run_trials(_trial, args, executor=executor)
     arrays = {name: np.stack([r[name] for r in results]) for name in _ARRAYS}
     freeze(*arrays.values())
     setup = GazeSetup(

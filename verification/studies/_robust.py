@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from kinfw.identification import refine
 from kinfw.model import CPCModel, Robot, cpc_from_robot
 from kinfw.simulation import plant_outliers
-from kinfw.verification.evaluation import Progress, check_count, run_trials
+from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.studies._common import arrays_from, freeze, json_lists
 from kinfw.verification.studies._head_experiment import (
     ExperimentSetup,
@@ -286,7 +286,6 @@ def robustness_study(
     stage2_views: int = 30,
     n_test: int = 200,
     seed: int = 0,
-    progress: Progress | None = None,
     executor: Executor | None = None,
 ) -> RobustStudy:
     """Refinement of data with planted gross errors, linear vs robust losses.
@@ -311,7 +310,7 @@ def robustness_study(
     variants : sequence of (loss, noise)
         ``loss`` in ``("linear", "huber", "cauchy")``; ``noise`` ``"given"`` (the true
         noise) or ``"estimated"`` (by ``refine`` from the residuals).
-    sigma_mm, sigma_deg, per_joint, stage2_views, n_test, seed, progress, executor
+    sigma_mm, sigma_deg, per_joint, stage2_views, n_test, seed, executor
         As for :func:`kinfw.verification.studies.crlb_study`.
 
     Returns
@@ -350,7 +349,6 @@ def robustness_study(
             for t in range(trials)
         ],
         executor=executor,
-        progress=progress,
     )
     result = RobustStudy(
         setup=setup,

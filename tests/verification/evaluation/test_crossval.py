@@ -7,11 +7,13 @@ import pytest
 
 from kinfw.identification import calibrate
 from kinfw.model import cpc_from_robot, load_robot
+from kinfw.progress import reporting
 from kinfw.simulation import perturb_robot, random_configurations
 from kinfw.verification.evaluation import crossvalidate
 from kinfw.verification.reporting import calibration_report
 from tests.head_data import PLATES, plate_data
 from tests.paths import HEAD_URDF as HEAD
+from tests.recorder import Recorder
 
 
 @pytest.mark.slow
@@ -168,20 +170,16 @@ def test_thread_and_process_executors_give_the_serial_scores(head):
         (f, p) for f in range(3) for p in ("none", "frames", "full")
     ]
     for pool in (ThreadPoolExecutor(max_workers=2), ProcessPoolExecutor(max_workers=2)):
-        with pool:
-            done: list[tuple[int, int]] = []
-            cv = crossvalidate(
-                nominal,
-                data,
-                executor=pool,
-                progress=lambda d, t, done=done: done.append((d, t)),
-                **kwargs,
-            )
+        recorder = Recorder()
+        with pool, reporting(recorder):
+            cv = crossvalidate(nominal, data, executor=pool, **kwargs)
         assert [(s.fold, s.parameters) for s in cv.scores] == [
             (s.fold, s.parameters) for s in serial.scores
         ]
         np.testing.assert_allclose(_fold_numbers(cv), _fold_numbers(serial), rtol=1e-12, atol=1e-12)
-        assert done[-1] == (9, 9) and len(done) == 9
+        (fits,) = recorder.tasks  # a worker (thread or process) starts silent
+        assert (fits.name, fits.total, fits.depth) == ("cross-validation fits", 9, 0)
+        assert [d for d, _ in fits.steps] == list(range(1, 10))
 
 
 def test_robot_pickles_as_its_urdf(head):

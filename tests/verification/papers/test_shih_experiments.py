@@ -106,17 +106,19 @@ def test_a_cell_does_not_depend_on_the_other_cells(head, tiny):
     np.testing.assert_array_equal(one.errors_mm[0, 0], tiny.errors_mm[1, 1])
 
 
-def test_progress_is_called_once_per_trial(head):
-    calls = []
-    fig11_study(
-        head,
-        per_joint=(2, 3),
-        sigmas_mm=(0.5,),
-        trials=2,
-        n_test=5,
-        progress=lambda done, total: calls.append((done, total)),
-    )
-    assert calls == [(1, 4), (2, 4), (3, 4), (4, 4)]
+def test_progress_steps_once_per_trial(head):
+    """The study's trials are one task of kinfw.progress, a step per trial (4 cells x
+    trials); nothing inside a trial is a stage of its own."""
+    from kinfw.progress import reporting
+    from tests.recorder import Recorder
+
+    recorder = Recorder()
+    with reporting(recorder):
+        fig11_study(head, per_joint=(2, 3), sigmas_mm=(0.5,), trials=2, n_test=5)
+    trials = [t for t in recorder.tasks if t.depth == 0]
+    assert [(t.name, t.total) for t in trials] == [("trials", 4)]
+    assert [done for done, _ in trials[0].steps] == [1, 2, 3, 4] and trials[0].closed
+    assert recorder.stages == []
 
 
 def test_smallest_per_joint_meeting_a_requirement(tiny):
