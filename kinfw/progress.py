@@ -100,7 +100,9 @@ class Reporter:
         return Task()
 
     def write(self, text: str) -> None:
-        """A line that is not progress (a warning), shown without breaking a bar."""
+        """A line that is not progress (a warning), shown without breaking a bar; this
+        base prints it on stderr (silence is for progress only)."""
+        print(text, file=sys.stderr, flush=True)
 
 
 class _Nested(Task):
@@ -249,7 +251,15 @@ def stderr_reporter() -> Reporter:
     return BarReporter(sys.stderr) if sys.stderr.isatty() else LineReporter()
 
 
+#: The reporter of the running code (None: :data:`_NOBODY`).
 _REPORTER: ContextVar[Reporter | None] = ContextVar("kinfw_progress", default=None)
+
+#: Who listens by default: nobody (progress is not shown; :meth:`Reporter.write` prints).
+_NOBODY = Reporter()
+
+
+def _current() -> Reporter:
+    return _REPORTER.get() or _NOBODY
 
 
 @contextlib.contextmanager
@@ -265,21 +275,15 @@ def reporting(reporter: Reporter | None = None) -> Iterator[Reporter]:
 
 
 def stage(text: str) -> None:
-    """Tell the listener (if any) that a stage begins: ``"reading data.json"``."""
-    reporter = _REPORTER.get()
-    if reporter is not None:
-        reporter.stage(text)
+    """Tell the listener that a stage begins: ``"reading data.json"``."""
+    _current().stage(text)
 
 
 @contextlib.contextmanager
 def task(name: str, total: int | None = None, unit: str = "step") -> Iterator[Task]:
-    """A loop of ``total`` steps (None: not known ahead, as iterations) for the listener
-    (if any); call the task's :meth:`Task.advance` after each step."""
-    reporter = _REPORTER.get()
-    if reporter is None:
-        yield _SILENT
-        return
-    opened = reporter.open(name, total, unit)
+    """A loop of ``total`` steps (None: not known ahead, as iterations) for the listener;
+    call the task's :meth:`Task.advance` after each step."""
+    opened = _current().open(name, total, unit)
     try:
         yield opened
     finally:
@@ -287,13 +291,6 @@ def task(name: str, total: int | None = None, unit: str = "step") -> Iterator[Ta
 
 
 def write(text: str) -> None:
-    """A line on the listener's stream without breaking its bar (a warning), else on
-    stderr."""
-    reporter = _REPORTER.get()
-    if reporter is None:
-        print(text, file=sys.stderr, flush=True)
-    else:
-        reporter.write(text)
-
-
-_SILENT = Task()
+    """A line on the listener's stream without breaking its bar (a warning; on stderr
+    when nobody listens)."""
+    _current().write(text)

@@ -3,6 +3,7 @@ the cost the solver's result has (checked by recomputing it), and say nothing wh
 nobody listens."""
 
 import io
+import itertools
 import re
 
 import numpy as np
@@ -52,7 +53,7 @@ def test_each_iteration_and_its_cost_is_told_and_the_last_is_the_solution_cost()
     # independent truth: 0.5 |r|^2 at the start and at the returned solution
     np.testing.assert_allclose(costs[0], 0.5 * np.sum(_exponential(x0, False)[0] ** 2), rtol=1e-5)
     np.testing.assert_allclose(costs[-1], 0.5 * np.sum(_exponential(x, False)[0] ** 2), rtol=1e-5)
-    assert all(b <= a for a, b in zip(costs, costs[1:], strict=False))
+    assert all(b <= a for a, b in itertools.pairwise(costs))
     assert costs[-1] < 1e-3 * costs[0]
 
 
@@ -81,7 +82,7 @@ def test_refine_lines_have_decreasing_costs_ending_at_the_result_cost():
     steps = [int(m.group(1)) for m in iterations]
     costs = [float(m.group(2)) for m in iterations]
     assert steps == list(range(len(steps))) and steps[-1] == result.iterations
-    assert all(b <= a for a, b in zip(costs, costs[1:], strict=False))
+    assert all(b <= a for a, b in itertools.pairwise(costs))
     assert costs[-1] < 0.01 * costs[0]
     np.testing.assert_allclose(costs[-1], result.cost, rtol=1e-5)
 
@@ -100,7 +101,7 @@ def test_refine_with_noise_rounds_tells_each_round_and_its_iterations():
     assert sum(t.steps[-1][0] for t in runs) == result.iterations
     for t in runs:
         costs = _costs(t)
-        assert all(b <= a for a, b in zip(costs, costs[1:], strict=False))
+        assert all(b <= a for a, b in itertools.pairwise(costs))
 
 
 def test_the_library_prints_nothing_by_default(capfd):

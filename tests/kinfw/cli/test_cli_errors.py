@@ -35,7 +35,9 @@ HEAD = HEAD_URDF
 
 
 def _run(argv, capsys):
-    code = main([str(a) for a in argv])
+    """Exit code, stdout and stderr of ``kinfw -q ARGV`` (-q: no progress lines, so
+    stderr holds only what the command says: its warnings and errors)."""
+    code = main(["-q", *(str(a) for a in argv)])
     out = capsys.readouterr()
     return code, out.out, out.err
 
@@ -390,7 +392,7 @@ def test_a_urdf_with_an_undeclared_link_names_the_joint_and_the_link(xml, messag
 
 def test_a_missing_parent_link_is_one_line_and_urdfdom_prints_nothing(tmp_path, capfd):
     (tmp_path / "bad.urdf").write_text(MISSING_PARENT)
-    code = main(["crosscheck", str(tmp_path / "bad.urdf")])
+    code = main(["-q", "crosscheck", str(tmp_path / "bad.urdf")])  # -q: no progress
     out, err = capfd.readouterr()  # file descriptors: C++ output would be here
     assert code == 2
     assert out == ""

@@ -2,6 +2,7 @@
 Levenberg-Marquardt costs decreasing), a tqdm bar on a terminal, nothing with -q."""
 
 import io
+import itertools
 import re
 import sys
 
@@ -60,7 +61,7 @@ def test_piped_lines_have_the_stages_in_order_and_decreasing_costs(head_data, ca
             runs[-1].append(float(m.group(2)))
     assert len(runs) >= 5  # a run per noise round
     for costs in runs:
-        assert all(b <= a for a, b in zip(costs, costs[1:], strict=False)), costs
+        assert all(b <= a for a, b in itertools.pairwise(costs)), costs
     assert runs[0][-1] < runs[0][0]  # the first run starts from the closed form, off the fit
 
 
