@@ -237,8 +237,8 @@ class _BarTask(Task):
         self.bar = bar
 
     def advance(self, n: int = 1, note: str = "") -> None:
-        if note:
-            self.bar.set_postfix_str(note, refresh=False)
+        if note:  # shown now when no step is (the start of a loop), else with the step
+            self.bar.set_postfix_str(note, refresh=n == 0)
         self.bar.update(n)
 
     def close(self) -> None:

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw import progress
 from kinfw.camera import CameraIntrinsics
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.model import Robot
@@ -390,18 +391,20 @@ def greedy(
         raise ValueError(f"n = {n}: only {int(available.sum())} candidates to choose from")
     M = _ridge_matrix(info)
     chosen, values = [], []
-    for _ in range(n):
-        C = _inverse(M)
-        gain = _gains(info.factors, C, A)
-        gain[~available] = -np.inf
-        i = int(np.argmax(gain))
-        chosen.append(i)
-        available[i] = False
-        full = groups is not None and quota is not None
-        if full and np.sum(groups[chosen] == groups[i]) >= quota:
-            available[groups == groups[i]] = False
-        M = M + info.factors[i].T @ info.factors[i]
-        values.append(float(np.trace(A @ _inverse(M))))
+    with progress.task("plan: greedy selection", total=n, unit="picks") as bar:
+        for _ in range(n):
+            C = _inverse(M)
+            gain = _gains(info.factors, C, A)
+            gain[~available] = -np.inf
+            i = int(np.argmax(gain))
+            chosen.append(i)
+            available[i] = False
+            full = groups is not None and quota is not None
+            if full and np.sum(groups[chosen] == groups[i]) >= quota:
+                available[groups == groups[i]] = False
+            M = M + info.factors[i].T @ info.factors[i]
+            values.append(float(np.trace(A @ _inverse(M))))
+            bar.advance(note=f"objective {values[-1]:.4g}")
     return np.array(chosen, np.int64), np.array(values)
 
 
@@ -436,28 +439,30 @@ def exchange(
     M = _ridge_matrix(info) + np.einsum("nkp,nkq->pq", F[chosen], F[chosen])
     current = float(np.trace(A @ _inverse(M)))
     swaps = 0
-    for _ in range(max_passes):
-        improved = False
-        for s in range(len(chosen)):
-            i = chosen[s]
-            Mm = M - F[i].T @ F[i]
-            C = _inverse(Mm)
-            free = base.copy()
-            free[chosen] = False
-            if groups is not None:
-                free &= groups == groups[i]
-            if not free.any():
-                continue
-            gain = _gains(F, C, A)
-            gain[~free] = -np.inf
-            j = int(np.argmax(gain))
-            value = float(np.trace(A @ C)) - gain[j]
-            if value < current * (1.0 - 1e-12):
-                chosen[s] = j
-                M = Mm + F[j].T @ F[j]
-                current = float(np.trace(A @ _inverse(M)))
-                swaps += 1
-                improved = True
-        if not improved:
-            break
+    with progress.task("plan: exchange", unit="pass") as bar:
+        for _ in range(max_passes):
+            improved = False
+            for s in range(len(chosen)):
+                i = chosen[s]
+                Mm = M - F[i].T @ F[i]
+                C = _inverse(Mm)
+                free = base.copy()
+                free[chosen] = False
+                if groups is not None:
+                    free &= groups == groups[i]
+                if not free.any():
+                    continue
+                gain = _gains(F, C, A)
+                gain[~free] = -np.inf
+                j = int(np.argmax(gain))
+                value = float(np.trace(A @ C)) - gain[j]
+                if value < current * (1.0 - 1e-12):
+                    chosen[s] = j
+                    M = Mm + F[j].T @ F[j]
+                    current = float(np.trace(A @ _inverse(M)))
+                    swaps += 1
+                    improved = True
+            bar.advance(note=f"objective {current:.4g}, {swaps} swaps")
+            if not improved:
+                break
     return chosen, current, swaps

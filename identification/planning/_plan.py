@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw import progress
 from kinfw.identification.planning._objective import (
     CandidateInformation,
     HeldOut,
@@ -179,6 +180,7 @@ def plan_configurations(
     if setup.cameras and w_T_target is None:
         lower, upper = robot.joint_limits(names)
         w_T_target = setup.target_pose(robot, names, 0.5 * (lower + upper))
+    progress.stage(f"plan: the information of {len(pool_qs)} candidates")
     ctx = _context(robot, setup, pool_qs, test_qs, names, w_T_target)
     A = ctx.heldout.objective[1]
     N = len(pool_qs)
@@ -193,6 +195,7 @@ def plan_configurations(
     chosen, final, swaps = exchange(ctx.info, A, order[:n])
     seconds = time.perf_counter() - t0
     log.info("plan: %d of %d candidates in %.2f s (%d swaps)", n, N, seconds, swaps)
+    progress.stage("plan: random designs, for comparison")
     random_ms = _random_ms(ctx, A, n, rng, random_draws)
     curve = []
     for k in curve_ns:

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw import progress
 from kinfw.files import atomic_path
 from kinfw.identification.planning._objective import Setup
 from kinfw.identification.planning._plan import Plan, plan_configurations
@@ -151,8 +152,10 @@ def plan_measurement(
         raise ValueError("give pool_qs or within_limits, not both")
     rng = np.random.default_rng(seed)
     fraction = within_limits or 0.8
+    progress.stage(f"plan: {n_test} test configurations")
     tests = evaluation_set(robot, setup, n_test, rng, fraction=fraction)
     names, w_T = tests.joint_names, tests.w_T_target
+    progress.stage("plan: the candidate pool")
     if pool_qs is not None:
         pool = candidate_pool(robot, setup, names, w_T, qs=pool_qs)
     else:

@@ -305,7 +305,18 @@ def test_the_cli_exits_2_and_writes_nothing(tmp_path, capsys, datasets):
     out = tmp_path / "calibrated.urdf"
     for method in ("refine", "closed-form"):
         code = main(
-            ["calibrate", "--urdf", str(HEAD), "--out", str(out), "--method", method, str(path)]
+            # -q: no progress lines, the error alone on stderr
+            [
+                "-q",
+                "calibrate",
+                "--urdf",
+                str(HEAD),
+                "--out",
+                str(out),
+                "--method",
+                method,
+                str(path),
+            ]
         )
         err = capsys.readouterr().err
         assert code == 2

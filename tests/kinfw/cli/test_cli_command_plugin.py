@@ -88,7 +88,16 @@ def test_its_outputs_are_checked_before_any_work(tmp_path, capsys):
 
 def test_its_user_errors_are_one_line(tmp_path, capsys):
     code = main(
-        ["distance", str(HEAD_URDF), "left_camera", "nowhere", "--out", str(tmp_path / "d.json")],
+        # -q: no progress lines (loading the URDF), the error alone
+        [
+            "-q",
+            "distance",
+            str(HEAD_URDF),
+            "left_camera",
+            "nowhere",
+            "--out",
+            str(tmp_path / "d.json"),
+        ],
         commands=(*COMMANDS, add_distance_parser),
     )
     err = capsys.readouterr().err

@@ -18,7 +18,9 @@ HEAD = builtin_head_urdf()
 
 
 def _run(argv, capsys):
-    code = main([str(a) for a in argv])
+    """Exit code, stdout and stderr of ``kinfw -q ARGV`` (-q: no progress lines, so
+    stderr holds only what the command says: its warnings and errors)."""
+    code = main(["-q", *(str(a) for a in argv)])
     out = capsys.readouterr()
     return code, out.out, out.err
 

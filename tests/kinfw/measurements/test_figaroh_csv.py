@@ -221,7 +221,8 @@ def test_bad_files_name_the_file_row_and_column(tiago, tmp_path, text, match):
 def test_cli_user_error_exits_2_and_writes_nothing(tmp_path, capsys):
     path = _csv(tmp_path, "x1,y1,z1,arm_1_joint\n1,2,x,4\n")
     out = tmp_path / "out.json"
-    argv = ["import-csv", str(path), "--urdf", str(URDF), "--frame", "arm_7_link"]
+    # -q: no progress lines (loading the URDF), the error alone on stderr
+    argv = ["-q", "import-csv", str(path), "--urdf", str(URDF), "--frame", "arm_7_link"]
     assert main([*argv, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert err.startswith("kinfw import-csv: error: ") and "column 'z1'" in err
@@ -229,7 +230,7 @@ def test_cli_user_error_exits_2_and_writes_nothing(tmp_path, capsys):
     # measured in the observed frame itself: refused
     # (tests/kinfw/observations/test_measured_in_robot.py
     # converts the eye-hand session in the head camera, a frame of the URDF)
-    eye_hand = ["import-csv", str(EYE_HAND_CSV), *argv[2:]]
+    eye_hand = ["-q", "import-csv", str(EYE_HAND_CSV), *argv[3:]]
     code = main([*eye_hand, "--measured-in", "arm_7_link", "--out", str(out)])
     err = capsys.readouterr().err
     assert code == 2 and err.startswith("kinfw import-csv: error: ")

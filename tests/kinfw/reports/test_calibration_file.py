@@ -201,7 +201,7 @@ def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
         tmp_path / "d.json",
         simulate(robot, qs, names, frames=("left_plate",), rng=np.random.default_rng(1)),
     )
-    code = main(["verify", str(head), str(tmp_path / "d.json"), "--sidecar", str(bad)])
+    code = main(["-q", "verify", str(head), str(tmp_path / "d.json"), "--sidecar", str(bad)])
     err = capsys.readouterr().err
     assert code == 2
     assert (
