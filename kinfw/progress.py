@@ -10,6 +10,8 @@ Library code reports without taking a callback argument::
         for it in range(1, 101):
             ...
             bar.advance(note=f"cost {cost:.6g}")
+    for candidate in progress.steps(candidates, "model choice", unit="candidates"):
+        ...
 
 Nothing listens by default: the library prints nothing. A listener is a :class:`Reporter`
 installed for a block of code with :func:`reporting` (in a context variable, so a thread
@@ -37,9 +39,9 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sized
 from contextvars import ContextVar
-from typing import TextIO
+from typing import TextIO, TypeVar
 
 __all__ = [
     "BarReporter",
@@ -49,9 +51,13 @@ __all__ = [
     "reporting",
     "stage",
     "stderr_reporter",
+    "steps",
     "task",
     "write",
 ]
+
+
+T = TypeVar("T")
 
 
 class Task:
@@ -288,6 +294,17 @@ def task(name: str, total: int | None = None, unit: str = "step") -> Iterator[Ta
         yield opened
     finally:
         opened.close()
+
+
+def steps(items: Iterable[T], name: str, *, unit: str = "step") -> Iterator[T]:
+    """``items``, each a step of a :func:`task` called ``name`` (of ``len(items)`` steps
+    when they have a length), as ``for item in tqdm(items)``: the step is done when the
+    loop's body is."""
+    total = len(items) if isinstance(items, Sized) else None
+    with task(name, total, unit) as bar:
+        for item in items:
+            yield item
+            bar.advance()
 
 
 def write(text: str) -> None:

@@ -140,3 +140,19 @@ def test_reporting_restores_the_reporter_before_it():
 def test_write_without_a_reporter_goes_to_stderr(capsys):
     progress.write("a warning")
     assert capsys.readouterr().err == "a warning\n"
+
+
+def test_steps_is_a_step_per_item_after_its_body_and_a_break_closes_the_task():
+    recorder = Recorder()
+    seen = []
+    with reporting(recorder):
+        for item in progress.steps(["a", "b", "c"], "items", unit="items"):
+            seen.append((item, list(recorder.tasks[0].steps)))
+        for item in progress.steps(iter(range(10)), "unsized"):
+            if item == 2:
+                break
+    assert seen == [("a", []), ("b", [(1, "")]), ("c", [(1, ""), (2, "")])]
+    items, unsized = recorder.tasks
+    assert (items.total, items.steps[-1], items.closed) == (3, (3, ""), True)
+    assert (unsized.total, unsized.steps[-1], unsized.closed) == (None, (2, ""), True)
+    assert recorder.depth == 0

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kinfw import progress
 from kinfw.identification import Calibration, calibrate
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements
@@ -238,7 +239,10 @@ def choose_parameters(
             f"{data.n_samples}; give --params"
         )
     runs = _runs(prior)
-    fits = [_fit(nominal, data, parameters, p, noise=noise, loss=loss) for parameters, p in runs]
+    fits = [
+        _fit(nominal, data, parameters, p, noise=noise, loss=loss)
+        for parameters, p in progress.steps(runs, "model choice", unit="candidates")
+    ]
     reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
     excluded = _rejected_keys(reference)
