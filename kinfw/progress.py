@@ -165,15 +165,12 @@ class _LineTask(Task):
     """The outermost loop of a :class:`LineReporter`: ``name: unit 5, note`` or
     ``name: 3/10 units, note`` at the steps the reporter shows, and the last at close."""
 
-    def __init__(self, reporter: LineReporter, name, total, unit, every) -> None:
-        self.reporter, self.name, self.total, self.unit, self.every = (
-            reporter,
-            name,
-            total,
-            unit,
-            every,
-        )
-        self.done, self.note, self.shown = 0, "", -1
+    def __init__(
+        self, reporter: LineReporter, name: str, total: int | None, unit: str, every: int
+    ) -> None:
+        self.reporter, self.name, self.total, self.unit = reporter, name, total, unit
+        self.every = every
+        self.done, self.note, self.shown = 0, "", -1  # shown: the step last shown
 
     def advance(self, n: int = 1, note: str = "") -> None:
         first = self.shown < 0
