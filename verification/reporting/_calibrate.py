@@ -118,7 +118,7 @@ def _model_choice(
 
     progress.stage("model choice: the parameter set and prior")
     choice = choose_parameters(nominal, data, noise=noise, loss=loss, prior=prior)
-    progress.stage(f"model choice: {choice.label}; calibrating with it")
+    progress.stage(f"model choice: {choice.label}")
     return choice.parameters, choice.prior, choice
 
 
