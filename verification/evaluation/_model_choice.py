@@ -243,6 +243,7 @@ def choose_parameters(
         _fit(nominal, data, parameters, p, noise=noise, loss=loss)
         for parameters, p in progress.steps(runs, "model choice", unit="candidates")
     ]
+    progress.stage("model choice: the candidates' leave-one-out scores")
     reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
     excluded = _rejected_keys(reference)

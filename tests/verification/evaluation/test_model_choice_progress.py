@@ -29,7 +29,10 @@ def test_piped_model_choice_is_a_line_per_candidate(few_plates):
         choice = choose_parameters(*few_plates)
     lines = [line.split(" s  ", 1)[1] for line in out.getvalue().splitlines()]
     n = len(choice.candidates)
-    assert n == 11 and lines == [f"model choice: {i}/{n} candidates" for i in range(1, n + 1)]
+    assert n == 11 and lines == [
+        *(f"model choice: {i}/{n} candidates" for i in range(1, n + 1)),
+        "model choice: the candidates' leave-one-out scores",
+    ]
 
 
 @pytest.mark.slow
@@ -41,4 +44,5 @@ def test_each_candidate_fit_is_a_loop_inside_the_model_choice(few_plates):
     assert [(t.name, t.total) for t in outer] == [("model choice", len(choice.candidates))]
     inner = [t for t in recorder.tasks if t.depth > 0]
     assert inner and {t.name for t in inner} == {"Levenberg-Marquardt"}
-    assert recorder.stages == []  # the candidates' stages are inside the loop
+    # the candidates' own stages are inside the loop
+    assert recorder.stages == ["model choice: the candidates' leave-one-out scores"]
