@@ -99,7 +99,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 
 def _print_fleet(fleet: FleetResult) -> None:
     """The summary table (in-sample RMS before/after per metric, over each robot's
-    observation groups), each failure's reason, and the files written."""
+    observation groups), each robot's warnings, each failure's reason, and the files
+    written."""
     from kinfw.verification.reporting import FLEET_SUMMARY
 
     metrics = list({b.key: b for r in fleet.rows for b, _ in r.rms}.values())
@@ -117,6 +118,9 @@ def _print_fleet(fleet: FleetResult) -> None:
     done = len(fleet.rows) - len(fleet.failed)
     print(f"calibrated {done} of {len(fleet.rows)} robots (RMS on each one's calibration data):")
     print(format_table(rows, [*header, "status"]))
+    for r in fleet.rows:
+        for warning in r.warnings:
+            print(f"{r.name}: warning: {warning}")
     for r in fleet.failed:
         print(f"{r.name}: failed: {r.error}")
     out = Path(fleet.out_dir)

@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import dataclasses
 import glob
+import logging
 import math
 import os
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -208,6 +210,9 @@ class FleetRow:
         None when calibrated; else the one-line reason (a file that cannot be read, data
         the calibration refuses, an output that cannot be written; an unexpected
         error is prefixed with its type).
+    warnings : tuple of str
+        What its calibration warned about (kinfw's Python warnings and logged warnings,
+        each once, in order), wherever it ran.
     n_samples : int or None
         Samples of its data (None when the data could not be read).
     model : ModelSummary or None
@@ -225,6 +230,7 @@ class FleetRow:
     urdf: str
     data: str
     error: str | None = None
+    warnings: tuple[str, ...] = ()
     n_samples: int | None = None
     model: ModelSummary | None = None
     rms: tuple[tuple[ErrorValue, ErrorValue], ...] = ()
@@ -239,6 +245,7 @@ class FleetRow:
             "robot": self.name,
             "status": "calibrated" if self.ok else "failed",
             "error": self.error,
+            "warnings": list(self.warnings),
             "urdf": self.urdf,
             "data": self.data,
             "n_samples": self.n_samples,
@@ -294,15 +301,46 @@ def _error_text(exc: Exception) -> str:
     return text if isinstance(exc, ValueError | OSError) else f"{type(exc).__name__}: {text}"
 
 
+class _Collected(logging.Handler):
+    """Appends each logged warning's message to a list."""
+
+    def __init__(self, out: list[str]) -> None:
+        super().__init__(logging.WARNING)
+        self.out = out
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.out.append(record.getMessage())
+
+
 def _calibrate_one(
     nominal: Robot, data: Measurements, options: Mapping[str, Any]
-) -> CalibrationResult | str:
+) -> tuple[CalibrationResult | str, tuple[str, ...]]:
     """One robot's task: :func:`calibrate_and_report`, or the error's text (so that one
-    robot's failure does not stop the others)."""
+    robot's failure does not stop the others), and the warnings it gave: kinfw's
+    ``UserWarning`` and the warnings logged under ``kinfw``, collected here instead of
+    printed, so that they come back from any worker with the robot they belong to.
+
+    Collecting swaps process-wide hooks (:func:`warnings.catch_warnings`, the ``kinfw``
+    logger's handlers) while the task runs: one task per worker thread keeps them apart.
+    """
+    said: list[str] = []
+    logger = logging.getLogger("kinfw")
+    handler, propagate = _Collected(said), logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
     try:
-        return calibrate_and_report(nominal, data, **options)
-    except Exception as exc:  # reported in its row; the fleet goes on
-        return _error_text(exc)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a library's deprecation notice is not the robot's
+            warnings.simplefilter("always", UserWarning)
+            warnings.showwarning = lambda message, *_, **__: said.append(str(message))
+            try:
+                result = calibrate_and_report(nominal, data, **options)
+            except Exception as exc:  # reported in its row; the fleet goes on
+                result = _error_text(exc)
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+    return result, tuple(dict.fromkeys(" ".join(w.split()) for w in said))
 
 
 def _write(member: FleetMember, result: CalibrationResult, folder: Path) -> None:
@@ -379,9 +417,11 @@ def calibrate_fleet(
         progress=progress,
     )
     rows = dict(failed)
-    for i, result in zip(order, results, strict=True):
+    for i, (result, said) in zip(order, results, strict=True):
         m = members[i]
-        row = FleetRow(m.name, str(m.urdf), str(m.data), n_samples=loaded[i][1].n_samples)
+        row = FleetRow(
+            m.name, str(m.urdf), str(m.data), warnings=said, n_samples=loaded[i][1].n_samples
+        )
         if isinstance(result, str):
             rows[i] = dataclasses.replace(row, error=result)
             continue

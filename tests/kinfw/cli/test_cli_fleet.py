@@ -119,3 +119,21 @@ def test_bad_outputs_and_options_stop_before_any_work(robots, tmp_path, capsys, 
     assert code == 2 and out == ""
     assert err.startswith("kinfw fleet: error: ") and len(err.splitlines()) == 1
     assert re.search(message, err), err
+
+
+def test_each_robots_warnings_are_the_ones_kinfw_calibrate_prints(robots, tmp_path, capsys):
+    understated = ["--params", "full", "--sigma-mm", "0.1", "--sigma-deg", "0.1"]
+    code, out, err = run_cli(["fleet", robots, "--out", tmp_path / "fleet", *understated], capsys)
+    assert code == 0 and err == ""
+    summary = json.loads((tmp_path / "fleet" / "summary.json").read_text())
+    for row in summary["robots"]:
+        name = row["robot"]
+        argv = ["calibrate", robots / name / "data.json", "--urdf", robots / name / "robot.urdf"]
+        code, _, err = run_cli([*argv, "--out", tmp_path / f"{name}.urdf", *understated], capsys)
+        assert code == 0
+        prefix = "kinfw calibrate: warning: "
+        own = [line.removeprefix(prefix) for line in err.splitlines() if line.startswith(prefix)]
+        assert row["warnings"] == own
+        assert any("times the stated noise" in w for w in own)  # the noise is understated
+        for warning in own:
+            assert f"{name}: warning: {warning}" in out

@@ -58,7 +58,9 @@ def test_crossvalidation_on_the_cluster_gives_the_serial_scores(cluster, head):
 
 def test_a_fleet_on_the_cluster_writes_the_serial_files(cluster, tmp_path, capsys):
     write_fleet(tmp_path / "robots", 3, per_joint=4, seed=20)
+    # an understated noise: each robot warns, and its warnings come back from the workers
     argv = ["fleet", str(tmp_path / "robots" / "*" / "data.json"), "--params", "full"]
+    argv += ["--sigma-mm", "0.1", "--sigma-deg", "0.1"]
     code, serial, _ = run_cli([*argv, "--out", tmp_path / "serial"], capsys)
     assert code == 0, serial
     code, remote, _ = run_cli([*argv, "--out", tmp_path / "remote", "--executor", cluster], capsys)
@@ -69,6 +71,8 @@ def test_a_fleet_on_the_cluster_writes_the_serial_files(cluster, tmp_path, capsy
         p.relative_to(tmp_path / "remote") for p in (tmp_path / "remote").rglob("*")
     )
     assert len([p for p in written if p.suffix == ".urdf"]) == 3
+    summary = json.loads((tmp_path / "serial" / "summary.json").read_text())
+    assert all(row["warnings"] for row in summary["robots"])
     for path in written:
         a, b = ((tmp_path / run / path) for run in ("serial", "remote"))
         if path.suffix == ".urdf" or path.name == "summary.json":
