@@ -39,6 +39,7 @@ def _fold_numbers(cv):
     )
 
 
+@pytest.mark.slow
 def test_crossvalidation_on_the_cluster_gives_the_serial_scores(cluster, head):
     truth = load_robot(perturb_robot(head, np.random.default_rng(11), origin_mm=5.0))
     data = plate_data(truth, 24, 12)
@@ -56,6 +57,7 @@ def test_crossvalidation_on_the_cluster_gives_the_serial_scores(cluster, head):
     assert done[-1] == (9, 9) and len(done) == 9
 
 
+@pytest.mark.slow
 def test_a_fleet_on_the_cluster_writes_the_serial_files(cluster, tmp_path, capsys):
     write_fleet(tmp_path / "robots", 3, per_joint=4, seed=20)
     # an understated noise: each robot warns, and its warnings come back from the workers
@@ -82,6 +84,7 @@ def test_a_fleet_on_the_cluster_writes_the_serial_files(cluster, tmp_path, capsy
             assert da == db, path
 
 
+@pytest.mark.slow
 def test_a_study_on_the_cluster_writes_the_serial_json(cluster, tmp_path, capsys):
     argv = ["reproduce", "table4", "--trials", "3", "--seed", "2"]
     assert run_cli([*argv, "--out", tmp_path / "serial"], capsys)[0] == 0
