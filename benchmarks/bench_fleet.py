@@ -10,16 +10,20 @@ one folder per robot with ``robot.urdf`` and ``data.json``. Each run is a whole
 with M = 6, 37 samples, enough residuals per parameter for ``full`` without the model
 choice's cross-validation), with one BLAS thread per process (as Dask's workers run;
 else the pool's processes each start a BLAS thread per core). The Dask cluster
-(``distributed.LocalCluster``, W worker processes of one thread) is started before its
-run and its start-up timed apart, as a cluster that is already up; its workers import
-kinfw on their first task, inside the timed run.
+(``distributed.LocalCluster``, W worker processes of one thread) is started before the
+rounds and its start-up timed apart, as a cluster that is already up; its workers import
+kinfw on their first task, inside the first round's run, and keep it.
 
 Compared files: every calibrated URDF and ``summary.json`` byte for byte; each report
 and sidecar as JSON without what says when, where and how long (``created``,
 ``sidecar``, ``seconds``).
 
+The three runs go one after the other, ``--rounds`` times (the table gives each round's
+wall time, the median and the speed-up of the medians over serial): other load on the
+machine moves single runs a lot.
+
 Run from the repository root: ``python benchmarks/bench_fleet.py [--robots 20]
-[--per-joint 6] [--workers 2]``.
+[--per-joint 6] [--workers 2] [--rounds 3]``.
 """
 
 from __future__ import annotations
@@ -32,6 +36,8 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -82,50 +88,64 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--robots", type=int, default=20, help="simulated robots (default 20)")
     parser.add_argument("--per-joint", type=int, default=6, help="values per joint (default 6)")
     parser.add_argument("--workers", type=int, default=2, help="pool / cluster workers (2)")
+    parser.add_argument("--rounds", type=int, default=3, help="rounds of the three runs (3)")
     args = parser.parse_args(argv)
     import distributed
     from distributed import LocalCluster
 
     started = time.perf_counter()
     print(machine_info((("distributed", distributed.__version__),)))
+    modes = {
+        "serial (this process)": (),
+        f"--jobs {args.workers} (process pool)": ("--jobs", str(args.workers)),
+        f"--executor dask:// ({args.workers} workers x 1 thread)": ("--executor", "{address}"),
+    }
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         write_fleet(root / "robots", args.robots, per_joint=args.per_joint)
         print(
             f"data       {args.robots} robots (IIS-head copies), {args.per_joint} values per "
-            f"joint, default options (--params auto); one BLAS thread per process\n"
+            f"joint, default options (--params auto); one BLAS thread per process; "
+            f"{args.rounds} rounds of the three runs, one after the other\n"
         )
-        runs: list[tuple[str, float, Path]] = []
-        seconds, table = run_fleet(root / "robots", root / "serial")
-        runs.append(("serial (this process)", seconds, root / "serial"))
-        seconds, _ = run_fleet(root / "robots", root / "jobs", "--jobs", str(args.workers))
-        runs.append((f"--jobs {args.workers} (process pool)", seconds, root / "jobs"))
         up = time.perf_counter()
         with LocalCluster(
             n_workers=args.workers, threads_per_worker=1, dashboard_address=":0"
         ) as cluster:
             up = time.perf_counter() - up
             address = cluster.scheduler_address.replace("tcp://", "dask://")
-            seconds, _ = run_fleet(root / "robots", root / "dask", "--executor", address)
-        label = f"--executor dask:// ({args.workers} workers x 1 thread)"
-        runs.append((label, seconds, root / "dask"))
-        serial = runs[0][1]
-        rows = [
-            [
-                label,
-                f"{seconds:.1f}",
-                f"{serial / seconds:.2f}",
-                "-" if path == runs[0][2] else (", ".join(differences(runs[0][2], path)) or "yes"),
-            ]
-            for label, seconds, path in runs
-        ]
-        print(
-            format_table(
-                ["run (whole kinfw fleet process)", "wall s", "speed-up", "same files as serial"],
-                rows,
+            seconds: dict[str, list[float]] = {label: [] for label in modes}
+            outs: dict[str, list[Path]] = {label: [] for label in modes}
+            for r in range(args.rounds):
+                for k, (label, extra) in enumerate(modes.items()):
+                    out = root / f"run{r}_{k}"
+                    extra = tuple(a.format(address=address) for a in extra)
+                    wall, text = run_fleet(root / "robots", out, *extra)
+                    seconds[label].append(wall)
+                    outs[label].append(out)
+                    if r == 0 and k == 0:
+                        table = text
+        reference = outs[next(iter(modes))][0]
+        serial = float(np.median(seconds[next(iter(modes))]))
+        rows = []
+        for label in modes:
+            wrong = sorted({d for out in outs[label] for d in differences(reference, out)})
+            median = float(np.median(seconds[label]))
+            rows.append(
+                [
+                    label,
+                    " ".join(f"{t:.1f}" for t in seconds[label]),
+                    f"{median:.1f}",
+                    f"{serial / median:.2f}",
+                    ", ".join(wrong) or "yes",
+                ]
             )
+        header = ["run (whole kinfw fleet process)", "wall s by round", "median s", "speed-up"]
+        print(format_table([*header, "same files as serial"], rows))
+        print(
+            f"\nDask LocalCluster start-up (not in its runs): {up:.1f} s; its workers import "
+            "kinfw in round 1 and keep it"
         )
-        print(f"\nDask LocalCluster start-up (not in its run): {up:.1f} s")
         print("\nthe serial run's summary:\n" + table)
     print(wall_time_line(started))
     return 0
