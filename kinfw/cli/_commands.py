@@ -27,6 +27,7 @@ from kinfw.cli._args import (
     up_arg,
 )
 from kinfw.cli._tables import accuracy_table
+from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, json_text, sidecar_path
 
 __all__ = [
@@ -230,12 +231,7 @@ def add_reproduce_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--trials", type=COUNT, default=None, help="random trials per point")
     p.add_argument("--seed", type=SEED, default=0)
-    p.add_argument(
-        "--jobs",
-        type=COUNT,
-        default=1,
-        help="run the trials in N worker processes (default 1: in this process)",
-    )
+    add_executor_options(p, tasks="the trials")
     p.add_argument("--json", action="store_true", help="print the study's JSON, not tables")
     p.set_defaults(func=cmd_reproduce, check_outputs=check_reproduce_outputs)
 
@@ -247,7 +243,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from kinfw.verification.papers import hirsh_figures_main, shih_figures_main
     from kinfw.verification.studies import gaze_study_main, head_studies_main
 
-    argv = ["--out", str(args.out), "--seed", str(args.seed), "--jobs", str(args.jobs)]
+    where = ["--jobs", str(args.jobs)] if args.executor is None else ["--executor", args.executor]
+    argv = ["--out", str(args.out), "--seed", str(args.seed), *where]
     if args.trials is not None:
         argv += ["--trials", str(args.trials)]
     if args.study == "hirsh":

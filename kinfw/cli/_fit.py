@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from kinfw.cli._args import read_data
 from kinfw.cli._tables import format_table, metric_format, number
@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     )
     from kinfw.verification.evaluation import CrossValidation
 
-__all__ = ["cmd_calibrate", "cmd_crossval", "cmd_demo"]
+__all__ = ["calibration_options", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
@@ -120,6 +120,20 @@ def _noise_arg(args: argparse.Namespace):
     )
 
 
+def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The keyword arguments of :func:`kinfw.verification.reporting.calibrate_and_report`
+    that the calibration's options give (:func:`kinfw.cli._fit_parser.
+    add_calibration_options`): parameters, method, noise, loss, prior, intrinsics."""
+    return {
+        "parameters": "auto" if args.params == "auto" else params_arg(args.params),
+        "method": args.method,
+        "noise": _noise_arg(args),
+        "loss": args.loss,
+        "prior": _prior_arg(args),
+        "refine_intrinsics": _intrinsics_arg(args.refine_intrinsics),
+    }
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from kinfw.model import load_robot
     from kinfw.reports import write_report
@@ -131,13 +145,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     result = calibrate_and_report(
         nominal,
         data,
-        parameters="auto" if args.params == "auto" else params_arg(args.params),
-        method=args.method,
-        noise=_noise_arg(args),
-        loss=args.loss,
-        prior=_prior_arg(args),
+        **calibration_options(args),
         held_out=held_out,
-        refine_intrinsics=_intrinsics_arg(args.refine_intrinsics),
         data_path=args.data,
     )
     report, choice = result.write(args.out), result.choice
@@ -384,23 +393,24 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # -- kinfw crossval ----------------------------------------------------------------------
 def cmd_crossval(args: argparse.Namespace) -> int:
     from kinfw.model import load_robot
-    from kinfw.verification.evaluation import crossvalidate
+    from kinfw.verification.evaluation import crossvalidate, open_executor
 
     nominal = load_robot(args.urdf)
     data = read_data(args.data, args)
     prior = _prior_arg(args)
-    cv = crossvalidate(
-        nominal,
-        data,
-        k=args.k,
-        seed=args.seed,
-        select=args.select,
-        noise=_noise_arg(args),
-        loss=args.loss,
-        prior=prior,
-        jobs=args.jobs,
-        exclude_flagged=args.exclude_flagged,
-    )
+    with open_executor(args.jobs, args.executor) as executor:
+        cv = crossvalidate(
+            nominal,
+            data,
+            k=args.k,
+            seed=args.seed,
+            select=args.select,
+            noise=_noise_arg(args),
+            loss=args.loss,
+            prior=prior,
+            executor=executor,
+            exclude_flagged=args.exclude_flagged,
+        )
     if args.json:
         print(json_text(cv.to_dict()))
         return 0

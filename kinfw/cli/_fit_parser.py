@@ -1,6 +1,6 @@
 """The parsers of the ``kinfw`` commands that fit a model: ``calibrate``, ``demo`` and
 ``crossval`` (the commands are in :mod:`kinfw.cli`), with the refinement's options
-they share.
+they share and the calibration's options ``fleet`` shares.
 
 Like :mod:`kinfw.cli`, this module imports only the standard library at start-up.
 """
@@ -11,7 +11,6 @@ import argparse
 from pathlib import Path
 
 from kinfw.cli._args import (
-    COUNT,
     POSITIVE_DEG,
     POSITIVE_MM,
     POSITIVE_PX,
@@ -21,9 +20,10 @@ from kinfw.cli._args import (
     number,
 )
 from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
+from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
-__all__ = ["add_fit_parsers"]
+__all__ = ["add_calibration_options", "add_fit_parsers"]
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -75,16 +75,25 @@ def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, help="calibrated URDF to write")
     p.add_argument("--report", type=Path, help="write the report (JSON) here")
     p.add_argument(
+        "--holdout",
+        type=Path,
+        help="measurement file not used for calibration; its errors go to the report and sidecar",
+    )
+    add_calibration_options(p)
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=cmd_calibrate, check_outputs=check_calibrate_outputs)
+
+
+def add_calibration_options(p: argparse.ArgumentParser) -> None:
+    """How ``calibrate`` (and ``fleet``, for each robot) calibrates: ``--method``,
+    ``--params``, noise, loss and prior, ``--camera``, ``--refine-intrinsics``
+    (:func:`kinfw.cli._fit.calibration_options` reads them)."""
+    p.add_argument(
         "--method",
         choices=("refine", "closed-form"),
         default="refine",
         help="refine (default): closed form and hand-eye, then the joint "
         "nonlinear least squares; closed-form: stop after closed form and hand-eye",
-    )
-    p.add_argument(
-        "--holdout",
-        type=Path,
-        help="measurement file not used for calibration; its errors go to the report and sidecar",
     )
     p.add_argument(
         "--params",
@@ -106,8 +115,6 @@ def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
         "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
         "the report says which the images do not determine",
     )
-    p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.set_defaults(func=cmd_calibrate, check_outputs=check_calibrate_outputs)
 
 
 def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
@@ -156,12 +163,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_fit_options(p)
     add_camera_option(p)
-    p.add_argument(
-        "--jobs",
-        type=COUNT,
-        default=1,
-        help="run the fits in N worker processes (default 1: in this process)",
-    )
+    add_executor_options(p, tasks="the fits (folds x parameter sets)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)
 

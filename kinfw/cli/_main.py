@@ -3,11 +3,11 @@ verification together.
 
 Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and where,
 never a traceback for a user error), 1 on an unexpected internal error, 3 when ``gaze``
-does not fixate or ``reach`` does not reach (:mod:`kinfw.cli`). Warnings (Python
-warnings and logged ones) are printed once each, as one line ``kinfw CMD: warning: ...``.
-Progress goes to stderr from the first second (:mod:`kinfw.progress`): a tqdm bar on a
-terminal, plain lines when stderr is piped, nothing with ``-q``; ``-v`` adds the logged
-information (what each stage found).
+does not fixate, ``reach`` does not reach or a robot of ``fleet`` fails
+(:mod:`kinfw.cli`). Warnings (Python warnings and logged ones) are printed once each, as
+one line ``kinfw CMD: warning: ...``. Progress goes to stderr from the first second
+(:mod:`kinfw.progress`): a tqdm bar on a terminal, plain lines when stderr is piped,
+nothing with ``-q``; ``-v`` adds the logged information (what each stage found).
 
 Every output path is checked before any work (each command's ``check_outputs``) and every file is
 written atomically (:mod:`kinfw.files`). This module imports only the standard library at
@@ -18,9 +18,10 @@ This module holds the top-level parser, the checks of the outputs, the warning p
 and :func:`main`. Each command's sub-parser is defined beside the command: ``simulate``
 in ``_simulate.py``; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
 ``import-csv`` in ``_commands.py``; ``calibrate``, ``demo`` and ``crossval`` in
-``_fit_parser.py`` (commands in ``_fit.py``); ``detect``, ``plan``, ``gaze`` and ``reach``
-in ``_detect.py``, ``_plan.py``, ``_gaze.py`` and ``_reach.py``. The argument types they
-share are in ``_args.py``.
+``_fit_parser.py`` (commands in ``_fit.py``); ``fleet``, ``detect``, ``plan``, ``gaze`` and
+``reach`` in ``_fleet.py``, ``_detect.py``, ``_plan.py``, ``_gaze.py`` and ``_reach.py``.
+The argument types they share are in ``_args.py``, the ``--jobs`` / ``--executor``
+options in :mod:`kinfw.executors`.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from kinfw.cli._commands import (
 )
 from kinfw.cli._detect import add_detect_parser
 from kinfw.cli._fit_parser import add_fit_parsers
+from kinfw.cli._fleet import add_fleet_parser
 from kinfw.cli._gaze import add_gaze_parser
 from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._reach import add_reach_parser
@@ -75,6 +77,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     add_simulate_parser,
     add_verify_parser,
     add_fit_parsers,
+    add_fleet_parser,
     add_view_parser,
     add_reproduce_parser,
     add_crosscheck_parser,

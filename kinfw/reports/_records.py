@@ -101,6 +101,16 @@ class ModelSummary:
     prior_rad: float | None
     reason: str
 
+    @property
+    def label(self) -> str:
+        """E.g. ``"full"``, ``"pan,tilt"`` or ``"full, prior 3 mm / 0.3 deg"``."""
+        if self.prior_m is None or self.prior_rad is None:
+            return ",".join(self.parameters)
+        return (
+            f"{','.join(self.parameters)}, prior {1e3 * self.prior_m:.3g} mm / "
+            f"{math.degrees(self.prior_rad):.3g} deg"
+        )
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "parameters": list(self.parameters),

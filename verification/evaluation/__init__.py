@@ -1,7 +1,8 @@
 """How good is a model: its errors against measurements (:func:`evaluate_model`, what
 ``kinfw verify`` reports), k-fold cross-validation of the whole pipeline, closed-form
 leave-one-out predictions, the default model choice, the Cramér-Rao bound, the
-CPC-vs-Pinocchio cross-check, and the trial runner.
+CPC-vs-Pinocchio cross-check, and the trial runner (in this process, a process pool or
+on a Dask scheduler's workers).
 """
 
 from __future__ import annotations
@@ -53,6 +54,7 @@ from kinfw.verification.evaluation._reprojection import WORST_IMAGES, reprojecti
 from kinfw.verification.evaluation._trials import (
     check_count,
     executor_for_jobs,
+    open_executor,
     run_trials,
 )
 
@@ -85,6 +87,7 @@ __all__ = [
     "known_frames",
     "leave_one_out",
     "metric_rms",
+    "open_executor",
     "pose_discrepancy",
     "position_jacobians",
     "predicted_position_ms",

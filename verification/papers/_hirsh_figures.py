@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.verification.evaluation import executor_for_jobs
 from kinfw.verification.papers._hirsh_experiments import (
     CONVERGED_DEG,
     PAPER_NOISE_DEG,
@@ -359,19 +358,10 @@ def hirsh_figures_main(argv: Sequence[str] | None = None) -> int:
     def run(**kwargs: Any) -> str:
         return format_hirsh(*run_hirsh(args.out, **kwargs))
 
-    executor = executor_for_jobs(args.jobs)
-    try:
-        return run_and_print(
-            "hirsh",
-            run,
-            {
-                "trials": args.trials,
-                "seed": args.seed,
-                "iterations": args.iterations,
-                "executor": executor,
-            },
-            (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"),
-        )
-    finally:
-        if executor is not None:
-            executor.shutdown()
+    return run_and_print(
+        "hirsh",
+        run,
+        {"trials": args.trials, "seed": args.seed, "iterations": args.iterations},
+        (args.out / "hirsh_fig3_fig4.png", args.out / "hirsh.json"),
+        args,
+    )

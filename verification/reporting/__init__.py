@@ -1,11 +1,21 @@
 """A calibration's report and sidecar built from the pipeline's results, the calibration
 workflow that makes them (:func:`calibrate_and_report`: model choice, pipeline, report;
-its result writes the URDF and sidecar together), and the errors-by-stage figure.
+its result writes the URDF and sidecar together), the same for a fleet of robots
+(:func:`calibrate_fleet`: a calibrated URDF and report per robot, a summary), and the
+errors-by-stage figure.
 """
 
 from __future__ import annotations
 
 from kinfw.verification.reporting._calibrate import CalibrationResult, calibrate_and_report
+from kinfw.verification.reporting._fleet import (
+    FLEET_SUMMARY,
+    FleetMember,
+    FleetResult,
+    FleetRow,
+    calibrate_fleet,
+    fleet_members,
+)
 from kinfw.verification.reporting._report import (
     before_after_rows,
     calibration_report,
@@ -25,15 +35,21 @@ from kinfw.verification.reporting._sections import (
 from kinfw.verification.reporting._stage_plot import plot_stage_errors
 
 __all__ = [
+    "FLEET_SUMMARY",
     "CalibrationResult",
+    "FleetMember",
+    "FleetResult",
+    "FleetRow",
     "before_after_rows",
     "calibrate_and_report",
+    "calibrate_fleet",
     "calibrated_unknowns",
     "calibration_report",
     "closed_form_section",
     "downweighted_rows",
     "errors_by_group",
     "file_sha256",
+    "fleet_members",
     "hand_eye_section",
     "noise_summary",
     "plot_stage_errors",

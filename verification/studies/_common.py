@@ -25,9 +25,10 @@ from typing import Any, Self, TypeVar, get_origin, get_type_hints
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw.executors import add_executor_options
 from kinfw.files import atomic_path, write_text_atomic
 from kinfw.model import builtin_head_urdf, load_robot
-from kinfw.verification.evaluation import executor_for_jobs
+from kinfw.verification.evaluation import open_executor
 
 __all__ = [
     "FieldsJSON",
@@ -242,27 +243,36 @@ def study_parser(
     studies: Sequence[str] = (),
 ) -> argparse.ArgumentParser:
     """The arguments every study's ``main`` takes: the study (when ``studies`` names a
-    choice), ``--out DIR`` (required), ``--trials N`` and ``--seed S`` (default 0)."""
+    choice), ``--out DIR`` (required), ``--trials N``, ``--seed S`` (default 0) and
+    where the trials run, ``--jobs N`` or ``--executor dask://HOST:PORT``
+    (:func:`kinfw.executors.add_executor_options`; :func:`run_and_print` opens it)."""
     parser = argparse.ArgumentParser(prog=prog, description=description)
     if studies:
         parser.add_argument("study", choices=tuple(studies))
     parser.add_argument("--out", type=Path, required=True, help="output directory")
     parser.add_argument("--trials", type=int, default=trials_default, help=trials_help)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument(
-        "--jobs", type=int, default=1, help="run the trials in N worker processes (default 1: here)"
-    )
+    add_executor_options(parser, tasks="the trials")
     return parser
 
 
 def run_and_print(
-    label: str, run: Callable[..., str], kwargs: Mapping[str, Any], written: Sequence[Path]
+    label: str,
+    run: Callable[..., str],
+    kwargs: Mapping[str, Any],
+    written: Sequence[Path],
+    args: argparse.Namespace,
 ) -> int:
-    """Call ``run(**kwargs)`` (a study that writes ``written`` and returns its table;
-    its trials are told to :mod:`kinfw.progress`); print the table, then one line with
+    """Call ``run(**kwargs)`` (a study that writes ``written`` and returns its table) with
+    its trials where ``args.jobs`` / ``args.executor`` say (:func:`study_parser`; passed
+    as ``executor=`` unless they run in this process, shut down after; the trials are
+    told to :mod:`kinfw.progress`); print the table, then one line with
     ``label``, the wall time and the files written. Returns 0, the exit status."""
     start = time.perf_counter()
-    text = run(**kwargs)
+    with open_executor(args.jobs, args.executor) as executor:
+        if executor is not None:
+            kwargs["executor"] = executor
+        text = run(**kwargs)
     print(text)
     print(
         f"\n{label}: {time.perf_counter() - start:.1f} s; wrote "
@@ -290,16 +300,10 @@ def choice_main(
     if args.trials is not None:
         kwargs["trials"] = args.trials
     run, format_table = studies[args.study]
-    executor = executor_for_jobs(args.jobs)
-    if executor is not None:
-        kwargs["executor"] = executor
-    try:
-        return run_and_print(
-            args.study,
-            lambda **kw: format_table(run(args.out, **kw)),
-            kwargs,
-            (args.out / f"{args.study}.png", args.out / f"{args.study}.json"),
-        )
-    finally:
-        if executor is not None:
-            executor.shutdown()
+    return run_and_print(
+        args.study,
+        lambda **kw: format_table(run(args.out, **kw)),
+        kwargs,
+        (args.out / f"{args.study}.png", args.out / f"{args.study}.json"),
+        args,
+    )

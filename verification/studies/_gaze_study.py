@@ -51,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.model import Robot, builtin_head_urdf, load_robot
-from kinfw.verification.evaluation import check_count, executor_for_jobs, run_trials
+from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.studies._common import (
     FieldsJSON,
     freeze,
@@ -416,8 +416,9 @@ def run_gaze(out_dir: str | Path, **kwargs: Any) -> GazeStudy:
 
 
 def gaze_study_main(argv: Sequence[str] | None = None) -> int:
-    """``kinfw reproduce gaze --out DIR [--trials N] [--seed S] [--jobs J]``:
-    run the study, write ``gaze.png`` and ``gaze.json``, print the table."""
+    """``kinfw reproduce gaze --out DIR [--trials N] [--seed S] [--jobs J | --executor
+    dask://HOST:PORT]``: run the study, write ``gaze.png`` and ``gaze.json``, print the
+    table."""
     args = study_parser(
         "kinfw reproduce gaze",
         "The value of calibration in use: a head fixating and an arm reaching with the "
@@ -427,16 +428,10 @@ def gaze_study_main(argv: Sequence[str] | None = None) -> int:
     kwargs: dict[str, Any] = {"seed": args.seed}
     if args.trials is not None:
         kwargs["trials"] = args.trials
-    executor = executor_for_jobs(args.jobs)
-    if executor is not None:
-        kwargs["executor"] = executor
-    try:
-        return run_and_print(
-            "gaze",
-            lambda **kw: format_gaze(run_gaze(args.out, **kw)),
-            kwargs,
-            (args.out / "gaze.png", args.out / "gaze.json"),
-        )
-    finally:
-        if executor is not None:
-            executor.shutdown()
+    return run_and_print(
+        "gaze",
+        lambda **kw: format_gaze(run_gaze(args.out, **kw)),
+        kwargs,
+        (args.out / "gaze.png", args.out / "gaze.json"),
+        args,
+    )

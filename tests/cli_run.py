@@ -1,0 +1,10 @@
+"""Run the ``kinfw`` command line in the test's process and capture what it prints."""
+
+from kinfw.cli._main import main
+
+
+def run_cli(argv, capsys) -> tuple[int, str, str]:
+    """``(exit code, stdout, stderr)`` of ``kinfw ARGV`` (each argument through ``str``)."""
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
