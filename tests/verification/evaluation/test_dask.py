@@ -10,12 +10,14 @@ import sys
 import numpy as np
 import pytest
 
+from kinfw import progress
 from kinfw.model import load_robot
 from kinfw.simulation import perturb_robot
 from kinfw.verification.evaluation import crossvalidate, open_executor
 from tests.cli_run import run_cli
 from tests.fleet_data import without_run_details, write_fleet
 from tests.head_data import plate_data
+from tests.recorder import Recorder
 
 
 @pytest.fixture(scope="module")
@@ -45,16 +47,15 @@ def test_crossvalidation_on_the_cluster_gives_the_serial_scores(cluster, head):
     data = plate_data(truth, 24, 12)
     kwargs = {"k": 3, "seed": 5, "sets": ("none", "frames", "full")}
     serial = crossvalidate(head, data, **kwargs)
-    done = []
-    with open_executor(address=cluster) as executor:
-        cv = crossvalidate(
-            head, data, executor=executor, progress=lambda d, t: done.append((d, t)), **kwargs
-        )
+    recorder = Recorder()
+    with open_executor(address=cluster) as executor, progress.reporting(recorder):
+        cv = crossvalidate(head, data, executor=executor, **kwargs)
     assert [(s.fold, s.parameters) for s in cv.scores] == [
         (f, p) for f in range(3) for p in ("none", "frames", "full")
     ]
     np.testing.assert_array_equal(_fold_numbers(cv), _fold_numbers(serial))
-    assert done[-1] == (9, 9) and len(done) == 9
+    (fits,) = recorder.tasks  # the fits are told as they come back from the workers
+    assert fits.total == 9 and [d for d, _ in fits.steps] == list(range(1, 10))
 
 
 @pytest.mark.slow
