@@ -318,23 +318,26 @@ class LeastSquaresProblem:
         """Whitened residuals and the Jacobian's ``columns`` (a mask; None: all)."""
         x = np.asarray(x, dtype=float)
         n_cols = self.n_parameters if columns is None else int(columns.sum())
-        rs, Js = [], []
+        k = self.prior_rows
+        n_rows = sum(len(g.sample) * g.rows for g in self.groups)
+        r_out = np.empty(n_rows + len(k))
+        J_out = np.zeros((len(r_out), n_cols)) if with_jacobian else None
+        a = 0
         for g in self.groups:
             r, J = g.evaluate(x, with_jacobian and n_cols > 0, columns)
             inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
-            rs.append(r * inv)
-            if with_jacobian:
-                Js.append(J * inv[:, None] if J is not None else np.zeros((len(r), 0)))
-        k = self.prior_rows
+            b = a + len(r)
+            np.multiply(r, inv, out=r_out[a:b])
+            if J is not None and J_out is not None:
+                np.multiply(J, inv[:, None], out=J_out[a:b])
+            a = b
         if len(k):  # Gaussian prior: (x - mean) / sigma
-            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
-            if with_jacobian:
+            r_out[a:] = (x[k] - self.prior_mean[k]) / self.prior_sigma[k]
+            if J_out is not None:
                 # the prior's parameters are free: their columns among ``columns``
                 cols = k if columns is None else np.searchsorted(np.flatnonzero(columns), k)
-                Jp = np.zeros((len(k), n_cols))
-                Jp[np.arange(len(k)), cols] = 1.0 / self.prior_sigma[k]
-                Js.append(Jp)
-        return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
+                J_out[a + np.arange(len(k)), cols] = 1.0 / self.prior_sigma[k]
+        return r_out, J_out
 
     def casadi_residual(self, noise: Any):
         """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened

@@ -59,6 +59,22 @@ def scaled_columns(J: NDArray) -> tuple[NDArray, NDArray]:
     return np.where(tiny, 0.0, J / c), c
 
 
+def _scaled_normal_equations(J: NDArray, r: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """``Js^T Js``, ``Js^T r`` and ``c`` of :func:`scaled_columns` ``(Js, c)`` of ``J``
+    (N, P), from ``J^T J`` (one pass over ``J`` instead of three): the column norms are
+    the square roots of its diagonal, numerically zero columns give zero rows and
+    columns."""
+    G = J.T @ J
+    c = np.sqrt(np.maximum(np.diag(G), 0.0))
+    tiny = negligible_columns(J, c)
+    c = np.where(tiny, 1.0, c)
+    H = G / np.outer(c, c)
+    H[tiny, :] = 0.0
+    H[:, tiny] = 0.0
+    g = np.where(tiny, 0.0, (J.T @ r) / c)
+    return H, g, c
+
+
 def negligible_columns(J: NDArray, norms: NDArray | None = None) -> NDArray[np.bool_]:
     """Columns of ``J`` (N, P) whose norm is at most :data:`NEGLIGIBLE_COLUMN` of the
     largest (exact zeros included): parameters the data do not see, shape (P,)."""
@@ -84,13 +100,14 @@ def leverages(A: NDArray) -> NDArray:
     if n > 2 * _QR_BLOCK and p > 0:
         c = np.linalg.norm(A, axis=0)
         if c.min() > 0.0:
-            As = A / c
-            blocks = [np.linalg.qr(As[a : a + _QR_BLOCK], mode="r") for a in range(0, n, _QR_BLOCK)]
+            blocks = [
+                np.linalg.qr(A[a : a + _QR_BLOCK] / c, mode="r") for a in range(0, n, _QR_BLOCK)
+            ]
             R = np.linalg.qr(np.vstack(blocks), mode="r")
             d = np.abs(np.diag(R))
             if d.min() > 1e-8 * d.max():
-                Q = As @ np.linalg.inv(R)
-                return np.sum(Q**2, axis=1)
+                Q = A @ (np.linalg.inv(R) / c[:, None])  # (A / c) R^-1
+                return np.einsum("ij,ij->i", Q, Q)
     Q, _ = np.linalg.qr(A)
     return np.sum(Q**2, axis=1)
 
@@ -199,9 +216,7 @@ def levenberg_marquardt(
     it = 0
     for it in range(1, max_iterations + 1):
         w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        Js, c = scaled_columns(J[:, free] * w[:, None])
-        g = Js.T @ (r * w)
-        H = Js.T @ Js
+        H, g, c = _scaled_normal_equations((J if free.all() else J[:, free]) * w[:, None], r * w)
         while True:
             y = -np.linalg.solve(H + lam * np.eye(len(H)), g)
             if np.linalg.norm(y) < 1e-12:
