@@ -47,6 +47,7 @@ class GroupFunctions:
     residual_expr: Any = field(repr=False)
     _by_free: dict = field(default_factory=dict, repr=False)
     _numeric_maps: OrderedDict = field(default_factory=OrderedDict, repr=False)
+    _compiled: dict = field(default_factory=dict, repr=False)
 
     def rj_free(self, free: NDArray[np.bool_]):
         """``rj`` with the Jacobian's ``free`` columns only: ``(rows,), (n_free, rows)``."""
@@ -79,13 +80,16 @@ class GroupFunctions:
             if f is not None:
                 self._numeric_maps.move_to_end(key)
                 return f
-        if not with_jacobian:
-            f = self.r
-        elif free is None:
-            f = self.rj
-        else:
-            f = self.rj_free(free)
-        f = compiled(f).map("numeric_map", "serial", m, [2, 3], [])
+        with _FUNCTION_CACHE_LOCK:
+            f = self._compiled.get(key[:2])
+        if f is None:
+            if not with_jacobian:
+                f = compiled(self.r)
+            else:
+                f = compiled(self.rj if free is None else self.rj_free(free))
+            with _FUNCTION_CACHE_LOCK:
+                self._compiled[key[:2]] = f
+        f = f.map("numeric_map", "serial", m, [2, 3], [])
         with _FUNCTION_CACHE_LOCK:
             self._numeric_maps[key] = f
             while len(self._numeric_maps) > 16:  # bounded: a few sizes and parameter sets
