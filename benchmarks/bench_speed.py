@@ -1,25 +1,28 @@
-"""Speed a user feels: the command line, this tree against a baseline git ref.
+"""Speed a user feels: the command line, this tree against a baseline.
 
-``python benchmarks/bench_speed.py [--baseline REF] [--repeats R] [--quick]``
+``python benchmarks/bench_speed.py [--baseline REF_OR_DIR] [--repeats R] [--quick]
+[--samples N]``
 
 Times, as separate processes, ``kinfw --help``, ``python -c "import kinfw.cli"``,
-``kinfw demo`` and ``kinfw crossval`` on the demo's data (85 samples, 5 folds, three
-parameter sets), once with this tree's code and once with the code of ``REF`` (default
-``2f87e10``, before issue 10), interleaved run by run (the machine is noisy: both see the
-same load). The baseline is ``git archive REF`` unpacked into a temporary directory, with
-``kinfw/urdf`` linked to its top-level ``urdf/`` (the mapping pyproject makes when
-installing) and that directory first on ``PYTHONPATH``; the header shows the files each
-side really imports. Both trees are byte-compiled first so that neither pays for it.
+``kinfw demo``, ``kinfw crossval`` on the demo's data (85 samples, 5 folds, three
+parameter sets) and ``kinfw calibrate`` with default options on N = 10,000 samples
+(``--samples``; 0 leaves them out) of the data of ``bench_memory.py``: UR10 mocap points,
+UR10 tool poses and the IIS head's poses; once with this tree's code and once with the
+baseline's, interleaved run by run (the machine is noisy: both see the same load). The
+baseline is a checkout directory (e.g. ``git worktree add --detach /tmp/base <parent>``)
+or a git ref (``git archive REF`` unpacked into a temporary directory; default ``main``);
+each child points the editable install's package map at its tree
+(:func:`benchmarks.common.repo_prelude`), and the header shows the files each side really
+imports. Both trees are byte-compiled first so that neither pays for it.
 
-Columns: median wall time over the repeats (s), the CPU time of the process (user +
-system, s; less sensitive to other load than the wall time) and the baseline / current
-ratio of the wall times.
+Columns: median wall time over the repeats (s; the calibrations run once each), the CPU
+time of the process (user + system, s; less sensitive to other load than the wall time)
+and the baseline / current ratio of the wall times.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import resource
 import subprocess
 import sys
@@ -31,8 +34,16 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from common import REPO, format_table, machine_info, time_interleaved, wall_time_line
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.bench_memory import write_data
+from benchmarks.common import (
+    REPO,
+    format_table,
+    machine_info,
+    repo_prelude,
+    time_interleaved,
+    wall_time_line,
+)
 
 #: Issue 10's goals, seconds of wall time.
 GOALS = {
@@ -40,59 +51,56 @@ GOALS = {
     "import kinfw.cli": None,
     "kinfw demo": 3.0,
     "kinfw crossval (demo data)": 10.0,
+    "kinfw calibrate": 5.0,  # issue 23, at 10,000 samples
 }
 
+#: The datasets of ``bench_memory.py`` timed at ``--samples``.
+CALIBRATE_DATA = ("ur10-points", "ur10-poses", "head-poses")
+
 #: ``python -c`` text that runs the ``kinfw`` console script's entry point.
-ENTRY = "import sys; from kinfw.cli import main; sys.exit(main())"
+ENTRY = "import sys; from kinfw.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
 def baseline_tree(ref: str, into: Path) -> Path:
-    """``git archive ref`` of the repository unpacked into ``into``, with ``kinfw/urdf``
-    linked to ``urdf/`` as the installed package has it."""
+    """The baseline's tree: ``ref`` itself when it is a directory, else ``git archive
+    ref`` of the repository unpacked into ``into``."""
+    if Path(ref).is_dir():
+        return Path(ref).resolve()
     archive = subprocess.run(
         ["git", "-C", str(REPO), "archive", "--format=tar", ref], check=True, capture_output=True
     ).stdout
     with tarfile.open(fileobj=BytesIO(archive)) as tar:
         tar.extractall(into, filter="data")
-    link = into / "kinfw" / "urdf"
-    if not link.exists():
-        link.symlink_to(into / "urdf", target_is_directory=True)
     return into
 
 
-def environment(tree: Path) -> dict[str, str]:
-    """The environment that makes ``python`` import ``tree``'s code first."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [env.get("PYTHONPATH")])])
-    return env
-
-
-def imported_files(env: dict[str, str], cwd: Path) -> str:
+def imported_files(tree: Path, cwd: Path) -> str:
     """Where ``kinfw.cli``, the built-in URDF, ``kinfw.identification`` and
-    ``kinfw.verification.evaluation`` come from."""
-    code = (
+    ``kinfw.verification.evaluation`` come from in a child running ``tree``'s code."""
+    code = repo_prelude(tree) + (
         "import kinfw.cli, kinfw.model as k, kinfw.identification as r, "
         "kinfw.verification.evaluation as c; "
         "print(kinfw.cli._main.__file__, k.builtin_head_urdf(), "
         "r.__file__, c.__file__)"
     )
     return subprocess.run(
-        [sys.executable, "-c", code], env=env, cwd=cwd, check=True, capture_output=True, text=True
+        [sys.executable, "-c", code], cwd=cwd, check=True, capture_output=True, text=True
     ).stdout.strip()
 
 
 class Run:
     """One command line in one tree; each call runs it and records the child's CPU time."""
 
-    def __init__(self, argv: list[str], env: dict[str, str], cwd: Path) -> None:
-        self.argv, self.env, self.cwd = argv, env, cwd
+    def __init__(self, argv: list[str], tree: Path, cwd: Path) -> None:
+        # ``-c CODE args``: CODE runs after the prelude that selects the tree's code
+        self.argv = [argv[0], repo_prelude(tree) + argv[1], *argv[2:]]
+        self.cwd = cwd
         self.cpu: list[float] = []
 
     def __call__(self) -> None:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         subprocess.run(
             [sys.executable, *self.argv],
-            env=self.env,
             cwd=self.cwd,
             check=True,
             stdout=subprocess.DEVNULL,
@@ -106,14 +114,20 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--baseline",
-        default="2f87e10",
-        help="git ref to compare with (default 2f87e10, before issue 10)",
+        default="main",
+        help="checkout directory or git ref to compare with (default main)",
     )
     parser.add_argument(
         "--repeats", type=int, default=3, help="timed runs per command and tree (default 3)"
     )
     parser.add_argument(
         "--quick", action="store_true", help="one run of the demo and of crossval (the slow ones)"
+    )
+    parser.add_argument(
+        "--samples",
+        type=int,
+        default=10_000,
+        help="samples of the kinfw calibrate rows (default 10000; 0: none)",
     )
     args = parser.parse_args(argv)
     if args.repeats < 1:
@@ -123,7 +137,6 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(tmp)
         base = baseline_tree(args.baseline, tmp / "baseline")
         trees = {"current": REPO, "baseline": base}
-        envs = {name: environment(tree) for name, tree in trees.items()}
         for tree in trees.values():
             subprocess.run(
                 [sys.executable, "-m", "compileall", "-q", "-x", r"\.venv", str(tree)],
@@ -131,7 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                 stdout=subprocess.DEVNULL,
             )
         # cwd outside both trees: ``python -c`` puts the working directory first on sys.path
-        where = {name: imported_files(env, tmp) for name, env in envs.items()}
+        where = {name: imported_files(tree, tmp) for name, tree in trees.items()}
         for name, tree in trees.items():  # each side must run its own code
             if not all(path.startswith(str(tree)) for path in where[name].split()):
                 raise SystemExit(
@@ -140,8 +153,7 @@ def main(argv: list[str] | None = None) -> int:
         # the crossval data: the current tree's demo output, the same file for both sides
         data_dir = tmp / "demo_data"
         subprocess.run(
-            [sys.executable, "-c", ENTRY, "demo", "--out", str(data_dir)],
-            env=envs["current"],
+            [sys.executable, "-c", repo_prelude(REPO) + ENTRY, "demo", "--out", str(data_dir)],
             cwd=tmp,
             check=True,
             stdout=subprocess.DEVNULL,
@@ -160,11 +172,24 @@ def main(argv: list[str] | None = None) -> int:
                 str(head),
             ],
         }
+        if args.samples > 0:
+            files = write_data(tmp, args.samples, CALIBRATE_DATA)
+            for name, (urdf, data) in files.items():
+                commands[f"kinfw calibrate ({name} {args.samples})"] = [
+                    "-c",
+                    ENTRY,
+                    "calibrate",
+                    str(data),
+                    "--urdf",
+                    str(urdf),
+                    "--out",
+                    str(tmp / f"{name}.urdf"),
+                ]
         print(
             machine_info(
                 code=[
                     ("current", str(REPO)),
-                    ("baseline", f"{args.baseline} (git archive in {base})"),
+                    ("baseline", f"{args.baseline} ({base})"),
                     ("imports", ""),
                     *[
                         (f"  {name}", path)
@@ -176,18 +201,19 @@ def main(argv: list[str] | None = None) -> int:
         )
         quick = " (1 for demo and crossval: --quick)" if args.quick else ""
         print(
-            f"mode       repeats {args.repeats}{quick}, runs interleaved current/baseline, "
-            "wall time of the whole process"
+            f"mode       repeats {args.repeats}{quick}, calibrations once, runs interleaved "
+            "current/baseline, wall time of the whole process"
         )
         rows = []
         for label, command in commands.items():
-            slow = label.startswith(("kinfw demo", "kinfw crossval"))
-            repeats = 1 if (args.quick and slow) else args.repeats
-            runs = [Run(command, envs[name], tmp) for name in trees]
+            calibrate = label.startswith("kinfw calibrate")
+            slow = calibrate or label.startswith(("kinfw demo", "kinfw crossval"))
+            repeats = 1 if (args.quick and slow) or calibrate else args.repeats
+            runs = [Run(command, tree, tmp) for tree in trees.values()]
             timings = time_interleaved(runs, repeats, warmup=0 if slow else 1)
             current, baseline = (t.median_ms / 1e3 for t in timings)
             cpu = [float(np.median(r.cpu[-repeats:])) for r in runs]
-            goal = GOALS[label]
+            goal = GOALS["kinfw calibrate" if calibrate else label]
             rows.append(
                 [
                     label,
@@ -208,10 +234,10 @@ def main(argv: list[str] | None = None) -> int:
             [
                 "command",
                 "current s",
-                f"{args.baseline} s",
+                "baseline s",
                 "ratio",
                 "current CPU s",
-                f"{args.baseline} CPU s",
+                "baseline CPU s",
                 "goal (wall)",
             ],
             rows,

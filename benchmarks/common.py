@@ -31,6 +31,7 @@ __all__ = [
     "machine_info",
     "mode_line",
     "parse_repeats",
+    "repo_prelude",
     "slope",
     "time_interleaved",
     "wall_time_line",
@@ -38,6 +39,22 @@ __all__ = [
 
 #: The repository the benchmarks run on (the code next to the scripts).
 REPO = Path(__file__).resolve().parents[1]
+
+
+def repo_prelude(repo: Path) -> str:
+    """Python source that makes a child import ``repo``'s kinfw (a checkout of this
+    repository): it points the editable install's package map (``kinfw``,
+    ``kinfw.identification``, ``kinfw.verification``, ``kinfw.robots``) at ``repo``. Run
+    it first in the child (``python -c PRELUDE + code``); it imports nothing itself."""
+    return (
+        "import sys as _sys\n"
+        "from pathlib import Path as _Path\n"
+        "for _m in list(_sys.modules.values()):\n"
+        "    _map = getattr(_m, 'MAPPING', None)\n"
+        "    if isinstance(_map, dict) and 'kinfw' in _map:\n"
+        "        _old = str(_Path(_map['kinfw']).parent)\n"
+        f"        _map.update({{k: {str(repo)!r} + v[len(_old):] for k, v in _map.items()}})\n"
+    )
 
 
 # -- timing ------------------------------------------------------------------------------

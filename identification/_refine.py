@@ -62,6 +62,7 @@ from kinfw.identification.problem import (
     estimate_noise,
     group_residuals,
     levenberg_marquardt,
+    leverages,
     negligible_columns,
     observation_norms,
     rejected_observations,
@@ -564,21 +565,26 @@ def _solve(
     """Levenberg-Marquardt from the start, the noise re-estimated after each of the
     ``noise_rounds`` rounds unless ``given`` (then one round under ``sigma``)."""
     free, obs_sizes = problem.free, problem.obs_sizes
-    x = np.zeros(problem.n_parameters)
+
+    def full(x_free: NDArray) -> NDArray:  # the fixed entries stay at the start
+        x = np.zeros(problem.n_parameters)
+        x[free] = x_free
+        return x
+
+    x_free = np.zeros(int(free.sum()))
     # what the data do not see at the start stays there for every round: once the other
     # parameters have moved, a structurally redundant one (a joint's axis tilt when the
     # only observed point lies on that axis) gets a small column again and would drift
     # along its redundancy; the diagnostics still report it (with the full free mask)
-    _, J0 = problem.evaluate(x, sigma, True, only_free=True)
-    moving = free.copy()
-    moving[free] = ~negligible_columns(J0[:, free])
+    _, J0 = problem.evaluate_free(full(x_free), sigma, True)
+    moving = ~negligible_columns(J0)
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         if not given:
             progress.stage(f"refine: noise estimate, round {round_ + 1}/{noise_rounds}")
-        x, its, converged = levenberg_marquardt(
-            lambda v, jac, s=sigma: problem.evaluate(v, s, jac, only_free=True),
-            x,
+        x_free, its, converged = levenberg_marquardt(
+            lambda v, jac, s=sigma: problem.evaluate_free(full(v), s, jac),
+            x_free,
             moving,
             obs_sizes,
             loss,
@@ -588,16 +594,16 @@ def _solve(
         iterations += its
         if given:
             break
-        r, J = problem.evaluate(x, sigma, True, only_free=True)
-        Q, _ = np.linalg.qr(J[:, free] * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None])
+        r, J = problem.evaluate_free(full(x_free), sigma, True)
         sigma = estimate_noise(
             r,
             problem.groups,
             sigma,
-            np.sum(Q**2, axis=1),
+            leverages(J * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None]),
             robust=loss != "linear",
             first=round_ == 0,
         )
+    x = full(x_free)
     return _Solution(x, sigma, iterations, converged)
 
 

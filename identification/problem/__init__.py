@@ -25,6 +25,7 @@ from kinfw.identification.problem._diagnostics import (
     rejected_observations,
 )
 from kinfw.identification.problem._functions import (
+    MAP_CHUNK,
     GroupFunctions,
     build_functions,
     clear_function_cache,
@@ -46,6 +47,7 @@ from kinfw.identification.problem._solver import (
     LOSSES,
     NEGLIGIBLE_COLUMN,
     levenberg_marquardt,
+    leverages,
     negligible_columns,
     observation_norms,
     robust_loss,
@@ -64,6 +66,7 @@ from kinfw.identification.problem._start import (
 __all__ = [
     "LOSSES",
     "LOSS_SCALE",
+    "MAP_CHUNK",
     "MARKER_RANK_TOL",
     "NEGLIGIBLE_COLUMN",
     "PRIOR",
@@ -89,6 +92,7 @@ __all__ = [
     "group_functions",
     "group_residuals",
     "levenberg_marquardt",
+    "leverages",
     "negligible_columns",
     "noise_shape",
     "norm2_cdf",

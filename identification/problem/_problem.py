@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification.problem._functions import GroupFunctions
+from kinfw.identification.problem._functions import MAP_CHUNK, GroupFunctions
 from kinfw.identification.problem._start import start_context
 from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
@@ -81,12 +81,15 @@ class ResidualGroup:
     _maps: dict = field(default_factory=dict, repr=False)
     _q_rows: NDArray[np.float64] = field(init=False, repr=False)
     _data_rows: NDArray[np.float64] = field(init=False, repr=False)
+    _last: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
         object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
         object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
         object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
+        # the last evaluation (see evaluate); not shared by dataclasses.replace copies
+        object.__setattr__(self, "_last", {})
 
     @property
     def sample(self) -> NDArray[np.int64]:
@@ -113,12 +116,13 @@ class ResidualGroup:
         """Per residual row of one observation, its noise sigma (SI)."""
         return np.concatenate([np.full(c.rows, noise.sigma(c)) for c in self.components])
 
-    def _mapped(self, which: str, free: NDArray[np.bool_] | None = None):
-        key = (which, None if free is None else free.tobytes())
-        if key not in self._maps:
-            f = getattr(self.functions, which) if free is None else self.functions.rj_free(free)
-            self._maps[key] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
-        return self._maps[key]
+    def _mapped(self, which: str):
+        """CasADi's own ``r`` or ``j`` (numeric or symbolic arguments) mapped over the
+        samples."""
+        if which not in self._maps:
+            f = getattr(self.functions, which)
+            self._maps[which] = f.map(f"{which}_map", "serial", len(self.sample), [2, 3], [])
+        return self._maps[which]
 
     @property
     def residual(self):
@@ -138,20 +142,38 @@ class ResidualGroup:
     ) -> tuple[NDArray, NDArray | None]:
         """Unwhitened residuals ``(m * rows,)`` (observation-major) and Jacobian
         ``(m * rows, P)``, or only its ``free`` columns ``(m * rows, n_free)``, written by
-        CasADi straight into numpy arrays."""
-        m = len(self.sample)
+        the compiled CasADi functions (:meth:`GroupFunctions.numeric_map`) straight into
+        numpy arrays.
+
+        The last evaluation is kept: asking again at the same ``x`` (the end of one
+        noise round and the start of the next, the quality at the estimate) returns the
+        same arrays, which callers must not modify.
+        """
+        x = np.ascontiguousarray(x, dtype=float)
+        key = (x.tobytes(), None if free is None else free.tobytes())
+        last = self._last.get(key)
+        if last is not None and (last[1] is not None or not with_jacobian):
+            return last[0], (last[1] if with_jacobian else None)
+        m, rows = len(self.sample), self.rows
+        r = np.empty(m * rows)
         n_cols = len(x) if free is None else int(free.sum())
-        fn = self._mapped("rj", free) if with_jacobian else self._mapped("r")
-        buf, call = fn.buffer()
-        args = (self._q_rows, self._data_rows, np.ascontiguousarray(x, dtype=float), self.const)
-        for i, a in enumerate(args):
-            buf.set_arg(i, memoryview(a))
-        r = np.empty(m * self.rows)
-        buf.set_res(0, memoryview(r))
-        J = np.empty((m * self.rows, n_cols)) if with_jacobian else None
-        if J is not None:
-            buf.set_res(1, memoryview(J))
-        call()
+        J = np.empty((m * rows, n_cols)) if with_jacobian else None
+        buffers = {}  # one CasADi buffer per chunk size (at most two)
+        for a in range(0, m, MAP_CHUNK):
+            b = min(a + MAP_CHUNK, m)
+            if b - a not in buffers:
+                fn = self.functions.numeric_map(with_jacobian, free, b - a)
+                buffers[b - a] = fn.buffer()
+            buf, call = buffers[b - a]
+            args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
+            for i, arg in enumerate(args):
+                buf.set_arg(i, memoryview(arg))
+            buf.set_res(0, memoryview(r[a * rows : b * rows]))
+            if J is not None:
+                buf.set_res(1, memoryview(J[a * rows : b * rows]))
+            call()
+        self._last.clear()
+        self._last[key] = (r, J)
         return r, J
 
 
@@ -272,31 +294,50 @@ class LeastSquaresProblem:
         ``only_free`` the columns of the fixed parameters are left at zero (not
         computed: what the fit needs, cheaper for the small parameter sets).
         """
-        P = self.n_parameters
         free = self.free
-        no_columns = only_free and not free.any()
-        rs, Js = [], []
-        for g in self.groups:
-            r, J = g.evaluate(x, with_jacobian and not no_columns, free if only_free else None)
-            inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
-            rs.append(r * inv)
-            if with_jacobian:
-                if only_free:
-                    full = np.zeros((len(r), P))
-                    if J is not None:
-                        full[:, free] = J * inv[:, None]
-                    J = full
-                else:
-                    J *= inv[:, None]
-                Js.append(J)
+        if not only_free:
+            return self._whitened(x, noise, with_jacobian, None)
+        r, J_free = self._whitened(x, noise, with_jacobian, free)
+        if J_free is None:
+            return r, None
+        J = np.zeros((len(r), self.n_parameters))
+        J[:, free] = J_free
+        return r, J
+
+    def evaluate_free(
+        self, x: NDArray, noise: Any, with_jacobian: bool = True
+    ) -> tuple[NDArray, NDArray | None]:
+        """Whitened residuals (N,) and the free columns of their Jacobian
+        ``(N, n_free)`` at ``x``: :meth:`evaluate` with ``only_free`` without the fixed
+        parameters' zero columns (what the solver works on)."""
+        return self._whitened(x, noise, with_jacobian, self.free)
+
+    def _whitened(
+        self, x: NDArray, noise: Any, with_jacobian: bool, columns: NDArray[np.bool_] | None
+    ) -> tuple[NDArray, NDArray | None]:
+        """Whitened residuals and the Jacobian's ``columns`` (a mask; None: all)."""
+        x = np.asarray(x, dtype=float)
+        n_cols = self.n_parameters if columns is None else int(columns.sum())
         k = self.prior_rows
+        n_rows = sum(len(g.sample) * g.rows for g in self.groups)
+        r_out = np.empty(n_rows + len(k))
+        J_out = np.zeros((len(r_out), n_cols)) if with_jacobian else None
+        a = 0
+        for g in self.groups:
+            r, J = g.evaluate(x, with_jacobian and n_cols > 0, columns)
+            inv = np.tile(1.0 / g.row_sigma(noise), len(g.sample))
+            b = a + len(r)
+            np.multiply(r, inv, out=r_out[a:b])
+            if J is not None and J_out is not None:
+                np.multiply(J, inv[:, None], out=J_out[a:b])
+            a = b
         if len(k):  # Gaussian prior: (x - mean) / sigma
-            rs.append((x[k] - self.prior_mean[k]) / self.prior_sigma[k])
-            if with_jacobian:
-                Jp = np.zeros((len(k), P))
-                Jp[np.arange(len(k)), k] = 1.0 / self.prior_sigma[k]
-                Js.append(Jp)
-        return np.concatenate(rs), (np.concatenate(Js) if with_jacobian else None)
+            r_out[a:] = (x[k] - self.prior_mean[k]) / self.prior_sigma[k]
+            if J_out is not None:
+                # the prior's parameters are free: their columns among ``columns``
+                cols = k if columns is None else np.searchsorted(np.flatnonzero(columns), k)
+                J_out[a + np.arange(len(k)), cols] = 1.0 / self.prior_sigma[k]
+        return r_out, J_out
 
     def casadi_residual(self, noise: Any):
         """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened

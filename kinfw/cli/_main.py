@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
@@ -139,6 +140,29 @@ class _WarningPrinter(logging.Handler):
             self.handleError(record)
 
 
+#: Environment variables that set the BLAS threads: when one is set, the user's count holds.
+BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def _one_blas_thread():
+    """One BLAS thread while a command runs, unless the environment sets the count
+    (:data:`BLAS_THREAD_VARIABLES`).
+
+    kinfw's matrices are tall and thin (residual rows x parameters): a second BLAS thread
+    gains little on them, and on a machine busy with other work its threads' waiting
+    costs more than it gains (``kinfw calibrate`` of 10,000 mocap points on two shared
+    cores: 2-3x the wall time with OpenBLAS's default threads)."""
+    if any(os.environ.get(name) for name in BLAS_THREAD_VARIABLES):
+        yield
+        return
+    import numpy  # noqa: F401  (loads the BLAS library that threadpoolctl limits)
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
 @contextlib.contextmanager
 def _warnings_printed_once(command: str, verbose: bool):
     """Route warnings and logging to a :class:`_WarningPrinter` while the command runs."""
@@ -184,7 +208,8 @@ def main(
             check = getattr(args, "check_outputs", None)
             if check is not None:  # every output path, before any work
                 check(args)
-            return func(args)
+            with _one_blas_thread():
+                return func(args)
         except USER_ERRORS as exc:
             message = " ".join(str(exc).split())
             print(f"kinfw {args.command}: error: {message}", file=sys.stderr)

@@ -133,7 +133,9 @@ class PixelObservations:
         rank = np.empty_like(order)
         rank[order] = np.arange(len(order))
         which = rank[np.ravel(inverse)]
-        rows = [np.flatnonzero(which == k) for k in range(len(order))]
+        # each image's rows in row order: a stable sort by image, split at the counts
+        by_image = np.argsort(which, kind="stable")
+        rows = np.split(by_image, np.cumsum(np.bincount(which, minlength=len(order)))[:-1])
         return self.sample[first[order]], rows
 
     def image_labels(self) -> list[str]:

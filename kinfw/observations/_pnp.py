@@ -5,6 +5,9 @@ OpenCV's PnP (:func:`pnp_camera_T_targets`), and the images as ``target`` observ
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -21,6 +24,13 @@ __all__ = ["PNP_MIN_POINTS", "pnp_camera_T_targets", "target_observations_from_p
 PNP_MIN_POINTS = 4
 _PLANAR_TOL = 1e-9  # smallest/largest singular value of the centred points: planar
 
+#: Poses found, by a hash of each image's points, pixels and intrinsics: every problem
+#: built from the same images (rejection refits, the report's evaluations, folds) asks
+#: for the same PnP again; bounded (~0.3 kB an entry).
+_PNP_CACHE: OrderedDict[bytes, NDArray[np.float64]] = OrderedDict()
+_PNP_CACHE_SIZE = 200_000
+_PNP_CACHE_LOCK = threading.Lock()
+
 
 def _is_planar(target_p: NDArray[np.float64]) -> bool:
     s = np.linalg.svd(target_p - target_p.mean(axis=0), compute_uv=False)
@@ -32,7 +42,8 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
 
     ``cv2.solvePnP`` with ``SOLVEPNP_IPPE`` for planar points, ``SOLVEPNP_SQPNP`` else,
     then ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the group's
-    intrinsics).
+    intrinsics). Each image's pose is kept (by a hash of its points, pixels and the
+    intrinsics) and not searched again when another problem holds the same image.
 
     Images with fewer than 4 points (left by a rejection of gross errors, or a held-out
     split) are skipped: PnP needs 4.
@@ -69,9 +80,19 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
     labels = [labels[k] for k in keep]
     out = np.empty((len(rows), 4, 4))
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-15)
+    intrinsics = (
+        np.ascontiguousarray(K, dtype=np.float64).tobytes()
+        + np.ascontiguousarray(dist, dtype=np.float64).tobytes()
+    )
     for k, r in enumerate(rows):
         obj = np.ascontiguousarray(group.target_p[r], dtype=np.float64)
         img = np.ascontiguousarray(group.uv[r], dtype=np.float64)
+        key = hashlib.blake2b(obj.tobytes() + img.tobytes() + intrinsics, digest_size=16).digest()
+        with _PNP_CACHE_LOCK:
+            known = _PNP_CACHE.get(key)
+        if known is not None:
+            out[k] = known
+            continue
         flag = cv2.SOLVEPNP_IPPE if _is_planar(obj) else cv2.SOLVEPNP_SQPNP
         where = f"image {labels[k]} (sample {int(samples[k])}, {len(r)} points)"
         try:
@@ -94,6 +115,10 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
             )
         R, _ = cv2.Rodrigues(rvec)
         out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
+        with _PNP_CACHE_LOCK:
+            _PNP_CACHE[key] = out[k].copy()
+            while len(_PNP_CACHE) > _PNP_CACHE_SIZE:
+                _PNP_CACHE.popitem(last=False)
     return samples, out
 
 

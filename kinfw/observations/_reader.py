@@ -108,6 +108,8 @@ class ObservationReader:
             raise self.error(where, f"expected a list of {n} numbers{what}, got {describe(value)}")
         if len(value) != n:
             raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
+        if all(type(x) is float for x in value) and math.isfinite(sum(value)):
+            return list(value)  # the usual case, checked at once (else item by item below)
         out = []
         for k, x in enumerate(value):
             ok = isinstance(x, (int, float)) and not isinstance(x, bool)

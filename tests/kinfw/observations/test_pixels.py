@@ -417,3 +417,34 @@ def test_the_drawing_puts_the_board_points_where_the_truth_has_them():
     gap = np.linalg.norm(drawn.w_p_measured - drawn.w_p_predicted, axis=1)
     z = kind.camera_points(g, ctx)[:, 2]
     np.testing.assert_allclose(gap, 2.0 * z / CAMERA.fx, rtol=0.2)
+
+
+def test_images_group_rows_as_a_scan_of_each_image_does():
+    """The rows of each image (stable sort by image) against a hand-written scan."""
+    _, _, _, data = _scene(6, seed=8)
+    (g,) = data.groups("pixels")
+    rng = np.random.default_rng(8)
+    order = rng.permutation(len(g.sample))  # the images' rows interleaved
+    shuffled = kind_of(g).take(g, order, g.sample[order])
+    samples, rows = shuffled.images()
+    keys = list(zip(shuffled.sample.tolist(), shuffled.shot.tolist(), strict=True))
+    first_seen = list(dict.fromkeys(keys))
+    assert samples.tolist() == [s for s, _ in first_seen]
+    for key, r in zip(first_seen, rows, strict=True):
+        assert r.tolist() == [i for i, k in enumerate(keys) if k == key]
+
+
+def test_pnp_poses_are_kept_and_found_again_unchanged(monkeypatch):
+    import kinfw.observations._pnp as pnp_module
+
+    _, _, _, data = _scene(5, seed=3)
+    (g,) = data.groups("pixels")
+    monkeypatch.setattr(pnp_module, "_PNP_CACHE", type(pnp_module._PNP_CACHE)())
+    samples, fresh = pnp_camera_T_targets(g)
+    assert len(pnp_module._PNP_CACHE) == len(samples)
+    calls = []
+    monkeypatch.setattr(pnp_module, "_is_planar", lambda p: calls.append(p) or True)
+    again_samples, again = pnp_camera_T_targets(g)  # every image found in the cache
+    assert calls == []
+    np.testing.assert_array_equal(again_samples, samples)
+    np.testing.assert_array_equal(again, fresh)

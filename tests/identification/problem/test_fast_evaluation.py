@@ -1,0 +1,179 @@
+"""The fast evaluation paths of the least-squares problem (issue 23): compiled residual
+functions over chunks of samples, the kept last evaluation, the free columns only, the
+leverages by blocks, and Levenberg-Marquardt's stop at the minimum."""
+
+import logging
+
+import numpy as np
+import pytest
+
+import kinfw.identification.problem._compiled as compiled_module
+from kinfw.identification.problem import (
+    MAP_CHUNK,
+    NoiseModel,
+    build_problem,
+    levenberg_marquardt,
+    leverages,
+)
+from kinfw.model import load_robot
+from kinfw.simulation import random_configurations, simulate
+from tests.robots import ARM_6R
+
+
+def _arm_problem(n: int, seed: int = 0):
+    """The 6R arm's flange poses and a marker's points, n samples, noisy."""
+    arm = load_robot(ARM_6R)
+    rng = np.random.default_rng(seed)
+    names = arm.topology(("flange",)).joint_names
+    qs = random_configurations(*arm.joint_limits(names), n, rng, fraction=0.8)
+    poses = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    points = simulate(arm, qs, names, markers=[("flange", [0.02, -0.01, 0.05])], rng=rng)
+    data = poses.with_groups([*poses.all_groups(), *points.all_groups()])
+    return build_problem(arm, data), rng
+
+
+def _per_sample(group, x, free):
+    """The reference: CasADi's own function (virtual machine), one sample at a time."""
+    f = group.functions.rj_free(free)
+    r, J = [], []
+    for i in range(len(group.sample)):
+        ri, Jti = f(group.qs[:, i], group.data[:, i], x, group.const)
+        r.append(np.asarray(ri).ravel())
+        J.append(np.asarray(Jti).T)
+    return np.concatenate(r), np.concatenate(J)
+
+
+def test_chunked_compiled_evaluation_equals_casadi_per_sample_bit_for_bit():
+    """Across chunk borders (2 chunks + 5 samples): the same numbers as CasADi's virtual
+    machine sample by sample (compiled without fused multiply-add; without a compiler
+    the functions are CasADi's own)."""
+    problem, rng = _arm_problem(2 * MAP_CHUNK + 5)
+    x = rng.normal(scale=1e-2, size=problem.n_parameters)
+    free = problem.free
+    for g in problem.groups:
+        r, J = g.evaluate(x, True, free)
+        r_ref, J_ref = _per_sample(g, x, free)
+        np.testing.assert_array_equal(r, r_ref)
+        np.testing.assert_array_equal(J, J_ref)
+        r_only, none = g.evaluate(x + 1e-3, False, free)
+        assert none is None
+        np.testing.assert_array_equal(r_only, _per_sample(g, x + 1e-3, free)[0])
+
+
+def test_the_last_evaluation_is_kept_and_not_shared_by_a_replaced_group():
+    from dataclasses import replace
+
+    problem, rng = _arm_problem(20)
+    g = problem.groups[0]
+    x = rng.normal(scale=1e-2, size=problem.n_parameters)
+    r, J = g.evaluate(x, True, problem.free)
+    again, J_again = g.evaluate(x.copy(), True, problem.free)
+    assert again is r and J_again is J
+    r_only, _ = g.evaluate(x, False, problem.free)  # the residuals of the kept evaluation
+    assert r_only is r
+    moved = replace(g, const=g.const + 1e-3)  # other numbers: its own evaluation
+    r_moved, _ = moved.evaluate(x, False, problem.free)
+    assert np.abs(r_moved - r).max() > 1e-6
+    assert g.evaluate(x, False, problem.free)[0] is r
+
+
+def test_free_columns_are_those_of_the_full_jacobian():
+    problem, rng = _arm_problem(30)
+    noise = NoiseModel(1e-3, 1e-3)
+    x = rng.normal(scale=1e-2, size=problem.n_parameters)
+    r_all, J_all = problem.evaluate(x, noise, True)
+    r_free, J_free = problem.evaluate_free(x, noise, True)
+    r_only, J_only = problem.evaluate(x, noise, True, only_free=True)
+    np.testing.assert_allclose(r_free, r_all, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(J_free, J_all[:, problem.free], rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(J_only[:, problem.free], J_free)
+    np.testing.assert_array_equal(J_only[:, ~problem.free], 0.0)
+    np.testing.assert_array_equal(r_only, r_free)
+
+
+@pytest.mark.parametrize("shape", [(20_000, 7), (9_000, 30)])
+def test_leverages_by_blocks_equal_the_hat_matrix_diagonal(shape):
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=shape) * np.logspace(-3, 3, shape[1])  # columns of any scale
+    Q, _ = np.linalg.qr(A)
+    h = leverages(A)
+    np.testing.assert_allclose(h, np.sum(Q**2, axis=1), rtol=1e-10, atol=1e-14)
+    assert h.sum() == pytest.approx(shape[1], abs=1e-8)  # trace of the hat matrix
+
+
+def test_leverages_of_a_rank_deficient_matrix_are_numpys_thin_qr():
+    rng = np.random.default_rng(6)
+    A = rng.normal(size=(10_000, 4))
+    A = np.column_stack([A, A[:, 0] + A[:, 1]])  # rank 4
+    Q, _ = np.linalg.qr(A)
+    np.testing.assert_array_equal(leverages(A), np.sum(Q**2, axis=1))
+
+
+def test_levenberg_marquardt_stops_at_the_minimum_without_retrying():
+    """A linear problem: one Gauss-Newton step reaches the least-squares solution (the
+    truth: numpy's lstsq); at the minimum the solver stops without a string of
+    rejected steps (the old loop spent up to ~40 residual evaluations there)."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(300, 4))
+    b = rng.normal(size=300)
+    calls = {True: 0, False: 0}
+
+    def evaluate(x, with_jacobian):
+        calls[with_jacobian] += 1
+        return A @ x - b, (A if with_jacobian else None)
+
+    x, iterations, converged = levenberg_marquardt(
+        evaluate, np.zeros(4), np.ones(4, bool), [(300, 1)], "linear", np.full(300, 1e9), 50
+    )
+    np.testing.assert_allclose(x, np.linalg.lstsq(A, b, rcond=None)[0], rtol=1e-9, atol=1e-12)
+    assert converged
+    assert iterations <= 3
+    assert calls[False] <= 3 and calls[True] <= 3
+
+
+def test_without_a_compiler_casadi_evaluates_the_functions(monkeypatch):
+    import casadi as ca
+
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f", [x], [ca.sin(x) * x[0]])
+    monkeypatch.setenv("KINFW_COMPILE", "0")
+    assert compiled_module.compiler() is None
+    assert compiled_module.compiled(f) is f
+    monkeypatch.delenv("KINFW_COMPILE")
+    monkeypatch.setenv("CC", "no-such-compiler-kinfw")
+    assert compiled_module.compiled(f) is f
+
+
+def test_a_failing_compiler_is_reported_once_and_casadi_takes_over(monkeypatch, tmp_path, caplog):
+    import casadi as ca
+
+    monkeypatch.setattr(compiled_module, "_FAILED", [])
+    monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("CC", "false")  # exists, always fails
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f", [x], [ca.cos(x) * x[1]])
+    with caplog.at_level(logging.WARNING, logger="kinfw.identification.problem"):
+        assert compiled_module.compiled(f) is f
+        assert compiled_module.compiled(f) is f  # not retried
+    assert len([r for r in caplog.records if "compiling" in r.getMessage()]) == 1
+
+
+def test_a_compiled_function_is_kept_on_disk_and_loaded_again(monkeypatch, tmp_path):
+    import casadi as ca
+
+    if compiled_module.compiler() is None:
+        pytest.fail("no C compiler on this machine: the compiled path is not tested")
+    monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_module, "_LOADED", {})
+    x = ca.SX.sym("x", 3)
+    f = ca.Function("f", [x], [ca.sqrt(x) * x[2] + ca.exp(x[0])])
+    g = compiled_module.compiled(f)
+    assert g is not f
+    (library,) = tmp_path.glob("kinfw_*.so")
+    stamp = library.stat().st_mtime_ns
+    monkeypatch.setattr(compiled_module, "_LOADED", {})  # a new process: from the disk
+    h = compiled_module.compiled(f)
+    assert library.stat().st_mtime_ns == stamp  # not compiled again
+    v = np.array([0.3, 1.7, 2.9])
+    np.testing.assert_array_equal(np.asarray(h(v)), np.asarray(f(v)))
+    np.testing.assert_array_equal(np.asarray(g(v)), np.asarray(f(v)))
