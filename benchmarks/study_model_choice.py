@@ -52,13 +52,13 @@ if str(REPO) not in sys.path:  # study the code next to this script, installed o
 from benchmarks.common import format_table, machine_info
 from kinfw.geometry import matrix_from_rotation_vector
 from kinfw.identification import calibrate
-from kinfw.identification.problem import Unknown
 from kinfw.measurements import Measurements
 from kinfw.model import Robot, load_robot
 from kinfw.simulation import perturb_robot, random_configurations, simulate
 from kinfw.verification.evaluation import (
     choose_parameters,
     crossvalidate,
+    fitted_unknowns,
     held_out_errors,
     leave_one_out,
 )
@@ -151,10 +151,8 @@ def dataset(
 
 def truth_rms_mm(nominal: Robot, result, test: Measurements) -> float:
     """Position RMS (mm) of the calibration's predictions of noise-free ``test`` data."""
-    unknowns = result.refined.unknowns
-    if result.refined.model_frame is not None:
-        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    pos, _ = held_out_errors(nominal, result.urdf_xml, unknowns, test).values("position")
+    held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test)
+    pos, _ = held.values("position")
     return 1e3 * float(np.sqrt(np.mean(pos**2)))
 
 

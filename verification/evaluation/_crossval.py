@@ -52,8 +52,10 @@ __all__ = [
     "CrossValidation",
     "FoldScore",
     "crossvalidate",
+    "fitted_unknowns",
     "held_out_errors",
     "metric_rms",
+    "rejected_keys",
     "whitened_score",
     "whitening_noise",
 ]
@@ -256,6 +258,27 @@ def whitening_noise(
     return tuple((c, float(noise.sigma(c))) for c in components)
 
 
+def fitted_unknowns(result: Calibration) -> tuple[Unknown, ...]:
+    """The frames a calibration fitted that its URDF cannot hold (targets, markers,
+    planes), with the root's pose in the external measurement frame when there is one:
+    what :func:`held_out_errors` holds fixed."""
+    unknowns = result.refined.unknowns
+    if result.refined.model_frame is not None:
+        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
+    return unknowns
+
+
+def rejected_keys(result: Calibration) -> tuple[tuple[int, str, str, str | None], ...]:
+    """The observations a calibration rejected as gross errors, ``(sample, kind, frame,
+    marker)``, sorted."""
+    return tuple(
+        sorted(
+            {(o.sample, o.kind, o.frame, o.marker) for o in result.refined.rejected},
+            key=lambda e: (e[0], e[1], e[2], e[3] or ""),
+        )
+    )
+
+
 def held_out_errors(
     nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
 ) -> AccuracyReport:
@@ -301,10 +324,7 @@ def _score(
         result = calibrate(
             nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
         )
-    unknowns = result.refined.unknowns
-    if result.refined.model_frame is not None:  # the root's pose in the external frame
-        unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
-    held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
+    held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test)
     # the worst held-out sample in the first per-observation metric
     first = next((m for m in held.metrics if m.per_observation), None)
     worst_sample, worst = 0, float("nan")
@@ -430,15 +450,8 @@ def crossvalidate(
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
     scored = data
     if exclude_flagged and reference is not None:
-        rejected = reference.refined.rejected
-        excluded = tuple(
-            sorted(
-                ((o.sample, o.kind, o.frame, o.marker) for o in rejected),
-                key=lambda e: (e[0], e[1], e[2], e[3] or ""),
-            )
-        )
-        drop = {(o.kind, o.frame, o.marker, o.sample) for o in rejected}
-        scored = without_observations(data, drop)
+        excluded = rejected_keys(reference)
+        scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
     tasks = [
         (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
         for f, (train, test, test_ids) in enumerate(_folds(data, scored, k, seed))

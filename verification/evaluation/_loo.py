@@ -42,7 +42,6 @@ from numpy.typing import NDArray
 from kinfw.identification import Calibration
 from kinfw.identification.problem import (
     LOSS_SCALE,
-    Unknown,
     build_problem,
     negligible_columns,
     row_weights,
@@ -52,6 +51,7 @@ from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
 from kinfw.observations import NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
+from kinfw.verification.evaluation._crossval import fitted_unknowns
 
 __all__ = ["LeaveOneOut", "leave_one_out"]
 
@@ -109,9 +109,7 @@ def leave_one_out(
     -------
     LeaveOneOut
     """
-    unknowns = fit.refined.unknowns
-    if fit.refined.model_frame is not None:  # the root's pose in the external frame
-        unknowns = (*unknowns, Unknown("frame", fit.refined.model_frame, fit.w_T_root))
+    unknowns = fitted_unknowns(fit)
     model = Robot(fit.urdf_xml, "<fitted>")
     with warnings.catch_warnings():  # the data's warnings belong to the fit, said once
         warnings.simplefilter("ignore", UserWarning)

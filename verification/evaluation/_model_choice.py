@@ -48,6 +48,7 @@ from kinfw.model import Robot
 from kinfw.observations import DatasetError, Metric
 from kinfw.verification.evaluation._crossval import (
     metric_rms,
+    rejected_keys,
     whitened_score,
     whitening_noise,
     without_observations,
@@ -246,7 +247,7 @@ def choose_parameters(
     progress.stage("model choice: the candidates' leave-one-out scores")
     reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
-    excluded = _rejected_keys(reference)
+    excluded = rejected_keys(reference)
     scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
     candidates = [
         _score(nominal, scored, parameters, p, fit, loss=loss, sigma=sigma)
@@ -315,17 +316,6 @@ def _reference(fits: list[Calibration | ValueError]) -> Calibration:
     return fitted[0]
 
 
-def _rejected_keys(fit: Calibration) -> tuple[tuple[int, str, str, str | None], ...]:
-    """The observations ``fit`` rejected as gross errors, ``(sample, kind, frame,
-    marker)``, sorted."""
-    return tuple(
-        sorted(
-            {(o.sample, o.kind, o.frame, o.marker) for o in fit.refined.rejected},
-            key=lambda e: (e[0], e[1], e[2], e[3] or ""),
-        )
-    )
-
-
 def _check_any_fitted(candidates: list[Candidate], source: str) -> None:
     """Refuse data on which no candidate can be scored."""
     failed = [c for c in candidates if c.failed is not None]
@@ -362,7 +352,7 @@ def _score(
     the reference's rejections), whitened by ``sigma``."""
     if isinstance(fit, ValueError):
         return Candidate(parameters, prior, np.nan, failed=str(fit))
-    own = {(k, f, m, s) for s, k, f, m in _rejected_keys(fit)}
+    own = {(k, f, m, s) for s, k, f, m in rejected_keys(fit)}
     loo = leave_one_out(
         nominal, scored, fit, parameters=parameters, prior=prior, loss=loss, trained_without=own
     )
