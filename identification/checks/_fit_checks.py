@@ -16,7 +16,9 @@ and name the likely cause:
   that is not where the URDF frame is (a frame on a revolute joint's axis asked to carry
   an offset — kinfw keeps such a frame on the axis — or a marker given as the frame
   itself: both follow the frame's orientation), or a parameter kept fixed
-  (``--params``: follows a joint). What alone explains most is named.
+  (``--params``: follows a joint). What alone explains most is named. A component
+  whose residuals are rounding (RMS below :data:`ROUNDING_RMS`: noise-free data) has
+  nothing to report.
 - **Residual size** (:func:`fit_warnings`): with a stated noise, a reduced chi-square
   above :data:`CHI2_LIMIT` means the residuals are larger than the stated noise; with an
   estimated noise, a position sigma above :data:`PLAUSIBLE_NOISE_M` (or an orientation
@@ -43,6 +45,7 @@ __all__ = [
     "CHI2_LIMIT",
     "PLAUSIBLE_NOISE_M",
     "PLAUSIBLE_NOISE_RAD",
+    "ROUNDING_RMS",
     "STRUCTURE_R2",
     "ResidualStructure",
     "fit_warnings",
@@ -56,6 +59,10 @@ CHI2_LIMIT = 4.0
 #: Estimated noise above which it is a model error, not a measurement system's noise.
 PLAUSIBLE_NOISE_M = 5e-3
 PLAUSIBLE_NOISE_RAD = math.radians(1.0)
+#: Residual RMS below which a component is rounding, not a measurement (in its unit: m,
+#: rad, px): noise-free data fit to ~1e-16 m, and rounding errors follow the joint
+#: values as much as anything, so their structure is not reported.
+ROUNDING_RMS = 1e-9
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,15 +108,7 @@ class ResidualStructure:
         what = f"{self.kind} {self.frame!r}" + (f" [{self.marker}]" if self.marker else "")
         size = "" if math.isnan(self.rms_m) else f" (position RMS {1e3 * self.rms_m:.3g} mm)"
         cause = (
-            f"the measured point or frame is probably not where {self.frame!r} is: a "
-            "constant offset in that frame that the model cannot carry"
-            + (
-                f" ({self.frame!r} hangs on joint {self.last_joint!r}: if it is that "
-                "joint's child link, kinfw keeps it on the axis; measure a frame off the "
-                "axis, or declare a marker)"
-                if self.last_joint
-                else ""
-            )
+            self._offset_cause()
             if self.explainer.startswith("the orientation")
             else f"a parameter of or near joint {self.explainer!r} is missing or fixed "
             "(--params), or the joint's readings are off (scale, backlash)"
@@ -120,6 +119,29 @@ class ResidualStructure:
             f"values and the frame's orientation ({100 * self.chance:.0f} % expected from "
             f"noise), {100 * self.explainer_explained:.0f} % by {self.explainer} alone. "
             f"Likely cause: {cause}"
+        )
+
+    def _offset_cause(self) -> str:
+        """The cause when the frame's orientation explains the residuals: an offset in
+        the frame the model cannot carry (a declared marker's offset is fitted, so then
+        the marker is not rigid on the frame)."""
+        if self.marker is not None:
+            return (
+                f"marker {self.marker!r} is declared and its offset on {self.frame!r} is "
+                "fitted, so an offset does not explain this: a parameter of the joints "
+                "before the frame is missing or fixed (--params), or the marker is not "
+                f"rigid on {self.frame!r} (on another link, or it moved during the recording)"
+            )
+        return (
+            f"the measured point or frame is probably not where {self.frame!r} is: a "
+            "constant offset in that frame that the model cannot carry"
+            + (
+                f" ({self.frame!r} hangs on joint {self.last_joint!r}: if it is that "
+                "joint's child link, kinfw keeps it on the axis; measure a frame off the "
+                "axis, or declare a marker)"
+                if self.last_joint
+                else ""
+            )
         )
 
 
@@ -205,6 +227,8 @@ def residual_structure(
         # per noise component (its rows share a unit): the most structured one
         scores = []
         for name, Y in group.components:
+            if np.sqrt(np.mean(Y**2)) < ROUNDING_RMS:
+                continue
             explained = _explained(X, Y)
             chance, limit = _chance(k, m, Y.shape[1])
             if explained >= limit:

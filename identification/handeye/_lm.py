@@ -65,6 +65,10 @@ LM_MAX_STEPS = 40
 #: scene's length) and the noise scales changed by less than ``LM_SCALE_TOL`` (relative).
 LM_STEP_TOL = 1e-9
 LM_SCALE_TOL = 1e-7
+#: Noise scales below this (radians, or relative to the scene's length) are rounding:
+#: on noise-free data they shrink with every step and never settle to ``LM_SCALE_TOL``,
+#: so a fit whose steps are below ``LM_STEP_TOL`` there has converged.
+LM_ROUNDING = 1e-12
 #: Bounds of sigma_t / (sigma_r * L), L the RMS camera-target distance: keeps the
 #: weights finite on noise-free data (rotation-only or translation-only noise).
 _RATIO_BOUNDS = (1e-6, 1e6)
@@ -401,7 +405,8 @@ def fit_lm(
                 s_r, s_t, change, last_du = _updated_scales(
                     H, H_r, H_t, c, r, s_r, s_t, data.length, last_du
                 )
-            if (step.size < LM_STEP_TOL and change < LM_SCALE_TOL) or step.cost == 0.0:
+            exact = s_r < LM_ROUNDING and s_t < LM_ROUNDING * data.length
+            if (step.size < LM_STEP_TOL and (change < LM_SCALE_TOL or exact)) or step.cost == 0.0:
                 converged = True
                 break
     Jr, Jt = _whitened(lean.jacobian(r, RXB, R_hat, v, X), maskf, s_r, s_t)

@@ -167,11 +167,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     print("RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.rms_by_stage))
     if report.refine is not None:
-        _print_refine(
-            report.refine,
-            has_report=bool(args.report),
-            n_pixel_points=sum(len(g.sample) for g in data.groups("pixels")),
-        )
+        _print_refine(report.refine, has_report=bool(args.report))
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
     if report.errors_held_out is not None:
@@ -241,7 +237,7 @@ def _noise_text(noise) -> str:
     return ", ".join(parts) or "-"
 
 
-def _print_refine(ref: RefineSection, *, has_report: bool, n_pixel_points: int = 0) -> None:
+def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     """The refinement's summary: noise, fit, rank, fixed and unidentifiable parameters,
     the worst down-weighted observations."""
     ident = ref.identifiability
@@ -288,29 +284,6 @@ def _print_refine(ref: RefineSection, *, has_report: bool, n_pixel_points: int =
             f"    ... and {len(down) - 5} more "
             f"({'see the report' if has_report else 'write them with --report'})"
         )
-    hint = _intrinsics_hint(ref, n_pixel_points)
-    if hint:
-        print(f"  warning: {hint}")
-
-
-def _intrinsics_hint(ref: RefineSection, n_points: int) -> str | None:
-    """When the pixel residuals are large and structured (more than 5 % of the image
-    points rejected or down-weighted, or an estimated pixel noise over 2 px), the
-    intrinsics are a likely cause: say so, unless they were refined. ``n_points``: the
-    image points of the calibration data."""
-    px_rows = [r for r in (*(ref.rejected or ()), *ref.downweighted) if r.kind == "pixels"]
-    sigma = ref.noise.of("pixel")
-    refined = any(p.owner.startswith("intrinsics") and not p.fixed for p in ref.parameters)
-    if sigma is None or refined:
-        return None
-    many = n_points > 0 and len(px_rows) > 0.05 * n_points
-    if not (many or (ref.noise.estimated and sigma > 2.0)):
-        return None
-    return (
-        f"the image points' residuals are large and structured ({len(px_rows)} rejected or "
-        f"down-weighted, estimated pixel noise {sigma:.3g} px): the camera intrinsics may "
-        "be wrong; try --refine-intrinsics (or check the --camera files)"
-    )
 
 
 # -- kinfw demo --------------------------------------------------------------------------

@@ -7,7 +7,12 @@ errors-by-stage figure.
 
 from __future__ import annotations
 
-from kinfw.verification.reporting._calibrate import CalibrationResult, calibrate_and_report
+from kinfw.verification.reporting._calibrate import (
+    CalibrationResult,
+    IntrinsicsEvidence,
+    calibrate_and_report,
+    intrinsics_evidence,
+)
 from kinfw.verification.reporting._fleet import (
     FLEET_SUMMARY,
     FleetMember,
@@ -40,6 +45,7 @@ __all__ = [
     "FleetMember",
     "FleetResult",
     "FleetRow",
+    "IntrinsicsEvidence",
     "before_after_rows",
     "calibrate_and_report",
     "calibrate_fleet",
@@ -51,6 +57,7 @@ __all__ = [
     "file_sha256",
     "fleet_members",
     "hand_eye_section",
+    "intrinsics_evidence",
     "noise_summary",
     "plot_stage_errors",
     "refine_section",

@@ -10,6 +10,8 @@ calibrated URDF and its sidecar written together.
 from __future__ import annotations
 
 import dataclasses
+import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -24,7 +26,139 @@ from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.verification.evaluation import ModelChoice
 from kinfw.verification.reporting._report import calibration_report, sidecar
 
-__all__ = ["CalibrationResult", "calibrate_and_report"]
+__all__ = [
+    "CalibrationResult",
+    "IntrinsicsEvidence",
+    "calibrate_and_report",
+    "intrinsics_evidence",
+]
+
+#: Pixel residuals worth a second look: an estimated pixel noise above this (px), or more
+#: than :data:`SUSPECT_FRACTION` of the image points rejected or down-weighted.
+SUSPECT_PIXEL_SIGMA_PX = 2.0
+SUSPECT_FRACTION = 0.05
+#: Refining the intrinsics must lower the pixel noise by this factor to be named a cause.
+MATERIAL_RATIO = 1.1
+
+
+@dataclass(frozen=True, slots=True)
+class IntrinsicsEvidence:
+    """Whether refined intrinsics explain large pixel residuals: the same calibration
+    with every camera's intrinsics refined, compared (:func:`intrinsics_evidence`).
+
+    Attributes
+    ----------
+    sigma_px : float
+        Pixel noise of the calibration with the intrinsics as given, px (the estimated
+        sigma, or the stated one times the root of the reduced chi-square).
+    refined_sigma_px : float
+        The same with the intrinsics refined, px.
+    parameters : int
+        Intrinsic parameters the refit freed.
+    rows : int
+        Pixel residual rows (two per image point).
+    suspect : str
+        What made the residuals suspect (the noise, the rejected points).
+    """
+
+    sigma_px: float
+    refined_sigma_px: float
+    parameters: int
+    rows: int
+    suspect: str
+
+    @property
+    def chi2_drop(self) -> float:
+        """The drop of the pixel chi-square (in the refined fit's noise) that freeing the
+        intrinsics buys, ``rows (sigma^2 / refined^2 - 1)``."""
+        return self.rows * ((self.sigma_px / self.refined_sigma_px) ** 2 - 1.0)
+
+    @property
+    def significant(self) -> bool:
+        """The drop is beyond chance (a chi-square with :attr:`parameters` degrees of
+        freedom plus 5 of its standard deviations) and material (the pixel noise falls by
+        :data:`MATERIAL_RATIO`)."""
+        k = self.parameters
+        chance = k + 5.0 * math.sqrt(2.0 * k)
+        return self.chi2_drop > chance and self.sigma_px > MATERIAL_RATIO * self.refined_sigma_px
+
+    def message(self) -> str:
+        """One line with the evidence, for a significant result."""
+        return (
+            f"the image points' residuals are large ({self.suspect}) and refining the "
+            f"camera intrinsics ({self.parameters} parameters) lowers the pixel noise from "
+            f"{self.sigma_px:.3g} to {self.refined_sigma_px:.3g} px: the intrinsics are "
+            "probably wrong; calibrate with --refine-intrinsics (or check the --camera files)"
+        )
+
+
+def intrinsics_evidence(
+    nominal: Robot,
+    data: Measurements,
+    result: Calibration,
+    *,
+    parameters: str | tuple[str, ...],
+    prior: tuple[float, float] | None,
+    noise: NoiseModel | None,
+    loss: str,
+) -> IntrinsicsEvidence | None:
+    """When the pixel residuals of ``result`` are suspect (an estimated pixel noise above
+    :data:`SUSPECT_PIXEL_SIGMA_PX`, or more than :data:`SUSPECT_FRACTION` of the image
+    points rejected or down-weighted) and its intrinsics were fixed, refit with every
+    camera's intrinsics refined and compare; None otherwise (no image points, intrinsics
+    refined, residuals not suspect, or the refit refused).
+
+    Large pixel residuals alone do not blame the intrinsics: a noisy detector or wrong
+    robot poses make them too, and refined intrinsics then explain little.
+    """
+    from kinfw.identification import calibrate
+
+    ref = result.refined
+    n_points = sum(len(g.sample) for g in data.groups("pixels"))
+    if ref is None or n_points == 0 or "pixel" not in dict(ref.noise.sigmas):
+        return None
+    if _intrinsics_freed(ref):
+        return None
+    sigma = ref.noise.of("pixel") * math.sqrt(ref.sigma_hat2)
+    off = sum(r.kind == "pixels" for r in ref.rejected) + sum(
+        d[0] == "pixels" for d in ref.downweighted
+    )
+    if off > SUSPECT_FRACTION * n_points:
+        suspect = f"{off} of {n_points} image points rejected or down-weighted"
+    elif ref.noise.estimated and sigma > SUSPECT_PIXEL_SIGMA_PX:
+        suspect = f"estimated pixel noise {sigma:.3g} px"
+    else:
+        return None
+    progress.stage("intrinsics check: the calibration with the intrinsics refined")
+    with warnings.catch_warnings():  # the data's warnings came with the calibration
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            alt = calibrate(
+                nominal,
+                data,
+                parameters=parameters,
+                prior=prior,
+                noise=noise,
+                loss=loss,
+                refine_intrinsics=True,
+            ).refined
+        except ValueError:
+            return None
+    return IntrinsicsEvidence(
+        sigma,
+        alt.noise.of("pixel") * math.sqrt(alt.sigma_hat2),
+        _intrinsics_freed(alt),
+        2 * n_points,
+        suspect,
+    )
+
+
+def _intrinsics_freed(refined) -> int:
+    """The intrinsic parameters a refinement estimated."""
+    return sum(
+        n.owner.startswith("intrinsics") and bool(f)
+        for n, f in zip(refined.parameter_names, refined.free, strict=True)
+    )
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -47,6 +181,9 @@ class CalibrationResult:
         reason); recorded in the sidecar.
     choice : ModelChoice or None
         The model choice, when the parameter set was chosen (``parameters="auto"``).
+    intrinsics : IntrinsicsEvidence or None
+        Whether refined intrinsics explain suspect pixel residuals (a significant one is
+        also warned about and noted in the report); None when nothing was suspect.
     nominal : Robot
         The robot calibrated.
     inputs : mapping of str to str
@@ -60,6 +197,7 @@ class CalibrationResult:
     calibration: Calibration
     model: ModelSummary
     choice: ModelChoice | None
+    intrinsics: IntrinsicsEvidence | None
     nominal: Robot
     inputs: Mapping[str, str]
 
@@ -201,6 +339,11 @@ def calibrate_and_report(
             prior=prior,
             refine_intrinsics=refine_intrinsics,
         )
+    evidence = None
+    if method == "refine" and not refine_intrinsics:
+        evidence = intrinsics_evidence(
+            nominal, data, result, parameters=parameters, prior=prior, noise=noise, loss=loss
+        )
     calibrated = Robot(result.urdf_xml, "<calibrated>")
     progress.stage("report: errors after each stage")
     report = calibration_report(
@@ -217,6 +360,9 @@ def calibrate_and_report(
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )
+    if evidence is not None and evidence.significant:
+        warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
+        report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
     model = ModelSummary(
         (parameters,) if isinstance(parameters, str) else tuple(parameters),
         None if prior is None else float(prior[0]),
@@ -227,5 +373,5 @@ def calibrate_and_report(
     if held_out is not None:
         sources["held-out data"] = held_out.source
     return CalibrationResult(
-        calibrated, result.urdf_xml, report, result, model, choice, nominal, sources
+        calibrated, result.urdf_xml, report, result, model, choice, evidence, nominal, sources
     )
