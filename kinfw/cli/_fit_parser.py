@@ -100,7 +100,8 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="what to estimate: auto (default: full when there are at least 10 residual "
         "rows per parameter, else the set and prior with the lowest leave-one-out held-out error "
-        "among frames, offsets, full and full with a prior of 1, 3 or 10 mm), full, "
+        "among frames, offsets, full and full with a prior of 0.3, 1, 3 or 10 mm and "
+        "angles as over 0.1 or 0.5 m), full, "
         "offsets (joint zero offsets + base and tool frames), frames (base and "
         "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
         "those joints' CPC parameters)",

@@ -19,6 +19,7 @@ from pathlib import Path
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
+from kinfw.identification.checks import InsufficientDataError
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, check_measurements
 from kinfw.model import Robot, check_robot
@@ -260,6 +261,40 @@ def _model_choice(
     return choice.parameters, choice.prior, choice
 
 
+def _determined_candidates(
+    nominal: Robot, data: Measurements, *, noise: NoiseModel | None, loss: str
+) -> str:
+    """For a refusal of given parameters: the model choice's candidates these data
+    determine, best held-out first (``"; determined by these data, ..."``), or ``""``
+    when none is or the choice cannot run."""
+    from kinfw.verification.evaluation import choose_parameters
+
+    progress.stage("too little data: which parameter sets these data determine")
+    try:
+        choice = choose_parameters(nominal, data, noise=noise, loss=loss)
+    except ValueError:
+        return ""
+    scored = sorted((c for c in choice.candidates if c.failed is None), key=lambda c: c.whitened)
+    if not scored:
+        return ""
+    best = ", ".join(f"{_options(c.parameters, c.prior)} ({c.whitened:.3g})" for c in scored[:4])
+    more = f" and {len(scored) - 4} more" if len(scored) > 4 else ""
+    return (
+        f"; the models these data determine, by leave-one-out held-out error (whitened), "
+        f"best first: {best}{more} (--params auto chooses the best)"
+    )
+
+
+def _options(parameters: str, prior: tuple[float, float] | None) -> str:
+    """The command-line options that fit ``parameters`` with ``prior``."""
+    if prior is None:
+        return f"--params {parameters}"
+    return (
+        f"--params {parameters} --prior-mm {1e3 * prior[0]:.3g} "
+        f"--prior-deg {math.degrees(prior[1]):.3g}"
+    )
+
+
 def calibrate_and_report(
     nominal: Robot,
     data: Measurements,
@@ -329,16 +364,23 @@ def calibrate_and_report(
     if choice is not None and choice.fit is not None and not refine_intrinsics:
         result = choice.fit  # the chosen candidate, fitted on all the data with these options
     else:
-        result = calibrate(
-            nominal,
-            data,
-            method=method,
-            noise=noise,
-            loss=loss,
-            parameters=parameters,
-            prior=prior,
-            refine_intrinsics=refine_intrinsics,
-        )
+        try:
+            result = calibrate(
+                nominal,
+                data,
+                method=method,
+                noise=noise,
+                loss=loss,
+                parameters=parameters,
+                prior=prior,
+                refine_intrinsics=refine_intrinsics,
+            )
+        except InsufficientDataError as exc:
+            if choice is not None or method != "refine":
+                raise
+            raise InsufficientDataError(
+                f"{exc}{_determined_candidates(nominal, data, noise=noise, loss=loss)}"
+            ) from exc
     evidence = None
     if method == "refine" and not refine_intrinsics:
         evidence = intrinsics_evidence(
