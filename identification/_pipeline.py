@@ -31,11 +31,17 @@ from kinfw.identification.checks import (
     check_redundancy,
     check_units,
     fit_warnings,
+    median_residuals,
 )
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
 from kinfw.identification.problem import NoiseModel, build_problem
-from kinfw.measurements import Measurements, check_joint_motion, observed_joints
-from kinfw.model import Robot, geometry_from_cpc
+from kinfw.measurements import (
+    Measurements,
+    check_joint_motion,
+    check_measurements,
+    observed_joints,
+)
+from kinfw.model import Robot, check_robot, geometry_from_cpc
 from kinfw.observations import DatasetError
 from kinfw.urdf import ExportResult, edit_urdf, export_urdf
 
@@ -156,7 +162,12 @@ def calibrate(
     ------
     DatasetError
         When no stage can use the data, or a check or stage refuses it (with the reason).
+    TypeError
+        ``nominal`` or ``data`` is not a Robot / Measurements (a path: load it first),
+        naming the argument.
     """
+    nominal = check_robot(nominal, "nominal")
+    data = check_measurements(data, "data")
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     progress.stage("checking the units")
@@ -319,5 +330,32 @@ def _refine_checked(
         try:
             check_fit(refined, data.source)
         except UnitError as exc:  # the residuals' structure names a likelier cause
-            raise UnitError(" ".join((str(exc), *(f"Also: {w}" for w in found)))) from None
+            order = _quaternion_order_hint(nominal, data, options)
+            raise UnitError(" ".join((*order, str(exc), *(f"Also: {w}" for w in found)))) from None
     return refined, found
+
+
+def _quaternion_order_hint(
+    nominal: Robot, data: Measurements, options: _RefineOptions
+) -> tuple[str, ...]:
+    """When the data do not fit but would with their quaternions in the other order
+    (:meth:`kinfw.measurements.Measurements.with_quaternions_reordered`): one sentence
+    saying so, to put first; else nothing."""
+    swapped = data.with_quaternions_reordered()
+    if swapped is None:
+        return ()
+    progress.stage("the data do not fit: trying the quaternions in the other order")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        try:
+            result = refine(nominal, swapped, noise=options.noise, loss=options.loss)
+            check_fit(result, data.source)
+        except ValueError:  # no better in the other order: not the cause
+            return ()
+    pos, rot = median_residuals(result)
+    return (
+        f"{data.source}: the orientations look like quaternions stored scalar first "
+        f"(w, x, y, z) where kinfw reads them scalar last (quat_xyzw: x, y, z, w): read in "
+        f"that order, the data fit (median residual {1e3 * pos:.3g} mm, "
+        f"{np.degrees(rot):.3g} deg). Reorder them in the file.",
+    )

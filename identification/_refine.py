@@ -69,8 +69,8 @@ from kinfw.identification.problem import (
     row_weights,
     thresholds,
 )
-from kinfw.measurements import Measurements
-from kinfw.model import Robot, RobotBlock
+from kinfw.measurements import Measurements, check_measurements
+from kinfw.model import Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_of
 
 __all__ = [
@@ -206,6 +206,9 @@ def refine(
     ------
     DatasetError
         When the data does not fit the robot or leaves an external frame unplaceable.
+    TypeError
+        ``robot`` or ``measurements`` is not a Robot / Measurements (a path: load it
+        first), naming the argument.
 
     Notes
     -----
@@ -236,6 +239,8 @@ def refine(
     that leaves the problem undetermined (:class:`DatasetError` on the refit) is undone
     and noted.
     """
+    robot = check_robot(robot, "robot")
+    measurements = check_measurements(measurements, "measurements")
     _check_loss_options(loss, reject, max_reject_fraction)
     t0 = time.perf_counter()
 

@@ -174,11 +174,15 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
     The temporary name keeps ``path``'s suffix (so a writer that infers the format from
     it still does) and starts with a dot. When the body raises, the temporary file is
     removed and ``path`` is left as it was. The file gets the permissions of a newly
-    created file (``0o666`` less the umask).
+    created file (``0o666`` less the umask). When the temporary file cannot be created
+    (a missing directory, no permission) the error names ``path``.
     """
     path = Path(path)
     tmp = path.with_name(f".{path.stem}.{os.urandom(4).hex()}.tmp{path.suffix}")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:  # the user's path in the message, not the temporary one
+        raise type(exc)(exc.errno, exc.strerror, str(path)) from None
     os.close(fd)
     try:
         yield tmp

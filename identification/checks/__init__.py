@@ -21,7 +21,13 @@ from kinfw.identification.checks._redundancy import (
     check_redundancy,
     redundancy,
 )
-from kinfw.identification.checks._units import UnitError, check_fit, check_joint_scale, check_units
+from kinfw.identification.checks._units import (
+    UnitError,
+    check_fit,
+    check_joint_scale,
+    check_units,
+    median_residuals,
+)
 from kinfw.identification.checks._units_evidence import (
     BAD_SCORE,
     BETTER_FACTOR,
@@ -56,6 +62,7 @@ __all__ = [
     "check_redundancy",
     "check_units",
     "fit_warnings",
+    "median_residuals",
     "redundancy",
     "residual_structure",
     "unit_diagnostics",

@@ -60,6 +60,7 @@ __all__ = [
     "check_fit",
     "check_joint_scale",
     "check_units",
+    "median_residuals",
     "unit_diagnostics",
 ]
 
@@ -218,6 +219,22 @@ def check_joint_scale(
     )
 
 
+def median_residuals(result: RefineResult) -> tuple[float, float]:
+    """Median position (m) and orientation (rad) residual norms over every observation
+    of a refinement (0 for a component no observation has)."""
+    pos = [
+        np.linalg.norm(g.position_m, axis=1) for g in result.residuals if g.position_m is not None
+    ]
+    rot = [
+        np.linalg.norm(g.rotation_rad, axis=1)
+        for g in result.residuals
+        if g.rotation_rad is not None
+    ]
+    med_p = float(np.median(np.concatenate(pos))) if pos else 0.0
+    med_r = float(np.median(np.concatenate(rot))) if rot else 0.0
+    return med_p, med_r
+
+
 def check_fit(result: RefineResult, source: str) -> None:
     """Refuse a refinement over every parameter that still does not fit the data.
 
@@ -236,17 +253,10 @@ def check_fit(result: RefineResult, source: str) -> None:
         :data:`FIT_LIMIT_M` or the median orientation one :data:`FIT_LIMIT_RAD`, naming
         the worst observation group.
     """
-    with_position = [g for g in result.residuals if g.position_m is not None]
-    pos = [np.linalg.norm(g.position_m, axis=1) for g in with_position]
-    rot = [
-        np.linalg.norm(g.rotation_rad, axis=1)
-        for g in result.residuals
-        if g.rotation_rad is not None
-    ]
-    med_p = float(np.median(np.concatenate(pos))) if pos else 0.0
-    med_r = float(np.median(np.concatenate(rot))) if rot else 0.0
+    med_p, med_r = median_residuals(result)
     if med_p <= FIT_LIMIT_M and med_r <= FIT_LIMIT_RAD:
         return
+    with_position = [g for g in result.residuals if g.position_m is not None]
     worst = max(with_position, key=lambda g: float(np.median(np.linalg.norm(g.position_m, axis=1))))
     raise UnitError(
         f"{source}: the refinement over every parameter still leaves a median residual of "

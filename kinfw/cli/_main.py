@@ -59,6 +59,20 @@ log = logging.getLogger("kinfw")
 #: ``kinfw.measurements.DatasetError``, ``kinfw.model.RobotModelError`` and
 #: ``kinfw.files.OutputPathError`` are ValueErrors (caught here without importing them).
 USER_ERRORS = (ValueError, OSError)
+#: Exit codes as a shell reports a process ended by SIGINT (Ctrl-C) or SIGPIPE (the
+#: reader of its output left): 128 + the signal's number.
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null: the reader is gone, and the interpreter's last flush
+    at exit would raise again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no file descriptor (a test's captured stdout)
+        pass
 
 
 class _Parser(argparse.ArgumentParser):
@@ -209,8 +223,17 @@ def main(
             if check is not None:  # every output path, before any work
                 check(args)
             with _one_blas_thread():
-                return func(args)
+                code = func(args)
+            sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+            return code
+        except BrokenPipeError:  # the reader left (``kinfw reach --json | head``)
+            _silence_stdout()
+            return EXIT_BROKEN_PIPE
         except USER_ERRORS as exc:
             message = " ".join(str(exc).split())
             print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
             return 2
+        except KeyboardInterrupt:  # outputs are written atomically: none is half-written
+            lead = "\n" if sys.stderr.isatty() else ""  # below a progress bar
+            print(f"{lead}kinfw {args.command}: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED

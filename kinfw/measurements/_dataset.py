@@ -188,6 +188,24 @@ class Measurements:
             by_field[kind_of(g).measurements_field or "others"].append(g)
         return replace(self, **{k: tuple(v) for k, v in by_field.items()}, **changes)
 
+    def with_quaternions_reordered(self) -> Measurements | None:
+        """The dataset as if every measured orientation's quaternion had been stored in
+        the other order: each rotation's ``(x, y, z, w)`` read as ``(w, x, y, z)``
+        (poses and target poses; the positions kept). None without measured
+        orientations. The diagnosis of quaternions written scalar first where kinfw reads
+        them scalar last (``quat_xyzw``)."""
+        from kinfw.geometry import quat_xyzw_from_matrix, transform_from_xyz_quat_xyzw
+
+        def reordered(T: NDArray) -> NDArray:
+            q = quat_xyzw_from_matrix(T[:, :3, :3])  # the stored one, up to its sign
+            return transform_from_xyz_quat_xyzw(T[:, :3, 3], q[:, [1, 2, 3, 0]])
+
+        if not (self.poses or self.targets):
+            return None
+        poses = [replace(g, meas_T_frame=reordered(g.meas_T_frame)) for g in self.poses]
+        targets = [replace(g, camera_T_target=reordered(g.camera_T_target)) for g in self.targets]
+        return replace(self, poses=tuple(poses), targets=tuple(targets))
+
     def _groups(self) -> Iterator[Any]:
         return self.all_groups()
 

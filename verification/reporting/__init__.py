@@ -12,6 +12,7 @@ from kinfw.verification.reporting._calibrate import (
     IntrinsicsEvidence,
     calibrate_and_report,
     intrinsics_evidence,
+    shared_configurations,
 )
 from kinfw.verification.reporting._fleet import (
     FLEET_SUMMARY,
@@ -62,5 +63,6 @@ __all__ = [
     "plot_stage_errors",
     "refine_section",
     "rejected_rows",
+    "shared_configurations",
     "sidecar",
 ]

@@ -16,6 +16,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
@@ -32,6 +34,7 @@ __all__ = [
     "IntrinsicsEvidence",
     "calibrate_and_report",
     "intrinsics_evidence",
+    "shared_configurations",
 ]
 
 #: Pixel residuals worth a second look: an estimated pixel noise above this (px), or more
@@ -261,6 +264,36 @@ def _model_choice(
     return choice.parameters, choice.prior, choice
 
 
+def shared_configurations(data: Measurements, held_out: Measurements) -> int:
+    """How many samples of ``held_out`` have exactly (to 1e-12) the joint values of a
+    sample of ``data``, on the joints both record; 0 when they share no joint."""
+    names = [n for n in held_out.joint_names if n in data.joint_names]
+    if not names or data.n_samples == 0:
+        return 0
+    train = {tuple(q) for q in np.round(data.q_of(names), 12).tolist()}
+    return sum(tuple(q) in train for q in np.round(held_out.q_of(names), 12).tolist())
+
+
+def _warn_overlap(data: Measurements, held_out: Measurements) -> None:
+    """Warn when held-out samples repeat calibration samples' joint values: if they are
+    the same measurements, their errors are in-sample, not held-out."""
+    shared = shared_configurations(data, held_out)
+    if shared == 0:
+        return
+    what = (
+        "every held-out sample has"
+        if shared == held_out.n_samples
+        else f"{shared} of {held_out.n_samples} held-out samples have"
+    )
+    warnings.warn(
+        f"{held_out.source}: {what} the joint values of a calibration sample of "
+        f"{data.source}: if they are the same measurements, their errors are in-sample, "
+        "not held-out (hold out samples the calibration never saw)",
+        UserWarning,
+        stacklevel=3,
+    )
+
+
 def _determined_candidates(
     nominal: Robot, data: Measurements, *, noise: NoiseModel | None, loss: str
 ) -> str:
@@ -336,6 +369,8 @@ def calibrate_and_report(
         ``(sigma_m, sigma_rad)`` of a Gaussian prior on the deviations from the nominal.
     held_out : Measurements, optional
         Data not used for calibration; its errors go to the report and the sidecar.
+        Samples with a calibration sample's exact joint values are warned about
+        (:func:`shared_configurations`).
     refine_intrinsics : bool or tuple of str
         Also estimate the intrinsics of these cameras (True: every camera).
     data_path : path, optional
@@ -358,6 +393,8 @@ def calibrate_and_report(
     nominal = check_robot(nominal, "nominal")
     data = check_measurements(data, "data")
     held_out = None if held_out is None else check_measurements(held_out, "held_out")
+    if held_out is not None:
+        _warn_overlap(data, held_out)
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
     )
