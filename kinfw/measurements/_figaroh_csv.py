@@ -20,7 +20,9 @@ calibration), so ``phix, phiy, phiz`` are roll, pitch, yaw about fixed axes:
 A marker with ``x, y, z`` only becomes a ``point`` observation of a marker of unknown
 offset on ``frame``; with all six columns, a ``pose`` observation of a rigid marker of
 unknown pose on ``frame``. Both are in ``measured_in`` (default: the URDF root link).
-Column names are stripped of spaces (some sessions pad them: ``"x1 "``). Unnamed columns
+Column names are stripped of spaces (some sessions pad them: ``"x1 "``). Spreadsheet
+dialects are read: a UTF-8 byte-order mark, ``;`` or tab separators, and with them
+decimal commas (``0,25``); a file mixing decimal commas and points is refused. Unnamed columns
 (``""`` or pandas' ``"Unnamed: N"``: a row index written by ``DataFrame.to_csv``, the empty
 column after a trailing comma) are ignored, as FIGAROH ignores every column it does not
 ask for; any other column must be a marker or a joint of the robot.
@@ -90,13 +92,39 @@ def _unnamed(name: str) -> bool:
     return name == "" or _PANDAS_UNNAMED.match(name) is not None
 
 
-def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    """Header (stripped) and the data rows with their line numbers (blank lines skipped)."""
+def _dialect(path: Path, header_line: str, lines: list[str]) -> tuple[str, bool]:
+    """The separator (``,`` ``;`` or tab: the one the header line holds most of) and
+    whether numbers use a decimal comma (``0,25``: only with another separator)."""
+    delimiter = max(",;\t", key=header_line.count)
+    if header_line.count(delimiter) == 0:
+        delimiter = ","
+    if delimiter == ",":
+        return delimiter, False
+    body = "\n".join(lines)
+    comma = re.search(r"(?<![\d.,])-?\d+,\d+(?![\d.,])", body) is not None
+    point = re.search(r"(?<![\d.,])-?\d+\.\d+(?![\d.,])", body) is not None
+    if comma and point:
+        raise DatasetError(
+            f"{path}: numbers with both decimal commas and decimal points (separator "
+            f"{delimiter!r}): write every number with one of them"
+        )
+    return delimiter, comma
+
+
+def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]], bool]:
+    """Header (stripped), the data rows with their line numbers (blank lines skipped),
+    and whether numbers use a decimal comma. A UTF-8 byte-order mark is skipped; the
+    separator is ``,``, ``;`` or a tab (:func:`_dialect`)."""
     try:
-        with path.open(newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not a text CSV file ({exc.reason})") from None
+        raise DatasetError(f"{path}: not a UTF-8 text CSV file ({exc.reason})") from None
+    lines = text.splitlines()
+    first = next((i for i, line in enumerate(lines) if line.strip()), None)
+    if first is None:
+        raise DatasetError(f"{path}: empty file; expected a header row of column names")
+    delimiter, decimal_comma = _dialect(path, lines[first], lines[first + 1 :])
+    rows = list(csv.reader(lines, delimiter=delimiter))
     if not rows or not any(cell.strip() for cell in rows[0]):
         raise DatasetError(f"{path}: empty file; expected a header row of column names")
     header = [cell.strip() for cell in rows[0]]
@@ -117,24 +145,26 @@ def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
             cells += [""] * (len(header) - len(cells))
         if len(cells) != len(header):
             raise DatasetError(
-                f"{path}: line {line}: {len(cells)} values, expected {len(header)} (one per "
-                "header column)"
+                f"{path}: line {line}: {len(cells)} values separated by {delimiter!r}, "
+                f"expected {len(header)} (one per header column; the separator is the one "
+                "the header line holds most of: ',', ';' or a tab)"
             )
         out.append((line, cells))
-    return header, out
+    return header, out, decimal_comma
 
 
 def _numbers(
-    path: Path, header: list[str], rows: list[tuple[int, list[str]]]
+    path: Path, header: list[str], rows: list[tuple[int, list[str]]], decimal_comma: bool
 ) -> NDArray[np.float64]:
-    """The table as floats; names the row, line and column of the first bad cell."""
+    """The table as floats (``0,25`` read as 0.25 with ``decimal_comma``); names the row,
+    line and column of the first bad cell."""
     table = np.full((len(rows), len(header)), np.nan)
     named = [c for c, name in enumerate(header) if not _unnamed(name)]
     for r, (line, cells) in enumerate(rows):
         for c in named:
             cell = cells[c]
             try:
-                table[r, c] = float(cell)
+                table[r, c] = float(cell.replace(",", ".") if decimal_comma else cell)
             except ValueError:
                 raise DatasetError(
                     f"{path}: row {r} (line {line}), column {header[c]!r}: expected a "
@@ -239,12 +269,12 @@ def measurements_from_figaroh_csv(
         raise ValueError(f"length_unit: expected one of {list(_LENGTH_SCALE)}, got {length_unit!r}")
     if angle_unit not in _ANGLE_SCALE:
         raise ValueError(f"angle_unit: expected one of {list(_ANGLE_SCALE)}, got {angle_unit!r}")
-    header, rows = _read_table(path)
+    header, rows, decimal_comma = _read_table(path)
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
     joint_columns = _joint_columns(path, header, markers, robot)
-    table = _numbers(path, header, rows)
+    table = _numbers(path, header, rows, decimal_comma)
     length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
     joint_names = [header[c] for c in joint_columns]
     scales = np.array(

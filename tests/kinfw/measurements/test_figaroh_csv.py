@@ -167,6 +167,28 @@ def test_pandas_index_and_trailing_commas_are_ignored(tiago, tmp_path):
         measurements_from_figaroh_csv(bad, robot=tiago, frame="arm_7_link")
 
 
+@pytest.mark.parametrize(
+    ("dialect", "encoding"),
+    [("bom", "utf-8-sig"), ("semicolon, decimal comma", "utf-8"), ("tab", "utf-8-sig")],
+)
+def test_spreadsheet_dialects_read_as_the_plain_csv(tiago, tmp_path, dialect, encoding):
+    """The real Vicon session as a spreadsheet in Europe exports it (a byte-order mark,
+    ';' separators, decimal commas) or as tab-separated text: the same measurements as
+    the plain file, every number equal."""
+    text = VICON_CSV.read_text()
+    if dialect.startswith("semicolon"):
+        text = text.replace(",", ";").replace(".", ",")
+    elif dialect == "tab":
+        text = text.replace(",", "\t")
+    path = tmp_path / "vicon.csv"
+    path.write_text(text, encoding=encoding)
+    a = _vicon(tiago)
+    b = measurements_from_figaroh_csv(path, robot=tiago, frame="arm_7_link", measured_in="vicon")
+    assert b.joint_names == a.joint_names
+    np.testing.assert_array_equal(b.qs, a.qs)
+    np.testing.assert_array_equal(b.points[0].meas_p_point, a.points[0].meas_p_point)
+
+
 def test_units_convert_lengths_angles_and_prismatic_joints(tiago, tmp_path):
     si = _csv(
         tmp_path,
@@ -205,7 +227,8 @@ def test_units_convert_lengths_angles_and_prismatic_joints(tiago, tmp_path):
         ("x1,y1,z1,elbow\n1,2,3,4\n", "column 'elbow' is neither a marker column.*arm_1_joint"),
         ("x1,y1,z1,arm_1_joint\n1,2,3,4\n1,2,oops,4\n", r"row 1 \(line 3\), column 'z1'.*'oops'"),
         ("x1,y1,z1,arm_1_joint\n1,2,nan,4\n", r"row 0 \(line 2\), column 'z1'.*occluded"),
-        ("x1,y1,z1,arm_1_joint\n1,2,3\n", "line 2: 3 values, expected 4"),
+        ("x1,y1,z1,arm_1_joint\n1,2,3\n", "line 2: 3 values separated by ',', expected 4"),
+        ("x1;y1;z1;arm_1_joint\n1,5;2.5;3;4\n", "both decimal commas and decimal points"),
         ("x1,y1,z1,x1,arm_1_joint\n1,2,3,4,5\n", "column 'x1' appears twice"),
         ("x1,y1,z1,arm_1_joint\n", "no data rows"),
         ("", "empty file"),
