@@ -9,23 +9,19 @@ the measured frames facing the tracker, and optionally no self-collision
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import inverse_transform
 from kinfw.identification.planning._objective import Setup
-from kinfw.model import Robot
+from kinfw.model import Robot, mesh_dirs, resolve_meshes
 from kinfw.simulation import random_configurations
 
 __all__ = ["Pool", "candidate_pool", "collision_free"]
-
-log = logging.getLogger(
-    "kinfw.identification.planning"
-)  # logged as the plan's, as before the split
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,25 +54,57 @@ def _facing(robot, setup, qs, names) -> NDArray[np.bool_]:
     return ok
 
 
-def collision_free(robot: Robot, qs: ArrayLike, names) -> NDArray[np.bool_] | None:
-    """Which configurations are free of self-collision (Pinocchio + coal/hpp-fcl), or
-    None when the URDF has no collision geometry or the collision module is missing.
+def collision_free(
+    robot: Robot, qs: ArrayLike, names, package_dirs: Sequence[str | Path] = ()
+) -> NDArray[np.bool_]:
+    """Which configurations are free of self-collision (Pinocchio + coal/hpp-fcl).
 
     Pairs that cannot tell a collision are left out, as MoveIt's setup assistant does:
     geometries on one joint's link or on adjacent links (touching at their joint), and
     pairs already in contact at the middle of the joint ranges (overlapping meshes).
+
+    Parameters
+    ----------
+    robot : Robot
+    qs : array_like, shape (N, J)
+        Joint values of ``names``.
+    names : sequence of str
+    package_dirs : sequence of path
+        Where the collision meshes' ``package://`` paths live
+        (:func:`kinfw.model.resolve_meshes`).
+
+    Raises
+    ------
+    ValueError
+        The check cannot be made as asked: the URDF has no collision geometry, a
+        collision mesh is not found (each named, with where it was looked for), or the
+        collision library is missing. A check that silently did nothing would pass
+        colliding configurations.
     """
     import pinocchio as pin
 
     if "<collision" not in robot.urdf_xml:
-        return None
+        raise ValueError(
+            f"{robot.source}: no <collision> geometry in the URDF: self-collision cannot be "
+            "checked (drop --collisions, or use a URDF with collision geometry)"
+        )
+    xml, missing = resolve_meshes(robot, package_dirs, "collision")
+    if missing:
+        names_missing = ", ".join(f"{m.filename} (link {m.link!r})" for m in missing[:3])
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        searched = [str(d) for d in mesh_dirs(package_dirs)] or "no package directories"
+        raise ValueError(
+            f"{robot.source}: {len(missing)} collision mesh(es) not found: {names_missing}"
+            f"{more} (searched {searched}); give --package-dir DIR where the packages live"
+        )
     try:
-        geom = pin.buildGeomFromUrdfString(robot.model, robot.urdf_xml, pin.COLLISION)
+        geom = pin.buildGeomFromUrdfString(robot.model, xml, pin.COLLISION)
         geom.addAllCollisionPairs()
         data, gdata = robot.model.createData(), pin.GeometryData(geom)
-    except Exception as exc:  # no coal/hpp-fcl, or meshes not found
-        log.warning("%s: no self-collision check (%s)", robot.source, exc)
-        return None
+    except Exception as exc:  # no coal/hpp-fcl, or a mesh that cannot be read
+        raise ValueError(
+            f"{robot.source}: self-collision cannot be checked ({exc}); drop --collisions"
+        ) from None
     parents = robot.model.parents
     lower, upper = robot.joint_limits(tuple(names))
     middle = robot.pin_configurations((0.5 * (lower + upper))[None], tuple(names))[0]
@@ -106,11 +134,13 @@ def candidate_pool(
     n: int = 1000,
     rng: np.random.Generator | None = None,
     collisions: bool = False,
+    package_dirs: Sequence[str | Path] = (),
 ) -> Pool:
     """The candidate configurations: ``qs`` (recorded joint states) or ``n`` random
     configurations in the centred ``within_limits`` fraction of each joint range, kept
     when inside the joint limits, the board is seen (stage 2), the frames face the
-    tracker (``setup.tracker_p``) and, with ``collisions``, free of self-collision."""
+    tracker (``setup.tracker_p``) and, with ``collisions``, free of self-collision
+    (:func:`collision_free`, its meshes under ``package_dirs``)."""
     lower, upper = robot.joint_limits(joint_names)
     if qs is None:
         if within_limits is None or rng is None:
@@ -129,8 +159,7 @@ def candidate_pool(
         dropped["not facing the tracker"] = int((keep & ~facing).sum())
         keep &= facing
     if collisions:
-        free = collision_free(robot, qs, joint_names)
-        if free is not None:
-            dropped["self-collision"] = int((keep & ~free).sum())
-            keep &= free
+        free = collision_free(robot, qs, joint_names, package_dirs)
+        dropped["self-collision"] = int((keep & ~free).sum())
+        keep &= free
     return Pool(qs[keep], {k: v for k, v in dropped.items() if v})

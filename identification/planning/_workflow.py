@@ -107,6 +107,7 @@ def plan_measurement(
     candidates: int = 1000,
     n_test: int = 200,
     collisions: bool = False,
+    package_dirs: Sequence[str | Path] = (),
     target_m: float | None = None,
     seed: int = 0,
 ) -> Plan:
@@ -131,7 +132,11 @@ def plan_measurement(
     candidates, n_test : int
         Random candidates and test configurations.
     collisions : bool
-        Drop self-colliding random candidates.
+        Drop self-colliding random candidates
+        (:func:`kinfw.identification.planning.collision_free`; refused when the check
+        cannot be made).
+    package_dirs : sequence of path
+        Where the collision meshes' ``package://`` paths live.
     target_m : float, optional
         Plan the smallest N whose predicted position RMS is below this (m) instead.
     seed : int
@@ -168,6 +173,7 @@ def plan_measurement(
             n=candidates,
             rng=rng,
             collisions=collisions,
+            package_dirs=package_dirs,
         )
     if len(pool.qs) < n and target_m is None:
         raise PoolTooSmallError(n, pool)

@@ -136,6 +136,18 @@ def add_camera_option(p: argparse.ArgumentParser) -> None:
 
 
 # -- what the options name --------------------------------------------------------------
+def add_package_dir_option(p: argparse.ArgumentParser) -> None:
+    """``--package-dir DIR`` (repeatable): where the URDF's ``package://`` meshes live,
+    before ``ROS_PACKAGE_PATH`` (:func:`kinfw.model.resolve_meshes`)."""
+    p.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="where package:// meshes live (repeatable; then ROS_PACKAGE_PATH)",
+    )
+
+
 def frames_arg(
     value: str | None, default: tuple[str, ...], flag: str, robot: Robot
 ) -> tuple[str, ...]:

@@ -21,6 +21,7 @@ from kinfw.cli._args import (
     COUNT,
     SEED,
     add_camera_option,
+    add_package_dir_option,
     frames_arg,
     number,
     read_data,
@@ -162,12 +163,7 @@ def add_view_parser(sub: argparse._SubParsersAction) -> None:
         help='"x y z": up direction of the root frame '
         "(default: the URDF's <kinfw up> hint, else z)",
     )
-    p.add_argument(
-        "--package-dir",
-        action="append",
-        default=[],
-        help="where package:// meshes live (repeatable)",
-    )
+    add_package_dir_option(p)
     p.add_argument("--html", type=Path, help="write a self-contained HTML file instead of serving")
     p.set_defaults(func=cmd_view, check_outputs=check_view_outputs)
 

@@ -10,7 +10,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from kinfw.cli._args import camera_inputs, frame_file, number
+from kinfw.cli._args import add_package_dir_option, camera_inputs, frame_file, number
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -86,6 +86,7 @@ def add_gaze_parser(sub: argparse._SubParsersAction) -> None:
         help="write a Meshcat scene (self-contained HTML): the robot at the solution, each "
         "camera's aimed ray to the point's distance, and the point",
     )
+    add_package_dir_option(p)
     p.set_defaults(func=cmd_gaze, check_outputs=check_gaze_outputs)
 
 
@@ -158,7 +159,7 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     if args.html is not None:
         from kinfw.view import write_gaze_html
 
-        write_gaze_html(robot, fix, args.html)
+        write_gaze_html(robot, fix, args.html, package_dirs=tuple(args.package_dir))
     if args.json:
         print(
             json_text(

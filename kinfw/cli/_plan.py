@@ -10,7 +10,7 @@ import json
 import math
 from pathlib import Path
 
-from kinfw.cli._args import number
+from kinfw.cli._args import add_package_dir_option, number
 from kinfw.files import check_outputs
 
 __all__ = ["add_plan_parser", "cmd_plan"]
@@ -50,7 +50,13 @@ def add_plan_parser(sub) -> None:
     p.add_argument("--pixel-sigma", type=positive, default=0.5, help="pixel noise, px (0.5)")
     p.add_argument("--tracker", help='tracker position "x y z" in the root frame, m')
     p.add_argument("--max-facing-deg", type=positive, default=60.0)
-    p.add_argument("--collisions", action="store_true", help="drop self-colliding candidates")
+    p.add_argument(
+        "--collisions",
+        action="store_true",
+        help="drop self-colliding candidates (refused when the URDF's collision meshes are "
+        "not found: give --package-dir)",
+    )
+    add_package_dir_option(p)
     p.add_argument("--protocol", choices=("free", "per-joint"), default="free")
     p.add_argument("--per-joint", type=count, default=5, help="per-joint protocol: M values")
     p.add_argument("--target-mm", type=positive, default=None, help="smallest N below this")
@@ -128,6 +134,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
             candidates=args.candidates,
             n_test=args.test,
             collisions=args.collisions,
+            package_dirs=tuple(args.package_dir),
             target_m=None if args.target_mm is None else args.target_mm * 1e-3,
             seed=args.seed,
         )

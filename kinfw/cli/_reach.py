@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinfw.cli._args import number
+from kinfw.cli._args import add_package_dir_option, number
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -75,6 +75,7 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         "target (a triad for a pose, a sphere for a point), the frame's triad, and a line "
         "from the frame to the target when not reached",
     )
+    add_package_dir_option(p)
     p.set_defaults(func=cmd_reach, check_outputs=check_reach_outputs)
 
 
@@ -150,7 +151,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
     if args.html is not None:
         from kinfw.view import write_reach_html
 
-        write_reach_html(robot, result, args.html)
+        write_reach_html(robot, result, args.html, package_dirs=tuple(args.package_dir))
     if args.json:
         print(
             json_text(

@@ -29,6 +29,7 @@ from kinfw.model._cpc import (
     rotation_from_axis,
 )
 from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
+from kinfw.model._meshes import MissingMesh, mesh_dirs, resolve_meshes
 from kinfw.model._robot import (
     Robot,
     Topology,
@@ -58,6 +59,7 @@ __all__ = [
     "CPCBlock",
     "CPCModel",
     "JointInfo",
+    "MissingMesh",
     "ParameterName",
     "PointBlock",
     "RigidFrameBlock",
@@ -80,9 +82,11 @@ __all__ = [
     "geometry_from_cpc",
     "geometry_from_robot",
     "load_robot",
+    "mesh_dirs",
     "parse_joints",
     "perpendicular_basis",
     "pinocchio_model",
+    "resolve_meshes",
     "rotation_from_axis",
     "up_vector",
     "xml_text",

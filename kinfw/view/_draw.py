@@ -5,9 +5,7 @@ imported inside the functions."""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,7 +20,6 @@ __all__ = [
     "OVERLAY_RENDER_ORDER",
     "STICK_RADIUS",
     "TRIAD_LENGTH",
-    "mesh_dirs",
     "overlay_material",
     "overlay_object",
     "rgb_int",
@@ -139,10 +136,3 @@ def up_direction(robot: Robot, up: ArrayLike | None = None) -> NDArray[np.float6
     if up.shape != (3,) or not np.linalg.norm(up) > 0:
         raise ValueError(f"up: expected a non-zero 3-vector, got {up!r}")
     return up
-
-
-def mesh_dirs(package_dirs: Sequence[str | Path]) -> tuple[Path, ...]:
-    """Where ``package://`` meshes are looked for: ``package_dirs``, then the
-    directories of ``ROS_PACKAGE_PATH``."""
-    ros = os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep)
-    return tuple(Path(d) for d in package_dirs) + tuple(Path(d) for d in ros if d)

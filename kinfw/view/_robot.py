@@ -21,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.model import Robot
+from kinfw.model import Robot, mesh_dirs, resolve_meshes
 
 if TYPE_CHECKING:
     import meshcat
@@ -47,52 +47,19 @@ BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
 # -- robot geometry ----------------------------------------------------------------------
 
 
-def _resolve_mesh(
-    filename: str, base_dir: Path | None, package_dirs: Sequence[Path]
-) -> Path | None:
-    """The existing file a URDF mesh ``filename`` names, or None."""
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        candidates = []
-        for d in package_dirs:
-            candidates += [d / package / rest, d / rest]
-        if base_dir is not None:  # .../<package>/urdf/robot.urdf: look up the tree
-            candidates += [a / rest for a in (base_dir, *base_dir.parents) if a.name == package]
-    elif filename.startswith("file://"):
-        candidates = [Path(filename[len("file://") :])]
-    else:
-        path = Path(filename)
-        candidates = [path if path.is_absolute() or base_dir is None else base_dir / path]
-    return next((c.resolve() for c in candidates if c.is_file()), None)
-
-
 def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
     """The robot's URDF with mesh paths made absolute and visuals whose mesh is missing
     removed (each with a logged warning)."""
-    root = ET.fromstring(robot.urdf_xml)
-    source = Path(robot.source)
-    base_dir = source.resolve().parent if source.is_file() else None
-    changed = False
-    for link in root.iter("link"):
-        for visual in list(link.findall("visual")):
-            mesh = visual.find("geometry/mesh")
-            if mesh is None:
-                continue
-            filename = mesh.get("filename", "")
-            found = _resolve_mesh(filename, base_dir, package_dirs)
-            if found is None:
-                logger.warning(
-                    "%s: mesh %r of link %r not found (searched %s); that visual is not drawn",
-                    robot.source,
-                    filename,
-                    link.get("name"),
-                    [str(d) for d in package_dirs] or "no package_dirs",
-                )
-                link.remove(visual)
-            else:
-                mesh.set("filename", str(found))
-            changed = True
-    return ET.tostring(root, encoding="unicode") if changed else robot.urdf_xml
+    xml, missing = resolve_meshes(robot, package_dirs, "visual")
+    for m in missing:
+        logger.warning(
+            "%s: mesh %r of link %r not found (searched %s); that visual is not drawn",
+            robot.source,
+            m.filename,
+            m.link,
+            [str(d) for d in mesh_dirs(package_dirs)] or "no package_dirs",
+        )
+    return xml
 
 
 def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryModel:
@@ -269,10 +236,10 @@ def robot_scene(
     """
     import meshcat
 
-    from kinfw.view._draw import mesh_dirs, up_direction
+    from kinfw.view._draw import up_direction
 
     up = up_direction(robot, up)
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     pin_q = robot.pin_configurations(q, joint_names)[0]
-    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, rgba, mesh_dirs(package_dirs))
+    robot_ps = draw_robot(vis, robot, "kinfw/robot", pin_q, rgba, package_dirs)
     return vis, vis["kinfw"], up, robot_ps

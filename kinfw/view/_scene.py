@@ -72,7 +72,6 @@ from kinfw.reports import CalibrationSidecar, read_sidecar
 from kinfw.view._cameras import CAMERA_TRIAD_LENGTH, FRUSTUM_DEPTH, draw_cameras, frustum_corners
 from kinfw.view._draw import (
     TRIAD_LENGTH,
-    mesh_dirs,
     overlay_object,
     rgb_int,
     stick,
@@ -259,11 +258,12 @@ def scene(
         for name, T in targets
     )
     up = up_direction(model, up)
-    dirs = mesh_dirs(package_dirs)
 
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     root = vis["kinfw"]
-    robot_ps = _draw_robots(vis, nominal, calibrated, q, joint_names, ghost_rgba, solid_rgba, dirs)
+    robot_ps = _draw_robots(
+        vis, nominal, calibrated, q, joint_names, ghost_rgba, solid_rgba, package_dirs
+    )
     focus_ps = []
     if data is not None and sample is not None:
         values = _known_values(data, targets, meas_T_root, unknowns)
