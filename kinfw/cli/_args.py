@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,12 +26,16 @@ __all__ = [
     "POSITIVE_PX",
     "SEED",
     "add_camera_option",
+    "add_package_dir_option",
+    "add_xacro_option",
     "camera_inputs",
     "frame_file",
     "frames_arg",
+    "load_model",
     "number",
     "read_data",
     "up_arg",
+    "xacro_arg",
 ]
 
 
@@ -136,6 +141,38 @@ def add_camera_option(p: argparse.ArgumentParser) -> None:
 
 
 # -- what the options name --------------------------------------------------------------
+def xacro_arg(text: str) -> tuple[str, str]:
+    """``NAME:=VALUE`` (xacro's own syntax) -> ``(NAME, VALUE)``."""
+    name, sep, value = text.partition(":=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME:=VALUE (as for xacro), got {text!r}")
+    return name.strip(), value
+
+
+def add_xacro_option(p: argparse.ArgumentParser) -> None:
+    """``--xacro-arg NAME:=VALUE`` (repeatable), for a xacro URDF (:func:`load_model`)."""
+    p.add_argument(
+        "--xacro-arg",
+        type=xacro_arg,
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="argument of a xacro URDF (repeatable); the URDF may be a .xacro file, or - to "
+        "read a URDF (robot_description) on stdin",
+    )
+
+
+def load_model(path: Path | str, args: argparse.Namespace) -> Robot:
+    """The robot of a command's URDF argument: a URDF or xacro file (with the command's
+    ``--xacro-arg`` values), or ``-``: the URDF text on stdin (a ``robot_description``)."""
+    from kinfw.model import load_robot
+
+    xacro_args = dict(getattr(args, "xacro_arg", None) or ())
+    if str(path) == "-":
+        return load_robot(sys.stdin.read(), xacro_args=xacro_args)
+    return load_robot(path, xacro_args=xacro_args)
+
+
 def add_package_dir_option(p: argparse.ArgumentParser) -> None:
     """``--package-dir DIR`` (repeatable): where the URDF's ``package://`` meshes live,
     before ``ROS_PACKAGE_PATH`` (:func:`kinfw.model.resolve_meshes`)."""

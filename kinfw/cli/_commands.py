@@ -22,7 +22,9 @@ from kinfw.cli._args import (
     SEED,
     add_camera_option,
     add_package_dir_option,
+    add_xacro_option,
     frames_arg,
+    load_model,
     number,
     read_data,
     up_arg,
@@ -50,6 +52,7 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
     """The ``verify`` sub-command."""
     p = sub.add_parser("verify", help="errors of a URDF model against measurements")
     p.add_argument("model", type=Path, help="URDF to evaluate")
+    add_xacro_option(p)
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
     p.add_argument(
         "--sidecar",
@@ -69,11 +72,10 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from kinfw.model import load_robot
     from kinfw.reports import read_sidecar
     from kinfw.verification.evaluation import evaluate_model
 
-    robot = load_robot(args.model)
+    robot = load_model(args.model, args)
     data = read_data(args.data, args)
     sidecar_file = args.sidecar or sidecar_path(args.model)
     sidecar = None
@@ -143,6 +145,7 @@ def add_view_parser(sub: argparse._SubParsersAction) -> None:
         "Live on 127.0.0.1, or one self-contained HTML file with --html.",
     )
     p.add_argument("nominal", type=Path, help="nominal URDF")
+    add_xacro_option(p)
     p.add_argument("--calibrated", type=Path, help="calibrated URDF")
     p.add_argument("--data", type=Path, help="measurement file: draw one sample's observations")
     p.add_argument(
@@ -169,13 +172,12 @@ def add_view_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from kinfw.model import load_robot
     from kinfw.view import show
 
     if args.sample is not None and args.data is None:
         raise ValueError(f"--sample {args.sample}: give --data, the measurements to draw")
-    nominal = load_robot(args.nominal)
-    calibrated = load_robot(args.calibrated) if args.calibrated else None
+    nominal = load_model(args.nominal, args)
+    calibrated = load_model(args.calibrated, args) if args.calibrated else None
     data = read_data(args.data, args) if args.data else None
     if args.sample is not None and not 0 <= args.sample < data.n_samples:
         raise ValueError(
@@ -274,10 +276,9 @@ def add_crosscheck_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_crosscheck(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from kinfw.model import load_robot
     from kinfw.verification.evaluation import crosscheck_cpc
 
-    robot = load_robot(args.urdf)
+    robot = load_model(args.urdf, args)
     frames = frames_arg(
         args.frames, (*robot.default_frames, *robot.default_cameras), "--frames", robot
     )
@@ -328,6 +329,7 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("csv", type=Path, help="FIGAROH CSV file")
     p.add_argument("--urdf", type=Path, required=True, help="URDF naming the joint columns")
+    add_xacro_option(p)
     p.add_argument("--frame", required=True, help="URDF link or joint the markers are on")
     p.add_argument(
         "--measured-in",
@@ -355,9 +357,8 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         measurements_from_figaroh_csv,
         write_measurements,
     )
-    from kinfw.model import load_robot
 
-    robot = load_robot(args.urdf)
+    robot = load_model(args.urdf, args)
     measurements = measurements_from_figaroh_csv(
         args.csv,
         robot=robot,

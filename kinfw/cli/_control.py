@@ -17,6 +17,8 @@ import logging
 import math
 from pathlib import Path
 
+from kinfw.cli._args import add_xacro_option
+
 __all__ = [
     "NOT_MET",
     "UNIT_M",
@@ -51,6 +53,7 @@ def _joint_value(text: str) -> tuple[str, str]:
 def add_joint_options(p: argparse.ArgumentParser) -> None:
     """The options of ``gaze`` and ``reach``: model, ``--unit``, ``--q``, ``--free``, ``--json``."""
     p.add_argument("model", type=Path, help="URDF of the robot (nominal or calibrated)")
+    add_xacro_option(p)
     p.add_argument(
         "--unit",
         choices=tuple(UNIT_M),

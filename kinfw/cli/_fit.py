@@ -16,7 +16,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from kinfw.cli._args import read_data
+from kinfw.cli._args import load_model, read_data
 from kinfw.cli._tables import format_table, metric_format, number
 from kinfw.files import json_text
 
@@ -135,11 +135,10 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from kinfw.model import load_robot
     from kinfw.reports import write_report
     from kinfw.verification.reporting import calibrate_and_report
 
-    nominal = load_robot(args.urdf)
+    nominal = load_model(args.urdf, args)
     data = read_data(args.data, args)
     held_out = read_data(args.holdout, args) if args.holdout else None
     result = calibrate_and_report(
@@ -365,10 +364,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 # -- kinfw crossval ----------------------------------------------------------------------
 def cmd_crossval(args: argparse.Namespace) -> int:
-    from kinfw.model import load_robot
     from kinfw.verification.evaluation import crossvalidate, open_executor
 
-    nominal = load_robot(args.urdf)
+    nominal = load_model(args.urdf, args)
     data = read_data(args.data, args)
     prior = _prior_arg(args)
     with open_executor(args.jobs, args.executor) as executor:

@@ -16,6 +16,7 @@ from kinfw.cli._args import (
     POSITIVE_PX,
     SEED,
     add_camera_option,
+    add_xacro_option,
     camera_inputs,
     number,
 )
@@ -72,6 +73,7 @@ def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("calibrate", help="identify the kinematics and write a calibrated URDF")
     p.add_argument("data", type=Path, help="measurement file (kinfw-measurements JSON)")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
+    add_xacro_option(p)
     p.add_argument("--out", type=Path, required=True, help="calibrated URDF to write")
     p.add_argument("--report", type=Path, help="write the report (JSON) here")
     p.add_argument(
@@ -148,6 +150,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("data", type=Path, help="measurement file")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")
+    add_xacro_option(p)
     p.add_argument("--k", type=number(int, low=2), default=5, help="folds (default 5)")
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument(

@@ -10,7 +10,13 @@ import argparse
 import logging
 from pathlib import Path
 
-from kinfw.cli._args import add_package_dir_option, camera_inputs, frame_file, number
+from kinfw.cli._args import (
+    add_package_dir_option,
+    camera_inputs,
+    frame_file,
+    load_model,
+    number,
+)
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -142,9 +148,8 @@ def cmd_gaze(args: argparse.Namespace) -> int:
     from kinfw.cli._args import frames_arg
     from kinfw.control import fixate
     from kinfw.files import json_text
-    from kinfw.model import load_robot
 
-    robot = load_robot(args.model)
+    robot = load_model(args.model, args)
     cameras = frames_arg(args.cameras, robot.default_cameras, "--cameras", robot)
     for c in cameras:
         robot.frame_id(c)  # an unknown frame: one line naming the links

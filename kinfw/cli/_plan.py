@@ -10,7 +10,7 @@ import json
 import math
 from pathlib import Path
 
-from kinfw.cli._args import add_package_dir_option, number
+from kinfw.cli._args import add_package_dir_option, add_xacro_option, load_model, number
 from kinfw.files import check_outputs
 
 __all__ = ["add_plan_parser", "cmd_plan"]
@@ -29,6 +29,7 @@ def add_plan_parser(sub) -> None:
         "problem at the nominal robot; greedy selection then Fedorov exchange).",
     )
     p.add_argument("--urdf", type=Path, default=None, help="nominal URDF (default: IIS-head)")
+    add_xacro_option(p)
     p.add_argument("--frames", help="stage 1: frames measured by a tracker, comma-separated")
     p.add_argument("--points", action="store_true", help="stage 1: measure frame origins only")
     p.add_argument("--cameras", help="stage 2: cameras seeing a fixed board, comma-separated")
@@ -105,11 +106,10 @@ def _setup(args, robot):
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from kinfw.model import load_robot
 
     if args.pool is not None and args.within_limits is not None:
         raise ValueError("give --pool or --within-limits, not both")
-    robot = load_robot(args.urdf)
+    robot = load_model(args.urdf, args)
     setup = _setup(args, robot)
     summary = {"urdf": str(args.urdf), "frames": list(setup.frames)}
     summary["cameras"] = list(setup.cameras)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from kinfw.cli._args import add_package_dir_option, number
+from kinfw.cli._args import add_package_dir_option, load_model, number
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -121,9 +121,8 @@ def cmd_reach(args: argparse.Namespace) -> int:
 
     from kinfw.control import reach
     from kinfw.files import json_text
-    from kinfw.model import load_robot
 
-    robot = load_robot(args.model)
+    robot = load_model(args.model, args)
     robot.frame_id(args.frame)  # an unknown frame: one line naming the links
     target = _reach_target(args)
     position = target if target.shape == (3,) else target[:3, 3]

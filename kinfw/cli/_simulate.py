@@ -19,8 +19,10 @@ from kinfw.cli._args import (
     MM,
     SEED,
     add_camera_option,
+    add_xacro_option,
     camera_inputs,
     frames_arg,
+    load_model,
     number,
 )
 from kinfw.files import check_outputs, write_text_atomic
@@ -42,6 +44,7 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--urdf", type=Path, default=None, help="nominal URDF (default: the built-in IIS-head)"
     )
+    add_xacro_option(p)
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
     p.add_argument("--truth-out", type=Path, required=True, help="true robot URDF to write")
     p.add_argument(
@@ -186,10 +189,9 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from kinfw.measurements import write_measurements
-    from kinfw.model import load_robot
     from kinfw.simulation import simulate_measurements
 
-    nominal = load_robot(args.urdf)
+    nominal = load_model(args.urdf, args)
     if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
         args.stage = "both" if args.pixels else "1"
     elif args.pixels and args.stage == "1":

@@ -40,10 +40,12 @@ from kinfw.model._robot import (
 )
 from kinfw.model._urdf_read import (
     MOVABLE_TYPES,
+    XACRO_NAMESPACE,
     JointInfo,
     RobotModelError,
     captured_native_stderr,
     check_urdf_xml,
+    expand_xacro,
     parse_joints,
     pinocchio_model,
     up_vector,
@@ -53,6 +55,7 @@ from kinfw.model._urdf_read import (
 __all__ = [
     "CPC_KEY",
     "MOVABLE_TYPES",
+    "XACRO_NAMESPACE",
     "BaseBlock",
     "Block",
     "BlockKey",
@@ -79,6 +82,7 @@ __all__ = [
     "cpc_from_geometry",
     "cpc_from_robot",
     "cpc_reference_vector",
+    "expand_xacro",
     "geometry_from_cpc",
     "geometry_from_robot",
     "load_robot",

@@ -16,6 +16,7 @@ The URDF text is read and checked in :mod:`kinfw.model` (where :class:`JointInfo
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -374,17 +375,20 @@ def builtin_head_urdf() -> Path:
     raise OSError("the built-in IIS-head URDF is missing from this installation")
 
 
-def load_robot(urdf: str | Path) -> Robot:
-    """Load a URDF from a file path or an XML string.
+def load_robot(urdf: str | Path, *, xacro_args: Mapping[str, str] | None = None) -> Robot:
+    """Load a URDF from a file path or an XML string (a ``robot_description``).
 
-    Meshes are not loaded (a URDF whose meshes are missing loads fine).
+    Meshes are not loaded (a URDF whose meshes are missing loads fine). A xacro file
+    (``.xacro``, or any document declaring the xacro namespace) is expanded with the
+    ``xacro`` package (the ``ros`` extra) and ``xacro_args`` (``{"name": "value"}``, as
+    ``name:=value`` on xacro's command line); the robot's URDF is the expanded text.
 
     Raises
     ------
     RobotModelError
-        Naming the file when it cannot be read or parsed.
+        Naming the file when it cannot be read, expanded or parsed.
     """
-    xml, source = xml_text(urdf)
+    xml, source = xml_text(urdf, xacro_args)
     progress.stage(f"loading the URDF {source}")
     return Robot(xml, source)
 

@@ -20,7 +20,7 @@ import sys
 import tempfile
 import threading
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,10 +30,12 @@ from numpy.typing import NDArray
 
 __all__ = [
     "MOVABLE_TYPES",
+    "XACRO_NAMESPACE",
     "JointInfo",
     "RobotModelError",
     "captured_native_stderr",
     "check_urdf_xml",
+    "expand_xacro",
     "parse_joints",
     "pinocchio_model",
     "up_vector",
@@ -96,15 +98,62 @@ class JointInfo:
         return self.type in ("revolute", "continuous")
 
 
-def xml_text(urdf: str | Path) -> tuple[str, str]:
-    """Return (xml_text, source) for a path or an XML string."""
+#: The xacro XML namespace: a file or string that declares it is a xacro document.
+XACRO_NAMESPACE = "http://www.ros.org/wiki/xacro"
+
+
+def xml_text(urdf: str | Path, xacro_args: Mapping[str, str] | None = None) -> tuple[str, str]:
+    """Return (xml_text, source) for a path or an XML string; a xacro document (a
+    ``.xacro`` file, or one declaring the xacro namespace) is expanded first
+    (:func:`expand_xacro`, with ``xacro_args``)."""
     if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
         path = Path(urdf)
         try:
-            return path.read_text(encoding="utf-8"), str(path)
+            text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise RobotModelError(f"{path}: cannot read URDF ({exc.strerror})") from None
-    return str(urdf), "<urdf string>"
+        source = str(path)
+    else:
+        text, source = str(urdf), "<urdf string>"
+    if source.endswith(".xacro") or XACRO_NAMESPACE in text:
+        return expand_xacro(text, source, xacro_args or {}), source
+    if xacro_args:
+        raise RobotModelError(
+            f"{source}: xacro arguments given ({', '.join(xacro_args)}) for a plain URDF "
+            "(no xacro namespace, not a .xacro file)"
+        )
+    return text, source
+
+
+def expand_xacro(text: str, source: str, xacro_args: Mapping[str, str]) -> str:
+    """The URDF a xacro document describes, with the ``xacro_args`` (``<xacro:arg>``
+    values, as ``name:=value`` on xacro's command line), by the ``xacro`` package (the
+    ``ros`` extra). Includes are relative to ``source``'s folder; ``$(find PKG)`` needs
+    the package on ``ROS_PACKAGE_PATH`` or in an ament index.
+
+    Raises
+    ------
+    RobotModelError
+        The xacro package is missing, or xacro refuses the document (its message, and
+        the file).
+    """
+    try:
+        import xacro
+    except ImportError:
+        raise RobotModelError(
+            f"{source}: a xacro file; reading it needs the xacro package (pip install 'kinfw[ros]')"
+        ) from None
+    path = Path(source)
+    try:
+        with captured_native_stderr():  # xacro's own warnings, printed on stderr
+            if path.is_file():  # includes relative to the file
+                doc = xacro.process_file(str(path), mappings=dict(xacro_args))
+            else:
+                doc = xacro.parse(text)
+                xacro.process_doc(doc, mappings=dict(xacro_args))
+    except Exception as exc:  # xacro raises XacroException and plain errors alike
+        raise RobotModelError(f"{source}: xacro: {' '.join(str(exc).split())}") from None
+    return doc.toxml()
 
 
 def check_urdf_xml(xml: str, source: str) -> ET.Element:
