@@ -392,6 +392,12 @@ class PlaneKind(ObservationKind):
         )
         return tuple(requests)
 
+    def trained_unknowns(self, group):
+        """The plane and an unknown probe offset: held-out contacts are scored by their
+        distance from the trained plane."""
+        probe = () if group.offset is not None else (offset_key(group.frame, group.marker),)
+        return (plane_key(group.plane), *probe)
+
     def data(self, group):
         return group.distance_m[:, None]
 
