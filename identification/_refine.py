@@ -70,7 +70,7 @@ from kinfw.identification.problem import (
     thresholds,
 )
 from kinfw.measurements import Measurements
-from kinfw.model import Robot, RobotBlock
+from kinfw.model import BaseBlock, Robot, RobotBlock
 from kinfw.observations import DatasetError, kind_of
 
 __all__ = [
@@ -603,7 +603,7 @@ def _solve(
             robust=loss != "linear",
             first=round_ == 0,
         )
-    robot = np.concatenate([np.full(b.size, isinstance(b, RobotBlock)) for b in problem.blocks])
+    robot = _robot_entries(problem)
     x_free[moving] = _nearest_to_start(
         lambda v: problem.evaluate_free(full(v), sigma, True),
         x_free,
@@ -613,6 +613,11 @@ def _solve(
     )
     x = full(x_free)
     return _Solution(x, sigma, iterations, converged)
+
+
+def _robot_entries(problem: LeastSquaresProblem) -> NDArray[np.bool_]:
+    """Which entries of ``x`` (P,) are the robot's (its blocks), not the unknowns'."""
+    return np.concatenate([np.full(b.size, isinstance(b, RobotBlock)) for b in problem.blocks])
 
 
 #: Relative singular value (of the column-scaled Jacobian) below which a direction of the
@@ -754,8 +759,19 @@ def _quality_at(
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
+    s_base = next(
+        s for b, s in zip(problem.blocks, problem.slices, strict=True) if isinstance(b, BaseBlock)
+    )
+    J_base = problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
     covariance, ident = covariance_and_identifiability(
-        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, data, problem.model0
+        Jw,
+        free,
+        list(problem.names),
+        1.0 if given else sigma_hat2,
+        data,
+        problem.model0,
+        base_columns=J_base,
+        robot=_robot_entries(problem),
     )
     # blocks that know when a full-rank estimate is still not determined (intrinsics)
     poor = tuple(
