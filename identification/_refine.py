@@ -635,7 +635,7 @@ def _nearest_to_start(
     moving: NDArray[np.bool_],
     robot: NDArray[np.bool_],
     weights: Callable[[NDArray], NDArray],
-    rounds: int = 20,
+    rounds: int = 200,
 ) -> NDArray[np.float64]:
     """The estimate moved along what the data do not determine to the start: shape
     ``(moving.sum(),)``, the ``moving`` entries of ``x_free``.
@@ -647,10 +647,12 @@ def _nearest_to_start(
     valley nearest to the start: the whitened, robust-weighted Jacobian's null space
     (rank rule :data:`UNDETERMINED_TOL` on unit-norm columns, as the identifiability
     report), the estimate's part along it removed, then Gauss-Newton steps back to the
-    minimum within the determined directions; repeated until the removed part is
-    rounding. The distance is Euclidean in the chart coordinates (m, rad) of the robot's
-    parameters, with the unknown blocks' weighted by :data:`UNKNOWN_WEIGHT`: an exported
-    URDF then differs from its start only along directions the data determine.
+    minimum within the determined directions (a shorter move, halved until the cost
+    stays at the minimum, when the directions are curved over a long way); repeated
+    until the removed part is rounding. The distance is Euclidean in the chart
+    coordinates (m, rad) of the robot's parameters, with the unknown blocks' weighted by
+    :data:`UNKNOWN_WEIGHT`: an exported URDF then differs from its start only along
+    directions the data determine.
 
     Parameters
     ----------
@@ -687,40 +689,52 @@ def _nearest_to_start(
         r = whitened(v)[0]
         return float(r @ r) if np.isfinite(r).all() else np.inf
 
-    before = cost(x)
-    for _ in range(rounds):
-        r, Jy = whitened(x)
-        if not np.isfinite(Jy).all():
-            break
-        _, _, Vt, c, kept = svd(Jy)
-        if kept.all():
-            break
-        last = x.copy()
-        Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
-        y = scale * x[moving]
-        along = Q @ (Q.T @ y)
-        x[moving] -= along / scale
-        for _ in range(3):  # back to the minimum, within the determined directions
-            r, Jy = whitened(x)
+    def back_to_minimum(v: NDArray, Q: NDArray) -> NDArray:
+        """Gauss-Newton steps within the determined directions (orthogonal to ``Q``)."""
+        v = v.copy()
+        for _ in range(3):
+            r, Jy = whitened(v)
             if not (np.isfinite(r).all() and np.isfinite(Jy).all()):
                 break
             U, s, Vt, c, kept = svd(Jy)
             n = int(kept.sum())
             step = -(Vt[:n].T @ ((U[:, :n].T @ r) / s[:n])) / c
             step -= Q @ (Q.T @ step)
-            x[moving] += step / scale
-        after = cost(x)
-        if not after <= before * (1.0 + 1e-6) + 1e-12:  # no longer at the minimum: undo
-            log.info(
-                "refine: moving the estimate along the %d undetermined directions to the "
-                "start raised the cost from %.6g to %.6g: left where the solver ended",
-                int((~kept).sum()),
-                before,
-                after,
-            )
-            x = last
+            v[moving] += step / scale
+        return v
+
+    before = cost(x)
+    fraction = 1.0
+    for _ in range(rounds):
+        Jy = whitened(x)[1]
+        if not np.isfinite(Jy).all():
             break
+        _, _, Vt, c, kept = svd(Jy)
+        if kept.all():
+            break
+        Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
+        y = scale * x[moving]
+        along = Q @ (Q.T @ y)
         if np.linalg.norm(along) <= 1e-12 * max(1.0, np.linalg.norm(y)):
+            break
+        # a long way along curved directions: shorter moves, each back to the minimum
+        while fraction >= 1e-3:
+            trial = x.copy()
+            trial[moving] -= fraction * along / scale
+            trial = back_to_minimum(trial, Q)
+            if cost(trial) <= before * (1.0 + 1e-6) + 1e-12:
+                x = trial
+                fraction = min(1.0, 2.0 * fraction)
+                break
+            fraction /= 2.0
+        else:
+            log.info(
+                "refine: the estimate could not be moved further along the %d "
+                "undetermined directions without raising the cost (%.3g of its part "
+                "along them left)",
+                int((~kept).sum()),
+                float(np.linalg.norm(along)),
+            )
             break
     return x[moving]
 
