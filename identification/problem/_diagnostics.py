@@ -210,9 +210,10 @@ def rejected_observations(
 #: Why a null direction is not determined when it moves the whole robot rigidly (what
 #: the base block would) and the unknowns with it.
 WORLD_MOTION = (
-    "a rigid motion of the whole robot together with the unknowns (planes, targets, "
-    "frames) changes no prediction: nothing in the data is fixed to the root; the "
-    "estimate stays at the start (the nominal URDF) along it"
+    "on these data the robot's part of this direction acts as a rigid motion of the "
+    "whole robot (its base), which the unknowns (planes, targets, frames) absorb: "
+    "nothing in the data is fixed to the root; the estimate stays at the start (the "
+    "nominal URDF) along it"
 )
 
 
@@ -317,28 +318,38 @@ def _world_motions_first(
     robot come first, and how many they are.
 
     A null vector ``v`` (``v / c`` unscaled) is such a motion when the change of the
-    robot's parameters (``robot``: mask of the free columns) alone changes the residuals
-    as a rigid motion of the robot does, ``Jf_robot (v / c)_robot`` in the span of
-    ``base_columns`` (N, 6): the unknowns then follow the robot (``Jf v = 0``). The
-    combinations of null vectors with that property are the null space of the robot
-    parts' residual changes projected off the base's span (relative rank rule 1e-6).
-    Conservative: a world motion that the chart can only follow with a probe's or
-    marker's offset re-expressed (its frame's tool is held at the nominal) is not
-    found here and keeps the generic explanation.
+    robot's parameters (``robot``: mask of the free columns) alone changes the residuals,
+    and as a rigid motion of the robot does: ``Jf_robot (v / c)_robot`` nonzero and in
+    the span of ``base_columns`` (N, 6), the unknowns absorbing it (``Jf v = 0``). The
+    combinations with that property: the null space of the robot parts' residual
+    changes projected off the base's span, less the combinations whose robot part
+    changes nothing (a redundancy of the robot's own parameters, e.g. a tool turned
+    about its probe); relative rank rule 1e-6. It is a statement about these data: a
+    common scale whose robot part shifts every contact alike (a plane's offset takes
+    it) reads the same; a world motion that the chart follows only with a probe's
+    offset re-expressed is not found and keeps the generic explanation.
     """
     null = Vt[rank:]
     M = Jf[:, robot] @ (null / c)[:, robot].T  # (N, m): each null vector's robot part
     Ub, sb, _ = np.linalg.svd(base_columns, full_matrices=False)
     Qb = Ub[:, sb > 1e-9 * sb[0]] if sb.size and sb[0] > 0 else Ub[:, :0]
-    R = M - Qb @ (Qb.T @ M)
     scale = max(float(np.linalg.norm(M)), 1e-300)
-    _, sr, Wt = np.linalg.svd(R, full_matrices=True)
-    sr = np.concatenate([sr, np.zeros(len(Wt) - len(sr))])
-    world = sr <= 1e-6 * scale
-    if not world.any():
+
+    def split(A: NDArray) -> tuple[NDArray, NDArray]:
+        """Orthonormal rows spanning ``A``'s null space (rule 1e-6 of ``scale``) and
+        the rest."""
+        _, sa, Wt = np.linalg.svd(A, full_matrices=True)
+        sa = np.concatenate([sa, np.zeros(len(Wt) - len(sa))])
+        small = sa <= 1e-6 * scale
+        return Wt[small], Wt[~small]
+
+    in_span, rest = split(M - Qb @ (Qb.T @ M))  # (k, m), (m - k, m)
+    idle, moving = split(M @ in_span.T)  # within in_span: no effect, base-like effect
+    world = moving @ in_span
+    if not len(world):
         return Vt, 0
-    T = Wt[world]  # (k, m) orthonormal combinations; the rest completes them
-    return np.vstack([Vt[:rank], T @ null, Wt[~world] @ null]), int(world.sum())
+    others = np.vstack([idle @ in_span, rest])
+    return np.vstack([Vt[:rank], world @ null, others @ null]), len(world)
 
 
 def group_residuals(
