@@ -70,7 +70,7 @@ from kinfw.identification.problem import (
     thresholds,
 )
 from kinfw.measurements import Measurements, check_measurements
-from kinfw.model import Robot, RobotBlock, check_robot
+from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_of
 
 __all__ = [
@@ -608,8 +608,140 @@ def _solve(
             robust=loss != "linear",
             first=round_ == 0,
         )
+    robot = _robot_entries(problem)
+    x_free[moving] = _nearest_to_start(
+        lambda v: problem.evaluate_free(full(v), sigma, True),
+        x_free,
+        moving,
+        robot[free][moving],
+        lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
+    )
     x = full(x_free)
     return _Solution(x, sigma, iterations, converged)
+
+
+def _robot_entries(problem: LeastSquaresProblem) -> NDArray[np.bool_]:
+    """Which entries of ``x`` (P,) are the robot's (its blocks), not the unknowns'."""
+    return np.concatenate([np.full(b.size, isinstance(b, RobotBlock)) for b in problem.blocks])
+
+
+#: Relative singular value (of the column-scaled Jacobian) below which a direction of the
+#: parameter space is not determined by the data: the identifiability report's rank rule.
+UNDETERMINED_TOL = 1e-8
+#: Weight of an unknown block's coordinate (a plane, a marker) against a robot parameter's
+#: in the distance :func:`_nearest_to_start` minimises: the robot's parameters stay at the
+#: start first; an undetermined direction of the unknowns alone still stays at theirs.
+UNKNOWN_WEIGHT = 1e-3
+
+
+def _nearest_to_start(
+    evaluate: Callable[[NDArray], tuple[NDArray, NDArray]],
+    x_free: NDArray,
+    moving: NDArray[np.bool_],
+    robot: NDArray[np.bool_],
+    weights: Callable[[NDArray], NDArray],
+    rounds: int = 200,
+) -> NDArray[np.float64]:
+    """The estimate moved along what the data do not determine to the start: shape
+    ``(moving.sum(),)``, the ``moving`` entries of ``x_free``.
+
+    Plane contacts leave the rigid motion of the robot with its planes and a common scale
+    free, a joint that never moves its axis, and so on: the cost is the same along those
+    directions, so the solver's end point along them is an accident of its path (the
+    steps are minimum-norm only to first order). This returns the point of the minimum's
+    valley nearest to the start: the whitened, robust-weighted Jacobian's null space
+    (rank rule :data:`UNDETERMINED_TOL` on unit-norm columns, as the identifiability
+    report), the estimate's part along it removed, then Gauss-Newton steps back to the
+    minimum within the determined directions (a shorter move, halved until the cost
+    stays at the minimum, when the directions are curved over a long way); repeated
+    until the removed part is rounding. The distance is Euclidean in the chart
+    coordinates (m, rad) of the robot's parameters, with the unknown blocks' weighted by
+    :data:`UNKNOWN_WEIGHT`: an exported URDF then differs from its start only along
+    directions the data determine.
+
+    Parameters
+    ----------
+    evaluate : callable
+        ``x_free -> (r, J)``: whitened residuals (N,) and their Jacobian (N, n_free).
+    x_free : ndarray, shape (n_free,)
+        The solver's estimate (chart coordinates from the start).
+    moving : ndarray of bool, shape (n_free,)
+        The entries the solver moved (the others stay at the start).
+    robot : ndarray of bool, shape (moving.sum(),)
+        Which moving entries are the robot's.
+    weights : callable
+        ``r -> w`` (N,): the robust loss's row weights' square roots at ``r``.
+    rounds : int
+        At most this many projections.
+    """
+    scale = np.where(robot, 1.0, UNKNOWN_WEIGHT)  # y = scale * x: Euclidean in y
+    x = x_free.copy()
+
+    def whitened(v: NDArray) -> tuple[NDArray, NDArray]:
+        r, J = evaluate(v)
+        w = weights(r)
+        return r * w, J[:, moving] * w[:, None] / scale
+
+    def svd(Jy: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
+        c = np.linalg.norm(Jy, axis=0)
+        c = np.where(c > 0.0, c, 1.0)
+        U, s, Vt = np.linalg.svd(Jy / c, full_matrices=True)
+        s = np.concatenate([s, np.zeros(len(Vt) - len(s))])
+        kept = s > UNDETERMINED_TOL * s[0] if s.size and s[0] > 0 else np.zeros(len(s), bool)
+        return U, s, Vt, c, kept
+
+    def cost(v: NDArray) -> float:
+        r = whitened(v)[0]
+        return float(r @ r) if np.isfinite(r).all() else np.inf
+
+    def back_to_minimum(v: NDArray, Q: NDArray) -> NDArray:
+        """Gauss-Newton steps within the determined directions (orthogonal to ``Q``)."""
+        v = v.copy()
+        for _ in range(3):
+            r, Jy = whitened(v)
+            if not (np.isfinite(r).all() and np.isfinite(Jy).all()):
+                break
+            U, s, Vt, c, kept = svd(Jy)
+            n = int(kept.sum())
+            step = -(Vt[:n].T @ ((U[:, :n].T @ r) / s[:n])) / c
+            step -= Q @ (Q.T @ step)
+            v[moving] += step / scale
+        return v
+
+    before = cost(x)
+    fraction = 1.0
+    for _ in range(rounds):
+        Jy = whitened(x)[1]
+        if not np.isfinite(Jy).all():
+            break
+        _, _, Vt, c, kept = svd(Jy)
+        if kept.all():
+            break
+        Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
+        y = scale * x[moving]
+        along = Q @ (Q.T @ y)
+        if np.linalg.norm(along) <= 1e-12 * max(1.0, np.linalg.norm(y)):
+            break
+        # a long way along curved directions: shorter moves, each back to the minimum
+        while fraction >= 1e-3:
+            trial = x.copy()
+            trial[moving] -= fraction * along / scale
+            trial = back_to_minimum(trial, Q)
+            if cost(trial) <= before * (1.0 + 1e-6) + 1e-12:
+                x = trial
+                fraction = min(1.0, 2.0 * fraction)
+                break
+            fraction /= 2.0
+        else:
+            log.info(
+                "refine: the estimate could not be moved further along the %d "
+                "undetermined directions without raising the cost (%.3g of its part "
+                "along them left)",
+                int((~kept).sum()),
+                float(np.linalg.norm(along)),
+            )
+            break
+    return x[moving]
 
 
 @dataclass(frozen=True, slots=True)
@@ -646,8 +778,19 @@ def _quality_at(
     rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
+    s_base = next(
+        s for b, s in zip(problem.blocks, problem.slices, strict=True) if isinstance(b, BaseBlock)
+    )
+    J_base = problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
     covariance, ident = covariance_and_identifiability(
-        Jw, free, list(problem.names), 1.0 if given else sigma_hat2, data, problem.model0
+        Jw,
+        free,
+        list(problem.names),
+        1.0 if given else sigma_hat2,
+        data,
+        problem.model0,
+        base_columns=J_base,
+        robot=_robot_entries(problem),
     )
     # blocks that know when a full-rank estimate is still not determined (intrinsics)
     poor = tuple(

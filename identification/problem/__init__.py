@@ -17,6 +17,7 @@
 
 from kinfw.identification.problem._build import build_problem
 from kinfw.identification.problem._diagnostics import (
+    WORLD_MOTION,
     GroupResiduals,
     Identifiability,
     RejectedObservation,
@@ -71,6 +72,7 @@ __all__ = [
     "NEGLIGIBLE_COLUMN",
     "PRIOR",
     "STRUCTURAL_RANK_TOL",
+    "WORLD_MOTION",
     "GroupFunctions",
     "GroupResiduals",
     "Identifiability",

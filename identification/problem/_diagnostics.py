@@ -207,6 +207,16 @@ def rejected_observations(
     return tuple(out)
 
 
+#: Why a null direction is not determined when it moves the whole robot rigidly (what
+#: the base block would) and the unknowns with it.
+WORLD_MOTION = (
+    "on these data the robot's part of this direction acts as a rigid motion of the "
+    "whole robot (its base), which the unknowns (planes, targets, frames) absorb: "
+    "nothing in the data is fixed to the root; the estimate stays at the start (the "
+    "nominal URDF) along it"
+)
+
+
 def covariance_and_identifiability(
     Jw: NDArray,
     free: NDArray,
@@ -214,12 +224,18 @@ def covariance_and_identifiability(
     sigma_hat2: float,
     measurements: Measurements,
     model: CPCModel,
+    base_columns: NDArray | None = None,
+    robot: NDArray | None = None,
 ) -> tuple[NDArray, Identifiability]:
     """``sigma_hat2 (J^T J)^+`` on the identifiable subspace, and what the data determines.
 
     ``Jw`` is the whitened (and robust-weighted) Jacobian (N, P); ``names`` the
     parameters' ``(owner, field)``; ``model`` gives the joints (to explain null
-    directions by joints that never move).
+    directions by joints that never move); ``base_columns`` (N, 6), the same
+    Jacobian's columns of a rigid motion of the whole robot (the base block's, free or
+    not), and ``robot`` (P,), which parameters are the robot's: the null directions
+    that are such a motion with the unknowns following it come first and are named so
+    (:data:`WORLD_MOTION`).
     """
     P = len(names)
     Jf = Jw[:, free]
@@ -236,6 +252,9 @@ def covariance_and_identifiability(
     idx = np.flatnonzero(free)
     covariance[np.ix_(idx, idx)] = cov_free
     free_names = [tuple(names[k]) for k in idx]
+    n_world = 0
+    if base_columns is not None and robot is not None and rank < len(s):
+        Vt, n_world = _world_motions_first(Jf, Vt, c, rank, base_columns, robot[free])
     q_range = (
         np.ptp(measurements.q_of(model.topology.joint_names), axis=0)
         if measurements.n_samples
@@ -243,10 +262,12 @@ def covariance_and_identifiability(
     )
     still = {n for n, rng in zip(model.topology.joint_names, q_range, strict=True) if rng < 1e-9}
     unidentifiable = []
-    for v in Vt[rank:]:
+    for i, v in enumerate(Vt[rank:]):
         involved = tuple(free_names[k] for k in np.flatnonzero(np.abs(v) > 0.2 * np.abs(v).max()))
         owners = {o for o, _ in involved}
-        if owners & still:
+        if i < n_world:
+            why = WORLD_MOTION
+        elif owners & still:
             why = (
                 f"joint(s) {sorted(owners & still)} never move in the data, so their "
                 "axes are not observed"
@@ -287,6 +308,48 @@ def covariance_and_identifiability(
         unidentifiable=tuple(unidentifiable),
         correlations=correlations,
     )
+
+
+def _world_motions_first(
+    Jf: NDArray, Vt: NDArray, c: NDArray, rank: int, base_columns: NDArray, robot: NDArray
+) -> tuple[NDArray, int]:
+    """``Vt`` (rows: right singular vectors of the column-scaled ``Jf``, shape (n, n))
+    with its null rows (from ``rank``) rotated so that the rigid motions of the whole
+    robot come first, and how many they are.
+
+    A null vector ``v`` (``v / c`` unscaled) is such a motion when the change of the
+    robot's parameters (``robot``: mask of the free columns) alone changes the residuals,
+    and as a rigid motion of the robot does: ``Jf_robot (v / c)_robot`` nonzero and in
+    the span of ``base_columns`` (N, 6), the unknowns absorbing it (``Jf v = 0``). The
+    combinations with that property: the null space of the robot parts' residual
+    changes projected off the base's span, less the combinations whose robot part
+    changes nothing (a redundancy of the robot's own parameters, e.g. a tool turned
+    about its probe); relative rank rule 1e-6. It is a statement about these data: a
+    common scale whose robot part shifts every contact alike (a plane's offset takes
+    it) reads the same; a world motion that the chart follows only with a probe's
+    offset re-expressed is not found and keeps the generic explanation.
+    """
+    null = Vt[rank:]
+    M = Jf[:, robot] @ (null / c)[:, robot].T  # (N, m): each null vector's robot part
+    Ub, sb, _ = np.linalg.svd(base_columns, full_matrices=False)
+    Qb = Ub[:, sb > 1e-9 * sb[0]] if sb.size and sb[0] > 0 else Ub[:, :0]
+    scale = max(float(np.linalg.norm(M)), 1e-300)
+
+    def split(A: NDArray) -> tuple[NDArray, NDArray]:
+        """Orthonormal rows spanning ``A``'s null space (rule 1e-6 of ``scale``) and
+        the rest."""
+        _, sa, Wt = np.linalg.svd(A, full_matrices=True)
+        sa = np.concatenate([sa, np.zeros(len(Wt) - len(sa))])
+        small = sa <= 1e-6 * scale
+        return Wt[small], Wt[~small]
+
+    in_span, rest = split(M - Qb @ (Qb.T @ M))  # (k, m), (m - k, m)
+    idle, moving = split(M @ in_span.T)  # within in_span: no effect, base-like effect
+    world = moving @ in_span
+    if not len(world):
+        return Vt, 0
+    others = np.vstack([idle @ in_span, rest])
+    return np.vstack([Vt[:rank], world @ null, others @ null]), len(world)
 
 
 def group_residuals(

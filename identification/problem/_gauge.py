@@ -261,10 +261,12 @@ def _structure_jacobian(
     lo, hi = np.maximum(lo, -np.pi), np.minimum(hi, np.pi)
     P = sum(b.size for b in blocks)
     n_free = int(sum(b.free.sum() for b in blocks))
-    n = max(12, n_free // 3 + 6)  # >= 6 rows per configuration and group
     x = np.zeros(P)
     parts = []
     for g in groups:
+        # enough configurations for every free parameter even from one group alone (a
+        # contact gives one row per configuration, a pose six)
+        n = max(12, -(-n_free // g.rows) + 6)
         qs = lo[:, None] + (hi - lo)[:, None] * rng.uniform(size=(len(lo), n))
         data = g.data[:, np.arange(n) % g.data.shape[1]]
         f = g.functions.j.map("structure", "serial", n, [2, 3], [])

@@ -486,6 +486,12 @@ class ObservationKind:
         """The unknown blocks the group needs, with closed-form start estimates."""
         return ()
 
+    def trained_unknowns(self, group: Any) -> tuple[BlockKey, ...]:
+        """The unknowns whose calibrated value other data of the same setup are scored
+        with (a fixed plane and the probe touching it), rather than fitted to those data
+        again (a target or a measurement frame that may have moved: the default)."""
+        return ()
+
     # -- errors as a person reads them
     @property
     def metrics(self) -> tuple[Metric, ...]:

@@ -10,12 +10,15 @@ group's ``tilt`` (deg): the angle between the model's plane and the plane the co
 say it is, from the heights' slope across the plane (:meth:`PlaneKind.errors`).
 
 The plane is an unknown block (:class:`PlaneBlock`): a unit normal ``n`` and an offset
-``d``, the plane ``{x : n . x = d}`` in the model frame (the URDF root), the normal
-pointing towards the root's origin at the start (the root lies at the positive distance
-``-d``). The probe's offset in ``frame`` is given (``offset``) or estimated, one unknown
-per ``(frame, marker)``, the same block as a ``point`` observation of that marker
-(:func:`kinfw.observations.offset_key`): a tracked probe that also touches a table
-is one point.
+``d``, the plane ``{x : n . x = d}`` in the frame it is fixed to (``measured_in``: any
+URDF frame, e.g. the foot a humanoid stands on; default the URDF root), the normal
+pointing towards that frame's origin at the start (the origin lies at the positive
+distance ``-d``). Contacts of several frames (two arms, a tool on a shared torso) that
+name one plane share its unknown and calibrate together. The probe's offset in
+``frame`` is given (``offset``) or estimated, one unknown per ``(frame, marker)``, the
+same block as a ``point`` observation of that marker
+(:func:`kinfw.observations.offset_key`): a tracked probe that also touches a table is
+one point.
 
 What plane contacts cannot determine
 -------------------------------------
@@ -24,7 +27,9 @@ normal) changes no distance: the block has no such coordinates (3 entries, not a
 frame's 6). With the robot's kinematics free, distances of 0 are also unchanged by
 
 - a rigid motion of the whole world (robot and planes together): 6 directions, the
-  same as for any data without an external reference;
+  same as for any data without an external reference (with ``measured_in`` a frame of
+  the robot: the joints above the common ancestor of the probe's and the plane's frames,
+  and the frame's own mounting);
 - a common scale of every length (the links, the probe offset and the planes' offsets):
   a contact stays a contact, so plane contacts alone never fix the robot's size. One
   known length fixes it: a ``point`` observation in the root frame, a given probe
@@ -34,7 +39,10 @@ frame's 6). With the robot's kinematics free, distances of 0 are also unchanged 
 
 The identifiability report counts these directions and lists the parameters each of its
 null vectors involves; it does not name them (its null basis mixes the world motion and
-the scale), so ``docs/measurements.md`` lists them for the user.
+the scale), so ``docs/measurements.md`` lists them for the user. The refinement leaves
+the robot at its start (the nominal URDF) along all of them
+(:func:`kinfw.identification.refine`): the exported URDF changes only along what the
+contacts determine.
 """
 
 from __future__ import annotations
@@ -219,7 +227,7 @@ def lifted_probe_offset(
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PlaneContacts:
-    """``plane`` observations that share ``(frame, plane, offset, marker)``.
+    """``plane`` observations that share ``(frame, plane, offset, marker, measured_in)``.
 
     Attributes
     ----------
@@ -235,6 +243,8 @@ class PlaneContacts:
         ``frame_p_probe`` in metres when given; None when estimated.
     marker : str or None
         Name of the probe (its offset is unknown; excludes ``offset``).
+    measured_in : str or None
+        URDF frame the plane is fixed to; None is the URDF root link.
     """
 
     kind: ClassVar[str] = "plane"
@@ -244,6 +254,7 @@ class PlaneContacts:
     plane: str = "plane"
     offset: NDArray[np.float64] | None = None
     marker: str | None = None
+    measured_in: str | None = None
 
     def __post_init__(self) -> None:
         name = f"PlaneContacts(frame={self.frame!r}, plane={self.plane!r})"
@@ -261,18 +272,22 @@ class PlaneContacts:
         offset = None if self.offset is None else self.offset.tolist()
         return (
             f"PlaneContacts(frame={self.frame!r}, plane={self.plane!r}, marker="
-            f"{self.marker!r}, offset={offset}, m={len(self.sample)})"
+            f"{self.marker!r}, offset={offset}, measured_in={self.measured_in!r}, "
+            f"m={len(self.sample)})"
         )
 
 
 class PlaneKind(ObservationKind):
     """``{"frame": f, "kind": "plane", "plane": name}``, optional ``offset`` or
-    ``marker`` and ``distance`` (default 0). Residual: signed distance (1, m)."""
+    ``marker``, ``distance`` (default 0) and ``measured_in`` (the URDF frame the plane is
+    fixed to; default the root; a file's top-level ``measured_in`` does not apply).
+    Residual: signed distance (1, m)."""
 
     name = "plane"
     group_type = PlaneContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)
+    has_measured_in = True
 
     # -- file edge
     def parse(self, reader, obs, at, frame):
@@ -281,13 +296,6 @@ class PlaneKind(ObservationKind):
                 obs, key, at, self.name, "a plane contact measures the distance 0, no position"
             )
         reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
-        reader.not_allowed(
-            obs,
-            "measured_in",
-            at,
-            self.name,
-            "the plane is estimated in the robot's root frame; no measurement frame",
-        )
         distance = 0.0
         if obs.get("distance") is not None:
             distance = reader.number(
@@ -304,7 +312,14 @@ class PlaneKind(ObservationKind):
                 "is unknown and estimated; drop the marker to use a known offset",
             )
         plane = reader.optional_string(obs, "plane", at) or "plane"
-        key = (("frame", frame), ("plane", plane), ("offset", offset), ("marker", marker))
+        measured_in = reader.optional_string(obs, "measured_in", at)
+        key = (
+            ("frame", frame),
+            ("plane", plane),
+            ("offset", offset),
+            ("marker", marker),
+            ("measured_in", measured_in),
+        )
         return key, reader.lengths([distance])
 
     def group_from_rows(self, key, sample, rows):
@@ -316,6 +331,7 @@ class PlaneKind(ObservationKind):
             for k, v in (
                 ("offset", None if group.offset is None else group.offset.tolist()),
                 ("marker", group.marker),
+                ("measured_in", group.measured_in),
             )
             if v is not None
         }
@@ -344,8 +360,9 @@ class PlaneKind(ObservationKind):
     def unknowns(self, group, start: StartContext):
         """Closed form: the probe offset of the lifted linear system
         (:func:`lifted_probe_offset`; the frame's origin when it is not determined),
-        then the plane through the start model's probe points (SVD, :func:`fit_plane`)."""
-        T = start.w_T(group.frame, group.sample)
+        then the plane through the start model's probe points (SVD, :func:`fit_plane`),
+        in the frame the plane is fixed to."""
+        T = start.meas_T(group.measured_in, group.frame, group.sample)
         R, t = T[:, :3, :3], T[:, :3, 3]
         requests = []
         if group.offset is not None:
@@ -375,12 +392,18 @@ class PlaneKind(ObservationKind):
         )
         return tuple(requests)
 
+    def trained_unknowns(self, group):
+        """The plane and an unknown probe offset: held-out contacts are scored by their
+        distance from the trained plane."""
+        probe = () if group.offset is not None else (offset_key(group.frame, group.marker),)
+        return (plane_key(group.plane), *probe)
+
     def data(self, group):
         return group.distance_m[:, None]
 
     def residual(self, group, model: SymbolicContext, m):
         ca = model.ca
-        T = model.w_T(group.frame)
+        T = model.meas_T(group.measured_in, group.frame)
         o = (
             ca.DM(group.offset)
             if group.offset is not None
@@ -423,7 +446,8 @@ class PlaneKind(ObservationKind):
 
     # -- numpy prediction, simulation (the default: Gaussian distance noise), drawing
     def _probe(self, group, model: NumericContext) -> NDArray[np.float64]:
-        T = model.w_T(group.frame, group.sample)
+        """The probe (m, 3) in the frame the plane is fixed to, metres."""
+        T = model.meas_T(group.measured_in, group.frame, group.sample)
         o = (
             group.offset
             if group.offset is not None
@@ -443,9 +467,14 @@ class PlaneKind(ObservationKind):
         plane = model.value(plane_key(group.plane))
         p = self._probe(group, model)
         predicted = p @ plane[:3] - plane[3]
+        w_T_meas = model.w_T_meas_at(group.measured_in, group.sample)
+
+        def in_w(meas_p: NDArray[np.float64]) -> NDArray[np.float64]:
+            return np.einsum("nij,nj->ni", w_T_meas[:, :3, :3], meas_p) + w_T_meas[:, :3, 3]
+
         return Drawing(
             node_name("planes", group.frame, group.plane, marker=group.marker),
-            p + (group.distance_m - predicted)[:, None] * plane[:3],
+            in_w(p + (group.distance_m - predicted)[:, None] * plane[:3]),
             None,
-            p,
+            in_w(p),
         )

@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
-from kinfw.identification import Calibration
+from kinfw.identification import Calibration, refine
+from kinfw.identification.problem import Unknown
 from kinfw.measurements import Measurements
-from kinfw.model import Robot
-from kinfw.observations import DatasetError
+from kinfw.model import BlockKey, Robot
+from kinfw.observations import DatasetError, kind_of
 from kinfw.reports import (
     BeforeAfter,
     CalibrationReport,
@@ -51,23 +54,30 @@ def file_sha256(path: str | Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary, ...]:
-    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
-    each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
-    report = evaluate_model(robot, data)
+def errors_by_group(
+    robot: Robot, data: Measurements, trained: Mapping[BlockKey, NDArray] | None = None
+) -> tuple[GroupErrorSummary, ...]:
+    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model, and
+    its ``trained`` unknowns: the planes contacts are scored against); each labelled
+    ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
+    report = evaluate_model(robot, data, trained=trained)
     return tuple(
         GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary()) for g in report.groups
     )
 
 
 def _errors_or_unavailable(
-    robot: Robot, data: Measurements, like: tuple[GroupErrorSummary, ...], notes: list[str]
+    robot: Robot,
+    data: Measurements,
+    like: tuple[GroupErrorSummary, ...],
+    notes: list[str],
+    trained: Mapping[BlockKey, NDArray] | None = None,
 ) -> tuple[GroupErrorSummary, ...]:
     """:func:`errors_by_group`, or, when ``robot`` cannot be evaluated on ``data`` (a
     frame its geometry cannot place: :class:`DatasetError`), the groups of ``like`` with
     every number NaN ("not available") and the reason added to ``notes``."""
     try:
-        return errors_by_group(robot, data)
+        return errors_by_group(robot, data, trained)
     except DatasetError as e:
         notes.append(f"errors of {robot.source or 'the nominal'} not available: {e}")
         return tuple(g.unavailable() for g in like)
@@ -94,6 +104,25 @@ def _with_refined_intrinsics(data: Measurements, calibration: Calibration) -> Me
         if u.kind == "intrinsics" and u.name in data.cameras
     }
     return data.with_cameras(cameras) if cameras else data
+
+
+def _trained(unknowns: tuple[Unknown, ...]) -> dict[BlockKey, NDArray]:
+    """A fit's unknowns by block key."""
+    return {BlockKey(u.kind, u.name): u.value for u in unknowns}
+
+
+def _nominal_trained(nominal: Robot, data: Measurements) -> dict[BlockKey, NDArray]:
+    """The unknowns that kinds score other data with (the planes and their probes:
+    :meth:`~kinfw.observations.ObservationKind.trained_unknowns`) fitted to ``data`` with
+    the nominal robot (``parameters="none"``, least squares): the nominal's errors are
+    then distances from its own trained planes, as the calibrated model's from its.
+    Empty when no kind asks for them or the fit refuses the data."""
+    if not any(kind_of(g).trained_unknowns(g) for g in data.all_groups()):
+        return {}
+    try:
+        return _trained(refine(nominal, data, parameters="none", loss="linear").unknowns)
+    except DatasetError:
+        return {}
 
 
 def calibration_report(
@@ -131,18 +160,26 @@ def calibration_report(
     # the refined intrinsics (--refine-intrinsics) for the calibrated model's errors;
     # the start ones (the file's) for the nominal and the stages before the refinement
     refined_data = _with_refined_intrinsics(data, calibration)
-    after = errors_by_group(calibrated, refined_data)
+    # contacts are scored against the trained planes: the calibration's, and for the
+    # nominal the ones fitted to the calibration data with the nominal robot
+    trained = {} if calibration.refined is None else _trained(calibration.refined.unknowns)
+    trained_nominal = _nominal_trained(nominal, data)
+    after = errors_by_group(calibrated, refined_data, trained)
     notes = list(calibration.notes)
-    before = _errors_or_unavailable(nominal, data, after, notes)
+    before = _errors_or_unavailable(nominal, data, after, notes, trained_nominal)
     held_out_rows = None
     if held_out is not None:
-        after_held = errors_by_group(calibrated, _with_refined_intrinsics(held_out, calibration))
-        before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
+        held = _with_refined_intrinsics(held_out, calibration)
+        after_held = errors_by_group(calibrated, held, trained)
+        before_held = _errors_or_unavailable(nominal, held_out, after_held, notes, trained_nominal)
         held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
     stage_rms += [
         StageErrors.of(
-            name, errors_by_group(Robot(xml, name), refined_data if name == "refine" else data)
+            name,
+            errors_by_group(Robot(xml, name), refined_data, trained)
+            if name == "refine"
+            else errors_by_group(Robot(xml, name), data),
         )
         for name, xml in calibration.stages
     ]

@@ -19,10 +19,11 @@ from functools import partial
 import numpy as np
 import pytest
 
+from kinfw.geometry import inverse_transform
 from kinfw.identification import refine
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, read_measurements, write_measurements
-from kinfw.model import load_robot
+from kinfw.model import geometry_from_cpc, load_robot
 from kinfw.observations import (
     DISTANCE,
     DatasetError,
@@ -37,7 +38,9 @@ from kinfw.observations import (
     plane_key,
 )
 from kinfw.simulation import perturb_robot, simulate
+from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import random_joint_values
+from tests.contacts import contact_configurations, probe_distances
 from tests.robots import ARM_6R
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
@@ -60,34 +63,8 @@ def _distance(robot, qs, plane, offset=OFFSET):
 
 def _contacts(truth, plane, n, rng, offset=OFFSET):
     """n configurations with the true probe on ``plane`` (n, d): random joints, then j2
-    solved by bisection between two grid angles where the signed distance changes sign."""
-    out = []
-    grid = np.linspace(-3.0, 3.0, 241)
-    while sum(map(len, out)) < n:
-        q = random_joint_values(truth, NAMES, 200, rng)
-        f = np.stack(
-            [
-                _distance(
-                    truth, np.column_stack([q[:, :1], np.full(len(q), a), q[:, 2:]]), plane, offset
-                )
-                for a in grid
-            ],
-            axis=1,
-        )
-        cross = np.argmax(np.sign(f[:, :-1]) != np.sign(f[:, 1:]), axis=1)
-        rows = np.arange(len(q))
-        ok = np.sign(f[rows, cross]) != np.sign(f[rows, cross + 1])
-        q, lo, hi, f_lo = q[ok], grid[cross[ok]], grid[cross[ok] + 1], f[ok, cross[ok]]
-        for _ in range(60):
-            mid = 0.5 * (lo + hi)
-            q[:, 1] = mid
-            f_mid = _distance(truth, q, plane, offset)
-            left = np.sign(f_mid) == np.sign(f_lo)
-            lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
-            hi = np.where(left, hi, mid)
-        q[:, 1] = 0.5 * (lo + hi)
-        out.append(q)
-    return np.concatenate(out)[:n]
+    solved by bisection (:func:`tests.contacts.contact_configurations`)."""
+    return contact_configurations(truth, NAMES, "flange", offset, plane, "j2", n, rng)
 
 
 @pytest.fixture(scope="module")
@@ -336,6 +313,71 @@ def test_contacts_alone_determine_the_robot_up_to_a_world_motion_and_a_scale(
             rtol=0,
             atol=1e-9,
         )
+
+
+def _exported_distances(nominal, problem, x, data, offset=None):
+    """Each contact's distance (m,) of the probe from its plane for the problem's
+    parameters ``x``, through the exported URDF and Pinocchio (not the CasADi model)."""
+    urdf = load_robot(export_urdf(nominal, geometry_from_cpc(problem.model_at(x))).urdf_xml)
+    found = {(u.kind, u.name): u.value for u in problem.unknowns_at(x)}
+    offset = found["offset", "flange:tip"] if offset is None else offset
+    return np.concatenate(
+        [
+            _distance(urdf, data.qs[g.sample], found["plane", g.plane], offset)
+            for g in data.groups("plane")
+        ]
+    )
+
+
+@pytest.mark.parametrize("given", [False, True])
+def test_what_contacts_leave_undetermined_stays_at_the_nominal(scene, given):
+    """The export differs from the nominal only along determined directions: the null
+    space of the contacts' Jacobian, by central differences through the exported URDF and
+    Pinocchio (the world motion, the scale, and with a given offset the tool's
+    orientation about the probe), holds none of the estimate (the robot's chart
+    coordinates in m and rad, the unknowns' weighted by UNKNOWN_WEIGHT), while the
+    held-out distances are the truth's up to the scale: the truth along what is
+    determined."""
+    from kinfw.identification._refine import UNKNOWN_WEIGHT
+
+    nominal, truth, planes, contacts = scene
+    data = _dataset(contacts, offset=OFFSET if given else None)
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4}))
+    problem = build_problem(nominal, data)
+    assert problem.names == result.parameter_names
+    offset = OFFSET if given else None
+    cols = np.flatnonzero(result.free)
+    robot = np.concatenate([np.full(b.size, b in problem.robot_blocks) for b in problem.blocks])[
+        cols
+    ]
+    scale = np.where(robot, 1.0, UNKNOWN_WEIGHT)
+    h, x = 1e-6, result.estimate
+    J = (
+        np.stack(
+            [
+                (
+                    _exported_distances(nominal, problem, x + h * e, data, offset)
+                    - _exported_distances(nominal, problem, x - h * e, data, offset)
+                )
+                / (2 * h)
+                for e in np.eye(len(x))[cols]
+            ],
+            axis=1,
+        )
+        / scale
+    )
+    c = np.linalg.norm(J, axis=0)
+    _, s, Vt = np.linalg.svd(J / c)
+    null = Vt[s < 1e-7 * s[0]]
+    assert len(null) == (10 if given else 7)
+    Q = np.linalg.qr((null / c).T)[0]
+    y = scale * x[cols]
+    assert np.linalg.norm(y) > 5e-3  # the fit moved
+    assert np.linalg.norm(Q.T @ y) < 1e-9 * np.linalg.norm(y)
+    probe = OFFSET if given else _found(result)["offset", "flange:tip"]
+    pred, true = _held_out(result, truth, planes, probe)
+    ratio = float(np.sum(pred * true) / np.sum(true * true))
+    np.testing.assert_allclose(pred, ratio * true, rtol=0, atol=1e-9)
 
 
 def _points(truth, n, seed):
@@ -597,11 +639,13 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
 
 
 def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts, tmp_path, capsys):
-    """calibrate --holdout: the held-out height RMS and tilt before and after (the plane
-    fitted to the held-out contacts, as a target's pose: total least squares through the
-    probe points set back by their measured distances), equal to the hand geometry;
-    report.json carries them, and the in-sample errors in the same keys."""
+    """calibrate --holdout: the held-out height RMS and tilt before and after, each
+    model's contacts scored against its trained plane (the calibration's, in its
+    sidecar; for the nominal, the least-squares plane of the training contacts with the
+    nominal robot), equal to the hand geometry; report.json carries them, and the
+    in-sample errors in the same keys."""
     from kinfw.cli._main import main
+    from kinfw.reports import read_sidecar
 
     nominal = scene[0]
     table = noisy_contacts.groups("plane")[0]
@@ -625,20 +669,41 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
     report = json.loads((tmp_path / "r.json").read_text())
     (row,) = report["errors_held_out"]
 
-    def tls(points):  # the normal towards the root: d <= 0 (the kind's convention)
-        c = points.mean(axis=0)
-        n = np.linalg.svd(points - c)[2][-1]
-        return np.append(n, n @ c) * (-1.0 if n @ c > 0 else 1.0)
+    def least_squares_plane(p, m):
+        """(n, d) minimising sum (m - (n . p - d))^2: Gauss-Newton on the normal's two
+        tangent angles and d, from the total least-squares plane of the points."""
+        c = p.mean(axis=0)
+        n = np.linalg.svd(p - c)[2][-1]
+        n = -n if n @ c > 0 else n
+        d = float(np.mean(p @ n - m))
+        for _ in range(50):
+            u, v = _in_plane(n)
+            r = m - (p @ n - d)
+            J = np.column_stack([-(p @ u), -(p @ v), np.ones(len(p))])
+            step = np.linalg.lstsq(J, -r, rcond=None)[0]
+            n = n + step[0] * u + step[1] * v
+            n /= np.linalg.norm(n)
+            d += step[2]
+        return np.append(n, d)
 
+    (g_train,) = train.groups("plane")
+    nominal_plane = least_squares_plane(
+        _probe(nominal, train.qs[g_train.sample]), g_train.distance_m
+    )
+    side = read_sidecar(tmp_path / "out.kinfw.json")
+    (trained_plane,) = (u.value for u in side.unknowns if u.kind == "plane")
     (g,) = held.groups("plane")
     qs = held.qs[g.sample]
-    for robot, when in ((nominal, "before"), (load_robot(tmp_path / "out.urdf"), "after")):
-        p = _probe(robot, qs)
-        plane = tls(p - g.distance_m[:, None] * tls(p)[:3])
+    models = (
+        (nominal, nominal_plane, "before"),
+        (load_robot(tmp_path / "out.urdf"), trained_plane, "after"),
+    )
+    for robot, plane, when in models:
         h, tilt = _height_and_tilt(robot, qs, g.distance_m, plane)
         rms = 1e3 * np.sqrt(np.mean(h**2))
         assert row[f"{when}_height_rms_mm"] == pytest.approx(rms, rel=1e-6), when
-        assert row[f"{when}_tilt_deg"] == pytest.approx(np.degrees(tilt), abs=1e-6), when
+        assert row[f"{when}_tilt_deg"] == pytest.approx(np.degrees(tilt), rel=1e-5), when
+        assert row[f"{when}_tilt_deg"] > 0.0
     assert row["before_height_rms_mm"] > row["after_height_rms_mm"]
     held_table = out.split("held-out errors:")[1]
     assert "before RMS mm" in held_table and "after tilt deg" in held_table
@@ -673,3 +738,55 @@ def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, 
     for c in choice.candidates:
         height_mm = dict((m.name, v) for m, v in c.errors)["height"]
         assert c.whitened == pytest.approx((height_mm * 1e-3 / sigma) ** 2, rel=1e-9)
+
+
+# -- a plane fixed to any URDF frame; several chains on one plane --------------------------
+
+
+def test_a_plane_fixed_to_a_frame_of_the_robot_calibrates_and_round_trips(scene, tmp_path):
+    """The table fixed to link ``l1`` (``measured_in``): contacts simulated in l1's frame
+    by Pinocchio FK; the file round-trips the frame; the fit leaves every contact on
+    the plane, predicts held-out distances in l1 as the truth does up to the scale, and
+    leaves j1 (above both frames: it moves probe and plane alike) at the nominal."""
+    nominal, truth, _, _ = scene
+    rng = np.random.default_rng(31)
+    q0 = np.array([[0.3, 0.2, -0.4, 0.5, 0.6, 0.1]])
+    l1_T_flange = (
+        inverse_transform(truth.frame_poses(q0, "l1", NAMES)[0])
+        @ truth.frame_poses(q0, "flange", NAMES)[0]
+    )
+    reach = l1_T_flange[:3, :3] @ OFFSET + l1_T_flange[:3, 3]
+    n = _unit([0.2, 1.0, -0.1])
+    plane = np.append(n, n @ (reach + 0.03 * n))
+    plane = plane if plane[3] < 0 else -plane
+    qs = contact_configurations(
+        truth, NAMES, "flange", OFFSET, plane, "j3", 80, rng, measured_in="l1"
+    )
+    assert np.abs(probe_distances(truth, qs, NAMES, "flange", OFFSET, plane, "l1")).max() < 1e-12
+    group = PlaneContacts(
+        "flange", np.arange(80), np.zeros(80), "table", marker="tip", measured_in="l1"
+    )
+    write_measurements(tmp_path / "c.json", Measurements(NAMES, qs, others=(group,)))
+    doc = json.loads((tmp_path / "c.json").read_text())
+    assert doc["samples"][0]["observations"][0]["measured_in"] == "l1"
+    data = read_measurements(tmp_path / "c.json")
+    (read,) = data.groups("plane")
+    assert read.measured_in == "l1" and read.marker == "tip"
+    result = refine(nominal, data, noise=NoiseModel(sigmas={"distance": 1e-4}))
+    assert result.converged
+    assert max(np.abs(g.component("distance")).max() for g in result.residuals) < 1e-10
+    found = _found(result)
+    q = random_joint_values(truth, NAMES, 200, np.random.default_rng(12))
+    exported = load_robot(export_urdf(nominal, geometry_from_cpc(result.model)).urdf_xml)
+    pred = probe_distances(
+        exported, q, NAMES, "flange", found["offset", "flange:tip"], found["plane", "table"], "l1"
+    )
+    true = probe_distances(truth, q, NAMES, "flange", OFFSET, plane, "l1")
+    assert np.abs(true).max() > 0.1
+    ratio = float(pred @ true / (true @ true))
+    np.testing.assert_allclose(pred, ratio * true, rtol=0, atol=1e-9)
+    for name in ("j1",):  # j1 moves probe and plane alike: nominal
+        np.testing.assert_allclose(
+            exported.joint(name).parent_T_child, nominal.joint(name).parent_T_child, atol=1e-12
+        )
+        np.testing.assert_allclose(exported.joint(name).axis, nominal.joint(name).axis, atol=1e-12)
