@@ -34,8 +34,10 @@ rendered images); each corner, an X junction of the tag and a square, is refined
 Kalibr refines them, and dropped if it moves by more than 1.5 half windows. The tags
 are then checked against the board's layout: a homography from the board's corners to
 the image (RANSAC, threshold a third of the median tag side) must keep every tag; a
-tag off the layout (a tag of another board, a misread id, another print orientation)
-is dropped and named. An image is ``found`` with at least ``min_corners`` corners.
+tag off the layout (a tag of another board, a misread id) is dropped and named, and
+when half the tags or more are off (another layout: wrong ``COLSxROWS`` or first id,
+tags printed in another orientation) the image is ``not found``. An image is
+``found`` with at least ``min_corners`` corners.
 """
 
 from __future__ import annotations
@@ -218,10 +220,15 @@ class AprilGridFinder:
         point_ids = board.corner_ids(ids).ravel()
         moved = np.linalg.norm(uv - raw.reshape(-1, 2), axis=1) > 1.5 * half
         off = self._off_layout(uv, point_ids, float(np.median(side)))
-        if off.any():
-            notes.append(
-                f"tags {sorted(set(np.repeat(ids, 4)[off].tolist()))} off the board's layout"
-            )
+        off_tags = sorted(set(np.repeat(ids, 4)[off].tolist()))
+        if 2 * len(off_tags) >= len(ids) > 1:
+            return _nothing(
+                "not found",
+                f"{len(off_tags)} of the {len(ids)} tags seen do not fit the board's layout "
+                f"(check COLSxROWS, FIRST_ID, and that the board is printed as Kalibr prints it)",
+            ), notes
+        if off_tags:
+            notes.append(f"tags {off_tags} off the board's layout")
         good = ~moved & ~np.repeat(off.reshape(-1, 4).any(axis=1), 4)
         order = np.argsort(point_ids[good])
         return ("found", "", uv[good][order], point_ids[good][order]), notes
