@@ -30,8 +30,11 @@ the tags and their ids; tags whose ids are not the board's, and ids seen twice, 
 dropped. The corners of a tag printed as Kalibr prints it touch the black squares at
 its corners, which bends the tag's outline found by OpenCV (its corners ~2 px off on
 rendered images); each corner, an X junction of the tag and a square, is refined by
-``cv2.cornerSubPix`` with a half window of half the gap between tags (3 to 10 px), as
-Kalibr refines them, and dropped if it moves by more than 1.5 half windows. The tags
+``cv2.cornerSubPix``, as Kalibr refines them, with a half window of 0.8 times the
+smaller of the gap and the tag's black border (2 to 10 px: a larger window reaches the
+square's far edges or the tag's bits and biases the corner), and dropped when it is off
+the homography of its neighbours (the corners within two tag pitches) by more than
+:data:`MAX_CORNER_ERROR` of a tag's side (``cornerSubPix`` drawn to another corner). The tags
 are then checked against the board's layout: a homography from the board's corners to
 the image (RANSAC, threshold a third of the median tag side) must keep every tag; a
 tag off the layout (a tag of another board, a misread id) is dropped and named, and
@@ -52,6 +55,10 @@ __all__ = ["AprilGridFinder", "find_circle_grid", "mirrored", "most_upright"]
 #: A disc's centre off the homography of its neighbours by more than this fraction of
 #: the distance between neighbouring centres is not the board's.
 MAX_LOCAL_ERROR = 0.2
+
+#: A tag corner off the homography of its neighbours by more than this fraction of the
+#: tag's side (at least 0.5 px) is dropped (``cornerSubPix`` drawn to another corner).
+MAX_CORNER_ERROR = 0.05
 
 #: (status, reason, uv, ids) of one image.
 Found = tuple[str, str, NDArray[np.float64], NDArray[np.int64]]
@@ -180,7 +187,9 @@ class AprilGridFinder:
         self.board = board
         params = cv2.aruco.DetectorParameters()
         params.markerBorderBits = board.border_bits
-        self._detector = cv2.aruco.ArucoDetector(board.opencv_dictionary(), params)
+        dictionary = board.opencv_dictionary()
+        self._bits = int(dictionary.markerSize)
+        self._detector = cv2.aruco.ArucoDetector(dictionary, params)
 
     def find(self, image: NDArray[np.uint8]) -> tuple[Found, list[str]]:
         """The corners seen, sorted by the board's numbers, and notes on the tags
@@ -211,15 +220,18 @@ class AprilGridFinder:
                 f"{'; '.join(notes)}: none of the board's tags (ids {board.first_id}-"
                 f"{board.first_id + board.tags - 1})",
             ), notes
-        side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=-1)
-        half = int(np.clip(0.5 * board.spacing * np.median(side), 3, 10))
+        side = float(np.median(np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=-1)))
+        bits = self._bits + 2 * board.border_bits
+        # the window stays inside the gap's corner square and the tag's black border
+        reach = min(board.spacing, board.border_bits / bits) * side
+        half = int(np.clip(0.8 * reach, 2, 10))
         raw = quads.reshape(-1, 1, 2).astype(np.float32)
         criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
         refined = cv2.cornerSubPix(image, raw.copy(), (half, half), (-1, -1), criteria)
         uv = np.asarray(refined, dtype=np.float64).reshape(-1, 2)
         point_ids = board.corner_ids(ids).ravel()
-        moved = np.linalg.norm(uv - raw.reshape(-1, 2), axis=1) > 1.5 * half
-        off = self._off_layout(uv, point_ids, float(np.median(side)))
+        moved = _off_neighbours(uv, board.points[point_ids, :2], board.pitch_m, side)
+        off = self._off_layout(uv, point_ids, side)
         off_tags = sorted(set(np.repeat(ids, 4)[off].tolist()))
         if 2 * len(off_tags) >= len(ids) > 1:
             return _nothing(
@@ -247,3 +259,26 @@ class AprilGridFinder:
         if inliers is None:
             return np.ones(len(uv), dtype=bool)
         return ~inliers.ravel().astype(bool)
+
+
+def _off_neighbours(
+    uv: NDArray[np.float64], board_xy: NDArray[np.float64], pitch_m: float, side_px: float
+) -> NDArray[np.bool_]:
+    """Corners farther than :data:`MAX_CORNER_ERROR` tag sides (at least 0.5 px) from
+    their prediction by the homography of the other corners within two tag pitches on
+    the board (corners with fewer than 4 such neighbours are kept)."""
+    import cv2
+
+    off = np.zeros(len(uv), dtype=bool)
+    near = np.linalg.norm(board_xy[:, None] - board_xy[None], axis=-1) <= 2.0 * pitch_m
+    for i in range(len(uv)):
+        others = near[i].copy()
+        others[i] = False
+        if others.sum() < 4:
+            continue
+        H, _ = cv2.findHomography(board_xy[others], uv[others], 0)
+        if H is None:
+            continue
+        predicted = cv2.perspectiveTransform(board_xy[i].reshape(1, 1, 2), H).reshape(2)
+        off[i] = np.linalg.norm(predicted - uv[i]) > max(MAX_CORNER_ERROR * side_px, 0.5)
+    return off

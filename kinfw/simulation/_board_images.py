@@ -189,6 +189,7 @@ def render_board(
     camera_T_board: ArrayLike,
     *,
     supersample: int = 3,
+    blur_sigma_px: float = 0.0,
     noise_sigma: float = 0.0,
     rng: np.random.Generator | None = None,
     texels_per_square: int = 64,
@@ -203,6 +204,9 @@ def render_board(
         Pose of the board in the camera's optical frame, metres.
     supersample : int
         Samples per pixel along each axis (anti-aliasing), default 3.
+    blur_sigma_px : float
+        Standard deviation of a Gaussian blur of the image (defocus), pixels; before the
+        noise.
     noise_sigma : float
         Standard deviation of Gaussian noise added to the grey levels (0..255 scale).
     rng : numpy Generator, optional
@@ -238,6 +242,8 @@ def render_board(
         borderValue=BACKGROUND,
     ).astype(np.float32)
     image = cv2.resize(fine, (camera.width, camera.height), interpolation=cv2.INTER_AREA)
+    if blur_sigma_px > 0.0:
+        image = cv2.GaussianBlur(image, (0, 0), blur_sigma_px)
     if noise_sigma > 0.0:
         rng = np.random.default_rng(0) if rng is None else rng
         image = image + rng.normal(0.0, noise_sigma, image.shape)
