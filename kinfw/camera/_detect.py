@@ -192,7 +192,7 @@ class Detector:
             status, reason, uv, ids = find_circle_grid(
                 image, self.board, allow_symmetric=self.allow_symmetric
             )
-            return Detection(label, status, reason, uv, ids, self.board.points[ids])  # type: ignore[arg-type]
+            return Detection(label, status, reason, uv, ids, self.board.points[ids])
         if self._tags is not None:
             return self._detect_tags(image, label)
         return self._detect_chessboard(image, label)
