@@ -249,8 +249,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
             "a chessboard whose corner counts differ in parity, an asymmetric circle grid, or "
             "--allow-symmetric if it is never turned by more than 90 degrees)"
             if ambiguous
-            else "check --board (inner corners for a chessboard; the tag family, first id and "
-            "border of an aprilgrid) and the images"
+            else "check --board (a chessboard's inner corners, an aprilgrid's tags) and the images"
         )
         raise ValueError(
             f"the board {board.spec()} was found in none of the images; {why}; nothing written"
