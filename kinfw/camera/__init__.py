@@ -1,11 +1,21 @@
 """Cameras and boards: intrinsics (pinhole with OpenCV's distortion), the boards' point
-models (chessboard, ChArUco) and corner detection numbered by the board (OpenCV, imported
-when used).
+models (chessboard, ChArUco, circle grids, AprilTag grids) and their detection in images,
+numbered by the board (OpenCV, imported when used).
 """
 
 from __future__ import annotations
 
-from kinfw.camera._boards import DEFAULT_DICTIONARY, BoardError, Charuco, Chessboard, parse_board
+from kinfw.camera._boards import (
+    APRILTAG_FAMILIES,
+    DEFAULT_DICTIONARY,
+    AprilGrid,
+    Board,
+    BoardError,
+    Charuco,
+    Chessboard,
+    CircleGrid,
+    parse_board,
+)
 from kinfw.camera._detect import Detection, Detector, read_gray
 from kinfw.camera._intrinsics import (
     PARAMETER_NAMES,
@@ -17,13 +27,17 @@ from kinfw.camera._intrinsics import (
 )
 
 __all__ = [
+    "APRILTAG_FAMILIES",
     "DEFAULT_DICTIONARY",
     "PARAMETER_NAMES",
+    "AprilGrid",
+    "Board",
     "BoardError",
     "CameraError",
     "CameraIntrinsics",
     "Charuco",
     "Chessboard",
+    "CircleGrid",
     "Detection",
     "Detector",
     "intrinsics_from_dict",

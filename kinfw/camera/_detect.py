@@ -52,6 +52,13 @@ ChArUco
 ``cv2.aruco.CharucoDetector``: the markers' ids number the corners, so there is no
 ambiguity; an image is ``found`` with at least ``min_corners`` (default 6) corners that
 are not all on one line (``CharucoBoard.checkCharucoCornersCollinear``).
+
+Circle grids and AprilTag grids
+-------------------------------
+:mod:`kinfw.camera._grids`: a circle grid is numbered by fitting each numbering its
+shape allows (symmetric grids are ``ambiguous`` as symmetric chessboards are); an
+AprilTag grid's corners by the tags' ids, partial views allowed (``min_corners`` as for
+ChArUco), every tag checked against the board's layout.
 """
 
 from __future__ import annotations
@@ -64,7 +71,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.camera._boards import Charuco, Chessboard
+from kinfw.camera._boards import AprilGrid, Board, BoardError, Charuco, CircleGrid
+from kinfw.camera._grids import AprilGridFinder, find_circle_grid, mirrored, most_upright
 
 __all__ = ["Detection", "Detector", "read_gray"]
 
@@ -133,22 +141,38 @@ class Detector:
 
     Parameters
     ----------
-    board : Chessboard or Charuco
+    board : Chessboard, Charuco, CircleGrid or AprilGrid
     allow_symmetric : bool
-        Accept a chessboard that looks the same turned by 180 degrees (module docstring).
+        Accept a chessboard or circle grid that looks the same turned by 180 degrees
+        (module docstring).
     min_corners : int
-        ChArUco: fewest corners for an image to count as found (default 6; >= 4).
+        ChArUco, AprilTag grid: fewest corners for an image to count as found (default
+        6; >= 4).
+
+    Raises
+    ------
+    BoardError
+        For an asymmetric circle grid with an even number of rows (OpenCV does not
+        number it by its layout).
     """
 
     def __init__(
-        self, board: Chessboard | Charuco, *, allow_symmetric: bool = False, min_corners: int = 6
+        self, board: Board, *, allow_symmetric: bool = False, min_corners: int = 6
     ) -> None:
         if min_corners < 4:
             raise ValueError(f"min_corners must be >= 4 (PnP needs 4), got {min_corners}")
+        if isinstance(board, CircleGrid) and board.asymmetric and board.rows % 2 == 0:
+            raise BoardError(
+                f"{board.spec()}: an asymmetric circle grid with an even number of rows looks "
+                f"the same turned by 180 degrees, and OpenCV's findCirclesGrid numbers its rows "
+                f"out of the layout's order (measured, OpenCV 4.14); use an odd number of rows "
+                f"(OpenCV's acircles 4x11)"
+            )
         self.board = board
         self.allow_symmetric = allow_symmetric
         self.min_corners = int(min_corners)
         self._charuco: Any = None
+        self._tags = AprilGridFinder(board) if isinstance(board, AprilGrid) else None
         if isinstance(board, Charuco):
             import cv2
 
@@ -164,7 +188,26 @@ class Detector:
             )
         if isinstance(self.board, Charuco):
             return self._detect_charuco(image, label)
+        if isinstance(self.board, CircleGrid):
+            status, reason, uv, ids = find_circle_grid(
+                image, self.board, allow_symmetric=self.allow_symmetric
+            )
+            return Detection(label, status, reason, uv, ids, self.board.points[ids])
+        if self._tags is not None:
+            return self._detect_tags(image, label)
         return self._detect_chessboard(image, label)
+
+    # -- AprilTag grid ---------------------------------------------------------------
+    def _detect_tags(self, image: NDArray[np.uint8], label: str) -> Detection:
+        (status, reason, uv, ids), notes = self._tags.find(image)
+        if status == "found" and len(ids) < self.min_corners:
+            status = "not found"
+            reason = f"{len(ids)} tag corners, fewer than {self.min_corners}"
+        if status != "found":
+            return Detection(label, "not found", "; ".join([reason, *notes]))
+        for note in notes:
+            log.info("%s: %s (dropped)", label, note)
+        return Detection(label, "found", "", uv, ids, self.board.points[ids])
 
     # -- ChArUco ---------------------------------------------------------------------
     def _detect_charuco(self, image: NDArray[np.uint8], label: str) -> Detection:
@@ -189,7 +232,7 @@ class Detector:
         if uv is None:
             return Detection(label, "not found", f"no {board.cols}x{board.rows} chessboard")
         grid = uv.reshape(board.rows, board.cols, 2)
-        if _mirrored(grid):
+        if mirrored(grid):
             grid = grid[:, ::-1]
         greys = _SquareGreys(image, grid)
         contrasts = [greys.contrast(turn) for turn in range(greys.turns)]
@@ -219,7 +262,7 @@ class Detector:
                 f"(use a board with one odd and one even count, a ChArUco board, or "
                 f"--allow-symmetric)",
             )
-        grid = _most_upright([greys.turned(turn) for turn in right])
+        grid = most_upright([greys.turned(turn) for turn in right])
         ids = np.arange(board.count, dtype=np.int64)
         return Detection(label, "found", "", grid.reshape(-1, 2).copy(), ids, board.points)
 
@@ -250,18 +293,6 @@ def _find_chessboard(image: NDArray[np.uint8], size: tuple[int, int]) -> NDArray
     criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
     refined = cv2.cornerSubPix(image, corners, (half, half), (-1, -1), criteria)
     return np.asarray(refined, dtype=float).reshape(-1, 2)
-
-
-def _mirrored(grid: NDArray[np.float64]) -> bool:
-    """True when the numbering's x (along a row) and y (down the columns) are left-handed
-    in the image (u right, v down), i.e. the board would face away from the camera."""
-    x_axis = grid[:, -1] - grid[:, 0]
-    y_axis = grid[-1, :] - grid[0, :]
-    cross = (
-        x_axis.mean(axis=0)[0] * y_axis.mean(axis=0)[1]
-        - x_axis.mean(axis=0)[1] * y_axis.mean(axis=0)[0]
-    )
-    return bool(cross < 0.0)
 
 
 class _SquareGreys:
@@ -340,14 +371,3 @@ class _SquareGreys:
         ring[1:-1, 1:-1] = False
         seen = ring & np.isfinite(g)
         return int(np.sum((g[seen] < threshold) != black[seen]))
-
-
-def _most_upright(grids: list[NDArray[np.float64]]) -> NDArray[np.float64]:
-    """Of the numberings a symmetric board allows, the one whose x axis (corner 0 to
-    corner ``cols - 1``) points most to the image's right."""
-
-    def rightness(g: NDArray[np.float64]) -> float:
-        x_axis = (g[:, -1] - g[:, 0]).mean(axis=0)
-        return float(x_axis[0] / (np.linalg.norm(x_axis) + 1e-12))
-
-    return max(grids, key=rightness)

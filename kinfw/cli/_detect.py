@@ -7,6 +7,9 @@ robot's joint values, as ``pixels`` observations of a ``kinfw-measurements`` fil
                  --frame CAMERA_FRAME [--target NAME] [--allow-symmetric]
                  [--min-corners N] [--angle-unit rad|deg] --out DATA.json
 
+``SPEC`` names a chessboard, a ChArUco board, a symmetric or asymmetric circle grid or
+Kalibr's AprilTag grid (:func:`kinfw.camera.parse_board`).
+
 ``JOINTS.csv``: a header of joint names and one row of joint values per image, either in
 the order of ``IMAGES`` or, with a column named ``image``, keyed by the image's path as
 given or its file name (every image needs exactly one row, every row one image).
@@ -41,19 +44,25 @@ def add_detect_parser(sub: Any) -> None:
     p = sub.add_parser(
         "detect",
         help="find a board's corners in images and write pixel observations",
-        description="Find a chessboard's or ChArUco board's corners in each image (OpenCV), "
-        "pair each image with its row of joint values and write a kinfw-measurements file of "
-        "'pixels' observations, with the camera's intrinsics. Images where the board is not "
-        "found, or found ambiguously (a symmetric chessboard's corner 0 cannot be told), are "
+        description="Find a board's points in each image (OpenCV: a chessboard's or ChArUco "
+        "board's corners, a circle grid's centres, an AprilTag grid's tag corners), numbered "
+        "by the board, pair each image with its row of joint values and write a "
+        "kinfw-measurements file of 'pixels' observations, with the camera's intrinsics and "
+        "the points' board coordinates. Images where the board is not found, or found "
+        "ambiguously (a symmetric chessboard's or circle grid's point 0 cannot be told), are "
         "listed and skipped.",
     )
     p.add_argument("images", type=Path, nargs="+", metavar="IMAGE", help="image files")
     p.add_argument(
         "--board",
         required=True,
-        help="chessboard:COLSxROWS:SQUARE_M (inner corners) or "
-        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares; DICT default DICT_5X5_100); "
-        "lengths in metres",
+        help="chessboard:COLSxROWS:SQUARE_M (inner corners), "
+        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares; DICT default DICT_5X5_100), "
+        "circles:COLSxROWS:SPACING_M[:DIAMETER_M] or acircles:COLSxROWS:SPACING_M[:DIAMETER_M] "
+        "(OpenCV's symmetric and asymmetric circle grids: circles per row x rows), "
+        "aprilgrid:COLSxROWS:TAG_M:SPACING[:FAMILY[:FIRST_ID[:BORDER_BITS]]] (Kalibr's "
+        "aprilgrid: tags, SPACING a fraction of TAG_M, FAMILY default DICT_APRILTAG_36h11 "
+        "(t36h11), first id 0, 2-bit borders); lengths in metres",
     )
     p.add_argument(
         "--joints",
@@ -77,14 +86,15 @@ def add_detect_parser(sub: Any) -> None:
     p.add_argument(
         "--allow-symmetric",
         action="store_true",
-        help="accept a chessboard that looks the same turned by 180 degrees (both counts of "
-        "one parity): you vouch it is never seen turned by more than 90 degrees",
+        help="accept a chessboard or circle grid that looks the same turned by 180 degrees "
+        "(a chessboard with both counts of one parity, a symmetric circle grid): you vouch it "
+        "is never seen turned by more than 90 degrees",
     )
     p.add_argument(
         "--min-corners",
         type=number(int, low=4),
         default=6,
-        help="ChArUco: fewest corners for an image to count (default 6, at least 4)",
+        help="ChArUco, aprilgrid: fewest corners for an image to count (default 6, at least 4)",
     )
     p.add_argument(
         "--angle-unit",
@@ -201,6 +211,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
     from kinfw.camera import Detector, parse_board, read_camera, read_gray
 
     board = parse_board(args.board)
+    detector = Detector(board, allow_symmetric=args.allow_symmetric, min_corners=args.min_corners)
     camera = read_camera(args.camera)
     frame = args.frame
     if not frame.strip():
@@ -211,7 +222,6 @@ def cmd_detect(args: argparse.Namespace) -> int:
     for path in args.images:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such image file")
-    detector = Detector(board, allow_symmetric=args.allow_symmetric, min_corners=args.min_corners)
     start = time.perf_counter()
     detections = []
     for path in args.images:
@@ -235,11 +245,11 @@ def cmd_detect(args: argparse.Namespace) -> int:
             print(f"  {title}: {d.image}: {d.reason}")
     if not found:
         why = (
-            f"it was ambiguous in {len(ambiguous)} (a symmetric chessboard: use a board whose "
-            "corner counts differ in parity, or --allow-symmetric if it is never turned by "
-            "more than 90 degrees)"
+            f"it was ambiguous in {len(ambiguous)} (a symmetric chessboard or circle grid: use "
+            "a chessboard whose corner counts differ in parity, an asymmetric circle grid, or "
+            "--allow-symmetric if it is never turned by more than 90 degrees)"
             if ambiguous
-            else "check --board (inner corners for a chessboard) and the images"
+            else "check --board (a chessboard's inner corners, an aprilgrid's tags) and the images"
         )
         raise ValueError(
             f"the board {board.spec()} was found in none of the images; {why}; nothing written"

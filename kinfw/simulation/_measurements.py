@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.camera import CameraIntrinsics, Charuco, Chessboard, parse_board
+from kinfw.camera import Board, CameraIntrinsics, parse_board
 from kinfw.measurements import Measurements, concatenate_measurements
 from kinfw.model import Robot, check_robot, load_robot
 from kinfw.simulation._perturb import one_joint_at_a_time, perturb_robot, random_configurations
@@ -100,7 +100,7 @@ def _stage2(
     planned: NDArray[np.float64] | None,
     *,
     noise: dict[str, float],
-    board: Chessboard | Charuco | None,
+    board: Board | None,
     intrinsics: dict[str, CameraIntrinsics],
     pixel_sigma: float,
     stage2_samples: int,
@@ -118,7 +118,7 @@ def _stage2(
             qs = random_configurations(lower, upper, stage2_samples, rng, fraction=fraction)
         w_T_target = default_target_pose(truth, qs, names, cameras)
         return simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
-    min_corners = board.count if isinstance(board, Chessboard) else MIN_CORNERS
+    min_corners = MIN_CORNERS if board.partial else board.count
     if planned is not None:
         w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
         data, _ = simulate_pixels(

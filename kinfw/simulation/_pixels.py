@@ -37,8 +37,9 @@ VIEW_MARGIN_PX = 5.0
 #: A whole image is dropped when the line of sight to the board's centre makes more than
 #: this angle with the board's normal (a board seen edge-on, or from behind) ...
 MAX_BOARD_ANGLE_DEG = 70.0
-#: ... or when fewer than this many of its corners are seen (PnP needs 4; a chessboard,
-#: which OpenCV finds only whole, needs all of them: ``min_corners=board.count``) ...
+#: ... or when fewer than this many of its corners are seen (PnP needs 4; a board that
+#: OpenCV finds only whole, a chessboard or a circle grid, needs all of them:
+#: ``min_corners=board.count``, see ``board.partial``) ...
 MIN_CORNERS = 4
 #: ... or when the seen corners are (nearly) on one line: the second singular value of
 #: their centred positions is below this fraction of the first.
