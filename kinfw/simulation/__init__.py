@@ -16,6 +16,7 @@ from kinfw.simulation._measurements import (
 from kinfw.simulation._outliers import plant_outliers
 from kinfw.simulation._perturb import (
     check_sigma,
+    finite_limits,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
@@ -50,6 +51,7 @@ __all__ = [
     "contact_configurations",
     "default_intrinsics",
     "default_target_pose",
+    "finite_limits",
     "level_plane",
     "nine_circle_plate",
     "one_joint_at_a_time",

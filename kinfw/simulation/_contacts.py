@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import skew
 from kinfw.model import Robot
-from kinfw.simulation._perturb import _finite_limits, random_configurations
+from kinfw.simulation._perturb import finite_limits, random_configurations
 
 __all__ = ["contact_configurations", "level_plane", "plane_through"]
 
@@ -49,7 +49,7 @@ def level_plane(
     """The plane ``(n, d)`` (4,) normal to the root's z axis through the probe (``offset``
     (3,) in ``frame``, metres) at the middle of the joint ranges (an infinite limit:
     -pi .. pi, as :func:`random_configurations`)."""
-    lo, hi = _finite_limits(lower, upper)
+    lo, hi = finite_limits(lower, upper)
     root_T_frame = robot.frame_poses(0.5 * (lo + hi), frame, tuple(joint_names))
     return plane_through(
         root_T_frame[:3, :3] @ np.asarray(offset, float) + root_T_frame[:3, 3], [0, 0, 1]
@@ -139,7 +139,7 @@ def contact_configurations(
     offset = np.asarray(offset, dtype=float)
     plane = np.asarray(plane, dtype=float)
     normal, d = plane[:3], float(plane[3])
-    lo, hi = _finite_limits(lower, upper)
+    lo, hi = finite_limits(lower, upper)
     mid, half = 0.5 * (lo + hi), 0.5 * fraction * (hi - lo) + 1e-12
     found: list[NDArray[np.float64]] = []
     for _ in range(max_rounds):
