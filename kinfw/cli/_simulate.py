@@ -277,9 +277,11 @@ def _intrinsics(args, cameras: tuple[str, ...]) -> dict:
 
 
 def _pixel_summary(sim, sigma_px: float) -> dict:
-    """The board and the images and corners per camera of ``--pixels`` data."""
+    """The board, its true pose and the images and corners per camera of ``--pixels``
+    data."""
     return {
         "board": sim.board,
+        "root_T_board": sim.w_T_board.tolist(),
         "sigma_px": sigma_px,
         "cameras": [
             {

@@ -28,7 +28,6 @@ from kinfw.observations import (
     PointObservations,
     offset_key,
     perturb_transforms,
-    plane_key,
 )
 from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
 from kinfw.simulation._perturb import one_joint_at_a_time, perturb_robot, random_configurations
@@ -533,17 +532,18 @@ def _simulate_contacts(
             plane=plane_nd,
             fraction=at.fraction,
         )
-        template = PlaneContacts(
+        # the probe is on the plane (to CONTACT_TOLERANCE_M): the measured distance is
+        # the noise alone (exactly 0 without noise)
+        noise = at.rng.normal(0.0, at.noise_m, n) if at.noise_m > 0.0 else np.zeros(n)
+        group = PlaneContacts(
             frame=probe.frame,
             sample=np.arange(n),
-            distance_m=np.zeros(n),
+            distance_m=noise,
             plane=plane_name,
             offset=probe.offset if at.offsets_known else None,
             marker=None if at.offsets_known else probe.name,
         )
-        unknowns = {
-            plane_key(plane_name): plane_nd,
-            offset_key(probe.frame, probe.name): probe.offset,
-        }
-        data.append(at.simulate(qs, [template], unknowns))
+        data.append(
+            Measurements(joint_names=at.names, qs=qs, source="<simulated>").with_groups([group])
+        )
     return _Touch(plane_nd, probes, tuple(data))
