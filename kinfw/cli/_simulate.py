@@ -396,16 +396,19 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
             )
         )
         return
-    poses = bool(sim.frames) or (bool(sim.cameras) and not args.pixels) or bool(sim.markers)
+    poses = bool(sim.frames) or (bool(sim.cameras) and not args.pixels)
+    noise = (
+        [f"{args.noise_mm} mm", f"{args.noise_deg} deg"]
+        if poses
+        else [f"{args.noise_mm} mm"]
+        if sim.markers or sim.probes
+        else []
+    )
+    if args.stereo_mm is not None and sim.frames:
+        noise.append(f"stereo rig {args.stereo_mm} mm per point")
     print(
         f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
-        + (
-            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
-            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-            + ")"
-            if poses
-            else ""
-        )
+        + (f" (noise {', '.join(noise)})" if noise else "")
     )
     if pixels is not None:
         print(
