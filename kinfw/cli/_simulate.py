@@ -74,7 +74,10 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
 def _add_noise_options(p: argparse.ArgumentParser) -> None:
     """``simulate``: the measurement noise and the true robot's errors."""
     p.add_argument(
-        "--noise-mm", type=MM, default=0.5, help="position noise sigma per axis, mm (default 0.5)"
+        "--noise-mm",
+        type=MM,
+        default=0.5,
+        help="position noise sigma per axis, mm (default 0.5); of the distance of contacts",
     )
     p.add_argument(
         "--noise-deg", type=DEG, default=0.5, help="rotation noise angle sigma, deg (default 0.5)"

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -425,23 +424,6 @@ class _Sampling:
     noise_m: float
     offsets_known: bool
 
-    def simulate(
-        self,
-        qs: NDArray[np.float64],
-        templates: list[Any],
-        unknowns: Mapping[BlockKey, NDArray[np.float64]],
-    ) -> Measurements:
-        """The ``templates`` groups simulated at ``qs`` (:func:`simulate`)."""
-        return simulate(
-            self.truth,
-            qs,
-            self.names,
-            groups=templates,
-            unknowns=unknowns,
-            rng=self.rng,
-            noise_m=self.noise_m,
-        )
-
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Mocap:
@@ -487,7 +469,9 @@ def _simulate_markers(
                 measured_in=mocap_frame if external else None,
             )
         )
-    data = at.simulate(qs, templates, unknowns)
+    data = simulate(
+        at.truth, qs, at.names, groups=templates, unknowns=unknowns, rng=at.rng, noise_m=at.noise_m
+    )
     return _Mocap(mocap_frame if external else None, mocap_T_w, probes, data)
 
 

@@ -120,6 +120,33 @@ def test_markers_calibrate_to_the_truth_held_out(mocap, arm6):
         assert g["position_max_mm"] < 1e-6, g
 
 
+def test_known_offsets_in_the_root_frame(arm6, tmp_path):
+    """--offsets-known writes each offset (markers: ``offset``, no ``marker``; probes the
+    same); --mocap-frame naming the URDF root measures the markers in it: the points are
+    Pinocchio FK + offset, no frame to estimate; a --mocap-frame of another URDF link is
+    refused (the tracker is external)."""
+    argv = ["--urdf", arm6, "--markers", "flange:0.01,0.02,0.03", "--mocap-frame", "world"]
+    argv += ["--contacts", "flange:0,0,0.1", "--offsets-known", "--seed", "9"]
+    summary = _simulate(tmp_path, argv)
+    assert summary["mocap_T_root"] is None and summary["mocap_frame"] is None
+    data = read_measurements(tmp_path / "data.json")
+    (points,) = data.groups("point")
+    (contacts,) = data.groups("plane")
+    assert points.marker is None and points.measured_in is None
+    np.testing.assert_array_equal(points.offset, [0.01, 0.02, 0.03])
+    assert contacts.marker is None
+    np.testing.assert_array_equal(contacts.offset, [0.0, 0.0, 0.1])
+    truth = (tmp_path / "true.urdf").read_text()
+    root_T_flange = pin_fk(truth, data.joint_names, data.qs[points.sample], "flange")
+    expected = (root_T_flange @ np.array([0.01, 0.02, 0.03, 1.0]))[:, :3]
+    np.testing.assert_allclose(points.meas_p_point, expected, rtol=0, atol=1e-12)
+    argv = ["--urdf", arm6, "--markers", "flange", "--mocap-frame", "l3"]
+    code, _, err = _kinfw(
+        ["simulate", *argv, "--out", tmp_path / "x.json", "--truth-out", tmp_path / "x.urdf"]
+    )
+    assert code == 2 and "'l3' is a frame of the URDF" in err, err
+
+
 # -- plane contacts -------------------------------------------------------------------------
 
 
