@@ -1,4 +1,4 @@
-"""SE(3) helpers for the hand-eye tests, computed with Pinocchio (independent of
+"""SE(3) helpers and forward kinematics for the tests, computed with Pinocchio (independent of
 :mod:`kinfw.geometry`, which the solvers use)."""
 
 from __future__ import annotations
@@ -36,3 +36,23 @@ def random_axis(rng: np.random.Generator) -> NDArray[np.float64]:
     """A uniformly random unit vector."""
     axis = rng.normal(size=3)
     return axis / np.linalg.norm(axis)
+
+
+def pin_fk(xml: str, joint_names: tuple[str, ...], qs: np.ndarray, frame: str) -> np.ndarray:
+    """root_T_frame by Pinocchio directly (framesForwardKinematics), shape (n, 4, 4)."""
+    model = pin.buildModelFromXML(xml)
+    data = model.createData()
+    fid = model.getFrameId(frame, pin.FrameType.BODY)
+    assert fid < model.nframes
+    out = []
+    for q_urdf in np.atleast_2d(qs):
+        q = pin.neutral(model)
+        for name, value in zip(joint_names, q_urdf, strict=True):
+            joint = model.joints[model.getJointId(name)]
+            if joint.nq == 2:
+                q[joint.idx_q], q[joint.idx_q + 1] = np.cos(value), np.sin(value)
+            else:
+                q[joint.idx_q] = value
+        pin.framesForwardKinematics(model, data, q)
+        out.append(data.oMf[fid].homogeneous.copy())
+    return np.array(out)

@@ -1,6 +1,8 @@
 """``kinfw simulate``: perturb a nominal URDF into a "true" robot and simulate its
 measurements (stage 1 poses one joint at a time, stage 2 camera observations or images of a
-board, or a plan file's configurations), :mod:`kinfw.simulation`.
+board, rendered as PNG files with ``--images``, or a plan file's configurations;
+motion-capture markers in an unknown frame, probes touching a plane),
+:mod:`kinfw.simulation`.
 
 Like the other command modules, only the standard library is imported at start-up.
 """
@@ -9,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -25,7 +28,7 @@ from kinfw.cli._args import (
     load_model,
     number,
 )
-from kinfw.files import check_outputs, write_text_atomic
+from kinfw.files import check_output_dir, check_outputs, write_text_atomic
 
 __all__ = ["add_simulate_parser", "cmd_simulate"]
 
@@ -39,7 +42,9 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         description="Perturb the nominal URDF into a 'true' robot and simulate "
         "its measurements: stage 1 poses of --frames, one joint at a time "
         "(Shih et al. section 4.1); stage 2 camera observations of a fixed "
-        "target at random configurations.",
+        "target at random configurations, or images of a board (--pixels, rendered "
+        "with --images); motion-capture markers (--markers); probes touching a plane "
+        "(--contacts).",
     )
     p.add_argument(
         "--urdf", type=Path, default=None, help="nominal URDF (default: the built-in IIS-head)"
@@ -56,6 +61,7 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     _add_noise_options(p)
     _add_configuration_options(p)
     _add_pixel_options(p)
+    _add_probe_options(p)
     p.add_argument(
         "--plan",
         type=Path,
@@ -71,7 +77,10 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
 def _add_noise_options(p: argparse.ArgumentParser) -> None:
     """``simulate``: the measurement noise and the true robot's errors."""
     p.add_argument(
-        "--noise-mm", type=MM, default=0.5, help="position noise sigma per axis, mm (default 0.5)"
+        "--noise-mm",
+        type=MM,
+        default=0.5,
+        help="position noise sigma per axis, mm (default 0.5); of the distance of contacts",
     )
     p.add_argument(
         "--noise-deg", type=DEG, default=0.5, help="rotation noise angle sigma, deg (default 0.5)"
@@ -110,7 +119,8 @@ def _add_configuration_options(p: argparse.ArgumentParser) -> None:
         choices=("1", "2", "both"),
         default=None,
         help="stage 1 (one joint at a time), 2 (random configurations seen by the cameras) "
-        "or both (default 1; with --pixels: both, and 1 is an error)",
+        "or both (default 1; with --pixels: both, and 1 is an error; with --markers or "
+        "--contacts and no --pixels: neither)",
     )
     p.add_argument(
         "--stage2-samples",
@@ -147,6 +157,110 @@ def _add_pixel_options(p: argparse.ArgumentParser) -> None:
         "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (default chessboard:9x6:0.04)",
     )
     add_camera_option(p)
+    p.add_argument(
+        "--images",
+        type=Path,
+        metavar="DIR",
+        default=None,
+        help="with --pixels (implied): also render each image of the board as a PNG, in "
+        "DIR/CAMERA/ with the configurations (joints.csv) and intrinsics (camera.json) "
+        "that kinfw detect reads",
+    )
+    p.add_argument(
+        "--image-noise",
+        type=number(float, low=0.0),
+        default=2.0,
+        help="with --images: Gaussian noise of each pixel, grey levels of 255 (default 2)",
+    )
+
+
+def _point_spec(text: str) -> tuple[str, tuple[float, float, float] | None]:
+    """``FRAME`` or ``FRAME:X,Y,Z`` (metres) -> ``(frame, offset or None)``."""
+    frame, _, xyz = text.partition(":")
+    if not frame.strip():
+        raise argparse.ArgumentTypeError(f"expected FRAME or FRAME:X,Y,Z, got {text!r}")
+    if not xyz:
+        return frame.strip(), None
+    try:
+        x, y, z = (float(v) for v in xyz.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected FRAME:X,Y,Z (three numbers, metres), got {text!r}"
+        ) from None
+    if not all(map(math.isfinite, (x, y, z))):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return frame.strip(), (x, y, z)
+
+
+def _plane_spec(text: str) -> tuple[float, float, float, float]:
+    """``NX,NY,NZ,D`` -> the four numbers (a non-zero normal)."""
+    try:
+        nx, ny, nz, d = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected NX,NY,NZ,D (four numbers), got {text!r}"
+        ) from None
+    if not all(map(math.isfinite, (nx, ny, nz, d))) or nx == ny == nz == 0.0:
+        raise argparse.ArgumentTypeError(f"expected finite numbers, a non-zero normal: {text!r}")
+    return nx, ny, nz, d
+
+
+def _add_probe_options(p: argparse.ArgumentParser) -> None:
+    """``simulate``: motion-capture markers and plane contacts."""
+    p.add_argument(
+        "--markers",
+        type=_point_spec,
+        action="append",
+        metavar="FRAME[:X,Y,Z]",
+        help="a motion-capture marker on URDF frame FRAME at X,Y,Z (m, in FRAME; default "
+        "a random 5 cm offset), measured at --mocap-samples random configurations in "
+        "--mocap-frame; its offset is left to the calibration (repeatable: marker1, "
+        "marker2, ...)",
+    )
+    p.add_argument(
+        "--mocap-frame",
+        default="mocap",
+        help="the frame the markers are measured in: a name not in the URDF (its pose is "
+        "random and left to the calibration; default mocap) or the URDF's root",
+    )
+    p.add_argument(
+        "--mocap-samples",
+        type=COUNT,
+        default=40,
+        help="random configurations at which the markers are measured (default 40)",
+    )
+    p.add_argument(
+        "--contacts",
+        type=_point_spec,
+        action="append",
+        metavar="FRAME[:X,Y,Z]",
+        help="a probe on URDF frame FRAME at X,Y,Z (m, in FRAME; default a random 5 cm "
+        "offset) that touches the plane at --contact-samples configurations (random ones "
+        "projected onto the plane); its offset is left to the calibration (repeatable: "
+        "probe1, probe2, ...)",
+    )
+    p.add_argument(
+        "--plane",
+        type=_plane_spec,
+        metavar="NX,NY,NZ,D",
+        default=None,
+        help="the plane {x : n . x = d} in the URDF root (d in m; n is normalised); "
+        "default normal to the root's z through the first probe at the middle of the "
+        "joint ranges",
+    )
+    p.add_argument("--plane-name", default="table", help="the plane's name (default table)")
+    p.add_argument(
+        "--contact-samples",
+        type=COUNT,
+        default=60,
+        help="contacts per probe (default 60)",
+    )
+    p.add_argument(
+        "--offsets-known",
+        action="store_true",
+        help="write the markers' and probes' offsets into the file (known to the "
+        "calibration) instead of leaving them to be estimated",
+    )
 
 
 # -- kinfw simulate ----------------------------------------------------------------------
@@ -169,9 +283,11 @@ def _intrinsics(args, cameras: tuple[str, ...]) -> dict:
 
 
 def _pixel_summary(sim, sigma_px: float) -> dict:
-    """The board and the images and corners per camera of ``--pixels`` data."""
+    """The board, its true pose and the images and corners per camera of ``--pixels``
+    data."""
     return {
         "board": sim.board,
+        "root_T_board": sim.w_T_board.tolist(),
         "sigma_px": sigma_px,
         "cameras": [
             {
@@ -192,14 +308,17 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     from kinfw.simulation import simulate_measurements
 
     nominal = load_model(args.urdf, args)
-    if args.stage is None:  # --pixels are stage 2 images: with the stage 1 poses by default
-        args.stage = "both" if args.pixels else "1"
-    elif args.pixels and args.stage == "1":
+    args.pixels = args.pixels or args.images is not None
+    markers, contacts = args.markers or [], args.contacts or []
+    if args.pixels and args.stage == "1":
         raise ValueError(
             "--pixels --stage 1: --pixels makes stage 2 images; give --stage 2 or both "
             "(the default with --pixels)"
         )
-    stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
+    if args.stage is not None:
+        stages = {"1": (1,), "2": (2,), "both": (1, 2)}[args.stage]
+    else:  # --pixels are stage 2 images: with the stage 1 poses by default
+        stages = (1, 2) if args.pixels else () if (markers or contacts) else (1,)
     frames = (
         frames_arg(args.frames, nominal.default_frames, "--frames", nominal) if 1 in stages else ()
     )
@@ -208,7 +327,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         if 2 in stages
         else ()
     )
-    names = nominal.topology((*frames, *cameras)).joint_names
+    probe_frames = [frame for frame, _ in (*markers, *contacts)]
+    names = nominal.topology((*frames, *cameras, *probe_frames)).joint_names
     sim = simulate_measurements(
         nominal,
         stages=stages,
@@ -227,23 +347,45 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         board=args.board,
         intrinsics=_intrinsics(args, cameras) if args.pixels and cameras else None,
         configurations=_plan_qs(args.plan, names) if args.plan is not None else None,
+        markers=markers,
+        mocap_frame=args.mocap_frame,
+        mocap_samples=args.mocap_samples,
+        contacts=contacts,
+        plane=args.plane,
+        plane_name=args.plane_name,
+        contact_samples=args.contact_samples,
+        offsets_known=args.offsets_known,
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)
     write_text_atomic(args.truth_out, sim.truth_xml)
+    if args.images is not None and sim.w_T_board is not None:
+        from kinfw.camera import parse_board
+        from kinfw.simulation import write_board_images
+
+        write_board_images(
+            args.images,
+            sim,
+            parse_board(sim.board),
+            noise_sigma=args.image_noise,
+            rng=np.random.default_rng([args.seed, 1]),
+        )
     _print_simulated(args, sim)
     return 0
 
 
 def _print_simulated(args: argparse.Namespace, sim) -> None:
-    """What ``kinfw simulate`` wrote: the JSON summary (``--json``) or two lines."""
+    """What ``kinfw simulate`` wrote: the JSON summary (``--json``) or a few lines."""
     data = sim.data
     pixels = _pixel_summary(sim, args.pixel_sigma) if args.pixels and sim.cameras else None
+    probes = _probe_summary(sim)
     if args.json:
         print(
             json.dumps(
                 {
                     "pixels": pixels,
+                    **probes,
+                    "images": None if args.images is None else str(args.images),
                     "data": str(args.out),
                     "truth": str(args.truth_out),
                     "n_samples": data.n_samples,
@@ -260,15 +402,18 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
         )
         return
     poses = bool(sim.frames) or (bool(sim.cameras) and not args.pixels)
+    noise = (
+        [f"{args.noise_mm} mm", f"{args.noise_deg} deg"]
+        if poses
+        else [f"{args.noise_mm} mm"]
+        if sim.markers or sim.probes
+        else []
+    )
+    if args.stereo_mm is not None and sim.frames:
+        noise.append(f"stereo rig {args.stereo_mm} mm per point")
     print(
         f"wrote {args.out}: {data.n_samples} samples of {', '.join(data.observed_frames)}"
-        + (
-            f" (noise {args.noise_mm} mm, {args.noise_deg} deg"
-            + (f", stereo rig {args.stereo_mm} mm per point" if args.stereo_mm is not None else "")
-            + ")"
-            if poses
-            else ""
-        )
+        + (f" (noise {', '.join(noise)})" if noise else "")
     )
     if pixels is not None:
         print(
@@ -279,10 +424,43 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
                 for c in pixels["cameras"]
             )
         )
+    if args.images is not None and pixels is not None:
+        print(
+            f"  rendered the images in {args.images}/CAMERA/ (PNG, joints.csv, camera.json; "
+            f"image noise {args.image_noise:g} grey levels) for kinfw detect"
+        )
+    for key, title in (("markers", "marker"), ("probes", "probe")):
+        for p in probes[key]:
+            xyz = ", ".join(f"{1e3 * v:.1f}" for v in p["offset_m"])
+            print(f"  {title} {p['name']} on {p['frame']}: true offset ({xyz}) mm")
+    if probes["mocap_T_root"] is not None:
+        print(f"  markers measured in {probes['mocap_frame']!r}, a frame of random pose")
+    if probes["plane"] is not None:
+        n, d = probes["plane"][:3], probes["plane"][3]
+        print(
+            f"  plane {probes['plane_name']!r}: n = ({', '.join(f'{v:.4f}' for v in n)}), "
+            f"d = {d:.4f} m"
+        )
     print(
         f"wrote {args.truth_out}: the true robot (nominal with errors of "
         f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
     )
+
+
+def _probe_summary(sim) -> dict:
+    """The markers, probes, mocap frame and plane of a simulation, JSON-ready."""
+
+    def listed(points):
+        return [{"frame": p.frame, "name": p.name, "offset_m": p.offset.tolist()} for p in points]
+
+    return {
+        "markers": listed(sim.markers),
+        "mocap_frame": sim.mocap_frame,
+        "mocap_T_root": None if sim.mocap_T_w is None else sim.mocap_T_w.tolist(),
+        "probes": listed(sim.probes),
+        "plane_name": sim.plane_name,
+        "plane": None if sim.plane is None else sim.plane.tolist(),
+    }
 
 
 def _plan_qs(path: Path, names: Sequence[str]) -> Any:
@@ -302,3 +480,5 @@ def check_simulate_outputs(args: argparse.Namespace) -> None:
         {"--out": args.out, "--truth-out": args.truth_out},
         inputs={"--urdf": args.urdf, "--plan": args.plan, **camera_inputs(args)},
     )
+    if args.images is not None:
+        check_output_dir(args.images, label="--images")

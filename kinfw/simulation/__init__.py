@@ -1,15 +1,22 @@
 """Rehearsal data: a perturbed "true" robot, measurement protocols (one joint at a time,
-random configurations), simulated observations of every kind with Fig. 10 noise of Shih
-et al. (1992), board images, and planted outliers.
+random configurations, contacts with a plane), simulated observations of every kind with
+Fig. 10 noise of Shih et al. (1992), rendered board images, and planted outliers.
 """
 
 from __future__ import annotations
 
 from kinfw.simulation._board_images import board_texture, render_board, true_corners
-from kinfw.simulation._measurements import SimulatedMeasurements, simulate_measurements
+from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
+from kinfw.simulation._images import write_board_images
+from kinfw.simulation._measurements import (
+    SimulatedMeasurements,
+    SimulatedProbe,
+    simulate_measurements,
+)
 from kinfw.simulation._outliers import plant_outliers
 from kinfw.simulation._perturb import (
     check_sigma,
+    finite_limits,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
@@ -37,16 +44,21 @@ __all__ = [
     "DEFAULT_CAMERA",
     "MIN_CORNERS",
     "SimulatedMeasurements",
+    "SimulatedProbe",
     "board_pose_facing",
     "board_texture",
     "check_sigma",
+    "contact_configurations",
     "default_intrinsics",
     "default_target_pose",
+    "finite_limits",
+    "level_plane",
     "nine_circle_plate",
     "one_joint_at_a_time",
     "perturb_poses",
     "perturb_robot",
     "pixel_views",
+    "plane_through",
     "plant_outliers",
     "random_configurations",
     "render_board",
@@ -56,4 +68,5 @@ __all__ = [
     "stereo_measure",
     "true_corners",
     "visible_points",
+    "write_board_images",
 ]

@@ -2,10 +2,13 @@
 :func:`kinfw.simulate` make it: the nominal robot perturbed into a "true" one, then its
 measurements (stage 1: poses of frames, one joint at a time; stage 2: camera observations
 of a fixed target, or images of a board, at random configurations; or both stages at
-given configurations, a plan's).
+given configurations, a plan's), then motion-capture markers of unknown offset measured
+in an unknown external frame, and probes touching a plane (random configurations
+projected onto the contact, :mod:`kinfw.simulation._contacts`).
 
 Every random draw comes from one generator seeded by ``seed``, in a fixed order (the
-truth, stage 1, stage 2), so a seed reproduces the experiment exactly.
+truth, stage 1, stage 2, the markers, the contacts), so a seed reproduces the experiment
+exactly, and adding markers or contacts leaves the stages' data unchanged.
 """
 
 from __future__ import annotations
@@ -18,7 +21,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.camera import Board, CameraIntrinsics, parse_board
 from kinfw.measurements import Measurements, concatenate_measurements
-from kinfw.model import Robot, check_robot, load_robot
+from kinfw.model import BlockKey, Robot, check_robot, load_robot
+from kinfw.observations import (
+    PlaneContacts,
+    PointObservations,
+    offset_key,
+    perturb_transforms,
+)
+from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
 from kinfw.simulation._perturb import one_joint_at_a_time, perturb_robot, random_configurations
 from kinfw.simulation._pixels import (
     DEFAULT_BOARD,
@@ -30,7 +40,29 @@ from kinfw.simulation._pixels import (
 )
 from kinfw.simulation._simulate import default_target_pose, simulate
 
-__all__ = ["SimulatedMeasurements", "simulate_measurements"]
+__all__ = ["SimulatedMeasurements", "SimulatedProbe", "simulate_measurements"]
+
+#: Length of a marker's or probe's offset drawn when none is given, metres.
+DEFAULT_OFFSET_M = 0.05
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SimulatedProbe:
+    """A motion-capture marker or a contact probe of a simulation: its true offset.
+
+    Attributes
+    ----------
+    frame : str
+        URDF frame the point rides on.
+    name : str
+        The marker's name in the measurement file (``marker``).
+    offset : ndarray, shape (3,)
+        Its true position in ``frame``, metres.
+    """
+
+    frame: str
+    name: str
+    offset: NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -56,6 +88,20 @@ class SimulatedMeasurements:
     default_cameras : tuple of str
         With ``pixels``: the cameras given no intrinsics, simulated with
         :func:`kinfw.simulation.default_intrinsics`.
+    w_T_board : ndarray, shape (4, 4), or None
+        With ``pixels``: the board's true pose in the root frame ``w``, metres.
+    markers : tuple of SimulatedProbe
+        The motion-capture markers.
+    mocap_frame : str or None
+        With markers: the external frame they are measured in (None: the root).
+    mocap_T_w : ndarray, shape (4, 4), or None
+        With markers in an external frame: the root's true pose in it, metres.
+    probes : tuple of SimulatedProbe
+        The probes touching the plane.
+    plane : ndarray, shape (4,), or None
+        With probes: the plane ``(n, d)``, ``{x : n . x = d}`` in ``w`` (``d`` metres).
+    plane_name : str or None
+        With probes: its name in the measurement file.
     """
 
     truth_xml: str
@@ -66,6 +112,13 @@ class SimulatedMeasurements:
     cameras: tuple[str, ...]
     board: str | None = None
     default_cameras: tuple[str, ...] = ()
+    w_T_board: NDArray[np.float64] | None = None
+    markers: tuple[SimulatedProbe, ...] = ()
+    mocap_frame: str | None = None
+    mocap_T_w: NDArray[np.float64] | None = None
+    probes: tuple[SimulatedProbe, ...] = ()
+    plane: NDArray[np.float64] | None = None
+    plane_name: str | None = None
 
 
 def _observed(
@@ -105,19 +158,20 @@ def _stage2(
     pixel_sigma: float,
     stage2_samples: int,
     fraction: float,
-) -> Measurements:
+) -> tuple[Measurements, NDArray[np.float64] | None]:
     """Stage 2: ``cameras`` see a fixed target (its pose, ``camera_T_target``), or with a
     ``board`` the board's points in images (cameras with ``intrinsics``), at the
     ``planned`` configurations, else at random ones within ``limits`` (``(lower,
     upper)``); images where no camera sees the board are dropped (planned) or drawn
-    again (random)."""
+    again (random). Returns the data and, with a ``board``, its pose ``w_T_board``."""
     lower, upper = limits
     if board is None:
         qs = planned
         if qs is None:
             qs = random_configurations(lower, upper, stage2_samples, rng, fraction=fraction)
         w_T_target = default_target_pose(truth, qs, names, cameras)
-        return simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
+        data = simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
+        return data, None
     min_corners = MIN_CORNERS if board.partial else board.count
     if planned is not None:
         w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
@@ -132,8 +186,8 @@ def _stage2(
             sigma_px=pixel_sigma,
             min_corners=min_corners,
         )
-        return data
-    data, _ = pixel_views(
+        return data, w_T_board
+    return pixel_views(
         truth,
         names,
         lower,
@@ -146,7 +200,6 @@ def _stage2(
         fraction=fraction,
         min_corners=min_corners,
     )
-    return data
 
 
 def simulate_measurements(
@@ -168,6 +221,14 @@ def simulate_measurements(
     board: str | None = None,
     intrinsics: Mapping[str, CameraIntrinsics] | None = None,
     configurations: ArrayLike | None = None,
+    markers: Sequence[tuple[str, ArrayLike | None]] = (),
+    mocap_frame: str | None = "mocap",
+    mocap_samples: int = 40,
+    contacts: Sequence[tuple[str, ArrayLike | None]] = (),
+    plane: ArrayLike | None = None,
+    plane_name: str = "table",
+    contact_samples: int = 60,
+    offsets_known: bool = False,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -178,7 +239,8 @@ def simulate_measurements(
     nominal : Robot
         The nominal robot (:func:`kinfw.load_robot`).
     stages : tuple of int, optional
-        ``(1,)``, ``(2,)`` or ``(1, 2)``; default ``(1,)``, with ``pixels`` ``(1, 2)``.
+        ``()``, ``(1,)``, ``(2,)`` or ``(1, 2)``; default ``(1,)``, with ``pixels``
+        ``(1, 2)``, with ``markers`` or ``contacts`` (and no ``pixels``) ``()``.
     frames, cameras : sequence of str, optional
         Stage 1 frames and stage 2 camera frames; default the URDF's ``<kinfw>`` hints.
     per_joint : int
@@ -207,6 +269,34 @@ def simulate_measurements(
         the order of ``nominal.topology(frames + cameras).joint_names``
         (:attr:`SimulatedMeasurements.joint_names`), rad/m; default one joint at a time
         (stage 1) and random (stage 2).
+    markers : sequence of (str, array_like or None)
+        Motion-capture markers: ``(frame, offset)``, the marker's true position in URDF
+        frame ``frame`` (3,), metres, or None for a random one (:data:`DEFAULT_OFFSET_M`
+        long, uniform direction). Named ``marker1``, ``marker2``, ... in order; their
+        ``point`` observations leave the offset out (unknown) unless ``offsets_known``.
+    mocap_frame : str or None
+        The external frame the markers are measured in (not a frame of the URDF); its
+        true pose is random (``mocap_T_w``: translation N(0, 1 m) per axis, a rotation
+        by N(0, 1 rad) about a uniform axis). None: the markers are measured in the root.
+    mocap_samples : int
+        Random configurations at which every marker is measured (noise ``noise_m`` per
+        axis).
+    contacts : sequence of (str, array_like or None)
+        Probes touching the plane: ``(frame, offset)`` as ``markers``, named ``probe1``,
+        ``probe2``, ...; each touches it at ``contact_samples`` configurations of its
+        own (:func:`kinfw.simulation.contact_configurations`), the ``plane``
+        observation's distance noise ``noise_m``.
+    plane : array_like, shape (4,), optional
+        ``(n, d)`` of the plane ``{x : n . x = d}`` in the root frame (``n`` is
+        normalised; ``d`` metres); default the plane normal to the root's z through the
+        first probe at the middle of the joint ranges (of the true robot).
+    plane_name : str
+        The plane's name in the measurement file.
+    contact_samples : int
+        Contacts per probe.
+    offsets_known : bool
+        Write the markers' and probes' offsets into the file (known) instead of leaving
+        them to be estimated.
     seed : int
         Seeds the one generator of every draw.
 
@@ -220,10 +310,13 @@ def simulate_measurements(
         ``nominal`` is not a Robot (naming it).
     ValueError
         ``pixels`` without stage 2, a stage with no frames or cameras, intrinsics of a
-        frame that is not a stage 2 camera.
+        frame that is not a stage 2 camera, a ``mocap_frame`` of the URDF, a plane out
+        of a probe's reach.
     """
     nominal = check_robot(nominal, "nominal")
-    stages = ((1, 2) if pixels else (1,)) if stages is None else tuple(stages)
+    if stages is None:
+        stages = (1, 2) if pixels else () if (markers or contacts) else (1,)
+    stages = tuple(stages)
     if pixels and 2 not in stages:
         raise ValueError(f"pixels: stage 2 makes the images; got stages {stages}")
     frames, cameras = _observed(nominal, stages, frames, cameras)
@@ -238,36 +331,46 @@ def simulate_measurements(
         nominal, rng, origin_mm=error_mm, origin_deg=error_deg, axis_deg=error_deg
     )
     truth = load_robot(truth_xml)
-    names = nominal.topology((*frames, *cameras)).joint_names
+    probe_frames = [frame for frame, _ in (*markers, *contacts)]
+    names = nominal.topology((*frames, *cameras, *probe_frames)).joint_names
     lower, upper = nominal.joint_limits(names)
     noise = {"noise_m": noise_m, "noise_rad": noise_rad}
     if stereo_sigma_m is not None:
         noise["stereo_sigma_m"] = stereo_sigma_m
     planned = None if configurations is None else np.asarray(configurations, dtype=float)
-    parts = []
+    parts: list[Measurements] = []
     if frames:
         qs = planned
         if qs is None:
             qs, _ = one_joint_at_a_time(lower, upper, per_joint=per_joint, fraction=fraction)
         parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
     shown = parse_board(board or DEFAULT_BOARD) if cameras and pixels else None
+    w_T_board = None
     if cameras:
-        parts.append(
-            _stage2(
-                truth,
-                cameras,
-                names,
-                (lower, upper),
-                rng,
-                planned,
-                noise=noise,
-                board=shown,
-                intrinsics={c: given.get(c) or default_intrinsics(c) for c in cameras},
-                pixel_sigma=pixel_sigma,
-                stage2_samples=stage2_samples,
-                fraction=fraction,
-            )
+        stage2, w_T_board = _stage2(
+            truth,
+            cameras,
+            names,
+            (lower, upper),
+            rng,
+            planned,
+            noise=noise,
+            board=shown,
+            intrinsics={c: given.get(c) or default_intrinsics(c) for c in cameras},
+            pixel_sigma=pixel_sigma,
+            stage2_samples=stage2_samples,
+            fraction=fraction,
         )
+        parts.append(stage2)
+    at = _Sampling(truth, names, (lower, upper), fraction, rng, noise_m, offsets_known)
+    mocap = _Mocap(mocap_frame, None, ())
+    if markers:
+        mocap = _simulate_markers(at, markers, mocap_frame, mocap_samples)
+        parts.append(mocap.data)
+    touch = _Touch(None, ())
+    if contacts:
+        touch = _simulate_contacts(at, contacts, plane, plane_name, contact_samples)
+        parts.extend(touch.data)
     return SimulatedMeasurements(
         truth_xml,
         truth,
@@ -277,4 +380,154 @@ def simulate_measurements(
         cameras,
         board=None if shown is None else shown.spec(),
         default_cameras=tuple(sorted(set(cameras) - set(given))) if shown is not None else (),
+        w_T_board=w_T_board,
+        markers=mocap.markers,
+        mocap_frame=mocap.frame if markers else None,
+        mocap_T_w=mocap.mocap_T_w,
+        probes=touch.probes,
+        plane=touch.plane,
+        plane_name=plane_name if contacts else None,
     )
+
+
+# -- markers and contacts ----------------------------------------------------------------
+
+
+def _probes(
+    points: Sequence[tuple[str, ArrayLike | None]], prefix: str, rng: np.random.Generator
+) -> tuple[SimulatedProbe, ...]:
+    """The points named ``prefix1``, ``prefix2``, ...: their given offsets, else drawn
+    (:data:`DEFAULT_OFFSET_M` long, uniform direction), in order."""
+    out = []
+    for k, (frame, offset) in enumerate(points, start=1):
+        if offset is None:
+            direction = rng.normal(size=3)
+            offset = DEFAULT_OFFSET_M * direction / np.linalg.norm(direction)
+        offset = np.asarray(offset, dtype=float)
+        if offset.shape != (3,) or not np.isfinite(offset).all():
+            raise ValueError(f"{prefix} on {frame!r}: expected 3 finite numbers, got {offset!r}")
+        out.append(SimulatedProbe(str(frame), f"{prefix}{k}", offset))
+    return tuple(out)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Sampling:
+    """What the markers' and the contacts' simulations share: the true robot, the joints
+    (``names``) and their ``limits`` (``(lower, upper)``) and ``fraction`` drawn in, the
+    generator, the noise (m) and whether the offsets are written as known."""
+
+    truth: Robot
+    names: tuple[str, ...]
+    limits: tuple[NDArray[np.float64], NDArray[np.float64]]
+    fraction: float
+    rng: np.random.Generator
+    noise_m: float
+    offsets_known: bool
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Mocap:
+    """Simulated markers: the external frame, the root's true pose in it, the markers
+    and their data."""
+
+    frame: str | None
+    mocap_T_w: NDArray[np.float64] | None
+    markers: tuple[SimulatedProbe, ...]
+    data: Measurements | None = None
+
+
+def _simulate_markers(
+    at: _Sampling, markers: Sequence[tuple[str, ArrayLike | None]], mocap_frame: str | None, n: int
+) -> _Mocap:
+    """``point`` observations of every marker at ``n`` random configurations, in the
+    external frame ``mocap_frame`` (None or the root: in the root)."""
+    external = mocap_frame not in (None, at.truth.root_link)
+    if external and at.truth.has_frame(mocap_frame):
+        raise ValueError(
+            f"mocap_frame {mocap_frame!r} is a frame of the URDF; the motion-capture frame "
+            "is external (a name the URDF does not use), or the root "
+            f"{at.truth.root_link!r}"
+        )
+    probes = _probes(markers, "marker", at.rng)
+    unknowns: dict[BlockKey, NDArray[np.float64]] = {}
+    mocap_T_w = None
+    if external:
+        mocap_T_w = perturb_transforms(np.eye(4)[None], at.rng, 1.0, 1.0)[0]
+        unknowns[BlockKey("frame", mocap_frame)] = mocap_T_w
+    qs = random_configurations(*at.limits, n, at.rng, fraction=at.fraction)
+    sample = np.arange(n)
+    templates = []
+    for probe in probes:
+        unknowns[offset_key(probe.frame, probe.name)] = probe.offset
+        templates.append(
+            PointObservations(
+                frame=probe.frame,
+                sample=sample,
+                meas_p_point=np.zeros((n, 3)),
+                offset=probe.offset if at.offsets_known else None,
+                marker=None if at.offsets_known else probe.name,
+                measured_in=mocap_frame if external else None,
+            )
+        )
+    data = simulate(
+        at.truth, qs, at.names, groups=templates, unknowns=unknowns, rng=at.rng, noise_m=at.noise_m
+    )
+    return _Mocap(mocap_frame if external else None, mocap_T_w, probes, data)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Touch:
+    """Simulated contacts: the plane ``(n, d)``, the probes and one dataset per probe."""
+
+    plane: NDArray[np.float64] | None
+    probes: tuple[SimulatedProbe, ...]
+    data: tuple[Measurements, ...] = ()
+
+
+def _simulate_contacts(
+    at: _Sampling,
+    contacts: Sequence[tuple[str, ArrayLike | None]],
+    plane: ArrayLike | None,
+    plane_name: str,
+    n: int,
+) -> _Touch:
+    """``plane`` observations: each probe touches the plane at ``n`` configurations."""
+    probes = _probes(contacts, "probe", at.rng)
+    if plane is None:
+        first = probes[0]
+        plane_nd = level_plane(
+            at.truth, at.names, *at.limits, frame=first.frame, offset=first.offset
+        )
+    else:
+        given = np.asarray(plane, dtype=float)
+        if given.shape != (4,) or not np.isfinite(given).all():
+            raise ValueError(f"plane: expected (nx, ny, nz, d), 4 finite numbers, got {plane!r}")
+        plane_nd = plane_through(given[:3] * (given[3] / (given[:3] @ given[:3])), given[:3])
+    data = []
+    for probe in probes:
+        qs = contact_configurations(
+            at.truth,
+            at.names,
+            *at.limits,
+            n,
+            at.rng,
+            frame=probe.frame,
+            offset=probe.offset,
+            plane=plane_nd,
+            fraction=at.fraction,
+        )
+        # the probe is on the plane (to CONTACT_TOLERANCE_M): the measured distance is
+        # the noise alone (exactly 0 without noise)
+        noise = at.rng.normal(0.0, at.noise_m, n) if at.noise_m > 0.0 else np.zeros(n)
+        group = PlaneContacts(
+            frame=probe.frame,
+            sample=np.arange(n),
+            distance_m=noise,
+            plane=plane_name,
+            offset=probe.offset if at.offsets_known else None,
+            marker=None if at.offsets_known else probe.name,
+        )
+        data.append(
+            Measurements(joint_names=at.names, qs=qs, source="<simulated>").with_groups([group])
+        )
+    return _Touch(plane_nd, probes, tuple(data))

@@ -25,6 +25,7 @@ from kinfw.urdf import edit_urdf
 
 __all__ = [
     "check_sigma",
+    "finite_limits",
     "one_joint_at_a_time",
     "perturb_robot",
     "random_configurations",
@@ -157,9 +158,11 @@ def _tilted_axis(
 # -- measurement protocols -------------------------------------------------------------
 
 
-def _finite_limits(
+def finite_limits(
     lower: ArrayLike, upper: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Joint limits (k,) checked, an infinite limit replaced by -pi or +pi (rad, or m)
+    (:func:`random_configurations` draws in these ranges); ValueError naming the fault."""
     lower = np.array(lower, dtype=float, ndmin=1)
     upper = np.array(upper, dtype=float, ndmin=1)
     if lower.ndim != 1 or lower.shape != upper.shape:
@@ -226,7 +229,7 @@ def one_joint_at_a_time(
     (such a sample would add nothing) and, unless ``q0_i`` is nearest an end point, they
     span the whole ``fraction``.
     """
-    lower, upper = _finite_limits(lower, upper)
+    lower, upper = finite_limits(lower, upper)
     per_joint = int(per_joint)
     if per_joint < 1:
         raise ValueError(f"per_joint: expected at least 1 value per joint, got {per_joint}")
@@ -279,7 +282,7 @@ def random_configurations(
     ndarray, shape (n, k)
         Joint values (rad or m).
     """
-    lower, upper = _finite_limits(lower, upper)
+    lower, upper = finite_limits(lower, upper)
     fraction = _check_fraction(fraction)
     if int(n) < 0:
         raise ValueError(f"n: expected a number of configurations >= 0, got {n}")

@@ -23,6 +23,7 @@ from kinfw.simulation import (
     stereo_measure,
 )
 from tests.paths import HEAD_URDF
+from tests.pin_se3 import pin_fk
 
 IIS_HEAD = HEAD_URDF
 
@@ -75,26 +76,6 @@ ARM_URDF = """<?xml version="1.0"?>
 """
 ARM_JOINTS = ("j1", "j2", "j3")
 ARM_PERTURBED = ("world_to_base", "j1", "j2", "j3", "flange_joint", "camera_joint")
-
-
-def pin_fk(xml: str, joint_names: tuple[str, ...], qs: np.ndarray, frame: str) -> np.ndarray:
-    """root_T_frame by Pinocchio directly (framesForwardKinematics), shape (n, 4, 4)."""
-    model = pin.buildModelFromXML(xml)
-    data = model.createData()
-    fid = model.getFrameId(frame, pin.FrameType.BODY)
-    assert fid < model.nframes
-    out = []
-    for q_urdf in np.atleast_2d(qs):
-        q = pin.neutral(model)
-        for name, value in zip(joint_names, q_urdf, strict=True):
-            joint = model.joints[model.getJointId(name)]
-            if joint.nq == 2:
-                q[joint.idx_q], q[joint.idx_q + 1] = np.cos(value), np.sin(value)
-            else:
-                q[joint.idx_q] = value
-        pin.framesForwardKinematics(model, data, q)
-        out.append(data.oMf[fid].homogeneous.copy())
-    return np.array(out)
 
 
 @pytest.fixture(scope="module")
