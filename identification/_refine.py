@@ -599,7 +599,7 @@ def _solve(
             r,
             problem.groups,
             sigma,
-            leverages(J * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None]),
+            leverages(J, np.sqrt(row_weights(r, obs_sizes, loss, k))),
             robust=loss != "linear",
             first=round_ == 0,
         )
@@ -636,9 +636,10 @@ def _quality_at(
     (a ``given`` noise model is trusted; an estimated one is rescaled by the fit); with
     the robust ``loss``, observations beyond ``k`` are flagged."""
     free = problem.free
-    r, J = problem.evaluate(x, sigma, True, only_free=True)
+    r, Jw = problem.evaluate_free(x, sigma, True)
     w_rows = row_weights(r, problem.obs_sizes, loss, k)
-    rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
+    rw = r * np.sqrt(w_rows)
+    Jw *= np.sqrt(w_rows)[:, None]  # the free columns, robust-weighted (a fresh array)
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
     covariance, ident = covariance_and_identifiability(

@@ -82,14 +82,17 @@ class ResidualGroup:
     _q_rows: NDArray[np.float64] = field(init=False, repr=False)
     _data_rows: NDArray[np.float64] = field(init=False, repr=False)
     _last: dict = field(init=False, repr=False)
+    _buffers: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
         object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
         object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
         object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
-        # the last evaluation (see evaluate); not shared by dataclasses.replace copies
+        # the last evaluation (see evaluate) and the CasADi call buffers by (with_jacobian,
+        # free, chunk size); not shared by dataclasses.replace copies
         object.__setattr__(self, "_last", {})
+        object.__setattr__(self, "_buffers", {})
 
     @property
     def sample(self) -> NDArray[np.int64]:
@@ -150,7 +153,8 @@ class ResidualGroup:
         same arrays, which callers must not modify.
         """
         x = np.ascontiguousarray(x, dtype=float)
-        key = (x.tobytes(), None if free is None else free.tobytes())
+        free_key = None if free is None else free.tobytes()
+        key = (x.tobytes(), free_key)
         last = self._last.get(key)
         if last is not None and (last[1] is not None or not with_jacobian):
             return last[0], (last[1] if with_jacobian else None)
@@ -158,13 +162,12 @@ class ResidualGroup:
         r = np.empty(m * rows)
         n_cols = len(x) if free is None else int(free.sum())
         J = np.empty((m * rows, n_cols)) if with_jacobian else None
-        buffers = {}  # one CasADi buffer per chunk size (at most two)
-        for a in range(0, m, MAP_CHUNK):
-            b = min(a + MAP_CHUNK, m)
-            if b - a not in buffers:
+        for a, b in chunks(m):
+            size_key = (with_jacobian, free_key, b - a)
+            if size_key not in self._buffers:
                 fn = self.functions.numeric_map(with_jacobian, free, b - a)
-                buffers[b - a] = fn.buffer()
-            buf, call = buffers[b - a]
+                self._buffers[size_key] = fn.buffer()
+            buf, call = self._buffers[size_key]
             args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
             for i, arg in enumerate(args):
                 buf.set_arg(i, memoryview(arg))
@@ -175,6 +178,21 @@ class ResidualGroup:
         self._last.clear()
         self._last[key] = (r, J)
         return r, J
+
+
+def chunks(m: int) -> list[tuple[int, int]]:
+    """The ``(first, end)`` samples of the calls of a mapped function over ``m`` samples:
+    chunks of :data:`MAP_CHUNK`, then the rest in powers of two (largest first), so that
+    any ``m`` (a refit without a few observations, a cross-validation fold) uses maps of
+    a few sizes, built once (a map of 2,048 samples takes ~10 ms to build)."""
+    out, a = [], 0
+    size = MAP_CHUNK
+    while a < m:
+        while size > m - a:
+            size //= 2
+        out.append((a, a + size))
+        a += size
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -321,7 +339,9 @@ class LeastSquaresProblem:
         k = self.prior_rows
         n_rows = sum(len(g.sample) * g.rows for g in self.groups)
         r_out = np.empty(n_rows + len(k))
-        J_out = np.zeros((len(r_out), n_cols)) if with_jacobian else None
+        J_out = np.empty((len(r_out), n_cols)) if with_jacobian else None
+        if J_out is not None:
+            J_out[n_rows:] = 0.0  # the prior's rows: one entry each, set below
         a = 0
         for g in self.groups:
             r, J = g.evaluate(x, with_jacobian and n_cols > 0, columns)
