@@ -41,13 +41,20 @@ from kinfw.identification.problem._noise import (
     norm2_cdf,
     quantile,
 )
-from kinfw.identification.problem._problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
+from kinfw.identification.problem._problem import (
+    PRIOR,
+    LeastSquaresProblem,
+    NormalEquations,
+    ResidualGroup,
+    Unknown,
+)
 from kinfw.identification.problem._solver import (
     LOSS_SCALE,
     LOSSES,
     NEGLIGIBLE_COLUMN,
     column_norms,
     levenberg_marquardt,
+    leverage_sums,
     leverages,
     negligible_columns,
     normal_equations,
@@ -80,6 +87,7 @@ __all__ = [
     "LeastSquaresProblem",
     "NoiseModel",
     "NoiseShape",
+    "NormalEquations",
     "RejectedObservation",
     "ResidualGroup",
     "Unknown",
@@ -96,6 +104,7 @@ __all__ = [
     "group_functions",
     "group_residuals",
     "levenberg_marquardt",
+    "leverage_sums",
     "leverages",
     "negligible_columns",
     "noise_shape",

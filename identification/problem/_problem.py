@@ -25,7 +25,7 @@ from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
-__all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown"]
+__all__ = ["PRIOR", "LeastSquaresProblem", "NormalEquations", "ResidualGroup", "Unknown"]
 
 PRIOR = NoiseComponent("prior", 1, "m")
 """The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
@@ -195,6 +195,34 @@ def chunks(m: int) -> list[tuple[int, int]]:
     return out
 
 
+#: Samples per block of :meth:`LeastSquaresProblem.normal_equations` (a block of their
+#: rows' Jacobian, whitened and scaled, stays in the cache).
+BLOCK_SAMPLES = 1024
+
+
+@dataclass(frozen=True, slots=True)
+class NormalEquations:
+    """The normal equations of :meth:`LeastSquaresProblem.normal_equations`.
+
+    Attributes
+    ----------
+    G : ndarray, shape (p, p)
+        ``A^T A`` of the scaled whitened Jacobian's columns ``A``.
+    g : ndarray, shape (p,)
+        ``A^T b`` of the scaled whitened residuals ``b``.
+    by_component : dict of str to ndarray, shape (p, p)
+        ``A_c^T A_c`` over the rows of each noise component (by name) of the groups
+        (empty unless asked for).
+    b : ndarray, shape (N,)
+        The scaled whitened residuals.
+    """
+
+    G: NDArray[np.float64]
+    g: NDArray[np.float64]
+    by_component: dict[str, NDArray[np.float64]]
+    b: NDArray[np.float64]
+
+
 @dataclass(frozen=True, slots=True)
 class LeastSquaresProblem:
     """The assembled problem: parameter blocks, their start values, the residual groups.
@@ -358,6 +386,68 @@ class LeastSquaresProblem:
                 cols = k if columns is None else np.searchsorted(np.flatnonzero(columns), k)
                 J_out[a + np.arange(len(k)), cols] = 1.0 / self.prior_sigma[k]
         return r_out, J_out
+
+    def normal_equations(
+        self, x: NDArray, noise: Any, row_scale: NDArray, *, by_component: bool = False
+    ) -> NormalEquations:
+        """The normal equations of the whitened residuals at ``x`` over the free
+        parameters, each row scaled by ``row_scale`` (e.g. the square roots of the robust
+        weights), without forming the whitened Jacobian.
+
+        With ``A`` the free columns of the whitened Jacobian (:meth:`evaluate_free`) and
+        ``r`` the whitened residuals, both scaled row by row:
+        ``A^T A``, ``A^T r`` and, with ``by_component``, per noise component of the
+        groups ``A_c^T A_c`` over its rows (the prior's rows belong to none; what
+        :func:`~kinfw.identification.problem.leverage_sums` takes; else the
+        ``by_component`` of the result is empty), accumulated by blocks of rows of each
+        group's unwhitened Jacobian (:meth:`ResidualGroup.evaluate`, kept for the next
+        call at the same ``x``).
+
+        Parameters
+        ----------
+        x : ndarray, shape (P,)
+        noise : NoiseModel
+        row_scale : ndarray, shape (N,)
+            One per row of :meth:`evaluate`'s residuals.
+        """
+        x = np.asarray(x, dtype=float)
+        columns = self.free
+        n_cols = int(columns.sum())
+        G, g = np.zeros((n_cols, n_cols)), np.zeros(n_cols)
+        grams: dict[str, NDArray] = {}
+        r_out = np.empty(len(row_scale))
+        a = 0
+        for grp in self.groups:
+            r, J = grp.evaluate(x, True, columns)
+            m, rows = len(grp.sample), grp.rows
+            scale = np.tile(1.0 / grp.row_sigma(noise), BLOCK_SAMPLES)
+            for first in range(0, m, BLOCK_SAMPLES):
+                rs = slice(first * rows, min(first + BLOCK_SAMPLES, m) * rows)
+                s = scale[: rs.stop - rs.start] * row_scale[a + rs.start : a + rs.stop]
+                A = J[rs] * s[:, None]
+                b = r[rs] * s
+                g += A.T @ b
+                r_out[a + rs.start : a + rs.stop] = b
+                if not by_component:
+                    G += A.T @ A
+                    continue
+                A3, c0 = A.reshape(len(b) // rows, rows, n_cols), 0
+                for c in grp.components:
+                    Ac = A3[:, c0 : c0 + c.rows].reshape(len(A3) * c.rows, n_cols)
+                    Gc = grams.setdefault(c.name, np.zeros((n_cols, n_cols)))
+                    Gc += Ac.T @ Ac
+                    c0 += c.rows
+            a += m * rows
+        for Gc in grams.values():
+            G += Gc
+        k = self.prior_rows
+        if len(k):  # one row each: (x - mean) / sigma, its one entry 1 / sigma
+            s = row_scale[a:] / self.prior_sigma[k]
+            cols = np.searchsorted(np.flatnonzero(columns), k)
+            G[cols, cols] += s**2
+            g[cols] += s * s * (x[k] - self.prior_mean[k])
+            r_out[a:] = s * (x[k] - self.prior_mean[k])
+        return NormalEquations(G, g, grams, r_out)
 
     def casadi_residual(self, noise: Any):
         """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened

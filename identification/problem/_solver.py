@@ -24,6 +24,7 @@ __all__ = [
     "NEGLIGIBLE_COLUMN",
     "column_norms",
     "levenberg_marquardt",
+    "leverage_sums",
     "leverages",
     "negligible_columns",
     "normal_equations",
@@ -197,6 +198,48 @@ def leverages(A: NDArray, row_scale: NDArray | None = None) -> NDArray:
     return np.sum(Q**2, axis=1)
 
 
+#: :func:`leverage_sums` works from the normal matrix when the reciprocal condition of
+#: its column-scaled Cholesky factor (that of the Jacobian) is above this: the sums are
+#: then exact to ~1e-8 of the parameter count; otherwise :func:`leverages` decides.
+_GRAM_RCOND = 1e-4
+
+
+def leverage_sums(G: NDArray, by_component: dict[str, NDArray]) -> dict[str, float] | None:
+    """Per noise component, the sum of the leverages of its rows, from the normal matrix.
+
+    For the rows ``A_c`` of a component of ``A`` (N, p) with ``G = A^T A`` and
+    ``G_c = A_c^T A_c``: ``sum_i h_i = trace(A_c G^-1 A_c^T) = trace(G^-1 G_c)``, linear
+    in the rows (the matrices come from
+    :meth:`~kinfw.identification.problem.LeastSquaresProblem.normal_equations`). None when
+    ``A`` has a zero column or its column-scaled Cholesky factor's reciprocal condition
+    is not above :data:`_GRAM_RCOND`: then :func:`leverages` of the rows themselves.
+
+    Parameters
+    ----------
+    G : ndarray, shape (p, p)
+    by_component : dict of str to ndarray, shape (p, p)
+
+    Returns
+    -------
+    dict of str to float, or None
+    """
+    c = np.sqrt(np.maximum(np.diag(G), 0.0))
+    if not len(c) or c.min() <= 0.0:
+        return None
+    try:
+        L = np.linalg.cholesky(G / np.outer(c, c))
+    except np.linalg.LinAlgError:
+        return None
+    d = np.abs(np.diag(L))
+    if d.min() <= _GRAM_RCOND * d.max():
+        return None
+    # trace(Gs^-1 Gs_c) with Gs = G / (c c^T): the scaling cancels in the trace
+    L_inv = np.linalg.inv(L) / c  # L^-1 D^-1, so that G^-1 = L_inv^T L_inv
+    return {
+        name: float(np.einsum("ij,ij->", L_inv @ Gc, L_inv)) for name, Gc in by_component.items()
+    }
+
+
 class _RowScaled:
     """``diag(row_scale) A`` read by slices of rows (``[a:b]``) without forming it."""
 
@@ -270,6 +313,7 @@ def levenberg_marquardt(
     loss: str,
     k: NDArray,
     max_iterations: int,
+    normal: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]] | None = None,
 ) -> tuple[NDArray, int, bool]:
     """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
 
@@ -293,6 +337,12 @@ def levenberg_marquardt(
     k : ndarray
         Per observation, the robust threshold (:func:`thresholds`).
     max_iterations : int
+    normal : callable, optional
+        ``normal(x, row_scale) -> (A^T A, A^T b)`` of the Jacobian's rows and residuals
+        scaled by ``row_scale`` (N,), over all its columns (e.g.
+        :meth:`~kinfw.identification.problem.LeastSquaresProblem.normal_equations`): then
+        ``evaluate`` is only asked for residuals and the Jacobian is never formed.
+        Default: from ``evaluate``'s Jacobian (:func:`normal_equations`).
 
     Returns
     -------
@@ -306,16 +356,24 @@ def levenberg_marquardt(
     (:func:`robust_loss`), is told to :mod:`kinfw.progress` (iteration 0: the start).
     """
     with progress.task("Levenberg-Marquardt", unit="iteration") as bar:
-        return _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar)
+        return _levenberg_marquardt(
+            evaluate, x, free, obs_sizes, loss, k, max_iterations, normal, bar
+        )
 
 
-def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar):
+def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, normal, bar):
     """:func:`levenberg_marquardt`, each cost told to ``bar``."""
 
     def cost_of(r):
         return float(robust_loss(observation_norms(r, obs_sizes), loss, k)[0].sum())
 
-    r, J = evaluate(x, True)
+    def normal_matrix(x, r, J, w):
+        if normal is None:
+            return normal_equations(J, r, w, None if free.all() else free)
+        G, g = normal(x, w)
+        return (G, g) if free.all() else (G[np.ix_(free, free)], g[free])
+
+    r, J = evaluate(x, normal is None)
     cost = cost_of(r)
     bar.advance(0, f"cost {cost:.6g}")
     lam = 1e-6  # column-scaled: start close to Gauss-Newton
@@ -323,7 +381,7 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
     it = 0
     for it in range(1, max_iterations + 1):
         w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        H, g, c = _scaled_normal_equations(*normal_equations(J, r, w, None if free.all() else free))
+        H, g, c = _scaled_normal_equations(*normal_matrix(x, r, J, w))
         while True:
             y = -np.linalg.solve(H + lam * np.eye(len(H)), g)
             if np.linalg.norm(y) < 1e-12:
@@ -353,5 +411,6 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
         if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
             converged = True
             break
-        _, J = evaluate(x, True)
+        if normal is None:
+            _, J = evaluate(x, True)
     return x, it, converged

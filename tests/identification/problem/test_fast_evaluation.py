@@ -16,6 +16,7 @@ from kinfw.identification.problem import (
     column_norms,
     covariance_and_identifiability,
     levenberg_marquardt,
+    leverage_sums,
     leverages,
     normal_equations,
     tall_r,
@@ -269,3 +270,50 @@ def test_covariance_by_blocks_equals_the_dense_pseudo_inverse(redundant):
         Jf, free, list(problem.names), 2.5, data, problem.model0
     )
     np.testing.assert_array_equal(covariance_free, covariance)
+
+
+def test_problem_normal_equations_equal_the_whitened_jacobians_products():
+    """Without forming the whitened Jacobian: A^T A, A^T b and the per-component grams
+    equal those of evaluate_free's arrays scaled row by row (prior rows included)."""
+    arm = load_robot(ARM_6R)
+    rng = np.random.default_rng(11)
+    names = arm.topology(("flange",)).joint_names
+    qs = random_configurations(*arm.joint_limits(names), 1_500, rng, fraction=0.8)
+    data = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    problem = build_problem(arm, data, prior=(1e-3, 1e-3))
+    assert len(problem.prior_rows)
+    noise = NoiseModel(1e-3, 2e-3)
+    x = rng.normal(scale=1e-3, size=problem.n_parameters)
+    r, J = problem.evaluate_free(x, noise, True)
+    w = rng.uniform(0.5, 1.0, size=len(r))
+    normal = problem.normal_equations(x, noise, w, by_component=True)
+    A, b = J * w[:, None], r * w
+    scale = np.abs(A.T @ A).max()
+    np.testing.assert_allclose(normal.G, A.T @ A, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(normal.g, A.T @ b, rtol=0, atol=1e-12 * np.abs(A.T @ b).max())
+    np.testing.assert_allclose(normal.b, b, rtol=1e-14, atol=0)
+    n_obs = len(problem.groups[0].sample)
+    A3 = A[: 6 * n_obs].reshape(n_obs, 6, -1)
+    position, rotation = A3[:, :3].reshape(-1, A.shape[1]), A3[:, 3:].reshape(-1, A.shape[1])
+    np.testing.assert_allclose(
+        normal.by_component["position"], position.T @ position, rtol=0, atol=1e-13 * scale
+    )
+    np.testing.assert_allclose(
+        normal.by_component["rotation"], rotation.T @ rotation, rtol=0, atol=1e-13 * scale
+    )
+
+
+def test_leverage_sums_are_the_sums_of_the_hat_matrix_diagonal():
+    rng = np.random.default_rng(12)
+    A = rng.normal(size=(3_000, 8)) * np.logspace(-2, 2, 8)
+    part = np.arange(3_000) % 3 == 0
+    Q, _ = np.linalg.qr(A)
+    h = np.sum(Q**2, axis=1)
+    sums = leverage_sums(A.T @ A, {"a": A[part].T @ A[part], "b": A[~part].T @ A[~part]})
+    assert sums["a"] == pytest.approx(h[part].sum(), rel=1e-10)
+    assert sums["b"] == pytest.approx(h[~part].sum(), rel=1e-10)
+    # a zero column or a rank-deficient matrix: the rows' own leverages decide
+    A[:, 3] = 0.0
+    assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None
+    A[:, 3] = A[:, 0] + A[:, 1]
+    assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None
