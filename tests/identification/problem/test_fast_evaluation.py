@@ -155,8 +155,9 @@ def test_a_failing_compiler_is_reported_once_and_casadi_takes_over(monkeypatch, 
     import casadi as ca
 
     monkeypatch.setattr(compiled_module, "_FAILED", [])
+    monkeypatch.setattr(compiled_module, "_NATIVE_REFUSED", [])
     monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("CC", "false")  # exists, always fails
+    monkeypatch.setenv("CC", "false")  # exists, always fails (with and without -march)
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [ca.cos(x) * x[1]])
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.problem"):
@@ -176,6 +177,7 @@ def test_a_compiled_function_is_kept_on_disk_and_loaded_again(monkeypatch, tmp_p
     f = ca.Function("f", [x], [ca.sqrt(x) * x[2] + ca.exp(x[0])])
     g = compiled_module.compiled(f)
     assert g is not f
+    assert not compiled_module._NATIVE_REFUSED  # built for this processor
     (library,) = tmp_path.glob("kinfw_*.so")
     stamp = library.stat().st_mtime_ns
     monkeypatch.setattr(compiled_module, "_LOADED", {})  # a new process: from the disk
