@@ -600,8 +600,10 @@ def _solve(
             break
         r, _ = problem.evaluate_free(full(x_free), sigma, False)
         w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        normal = problem.normal_equations(full(x_free), sigma, w, by_component=True)
-        hat = leverage_sums(normal.G, normal.by_component)
+        hat = None
+        if moving.all():  # else a column is negligible: leverage_sums would refuse
+            normal = problem.normal_equations(full(x_free), sigma, w, by_component=True)
+            hat = leverage_sums(normal.G, normal.by_component)
         if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
             hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
         sigma = estimate_noise(
