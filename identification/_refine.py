@@ -54,6 +54,7 @@ from kinfw.identification.problem import (
     Identifiability,
     LeastSquaresProblem,
     NoiseModel,
+    NormalEquations,
     RejectedObservation,
     Unknown,
     build_problem,
@@ -62,6 +63,7 @@ from kinfw.identification.problem import (
     estimate_noise,
     group_residuals,
     levenberg_marquardt,
+    leverage_sums,
     leverages,
     negligible_columns,
     observation_norms,
@@ -577,12 +579,13 @@ def _solve(
         return x
 
     x_free = np.zeros(int(free.sum()))
+    n_rows = sum(m * rows for m, rows in obs_sizes)
     # what the data do not see at the start stays there for every round: once the other
     # parameters have moved, a structurally redundant one (a joint's axis tilt when the
     # only observed point lies on that axis) gets a small column again and would drift
     # along its redundancy; the diagnostics still report it (with the full free mask)
-    _, J0 = problem.evaluate_free(full(x_free), sigma, True)
-    moving = ~negligible_columns(J0)
+    G0 = problem.normal_equations(full(x_free), sigma, np.ones(n_rows)).G
+    moving = ~negligible_columns(np.zeros((0, len(G0))), np.sqrt(np.diag(G0)))
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         if not given:
@@ -595,18 +598,21 @@ def _solve(
             loss,
             k,
             max_iterations,
+            lambda v, w, s=sigma: _gram(problem.normal_equations(full(v), s, w)),
         )
         iterations += its
         if given:
             break
-        r, J = problem.evaluate_free(full(x_free), sigma, True)
+        r, _ = problem.evaluate_free(full(x_free), sigma, False)
+        w = np.sqrt(row_weights(r, obs_sizes, loss, k))
+        hat = None
+        if moving.all():  # else a column is negligible: leverage_sums would refuse
+            normal = problem.normal_equations(full(x_free), sigma, w, by_component=True)
+            hat = leverage_sums(normal.G, normal.by_component)
+        if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
+            hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
         sigma = estimate_noise(
-            r,
-            problem.groups,
-            sigma,
-            leverages(J * np.sqrt(row_weights(r, obs_sizes, loss, k))[:, None]),
-            robust=loss != "linear",
-            first=round_ == 0,
+            r, problem.groups, sigma, hat, robust=loss != "linear", first=round_ == 0
         )
     robot = _robot_entries(problem)
     x_free[moving] = _nearest_to_start(
@@ -744,6 +750,11 @@ def _nearest_to_start(
     return x[moving]
 
 
+def _gram(normal: NormalEquations) -> tuple[NDArray, NDArray]:
+    """``(A^T A, A^T b)`` of the normal equations, what the solver takes."""
+    return normal.G, normal.g
+
+
 @dataclass(frozen=True, slots=True)
 class _Quality:
     """The fit's quality at its estimate: whitened residuals ``r`` (and per group, with
@@ -773,9 +784,10 @@ def _quality_at(
     (a ``given`` noise model is trusted; an estimated one is rescaled by the fit); with
     the robust ``loss``, observations beyond ``k`` are flagged."""
     free = problem.free
-    r, J = problem.evaluate(x, sigma, True, only_free=True)
+    r, Jw = problem.evaluate_free(x, sigma, True)
     w_rows = row_weights(r, problem.obs_sizes, loss, k)
-    rw, Jw = r * np.sqrt(w_rows), J * np.sqrt(w_rows)[:, None]
+    rw = r * np.sqrt(w_rows)
+    Jw *= np.sqrt(w_rows)[:, None]  # the free columns, robust-weighted (a fresh array)
     dof = max(len(r) - int(free.sum()), 1)
     sigma_hat2 = float(rw @ rw / dof)
     s_base = next(

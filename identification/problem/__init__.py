@@ -42,18 +42,28 @@ from kinfw.identification.problem._noise import (
     norm2_cdf,
     quantile,
 )
-from kinfw.identification.problem._problem import PRIOR, LeastSquaresProblem, ResidualGroup, Unknown
+from kinfw.identification.problem._problem import (
+    PRIOR,
+    LeastSquaresProblem,
+    NormalEquations,
+    ResidualGroup,
+    Unknown,
+)
 from kinfw.identification.problem._solver import (
     LOSS_SCALE,
     LOSSES,
     NEGLIGIBLE_COLUMN,
+    column_norms,
     levenberg_marquardt,
+    leverage_sums,
     leverages,
     negligible_columns,
+    normal_equations,
     observation_norms,
     robust_loss,
     row_weights,
     scaled_columns,
+    tall_r,
     thresholds,
 )
 from kinfw.identification.problem._start import (
@@ -79,6 +89,7 @@ __all__ = [
     "LeastSquaresProblem",
     "NoiseModel",
     "NoiseShape",
+    "NormalEquations",
     "RejectedObservation",
     "ResidualGroup",
     "Unknown",
@@ -86,6 +97,7 @@ __all__ = [
     "build_problem",
     "chi2_cdf",
     "clear_function_cache",
+    "column_norms",
     "covariance_and_identifiability",
     "estimate_noise",
     "estimate_unknowns",
@@ -94,10 +106,12 @@ __all__ = [
     "group_functions",
     "group_residuals",
     "levenberg_marquardt",
+    "leverage_sums",
     "leverages",
     "negligible_columns",
     "noise_shape",
     "norm2_cdf",
+    "normal_equations",
     "observation_norms",
     "quantile",
     "rejected_observations",
@@ -107,5 +121,6 @@ __all__ = [
     "row_weights",
     "scaled_columns",
     "start_context",
+    "tall_r",
     "thresholds",
 ]

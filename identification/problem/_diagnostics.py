@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification.problem._solver import scaled_columns
+from kinfw.identification.problem._solver import column_norms, negligible_columns, tall_r
 from kinfw.measurements import Measurements
 from kinfw.model import CPCModel
 
@@ -229,22 +229,33 @@ def covariance_and_identifiability(
 ) -> tuple[NDArray, Identifiability]:
     """``sigma_hat2 (J^T J)^+`` on the identifiable subspace, and what the data determines.
 
-    ``Jw`` is the whitened (and robust-weighted) Jacobian (N, P); ``names`` the
-    parameters' ``(owner, field)``; ``model`` gives the joints (to explain null
-    directions by joints that never move); ``base_columns`` (N, 6), the same
-    Jacobian's columns of a rigid motion of the whole robot (the base block's, free or
-    not), and ``robot`` (P,), which parameters are the robot's: the null directions
-    that are such a motion with the unknowns following it come first and are named so
-    (:data:`WORLD_MOTION`).
+    ``Jw`` is the whitened (and robust-weighted) Jacobian (N, P), or only its ``free``
+    columns (N, n_free); ``names`` the parameters' ``(owner, field)``; ``model`` gives
+    the joints (to explain null directions by joints that never move); ``base_columns``
+    (N, 6), the same Jacobian's columns of a rigid motion of the whole robot (the base
+    block's, free or not), and ``robot`` (P,), which parameters are the robot's: the null
+    directions that are such a motion with the unknowns following it come first and are
+    named so (:data:`WORLD_MOTION`).
+
+    Notes
+    -----
+    The singular values and right singular vectors are those of the column-scaled free
+    Jacobian ``Js`` (:func:`~kinfw.identification.problem.scaled_columns`), taken from
+    the ``R`` of its QR by blocks of rows (:func:`~kinfw.identification.problem.tall_r`:
+    ``Js = Q R``, so ``R`` has them too): linear in the rows, with no temporary of the
+    Jacobian's size; the rank is the number of singular values above 1e-8 of the
+    largest.
     """
     P = len(names)
-    Jf = Jw[:, free]
-    Js, c = scaled_columns(Jf)
-    _, s, Vt = np.linalg.svd(Js, full_matrices=False)
-    if len(s) < Js.shape[1]:  # fewer rows than parameters: the rest is null too
+    Jf = Jw if Jw.shape[1] == int(free.sum()) else Jw[:, free]
+    c = column_norms(Jf)
+    tiny = negligible_columns(Jf, c)
+    c = np.where(tiny, 1.0, c)
+    _, s, Vt = np.linalg.svd(tall_r(Jf, np.where(tiny, 0.0, 1.0 / c)), full_matrices=False)
+    if len(s) < Jf.shape[1]:  # fewer rows than parameters: the rest is null too
         Q, _ = np.linalg.qr(Vt.T, mode="complete")
         Vt = np.vstack([Vt, Q[:, len(s) :].T])
-        s = np.concatenate([s, np.zeros(Js.shape[1] - len(s))])
+        s = np.concatenate([s, np.zeros(Jf.shape[1] - len(s))])
     rank = int(np.sum(s > s[0] * 1e-8)) if len(s) and s[0] > 0 else 0
     V = Vt[:rank].T
     cov_free = (V / s[:rank] ** 2) @ V.T / np.outer(c, c) * sigma_hat2

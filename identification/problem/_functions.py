@@ -69,7 +69,8 @@ class GroupFunctions:
 
     def numeric_map(self, with_jacobian: bool, free: NDArray[np.bool_] | None, m: int):
         """``r`` (or ``rj``, or ``rj_free(free)``) mapped over ``m`` samples (at most
-        :data:`MAP_CHUNK`: building a CasADi map grows faster than its size), compiled
+        :data:`MAP_CHUNK`: building a CasADi map grows faster than its size; the
+        evaluations ask for :data:`MAP_CHUNK` and powers of two below it), compiled
         (:func:`~kinfw.identification.problem._compiled.compiled`: the same results, bit
         for bit; numeric arguments only), with the parameters and constants shared:
         ``(q (J, m), data (width, m), theta, const)``. Kept for the problems of one
@@ -92,7 +93,9 @@ class GroupFunctions:
         f = f.map("numeric_map", "serial", m, [2, 3], [])
         with _FUNCTION_CACHE_LOCK:
             self._numeric_maps[key] = f
-            while len(self._numeric_maps) > 16:  # bounded: a few sizes and parameter sets
+            # bounded: the chunk sizes (MAP_CHUNK and powers of two below it) of a few
+            # parameter sets
+            while len(self._numeric_maps) > 64:
                 self._numeric_maps.popitem(last=False)
         return f
 

@@ -220,7 +220,7 @@ def estimate_noise(
     r: NDArray,
     groups: Sequence[Any],
     sigma: NoiseModel,
-    leverage: NDArray,
+    leverage: NDArray | Mapping[str, float],
     *,
     robust: bool = False,
     first: bool = True,
@@ -236,10 +236,12 @@ def estimate_noise(
         order of the rows of ``r``.
     sigma : NoiseModel
         The whitening of ``r``.
-    leverage : ndarray, shape (R,)
-        Diagonal of the hat matrix ``J (J^T J)^+ J^T`` (one per row): a component's
-        residual degrees of freedom are its rows minus its leverages, so a component the
-        fit follows closely (orientations, here) is not underestimated.
+    leverage : ndarray, shape (R,), or mapping of str to float
+        Diagonal of the hat matrix ``J (J^T J)^+ J^T`` (one per row), or per noise
+        component (by name) the sum of its rows' (only the sums enter:
+        :func:`~kinfw.identification.problem.leverage_sums`): a component's residual
+        degrees of freedom are its rows minus its leverages, so a component the fit
+        follows closely (orientations, here) is not underestimated.
     robust : bool
         False: least squares' variance components. True: the robust estimate below.
     first : bool
@@ -273,7 +275,7 @@ def estimate_noise(
     for grp in groups:
         m, rows = len(grp.sample), grp.rows
         block = r[k : k + m * rows].reshape(m, rows)
-        h = leverage[k : k + m * rows].reshape(m, rows)
+        h = None if isinstance(leverage, Mapping) else leverage[k : k + m * rows].reshape(m, rows)
         c0 = 0
         for c in grp.components:
             if comps.setdefault(c.name, c).rows != c.rows:
@@ -282,14 +284,16 @@ def estimate_noise(
                     f"and {comps[c.name].rows} in another"
                 )
             blocks.setdefault(c.name, []).append(block[:, c0 : c0 + c.rows])
-            hats.setdefault(c.name, []).append(h[:, c0 : c0 + c.rows])
+            if h is not None:
+                hats.setdefault(c.name, []).append(h[:, c0 : c0 + c.rows])
             c0 += c.rows
         k += m * rows
 
     def factor(name: str) -> float:
-        block, hat = np.concatenate(blocks[name]), np.concatenate(hats[name])
+        block = np.concatenate(blocks[name])
+        hat = leverage[name] if isinstance(leverage, Mapping) else np.concatenate(hats[name]).sum()
         shape = noise_shape(comps[name])
-        share = max(1.0 - hat.sum() / block.size, 1e-3)
+        share = max(1.0 - hat / block.size, 1e-3)
         s2 = np.sum(block**2, axis=1)
         if robust and first:
             return float(np.sqrt(np.median(s2) / (shape.median * share)))

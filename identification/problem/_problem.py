@@ -25,7 +25,7 @@ from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
-__all__ = ["PRIOR", "LeastSquaresProblem", "ResidualGroup", "Unknown"]
+__all__ = ["PRIOR", "LeastSquaresProblem", "NormalEquations", "ResidualGroup", "Unknown"]
 
 PRIOR = NoiseComponent("prior", 1, "m")
 """The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
@@ -82,14 +82,17 @@ class ResidualGroup:
     _q_rows: NDArray[np.float64] = field(init=False, repr=False)
     _data_rows: NDArray[np.float64] = field(init=False, repr=False)
     _last: dict = field(init=False, repr=False)
+    _buffers: dict = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         # column-major (J, m) and (k, m) inputs, as C-contiguous (m, J) and (m, k) buffers
         object.__setattr__(self, "_q_rows", np.ascontiguousarray(self.qs.T, dtype=float))
         object.__setattr__(self, "_data_rows", np.ascontiguousarray(self.data.T, dtype=float))
         object.__setattr__(self, "const", np.ascontiguousarray(self.const, dtype=float))
-        # the last evaluation (see evaluate); not shared by dataclasses.replace copies
+        # the last evaluation (see evaluate) and the CasADi call buffers by (with_jacobian,
+        # free, chunk size); not shared by dataclasses.replace copies
         object.__setattr__(self, "_last", {})
+        object.__setattr__(self, "_buffers", {})
 
     @property
     def sample(self) -> NDArray[np.int64]:
@@ -150,7 +153,8 @@ class ResidualGroup:
         same arrays, which callers must not modify.
         """
         x = np.ascontiguousarray(x, dtype=float)
-        key = (x.tobytes(), None if free is None else free.tobytes())
+        free_key = None if free is None else free.tobytes()
+        key = (x.tobytes(), free_key)
         last = self._last.get(key)
         if last is not None and (last[1] is not None or not with_jacobian):
             return last[0], (last[1] if with_jacobian else None)
@@ -158,13 +162,12 @@ class ResidualGroup:
         r = np.empty(m * rows)
         n_cols = len(x) if free is None else int(free.sum())
         J = np.empty((m * rows, n_cols)) if with_jacobian else None
-        buffers = {}  # one CasADi buffer per chunk size (at most two)
-        for a in range(0, m, MAP_CHUNK):
-            b = min(a + MAP_CHUNK, m)
-            if b - a not in buffers:
+        for a, b in chunks(m):
+            size_key = (with_jacobian, free_key, b - a)
+            if size_key not in self._buffers:
                 fn = self.functions.numeric_map(with_jacobian, free, b - a)
-                buffers[b - a] = fn.buffer()
-            buf, call = buffers[b - a]
+                self._buffers[size_key] = fn.buffer()
+            buf, call = self._buffers[size_key]
             args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
             for i, arg in enumerate(args):
                 buf.set_arg(i, memoryview(arg))
@@ -175,6 +178,49 @@ class ResidualGroup:
         self._last.clear()
         self._last[key] = (r, J)
         return r, J
+
+
+def chunks(m: int) -> list[tuple[int, int]]:
+    """The ``(first, end)`` samples of the calls of a mapped function over ``m`` samples:
+    chunks of :data:`MAP_CHUNK`, then the rest in powers of two (largest first), so that
+    any ``m`` (a refit without a few observations, a cross-validation fold) uses maps of
+    a few sizes, built once (a map of 2,048 samples takes ~10 ms to build)."""
+    out, a = [], 0
+    size = MAP_CHUNK
+    while a < m:
+        while size > m - a:
+            size //= 2
+        out.append((a, a + size))
+        a += size
+    return out
+
+
+#: Samples per block of :meth:`LeastSquaresProblem.normal_equations` (a block of their
+#: rows' Jacobian, whitened and scaled, stays in the cache).
+BLOCK_SAMPLES = 1024
+
+
+@dataclass(frozen=True, slots=True)
+class NormalEquations:
+    """The normal equations of :meth:`LeastSquaresProblem.normal_equations`.
+
+    Attributes
+    ----------
+    G : ndarray, shape (p, p)
+        ``A^T A`` of the scaled whitened Jacobian's columns ``A``.
+    g : ndarray, shape (p,)
+        ``A^T b`` of the scaled whitened residuals ``b``.
+    by_component : dict of str to ndarray, shape (p, p)
+        ``A_c^T A_c`` over the rows of each noise component (by name) of the groups
+        (empty unless asked for).
+    b : ndarray, shape (N,)
+        The scaled whitened residuals.
+    """
+
+    G: NDArray[np.float64]
+    g: NDArray[np.float64]
+    by_component: dict[str, NDArray[np.float64]]
+    b: NDArray[np.float64]
 
 
 @dataclass(frozen=True, slots=True)
@@ -321,7 +367,9 @@ class LeastSquaresProblem:
         k = self.prior_rows
         n_rows = sum(len(g.sample) * g.rows for g in self.groups)
         r_out = np.empty(n_rows + len(k))
-        J_out = np.zeros((len(r_out), n_cols)) if with_jacobian else None
+        J_out = np.empty((len(r_out), n_cols)) if with_jacobian else None
+        if J_out is not None:
+            J_out[n_rows:] = 0.0  # the prior's rows: one entry each, set below
         a = 0
         for g in self.groups:
             r, J = g.evaluate(x, with_jacobian and n_cols > 0, columns)
@@ -338,6 +386,68 @@ class LeastSquaresProblem:
                 cols = k if columns is None else np.searchsorted(np.flatnonzero(columns), k)
                 J_out[a + np.arange(len(k)), cols] = 1.0 / self.prior_sigma[k]
         return r_out, J_out
+
+    def normal_equations(
+        self, x: NDArray, noise: Any, row_scale: NDArray, *, by_component: bool = False
+    ) -> NormalEquations:
+        """The normal equations of the whitened residuals at ``x`` over the free
+        parameters, each row scaled by ``row_scale`` (e.g. the square roots of the robust
+        weights), without forming the whitened Jacobian.
+
+        With ``A`` the free columns of the whitened Jacobian (:meth:`evaluate_free`) and
+        ``r`` the whitened residuals, both scaled row by row:
+        ``A^T A``, ``A^T r`` and, with ``by_component``, per noise component of the
+        groups ``A_c^T A_c`` over its rows (the prior's rows belong to none; what
+        :func:`~kinfw.identification.problem.leverage_sums` takes; else the
+        ``by_component`` of the result is empty), accumulated by blocks of rows of each
+        group's unwhitened Jacobian (:meth:`ResidualGroup.evaluate`, kept for the next
+        call at the same ``x``).
+
+        Parameters
+        ----------
+        x : ndarray, shape (P,)
+        noise : NoiseModel
+        row_scale : ndarray, shape (N,)
+            One per row of :meth:`evaluate`'s residuals.
+        """
+        x = np.asarray(x, dtype=float)
+        columns = self.free
+        n_cols = int(columns.sum())
+        G, g = np.zeros((n_cols, n_cols)), np.zeros(n_cols)
+        grams: dict[str, NDArray] = {}
+        r_out = np.empty(len(row_scale))
+        a = 0
+        for grp in self.groups:
+            r, J = grp.evaluate(x, True, columns)
+            m, rows = len(grp.sample), grp.rows
+            scale = np.tile(1.0 / grp.row_sigma(noise), BLOCK_SAMPLES)
+            for first in range(0, m, BLOCK_SAMPLES):
+                rs = slice(first * rows, min(first + BLOCK_SAMPLES, m) * rows)
+                s = scale[: rs.stop - rs.start] * row_scale[a + rs.start : a + rs.stop]
+                A = J[rs] * s[:, None]
+                b = r[rs] * s
+                g += A.T @ b
+                r_out[a + rs.start : a + rs.stop] = b
+                if not by_component:
+                    G += A.T @ A
+                    continue
+                A3, c0 = A.reshape(len(b) // rows, rows, n_cols), 0
+                for c in grp.components:
+                    Ac = A3[:, c0 : c0 + c.rows].reshape(len(A3) * c.rows, n_cols)
+                    Gc = grams.setdefault(c.name, np.zeros((n_cols, n_cols)))
+                    Gc += Ac.T @ Ac
+                    c0 += c.rows
+            a += m * rows
+        for Gc in grams.values():
+            G += Gc
+        k = self.prior_rows
+        if len(k):  # one row each: (x - mean) / sigma, its one entry 1 / sigma
+            s = row_scale[a:] / self.prior_sigma[k]
+            cols = np.searchsorted(np.flatnonzero(columns), k)
+            G[cols, cols] += s**2
+            g[cols] += s * s * (x[k] - self.prior_mean[k])
+            r_out[a:] = s * (x[k] - self.prior_mean[k])
+        return NormalEquations(G, g, grams, r_out)
 
     def casadi_residual(self, noise: Any):
         """``(x, r)``: a CasADi MX symbol for the free entries of ``x`` and the whitened

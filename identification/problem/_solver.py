@@ -22,13 +22,17 @@ __all__ = [
     "LOSSES",
     "LOSS_SCALE",
     "NEGLIGIBLE_COLUMN",
+    "column_norms",
     "levenberg_marquardt",
+    "leverage_sums",
     "leverages",
     "negligible_columns",
+    "normal_equations",
     "observation_norms",
     "robust_loss",
     "row_weights",
     "scaled_columns",
+    "tall_r",
     "thresholds",
 ]
 
@@ -60,63 +64,190 @@ def scaled_columns(J: NDArray) -> tuple[NDArray, NDArray]:
     Js : ndarray, shape (N, P)
     c : ndarray, shape (P,)
     """
-    c = np.linalg.norm(J, axis=0)
+    c = column_norms(J)
     tiny = negligible_columns(J, c)
     c = np.where(tiny, 1.0, c)
     return np.where(tiny, 0.0, J / c), c
 
 
-def _scaled_normal_equations(J: NDArray, r: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """``Js^T Js``, ``Js^T r`` and ``c`` of :func:`scaled_columns` ``(Js, c)`` of ``J``
-    (N, P), from ``J^T J`` (one pass over ``J`` instead of three): the column norms are
+#: Rows per block of the passes over a tall Jacobian (:func:`column_norms`,
+#: :func:`leverages`, :func:`tall_r`, the normal equations): a block of a few hundred
+#: columns stays in the cache, and no temporary of the Jacobian's size is made.
+_BLOCK = 4096
+
+
+def _blocks(n: int) -> range:
+    """The first rows of the blocks of :data:`_BLOCK` rows of an (n, ...) array."""
+    return range(0, n, _BLOCK)
+
+
+def column_norms(A: NDArray) -> NDArray:
+    """The Euclidean norm of each column of ``A`` (N, P), shape (P,): by blocks of rows,
+    without a temporary of ``A``'s size."""
+    n, p = A.shape
+    s2 = np.zeros(p)
+    for a in _blocks(n):
+        block = A[a : a + _BLOCK]
+        s2 += np.einsum("ij,ij->j", block, block)
+    return np.sqrt(s2)
+
+
+def normal_equations(
+    J: NDArray, r: NDArray, row_scale: NDArray, columns: NDArray[np.bool_] | None = None
+) -> tuple[NDArray, NDArray]:
+    """``A^T A`` and ``A^T b`` of ``A = diag(row_scale) J[:, columns]`` and ``b = row_scale
+    r``, by blocks of rows (no copy of ``J``).
+
+    Parameters
+    ----------
+    J : ndarray, shape (N, P)
+    r : ndarray, shape (N,)
+    row_scale : ndarray, shape (N,)
+    columns : ndarray of bool, shape (P,), optional
+        The columns of ``J`` to use (default all).
+
+    Returns
+    -------
+    G : ndarray, shape (p, p)
+    g : ndarray, shape (p,)
+    """
+    p = J.shape[1] if columns is None else int(columns.sum())
+    G, g = np.zeros((p, p)), np.zeros(p)
+    for a in _blocks(len(J)):
+        block = J[a : a + _BLOCK] if columns is None else J[a : a + _BLOCK, columns]
+        w = row_scale[a : a + _BLOCK]
+        A = block * w[:, None]
+        G += A.T @ A
+        g += A.T @ (r[a : a + _BLOCK] * w)
+    return G, g
+
+
+def _scaled_normal_equations(G: NDArray, g: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """``Js^T Js``, ``Js^T b`` and ``c`` of :func:`scaled_columns` ``(Js, c)`` of ``A``
+    from ``G = A^T A`` and ``g = A^T b`` (:func:`normal_equations`): the column norms are
     the square roots of its diagonal, numerically zero columns give zero rows and
     columns."""
-    G = J.T @ J
     c = np.sqrt(np.maximum(np.diag(G), 0.0))
-    tiny = negligible_columns(J, c)
+    tiny = _negligible(c)
     c = np.where(tiny, 1.0, c)
     H = G / np.outer(c, c)
     H[tiny, :] = 0.0
     H[:, tiny] = 0.0
-    g = np.where(tiny, 0.0, (J.T @ r) / c)
-    return H, g, c
+    return H, np.where(tiny, 0.0, g / c), c
 
 
 def negligible_columns(J: NDArray, norms: NDArray | None = None) -> NDArray[np.bool_]:
     """Columns of ``J`` (N, P) whose norm is at most :data:`NEGLIGIBLE_COLUMN` of the
     largest (exact zeros included): parameters the data do not see, shape (P,)."""
-    c = np.linalg.norm(J, axis=0) if norms is None else norms
+    return _negligible(column_norms(J) if norms is None else norms)
+
+
+def _negligible(c: NDArray) -> NDArray[np.bool_]:
+    """Of the column norms ``c``, those at most :data:`NEGLIGIBLE_COLUMN` of the largest."""
     return c <= NEGLIGIBLE_COLUMN * (c.max() if c.size else 0.0)
 
 
-#: Rows per block of the tall-skinny QR of :func:`leverages`.
-_QR_BLOCK = 4096
+def tall_r(A: NDArray, column_scale: NDArray) -> NDArray:
+    """``R`` of a thin QR of ``A diag(column_scale)`` (A: (N, p)), by blocks of rows.
+
+    Each block's ``R``, then the QR of the stacked ``R`` s (a tall-skinny QR): ``R^T R =
+    A_s^T A_s`` and the singular values and right singular vectors of ``R`` are those of
+    ``A_s`` to rounding (backward stable, rank-deficient ``A`` included), at the cost of
+    ``R`` alone: no ``Q`` and no temporary of ``A``'s size.
+
+    Returns
+    -------
+    R : ndarray, shape (min(N, p), p)
+        Upper triangular (trapezoidal when N < p).
+    """
+    n = A.shape[0]
+    if n <= 2 * _BLOCK:
+        return np.linalg.qr(A[:n] * column_scale, mode="r")
+    stacked = [np.linalg.qr(A[a : a + _BLOCK] * column_scale, mode="r") for a in _blocks(n)]
+    return np.linalg.qr(np.vstack(stacked), mode="r")
 
 
-def leverages(A: NDArray) -> NDArray:
+def leverages(A: NDArray, row_scale: NDArray | None = None) -> NDArray:
     """Each row's leverage: the diagonal of the hat matrix ``A (A^T A)^+ A^T``, shape (N,).
 
-    The squared row norms of ``Q`` of a thin QR of ``A`` (N, p). For a tall ``A`` whose
-    unit-norm columns are well conditioned (reciprocal condition of ``R`` above 1e-8),
-    ``R`` comes from a QR by blocks of rows (each block's ``R``, then the QR of the
-    stacked ``R`` s) and ``Q = A R^-1``: the same numbers to rounding, without forming
+    The squared row norms of ``Q`` of a thin QR of ``A`` (N, p), or of
+    ``diag(row_scale) A`` when ``row_scale`` (N,) is given (without forming it). For a
+    tall ``A`` whose unit-norm columns are well conditioned (reciprocal condition of ``R``
+    above 1e-8), ``R`` comes from a QR by blocks of rows (:func:`tall_r`) and ``Q = A
+    R^-1``, a block of rows at a time: the same numbers to rounding, without forming
     ``Q`` by Householder reflections (5-10 times slower for N >> p). Otherwise (rank
     deficient or ill conditioned) ``Q`` is numpy's thin QR of ``A``.
     """
     n, p = A.shape
-    if n > 2 * _QR_BLOCK and p > 0:
-        c = np.linalg.norm(A, axis=0)
+    if row_scale is not None:
+        A = _RowScaled(A, row_scale)
+    if n > 2 * _BLOCK and p > 0:
+        c = column_norms(A)
         if c.min() > 0.0:
-            blocks = [
-                np.linalg.qr(A[a : a + _QR_BLOCK] / c, mode="r") for a in range(0, n, _QR_BLOCK)
-            ]
-            R = np.linalg.qr(np.vstack(blocks), mode="r")
+            R = tall_r(A, 1.0 / c)
             d = np.abs(np.diag(R))
             if d.min() > 1e-8 * d.max():
-                Q = A @ (np.linalg.inv(R) / c[:, None])  # (A / c) R^-1
-                return np.einsum("ij,ij->i", Q, Q)
+                T = np.linalg.inv(R) / c[:, None]  # (A / c) R^-1 = A T
+                h = np.empty(n)
+                for a in _blocks(n):
+                    Q = A[a : a + _BLOCK] @ T
+                    h[a : a + _BLOCK] = np.einsum("ij,ij->i", Q, Q)
+                return h
+    A = A[:n]
     Q, _ = np.linalg.qr(A)
     return np.sum(Q**2, axis=1)
+
+
+#: :func:`leverage_sums` works from the normal matrix when the reciprocal condition of
+#: its column-scaled Cholesky factor (that of the Jacobian) is above this: the sums are
+#: then exact to ~1e-8 of the parameter count; otherwise :func:`leverages` decides.
+_GRAM_RCOND = 1e-4
+
+
+def leverage_sums(G: NDArray, by_component: dict[str, NDArray]) -> dict[str, float] | None:
+    """Per noise component, the sum of the leverages of its rows, from the normal matrix.
+
+    For the rows ``A_c`` of a component of ``A`` (N, p) with ``G = A^T A`` and
+    ``G_c = A_c^T A_c``: ``sum_i h_i = trace(A_c G^-1 A_c^T) = trace(G^-1 G_c)``, linear
+    in the rows (the matrices come from
+    :meth:`~kinfw.identification.problem.LeastSquaresProblem.normal_equations`). None when
+    ``A`` has a zero column or its column-scaled Cholesky factor's reciprocal condition
+    is not above :data:`_GRAM_RCOND`: then :func:`leverages` of the rows themselves.
+
+    Parameters
+    ----------
+    G : ndarray, shape (p, p)
+    by_component : dict of str to ndarray, shape (p, p)
+
+    Returns
+    -------
+    dict of str to float, or None
+    """
+    c = np.sqrt(np.maximum(np.diag(G), 0.0))
+    if not len(c) or c.min() <= 0.0:
+        return None
+    try:
+        L = np.linalg.cholesky(G / np.outer(c, c))
+    except np.linalg.LinAlgError:
+        return None
+    d = np.abs(np.diag(L))
+    if d.min() <= _GRAM_RCOND * d.max():
+        return None
+    # trace(Gs^-1 Gs_c) with Gs = G / (c c^T): the scaling cancels in the trace
+    L_inv = np.linalg.inv(L) / c  # L^-1 D^-1, so that G^-1 = L_inv^T L_inv
+    return {
+        name: float(np.einsum("ij,ij->", L_inv @ Gc, L_inv)) for name, Gc in by_component.items()
+    }
+
+
+class _RowScaled:
+    """``diag(row_scale) A`` read by slices of rows (``[a:b]``) without forming it."""
+
+    def __init__(self, A: NDArray, row_scale: NDArray) -> None:
+        self.A, self.row_scale, self.shape = A, row_scale, A.shape
+
+    def __getitem__(self, rows: slice) -> NDArray:
+        return self.A[rows] * self.row_scale[rows, None]
 
 
 def observation_norms(r: NDArray, obs_sizes: ObsSizes) -> NDArray:
@@ -182,6 +313,7 @@ def levenberg_marquardt(
     loss: str,
     k: NDArray,
     max_iterations: int,
+    normal: Callable[[NDArray, NDArray], tuple[NDArray, NDArray]] | None = None,
 ) -> tuple[NDArray, int, bool]:
     """Levenberg-Marquardt with IRLS weights, in column-scaled coordinates.
 
@@ -205,6 +337,12 @@ def levenberg_marquardt(
     k : ndarray
         Per observation, the robust threshold (:func:`thresholds`).
     max_iterations : int
+    normal : callable, optional
+        ``normal(x, row_scale) -> (A^T A, A^T b)`` of the Jacobian's rows and residuals
+        scaled by ``row_scale`` (N,), over all its columns (e.g.
+        :meth:`~kinfw.identification.problem.LeastSquaresProblem.normal_equations`): then
+        ``evaluate`` is only asked for residuals and the Jacobian is never formed.
+        Default: from ``evaluate``'s Jacobian (:func:`normal_equations`).
 
     Returns
     -------
@@ -218,16 +356,24 @@ def levenberg_marquardt(
     (:func:`robust_loss`), is told to :mod:`kinfw.progress` (iteration 0: the start).
     """
     with progress.task("Levenberg-Marquardt", unit="iteration") as bar:
-        return _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar)
+        return _levenberg_marquardt(
+            evaluate, x, free, obs_sizes, loss, k, max_iterations, normal, bar
+        )
 
 
-def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, bar):
+def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, normal, bar):
     """:func:`levenberg_marquardt`, each cost told to ``bar``."""
 
     def cost_of(r):
         return float(robust_loss(observation_norms(r, obs_sizes), loss, k)[0].sum())
 
-    r, J = evaluate(x, True)
+    def normal_matrix(x, r, J, w):
+        if normal is None:
+            return normal_equations(J, r, w, None if free.all() else free)
+        G, g = normal(x, w)
+        return (G, g) if free.all() else (G[np.ix_(free, free)], g[free])
+
+    r, J = evaluate(x, normal is None)
     cost = cost_of(r)
     bar.advance(0, f"cost {cost:.6g}")
     lam = 1e-6  # column-scaled: start close to Gauss-Newton
@@ -235,7 +381,7 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
     it = 0
     for it in range(1, max_iterations + 1):
         w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        H, g, c = _scaled_normal_equations((J if free.all() else J[:, free]) * w[:, None], r * w)
+        H, g, c = _scaled_normal_equations(*normal_matrix(x, r, J, w))
         while True:
             y = -np.linalg.solve(H + lam * np.eye(len(H)), g)
             if np.linalg.norm(y) < 1e-12:
@@ -265,5 +411,6 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
         if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
             converged = True
             break
-        _, J = evaluate(x, True)
+        if normal is None:
+            _, J = evaluate(x, True)
     return x, it, converged

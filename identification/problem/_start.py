@@ -97,6 +97,7 @@ def estimate_unknowns(
     blocks the groups request (:meth:`ObservationKind.unknowns`), merged by key. Returns
     the blocks and a description of each one estimated from these data.
     """
+    # the frames' poses once for both contexts (only the external frames differ)
     start = start_context(model0, q_all, {}, model_frame)
     blocks: list[Block] = []
     fitted: list[tuple[BlockKey, str]] = []
@@ -127,7 +128,7 @@ def estimate_unknowns(
                 how = "with the markers' offsets, lifted linear least squares"
             fitted.append((key, f"pose of the root link in {name!r} ({how})"))
         blocks.append(RigidFrameBlock(key, start=meas_T_w[name]))
-    start = start_context(model0, q_all, meas_T_w, model_frame)
+    start = start.with_frames(meas_T_w)
     requests: dict[BlockKey, list[Any]] = {}
     for g in groups:
         for req in kind_of(g).unknowns(g, start):

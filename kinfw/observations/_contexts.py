@@ -9,6 +9,7 @@ with :func:`inverse_casadi`. The numpy view for prediction and drawing is
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from typing import Any
 
@@ -48,6 +49,12 @@ class StartContext:
         self._index = {f: k for k, f in enumerate(frames)}
         self._meas_T_w = meas_T_w
         self.model_frame = model_frame
+
+    def with_frames(self, meas_T_w: dict[str, NDArray[np.float64]]) -> StartContext:
+        """The same poses with other external frames' start poses (nothing recomputed)."""
+        out = copy.copy(self)
+        out._meas_T_w = meas_T_w
+        return out
 
     def w_T(self, frame: str, sample: NDArray[np.int64]) -> NDArray[np.float64]:
         """Pose of ``frame`` in the model frame at the samples, shape (m, 4, 4)."""

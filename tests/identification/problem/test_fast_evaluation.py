@@ -2,6 +2,7 @@
 functions over chunks of samples, the kept last evaluation, the free columns only, the
 leverages by blocks, and Levenberg-Marquardt's stop at the minimum."""
 
+import itertools
 import logging
 
 import numpy as np
@@ -12,9 +13,15 @@ from kinfw.identification.problem import (
     MAP_CHUNK,
     NoiseModel,
     build_problem,
+    column_norms,
+    covariance_and_identifiability,
     levenberg_marquardt,
+    leverage_sums,
     leverages,
+    normal_equations,
+    tall_r,
 )
+from kinfw.identification.problem._problem import chunks
 from kinfw.model import load_robot
 from kinfw.simulation import random_configurations, simulate
 from tests.robots import ARM_6R
@@ -148,8 +155,9 @@ def test_a_failing_compiler_is_reported_once_and_casadi_takes_over(monkeypatch, 
     import casadi as ca
 
     monkeypatch.setattr(compiled_module, "_FAILED", [])
+    monkeypatch.setattr(compiled_module, "_NATIVE_REFUSED", [])
     monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("CC", "false")  # exists, always fails
+    monkeypatch.setenv("CC", "false")  # exists, always fails (with and without -march)
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [ca.cos(x) * x[1]])
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.problem"):
@@ -169,6 +177,7 @@ def test_a_compiled_function_is_kept_on_disk_and_loaded_again(monkeypatch, tmp_p
     f = ca.Function("f", [x], [ca.sqrt(x) * x[2] + ca.exp(x[0])])
     g = compiled_module.compiled(f)
     assert g is not f
+    assert not compiled_module._NATIVE_REFUSED  # built for this processor
     (library,) = tmp_path.glob("kinfw_*.so")
     stamp = library.stat().st_mtime_ns
     monkeypatch.setattr(compiled_module, "_LOADED", {})  # a new process: from the disk
@@ -177,3 +186,136 @@ def test_a_compiled_function_is_kept_on_disk_and_loaded_again(monkeypatch, tmp_p
     v = np.array([0.3, 1.7, 2.9])
     np.testing.assert_array_equal(np.asarray(h(v)), np.asarray(f(v)))
     np.testing.assert_array_equal(np.asarray(g(v)), np.asarray(f(v)))
+
+
+def test_chunks_cover_every_sample_once_in_few_sizes():
+    for m in (1, 5, 2047, MAP_CHUNK, 2 * MAP_CHUNK + 5, 10_000, 99_999):
+        spans = chunks(m)
+        assert spans[0][0] == 0 and spans[-1][1] == m
+        assert all(b0 == a1 for (_, b0), (a1, _) in itertools.pairwise(spans))
+        sizes = {b - a for a, b in spans}
+        assert sizes <= {MAP_CHUNK >> i for i in range(12)}  # MAP_CHUNK and powers of two
+        assert len([s for s in (b - a for a, b in spans) if s < MAP_CHUNK]) == len(
+            sizes - {MAP_CHUNK}
+        )  # each smaller size at most once
+
+
+def test_normal_equations_by_blocks_equal_the_dense_products():
+    rng = np.random.default_rng(8)
+    J = rng.normal(size=(9_001, 12)) * np.logspace(-2, 2, 12)
+    r, w = rng.normal(size=9_001), rng.uniform(0.1, 1.0, size=9_001)
+    columns = np.arange(12) % 3 != 1
+    A, b = J[:, columns] * w[:, None], r * w
+    G, g = normal_equations(J, r, w, columns)
+    np.testing.assert_allclose(G, A.T @ A, rtol=1e-12, atol=1e-12 * np.abs(A.T @ A).max())
+    np.testing.assert_allclose(g, A.T @ b, rtol=1e-11, atol=1e-12 * np.abs(A.T @ b).max())
+    np.testing.assert_allclose(column_norms(J), np.linalg.norm(J, axis=0), rtol=1e-13)
+
+
+@pytest.mark.parametrize("n", [7, 500, 20_000])
+def test_tall_r_has_the_singular_values_of_the_scaled_matrix(n):
+    """R of the blocked QR: R^T R = A^T A and the singular values of A (numpy's SVD of
+    the whole matrix), rank-deficient A included."""
+    rng = np.random.default_rng(9)
+    A = rng.normal(size=(n, 10)) * np.logspace(-3, 3, 10)
+    A[:, 4] = A[:, 0] - 2e3 * A[:, 9] / 1e3  # a null direction
+    scale = 1.0 / np.linalg.norm(A, axis=0)
+    R = tall_r(A, scale)
+    As = A * scale
+    assert R.shape == (min(n, 10), 10)
+    np.testing.assert_allclose(R.T @ R, As.T @ As, atol=1e-12)
+    s_ref = np.linalg.svd(As, compute_uv=False)
+    np.testing.assert_allclose(np.linalg.svd(R, compute_uv=False), s_ref, atol=1e-12)
+
+
+def test_leverages_with_a_row_scale_are_those_of_the_scaled_rows():
+    rng = np.random.default_rng(10)
+    A = rng.normal(size=(12_000, 6))
+    w = rng.uniform(0.2, 1.0, size=12_000)
+    Q, _ = np.linalg.qr(A * w[:, None])
+    np.testing.assert_allclose(leverages(A, w), np.sum(Q**2, axis=1), rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("redundant", [False, True])
+def test_covariance_by_blocks_equals_the_dense_pseudo_inverse(redundant):
+    """The covariance from the blocked QR's R equals sigma^2 (Js^T Js)^+ / (c c^T) of
+    numpy's pseudo-inverse of the whole column-scaled Jacobian (rcond 1e-8), on 14,000
+    rows (blocks of 4,096); with a column made the double of another (a gauge-like
+    redundancy) the rank drops by one and the null direction names both."""
+    problem, rng = _arm_problem(2_000)
+    arm = load_robot(ARM_6R)
+    names = arm.topology(("flange",)).joint_names
+    qs = random_configurations(*arm.joint_limits(names), 2_000, rng, fraction=0.8)
+    data = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    x = rng.normal(scale=1e-2, size=problem.n_parameters)
+    _, J = problem.evaluate(x, NoiseModel(1e-3, 1e-3), True)
+    free = problem.free
+    idx = np.flatnonzero(free)
+    if redundant:
+        J[:, idx[3]] = 2.0 * J[:, idx[1]]
+    Jf = J[:, free]
+    c = np.linalg.norm(Jf, axis=0)
+    pinv = np.linalg.pinv(Jf / c, rcond=1e-8)
+    reference = pinv @ pinv.T / np.outer(c, c) * 2.5
+    covariance, ident = covariance_and_identifiability(
+        J, free, list(problem.names), 2.5, data, problem.model0
+    )
+    scale = np.abs(reference).max()
+    np.testing.assert_allclose(covariance[np.ix_(idx, idx)], reference, atol=1e-10 * scale)
+    np.testing.assert_array_equal(covariance[~free], 0.0)
+    assert ident.rank == len(idx) - int(redundant)
+    if redundant:
+        ((involved, _),) = ident.unidentifiable
+        assert {problem.names[idx[1]], problem.names[idx[3]]} <= set(involved)
+    # the free columns alone give the same
+    covariance_free, _ = covariance_and_identifiability(
+        Jf, free, list(problem.names), 2.5, data, problem.model0
+    )
+    np.testing.assert_array_equal(covariance_free, covariance)
+
+
+def test_problem_normal_equations_equal_the_whitened_jacobians_products():
+    """Without forming the whitened Jacobian: A^T A, A^T b and the per-component grams
+    equal those of evaluate_free's arrays scaled row by row (prior rows included)."""
+    arm = load_robot(ARM_6R)
+    rng = np.random.default_rng(11)
+    names = arm.topology(("flange",)).joint_names
+    qs = random_configurations(*arm.joint_limits(names), 1_500, rng, fraction=0.8)
+    data = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    problem = build_problem(arm, data, prior=(1e-3, 1e-3))
+    assert len(problem.prior_rows)
+    noise = NoiseModel(1e-3, 2e-3)
+    x = rng.normal(scale=1e-3, size=problem.n_parameters)
+    r, J = problem.evaluate_free(x, noise, True)
+    w = rng.uniform(0.5, 1.0, size=len(r))
+    normal = problem.normal_equations(x, noise, w, by_component=True)
+    A, b = J * w[:, None], r * w
+    scale = np.abs(A.T @ A).max()
+    np.testing.assert_allclose(normal.G, A.T @ A, rtol=0, atol=1e-13 * scale)
+    np.testing.assert_allclose(normal.g, A.T @ b, rtol=0, atol=1e-12 * np.abs(A.T @ b).max())
+    np.testing.assert_allclose(normal.b, b, rtol=1e-14, atol=0)
+    n_obs = len(problem.groups[0].sample)
+    A3 = A[: 6 * n_obs].reshape(n_obs, 6, -1)
+    position, rotation = A3[:, :3].reshape(-1, A.shape[1]), A3[:, 3:].reshape(-1, A.shape[1])
+    np.testing.assert_allclose(
+        normal.by_component["position"], position.T @ position, rtol=0, atol=1e-13 * scale
+    )
+    np.testing.assert_allclose(
+        normal.by_component["rotation"], rotation.T @ rotation, rtol=0, atol=1e-13 * scale
+    )
+
+
+def test_leverage_sums_are_the_sums_of_the_hat_matrix_diagonal():
+    rng = np.random.default_rng(12)
+    A = rng.normal(size=(3_000, 8)) * np.logspace(-2, 2, 8)
+    part = np.arange(3_000) % 3 == 0
+    Q, _ = np.linalg.qr(A)
+    h = np.sum(Q**2, axis=1)
+    sums = leverage_sums(A.T @ A, {"a": A[part].T @ A[part], "b": A[~part].T @ A[~part]})
+    assert sums["a"] == pytest.approx(h[part].sum(), rel=1e-10)
+    assert sums["b"] == pytest.approx(h[~part].sum(), rel=1e-10)
+    # a zero column or a rank-deficient matrix: the rows' own leverages decide
+    A[:, 3] = 0.0
+    assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None
+    A[:, 3] = A[:, 0] + A[:, 1]
+    assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None

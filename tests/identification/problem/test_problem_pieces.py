@@ -138,3 +138,23 @@ def test_a_kind_name_or_group_type_can_be_registered_once():
     assert [k.name for k in kinds()][:3] == ["pose", "target", "point"]
     with pytest.raises(ValueError, match="a kind named 'pose' is already registered"):
         register_kind(PoseKind())
+
+
+def test_noise_estimate_takes_the_leverages_per_row_or_their_sums_per_component():
+    """Only each component's sum of leverages enters: per-row leverages and their sums
+    per component (what the normal equations give) estimate the same noise."""
+    rng = np.random.default_rng(3)
+    position, rotation = NoiseComponent("position", 3, "m"), NoiseComponent("rotation", 3, "rad")
+    groups = [SimpleNamespace(sample=np.arange(500), rows=6, components=(position, rotation))]
+    r = rng.normal(size=3000)
+    h = rng.uniform(0.0, 0.02, size=3000)
+    h3 = h.reshape(500, 6)
+    sums = {"position": float(h3[:, :3].sum()), "rotation": float(h3[:, 3:].sum())}
+    guess = NoiseModel(1e-3, 1e-3)
+    for robust, first in ((False, True), (True, True), (True, False)):
+        per_row = estimate_noise(r, groups, guess, h, robust=robust, first=first)
+        per_component = estimate_noise(r, groups, guess, sums, robust=robust, first=first)
+        for name in ("position", "rotation"):
+            assert per_row.of(name) == pytest.approx(per_component.of(name), rel=1e-14)
+            without = estimate_noise(r, groups, guess, np.zeros(3000), robust=robust, first=first)
+            assert per_row.of(name) > without.of(name) * (1 + 1e-3)  # fewer dof: larger
