@@ -130,5 +130,9 @@ def target_observations_from_pixels(group: PixelObservations) -> Any:
 
     samples, camera_T_targets = pnp_camera_T_targets(group)
     return TargetObservations(
-        camera=group.camera, sample=samples, camera_T_target=camera_T_targets, target=group.target
+        camera=group.camera,
+        sample=samples,
+        camera_T_target=camera_T_targets,
+        target=group.target,
+        target_frame=group.target_frame,
     )
