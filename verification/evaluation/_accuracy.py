@@ -23,6 +23,7 @@ fit, slightly optimistic for few samples. Rotation errors are
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -167,7 +168,11 @@ def known_frames(sidecar: CalibrationSidecar | None) -> dict[tuple[str, str], ND
 
 
 def evaluate_model(
-    robot: Robot, measurements: Measurements, *, sidecar: CalibrationSidecar | None = None
+    robot: Robot,
+    measurements: Measurements,
+    *,
+    sidecar: CalibrationSidecar | None = None,
+    known: Iterable[Any] = (),
 ) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
@@ -179,7 +184,10 @@ def evaluate_model(
     ``*.kinfw.json`` written beside a calibrated URDF), the frames it provides (the
     root's pose in the measurement frame, target poses, markers, point offsets) are used
     as calibrated instead of being fitted to these data, so the errors are honest
-    predictions; the others get the kinds' closed-form start values.
+    predictions; the others get the kinds' closed-form start values. ``known`` does the
+    same from a calibration's own unknowns (:attr:`RefineResult.unknowns`: ``kind``,
+    ``name``, ``value``; they take precedence over the sidecar's): held-out images are
+    then scored by reprojection with the board pose from training.
 
     Raises
     ------
@@ -192,8 +200,10 @@ def evaluate_model(
     from kinfw.measurements import check_against_robot
 
     measurements = check_against_robot(measurements, robot)
+    given = {(u.kind, u.name): np.asarray(u.value, dtype=float) for u in known}
     known = tuple(
-        Unknown(kind, name, value) for (kind, name), value in known_frames(sidecar).items()
+        Unknown(kind, name, value)
+        for (kind, name), value in {**known_frames(sidecar), **given}.items()
     )
     known_keys = {BlockKey(u.kind, u.name) for u in known}
     problem = build_problem(robot, measurements, parameters="none", known=known)

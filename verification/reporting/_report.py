@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,10 +53,14 @@ def file_sha256(path: str | Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def errors_by_group(robot: Robot, data: Measurements) -> tuple[GroupErrorSummary, ...]:
-    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model);
-    each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
-    report = evaluate_model(robot, data)
+def errors_by_group(
+    robot: Robot, data: Measurements, known: Iterable[Any] = ()
+) -> tuple[GroupErrorSummary, ...]:
+    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model: the
+    ``known`` unknowns, e.g. a calibration's target poses, as given, the others fitted
+    to ``data``); each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its
+    ``group``."""
+    report = evaluate_model(robot, data, known=known)
     return tuple(
         GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary()) for g in report.groups
     )
@@ -131,12 +137,17 @@ def calibration_report(
     # the refined intrinsics (--refine-intrinsics) for the calibrated model's errors;
     # the start ones (the file's) for the nominal and the stages before the refinement
     refined_data = _with_refined_intrinsics(data, calibration)
-    after = errors_by_group(calibrated, refined_data)
+    # the calibrated model with the unknowns it was fitted with (target poses, markers,
+    # measurement frames): held-out images are scored with the board pose from training
+    trained = () if calibration.refined is None else calibration.refined.unknowns
+    after = errors_by_group(calibrated, refined_data, trained)
     notes = list(calibration.notes)
     before = _errors_or_unavailable(nominal, data, after, notes)
     held_out_rows = None
     if held_out is not None:
-        after_held = errors_by_group(calibrated, _with_refined_intrinsics(held_out, calibration))
+        after_held = errors_by_group(
+            calibrated, _with_refined_intrinsics(held_out, calibration), trained
+        )
         before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
         held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
