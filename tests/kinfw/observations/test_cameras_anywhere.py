@@ -7,6 +7,7 @@ links on fixed joints:
   board on the flange (``target_frame``);
 - ``stereo``: a static stereo pair (two optical frames 12 cm apart on one fixed mount)
   sharing one board on the flange;
+- ``eye_in_hand``: a camera on the flange (its own link) and a board fixed in the world;
 - ``wrist``: a camera on ``l5`` (not the end of the chain) and a board fixed in the world.
 
 Truths: the true robot's Pinocchio forward kinematics at configurations the fit never
@@ -66,6 +67,16 @@ SETUPS = {
   <link name="right_optical"/>""",
         ("left_optical", "right_optical"),
         "flange",
+    ),
+    "eye_in_hand": (
+        """
+  <joint name="hand_camera_joint" type="fixed">
+    <parent link="flange"/><child link="hand_camera"/>
+    <origin xyz="0.03 -0.05 0.08" rpy="0.1 -0.2 0.3"/>
+  </joint>
+  <link name="hand_camera"/>""",
+        ("hand_camera",),
+        None,
     ),
     "wrist": (
         """
