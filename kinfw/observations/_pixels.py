@@ -327,6 +327,10 @@ class PixelKind(ObservationKind):
     def direct_frames(self, group):
         return (group.camera,)
 
+    def relative_to(self, group):
+        """The camera, for a target on the robot (``target_frame``); None: absolute."""
+        return None if group.target_frame is None else group.camera
+
     def camera_frames(self, group):
         return (group.camera,)
 

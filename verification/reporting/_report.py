@@ -151,9 +151,12 @@ def calibration_report(
         before_held = _errors_or_unavailable(nominal, held_out, after_held, notes)
         held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
-    stage_rms += [
+    stage_rms += [  # the refinement's stage: the calibrated model with its own unknowns
         StageErrors.of(
-            name, errors_by_group(Robot(xml, name), refined_data if name == "refine" else data)
+            name,
+            errors_by_group(Robot(xml, name), refined_data, trained)
+            if name == "refine"
+            else errors_by_group(Robot(xml, name), data),
         )
         for name, xml in calibration.stages
     ]
