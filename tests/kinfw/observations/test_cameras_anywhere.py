@@ -213,3 +213,47 @@ def test_a_static_camera_and_a_world_board_are_refused_with_the_fix():
     wrong = data.with_groups([replace(g, target_frame=None)])  # "the board is in the world"
     with pytest.raises(DatasetError, match=r'does not move relative to the camera.*"target_frame"'):
         calibrate_cameras(nominal, wrong)
+
+
+def test_a_head_camera_seeing_a_board_on_the_hand_is_a_target_on_a_frame():
+    """FIGAROH's real TIAGo eye-hand session (tests/data/tiago_figaroh): the head camera
+    sees a board on the hand. Read as ``pose`` observations measured in the camera with a
+    marker on ``arm_7_link`` (tests/kinfw/observations/test_measured_in_robot.py), or as
+    ``target`` observations with ``target_frame = arm_7_link``: one model, so one fit (the
+    same residuals and the same board pose in arm_7_link), torso held out of both."""
+    from kinfw.identification import refine
+    from kinfw.measurements import measurements_from_figaroh_csv, observed_joints
+    from kinfw.observations import TargetObservations
+    from tests.erd import urdf_path
+    from tests.paths import DATA
+
+    tiago = load_robot(urdf_path("tiago_description/robots/tiago_no_hand.urdf"))
+    csv = DATA / "tiago_figaroh" / "eye_hand_calibration_recorded_data_48c_hey5_12_test1.csv"
+    poses = measurements_from_figaroh_csv(
+        csv, robot=tiago, frame="arm_7_link", measured_in="xtion_rgb_optical_frame"
+    )
+    (g,) = poses.poses
+    targets = poses.with_groups(
+        [
+            TargetObservations(
+                camera="xtion_rgb_optical_frame",
+                sample=g.sample,
+                camera_T_target=g.meas_T_frame,
+                target="board",
+                target_frame="arm_7_link",
+            )
+        ]
+    )
+    a = refine(tiago, poses, parameters="frames")
+    b = refine(tiago, targets, parameters="frames")
+    np.testing.assert_allclose(
+        b.residuals[0].component("position"), a.residuals[0].component("position"), atol=1e-9
+    )
+    found_a = {(u.kind, u.name): u.value for u in a.unknowns}
+    found_b = {(u.kind, u.name): u.value for u in b.unknowns}
+    np.testing.assert_allclose(  # to the solver's convergence on real (noisy) data
+        found_b[("target", "board")], found_a[("marker", "marker1")], rtol=0, atol=1e-7
+    )
+    # the torso moves camera and board alike: not observed, in either reading
+    assert observed_joints(targets, tiago) == observed_joints(poses, tiago)
+    assert "torso_lift_joint" not in observed_joints(targets, tiago)
