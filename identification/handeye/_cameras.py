@@ -10,8 +10,11 @@ observation is one equation of the hand-eye convention of
            A_i           =       X        @        B_i         @        Y
 
 where ``hand`` is the URDF link the camera's fixed joint hangs from (for the IIS-head, the
-plate: the paper's "camera mount coordinate system"), solved by
-:func:`kinfw.identification.handeye.solve_axyb` with ``base_T_hands = root_T_hand(q_i)``.
+plate: the paper's "camera mount coordinate system"; the root for a static camera),
+solved by :func:`kinfw.identification.handeye.solve_axyb` with
+``base_T_hands = root_T_hand(q_i)``. A target on the robot (eye-to-hand: a board on the
+flange, ``target_frame``) is the same equation with that frame as the base:
+``B_i = hand_T_root(q_i) @ root_T_frame(q_i)``, ``Y = frame_T_target``.
 The camera's fixed joint origin ``hand_T_camera`` is what the calibrated URDF changes;
 ``root_T_target`` (the solver's ``base_T_target``) is the target's pose in the
 measurement frame, which belongs in the report, not the URDF.
@@ -25,12 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.geometry import average_transform, rotation_angle
+from kinfw.geometry import average_transform, inverse_transform, rotation_angle
 from kinfw.identification.handeye._axyb import solve_axyb
 from kinfw.identification.handeye._result import AXYBResult
 from kinfw.identification.handeye._uncertainty import Verdict
 from kinfw.measurements import Measurements
-from kinfw.model import Robot, cpc_from_robot
+from kinfw.model import Robot
 from kinfw.observations import DatasetError, TargetObservations
 
 __all__ = [
@@ -55,7 +58,8 @@ class CameraCalibration:
     hand_T_camera : ndarray, shape (4, 4)
         Identified pose of the camera in the hand link (the new joint origin), metres.
     root_T_target : ndarray, shape (4, 4)
-        Identified pose of the target in the measurement frame, from this camera alone.
+        Identified pose of the target in the measurement frame (in its ``target_frame``
+        for a target on the robot), from this camera alone.
     n_views : int
     solver : AXYBResult
         The solver's record (iterations, restarts, residuals, verdict).
@@ -109,14 +113,40 @@ def camera_mount(robot: Robot, camera: str) -> tuple[str, str]:
     return path[-1].name, path[-1].parent
 
 
+def _check_relative_motion(robot: Robot, group: TargetObservations) -> None:
+    """Refuse a camera and a target that no joint moves relative to each other.
+
+    Raises
+    ------
+    DatasetError
+        Naming the target and the ``target_frame`` key (a static camera
+        watching a board on the robot: the board is on a link, not fixed in the world).
+    """
+    target_frame = robot.root_link if group.target_frame is None else group.target_frame
+    between = set(robot.movable_path(group.camera)) ^ set(robot.movable_path(target_frame))
+    if not between:
+        where = "fixed in the world" if group.target_frame is None else f"on {target_frame!r}"
+        raise DatasetError(
+            f"target {group.target!r} ({where}) does not move relative to the camera: no "
+            "joint lies between them. If the board rides on "
+            'the robot (a static camera, eye-to-hand), give its observations "target_frame": '
+            "the URDF link it is fixed to (e.g. the flange)"
+        )
+
+
 def _solve_one(
     robot: Robot, group: TargetObservations, measurements: Measurements, rng: np.random.Generator
 ) -> CameraCalibration:
     joint, hand = camera_mount(robot, group.camera)
-    model = cpc_from_robot(robot, (hand,))
-    qs = measurements.q_of(model.topology.joint_names)[group.sample]  # (n, J), n >= 1
-    root_T_hands = model.frame_poses(qs, hand)
-    result = solve_axyb(camera_T_targets=group.camera_T_target, base_T_hands=root_T_hands, rng=rng)
+    _check_relative_motion(robot, group)
+    qs = measurements.qs[group.sample]
+    names = measurements.joint_names
+    # the solver's base is where the target is fixed: the root, or its target_frame
+    base_T_hands = robot.frame_poses(qs, hand, names).reshape(-1, 4, 4)
+    if group.target_frame is not None:
+        root_T_bases = robot.frame_poses(qs, group.target_frame, names).reshape(-1, 4, 4)
+        base_T_hands = inverse_transform(root_T_bases) @ base_T_hands
+    result = solve_axyb(camera_T_targets=group.camera_T_target, base_T_hands=base_T_hands, rng=rng)
     if result.verdict is not Verdict.DETERMINED:
         warnings.warn(
             f"camera {group.camera!r}: hand-eye {result.verdict_message} (lengths in m); "

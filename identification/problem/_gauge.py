@@ -307,7 +307,7 @@ def _shared_joints(groups: list[Any], topo: Any) -> set[int]:
     shared = set(range(len(topo.joint_names)))
     for g in groups:
         kind, group = g.kind, g.group
-        inside = kind.measured_in(group)
+        inside = kind.relative_to(group)
         if inside not in frames:  # measured in the root or an external frame: pins all
             return set()
         for f in kind.frames(group):

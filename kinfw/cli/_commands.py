@@ -342,7 +342,14 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="read the 6D columns as the pose of a fixed target NAME seen by a camera on "
         "--frame (camera_T_target: a camera on the flange seeing a board; the camera's mount "
-        "and the target's pose are estimated); excludes --measured-in",
+        "and the target's pose are estimated); needs --camera-frame; excludes --measured-in",
+    )
+    p.add_argument(
+        "--camera-frame",
+        default=None,
+        help="with --target: the camera's own URDF link, on a fixed joint to --frame; its "
+        "joint origin (the mount) is calibrated, --frame keeps its own (a link not in the "
+        "URDF is refused with the lines to add)",
     )
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
@@ -368,6 +375,7 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         length_unit=args.length_unit,
         angle_unit=args.angle_unit,
         target=args.target,
+        camera_frame=args.camera_frame,
     )
     check_against_robot(measurements, robot)
     write_measurements(args.out, measurements)
@@ -377,7 +385,8 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
     )
     print(
         f"wrote {args.out}: {measurements.n_samples} samples, joints "
-        f"{', '.join(measurements.joint_names)}; {kinds} on {args.frame!r}"
+        f"{', '.join(measurements.joint_names)}; {kinds} on "
+        f"{args.camera_frame if args.target is not None else args.frame!r}"
     )
     return 0
 

@@ -205,8 +205,10 @@ def observed_joints(measurements: Measurements, robot: Robot) -> tuple[str, ...]
     """The movable joints whose geometry the observations see (robot order).
 
     The joints on the paths from the root to the observed frames and to the robot
-    frames observations are measured in; when every observation is measured in a frame
-    of the robot (relative poses), without the joints above each pair's common ancestor,
+    frames observations are measured in; when every observation is relative to a frame
+    of the robot (:meth:`~kinfw.observations.ObservationKind.relative_to`: measured in
+    it, or a camera seeing a board on the robot), without the joints above each pair's
+    common ancestor,
     which move both frames alike and never enter the data.
     """
     frames = (*measurements.observed_frames, *robot_measurement_frames(measurements, robot))
@@ -219,7 +221,7 @@ def observed_joints(measurements: Measurements, robot: Robot) -> tuple[str, ...]
     shared: set[str] | None = None
     for g in measurements.all_groups():
         kind = kind_of(g)
-        inside = kind.measured_in(g)
+        inside = kind.relative_to(g)
         if inside is None or inside == root or not robot.has_frame(inside):
             return tuple(n for n in robot.joint_names if n in names)
         for f in kind.frames(g):

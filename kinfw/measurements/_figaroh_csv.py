@@ -217,6 +217,7 @@ def measurements_from_figaroh_csv(
     length_unit: str = "m",
     angle_unit: str = "rad",
     target: str | None = None,
+    camera_frame: str | None = None,
 ) -> Measurements:
     """Read a FIGAROH calibration CSV (see the module docstring for its columns).
 
@@ -245,7 +246,13 @@ def measurements_from_figaroh_csv(
         observations, the target's pose and the camera's mount on ``frame`` estimated.
         Target ``i`` is named ``target`` (one marker) or ``f"{target}{i}"``. Excludes
         ``measured_in`` (the camera is the measurement frame); every marker needs its
-        ``phi`` columns.
+        ``phi`` columns; needs ``camera_frame``.
+    camera_frame : str, optional
+        With ``target``: the camera's own URDF link, on a fixed joint that hangs (through
+        fixed joints only) from ``frame``; its joint origin, the camera's mount, is what
+        the calibration estimates and writes. Required, so that no existing frame
+        (``tool0``) is redefined as the camera: a link not in the URDF is refused with
+        the lines to add.
 
     Returns
     -------
@@ -273,6 +280,7 @@ def measurements_from_figaroh_csv(
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
+        frame = _camera_link(path, robot, frame, camera_frame)
     joint_columns = _joint_columns(path, header, markers, robot)
     table = _numbers(path, header, rows, decimal_comma)
     length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
@@ -298,6 +306,32 @@ def measurements_from_figaroh_csv(
         ],
     }
     return measurements_from_dict(doc, source=str(path))
+
+
+def _camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str:
+    """The camera's own link for ``target`` observations (see
+    :func:`measurements_from_figaroh_csv`), checked; a refusal says what to add."""
+    add = (
+        f'add it to the URDF: <link name="{camera_frame or "camera"}"/> and <joint '
+        f'name="{camera_frame or "camera"}_joint" type="fixed"> with <parent link="{frame}"/>, '
+        f'<child link="{camera_frame or "camera"}"/> and any start <origin> (the calibration '
+        "writes the fitted mount there)"
+    )
+    if camera_frame is None:
+        raise DatasetError(
+            f"{path}: target poses are measured in the camera, whose pose on {frame!r} is "
+            f"unknown: reading them as seen by {frame!r} would make calibrate redefine "
+            f"{frame!r} as the camera. Name the camera's own link with --camera-frame NAME "
+            f"(camera_frame=) on {frame!r}; if the URDF has none, {add}"
+        )
+    if not robot.has_frame(camera_frame):
+        raise DatasetError(f"{path}: camera frame {camera_frame!r} is not in the URDF; {add}")
+    if camera_frame == frame or robot.movable_path(camera_frame) != robot.movable_path(frame):
+        raise DatasetError(
+            f"{path}: camera frame {camera_frame!r} must be its own link fixed to {frame!r} "
+            f"(no joint that moves between them, and not {frame!r} itself)"
+        )
+    return camera_frame
 
 
 def _check_target_markers(

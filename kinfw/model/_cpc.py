@@ -195,7 +195,7 @@ class CPCModel:
     # -- the chart of identifiable parameters --------------------------------------------
     def axis_bases(self) -> NDArray[np.float64]:
         """Per joint, two unit vectors orthogonal to ``b`` (J, 2, 3): the axis-tilt chart."""
-        return np.stack([perpendicular_basis(b) for b in self.b])
+        return np.array([perpendicular_basis(b) for b in self.b]).reshape(-1, 2, 3)
 
     def perturbed(self, delta: ArrayLike) -> CPCModel:
         """The model moved by ``delta`` in the chart of :attr:`parameter_names`.

@@ -468,6 +468,13 @@ class ObservationKind:
         """The measurement frame of a group (None: the URDF root)."""
         return getattr(group, "measured_in", None) if self.has_measured_in else None
 
+    def relative_to(self, group: Any) -> str | None:
+        """The frame the group's observations are relative to: its measurement frame
+        (default, :meth:`measured_in`), or a frame of the robot when every observation
+        is a relative pose between two of its frames (a camera on the robot seeing a
+        board on the robot); None or an external frame: absolute."""
+        return self.measured_in(group)
+
     def root_pose_estimates(self, group: Any, start: StartContext) -> NDArray[np.float64] | None:
         """Per-sample estimates (k, 4, 4) of ``meas_T_w`` (model frame in the group's
         measurement frame), when the group pins it alone; else None."""

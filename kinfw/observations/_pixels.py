@@ -1,17 +1,21 @@
-"""``"pixels"``: image points of a fixed target seen by a camera frame on the robot.
+"""``"pixels"``: image points of a target seen by a camera frame on the robot.
 
 One observation in the file is one image of one target by one camera: the pixels ``uv``
 (k, 2) of the target's points ``points`` (k, 3, in the target's frame), optionally their
 ids, an image label and a pixel sigma. Inside the dataset it is k rows, one per point,
 whose residual is the reprojection error (2 rows, pixels)::
 
-    uv_measured - project(K, inv(w_T_camera) @ w_T_target @ target_p)
+    uv_measured - project(K, camera_T_target(q) @ target_p)
 
 with ``project`` OpenCV's pinhole and distortion model
-(:func:`kinfw.camera.project_normalized`, the same formula in CasADi and numpy).
+(:func:`kinfw.camera.project_normalized`, the same formula in CasADi and numpy) and
+``camera_T_target(q)`` the ``target`` kind's (:mod:`kinfw.observations`): the camera on
+any URDF frame (a link fixed to the root is a static camera), the target fixed in the
+world or, with ``target_frame``, on a URDF frame (a board on the flange).
 The camera's frame is its optical frame (z forward, x right, y down). Unknowns: the
-target's pose (``BlockKey("target", name)``, shared with the ``target`` kind: a pose
-target and a pixel target of one name are one unknown), started per image from
+target's pose (``BlockKey("target", name)``, in the world or in ``target_frame``; shared
+with the ``target`` kind: a pose target and a pixel target of one name are one unknown),
+started per image from
 ``cv2.solvePnP``; and the camera's intrinsics (``BlockKey("intrinsics", camera)``, 9
 numbers in OpenCV's order, :class:`kinfw.observations.IntrinsicsBlock`),
 known (fixed) unless the fit frees them. The PnP start is :mod:`kinfw.observations`.
@@ -29,7 +33,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.camera import CameraIntrinsics, project_normalized
-from kinfw.geometry import inverse_transform
 from kinfw.model import BlockKey, RigidFrameBlock
 from kinfw.observations._base import (
     Metric,
@@ -40,22 +43,29 @@ from kinfw.observations._base import (
     frozen_array,
     sample_array,
 )
-from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._intrinsics_block import IntrinsicsBlock
 from kinfw.observations._numeric import Drawing, NumericContext, node_name
 from kinfw.observations._pnp import PNP_MIN_POINTS, pnp_camera_T_targets
+from kinfw.observations._target import (
+    DEFAULT_TARGET,
+    camera_T_target_symbolic,
+    camera_T_targets_numeric,
+    described_target,
+    target_estimates,
+    target_frames,
+    target_keys,
+)
 
 __all__ = ["PIXEL", "PixelKind", "PixelObservations", "pixel_weights"]
 
 PIXEL = NoiseComponent("pixel", 2, "px", metric=Metric("pixel", "px", axes="uv"))
 """The reprojection error of one point: (u, v) rows in pixels (its size: the norm, px)."""
 
-_DEFAULT_TARGET = "target"
-
 
 @dataclass(frozen=True, slots=True, eq=False)
 class PixelObservations:
-    """All ``pixels`` observations of one fixed target by one camera: one row per point.
+    """All ``pixels`` observations of one target by one camera: one row per point.
 
     Attributes
     ----------
@@ -81,7 +91,10 @@ class PixelObservations:
         image's residual rows times ``median(sigma_px) / sigma_px``, :func:`pixel_weights`)
         before the noise component ``"pixel"`` whitens them all by one sigma.
     target : str
-        Name of the fixed target (its pose in the world is unknown).
+        Name of the target (its pose in the world, or in ``target_frame``, is unknown).
+    target_frame : str or None
+        The URDF frame the target is fixed to (a board on the flange seen by a static
+        camera); None: fixed in the world.
     """
 
     kind: ClassVar[str] = "pixels"
@@ -94,7 +107,8 @@ class PixelObservations:
     shot: NDArray[np.int64]
     image: NDArray[np.object_]
     sigma_px: NDArray[np.float64]
-    target: str = _DEFAULT_TARGET
+    target: str = DEFAULT_TARGET
+    target_frame: str | None = None
 
     def __post_init__(self) -> None:
         name = f"PixelObservations(camera={self.camera!r})"
@@ -122,7 +136,8 @@ class PixelObservations:
     def __repr__(self) -> str:
         return (
             f"PixelObservations(camera={self.camera!r}, target={self.target!r}, "
-            f"images={len(self.images()[0])}, points={len(self.sample)})"
+            f"target_frame={self.target_frame!r}, images={len(self.images()[0])}, "
+            f"points={len(self.sample)})"
         )
 
     def images(self) -> tuple[NDArray[np.int64], list[NDArray[np.intp]]]:
@@ -235,11 +250,17 @@ class PixelKind(ObservationKind):
             sigma = reader.number(obs, "sigma_px", at, "a positive pixel sigma")
             if not sigma > 0:
                 raise reader.error(f"{at}.sigma_px", f"expected a positive number, got {sigma!r}")
-        target = reader.optional_string(obs, "target", at) or _DEFAULT_TARGET
+        target = reader.optional_string(obs, "target", at) or DEFAULT_TARGET
+        target_frame = reader.optional_string(obs, "target_frame", at)
         rows = [
             (*p_uv, *pts(p), i, image, sigma) for p_uv, p, i in zip(uv, points, ids, strict=True)
         ]
-        key = (("camera", frame), ("intrinsics", cameras[frame]), ("target", target))
+        key = (
+            ("camera", frame),
+            ("intrinsics", cameras[frame]),
+            ("target", target),
+            ("target_frame", target_frame),
+        )
         return key, rows
 
     def group_from_parsed(self, key, sample, parsed):
@@ -270,8 +291,7 @@ class PixelKind(ObservationKind):
         samples, rows = group.images()
         for s, r in zip(samples.tolist(), rows, strict=True):
             obs: dict[str, Any] = {"frame": group.camera, "kind": self.name}
-            if group.target != _DEFAULT_TARGET:
-                obs["target"] = group.target
+            obs.update(target_keys(group.target, group.target_frame))
             if group.image[r[0]]:
                 obs["image"] = str(group.image[r[0]])
             obs["uv"] = group.uv[r].tolist()
@@ -298,14 +318,18 @@ class PixelKind(ObservationKind):
         return None
 
     def key(self, group):
-        return (self.name, group.camera, group.intrinsics, group.target)
+        return (self.name, group.camera, group.intrinsics, group.target, group.target_frame)
 
     # -- structure
     def frames(self, group):
-        return (group.camera,)
+        return target_frames(group.camera, group.target_frame)
 
     def direct_frames(self, group):
         return (group.camera,)
+
+    def relative_to(self, group):
+        """The camera, for a target on the robot (``target_frame``); None: absolute."""
+        return None if group.target_frame is None else group.camera
 
     def camera_frames(self, group):
         return (group.camera,)
@@ -316,9 +340,11 @@ class PixelKind(ObservationKind):
         return (
             UnknownRequest(
                 BlockKey("target", group.target),
-                start.w_T(group.camera, samples) @ camera_T_targets,
+                target_estimates(
+                    start, group.camera, group.target_frame, samples, camera_T_targets
+                ),
                 RigidFrameBlock.from_estimates,
-                f"pose of target {group.target!r} (seen by {group.camera!r})",
+                described_target(group.target, group.camera, group.target_frame),
             ),
             UnknownRequest(
                 BlockKey("intrinsics", group.camera),
@@ -344,9 +370,7 @@ class PixelKind(ObservationKind):
     def residual(self, group, model: SymbolicContext, m):
         """``w * (uv_measured - uv_predicted)``, pixels times the row's weight ``m[5]``."""
         ca = model.ca
-        c_T_t = inverse_casadi(ca, model.w_T(group.camera)) @ model.value(
-            BlockKey("target", group.target)
-        )
+        c_T_t = camera_T_target_symbolic(model, group.camera, group.target, group.target_frame)
         p = c_T_t[0:3, 0:3] @ m[2:5] + c_T_t[0:3, 3]
         params = model.value(BlockKey("intrinsics", group.camera))
         u, v = project_normalized(p[0] / p[2], p[1] / p[2], params)
@@ -359,8 +383,8 @@ class PixelKind(ObservationKind):
 
     def camera_points(self, group, model: NumericContext) -> NDArray[np.float64]:
         """The target's points in the camera frame (m, 3), metres, as predicted."""
-        c_T_t = inverse_transform(model.w_T(group.camera, group.sample)) @ model.value(
-            BlockKey("target", group.target)
+        c_T_t = camera_T_targets_numeric(
+            model, group.camera, group.target, group.target_frame, group.sample
         )
         return np.einsum("mij,mj->mi", c_T_t[:, :3, :3], group.target_p) + c_T_t[:, :3, 3]
 

@@ -37,13 +37,43 @@ def _is_planar(target_p: NDArray[np.float64]) -> bool:
     return bool(s[0] > 0 and s[-1] <= _PLANAR_TOL * s[0])
 
 
+def _pnp_candidates(cv2: Any, obj, img, K, dist, criteria) -> list[tuple[Any, Any]]:
+    """The PnP poses of one image worth refining, each refined by ``solvePnPRefineLM``:
+    both of IPPE's (planar points) and SQPnP's; only finite poses with every point in
+    front of the camera."""
+    starts = []
+    if _is_planar(obj):
+        _, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE)
+        starts += list(zip(rvecs, tvecs, strict=True))
+    ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_SQPNP)
+    if ok:
+        starts.append((rvec, tvec))
+    out = []
+    for rvec, tvec in starts:
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+            continue
+        R, _ = cv2.Rodrigues(rvec)
+        if ((obj @ R.T)[:, 2] + tvec[2, 0] > 0).all():
+            out.append((rvec, tvec))
+    return out
+
+
+def _reprojection_rms(cv2: Any, obj, img, K, dist, rvec, tvec) -> float:
+    uv, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+    return float(np.sqrt(np.mean((uv.reshape(-1, 2) - img) ** 2)))
+
+
 def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     """Per image, the target's pose in the camera from its pixels (OpenCV's PnP).
 
-    ``cv2.solvePnP`` with ``SOLVEPNP_IPPE`` for planar points, ``SOLVEPNP_SQPNP`` else,
-    then ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the group's
-    intrinsics). Each image's pose is kept (by a hash of its points, pixels and the
-    intrinsics) and not searched again when another problem holds the same image.
+    Both of ``SOLVEPNP_IPPE``'s poses (planar points) and ``SOLVEPNP_SQPNP``'s, each
+    refined by ``cv2.solvePnPRefineLM`` (the reprojection error's minimum, with the
+    group's intrinsics); the one with the lowest reprojection error among those that put
+    every point in front of the camera (IPPE's first pose alone can be far off on an
+    image of a few corners near a line). Each image's pose is kept (by a hash of its
+    points, pixels and the intrinsics) and not searched again when another problem holds
+    the same image.
 
     Images with fewer than 4 points (left by a rejection of gross errors, or a held-out
     split) are skipped: PnP needs 4.
@@ -93,26 +123,20 @@ def pnp_camera_T_targets(group: PixelObservations) -> tuple[NDArray[np.int64], N
         if known is not None:
             out[k] = known
             continue
-        flag = cv2.SOLVEPNP_IPPE if _is_planar(obj) else cv2.SOLVEPNP_SQPNP
         where = f"image {labels[k]} (sample {int(samples[k])}, {len(r)} points)"
         try:
-            ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=flag)
-            if not ok:
-                ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
-            if ok:
-                rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, dist, rvec, tvec, criteria=criteria)
+            found = _pnp_candidates(cv2, obj, img, K, dist, criteria)
         except cv2.error as exc:
             raise DatasetError(
                 f"pixels: camera {group.camera!r}: PnP failed on {where}: "
                 + " ".join(str(exc.err or exc).split())
             ) from None
-        if not ok:
-            raise DatasetError(f"pixels: camera {group.camera!r}: PnP failed on {where}")
-        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+        if not found:
             raise DatasetError(
                 f"pixels: camera {group.camera!r}: PnP found no pose for {where} "
                 "(are the points on one line?)"
             )
+        rvec, tvec = min(found, key=lambda c: _reprojection_rms(cv2, obj, img, K, dist, *c))
         R, _ = cv2.Rodrigues(rvec)
         out[k] = transform_from_rotation_translation(R, np.ravel(tvec))
         with _PNP_CACHE_LOCK:
@@ -130,5 +154,9 @@ def target_observations_from_pixels(group: PixelObservations) -> Any:
 
     samples, camera_T_targets = pnp_camera_T_targets(group)
     return TargetObservations(
-        camera=group.camera, sample=samples, camera_T_target=camera_T_targets, target=group.target
+        camera=group.camera,
+        sample=samples,
+        camera_T_target=camera_T_targets,
+        target=group.target,
+        target_frame=group.target_frame,
     )

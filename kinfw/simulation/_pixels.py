@@ -152,9 +152,12 @@ def simulate_pixels(
     sigma_px: float = 0.0,
     target: str = "board",
     point_ids: ArrayLike | None = None,
+    target_frame: str | None = None,
     **visibility: float,
 ) -> tuple[Measurements, NDArray[np.int64]]:
-    """``pixels`` observations of a fixed board by cameras on the robot.
+    """``pixels`` observations of a board by cameras on the robot (the board fixed in
+    the world, or on the URDF frame ``target_frame``: a static camera watching a board
+    on the flange).
 
     Each camera's image of the board at each configuration: the board's points seen
     (:func:`visible_points`), projected through the true robot by the ``pixels`` kind
@@ -173,7 +176,7 @@ def simulate_pixels(
     board_p : array_like, shape (m, 3)
         The board's points in its frame, metres.
     w_T_board : array_like, shape (4, 4)
-        The board's true pose in the root frame ``w``.
+        The board's true pose in the root frame ``w`` (in ``target_frame`` when given).
     rng : numpy.random.Generator
     sigma_px : float
         Pixel noise per coordinate, px.
@@ -181,6 +184,8 @@ def simulate_pixels(
         The board's target name.
     point_ids : array_like of int, shape (m,), optional
         The points' ids (default ``0 .. m-1``).
+    target_frame : str, optional
+        The URDF frame the board is fixed to (default: fixed in the world).
     **visibility
         ``margin_px``, ``max_point_angle_deg``, ``max_board_angle_deg``,
         ``min_corners`` of :func:`visible_points`.
@@ -201,10 +206,13 @@ def simulate_pixels(
     w_T_board = check_transform(w_T_board, name="w_T_board")
     sigma_px = check_sigma(sigma_px, "sigma_px")
     ids = np.arange(len(board_p)) if point_ids is None else np.asarray(point_ids, np.int64)
+    w_T_boards = np.broadcast_to(w_T_board, (len(qs), 4, 4))
+    if target_frame is not None:
+        w_T_boards = robot.frame_poses(qs, target_frame, names) @ w_T_board
     masks = {
         camera: visible_points(
             intr,
-            inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_board,
+            inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_boards,
             board_p,
             **visibility,
         )
@@ -234,6 +242,7 @@ def simulate_pixels(
                 image=np.array([f"{camera}_{int(kept[s]):03d}" for s in sample], dtype=object),
                 sigma_px=np.full(len(sample), np.nan),
                 target=target,
+                target_frame=target_frame,
             )
         )
     data = simulate(

@@ -23,7 +23,7 @@ fit, slightly optimistic for few samples. Rotation errors are
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from kinfw.measurements import Measurements
 from kinfw.model import Block, BlockKey, Robot
-from kinfw.observations import Metric, MetricErrors, NumericContext, kind_of
+from kinfw.observations import Metric, MetricErrors, NumericContext
 from kinfw.reports import CalibrationSidecar
 
 __all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "group_errors", "known_frames"]
@@ -172,7 +172,7 @@ def evaluate_model(
     measurements: Measurements,
     *,
     sidecar: CalibrationSidecar | None = None,
-    trained: Mapping[BlockKey, NDArray[np.float64]] | None = None,
+    known: Iterable[Any] = (),
 ) -> AccuracyReport:
     """Errors of ``robot``'s URDF geometry against ``measurements``.
 
@@ -184,12 +184,10 @@ def evaluate_model(
     ``*.kinfw.json`` written beside a calibrated URDF), the frames it provides (the
     root's pose in the measurement frame, target poses, markers, point offsets) are used
     as calibrated instead of being fitted to these data, so the errors are honest
-    predictions; the others get the kinds' closed-form start values. ``trained`` gives
-    the values of a calibration's unknowns (:attr:`RefineResult.unknowns
-    <kinfw.identification.RefineResult.unknowns>` by block key): those a kind scores
-    other data with (:meth:`~kinfw.observations.ObservationKind.trained_unknowns`: a
-    plane and its probe, so that a contact's error is its distance from the trained
-    plane) are used instead of fitted.
+    predictions; the others get the kinds' closed-form start values. ``known`` does the
+    same from a calibration's own unknowns (:attr:`RefineResult.unknowns`: ``kind``,
+    ``name``, ``value``; they take precedence over the sidecar's): held-out images are
+    then scored by reprojection with the board pose from training.
 
     Raises
     ------
@@ -202,10 +200,11 @@ def evaluate_model(
     from kinfw.measurements import check_against_robot
 
     measurements = check_against_robot(measurements, robot)
-    given = {BlockKey(kind, name): value for (kind, name), value in known_frames(sidecar).items()}
-    scored_with = {key for g in measurements.all_groups() for key in kind_of(g).trained_unknowns(g)}
-    given.update({k: v for k, v in (trained or {}).items() if k in scored_with})
-    known = tuple(Unknown(key.kind, key.name, value) for key, value in given.items())
+    given = {(u.kind, u.name): np.asarray(u.value, dtype=float) for u in known}
+    known = tuple(
+        Unknown(kind, name, value)
+        for (kind, name), value in {**known_frames(sidecar), **given}.items()
+    )
     known_keys = {BlockKey(u.kind, u.name) for u in known}
     problem = build_problem(robot, measurements, parameters="none", known=known)
     # external measurement frames: fitted once from all the data; every other unknown

@@ -9,16 +9,16 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-from collections.abc import Mapping
+from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from kinfw.identification import Calibration, refine
 from kinfw.identification.problem import Unknown
 from kinfw.measurements import Measurements
-from kinfw.model import BlockKey, Robot
+from kinfw.model import Robot
 from kinfw.observations import DatasetError, kind_of
 from kinfw.reports import (
     BeforeAfter,
@@ -55,12 +55,13 @@ def file_sha256(path: str | Path) -> str:
 
 
 def errors_by_group(
-    robot: Robot, data: Measurements, trained: Mapping[BlockKey, NDArray] | None = None
+    robot: Robot, data: Measurements, known: Iterable[Any] = ()
 ) -> tuple[GroupErrorSummary, ...]:
-    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model, and
-    its ``trained`` unknowns: the planes contacts are scored against); each labelled
-    ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its ``group``."""
-    report = evaluate_model(robot, data, trained=trained)
+    """Errors of ``robot`` on ``data`` per observation group (see evaluate_model: the
+    ``known`` unknowns, e.g. a calibration's target poses, as given, the others fitted
+    to ``data``); each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its
+    ``group``."""
+    report = evaluate_model(robot, data, known=known)
     return tuple(
         GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary()) for g in report.groups
     )
@@ -71,13 +72,13 @@ def _errors_or_unavailable(
     data: Measurements,
     like: tuple[GroupErrorSummary, ...],
     notes: list[str],
-    trained: Mapping[BlockKey, NDArray] | None = None,
+    known: Iterable[Any] = (),
 ) -> tuple[GroupErrorSummary, ...]:
     """:func:`errors_by_group`, or, when ``robot`` cannot be evaluated on ``data`` (a
     frame its geometry cannot place: :class:`DatasetError`), the groups of ``like`` with
     every number NaN ("not available") and the reason added to ``notes``."""
     try:
-        return errors_by_group(robot, data, trained)
+        return errors_by_group(robot, data, known)
     except DatasetError as e:
         notes.append(f"errors of {robot.source or 'the nominal'} not available: {e}")
         return tuple(g.unavailable() for g in like)
@@ -106,23 +107,18 @@ def _with_refined_intrinsics(data: Measurements, calibration: Calibration) -> Me
     return data.with_cameras(cameras) if cameras else data
 
 
-def _trained(unknowns: tuple[Unknown, ...]) -> dict[BlockKey, NDArray]:
-    """A fit's unknowns by block key."""
-    return {BlockKey(u.kind, u.name): u.value for u in unknowns}
-
-
-def _nominal_trained(nominal: Robot, data: Measurements) -> dict[BlockKey, NDArray]:
-    """The unknowns that kinds score other data with (the planes and their probes:
-    :meth:`~kinfw.observations.ObservationKind.trained_unknowns`) fitted to ``data`` with
-    the nominal robot (``parameters="none"``, least squares): the nominal's errors are
-    then distances from its own trained planes, as the calibrated model's from its.
-    Empty when no kind asks for them or the fit refuses the data."""
+def _nominal_trained(nominal: Robot, data: Measurements) -> tuple[Unknown, ...]:
+    """The unknowns fitted to ``data`` with the nominal robot (``parameters="none"``,
+    least squares) when a kind scores other data with trained unknowns (the planes and
+    their probes: :meth:`~kinfw.observations.ObservationKind.trained_unknowns`): the
+    nominal's errors are then distances from its own trained planes, as the calibrated
+    model's from its. Empty when no kind asks for them or the fit refuses the data."""
     if not any(kind_of(g).trained_unknowns(g) for g in data.all_groups()):
-        return {}
+        return ()
     try:
-        return _trained(refine(nominal, data, parameters="none", loss="linear").unknowns)
+        return refine(nominal, data, parameters="none", loss="linear").unknowns
     except DatasetError:
-        return {}
+        return ()
 
 
 def calibration_report(
@@ -160,9 +156,11 @@ def calibration_report(
     # the refined intrinsics (--refine-intrinsics) for the calibrated model's errors;
     # the start ones (the file's) for the nominal and the stages before the refinement
     refined_data = _with_refined_intrinsics(data, calibration)
-    # contacts are scored against the trained planes: the calibration's, and for the
-    # nominal the ones fitted to the calibration data with the nominal robot
-    trained = {} if calibration.refined is None else _trained(calibration.refined.unknowns)
+    # each model scored with the unknowns it was trained with (target poses, markers,
+    # measurement frames, planes): held-out images by reprojection with the board pose
+    # from training, contacts by distance from the trained plane; for the nominal, those
+    # fitted to the calibration data with the nominal robot when a kind scores with them
+    trained = () if calibration.refined is None else calibration.refined.unknowns
     trained_nominal = _nominal_trained(nominal, data)
     after = errors_by_group(calibrated, refined_data, trained)
     notes = list(calibration.notes)
@@ -174,7 +172,7 @@ def calibration_report(
         before_held = _errors_or_unavailable(nominal, held_out, after_held, notes, trained_nominal)
         held_out_rows = before_after(before_held, after_held)
     stage_rms = [StageErrors.of("nominal", before)]
-    stage_rms += [
+    stage_rms += [  # the refinement's stage: the calibrated model with its own unknowns
         StageErrors.of(
             name,
             errors_by_group(Robot(xml, name), refined_data, trained)

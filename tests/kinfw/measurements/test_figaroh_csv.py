@@ -276,7 +276,14 @@ def _camera_csv(path, robot, names, qs, flange_T_camera, root_T_board):
     path.write_text("\n".join(lines) + "\n")
 
 
-def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_path):
+CAMERA_LINK = """  <joint name="camera_joint" type="fixed">
+    <parent link="flange"/><child link="camera"/>
+  </joint>
+  <link name="camera"/>
+"""
+
+
+def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_path, capsys):
     """``--target board``: the 6D columns are the board's pose in a camera on the flange
     (mount and board unknown). Noise-free data of a perturbed 6R arm: calibrated, the
     board's pose in the camera at new configurations is the truth's (Pinocchio) to 1e-8."""
@@ -303,14 +310,17 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
         _camera_csv(tmp_path / name, truth, names, q, flange_T_camera, root_T_board)
     out = tmp_path / "train.json"
     args = ["import-csv", str(tmp_path / "train.csv"), "--urdf", str(tmp_path / "n.urdf")]
-    (tmp_path / "n.urdf").write_text(ARM_6R)
-    assert main([*args, "--frame", "flange", "--target", "board", "--out", str(out)]) == 0
+    # the camera's own link on the flange (its nominal mount: the flange itself)
+    (tmp_path / "n.urdf").write_text(ARM_6R.replace("</robot>", CAMERA_LINK + "</robot>"))
+    nominal = load_robot(tmp_path / "n.urdf")
+    args += ["--frame", "flange", "--target", "board", "--out", str(out)]
+    assert main([*args, "--camera-frame", "camera"]) == 0
     train = read_measurements(out)
     (group,) = train.targets
-    assert (group.camera, group.target) == ("flange", "board")
+    assert (group.camera, group.target) == ("camera", "board")
     result = calibrate(nominal, train)
     test = measurements_from_figaroh_csv(
-        tmp_path / "test.csv", robot=nominal, frame="flange", target="board"
+        tmp_path / "test.csv", robot=nominal, frame="flange", target="board", camera_frame="camera"
     )
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:
@@ -318,6 +328,33 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
     held = held_out_errors(nominal, result.urdf_xml, unknowns, test)
     pos, rot = held.values("position")[0], held.values("rotation")[0]
     assert pos.max() < 1e-8 and rot.max() < 1e-8
+    # the flange stays the flange: its fixed joint keeps the nominal origin (the data see
+    # the camera, not the flange) but for the shift of l6 onto its calibrated joint axis
+    # (re-expressed: the flange does not move with it), and the camera's joint holds the
+    # fitted mount
+    calibrated = load_robot(result.urdf_xml)
+    old_T_new = dict(result.export.link_shifts).get("l6", np.eye(4))
+    np.testing.assert_allclose(
+        calibrated.joint("flange_joint").parent_T_child,
+        inverse_transform(old_T_new) @ nominal.joint("flange_joint").parent_T_child,
+        rtol=0,
+        atol=1e-12,
+    )
+    model = result.refined.model
+    model_qs = qs[:, [names.index(j) for j in model.topology.joint_names]]
+    np.testing.assert_allclose(  # the camera link where the fit put the camera
+        calibrated.frame_poses(qs, "camera", names),
+        model.frame_poses(model_qs, "camera"),
+        rtol=0,
+        atol=1e-9,
+    )
+    # without --camera-frame, or with a link the URDF lacks: refused, saying how
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "would make calibrate redefine 'flange'" in err and "--camera-frame NAME" in err
+    assert main([*args, "--camera-frame", "wrist_cam"]) == 2
+    err = capsys.readouterr().err
+    assert "'wrist_cam' is not in the URDF" in err and '<link name="wrist_cam"/>' in err
     # a target needs orientation columns, and is measured in the camera
     with pytest.raises(DatasetError, match="marker 1 has no phix1"):
         measurements_from_figaroh_csv(

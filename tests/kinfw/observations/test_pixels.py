@@ -386,10 +386,10 @@ def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_wo
     all_e = np.concatenate(errs)
     assert cam.camera == "flange" and cam.n_images == 30 and cam.n_points == len(all_e)
     assert cam.rms_px == pytest.approx(np.sqrt(np.mean(all_e**2)), rel=1e-6)
-    # the stage table is in px for image points (its target pose refitted in closed
-    # form, as for 'target' observations: near the calibrated one); the file reads back
+    # the stage table is in px for image points (after the refinement: the calibrated
+    # target pose, the reprojection section's); the file reads back
     (after,) = report.errors_after
-    assert after.rms("pixel") == pytest.approx(cam.rms_px, rel=0.05)
+    assert after.rms("pixel") == pytest.approx(cam.rms_px, rel=1e-9)
     ((group, value),) = report.rms_by_stage[-1].rms
     assert (group, value.key, value.value) == (
         "flange (pixels)",
