@@ -454,8 +454,9 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     """verify (text, --json), calibrate --holdout and report.json give the sphere's
     distance error in mm (its component's metric: no library code names it), equal to
     the hand computation: radius minus |probe - centre| with Pinocchio FK, the probe and
-    centre from the sidecar (verify of the calibration) or from the kind's closed form on
-    the held-out contacts (the before / after table, as for a target's pose)."""
+    centre from the sidecar (verify, and the calibration's "after": scored with what it
+    was trained with) or, for the nominal ("before"), from the kind's closed form on the
+    held-out contacts."""
     from kinfw.reports import read_report, read_sidecar
 
     paths, nominal, qs, radius = sphere_files
@@ -472,7 +473,13 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
         sol = sphere_closed_form(robot.frame_poses(q_held, "flange", NAMES), r_held)
         return _distance_errors(robot, q_held, r_held, sol[0:3], sol[3:6])
 
-    before, after = _stats_mm(refitted(nominal)), _stats_mm(refitted(calibrated))
+    # after: the calibration with the probe and centre it was trained with (the sidecar's)
+    side = read_sidecar(out_urdf.with_suffix(".kinfw.json"))
+    known = side.known_frames()
+    e = _distance_errors(
+        calibrated, q_held, r_held, known[("probe", "flange")], known[("sphere", "ball")]
+    )
+    before, after = _stats_mm(refitted(nominal)), _stats_mm(e)
     assert before[1] > 10 * after[1]  # the calibration helps
     held_table = out.split("held-out errors:")[1]
     assert "before RMS mm" in held_table.splitlines()[1]
@@ -488,14 +495,9 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
         held["before_distance_rms_mm"],
         held["after_distance_rms_mm"],
     )
-    side = read_sidecar(out_urdf.with_suffix(".kinfw.json"))
     assert side.errors_held_out[0].of("distance") == pytest.approx((before[1], after[1]), rel=1e-9)
 
     # verify of the calibration on the held-out contacts: the sidecar's probe and centre
-    known = side.known_frames()
-    e = _distance_errors(
-        calibrated, q_held, r_held, known[("probe", "flange")], known[("sphere", "ball")]
-    )
     doc = json.loads(_cli(["verify", out_urdf, paths["held"], "--json"], capsys))
     (g,) = doc["groups"]
     mean, rms, worst = _stats_mm(e)
