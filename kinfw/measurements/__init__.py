@@ -108,6 +108,13 @@ from kinfw.measurements._file import (
     read_measurements,
     write_measurements,
 )
+from kinfw.measurements._pose_pairs import (
+    MIN_POSE_PAIRS,
+    POSE_PAIR_COLUMNS,
+    PosePairs,
+    pose_pairs_text,
+    read_pose_pairs,
+)
 from kinfw.measurements._streams import (
     align_streams,
     check_stream,
@@ -119,8 +126,11 @@ __all__ = [
     "DISTINCT_TOL",
     "FORMAT",
     "IGNORED_COLUMNS",
+    "MIN_POSE_PAIRS",
+    "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
     "Measurements",
+    "PosePairs",
     "align_streams",
     "check_against_robot",
     "check_joint_motion",
@@ -135,8 +145,10 @@ __all__ = [
     "measurements_to_dict",
     "merge_same_key",
     "observed_joints",
+    "pose_pairs_text",
     "read_measurements",
     "read_pose_csv",
+    "read_pose_pairs",
     "robot_measurement_frames",
     "write_measurements",
 ]
