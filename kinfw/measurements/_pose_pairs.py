@@ -108,7 +108,10 @@ class PosePairs:
 
 def _pose(xyz, quat_xyzw, where: str) -> NDArray[np.float64]:
     """``a_T_b`` of a position and a scalar-last quaternion, refusing a non-unit one."""
-    xyz, q = np.asarray(xyz, dtype=float), np.asarray(quat_xyzw, dtype=float)
+    try:
+        xyz, q = np.asarray(xyz, dtype=float), np.asarray(quat_xyzw, dtype=float)
+    except (TypeError, ValueError):
+        raise DatasetError(f"{where}: a value is not a number") from None
     if not (np.isfinite(xyz).all() and np.isfinite(q).all()):
         raise DatasetError(f"{where}: a value is not a finite number")
     norm = float(np.linalg.norm(q))
