@@ -1,4 +1,7 @@
 """Measurement files (``kinfw-measurements``, version 1, JSON): read, validate, write.
+Also the hand-eye pose-pair files of ``kinfw handeye`` (CSV, JSON, easy_handeye2 YAML:
+:func:`read_pose_pairs`, :func:`pose_pairs_text`; formats in ``_pose_pairs.py`` and
+``docs/handeye.md``).
 
 A measurement file lists samples; each sample is one robot configuration ``q`` and the
 observations made in it::
