@@ -82,6 +82,7 @@ from kinfw.identification.handeye._compare import (
     fit_method,
     kfold_errors,
     loop_closure_errors,
+    repeated_pairs,
 )
 from kinfw.identification.handeye._lm import (
     LMFit,
@@ -235,6 +236,7 @@ __all__ = [
     "read_handeye_calibration",
     "register_start",
     "rejection_threshold",
+    "repeated_pairs",
     "right_product_matrix_xyzw",
     "robust_sigmas",
     "ros_launch_text",

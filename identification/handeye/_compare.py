@@ -34,6 +34,7 @@ __all__ = [
     "fit_method",
     "kfold_errors",
     "loop_closure_errors",
+    "repeated_pairs",
 ]
 
 #: The methods :func:`fit_method` knows: kinfw's maximum likelihood (``solve_axxb``),
@@ -128,6 +129,25 @@ def loop_closure_errors(
     rot = np.degrees(rotation_angle(predicted_R_measured))
     trans = np.linalg.norm(predicted[:, :3, 3] - measured[:, :3, 3], axis=-1)
     return HeldOutErrors(rot, trans)
+
+
+def repeated_pairs(
+    base_T_hands: ArrayLike,
+    camera_T_targets: ArrayLike,
+    *,
+    held_base_T_hands: ArrayLike,
+    held_camera_T_targets: ArrayLike,
+    tol: float = 1e-9,
+) -> list[int]:
+    """Indices of the held-out pairs equal (within ``tol`` per entry) to a pair of the
+    fit: their errors would be in-sample, not held-out."""
+    A, B = np.asarray(base_T_hands, dtype=float), np.asarray(camera_T_targets, dtype=float)
+    HA = np.asarray(held_base_T_hands, dtype=float)
+    HB = np.asarray(held_camera_T_targets, dtype=float)
+    same = (np.abs(HA[:, None] - A[None]).max(axis=(-2, -1)) <= tol) & (
+        np.abs(HB[:, None] - B[None]).max(axis=(-2, -1)) <= tol
+    )
+    return [int(i) for i in np.flatnonzero(same.any(axis=1))]
 
 
 def kfold_errors(

@@ -9,12 +9,15 @@ Like the other command modules, only the standard library is imported at start-u
 from __future__ import annotations
 
 import argparse
+import logging
 from pathlib import Path
 
 from kinfw.cli._args import number
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
 __all__ = ["add_handeye_parser", "cmd_handeye"]
+
+log = logging.getLogger("kinfw")
 
 #: Folds of the cross-validation when --method is given without --holdout or --k.
 DEFAULT_K = 5
@@ -130,6 +133,7 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         fit_method,
         kfold_errors,
         loop_closure_errors,
+        repeated_pairs,
     )
     from kinfw.measurements import read_pose_pairs
 
@@ -137,6 +141,19 @@ def cmd_handeye(args: argparse.Namespace) -> int:
     pairs = read_pose_pairs(args.pairs).scaled(scale)
     setup = args.setup or pairs.setup or "eye-in-hand"
     holdout = read_pose_pairs(args.holdout).scaled(scale) if args.holdout else None
+    if holdout is not None:
+        repeated = repeated_pairs(
+            pairs.base_T_hands,
+            pairs.sensor_T_targets,
+            held_base_T_hands=holdout.base_T_hands,
+            held_camera_T_targets=holdout.sensor_T_targets,
+        )
+        if repeated:
+            log.warning(
+                f"--holdout {args.holdout}: {len(repeated)} of its {len(holdout)} pairs are "
+                f"also in {args.pairs} (e.g. pair {repeated[0]}): their errors are in-sample, "
+                "not held-out"
+            )
     mount_frame = args.hand_frame if setup == "eye-in-hand" else args.base_frame
     calibration, _ = calibrate_pose_pairs(
         base_T_hands=pairs.base_T_hands,

@@ -111,3 +111,13 @@ def test_motions_about_one_axis_exit_2_naming_the_axis(tmp_path, capsys):
     path = _write(tmp_path / "p.csv", PosePairs(hands, B, "x"), "csv")
     code, _, stderr = run_cli(["-q", "handeye", path], capsys)
     assert code == 2 and "about one axis ([0. 0. 1.] in the hand frame" in stderr
+
+
+def test_a_holdout_repeating_the_fits_pairs_is_warned_about(tmp_path, capsys):
+    pairs = _write(tmp_path / "p.csv", _pairs(5, 8, noise=1e-3), "csv")
+    code, _, stderr = run_cli(["-q", "handeye", pairs, "--holdout", pairs], capsys)
+    assert code == 0
+    assert "warning: --holdout" in stderr and "8 of its 8 pairs are also in" in stderr
+    held = _write(tmp_path / "h.csv", _pairs(6, 8, noise=1e-3), "csv")
+    code, _, stderr = run_cli(["-q", "handeye", pairs, "--holdout", held], capsys)
+    assert code == 0 and "warning" not in stderr
