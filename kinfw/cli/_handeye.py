@@ -12,7 +12,7 @@ import argparse
 import logging
 from pathlib import Path
 
-from kinfw.cli._args import number
+from kinfw.cli._args import add_xacro_option, number
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
 __all__ = ["add_handeye_parser", "cmd_handeye"]
@@ -21,6 +21,7 @@ log = logging.getLogger("kinfw")
 
 #: Folds of the cross-validation when --method is given without --holdout or --k.
 DEFAULT_K = 5
+CAMERA_FRAME = "camera_link"
 _METRES_PER = {"m": 1.0, "mm": 1e-3}
 _OPENCV = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
 
@@ -101,7 +102,20 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--base-frame", default="base_link", help="the robot base's TF frame")
     p.add_argument("--hand-frame", default="tool0", help="the hand's TF frame")
-    p.add_argument("--camera-frame", default="camera_link", help="the camera's TF frame")
+    p.add_argument(
+        "--camera-frame",
+        default=CAMERA_FRAME,
+        help="the camera's TF frame (with --urdf: the URDF camera frame whose target "
+        "observations to use, when several cameras observe)",
+    )
+    p.add_argument(
+        "--urdf",
+        default=argparse.SUPPRESS,
+        help="PAIRS is a kinfw measurement file (target observations of a camera on the "
+        "robot): the hand's poses are this URDF's forward kinematics of --hand-frame "
+        "(eye-in-hand, metres)",
+    )
+    add_xacro_option(p)
     p.set_defaults(func=cmd_handeye, check_outputs=check_handeye_outputs)
 
 
@@ -138,7 +152,18 @@ def cmd_handeye(args: argparse.Namespace) -> int:
     from kinfw.measurements import read_pose_pairs
 
     scale = _METRES_PER[args.unit]
-    pairs = read_pose_pairs(args.pairs).scaled(scale)
+    if getattr(args, "urdf", None) is not None:
+        from kinfw.cli._args import load_model
+        from kinfw.measurements import pose_pairs_from_measurements, read_measurements
+
+        pairs = pose_pairs_from_measurements(
+            read_measurements(args.pairs),
+            load_model(args.urdf, args),
+            hand_frame=args.hand_frame,
+            camera=args.camera_frame if args.camera_frame != CAMERA_FRAME else None,
+        )
+    else:
+        pairs = read_pose_pairs(args.pairs).scaled(scale)
     setup = args.setup or pairs.setup or "eye-in-hand"
     holdout = read_pose_pairs(args.holdout).scaled(scale) if args.holdout else None
     if holdout is not None:

@@ -115,6 +115,7 @@ from kinfw.measurements._pose_pairs import (
     MIN_POSE_PAIRS,
     POSE_PAIR_COLUMNS,
     PosePairs,
+    pose_pairs_from_measurements,
     pose_pairs_text,
     read_pose_pairs,
 )
@@ -148,6 +149,7 @@ __all__ = [
     "measurements_to_dict",
     "merge_same_key",
     "observed_joints",
+    "pose_pairs_from_measurements",
     "pose_pairs_text",
     "read_measurements",
     "read_pose_csv",

@@ -50,6 +50,7 @@ __all__ = [
     "MIN_POSE_PAIRS",
     "POSE_PAIR_COLUMNS",
     "PosePairs",
+    "pose_pairs_from_measurements",
     "pose_pairs_text",
     "read_pose_pairs",
 ]
@@ -174,6 +175,11 @@ def _read_json(path: Path, text: str) -> PosePairs:
         data = json.loads(text)
     except json.JSONDecodeError as err:
         raise DatasetError(f"{path}: not JSON ({err})") from None
+    if isinstance(data, dict) and data.get("format") == "kinfw-measurements":
+        raise DatasetError(
+            f"{path}: a kinfw measurement file, not pose pairs: give the robot's URDF "
+            "(kinfw handeye --urdf) to compute the hand's poses from its joint values"
+        )
     if not isinstance(data, list) or not all(isinstance(p, list) and len(p) == 2 for p in data):
         raise DatasetError(f"{path}: expected a list of [base_T_hand, sensor_T_target] pairs")
     hands = [_matrix(p[0], f"{path}: pair {i}, base_T_hand") for i, p in enumerate(data)]
@@ -225,6 +231,49 @@ def _pairs(hands, sensors, source: str, setup: str | None) -> PosePairs:
             f"{MIN_POSE_PAIRS} (two motions about different axes), 10 or more in practice"
         )
     return PosePairs(np.stack(hands), np.stack(sensors), source, setup)
+
+
+def pose_pairs_from_measurements(
+    measurements, robot, *, hand_frame: str, camera: str | None = None
+) -> PosePairs:
+    """Pose pairs of a kinfw measurement file's ``target`` observations: at each
+    observation the hand's pose by the robot's forward kinematics and the target's pose
+    in the camera (eye-in-hand; metres).
+
+    Parameters
+    ----------
+    measurements : kinfw.measurements.Measurements
+        With ``target`` observations.
+    robot : kinfw.model.Robot
+        The model whose forward kinematics give ``base_T_hand`` (its root link is the
+        base).
+    hand_frame : str
+        The URDF link the camera is mounted on.
+    camera : str, optional
+        The camera frame whose observations to use; needed when several cameras observe.
+
+    Raises
+    ------
+    DatasetError
+        No target observations, several cameras and none chosen (the message lists
+        them), or fewer than :data:`MIN_POSE_PAIRS` observations.
+    """
+    groups = [g for g in measurements.targets if camera is None or g.camera == camera]
+    cameras = sorted({g.camera for g in measurements.targets})
+    if not groups:
+        raise DatasetError(
+            f"{measurements.source}: no target observations"
+            + (f" by camera {camera!r} (cameras: {', '.join(cameras)})" if cameras else "")
+        )
+    if len({g.camera for g in groups}) > 1 or len(groups) > 1:
+        raise DatasetError(
+            f"{measurements.source}: targets seen by {', '.join(cameras)} or several targets: "
+            "choose one camera (--camera-frame) and one target per file"
+        )
+    g = groups[0]
+    qs = measurements.qs[g.sample]
+    base_T_hands = robot.frame_poses(qs, hand_frame, measurements.joint_names)
+    return _pairs(list(base_T_hands), list(g.camera_T_target), measurements.source, "eye-in-hand")
 
 
 def read_pose_pairs(path: str | Path) -> PosePairs:

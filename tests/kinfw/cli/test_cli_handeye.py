@@ -121,3 +121,42 @@ def test_a_holdout_repeating_the_fits_pairs_is_warned_about(tmp_path, capsys):
     held = _write(tmp_path / "h.csv", _pairs(6, 8, noise=1e-3), "csv")
     code, _, stderr = run_cli(["-q", "handeye", pairs, "--holdout", held], capsys)
     assert code == 0 and "warning" not in stderr
+
+
+def test_a_kinfw_measurement_file_with_a_urdf_gives_the_models_camera_mount(tmp_path, capsys):
+    """Target observations of the IIS head's left camera, simulated from the URDF's own
+    kinematics (Pinocchio): the camera's pose on its vergence link is the URDF's."""
+    from kinfw.measurements import Measurements, write_measurements
+    from kinfw.model import builtin_head_urdf, load_robot
+    from kinfw.observations import TargetObservations
+
+    urdf = builtin_head_urdf()
+    model = pin.buildModelFromUrdf(str(urdf))
+    data = model.createData()
+    robot = load_robot(urdf)
+    rng = np.random.default_rng(0)
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    qs = np.stack([lo + (hi - lo) * rng.uniform(0.1, 0.9, size=model.nq) for _ in range(12)])
+    cam, hand = model.getFrameId("left_camera"), model.getFrameId("vergence_left_link")
+    target = pin.SE3(np.eye(3), np.array([0.0, 0.0, 2.0]))
+    camera_T_target, mount = [], []
+    for q in qs:
+        pin.framesForwardKinematics(model, data, q)
+        camera_T_target.append((data.oMf[cam].inverse() * target).homogeneous)
+        mount.append((data.oMf[hand].inverse() * data.oMf[cam]).homogeneous)
+    names = tuple(model.names[1:])
+    assert names == robot.joint_names[: len(names)]
+    m = Measurements(
+        joint_names=names,
+        qs=qs,
+        targets=(TargetObservations("left_camera", np.arange(12), np.stack(camera_T_target)),),
+    )
+    path = tmp_path / "m.json"
+    write_measurements(path, m)
+    out = tmp_path / "r.yaml"
+    argv = ["-q", "handeye", path, "--urdf", urdf, "--hand-frame", "vergence_left_link"]
+    code, _, stderr = run_cli([*argv, "--out", out], capsys)
+    assert code == 0, stderr
+    np.testing.assert_allclose(read_handeye_calibration(out).mount_T_camera, mount[0], atol=1e-9)
+    code, _, stderr = run_cli(["-q", "handeye", path], capsys)
+    assert code == 2 and "a kinfw measurement file, not pose pairs" in stderr
