@@ -52,7 +52,12 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "[base_T_hand, camera_T_target] pairs of 4x4 row-major matrices; or "
         "easy_handeye2's saved samples (.yaml, .yml, .samples).",
     )
-    p.add_argument("pairs", type=Path, metavar="PAIRS", help="the pose-pair file")
+    p.add_argument(
+        "pairs",
+        type=Path,
+        metavar="PAIRS",
+        help="the pose-pair file (or, with --urdf, a kinfw measurement file)",
+    )
     p.add_argument(
         "--setup",
         choices=("eye-in-hand", "eye-to-hand"),
