@@ -1,5 +1,6 @@
 """``kinfw handeye``: hand-eye calibration from pose pairs (CSV, JSON, easy_handeye2
-YAML; :func:`kinfw.measurements.read_pose_pairs`), eye-in-hand or eye-to-hand, with
+YAML; :func:`kinfw.measurements.read_pose_pairs`) or a measurement file with a URDF
+(:func:`kinfw.measurements.pose_pairs_from_measurements`), eye-in-hand or eye-to-hand, with
 OpenCV's closed forms side by side, held-out errors, a typed result file and ROS 2
 outputs (:mod:`kinfw.identification.handeye`).
 
@@ -132,7 +133,8 @@ def check_handeye_outputs(args: argparse.Namespace) -> None:
         check_output_dir(args.ros_out, label="--ros-out")
 
 
-def _pose_line(name: str, T, unit_mm: bool = True) -> str:
+def _pose_line(name: str, T) -> str:
+    """``name: xyz [mm] [...]  quat xyzw [...]`` of a transform in metres."""
     import numpy as np
 
     from kinfw.geometry import xyz_quat_xyzw_from_transform
@@ -145,6 +147,8 @@ def _pose_line(name: str, T, unit_mm: bool = True) -> str:
 
 
 def cmd_handeye(args: argparse.Namespace) -> int:
+    """Calibrate, print (or ``--json``), compare (``--method``), write (``--out``,
+    ``--ros-out``); 0 on success."""
     import numpy as np
 
     from kinfw.identification.handeye import (
@@ -158,6 +162,11 @@ def cmd_handeye(args: argparse.Namespace) -> int:
 
     scale = _METRES_PER[args.unit]
     if getattr(args, "urdf", None) is not None:
+        if args.setup == "eye-to-hand":
+            raise ValueError(
+                "--urdf: a measurement file's targets are seen by a camera on "
+                "the robot (eye-in-hand); --setup eye-to-hand does not apply"
+            )
         from kinfw.cli._args import load_model
         from kinfw.measurements import pose_pairs_from_measurements, read_measurements
 
