@@ -10,15 +10,13 @@ Like the other command modules, only the standard library is imported at start-u
 from __future__ import annotations
 
 import argparse
-import logging
+import warnings
 from pathlib import Path
 
 from kinfw.cli._args import add_xacro_option, number
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
 __all__ = ["add_handeye_parser", "cmd_handeye"]
-
-log = logging.getLogger("kinfw")
 
 #: Folds of the cross-validation when --method is given without --holdout or --k.
 DEFAULT_K = 5
@@ -188,10 +186,12 @@ def cmd_handeye(args: argparse.Namespace) -> int:
             held_camera_T_targets=holdout.sensor_T_targets,
         )
         if repeated:
-            log.warning(
+            warnings.warn(
                 f"--holdout {args.holdout}: {len(repeated)} of its {len(holdout)} pairs are "
                 f"also in {args.pairs} (e.g. pair {repeated[0]}): their errors are in-sample, "
-                "not held-out"
+                "not held-out",
+                UserWarning,
+                stacklevel=2,
             )
     mount_frame = args.hand_frame if setup == "eye-in-hand" else args.base_frame
     calibration, _ = calibrate_pose_pairs(
