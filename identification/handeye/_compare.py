@@ -30,7 +30,9 @@ from kinfw.identification.handeye._result import HandEyeResult
 __all__ = [
     "HANDEYE_METHODS",
     "HeldOutErrors",
+    "MethodResult",
     "calibrate_pose_pairs",
+    "compare_methods",
     "fit_method",
     "kfold_errors",
     "loop_closure_errors",
@@ -218,3 +220,65 @@ def calibrate_pose_pairs(
         camera_frame=frames[1],
     )
     return calibration, r
+
+
+@dataclass(frozen=True, slots=True)
+class MethodResult:
+    """One method's fit and held-out errors (:func:`compare_methods`).
+
+    Attributes
+    ----------
+    method : str
+        A name of :data:`HANDEYE_METHODS`.
+    mount_T_camera, holder_T_target : ndarray, shape (4, 4), or None
+        The fit (input unit); None when the method failed.
+    holdout : HeldOutErrors or None
+        Loop-closure errors on the held-out pairs, when given.
+    kfold : HeldOutErrors or None
+        k-fold errors, when ``k`` is given.
+    error : str or None
+        Why the method failed (its exception's message), else None.
+    """
+
+    method: str
+    mount_T_camera: NDArray[np.float64] | None
+    holder_T_target: NDArray[np.float64] | None
+    holdout: HeldOutErrors | None
+    kfold: HeldOutErrors | None
+    error: str | None = None
+
+
+def compare_methods(
+    methods: Sequence[str],
+    calibration: HandEyeCalibration,
+    *,
+    base_T_hands: ArrayLike,
+    camera_T_targets: ArrayLike,
+    held_out: tuple[ArrayLike, ArrayLike] | None = None,
+    k: int | None = None,
+) -> list[MethodResult]:
+    """kinfw's ``calibration`` and each of ``methods`` on the same pairs, with their
+    loop-closure errors on ``held_out`` pairs ``(base_T_hands, camera_T_targets)`` and
+    by ``k``-fold cross-validation; kinfw first. A method that raises is a result with
+    its ``error`` (OpenCV's closed forms fail on some data); kinfw's errors propagate."""
+    setup = calibration.setup
+    data = {"base_T_hands": base_T_hands, "camera_T_targets": camera_T_targets}
+    results = []
+    for method in ["kinfw", *methods]:
+        try:
+            X, Y = (
+                (calibration.mount_T_camera, calibration.holder_T_target)
+                if method == "kinfw"
+                else fit_method(method, **data, setup=setup)
+            )
+            held = None
+            if held_out is not None:
+                A, B = held_out
+                held = loop_closure_errors(X, Y, base_T_hands=A, camera_T_targets=B, setup=setup)
+            fold = kfold_errors(method, **data, setup=setup, k=k) if k else None
+            results.append(MethodResult(method, X, Y, held, fold))
+        except Exception as exc:
+            if method == "kinfw":
+                raise
+            results.append(MethodResult(method, None, None, None, None, " ".join(str(exc).split())))
+    return results

@@ -144,18 +144,10 @@ def _pose_line(name: str, T) -> str:
     )
 
 
-def cmd_handeye(args: argparse.Namespace) -> int:
-    """Calibrate, print (or ``--json``), compare (``--method``), write (``--out``,
-    ``--ros-out``); 0 on success."""
-    import numpy as np
-
-    from kinfw.identification.handeye import (
-        calibrate_pose_pairs,
-        fit_method,
-        kfold_errors,
-        loop_closure_errors,
-        repeated_pairs,
-    )
+def _read_pairs(args: argparse.Namespace):
+    """The pairs to fit (metres) and the held-out ones (or None); warns when held-out
+    pairs repeat the fit's."""
+    from kinfw.identification.handeye import repeated_pairs
     from kinfw.measurements import read_pose_pairs
 
     scale = _METRES_PER[args.unit]
@@ -176,7 +168,6 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         )
     else:
         pairs = read_pose_pairs(args.pairs).scaled(scale)
-    setup = args.setup or pairs.setup or "eye-in-hand"
     holdout = read_pose_pairs(args.holdout).scaled(scale) if args.holdout else None
     if holdout is not None:
         repeated = repeated_pairs(
@@ -193,6 +184,16 @@ def cmd_handeye(args: argparse.Namespace) -> int:
                 UserWarning,
                 stacklevel=2,
             )
+    return pairs, holdout
+
+
+def cmd_handeye(args: argparse.Namespace) -> int:
+    """Calibrate, compare (``--method``), write (``--out``, ``--ros-out``), print (or
+    ``--json``); 0 on success."""
+    from kinfw.identification.handeye import calibrate_pose_pairs, compare_methods
+
+    pairs, holdout = _read_pairs(args)
+    setup = args.setup or pairs.setup or "eye-in-hand"
     mount_frame = args.hand_frame if setup == "eye-in-hand" else args.base_frame
     calibration, _ = calibrate_pose_pairs(
         base_T_hands=pairs.base_T_hands,
@@ -203,34 +204,14 @@ def cmd_handeye(args: argparse.Namespace) -> int:
     k = args.k or (DEFAULT_K if args.method and holdout is None else None)
     if k is not None and k > len(pairs):
         raise ValueError(f"--k {k}: more folds than the {len(pairs)} pose pairs")
-    data = {"base_T_hands": pairs.base_T_hands, "camera_T_targets": pairs.sensor_T_targets}
-
-    rows = []  # (method, mount_T_camera, holder_T_target, held-out, k-fold, error)
-    for method in ["kinfw", *(args.method or [])]:
-        try:
-            X, Y = (
-                (calibration.mount_T_camera, calibration.holder_T_target)
-                if method == "kinfw"
-                else fit_method(method, **data, setup=setup)
-            )
-            held = (
-                loop_closure_errors(
-                    X,
-                    Y,
-                    base_T_hands=holdout.base_T_hands,
-                    camera_T_targets=holdout.sensor_T_targets,
-                    setup=setup,
-                )
-                if holdout is not None
-                else None
-            )
-            fold = kfold_errors(method, **data, setup=setup, k=k) if k else None
-            rows.append((method, X, Y, held, fold, None))
-        except Exception as exc:  # an OpenCV method failing is a row of the table
-            if method == "kinfw":
-                raise
-            rows.append((method, None, None, None, None, " ".join(str(exc).split())[:60]))
-
+    rows = compare_methods(
+        args.method or [],
+        calibration,
+        base_T_hands=pairs.base_T_hands,
+        camera_T_targets=pairs.sensor_T_targets,
+        held_out=None if holdout is None else (holdout.base_T_hands, holdout.sensor_T_targets),
+        k=k,
+    )
     if args.out is not None:
         from kinfw.identification.handeye import handeye_calibration_text
 
@@ -242,36 +223,50 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         write_ros_outputs(
             args.ros_out, calibration, base_frame=args.base_frame, hand_frame=args.hand_frame
         )
-
-    def errors(e):
-        if e is None:
-            return None
-        mm = 1e3 * e.rms_translation
-        return {"rms_rotation_deg": e.rms_rotation_deg, "rms_translation_mm": mm}
-
     if args.json:
-        out = {
-            "calibration": calibration.to_dict(),
-            "sigma_rotation_deg": calibration.sigma_rotation_deg.tolist(),
-            "sigma_translation_mm": (1e3 * calibration.sigma_translation_m).tolist(),
-            "methods": [
-                {
-                    "method": m,
-                    f"{calibration.mount_name}_T_camera": None if X is None else X.tolist(),
-                    f"{calibration.holder_name}_T_target": None if Y is None else Y.tolist(),
-                    "holdout": errors(h),
-                    "kfold": errors(f),
-                    "k": k if f is not None else None,
-                    "error": err,
-                }
-                for m, X, Y, h, f, err in rows
-            ],
-        }
-        print(json_text(out))
-        return 0
+        print(json_text(_json(calibration, rows, k)))
+    else:
+        _print_calibration(calibration, pairs.source)
+        if len(rows) > 1 or holdout is not None or k:
+            _print_table(rows, calibration.mount_name, holdout is not None, k)
+    return 0
 
-    c = calibration
-    print(f"kinfw handeye: {c.n_samples} pose pairs from {pairs.source} ({setup}), ", end="")
+
+def _errors(e) -> dict | None:
+    if e is None:
+        return None
+    return {"rms_rotation_deg": e.rms_rotation_deg, "rms_translation_mm": 1e3 * e.rms_translation}
+
+
+def _json(calibration, rows, k: int | None) -> dict:
+    """``--json``'s document: the calibration, its 1-sigma and every method's results."""
+    return {
+        "calibration": calibration.to_dict(),
+        "sigma_rotation_deg": calibration.sigma_rotation_deg.tolist(),
+        "sigma_translation_mm": (1e3 * calibration.sigma_translation_m).tolist(),
+        "methods": [
+            {
+                "method": r.method,
+                f"{calibration.mount_name}_T_camera": None
+                if r.mount_T_camera is None
+                else r.mount_T_camera.tolist(),
+                f"{calibration.holder_name}_T_target": None
+                if r.holder_T_target is None
+                else r.holder_T_target.tolist(),
+                "holdout": _errors(r.holdout),
+                "kfold": _errors(r.kfold),
+                "k": k if r.kfold is not None else None,
+                "error": r.error,
+            }
+            for r in rows
+        ],
+    }
+
+
+def _print_calibration(c, source: str) -> None:
+    import numpy as np
+
+    print(f"kinfw handeye: {c.n_samples} pose pairs from {source} ({c.setup}), ", end="")
     print(f"{len(c.rejected)} rejected" + (f": {list(c.rejected)}" if c.rejected else ""))
     print(_pose_line(f"{c.mount_name}_T_camera", c.mount_T_camera))
     rpy = np.degrees(_rpy(c.mount_T_camera))
@@ -283,9 +278,6 @@ def cmd_handeye(args: argparse.Namespace) -> int:
     )
     print(_pose_line(f"{c.holder_name}_T_target", c.holder_T_target))
     print(f"verdict: {c.verdict_message}")
-    if len(rows) > 1 or holdout is not None or k:
-        _print_table(rows, c.mount_name, holdout is not None, k)
-    return 0
 
 
 def _rpy(T):
@@ -304,11 +296,12 @@ def _print_table(rows, mount: str, holdout: bool, k: int | None) -> None:
         header += ["holdout deg", "holdout mm"]
     if k:
         header += [f"{k}-fold deg", f"{k}-fold mm"]
-    X0 = rows[0][1]
+    X0 = rows[0].mount_T_camera
     lines = [header]
-    for m, X, _, h, f, err in rows:
+    for r in rows:
+        m, X, h, f = r.method, r.mount_T_camera, r.holdout, r.kfold
         if X is None:
-            lines.append([m, f"failed: {err}"])
+            lines.append([m, f"failed: {r.error[:60]}"])
             continue
         d_rot = float(np.degrees(rotation_angle(X0[:3, :3].T @ X[:3, :3])))
         d_t = 1e3 * float(np.linalg.norm(X0[:3, 3] - X[:3, 3]))
