@@ -3,7 +3,11 @@
 likelihood on SE(3) with covariance, verdict and outlier rejection; the closed forms of
 Park, Andreff, Daniilidis, Shah and Li as starts (by name in :data:`START_METHODS`);
 stage 2 of Shih et al. per camera (:func:`calibrate_cameras`); the time offset between
-pose streams (:func:`best_time_offset`).
+pose streams (:func:`best_time_offset`). For ``kinfw handeye``: either setup from pose
+pairs (:func:`calibrate_pose_pairs`, a :class:`HandEyeCalibration` written and read back
+by :func:`handeye_calibration_text` / :func:`read_handeye_calibration`), OpenCV's closed
+forms side by side (:func:`fit_method`) with held-out errors (:func:`loop_closure_errors`,
+:func:`kfold_errors`), and the ROS 2 outputs (:func:`write_ros_outputs`).
 
 One convention for every solver here (eye-in-hand): a camera rigidly mounted on the
 robot's *hand* (the link it hangs from: end effector, flange, the head's plate) looks at
@@ -46,6 +50,14 @@ from kinfw.identification.handeye._axyb_start import (
     check_start,
     start_of_y,
 )
+from kinfw.identification.handeye._calibration import (
+    HANDEYE_FORMAT,
+    SETUPS,
+    HandEyeCalibration,
+    handeye_calibration_text,
+    read_handeye_calibration,
+    solver_hand_poses,
+)
 from kinfw.identification.handeye._cameras import (
     CameraCalibration,
     CamerasResult,
@@ -62,6 +74,17 @@ from kinfw.identification.handeye._checks import (
     length_scale,
     nearest_rotation,
     solve_normal,
+)
+from kinfw.identification.handeye._compare import (
+    HANDEYE_METHODS,
+    HeldOutErrors,
+    MethodResult,
+    calibrate_pose_pairs,
+    compare_methods,
+    fit_method,
+    kfold_errors,
+    loop_closure_errors,
+    repeated_pairs,
 )
 from kinfw.identification.handeye._lm import (
     LMFit,
@@ -88,6 +111,14 @@ from kinfw.identification.handeye._quaternion import (
     rotation_from_quat_xyzw,
 )
 from kinfw.identification.handeye._result import AXYBResult, HandEyeResult
+from kinfw.identification.handeye._ros import (
+    ROS_FILES,
+    easy_handeye_text,
+    ros_launch_text,
+    static_transform_args,
+    urdf_mount_text,
+    write_ros_outputs,
+)
 from kinfw.identification.handeye._starts import (
     START_METHODS,
     RankedStart,
@@ -131,6 +162,8 @@ from kinfw.identification.handeye._uncertainty import (
 __all__ = [
     "CHI2_6_999",
     "HALF_TURN_BAND_RAD",
+    "HANDEYE_FORMAT",
+    "HANDEYE_METHODS",
     "MIN_MOTION_RAD",
     "ORTHONORMAL_TOL",
     "PARALLEL_AXES_RAD",
@@ -138,6 +171,8 @@ __all__ = [
     "POOR_TRANSLATION_FRACTION",
     "PRE_ROTATE_ABOVE_RAD",
     "RANK_TOL",
+    "ROS_FILES",
+    "SETUPS",
     "START_METHODS",
     "UNDETERMINED_ROTATION_DEG",
     "UNDETERMINED_TRANSLATION_FRACTION",
@@ -146,9 +181,12 @@ __all__ = [
     "AXYBResult",
     "CameraCalibration",
     "CamerasResult",
+    "HandEyeCalibration",
     "HandEyeError",
     "HandEyeResult",
+    "HeldOutErrors",
     "LMFit",
+    "MethodResult",
     "PoseData",
     "PoseFit",
     "RankedStart",
@@ -163,6 +201,7 @@ __all__ = [
     "assess",
     "best_time_offset",
     "calibrate_cameras",
+    "calibrate_pose_pairs",
     "camera_mount",
     "candidate_starts",
     "check_motion",
@@ -172,18 +211,24 @@ __all__ = [
     "closed_form_batch",
     "closed_form_start",
     "combined_verdict",
+    "compare_methods",
     "consistent_quats_xyzw",
     "convergence_factor",
     "daniilidis_axxb",
+    "easy_handeye_text",
     "fit_absolute",
     "fit_lm",
+    "fit_method",
+    "handeye_calibration_text",
     "implied_target_spread",
     "inverse_covariance_map",
     "iteration_matrix",
+    "kfold_errors",
     "largest_line_angle",
     "left_product_matrix_xyzw",
     "length_scale",
     "li_axyb",
+    "loop_closure_errors",
     "motion_pairs",
     "nearest_rotation",
     "normalise",
@@ -192,22 +237,29 @@ __all__ = [
     "product_matrices",
     "product_tensor",
     "rank_starts",
+    "read_handeye_calibration",
     "register_start",
     "rejection_threshold",
+    "repeated_pairs",
     "right_product_matrix_xyzw",
     "robust_sigmas",
+    "ros_launch_text",
     "rotation_from_quat_xyzw",
     "rotation_iteration",
     "shah_axyb",
     "solve_axxb",
     "solve_axyb",
     "solve_normal",
+    "solver_hand_poses",
     "start_of_y",
+    "static_transform_args",
     "target_views",
     "translation_iteration",
     "translations_least_squares",
     "tsai_rotation",
     "uncertainty",
     "unregister_start",
+    "urdf_mount_text",
     "variance_components",
+    "write_ros_outputs",
 ]

@@ -47,6 +47,7 @@ from kinfw.cli._detect import add_detect_parser
 from kinfw.cli._fit_parser import add_fit_parsers
 from kinfw.cli._fleet import add_fleet_parser
 from kinfw.cli._gaze import add_gaze_parser
+from kinfw.cli._handeye import add_handeye_parser
 from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
@@ -101,6 +102,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     add_plan_parser,
     add_gaze_parser,
     add_reach_parser,
+    add_handeye_parser,
 )
 
 

@@ -1,4 +1,7 @@
 """Measurement files (``kinfw-measurements``, version 1, JSON): read, validate, write.
+Also the hand-eye pose-pair files of ``kinfw handeye`` (CSV, JSON, easy_handeye2 YAML:
+:func:`read_pose_pairs`, :func:`pose_pairs_text`; formats in ``_pose_pairs.py`` and
+``docs/handeye.md``).
 
 A measurement file lists samples; each sample is one robot configuration ``q`` and the
 observations made in it::
@@ -108,6 +111,14 @@ from kinfw.measurements._file import (
     read_measurements,
     write_measurements,
 )
+from kinfw.measurements._pose_pairs import (
+    MIN_POSE_PAIRS,
+    POSE_PAIR_COLUMNS,
+    PosePairs,
+    pose_pairs_from_measurements,
+    pose_pairs_text,
+    read_pose_pairs,
+)
 from kinfw.measurements._streams import (
     align_streams,
     check_stream,
@@ -119,8 +130,11 @@ __all__ = [
     "DISTINCT_TOL",
     "FORMAT",
     "IGNORED_COLUMNS",
+    "MIN_POSE_PAIRS",
+    "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
     "Measurements",
+    "PosePairs",
     "align_streams",
     "check_against_robot",
     "check_joint_motion",
@@ -135,8 +149,11 @@ __all__ = [
     "measurements_to_dict",
     "merge_same_key",
     "observed_joints",
+    "pose_pairs_from_measurements",
+    "pose_pairs_text",
     "read_measurements",
     "read_pose_csv",
+    "read_pose_pairs",
     "robot_measurement_frames",
     "write_measurements",
 ]
