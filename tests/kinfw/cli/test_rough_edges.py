@@ -32,34 +32,41 @@ HEAD = builtin_head_urdf()
 KINFW = [sys.executable, "-m", "kinfw.cli"]
 
 
-@pytest.fixture(scope="module")
-def poses(tmp_path_factory) -> Path:
-    """Simulated plate and camera poses of the IIS head (0.5 mm, 0.5 deg noise)."""
-    out = tmp_path_factory.mktemp("rough")
-    code = subprocess.run(
-        [
-            *KINFW,
-            "-q",
-            "simulate",
-            "--out",
-            out / "d.json",
-            "--truth-out",
-            out / "t.urdf",
-            "--stage",
-            "both",
-            "--stage2-samples",
-            "200",
-        ],
-        capture_output=True,
-    ).returncode
-    assert code == 0
+def _simulated(out, samples: int):
+    """Simulated plate and camera poses of the IIS head (0.5 mm, 0.5 deg noise): stage 1
+    and ``samples`` stage-2 configurations."""
+    argv = [*KINFW, "-q", "simulate", "--out", out / "d.json", "--truth-out", out / "t.urdf"]
+    argv += ["--stage", "both", "--stage2-samples", str(samples)]
+    assert subprocess.run(argv, capture_output=True).returncode == 0
     return out / "d.json"
 
 
-def test_ctrl_c_prints_one_line_exits_130_and_writes_nothing(poses, tmp_path):
+@pytest.fixture(scope="module")
+def poses(tmp_path_factory) -> Path:
+    """A small set: calibrated in about a second."""
+    return _simulated(tmp_path_factory.mktemp("rough"), 40)
+
+
+@pytest.fixture(scope="module")
+def long_poses(tmp_path_factory) -> Path:
+    """A set whose calibration takes seconds: long enough to interrupt."""
+    return _simulated(tmp_path_factory.mktemp("rough_long"), 200)
+
+
+def test_ctrl_c_prints_one_line_exits_130_and_writes_nothing(long_poses, tmp_path):
     out = tmp_path / "c.urdf"
     proc = subprocess.Popen(
-        [*KINFW, "calibrate", poses, "--urdf", HEAD, "--out", out, "--report", tmp_path / "r.json"],
+        [
+            *KINFW,
+            "calibrate",
+            long_poses,
+            "--urdf",
+            HEAD,
+            "--out",
+            out,
+            "--report",
+            tmp_path / "r.json",
+        ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
