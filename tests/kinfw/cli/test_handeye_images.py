@@ -18,6 +18,7 @@ from kinfw.geometry import inverse_transform, rotation_angle
 from kinfw.identification.handeye import read_handeye_calibration
 from kinfw.model import load_robot
 from kinfw.simulation import render_board
+from tests.board_views import board_in_view
 from tests.robots import ARM_6R
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
@@ -48,10 +49,8 @@ def _images(tmp_path, name, robot, w_T_board, qs, rng):
 
 
 def _in_view(robot, w_T_board, qs):
-    c_T_b = inverse_transform(robot.frame_poses(qs, "flange", NAMES) @ HAND_T_CAMERA) @ w_T_board
-    c_p = np.einsum("nij,kj->nki", c_T_b[:, :3, :3], BOARD.points) + c_T_b[:, None, :3, 3]
-    tilt = np.degrees(np.arccos(np.clip(c_T_b[:, 2, 2], -1.0, 1.0)))
-    return qs[CAMERA.in_view(c_p, margin_px=25).all(axis=1) & (tilt < 50.0)]
+    w_T_cameras = robot.frame_poses(qs, "flange", NAMES) @ HAND_T_CAMERA
+    return qs[board_in_view(w_T_cameras, w_T_board, BOARD, CAMERA)]
 
 
 @pytest.mark.slow
