@@ -149,9 +149,10 @@ def ur_kinematics_from_dh(
     each second half with the next first half, as here. It converts the rotations with
     Eigen's ``eulerAngles(0, 1, 2)`` (moving axes, ``Rx Ry Rz``), which ``ur_description``
     reads as URDF's fixed-axis ``rpy`` (``Rz Ry Rx``); the two agree when a rotation is
-    about one axis (every nominal UR table) and differ by the product of ``alpha`` and
-    ``theta`` otherwise. :func:`ur_kinematics_text` writes URDF's ``rpy`` of the
-    matrices, the convention the xacro reads.
+    about one axis (every nominal UR table) and differ otherwise (``Rx(alpha) Rz(theta)``
+    read back as ``Rz(theta) Rx(alpha)``: ``sqrt(2) theta`` for ``alpha = +-pi/2``).
+    :func:`ur_kinematics_text` writes URDF's ``rpy`` of the matrices, the convention the
+    xacro reads.
     """
     d, a, alpha = (_six(v, name) for v, name in ((d, "d"), (a, "a"), (alpha, "alpha")))
     theta = np.zeros(6) if theta is None else _six(theta, "theta")

@@ -224,3 +224,30 @@ def test_export_ur_kinematics_command(tmp_path, capsys):
     err = capsys.readouterr().err
     assert str(bad) in err and "not a UR arm" in err
     assert not (tmp_path / "x.yaml").exists()
+
+
+@pytest.mark.slow
+def test_kinfw_calibrated_ur10_exports_to_the_same_fk(tmp_path, capsys):
+    """The real path: simulate a UR10 (published DH), calibrate it with kinfw, export the
+    calibrated URDF (axes tilted, tool0 moved by the exporter) to the file: the file's
+    chain times the printed tool0 offset is the calibrated URDF's FK to 1e-9."""
+    from kinfw.verification.studies import ur10_urdf
+
+    (tmp_path / "ur10.urdf").write_text(ur10_urdf())
+    run = ["simulate", "--urdf", tmp_path / "ur10.urdf", "--frames", "tool0", "--seed", "3"]
+    run += ["--out", tmp_path / "data.json", "--truth-out", tmp_path / "true.urdf"]
+    assert main([str(a) for a in run]) == 0
+    run = ["calibrate", tmp_path / "data.json", "--urdf", tmp_path / "ur10.urdf"]
+    assert main([str(a) for a in [*run, "--out", tmp_path / "cal.urdf"]]) == 0
+    out = tmp_path / "ur.yaml"
+    assert main(["export", "ur-kinematics", str(tmp_path / "cal.urdf"), "--out", str(out)]) == 0
+    calibrated = load_robot(tmp_path / "cal.urdf")
+    kinematics = ur_kinematics_from_robot(calibrated)
+    assert out.read_text() == ur_kinematics_text(kinematics)
+    assert np.degrees(kinematics.axis_tilts_rad[:5]).max() > 0.01  # the exporter tilted them
+    robot = _yaml_robot(out.read_text(), tmp_path)
+    qs = np.random.default_rng(0).uniform(-np.pi, np.pi, (50, 6))
+    base = calibrated.frame_poses(np.zeros(6), "base_link", JOINTS)
+    truth = np.linalg.inv(base) @ calibrated.frame_poses(qs, "tool0", JOINTS)
+    fk = robot.frame_poses(qs, "tool0", JOINTS) @ kinematics.tool0_T_calibrated_tool0
+    np.testing.assert_allclose(fk, truth, atol=1e-9)
