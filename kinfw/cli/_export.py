@@ -18,7 +18,7 @@ import argparse
 from pathlib import Path
 
 from kinfw.cli._args import add_xacro_option, load_model
-from kinfw.files import check_output_dir, check_outputs, write_text_atomic
+from kinfw.files import check_output_dir, check_outputs, check_writable, write_text_atomic
 
 __all__ = ["add_export_parser"]
 
@@ -72,7 +72,9 @@ def _check_dir(args: argparse.Namespace) -> None:
 
     files = tuple(ROBOT_DESCRIPTION_FILES.values())
     check_output_dir(args.out, label="--out", files=files)
-    check_outputs({}, inputs=_inputs(args))
+    if args.out.is_dir():  # the URDF read may be one of the files written
+        for name in files:
+            check_writable(args.out / name, label=f"--out .../{name}", inputs=_inputs(args))
 
 
 def _check_file(args: argparse.Namespace) -> None:

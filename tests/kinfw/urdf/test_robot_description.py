@@ -61,9 +61,13 @@ def test_robot_description_read_back_gives_the_same_fk(tmp_path, capsys, monkeyp
         np.testing.assert_array_equal(load_robot(text).frame_poses(qs, "flange", NAMES), truth)
 
 
-def test_robot_description_refuses_a_file_as_directory(tmp_path, capsys):
+def test_robot_description_refuses_a_file_as_directory_and_overwriting_its_input(tmp_path, capsys):
     urdf = tmp_path / "cal.urdf"
     urdf.write_text(ARM_6R)
     code = main(["export", "robot-description", str(urdf), "--out", str(urdf)])
     assert code == 2
     assert f"--out {urdf}: exists and is not a directory" in capsys.readouterr().err
+    inside = tmp_path / ROBOT_DESCRIPTION_FILES["urdf"]
+    inside.write_text(ARM_6R)
+    assert main(["export", "robot-description", str(inside), "--out", str(tmp_path)]) == 2
+    assert "refusing to overwrite an input" in capsys.readouterr().err
