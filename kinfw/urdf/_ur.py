@@ -296,9 +296,14 @@ def ur_kinematics_from_robot(robot: Robot) -> URKinematics:
 
 
 def _turn_onto(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
-    """The minimal rotation taking unit ``u`` onto unit ``v`` (``u != -v``)."""
+    """The minimal rotation taking unit ``u`` onto unit ``v`` (a half turn about an axis
+    normal to ``u`` when ``v = -u``)."""
     w = np.cross(u, v)
     c = float(u @ v)
+    if 1.0 + c < 1e-12:
+        normal = np.cross(u, np.eye(3)[int(np.argmin(np.abs(u)))])
+        normal /= np.linalg.norm(normal)
+        return 2.0 * np.outer(normal, normal) - np.eye(3)
     K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
     return np.eye(3) + K + K @ K / (1.0 + c)
 

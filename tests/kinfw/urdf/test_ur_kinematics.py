@@ -96,11 +96,12 @@ def test_ur10_dh_table_to_yaml_to_fk(tmp_path, calibrated):
     np.testing.assert_allclose(fk, dh, atol=1e-9)
 
 
-def _ur10_urdf(rng=None, *, tilt=0.0, tool_off=False, prefix=""):
+def _ur10_urdf(rng=None, *, tilt=0.0, tool_off=False, prefix="", tool_rpy=None):
     """A UR10 URDF (world -> base_link -> base_link_inertia -> 6 joints -> flange -> tool0
     -> camera); with ``rng`` calibrated: every origin moved by mm and mrad, the base fixed
     joint moved, the axes of joints 1-5 tilted by ``tilt`` rad and, with ``tool_off``,
-    ``tool0`` moved and the wrist_3 axis tilted (tool0 off that axis)."""
+    ``tool0`` moved and the wrist_3 axis tilted (tool0 off that axis); ``tool_rpy``: the
+    flange-to-tool0 rotation instead of ur_description's."""
 
     def joint(name, kind, parent, child, xyz, rpy, axis="0 0 1"):
         xyz_s, rpy_s = " ".join(map(repr, map(float, xyz))), " ".join(map(repr, map(float, rpy)))
@@ -136,11 +137,8 @@ def _ur10_urdf(rng=None, *, tilt=0.0, tool_off=False, prefix=""):
     text += joint(
         "wrist_3-flange", "fixed", "wrist_3_link", "flange", (0, 0, 0), (0, -np.pi / 2, -np.pi / 2)
     )
-    tool = (
-        moved((0, 0, 0), (np.pi / 2, np.pi, np.pi / 2))
-        if tool_off
-        else ((0, 0, 0), (np.pi / 2, np.pi, np.pi / 2))
-    )
+    tool_rpy = (np.pi / 2, np.pi, np.pi / 2) if tool_rpy is None else tool_rpy
+    tool = moved((0, 0, 0), tool_rpy) if tool_off else ((0, 0, 0), tool_rpy)
     text += joint("flange-tool0", "fixed", "flange", "tool0", *tool)
     text += joint("tool-cam", "fixed", "tool0", "camera", (0.03, -0.05, 0.07), (0.1, 0.2, 0.3))
     return text + "</robot>"
@@ -170,6 +168,22 @@ def test_calibrated_ur10_urdf_to_yaml_to_fk(tmp_path, tilt, tool_off, prefix):
         assert 1e-4 < np.linalg.norm(offset[:3, 3]) < 1e-2
     else:  # tool0 on the wrist_3 axis: the file alone reproduces it
         np.testing.assert_allclose(offset, np.eye(4), atol=1e-12)
+
+
+def test_tool0_turned_upside_down_is_a_half_turn_offset(tmp_path):
+    """tool0 turned a half turn about its x (z against the wrist_3 axis): a turn about the
+    axis is absorbed by the wrist_3 origin, this one is the offset."""
+    flipped = pin.rpy.rpyToMatrix(np.pi / 2, np.pi, np.pi / 2) @ pin.rpy.rpyToMatrix(np.pi, 0, 0)
+    calibrated = load_robot(_ur10_urdf(tool_rpy=pin.rpy.matrixToRpy(flipped)))
+    kinematics = ur_kinematics_from_robot(calibrated)
+    robot = _yaml_robot(ur_kinematics_text(kinematics), tmp_path)
+    qs = np.random.default_rng(2).uniform(-np.pi, np.pi, (20, 6))
+    base = calibrated.frame_poses(np.zeros(6), "base_link", JOINTS)
+    truth = np.linalg.inv(base) @ calibrated.frame_poses(qs, "tool0", JOINTS)
+    fk = robot.frame_poses(qs, "tool0", JOINTS) @ kinematics.tool0_T_calibrated_tool0
+    np.testing.assert_allclose(fk, truth, atol=1e-9)
+    offset = kinematics.tool0_T_calibrated_tool0
+    np.testing.assert_allclose(np.trace(offset[:3, :3]), -1.0, atol=1e-12)  # a half turn
 
 
 def test_nominal_ur10_urdf_gives_ur_descriptions_file():
