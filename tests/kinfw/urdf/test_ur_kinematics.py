@@ -234,7 +234,7 @@ def test_export_ur_kinematics_command(tmp_path, capsys):
     assert robot.has_frame("tool0")
     bad = tmp_path / "arm.urdf"
     bad.write_text(_ur10_urdf().replace("wrist_3_joint", "j6"))
-    assert main(["export", "ur-kinematics", str(bad), "--out", str(tmp_path / "x.yaml")]) != 0
+    assert main(["export", "ur-kinematics", str(bad), "--out", str(tmp_path / "x.yaml")]) == 2
     err = capsys.readouterr().err
     assert str(bad) in err and "not a UR arm" in err
     assert not (tmp_path / "x.yaml").exists()
