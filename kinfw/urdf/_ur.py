@@ -44,7 +44,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import inverse_transform
-from kinfw.model import Robot, rotation_from_axis
+from kinfw.model import Robot, check_robot, rotation_from_axis
 from kinfw.urdf._edit import ExportError, rpy_from_matrix
 
 __all__ = [
@@ -254,6 +254,8 @@ def ur_kinematics_from_robot(robot: Robot) -> URKinematics:
 
     Raises
     ------
+    TypeError
+        ``robot`` is not a :class:`kinfw.model.Robot` (a path: load it first).
     ExportError
         Not a UR arm (which name or joint is missing or in the way), or a joint axis more
         than :data:`MAX_AXIS_TILT_DEG` off its link frame's z.
@@ -269,6 +271,7 @@ def ur_kinematics_from_robot(robot: Robot) -> URKinematics:
     origin)`` in both models, so by the product of exponentials they agree at every q
     where they agree at q = 0.
     """
+    robot = check_robot(robot, "robot")
     prefix = _ur_prefix(robot)
     base_T_children, axes, base_T_tool0, root_T_base = _chain_at_zero(robot, prefix)
     tilts = np.arccos(np.clip(axes[:, 2], -1.0, 1.0))

@@ -211,6 +211,11 @@ def test_refuses_what_is_not_a_ur_arm():
         ur_kinematics_from_robot(load_robot(_ur10_urdf().replace('"tool0"', '"tool"')))
 
 
+def test_a_path_is_not_a_robot():
+    with pytest.raises(TypeError, match=r"robot"):
+        ur_kinematics_from_robot("ur10.urdf")
+
+
 def test_refuses_an_axis_far_from_z():
     with pytest.raises(ExportError, match=r"'shoulder_pan_joint' turns about .* 8.02 deg off z"):
         ur_kinematics_from_robot(load_robot(_ur10_urdf(tilt=0.14)))
