@@ -30,13 +30,11 @@ truth at 300 new configurations (noise-free). A *rule* is a candidate list and a
 picks the candidate with the lowest score, and the table prints the truth RMS of its
 picks, averaged over the trials, next to what the default itself picks
 (:func:`kinfw.verification.evaluation.choose_parameters`: whitened scores, ties to the
-simpler model), what the issue-23 rule picks from the same scores (every candidate, frames
-included: the default before the 2026-11-28 change; the same pick when both agree) and
-the oracle (the best candidate at the truth), with the ratios to the oracle and their
-standard errors over the trials (the per-trial ratio's; the paired difference of the two
-defaults too); then the mean seconds of the 5-fold scoring of the 11 default candidates
-against ``choose_parameters`` whole. ``--no-kfold`` skips the 5-fold scoring (the
-expensive part: its rows and column are omitted) for many trials of the default.
+simpler model) and the oracle (the best candidate at the truth), with the ratio of the
+two and its standard error over the trials (the per-trial ratio's); then the mean
+seconds of the 5-fold scoring of the 11 default candidates against ``choose_parameters``
+whole. ``--no-kfold`` skips the 5-fold scoring (the expensive part: its rows are omitted,
+its column NaN) for many trials of the default.
 """
 
 from __future__ import annotations
@@ -62,7 +60,6 @@ from kinfw.measurements import Measurements
 from kinfw.model import Robot, load_robot
 from kinfw.simulation import perturb_robot, random_configurations, simulate
 from kinfw.verification.evaluation import (
-    Candidate,
     choose_parameters,
     crossvalidate,
     fitted_unknowns,
@@ -166,25 +163,13 @@ def truth_rms_mm(nominal: Robot, result, test: Measurements) -> float:
 @dataclass(frozen=True, slots=True)
 class Trial:
     """One dataset: per candidate ``label -> (5-fold CV mm, closed-form LOO mm, truth mm)``
-    (5-fold NaN with ``kfold`` off); the default's pick (:func:`choose_parameters`), the
-    issue-23 rule's pick from the same scores, and the seconds the default and the 5-fold
-    scoring of every candidate took."""
+    (5-fold NaN with ``kfold`` off); the default's pick (:func:`choose_parameters`) and
+    the seconds it and the 5-fold scoring of every candidate took."""
 
     scores: dict[str, tuple[float, float, float]]
     default: str
-    previous: str
     default_s: float
     kfold_s: float
-
-
-def previous_pick(candidates: tuple[Candidate, ...]) -> str:
-    """The issue-23 rule (before 2026-11-28): the simplest of every candidate, frames
-    included, within 1 % of the lowest whitened score (simplest first: frames, offsets,
-    full under the strongest prior ... the weakest, full alone)."""
-    order = [0, 1, *range(3, len(candidates)), 2]
-    best = np.nanmin([c.whitened for c in candidates])
-    chosen = next(candidates[i] for i in order if candidates[i].whitened <= 1.01 * best)
-    return label(chosen.parameters, chosen.prior)
 
 
 def trial(nominal: Robot, regime: Regime, seed: int, *, kfold: bool = True) -> Trial:
@@ -232,7 +217,7 @@ def trial(nominal: Robot, regime: Regime, seed: int, *, kfold: bool = True) -> T
             truth_rms_mm(nominal, fit, test),
         )
     picked = label(choice.parameters, choice.prior)
-    return Trial(out, picked, previous_pick(choice.candidates), default_s, kfold_s)
+    return Trial(out, picked, default_s, kfold_s)
 
 
 def rules_table(per_regime: dict[str, list[Trial]], *, kfold: bool = True) -> str:
@@ -249,23 +234,15 @@ def rules_table(per_regime: dict[str, list[Trial]], *, kfold: bool = True) -> st
                 cells.append(f"{np.mean(picks):.3f}")
             rows.append(cells)
     default = ["default: choose_parameters"]
-    previous = ["issue-23 rule (frames a candidate)"]
     oracle = ["oracle (best at the truth)"]
     ratio = ["default / oracle (± s.e.)"]
-    ratio_previous = ["issue-23 rule / oracle (± s.e.)"]
-    paired = ["default - issue-23 rule, / oracle"]
     for runs in per_regime.values():
         mine = np.array([r.scores[r.default][2] for r in runs])
-        before = np.array([r.scores[r.previous][2] for r in runs])
         best = np.array([min(v[2] for v in r.scores.values()) for r in runs])
         default.append(f"{mine.mean():.3f}")
-        previous.append(f"{before.mean():.3f}")
         oracle.append(f"{best.mean():.3f}")
         ratio.append(f"{mine.mean() / best.mean():.3f} ± {_se(mine / best):.3f}")
-        ratio_previous.append(f"{before.mean() / best.mean():.3f} ± {_se(before / best):.3f}")
-        d = (mine - before) / best
-        paired.append(f"{d.mean():+.3f} ± {_se(d):.3f}")
-    rows += [default, previous, oracle, ratio, ratio_previous, paired]
+    rows += [default, oracle, ratio]
     times = [
         ["5-fold CV of the 11 candidates (s, mean)"]
         + [f"{np.mean([r.kfold_s for r in runs]):.2f}" for runs in per_regime.values()],

@@ -29,13 +29,8 @@ The observations the robust full-data fit rejects as gross errors are left out o
 score (each candidate's fit rejects its own; those it did not train on are predicted by
 its full fit): one 68 mm sample moves an RMS more than the candidates differ.
 
-Ties (within 1 %) go to the simpler model, in the order above. When the prior grid is
-searched, ``"frames"`` is scored and shown but chosen only if no candidate that moves the
-joints can be scored: the grid's strongest prior (0.3 mm) already keeps the joints near
-the nominal, and on the simulated regimes of ``benchmarks/study_model_choice.py`` a
-``"frames"`` win was a scoring accident (regime A, seed 103: frames 4.11 whitened against
-4.14 for the 0.3 mm prior, 3.0 mm from the truth against 2.1-2.8 mm). Identification does
-not import this module; the CLI wires them.
+Ties (within 1 %) go to the simpler model, in the order above. Identification does not
+import this module; the CLI wires them.
 """
 
 from __future__ import annotations
@@ -271,7 +266,7 @@ def choose_parameters(
             data.n_samples,
             fit=reference,
         )
-    chosen, why = _simplest_best(candidates)
+    chosen, why = _simplest_best(candidates, min(scores))
     if excluded:
         samples = ", ".join(str(e[0]) for e in excluded)
         why += f"; {len(excluded)} rejected observation(s) not scored (sample(s) {samples})"
@@ -375,16 +370,11 @@ def _score(
     return Candidate(parameters, prior, whitened_score(errors, sigma), errors)
 
 
-def _simplest_best(candidates: list[Candidate]) -> tuple[Candidate, str]:
-    """The simplest candidate within 1 % of the lowest whitened error and why (against
-    full alone, the third of :func:`_runs`); with the prior grid (more than three
-    candidates) frames only when no other candidate is scored (see the module's
-    docstring)."""
+def _simplest_best(candidates: list[Candidate], best: float) -> tuple[Candidate, str]:
+    """The simplest candidate within 1 % of the ``best`` whitened error and why (against
+    full alone, the third of :func:`_runs`)."""
     # simplest first: frames, offsets, full with the strongest prior ... full alone
     order = [0, 1, *range(3, len(candidates)), 2]
-    if len(candidates) > 3 and any(np.isfinite(candidates[i].whitened) for i in order[1:]):
-        order = order[1:]
-    best = np.nanmin([candidates[i].whitened for i in order])
     full = candidates[2]
     chosen = next(candidates[i] for i in order if candidates[i].whitened <= 1.01 * best)
     if chosen is full:

@@ -72,8 +72,7 @@ def test_small_data_is_not_given_the_full_set_and_predicts_the_truth_better(head
     (chosen,) = [
         c for c in choice.candidates if (c.parameters, c.prior) == (choice.parameters, choice.prior)
     ]
-    # frames (index 0) competes only when nothing that moves the joints is scored
-    assert chosen.whitened <= 1.01 * min(c.whitened for c in choice.candidates[1:])
+    assert chosen.whitened <= 1.01 * min(c.whitened for c in choice.candidates)
     assert chosen.whitened < choice.candidates[2].whitened  # full alone scores worse
     # against the truth (not the held-out measurements): the chosen model is no worse
     pos, rot = _held_out_vs_truth(head, truth, data, choice.parameters, choice.prior)
@@ -217,35 +216,3 @@ def test_a_candidate_the_data_cannot_fit_is_skipped_not_fatal():
         return 1e3 * np.sqrt(np.mean(pos**2))
 
     assert unseen_rms_mm(choice.parameters, choice.prior) < 0.7 * unseen_rms_mm("frames", None)
-
-
-def _candidate(parameters, prior, whitened):
-    from kinfw.observations import Metric
-
-    return model_choice.Candidate(parameters, prior, whitened, ((Metric("position", "mm"), 1.0),))
-
-
-def test_frames_is_chosen_with_the_prior_grid_only_when_nothing_else_is_scored():
-    """Hand-made scores: with the grid (11 candidates) a frames win goes to the simplest
-    other candidate within 1 % of the lowest of the others; with a user's prior (3
-    candidates) frames competes as before; with every other candidate unscored, frames."""
-    priors = model_choice._runs(None)[3:]
-    grid = [
-        _candidate("frames", None, 4.0),
-        _candidate("offsets", None, 4.5),
-        _candidate("full", None, 5.0),
-        *(_candidate("full", p, 4.2 + 0.01 * i) for i, p in enumerate(priors)),
-    ]
-    chosen, _ = model_choice._simplest_best(grid)
-    assert (chosen.parameters, chosen.prior) == ("full", priors[0])  # 4.2, the lowest
-    grid[4] = _candidate("full", priors[1], 4.2 * 1.005)  # within 1 %: the stronger wins
-    grid[3] = _candidate("full", priors[0], 4.2 * 1.02)
-    grid[5] = _candidate("full", priors[2], 4.2)
-    chosen, _ = model_choice._simplest_best(grid)
-    assert chosen.prior == priors[1]
-    user = grid[:3]
-    chosen, _ = model_choice._simplest_best(user)
-    assert chosen.parameters == "frames"
-    alone = [grid[0], *(_candidate(c.parameters, c.prior, np.nan) for c in grid[1:])]
-    chosen, _ = model_choice._simplest_best(alone)
-    assert chosen.parameters == "frames"
