@@ -248,7 +248,7 @@ def rules_table(per_regime: dict[str, list[Trial]], *, kfold: bool = True) -> st
         + [f"{np.mean([r.kfold_s for r in runs]):.2f}" for runs in per_regime.values()],
         ["choose_parameters (s, mean)"]
         + [f"{np.mean([r.default_s for r in runs]):.2f}" for runs in per_regime.values()],
-    ]
+    ][0 if kfold else 1 :]
     header = ["rule", *(n.split()[0] for n in per_regime)]
     return (
         "\nTruth RMS (mm) of each rule's pick (lowest score among its candidates), mean over "
