@@ -407,6 +407,19 @@ class ObservationKind:
         """
         raise NotImplementedError
 
+    #: The keys :meth:`parse_many` reads; empty: the kind's observations are read one at
+    #: a time.
+    bulk_keys: ClassVar[tuple[str, ...]] = ()
+
+    def parse_many(
+        self, reader: ObservationReader, observations: list[dict[str, Any]]
+    ) -> NDArray[np.float64] | None:
+        """The rows (m, width) :meth:`parse` returns for many observation dicts that hold
+        the same values at every key but :data:`bulk_keys` (the first already parsed),
+        at once; None when any fails a check (the reader then parses them one at a time,
+        naming the culprit). Default None: one at a time."""
+        return None
+
     def group_from_rows(
         self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], rows: NDArray[np.float64]
     ) -> Any:
