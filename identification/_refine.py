@@ -805,7 +805,6 @@ def _quality_at(
     s_base = next(
         s for b, s in zip(problem.blocks, problem.slices, strict=True) if isinstance(b, BaseBlock)
     )
-    J_base = problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
     covariance, ident = covariance_and_identifiability(
         Jw,
         free,
@@ -813,7 +812,10 @@ def _quality_at(
         1.0 if given else sigma_hat2,
         data,
         problem.model0,
-        base_columns=J_base,
+        # every column's Jacobian only for a rank-deficient fit (its null directions)
+        base_columns=lambda: (
+            problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
+        ),
         robot=_robot_entries(problem),
     )
     # blocks that know when a full-rank estimate is still not determined (intrinsics)
