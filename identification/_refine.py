@@ -69,6 +69,7 @@ from kinfw.identification.problem import (
     observation_norms,
     rejected_observations,
     row_weights,
+    tall_r,
     thresholds,
 )
 from kinfw.measurements import Measurements, check_measurements
@@ -616,7 +617,7 @@ def _solve(
         )
     robot = _robot_entries(problem)
     x_free[moving] = _nearest_to_start(
-        lambda v: problem.evaluate_free(full(v), sigma, True),
+        lambda v, jac: problem.evaluate_free(full(v), sigma, jac),
         x_free,
         moving,
         robot[free][moving],
@@ -668,7 +669,8 @@ def _nearest_to_start(
     Parameters
     ----------
     evaluate : callable
-        ``x_free -> (r, J)``: whitened residuals (N,) and their Jacobian (N, n_free).
+        ``(x_free, with_jacobian) -> (r, J)``: whitened residuals (N,) and their
+        Jacobian (N, n_free), or None without ``with_jacobian``.
     x_free : ndarray, shape (n_free,)
         The solver's estimate (chart coordinates from the start).
     moving : ndarray of bool, shape (n_free,)
@@ -684,20 +686,30 @@ def _nearest_to_start(
     x = x_free.copy()
 
     def whitened(v: NDArray) -> tuple[NDArray, NDArray]:
-        r, J = evaluate(v)
+        r, J = evaluate(v, True)
         w = weights(r)
         return r * w, J[:, moving] * w[:, None] / scale
 
-    def svd(Jy: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
+    def svd(
+        Jy: NDArray, with_u: bool
+    ) -> tuple[NDArray | None, NDArray, NDArray, NDArray, NDArray[np.bool_]]:
+        """``(U, s, Vt, c, kept)`` of ``Jy / c`` (unit-norm columns), ``Vt`` square (the
+        null space's directions too); without ``with_u`` from the ``R`` of its blocked
+        QR (:func:`tall_r`: the same ``s`` and ``Vt``, no array of ``Jy``'s size) and
+        ``U`` None."""
         c = np.linalg.norm(Jy, axis=0)
         c = np.where(c > 0.0, c, 1.0)
-        U, s, Vt = np.linalg.svd(Jy / c, full_matrices=True)
+        if with_u:  # U only as wide as Jy: a full U of a tall Jy would be rows x rows
+            U, s, Vt = np.linalg.svd(Jy / c, full_matrices=len(Jy) < Jy.shape[1])
+        else:
+            U, (_, s, Vt) = None, np.linalg.svd(tall_r(Jy, 1.0 / c), full_matrices=True)
         s = np.concatenate([s, np.zeros(len(Vt) - len(s))])
         kept = s > UNDETERMINED_TOL * s[0] if s.size and s[0] > 0 else np.zeros(len(s), bool)
         return U, s, Vt, c, kept
 
     def cost(v: NDArray) -> float:
-        r = whitened(v)[0]
+        r = evaluate(v, False)[0]
+        r = r * weights(r)
         return float(r @ r) if np.isfinite(r).all() else np.inf
 
     def back_to_minimum(v: NDArray, Q: NDArray) -> NDArray:
@@ -707,7 +719,7 @@ def _nearest_to_start(
             r, Jy = whitened(v)
             if not (np.isfinite(r).all() and np.isfinite(Jy).all()):
                 break
-            U, s, Vt, c, kept = svd(Jy)
+            U, s, Vt, c, kept = svd(Jy, True)
             n = int(kept.sum())
             step = -(Vt[:n].T @ ((U[:, :n].T @ r) / s[:n])) / c
             step -= Q @ (Q.T @ step)
@@ -720,7 +732,7 @@ def _nearest_to_start(
         Jy = whitened(x)[1]
         if not np.isfinite(Jy).all():
             break
-        _, _, Vt, c, kept = svd(Jy)
+        _, _, Vt, c, kept = svd(Jy, False)
         if kept.all():
             break
         Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
@@ -793,7 +805,6 @@ def _quality_at(
     s_base = next(
         s for b, s in zip(problem.blocks, problem.slices, strict=True) if isinstance(b, BaseBlock)
     )
-    J_base = problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
     covariance, ident = covariance_and_identifiability(
         Jw,
         free,
@@ -801,7 +812,10 @@ def _quality_at(
         1.0 if given else sigma_hat2,
         data,
         problem.model0,
-        base_columns=J_base,
+        # every column's Jacobian only for a rank-deficient fit (its null directions)
+        base_columns=lambda: (
+            problem.evaluate(x, sigma, True)[1][:, s_base] * np.sqrt(w_rows)[:, None]
+        ),
         robot=_robot_entries(problem),
     )
     # blocks that know when a full-rank estimate is still not determined (intrinsics)

@@ -6,7 +6,7 @@ whitened Jacobian, residuals are split by each kind's noise components.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -224,7 +224,7 @@ def covariance_and_identifiability(
     sigma_hat2: float,
     measurements: Measurements,
     model: CPCModel,
-    base_columns: NDArray | None = None,
+    base_columns: NDArray | Callable[[], NDArray] | None = None,
     robot: NDArray | None = None,
 ) -> tuple[NDArray, Identifiability]:
     """``sigma_hat2 (J^T J)^+`` on the identifiable subspace, and what the data determines.
@@ -233,7 +233,8 @@ def covariance_and_identifiability(
     columns (N, n_free); ``names`` the parameters' ``(owner, field)``; ``model`` gives
     the joints (to explain null directions by joints that never move); ``base_columns``
     (N, 6), the same Jacobian's columns of a rigid motion of the whole robot (the base
-    block's, free or not), and ``robot`` (P,), which parameters are the robot's: the null
+    block's, free or not; or a callable returning them, called only when the Jacobian
+    is rank deficient), and ``robot`` (P,), which parameters are the robot's: the null
     directions that are such a motion with the unknowns following it come first and are
     named so (:data:`WORLD_MOTION`).
 
@@ -265,7 +266,8 @@ def covariance_and_identifiability(
     free_names = [tuple(names[k]) for k in idx]
     n_world = 0
     if base_columns is not None and robot is not None and rank < len(s):
-        Vt, n_world = _world_motions_first(Jf, Vt, c, rank, base_columns, robot[free])
+        base = base_columns() if callable(base_columns) else base_columns
+        Vt, n_world = _world_motions_first(Jf, Vt, c, rank, base, robot[free])
     q_range = (
         np.ptp(measurements.q_of(model.topology.joint_names), axis=0)
         if measurements.n_samples

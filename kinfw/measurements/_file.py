@@ -13,6 +13,7 @@ import logging
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -192,13 +193,109 @@ class _ParsedObservations:
 def _read_samples(
     p: ObservationReader, reader: ObservationReader, samples: list[Any], k: int
 ) -> _ParsedObservations:
-    """Read every sample's ``q`` (``k`` values, file units) and its observations."""
+    """Read every sample's ``q`` (``k`` values, file units) and its observations: in
+    bulk (:func:`_read_samples_in_bulk`) when the file allows, else one at a time."""
     names = tuple(kind.name for kind in kinds())
     expected_kind = (
         ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
         if len(names) > 1
         else repr(names[0])
     )
+    bulk = ObservationReader(reader.source, reader.length_unit, reader.default_measured_in)
+    bulk.cameras = reader.cameras
+    parsed = _read_samples_in_bulk(p, bulk, samples, k, names, expected_kind)
+    if parsed is not None:
+        reader.quaternions += bulk.quaternions
+        reader.rounded.extend(bulk.rounded)
+        return parsed
+    return _read_samples_one_by_one(p, reader, samples, k, names, expected_kind)
+
+
+def _read_samples_in_bulk(
+    p: ObservationReader,
+    reader: ObservationReader,
+    samples: list[Any],
+    k: int,
+    names: tuple[str, ...],
+    expected_kind: str,
+) -> _ParsedObservations | None:
+    """:func:`_read_samples_one_by_one`'s result, read in bulk: every ``q`` at once, and
+    the observations by their signature (every key but the kinds'
+    :attr:`~kinfw.observations.ObservationKind.bulk_keys`, with its value): the first of
+    each parsed one at a time, all of them by the kind's
+    :meth:`~kinfw.observations.ObservationKind.parse_many`. None when a kind reads one
+    at a time, a signature holds other than strings and null, or anything fails a check
+    (then the one-by-one reader names the first culprit in file order)."""
+    if set(map(type, samples)) != {dict}:
+        return None
+    qs = p.numbers_many([s.get("q") for s in samples], k)
+    lists = [s.get("observations") for s in samples]
+    if qs is None or set(map(type, lists)) != {list} or not all(lists):
+        return None
+    flat = list(chain.from_iterable(lists))
+    if set(map(type, flat)) != {dict}:
+        return None
+    skip = frozenset(chain.from_iterable(kind.bulk_keys for kind in kinds()))
+    kept_keys: dict[tuple[str, ...], tuple[str, ...]] = {}
+    signature_id: dict[tuple[Any, ...], int] = {}
+    first: list[int] = []
+    id_list = []
+    for o, obs in enumerate(flat):
+        keys = tuple(obs)
+        kept = kept_keys.get(keys)
+        if kept is None:
+            kept = kept_keys[keys] = tuple(key for key in keys if key not in skip)
+        signature = (keys, *map(obs.__getitem__, kept))
+        try:
+            sid = signature_id.setdefault(signature, len(signature_id))
+        except TypeError:  # a list or object where a string belongs
+            return None
+        if sid == len(first):
+            # only strings and null: a value equal to a string is that string
+            if not all(v is None or type(v) is str for v in signature[1:]):
+                return None
+            first.append(o)
+        id_list.append(sid)
+    ids = np.array(id_list, dtype=np.intp)
+    sample_of = np.repeat(np.arange(len(samples)), list(map(len, lists)))
+    parsed = _ParsedObservations(q_rows=qs.tolist(), obs_sample=sample_of.tolist())
+    # the first of each signature read (and noted) on its own, as one by one would
+    single = ObservationReader(reader.source, reader.length_unit, reader.default_measured_in)
+    single.cameras = reader.cameras
+    scratch = _ParsedObservations()
+    group_of_signature = np.empty(len(first), dtype=np.intp)
+    rows: list[Any] = [None] * len(flat)
+    by_signature = np.split(np.argsort(ids, kind="stable"), np.cumsum(np.bincount(ids))[:-1])
+    try:
+        for sid, (o, members) in enumerate(zip(first, by_signature, strict=True)):
+            i = int(sample_of[o])  # in file order: groups numbered as one by one
+            at = f"samples[{i}].observations[{o - int(np.searchsorted(sample_of, i))}]"
+            _read_observation(p, single, flat[o], at, i, names, expected_kind, scratch)
+            kind = kind_named(flat[o]["kind"])
+            many = kind.parse_many(reader, [flat[m] for m in members])
+            if many is None:
+                return None
+            for m, row in zip(members.tolist(), many.tolist(), strict=True):
+                rows[m] = row
+            group_of_signature[sid] = scratch.obs_group[-1]
+    except DatasetError:
+        return None
+    parsed.obs_group.extend(group_of_signature[ids].tolist())
+    parsed.rows.extend(rows)
+    parsed.group_of_key.update(scratch.group_of_key)
+    parsed.marker_home.update(scratch.marker_home)
+    return parsed
+
+
+def _read_samples_one_by_one(
+    p: ObservationReader,
+    reader: ObservationReader,
+    samples: list[Any],
+    k: int,
+    names: tuple[str, ...],
+    expected_kind: str,
+) -> _ParsedObservations:
+    """Read every sample's ``q`` and its observations, one at a time."""
     parsed = _ParsedObservations()
     for i, raw_sample in enumerate(samples):
         at = f"samples[{i}]"

@@ -24,6 +24,7 @@ from kinfw.observations._base import (
     UnknownRequest,
     component_errors,
     data_array,
+    evenly_spaced,
     frozen_array,
     sample_array,
 )
@@ -103,6 +104,7 @@ __all__ = [
     "component_errors",
     "data_array",
     "describe",
+    "evenly_spaced",
     "fit_plane",
     "frozen_array",
     "gaussian_rows",

@@ -59,6 +59,7 @@ __all__ = [
     "component_errors",
     "data_array",
     "describe",
+    "evenly_spaced",
     "frozen_array",
     "inverse_casadi",
     "sample_array",
@@ -85,6 +86,24 @@ def sample_array(values: ArrayLike, name: str) -> NDArray[np.int64]:
     if arr.size and arr.min() < 0:
         raise ValueError(f"{name}: sample indices must be >= 0, got {int(arr.min())}")
     return frozen_array(arr, np.int64)
+
+
+def evenly_spaced(m: int, at_most: int) -> NDArray[np.intp]:
+    """At most ``at_most`` of the indices ``0 .. m-1``, evenly spread over them in order
+    (first and last included): the rows a start value needs of many (a well-spread
+    subsample; all ``m`` when ``m <= at_most``).
+
+    Returns
+    -------
+    ndarray of intp, shape (min(m, at_most),)
+        Ascending, distinct.
+    """
+    if m <= at_most:
+        return np.arange(m)
+    if at_most <= 1:
+        return np.zeros(min(at_most, 1), dtype=np.intp)
+    # the rounded positions of at_most evenly spaced points are distinct: spacing >= 1
+    return np.round(np.linspace(0.0, m - 1.0, at_most)).astype(np.intp)
 
 
 def data_array(values: ArrayLike, shape: tuple[int, ...], name: str) -> NDArray[np.float64]:
@@ -387,6 +406,19 @@ class ObservationKind:
         group). ``frame`` is the already-checked ``"frame"``.
         """
         raise NotImplementedError
+
+    #: The keys :meth:`parse_many` reads; empty: the kind's observations are read one at
+    #: a time.
+    bulk_keys: ClassVar[tuple[str, ...]] = ()
+
+    def parse_many(
+        self, reader: ObservationReader, observations: list[dict[str, Any]]
+    ) -> NDArray[np.float64] | None:
+        """The rows (m, width) :meth:`parse` returns for many observation dicts that hold
+        the same values at every key but :data:`bulk_keys` (the first already parsed),
+        at once; None when any fails a check (the reader then parses them one at a time,
+        naming the culprit). Default None: one at a time."""
+        return None
 
     def group_from_rows(
         self, key: tuple[tuple[str, Any], ...], sample: NDArray[np.int64], rows: NDArray[np.float64]

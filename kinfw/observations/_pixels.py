@@ -40,6 +40,7 @@ from kinfw.observations._base import (
     ObservationKind,
     UnknownRequest,
     data_array,
+    evenly_spaced,
     frozen_array,
     sample_array,
 )
@@ -179,6 +180,24 @@ def pixel_weights(group: PixelObservations) -> NDArray[np.float64]:
         reference = float(np.median(per_image[np.isfinite(per_image)]))
         weights[given] = reference / sigma[given]
     return weights
+
+
+#: Images whose PnP poses start the target's pose (:func:`start_images`): a few hundred
+#: average its noise out; PnP on every image of a large set would cost more than the fit.
+START_IMAGES = 500
+
+
+def start_images(group: PixelObservations) -> PixelObservations:
+    """``group`` restricted to at most :data:`START_IMAGES` of its images with
+    :data:`PNP_MIN_POINTS` points or more, evenly spread over them in order
+    (:func:`evenly_spaced`), samples unchanged; the group itself when it has no more."""
+    _, rows = group.images()
+    usable = [r for r in rows if len(r) >= PNP_MIN_POINTS]
+    if len(usable) <= START_IMAGES:
+        return group
+    keep = np.concatenate([usable[k] for k in evenly_spaced(len(usable), START_IMAGES)])
+    keep.sort()
+    return PixelKind().take(group, keep, group.sample[keep])
 
 
 def _read_points(reader, obs, at, key, width, what):
@@ -336,7 +355,9 @@ class PixelKind(ObservationKind):
 
     # -- estimation
     def unknowns(self, group, start: StartContext):
-        samples, camera_T_targets = pnp_camera_T_targets(group)
+        """The target's start from the PnP poses of at most :data:`START_IMAGES` of the
+        images (:func:`start_images`), and the intrinsics' from the file."""
+        samples, camera_T_targets = pnp_camera_T_targets(start_images(group))
         return (
             UnknownRequest(
                 BlockKey("target", group.target),

@@ -107,6 +107,21 @@ def read_quaternion(reader: ObservationReader, obs: dict[str, Any], at: str) -> 
     return quat
 
 
+def read_quaternions(reader: ObservationReader, values: list[Any]) -> NDArray[np.float64] | None:
+    """Many ``quat_xyzw`` at once (m, 4), as :func:`read_quaternion` checks and notes
+    each; None when any fails a check (nothing noted: :func:`read_quaternion` then names
+    it)."""
+    quats = reader.numbers_many(values, 4)
+    if quats is None:
+        return None
+    off = np.abs(np.linalg.norm(quats, axis=1) - 1.0)
+    if not (off <= QUAT_NORM_TOL).all():
+        return None
+    reader.quaternions += len(quats)
+    reader.rounded.extend(off[off > QUAT_ROUNDED_TOL].tolist())
+    return quats
+
+
 def transforms_from_rows(rows: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rows (m, 7) of xyz (m) and quat_xyzw -> (m, 4, 4), quaternions renormalised."""
     quats = rows[:, 3:7]

@@ -11,7 +11,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from itertools import chain
 from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["DatasetError", "ObservationReader", "describe"]
 
@@ -121,6 +125,20 @@ class ObservationReader:
                 raise self.error(f"{where}[{k}]", f"expected a finite number, got {describe(x)}")
             out.append(float(x))
         return out
+
+    def numbers_many(self, values: Sequence[Any], n: int) -> NDArray[np.float64] | None:
+        """Many lists of ``n`` finite numbers at once, as an (m, n) float array; None
+        when any value is not one (then :meth:`numbers`, one at a time, names it)."""
+        if set(map(type, values)) != {list} or set(map(len, values)) != {n}:
+            return None
+        flat = list(chain.from_iterable(values))
+        if not set(map(type, flat)) <= {float, int}:  # bool is neither
+            return None
+        try:
+            out = np.array(flat, dtype=float).reshape(len(values), n)
+        except OverflowError:  # an integer too large for a float
+            return None
+        return out if np.isfinite(out).all() else None
 
     def number(self, obj: dict[str, Any], key: str, where: str, expected: str) -> float:
         """One required finite number."""

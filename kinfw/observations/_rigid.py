@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.observations._base import ObservationKind, pose_rows
@@ -26,6 +27,20 @@ __all__ = ["RigidTransformKind"]
 class RigidTransformKind(ObservationKind):
     """Base of kinds that measure a transform held in their one row field (``row_fields[0]``,
     shape (m, 4, 4)); subclasses give :meth:`predicted_transforms`."""
+
+    bulk_keys = ("xyz", "quat_xyzw")
+
+    def parse_many(self, reader, observations):
+        """The rows ``[x, y, z (m), qx, qy, qz, qw]`` of many observations at once."""
+        from kinfw.observations._pose import read_quaternions
+
+        xyz = reader.numbers_many([o.get("xyz") for o in observations], 3)
+        if xyz is None:
+            return None
+        quats = read_quaternions(reader, [o.get("quat_xyzw") for o in observations])
+        if quats is None:
+            return None
+        return np.concatenate([xyz / 1000.0 if reader.length_unit == "mm" else xyz, quats], axis=1)
 
     def predicted_transforms(self, group, model: NumericContext) -> NDArray:
         """Predicted measured transforms (m, 4, 4), as the kind's residual forms them."""
