@@ -39,6 +39,7 @@ from kinfw.measurements import (
     Measurements,
     check_joint_motion,
     check_measurements,
+    fixed_in_experiment,
     observed_joints,
 )
 from kinfw.model import Robot, check_robot, geometry_from_cpc
@@ -175,7 +176,7 @@ def calibrate(
     options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
     if method == "refine":
         progress.stage("checking that the data determine the parameters (start values)")
-        _check_refinable(nominal, data, options)
+        fixed_note = _check_refinable(nominal, data, options)
     clock = time.perf_counter()
 
     def done(message: str) -> None:
@@ -185,7 +186,7 @@ def calibrate(
 
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
-    notes: list[str] = []
+    notes: list[str] = [fixed_note] if method == "refine" and fixed_note else []
     xml = nominal.urdf_xml
     if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
         progress.stage("closed form (Shih et al.)")
@@ -246,13 +247,16 @@ class _RefineOptions:
     refine_intrinsics: bool | tuple[str, ...]
 
 
-def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> None:
+def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> str:
     """The checks of :func:`calibrate` before a refinement: every joint on a measured path
-    moves, and the residuals determine the free parameters with redundancy."""
+    moves but those fixed in this experiment (:func:`kinfw.measurements.fixed_in_experiment`:
+    said in the note returned, "" for none), and the residuals determine the free
+    parameters with redundancy."""
     parameters, prior = options.parameters, options.prior
     # every joint on a measured path must move, or its geometry is not observed
+    fixed = fixed_in_experiment(data, nominal)
     if parameters in ("full", "offsets"):
-        check_joint_motion(data, observed_joints(data, nominal))
+        check_joint_motion(data, observed_joints(data, nominal), fixed=fixed)
     cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
     smaller = None
     if parameters == "full":
@@ -270,6 +274,14 @@ def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions
         source=data.source,
         cameras=cameras_seen,
         smaller=smaller,
+    )
+    if not fixed:
+        return ""
+    return (
+        f"joint(s) {', '.join(fixed)} never move and carry no observed frame, only the "
+        "frame a contact surface is fixed to (its unknown pose absorbs them): fixed in "
+        "this experiment; their parameters are not identifiable from these data and stay "
+        "at the nominal"
     )
 
 

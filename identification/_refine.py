@@ -71,7 +71,12 @@ from kinfw.identification.problem import (
     row_weights,
     thresholds,
 )
-from kinfw.measurements import Measurements, check_measurements
+from kinfw.measurements import (
+    Measurements,
+    check_measurements,
+    fixed_in_experiment,
+    robot_measurement_frames,
+)
 from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_of
 
@@ -488,6 +493,7 @@ def _fit(
         refine_intrinsics=refine_intrinsics,
         extra_blocks=extra_blocks,
     )
+    problem = _fixed_in_experiment_kept(problem, robot, measurements)
     given = noise is not None
     if given:
         _check_noise_covers(noise, problem, measurements.source)
@@ -624,6 +630,29 @@ def _solve(
     )
     x = full(x_free)
     return _Solution(x, sigma, iterations, converged)
+
+
+def _fixed_in_experiment_kept(
+    problem: LeastSquaresProblem, robot: Robot, measurements: Measurements
+) -> LeastSquaresProblem:
+    """``problem`` with the robot's parameters that these data cannot see at their start:
+    those of the joints fixed in this experiment
+    (:func:`kinfw.measurements.fixed_in_experiment`: a still leg between the root and a
+    foot a plane is fixed to) and of the frames they alone carry (the foot's mounting)."""
+    fixed = set(fixed_in_experiment(measurements, robot))
+    if not fixed:
+        return problem
+    for frame in robot_measurement_frames(measurements, robot):
+        movable = [j.name for j in robot.path_joints(frame) if j.type != "fixed"]
+        if movable and movable[-1] in fixed:
+            fixed.add(frame)
+    blocks = tuple(
+        b.with_free(b.free & ~np.isin([n.owner for n in b.names], sorted(fixed)))
+        if isinstance(b, RobotBlock)
+        else b
+        for b in problem.blocks
+    )
+    return replace(problem, blocks=blocks)
 
 
 def _robot_entries(problem: LeastSquaresProblem) -> NDArray[np.bool_]:
