@@ -528,6 +528,7 @@ def _fit(
         identifiability=quality.identifiability,
         iterations=solution.iterations,
         converged=solution.converged,
+        undetermined=solution.undetermined,
         cost=quality.cost,
         seconds=time.perf_counter() - t0,
     )
@@ -556,13 +557,15 @@ def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source:
 
 @dataclass(frozen=True, slots=True)
 class _Solution:
-    """The estimate ``x`` of the chart coordinates, the noise model it ends with, and the
-    Levenberg-Marquardt iterations (summed over the noise rounds) and convergence."""
+    """The estimate ``x`` of the chart coordinates, the noise model it ends with, the
+    Levenberg-Marquardt iterations (summed over the noise rounds) and convergence, and
+    the part along undetermined directions left (:func:`_nearest_to_start`)."""
 
     x: NDArray[np.float64]
     noise: NoiseModel
     iterations: int
     converged: bool
+    undetermined: float = 0.0
 
 
 def _solve(
@@ -621,7 +624,7 @@ def _solve(
             r, problem.groups, sigma, hat, robust=loss != "linear", first=round_ == 0
         )
     robot = _robot_entries(problem)
-    x_free[moving] = _nearest_to_start(
+    x_free[moving], left = _nearest_to_start(
         lambda v: problem.evaluate_free(full(v), sigma, True),
         x_free,
         moving,
@@ -629,7 +632,7 @@ def _solve(
         lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
     )
     x = full(x_free)
-    return _Solution(x, sigma, iterations, converged)
+    return _Solution(x, sigma, iterations, converged, left)
 
 
 def _fixed_in_experiment_kept(
@@ -676,9 +679,11 @@ def _nearest_to_start(
     robot: NDArray[np.bool_],
     weights: Callable[[NDArray], NDArray],
     rounds: int = 200,
-) -> NDArray[np.float64]:
+) -> tuple[NDArray[np.float64], float]:
     """The estimate moved along what the data do not determine to the start: shape
-    ``(moving.sum(),)``, the ``moving`` entries of ``x_free``.
+    ``(moving.sum(),)``, the ``moving`` entries of ``x_free``; and the norm of its part
+    along those directions that could not be removed (0 when none is left; in the
+    distance's coordinates).
 
     Plane contacts leave the rigid motion of the robot with its planes and a common scale
     free, a joint that never moves its axis, and so on: the cost is the same along those
@@ -744,7 +749,7 @@ def _nearest_to_start(
         return v
 
     before = cost(x)
-    fraction = 1.0
+    fraction, left = 1.0, 0.0
     for _ in range(rounds):
         Jy = whitened(x)[1]
         if not np.isfinite(Jy).all():
@@ -755,7 +760,9 @@ def _nearest_to_start(
         Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
         y = scale * x[moving]
         along = Q @ (Q.T @ y)
-        if np.linalg.norm(along) <= 1e-12 * max(1.0, np.linalg.norm(y)):
+        left = float(np.linalg.norm(along))
+        if left <= 1e-12 * max(1.0, np.linalg.norm(y)):
+            left = 0.0
             break
         # a long way along curved directions: shorter moves, each back to the minimum
         while fraction >= 1e-3:
@@ -776,7 +783,7 @@ def _nearest_to_start(
                 float(np.linalg.norm(along)),
             )
             break
-    return x[moving]
+    return x[moving], left
 
 
 def _gram(normal: NormalEquations) -> tuple[NDArray, NDArray]:
