@@ -351,3 +351,28 @@ def test_the_held_out_rms_is_sigma_sqrt_1_plus_p_over_n(scene, kind):
     expected = sigma * np.sqrt(1 + p / (n * rows - p - 1))
     assert np.sqrt(np.mean(squares)) == pytest.approx(expected, rel=0.08)
     assert np.sqrt(np.mean(ratios)) == pytest.approx(1.0, rel=0.1)
+
+
+def test_the_contacts_are_drawn_on_the_ball_and_at_the_point(scene):
+    """The view's drawing: predicted, the probe (Pinocchio FK); measured, the point at the
+    measured distance off the ball's surface (on the ray from its centre), or the point
+    plus the measured gap."""
+    _, truth, ball, point, on_ball, on_point = scene
+    known = {offset_key("flange", "tip"): OFFSET, sphere_key("ball"): ball[:3]}
+    ctx = NumericContext.from_robot(truth, on_ball, NAMES, known)
+    (g,) = _spheres(on_ball, distance=np.full(60, 0.01)).others
+    drawing = kind_of(g).drawing(g, ctx)
+    assert drawing.node == "spheres/flange/ball@tip"
+    np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, on_ball), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        np.linalg.norm(drawing.w_p_measured - ball[:3], axis=1), RADIUS + 0.01, rtol=0, atol=1e-12
+    )
+    gap = np.random.default_rng(4).normal(0, 1e-3, (40, 3))
+    (g,) = _divots(on_point, gap=gap).others
+    ctx = NumericContext.from_robot(
+        truth, on_point, NAMES, {offset_key("flange", "tip"): OFFSET, divot_key("divot"): point}
+    )
+    drawing = kind_of(g).drawing(g, ctx)
+    assert drawing.node == "divots/flange/divot@tip"
+    np.testing.assert_allclose(drawing.w_p_measured, point + gap, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, on_point), rtol=0, atol=1e-12)
