@@ -379,7 +379,7 @@ def _undetermined_refusal(
         )
         for n in refined.model.topology.joint_names
     )
-    shown = f" (the origin of joint {worst[1]!r} moved by {worst[0]:.3g} m)"
+    shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
     how = (
         f"did not converge in {refined.iterations} iterations and " if not refined.converged else ""
     )

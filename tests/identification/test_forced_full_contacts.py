@@ -37,7 +37,7 @@ def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_mod
         InsufficientDataError,
         match=r"too little data to refine --params full: the fit did not converge in \d+ "
         r"iterations and moved [0-9.]+ \(m, rad\) along directions these data do not "
-        r"determine.*\(the origin of joint 'j\d' moved by [0-9.]+ m\).*the models these "
+        r"determine.*\(the largest move of a joint origin: 'j\d' by [0-9.]+ m\).*the models these "
         r"data determine, by leave-one-out held-out error \(whitened\), best first: "
         r"--params full --prior-mm",
     ):
