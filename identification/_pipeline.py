@@ -335,8 +335,6 @@ def _refine_checked(
         prior=options.prior,
         refine_intrinsics=options.refine_intrinsics,
     )
-    if refined.undetermined > UNDETERMINED_LEFT:
-        raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
     # a smaller set, or a prior, is a deliberately restricted model (baselines, the
     # model choice's candidates): its residuals are expected to show what it leaves out
     unrestricted = options.parameters == "full" and options.prior is None
@@ -347,45 +345,53 @@ def _refine_checked(
         except UnitError as exc:  # the residuals' structure names a likelier cause
             order = _quaternion_order_hint(nominal, data, options)
             raise UnitError(" ".join((*order, str(exc), *(f"Also: {w}" for w in found)))) from None
+    # not converged and drifted along what the data do not determine: meaningless geometry
+    if not refined.converged and refined.undetermined > UNDETERMINED_LEFT:
+        raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
     return refined, found
 
 
 #: Size (chart coordinates, m and rad) of an estimate's part along undetermined
-#: directions above which a refinement is refused (:func:`_undetermined_refusal`).
+#: directions above which a refinement that did not converge is refused
+#: (:func:`_undetermined_refusal`; a converged one may keep a few mm along them where the
+#: return to the nominal stops at the minimum's curvature).
 UNDETERMINED_LEFT = 1e-4
 
 
 def _undetermined_refusal(
     nominal: Robot, data: Measurements, refined: RefineResult, options: _RefineOptions
 ) -> str:
-    """Why a refinement is refused whose estimate moved along what the data do not
-    determine and could not be brought back (:attr:`RefineResult.undetermined`): the
-    exported geometry would be meaningless there (the root's joint moved by a metre on
-    little contact data), whatever the predictions."""
-    exported = Robot(
-        export_urdf(
-            nominal,
-            geometry_from_cpc(refined.model),
-            root_is_measurement_frame=refined.model_frame is None,
-        ).urdf_xml,
-        nominal.source,
-    )
-    worst = max(
-        (
-            np.linalg.norm(
-                exported.joint(n).parent_T_child[:3, 3] - nominal.joint(n).parent_T_child[:3, 3]
-            ),
-            n,
+    """Why a refinement is refused that did not converge and whose estimate moved along
+    what the data do not determine and could not be brought back
+    (:attr:`RefineResult.undetermined`): the exported geometry would be meaningless
+    there (the root's joint moved by a metre on little contact data), whatever the
+    predictions."""
+    try:  # the export of a degenerate estimate (an axis turned over) may not exist
+        exported = Robot(
+            export_urdf(
+                nominal,
+                geometry_from_cpc(refined.model),
+                root_is_measurement_frame=refined.model_frame is None,
+            ).urdf_xml,
+            nominal.source,
         )
-        for n in refined.model.topology.joint_names
-    )
-    shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
-    how = (
-        f"did not converge in {refined.iterations} iterations and " if not refined.converged else ""
-    )
+    except ValueError:
+        shown = ""
+    else:
+        worst = max(
+            (
+                np.linalg.norm(
+                    exported.joint(n).parent_T_child[:3, 3] - nominal.joint(n).parent_T_child[:3, 3]
+                ),
+                n,
+            )
+            for n in refined.model.topology.joint_names
+        )
+        shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
     params = options.parameters if isinstance(options.parameters, str) else "the mask"
     return (
-        f"{data.source}: too little data to refine --params {params}: the fit {how}moved "
+        f"{data.source}: too little data to refine --params {params}: the fit did not "
+        f"converge in {refined.iterations} iterations and moved "
         f"{refined.undetermined:.3g} (m, rad) along directions these data do not "
         f"determine, which it cannot bring back to the nominal URDF{shown}: the exported "
         "geometry would be meaningless there; refine fewer parameters, add a prior "
