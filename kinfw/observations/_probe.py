@@ -21,7 +21,7 @@ from kinfw.model import BlockKey, PointBlock
 from kinfw.observations._base import ObservationKind, UnknownRequest, data_array
 from kinfw.observations._contexts import SymbolicContext
 from kinfw.observations._numeric import NumericContext
-from kinfw.observations._point import offset_key
+from kinfw.observations._point import offset_key, read_offset_or_marker
 
 __all__ = ["ProbeContactKind", "check_probe"]
 
@@ -55,16 +55,7 @@ class ProbeContactKind(ObservationKind):
                 obs, key, at, self.name, "a contact measures its distance, no position"
             )
         reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
-        offset = None
-        if obs.get("offset") is not None:
-            offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
-        marker = reader.optional_string(obs, "marker", at)
-        if marker is not None and offset is not None:
-            raise reader.error(
-                f"{at}.offset",
-                f"an offset and a marker ({marker!r}) exclude each other: a marker's offset "
-                "is unknown and estimated; drop the marker to use a known offset",
-            )
+        offset, marker = read_offset_or_marker(reader, obs, at)
         measured_in = reader.optional_string(obs, "measured_in", at)
         return (("offset", offset), ("marker", marker), ("measured_in", measured_in))
 

@@ -28,7 +28,7 @@ from kinfw.measurements import (
 from kinfw.model import load_robot
 from kinfw.observations import DatasetError
 from kinfw.simulation import perturb_robot
-from tests.contacts import TALOS_JOINTS, contact_configurations, probe_distances
+from tests.contacts import TALOS_JOINTS, probe_distances, two_arm_contacts
 from tests.erd import urdf_path
 
 LEG = tuple(f"leg_left_{k}_joint" for k in range(1, 7))
@@ -53,46 +53,16 @@ def _table_in_foot(robot) -> np.ndarray:
     return plane if plane[3] < 0 else -plane
 
 
-def _contacts(truth, table, n, rng) -> Measurements:
-    qs, groups = [], []
-    from kinfw.observations import PlaneContacts
-
-    for frame, offset in OFFSETS.items():
-        side = "left" if "left" in frame else "right"
-        q = contact_configurations(
-            truth,
-            JOINTS,
-            frame,
-            offset,
-            table,
-            f"arm_{side}_4_joint",
-            n,
-            rng,
-            measured_in=FOOT,
-            fixed=STANCE,
-        )
-        start = sum(map(len, qs))
-        groups.append(
-            PlaneContacts(
-                frame,
-                np.arange(start, start + n),
-                np.zeros(n),
-                plane="table",
-                marker=f"{side}_tip",
-                measured_in=FOOT,
-            )
-        )
-        qs.append(q)
-    return Measurements(JOINTS, np.concatenate(qs), others=tuple(groups))
-
-
 @pytest.fixture(scope="module")
 def standing():
     nominal = load_robot(urdf_path("talos_data/robots/talos_reduced.urdf"))
     rng = np.random.default_rng(1)
     truth = load_robot(perturb_robot(nominal, rng, joints=JOINTS))
     table = _table_in_foot(truth)
-    return nominal, truth, table, _contacts(truth, table, 60, rng)
+    data = two_arm_contacts(
+        truth, table, OFFSETS, 60, rng, measured_in=FOOT, joint_names=JOINTS, fixed=STANCE
+    )
+    return nominal, truth, table, data
 
 
 def test_the_still_leg_is_fixed_in_this_experiment_not_an_error(standing):
