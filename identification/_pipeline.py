@@ -355,7 +355,7 @@ def _refine_checked(
 #: directions above which a refinement that did not converge is refused
 #: (:func:`_undetermined_refusal`; a converged one may keep a few mm along them where the
 #: return to the nominal stops at the minimum's curvature).
-UNDETERMINED_LEFT = 1e-4
+UNDETERMINED_LEFT = 1e-3
 
 
 def _undetermined_refusal(
