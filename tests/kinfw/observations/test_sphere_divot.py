@@ -376,3 +376,37 @@ def test_the_contacts_are_drawn_on_the_ball_and_at_the_point(scene):
     assert drawing.node == "divots/flange/divot@tip"
     np.testing.assert_allclose(drawing.w_p_measured, point + gap, rtol=0, atol=1e-12)
     np.testing.assert_allclose(drawing.w_p_predicted, _probe(truth, on_point), rtol=0, atol=1e-12)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["sphere", "divot"])
+def test_the_model_choice_scores_ball_and_point_contacts_in_their_metric(scene, kind):
+    """Leave-one-out (closed form) on 60 ball contacts or 40 placements with 0.1 mm
+    noise: every candidate scored in the kind's own metric (height mm; placement mm),
+    finite, its whitened score the squared metric over the fit's sigma; the chosen candidate
+    within 1 % of the best (the simplest such)."""
+    from kinfw.identification import calibrate
+    from kinfw.verification.evaluation import choose_parameters, whitening_noise
+
+    nominal, _, _, _, on_ball, on_point = scene
+    rng = np.random.default_rng(9)
+    if kind == "sphere":
+        data, metric = _spheres(on_ball, distance=rng.normal(0, 1e-4, 60)), "height"
+    else:
+        data, metric = _divots(on_point, gap=rng.normal(0, 1e-4, (40, 3))), "placement"
+    prior = (3e-3, np.radians(1.72))
+    choice = choose_parameters(nominal, data, prior=prior)
+    whitened = [c.whitened for c in choice.candidates]
+    assert np.all(np.isfinite(whitened)) and min(whitened) > 0
+    for c in choice.candidates:
+        assert [m.name for m, _ in c.errors] == [metric]
+        assert [m.unit for m, _ in c.errors] == ["mm"]
+    best = min(whitened)
+    expected = next(c for c in choice.candidates if c.whitened <= 1.01 * best)
+    assert (choice.parameters, choice.prior) == (expected.parameters, expected.prior)
+    full = calibrate(nominal, data, parameters="full", prior=prior)
+    component = "distance" if kind == "sphere" else "placement"
+    (sigma,) = (v for c, v in whitening_noise(full.refined.noise, data) if c.name == component)
+    for c in choice.candidates:  # the placement's size is the norm of its 3 rows
+        size_mm = dict((m.name, v) for m, v in c.errors)[metric]
+        assert c.whitened == pytest.approx((size_mm * 1e-3 / sigma) ** 2, rel=1e-6)
