@@ -345,6 +345,11 @@ def _refine_checked(
         except UnitError as exc:  # the residuals' structure names a likelier cause
             order = _quaternion_order_hint(nominal, data, options)
             raise UnitError(" ".join((*order, str(exc), *(f"Also: {w}" for w in found)))) from None
+        # a fit that passes but is contradicted by its residuals may still be the wrong
+        # quaternion order (a few frames, the rest of the error absorbed by the geometry)
+        order = _quaternion_order_hint(nominal, data, options) if found else ()
+        if order:
+            raise UnitError(" ".join((*order, *(f"Read as written: {w}" for w in found))))
     # not converged and drifted along what the data do not determine: meaningless geometry
     if not refined.converged and refined.undetermined > UNDETERMINED_LEFT:
         raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
@@ -403,8 +408,8 @@ def _quaternion_order_hint(
     nominal: Robot, data: Measurements, options: _RefineOptions
 ) -> tuple[str, ...]:
     """When the data do not fit but would with their quaternions in the other order
-    (:meth:`kinfw.measurements.Measurements.with_quaternions_reordered`): one sentence
-    saying so, to put first; else nothing."""
+    (:meth:`kinfw.measurements.Measurements.with_quaternions_reordered`) without a
+    warning about the fit: one sentence saying so, to put first; else nothing."""
     swapped = data.with_quaternions_reordered()
     if swapped is None:
         return ()
@@ -416,6 +421,8 @@ def _quaternion_order_hint(
             check_fit(result, data.source)
         except ValueError:  # no better in the other order: not the cause
             return ()
+    if fit_warnings(result, swapped):  # no cleaner in the other order either
+        return ()
     pos, rot = median_residuals(result)
     return (
         f"{data.source}: the orientations look like quaternions stored scalar first "

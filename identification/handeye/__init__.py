@@ -63,7 +63,6 @@ from kinfw.identification.handeye._cameras import (
     CamerasResult,
     calibrate_cameras,
     camera_mount,
-    target_views,
 )
 from kinfw.identification.handeye._checks import (
     ORTHONORMAL_TOL,
@@ -253,7 +252,6 @@ __all__ = [
     "solver_hand_poses",
     "start_of_y",
     "static_transform_args",
-    "target_views",
     "translation_iteration",
     "translations_least_squares",
     "tsai_rotation",

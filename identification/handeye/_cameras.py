@@ -32,7 +32,7 @@ from kinfw.geometry import average_transform, inverse_transform, rotation_angle
 from kinfw.identification.handeye._axyb import solve_axyb
 from kinfw.identification.handeye._result import AXYBResult
 from kinfw.identification.handeye._uncertainty import Verdict
-from kinfw.measurements import Measurements
+from kinfw.measurements import Measurements, target_views
 from kinfw.model import Robot
 from kinfw.observations import DatasetError, TargetObservations
 
@@ -41,7 +41,6 @@ __all__ = [
     "CamerasResult",
     "calibrate_cameras",
     "camera_mount",
-    "target_views",
 ]
 
 
@@ -166,17 +165,6 @@ def _solve_one(
     )
 
 
-def target_views(measurements: Measurements) -> tuple[TargetObservations, ...]:
-    """The ``target`` groups, and each ``pixels`` group as the target poses of its
-    images from PnP (:func:`kinfw.observations.target_observations_from_pixels`)."""
-    from kinfw.observations import target_observations_from_pixels
-
-    return (
-        *measurements.targets,
-        *(target_observations_from_pixels(g) for g in measurements.groups("pixels")),
-    )
-
-
 def calibrate_cameras(
     robot: Robot, measurements: Measurements, *, rng: np.random.Generator | None = None
 ) -> CamerasResult:
@@ -188,7 +176,7 @@ def calibrate_cameras(
         Kinematics to trust (the stage-1 calibrated URDF, or the nominal one).
     measurements : Measurements
         ``target`` observations (``camera_T_target``) and ``pixels`` observations (their
-        images' PnP poses, :func:`target_views`); other kinds are ignored.
+        images' PnP poses, :func:`kinfw.measurements.target_views`); other kinds are ignored.
     rng : numpy.random.Generator, optional
         For the solver's random restarts (reproducible by default).
 

@@ -1,6 +1,7 @@
 """``kinfw handeye``: hand-eye calibration from pose pairs (CSV, JSON, easy_handeye2
 YAML; :func:`kinfw.measurements.read_pose_pairs`) or a measurement file with a URDF
-(:func:`kinfw.measurements.pose_pairs_from_measurements`), eye-in-hand or eye-to-hand, with
+(:func:`kinfw.measurements.pose_pairs_from_measurements`: target observations, or the
+images of ``kinfw detect`` posed by PnP), eye-in-hand or eye-to-hand, with
 OpenCV's closed forms side by side, held-out errors, a typed result file and ROS 2
 outputs (:mod:`kinfw.identification.handeye`).
 
@@ -55,7 +56,8 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "pairs",
         type=Path,
         metavar="PAIRS",
-        help="the pose-pair file (or, with --urdf, a kinfw measurement file)",
+        help="the pose-pair file (or, with --urdf, a kinfw measurement file: target "
+        "observations, or the pixels observations of kinfw detect, posed by PnP)",
     )
     p.add_argument(
         "--setup",
@@ -79,8 +81,8 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "--holdout",
         type=Path,
         metavar="FILE",
-        help="pose pairs not used in the fit (same format rules): print the held-out "
-        "loop-closure errors (deg, mm) of every method",
+        help="pose pairs not used in the fit, read as PAIRS is (with --urdf a measurement "
+        "file): print the held-out loop-closure errors (deg, mm) of every method",
     )
     p.add_argument(
         "--k",
@@ -115,9 +117,10 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--urdf",
         default=argparse.SUPPRESS,
-        help="PAIRS is a kinfw measurement file (target observations of a camera on the "
-        "robot): the hand's poses are this URDF's forward kinematics of --hand-frame "
-        "(eye-in-hand, metres)",
+        help="PAIRS (and --holdout) is a kinfw measurement file (target observations of a "
+        "camera on the robot, or images' pixels from kinfw detect: PnP per image with the "
+        "file's intrinsics): the hand's poses are this URDF's forward kinematics of "
+        "--hand-frame (eye-in-hand, metres)",
     )
     add_xacro_option(p)
     p.set_defaults(func=cmd_handeye, check_outputs=check_handeye_outputs)
@@ -145,8 +148,9 @@ def _pose_line(name: str, T) -> str:
 
 
 def _read_pairs(args: argparse.Namespace):
-    """The pairs to fit (metres) and the held-out ones (or None); warns when held-out
-    pairs repeat the fit's."""
+    """The pairs to fit (metres) and the held-out ones (or None), both read the same way
+    (pose-pair files, or with --urdf measurement files); warns when held-out pairs repeat
+    the fit's."""
     from kinfw.identification.handeye import repeated_pairs
     from kinfw.measurements import read_pose_pairs
 
@@ -160,15 +164,20 @@ def _read_pairs(args: argparse.Namespace):
         from kinfw.cli._args import load_model
         from kinfw.measurements import pose_pairs_from_measurements, read_measurements
 
-        pairs = pose_pairs_from_measurements(
-            read_measurements(args.pairs),
-            load_model(args.urdf, args),
-            hand_frame=args.hand_frame,
-            camera=args.camera_frame if args.camera_frame != CAMERA_FRAME else None,
-        )
+        robot = load_model(args.urdf, args)
+        camera = args.camera_frame if args.camera_frame != CAMERA_FRAME else None
+
+        def read(path: Path):
+            return pose_pairs_from_measurements(
+                read_measurements(path), robot, hand_frame=args.hand_frame, camera=camera
+            )
     else:
-        pairs = read_pose_pairs(args.pairs).scaled(scale)
-    holdout = read_pose_pairs(args.holdout).scaled(scale) if args.holdout else None
+
+        def read(path: Path):
+            return read_pose_pairs(path).scaled(scale)
+
+    pairs = read(args.pairs)
+    holdout = read(args.holdout) if args.holdout else None
     if holdout is not None:
         repeated = repeated_pairs(
             pairs.base_T_hands,

@@ -44,6 +44,7 @@ from kinfw.cli._commands import (
     add_view_parser,
 )
 from kinfw.cli._detect import add_detect_parser
+from kinfw.cli._export import add_export_parser
 from kinfw.cli._fit_parser import add_fit_parsers
 from kinfw.cli._fleet import add_fleet_parser
 from kinfw.cli._gaze import add_gaze_parser
@@ -103,6 +104,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     add_gaze_parser,
     add_reach_parser,
     add_handeye_parser,
+    add_export_parser,
 )
 
 

@@ -119,6 +119,7 @@ from kinfw.measurements._pose_pairs import (
     pose_pairs_from_measurements,
     pose_pairs_text,
     read_pose_pairs,
+    target_views,
 )
 from kinfw.measurements._streams import (
     align_streams,
@@ -157,5 +158,6 @@ __all__ = [
     "read_pose_csv",
     "read_pose_pairs",
     "robot_measurement_frames",
+    "target_views",
     "write_measurements",
 ]

@@ -53,6 +53,7 @@ __all__ = [
     "pose_pairs_from_measurements",
     "pose_pairs_text",
     "read_pose_pairs",
+    "target_views",
 ]
 
 #: The CSV columns, in the order the writer writes them: ``base_T_hand`` then
@@ -233,17 +234,31 @@ def _pairs(hands, sensors, source: str, setup: str | None) -> PosePairs:
     return PosePairs(np.stack(hands), np.stack(sensors), source, setup)
 
 
+def target_views(measurements) -> tuple:
+    """The ``target`` groups of ``measurements``, and each ``pixels`` group as the target
+    poses of its images from PnP (:func:`kinfw.observations.target_observations_from_pixels`;
+    images PnP cannot solve are left out): a tuple of
+    :class:`kinfw.observations.TargetObservations`."""
+    from kinfw.observations import target_observations_from_pixels
+
+    return (
+        *measurements.targets,
+        *(target_observations_from_pixels(g) for g in measurements.groups("pixels")),
+    )
+
+
 def pose_pairs_from_measurements(
     measurements, robot, *, hand_frame: str, camera: str | None = None
 ) -> PosePairs:
-    """Pose pairs of a kinfw measurement file's ``target`` observations: at each
-    observation the hand's pose by the robot's forward kinematics and the target's pose
-    in the camera (eye-in-hand; metres).
+    """Pose pairs of a kinfw measurement file's ``target`` or ``pixels`` observations (the
+    images of ``kinfw detect``, each turned into the target's pose by PnP,
+    :func:`target_views`): at each observation the hand's pose by the robot's forward
+    kinematics and the target's pose in the camera (eye-in-hand; metres).
 
     Parameters
     ----------
     measurements : kinfw.measurements.Measurements
-        With ``target`` observations.
+        With ``target`` or ``pixels`` observations.
     robot : kinfw.model.Robot
         The model whose forward kinematics give ``base_T_hand`` (its root link is the
         base).
@@ -255,14 +270,15 @@ def pose_pairs_from_measurements(
     Raises
     ------
     DatasetError
-        No target observations, several cameras and none chosen (the message lists
-        them), or fewer than :data:`MIN_POSE_PAIRS` observations.
+        No target or pixels observations, several cameras and none chosen (the message
+        lists them), or fewer than :data:`MIN_POSE_PAIRS` observations.
     """
-    groups = [g for g in measurements.targets if camera is None or g.camera == camera]
-    cameras = sorted({g.camera for g in measurements.targets})
+    views = target_views(measurements)
+    groups = [g for g in views if camera is None or g.camera == camera]
+    cameras = sorted({g.camera for g in views})
     if not groups:
         raise DatasetError(
-            f"{measurements.source}: no target observations"
+            f"{measurements.source}: no target or pixels observations"
             + (f" by camera {camera!r} (cameras: {', '.join(cameras)})" if cameras else "")
         )
     if len({g.camera for g in groups}) > 1 or len(groups) > 1:

@@ -1,18 +1,51 @@
 """Writing a calibrated model back into the robot's own URDF text: every tag kept, joint
 origins and axes changed on measured paths, link frames re-expressed so nothing attached
-moves (:func:`export_urdf`, :func:`write_urdf`, :func:`edit_urdf`).
+moves (:func:`export_urdf`, :func:`write_urdf`, :func:`edit_urdf`); and into the files ROS 2
+loads: a ``robot_description`` parameter file and launch file
+(:func:`write_robot_description`) and, for a UR arm, ``ur_description``'s kinematics file
+(:func:`ur_kinematics_from_robot`, :func:`ur_kinematics_text`).
 """
 
 from __future__ import annotations
 
 from kinfw.urdf._edit import SAME_TOL, ExportError, edit_urdf
 from kinfw.urdf._export import ExportResult, export_urdf, write_urdf
+from kinfw.urdf._robot_description import (
+    ROBOT_DESCRIPTION_FILES,
+    robot_description_launch_text,
+    robot_description_params_text,
+    write_robot_description,
+)
+from kinfw.urdf._ur import (
+    BASE_LINK_T_INERTIA,
+    MAX_AXIS_TILT_DEG,
+    UR_JOINTS,
+    UR_SEGMENTS,
+    WRIST_3_T_TOOL0,
+    URKinematics,
+    ur_kinematics_from_dh,
+    ur_kinematics_from_robot,
+    ur_kinematics_text,
+)
 
 __all__ = [
+    "BASE_LINK_T_INERTIA",
+    "MAX_AXIS_TILT_DEG",
+    "ROBOT_DESCRIPTION_FILES",
     "SAME_TOL",
+    "UR_JOINTS",
+    "UR_SEGMENTS",
+    "WRIST_3_T_TOOL0",
     "ExportError",
     "ExportResult",
+    "URKinematics",
     "edit_urdf",
     "export_urdf",
+    "robot_description_launch_text",
+    "robot_description_params_text",
+    "ur_kinematics_from_dh",
+    "ur_kinematics_from_robot",
+    "ur_kinematics_text",
+    "write_robot_description",
     "write_urdf",
 ]

@@ -183,7 +183,7 @@ def _format(values: ArrayLike) -> str:
     return " ".join(repr(float(v)) for v in np.asarray(values))
 
 
-def _rpy_from_matrix(a_R_b: NDArray[np.float64], what: str) -> NDArray[np.float64]:
+def rpy_from_matrix(a_R_b: NDArray[np.float64], what: str) -> NDArray[np.float64]:
     """URDF roll, pitch, yaw (rad) of ``a_R_b``, checked to reproduce it to ``SAME_TOL``.
 
     ``pin.rpy.matrixToRpy`` stays exact at pitch = +-pi/2, where roll and yaw are not
@@ -219,7 +219,7 @@ def _set_origin(elem: etree._Element, a_T_b: NDArray[np.float64], what: str) -> 
     if new_xyz:
         _child(elem, "origin").set("xyz", _format(a_T_b[:3, 3]))
     if new_rpy:
-        _child(elem, "origin").set("rpy", _format(_rpy_from_matrix(a_T_b[:3, :3], what)))
+        _child(elem, "origin").set("rpy", _format(rpy_from_matrix(a_T_b[:3, :3], what)))
     return bool(new_xyz or new_rpy)
 
 

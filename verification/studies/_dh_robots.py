@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from kinfw.urdf import UR_JOINTS
+
 __all__ = ["UR10_DH", "UR10_JOINTS", "dh_urdf", "ur10_urdf"]
 
 #: Universal Robots' DH parameters of the UR10 (standard DH), per joint:
@@ -20,14 +22,7 @@ UR10_DH = (
     (0.1157, 0.0, -math.pi / 2),
     (0.0922, 0.0, 0.0),
 )
-UR10_JOINTS = (
-    "shoulder_pan_joint",
-    "shoulder_lift_joint",
-    "elbow_joint",
-    "wrist_1_joint",
-    "wrist_2_joint",
-    "wrist_3_joint",
-)
+UR10_JOINTS = UR_JOINTS
 
 
 def dh_urdf(

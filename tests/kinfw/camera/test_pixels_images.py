@@ -17,6 +17,7 @@ from kinfw.model import load_robot
 from kinfw.reports import read_sidecar
 from kinfw.simulation import perturb_robot, render_board
 from kinfw.verification.evaluation import pose_discrepancy
+from tests.board_views import board_in_view
 from tests.robots import ARM_6R
 
 NAMES = ("j1", "j2", "j3", "j4", "j5", "j6")
@@ -33,10 +34,7 @@ def _tilt(rx: float, ry: float) -> np.ndarray:
 
 
 def _in_view(robot, w_T_board, qs):
-    c_T_b = inverse_transform(robot.frame_poses(qs, "flange", NAMES)) @ w_T_board
-    c_p = np.einsum("nij,kj->nki", c_T_b[:, :3, :3], BOARD.points) + c_T_b[:, None, :3, 3]
-    tilt = np.degrees(np.arccos(np.clip(c_T_b[:, 2, 2], -1.0, 1.0)))
-    return qs[CAMERA.in_view(c_p, margin_px=25).all(axis=1) & (tilt < 50.0)]
+    return qs[board_in_view(robot.frame_poses(qs, "flange", NAMES), w_T_board, BOARD, CAMERA)]
 
 
 @pytest.mark.slow
