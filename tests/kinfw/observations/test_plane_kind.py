@@ -656,11 +656,14 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
     write_measurements(tmp_path / "held.json", held)
     (tmp_path / "arm.urdf").write_text(ARM_6R)
     argv = ["calibrate", tmp_path / "train.json", "--urdf", tmp_path / "arm.urdf"]
-    argv += ["--out", tmp_path / "out.urdf", "--params", "full"]
-    # 48 contacts with one plane do not determine full without a prior: refused
-    assert main([str(a) for a in argv]) == 2
-    assert "too little data to refine --params full" in capsys.readouterr().err
-    argv += ["--prior-mm", "3", "--prior-deg", "1.72", "--holdout", tmp_path / "held.json"]
+    argv += [
+        "--out",
+        tmp_path / "out.urdf",
+        "--params",
+        "full",
+        "--holdout",
+        tmp_path / "held.json",
+    ]
     assert main([str(a) for a in [*argv, "--report", tmp_path / "r.json"]]) == 0
     out = capsys.readouterr().out
     report = json.loads((tmp_path / "r.json").read_text())
