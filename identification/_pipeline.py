@@ -26,6 +26,7 @@ from kinfw.identification._closed_form import ClosedFormResult, ProtocolError, i
 from kinfw.identification._refine import refine
 from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.checks import (
+    InsufficientDataError,
     UnitError,
     check_fit,
     check_redundancy,
@@ -39,6 +40,7 @@ from kinfw.measurements import (
     Measurements,
     check_joint_motion,
     check_measurements,
+    fixed_in_experiment,
     observed_joints,
 )
 from kinfw.model import Robot, check_robot, geometry_from_cpc
@@ -178,7 +180,7 @@ def calibrate(
     options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
     if method == "refine":
         progress.stage("checking that the data determine the parameters (start values)")
-        _check_refinable(nominal, data, options)
+        fixed_note = _check_refinable(nominal, data, options)
     clock = time.perf_counter()
 
     def done(message: str) -> None:
@@ -188,7 +190,7 @@ def calibrate(
 
     closed_form = export = cameras = refined = None
     stages: list[tuple[str, str]] = []
-    notes: list[str] = []
+    notes: list[str] = [fixed_note] if method == "refine" and fixed_note else []
     xml = nominal.urdf_xml
     if parameters == "full" and any(g.marker is None and g.measured_in is None for g in data.poses):
         progress.stage("closed form (Shih et al.)")
@@ -270,13 +272,16 @@ class _RefineOptions:
     refine_intrinsics: bool | tuple[str, ...]
 
 
-def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> None:
+def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> str:
     """The checks of :func:`calibrate` before a refinement: every joint on a measured path
-    moves, and the residuals determine the free parameters with redundancy."""
+    moves but those fixed in this experiment (:func:`kinfw.measurements.fixed_in_experiment`:
+    said in the note returned, "" for none), and the residuals determine the free
+    parameters with redundancy."""
     parameters, prior = options.parameters, options.prior
     # every joint on a measured path must move, or its geometry is not observed
+    fixed = fixed_in_experiment(data, nominal)
     if parameters in ("full", "offsets"):
-        check_joint_motion(data, observed_joints(data, nominal))
+        check_joint_motion(data, observed_joints(data, nominal), fixed=fixed)
     cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
     smaller = None
     if parameters == "full":
@@ -294,6 +299,14 @@ def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions
         source=data.source,
         cameras=cameras_seen,
         smaller=smaller,
+    )
+    if not fixed:
+        return ""
+    return (
+        f"joint(s) {', '.join(fixed)} never move and carry no observed frame, only the "
+        "frame a contact surface is fixed to (its unknown pose absorbs them): fixed in "
+        "this experiment; their parameters are not identifiable from these data and stay "
+        "at the nominal"
     )
 
 
@@ -361,7 +374,61 @@ def _refine_checked(
         order = _quaternion_order_hint(nominal, data, options) if found else ()
         if order:
             raise UnitError(" ".join((*order, *(f"Read as written: {w}" for w in found))))
+    # not converged and drifted along what the data do not determine: meaningless geometry
+    if not refined.converged and refined.undetermined > UNDETERMINED_LEFT:
+        raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
     return refined, found
+
+
+#: Size (chart coordinates, m and rad) of an estimate's part along undetermined
+#: directions above which a refinement that did not converge is refused
+#: (:func:`_undetermined_refusal`): a drift of metres (the root's joint by 1.6 m on 40
+#: contacts). Smaller drifts are kept: cross-validation and the model choice fit through
+#: :func:`calibrate` and score predictions, which the drift does not change (0.3 on 48
+#: contacts of one plane; a converged fit may keep a few mm where the return to the
+#: nominal stops at the minimum's curvature).
+UNDETERMINED_LEFT = 1.0
+
+
+def _undetermined_refusal(
+    nominal: Robot, data: Measurements, refined: RefineResult, options: _RefineOptions
+) -> str:
+    """Why a refinement is refused that did not converge and whose estimate moved along
+    what the data do not determine and could not be brought back
+    (:attr:`RefineResult.undetermined`): the exported geometry would be meaningless
+    there (the root's joint moved by a metre on little contact data), whatever the
+    predictions."""
+    try:  # the export of a degenerate estimate (an axis turned over) may not exist
+        exported = Robot(
+            export_urdf(
+                nominal,
+                geometry_from_cpc(refined.model),
+                root_is_measurement_frame=refined.model_frame is None,
+            ).urdf_xml,
+            nominal.source,
+        )
+    except ValueError:
+        shown = ""
+    else:
+        worst = max(
+            (
+                np.linalg.norm(
+                    exported.joint(n).parent_T_child[:3, 3] - nominal.joint(n).parent_T_child[:3, 3]
+                ),
+                n,
+            )
+            for n in refined.model.topology.joint_names
+        )
+        shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
+    params = options.parameters if isinstance(options.parameters, str) else "the mask"
+    return (
+        f"{data.source}: too little data to refine --params {params}: the fit did not "
+        f"converge in {refined.iterations} iterations and moved "
+        f"{refined.undetermined:.3g} (m, rad) along directions these data do not "
+        f"determine, which it cannot bring back to the nominal URDF{shown}: the exported "
+        "geometry would be meaningless there; refine fewer parameters, add a prior "
+        "(--prior-mm, --prior-deg), or add data"
+    )
 
 
 def _quaternion_order_hint(

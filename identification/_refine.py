@@ -72,7 +72,12 @@ from kinfw.identification.problem import (
     tall_r,
     thresholds,
 )
-from kinfw.measurements import Measurements, check_measurements
+from kinfw.measurements import (
+    Measurements,
+    check_measurements,
+    fixed_in_experiment,
+    robot_measurement_frames,
+)
 from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_of
 
@@ -489,6 +494,7 @@ def _fit(
         refine_intrinsics=refine_intrinsics,
         extra_blocks=extra_blocks,
     )
+    problem = _fixed_in_experiment_kept(problem, robot, measurements)
     given = noise is not None
     if given:
         _check_noise_covers(noise, problem, measurements.source)
@@ -523,6 +529,7 @@ def _fit(
         identifiability=quality.identifiability,
         iterations=solution.iterations,
         converged=solution.converged,
+        undetermined=solution.undetermined,
         cost=quality.cost,
         seconds=time.perf_counter() - t0,
     )
@@ -551,13 +558,15 @@ def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source:
 
 @dataclass(frozen=True, slots=True)
 class _Solution:
-    """The estimate ``x`` of the chart coordinates, the noise model it ends with, and the
-    Levenberg-Marquardt iterations (summed over the noise rounds) and convergence."""
+    """The estimate ``x`` of the chart coordinates, the noise model it ends with, the
+    Levenberg-Marquardt iterations (summed over the noise rounds) and convergence, and
+    the part along undetermined directions left (:func:`_nearest_to_start`)."""
 
     x: NDArray[np.float64]
     noise: NoiseModel
     iterations: int
     converged: bool
+    undetermined: float = 0.0
 
 
 def _solve(
@@ -616,7 +625,7 @@ def _solve(
             r, problem.groups, sigma, hat, robust=loss != "linear", first=round_ == 0
         )
     robot = _robot_entries(problem)
-    x_free[moving] = _nearest_to_start(
+    x_free[moving], left = _nearest_to_start(
         lambda v, jac: problem.evaluate_free(full(v), sigma, jac),
         x_free,
         moving,
@@ -624,7 +633,30 @@ def _solve(
         lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
     )
     x = full(x_free)
-    return _Solution(x, sigma, iterations, converged)
+    return _Solution(x, sigma, iterations, converged, left)
+
+
+def _fixed_in_experiment_kept(
+    problem: LeastSquaresProblem, robot: Robot, measurements: Measurements
+) -> LeastSquaresProblem:
+    """``problem`` with the robot's parameters that these data cannot see at their start:
+    those of the joints fixed in this experiment
+    (:func:`kinfw.measurements.fixed_in_experiment`: a still leg between the root and a
+    foot a plane is fixed to) and of the frames they alone carry (the foot's mounting)."""
+    fixed = set(fixed_in_experiment(measurements, robot))
+    if not fixed:
+        return problem
+    for frame in robot_measurement_frames(measurements, robot):
+        movable = [j.name for j in robot.path_joints(frame) if j.type != "fixed"]
+        if movable and movable[-1] in fixed:
+            fixed.add(frame)
+    blocks = tuple(
+        b.with_free(b.free & ~np.isin([n.owner for n in b.names], sorted(fixed)))
+        if isinstance(b, RobotBlock)
+        else b
+        for b in problem.blocks
+    )
+    return replace(problem, blocks=blocks)
 
 
 def _robot_entries(problem: LeastSquaresProblem) -> NDArray[np.bool_]:
@@ -642,15 +674,17 @@ UNKNOWN_WEIGHT = 1e-3
 
 
 def _nearest_to_start(
-    evaluate: Callable[[NDArray], tuple[NDArray, NDArray]],
+    evaluate: Callable[[NDArray, bool], tuple[NDArray, NDArray | None]],
     x_free: NDArray,
     moving: NDArray[np.bool_],
     robot: NDArray[np.bool_],
     weights: Callable[[NDArray], NDArray],
     rounds: int = 200,
-) -> NDArray[np.float64]:
+) -> tuple[NDArray[np.float64], float]:
     """The estimate moved along what the data do not determine to the start: shape
-    ``(moving.sum(),)``, the ``moving`` entries of ``x_free``.
+    ``(moving.sum(),)``, the ``moving`` entries of ``x_free``; and the norm of its part
+    along those directions that could not be removed (0 when none is left; in the
+    distance's coordinates).
 
     Plane contacts leave the rigid motion of the robot with its planes and a common scale
     free, a joint that never moves its axis, and so on: the cost is the same along those
@@ -727,7 +761,7 @@ def _nearest_to_start(
         return v
 
     before = cost(x)
-    fraction = 1.0
+    fraction, left = 1.0, 0.0
     for _ in range(rounds):
         Jy = whitened(x)[1]
         if not np.isfinite(Jy).all():
@@ -738,7 +772,9 @@ def _nearest_to_start(
         Q = np.linalg.qr(Vt[~kept].T / c[:, None])[0]  # the null space, in y
         y = scale * x[moving]
         along = Q @ (Q.T @ y)
-        if np.linalg.norm(along) <= 1e-12 * max(1.0, np.linalg.norm(y)):
+        left = float(np.linalg.norm(along))
+        if left <= 1e-12 * max(1.0, np.linalg.norm(y)):
+            left = 0.0
             break
         # a long way along curved directions: shorter moves, each back to the minimum
         while fraction >= 1e-3:
@@ -759,7 +795,7 @@ def _nearest_to_start(
                 float(np.linalg.norm(along)),
             )
             break
-    return x[moving]
+    return x[moving], left
 
 
 def _gram(normal: NormalEquations) -> tuple[NDArray, NDArray]:

@@ -74,6 +74,12 @@ class RefineResult:
         Why fewer observations were rejected than the threshold asked (more than the
         allowed fraction beyond it: the data may be inconsistent with the model), or
         why none could be (the rest would not determine the problem); None otherwise.
+    undetermined : float
+        The size of the estimate's part along directions the data do not determine that
+        the refinement could not bring back to the start (chart coordinates, m and rad;
+        the unknowns' weighted by ``UNKNOWN_WEIGHT``): 0 when the model differs from the
+        start only along what the data determine. Large when the fit did not converge
+        on too little data (the calibration refuses it).
     """
 
     model: CPCModel
@@ -95,6 +101,7 @@ class RefineResult:
     seconds: float = field(default=0.0)
     rejected: tuple[RejectedObservation, ...] = ()
     rejection_note: str | None = None
+    undetermined: float = 0.0
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -102,17 +102,21 @@ def two_arm_contacts(
     rng: np.random.Generator,
     *,
     measured_in: str | None = None,
+    joint_names: tuple[str, ...] = TALOS_JOINTS,
+    fixed: dict[str, float] | None = None,
 ) -> Measurements:
     """``n`` contacts per arm of TALOS's torso and arms: the probe at ``offsets[frame]``
     on each arm's frame (``"arm_left_7_link"``, ``"arm_right_7_link"``) touches one plane
     ``"table"`` fixed in ``measured_in``, the elbow (joint 4) solved; the probes' offsets
-    unknown (markers ``"left_tip"`` and ``"right_tip"``: a marker belongs to one frame)."""
+    unknown (markers ``"left_tip"`` and ``"right_tip"``: a marker belongs to one frame).
+    ``joint_names`` are the columns (more joints than the torso's and arms': a leg),
+    ``fixed`` joints held at their value."""
     qs, groups = [], []
     for frame, offset in offsets.items():
         side = "left" if "left" in frame else "right"
         q = contact_configurations(
             robot,
-            TALOS_JOINTS,
+            joint_names,
             frame,
             offset,
             plane,
@@ -120,6 +124,7 @@ def two_arm_contacts(
             n,
             rng,
             measured_in=measured_in,
+            fixed=fixed,
         )
         start = sum(map(len, qs))
         groups.append(
@@ -133,4 +138,4 @@ def two_arm_contacts(
             )
         )
         qs.append(q)
-    return Measurements(TALOS_JOINTS, np.concatenate(qs), others=tuple(groups))
+    return Measurements(joint_names, np.concatenate(qs), others=tuple(groups))

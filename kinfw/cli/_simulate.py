@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -194,19 +194,30 @@ def _point_spec(text: str) -> tuple[str, tuple[float, float, float] | None]:
 
 def _plane_spec(text: str) -> tuple[float, float, float, float]:
     """``NX,NY,NZ,D`` -> the four numbers (a non-zero normal)."""
-    try:
-        nx, ny, nz, d = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected NX,NY,NZ,D (four numbers), got {text!r}"
-        ) from None
-    if not all(map(math.isfinite, (nx, ny, nz, d))) or nx == ny == nz == 0.0:
-        raise argparse.ArgumentTypeError(f"expected finite numbers, a non-zero normal: {text!r}")
+    nx, ny, nz, d = _numbers_spec(4, "NX,NY,NZ,D")(text)
+    if nx == ny == nz == 0.0:
+        raise argparse.ArgumentTypeError(f"expected a non-zero normal: {text!r}")
     return nx, ny, nz, d
 
 
+def _numbers_spec(count: int, what: str) -> Callable[[str], tuple[float, ...]]:
+    """An argparse type: ``count`` finite numbers separated by commas (``what`` names
+    them in the message)."""
+
+    def parse(text: str) -> tuple[float, ...]:
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != count or not all(map(math.isfinite, values)):
+            raise argparse.ArgumentTypeError(f"expected {what} ({count} numbers), got {text!r}")
+        return values
+
+    return parse
+
+
 def _add_probe_options(p: argparse.ArgumentParser) -> None:
-    """``simulate``: motion-capture markers and plane contacts."""
+    """``simulate``: motion-capture markers and contacts (plane, ball, point)."""
     p.add_argument(
         "--markers",
         type=_point_spec,
@@ -235,9 +246,9 @@ def _add_probe_options(p: argparse.ArgumentParser) -> None:
         action="append",
         metavar="FRAME[:X,Y,Z]",
         help="a probe on URDF frame FRAME at X,Y,Z (m, in FRAME; default a random 5 cm "
-        "offset) that touches the plane at --contact-samples configurations (random ones "
-        "projected onto the plane); its offset is left to the calibration (repeatable: "
-        "probe1, probe2, ...)",
+        "offset) that touches the plane (--sphere: the ball; --point: the point) at "
+        "--contact-samples configurations (random ones projected onto the contact); its "
+        "offset is left to the calibration (repeatable: probe1, probe2, ...)",
     )
     p.add_argument(
         "--plane",
@@ -248,7 +259,29 @@ def _add_probe_options(p: argparse.ArgumentParser) -> None:
         "default normal to the root's z through the first probe at the middle of the "
         "joint ranges",
     )
-    p.add_argument("--plane-name", default="table", help="the plane's name (default table)")
+    p.add_argument(
+        "--sphere",
+        type=_numbers_spec(4, "CX,CY,CZ,R"),
+        metavar="CX,CY,CZ,R",
+        default=None,
+        help="instead of a plane, a ball of centre CX,CY,CZ in the URDF root and radius R "
+        "(m) that the probes touch: 'sphere' observations with the radius given and the "
+        "centre left to the calibration",
+    )
+    p.add_argument(
+        "--point",
+        type=_numbers_spec(3, "CX,CY,CZ"),
+        metavar="CX,CY,CZ",
+        default=None,
+        help="instead of a plane, a point (a divot) in the URDF root (m) that the probes "
+        "are placed on in many orientations: 'divot' observations (--noise-mm per axis), "
+        "the point left to the calibration",
+    )
+    p.add_argument(
+        "--plane-name",
+        default=None,
+        help="the name of the plane (ball, point) in the file (default table, ball, divot)",
+    )
     p.add_argument(
         "--contact-samples",
         type=COUNT,
@@ -353,6 +386,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         contacts=contacts,
         plane=args.plane,
         plane_name=args.plane_name,
+        sphere=args.sphere,
+        point=args.point,
         contact_samples=args.contact_samples,
         offsets_known=args.offsets_known,
         seed=args.seed,
@@ -441,6 +476,11 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
             f"  plane {probes['plane_name']!r}: n = ({', '.join(f'{v:.4f}' for v in n)}), "
             f"d = {d:.4f} m"
         )
+    for key, what in (("sphere", "ball"), ("point", "point")):
+        if probes[key] is not None:
+            c = ", ".join(f"{v:.4f}" for v in probes[key][:3])
+            radius = f", radius {probes[key][3]:.4f} m" if key == "sphere" else ""
+            print(f"  {what} {probes['plane_name']!r}: centre ({c}) m{radius}")
     print(
         f"wrote {args.truth_out}: the true robot (nominal with errors of "
         f"{args.error_mm} mm / {args.error_deg} deg, seed {args.seed})"
@@ -460,6 +500,8 @@ def _probe_summary(sim) -> dict:
         "probes": listed(sim.probes),
         "plane_name": sim.plane_name,
         "plane": None if sim.plane is None else sim.plane.tolist(),
+        "sphere": None if sim.sphere is None else sim.sphere.tolist(),
+        "point": None if sim.point is None else sim.point.tolist(),
     }
 
 

@@ -88,6 +88,7 @@ from kinfw.measurements._checks import (
     DISTINCT_TOL,
     check_against_robot,
     check_joint_motion,
+    fixed_in_experiment,
     observed_joints,
     robot_measurement_frames,
 )
@@ -143,6 +144,7 @@ __all__ = [
     "check_stream",
     "concatenate_measurements",
     "first_uses",
+    "fixed_in_experiment",
     "interpolate_poses",
     "matrix_from_figaroh_rpy",
     "measurements_from_dict",

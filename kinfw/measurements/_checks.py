@@ -2,7 +2,9 @@
 
 :func:`check_against_robot` checks joint names, observed frames and measurement frames
 against the robot (and warns about joint values outside the limits);
-:func:`check_joint_motion` that each joint moves through enough distinct values.
+:func:`check_joint_motion` that each joint moves through enough distinct values, but for
+the joints :func:`fixed_in_experiment` finds held still where they do not matter (the
+legs a humanoid stands on while its hands touch a table fixed to its foot).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ __all__ = [
     "DISTINCT_TOL",
     "check_against_robot",
     "check_joint_motion",
+    "fixed_in_experiment",
     "observed_joints",
     "robot_measurement_frames",
 ]
@@ -255,8 +258,76 @@ def _warn_limits(m: Measurements, robot: Robot) -> None:
         )
 
 
+def _distinct(values: np.ndarray) -> np.ndarray:
+    """The distinct values (sorted) of one joint's column: closer than
+    :data:`DISTINCT_TOL` count as one."""
+    values = np.sort(values) + 0.0  # + 0.0 turns -0.0 into 0.0 for the messages
+    if not len(values):
+        return values
+    return values[np.concatenate(([True], np.diff(values) >= DISTINCT_TOL))]
+
+
+def fixed_in_experiment(
+    measurements: Measurements, robot: Robot, *, min_distinct: int = 2
+) -> tuple[str, ...]:
+    """The joints held still where that loses nothing but their own parameters (robot
+    order).
+
+    A frame of the robot that observations are relative to (a plane fixed to the foot a
+    humanoid stands on: ``measured_in``) hangs from the common ancestor of it and the
+    observed frames by a branch of joints that carry no observed frame (the leg). When
+    every such joint moves through fewer than ``min_distinct`` values and every
+    observation relative to that frame touches something of unknown pose fixed in it (a
+    plane, a ball, a point: :meth:`~kinfw.observations.ObservationKind.trained_unknowns`),
+    the branch is one constant transform the unknown absorbs: those joints are fixed in
+    this experiment, their parameters are not identifiable from these data (the
+    calibration keeps them at the nominal) and their stillness is no error. A still
+    joint on an observed frame's path, or on a branch to a frame whose observations pin
+    it (a head camera measuring points), is needed: :func:`check_joint_motion` refuses
+    it.
+
+    Parameters
+    ----------
+    measurements : Measurements
+    robot : Robot
+    min_distinct : int, optional
+        As in :func:`check_joint_motion`.
+    """
+    root = robot.root_link
+
+    def path(frame: str) -> set[str]:
+        return {j.name for j in robot.path_joints(frame) if j.type != "fixed"}
+
+    needed: set[str] = set()
+    branches: dict[str, set[str]] = {}
+    absorbed: dict[str, bool] = {}
+    for g in measurements.all_groups():
+        kind = kind_of(g)
+        on_probe = set().union(*(path(f) for f in kind.frames(g)))
+        needed |= on_probe
+        inside = kind.relative_to(g)
+        if inside is None or inside == root or not robot.has_frame(inside):
+            continue
+        branches.setdefault(inside, set()).update(path(inside) - on_probe)
+        absorbed[inside] = absorbed.get(inside, True) and bool(kind.trained_unknowns(g))
+    qs = measurements.q_of(robot.joint_names)
+    still = {
+        name for c, name in enumerate(robot.joint_names) if len(_distinct(qs[:, c])) < min_distinct
+    }
+    fixed: set[str] = set()
+    for inside, branch in branches.items():
+        branch -= needed
+        if absorbed[inside] and branch and branch <= still:
+            fixed |= branch
+    return tuple(n for n in robot.joint_names if n in fixed)
+
+
 def check_joint_motion(
-    measurements: Measurements, joint_names: Sequence[str], *, min_distinct: int = 2
+    measurements: Measurements,
+    joint_names: Sequence[str],
+    *,
+    min_distinct: int = 2,
+    fixed: Sequence[str] = (),
 ) -> None:
     """Check that each joint moves through enough distinct values to be identified.
 
@@ -269,27 +340,26 @@ def check_joint_motion(
     min_distinct : int, optional
         Number of distinct values needed per joint (values closer than
         :data:`DISTINCT_TOL` = 1e-9 rad or m count as one).
+    fixed : sequence of str, optional
+        Joints fixed in this experiment (:func:`fixed_in_experiment`): held still where
+        only their own parameters are lost, so not checked.
 
     Raises
     ------
     DatasetError
-        Naming every joint with too few values, how many distinct values it has and
-        how many are needed.
+        Naming every other joint with too few values, how many distinct values it has
+        and how many are needed.
     """
     if isinstance(joint_names, str):
         raise TypeError("check_joint_motion: joint_names must be a sequence of names, not a string")
     if min_distinct < 1:
         raise ValueError(f"check_joint_motion: min_distinct must be >= 1, got {min_distinct}")
     m = measurements
+    joint_names = [n for n in joint_names if n not in set(fixed)]
     qs = m.q_of(joint_names)
     problems = []
     for c, name in enumerate(joint_names):
-        values = np.sort(qs[:, c]) + 0.0  # + 0.0 turns -0.0 into 0.0 for the message
-        distinct = (
-            values[np.concatenate(([True], np.diff(values) >= DISTINCT_TOL))]
-            if len(values)
-            else values
-        )
+        distinct = _distinct(qs[:, c])
         if len(distinct) >= min_distinct:
             continue
         shown = ", ".join(f"{v:.6g}" for v in distinct[:5]) + (", ..." if len(distinct) > 5 else "")

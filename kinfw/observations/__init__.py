@@ -1,6 +1,7 @@
 """The registry of observation kinds.
 
-Every kind of observation (``pose``, ``target``, ``point``, ``plane``, ``pixels``, and any
+Every kind of observation (``pose``, ``target``, ``point``, ``plane``, ``sphere``,
+``divot``, ``pixels``, and any
 kind registered by an application or a test) is one
 :class:`~kinfw.observations.ObservationKind`. The measurement files, the estimation
 problem and verification look kinds up here and loop over :func:`kinds`; none of them
@@ -29,6 +30,13 @@ from kinfw.observations._base import (
     sample_array,
 )
 from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._divot import (
+    PLACEMENT,
+    DivotContacts,
+    DivotKind,
+    divot_key,
+    pivot_calibration,
+)
 from kinfw.observations._intrinsics_block import UNDETERMINED_PX, IntrinsicsBlock
 from kinfw.observations._numeric import (
     Drawing,
@@ -68,12 +76,21 @@ from kinfw.observations._pose import (
 )
 from kinfw.observations._reader import DatasetError, ObservationReader, describe
 from kinfw.observations._rigid import RigidTransformKind
+from kinfw.observations._sphere import (
+    SphereBlock,
+    SphereContacts,
+    SphereKind,
+    fit_sphere,
+    lifted_sphere_probe,
+    sphere_key,
+)
 from kinfw.observations._target import DEFAULT_TARGET, TargetKind, TargetObservations
 
 __all__ = [
     "DEFAULT_TARGET",
     "DISTANCE",
     "PIXEL",
+    "PLACEMENT",
     "PNP_MIN_POINTS",
     "POSITION",
     "QUAT_NORM_TOL",
@@ -82,6 +99,7 @@ __all__ = [
     "TILT",
     "UNDETERMINED_PX",
     "DatasetError",
+    "DivotContacts",
     "Drawing",
     "IntrinsicsBlock",
     "Metric",
@@ -97,6 +115,8 @@ __all__ = [
     "PointObservations",
     "PoseObservations",
     "RigidTransformKind",
+    "SphereBlock",
+    "SphereContacts",
     "StartContext",
     "SymbolicContext",
     "TargetObservations",
@@ -104,17 +124,21 @@ __all__ = [
     "component_errors",
     "data_array",
     "describe",
+    "divot_key",
     "evenly_spaced",
     "fit_plane",
+    "fit_sphere",
     "frozen_array",
     "gaussian_rows",
     "inverse_casadi",
     "kind_of",
     "kinds",
     "lifted_probe_offset",
+    "lifted_sphere_probe",
     "node_name",
     "offset_key",
     "perturb_transforms",
+    "pivot_calibration",
     "pixel_weights",
     "plane_key",
     "pnp_camera_T_targets",
@@ -124,6 +148,7 @@ __all__ = [
     "read_quaternion",
     "register_kind",
     "sample_array",
+    "sphere_key",
     "target_observations_from_pixels",
     "transforms_from_pose_rows",
     "unregister_kind",
@@ -159,7 +184,7 @@ def unregister_kind(name: str) -> None:
 
 def kinds() -> tuple[ObservationKind, ...]:
     """Every registered kind, built-ins first (``pose``, ``target``, ``point``, ``plane``,
-    ``pixels``)."""
+    ``sphere``, ``divot``, ``pixels``)."""
     return tuple(_REGISTRY.values())
 
 
@@ -183,6 +208,14 @@ def kind_of(group: Any) -> ObservationKind:
     return kind
 
 
-for _kind in (PoseKind(), TargetKind(), PointKind(), PlaneKind(), PixelKind()):
+for _kind in (
+    PoseKind(),
+    TargetKind(),
+    PointKind(),
+    PlaneKind(),
+    SphereKind(),
+    DivotKind(),
+    PixelKind(),
+):
     register_kind(_kind)
 _BUILT_IN = frozenset(_REGISTRY)

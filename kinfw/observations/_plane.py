@@ -53,19 +53,18 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.model import Block, BlockKey, PointBlock
+from kinfw.model import Block, BlockKey
 from kinfw.observations._base import (
     Metric,
     MetricErrors,
     NoiseComponent,
-    ObservationKind,
     UnknownRequest,
     data_array,
     sample_array,
 )
 from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, MissingValue, NumericContext, node_name
-from kinfw.observations._point import offset_key
+from kinfw.observations._probe import ProbeContactKind, check_probe
 
 __all__ = ["DISTANCE", "TILT", "PlaneBlock", "PlaneContacts", "PlaneKind", "plane_key"]
 
@@ -263,10 +262,7 @@ class PlaneContacts:
         object.__setattr__(
             self, "distance_m", data_array(self.distance_m, (len(sample),), f"{name}.distance_m")
         )
-        if self.offset is not None:
-            object.__setattr__(self, "offset", data_array(self.offset, (3,), f"{name}.offset"))
-        if self.offset is not None and self.marker is not None:
-            raise ValueError(f"{name}: an offset and a marker exclude each other")
+        check_probe(self, name)
 
     def __repr__(self) -> str:
         offset = None if self.offset is None else self.offset.tolist()
@@ -277,7 +273,7 @@ class PlaneContacts:
         )
 
 
-class PlaneKind(ObservationKind):
+class PlaneKind(ProbeContactKind):
     """``{"frame": f, "kind": "plane", "plane": name}``, optional ``offset`` or
     ``marker``, ``distance`` (default 0) and ``measured_in`` (the URDF frame the plane is
     fixed to; default the root; a file's top-level ``measured_in`` does not apply).
@@ -287,74 +283,27 @@ class PlaneKind(ObservationKind):
     group_type = PlaneContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)
-    has_measured_in = True
 
     # -- file edge
     def parse(self, reader, obs, at, frame):
-        for key in ("xyz", "quat_xyzw"):
-            reader.not_allowed(
-                obs, key, at, self.name, "a plane contact measures the distance 0, no position"
-            )
-        reader.not_allowed(obs, "target", at, self.name, "only 'target' observations name a target")
+        probe = self.probe_fields(reader, obs, at)
         distance = 0.0
         if obs.get("distance") is not None:
             distance = reader.number(
                 obs, "distance", at, "the probe's signed distance from the plane (a length)"
             )
-        offset = None
-        if obs.get("offset") is not None:
-            offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
-        marker = reader.optional_string(obs, "marker", at)
-        if marker is not None and offset is not None:
-            raise reader.error(
-                f"{at}.offset",
-                f"an offset and a marker ({marker!r}) exclude each other: a marker's offset "
-                "is unknown and estimated; drop the marker to use a known offset",
-            )
         plane = reader.optional_string(obs, "plane", at) or "plane"
-        measured_in = reader.optional_string(obs, "measured_in", at)
-        key = (
-            ("frame", frame),
-            ("plane", plane),
-            ("offset", offset),
-            ("marker", marker),
-            ("measured_in", measured_in),
-        )
-        return key, reader.lengths([distance])
+        return (("frame", frame), ("plane", plane), *probe), reader.lengths([distance])
 
     def group_from_rows(self, key, sample, rows):
         return PlaneContacts(sample=sample, distance_m=rows[:, 0], **dict(key))
 
     def to_dicts(self, group, top_measured_in):
-        more = {
-            k: v
-            for k, v in (
-                ("offset", None if group.offset is None else group.offset.tolist()),
-                ("marker", group.marker),
-                ("measured_in", group.measured_in),
-            )
-            if v is not None
-        }
-        return [
-            {
-                "frame": group.frame,
-                "kind": "plane",
-                "plane": group.plane,
-                **more,
-                **({"distance": dist} if dist != 0.0 else {}),
-            }
-            for dist in group.distance_m.tolist()
-        ]
-
-    # -- structure
-    def frames(self, group):
-        return (group.frame,)
-
-    def direct_frames(self, group):
-        """With a given offset the frame's tool transform is estimated (it carries the
-        probe, as for a ``point`` of known offset); with an unknown one the offset does
-        and the tool stays nominal."""
-        return (group.frame,) if group.offset is not None else ()
+        return self.contact_dicts(
+            group,
+            {"plane": group.plane},
+            [{"distance": d} if d != 0.0 else {} for d in group.distance_m.tolist()],
+        )
 
     # -- estimation
     def unknowns(self, group, start: StartContext):
@@ -364,52 +313,34 @@ class PlaneKind(ObservationKind):
         in the frame the plane is fixed to."""
         T = start.meas_T(group.measured_in, group.frame, group.sample)
         R, t = T[:, :3, :3], T[:, :3, 3]
-        requests = []
-        if group.offset is not None:
-            o = group.offset
-        else:
+        o = group.offset
+        if o is None:
             o = lifted_probe_offset(R, t)
             o = np.zeros(3) if o is None else o
-            who = repr(group.marker) if group.marker else "probe"
-            requests.append(
-                UnknownRequest(
-                    offset_key(group.frame, group.marker),
-                    o[None],
-                    PointBlock.from_estimates,
-                    f"offset of {who} on {group.frame!r} (plane contacts)",
-                )
-            )
         # the probe at its measured distance: shift along the first fit's normal
         plane = fit_plane(R @ o + t)
         points = R @ o + t - group.distance_m[:, None] * plane[:3]
-        requests.append(
+        return (
+            *self.offset_request(group, o, "plane contacts"),
             UnknownRequest(
                 plane_key(group.plane),
                 fit_plane(points)[None],
                 PlaneBlock.from_estimates,
                 f"plane {group.plane!r} (touched by {group.frame!r})",
-            )
+            ),
         )
-        return tuple(requests)
 
     def trained_unknowns(self, group):
         """The plane and an unknown probe offset: held-out contacts are scored by their
         distance from the trained plane."""
-        probe = () if group.offset is not None else (offset_key(group.frame, group.marker),)
-        return (plane_key(group.plane), *probe)
+        return (plane_key(group.plane), *self.probe_unknowns(group))
 
     def data(self, group):
         return group.distance_m[:, None]
 
     def residual(self, group, model: SymbolicContext, m):
         ca = model.ca
-        T = model.meas_T(group.measured_in, group.frame)
-        o = (
-            ca.DM(group.offset)
-            if group.offset is not None
-            else model.value(offset_key(group.frame, group.marker))
-        )
-        p = T[0:3, 0:3] @ o + T[0:3, 3]
+        p = self.symbolic_probe(group, model)
         plane = model.value(plane_key(group.plane))
         return m[0] - (ca.dot(plane[0:3], p) - plane[3])
 
@@ -432,7 +363,7 @@ class PlaneKind(ObservationKind):
         (height,) = super().errors(group, rows, model)
         tilt = np.nan
         try:
-            p = self._probe(group, model)
+            p = self.probe(group, model)
             plane = model.value(plane_key(group.plane))
         except MissingValue:
             p = None
@@ -445,36 +376,23 @@ class PlaneKind(ObservationKind):
         return (height, MetricErrors(TILT, np.asarray(tilt)))
 
     # -- numpy prediction, simulation (the default: Gaussian distance noise), drawing
-    def _probe(self, group, model: NumericContext) -> NDArray[np.float64]:
-        """The probe (m, 3) in the frame the plane is fixed to, metres."""
-        T = model.meas_T(group.measured_in, group.frame, group.sample)
-        o = (
-            group.offset
-            if group.offset is not None
-            else model.value(offset_key(group.frame, group.marker))
-        )
-        return T[:, :3, :3] @ o + T[:, :3, 3]
-
     def predict(self, group, model: NumericContext):
         """Signed distance (m, 1) of the probe from the plane, metres."""
         plane = model.value(plane_key(group.plane))
-        return (self._probe(group, model) @ plane[:3] - plane[3])[:, None]
+        return (self.probe(group, model) @ plane[:3] - plane[3])[:, None]
 
     def drawing(self, group, model: NumericContext):
         """Measured: the point at the measured distance from the plane on the normal
         through the predicted probe (the contact point on the plane for a distance 0);
         predicted: the probe."""
         plane = model.value(plane_key(group.plane))
-        p = self._probe(group, model)
+        p = self.probe(group, model)
         predicted = p @ plane[:3] - plane[3]
-        w_T_meas = model.w_T_meas_at(group.measured_in, group.sample)
-
-        def in_w(meas_p: NDArray[np.float64]) -> NDArray[np.float64]:
-            return np.einsum("nij,nj->ni", w_T_meas[:, :3, :3], meas_p) + w_T_meas[:, :3, 3]
-
         return Drawing(
             node_name("planes", group.frame, group.plane, marker=group.marker),
-            in_w(p + (group.distance_m - predicted)[:, None] * plane[:3]),
+            self.in_model_frame(
+                group, model, p + (group.distance_m - predicted)[:, None] * plane[:3]
+            ),
             None,
-            in_w(p),
+            self.in_model_frame(group, model, p),
         )

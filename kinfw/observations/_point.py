@@ -19,12 +19,30 @@ from kinfw.observations._base import (
 from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, NumericContext, node_name, predicted_or_missing
 
-__all__ = ["PointKind", "PointObservations", "offset_key"]
+__all__ = ["PointKind", "PointObservations", "offset_key", "read_offset_or_marker"]
 
 
 def offset_key(frame: str, marker: str | None) -> BlockKey:
     """The block of an unknown point offset: one per (frame, marker or 'point')."""
     return BlockKey("offset", f"{frame}:{marker or 'point'}")
+
+
+def read_offset_or_marker(
+    reader: Any, obs: dict[str, Any], at: str
+) -> tuple[tuple[float, float, float] | None, str | None]:
+    """A file observation's point on its frame: the known ``offset`` (metres) or the
+    ``marker`` naming an unknown one (both None: an unknown offset), never both."""
+    offset = None
+    if obs.get("offset") is not None:
+        offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
+    marker = reader.optional_string(obs, "marker", at)
+    if marker is not None and offset is not None:
+        raise reader.error(
+            f"{at}.offset",
+            f"an offset and a marker ({marker!r}) exclude each other: a marker's offset is "
+            "unknown and estimated; drop the marker to use a known offset",
+        )
+    return offset, marker
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -100,17 +118,7 @@ class PointKind(ObservationKind):
             self.name,
             "a point has a position only; use kind 'pose' for a pose",
         )
-        offset = None
-        if obs.get("offset") is not None:
-            offset = tuple(reader.lengths(reader.numbers(obs["offset"], 3, f"{at}.offset")))
-        marker = reader.optional_string(obs, "marker", at)
-        if marker is not None and offset is not None:
-            raise reader.error(
-                f"{at}.offset",
-                f"an offset and a marker ({marker!r}) exclude "
-                "each other: a marker's offset is unknown and estimated; drop "
-                "the marker to use a known offset",
-            )
+        offset, marker = read_offset_or_marker(reader, obs, at)
         measured_in = reader.optional_string(obs, "measured_in", at) or reader.default_measured_in
         key = (
             ("frame", frame),

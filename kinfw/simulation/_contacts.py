@@ -1,15 +1,21 @@
-"""Configurations that put a probe on a plane: the contacts of ``kinfw simulate --contact``.
+"""Configurations that put a probe on a plane, a ball or a point: the contacts of
+``kinfw simulate --contacts``.
 
-A probe at ``offset`` in URDF frame ``frame`` touches the plane ``{x : n . x = d}`` of the
-root when ``n . p(q) - d = 0``, ``p(q) = root_T_frame(q) @ offset``. Random
-configurations are projected onto that manifold by Gauss-Newton steps of least norm
-(:func:`contact_configurations`): one scalar residual, its gradient from Pinocchio's frame
+A probe at ``offset`` in URDF frame ``frame``, ``p(q) = root_T_frame(q) @ offset`` in the
+root, touches
+
+- the plane ``{x : n . x = d}`` when ``n . p(q) - d = 0`` (one residual);
+- the ball of centre ``c`` and radius ``r`` when ``|p(q) - c| - r = 0`` (one residual);
+- the point ``c`` when ``p(q) - c = 0`` (three residuals).
+
+Random configurations are projected onto that manifold by Gauss-Newton steps of least
+norm (:func:`contact_configurations`), the residuals' Jacobian from Pinocchio's frame
 Jacobian (``LOCAL_WORLD_ALIGNED``: the probe moves at ``v - (R offset) x w``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,16 +62,15 @@ def level_plane(
     )
 
 
-def _probe_and_gradient(
+def _probe_and_jacobian(
     robot: Robot,
     q: NDArray[np.float64],
     names: tuple[str, ...],
     frame: str,
     offset: NDArray[np.float64],
-    normal: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The probe's position ``root_p_probe`` (3,) at ``q`` (k,) and the gradient (k,) of
-    ``normal . root_p_probe`` with respect to ``q`` (joints ``names``)."""
+    """The probe's position ``root_p_probe`` (3,) at ``q`` (k,) and its Jacobian (3, k)
+    with respect to ``q`` (joints ``names``)."""
     import pinocchio as pin
 
     model, data = robot.model, robot.model.createData()
@@ -76,7 +81,35 @@ def _probe_and_gradient(
     lever = root_T_frame[:3, :3] @ offset
     J_probe = J[:3] - skew(lever) @ J[3:]
     columns = [robot.velocity_index(name) for name in names]
-    return root_T_frame[:3, :3] @ offset + root_T_frame[:3, 3], normal @ J_probe[:, columns]
+    return root_T_frame[:3, :3] @ offset + root_T_frame[:3, 3], J_probe[:, columns]
+
+
+def _surface(
+    plane: ArrayLike | None, sphere: ArrayLike | None, point: ArrayLike | None
+) -> tuple[Callable[[NDArray], tuple[NDArray, NDArray]], str]:
+    """The contact's residual ``p -> (r (k,), dr/dp (k, 3))`` of exactly one of
+    ``plane`` ``(n, d)``, ``sphere`` ``(c, r)`` or ``point`` ``c`` (metres, root), and its
+    description for messages."""
+    given = [(name, v) for name, v in (("plane", plane), ("sphere", sphere), ("point", point))]
+    given = [(name, np.asarray(v, dtype=float)) for name, v in given if v is not None]
+    if len(given) != 1:
+        raise ValueError("contact_configurations: give exactly one of plane, sphere, point")
+    ((name, v),) = given
+    size = {"plane": 4, "sphere": 4, "point": 3}[name]
+    if v.shape != (size,) or not np.isfinite(v).all():
+        raise ValueError(f"{name}: expected {size} finite numbers, got {v!r}")
+    shown = np.round(v, 4).tolist()
+    if name == "plane":
+        return (lambda p: (np.array([v[:3] @ p - v[3]]), v[None, :3])), f"the plane {shown}"
+    if name == "point":
+        return (lambda p: (p - v, np.eye(3))), f"the point {shown}"
+
+    def ball(p: NDArray) -> tuple[NDArray, NDArray]:
+        gap = p - v[:3]
+        norm = float(np.linalg.norm(gap))
+        return np.array([norm - v[3]]), (gap / norm if norm > 0.0 else np.zeros(3))[None]
+
+    return ball, f"the ball (centre, radius) {shown}"
 
 
 def contact_configurations(
@@ -89,16 +122,19 @@ def contact_configurations(
     *,
     frame: str,
     offset: ArrayLike,
-    plane: ArrayLike,
+    plane: ArrayLike | None = None,
+    sphere: ArrayLike | None = None,
+    point: ArrayLike | None = None,
     fraction: float = 0.8,
     max_rounds: int = 50,
 ) -> NDArray[np.float64]:
-    """``n`` configurations that put the probe on the plane, within the joint ranges.
+    """``n`` configurations that put the probe on the plane, the ball or the point,
+    within the joint ranges.
 
     Configurations are drawn by :func:`random_configurations` (``fraction`` of each
     joint range) and each is projected onto the contact manifold by Gauss-Newton steps
-    of least norm, ``q <- q - g (n . p(q) - d) / |g|^2`` with ``g`` the gradient of
-    ``n . p`` (Pinocchio Jacobian); a projection is kept when it converges
+    of least norm, ``q <- q - G^+ r(p(q))`` with ``G`` the Jacobian of the contact's
+    residuals ``r`` (Pinocchio Jacobian); a projection is kept when it converges
     (:data:`CONTACT_TOLERANCE_M`) within the ``fraction`` of every joint range.
 
     Parameters
@@ -116,9 +152,14 @@ def contact_configurations(
         URDF frame carrying the probe.
     offset : array_like, shape (3,)
         The probe's position in ``frame``, metres.
-    plane : array_like, shape (4,)
+    plane : array_like, shape (4,), optional
         ``(n, d)``: unit normal and offset of the plane ``{x : n . x = d}`` in the root
         frame (metres).
+    sphere : array_like, shape (4,), optional
+        ``(c, r)``: the ball's centre in the root frame and its radius (metres).
+    point : array_like, shape (3,), optional
+        The point in the root frame (metres). Exactly one of ``plane``, ``sphere``,
+        ``point`` is given.
     fraction : float
     max_rounds : int
         Rounds of ``2 n`` draws before giving up.
@@ -126,36 +167,37 @@ def contact_configurations(
     Returns
     -------
     qs : ndarray, shape (n, k)
-        In draw order; the probe is within :data:`CONTACT_TOLERANCE_M` of the plane.
+        In draw order; the probe is within :data:`CONTACT_TOLERANCE_M` of the surface
+        (of the point).
 
     Raises
     ------
     ValueError
-        When fewer than ``n`` of ``2 n max_rounds`` draws reach the plane within the
-        ranges (the plane out of the probe's reach).
+        When fewer than ``n`` of ``2 n max_rounds`` draws reach the surface within the
+        ranges (out of the probe's reach), or not exactly one surface is given.
     """
     names = tuple(joint_names)
     lower, upper = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
     offset = np.asarray(offset, dtype=float)
-    plane = np.asarray(plane, dtype=float)
-    normal, d = plane[:3], float(plane[3])
+    residual, shown = _surface(plane, sphere, point)
     lo, hi = finite_limits(lower, upper)
     mid, half = 0.5 * (lo + hi), 0.5 * fraction * (hi - lo) + 1e-12
     found: list[NDArray[np.float64]] = []
     for _ in range(max_rounds):
         for q in random_configurations(lower, upper, 2 * n, rng, fraction=fraction):
             for _ in range(MAX_STEPS):
-                p, g = _probe_and_gradient(robot, q, names, frame, offset, normal)
-                r = float(normal @ p - d)
-                if abs(r) < CONTACT_TOLERANCE_M or not g @ g > 0.0:
+                p, J = _probe_and_jacobian(robot, q, names, frame, offset)
+                r, dr_dp = residual(p)
+                G = dr_dp @ J
+                if np.abs(r).max() < CONTACT_TOLERANCE_M or not np.abs(G).max() > 0.0:
                     break
-                q = q - g * (r / (g @ g))
-            if abs(r) < CONTACT_TOLERANCE_M and np.all(np.abs(q - mid) <= half):
+                q = q - np.linalg.lstsq(G, r, rcond=None)[0]
+            if np.abs(r).max() < CONTACT_TOLERANCE_M and np.all(np.abs(q - mid) <= half):
                 found.append(q)
                 if len(found) == n:
                     return np.array(found)
     raise ValueError(
         f"contacts of {frame!r}: only {len(found)} of {2 * n * max_rounds} random "
-        f"configurations reach the plane n = {np.round(normal, 4).tolist()}, d = {d:.4g} m "
-        f"within {fraction:g} of the joint ranges; {n} wanted (is the plane in reach?)"
+        f"configurations reach {shown} within {fraction:g} of the joint ranges; {n} "
+        "wanted (is it in reach?)"
     )

@@ -3,8 +3,8 @@
 measurements (stage 1: poses of frames, one joint at a time; stage 2: camera observations
 of a fixed target, or images of a board, at random configurations; or both stages at
 given configurations, a plan's), then motion-capture markers of unknown offset measured
-in an unknown external frame, and probes touching a plane (random configurations
-projected onto the contact, :mod:`kinfw.simulation._contacts`).
+in an unknown external frame, and probes touching a plane, a ball or a point (random
+configurations projected onto the contact, :mod:`kinfw.simulation._contacts`).
 
 Every random draw comes from one generator seeded by ``seed``, in a fixed order (the
 truth, stage 1, stage 2, the markers, the contacts), so a seed reproduces the experiment
@@ -23,8 +23,10 @@ from kinfw.camera import Board, CameraIntrinsics, parse_board
 from kinfw.measurements import Measurements, concatenate_measurements
 from kinfw.model import BlockKey, Robot, check_robot, load_robot
 from kinfw.observations import (
+    DivotContacts,
     PlaneContacts,
     PointObservations,
+    SphereContacts,
     offset_key,
     perturb_transforms,
 )
@@ -97,11 +99,15 @@ class SimulatedMeasurements:
     mocap_T_w : ndarray, shape (4, 4), or None
         With markers in an external frame: the root's true pose in it, metres.
     probes : tuple of SimulatedProbe
-        The probes touching the plane.
+        The probes touching the plane (the ball, the point).
     plane : ndarray, shape (4,), or None
-        With probes: the plane ``(n, d)``, ``{x : n . x = d}`` in ``w`` (``d`` metres).
+        With probes on a plane: ``(n, d)``, ``{x : n . x = d}`` in ``w`` (``d`` metres).
     plane_name : str or None
-        With probes: its name in the measurement file.
+        With probes: the name of the plane (the ball, the point) in the measurement file.
+    sphere : ndarray, shape (4,), or None
+        With probes on a ball: its centre in ``w`` and its radius, metres.
+    point : ndarray, shape (3,), or None
+        With probes on a point: the point in ``w``, metres.
     """
 
     truth_xml: str
@@ -119,6 +125,8 @@ class SimulatedMeasurements:
     probes: tuple[SimulatedProbe, ...] = ()
     plane: NDArray[np.float64] | None = None
     plane_name: str | None = None
+    sphere: NDArray[np.float64] | None = None
+    point: NDArray[np.float64] | None = None
 
 
 def _observed(
@@ -226,7 +234,9 @@ def simulate_measurements(
     mocap_samples: int = 40,
     contacts: Sequence[tuple[str, ArrayLike | None]] = (),
     plane: ArrayLike | None = None,
-    plane_name: str = "table",
+    plane_name: str | None = None,
+    sphere: ArrayLike | None = None,
+    point: ArrayLike | None = None,
     contact_samples: int = 60,
     offsets_known: bool = False,
     seed: int = 0,
@@ -290,8 +300,17 @@ def simulate_measurements(
         ``(n, d)`` of the plane ``{x : n . x = d}`` in the root frame (``n`` is
         normalised; ``d`` metres); default the plane normal to the root's z through the
         first probe at the middle of the joint ranges (of the true robot).
-    plane_name : str
-        The plane's name in the measurement file.
+    plane_name : str, optional
+        The name of the plane (the ball, the point) in the measurement file; default
+        ``table`` (``ball``, ``divot``).
+    sphere : array_like, shape (4,), optional
+        Instead of a plane, a ball the probes touch: its centre in the root frame and its
+        radius, metres; ``sphere`` observations, the radius given (a tooling ball's is
+        known), the centre left to the calibration.
+    point : array_like, shape (3,), optional
+        Instead of a plane, a point (a divot) the probes are placed on, in the root
+        frame, metres; ``divot`` observations (the placement noise ``noise_m`` per
+        axis), the point left to the calibration.
     contact_samples : int
         Contacts per probe.
     offsets_known : bool
@@ -367,9 +386,11 @@ def simulate_measurements(
     if markers:
         mocap = _simulate_markers(at, markers, mocap_frame, mocap_samples)
         parts.append(mocap.data)
-    touch = _Touch(None, ())
+    touch = _Touch()
     if contacts:
-        touch = _simulate_contacts(at, contacts, plane, plane_name, contact_samples)
+        touch = _simulate_contacts(
+            at, contacts, (plane, sphere, point), plane_name, contact_samples
+        )
         parts.extend(touch.data)
     return SimulatedMeasurements(
         truth_xml,
@@ -386,7 +407,9 @@ def simulate_measurements(
         mocap_T_w=mocap.mocap_T_w,
         probes=touch.probes,
         plane=touch.plane,
-        plane_name=plane_name if contacts else None,
+        plane_name=touch.name,
+        sphere=touch.sphere,
+        point=touch.point,
     )
 
 
@@ -477,32 +500,45 @@ def _simulate_markers(
 
 @dataclass(frozen=True, slots=True, eq=False)
 class _Touch:
-    """Simulated contacts: the plane ``(n, d)``, the probes and one dataset per probe."""
+    """Simulated contacts: what is touched (the plane ``(n, d)``, the ball ``(c, r)`` or
+    the point ``c``) and its name, the probes and one dataset per probe."""
 
-    plane: NDArray[np.float64] | None
-    probes: tuple[SimulatedProbe, ...]
+    plane: NDArray[np.float64] | None = None
+    sphere: NDArray[np.float64] | None = None
+    point: NDArray[np.float64] | None = None
+    name: str | None = None
+    probes: tuple[SimulatedProbe, ...] = ()
     data: tuple[Measurements, ...] = ()
 
 
 def _simulate_contacts(
     at: _Sampling,
     contacts: Sequence[tuple[str, ArrayLike | None]],
-    plane: ArrayLike | None,
-    plane_name: str,
+    touched: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None],
+    name: str | None,
     n: int,
 ) -> _Touch:
-    """``plane`` observations: each probe touches the plane at ``n`` configurations."""
+    """``plane`` (``sphere``, ``divot``) observations: each probe touches the plane (the
+    ball ``(c, r)``, the point ``c``: ``touched``, at most one given) at ``n``
+    configurations."""
     probes = _probes(contacts, "probe", at.rng)
-    if plane is None:
-        first = probes[0]
-        plane_nd = level_plane(
-            at.truth, at.names, *at.limits, frame=first.frame, offset=first.offset
-        )
-    else:
-        given = np.asarray(plane, dtype=float)
-        if given.shape != (4,) or not np.isfinite(given).all():
-            raise ValueError(f"plane: expected (nx, ny, nz, d), 4 finite numbers, got {plane!r}")
-        plane_nd = plane_through(given[:3] * (given[3] / (given[:3] @ given[:3])), given[:3])
+    plane, sphere, point = (None if v is None else np.asarray(v, dtype=float) for v in touched)
+    if sum(v is not None for v in (plane, sphere, point)) > 1:
+        raise ValueError("contacts: give at most one of plane, sphere, point")
+    for what, v, size in (("plane", plane, 4), ("sphere", sphere, 4), ("point", point, 3)):
+        if v is not None and (v.shape != (size,) or not np.isfinite(v).all()):
+            raise ValueError(f"{what}: expected {size} finite numbers, got {v.tolist()!r}")
+    if sphere is not None and sphere[3] <= 0.0:
+        raise ValueError(f"sphere: expected a radius > 0 m, got {sphere[3]!r}")
+    if sphere is None and point is None:
+        if plane is None:
+            first = probes[0]
+            plane = level_plane(
+                at.truth, at.names, *at.limits, frame=first.frame, offset=first.offset
+            )
+        else:
+            plane = plane_through(plane[:3] * (plane[3] / (plane[:3] @ plane[:3])), plane[:3])
+    name = name or ("table" if plane is not None else "ball" if sphere is not None else "divot")
     data = []
     for probe in probes:
         qs = contact_configurations(
@@ -513,21 +549,32 @@ def _simulate_contacts(
             at.rng,
             frame=probe.frame,
             offset=probe.offset,
-            plane=plane_nd,
+            plane=plane,
+            sphere=sphere,
+            point=point,
             fraction=at.fraction,
         )
-        # the probe is on the plane (to CONTACT_TOLERANCE_M): the measured distance is
-        # the noise alone (exactly 0 without noise)
-        noise = at.rng.normal(0.0, at.noise_m, n) if at.noise_m > 0.0 else np.zeros(n)
-        group = PlaneContacts(
-            frame=probe.frame,
-            sample=np.arange(n),
-            distance_m=noise,
-            plane=plane_name,
-            offset=probe.offset if at.offsets_known else None,
-            marker=None if at.offsets_known else probe.name,
+        # the probe is on the surface (to CONTACT_TOLERANCE_M): the measured distance
+        # (the gap to the point) is the noise alone (exactly 0 without noise)
+        rows = 3 if point is not None else 1
+        noise = (
+            at.rng.normal(0.0, at.noise_m, (n, rows)) if at.noise_m > 0.0 else np.zeros((n, rows))
         )
+        probe_fields = {
+            "frame": probe.frame,
+            "sample": np.arange(n),
+            "offset": probe.offset if at.offsets_known else None,
+            "marker": None if at.offsets_known else probe.name,
+        }
+        if plane is not None:
+            group = PlaneContacts(distance_m=noise[:, 0], plane=name, **probe_fields)
+        elif sphere is not None:
+            group = SphereContacts(
+                distance_m=noise[:, 0], sphere=name, radius=float(sphere[3]), **probe_fields
+            )
+        else:
+            group = DivotContacts(gap_m=noise, divot=name, **probe_fields)
         data.append(
             Measurements(joint_names=at.names, qs=qs, source="<simulated>").with_groups([group])
         )
-    return _Touch(plane_nd, probes, tuple(data))
+    return _Touch(plane, sphere, point, name, probes, tuple(data))

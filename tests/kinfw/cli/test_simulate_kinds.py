@@ -196,6 +196,66 @@ def test_contacts_calibrate_to_the_truth_held_out(contacts, arm6):
         assert g["kind"] == "plane" and g["height_max_mm"] < 1e-6, g
 
 
+# -- ball and point contacts -----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module", params=["sphere", "point"])
+def touching(request, arm6, tmp_path_factory):
+    """A probe of random offset on the flange touching a ball (``--sphere``, radius 25 mm)
+    or placed on a point (``--point``), 60 noise-free contacts."""
+    root = tmp_path_factory.mktemp(request.param)
+    where = "0.3,0.1,0.4,0.025" if request.param == "sphere" else "0.3,0.1,0.4"
+    argv = ["--urdf", arm6, "--contacts", "flange", f"--{request.param}", where]
+    argv += ["--contact-samples", "60", "--seed", "3"]
+    return request.param, root, _simulate(root, argv)
+
+
+def test_ball_and_point_contacts_are_on_them_by_pinocchio(touching):
+    """Pinocchio FK of the true URDF puts the probe on the ball (at the radius from the
+    centre) or on the point, to 1e-9 m; the file gives the radius (a tooling ball's is
+    known), not the centre nor the probe's offset."""
+    which, root, summary = touching
+    truth = (root / "true.urdf").read_text()
+    data = read_measurements(root / "data.json")
+    (probe,) = summary["probes"]
+    kind = "sphere" if which == "sphere" else "divot"
+    (g,) = data.groups(kind)
+    assert g.offset is None and g.marker == "probe1" and len(g.sample) == 60
+    root_T_frame = pin_fk(truth, data.joint_names, data.qs[g.sample], "flange")
+    p = (root_T_frame @ np.append(probe["offset_m"], 1.0))[:, :3]
+    if which == "sphere":
+        assert summary["sphere"] == [0.3, 0.1, 0.4, 0.025] and g.radius == 0.025
+        assert g.sphere == "ball"
+        np.testing.assert_array_equal(g.distance_m, 0.0)
+        np.testing.assert_allclose(
+            np.linalg.norm(p - [0.3, 0.1, 0.4], axis=1), 0.025, rtol=0, atol=1e-9
+        )
+    else:
+        assert summary["point"] == [0.3, 0.1, 0.4] and g.centre is None and g.divot == "divot"
+        np.testing.assert_array_equal(g.gap_m, 0.0)
+        np.testing.assert_allclose(p, np.tile([0.3, 0.1, 0.4], (60, 1)), rtol=0, atol=1e-9)
+
+
+def test_ball_and_point_contacts_calibrate_verify_and_crossvalidate(touching, arm6):
+    """simulate -> calibrate (default options: the model choice) -> verify on 20
+    held-out contacts of the true robot: on the calibrated ball to 1e-6 mm (point: placed
+    on it); crossval: finite held-out RMS per fold in the kind's metric, the calibrated
+    model's below 1e-6 mm where the nominal's is millimetres."""
+    which, root, _ = touching
+    doc = _calibrate_and_verify(root, arm6)
+    (g,) = doc["groups"]
+    metric = "height" if which == "sphere" else "placement"
+    assert g["kind"] == ("sphere" if which == "sphere" else "divot") and g["n"] == 20
+    assert g[f"{metric}_max_mm"] < 1e-6, g
+    code, out, err = _kinfw(["-q", "crossval", root / "data.json", "--urdf", arm6, "--json"])
+    assert code == 0, err
+    cv = json.loads(out)
+    rms = [f[f"{metric}_rms_mm"] for f in cv["folds"]]
+    assert len(rms) == 15 and np.isfinite(rms).all()
+    means = cv[f"mean_{metric}_rms_mm"]
+    assert means["none"] > 1.0 and means["full"] < 1e-6, means
+
+
 # -- rendered images ------------------------------------------------------------------------
 
 

@@ -560,14 +560,14 @@ ERROR_CASES = [
         (*OBS, "kind"),
         "posture",
         "samples[1].observations[0].kind: expected one of 'pose', 'target', 'point', "
-        "'plane', 'pixels', got 'posture'",
+        "'plane', 'sphere', 'divot', 'pixels', got 'posture'",
         id="kind",
     ),
     pytest.param(
         (*OBS, "kind"),
         DELETE,
         "samples[1].observations[0].kind: missing; expected 'pose', 'target', 'point', "
-        "'plane' or 'pixels'",
+        "'plane', 'sphere', 'divot' or 'pixels'",
         id="kind-missing",
     ),
     pytest.param(

@@ -1,13 +1,13 @@
 """The proof of the design: a new observation kind defined entirely in this file.
 
-"sphere": a probe point on a robot frame (unknown offset) touches a fixed sphere of
-unknown centre and known radius (a ball bar of known length: the distance from the
-probe to the ball's centre is the radius). Residual: ``radius - |w_p_probe - centre|``,
-one row in metres. The kind is registered, written to and read from a
-``kinfw-measurements`` file, and calibrates the 6R arm through the public ``refine``;
-with its numpy prediction and its drawing (and the default Gaussian simulation) it is
-simulated by ``kinfw.simulation.simulate`` and drawn by ``kinfw.view.scene``, whose
-code names no kind.
+"ball" (a smaller twin of the built-in ``sphere`` kind): a probe point on a robot frame
+(unknown offset) touches a fixed sphere of unknown centre and known radius (a ball bar
+of known length: the distance from the probe to the ball's centre is the radius).
+Residual: ``radius - |w_p_probe - centre|``, one row in metres. The kind is registered,
+written to and read from a ``kinfw-measurements`` file, and calibrates the 6R arm
+through the public ``refine``; with its numpy prediction and its drawing (and the
+default Gaussian simulation) it is simulated by ``kinfw.simulation.simulate`` and drawn
+by ``kinfw.view.scene``, whose code names no kind.
 
 Truth: contacts are simulated on a perturbed arm by solving for the joint angle that puts
 the probe on the sphere. A rigid motion of the world moves the model and the centre
@@ -54,7 +54,7 @@ class SphereContacts:
     sample : (m,) sample indices; radius_m : (m,) the sphere's radius at each contact.
     """
 
-    kind: ClassVar[str] = "sphere"
+    kind: ClassVar[str] = "ball"
     frame: str
     sample: NDArray[np.int64]
     radius_m: NDArray[np.float64]
@@ -91,9 +91,9 @@ def sphere_closed_form(w_T_frames: NDArray, radius_m: NDArray) -> NDArray:
 
 
 class SphereKind(ObservationKind):
-    """``{"frame": f, "kind": "sphere", "sphere": name, "radius": r}``."""
+    """``{"frame": f, "kind": "ball", "sphere": name, "radius": r}``."""
 
-    name = "sphere"
+    name = "ball"
     group_type = SphereContacts
     row_fields = ("radius_m",)
     components = (NoiseComponent("distance", 1, "m"),)
@@ -108,7 +108,7 @@ class SphereKind(ObservationKind):
 
     def to_dicts(self, group, top_measured_in):
         return [
-            {"frame": group.frame, "kind": "sphere", "sphere": group.sphere, "radius": r}
+            {"frame": group.frame, "kind": "ball", "sphere": group.sphere, "radius": r}
             for r in group.radius_m.tolist()
         ]
 
@@ -241,7 +241,7 @@ def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, t
     path = tmp_path / "contacts.json"
     write_measurements(path, data)
     back = read_measurements(path)
-    (group,) = back.groups("sphere")
+    (group,) = back.groups("ball")
     assert isinstance(group, SphereContacts) and group.sphere == "ball"
     np.testing.assert_array_equal(back.qs, qs)
     np.testing.assert_array_equal(group.radius_m, RADIUS)
@@ -252,7 +252,7 @@ def test_a_kind_defined_in_a_test_file_round_trips_and_calibrates(sphere_kind, t
     ident = result.identifiability
     assert ident.rank == ident.n_parameters - 6  # a rigid motion of the world is free
     (g,) = result.residuals
-    assert g.kind == "sphere" and np.abs(g.component("distance")).max() < 1e-10
+    assert g.kind == "ball" and np.abs(g.component("distance")).max() < 1e-10
     found = {u.kind: u.value for u in result.unknowns}
 
     # what the data determines: the probe-to-centre distance anywhere in joint space
@@ -271,9 +271,9 @@ def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_k
     doc = (
         '{"format": "kinfw-measurements", "version": 1, '
         '"units": {"length": "mm", "angle": "deg"}, "joint_names": ["j1"], "samples": ['
-        '{"q": [10], "observations": [{"frame": "flange", "kind": "sphere", '
+        '{"q": [10], "observations": [{"frame": "flange", "kind": "ball", '
         '"sphere": "ball", "radius": 150}]},'
-        '{"q": [20], "observations": [{"frame": "flange", "kind": "sphere", '
+        '{"q": [20], "observations": [{"frame": "flange", "kind": "ball", '
         '"radius": "big"}]}]}'
     )
     path = tmp_path / "bad.json"
@@ -288,7 +288,7 @@ def test_the_new_kind_reads_from_a_hand_written_file_and_names_bad_keys(sphere_k
         read_measurements(path)
     path.write_text(doc.replace('"big"', "120"))
     m = read_measurements(path)
-    by_sphere = {g.sphere: g for g in m.groups("sphere")}
+    by_sphere = {g.sphere: g for g in m.groups("ball")}
     np.testing.assert_array_equal(by_sphere["ball"].radius_m, [0.15])  # mm -> m
     np.testing.assert_array_equal(by_sphere["sphere"].sample, [1])
 
@@ -298,13 +298,14 @@ def test_without_the_kind_registered_the_file_is_refused(tmp_path):
     path.write_text(
         '{"format": "kinfw-measurements", "version": 1, "units": {"length": '
         '"m", "angle": "rad"}, "joint_names": ["j1"], "samples": [{"q": [0], '
-        '"observations": [{"frame": "f", "kind": "sphere", "radius": 1}]}]}'
+        '"observations": [{"frame": "f", "kind": "ball", "radius": 1}]}]}'
     )
     from kinfw.observations import DatasetError
 
     with pytest.raises(
         DatasetError,
-        match="kind: expected one of 'pose', 'target', 'point', 'plane', 'pixels', got 'sphere'",
+        match="kind: expected one of 'pose', 'target', 'point', 'plane', 'sphere', 'divot', "
+        "'pixels', got 'ball'",
     ):
         read_measurements(path)
 
@@ -328,7 +329,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     data = simulate(
         truth, qs, NAMES, groups=[template(30)], unknowns=unknowns, rng=np.random.default_rng(0)
     )
-    (g,) = data.groups("sphere")
+    (g,) = data.groups("ball")
     assert g.sphere == "ball" and not data.poses and not data.points
     np.testing.assert_allclose(g.radius_m, RADIUS, rtol=0, atol=1e-12)
 
@@ -343,7 +344,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
         unknowns=unknowns,
         rng=np.random.default_rng(1),
         noise_m=sigma,
-    ).groups("sphere")[0]
+    ).groups("ball")[0]
     error = noisy.radius_m - np.linalg.norm(_probe(truth, q_any, offset) - centre, axis=1)
     assert abs(error.std() / sigma - 1) < 0.05 and abs(error.mean()) < 4 * sigma / np.sqrt(n)
     by_name = simulate(
@@ -357,7 +358,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
         noise_m=sigma,
     )
     np.testing.assert_allclose(
-        by_name.groups("sphere")[0].radius_m,
+        by_name.groups("ball")[0].radius_m,
         np.linalg.norm(_probe(truth, q_any[:5], offset) - centre, axis=1),
         rtol=0,
         atol=1e-15,
@@ -483,7 +484,7 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     assert before[1] > 10 * after[1]  # the calibration helps
     held_table = out.split("held-out errors:")[1]
     assert "before RMS mm" in held_table.splitlines()[1]
-    row = _row(held_table, "flange (sphere)")
+    row = _row(held_table, "flange (ball)")
     assert float(row[3]) == pytest.approx(before[1], abs=6e-4)
     assert float(row[4]) == pytest.approx(after[1], abs=6e-4)
     report = json.loads(report_path.read_text())
@@ -501,7 +502,7 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     doc = json.loads(_cli(["verify", out_urdf, paths["held"], "--json"], capsys))
     (g,) = doc["groups"]
     mean, rms, worst = _stats_mm(e)
-    assert g["kind"] == "sphere" and "position_rms_mm" not in g
+    assert g["kind"] == "ball" and "position_rms_mm" not in g
     for key, value in (("mean", mean), ("rms", rms), ("max", worst)):
         assert g[f"distance_{key}_mm"] == pytest.approx(value, rel=1e-9), key
     np.testing.assert_allclose(

@@ -1,0 +1,86 @@
+"""Forced ``--params full`` on contact data: never a meaningless geometry.
+
+Contacts determine the robot only up to a rigid motion of robot and contact surface
+together (and a scale): the refinement keeps the robot at the nominal along those
+directions. On too little contact data the least squares do not converge and the
+estimate drifts along them by metres (the 6R arm's first joint by 1.6 m on 40 contacts
+with a level table, measured before this refusal); the calibration then refuses, naming
+the models the data determine, instead of writing that geometry. Where it accepts a
+forced full fit, the exported URDF keeps the first joint, whose motion the contacts
+cannot see apart from the world's, at the nominal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kinfw.geometry import inverse_transform
+from kinfw.identification import calibrate
+from kinfw.identification.checks import InsufficientDataError
+from kinfw.model import load_robot
+from kinfw.simulation import contact_configurations, simulate_measurements
+from kinfw.verification.reporting import calibrate_and_report
+from tests.robots import ARM_6R
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return load_robot(ARM_6R)
+
+
+def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_models(nominal):
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=40, noise_m=1e-4, seed=7
+    )
+    with pytest.raises(
+        InsufficientDataError,
+        match=r"too little data to refine --params full: the fit did not converge in \d+ "
+        r"iterations and moved [0-9.]+ \(m, rad\) along directions these data do not "
+        r"determine.*\(the largest move of a joint origin: 'j\d' by [0-9.]+ m\).*the models these "
+        r"data determine, by leave-one-out held-out error \(whitened\), best first: "
+        r"--params full --prior-mm",
+    ):
+        calibrate_and_report(nominal, sim.data, parameters="full", loss="linear")
+    # the default chooses among the determined models and calibrates
+    result = calibrate_and_report(nominal, sim.data, loss="linear")
+    assert result.model.parameters == ("full",) and result.model.prior_m is not None
+
+
+def test_an_accepted_forced_full_fit_keeps_the_world_motion_at_the_nominal(nominal):
+    """90 contacts with a 25 mm ball (radius given), 0.1 mm noise: forced full is
+    accepted (nothing left along undetermined directions), the exported first joint is
+    the nominal's to 1e-8 (its motion is the world's, which the ball absorbs), and 200
+    held-out contacts of the true robot are on the calibrated ball to 0.1 mm RMS."""
+    sim = simulate_measurements(
+        nominal,
+        contacts=[("flange", None)],
+        sphere=(0.3, 0.1, 0.4, 0.025),
+        contact_samples=90,
+        noise_m=1e-4,
+        seed=7,
+    )
+    result = calibrate(nominal, sim.data, parameters="full")
+    assert result.refined.undetermined == 0.0
+    exported = load_robot(result.urdf_xml)
+    moved = (
+        inverse_transform(nominal.joint("j1").parent_T_child) @ exported.joint("j1").parent_T_child
+    )
+    np.testing.assert_allclose(moved, np.eye(4), rtol=0, atol=1e-8)
+    found = {(u.kind, u.name): u.value for u in result.refined.unknowns}
+    names = sim.joint_names
+    (probe,) = sim.probes
+    q = contact_configurations(
+        sim.truth,
+        names,
+        *nominal.joint_limits(names),
+        200,
+        np.random.default_rng(3),
+        frame="flange",
+        offset=probe.offset,
+        sphere=sim.sphere,
+    )
+    T = exported.frame_poses(q, "flange", names)
+    p = T[:, :3, :3] @ found["offset", "flange:probe1"] + T[:, :3, 3]
+    predicted = np.linalg.norm(p - found["sphere", "ball"], axis=1) - 0.025
+    assert np.sqrt(np.mean(predicted**2)) < 1e-4  # the truth: 0 (on the ball)
