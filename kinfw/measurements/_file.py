@@ -23,6 +23,7 @@ from kinfw import progress
 from kinfw.camera import CameraError, CameraIntrinsics, intrinsics_from_dict
 from kinfw.files import write_text_atomic
 from kinfw.measurements._dataset import Measurements
+from kinfw.measurements._mounts import mounts_from_dict, mounts_to_dict
 from kinfw.observations import DatasetError, ObservationReader, describe, kind_named, kind_of, kinds
 
 __all__ = [
@@ -320,7 +321,10 @@ def measurements_from_dict(
             stacklevel=2,
         )
     groups = _groups(parsed)
-    out = Measurements(joint_names, qs, source=source, cameras=reader.cameras).with_groups(groups)
+    mounts = mounts_from_dict(reader, doc["mounts"]) if doc.get("mounts") is not None else {}
+    out = Measurements(
+        joint_names, qs, source=source, cameras=reader.cameras, mounts=mounts
+    ).with_groups(groups)
     logger.debug(
         "%s: %d samples, %d observations in %d groups",
         source,
@@ -384,6 +388,8 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
         doc["measured_in"] = top_measured_in
     if cameras:
         doc["cameras"] = {frame: c.to_dict() for frame, c in cameras.items()}
+    if m.mounts:
+        doc["mounts"] = mounts_to_dict(m.mounts)
     doc["samples"] = [
         {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
     ]
