@@ -163,6 +163,7 @@ class Measurements:
                         f"but there are {n} samples"
                     )
             object.__setattr__(self, attr, groups)
+        _check_one_frame_per_target(self)
 
     def __repr__(self) -> str:
         others = f", others={list(self.others)}" if self.others else ""
@@ -315,6 +316,27 @@ class Measurements:
             if name in column:
                 out[:, c] = self.qs[:, column[name]]
         return out
+
+
+def _check_one_frame_per_target(m: Measurements) -> None:
+    """Raise unless every target name is on one frame (or fixed in the world) in every
+    group that names it, naming two groups that disagree and their first samples."""
+    homes: dict[str, Any] = {}
+    for g in m.all_groups():
+        if not hasattr(g, "target_frame"):
+            continue
+        seen = homes.setdefault(g.target, g)
+        if seen.target_frame != g.target_frame:
+
+            def placed(group: Any) -> str:
+                where = group.target_frame
+                on = "fixed in the world" if where is None else f"on {where!r}"
+                return f"{on} in {group!r} (first sample {int(group.sample.min())})"
+
+            raise DatasetError(
+                f"{m.source}: target {g.target!r} is {placed(seen)} but {placed(g)}; a "
+                "target is rigidly attached to one frame (give each board its own name)"
+            )
 
 
 def first_uses(measurements: Measurements) -> dict[str, tuple[int, str]]:

@@ -124,3 +124,30 @@ def test_the_mount_option_adds_to_the_files_mounts(tmp_path, capsys):
     assert main(["verify", str(urdf), str(path), "--mount", "cam:flange"]) == 0
     assert main(["verify", str(urdf), str(path), "--mount", "cam"]) == 2
     assert "expected NAME:PARENT" in capsys.readouterr().err
+
+
+def test_a_target_said_to_be_on_two_frames_is_refused():
+    """One board name on two frames in one file: the reader names both observations;
+    two files merged, or groups built in memory: the dataset names both groups."""
+    obs = [
+        {"frame": "cam", "kind": "target", "target": "board", "xyz": [0, 0, 1]}
+        | {"quat_xyzw": [0, 0, 0, 1]},
+        {"frame": "cam", "kind": "target", "target": "board", "xyz": [0, 0, 1]}
+        | {"quat_xyzw": [0, 0, 0, 1], "target_frame": "l6"},
+    ]
+    doc = _doc({}) | {"samples": [{"q": [0.1], "observations": [o]} for o in obs]}
+    with pytest.raises(
+        DatasetError,
+        match=r"samples\[1\]\.observations\[0\]\.target_frame: target 'board' is on frame 'l6' "
+        r"here but fixed in the world in samples\[0\]\.observations\[0\]",
+    ):
+        measurements_from_dict(doc)
+    a, b = (measurements_from_dict(doc | {"samples": doc["samples"][i : i + 1]}) for i in (0, 1))
+    with pytest.raises(
+        DatasetError, match=r"target 'board' is fixed in the world in .* but on 'l6'"
+    ):
+        concatenate_measurements(a, b)
+    # other names, or the same frame, are fine
+    renamed = dict(obs[1], target="board2")
+    doc2 = _doc({}) | {"samples": [{"q": [0.1], "observations": [obs[0], renamed]}]}
+    assert len(measurements_from_dict(doc2).targets) == 2
