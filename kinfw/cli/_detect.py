@@ -102,6 +102,13 @@ def add_detect_parser(sub: Any) -> None:
     )
     p.add_argument("--target", default="board", help="the board's target name (default board)")
     p.add_argument(
+        "--target-frame",
+        metavar="LINK",
+        default=None,
+        help="the URDF frame the board is fixed to (eye-to-hand: the flange; written as each "
+        'observation\'s "target_frame"); default fixed in the world',
+    )
+    p.add_argument(
         "--allow-symmetric",
         action="store_true",
         help="accept a chessboard or circle grid that looks the same turned by 180 degrees "
@@ -344,6 +351,7 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 "frame": camera.frame,
                 "kind": "pixels",
                 "target": args.target,
+                **({} if args.target_frame is None else {"target_frame": args.target_frame}),
                 "image": d.image,
                 "uv": d.uv.tolist(),
                 "points": d.points.tolist(),
@@ -365,7 +373,9 @@ def cmd_detect(args: argparse.Namespace) -> int:
     frames = ", ".join(repr(c.frame) for c in cameras)
     print(
         f"wrote {args.out}: {len(samples)} samples, {len(found)} images, {corners} corners of "
-        f"target {args.target!r} seen by camera frame{'s' * (len(cameras) > 1)} {frames}"
+        f"target {args.target!r}"
+        + ("" if args.target_frame is None else f" on {args.target_frame!r}")
+        + f" seen by camera frame{'s' * (len(cameras) > 1)} {frames}"
     )
     return 0
 
