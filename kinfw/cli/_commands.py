@@ -183,6 +183,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     nominal = load_model(args.nominal, args)
     calibrated = load_model(args.calibrated, args) if args.calibrated else None
     data = read_data(args.data, args) if args.data else None
+    if data is not None:  # frames the data mount on the robot: drawn on the nominal too
+        nominal = mounted_model(nominal, data)
     if args.sample is not None and not 0 <= args.sample < data.n_samples:
         raise ValueError(
             f"--sample {args.sample}: out of range, {args.data} has "
