@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from kinfw.geometry import (
     xyz_quat_xyzw_from_transform,
 )
 from kinfw.observations import DatasetError, ObservationReader, frozen_array, read_quaternion
+
+if TYPE_CHECKING:
+    from kinfw.model import Robot
 
 __all__ = ["Mount", "mounted_robot", "mounts_from_dict", "mounts_to_dict"]
 
@@ -85,7 +88,7 @@ def mounts_to_dict(mounts: Mapping[str, Mount]) -> dict[str, Any]:
     return out
 
 
-def mounted_robot(robot: Any, mounts: Mapping[str, Mount], source: str = "<memory>") -> Any:
+def mounted_robot(robot: Robot, mounts: Mapping[str, Mount], source: str = "<memory>") -> Robot:
     """The robot with each mounted frame it lacks added as a link on a fixed joint.
 
     Parameters
