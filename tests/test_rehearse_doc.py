@@ -43,6 +43,7 @@ def test_every_command_of_the_rehearsal_page_runs(tmp_path, monkeypatch, capsys)
         assert code == 0, (line, out.err)
         outputs[line] = out.out
     assert (tmp_path / "detected.json").is_file() and (tmp_path / "camera_cal.urdf").is_file()
+    assert (tmp_path / "wall_detected.json").is_file() and (tmp_path / "wall_cal.urdf").is_file()
     # "With 40 samples ... about 0.9 mm (the noise floor ... 0.87 mm), with 20 it is larger"
     crossval = {k: _mean_calibrated_mm(v) for k, v in outputs.items() if "crossval" in k}
     forty = next(v for k, v in crossval.items() if "mocap.json" in k)

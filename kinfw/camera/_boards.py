@@ -26,7 +26,10 @@ sees the printed face); metres.
   ``r = i // cols``, column ``j = i % cols``) at ``(2 j + r % 2, r, 0) * spacing_m``
   (so ``spacing_m`` is half the distance between neighbours in a row). The discs'
   diameter defaults to ``0.4 * spacing_m``, the one of OpenCV's ``gen_pattern.py``
-  (radius ``spacing / 5``); it matters only to draw the board.
+  (radius ``spacing / 5``); it matters only to draw the board. ``origin_diameter_m``: disc
+  0 is larger (industrial_calibration's modified circle grid, whose large dot is its
+  origin), which tells a square or symmetric grid's numbering (the detector reads the
+  blobs' sizes).
 - :class:`AprilGrid` ``(cols, rows, tag_m, spacing, dictionary, first_id,
   border_bits)``: Kalibr's ``aprilgrid``: ``cols x rows`` AprilTags of side ``tag_m``
   (edge to edge of the black border), ``spacing * tag_m`` apart, tag ids row by row
@@ -43,7 +46,8 @@ sees the printed face); metres.
 Specs (:func:`parse_board`): ``chessboard:COLSxROWS:SQUARE_M`` (inner corners),
 ``charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT]`` (squares; ``DICT`` an OpenCV predefined
 ArUco dictionary, default ``DICT_5X5_100``, the one of OpenCV's ChArUco tutorial),
-``circles:COLSxROWS:SPACING_M[:DIAMETER_M]`` and ``acircles:COLSxROWS:SPACING_M[:DIAMETER_M]``
+``circles:COLSxROWS:SPACING_M[:DIAMETER_M[:ORIGIN_DIAMETER_M]]`` and
+``acircles:COLSxROWS:SPACING_M[:DIAMETER_M[:ORIGIN_DIAMETER_M]]``
 (circles per row x rows, OpenCV's names), and
 ``aprilgrid:COLSxROWS:TAG_M:SPACING[:FAMILY[:FIRST_ID[:BORDER_BITS]]]`` (tags; Kalibr's
 ``tagCols x tagRows``, ``tagSize`` in metres and ``tagSpacing`` as a fraction of the tag
@@ -247,6 +251,10 @@ class CircleGrid:
     diameter_m : float, optional
         The discs' diameter, metres (default ``0.4 * spacing_m``, OpenCV's
         ``gen_pattern.py``); smaller than the distance between neighbouring centres.
+    origin_diameter_m : float, optional
+        The diameter of disc 0 when it is larger than the others and so marks the
+        origin (industrial_calibration's "modified circle grid": one large dot), metres;
+        between ``diameter_m`` and ``spacing_m``. None: every disc is alike.
     """
 
     cols: int
@@ -254,6 +262,7 @@ class CircleGrid:
     spacing_m: float
     asymmetric: bool = False
     diameter_m: float | None = None
+    origin_diameter_m: float | None = None
 
     def __post_init__(self) -> None:
         kind = self.kind
@@ -268,6 +277,14 @@ class CircleGrid:
                 f"{kind}: diameter_m ({self.diameter_m!r}) must be smaller than the distance "
                 f"between neighbouring centres ({nearest!r} m)"
             )
+        origin = self.origin_diameter_m
+        if origin is not None:
+            _check_length(kind, "origin_diameter_m", origin)
+            if not self.diameter_m < origin < self.spacing_m:
+                raise BoardError(
+                    f"{kind}: origin_diameter_m ({origin!r}) must be larger than diameter_m "
+                    f"({self.diameter_m!r}) and smaller than spacing_m ({self.spacing_m!r})"
+                )
 
     @property
     def kind(self) -> str:
@@ -292,14 +309,19 @@ class CircleGrid:
     def symmetric(self) -> bool:
         """True when the grid looks the same turned by 180 degrees about its normal (every
         symmetric grid, a square one also by 90 degrees; an asymmetric grid with an even
-        number of rows), so that an image cannot tell its disc 0 from its last disc."""
+        number of rows), so that an image cannot tell its disc 0 from its last disc. A grid
+        whose disc 0 is larger (``origin_diameter_m``) is told by that disc: not
+        symmetric."""
+        if self.origin_diameter_m is not None:
+            return False
         return not self.asymmetric or self.rows % 2 == 0
 
     partial = False  # OpenCV finds the grid only whole
 
     def spec(self) -> str:
         """The command-line spec of this board."""
-        return f"{self.kind}:{self.cols}x{self.rows}:{self.spacing_m!r}:{self.diameter_m!r}"
+        origin = "" if self.origin_diameter_m is None else f":{self.origin_diameter_m!r}"
+        return f"{self.kind}:{self.cols}x{self.rows}:{self.spacing_m!r}:{self.diameter_m!r}{origin}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -437,8 +459,9 @@ Board = Chessboard | Charuco | CircleGrid | AprilGrid
 _SPEC_HELP = (
     "expected chessboard:COLSxROWS:SQUARE_M (inner corners, e.g. chessboard:9x6:0.025), "
     "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares, e.g. "
-    "charuco:7x5:0.04:0.03:DICT_5X5_100), circles:COLSxROWS:SPACING_M[:DIAMETER_M] or "
-    "acircles:COLSxROWS:SPACING_M[:DIAMETER_M] (circles per row x rows, e.g. "
+    "charuco:7x5:0.04:0.03:DICT_5X5_100), circles:COLSxROWS:SPACING_M[:DIAMETER_M"
+    "[:ORIGIN_DIAMETER_M]] or acircles:COLSxROWS:SPACING_M[:DIAMETER_M[:ORIGIN_DIAMETER_M]] "
+    "(circles per row x rows; ORIGIN_DIAMETER_M: a larger disc 0 marks the origin; e.g. "
     "acircles:4x11:0.02), aprilgrid:COLSxROWS:TAG_M:SPACING[:FAMILY[:FIRST_ID[:BORDER_BITS]]] "
     "(tags, SPACING a fraction of TAG_M, e.g. aprilgrid:6x6:0.088:0.3); lengths in metres"
 )
@@ -447,8 +470,8 @@ _SPEC_HELP = (
 _FIELDS = {
     "chessboard": (("SQUARE_M",), ()),
     "charuco": (("SQUARE_M", "MARKER_M"), ("DICT",)),
-    "circles": (("SPACING_M",), ("DIAMETER_M",)),
-    "acircles": (("SPACING_M",), ("DIAMETER_M",)),
+    "circles": (("SPACING_M",), ("DIAMETER_M", "ORIGIN_DIAMETER_M")),
+    "acircles": (("SPACING_M",), ("DIAMETER_M", "ORIGIN_DIAMETER_M")),
     "aprilgrid": (("TAG_M", "SPACING"), ("FAMILY", "FIRST_ID", "BORDER_BITS")),
 }
 
@@ -486,7 +509,14 @@ def parse_board(spec: str) -> Board:
             return Charuco(cols, rows, values["SQUARE_M"], values["MARKER_M"], dictionary)
         if kind in ("circles", "acircles"):
             asymmetric = kind == "acircles"
-            return CircleGrid(cols, rows, values["SPACING_M"], asymmetric, values.get("DIAMETER_M"))
+            return CircleGrid(
+                cols,
+                rows,
+                values["SPACING_M"],
+                asymmetric,
+                values.get("DIAMETER_M"),
+                values.get("ORIGIN_DIAMETER_M"),
+            )
         return AprilGrid(
             cols,
             rows,

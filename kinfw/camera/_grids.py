@@ -18,10 +18,13 @@ from the board's points to the centres, and those seen from behind (x cross y to
 the camera) are dropped. The best fit is the board's numbering, unless another fits as
 well (the grid looks the same turned: :attr:`CircleGrid.symmetric`): then the image is
 ``ambiguous`` unless ``allow_symmetric`` (the numbering whose x axis points most to the
-image's right is kept). Each centre is then checked against the homography of its
-neighbours (up to two rows and columns away): one off by more than
-:data:`MAX_LOCAL_ERROR` of the distance between neighbours (a stray blob taken for a
-disc) makes the image ``not found``.
+image's right is kept). A grid with a larger origin disc (``origin_diameter_m``, the
+modified circle grid of industrial_calibration) keeps the numbering whose disc 0 is that
+disc: the blob detector's size at each candidate's disc 0 (the largest, and at least
+:data:`ORIGIN_SIZE_RATIO` times the median disc; else ``ambiguous``). Each centre is
+then checked against the homography of its neighbours (up to two rows and columns
+away): one off by more than :data:`MAX_LOCAL_ERROR` of the distance between neighbours
+(a stray blob taken for a disc) makes the image ``not found``.
 
 AprilTag grids
 --------------
@@ -129,6 +132,10 @@ def find_circle_grid(
         return _nothing("not found", f"the centres found do not fit the {name}'s layout")
     best = min(f[0] for f in fits)
     same = [grid for residual, grid in fits if residual <= best * (1.0 + 1e-6) + 1e-9]
+    if len(same) > 1 and board.origin_diameter_m is not None:
+        same, why = _by_origin_disc(image, blobs, same, spacing_px)
+        if not same:
+            return _nothing("ambiguous", f"{name}: {why}")
     if len(same) > 1 and not allow_symmetric:
         turns = "180 degrees" + (" (and 90)" if len(same) > 2 else "")
         return _nothing(
@@ -145,6 +152,43 @@ def find_circle_grid(
             f"(a stray blob taken for a disc?)",
         )
     return "found", "", grid.reshape(-1, 2).copy(), np.arange(board.count, dtype=np.int64)
+
+
+#: The origin disc's blob must be this many times the median disc's size (diameter).
+ORIGIN_SIZE_RATIO = 1.3
+
+
+def _by_origin_disc(
+    image: NDArray[np.uint8],
+    blobs: object,
+    grids: list[NDArray[np.float64]],
+    spacing_px: float,
+) -> tuple[list[NDArray[np.float64]], str]:
+    """Of the numberings a symmetric grid allows, the one whose disc 0 is the larger
+    origin disc (its blob's size, from the blob detector, at least
+    :data:`ORIGIN_SIZE_RATIO` times the median disc's and the largest of the candidates'
+    disc 0); ``([], why)`` when no candidate's disc 0 is clearly larger."""
+    keypoints = blobs.detect(image)
+    if not keypoints:
+        return [], "no blobs to measure the origin disc"
+    centres = np.array([k.pt for k in keypoints])
+    sizes = np.array([k.size for k in keypoints])
+
+    def size_at(uv: NDArray[np.float64]) -> float:
+        distance = np.linalg.norm(centres - uv, axis=1)
+        k = int(np.argmin(distance))
+        return float(sizes[k]) if distance[k] < 0.5 * spacing_px else 0.0
+
+    median = float(np.median([size_at(uv) for uv in grids[0].reshape(-1, 2)]))
+    origin = [size_at(grid[0, 0]) for grid in grids]
+    k = int(np.argmax(origin))
+    others = max([size for i, size in enumerate(origin) if i != k], default=0.0)
+    if origin[k] < ORIGIN_SIZE_RATIO * median or others >= origin[k] / ORIGIN_SIZE_RATIO:
+        return [], (
+            f"no corner disc is the larger origin disc (disc 0 candidates {origin[k]:.1f} px "
+            f"and {others:.1f} px across, the median disc {median:.1f} px)"
+        )
+    return [grids[k]], ""
 
 
 def _neighbour_distance(grid: NDArray[np.float64], board: CircleGrid) -> float:

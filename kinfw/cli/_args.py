@@ -26,12 +26,15 @@ __all__ = [
     "POSITIVE_PX",
     "SEED",
     "add_camera_option",
+    "add_mount_option",
     "add_package_dir_option",
     "add_xacro_option",
     "camera_inputs",
     "frame_file",
     "frames_arg",
     "load_model",
+    "mount_arg",
+    "mounted_model",
     "number",
     "read_data",
     "up_arg",
@@ -140,6 +143,40 @@ def add_camera_option(p: argparse.ArgumentParser) -> None:
     )
 
 
+def mount_arg(text: str) -> tuple[str, str]:
+    """``NAME:PARENT`` of ``--mount``."""
+    name, sep, parent = text.partition(":")
+    if not sep or not name.strip() or not parent.strip():
+        raise argparse.ArgumentTypeError(
+            f"expected NAME:PARENT (a frame the URDF lacks and the link it is on), got {text!r}"
+        )
+    return name.strip(), parent.strip()
+
+
+def add_mount_option(p: argparse.ArgumentParser) -> None:
+    """``--mount NAME:PARENT`` (repeatable): a frame of the data that the URDF lacks."""
+    p.add_argument(
+        "--mount",
+        action="append",
+        type=mount_arg,
+        default=[],
+        metavar="NAME:PARENT",
+        help="the data's frame NAME (a camera, a marker body) is not in the URDF: add it as "
+        "a link on a fixed joint to the URDF link PARENT (identity start), whose origin is "
+        'calibrated and exported; adds to the data file\'s "mounts" section (repeatable)',
+    )
+
+
+def mounted_model(robot: Robot, *datasets: Any) -> Robot:
+    """The robot with the mounted frames of ``datasets`` (their ``"mounts"`` and the
+    command's ``--mount``, :func:`read_data`) that it lacks added on fixed joints."""
+    from kinfw.measurements import mounted_robot
+
+    for data in datasets:
+        robot = mounted_robot(robot, data.mounts, data.source)
+    return robot
+
+
 # -- what the options name --------------------------------------------------------------
 def xacro_arg(text: str) -> tuple[str, str]:
     """``NAME:=VALUE`` (xacro's own syntax) -> ``(NAME, VALUE)``."""
@@ -203,9 +240,10 @@ def frames_arg(
 
 def read_data(path: Path, args: argparse.Namespace) -> Any:
     """The measurement file ``path`` with the intrinsics of ``--camera FRAME=FILE``
-    (override or add to its ``"cameras"`` section)."""
+    (override or add to its ``"cameras"`` section) and the frames of ``--mount
+    NAME:PARENT`` (add to its ``"mounts"``)."""
     from kinfw.camera import CameraError, read_camera
-    from kinfw.measurements import read_measurements
+    from kinfw.measurements import Mount, read_measurements
     from kinfw.observations import DatasetError
 
     cameras = {}
@@ -216,6 +254,8 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
         except CameraError as exc:
             raise DatasetError(f"--camera {frame}={file}: {exc}") from None
     data = read_measurements(path, cameras=cameras)
+    mounts = getattr(args, "mount", None) or ()
+    data = data.with_mounts({name: Mount(parent) for name, parent in mounts})
     used = list(dict.fromkeys(g.camera for g in data.groups("pixels")))
     for frame, file in given:
         if frame not in used:

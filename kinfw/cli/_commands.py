@@ -21,10 +21,12 @@ from kinfw.cli._args import (
     COUNT,
     SEED,
     add_camera_option,
+    add_mount_option,
     add_package_dir_option,
     add_xacro_option,
     frames_arg,
     load_model,
+    mounted_model,
     number,
     read_data,
     up_arg,
@@ -65,6 +67,7 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
         help="ignore the sidecar: fit nuisance frames to these data",
     )
     add_camera_option(p)
+    add_mount_option(p)
     p.add_argument(
         "--json", action="store_true", help="print the report as JSON, with per-sample errors"
     )
@@ -77,6 +80,7 @@ def cmd_verify(args: argparse.Namespace) -> int:
 
     robot = load_model(args.model, args)
     data = read_data(args.data, args)
+    robot = mounted_model(robot, data)
     sidecar_file = args.sidecar or sidecar_path(args.model)
     sidecar = None
     if Path(sidecar_file).is_file() and not args.no_sidecar:
@@ -179,6 +183,8 @@ def cmd_view(args: argparse.Namespace) -> int:
     nominal = load_model(args.nominal, args)
     calibrated = load_model(args.calibrated, args) if args.calibrated else None
     data = read_data(args.data, args) if args.data else None
+    if data is not None:  # frames the data mount on the robot: drawn on the nominal too
+        nominal = mounted_model(nominal, data)
     if args.sample is not None and not 0 <= args.sample < data.n_samples:
         raise ValueError(
             f"--sample {args.sample}: out of range, {args.data} has "
@@ -348,8 +354,9 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
         "--camera-frame",
         default=None,
         help="with --target: the camera's own URDF link, on a fixed joint to --frame; its "
-        "joint origin (the mount) is calibrated, --frame keeps its own (a link not in the "
-        "URDF is refused with the lines to add)",
+        "joint origin (the mount) is calibrated, --frame keeps its own. A name the URDF "
+        'lacks is written as a mount on --frame ("mounts" in the file): calibrate adds the '
+        "link and its fixed joint, and exports them",
     )
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
@@ -362,6 +369,7 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
     from kinfw.measurements import (
         check_against_robot,
         measurements_from_figaroh_csv,
+        mounted_robot,
         write_measurements,
     )
 
@@ -377,7 +385,7 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         target=args.target,
         camera_frame=args.camera_frame,
     )
-    check_against_robot(measurements, robot)
+    check_against_robot(measurements, mounted_robot(robot, measurements.mounts))
     write_measurements(args.out, measurements)
     kinds = ", ".join(
         f"{len(g.sample)} {type(g).kind} of {getattr(g, 'marker', None) or g.target!r}"
@@ -388,6 +396,11 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         f"{', '.join(measurements.joint_names)}; {kinds} on "
         f"{args.camera_frame if args.target is not None else args.frame!r}"
     )
+    for name, mount in measurements.mounts.items():
+        print(
+            f"{name!r} is not in {args.urdf}: the file mounts it on {mount.parent!r} "
+            "(calibrate adds it as a link on a fixed joint, calibrates and exports its origin)"
+        )
     return 0
 
 

@@ -6,6 +6,7 @@ robot's joint values, as ``pixels`` observations of a ``kinfw-measurements`` fil
     kinfw detect IMAGES... --board SPEC --joints JOINTS.csv --camera CAM.yaml
                  --frame CAMERA_FRAME [--target NAME] [--allow-symmetric]
                  [--min-corners N] [--angle-unit rad|deg] --out DATA.json
+    kinfw detect --images DIR:CAMERA_FRAME [--images DIR2:FRAME2 ...] --board SPEC ...
 
 ``SPEC`` names a chessboard, a ChArUco board, a symmetric or asymmetric circle grid or
 Kalibr's AprilTag grid (:func:`kinfw.camera.parse_board`).
@@ -17,7 +18,14 @@ given or its file name (every image needs exactly one row, every row one image).
 The output (format: ``docs/measurements.md``, the ``pixels`` kind) has the camera's
 intrinsics under ``"cameras"`` and one sample per image where the board was found; the
 images where it was not found, or found ambiguously (:mod:`kinfw.camera`), are listed on
-stdout and left out. Like :mod:`kinfw.cli`, this module imports only the standard library
+stdout and left out.
+
+``--images DIR:FRAME`` (repeatable) reads a folder laid out as ``kinfw simulate --images``
+writes it (:mod:`kinfw.simulation`): ``DIR/joints.csv`` keyed by an ``image`` column,
+``DIR/camera.json`` and the images it names, seen by camera frame ``FRAME``. Several
+folders (a stereo pair, cameras on several links) are merged into one file: images whose
+joint values are equal (the same configuration, bit for bit as read) are one sample with
+one observation per camera. Like :mod:`kinfw.cli`, this module imports only the standard library
 at start-up; numpy and OpenCV are imported by the command.
 """
 
@@ -28,6 +36,7 @@ import csv
 import json
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +61,19 @@ def add_detect_parser(sub: Any) -> None:
         "ambiguously (a symmetric chessboard's or circle grid's point 0 cannot be told), are "
         "listed and skipped.",
     )
-    p.add_argument("images", type=Path, nargs="+", metavar="IMAGE", help="image files")
+    p.add_argument("images", type=Path, nargs="*", metavar="IMAGE", help="image files")
+    p.add_argument(
+        "--images",
+        dest="folders",
+        type=_folder_arg,
+        action="append",
+        default=[],
+        metavar="DIR:FRAME",
+        help="instead of IMAGE..., --joints, --camera and --frame: a folder as kinfw simulate "
+        "--images writes it (DIR/joints.csv with an 'image' column, DIR/camera.json, the "
+        "images), seen by camera frame FRAME; repeat for several cameras: images taken at "
+        "equal joint values become one sample with an observation per camera",
+    )
     p.add_argument(
         "--board",
         required=True,
@@ -67,22 +88,26 @@ def add_detect_parser(sub: Any) -> None:
     p.add_argument(
         "--joints",
         type=Path,
-        required=True,
         help="CSV: a header of joint names, one row per image (in the images' order, or "
         "keyed by an 'image' column)",
     )
     p.add_argument(
         "--camera",
         type=Path,
-        required=True,
         help="the camera's intrinsics (ROS camera_info YAML, OpenCV YAML/XML or JSON)",
     )
     p.add_argument(
         "--frame",
-        required=True,
         help="URDF frame of the camera's optical frame (z forward, x right, y down)",
     )
     p.add_argument("--target", default="board", help="the board's target name (default board)")
+    p.add_argument(
+        "--target-frame",
+        metavar="LINK",
+        default=None,
+        help="the URDF frame the board is fixed to (eye-to-hand: the flange; written as each "
+        'observation\'s "target_frame"); default fixed in the world',
+    )
     p.add_argument(
         "--allow-symmetric",
         action="store_true",
@@ -106,12 +131,82 @@ def add_detect_parser(sub: Any) -> None:
     p.set_defaults(func=cmd_detect, check_outputs=check_detect_outputs)
 
 
+def _folder_arg(text: str) -> tuple[Path, str]:
+    """``DIR:FRAME`` of ``--images`` (the last ``:`` splits, so DIR may hold one)."""
+    folder, sep, frame = text.rpartition(":")
+    if not sep or not folder or not frame.strip():
+        raise argparse.ArgumentTypeError(
+            f"expected DIR:FRAME (a folder of images and the camera frame), got {text!r}"
+        )
+    return Path(folder), frame.strip()
+
+
+@dataclass(frozen=True, slots=True)
+class _CameraImages:
+    """One camera's images with their joints file, intrinsics file and frame."""
+
+    images: tuple[Path, ...]
+    joints: Path
+    camera: Path
+    frame: str
+
+
+def _camera_images(args: argparse.Namespace) -> list[_CameraImages]:
+    """The cameras of the command: ``IMAGE... --joints --camera --frame``, or one per
+    ``--images DIR:FRAME`` (its images those its ``joints.csv`` names, in its order)."""
+    from kinfw.simulation import CAMERA_FILE, JOINTS_FILE
+
+    single = {"--joints": args.joints, "--camera": args.camera, "--frame": args.frame}
+    if not args.folders:
+        missing = [flag for flag, value in single.items() if value is None]
+        if not args.images or missing:
+            raise ValueError(
+                "give the images, --joints, --camera and --frame (missing: "
+                f"{', '.join(['IMAGE...'] * (not args.images) + missing)}), or --images DIR:FRAME"
+            )
+        return [_CameraImages(tuple(args.images), args.joints, args.camera, args.frame)]
+    given = [flag for flag, value in single.items() if value is not None]
+    if args.images or given:
+        raise ValueError(
+            f"--images DIR:FRAME reads each folder's {JOINTS_FILE} and {CAMERA_FILE}: give "
+            f"no {', '.join(['IMAGE...'] * bool(args.images) + given)} with it"
+        )
+    frames = [frame for _, frame in args.folders]
+    if len(set(frames)) != len(frames):
+        raise ValueError(f"--images: a camera frame is given twice in {frames}")
+    return [
+        _CameraImages(
+            _folder_images(folder / JOINTS_FILE), folder / JOINTS_FILE, folder / CAMERA_FILE, frame
+        )
+        for folder, frame in args.folders
+    ]
+
+
+def _folder_images(joints: Path) -> tuple[Path, ...]:
+    """The images a folder's joints file names (its ``image`` column), beside it."""
+    try:
+        text = joints.read_text(encoding="utf-8-sig")
+    except OSError as exc:
+        raise OSError(f"{joints}: cannot read the joints CSV ({exc.strerror})") from None
+    rows = [row for row in csv.reader(text.splitlines()) if any(c.strip() for c in row)]
+    header = [c.strip() for c in rows[0]] if rows else []
+    if IMAGE_COLUMN not in header:
+        raise ValueError(
+            f"{joints}: line 1: no '{IMAGE_COLUMN}' column naming each row's image "
+            f"(header {header})"
+        )
+    column = header.index(IMAGE_COLUMN)
+    return tuple(joints.parent / row[column].strip() for row in rows[1:] if len(row) > column)
+
+
 def detect_inputs(args: argparse.Namespace) -> dict[str, Path]:
     """The input files of ``kinfw detect``, keyed by how the user gave them (for the
     check that ``--out`` overwrites none)."""
     inputs = {"--joints": args.joints, "--camera": args.camera}
     inputs.update({f"IMAGES[{k}]": path for k, path in enumerate(args.images)})
-    return inputs
+    for folder, frame in args.folders:
+        inputs[f"--images {folder}:{frame}"] = folder
+    return {flag: path for flag, path in inputs.items() if path is not None}
 
 
 def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list[list[float]]]:
@@ -208,36 +303,31 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
 def cmd_detect(args: argparse.Namespace) -> int:
     import time
 
-    from kinfw.camera import Detector, parse_board, read_camera, read_gray
+    from kinfw.camera import Detector, parse_board
 
     board = parse_board(args.board)
     detector = Detector(board, allow_symmetric=args.allow_symmetric, min_corners=args.min_corners)
-    camera = read_camera(args.camera)
-    frame = args.frame
-    if not frame.strip():
-        raise ValueError("--frame: empty camera frame name")
     if not args.target.strip():
         raise ValueError("--target: empty target name")
-    joints, qs = read_joint_rows(args.joints, args.images)
-    for path in args.images:
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such image file")
+    cameras = _camera_images(args)
+    if any(not c.frame.strip() for c in cameras):
+        raise ValueError("--frame: empty camera frame name")
     start = time.perf_counter()
-    detections = []
-    for path in args.images:
-        image = read_gray(path)
-        if image.shape != (camera.height, camera.width):
-            raise ValueError(
-                f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, the camera "
-                f"{args.camera} is {camera.width}x{camera.height}"
-            )
-        detections.append(detector.detect(image, str(path)))
+    per_camera = [_detect_camera(c, detector) for c in cameras]
     elapsed = time.perf_counter() - start
-    found = [(d, q) for d, q in zip(detections, qs, strict=True) if d.found]
-    missed = [d for d in detections if d.status == "not found"]
-    ambiguous = [d for d in detections if d.status == "ambiguous"]
+    n_images = sum(len(c.images) for c in cameras)
+    joints = per_camera[0].joints
+    for c, result in zip(cameras, per_camera, strict=True):
+        if result.joints != joints:
+            raise ValueError(
+                f"{c.joints}: joint columns {result.joints} differ from "
+                f"{cameras[0].joints}'s {joints}; the cameras' files must name the same joints"
+            )
+    found = [(c, d, q) for c, r in zip(cameras, per_camera, strict=True) for d, q in r.found]
+    missed = [d for r in per_camera for d in r.missed if d.status == "not found"]
+    ambiguous = [d for r in per_camera for d in r.missed if d.status == "ambiguous"]
     print(
-        f"{len(detections)} images ({elapsed / len(detections) * 1e3:.0f} ms each): "
+        f"{n_images} images ({elapsed / n_images * 1e3:.0f} ms each): "
         f"{len(found)} found, {len(missed)} not found, {len(ambiguous)} ambiguous"
     )
     for title, group in (("not found", missed), ("ambiguous", ambiguous)):
@@ -254,37 +344,73 @@ def cmd_detect(args: argparse.Namespace) -> int:
         raise ValueError(
             f"the board {board.spec()} was found in none of the images; {why}; nothing written"
         )
+    samples: dict[tuple[float, ...], list[dict[str, Any]]] = {}
+    for camera, d, q in found:
+        samples.setdefault(tuple(q), []).append(
+            {
+                "frame": camera.frame,
+                "kind": "pixels",
+                "target": args.target,
+                **({} if args.target_frame is None else {"target_frame": args.target_frame}),
+                "image": d.image,
+                "uv": d.uv.tolist(),
+                "points": d.points.tolist(),
+                "ids": d.ids.tolist(),
+            }
+        )
     doc = {
         "format": "kinfw-measurements",
         "version": 1,
         "units": {"length": "m", "angle": args.angle_unit},
         "joint_names": joints,
-        "cameras": {frame: camera.to_dict()},
-        "samples": [
-            {
-                "q": q,
-                "observations": [
-                    {
-                        "frame": frame,
-                        "kind": "pixels",
-                        "target": args.target,
-                        "image": d.image,
-                        "uv": d.uv.tolist(),
-                        "points": d.points.tolist(),
-                        "ids": d.ids.tolist(),
-                    }
-                ],
-            }
-            for d, q in found
-        ],
+        "cameras": {
+            c.frame: r.intrinsics.to_dict() for c, r in zip(cameras, per_camera, strict=True)
+        },
+        "samples": [{"q": list(q), "observations": obs} for q, obs in samples.items()],
     }
     write_text_atomic(args.out, _dumps(doc))
-    corners = sum(len(d.ids) for d, _ in found)
+    corners = sum(len(d.ids) for _, d, _ in found)
+    frames = ", ".join(repr(c.frame) for c in cameras)
     print(
-        f"wrote {args.out}: {len(found)} samples, {corners} corners of target {args.target!r} "
-        f"seen by camera frame {frame!r}"
+        f"wrote {args.out}: {len(samples)} samples, {len(found)} images, {corners} corners of "
+        f"target {args.target!r}"
+        + ("" if args.target_frame is None else f" on {args.target_frame!r}")
+        + f" seen by camera frame{'s' * (len(cameras) > 1)} {frames}"
     )
     return 0
+
+
+@dataclass(frozen=True, slots=True)
+class _CameraDetections:
+    """One camera's detections: the joints file's joint names, the images where the
+    board was found with their joint values, the others, and the intrinsics."""
+
+    joints: list[str]
+    found: list[tuple[Any, list[float]]]
+    missed: list[Any]
+    intrinsics: Any
+
+
+def _detect_camera(camera: _CameraImages, detector: Any) -> _CameraDetections:
+    """Detect the board in one camera's images (checked against its intrinsics' size)."""
+    from kinfw.camera import read_camera, read_gray
+
+    intrinsics = read_camera(camera.camera)
+    joints, qs = read_joint_rows(camera.joints, camera.images)
+    for path in camera.images:
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such image file")
+    detections = []
+    for path in camera.images:
+        image = read_gray(path)
+        if image.shape != (intrinsics.height, intrinsics.width):
+            raise ValueError(
+                f"{path}: image is {image.shape[1]}x{image.shape[0]} pixels, the camera "
+                f"{camera.camera} is {intrinsics.width}x{intrinsics.height}"
+            )
+        detections.append(detector.detect(image, str(path)))
+    found = [(d, q) for d, q in zip(detections, qs, strict=True) if d.found]
+    return _CameraDetections(joints, found, [d for d in detections if not d.found], intrinsics)
 
 
 def _dumps(doc: dict[str, Any]) -> str:

@@ -16,7 +16,7 @@ import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from kinfw.cli._args import load_model, read_data
+from kinfw.cli._args import load_model, mounted_model, read_data
 from kinfw.cli._tables import format_table, metric_format, number
 from kinfw.files import json_text
 
@@ -141,6 +141,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     nominal = load_model(args.urdf, args)
     data = read_data(args.data, args)
     held_out = read_data(args.holdout, args) if args.holdout else None
+    nominal = mounted_model(nominal, data, *filter(None, [held_out]))
     result = calibrate_and_report(
         nominal,
         data,
@@ -368,6 +369,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
 
     nominal = load_model(args.urdf, args)
     data = read_data(args.data, args)
+    nominal = mounted_model(nominal, data)
     prior = _prior_arg(args)
     with open_executor(args.jobs, args.executor) as executor:
         cv = crossvalidate(

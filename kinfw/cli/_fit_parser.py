@@ -16,6 +16,7 @@ from kinfw.cli._args import (
     POSITIVE_PX,
     SEED,
     add_camera_option,
+    add_mount_option,
     add_xacro_option,
     camera_inputs,
     number,
@@ -82,6 +83,7 @@ def _add_calibrate_parser(sub: argparse._SubParsersAction) -> None:
         help="measurement file not used for calibration; its errors go to the report and sidecar",
     )
     add_calibration_options(p)
+    add_mount_option(p)
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.set_defaults(func=cmd_calibrate, check_outputs=check_calibrate_outputs)
 
@@ -167,6 +169,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     )
     _add_fit_options(p)
     add_camera_option(p)
+    add_mount_option(p)
     add_executor_options(p, tasks="the fits (folds x parameter sets)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)

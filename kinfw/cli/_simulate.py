@@ -167,6 +167,14 @@ def _add_pixel_options(p: argparse.ArgumentParser) -> None:
         "that kinfw detect reads",
     )
     p.add_argument(
+        "--target-frame",
+        metavar="LINK",
+        default=None,
+        help="with --pixels: the board rides on URDF frame LINK (eye-to-hand: a board on the "
+        "flange seen by a camera on a link fixed to the root), centred on its origin and "
+        "facing the cameras at the middle of the joint ranges; default fixed in the world",
+    )
+    p.add_argument(
         "--image-noise",
         type=number(float, low=0.0),
         default=2.0,
@@ -316,10 +324,11 @@ def _intrinsics(args, cameras: tuple[str, ...]) -> dict:
 
 
 def _pixel_summary(sim, sigma_px: float) -> dict:
-    """The board, its true pose and the images and corners per camera of ``--pixels``
-    data."""
+    """The board, its true pose (``root_T_board``: in ``target_frame`` when the board is
+    on one) and the images and corners per camera of ``--pixels`` data."""
     return {
         "board": sim.board,
+        "target_frame": sim.target_frame,
         "root_T_board": sim.w_T_board.tolist(),
         "sigma_px": sigma_px,
         "cameras": [
@@ -361,7 +370,8 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         else ()
     )
     probe_frames = [frame for frame, _ in (*markers, *contacts)]
-    names = nominal.topology((*frames, *cameras, *probe_frames)).joint_names
+    on = () if args.target_frame is None else (args.target_frame,)
+    names = nominal.topology((*frames, *cameras, *probe_frames, *on)).joint_names
     sim = simulate_measurements(
         nominal,
         stages=stages,
@@ -390,6 +400,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         point=args.point,
         contact_samples=args.contact_samples,
         offsets_known=args.offsets_known,
+        target_frame=args.target_frame,
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)
@@ -452,7 +463,9 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
     )
     if pixels is not None:
         print(
-            f"  stage 2 as images of {pixels['board']} (pixel noise {args.pixel_sigma:g} px): "
+            f"  stage 2 as images of {pixels['board']}"
+            + ("" if sim.target_frame is None else f" on {sim.target_frame!r}")
+            + f" (pixel noise {args.pixel_sigma:g} px): "
             + "; ".join(
                 f"{c['camera']}: {c['images']} images, {c['points']} corners"
                 + (" (default intrinsics: 640x480, fx = fy = 600 px)" if c["default"] else "")

@@ -42,6 +42,11 @@ Observation kinds
     ``frame`` when it is known; without it the offset is estimated. ``"marker"`` names a
     marker whose offset is unknown, so ``marker`` and ``offset`` exclude each other.
 
+A frame the URDF lacks (a camera on ``tool0``) may be declared in the top-level
+``"mounts"`` section, ``{"camera": {"parent": "tool0"}}`` (optional start ``xyz``,
+``quat_xyzw``): :func:`mounted_robot` adds it to the robot as a link on a fixed joint,
+whose origin the calibration estimates (``docs/measurements.md``).
+
 The measurement frame is the URDF root link unless ``"measured_in"`` names another frame
 (one that is *not* in the URDF, whose pose in the root link is then estimated). A
 top-level ``measured_in`` is the default for every ``pose`` and ``point`` observation
@@ -112,6 +117,7 @@ from kinfw.measurements._file import (
     read_measurements,
     write_measurements,
 )
+from kinfw.measurements._mounts import Mount, mounted_robot
 from kinfw.measurements._pose_pairs import (
     MIN_POSE_PAIRS,
     POSE_PAIR_COLUMNS,
@@ -136,6 +142,7 @@ __all__ = [
     "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
     "Measurements",
+    "Mount",
     "PosePairs",
     "align_streams",
     "check_against_robot",
@@ -151,6 +158,7 @@ __all__ = [
     "measurements_from_figaroh_csv",
     "measurements_to_dict",
     "merge_same_key",
+    "mounted_robot",
     "observed_joints",
     "pose_pairs_from_measurements",
     "pose_pairs_text",

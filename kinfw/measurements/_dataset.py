@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.measurements._mounts import Mount
 from kinfw.observations import (
     DatasetError,
     PointObservations,
@@ -93,6 +94,9 @@ class Measurements:
     cameras : mapping of str to CameraIntrinsics
         Camera intrinsics by camera frame (the file's ``"cameras"`` section; frames that
         no observation uses are kept), read-only.
+    mounts : mapping of str to Mount
+        Frames the data name that the URDF may lack, each on a URDF link (the file's
+        ``"mounts"`` section; :func:`kinfw.measurements.mounted_robot` adds them), read-only.
     """
 
     joint_names: tuple[str, ...]
@@ -103,10 +107,17 @@ class Measurements:
     source: str = "<memory>"
     others: tuple[Any, ...] = ()
     cameras: Mapping[str, Any] = field(default_factory=dict)
+    mounts: Mapping[str, Mount] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         src = self.source
         object.__setattr__(self, "cameras", FrozenMapping(self.cameras))
+        object.__setattr__(self, "mounts", FrozenMapping(self.mounts))
+        for name, mount in self.mounts.items():
+            if not isinstance(mount, Mount):
+                raise DatasetError(
+                    f"{src}: mounts[{name!r}]: expected Mount, got {type(mount).__name__}"
+                )
         names = tuple(self.joint_names)
         if isinstance(self.joint_names, str) or not all(isinstance(n, str) for n in names):
             raise DatasetError(f"{src}: joint_names: expected a sequence of strings")
@@ -152,6 +163,7 @@ class Measurements:
                         f"but there are {n} samples"
                     )
             object.__setattr__(self, attr, groups)
+        _check_one_frame_per_target(self)
 
     def __repr__(self) -> str:
         others = f", others={list(self.others)}" if self.others else ""
@@ -179,6 +191,11 @@ class Measurements:
         merged = {**self.cameras, **cameras}
         groups = [kind_of(g).with_cameras(g, merged) for g in self.all_groups()]
         return self.with_groups(groups, cameras=merged)
+
+    def with_mounts(self, mounts: Mapping[str, Mount]) -> Measurements:
+        """The dataset with more mounted frames (:attr:`mounts`); a frame already
+        mounted differently is a DatasetError naming it."""
+        return replace(self, mounts=_merged_mounts((self.mounts, mounts), self.source))
 
     def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
         """The dataset with other observation groups (of any registered kinds), and
@@ -301,6 +318,27 @@ class Measurements:
         return out
 
 
+def _check_one_frame_per_target(m: Measurements) -> None:
+    """Raise unless every target name is on one frame (or fixed in the world) in every
+    group that names it, naming two groups that disagree and their first samples."""
+    homes: dict[str, Any] = {}
+    for g in m.all_groups():
+        if not hasattr(g, "target_frame"):
+            continue
+        seen = homes.setdefault(g.target, g)
+        if seen.target_frame != g.target_frame:
+
+            def placed(group: Any) -> str:
+                where = group.target_frame
+                on = "fixed in the world" if where is None else f"on {where!r}"
+                return f"{on} in {group!r} (first sample {int(group.sample.min())})"
+
+            raise DatasetError(
+                f"{m.source}: target {g.target!r} is {placed(seen)} but {placed(g)}; a "
+                "target is rigidly attached to one frame (give each board its own name)"
+            )
+
+
 def first_uses(measurements: Measurements) -> dict[str, tuple[int, str]]:
     """Observed frame -> (first sample index, kind), ordered by first use."""
     entries = []
@@ -357,4 +395,19 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
         qs=np.concatenate([p.q_of(names) for p in parts]),
         source=" + ".join(dict.fromkeys(p.source for p in parts)),
         cameras={k: v for p in parts for k, v in p.cameras.items()},
+        mounts=_merged_mounts([p.mounts for p in parts], " + ".join(p.source for p in parts)),
     )
+
+
+def _merged_mounts(parts: Iterable[Mapping[str, Mount]], source: str) -> dict[str, Mount]:
+    """The union of mount sections; one frame mounted two ways is a DatasetError."""
+    out: dict[str, Mount] = {}
+    for mounts in parts:
+        for name, mount in mounts.items():
+            seen = out.setdefault(name, mount)
+            if not seen.same_as(mount):
+                raise DatasetError(
+                    f"{source}: mounts: frame {name!r} is mounted on {seen.parent!r} in one "
+                    f"part and on {mount.parent!r} (or at another start pose) in another"
+                )
+    return out

@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.geometry import quat_xyzw_from_matrix
 from kinfw.measurements._dataset import Measurements
 from kinfw.measurements._file import measurements_from_dict
+from kinfw.measurements._mounts import Mount
 from kinfw.observations import DatasetError
 
 if TYPE_CHECKING:
@@ -251,8 +252,9 @@ def measurements_from_figaroh_csv(
         With ``target``: the camera's own URDF link, on a fixed joint that hangs (through
         fixed joints only) from ``frame``; its joint origin, the camera's mount, is what
         the calibration estimates and writes. Required, so that no existing frame
-        (``tool0``) is redefined as the camera: a link not in the URDF is refused with
-        the lines to add.
+        (``tool0``) is redefined as the camera. A name the URDF lacks is mounted on
+        ``frame``'s link (the dataset's ``mounts``: :func:`mounted_robot` adds it as a
+        link on a fixed joint, identity start).
 
     Returns
     -------
@@ -260,7 +262,8 @@ def measurements_from_figaroh_csv(
         One sample per data row, in file order; joint values in SI, columns in the
         file's order; per marker a ``point`` group (``x, y, z`` only) or a ``pose``
         group (with ``phix, phiy, phiz``), ``marker`` named, offsets unknown; with
-        ``target``, a ``target`` group per marker.
+        ``target``, a ``target`` group per marker, and ``mounts`` holding the camera
+        frame when the URDF lacks it.
 
     Raises
     ------
@@ -276,11 +279,14 @@ def measurements_from_figaroh_csv(
         raise ValueError(f"length_unit: expected one of {list(_LENGTH_SCALE)}, got {length_unit!r}")
     if angle_unit not in _ANGLE_SCALE:
         raise ValueError(f"angle_unit: expected one of {list(_ANGLE_SCALE)}, got {angle_unit!r}")
+    mounts: dict[str, Mount] = {}
     header, rows, decimal_comma = _read_table(path)
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
-        frame = _camera_link(path, robot, frame, camera_frame)
+        link = _camera_link(path, robot, frame, camera_frame)
+        mounts = {camera_frame: link} if isinstance(link, Mount) else {}
+        frame = camera_frame
     joint_columns = _joint_columns(path, header, markers, robot)
     table = _numbers(path, header, rows, decimal_comma)
     length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
@@ -305,27 +311,24 @@ def measurements_from_figaroh_csv(
             for s, q in enumerate(qs.tolist())
         ],
     }
-    return measurements_from_dict(doc, source=str(path))
+    return measurements_from_dict(doc, source=str(path)).with_mounts(mounts)
 
 
-def _camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str:
+def _camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str | Mount:
     """The camera's own link for ``target`` observations (see
-    :func:`measurements_from_figaroh_csv`), checked; a refusal says what to add."""
-    add = (
-        f'add it to the URDF: <link name="{camera_frame or "camera"}"/> and <joint '
-        f'name="{camera_frame or "camera"}_joint" type="fixed"> with <parent link="{frame}"/>, '
-        f'<child link="{camera_frame or "camera"}"/> and any start <origin> (the calibration '
-        "writes the fitted mount there)"
-    )
+    :func:`measurements_from_figaroh_csv`), checked: its name when the URDF has it, else
+    the :class:`Mount` that adds it on ``frame``'s link; a refusal says what to give."""
     if camera_frame is None:
         raise DatasetError(
             f"{path}: target poses are measured in the camera, whose pose on {frame!r} is "
             f"unknown: reading them as seen by {frame!r} would make calibrate redefine "
-            f"{frame!r} as the camera. Name the camera's own link with --camera-frame NAME "
-            f"(camera_frame=) on {frame!r}; if the URDF has none, {add}"
+            f"{frame!r} as the camera. Name the camera's own frame with --camera-frame NAME "
+            f"(camera_frame=): a link of the URDF fixed to {frame!r}, or a new name, which "
+            f"the file then mounts on {frame!r} (calibrate adds it as a link on a fixed joint)"
         )
     if not robot.has_frame(camera_frame):
-        raise DatasetError(f"{path}: camera frame {camera_frame!r} is not in the URDF; {add}")
+        link = frame if frame in robot.link_names else robot.joint(frame).child
+        return Mount(link)
     if camera_frame == frame or robot.movable_path(camera_frame) != robot.movable_path(frame):
         raise DatasetError(
             f"{path}: camera frame {camera_frame!r} must be its own link fixed to {frame!r} "

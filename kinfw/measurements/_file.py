@@ -24,6 +24,7 @@ from kinfw import progress
 from kinfw.camera import CameraError, CameraIntrinsics, intrinsics_from_dict
 from kinfw.files import write_text_atomic
 from kinfw.measurements._dataset import Measurements
+from kinfw.measurements._mounts import mounts_from_dict, mounts_to_dict
 from kinfw.observations import DatasetError, ObservationReader, describe, kind_named, kind_of, kinds
 
 __all__ = [
@@ -188,6 +189,7 @@ class _ParsedObservations:
     rows: list[Any] = field(default_factory=list)
     group_of_key: dict[tuple[Any, ...], int] = field(default_factory=dict)
     marker_home: dict[str, tuple[str, str]] = field(default_factory=dict)  # marker -> (frame, at)
+    target_home: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # -> (frame, at)
 
 
 def _read_samples(
@@ -335,21 +337,41 @@ def _read_observation(
     frame = p.string(p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame")
     kind = kind_named(p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names))
     key, row = kind.parse(reader, obs, at_obs, frame)
-    marker = kind.marker(key)
-    if marker is not None:
-        home = parsed.marker_home.setdefault(marker[0], (marker[1], at_obs))
-        if home[0] != marker[1]:
-            raise p.error(
-                f"{at_obs}.marker",
-                f"marker {marker[0]!r} is on frame {marker[1]!r} here but "
-                f"on frame {home[0]!r} in {home[1]}; a marker is rigidly "
-                "attached to one frame",
-            )
+    for what, attached, homes in (
+        ("marker", kind.marker(key), parsed.marker_home),
+        ("target", kind.target_of(key), parsed.target_home),
+    ):
+        if attached is not None:
+            _check_one_frame(p, homes, what, attached, at_obs)
     parsed.obs_group.append(
         parsed.group_of_key.setdefault((kind.name, key), len(parsed.group_of_key))
     )
     parsed.obs_sample.append(i)
     parsed.rows.append(row)
+
+
+def _check_one_frame(
+    p: ObservationReader,
+    homes: dict[str, tuple[str | None, str]],
+    what: str,
+    attached: tuple[str, str | None],
+    at_obs: str,
+) -> None:
+    """Raise unless the marker or target ``attached = (name, frame)`` is on the frame it
+    was first seen on (frame None: a target fixed in the world), naming both places."""
+
+    def placed(frame: str | None) -> str:
+        return "fixed in the world" if frame is None else f"on frame {frame!r}"
+
+    name, frame = attached
+    home = homes.setdefault(name, (frame, at_obs))
+    if home[0] != frame:
+        key = "marker" if what == "marker" else "target_frame"
+        raise p.error(
+            f"{at_obs}.{key}",
+            f"{what} {name!r} is {placed(frame)} here but {placed(home[0])} in {home[1]}; a "
+            f"{what} is rigidly attached to one frame (give each its own {what} name)",
+        )
 
 
 def _groups(parsed: _ParsedObservations) -> list[Any]:
@@ -417,7 +439,10 @@ def measurements_from_dict(
             stacklevel=2,
         )
     groups = _groups(parsed)
-    out = Measurements(joint_names, qs, source=source, cameras=reader.cameras).with_groups(groups)
+    mounts = mounts_from_dict(reader, doc["mounts"]) if doc.get("mounts") is not None else {}
+    out = Measurements(
+        joint_names, qs, source=source, cameras=reader.cameras, mounts=mounts
+    ).with_groups(groups)
     logger.debug(
         "%s: %d samples, %d observations in %d groups",
         source,
@@ -481,6 +506,8 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
         doc["measured_in"] = top_measured_in
     if cameras:
         doc["cameras"] = {frame: c.to_dict() for frame, c in cameras.items()}
+    if m.mounts:
+        doc["mounts"] = mounts_to_dict(m.mounts)
     doc["samples"] = [
         {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
     ]

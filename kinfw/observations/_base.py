@@ -460,6 +460,12 @@ class ObservationKind:
         k = dict(key)
         return (k["marker"], k["frame"]) if k.get("marker") is not None else None
 
+    def target_of(self, key: tuple[tuple[str, Any], ...]) -> tuple[str, str | None] | None:
+        """``(target, target_frame)`` of a group key that names a target (None: fixed in
+        the world), for the one-frame-per-target rule; None for kinds without targets."""
+        k = dict(key)
+        return (k["target"], k.get("target_frame")) if "target" in k else None
+
     def key(self, group: Any) -> tuple[Any, ...]:
         """Groups with equal keys observe the same thing (merged on concatenation)."""
         out = [self.name]

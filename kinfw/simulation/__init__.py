@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from kinfw.simulation._board_images import board_texture, render_board, true_corners
 from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
-from kinfw.simulation._images import write_board_images
+from kinfw.simulation._images import CAMERA_FILE, JOINTS_FILE, write_board_images
 from kinfw.simulation._measurements import (
     SimulatedMeasurements,
     SimulatedProbe,
@@ -40,8 +40,10 @@ from kinfw.simulation._simulate import (
 )
 
 __all__ = [
+    "CAMERA_FILE",
     "DEFAULT_BOARD",
     "DEFAULT_CAMERA",
+    "JOINTS_FILE",
     "MIN_CORNERS",
     "SimulatedMeasurements",
     "SimulatedProbe",

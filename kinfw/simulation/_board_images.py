@@ -19,7 +19,8 @@ the disc's coverage (16 samples per texel).
 - Chessboard: ``cols + 1`` by ``rows + 1`` squares, the top-left one black
   (:mod:`kinfw.camera`), a margin of one square;
 - ChArUco: ``CharucoBoard.generateImage``, a margin of one square;
-- circle grids: black discs of ``diameter_m`` at the board's points, a margin of two
+- circle grids: black discs of ``diameter_m`` (disc 0 of ``origin_diameter_m`` when the
+  grid has one) at the board's points, a margin of two
   spacings from the outer centres;
 - AprilTag grid: as Kalibr's ``kalibr_create_target_pdf`` prints it: each tag is
   OpenCV's ``generateImageMarker`` (the real bit pattern, ``border_bits`` wide border)
@@ -121,7 +122,10 @@ def _circle_grid_texture(
     shift = row % 2 if board.asymmetric else 0.0
     step = 2.0 if board.asymmetric else 1.0
     col = np.clip(np.rint((x / s - shift) / step), 0, board.cols - 1)
-    inside = np.hypot(x - (step * col + shift) * s, y - row * s) <= 0.5 * board.diameter_m
+    diameter = np.where(
+        (row == 0) & (col == 0), board.origin_diameter_m or board.diameter_m, board.diameter_m
+    )
+    inside = np.hypot(x - (step * col + shift) * s, y - row * s) <= 0.5 * diameter
     coverage = inside.reshape(height, samples, width, samples).mean(axis=(1, 3))
     texture = np.rint(255.0 * (1.0 - coverage)).astype(np.uint8)
     return texture, texel, origin

@@ -4,9 +4,10 @@
 For each camera with ``pixels`` observations, a directory ``DIR/CAMERA`` holds
 
 - one PNG per image of the simulation, ``IMAGE.png`` (``IMAGE`` its label in the
-  measurement file), the board at its true pose seen by the camera through the true
-  robot (:func:`kinfw.simulation.render_board`: the exact projection, distortion
-  included, anti-aliased);
+  measurement file), the board at its true pose (in the world, or on its
+  ``target_frame`` moved by the true robot) seen by the camera through the true robot
+  (:func:`kinfw.simulation.render_board`: the exact projection, distortion included,
+  anti-aliased);
 - ``joints.csv``: a header ``image,JOINT,...`` and one row per PNG, the configuration
   (rad, m) it was taken at (``kinfw detect --joints``, keyed by the ``image`` column);
 - ``camera.json``: the camera's intrinsics (``kinfw detect --camera``,
@@ -75,11 +76,17 @@ def write_board_images(
         samples = group.images()[0].tolist()
         labels = group.image_labels()
         root_T_cameras = sim.truth.frame_poses(data.qs[samples], group.camera, data.joint_names)
+        root_T_boards = np.broadcast_to(sim.w_T_board, root_T_cameras.shape)
+        if sim.target_frame is not None:
+            on = sim.truth.frame_poses(data.qs[samples], sim.target_frame, data.joint_names)
+            root_T_boards = on @ sim.w_T_board
         table = io.StringIO()
         writer = csv.writer(table, lineterminator="\n")
         writer.writerow(["image", *data.joint_names])
-        for label, sample, root_T_camera in zip(labels, samples, root_T_cameras, strict=True):
-            camera_T_board = inverse_transform(root_T_camera) @ sim.w_T_board
+        for label, sample, root_T_camera, root_T_board in zip(
+            labels, samples, root_T_cameras, root_T_boards, strict=True
+        ):
+            camera_T_board = inverse_transform(root_T_camera) @ root_T_board
             image = render_board(
                 board, group.intrinsics, camera_T_board, noise_sigma=noise_sigma, rng=rng
             )

@@ -31,7 +31,12 @@ from kinfw.observations import (
     perturb_transforms,
 )
 from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
-from kinfw.simulation._perturb import one_joint_at_a_time, perturb_robot, random_configurations
+from kinfw.simulation._perturb import (
+    finite_limits,
+    one_joint_at_a_time,
+    perturb_robot,
+    random_configurations,
+)
 from kinfw.simulation._pixels import (
     DEFAULT_BOARD,
     MIN_CORNERS,
@@ -91,7 +96,8 @@ class SimulatedMeasurements:
         With ``pixels``: the cameras given no intrinsics, simulated with
         :func:`kinfw.simulation.default_intrinsics`.
     w_T_board : ndarray, shape (4, 4), or None
-        With ``pixels``: the board's true pose in the root frame ``w``, metres.
+        With ``pixels``: the board's true pose in the root frame ``w`` (in
+        ``target_frame`` when given), metres.
     markers : tuple of SimulatedProbe
         The motion-capture markers.
     mocap_frame : str or None
@@ -108,6 +114,8 @@ class SimulatedMeasurements:
         With probes on a ball: its centre in ``w`` and its radius, metres.
     point : ndarray, shape (3,), or None
         With probes on a point: the point in ``w``, metres.
+    target_frame : str or None
+        With ``pixels``: the URDF frame the board is fixed to (None: the world).
     """
 
     truth_xml: str
@@ -127,6 +135,7 @@ class SimulatedMeasurements:
     plane_name: str | None = None
     sphere: NDArray[np.float64] | None = None
     point: NDArray[np.float64] | None = None
+    target_frame: str | None = None
 
 
 def _observed(
@@ -166,12 +175,14 @@ def _stage2(
     pixel_sigma: float,
     stage2_samples: int,
     fraction: float,
+    target_frame: str | None,
 ) -> tuple[Measurements, NDArray[np.float64] | None]:
     """Stage 2: ``cameras`` see a fixed target (its pose, ``camera_T_target``), or with a
     ``board`` the board's points in images (cameras with ``intrinsics``), at the
     ``planned`` configurations, else at random ones within ``limits`` (``(lower,
     upper)``); images where no camera sees the board are dropped (planned) or drawn
-    again (random). Returns the data and, with a ``board``, its pose ``w_T_board``."""
+    again (random). Returns the data and, with a ``board``, its pose ``w_T_board`` (in
+    ``target_frame`` when the board is on that URDF frame)."""
     lower, upper = limits
     if board is None:
         qs = planned
@@ -182,7 +193,14 @@ def _stage2(
         return data, None
     min_corners = MIN_CORNERS if board.partial else board.count
     if planned is not None:
-        w_T_board = board_pose_facing(truth, 0.5 * (lower + upper), names, cameras, board.points)
+        w_T_board = board_pose_facing(
+            truth,
+            0.5 * (lower + upper),
+            names,
+            cameras,
+            board.points,
+            target_frame=target_frame,
+        )
         data, _ = simulate_pixels(
             truth,
             planned,
@@ -193,6 +211,7 @@ def _stage2(
             rng=rng,
             sigma_px=pixel_sigma,
             min_corners=min_corners,
+            target_frame=target_frame,
         )
         return data, w_T_board
     return pixel_views(
@@ -207,6 +226,7 @@ def _stage2(
         sigma_px=pixel_sigma,
         fraction=fraction,
         min_corners=min_corners,
+        target_frame=target_frame,
     )
 
 
@@ -239,6 +259,7 @@ def simulate_measurements(
     point: ArrayLike | None = None,
     contact_samples: int = 60,
     offsets_known: bool = False,
+    target_frame: str | None = None,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -316,6 +337,11 @@ def simulate_measurements(
     offsets_known : bool
         Write the markers' and probes' offsets into the file (known) instead of leaving
         them to be estimated.
+    target_frame : str, optional
+        With ``pixels``: the board rides on this URDF frame (a board on the flange seen
+        by a static camera, eye-to-hand), its centre at the frame's origin facing the
+        cameras at the middle of the joint ranges; its observations say
+        ``"target_frame"``. Default: the board is fixed in the world.
     seed : int
         Seeds the one generator of every draw.
 
@@ -338,6 +364,10 @@ def simulate_measurements(
     stages = tuple(stages)
     if pixels and 2 not in stages:
         raise ValueError(f"pixels: stage 2 makes the images; got stages {stages}")
+    if target_frame is not None and not pixels:
+        raise ValueError(f"target_frame {target_frame!r}: a board on the robot needs pixels")
+    if target_frame is not None:
+        nominal.frame_id(target_frame)  # an unknown frame is named with the links
     frames, cameras = _observed(nominal, stages, frames, cameras)
     given = dict(intrinsics or {})
     if set(given) - set(cameras):
@@ -351,8 +381,9 @@ def simulate_measurements(
     )
     truth = load_robot(truth_xml)
     probe_frames = [frame for frame, _ in (*markers, *contacts)]
-    names = nominal.topology((*frames, *cameras, *probe_frames)).joint_names
-    lower, upper = nominal.joint_limits(names)
+    on = () if target_frame is None else (target_frame,)
+    names = nominal.topology((*frames, *cameras, *probe_frames, *on)).joint_names
+    lower, upper = finite_limits(*nominal.joint_limits(names))  # continuous: +-pi
     noise = {"noise_m": noise_m, "noise_rad": noise_rad}
     if stereo_sigma_m is not None:
         noise["stereo_sigma_m"] = stereo_sigma_m
@@ -379,6 +410,7 @@ def simulate_measurements(
             pixel_sigma=pixel_sigma,
             stage2_samples=stage2_samples,
             fraction=fraction,
+            target_frame=target_frame,
         )
         parts.append(stage2)
     at = _Sampling(truth, names, (lower, upper), fraction, rng, noise_m, offsets_known)
@@ -410,6 +442,7 @@ def simulate_measurements(
         plane_name=touch.name,
         sphere=touch.sphere,
         point=touch.point,
+        target_frame=target_frame,
     )
 
 

@@ -22,7 +22,7 @@ from kinfw.geometry import check_transform, inverse_transform, transform_from_ro
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
 from kinfw.simulation._perturb import check_sigma, random_configurations
-from kinfw.simulation._simulate import default_target_pose, simulate
+from kinfw.simulation._simulate import default_target_pose, frame_from_z_and_x, simulate
 
 #: Default intrinsics of a simulated camera with none given: a plausible 640 x 480 VGA
 #: camera with a ~56 deg horizontal field of view (fx = fy = 600 px), principal point at
@@ -58,8 +58,14 @@ def board_pose_facing(
     cameras: Sequence[str],
     board_p: ArrayLike,
     distance: float = 0.8,
+    *,
+    target_frame: str | None = None,
 ) -> NDArray[np.float64]:
     """A board pose ``w_T_board`` in front of the cameras at one configuration ``q``.
+
+    With ``target_frame`` (a board on the robot seen by a static camera): the board's
+    pose in that frame, its points' centre at the frame's origin and its z axis along
+    the line from the cameras' mean position to it (facing them) at ``q``.
 
     The centre of the board's points is ``distance`` metres along the cameras' mean
     optical axis (z) from their mean position; the board's z axis is that axis (a
@@ -84,10 +90,23 @@ def board_pose_facing(
     w_T_board : ndarray, shape (4, 4)
     """
     board_p = np.asarray(board_p, dtype=float)
+    centre_T_board = transform_from_rotation_translation(np.eye(3), -board_p.mean(axis=0))
+    if target_frame is not None:
+        qs = np.atleast_2d(q)
+        w_T_frame = robot.frame_poses(qs, target_frame, joint_names)[0]
+        w_T_cams = np.stack([robot.frame_poses(qs, c, joint_names)[0] for c in cameras])
+        z = w_T_frame[:3, 3] - w_T_cams[:, :3, 3].mean(axis=0)
+        if np.linalg.norm(z) < 1e-6:
+            raise ValueError(
+                f"board_pose_facing: {target_frame!r} is at the cameras' mean position; "
+                "give the board's pose"
+            )
+        w_T_centre = frame_from_z_and_x(z, w_T_cams[:, :3, 0].mean(axis=0), w_T_frame[:3, 3])
+        return inverse_transform(w_T_frame) @ w_T_centre @ centre_T_board
     w_T_centre = default_target_pose(robot, np.atleast_2d(q), joint_names, cameras, distance)
     # default_target_pose's z points back at the cameras: turn about x (z -> -z, y -> -y)
     w_T_centre = w_T_centre @ np.diag([1.0, -1.0, -1.0, 1.0])
-    return w_T_centre @ transform_from_rotation_translation(np.eye(3), -board_p.mean(axis=0))
+    return w_T_centre @ centre_T_board
 
 
 def visible_points(
@@ -274,9 +293,10 @@ def pixel_views(
     distance: float = 0.8,
     max_rounds: int = 50,
     min_corners: int = MIN_CORNERS,
+    target_frame: str | None = None,
 ) -> tuple[Measurements, NDArray[np.float64]]:
-    """``n`` random configurations at which some camera sees a fixed board, and the
-    images (:func:`simulate_pixels`).
+    """``n`` random configurations at which some camera sees a fixed board (or a board
+    on ``target_frame``), and the images (:func:`simulate_pixels`).
 
     Configurations are drawn by :func:`random_configurations` (``fraction`` of each
     joint range), ``2 n`` at a time, and kept when at least one camera sees the board
@@ -303,11 +323,15 @@ def pixel_views(
         joint ranges, ``distance`` metres away.
     min_corners : int
         Fewest corners an image must see (:func:`visible_points`).
+    target_frame : str, optional
+        The URDF frame the board is fixed to (``w_T_board`` is then its pose in that
+        frame; default :func:`board_pose_facing` with ``target_frame``).
 
     Returns
     -------
     data : Measurements
     w_T_board : ndarray, shape (4, 4)
+        In the root frame, or in ``target_frame``.
 
     Raises
     ------
@@ -319,7 +343,13 @@ def pixel_views(
     board_p = np.asarray(board_p, dtype=float)
     if w_T_board is None:
         w_T_board = board_pose_facing(
-            robot, 0.5 * (lower + upper), names, tuple(cameras), board_p, distance
+            robot,
+            0.5 * (lower + upper),
+            names,
+            tuple(cameras),
+            board_p,
+            distance,
+            target_frame=target_frame,
         )
     w_T_board = check_transform(w_T_board, name="w_T_board")
     found: list[NDArray[np.float64]] = []
@@ -327,8 +357,11 @@ def pixel_views(
     for _ in range(max_rounds):
         qs = random_configurations(lower, upper, 2 * n, rng, fraction=fraction)
         seen = np.zeros(len(qs), bool)
+        w_T_boards = np.broadcast_to(w_T_board, (len(qs), 4, 4))
+        if target_frame is not None:
+            w_T_boards = robot.frame_poses(qs, target_frame, names) @ w_T_board
         for camera, intr in cameras.items():
-            c_T_b = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_board
+            c_T_b = inverse_transform(robot.frame_poses(qs, camera, names)) @ w_T_boards
             seen |= visible_points(intr, c_T_b, board_p, min_corners=min_corners).any(axis=1)
         found.append(qs[seen])
         count += int(seen.sum())
@@ -351,5 +384,6 @@ def pixel_views(
         sigma_px=sigma_px,
         target=target,
         min_corners=min_corners,
+        target_frame=target_frame,
     )
     return data, w_T_board

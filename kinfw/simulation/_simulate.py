@@ -52,6 +52,7 @@ from kinfw.simulation._perturb import (
 
 __all__ = [
     "default_target_pose",
+    "frame_from_z_and_x",
     "nine_circle_plate",
     "one_joint_at_a_time",
     "perturb_poses",
@@ -204,15 +205,21 @@ def default_target_pose(
             "default_target_pose: the cameras' optical axes average to zero; give w_T_target"
         )
     mean_z /= np.linalg.norm(mean_z)
-    z = -mean_z
-    x = w_T_cams[:, :3, 0].mean(axis=0)
-    x -= (x @ z) * z
-    if np.linalg.norm(x) < 1e-6:  # any direction perpendicular to z
-        x = np.cross(z, np.eye(3)[np.argmin(np.abs(z))])
-    x /= np.linalg.norm(x)
-    w_R_target = np.stack([x, np.cross(z, x), z], axis=-1)
     w_p_target = w_T_cams[:, :3, 3].mean(axis=0) + float(distance) * mean_z
-    return transform_from_rotation_translation(w_R_target, w_p_target)
+    return frame_from_z_and_x(-mean_z, w_T_cams[:, :3, 0].mean(axis=0), w_p_target)
+
+
+def frame_from_z_and_x(
+    z: NDArray[np.float64], x: NDArray[np.float64], origin: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The frame at ``origin`` with z along ``z`` and x along ``x`` made perpendicular
+    to it (any perpendicular when ``x`` is parallel to ``z``)."""
+    z = z / np.linalg.norm(z)
+    x = x - (x @ z) * z
+    if np.linalg.norm(x) < 1e-6:
+        x = np.cross(z, np.eye(3)[np.argmin(np.abs(z))])
+    x = x / np.linalg.norm(x)
+    return transform_from_rotation_translation(np.column_stack([x, np.cross(z, x), z]), origin)
 
 
 def simulate(

@@ -1,14 +1,15 @@
 """Writing a calibrated model back into the robot's own URDF text: every tag kept, joint
 origins and axes changed on measured paths, link frames re-expressed so nothing attached
-moves (:func:`export_urdf`, :func:`write_urdf`, :func:`edit_urdf`); and into the files ROS 2
-loads: a ``robot_description`` parameter file and launch file
-(:func:`write_robot_description`) and, for a UR arm, ``ur_description``'s kinematics file
-(:func:`ur_kinematics_from_robot`, :func:`ur_kinematics_text`).
+moves (:func:`export_urdf`, :func:`write_urdf`, :func:`edit_urdf`); new links on fixed
+joints (:func:`add_fixed_links`); and into the files ROS 2 loads: a ``robot_description``
+parameter file and launch file (:func:`write_robot_description`) and, for a UR arm,
+``ur_description``'s kinematics file (:func:`ur_kinematics_from_robot`,
+:func:`ur_kinematics_text`).
 """
 
 from __future__ import annotations
 
-from kinfw.urdf._edit import SAME_TOL, ExportError, edit_urdf
+from kinfw.urdf._edit import SAME_TOL, ExportError, add_fixed_links, edit_urdf
 from kinfw.urdf._export import ExportResult, export_urdf, write_urdf
 from kinfw.urdf._robot_description import (
     ROBOT_DESCRIPTION_FILES,
@@ -39,6 +40,7 @@ __all__ = [
     "ExportError",
     "ExportResult",
     "URKinematics",
+    "add_fixed_links",
     "edit_urdf",
     "export_urdf",
     "robot_description_launch_text",

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform, inverse_transform
 
-__all__ = ["SAME_TOL", "ExportError", "edit_urdf"]
+__all__ = ["SAME_TOL", "ExportError", "add_fixed_links", "edit_urdf"]
 
 SAME_TOL = 1e-12
 """An origin or axis within this of the file's value (max abs entry) keeps its text."""
@@ -95,6 +95,67 @@ def edit_urdf(
         for elem in _shifted_elements(links[name], joints, name, skip=joint_origins):
             changed |= _set_origin(elem, new_T_old @ _origin_transform(elem), _describe(elem))
     return _serialize(robot_elem, urdf_xml) if changed else urdf_xml
+
+
+def add_fixed_links(urdf_xml: str, links: Mapping[str, tuple[str, ArrayLike]]) -> str:
+    """Return ``urdf_xml`` with new links, each on a new fixed joint to an existing link.
+
+    Parameters
+    ----------
+    urdf_xml : str
+        URDF text.
+    links : mapping of str to (str, array_like of shape (4, 4))
+        Per new link name: its parent link (one of the URDF's, or a link added before it
+        in ``links``) and the new joint's origin ``parent_T_link``, metres. The joint is
+        named ``f"{name}_joint"``.
+
+    Returns
+    -------
+    str
+        The URDF with ``<link name="NAME"/>`` and ``<joint name="NAME_joint"
+        type="fixed">`` appended at the end of ``<robot>``, in the order of ``links``;
+        every other element and the text around the root element kept as in
+        :func:`edit_urdf`. ``urdf_xml`` itself when ``links`` is empty.
+
+    Raises
+    ------
+    ExportError
+        For a name that is already a link or joint, an unknown parent (the links are
+        listed) or a transform that is not rigid.
+    """
+    if not links:
+        return urdf_xml
+    robot_elem = _parse(urdf_xml)
+    known_links = _named_children(robot_elem, "link")
+    known_joints = _named_children(robot_elem, "joint")
+    indent = (robot_elem.text or "\n  ") if not (robot_elem.text or "").strip() else "\n  "
+    last = robot_elem[-1] if len(robot_elem) else None
+    for name, (parent, parent_T_link) in links.items():
+        parent_T_link = check_transform(parent_T_link, name=f"links[{name!r}]")
+        joint_name = f"{name}_joint"
+        if name in known_links or name in known_joints or joint_name in known_joints:
+            raise ExportError(
+                f"link {name!r}: the URDF already has a link or joint {name!r} or "
+                f"{joint_name!r}; choose another name"
+            )
+        if parent not in known_links:
+            raise ExportError(
+                f"link {name!r}: its parent {parent!r} is not a link of the URDF; links are "
+                f"{list(known_links)}"
+            )
+        link = etree.Element("link", name=name)
+        joint = etree.Element("joint", name=joint_name, type="fixed")
+        for tag, value in (("parent", parent), ("child", name)):
+            etree.SubElement(joint, tag, link=value)
+        joint.append(etree.Element("origin", xyz="0 0 0", rpy="0 0 0"))
+        _set_origin(joint, parent_T_link, f"joint {joint_name!r}")
+        for elem in (link, joint):
+            if last is not None:
+                elem.tail, last.tail = last.tail, indent
+            robot_elem.append(elem)
+            last = elem
+        known_links[name], known_joints[joint_name] = link, joint
+    return _serialize(robot_elem, urdf_xml)
 
 
 def _parse(urdf_xml: str) -> etree._Element:

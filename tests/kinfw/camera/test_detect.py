@@ -359,3 +359,22 @@ def test_detect_command_when_every_image_is_ambiguous_says_why(tmp_path, capsys)
     )  # fmt: skip
     err = capsys.readouterr().err
     assert code == 2 and f"same file as IMAGES[0] {images[0]}:" in err
+
+
+def test_detect_takes_either_image_files_or_folders(tmp_path, capsys):
+    """``--images DIR:FRAME`` excludes IMAGE..., --joints, --camera and --frame; without
+    it all four are needed; a folder needs its joints.csv with an image column."""
+    from kinfw.cli._main import main
+
+    base = ["detect", "--board", "chessboard:9x6:0.04", "--out", str(tmp_path / "o.json")]
+    assert main([*base, str(tmp_path / "a.png"), "--frame", "cam"]) == 2
+    assert "missing: --joints, --camera" in capsys.readouterr().err
+    assert main([*base, "--images", f"{tmp_path}:cam", "--frame", "cam"]) == 2
+    assert "give no --frame with it" in capsys.readouterr().err
+    assert main([*base, "--images", f"{tmp_path}:cam", "--images", f"{tmp_path}:cam"]) == 2
+    assert "a camera frame is given twice" in capsys.readouterr().err
+    assert main([*base, "--images", str(tmp_path)]) == 2
+    assert "expected DIR:FRAME" in capsys.readouterr().err
+    (tmp_path / "joints.csv").write_text("pan,tilt\n0.1,0.2\n")
+    assert main([*base, "--images", f"{tmp_path}:cam"]) == 2
+    assert "no 'image' column" in capsys.readouterr().err

@@ -235,3 +235,33 @@ def test_detect_command_writes_grid_points(tmp_path, capsys, board):
         np.testing.assert_array_equal(points, board.points[obs["ids"]])  # the board's 3-D points
         reprojected = CAMERA.project(points @ camera_T_board[:3, :3].T + camera_T_board[:3, 3])
         assert np.median(np.linalg.norm(uv - reprojected, axis=1)) < MEDIAN_BOUND_PX
+
+
+#: industrial_calibration's modified circle grid, 10 x 10: disc 0 twice the others.
+MODIFIED = CircleGrid(10, 10, 0.0254, False, 0.01, 0.02)
+
+
+def test_a_larger_origin_disc_numbers_a_square_grid_at_every_roll():
+    """A square symmetric grid with a larger disc 0 (the modified circle grid), rendered
+    turned by 0, 90, 180 and 270 degrees (and tilted): found without allow_symmetric,
+    every centre numbered by the board (its distance from the truth's projection of the
+    same board point: median < 0.1 px, max < 0.3 px); the same images read as a grid
+    without the origin disc are ambiguous. The spec round-trips, and an origin disc no
+    larger than the others, or as wide as the spacing, is refused."""
+    plain = CircleGrid(10, 10, 0.0254, False, 0.01)
+    for roll in (0.3, 0.3 + np.pi / 2, 0.3 + np.pi, 0.3 - np.pi / 2):
+        camera_T_board = board_pose(MODIFIED, [0.2, -0.25, 0.0], roll, distance=0.6)
+        image = render_board(MODIFIED, CAMERA, camera_T_board, noise_sigma=1.0)
+        detection = Detector(MODIFIED).detect(image, "x.png")
+        assert detection.status == "found", detection.reason
+        np.testing.assert_array_equal(detection.points, MODIFIED.points)
+        e = errors(detection, MODIFIED, camera_T_board)
+        assert np.median(e) < MEDIAN_BOUND_PX and e.max() < MAX_BOUND_PX, (roll, e.max())
+        assert Detector(plain).detect(image).status == "ambiguous"
+    assert not MODIFIED.symmetric and plain.symmetric
+    assert parse_board("circles:10x10:0.0254:0.01:0.02") == MODIFIED
+    assert parse_board(MODIFIED.spec()) == MODIFIED
+    with pytest.raises(BoardError, match=r"origin_diameter_m .* must be larger than diameter_m"):
+        parse_board("circles:10x10:0.0254:0.01:0.01")
+    with pytest.raises(BoardError, match="smaller than spacing_m"):
+        parse_board("circles:10x10:0.0254:0.01:0.03")
