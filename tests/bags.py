@@ -2,7 +2,8 @@
 
 :func:`simulated_recording` moves a perturbed ``ARM_6R`` (the truth) continuously and
 samples it twice: joint states at 100 Hz, and a motion-capture pose of a marker on the
-flange at 30 Hz whose stamps lag the true instants by ``DELAY_S`` (an arrival stamp).
+flange at 30 Hz whose stamps lag the true instants by ``DELAY_S`` (an arrival stamp),
+with noise.
 :func:`write_bag` writes that as a ROS 1 ``.bag`` or a ROS 2 folder: ``/joint_states``
 (joints shuffled, plus a gripper joint the URDF lacks), ``/mocap/pose``
 (``PoseStamped`` in ``mocap``), ``/mocap/point`` (``PointStamped``) and, on ROS 2,
@@ -19,7 +20,7 @@ from numpy.typing import NDArray
 
 from kinfw.geometry import matrix_from_rotation_vector, quat_xyzw_from_matrix
 from kinfw.model import Robot, load_robot
-from kinfw.simulation import perturb_robot
+from kinfw.simulation import perturb_poses, perturb_robot
 from tests.robots import ARM_6R
 
 #: The mocap stamps lag the true instants by this, seconds: the offset to recover.
@@ -28,6 +29,8 @@ DELAY_S = 0.023
 EPOCH_S = 1_700_000_000
 JOINT_RATE_HZ = 100.0
 MOCAP_RATE_HZ = 30.0
+#: The mocap's noise: per translation component (m) and rotation angle (rad), 1 sigma.
+SIGMA_M, SIGMA_RAD = 1e-4, 2e-4
 
 
 def _pose(rotvec, xyz) -> NDArray[np.float64]:
@@ -69,15 +72,17 @@ def trajectory(t: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def simulated_recording(duration_s: float = 12.0, seed: int = 4) -> Recording:
-    """Joint states at 100 Hz over ``duration_s``; mocap at 30 Hz from 0.2 s to the end
-    minus 0.2 s, stamped ``DELAY_S`` late; noise-free."""
+    """Joint states at 100 Hz over ``duration_s`` (exact); mocap at 30 Hz from 0.2 s to
+    the end minus 0.2 s, stamped ``DELAY_S`` late, with noise ``SIGMA_M``, ``SIGMA_RAD``."""
+    rng = np.random.default_rng(seed)
     nominal = load_robot(ARM_6R)
-    truth = load_robot(perturb_robot(nominal, np.random.default_rng(seed)))
+    truth = load_robot(perturb_robot(nominal, rng))
     names = nominal.joint_names
     t_joints = np.arange(0.0, duration_s, 1.0 / JOINT_RATE_HZ)
     t_true = np.arange(0.2, duration_s - 0.2, 1.0 / MOCAP_RATE_HZ)
     root_T_flanges = truth.frame_poses(trajectory(t_true), "flange", names)
     mocap_T_markers = np.linalg.inv(ROOT_T_MOCAP) @ root_T_flanges @ FLANGE_T_MARKER
+    mocap_T_markers = perturb_poses(mocap_T_markers, rng, SIGMA_M, SIGMA_RAD)
     return Recording(
         nominal,
         truth,
@@ -114,7 +119,7 @@ def write_bag(path: Path, recording: Recording, *, ros: int = 2) -> Path:
     PointStamped = types["geometry_msgs/msg/PointStamped"]
 
     def header(t: float, frame_id: str):
-        ns = round((EPOCH_S + t) * 1e9)
+        ns = EPOCH_S * 1_000_000_000 + round(t * 1e9)  # exact: no float near 1.7e18
         stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
         extra = {"seq": 0} if ros == 1 else {}
         return Header(stamp=stamp, frame_id=frame_id, **extra), ns
@@ -162,7 +167,8 @@ def write_bag(path: Path, recording: Recording, *, ros: int = 2) -> Path:
             transform = Transform(
                 Vector3(x=p[0], y=p[1], z=p[2]), Quaternion(x=o[0], y=o[1], z=o[2], w=o[3])
             )
-            messages.append((ns, "/tf_static", TFMessage([TransformStamped(h, "mocap", transform)])))
+            static = TFMessage([TransformStamped(h, "mocap", transform)])
+            messages.append((ns, "/tf_static", static))
         for ns, topic, msg in sorted(messages, key=lambda m: m[0]):
             writer.write(conn[topic], ns, serialize(msg, type(msg).__msgtype__))
     return path

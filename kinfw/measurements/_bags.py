@@ -61,7 +61,7 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
 )
 from kinfw.measurements._dataset import Measurements
-from kinfw.measurements._figaroh_csv import _camera_link
+from kinfw.measurements._figaroh_csv import camera_link
 from kinfw.measurements._file import measurements_from_dict
 from kinfw.measurements._streams import interpolate_poses
 from kinfw.observations import DatasetError
@@ -787,7 +787,7 @@ def measurements_from_bag(
             raise ValueError("target excludes marker and measured_in: the camera measures")
         if measured.kind != "pose":
             raise DatasetError(f"{path}: {measured.source}: a target needs poses, got points")
-        common = {"frame": _camera_link(path, robot, frame, camera_frame), "target": target}
+        common = {"frame": camera_link(path, robot, frame, camera_frame), "target": target}
         kind = "target"
     else:
         kind = measured.kind

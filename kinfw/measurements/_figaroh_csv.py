@@ -46,7 +46,12 @@ from kinfw.observations import DatasetError
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = ["IGNORED_COLUMNS", "matrix_from_figaroh_rpy", "measurements_from_figaroh_csv"]
+__all__ = [
+    "IGNORED_COLUMNS",
+    "camera_link",
+    "matrix_from_figaroh_rpy",
+    "measurements_from_figaroh_csv",
+]
 
 #: Columns FIGAROH reads that are not joints or markers (kept out of the joint list).
 IGNORED_COLUMNS = ("session_id",)
@@ -280,7 +285,7 @@ def measurements_from_figaroh_csv(
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
-        frame = _camera_link(path, robot, frame, camera_frame)
+        frame = camera_link(path, robot, frame, camera_frame)
     joint_columns = _joint_columns(path, header, markers, robot)
     table = _numbers(path, header, rows, decimal_comma)
     length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
@@ -308,7 +313,7 @@ def measurements_from_figaroh_csv(
     return measurements_from_dict(doc, source=str(path))
 
 
-def _camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str:
+def camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str:
     """The camera's own link for ``target`` observations (see
     :func:`measurements_from_figaroh_csv`), checked; a refusal says what to add."""
     add = (
