@@ -214,7 +214,7 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
     dropped = ", ".join(f"{n} {r} ({rules[r]})" for r, n in alignment.dropped.items() if n)
     n_dropped = alignment.n_measured - len(alignment.kept)
     print(
-        f"time offset {alignment.offset_s:+.4f} s; kept {len(alignment.kept)} of "
+        f"paired at time offset {alignment.offset_s:+.4f} s: kept {len(alignment.kept)} of "
         f"{alignment.n_measured} measurements"
         + (f", dropped {n_dropped}: {dropped}" if n_dropped else "")
     )

@@ -86,7 +86,9 @@ def test_bag_to_measurements_to_calibration_recovers_offset_and_arm(
     assert "(ROS 1)" in stdout and "/joint_states: 1200 messages, 100.0 Hz" in stdout
     assert "(not in the URDF, not read: gripper_finger_joint)" in stdout
     assert "/mocap/pose (geometry_msgs/msg/PoseStamped): 349 poses, 30.0 Hz, in 'mocap'" in stdout
-    (found,) = re.findall(r"time offset ([+-][0-9.]+) s; kept 349 of 349 measurements\n", stdout)
+    (found,) = re.findall(
+        r"paired at time offset ([+-][0-9.]+) s: kept 349 of 349 measurements\n", stdout
+    )
     assert abs(float(found) - DELAY_S) <= 1e-3
     data = read_measurements(out)
     assert data.n_samples == 349 and data.joint_names == recording.joint_names
