@@ -94,8 +94,18 @@ def simulated_recording(duration_s: float = 12.0, seed: int = 4) -> Recording:
     )
 
 
-def write_bag(path: Path, recording: Recording, *, ros: int = 2) -> Path:
-    """Write ``recording`` as a ROS ``ros`` bag at ``path`` (module docstring)."""
+def image_pixels(k: int) -> tuple[NDArray[np.uint8], NDArray[np.uint16]]:
+    """Image ``k`` of :func:`write_bag`'s cameras: 4 x 6 RGB (``rgb8``) and 16-bit grey
+    (``mono16``) whose values encode ``k`` and the pixel."""
+    rgb = (np.arange(4 * 6 * 3).reshape(4, 6, 3) + 7 * k) % 256
+    return rgb.astype(np.uint8), (np.arange(24).reshape(4, 6) * 1000 + k).astype(np.uint16)
+
+
+def write_bag(path: Path, recording: Recording, *, ros: int = 2, images: bool = False) -> Path:
+    """Write ``recording`` as a ROS ``ros`` bag at ``path`` (module docstring); with
+    ``images``, also ``/camera/rgb`` (``rgb8``) and ``/camera/depth`` (``mono16``,
+    big-endian) at 10 Hz, stamped on the joints' clock, image ``k`` at ``0.1 k + 0.05`` s
+    (:func:`image_pixels`)."""
     from rosbags.typesys import Stores, get_typestore
 
     if ros == 1:
@@ -134,6 +144,9 @@ def write_bag(path: Path, recording: Recording, *, ros: int = 2) -> Path:
         if ros == 2:
             TFMessage = types["tf2_msgs/msg/TFMessage"]
             topics |= {"/tf": TFMessage, "/tf_static": TFMessage}
+        if images:
+            Image = types["sensor_msgs/msg/Image"]
+            topics |= {"/camera/rgb": Image, "/camera/depth": Image}
         conn = {
             name: writer.add_connection(name, cls.__msgtype__, typestore=typestore)
             for name, cls in topics.items()
@@ -169,6 +182,12 @@ def write_bag(path: Path, recording: Recording, *, ros: int = 2) -> Path:
             )
             static = TFMessage([TransformStamped(h, "mocap", transform)])
             messages.append((ns, "/tf_static", static))
+        for k, t in enumerate(np.arange(0.05, recording.t_joints[-1], 0.1) if images else ()):
+            h, ns = header(t, "camera")
+            rgb, depth = image_pixels(k)
+            color = Image(h, 4, 6, "rgb8", 0, 18, rgb.reshape(-1))
+            grey = Image(h, 4, 6, "mono16", 1, 12, depth.astype(">u2").view(np.uint8).reshape(-1))
+            messages += [(ns, "/camera/rgb", color), (ns, "/camera/depth", grey)]
         for ns, topic, msg in sorted(messages, key=lambda m: m[0]):
             writer.write(conn[topic], ns, serialize(msg, type(msg).__msgtype__))
     return path

@@ -16,7 +16,7 @@ import warnings
 from pathlib import Path
 
 from kinfw.cli._args import add_xacro_option, load_model, number
-from kinfw.files import check_outputs
+from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["add_import_bag_parser", "cmd_import_bag"]
 
@@ -75,10 +75,17 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
         metavar=("PARENT", "CHILD"),
         help="pose of CHILD in PARENT composed through /tf and /tf_static",
     )
+    stream.add_argument(
+        "--images",
+        metavar="TOPIC",
+        help="sensor_msgs/Image or CompressedImage topic: write the images, their joint "
+        "values (joints.csv, for kinfw detect --joints) and stamps (images.json) into the "
+        "folder --out",
+    )
     p.add_argument(
         "--frame",
-        required=True,
-        help="URDF frame measured, carrying the marker, or carrying the camera (--target)",
+        help="URDF frame measured, carrying the marker, or carrying the camera (--target); "
+        "required but with --images",
     )
     p.add_argument(
         "--marker",
@@ -141,12 +148,26 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
         help="keep only measurements where every joint moves slower (rad/s or m/s): the "
         "stops of a stop-and-go recording",
     )
-    p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="measurement file to write (JSON); with --images, the folder to write",
+    )
     p.set_defaults(func=cmd_import_bag, check_outputs=check_import_bag_outputs)
 
 
 def check_import_bag_outputs(args: argparse.Namespace) -> None:
-    """``kinfw import-bag``'s measurement file, never the URDF or the bag."""
+    """``kinfw import-bag``'s measurement file (or image folder), never the URDF or the
+    bag; ``--frame`` given unless ``--images``."""
+    from kinfw.measurements import IMAGE_JOINTS_CSV, IMAGE_STAMPS_JSON
+
+    if args.images is not None:
+        files = (IMAGE_JOINTS_CSV, IMAGE_STAMPS_JSON)
+        check_output_dir(args.out, label="--out", files=files)
+        return
+    if args.frame is None:
+        raise ValueError("--frame is required with --pose, --point and --tf")
     check_outputs({"--out": args.out}, inputs={"--urdf": args.urdf, "bag": args.bag})
 
 
@@ -165,6 +186,8 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
     )
 
     robot = load_model(args.urdf, args)
+    if args.images is not None:
+        return _import_images(robot, args)
     recording = read_bag(
         args.bag,
         robot=robot,
@@ -205,6 +228,18 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
     )
     check_against_robot(measurements, robot)
     write_measurements(args.out, measurements)
+    _print_alignment(alignment, args)
+    (group,) = measurements.all_groups()
+    print(
+        f"wrote {args.out}: {measurements.n_samples} samples, joints "
+        f"{', '.join(measurements.joint_names)}; {type(group).kind} observations of "
+        f"{args.camera_frame if args.target is not None else args.frame!r}"
+    )
+    return 0
+
+
+def _print_alignment(alignment, args: argparse.Namespace) -> None:
+    """The offset used, how many measurements were kept and, per reason, dropped."""
     rules = {
         "outside": "outside the joint states' time range",
         "gap": f"joint states more than {args.max_gap:g} s apart",
@@ -218,13 +253,6 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
         f"{alignment.n_measured} measurements"
         + (f", dropped {n_dropped}: {dropped}" if n_dropped else "")
     )
-    (group,) = measurements.all_groups()
-    print(
-        f"wrote {args.out}: {measurements.n_samples} samples, joints "
-        f"{', '.join(measurements.joint_names)}; {type(group).kind} observations of "
-        f"{args.camera_frame if args.target is not None else args.frame!r}"
-    )
-    return 0
 
 
 def _estimate_offset(recording, robot, args: argparse.Namespace) -> float:
@@ -260,3 +288,34 @@ def _estimate_offset(recording, robot, args: argparse.Namespace) -> float:
             stacklevel=1,
         )
     return result.offset_s
+
+
+def _import_images(robot, args: argparse.Namespace) -> int:
+    """``kinfw import-bag --images``: the images and their joint values into a folder."""
+    from kinfw.measurements import IMAGE_JOINTS_CSV, IMAGE_STAMPS_JSON, write_bag_images
+
+    if args.time_offset == "auto":
+        raise ValueError(
+            "--time-offset auto needs poses (--pose, --tf); with --images give the offset "
+            "in seconds (estimate it from the board poses: run kinfw detect, then "
+            "kinfw handeye, or import a pose stream of the same recording)"
+        )
+    written = write_bag_images(
+        args.bag,
+        args.out,
+        robot=robot,
+        images=args.images,
+        joint_states=args.joint_states,
+        offset_s=args.time_offset,
+        max_gap_s=args.max_gap,
+        max_interpolation_error=args.max_interpolation_error,
+        still_speed=args.still,
+    )
+    _print_alignment(written.alignment, args)
+    print(
+        f"wrote {args.out}: {len(written.files)} images, {IMAGE_JOINTS_CSV} (joints "
+        f"{', '.join(written.joint_names)}) and {IMAGE_STAMPS_JSON}; next: kinfw detect "
+        f"{args.out}/image_* --joints {args.out / IMAGE_JOINTS_CSV} --board ... --camera ... "
+        f"--frame CAMERA_FRAME"
+    )
+    return 0

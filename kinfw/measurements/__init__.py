@@ -88,7 +88,10 @@ callers import from here).
 
 from kinfw.measurements._bags import (
     DROP_REASONS,
+    IMAGE_JOINTS_CSV,
+    IMAGE_STAMPS_JSON,
     BagAlignment,
+    BagImages,
     BagRecording,
     JointStates,
     MeasuredStream,
@@ -96,6 +99,7 @@ from kinfw.measurements._bags import (
     measurements_from_bag,
     read_bag,
     time_offset_streams,
+    write_bag_images,
 )
 from kinfw.measurements._checks import (
     DISTINCT_TOL,
@@ -144,10 +148,13 @@ __all__ = [
     "DROP_REASONS",
     "FORMAT",
     "IGNORED_COLUMNS",
+    "IMAGE_JOINTS_CSV",
+    "IMAGE_STAMPS_JSON",
     "MIN_POSE_PAIRS",
     "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
     "BagAlignment",
+    "BagImages",
     "BagRecording",
     "JointStates",
     "MeasuredStream",
@@ -177,5 +184,6 @@ __all__ = [
     "read_pose_pairs",
     "robot_measurement_frames",
     "time_offset_streams",
+    "write_bag_images",
     "write_measurements",
 ]

@@ -146,3 +146,39 @@ def test_user_errors_exit_2_naming_the_bag_and_topic(recording, urdf, tmp_path, 
         assert code == 2, (extra, stderr)
         assert stderr.startswith("kinfw import-bag: error: ") and message in stderr, stderr
         assert not out.exists()
+
+
+def test_images_go_to_a_folder_that_detect_reads(recording, urdf, tmp_path, capsys):
+    """``--images``: the PNGs, joints.csv and images.json in --out; the still filter
+    keeps the images where no joint moved faster than the threshold."""
+    import json
+
+    from kinfw.measurements import IMAGE_JOINTS_CSV, IMAGE_STAMPS_JSON
+
+    bag = write_bag(tmp_path / "cam", recording, images=True)
+    out = tmp_path / "images"
+    argv = ["-q", "import-bag", bag, "--urdf", urdf, "--images", "/camera/rgb", "--out", out]
+    code, stdout, stderr = run_cli([*argv, "--time-offset", "0.05"], capsys)
+    assert code == 0, stderr
+    record = json.loads((out / IMAGE_STAMPS_JSON).read_text())
+    n = len(record["images"])
+    assert f"wrote {out}: {n} images, {IMAGE_JOINTS_CSV} (joints j1, " in stdout
+    assert sorted(p.name for p in out.glob("image_*.png")) == [i["file"] for i in record["images"]]
+    # offset 5 ms: image k (0.1 k + 0.05 s) pairs with the joints mid-way between samples
+    # 10 k + 4 and 10 k + 5; kept when every joint's speed there is at most 1 rad/s
+    still = [*argv[:-1], tmp_path / "still", "--time-offset", "0.005", "--still", "1.0"]
+    code, stdout, stderr = run_cli(still, capsys)
+    assert code == 0, stderr
+    j = 10 * np.arange(n) + 4
+    speeds = np.abs(recording.q_joints[j + 1] - recording.q_joints[j]).max(axis=1) / 0.01
+    n_still = int(np.count_nonzero(speeds <= 1.0))
+    assert 0 < n_still < n
+    assert (
+        f"kept {n_still} of {n} measurements, dropped {n - n_still}: {n - n_still} moving (a "
+        in stdout
+    )
+    code, _, stderr = run_cli([*argv[:-1], tmp_path / "x", "--time-offset", "auto"], capsys)
+    assert code == 2 and "--time-offset auto needs poses" in stderr
+    no_frame = ["-q", "import-bag", bag, "--urdf", urdf, "--pose", "/mocap/pose", "--out", out]
+    code, _, stderr = run_cli([*no_frame[:-1], tmp_path / "y.json"], capsys)
+    assert code == 2 and "--frame is required with --pose" in stderr

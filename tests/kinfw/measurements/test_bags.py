@@ -186,3 +186,39 @@ def test_missing_rosbags_names_the_extra(recording, bags, monkeypatch):
     monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)
     with pytest.raises(DatasetError, match=r'needs the rosbags package \(pip install "kinfw\[ros'):
         read_bag(bags[1], robot=recording.nominal, pose="/mocap/pose")
+
+
+def test_images_are_written_with_their_joint_values_for_detect(recording, tmp_path):
+    """rgb8 and big-endian mono16 images back pixel for pixel (PNG, BGR order on disk);
+    each image's joint values are the trajectory at its stamp minus the offset (an
+    offset of 0.05 s: image k, stamped 0.1 k + 0.05 s, pairs with the joints at 0.1 k);
+    the CSV is what ``kinfw detect --joints`` reads."""
+    import cv2
+
+    from kinfw.cli._detect import read_joint_rows
+    from kinfw.measurements import IMAGE_JOINTS_CSV, write_bag_images
+    from tests.bags import image_pixels
+
+    bag = write_bag(tmp_path / "cam", recording, images=True)
+    rgb = write_bag_images(
+        bag, tmp_path / "rgb", robot=recording.nominal, images="/camera/rgb", offset_s=0.05
+    )
+    n = len(np.arange(0.05, recording.t_joints[-1], 0.1))
+    assert rgb.alignment.dropped == {"outside": 0, "gap": 0, "fast": 0, "moving": 0}
+    assert len(rgb.files) == n and rgb.files[0] == "image_00000.png"
+    k = np.arange(n)
+    np.testing.assert_allclose(rgb.t_s, 0.1 * k + 0.05, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rgb.qs, recording.q_joints[10 * k], rtol=0, atol=1e-9)
+    for i in (0, 7, n - 1):
+        on_disk = cv2.imread(str(tmp_path / "rgb" / rgb.files[i]), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(on_disk[..., ::-1], image_pixels(i)[0])
+    images = [tmp_path / "rgb" / f for f in rgb.files]
+    names, rows = read_joint_rows(tmp_path / "rgb" / IMAGE_JOINTS_CSV, images)
+    assert tuple(names) == recording.joint_names
+    np.testing.assert_array_equal(rows, rgb.qs)  # repr: exact
+    depth = write_bag_images(bag, tmp_path / "d", robot=recording.nominal, images="/camera/depth")
+    on_disk = cv2.imread(str(tmp_path / "d" / depth.files[3]), cv2.IMREAD_UNCHANGED)
+    assert on_disk.dtype == np.uint16
+    np.testing.assert_array_equal(on_disk, image_pixels(3)[1])
+    with pytest.raises(DatasetError, match=r"'/mocap/pose' is geometry_msgs/msg/PoseStamped, "):
+        write_bag_images(bag, tmp_path / "p", robot=recording.nominal, images="/mocap/pose")
