@@ -222,3 +222,28 @@ def test_images_are_written_with_their_joint_values_for_detect(recording, tmp_pa
     np.testing.assert_array_equal(on_disk, image_pixels(3)[1])
     with pytest.raises(DatasetError, match=r"'/mocap/pose' is geometry_msgs/msg/PoseStamped, "):
         write_bag_images(bag, tmp_path / "p", robot=recording.nominal, images="/mocap/pose")
+
+
+def test_a_camera_seeing_a_board_reads_as_target_and_its_offset_is_found(recording, bags):
+    """Read backwards, the mocap chain is a camera on the flange (at the marker) seeing a
+    fixed board (the mocap frame): ``rigid_body -> room`` is ``camera_T_board``; target
+    observations of the camera link, and the delay found from them as from the marker."""
+    from tests.robots import ARM_6R
+
+    camera = (
+        '<joint name="camera_joint" type="fixed"><parent link="flange"/>'
+        '<child link="camera"/></joint><link name="camera"/></robot>'
+    )
+    robot = load_robot(ARM_6R.replace("</robot>", camera))
+    bag = read_bag(bags[2], robot=robot, tf=("rigid_body", "room"))
+    data, _ = measurements_from_bag(
+        bag, robot=robot, frame="flange", target="board", camera_frame="camera", offset_s=DELAY_S
+    )
+    (group,) = data.targets
+    assert (group.camera, group.target) == ("camera", "board")
+    camera_T_boards = np.linalg.inv(ROOM_T_MOCAP @ recording.mocap_T_markers)
+    np.testing.assert_allclose(group.camera_T_target, camera_T_boards, rtol=0, atol=1e-9)
+    streams = time_offset_streams(bag, robot, "camera", target=True)
+    assert abs(best_time_offset(*streams, step=8).offset_s - DELAY_S) <= 1e-3
+    with pytest.raises(DatasetError, match="would make calibrate redefine 'flange'"):
+        measurements_from_bag(bag, robot=robot, frame="flange", target="board")
