@@ -65,7 +65,7 @@ from kinfw.measurements._dataset import Measurements
 from kinfw.measurements._figaroh_csv import camera_link
 from kinfw.measurements._file import measurements_from_dict
 from kinfw.measurements._streams import interpolate_poses
-from kinfw.observations import DatasetError
+from kinfw.observations import QUAT_NORM_TOL, DatasetError
 
 if TYPE_CHECKING:
     from kinfw.model import Robot
@@ -504,23 +504,29 @@ def _read_stamped(
             f"{path}: {topic}: messages in several frames {sorted(parents)}; expected one"
         )
     t, data = _sorted_stream(path, topic, t_ns, np.array(rows))
-    if not np.isfinite(data).all():
-        raise DatasetError(f"{path}: {topic}: a message has a value that is not finite")
-    norms = np.linalg.norm(data[:, 3:], axis=1)
-    if np.any(np.abs(norms - 1.0) > 1e-3):
-        k = int(np.argmax(np.abs(norms - 1.0)))
-        raise DatasetError(
-            f"{path}: {topic}: orientation of message {k} (by stamp) has norm {norms[k]:.6g}, "
-            f"expected a unit quaternion"
-        )
     return MeasuredStream(
         source=topic,
         kind="pose" if is_pose else "point",
         t_s=(t - t0_ns) * 1e-9,
-        parent_T_childs=transform_from_xyz_quat_xyzw(data[:, :3], data[:, 3:] / norms[:, None]),
+        parent_T_childs=_poses(path, topic, data),
         parent=parents.pop(),
         n_messages=len(rows),
     )
+
+
+def _poses(path: Path, what: str, rows: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Poses ``(n, 4, 4)`` from rows ``x, y, z, qx, qy, qz, qw``; raises unless finite with
+    unit quaternions (within :data:`kinfw.observations.QUAT_NORM_TOL`)."""
+    if not np.isfinite(rows).all():
+        raise DatasetError(f"{path}: {what}: a message has a value that is not finite")
+    norms = np.linalg.norm(rows[:, 3:], axis=1)
+    if np.any(np.abs(norms - 1.0) > QUAT_NORM_TOL):
+        k = int(np.argmax(np.abs(norms - 1.0)))
+        raise DatasetError(
+            f"{path}: {what}: orientation of message {k} (by stamp) has norm {norms[k]:.6g}, "
+            f"expected a unit quaternion (x, y, z, w)"
+        )
+    return transform_from_xyz_quat_xyzw(rows[:, :3], rows[:, 3:])
 
 
 def _read_tf_chain(
@@ -561,22 +567,22 @@ def _read_tf_chain(
     streams = {}
     for key, _ in moving:
         t_ns, rows = edges[key]
-        t, data = _sorted_stream(path, f"{dynamic} {key[0]} -> {key[1]}", t_ns, np.array(rows))
-        streams[key] = ((t - t0_ns) * 1e-9, transform_from_xyz_quat_xyzw(data[:, :3], data[:, 3:]))
+        what = f"{dynamic} {key[0]} -> {key[1]}"
+        t, data = _sorted_stream(path, what, t_ns, np.array(rows))
+        streams[key] = ((t - t0_ns) * 1e-9, _poses(path, what, data))
     base = min(streams, key=lambda k: len(streams[k][0]))
     t_s = streams[base][0]
     valid = np.ones(len(t_s), dtype=bool)
     parent_T_childs = np.broadcast_to(np.eye(4), (len(t_s), 4, 4)).copy()
     for key, inverted in chain:
         if key in statics:
-            row = np.array(statics[key])
-            edge_T = transform_from_xyz_quat_xyzw(row[:3], row[3:])[None]
+            edge_T = _poses(path, f"{static} {key[0]} -> {key[1]}", np.array([statics[key]]))
         elif key == base:
             edge_T = streams[key][1]
         else:
             t_edge, T_edge = streams[key]
             inside = (t_s >= t_edge[0]) & (t_s <= t_edge[-1])
-            edge_T = np.full((len(t_s), 4, 4), np.nan)
+            edge_T = np.broadcast_to(np.eye(4), (len(t_s), 4, 4)).copy()  # where valid
             if len(t_edge) > 1 and np.any(inside):
                 edge_T[inside], ok = interpolate_poses(
                     t_edge, T_edge, t_s[inside], max_gap_s=max_gap_s

@@ -247,3 +247,57 @@ def test_a_camera_seeing_a_board_reads_as_target_and_its_offset_is_found(recordi
     assert abs(best_time_offset(*streams, step=8).offset_s - DELAY_S) <= 1e-3
     with pytest.raises(DatasetError, match="would make calibrate redefine 'flange'"):
         measurements_from_bag(bag, robot=robot, frame="flange", target="board")
+
+
+def test_two_moving_tf_edges_compose_at_the_sparser_ones_stamps(recording, tmp_path):
+    """``a -> b`` turns about z at 1 rad/s (50 Hz, from 0.1 s), ``b -> c`` slides along x
+    at 0.2 m/s (20 Hz, from 0 s): SLERP and linear interpolation are exact for them, so
+    ``a_T_c`` at ``b -> c``'s stamps is the closed form; the stamps before ``a -> b``
+    starts (0 and 0.05 s) are dropped."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from kinfw.geometry import matrix_from_rotation_vector
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    T = store.types
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    Vector3, Quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    TransformStamped, Transform = (
+        T["geometry_msgs/msg/TransformStamped"],
+        T["geometry_msgs/msg/Transform"],
+    )
+    TFMessage, JointState = T["tf2_msgs/msg/TFMessage"], T["sensor_msgs/msg/JointState"]
+
+    def header(t, frame):
+        ns = round(t * 1e9)
+        return Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame), ns
+
+    def tf(t, parent, child, xyz, quat_xyzw):
+        h, ns = header(t, parent)
+        v, q = Vector3(*xyz), Quaternion(*quat_xyzw)
+        return ns, TFMessage([TransformStamped(h, child, Transform(v, q))])
+
+    path = tmp_path / "two"
+    with Writer(path, version=9) as writer:
+        c_tf = writer.add_connection("/tf", TFMessage.__msgtype__, typestore=store)
+        c_js = writer.add_connection("/joint_states", JointState.__msgtype__, typestore=store)
+        messages = [
+            tf(t, "a", "b", (0, 0, 0), (0, 0, np.sin(t / 2), np.cos(t / 2)))
+            for t in 0.1 + 0.02 * np.arange(100)
+        ]
+        messages += [tf(t, "b", "c", (0.2 * t, 0, 0), (0, 0, 0, 1)) for t in 0.05 * np.arange(40)]
+        for t in (0.0, 2.5):
+            h, ns = header(t, "")
+            js = JointState(h, list(recording.joint_names), np.zeros(6), np.zeros(0), np.zeros(0))
+            messages.append((ns, js))
+        for ns, msg in sorted(messages, key=lambda m: m[0]):
+            conn = c_js if isinstance(msg, JointState) else c_tf
+            writer.write(conn, ns, store.serialize_cdr(msg, type(msg).__msgtype__))
+    bag = read_bag(path, robot=recording.nominal, tf=("a", "c"), max_gap_s=None)
+    t = 0.05 * np.arange(2, 40)  # 0.1 s on: inside a -> b's stream (0.1 to 2.08 s)
+    np.testing.assert_allclose(bag.measured.t_s, t, rtol=0, atol=1e-9)
+    a_T_c = np.broadcast_to(np.eye(4), (len(t), 4, 4)).copy()
+    a_T_c[:, :3, :3] = matrix_from_rotation_vector(t[:, None] * [0.0, 0.0, 1.0])
+    a_T_c[:, :3, 3] = a_T_c[:, :3, 0] * 0.2 * t[:, None]
+    np.testing.assert_allclose(bag.measured.parent_T_childs, a_T_c, rtol=0, atol=1e-9)
