@@ -15,6 +15,7 @@ import math
 import warnings
 from pathlib import Path
 
+from kinfw import progress
 from kinfw.cli._args import add_xacro_option, load_model, number
 from kinfw.files import check_output_dir, check_outputs
 
@@ -186,6 +187,7 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
     )
 
     robot = load_model(args.urdf, args)
+    progress.stage(f"reading {args.bag}")
     if args.images is not None:
         return _import_images(robot, args)
     recording = read_bag(
@@ -264,9 +266,15 @@ def _estimate_offset(recording, robot, args: argparse.Namespace) -> float:
 
     streams = time_offset_streams(recording, robot, args.frame, target=args.target is not None)
     step = max(1, math.ceil(len(streams[2]) / OFFSET_SAMPLES))
-    result = best_time_offset(
-        *streams, search_s=(-args.max_offset, args.max_offset), max_gap_s=args.max_gap, step=step
-    )
+    # one task around the search: the hand-eye fit of each candidate offset is an inner loop
+    with progress.task("time offset: a hand-eye fit per candidate offset", 1) as search:
+        result = best_time_offset(
+            *streams,
+            search_s=(-args.max_offset, args.max_offset),
+            max_gap_s=args.max_gap,
+            step=step,
+        )
+        search.advance()
     spreads, offsets = result.position_spreads, result.offsets_s
     best = int(np.argmin(spreads))
     flat = spreads <= FLAT_FACTOR * spreads[best]

@@ -41,6 +41,12 @@ TF chains
 The chain's stamps are those of its moving edge with the fewest messages; the other
 moving edges are interpolated there (:func:`kinfw.measurements.interpolate_poses`, with
 ``max_gap_s``), static edges are constant.
+
+Images
+------
+:func:`write_bag_images` writes the images of a ``sensor_msgs/Image`` or
+``CompressedImage`` topic that the joint states place (the same drop rules) into a
+folder, with the joint values per image in the CSV that ``kinfw detect --joints`` reads.
 """
 
 from __future__ import annotations
