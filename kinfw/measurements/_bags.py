@@ -764,7 +764,7 @@ def time_offset_streams(
             f"{recording.path}: {measured.source}: the time offset is estimated from "
             f"poses (orientations), and this stream has points; give the offset in seconds"
         )
-    names = _frame_joints(recording, robot, frame)
+    names = _published_joints(recording, robot, frame)
     j = max(range(len(names)), key=lambda i: len(recording.joints.t_s[i]))
     t_hand = recording.joints.t_s[j]
     qs, reasons = joint_values_at(
@@ -778,8 +778,9 @@ def time_offset_streams(
     return t_hand[ok], base_T_hands, measured.t_s, target_T_eyes
 
 
-def _frame_joints(recording: BagRecording, robot: Robot, frame: str) -> tuple[str, ...]:
-    """The joints moving ``frame``; raises unless each is published."""
+def _published_joints(recording: BagRecording, robot: Robot, frame: str) -> tuple[str, ...]:
+    """The joints read (the URDF's published joints), once every joint that moves
+    ``frame`` is checked to be among them (an unpublished one would be held at zero)."""
     missing = [n for n in robot.movable_path(frame) if n not in recording.joints.names]
     if missing:
         raise DatasetError(
@@ -852,7 +853,7 @@ def measurements_from_bag(
         ``target`` with ``marker`` or ``measured_in``.
     """
     path, measured = recording.path, recording.measured
-    names = _frame_joints(recording, robot, frame)
+    names = _published_joints(recording, robot, frame)
     common: dict[str, Any] = {"frame": frame}
     if target is not None:
         if marker is not None or measured_in is not None:
