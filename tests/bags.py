@@ -101,8 +101,11 @@ def image_pixels(k: int) -> tuple[NDArray[np.uint8], NDArray[np.uint16]]:
     return rgb.astype(np.uint8), (np.arange(24).reshape(4, 6) * 1000 + k).astype(np.uint16)
 
 
-def write_bag(path: Path, recording: Recording, *, ros: int = 2, images: bool = False) -> Path:
-    """Write ``recording`` as a ROS ``ros`` bag at ``path`` (module docstring); with
+def write_bag(
+    path: Path, recording: Recording, *, ros: int = 2, images: bool = False, mcap: bool = False
+) -> Path:
+    """Write ``recording`` as a ROS ``ros`` bag at ``path`` (module docstring; ROS 2 in
+    SQLite, or with ``mcap`` in MCAP storage); with
     ``images``, also ``/camera/rgb`` (``rgb8``) and ``/camera/depth`` (``mono16``,
     big-endian) at 10 Hz, stamped on the joints' clock, image ``k`` at ``0.1 k + 0.05`` s
     (:func:`image_pixels`)."""
@@ -115,10 +118,11 @@ def write_bag(path: Path, recording: Recording, *, ros: int = 2, images: bool = 
         writer = Writer(path)
         serialize = typestore.serialize_ros1
     else:
-        from rosbags.rosbag2 import Writer
+        from rosbags.rosbag2 import StoragePlugin, Writer
 
         typestore = get_typestore(Stores.ROS2_HUMBLE)
-        writer = Writer(path, version=9)
+        storage = StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3
+        writer = Writer(path, version=9, storage_plugin=storage)
         serialize = typestore.serialize_cdr
     types = typestore.types
     Time, Header = types["builtin_interfaces/msg/Time"], types["std_msgs/msg/Header"]

@@ -33,15 +33,19 @@ def recording():
 @pytest.fixture(scope="module")
 def bags(recording, tmp_path_factory):
     root = tmp_path_factory.mktemp("bags")
-    return {1: write_bag(root / "r1.bag", recording, ros=1), 2: write_bag(root / "r2", recording)}
+    return {
+        1: write_bag(root / "r1.bag", recording, ros=1),
+        2: write_bag(root / "r2", recording),
+        "mcap": write_bag(root / "r2_mcap", recording, mcap=True),
+    }
 
 
-@pytest.mark.parametrize("ros", [1, 2])
+@pytest.mark.parametrize("ros", [1, 2, "mcap"])
 def test_bags_read_back_the_written_streams(recording, bags, ros):
-    """Joints in URDF order whatever the message order, the extra joint ignored; stamps
-    from the first message; the poses as written."""
+    """ROS 1, ROS 2 (SQLite and MCAP storage): joints in URDF order whatever the message
+    order, the extra joint ignored; stamps from the first message; the poses as written."""
     bag = read_bag(bags[ros], robot=recording.nominal, pose="/mocap/pose")
-    assert bag.ros_version == ros
+    assert bag.ros_version == (1 if ros == 1 else 2)
     assert bag.t0_ns == EPOCH_S * 10**9  # the first joint state, at t = 0
     joints = bag.joints
     assert joints.names == recording.joint_names and joints.ignored == ("gripper_finger_joint",)
