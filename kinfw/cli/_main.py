@@ -20,6 +20,7 @@ in ``_simulate.py``; ``verify``, ``view``, ``reproduce``, ``crosscheck`` and
 ``import-csv`` in ``_commands.py``; ``calibrate``, ``demo`` and ``crossval`` in
 ``_fit_parser.py`` (commands in ``_fit.py``); ``fleet``, ``detect``, ``plan``, ``gaze`` and
 ``reach`` in ``_fleet.py``, ``_detect.py``, ``_plan.py``, ``_gaze.py`` and ``_reach.py``.
+``import-bag`` is in ``_bag.py``.
 The argument types they share are in ``_args.py``, the ``--jobs`` / ``--executor``
 options in :mod:`kinfw.executors`.
 """
@@ -36,6 +37,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
 
 from kinfw import progress
+from kinfw.cli._bag import add_import_bag_parser
 from kinfw.cli._commands import (
     add_crosscheck_parser,
     add_import_csv_parser,
@@ -99,6 +101,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     add_reproduce_parser,
     add_crosscheck_parser,
     add_import_csv_parser,
+    add_import_bag_parser,
     add_detect_parser,
     add_plan_parser,
     add_gaze_parser,

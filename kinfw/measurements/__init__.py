@@ -1,7 +1,9 @@
 """Measurement files (``kinfw-measurements``, version 1, JSON): read, validate, write.
 Also the hand-eye pose-pair files of ``kinfw handeye`` (CSV, JSON, easy_handeye2 YAML:
 :func:`read_pose_pairs`, :func:`pose_pairs_text`; formats in ``_pose_pairs.py`` and
-``docs/handeye.md``).
+``docs/handeye.md``). And ROS 1 / ROS 2 bags (:func:`read_bag`,
+:func:`measurements_from_bag`: joint states and a pose, point or TF stream, time-aligned;
+``_bags.py`` and ``docs/bags.md``).
 
 A measurement file lists samples; each sample is one robot configuration ``q`` and the
 observations made in it::
@@ -89,6 +91,21 @@ writer are in :mod:`kinfw.measurements` and the checks in
 callers import from here).
 """
 
+from kinfw.measurements._bags import (
+    DROP_REASONS,
+    IMAGE_JOINTS_CSV,
+    IMAGE_STAMPS_JSON,
+    BagAlignment,
+    BagImages,
+    BagRecording,
+    JointStates,
+    MeasuredStream,
+    joint_values_at,
+    measurements_from_bag,
+    read_bag,
+    time_offset_streams,
+    write_bag_images,
+)
 from kinfw.measurements._checks import (
     DISTINCT_TOL,
     check_against_robot,
@@ -136,11 +153,19 @@ from kinfw.measurements._streams import (
 
 __all__ = [
     "DISTINCT_TOL",
+    "DROP_REASONS",
     "FORMAT",
     "IGNORED_COLUMNS",
+    "IMAGE_JOINTS_CSV",
+    "IMAGE_STAMPS_JSON",
     "MIN_POSE_PAIRS",
     "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
+    "BagAlignment",
+    "BagImages",
+    "BagRecording",
+    "JointStates",
+    "MeasuredStream",
     "Measurements",
     "Mount",
     "PosePairs",
@@ -153,7 +178,9 @@ __all__ = [
     "first_uses",
     "fixed_in_experiment",
     "interpolate_poses",
+    "joint_values_at",
     "matrix_from_figaroh_rpy",
+    "measurements_from_bag",
     "measurements_from_dict",
     "measurements_from_figaroh_csv",
     "measurements_to_dict",
@@ -162,10 +189,13 @@ __all__ = [
     "observed_joints",
     "pose_pairs_from_measurements",
     "pose_pairs_text",
+    "read_bag",
     "read_measurements",
     "read_pose_csv",
     "read_pose_pairs",
     "robot_measurement_frames",
     "target_views",
+    "time_offset_streams",
+    "write_bag_images",
     "write_measurements",
 ]

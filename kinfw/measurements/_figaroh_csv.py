@@ -47,7 +47,12 @@ from kinfw.observations import DatasetError
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = ["IGNORED_COLUMNS", "matrix_from_figaroh_rpy", "measurements_from_figaroh_csv"]
+__all__ = [
+    "IGNORED_COLUMNS",
+    "camera_link",
+    "matrix_from_figaroh_rpy",
+    "measurements_from_figaroh_csv",
+]
 
 #: Columns FIGAROH reads that are not joints or markers (kept out of the joint list).
 IGNORED_COLUMNS = ("session_id",)
@@ -284,7 +289,7 @@ def measurements_from_figaroh_csv(
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
-        link = _camera_link(path, robot, frame, camera_frame)
+        link = camera_link(path, robot, frame, camera_frame)
         mounts = {camera_frame: link} if isinstance(link, Mount) else {}
         frame = camera_frame
     joint_columns = _joint_columns(path, header, markers, robot)
@@ -314,7 +319,7 @@ def measurements_from_figaroh_csv(
     return measurements_from_dict(doc, source=str(path)).with_mounts(mounts)
 
 
-def _camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str | Mount:
+def camera_link(path: Path, robot: Robot, frame: str, camera_frame: str | None) -> str | Mount:
     """The camera's own link for ``target`` observations (see
     :func:`measurements_from_figaroh_csv`), checked: its name when the URDF has it, else
     the :class:`Mount` that adds it on ``frame``'s link; a refusal says what to give."""
