@@ -441,13 +441,19 @@ def _quaternion_order_hint(
     if swapped is None:
         return ()
     progress.stage("the data do not fit: trying the quaternions in the other order")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        try:
+    # a trial: its warnings (warned or logged) are about data the user did not give
+    package = logging.getLogger("kinfw.identification")
+    level = package.level
+    package.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
             result = refine(nominal, swapped, noise=options.noise, loss=options.loss)
             check_fit(result, data.source)
-        except ValueError:  # no better in the other order: not the cause
-            return ()
+    except ValueError:  # no better in the other order: not the cause
+        return ()
+    finally:
+        package.setLevel(level)
     if fit_warnings(result, swapped):  # no cleaner in the other order either
         return ()
     pos, rot = median_residuals(result)
