@@ -216,3 +216,22 @@ def test_a_candidate_the_data_cannot_fit_is_skipped_not_fatal():
         return 1e3 * np.sqrt(np.mean(pos**2))
 
     assert unseen_rms_mm(choice.parameters, choice.prior) < 0.7 * unseen_rms_mm("frames", None)
+
+
+def test_an_image_counts_as_the_pose_it_determines(head):
+    """Rows per parameter: an image of the board (2 rows per corner, tens of corners)
+    counts as much as the board's pose seen in it (6 rows): 6 x the images the file
+    holds (counted here from the observations' samples) per parameter of the full set;
+    poses still count 6 each."""
+    from kinfw.identification.problem import build_problem
+    from kinfw.simulation import simulate_measurements
+
+    sim = simulate_measurements(head, stages=(1, 2), pixels=True, stage2_samples=12, seed=3)
+    data = sim.data
+    corners = sum(len(g.sample) for g in data.groups("pixels"))
+    n_images = sum(len(set(g.sample.tolist())) for g in data.groups("pixels"))
+    n_poses = sum(len(g.sample) for g in data.groups("pose"))
+    assert corners >= 4 * n_images and n_poses > 0  # many corners per image
+    n_parameters = build_problem(head, data, parameters="full").n_parameters
+    expected = 6 * (n_images + n_poses) / n_parameters
+    assert rows_per_parameter(head, data) == pytest.approx(expected, rel=1e-12)
