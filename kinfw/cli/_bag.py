@@ -61,6 +61,20 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("bag", type=Path, help="ROS 1 .bag file or ROS 2 bag folder")
     p.add_argument("--urdf", type=Path, required=True, help="URDF naming the joints")
     add_xacro_option(p)
+    _add_stream_options(p)
+    _add_frame_options(p)
+    _add_alignment_options(p)
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        help="measurement file to write (JSON); with --images, the folder to write",
+    )
+    p.set_defaults(func=cmd_import_bag, check_outputs=check_import_bag_outputs)
+
+
+def _add_stream_options(p: argparse.ArgumentParser) -> None:
+    """The topics read: joint states and one measurement stream."""
     p.add_argument(
         "--joint-states",
         default="/joint_states",
@@ -83,6 +97,10 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
         "values (joints.csv, for kinfw detect --joints) and stamps (images.json) into the "
         "folder --out",
     )
+
+
+def _add_frame_options(p: argparse.ArgumentParser) -> None:
+    """What the stream measures: the URDF frame, a marker, a measurement frame, a target."""
     p.add_argument(
         "--frame",
         help="URDF frame measured, carrying the marker, or carrying the camera (--target); "
@@ -110,6 +128,10 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="with --target: the camera's own URDF link, fixed to --frame",
     )
+
+
+def _add_alignment_options(p: argparse.ArgumentParser) -> None:
+    """The time offset and the rules that drop measurements the joints cannot place."""
     p.add_argument(
         "--time-offset",
         type=_offset,
@@ -149,13 +171,6 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
         help="keep only measurements where every joint moves slower (rad/s or m/s): the "
         "stops of a stop-and-go recording",
     )
-    p.add_argument(
-        "--out",
-        type=Path,
-        required=True,
-        help="measurement file to write (JSON); with --images, the folder to write",
-    )
-    p.set_defaults(func=cmd_import_bag, check_outputs=check_import_bag_outputs)
 
 
 def check_import_bag_outputs(args: argparse.Namespace) -> None:
