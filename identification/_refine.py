@@ -164,7 +164,8 @@ def refine(
     max_iterations : int
         Levenberg-Marquardt iterations per noise round.
     noise_rounds : int
-        Re-estimations of the noise when it is not given.
+        At most this many re-estimations of the noise when it is not given: fewer once a
+        converged round leaves every sigma within :data:`NOISE_SETTLED` of itself.
     parameters : {"full", "offsets", "frames", "none"} or tuple of joint names
         What to estimate besides the targets, external frames, markers and offsets:
         ``"full"`` every identifiable CPC parameter; ``"offsets"`` joint zero offsets,
@@ -621,19 +622,64 @@ def _solve(
             hat = leverage_sums(normal.G, normal.by_component)
         if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
             hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
+        before = sigma
         sigma = estimate_noise(
             r, problem.groups, sigma, hat, robust=loss != "linear", first=round_ == 0
         )
-    robot = _robot_entries(problem)
-    x_free[moving], left = _nearest_to_start(
-        lambda v, jac: problem.evaluate_free(full(v), sigma, jac),
-        x_free,
-        moving,
-        robot[free][moving],
-        lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
-    )
-    x = full(x_free)
-    return _Solution(x, sigma, iterations, converged, left)
+        if converged and _noise_settled(before, sigma):
+            break  # the next round would solve the same problem again
+    r, _ = problem.evaluate_free(full(x_free), sigma, False)
+    w = np.sqrt(row_weights(r, obs_sizes, loss, k))
+    G = problem.normal_equations(full(x_free), sigma, w).G[np.ix_(moving, moving)]
+    left = 0.0
+    if not _every_direction_determined(G):
+        robot = _robot_entries(problem)
+        x_free[moving], left = _nearest_to_start(
+            lambda v, jac: problem.evaluate_free(full(v), sigma, jac),
+            x_free,
+            moving,
+            robot[free][moving],
+            lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
+        )
+    return _Solution(full(x_free), sigma, iterations, converged, left)
+
+
+def _every_direction_determined(G: NDArray) -> bool:
+    """Whether the normal matrix ``G`` (p, p) (``J^T J`` of the whitened, robust-weighted
+    Jacobian) proves that the data determine every direction by the rank rule of
+    :func:`_nearest_to_start` (:data:`UNDETERMINED_TOL`), without forming the Jacobian.
+
+    With unit-norm columns (a diagonal scaling, which also removes the distance's), the
+    eigenvalues of ``G`` are the squared singular values of the Jacobian, computed to
+    within about 2e-16 of the largest: a smallest eigenvalue above :data:`SCREEN_TOL`
+    (1e-12) of the largest puts the smallest relative singular value above ~1e-6, far
+    above the rule's 1e-8. False does not mean a direction is undetermined, only that
+    the Jacobian must tell (:func:`_nearest_to_start`).
+    """
+    d = np.sqrt(np.diag(G))
+    if not len(d) or not (d > 0.0).all() or not np.isfinite(G).all():
+        return not len(d)
+    eig = np.linalg.eigvalsh(G / np.outer(d, d))
+    return bool(eig[0] > SCREEN_TOL * eig[-1])
+
+
+#: Smallest eigenvalue, relative to the largest, of the column-scaled normal matrix above
+#: which :func:`_every_direction_determined` holds (a relative singular value above 1e-6).
+SCREEN_TOL = 1e-12
+
+
+#: Largest relative change of every noise component's sigma between two rounds below which
+#: :func:`_solve` stops re-estimating the noise (after a converged round): another round
+#: would reweigh the components by about twice this fraction, which moves the estimate by
+#: a small fraction of its standard errors.
+NOISE_SETTLED = 1e-4
+
+
+def _noise_settled(before: NoiseModel, after: NoiseModel) -> bool:
+    """Whether no noise component's sigma changed by more than :data:`NOISE_SETTLED` of
+    itself from ``before`` to ``after``."""
+    old = dict(before.sigmas)
+    return all(abs(v - old.get(c, np.inf)) <= NOISE_SETTLED * v for c, v in after.sigmas)
 
 
 def _fixed_in_experiment_kept(

@@ -120,6 +120,21 @@ def test_the_noise_is_estimated_and_the_fit_is_consistent():
     assert np.all(result.std[: result.model.n_parameters] > 0)
 
 
+@pytest.mark.parametrize("loss", ["linear", "huber"])
+def test_the_noise_rounds_stop_at_their_fixed_point(loss):
+    """The noise rounds stop once the estimate settles (fewer than five when it does):
+    then the estimate is the fit under its own noise estimate, to a small fraction of its
+    standard errors, and that noise is what the fit's residuals estimate again."""
+    nominal, _, data, _ = _head_data(n=150, noise_m=0.5e-3, noise_rad=np.radians(0.5))
+    result = refine(nominal, data, loss=loss, reject=None)
+    again = refine(nominal, data, noise=result.noise, loss=loss, reject=None)
+    free = result.std > 0
+    moved = np.abs(again.estimate - result.estimate)[free] / result.std[free]
+    assert moved.max() < 1e-2, moved.max()
+    longer = refine(nominal, data, loss=loss, reject=None, noise_rounds=20)
+    assert dict(longer.noise.sigmas) == pytest.approx(dict(result.noise.sigmas), rel=1e-3)
+
+
 def test_gross_outliers_are_downweighted_by_the_robust_loss():
     nominal, truth, data, _ = _head_data(n=100, noise_m=0.5e-3, noise_rad=0.005)
     rng = np.random.default_rng(4)
