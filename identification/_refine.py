@@ -253,10 +253,11 @@ def refine(
     _check_loss_options(loss, reject, max_reject_fraction)
     t0 = time.perf_counter()
 
-    def fit(data: Measurements):
+    def fit(data: Measurements, warm: RefineResult | None = None):
         return _fit(
             robot,
             data,
+            warm=warm,
             start=start,
             targets=targets,
             noise=noise,
@@ -312,7 +313,7 @@ _Round = tuple[LeastSquaresProblem, NDArray, NDArray]
 
 
 def _reject_gross_errors(
-    fit: Callable[[Measurements], tuple[RefineResult, LeastSquaresProblem, NDArray]],
+    fit: Callable[[Measurements, RefineResult], tuple[RefineResult, LeastSquaresProblem, NDArray]],
     measurements: Measurements,
     result: RefineResult,
     problem: LeastSquaresProblem,
@@ -325,7 +326,8 @@ def _reject_gross_errors(
     """The rejection rounds of :func:`refine` (see its Notes), from the robust fit
     ``result`` of ``problem`` with whitened residuals ``r``: the last fit and its problem,
     the rounds that rejected, the rejected observations (at the fits that rejected them)
-    and the rejection note."""
+    and the rejection note. Each refit starts from the fit before it (``fit(data,
+    warm)``)."""
     n_obs = sum(len(g.sample) for g in problem.groups)
     # one gross error is what any dataset may hold, however small (a training fold of 16)
     allowed = max(int(np.floor(max_reject_fraction * n_obs)), int(max_reject_fraction > 0))
@@ -357,7 +359,7 @@ def _reject_gross_errors(
         reduced = _without(data, groups, beyond)
         progress.stage(f"refine: refit without {len(rejected) + len(new)} gross errors")
         try:
-            refit, refit_problem, refit_r = fit(reduced)
+            refit, refit_problem, refit_r = fit(reduced, result)
         except DatasetError as exc:
             note = (
                 f"{len(new)} observations beyond the rejection threshold were kept: "
@@ -467,6 +469,7 @@ def _fit(
     robot: Robot,
     measurements: Measurements,
     *,
+    warm: RefineResult | None,
     start: Robot | None,
     targets: dict[str, NDArray] | None,
     noise: NoiseModel | None,
@@ -481,7 +484,11 @@ def _fit(
     extra_blocks: tuple[RobotBlock, ...],
 ) -> tuple[RefineResult, LeastSquaresProblem, NDArray]:
     """One robust fit of every observation of ``measurements`` (see :func:`refine`):
-    the result, the problem and the final whitened residuals."""
+    the result, the problem and the final whitened residuals. With ``warm``, a fit of
+    the same problem on more data (a rejection refit), its estimate is where the solver
+    starts, and its noise estimate too when it had settled (the chart and the start the
+    undetermined directions stay at remain a cold fit's; so do the noise rounds unless
+    settled: the same estimate, in fewer iterations)."""
     t0 = time.perf_counter()
     progress.stage(f"refine: start values ({measurements.n_samples} samples)")
     problem = build_problem(
@@ -503,9 +510,20 @@ def _fit(
         noise if given else NoiseModel(1e-3, np.radians(0.5), estimated=True, sigmas={"pixel": 1.0})
     )
     k = thresholds(problem.obs_components, loss_scale)
+    x0, settled = None, False
+    if (
+        warm is not None
+        and tuple(warm.parameter_names) == tuple(problem.names)
+        and np.array_equal(warm.free, problem.free)
+    ):
+        x0 = warm.estimate
+        if warm.noise_settled and not given:  # the same fixed point, from next to it
+            sigma, settled = warm.noise, True
     solution = _solve(
         problem,
         sigma,
+        x0=x0,
+        settled=settled,
         given=given,
         loss=loss,
         k=k,
@@ -531,6 +549,7 @@ def _fit(
         iterations=solution.iterations,
         converged=solution.converged,
         undetermined=solution.undetermined,
+        noise_settled=solution.settled,
         cost=quality.cost,
         seconds=time.perf_counter() - t0,
     )
@@ -561,27 +580,34 @@ def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source:
 class _Solution:
     """The estimate ``x`` of the chart coordinates, the noise model it ends with, the
     Levenberg-Marquardt iterations (summed over the noise rounds) and convergence, and
-    the part along undetermined directions left (:func:`_nearest_to_start`)."""
+    the part along undetermined directions left (:func:`_nearest_to_start`), and whether
+    the noise estimate settled (:func:`_noise_settled`; True when given)."""
 
     x: NDArray[np.float64]
     noise: NoiseModel
     iterations: int
     converged: bool
     undetermined: float = 0.0
+    settled: bool = True
 
 
 def _solve(
     problem: LeastSquaresProblem,
     sigma: NoiseModel,
     *,
+    x0: NDArray | None,
+    settled: bool,
     given: bool,
     loss: str,
     k: NDArray,
     max_iterations: int,
     noise_rounds: int,
 ) -> _Solution:
-    """Levenberg-Marquardt from the start, the noise re-estimated after each of the
-    ``noise_rounds`` rounds unless ``given`` (then one round under ``sigma``)."""
+    """Levenberg-Marquardt from the start (or from ``x0`` (P,): the same minimum, fewer
+    iterations), the noise re-estimated after each of the ``noise_rounds`` rounds unless
+    ``given`` (then one round under ``sigma``). ``settled``: ``sigma`` is a noise estimate
+    at its fixed point (from a fit of the same problem), so the first round is a later
+    one."""
     free, obs_sizes = problem.free, problem.obs_sizes
 
     def full(x_free: NDArray) -> NDArray:  # the fixed entries stay at the start
@@ -597,6 +623,8 @@ def _solve(
     # along its redundancy; the diagnostics still report it (with the full free mask)
     G0 = problem.normal_equations(full(x_free), sigma, np.ones(n_rows)).G
     moving = ~negligible_columns(np.zeros((0, len(G0))), np.sqrt(np.diag(G0)))
+    if x0 is not None:
+        x_free[moving] = x0[free][moving]
     iterations, converged = 0, False
     for round_ in range(1 if given else noise_rounds):
         if not given:
@@ -624,9 +652,15 @@ def _solve(
             hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
         before = sigma
         sigma = estimate_noise(
-            r, problem.groups, sigma, hat, robust=loss != "linear", first=round_ == 0
+            r,
+            problem.groups,
+            sigma,
+            hat,
+            robust=loss != "linear",
+            first=round_ == 0 and not settled,
         )
-        if converged and _noise_settled(before, sigma):
+        settled = converged and _noise_settled(before, sigma)
+        if settled:
             break  # the next round would solve the same problem again
     r, _ = problem.evaluate_free(full(x_free), sigma, False)
     w = np.sqrt(row_weights(r, obs_sizes, loss, k))
@@ -641,7 +675,7 @@ def _solve(
             robot[free][moving],
             lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
         )
-    return _Solution(full(x_free), sigma, iterations, converged, left)
+    return _Solution(full(x_free), sigma, iterations, converged, left, settled or given)
 
 
 def _every_direction_determined(G: NDArray) -> bool:

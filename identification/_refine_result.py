@@ -80,6 +80,10 @@ class RefineResult:
         the unknowns' weighted by ``UNKNOWN_WEIGHT``): 0 when the model differs from the
         start only along what the data determine. Large when the fit did not converge
         on too little data (the calibration refuses it).
+    noise_settled : bool
+        Whether the noise estimate reached its fixed point (no sigma changed by more
+        than ``NOISE_SETTLED`` of itself in the last round, after a converged round)
+        before the noise rounds ran out; True when the noise was given.
     """
 
     model: CPCModel
@@ -102,6 +106,7 @@ class RefineResult:
     rejected: tuple[RejectedObservation, ...] = ()
     rejection_note: str | None = None
     undetermined: float = 0.0
+    noise_settled: bool = True
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -12,7 +12,7 @@ component, so they do not depend on the noise.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -179,6 +179,41 @@ class ResidualGroup:
         self._last[key] = (r, J)
         return r, J
 
+    def jacobian_blocks(
+        self, x: NDArray, free: NDArray[np.bool_]
+    ) -> Iterator[tuple[int, int, NDArray, NDArray]]:
+        """The residuals and the ``free`` columns of the Jacobian at ``x``, a chunk of
+        samples at a time (:func:`chunks`): ``(first, end, r, J)`` with ``r`` the chunk's
+        unwhitened residuals ``((end - first) * rows,)`` and ``J`` its Jacobian rows
+        ``((end - first) * rows, n_free)``, without forming the whole Jacobian (for the
+        normal equations of many samples: no array of its size, no page faults).
+
+        ``J`` is a buffer the next chunk overwrites (the caller may modify it); ``r`` is
+        part of the whole residual vector, kept at the end as the last evaluation (see
+        :meth:`evaluate`), which callers must not modify.
+        """
+        x = np.ascontiguousarray(x, dtype=float)
+        free_key = free.tobytes()
+        m, rows = len(self.sample), self.rows
+        r = np.empty(m * rows)
+        J = np.empty((min(m, MAP_CHUNK) * rows, int(free.sum())))  # the first is the largest
+        for a, b in chunks(m):
+            size_key = (True, free_key, b - a)
+            if size_key not in self._buffers:
+                fn = self.functions.numeric_map(True, free, b - a)
+                self._buffers[size_key] = fn.buffer()
+            buf, call = self._buffers[size_key]
+            args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
+            for i, arg in enumerate(args):
+                buf.set_arg(i, memoryview(arg))
+            r_chunk, J_chunk = r[a * rows : b * rows], J[: (b - a) * rows]
+            buf.set_res(0, memoryview(r_chunk))
+            buf.set_res(1, memoryview(J_chunk))
+            call()
+            yield a, b, r_chunk, J_chunk
+        self._last.clear()
+        self._last[(x.tobytes(), free_key)] = (r, None)
+
 
 def chunks(m: int) -> list[tuple[int, int]]:
     """The ``(first, end)`` samples of the calls of a mapped function over ``m`` samples:
@@ -193,11 +228,6 @@ def chunks(m: int) -> list[tuple[int, int]]:
         out.append((a, a + size))
         a += size
     return out
-
-
-#: Samples per block of :meth:`LeastSquaresProblem.normal_equations` (a block of their
-#: rows' Jacobian, whitened and scaled, stays in the cache).
-BLOCK_SAMPLES = 1024
 
 
 @dataclass(frozen=True, slots=True)
@@ -399,9 +429,9 @@ class LeastSquaresProblem:
         ``A^T A``, ``A^T r`` and, with ``by_component``, per noise component of the
         groups ``A_c^T A_c`` over its rows (the prior's rows belong to none; what
         :func:`~kinfw.identification.problem.leverage_sums` takes; else the
-        ``by_component`` of the result is empty), accumulated by blocks of rows of each
-        group's unwhitened Jacobian (:meth:`ResidualGroup.evaluate`, kept for the next
-        call at the same ``x``).
+        ``by_component`` of the result is empty), accumulated chunk by chunk of each
+        group's samples (:meth:`ResidualGroup.jacobian_blocks`: no array of the whole
+        Jacobian's size; the residuals kept for the next call at the same ``x``).
 
         Parameters
         ----------
@@ -418,14 +448,13 @@ class LeastSquaresProblem:
         r_out = np.empty(len(row_scale))
         a = 0
         for grp in self.groups:
-            r, J = grp.evaluate(x, True, columns)
             m, rows = len(grp.sample), grp.rows
-            scale = np.tile(1.0 / grp.row_sigma(noise), BLOCK_SAMPLES)
-            for first in range(0, m, BLOCK_SAMPLES):
-                rs = slice(first * rows, min(first + BLOCK_SAMPLES, m) * rows)
+            scale = np.tile(1.0 / grp.row_sigma(noise), min(m, MAP_CHUNK))
+            for first, end, r, A in grp.jacobian_blocks(x, columns):
+                rs = slice(first * rows, end * rows)
                 s = scale[: rs.stop - rs.start] * row_scale[a + rs.start : a + rs.stop]
-                A = J[rs] * s[:, None]
-                b = r[rs] * s
+                A *= s[:, None]  # the chunk's buffer: whitened and scaled in place
+                b = r * s
                 g += A.T @ b
                 r_out[a + rs.start : a + rs.stop] = b
                 if not by_component:
