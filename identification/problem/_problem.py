@@ -163,21 +163,36 @@ class ResidualGroup:
         n_cols = len(x) if free is None else int(free.sum())
         J = np.empty((m * rows, n_cols)) if with_jacobian else None
         for a, b in chunks(m):
-            size_key = (with_jacobian, free_key, b - a)
-            if size_key not in self._buffers:
-                fn = self.functions.numeric_map(with_jacobian, free, b - a)
-                self._buffers[size_key] = fn.buffer()
-            buf, call = self._buffers[size_key]
-            args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
-            for i, arg in enumerate(args):
-                buf.set_arg(i, memoryview(arg))
-            buf.set_res(0, memoryview(r[a * rows : b * rows]))
-            if J is not None:
-                buf.set_res(1, memoryview(J[a * rows : b * rows]))
-            call()
+            J_chunk = None if J is None else J[a * rows : b * rows]
+            self._call(a, b, x, free, r[a * rows : b * rows], J_chunk)
         self._last.clear()
         self._last[key] = (r, J)
         return r, J
+
+    def _call(
+        self,
+        a: int,
+        b: int,
+        x: NDArray,
+        free: NDArray[np.bool_] | None,
+        r_out: NDArray,
+        J_out: NDArray | None,
+    ) -> None:
+        """Samples ``a:b``'s residuals into ``r_out`` and, unless None, the Jacobian's
+        ``free`` columns (None: all) into ``J_out`` (contiguous), by the compiled map of
+        that chunk size (its CasADi call buffer kept)."""
+        size_key = (J_out is not None, None if free is None else free.tobytes(), b - a)
+        if size_key not in self._buffers:
+            fn = self.functions.numeric_map(J_out is not None, free, b - a)
+            self._buffers[size_key] = fn.buffer()
+        buf, call = self._buffers[size_key]
+        args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
+        for i, arg in enumerate(args):
+            buf.set_arg(i, memoryview(arg))
+        buf.set_res(0, memoryview(r_out))
+        if J_out is not None:
+            buf.set_res(1, memoryview(J_out))
+        call()
 
     def jacobian_blocks(
         self, x: NDArray, free: NDArray[np.bool_]
@@ -193,26 +208,15 @@ class ResidualGroup:
         :meth:`evaluate`), which callers must not modify.
         """
         x = np.ascontiguousarray(x, dtype=float)
-        free_key = free.tobytes()
         m, rows = len(self.sample), self.rows
         r = np.empty(m * rows)
         J = np.empty((min(m, MAP_CHUNK) * rows, int(free.sum())))  # the first is the largest
         for a, b in chunks(m):
-            size_key = (True, free_key, b - a)
-            if size_key not in self._buffers:
-                fn = self.functions.numeric_map(True, free, b - a)
-                self._buffers[size_key] = fn.buffer()
-            buf, call = self._buffers[size_key]
-            args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)
-            for i, arg in enumerate(args):
-                buf.set_arg(i, memoryview(arg))
             r_chunk, J_chunk = r[a * rows : b * rows], J[: (b - a) * rows]
-            buf.set_res(0, memoryview(r_chunk))
-            buf.set_res(1, memoryview(J_chunk))
-            call()
+            self._call(a, b, x, free, r_chunk, J_chunk)
             yield a, b, r_chunk, J_chunk
         self._last.clear()
-        self._last[(x.tobytes(), free_key)] = (r, None)
+        self._last[(x.tobytes(), free.tobytes())] = (r, None)
 
 
 def chunks(m: int) -> list[tuple[int, int]]:
