@@ -253,7 +253,7 @@ def refine(
     _check_loss_options(loss, reject, max_reject_fraction)
     t0 = time.perf_counter()
 
-    def fit(data: Measurements, warm: RefineResult | None = None):
+    def fit(data: Measurements, warm: _Fitted | None = None) -> _Fitted:
         return _fit(
             robot,
             data,
@@ -272,20 +272,19 @@ def refine(
             extra_blocks=extra_blocks,
         )
 
-    result, problem, r = fit(measurements)
+    fitted = fit(measurements)
     if loss == "linear" or reject is None:
-        return result
-    result, problem, rounds, rejected, note = _reject_gross_errors(
+        return _rated(fitted, loss)
+    fitted, rounds, rejected, note = _reject_gross_errors(
         fit,
         measurements,
-        result,
-        problem,
-        r,
+        fitted,
         reject=reject,
         max_reject_fraction=max_reject_fraction,
         max_reject_rounds=max_reject_rounds,
     )
-    rejected = _rejected_at_final(rounds, rejected, problem, result)
+    result = _rated(fitted, loss)
+    rejected = _rejected_at_final(rounds, rejected, fitted.problem, result)
     _log_rejection(rejected, note)
     return replace(
         result,
@@ -313,22 +312,19 @@ _Round = tuple[LeastSquaresProblem, NDArray, NDArray]
 
 
 def _reject_gross_errors(
-    fit: Callable[[Measurements, RefineResult], tuple[RefineResult, LeastSquaresProblem, NDArray]],
+    fit: Callable[[Measurements, _Fitted], _Fitted],
     measurements: Measurements,
-    result: RefineResult,
-    problem: LeastSquaresProblem,
-    r: NDArray,
+    fitted: _Fitted,
     *,
     reject: float,
     max_reject_fraction: float,
     max_reject_rounds: int,
-) -> tuple[RefineResult, LeastSquaresProblem, list[_Round], list[RejectedObservation], str | None]:
+) -> tuple[_Fitted, list[_Round], list[RejectedObservation], str | None]:
     """The rejection rounds of :func:`refine` (see its Notes), from the robust fit
-    ``result`` of ``problem`` with whitened residuals ``r``: the last fit and its problem,
-    the rounds that rejected, the rejected observations (at the fits that rejected them)
-    and the rejection note. Each refit starts from the fit before it (``fit(data,
-    warm)``)."""
-    n_obs = sum(len(g.sample) for g in problem.groups)
+    ``fitted``: the last fit, the rounds that rejected, the rejected observations (at
+    the fits that rejected them) and the rejection note. Each refit starts from the fit
+    before it (``fit(data, warm)``)."""
+    n_obs = sum(len(g.sample) for g in fitted.problem.groups)
     # one gross error is what any dataset may hold, however small (a training fold of 16)
     allowed = max(int(np.floor(max_reject_fraction * n_obs)), int(max_reject_fraction > 0))
     rejected: list[RejectedObservation] = []
@@ -336,6 +332,7 @@ def _reject_gross_errors(
     note = None
     data = measurements
     for _ in range(max_reject_rounds):
+        problem, r = fitted.problem, fitted.r
         groups = list(problem.groups)
         m = sum(len(g.sample) for g in groups)
         k = thresholds(problem.obs_components, reject)[:m]
@@ -354,12 +351,12 @@ def _reject_gross_errors(
             beyond &= keep_worst
             if not beyond.any():
                 break
-        new = rejected_observations(groups, r, result.noise, norms, k, beyond)
+        new = rejected_observations(groups, r, fitted.solution.noise, norms, k, beyond)
         rounds.append((problem, k, beyond))
         reduced = _without(data, groups, beyond)
         progress.stage(f"refine: refit without {len(rejected) + len(new)} gross errors")
         try:
-            refit, refit_problem, refit_r = fit(reduced, result)
+            refit = fit(reduced, fitted)
         except DatasetError as exc:
             note = (
                 f"{len(new)} observations beyond the rejection threshold were kept: "
@@ -367,10 +364,10 @@ def _reject_gross_errors(
             )
             break
         rejected += new
-        data, result, problem, r = reduced, refit, refit_problem, refit_r
+        data, fitted = reduced, refit
         if note is not None:
             break
-    return result, problem, rounds, rejected, note
+    return fitted, rounds, rejected, note
 
 
 def _too_many_note(
@@ -469,7 +466,7 @@ def _fit(
     robot: Robot,
     measurements: Measurements,
     *,
-    warm: RefineResult | None,
+    warm: _Fitted | None,
     start: Robot | None,
     targets: dict[str, NDArray] | None,
     noise: NoiseModel | None,
@@ -482,9 +479,9 @@ def _fit(
     known: tuple[Unknown, ...],
     refine_intrinsics: bool | tuple[str, ...],
     extra_blocks: tuple[RobotBlock, ...],
-) -> tuple[RefineResult, LeastSquaresProblem, NDArray]:
-    """One robust fit of every observation of ``measurements`` (see :func:`refine`):
-    the result, the problem and the final whitened residuals. With ``warm``, a fit of
+) -> _Fitted:
+    """One robust fit of every observation of ``measurements`` (see :func:`refine`),
+    before its quality (:func:`_rated`). With ``warm``, a fit of
     the same problem on more data (a rejection refit), its estimate is where the solver
     starts, and its noise estimate too when it had settled (the chart and the start the
     undetermined directions stay at remain a cold fit's; so do the noise rounds unless
@@ -513,12 +510,12 @@ def _fit(
     x0, settled = None, False
     if (
         warm is not None
-        and tuple(warm.parameter_names) == tuple(problem.names)
-        and np.array_equal(warm.free, problem.free)
+        and warm.problem.names == problem.names
+        and np.array_equal(warm.problem.free, problem.free)
     ):
-        x0 = warm.estimate
-        if warm.noise_settled and not given:  # the same fixed point, from next to it
-            sigma, settled = warm.noise, True
+        x0 = warm.solution.x
+        if warm.solution.settled and not given:  # the same fixed point, from next to it
+            sigma, settled = warm.solution.noise, True
     solution = _solve(
         problem,
         sigma,
@@ -530,8 +527,35 @@ def _fit(
         max_iterations=max_iterations,
         noise_rounds=noise_rounds,
     )
+    r = problem.evaluate_free(solution.x, solution.noise, False)[0]
+    return _Fitted(problem, measurements, solution, given, k, r, time.perf_counter() - t0)
+
+
+@dataclass(frozen=True, slots=True)
+class _Fitted:
+    """A fit of :func:`_fit` before its quality: the problem and the data it fitted, the
+    solution, whether the noise was given, the robust thresholds ``k`` (per
+    observation), the whitened residuals ``r`` at the estimate and the seconds taken."""
+
+    problem: LeastSquaresProblem
+    data: Measurements
+    solution: _Solution
+    given: bool
+    k: NDArray[np.float64]
+    r: NDArray[np.float64]
+    seconds: float
+
+
+def _rated(fitted: _Fitted, loss: str) -> RefineResult:
+    """The result of a fit, with its residuals, covariance and identifiability
+    (:func:`_quality_at`): only for the fit :func:`refine` returns (a rejection refit
+    replaces the fits before it)."""
+    t0 = time.perf_counter()
+    problem, solution = fitted.problem, fitted.solution
     x, sigma = solution.x, solution.noise
-    quality = _quality_at(problem, x, sigma, given=given, loss=loss, k=k, data=measurements)
+    quality = _quality_at(
+        problem, x, sigma, given=fitted.given, loss=loss, k=fitted.k, data=fitted.data
+    )
     result = RefineResult(
         model=problem.model_at(x),
         model_frame=problem.model_frame,
@@ -551,7 +575,7 @@ def _fit(
         undetermined=solution.undetermined,
         noise_settled=solution.settled,
         cost=quality.cost,
-        seconds=time.perf_counter() - t0,
+        seconds=fitted.seconds + time.perf_counter() - t0,
     )
     log.info(
         "refine: %d free parameters (%d before gauge fixing and the parameter set), "
@@ -563,7 +587,7 @@ def _fit(
         quality.sigma_hat2,
         result.seconds,
     )
-    return result, problem, quality.r
+    return result
 
 
 def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source: str) -> None:
