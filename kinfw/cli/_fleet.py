@@ -11,7 +11,7 @@ import argparse
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from kinfw.cli._args import read_data
+from kinfw.cli._args import add_mount_option, read_data
 from kinfw.cli._fit import calibration_options
 from kinfw.cli._fit_parser import add_calibration_options
 from kinfw.cli._tables import format_table, metric_format, number
@@ -62,6 +62,7 @@ def add_fleet_parser(sub: argparse._SubParsersAction) -> None:
         "robot, summary.json",
     )
     add_calibration_options(p)
+    add_mount_option(p)
     add_executor_options(p, tasks="the robots' calibrations")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=cmd_fleet, check_outputs=check_fleet_outputs)

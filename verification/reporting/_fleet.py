@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from kinfw.files import check_output_dir, json_text, write_text_atomic
-from kinfw.measurements import Measurements, read_measurements
+from kinfw.measurements import Measurements, mounted_robot, read_measurements
 from kinfw.model import Robot, load_robot
 from kinfw.reports import BeforeAfter, ErrorValue, ModelSummary, write_report
 from kinfw.verification.evaluation import run_trials
@@ -403,7 +403,9 @@ def calibrate_fleet(
         try:
             if m.urdf not in robots:
                 robots[m.urdf] = load_robot(m.urdf)
-            loaded[i] = robots[m.urdf], read(m.data)
+            data = read(m.data)
+            # frames the URDF lacks, mounted as the file (or --mount) says: as calibrate
+            loaded[i] = mounted_robot(robots[m.urdf], data.mounts, data.source), data
         except (ValueError, OSError) as exc:
             failed[i] = FleetRow(m.name, str(m.urdf), str(m.data), _error_text(exc))
     order = sorted(loaded)

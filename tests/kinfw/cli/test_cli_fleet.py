@@ -139,3 +139,49 @@ def test_each_robots_warnings_are_the_ones_kinfw_calibrate_prints(robots, tmp_pa
         assert any("times the stated noise" in w for w in own)  # the noise is understated
         for warning in own:
             assert f"{name}: warning: {warning}" in out
+
+
+def _with_sticker(robots, out, *, declared):
+    """The fleet with each robot's left plate seen as 'left_sticker', a frame its URDF
+    lacks, declared in the file's ``"mounts"`` (on 'left_plate') or not."""
+    out.mkdir()
+    for folder in sorted(robots.iterdir()):
+        (out / folder.name).mkdir()
+        (out / folder.name / "robot.urdf").write_bytes((folder / "robot.urdf").read_bytes())
+        doc = json.loads((folder / "data.json").read_text())
+        for sample in doc["samples"]:
+            for obs in sample["observations"]:
+                if obs["frame"] == "left_plate":
+                    obs["frame"] = "left_sticker"
+        if declared:
+            doc["mounts"] = {"left_sticker": {"parent": "left_plate"}}
+        (out / folder.name / "data.json").write_text(json.dumps(doc))
+    return out
+
+
+@pytest.mark.parametrize("declared", [True, False])
+def test_a_frame_the_urdfs_lack_is_mounted_as_kinfw_calibrate_mounts_it(
+    robots, tmp_path, capsys, declared
+):
+    """The files' "mounts" section, or --mount NAME:PARENT: each robot's calibrated URDF
+    is kinfw calibrate's (the sticker a link on a fixed joint of the left plate, its
+    origin calibrated); undeclared, every robot fails alone naming the frame."""
+    stickers = _with_sticker(robots, tmp_path / "robots", declared=declared)
+    code, out, _ = run_cli(["fleet", stickers, "--out", tmp_path / "fleet"], capsys)
+    if not declared:
+        assert code == 3 and out.count("left_sticker") >= 3, out
+        code, out, _ = run_cli(
+            ["fleet", stickers, "--out", tmp_path / "fleet", "--mount", "left_sticker:left_plate"],
+            capsys,
+        )
+    assert code == 0, out
+    mount = [] if declared else ["--mount", "left_sticker:left_plate"]
+    for folder in sorted(stickers.iterdir()):
+        own = tmp_path / "own" / folder.name
+        own.mkdir(parents=True)
+        argv = ["calibrate", folder / "data.json", "--urdf", folder / "robot.urdf"]
+        assert run_cli([*argv, "--out", own / "c.urdf", *mount], capsys)[0] == 0
+        fleet_urdf = (tmp_path / "fleet" / folder.name / "calibrated.urdf").read_text()
+        assert fleet_urdf == (own / "c.urdf").read_text()
+        assert re.search(r'<joint name="left_sticker_joint" type="fixed">', fleet_urdf)
+        assert re.search(r'<parent link="left_plate"\s*/>', fleet_urdf)
