@@ -17,6 +17,7 @@ from kinfw.measurements import (
     JointStates,
     joint_values_at,
     measurements_from_bag,
+    mounted_robot,
     read_bag,
     time_offset_streams,
 )
@@ -251,6 +252,18 @@ def test_a_camera_seeing_a_board_reads_as_target_and_its_offset_is_found(recordi
     assert abs(best_time_offset(*streams, step=8).offset_s - DELAY_S) <= 1e-3
     with pytest.raises(DatasetError, match="would make calibrate redefine 'flange'"):
         measurements_from_bag(bag, robot=robot, frame="flange", target="board")
+    # a camera frame the URDF lacks: the same observations, the camera mounted on the flange
+    bare = load_robot(ARM_6R)
+    bag = read_bag(bags[2], robot=bare, tf=("rigid_body", "room"))
+    data, _ = measurements_from_bag(
+        bag, robot=bare, frame="flange", target="board", camera_frame="hand_cam", offset_s=DELAY_S
+    )
+    (group,) = data.targets
+    assert (group.camera, group.target) == ("hand_cam", "board")
+    np.testing.assert_allclose(group.camera_T_target, camera_T_boards, rtol=0, atol=1e-9)
+    assert list(data.mounts) == ["hand_cam"] and data.mounts["hand_cam"].parent == "flange"
+    mounted = mounted_robot(bare, data.mounts, data.source)
+    assert mounted.movable_path("hand_cam") == mounted.movable_path("flange")
 
 
 def test_two_moving_tf_edges_compose_at_the_sparser_ones_stamps(recording, tmp_path):
