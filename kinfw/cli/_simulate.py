@@ -291,6 +291,14 @@ def _add_probe_options(p: argparse.ArgumentParser) -> None:
         help="the name of the plane (ball, point) in the file (default table, ball, divot)",
     )
     p.add_argument(
+        "--plane-frame",
+        metavar="LINK",
+        default=None,
+        help="the URDF link the plane is fixed to (a table link on fixed joints from the "
+        "root): --plane is given in it, and the file's plane observations are measured_in "
+        "it (default: the root)",
+    )
+    p.add_argument(
         "--contact-samples",
         type=COUNT,
         default=60,
@@ -396,6 +404,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         contacts=contacts,
         plane=args.plane,
         plane_name=args.plane_name,
+        plane_frame=args.plane_frame,
         sphere=args.sphere,
         point=args.point,
         contact_samples=args.contact_samples,
@@ -487,7 +496,8 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
         n, d = probes["plane"][:3], probes["plane"][3]
         print(
             f"  plane {probes['plane_name']!r}: n = ({', '.join(f'{v:.4f}' for v in n)}), "
-            f"d = {d:.4f} m"
+            f"d = {d:.4f} m in the root"
+            + (f", fixed to {probes['plane_frame']!r}" if probes["plane_frame"] else "")
         )
     for key, what in (("sphere", "ball"), ("point", "point")):
         if probes[key] is not None:
@@ -513,6 +523,7 @@ def _probe_summary(sim) -> dict:
         "probes": listed(sim.probes),
         "plane_name": sim.plane_name,
         "plane": None if sim.plane is None else sim.plane.tolist(),
+        "plane_frame": sim.plane_frame,
         "sphere": None if sim.sphere is None else sim.sphere.tolist(),
         "point": None if sim.point is None else sim.point.tolist(),
     }

@@ -110,6 +110,9 @@ class SimulatedMeasurements:
         With probes on a plane: ``(n, d)``, ``{x : n . x = d}`` in ``w`` (``d`` metres).
     plane_name : str or None
         With probes: the name of the plane (the ball, the point) in the measurement file.
+    plane_frame : str or None
+        With probes on a plane fixed to a URDF frame other than the root: that frame
+        (the observations' ``measured_in``; :attr:`plane` is still in ``w``).
     sphere : ndarray, shape (4,), or None
         With probes on a ball: its centre in ``w`` and its radius, metres.
     point : ndarray, shape (3,), or None
@@ -133,6 +136,7 @@ class SimulatedMeasurements:
     probes: tuple[SimulatedProbe, ...] = ()
     plane: NDArray[np.float64] | None = None
     plane_name: str | None = None
+    plane_frame: str | None = None
     sphere: NDArray[np.float64] | None = None
     point: NDArray[np.float64] | None = None
     target_frame: str | None = None
@@ -255,6 +259,7 @@ def simulate_measurements(
     contacts: Sequence[tuple[str, ArrayLike | None]] = (),
     plane: ArrayLike | None = None,
     plane_name: str | None = None,
+    plane_frame: str | None = None,
     sphere: ArrayLike | None = None,
     point: ArrayLike | None = None,
     contact_samples: int = 60,
@@ -318,12 +323,17 @@ def simulate_measurements(
         own (:func:`kinfw.simulation.contact_configurations`), the ``plane``
         observation's distance noise ``noise_m``.
     plane : array_like, shape (4,), optional
-        ``(n, d)`` of the plane ``{x : n . x = d}`` in the root frame (``n`` is
-        normalised; ``d`` metres); default the plane normal to the root's z through the
-        first probe at the middle of the joint ranges (of the true robot).
+        ``(n, d)`` of the plane ``{x : n . x = d}`` in the root frame (in
+        ``plane_frame`` when given; ``n`` is normalised; ``d`` metres); default the plane
+        normal to the root's z through the first probe at the middle of the joint ranges
+        (of the true robot).
     plane_name : str, optional
         The name of the plane (the ball, the point) in the measurement file; default
         ``table`` (``ball``, ``divot``).
+    plane_frame : str, optional
+        The URDF frame the plane is fixed to (a table link of the URDF), written as the
+        plane observations' ``measured_in``; it must be fixed to the root (no movable
+        joint between them). Default: the root.
     sphere : array_like, shape (4,), optional
         Instead of a plane, a ball the probes touch: its centre in the root frame and its
         radius, metres; ``sphere`` observations, the radius given (a tooling ball's is
@@ -421,7 +431,7 @@ def simulate_measurements(
     touch = _Touch()
     if contacts:
         touch = _simulate_contacts(
-            at, contacts, (plane, sphere, point), plane_name, contact_samples
+            at, contacts, (plane, sphere, point), plane_name, contact_samples, plane_frame
         )
         parts.extend(touch.data)
     return SimulatedMeasurements(
@@ -440,6 +450,7 @@ def simulate_measurements(
         probes=touch.probes,
         plane=touch.plane,
         plane_name=touch.name,
+        plane_frame=plane_frame if touch.plane is not None else None,
         sphere=touch.sphere,
         point=touch.point,
         target_frame=target_frame,
@@ -550,10 +561,12 @@ def _simulate_contacts(
     touched: tuple[ArrayLike | None, ArrayLike | None, ArrayLike | None],
     name: str | None,
     n: int,
+    plane_frame: str | None = None,
 ) -> _Touch:
     """``plane`` (``sphere``, ``divot``) observations: each probe touches the plane (the
     ball ``(c, r)``, the point ``c``: ``touched``, at most one given) at ``n``
-    configurations."""
+    configurations; a plane given in ``plane_frame`` (see :func:`simulate_measurements`)
+    is touched where the true robot holds that frame."""
     probes = _probes(contacts, "probe", at.rng)
     plane, sphere, point = (None if v is None else np.asarray(v, dtype=float) for v in touched)
     if sum(v is not None for v in (plane, sphere, point)) > 1:
@@ -563,6 +576,11 @@ def _simulate_contacts(
             raise ValueError(f"{what}: expected {size} finite numbers, got {v.tolist()!r}")
     if sphere is not None and sphere[3] <= 0.0:
         raise ValueError(f"sphere: expected a radius > 0 m, got {sphere[3]!r}")
+    if plane_frame is not None:
+        if sphere is not None or point is not None:
+            raise ValueError("plane_frame: only a plane can be fixed to a URDF frame here")
+        if plane is not None:
+            plane = _plane_in_root(at.truth, plane_frame, plane)
     if sphere is None and point is None:
         if plane is None:
             first = probes[0]
@@ -600,7 +618,9 @@ def _simulate_contacts(
             "marker": None if at.offsets_known else probe.name,
         }
         if plane is not None:
-            group = PlaneContacts(distance_m=noise[:, 0], plane=name, **probe_fields)
+            group = PlaneContacts(
+                distance_m=noise[:, 0], plane=name, measured_in=plane_frame, **probe_fields
+            )
         elif sphere is not None:
             group = SphereContacts(
                 distance_m=noise[:, 0], sphere=name, radius=float(sphere[3]), **probe_fields
@@ -611,3 +631,23 @@ def _simulate_contacts(
             Measurements(joint_names=at.names, qs=qs, source="<simulated>").with_groups([group])
         )
     return _Touch(plane, sphere, point, name, probes, tuple(data))
+
+
+def _plane_in_root(robot: Robot, frame: str, plane: ArrayLike) -> NDArray[np.float64]:
+    """The plane ``(n, d)`` (4,) given in ``frame`` (fixed to the root) in the root:
+    with ``root_T_frame = (R, t)``, ``x = R y + t`` for ``n . y = d`` gives ``(R n) . x =
+    d + (R n) . t`` (``n`` normalised first)."""
+    if not robot.has_frame(frame):
+        raise ValueError(f"plane_frame: {frame!r} is not a frame of the URDF")
+    moving = robot.movable_path(frame)
+    if moving:
+        raise ValueError(
+            f"plane_frame: {frame!r} moves with the joints {list(moving)}: a plane to "
+            "simulate must be fixed to the root (a table link on fixed joints)"
+        )
+    plane = np.asarray(plane, dtype=float)
+    if plane.shape != (4,) or not np.isfinite(plane).all() or not plane[:3].any():
+        raise ValueError(f"plane: expected 4 finite numbers n, d (n not 0), got {plane.tolist()!r}")
+    T = robot.frame_poses(np.zeros(len(robot.joint_names)), frame)
+    n = T[:3, :3] @ (plane[:3] / np.linalg.norm(plane[:3]))
+    return np.concatenate([n, [plane[3] / np.linalg.norm(plane[:3]) + n @ T[:3, 3]]])
