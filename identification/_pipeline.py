@@ -382,12 +382,13 @@ def _refine_checked(
 
 #: Size (chart coordinates, m and rad) of an estimate's part along undetermined
 #: directions above which a refinement that did not converge is refused
-#: (:func:`_undetermined_refusal`): a drift of metres (the root's joint by 1.6 m on 40
-#: contacts). Smaller drifts are kept: cross-validation and the model choice fit through
-#: :func:`calibrate` and score predictions, which the drift does not change (0.3 on 48
-#: contacts of one plane; a converged fit may keep a few mm where the return to the
-#: nominal stops at the minimum's curvature).
-UNDETERMINED_LEFT = 1.0
+#: (:func:`_undetermined_refusal`): 10 mm or 10 mrad. Forced ``full`` on one plane's
+#: contacts drifts by metres (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90
+#: (the root's joint by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). The model
+#: choice's candidates fit through :func:`calibrate`: such a candidate fails and another
+#: is chosen. A converged fit is kept whatever is left (a few mm where the return to the
+#: nominal stops at the minimum's curvature, or at rounding on noise-free data).
+UNDETERMINED_LEFT = 1e-2
 
 
 def _undetermined_refusal(

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.identification import Calibration, calibrate
+from kinfw.identification.checks import InsufficientDataError
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
@@ -297,6 +298,30 @@ def held_out_errors(
     )
 
 
+def _reference_fit(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    noise: NoiseModel | None,
+    loss: str,
+    prior: tuple[float, float] | None,
+) -> Calibration:
+    """The fit of all the data whose noise whitens the selection and whose rejections are
+    flagged: ``"full"``, else, on data too little for it (refused: e.g. one plane's
+    contacts, along whose undetermined directions a forced full fit drifts), the next
+    most flexible set that fits (``"offsets"``, ``"frames"``); full's refusal when none
+    does."""
+    refusal = None
+    for parameters in ("full", "offsets", "frames"):
+        try:
+            return calibrate(
+                nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
+            )
+        except InsufficientDataError as exc:
+            refusal = refusal or exc
+    raise refusal
+
+
 def _rms(values: NDArray) -> float:
     """RMS of the finite values; NaN when there are none."""
     finite = values[np.isfinite(values)]
@@ -433,7 +458,8 @@ def crossvalidate(
         Without an ``executor``: run the fits in a pool of ``jobs`` worker processes,
         shut down at the end (1, the default: in this process).
     exclude_flagged : bool
-        Leave the observations the full-data fit (``"full"``, this ``loss``) rejects as
+        Leave the observations the full-data fit (``"full"``, this ``loss``; on data too
+        little for full the most flexible set that fits: :func:`_reference_fit`) rejects as
         gross errors out of the held-out scores (:attr:`CrossValidation.excluded`);
         nothing is rejected with ``loss="linear"``.
     reference : Calibration, optional
@@ -446,7 +472,7 @@ def crossvalidate(
         sets = SELECTION_SETS if select else BASELINES
     if reference is None and (exclude_flagged or (select and noise is None)):
         # the full-data fit: its noise whitens the selection, its rejections are flagged
-        reference = calibrate(nominal, data, parameters="full", noise=noise, loss=loss, prior=prior)
+        reference = _reference_fit(nominal, data, noise=noise, loss=loss, prior=prior)
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
     scored = data
     if exclude_flagged and reference is not None:

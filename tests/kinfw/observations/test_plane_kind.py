@@ -606,7 +606,7 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
 
     nominal = scene[0]
     data = noisy_contacts
-    cv = crossvalidate(nominal, data, k=3, sets=("frames", "full"), select=True)
+    cv = crossvalidate(nominal, data, k=3, sets=("frames", "offsets"), select=True)
     doc = cv.to_dict()
     assert [m.headline for m in cv.metrics] == ["height_rms_mm", "tilt_deg"]
     (sigma,) = doc["noise"].values()
@@ -614,11 +614,12 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
         folds = [f for f in doc["folds"] if f["parameters"] == p]
         whitened = np.mean([(f["height_rms_mm"] * 1e-3 / sigma) ** 2 for f in folds])
         assert doc["mean_whitened"][p] == pytest.approx(whitened, rel=1e-9)
-    assert cv.whitened("frames") != cv.whitened("full")
+    assert cv.whitened("frames") != cv.whitened("offsets")
     assert cv.selected == min(cv.sets, key=cv.whitened)
-    # fold 0 of "full" by hand
+    # fold 0 of "offsets" by hand
     test_ids = np.sort(np.array_split(np.random.default_rng(0).permutation(data.n_samples), 3)[0])
-    result = calibrate(nominal, data.subset(np.setdiff1d(np.arange(data.n_samples), test_ids)))
+    train = data.subset(np.setdiff1d(np.arange(data.n_samples), test_ids))
+    result = calibrate(nominal, train, parameters="offsets")
     trained = load_robot(result.urdf_xml)
     found = {u.name: u.value for u in result.refined.unknowns if u.kind == "plane"}
     heights, tilts = [], []
@@ -629,7 +630,7 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
         )
         heights.append(h)
         tilts.append(tilt)
-    fold = next(s for s in cv.scores if (s.fold, s.parameters) == (0, "full"))
+    fold = next(s for s in cv.scores if (s.fold, s.parameters) == (0, "offsets"))
     assert fold.of("height") == pytest.approx(
         1e3 * np.sqrt(np.mean(np.concatenate(heights) ** 2)), rel=1e-6
     )
@@ -660,7 +661,7 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
         "--out",
         tmp_path / "out.urdf",
         "--params",
-        "full",
+        "offsets",
         "--holdout",
         tmp_path / "held.json",
     ]
