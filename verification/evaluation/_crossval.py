@@ -338,17 +338,21 @@ def _score(
     noise,
     loss,
     prior,
-) -> FoldScore:
+) -> FoldScore | str:
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
-    original indices of the test samples). One task of :func:`crossvalidate`: module
-    level, picklable arguments."""
+    original indices of the test samples); the refusal's message when the training fold
+    is too little for the set. One task of :func:`crossvalidate`: module level,
+    picklable arguments."""
     with warnings.catch_warnings():
         # the data's warnings (limits, fit checks) belong to the full data, said once by
         # the caller; every fold would repeat them with its own numbers
         warnings.simplefilter("ignore", UserWarning)
-        result = calibrate(
-            nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
-        )
+        try:
+            result = calibrate(
+                nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
+            )
+        except InsufficientDataError as exc:  # this set on this fold: said by the caller
+            return str(exc)
     held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test)
     # the worst held-out sample in the first per-observation metric
     first = next((m for m in held.metrics if m.per_observation), None)
@@ -489,15 +493,16 @@ def crossvalidate(
     finally:
         if pool is not None:
             pool.shutdown()
+    scores, sets, refused = _without_refused(scores, tasks, tuple(sets))
     selected, sigma = None, None
     if select:
         sigma = whitening_noise(noise if noise is not None else reference.refined.noise, data)
     cv = CrossValidation(
         k,
         seed,
-        tuple(sets),
+        sets,
         tuple(scores),
-        tuple(_warnings(scores, sets, loss)),
+        (*refused, *_warnings(scores, sets, loss)),
         None,
         sigma,
         excluded,
@@ -505,6 +510,27 @@ def crossvalidate(
     if select:
         selected = min(sets, key=cv.whitened)
     return replace(cv, selected=selected)
+
+
+def _without_refused(
+    scores: Sequence[FoldScore | str], tasks: Sequence[tuple], sets: tuple[str, ...]
+) -> tuple[list[FoldScore], tuple[str, ...], list[str]]:
+    """The fold scores and sets without the sets some fold's training data refused
+    (:func:`_score` gave its message: e.g. ``full`` on one plane's contacts, which
+    drifts along what they do not determine), and a warning per such set naming the
+    first refusal; every set refused raises that refusal."""
+    refusals: dict[str, tuple[int, str]] = {}
+    for task, score in zip(tasks, scores, strict=True):
+        if isinstance(score, str):
+            refusals.setdefault(task[4], (task[5], score))
+    kept = tuple(p for p in sets if p not in refusals)
+    if not kept:
+        raise InsufficientDataError(next(iter(refusals.values()))[1])
+    said = [
+        f"--params {p} not scored: refused on the training samples of fold {fold}: {why}"
+        for p, (fold, why) in refusals.items()
+    ]
+    return [s for s in scores if not isinstance(s, str) and s.parameters in kept], kept, said
 
 
 def _folds(

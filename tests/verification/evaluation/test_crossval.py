@@ -364,3 +364,27 @@ def test_the_outlier_advice_names_huber_only_when_it_is_not_in_use():
     (huber,) = _warnings(scores, ("frames", "full"), "huber")
     assert "sample 4: 70.0 mm" in huber and "try --loss huber" not in huber
     assert "--exclude-flagged" in huber
+
+
+def test_a_set_the_training_folds_refuse_is_left_out_and_said():
+    """90 contacts of one plane (6R arm, 0.1 mm): forced full drifts along what contacts
+    do not determine and is refused on the training folds; cross-validation scores the
+    other sets, says which was left out and why, and selects among those scored; every
+    set refused raises the refusal."""
+    from kinfw.identification.checks import InsufficientDataError
+    from kinfw.simulation import simulate_measurements
+    from tests.robots import ARM_6R
+
+    nominal = load_robot(ARM_6R)
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=90, noise_m=1e-4, seed=7
+    )
+    cv = crossvalidate(nominal, sim.data, k=3, sets=("frames", "offsets", "full"), select=True)
+    assert cv.sets == ("frames", "offsets") and cv.selected in cv.sets
+    assert {s.parameters for s in cv.scores} == {"frames", "offsets"} and len(cv.scores) == 6
+    (said,) = [w for w in cv.warnings if "not scored" in w]
+    assert said.startswith("--params full not scored: refused on the training samples of fold ")
+    assert "too little data to refine --params full" in said
+    assert cv.to_dict()["sets"] == ["frames", "offsets"]
+    with pytest.raises(InsufficientDataError, match="too little data to refine --params full"):
+        crossvalidate(nominal, sim.data, k=3, sets=("full",))
