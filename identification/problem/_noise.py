@@ -308,6 +308,8 @@ def estimate_noise(
 
     values = dict(sigma.sigmas)
     for name, c in comps.items():
-        floor = 1e-15 if c.unit == "rad" else 1e-12
+        # the rounding of a prediction: 1e-12 m of a metre, 1e-15 rad, and 1e-9 px of an
+        # image's 1000 px (pixels of noise-free images are exact to ~1e-10 px, not 1e-12)
+        floor = {"rad": 1e-15, "px": 1e-9}.get(c.unit, 1e-12)
         values[name] = float(max(sigma.sigma(c) * factor(name), floor))
     return NoiseModel(estimated=True, sigmas=values)
