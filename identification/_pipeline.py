@@ -374,28 +374,29 @@ def _refine_checked(
         order = _quaternion_order_hint(nominal, data, options) if found else ()
         if order:
             raise UnitError(" ".join((*order, *(f"Read as written: {w}" for w in found))))
-    # not converged and drifted along what the data do not determine: meaningless geometry
-    if not refined.converged and refined.undetermined > UNDETERMINED_LEFT:
+    # drifted along what the data do not determine and not brought back: meaningless geometry
+    if refined.undetermined > UNDETERMINED_LEFT:
         raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
     return refined, found
 
 
 #: Size (chart coordinates, m and rad) of an estimate's part along undetermined
-#: directions above which a refinement that did not converge is refused
-#: (:func:`_undetermined_refusal`): 10 mm or 10 mrad. Forced ``full`` on one plane's
-#: contacts drifts by metres (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90
-#: (the root's joint by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). The model
-#: choice's candidates fit through :func:`calibrate`: such a candidate fails and another
-#: is chosen. A converged fit is kept whatever is left (a few mm where the return to the
-#: nominal stops at the minimum's curvature, or at rounding on noise-free data).
+#: directions above which a refinement is refused (:func:`_undetermined_refusal`): 10 mm
+#: or 10 mrad. Forced ``full`` on one plane's contacts drifts by metres when it does not
+#: converge (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90 (the root's joint
+#: by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). A converged fit returns
+#: to the nominal along those directions to rounding (noise-free data included, since
+#: the noise floors and :data:`kinfw.identification._refine.ROUNDING_SLACK`); one that
+#: cannot is refused as well. The model choice's candidates fit through
+#: :func:`calibrate`: such a candidate fails and another is chosen.
 UNDETERMINED_LEFT = 1e-2
 
 
 def _undetermined_refusal(
     nominal: Robot, data: Measurements, refined: RefineResult, options: _RefineOptions
 ) -> str:
-    """Why a refinement is refused that did not converge and whose estimate moved along
-    what the data do not determine and could not be brought back
+    """Why a refinement is refused whose estimate moved along what the data do not
+    determine and could not be brought back
     (:attr:`RefineResult.undetermined`): the exported geometry would be meaningless
     there (the root's joint moved by a metre on little contact data), whatever the
     predictions."""
@@ -423,8 +424,9 @@ def _undetermined_refusal(
         shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
     params = options.parameters if isinstance(options.parameters, str) else "the mask"
     return (
-        f"{data.source}: too little data to refine --params {params}: the fit did not "
-        f"converge in {refined.iterations} iterations and moved "
+        f"{data.source}: too little data to refine --params {params}: the fit "
+        + ("converged" if refined.converged else "did not converge")
+        + f" in {refined.iterations} iterations and moved "
         f"{refined.undetermined:.3g} (m, rad) along directions these data do not "
         f"determine, which it cannot bring back to the nominal URDF{shown}: the exported "
         "geometry would be meaningless there; refine fewer parameters, add a prior "

@@ -779,8 +779,9 @@ UNKNOWN_WEIGHT = 1e-3
 #: Whitened cost per residual row that :func:`_nearest_to_start` may add besides 1e-6 of
 #: the cost at its start: on noise-free data the residuals are rounding (the noise
 #: estimate at its floor, :func:`kinfw.identification.problem.estimate_noise`), and a move
-#: along undetermined directions changes them by rounding, ~1e-8 whitened per row; on
-#: real data (a cost of about one per row) it is 1e-6 of the cost again.
+#: along undetermined directions changes them by rounding, at most ~1e-4 whitened per
+#: row at the floors; on real data (a cost of about one per row) it is 1e-6 of the cost
+#: again.
 ROUNDING_SLACK = 1e-6
 
 

@@ -308,8 +308,9 @@ def estimate_noise(
 
     values = dict(sigma.sigmas)
     for name, c in comps.items():
-        # the rounding of a prediction: 1e-12 m of a metre, 1e-15 rad, and 1e-9 px of an
-        # image's 1000 px (pixels of noise-free images are exact to ~1e-10 px, not 1e-12)
-        floor = {"rad": 1e-15, "px": 1e-9}.get(c.unit, 1e-12)
+        # noise-free data: ~100 times the rounding of a prediction (1e-13 m of a metre-
+        # sized robot, 1e-16 rad, 1e-13-1e-11 px), so that rounding whitens to ~0.01 and
+        # cannot tell directions apart that the data leave undetermined
+        floor = {"rad": 1e-14, "px": 1e-9}.get(c.unit, 1e-11)
         values[name] = float(max(sigma.sigma(c) * factor(name), floor))
     return NoiseModel(estimated=True, sigmas=values)
