@@ -176,7 +176,9 @@ def refine(
         ``l_y``).
     prior : (sigma_m, sigma_rad), optional
         Gaussian prior on the robot parameters' deviations from the nominal URDF (from
-        the start when the model lives in an external frame), for small datasets. With
+        the start when the model lives in an external frame), for small datasets: the
+        joints' (the CPC chart's axis tilts and line offsets, zero offsets); the end
+        frames' tools (a camera's mount) stay free, as ``"frames"`` fits them. With
         ``"full"``, the joint zero offsets are estimated too, under the same prior (a
         zero offset is one angle where the CPC chart would spread it over every axis
         below the joint: :func:`kinfw.identification.problem.robot_blocks`).

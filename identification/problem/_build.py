@@ -220,7 +220,15 @@ def _prior_rows(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Mean and sigma, shape (P,), of the Gaussian ``prior`` (sigma_m, sigma_rad) on the
     robot blocks' entries in rad and m (other units and without a prior: inf sigma); its
-    mean on the CPC chart is the nominal URDF when the model is in the root frame."""
+    mean on the CPC chart is the nominal URDF when the model is in the root frame.
+
+    The CPC chart's end-frame tools (a camera's or marker body's mount, the flange's tool
+    frame) have no prior: they are what ``"frames"`` fits freely, and a URDF's mount is
+    often a rough guess (centimetres, degrees), not a machined length. A prior there
+    pinned a wrist camera 3.5 cm and 118 sigma from its URDF guess (industrial_calibration's
+    circle grid, ``benchmarks/bench_circles_real.py``); without it ``"full"`` under a
+    tight prior tends to ``"frames"``, as FIGAROH's MAP priors do (frames estimated freely).
+    """
     prior_sigma = np.full(P, np.inf)
     prior_mean = np.zeros(P)
     if prior is not None:
@@ -232,8 +240,17 @@ def _prior_rows(
             if not isinstance(b, RobotBlock):
                 continue
             units = np.array(b.units)
-            prior_sigma[s] = np.select([units == "rad", units == "m"], [sigma_rad, sigma_m], np.inf)
+            sigma = np.select([units == "rad", units == "m"], [sigma_rad, sigma_m], np.inf)
+            if b.key == CPC_KEY:
+                sigma[_joint_entries(model0) :] = np.inf  # the end frames' tools: frames
+            prior_sigma[s] = sigma
             if b.key == CPC_KEY and model_frame is None:  # deviations from the nominal
                 nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
                 prior_mean[s] = model0.chart_coordinates(nominal)
     return prior_mean, prior_sigma
+
+
+def _joint_entries(model: CPCModel) -> int:
+    """Number of the CPC chart's joint entries (axis tilts, and line offsets of revolute
+    joints), which come before its end frames' tools (:attr:`CPCModel.parameter_names`)."""
+    return 2 * len(model.topology.joint_names) + 2 * int(np.sum(model.topology.revolute))

@@ -56,8 +56,8 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--prior-mm",
         type=POSITIVE_MM,
-        help="Gaussian prior on deviations from "
-        "the nominal: sigma of lengths, mm (for small datasets)",
+        help="Gaussian prior on the joints' deviations from the nominal (base and tool "
+        "frames stay free): sigma of lengths, mm (for small datasets)",
     )
     p.add_argument("--prior-deg", type=POSITIVE_DEG, help="... and of angles, deg")
 

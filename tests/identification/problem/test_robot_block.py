@@ -120,6 +120,10 @@ def test_the_gear_scale_is_reported_with_its_unit(geared):
     assert 0.0 < row.std < S_TRUE / 10  # 0.5 mm noise: the scale is well determined
 
 
+#: The CPC chart's fields of an end frame's tool (the rest are the joints').
+TOOL_FIELDS = ("rot_x", "rot_y", "rot_z", "x", "y", "z")
+
+
 def test_the_block_says_what_it_frees_per_parameter_set_and_takes_no_prior(geared):
     nominal, _, data, _, _ = geared
     for parameters, free in (("full", True), ("frames", False), ("none", False)):
@@ -130,7 +134,10 @@ def test_the_block_says_what_it_frees_per_parameter_set_and_takes_no_prior(geare
     _, s = problem.block(GEAR.key)
     assert np.isinf(problem.prior_sigma[s]).all()  # a unitless entry: no prior in m or rad
     _, s_cpc = problem.block(CPC_KEY)
-    assert np.isfinite(problem.prior_sigma[s_cpc]).all()  # the chart's rad and m entries
+    tools = np.array([n.field in TOOL_FIELDS for n in problem.names[s_cpc]])
+    assert tools.sum() == 6 * len(problem.model0.topology.frames)
+    assert np.isfinite(problem.prior_sigma[s_cpc][~tools]).all()  # the joints' rad and m
+    assert np.isinf(problem.prior_sigma[s_cpc][tools]).all()  # the end frames: as frames
     with pytest.raises(ValueError, match="the key gear_scale:tilt is taken"):
         build_problem(nominal, data, extra_blocks=(GEAR, GEAR))
 

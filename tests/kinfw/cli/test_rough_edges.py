@@ -56,8 +56,9 @@ def plates(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def long_poses(tmp_path_factory) -> Path:
-    """A set whose calibration takes seconds: long enough to interrupt."""
-    return _simulated(tmp_path_factory.mktemp("rough_long"), 200)
+    """A set whose calibration takes seconds: long enough to interrupt (200 samples
+    took 1.2 s once the noise rounds stopped when settled: finished before the signal)."""
+    return _simulated(tmp_path_factory.mktemp("rough_long"), 3000)
 
 
 def test_ctrl_c_prints_one_line_exits_130_and_writes_nothing(long_poses, tmp_path):
