@@ -88,3 +88,40 @@ def test_an_accepted_forced_full_fit_keeps_the_world_motion_at_the_nominal(nomin
     p = T[:, :3, :3] @ found["offset", "flange:probe1"] + T[:, :3, 3]
     predicted = np.linalg.norm(p - found["sphere", "ball"], axis=1) - 0.025
     assert np.sqrt(np.mean(predicted**2)) < 1e-4  # the truth: 0 (on the ball)
+
+
+def test_the_default_scores_the_candidates_when_plentiful_contacts_refuse_full(nominal):
+    """500 contacts of one level plane (0.1 mm noise): 10.4 residual rows per parameter,
+    enough for the default to take full unscored, but full drifts (1.6 m along what the
+    contacts do not determine) and is refused. The default says so and chooses among
+    the scored candidates; 200 held-out contacts of the true robot are on the calibrated
+    plane to 0.2 mm RMS (the nominal's: millimetres)."""
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=500, noise_m=1e-4, seed=10
+    )
+    with pytest.warns(UserWarning, match=r"--params auto: too little data to refine --params full"):
+        result = calibrate_and_report(nominal, sim.data)
+    assert result.model.reason.startswith("full refused (too little data to refine --params full")
+    assert "enough, but full alone was refused" in result.model.reason
+    found = {(u.kind, u.name): u.value for u in result.calibration.refined.unknowns}
+    names = sim.joint_names
+    (probe,) = sim.probes
+    q = contact_configurations(
+        sim.truth,
+        names,
+        *nominal.joint_limits(names),
+        200,
+        np.random.default_rng(4),
+        frame="flange",
+        offset=probe.offset,
+        plane=sim.plane,
+    )
+
+    def distances(robot, plane, offset):
+        T = robot.frame_poses(q, "flange", names)
+        return (T[:, :3, :3] @ offset + T[:, :3, 3]) @ plane[:3] - plane[3]
+
+    plane = found["plane", sim.plane_name]
+    calibrated = distances(result.robot, plane, found["offset", f"flange:{probe.name}"])
+    assert np.sqrt(np.mean(calibrated**2)) < 2e-4
+    assert np.sqrt(np.mean(distances(nominal, sim.plane, probe.offset) ** 2)) > 1e-3

@@ -3,15 +3,17 @@
 ``kinfw calibrate`` (``--params auto``, the default) asks :func:`choose_parameters`
 which model to fit. When the data is plentiful -- at least :data:`ROWS_PER_PARAMETER`
 residual rows per free parameter of the full set, a view (an image) counting at most
-:data:`VIEW_ROWS` -- every parameter can be estimated
-and ``"full"`` is chosen without cross-validation (fast: ``kinfw demo``'s 85 samples give
-about 20 rows per parameter). Otherwise each candidate is fitted once on all the data and
-scored by leave-one-sample-out cross-validation in closed form, linearised at its fit
-(:func:`kinfw.verification.evaluation.leave_one_out`: every sample predicted by the fit
-without it, one Gauss-Newton step away, no refit and no random partition); the candidate
-with the lowest whitened held-out error wins (each observed kind's error in its own
-metric, every noise component in units of its noise, so poses, points, image points,
-plane contacts and registered kinds mix:
+:data:`VIEW_ROWS` -- every parameter can be estimated and ``"full"`` is chosen without
+cross-validation (fast: ``kinfw demo``'s 85 samples give about 20 rows per parameter);
+if those data then refuse ``"full"`` (500 contacts of one plane: the fit drifts along
+what they do not determine), ``kinfw calibrate`` warns and scores the candidates after
+all (``cross_validate=True``). Otherwise each candidate is fitted once on all the data
+and scored by leave-one-sample-out cross-validation in closed form, linearised at its
+fit (:func:`kinfw.verification.evaluation.leave_one_out`: every sample predicted by the
+fit without it, one Gauss-Newton step away, no refit and no random partition); the
+candidate with the lowest whitened held-out error wins (each observed kind's error in
+its own metric, every noise component in units of its noise, so poses, points, image
+points, plane contacts and registered kinds mix:
 :func:`kinfw.verification.evaluation.whitened_score`):
 
 - ``"frames"``: nominal joints, base and tool frames fitted;
@@ -219,6 +221,7 @@ def choose_parameters(
     noise: NoiseModel | None = None,
     loss: str = "huber",
     prior: tuple[float, float] | None = None,
+    cross_validate: bool = False,
 ) -> ModelChoice:
     """Choose the parameter set and prior that predict held-out data best.
 
@@ -232,6 +235,11 @@ def choose_parameters(
     prior : (sigma_m, sigma_rad), optional
         A prior given by the user: every set is scored with it and no prior scale is
         searched.
+    cross_validate : bool
+        Score the candidates even on data with :data:`ROWS_PER_PARAMETER` rows per
+        parameter or more, where ``"full"`` is otherwise chosen unscored: for data that
+        refuse ``"full"`` alone (a fit that drifts along what they do not determine, as
+        500 contacts of one plane can).
 
     Returns
     -------
@@ -244,7 +252,7 @@ def choose_parameters(
         can be fitted on all the data (the calibration's own error).
     """
     ratio = rows_per_parameter(nominal, data)
-    if ratio >= ROWS_PER_PARAMETER:
+    if ratio >= ROWS_PER_PARAMETER and not cross_validate:
         return ModelChoice(
             "full",
             prior,
@@ -293,13 +301,20 @@ def choose_parameters(
         chosen.parameters,
         chosen.prior,
         f"leave-one-out cross-validation (closed form), {ratio:.1f} residual rows per free "
-        f"parameter of the full set (< {ROWS_PER_PARAMETER:g}): {why}",
+        f"parameter of the full set ({_enough(ratio)}): {why}",
         tuple(candidates),
         ratio,
         data.n_samples,
         excluded,
         fit=fits[candidates.index(chosen)],
     )
+
+
+def _enough(ratio: float) -> str:
+    """Why rows ``ratio`` per parameter were scored: too few, or full alone refused."""
+    if ratio < ROWS_PER_PARAMETER:
+        return f"< {ROWS_PER_PARAMETER:g}"
+    return "enough, but full alone was refused"
 
 
 def _fit(
@@ -402,7 +417,7 @@ def _simplest_best(candidates: list[Candidate], best: float) -> tuple[Candidate,
         why = (
             f"lowest held-out error ({chosen.whitened:.3g} whitened); full alone cannot be "
             "fitted on these data, or without one sample (too few residuals for its "
-            "parameters)"
+            "parameters, or a fit that drifts along what the data do not determine)"
         )
     else:
         (metric, mine), (_, theirs) = chosen.errors[0], full.errors[0]

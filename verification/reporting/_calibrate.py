@@ -294,6 +294,72 @@ def _warn_overlap(data: Measurements, held_out: Measurements) -> None:
     )
 
 
+def _fitted(
+    nominal: Robot,
+    data: Measurements,
+    parameters: str | tuple[str, ...],
+    prior: tuple[float, float] | None,
+    choice: ModelChoice | None,
+    *,
+    method: str,
+    noise: NoiseModel | None,
+    loss: str,
+    refine_intrinsics: bool | tuple[str, ...],
+) -> tuple[Calibration, ModelChoice | None]:
+    """The calibration with the chosen (or given) ``parameters`` and ``prior``, and the
+    model choice it came from: the choice's own fit when it has one; a refusal of given
+    parameters names what the data determine; a refusal of ``"full"`` that ``"auto"``
+    chose unscored (plentiful data) falls back to the scored choice."""
+    from kinfw.identification import calibrate
+
+    if choice is not None and choice.fit is not None and not refine_intrinsics:
+        return choice.fit, choice  # the chosen candidate, fitted on all the data
+    options = dict(method=method, noise=noise, loss=loss, refine_intrinsics=refine_intrinsics)
+    try:
+        return calibrate(nominal, data, parameters=parameters, prior=prior, **options), choice
+    except InsufficientDataError as exc:
+        if method != "refine" or (choice is not None and choice.k > 0):
+            raise
+        if choice is None:  # given parameters: refused, with what the data determine
+            raise InsufficientDataError(
+                f"{exc}{_determined_candidates(nominal, data, noise=noise, loss=loss)}"
+            ) from exc
+        choice = _scored_choice(nominal, data, exc, noise=noise, loss=loss, prior=prior)
+    if choice.fit is not None and not refine_intrinsics:
+        return choice.fit, choice
+    fit = calibrate(nominal, data, parameters=choice.parameters, prior=choice.prior, **options)
+    return fit, choice
+
+
+def _scored_choice(
+    nominal: Robot,
+    data: Measurements,
+    refusal: InsufficientDataError,
+    *,
+    noise: NoiseModel | None,
+    loss: str,
+    prior: tuple[float, float] | None,
+) -> ModelChoice:
+    """The model choice scored by cross-validation on data whose rows would choose
+    ``"full"`` unscored but which refuse it (``refusal``), said in a warning and in its
+    reason."""
+    from kinfw.verification.evaluation import choose_parameters
+
+    progress.stage("model choice: full refused; scoring the candidates")
+    choice = choose_parameters(
+        nominal, data, noise=noise, loss=loss, prior=prior, cross_validate=True
+    )
+    why = str(refusal).replace(f"{data.source}: ", "").split(": the exported")[0]
+    warnings.warn(
+        f"{data.source}: --params auto: {why}; chose {choice.label} by leave-one-out "
+        "cross-validation instead",
+        UserWarning,
+        stacklevel=3,
+    )
+    progress.stage(f"model choice: {choice.label}")
+    return dataclasses.replace(choice, reason=f"full refused ({why}); {choice.reason}")
+
+
 def _determined_candidates(
     nominal: Robot, data: Measurements, *, noise: NoiseModel | None, loss: str
 ) -> str:
@@ -304,7 +370,7 @@ def _determined_candidates(
 
     progress.stage("too little data: which parameter sets these data determine")
     try:
-        choice = choose_parameters(nominal, data, noise=noise, loss=loss)
+        choice = choose_parameters(nominal, data, noise=noise, loss=loss, cross_validate=True)
     except ValueError:
         return ""
     scored = sorted((c for c in choice.candidates if c.failed is None), key=lambda c: c.whitened)
@@ -388,8 +454,6 @@ def calibrate_and_report(
         ``nominal``, ``data`` or ``held_out`` is not a Robot / Measurements (a path:
         load it first), naming the argument.
     """
-    from kinfw.identification import calibrate
-
     nominal = check_robot(nominal, "nominal")
     data = check_measurements(data, "data")
     held_out = None if held_out is None else check_measurements(held_out, "held_out")
@@ -398,26 +462,19 @@ def calibrate_and_report(
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
     )
-    if choice is not None and choice.fit is not None and not refine_intrinsics:
-        result = choice.fit  # the chosen candidate, fitted on all the data with these options
-    else:
-        try:
-            result = calibrate(
-                nominal,
-                data,
-                method=method,
-                noise=noise,
-                loss=loss,
-                parameters=parameters,
-                prior=prior,
-                refine_intrinsics=refine_intrinsics,
-            )
-        except InsufficientDataError as exc:
-            if choice is not None or method != "refine":
-                raise
-            raise InsufficientDataError(
-                f"{exc}{_determined_candidates(nominal, data, noise=noise, loss=loss)}"
-            ) from exc
+    result, choice = _fitted(
+        nominal,
+        data,
+        parameters,
+        prior,
+        choice,
+        method=method,
+        noise=noise,
+        loss=loss,
+        refine_intrinsics=refine_intrinsics,
+    )
+    if choice is not None:
+        parameters, prior = choice.parameters, choice.prior
     evidence = None
     if method == "refine" and not refine_intrinsics:
         evidence = intrinsics_evidence(
