@@ -211,7 +211,7 @@ def _choice_table(choice) -> str:
     for c in choice.candidates:
         mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
         if c.failed is not None:
-            rows.append(f"  {c.label:<32} not fitted on a training fold (too few residuals)")
+            rows.append(f"  {c.label:<32} not scored: {_short_failure(c.failed)}")
             continue
         mine = dict(c.errors)
         cells = "".join(
@@ -220,6 +220,15 @@ def _choice_table(choice) -> str:
         )
         rows.append(f"  {c.label:<32} {c.whitened:>9.3g}{cells}{mark}")
     return "\n".join(rows)
+
+
+def _short_failure(failed: str) -> str:
+    """A candidate's refusal in a table row: from "too little data" (the data file's
+    name dropped) to the first detail in parentheses or after ", which"."""
+    text = failed[failed.find("too little data") :] if "too little data" in failed else failed
+    for stop in (" (the largest move", ", which it cannot", ": the exported"):
+        text = text.split(stop)[0]
+    return text if len(text) <= 120 else text[:117] + "..."
 
 
 def _noise_text(noise) -> str:

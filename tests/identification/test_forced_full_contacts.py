@@ -13,12 +13,17 @@ cannot see apart from the world's, at the nominal.
 
 from __future__ import annotations
 
+import contextlib
+import io
+
 import numpy as np
 import pytest
 
+from kinfw.cli._main import main
 from kinfw.geometry import inverse_transform
 from kinfw.identification import calibrate
 from kinfw.identification.checks import InsufficientDataError
+from kinfw.measurements import write_measurements
 from kinfw.model import load_robot
 from kinfw.simulation import contact_configurations, simulate_measurements
 from kinfw.verification.reporting import calibrate_and_report
@@ -125,3 +130,21 @@ def test_the_default_scores_the_candidates_when_plentiful_contacts_refuse_full(n
     calibrated = distances(result.robot, plane, found["offset", f"flange:{probe.name}"])
     assert np.sqrt(np.mean(calibrated**2)) < 2e-4
     assert np.sqrt(np.mean(distances(nominal, sim.plane, probe.offset) ** 2)) > 1e-3
+
+
+def test_the_choice_table_says_why_full_alone_is_not_scored(nominal, tmp_path):
+    """``kinfw calibrate`` on 90 contacts of one plane (default options): the candidates'
+    table gives full alone's refusal (it drifts along what contacts do not determine),
+    not a training fold's (there are none: leave-one-out in closed form)."""
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=90, noise_m=1e-4, seed=7
+    )
+    write_measurements(tmp_path / "d.json", sim.data)
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    argv = ["calibrate", tmp_path / "d.json", "--urdf", tmp_path / "arm.urdf"]
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        assert main([str(a) for a in [*argv, "--out", tmp_path / "c.urdf"]]) == 0
+    (row,) = [x for x in out.getvalue().splitlines() if x.strip().startswith("full  ")]
+    assert "not scored: too little data to refine --params full: the fit" in row
+    assert "training fold" not in out.getvalue()
