@@ -8,9 +8,10 @@ Data: ros-industrial/industrial_calibration's ``examples/data/test_set_10x10`` (
 by a Kinect on an industrial arm's wrist; the nominal intrinsics fx = fy = 550 px, no
 distortion, uncalibrated), as ``../shared/data/industrial_calibration_circles`` holds it
 (its README gives the provenance). No joint angles were logged, only the flange poses;
-they are written as a six-joint chain (x, y, z prismatic, then yaw, pitch, roll about z,
-y, x: ``base_T_tool0 = Trans(x, y, z) Rz Ry Rx``), exact by construction, with the camera's
-optical frame on a fixed joint of ``tool0`` at the source's own guess (90 deg about z).
+they are written as the six-joint chain of ``kinfw pose-chain`` (x, y, z prismatic, then
+yaw, pitch, roll about z, y, x: ``base_T_tool0 = Trans(x, y, z) Rz Ry Rx``), exact by
+construction, with the camera's optical frame on a fixed joint of ``tool0`` (identity
+start).
 The right model is then the camera mount and the board pose alone ("frames"); "offsets"
 and "full" can only fit the uncalibrated intrinsics' error into the chain.
 
@@ -46,62 +47,31 @@ DATA = REPO.parent / "shared" / "data" / "industrial_calibration_circles"
 BOARD = "circles:10x10:0.0254:0.01:0.02"
 SETS = ("frames", "offsets", "full")
 
-_CHAIN = """<?xml version="1.0"?>
-<robot name="flange_pose_chain">
-  <link name="base_link"/>
-  {links}
-  <joint name="camera_joint" type="fixed">
-    <parent link="tool0"/><child link="camera_optical"/>
-    <origin xyz="0 0 0" rpy="0 0 -1.5707963267948966"/>
-  </joint>
-  <link name="camera_optical"/>
-</robot>
-"""
-#: (joint, type, axis): the flange pose as a chain, base_T_tool0 = Trans(x, y, z) Rz Ry Rx
-_JOINTS = (
-    ("x", "prismatic", "1 0 0"),
-    ("y", "prismatic", "0 1 0"),
-    ("z", "prismatic", "0 0 1"),
-    ("yaw", "revolute", "0 0 1"),
-    ("pitch", "revolute", "0 1 0"),
-    ("roll", "revolute", "1 0 0"),
-)
-
-
-def chain_urdf() -> str:
-    """The six-joint chain whose joint values are the flange poses."""
-    parts, parent = [], "base_link"
-    for i, (name, kind, axis) in enumerate(_JOINTS):
-        child = "tool0" if i == len(_JOINTS) - 1 else f"{name}_link"
-        limit = "-2.0 2.0" if kind == "prismatic" else "-3.5 3.5"
-        lower, upper = limit.split()
-        parts.append(
-            f'<joint name="{name}" type="{kind}"><parent link="{parent}"/>'
-            f'<child link="{child}"/><origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="{axis}"/>'
-            f'<limit lower="{lower}" upper="{upper}" effort="1" velocity="1"/></joint>'
-            f'<link name="{child}"/>'
-        )
-        parent = child
-    return _CHAIN.format(links="\n  ".join(parts))
-
 
 def joint_rows(flange_csv: Path) -> list[dict[str, str]]:
-    """Per image its joint values: the position, and the rotation's z-y-x angles."""
+    """Per image its joint values on the pose chain
+    (:func:`kinfw.model.pose_chain_joint_values`)."""
     from kinfw.geometry import transform_from_xyz_quat_xyzw
+    from kinfw.model import POSE_CHAIN_JOINTS, pose_chain_joint_values
 
-    rows = []
     with flange_csv.open(newline="") as f:
-        for r in csv.DictReader(f):
-            R = transform_from_xyz_quat_xyzw(
-                np.zeros(3), [float(r[k]) for k in ("qx", "qy", "qz", "qw")]
-            )[:3, :3]
-            yaw = np.arctan2(R[1, 0], R[0, 0])
-            pitch = np.arcsin(-np.clip(R[2, 0], -1.0, 1.0))
-            roll = np.arctan2(R[2, 1], R[2, 2])
-            values = [float(r["x"]), float(r["y"]), float(r["z"]), yaw, pitch, roll]
-            named = zip((j[0] for j in _JOINTS), values, strict=True)
-            rows.append({"image": r["image"], **{n: repr(float(v)) for n, v in named}})
-    return rows
+        rows = list(csv.DictReader(f))
+    base_T_tool0 = np.stack(
+        [
+            transform_from_xyz_quat_xyzw(
+                [float(r[k]) for k in "xyz"], [float(r[k]) for k in ("qx", "qy", "qz", "qw")]
+            )
+            for r in rows
+        ]
+    )
+    q = pose_chain_joint_values(base_T_tool0)
+    return [
+        {
+            "image": r["image"],
+            **{n: repr(float(v)) for n, v in zip(POSE_CHAIN_JOINTS, qi, strict=True)},
+        }
+        for r, qi in zip(rows, q, strict=True)
+    ]
 
 
 def detect(data_dir: Path, tmp: Path) -> Path:
@@ -149,14 +119,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from kinfw.identification import calibrate
     from kinfw.measurements import read_measurements
-    from kinfw.model import load_robot
+    from kinfw.model import load_robot, pose_chain_urdf
     from kinfw.verification.evaluation import choose_parameters
 
     started = time.perf_counter()
     print(machine_info())
     with tempfile.TemporaryDirectory() as tmp:
         urdf = Path(tmp, "chain.urdf")
-        urdf.write_text(chain_urdf())
+        urdf.write_text(pose_chain_urdf(camera="camera_optical", hand="tool0", base="base_link"))
         nominal = load_robot(urdf)
         data = read_measurements(detect(args.data, Path(tmp)))
     print(f"\n{data.n_samples} images detected ({BOARD}); {args.k}-fold by image, seed 0")

@@ -52,6 +52,7 @@ from kinfw.cli._fleet import add_fleet_parser
 from kinfw.cli._gaze import add_gaze_parser
 from kinfw.cli._handeye import add_handeye_parser
 from kinfw.cli._plan import add_plan_parser
+from kinfw.cli._pose_chain import add_pose_chain_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
 
@@ -107,6 +108,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     add_gaze_parser,
     add_reach_parser,
     add_handeye_parser,
+    add_pose_chain_parser,
     add_export_parser,
 )
 

@@ -136,11 +136,14 @@ from kinfw.measurements._file import (
 )
 from kinfw.measurements._mounts import Mount, mounted_robot
 from kinfw.measurements._pose_pairs import (
+    HAND_POSE_COLUMNS,
     MIN_POSE_PAIRS,
     POSE_PAIR_COLUMNS,
+    HandPoses,
     PosePairs,
     pose_pairs_from_measurements,
     pose_pairs_text,
+    read_hand_poses,
     read_pose_pairs,
     target_views,
 )
@@ -155,6 +158,7 @@ __all__ = [
     "DISTINCT_TOL",
     "DROP_REASONS",
     "FORMAT",
+    "HAND_POSE_COLUMNS",
     "IGNORED_COLUMNS",
     "IMAGE_JOINTS_CSV",
     "IMAGE_STAMPS_JSON",
@@ -164,6 +168,7 @@ __all__ = [
     "BagAlignment",
     "BagImages",
     "BagRecording",
+    "HandPoses",
     "JointStates",
     "MeasuredStream",
     "Measurements",
@@ -190,6 +195,7 @@ __all__ = [
     "pose_pairs_from_measurements",
     "pose_pairs_text",
     "read_bag",
+    "read_hand_poses",
     "read_measurements",
     "read_pose_csv",
     "read_pose_pairs",

@@ -47,11 +47,14 @@ from kinfw.geometry import (
 from kinfw.observations import QUAT_NORM_TOL, DatasetError
 
 __all__ = [
+    "HAND_POSE_COLUMNS",
     "MIN_POSE_PAIRS",
     "POSE_PAIR_COLUMNS",
+    "HandPoses",
     "PosePairs",
     "pose_pairs_from_measurements",
     "pose_pairs_text",
+    "read_hand_poses",
     "read_pose_pairs",
     "target_views",
 ]
@@ -63,6 +66,8 @@ POSE_PAIR_COLUMNS = tuple(
     for pose in ("hand", "sensor")
     for part in ("x", "y", "z", "qx", "qy", "qz", "qw")
 )
+#: The columns of :func:`read_hand_poses`: ``base_T_hand`` alone.
+HAND_POSE_COLUMNS = POSE_PAIR_COLUMNS[:7]
 #: Fewer pairs than this cannot determine a hand-eye transform (two relative motions
 #: about different axes need three poses).
 MIN_POSE_PAIRS = 3
@@ -125,24 +130,28 @@ def _pose(xyz, quat_xyzw, where: str) -> NDArray[np.float64]:
     return transform_from_xyz_quat_xyzw(xyz, q)
 
 
-def _read_csv(path: Path, text: str) -> PosePairs:
+def _csv_rows(
+    path: Path, text: str, columns: tuple[str, ...], what: str
+) -> tuple[list[str], list[tuple[int, list[str], list[float]]]]:
+    """The CSV's header and, per non-empty row, its line number, cells and the numbers of
+    ``columns`` (any order in the file, other columns kept in the cells); ``what`` says
+    what the columns are, for the error naming a missing one."""
     rows = list(csv.reader(text.lstrip("\ufeff").splitlines()))
     rows = [(i, r) for i, r in enumerate(rows, start=1) if any(c.strip() for c in r)]
     if not rows:
-        raise DatasetError(f"{path}: empty; expected a header with {', '.join(POSE_PAIR_COLUMNS)}")
+        raise DatasetError(f"{path}: empty; expected a header with {', '.join(columns)}")
     header = [c.strip() for c in rows[0][1]]
-    missing = [c for c in POSE_PAIR_COLUMNS if c not in header]
+    missing = [c for c in columns if c not in header]
     if missing:
         raise DatasetError(
             f"{path}: header lacks column(s) {', '.join(missing)} (the columns are "
-            f"{', '.join(POSE_PAIR_COLUMNS)}: base_T_hand and sensor_T_target, position "
-            "then quaternion scalar last)"
+            f"{', '.join(columns)}: {what}, position then quaternion scalar last)"
         )
-    index = [header.index(c) for c in POSE_PAIR_COLUMNS]
-    hands, sensors = [], []
+    index = [header.index(c) for c in columns]
+    out = []
     for line, row in rows[1:]:
         values = []
-        for c, k in zip(POSE_PAIR_COLUMNS, index, strict=True):
+        for c, k in zip(columns, index, strict=True):
             cell = row[k].strip() if k < len(row) else ""
             try:
                 values.append(float(cell))
@@ -150,9 +159,70 @@ def _read_csv(path: Path, text: str) -> PosePairs:
                 raise DatasetError(
                     f"{path}: row {line}, column {c!r}: {cell!r} is not a number"
                 ) from None
+        out.append((line, row, values))
+    return header, out
+
+
+def _read_csv(path: Path, text: str) -> PosePairs:
+    what = "base_T_hand and sensor_T_target"
+    _, rows = _csv_rows(path, text, POSE_PAIR_COLUMNS, what)
+    hands, sensors = [], []
+    for line, _, values in rows:
         hands.append(_pose(values[0:3], values[3:7], f"{path}: row {line}, hand_q*"))
         sensors.append(_pose(values[7:10], values[10:14], f"{path}: row {line}, sensor_q*"))
     return _pairs(hands, sensors, str(path), None)
+
+
+@dataclass(frozen=True, slots=True)
+class HandPoses:
+    """The hand's logged poses, one per image (``kinfw pose-chain``).
+
+    Attributes
+    ----------
+    base_T_hands : ndarray, shape (n, 4, 4)
+        Pose of the hand in the robot's base, the file's length unit.
+    images : tuple of str, or None
+        The ``image`` column (each row's image file), when the file has one.
+    source : str
+        The file's path, for messages.
+    """
+
+    base_T_hands: NDArray[np.float64]
+    images: tuple[str, ...] | None
+    source: str
+
+
+def read_hand_poses(path: str | Path) -> HandPoses:
+    """Read the hand's poses from a CSV: the ``hand_*`` columns of
+    :data:`POSE_PAIR_COLUMNS` (``base_T_hand``: position, quaternion scalar last) and,
+    optionally, an ``image`` column naming each row's image.
+
+    Raises
+    ------
+    DatasetError
+        A missing or unreadable file, a missing column, a cell that is not a number
+        (file, row and column), a quaternion that is not unit (file, row), an empty image
+        name, or fewer than :data:`MIN_POSE_PAIRS` rows.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        raise DatasetError(f"{path}: cannot read ({err.strerror or err})") from None
+    header, rows = _csv_rows(path, text, HAND_POSE_COLUMNS, "base_T_hand")
+    poses = [_pose(v[0:3], v[3:7], f"{path}: row {line}, hand_q*") for line, _, v in rows]
+    if len(poses) < MIN_POSE_PAIRS:
+        raise DatasetError(
+            f"{path}: {len(poses)} hand pose(s); at least {MIN_POSE_PAIRS} are needed"
+        )
+    images = None
+    if "image" in header:
+        k = header.index("image")
+        images = tuple(row[k].strip() if k < len(row) else "" for _, row, _ in rows)
+        empty = [line for (line, _, _), name in zip(rows, images, strict=True) if not name]
+        if empty:
+            raise DatasetError(f"{path}: row {empty[0]}: the 'image' cell is empty")
+    return HandPoses(np.stack(poses), images, str(path))
 
 
 def _matrix(value, where: str) -> NDArray[np.float64]:

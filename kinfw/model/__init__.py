@@ -30,6 +30,7 @@ from kinfw.model._cpc import (
 )
 from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
 from kinfw.model._meshes import MissingMesh, mesh_dirs, resolve_meshes
+from kinfw.model._pose_chain import POSE_CHAIN_JOINTS, pose_chain_joint_values, pose_chain_urdf
 from kinfw.model._robot import (
     Robot,
     Topology,
@@ -55,6 +56,7 @@ from kinfw.model._urdf_read import (
 __all__ = [
     "CPC_KEY",
     "MOVABLE_TYPES",
+    "POSE_CHAIN_JOINTS",
     "XACRO_NAMESPACE",
     "BaseBlock",
     "Block",
@@ -90,6 +92,8 @@ __all__ = [
     "parse_joints",
     "perpendicular_basis",
     "pinocchio_model",
+    "pose_chain_joint_values",
+    "pose_chain_urdf",
     "resolve_meshes",
     "rotation_from_axis",
     "up_vector",
