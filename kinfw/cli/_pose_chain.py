@@ -29,13 +29,14 @@ def add_pose_chain_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "pose-chain",
         help="hand poses without joint values: a six-joint chain URDF and its joints file",
-        description="Read the hand's logged poses (base_T_hand: a CSV with the columns "
-        "hand_x, hand_y, hand_z, hand_qx, hand_qy, hand_qz, hand_qw, quaternion scalar last, "
-        "and optionally 'image' naming each row's image) and write a URDF whose six joints "
-        "(x, y, z prismatic; yaw, pitch, roll revolute) put its hand at each pose exactly, "
-        "with the camera's link on a fixed joint, and the joints file kinfw detect pairs "
-        "with the images. Calibrate with --params frames: the camera's mount and the "
-        "board's pose from the pixels (the chain has no kinematic error to fit).",
+        description="Read the hand's logged poses (base_T_hand: a CSV with the columns hand_x, "
+        "hand_y, hand_z, hand_qx, hand_qy, hand_qz, hand_qw, or x, y, z, qx, qy, qz, qw, "
+        "quaternion scalar last, and optionally 'image' naming each row's image) and "
+        "write a URDF whose six joints (x, y, z prismatic; yaw, pitch, roll revolute) put"
+        " its hand at each pose exactly, with the camera's link on a fixed joint, and the"
+        " joints file kinfw detect pairs with the images. Calibrate with --params frames:"
+        " the camera's mount and the board's pose from the pixels (the chain has no "
+        "kinematic error to fit).",
     )
     p.add_argument("poses", type=Path, help="CSV of the hand's poses in the base")
     p.add_argument(

@@ -68,6 +68,8 @@ POSE_PAIR_COLUMNS = tuple(
 )
 #: The columns of :func:`read_hand_poses`: ``base_T_hand`` alone.
 HAND_POSE_COLUMNS = POSE_PAIR_COLUMNS[:7]
+#: The same without the ``hand_`` prefix, which :func:`read_hand_poses` also reads.
+PLAIN_POSE_COLUMNS = tuple(c.removeprefix("hand_") for c in HAND_POSE_COLUMNS)
 #: Fewer pairs than this cannot determine a hand-eye transform (two relative motions
 #: about different axes need three poses).
 MIN_POSE_PAIRS = 3
@@ -194,8 +196,9 @@ class HandPoses:
 
 def read_hand_poses(path: str | Path) -> HandPoses:
     """Read the hand's poses from a CSV: the ``hand_*`` columns of
-    :data:`POSE_PAIR_COLUMNS` (``base_T_hand``: position, quaternion scalar last) and,
-    optionally, an ``image`` column naming each row's image.
+    :data:`POSE_PAIR_COLUMNS` (``base_T_hand``: position, quaternion scalar last), or the
+    same without the prefix (:data:`PLAIN_POSE_COLUMNS`: ``x, y, z, qx, qy, qz, qw``),
+    and, optionally, an ``image`` column naming each row's image.
 
     Raises
     ------
@@ -209,7 +212,12 @@ def read_hand_poses(path: str | Path) -> HandPoses:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise DatasetError(f"{path}: cannot read ({err.strerror or err})") from None
-    header, rows = _csv_rows(path, text, HAND_POSE_COLUMNS, "base_T_hand")
+    columns = HAND_POSE_COLUMNS
+    first = text.lstrip("\ufeff").splitlines()[:1]
+    named = {c.strip() for c in next(csv.reader(first), [])}
+    if not named >= set(HAND_POSE_COLUMNS) and named >= set(PLAIN_POSE_COLUMNS):
+        columns = PLAIN_POSE_COLUMNS  # x, y, z, qx, qy, qz, qw without the hand_ prefix
+    header, rows = _csv_rows(path, text, columns, "base_T_hand")
     poses = [_pose(v[0:3], v[3:7], f"{path}: row {line}, hand_q*") for line, _, v in rows]
     if len(poses) < MIN_POSE_PAIRS:
         raise DatasetError(

@@ -16,6 +16,7 @@ import pytest
 
 from kinfw.cli._main import main
 from kinfw.geometry import matrix_from_rotation_vector, xyz_quat_xyzw_from_transform
+from kinfw.measurements import read_hand_poses
 from kinfw.model import POSE_CHAIN_JOINTS, load_robot, pose_chain_joint_values, pose_chain_urdf
 from kinfw.observations import DatasetError
 from tests.paths import HEAD_URDF
@@ -77,11 +78,22 @@ def test_bad_pose_files_are_refused_naming_the_row(tmp_path, capsys):
     argv += ["--urdf-out", str(tmp_path / "c.urdf"), "--joints-out", str(tmp_path / "j.csv")]
     assert main(argv) != 0
     assert "row 6, hand_q*" in capsys.readouterr().err and not (tmp_path / "c.urdf").exists()
-    with pytest.raises(DatasetError, match="header lacks column"):
-        from kinfw.measurements import read_hand_poses
-
-        (tmp_path / "q.csv").write_text("image,x,y,z,qx,qy,qz,qw\na,0,0,0,0,0,0,1\n")
+    (tmp_path / "q.csv").write_text("image,x,y,z,qx,qy,q_z,qw\na,0,0,0,0,0,0,1\n")
+    with pytest.raises(DatasetError, match=r"header lacks column.*hand_qz"):
         read_hand_poses(tmp_path / "q.csv")
+
+
+def test_the_columns_without_the_hand_prefix_are_read_alike(tmp_path):
+    """``x, y, z, qx, qy, qz, qw`` (a flange-pose log as industrial_calibration's poses
+    give it) read as the ``hand_*`` columns do."""
+    T = _poses(5, 3)
+    _write_poses(tmp_path / "a.csv", list("abcde"), T)
+    text = (tmp_path / "a.csv").read_text().replace("hand_", "", 7)
+    (tmp_path / "b.csv").write_text(text)
+    a, b = read_hand_poses(tmp_path / "a.csv"), read_hand_poses(tmp_path / "b.csv")
+    np.testing.assert_allclose(b.base_T_hands, T, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(a.base_T_hands, b.base_T_hands)
+    assert b.images == tuple("abcde")
 
 
 def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_path):
