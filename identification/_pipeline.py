@@ -225,6 +225,7 @@ def calibrate(
             nominal,
             geometry_from_cpc(refined.model),
             root_is_measurement_frame=refined.model_frame is None,
+            base_motion=refined.w_T_base,
         )
         xml = export.urdf_xml
         stages.append(("refine", xml))
@@ -315,6 +316,11 @@ def _try_closed_form(
 ) -> tuple[ClosedFormResult | None, str]:
     """The closed form of :func:`calibrate`, or None and why it was skipped (a refusal
     raises with ``method="closed-form"`` and for a unit error)."""
+    if nominal.exact_joints and method != "closed-form":
+        return None, (
+            f"closed form skipped: it would move the exact joints {list(nominal.exact_joints)}"
+            " (the URDF's <kinfw exact>); the refinement starts from the nominal"
+        )
     try:
         return identify_closed_form(nominal, data), ""
     except ProtocolError as exc:
@@ -406,6 +412,7 @@ def _undetermined_refusal(
                 nominal,
                 geometry_from_cpc(refined.model),
                 root_is_measurement_frame=refined.model_frame is None,
+                base_motion=refined.w_T_base,
             ).urdf_xml,
             nominal.source,
         )

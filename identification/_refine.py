@@ -576,6 +576,7 @@ def _rated(fitted: _Fitted, loss: str) -> RefineResult:
         converged=solution.converged,
         undetermined=solution.undetermined,
         noise_settled=solution.settled,
+        w_T_base=problem.base_motion_at(x),
         cost=quality.cost,
         seconds=fitted.seconds + time.perf_counter() - t0,
     )

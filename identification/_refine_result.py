@@ -84,6 +84,10 @@ class RefineResult:
         Whether the noise estimate reached its fixed point (no sigma changed by more
         than ``NOISE_SETTLED`` of itself in the last round, after a converged round)
         before the noise rounds ran out; True when the noise was given.
+    w_T_base : ndarray, shape (4, 4), or None
+        The estimated rigid motion of the whole nominal robot in the model frame (the
+        base block), folded into :attr:`model`; None when the parameter set left it
+        fixed (``"full"``). The URDF export writes it into the root's fixed joint.
     """
 
     model: CPCModel
@@ -107,6 +111,7 @@ class RefineResult:
     rejection_note: str | None = None
     undetermined: float = 0.0
     noise_settled: bool = True
+    w_T_base: NDArray[np.float64] | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -95,6 +95,18 @@ def _cpc_free(
     return free & (tools | np.isin(np.arange(len(names)), sorted(wanted)))
 
 
+def _without_exact(
+    parameters: str | tuple[str, ...], topo: Any, exact: NDArray[np.bool_]
+) -> str | tuple[str, ...]:
+    """``"full"`` without the joints whose kinematics is exact (``exact``, along
+    ``topo.joint_names``: :attr:`kinfw.model.Robot.exact_joints`): the mask of the others,
+    or ``"frames"`` when every joint is exact; other sets as given."""
+    if parameters != "full" or not exact.any():
+        return parameters
+    rest = tuple(name for name, e in zip(topo.joint_names, exact, strict=True) if not e)
+    return rest or "frames"
+
+
 def robot_blocks(
     model0: CPCModel,
     robot: Robot,
@@ -119,7 +131,9 @@ def robot_blocks(
     model_frame : str or None
         The external frame the model is expressed in, None for the URDF root.
     parameters : str or tuple of str
-        The parameter set (see :func:`kinfw.identification.refine`).
+        The parameter set (see :func:`kinfw.identification.refine`). The joints
+        ``robot.exact_joints`` names keep their nominal CPC parameters and zero offsets
+        under every set: ``"full"`` is then the mask of the other joints.
     with_prior : bool
         Whether a Gaussian prior restrains the robot's parameters. With ``"full"`` the
         joint zero offsets are then free too: redundant with the CPC chart without a
@@ -137,15 +151,18 @@ def robot_blocks(
         is taken.
     """
     observed = model0.topology.frames
+    topo = model0.topology
+    exact = np.isin(topo.joint_names, robot.exact_joints)
     cpc = CPCBlock(
-        CPC_KEY, free=_cpc_free(model0, robot, groups, observed, parameters), model=model0
+        CPC_KEY,
+        free=_cpc_free(model0, robot, groups, observed, _without_exact(parameters, topo, exact)),
+        model=model0,
     )
     in_model_frame = any(
         kind_of(g).has_measured_in and kind_of(g).measured_in(g) == model_frame for g in groups
     )
-    base_free = parameters not in ("full", "none") and in_model_frame
+    base_free = _without_exact(parameters, topo, exact) not in ("full", "none") and in_model_frame
     base = BaseBlock(BlockKey("base"), free=np.full(6, base_free), start=np.eye(4))
-    topo = model0.topology
     # a zero offset is redundant with a tool when the joint carries only end frames, and
     # with the base when only prismatic joints lie above it (a constant translation)
     useful = np.array(
@@ -158,7 +175,7 @@ def robot_blocks(
     )
     zero = ZeroOffsetBlock(
         BlockKey("zero_offset"),
-        free=useful & (parameters == "offsets" or (parameters == "full" and with_prior)),
+        free=useful & ~exact & (parameters == "offsets" or (parameters == "full" and with_prior)),
         joint_names=tuple(topo.joint_names),
         revolute=tuple(bool(r) for r in topo.revolute),
     )

@@ -520,6 +520,16 @@ class LeastSquaresProblem:
                 model = b.moved_model(model, x[s])
         return model
 
+    def base_motion_at(self, x: NDArray) -> NDArray[np.float64] | None:
+        """The base's estimate at ``x``: the rigid motion ``w_T_base`` of the whole
+        nominal robot in the model frame (:class:`kinfw.model.BaseBlock`), or None when
+        the parameter set left the base fixed (``"full"``: the chart's first joints carry
+        it)."""
+        for b, s in zip(self.blocks, self.slices, strict=True):
+            if b.key == BlockKey("base") and b.free.any():
+                return b.numpy_value(x[s])
+        return None
+
     def start_context(self, measurements: Measurements) -> StartContext:
         """The start model's poses at the samples of ``measurements`` (those the problem
         was built from) and the external frames' starts, for the kinds' estimators."""

@@ -170,6 +170,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         _print_refine(report.refine, has_report=bool(args.report))
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
+    _print_origin_changes(result.nominal, result.robot)
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))
@@ -192,6 +193,37 @@ def _print_reprojection(rep) -> None:
             f"{i.image} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}" for i in rep.worst[:5]
         )
     )
+
+
+def _print_origin_changes(nominal, calibrated, shown: int = 8) -> None:
+    """The joints whose origin the calibrated URDF changed, largest shift first: the
+    camera's mount, a joint's offset (:func:`kinfw.urdf.origin_changes`)."""
+    import pinocchio as pin
+
+    from kinfw.urdf import origin_changes
+
+    changes = origin_changes(nominal, calibrated)
+    if not changes:
+        print("the calibrated URDF has the nominal's joint origins and axes")
+        return
+    rows = [
+        [
+            c.joint,
+            f"{1e3 * c.shift_m:.3g}",
+            f"{math.degrees(c.turn_rad):.3g}",
+            f"{math.degrees(c.axis_turn_rad):.3g}",
+            " ".join(f"{1e3 * v:.2f}" for v in c.parent_T_child[:3, 3]),
+            " ".join(
+                f"{math.degrees(v):.3f}" for v in pin.rpy.matrixToRpy(c.parent_T_child[:3, :3])
+            ),
+        ]
+        for c in changes[:shown]
+    ]
+    print("joint origins the calibration changed (calibrated vs nominal, largest first):")
+    header = ["joint", "moved mm", "turned deg", "axis deg", "origin xyz mm", "origin rpy deg"]
+    print(format_table(rows, header))
+    if len(changes) > shown:
+        print(f"  ... and {len(changes) - shown} more (the calibrated URDF has them all)")
 
 
 def _intrinsics_arg(frames: list[str] | None) -> bool | tuple[str, ...]:

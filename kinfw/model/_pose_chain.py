@@ -14,8 +14,9 @@ they go through ``kinfw detect`` and ``kinfw calibrate`` as any robot's: the cam
 link on a fixed joint of the hand (eye-in-hand) or of the base (eye-to-hand), and
 ``--params frames`` fits the camera's mount and the board's pose from the pixels
 (maximum likelihood in pixels, not from PnP poses). The chain is exact by construction:
-its joints carry no kinematic error to calibrate (``offsets``, ``full`` would fit the
-logged poses' own errors).
+its joints carry no kinematic error to calibrate, and the URDF says so
+(``<kinfw exact="pose_x ..."/>``, :attr:`kinfw.model.Robot.exact_joints`): no parameter
+set estimates them, and ``--params auto`` is ``frames``.
 
 The angles are Pinocchio's roll-pitch-yaw (``pinocchio.rpy.matrixToRpy``: ``R = Rz(yaw)
 Ry(pitch) Rx(roll)``); pitch in [-pi/2, pi/2], the others in (-pi, pi]. Near pitch = +-pi/2
@@ -84,7 +85,8 @@ def pose_chain_urdf(
     Returns
     -------
     str
-        The URDF text.
+        The URDF text, with the hint ``<kinfw exact="pose_x ... pose_roll"
+        cameras="{camera}"/>``.
 
     Raises
     ------
@@ -118,5 +120,7 @@ def pose_chain_urdf(
         f"  </joint>\n"
         f'  <link name="{camera}"/>'
     )
+    # kinfw's hints: the chain's joints are exact (never calibrated), the camera observes
+    parts.append(f'  <kinfw exact="{" ".join(POSE_CHAIN_JOINTS)}" cameras="{camera}"/>')
     body = "\n".join(parts)
     return f'<?xml version="1.0"?>\n<robot name="{name}">\n{body}\n</robot>\n'

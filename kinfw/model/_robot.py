@@ -16,6 +16,7 @@ The URDF text is read and checked in :mod:`kinfw.model` (where :class:`JointInfo
 
 from __future__ import annotations
 
+import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -111,6 +112,18 @@ class Topology:
         return tuple(sorted(i for i, c in counts.items() if c > 1))
 
 
+def _hints(element: ET.Element, source: str) -> dict[str, str]:
+    """The attributes of the ``<kinfw>`` elements under ``<robot>``, merged (one element
+    or several); an attribute given twice is refused."""
+    out: dict[str, str] = {}
+    for hint in element.findall("kinfw"):
+        for key, value in hint.attrib.items():
+            if key in out:
+                raise RobotModelError(f"{source}: <kinfw {key}> is given twice")
+            out[key] = value
+    return out
+
+
 class Robot:
     """A URDF robot model for forward kinematics and topology queries.
 
@@ -139,6 +152,13 @@ class Robot:
         ``<gazebo>``); empty when absent. The command line uses them as defaults.
     default_up : ndarray, shape (3,), or None
         The root frame's "up" direction for viewers, from ``<kinfw up="x y z"/>``.
+    exact_joints : tuple of str
+        Movable joints whose kinematics is exact, from ``<kinfw exact="j1 j2"/>``: their
+        CPC parameters and zero offsets are never estimated, whatever the parameter set
+        (a pose chain's joints, :func:`kinfw.model.pose_chain_urdf`, reproduce logged
+        poses and carry no kinematic error). Every movable joint above an exact one must be
+        exact too (they are a path's first joints), so their URDF origins and axes stay
+        as written. Empty when absent.
     """
 
     def __reduce__(self) -> tuple:
@@ -149,17 +169,32 @@ class Robot:
         self.urdf_xml = urdf_xml
         self.source = source
         element = check_urdf_xml(urdf_xml, source)
-        hint = element.find("kinfw")
+        hint = _hints(element, source)
         self.joints, self.link_names, self.root_link = parse_joints(element, source)
         self.model = pinocchio_model(urdf_xml, source)
         self._data = self.model.createData()
         self._joint_by_name = {j.name: j for j in self.joints}
         self._joint_by_child = {j.child: j for j in self.joints}
         self.joint_names = tuple(j.name for j in self.joints if j.is_movable)
-        hint = {} if hint is None else hint.attrib
         self.default_frames = tuple(hint.get("frames", "").split())
         self.default_cameras = tuple(hint.get("cameras", "").split())
         self.default_up = up_vector(hint.get("up"), source)
+        self.exact_joints = tuple(hint.get("exact", "").split())
+        not_movable = [n for n in self.exact_joints if n not in self.joint_names]
+        if not_movable:
+            raise RobotModelError(
+                f"{source}: <kinfw exact> names {not_movable}, which are not movable joints "
+                f"of the URDF; movable joints are {list(self.joint_names)}"
+            )
+        for name in self.exact_joints:  # the first joints of their paths (CPC's frames)
+            above = [j.name for j in self.path_joints(self.joint(name).child) if j.is_movable]
+            inexact = [j for j in above if j not in self.exact_joints]
+            if inexact:
+                raise RobotModelError(
+                    f"{source}: <kinfw exact> names {name!r} but not {inexact}, above it: "
+                    "exact joints must be the first movable joints of their paths (every "
+                    "joint above an exact one exact too)"
+                )
         for name in (*self.default_frames, *self.default_cameras):
             if not self.model.existFrame(name):
                 raise RobotModelError(

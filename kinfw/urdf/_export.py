@@ -67,7 +67,11 @@ class ExportResult:
 
 
 def export_urdf(
-    robot: Robot, geometry: ZeroGeometry, *, root_is_measurement_frame: bool = True
+    robot: Robot,
+    geometry: ZeroGeometry,
+    *,
+    root_is_measurement_frame: bool = True,
+    base_motion: NDArray[np.float64] | None = None,
 ) -> ExportResult:
     """A URDF whose Pinocchio FK reproduces a calibrated screw geometry exactly.
 
@@ -83,6 +87,13 @@ def export_urdf(
         fixed root-to-base joint (the root's only child joint, when it is fixed) takes the
         registered world-to-base placement. False when ``w`` is external: the root's
         placement in ``w`` is estimated and returned, not written.
+    base_motion : ndarray, shape (4, 4), optional
+        The rigid motion ``w_T_base`` of the whole nominal robot that the calibration
+        estimated (:attr:`kinfw.identification.RefineResult.w_T_base`). With the root as
+        the measurement frame and a fixed root-to-base joint, that joint takes the
+        nominal base placement moved by it, instead of a registration of the end frames:
+        joints whose lines only moved with the base (not estimated, or exact) then keep
+        their origins and axes. Ignored otherwise.
 
     Returns
     -------
@@ -117,7 +128,7 @@ def export_urdf(
             f"geometry.topology {geometry.topology} does not match the robot's "
             f"topology for its frames: {topology}"
         )
-    w_T_root, w_T_placed = _anchor(robot, geometry, root_is_measurement_frame)
+    w_T_root, w_T_placed = _anchor(robot, geometry, root_is_measurement_frame, base_motion)
     lines = {name: j for j, name in enumerate(topology.joint_names)}
     w_T_links = {robot.root_link: w_T_root}
     old_T_news: dict[str, NDArray[np.float64]] = {}
@@ -234,14 +245,18 @@ def _check_on_line(
 
 
 def _anchor(
-    robot: Robot, geometry: ZeroGeometry, root_is_measurement_frame: bool
+    robot: Robot,
+    geometry: ZeroGeometry,
+    root_is_measurement_frame: bool,
+    base_motion: NDArray[np.float64] | None,
 ) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]]]:
     """``w_T_root`` and the links placed outright: ``{link: w_T_link}`` at q = 0.
 
     The placed links are the end-frame links (a joint frame is its child link's frame at
     q = 0) and, under a fixed root-to-base joint, the base. The anchor (that base, or the
-    root when ``w`` is external) is registered so that the nominal end frames land on the
-    calibrated ones.
+    root when ``w`` is external) is the nominal one moved by ``base_motion`` when given
+    (the base), else registered so that the nominal end frames land on the calibrated
+    ones.
     """
     model, data = robot.model, robot.model.createData()
     pin.framesForwardKinematics(model, data, pin.neutral(model))
@@ -262,9 +277,12 @@ def _anchor(
     elif len(root_joints) == 1 and root_joints[0].type == "fixed":
         base = root_joints[0].child
         root_T_base = data.oMf[robot.frame_id(base)].homogeneous
-        w_T_base = _register_frames(
-            inverse_transform(root_T_base) @ root_T_ends, geometry.w_T_frames
-        )
+        if base_motion is not None:
+            w_T_base = np.asarray(base_motion, dtype=float) @ root_T_base
+        else:
+            w_T_base = _register_frames(
+                inverse_transform(root_T_base) @ root_T_ends, geometry.w_T_frames
+            )
         w_T_placed.setdefault(base, w_T_base)
     root = robot.root_link
     if root in w_T_placed and not _close(w_T_placed[root], w_T_root, ON_AXIS_TOL):

@@ -46,7 +46,7 @@ import numpy as np
 from kinfw import progress
 from kinfw.identification import Calibration, calibrate
 from kinfw.identification.problem import NoiseModel, build_problem
-from kinfw.measurements import Measurements
+from kinfw.measurements import Measurements, observed_joints
 from kinfw.model import Robot
 from kinfw.observations import DatasetError, Metric
 from kinfw.verification.evaluation._crossval import (
@@ -244,6 +244,8 @@ def choose_parameters(
     Returns
     -------
     ModelChoice
+        ``"frames"``, unscored, when every joint on a measured path is one of the
+        URDF's exact joints (:attr:`kinfw.model.Robot.exact_joints`: a pose chain's).
 
     Raises
     ------
@@ -252,6 +254,17 @@ def choose_parameters(
         can be fitted on all the data (the calibration's own error).
     """
     ratio = rows_per_parameter(nominal, data)
+    measured = observed_joints(data, nominal)
+    if nominal.exact_joints and set(measured) <= set(nominal.exact_joints):
+        return ModelChoice(
+            "frames",
+            prior,
+            "every joint on a measured path is exact (the URDF's <kinfw exact>, as kinfw "
+            "pose-chain writes it): only the frames are estimated",
+            (),
+            ratio,
+            0,
+        )
     if ratio >= ROWS_PER_PARAMETER and not cross_validate:
         return ModelChoice(
             "full",
