@@ -30,7 +30,8 @@ choice, and it differs between the two detectors and with the board's parity:
   degrees. No image can tell; every such image is reported ``ambiguous`` unless
   ``allow_symmetric=True`` (the user vouches that the board is never seen turned by more
   than 90 degrees). Then, of the numberings with the right colours, the one whose x axis
-  (corner 0 to corner ``cols - 1``) points most to the image's right is kept.
+  (corner 0 to corner ``cols - 1``) points most to the image's right is kept. Only such
+  an image is flagged :attr:`Detection.symmetric` (``allow_symmetric`` would accept it).
 
 The colours: through the homography of the found corners (grid indices to pixels), the
 image is sampled at the centres of the ``(cols-1) x (rows-1)`` squares between the inner
@@ -41,7 +42,12 @@ the grey range (none right: ``ambiguous``). Then the ring of the board's outer s
 around the inner corners, where it is in the image, must have the chessboard's colours
 too: otherwise the corners are not the board's inner corners (``findChessboardCornersSB``
 returns, for a board cut by the image border, a grid shifted by one square onto the white
-margin; ``tests/kinfw/camera/test_detect.py``) and the image is ``not found``.
+margin; ``tests/kinfw/camera/test_detect.py``) and the image is ``not found``. And beyond
+that ring, along each side (where in the image), the squares must not continue the
+chessboard (each the other colour than the outer square beside it): otherwise the corners
+are part of a larger board (OpenCV finds a 7 x 6 or 8 x 6 grid in a 9 x 6 board), the
+spec's ``COLSxROWS`` is wrong, and the image is ``not found`` saying so, not numbered (nor
+refused as symmetric, which ``allow_symmetric`` would then number by the wrong layout).
 
 In every case a numbering that is mirrored in the image (x cross y pointing towards the
 camera; a printed board seen from its front has x, y right-handed in the image, as u, v)
@@ -103,6 +109,9 @@ class Detection:
         The corners' numbers in the board's numbering (:mod:`kinfw.camera`).
     points : ndarray, shape (k, 3)
         ``board_ps`` of those corners, metres.
+    symmetric : bool
+        Ambiguous because the board was found but looks the same turned by 180 degrees
+        (``allow_symmetric`` would accept it); False for every other outcome.
     """
 
     image: str
@@ -111,6 +120,7 @@ class Detection:
     uv: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 2)))
     ids: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     points: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    symmetric: bool = False
 
     @property
     def found(self) -> bool:
@@ -189,17 +199,18 @@ class Detector:
         if isinstance(self.board, Charuco):
             return self._detect_charuco(image, label)
         if isinstance(self.board, CircleGrid):
-            status, reason, uv, ids = find_circle_grid(
-                image, self.board, allow_symmetric=self.allow_symmetric
+            grid = find_circle_grid(image, self.board, allow_symmetric=self.allow_symmetric)
+            points = self.board.points[grid.ids]
+            return Detection(
+                label, grid.status, grid.reason, grid.uv, grid.ids, points, grid.symmetric
             )
-            return Detection(label, status, reason, uv, ids, self.board.points[ids])
         if self._tags is not None:
             return self._detect_tags(image, label)
         return self._detect_chessboard(image, label)
 
     # -- AprilTag grid ---------------------------------------------------------------
     def _detect_tags(self, image: NDArray[np.uint8], label: str) -> Detection:
-        (status, reason, uv, ids), notes = self._tags.find(image)
+        (status, reason, uv, ids, _), notes = self._tags.find(image)
         if status == "found" and len(ids) < self.min_corners:
             status = "not found"
             reason = f"{len(ids)} tag corners, fewer than {self.min_corners}"
@@ -253,6 +264,15 @@ class Detector:
                 f"{wrong} of the squares around them have the wrong colour (a board cut by the "
                 f"image border, or its outer squares hidden?)",
             )
+        beyond = greys.continues()
+        if beyond:
+            return Detection(
+                label,
+                "not found",
+                f"the {board.cols}x{board.rows} corners found are part of a larger chessboard "
+                f"(its squares continue past them: {beyond}); check COLSxROWS, the inner "
+                f"corners per row x rows",
+            )
         if len(right) > 1 and not self.allow_symmetric:
             return Detection(
                 label,
@@ -261,6 +281,7 @@ class Detector:
                 f"{' (and 90)' if board.cols == board.rows else ''}: its corner 0 cannot be told "
                 f"(use a board with one odd and one even count, a ChArUco board, or "
                 f"--allow-symmetric)",
+                symmetric=True,
             )
         grid = most_upright([greys.turned(turn) for turn in right])
         ids = np.arange(board.count, dtype=np.int64)
@@ -315,8 +336,9 @@ class _SquareGreys:
         j, i = np.mgrid[0:rows, 0:cols]
         board_xy = np.stack([i.ravel(), j.ravel()], axis=1).astype(np.float64)
         H, _ = cv2.findHomography(board_xy, grid.reshape(-1, 2), 0)
-        # all the printed squares: i in -1 .. cols-1, j in -1 .. rows-1
-        sj, si = np.mgrid[-1:rows, -1:cols]
+        # all the printed squares, i in -1 .. cols-1, j in -1 .. rows-1, and a ring of
+        # squares around them (the margin, unless the board is larger than its spec)
+        sj, si = np.mgrid[-2 : rows + 1, -2 : cols + 1]
         centres = np.stack([si.ravel() + 0.5, sj.ravel() + 0.5, np.ones(si.size)], axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
             uvw = centres @ (H.T if H is not None else np.full((3, 3), np.nan))
@@ -328,7 +350,8 @@ class _SquareGreys:
         u = np.rint(uv[inside, 0]).astype(int)
         v = np.rint(uv[inside, 1]).astype(int)
         greys[inside] = blurred[v, u]
-        self.greys = greys.reshape(rows + 1, cols + 1)  # [j + 1, i + 1]
+        self.outer = greys.reshape(rows + 3, cols + 3)  # [j + 2, i + 2]
+        self.greys = self.outer[1:-1, 1:-1]  # [j + 1, i + 1]: the printed squares
 
     def _turned_greys(self, turn: int) -> NDArray[np.float64]:
         g = self.greys
@@ -359,14 +382,43 @@ class _SquareGreys:
             return 0.0
         return float((inner[~black].mean() - inner[black].mean()) / spread)
 
+    def _threshold(self) -> float:
+        """The middle of the inner squares' two grey levels (either numbering)."""
+        inner = self.greys[1:-1, 1:-1]
+        black = self._black(self.greys.shape)[1:-1, 1:-1]
+        return float(0.5 * (inner[black].mean() + inner[~black].mean()))
+
+    def continues(self) -> str:
+        """Which way the chessboard continues past its printed squares: on a side of
+        the grid, the squares of the ring around them that are in the image (at least
+        two, and half the side's) each of the other colour than the outer square beside
+        it, as a chessboard's squares are; "" when on no side (a board whose
+        ``COLSxROWS`` is right has its margin or the background there)."""
+        dark = self.outer < self._threshold()
+        seen = np.isfinite(self.outer)
+        rows, cols = self.grid.shape[:2]
+        more_rows = f"more than {rows} rows of inner corners"
+        more_cols = f"more than {cols} inner corners per row"
+        sides = (  # the ring beyond a side, the printed outer squares beside it
+            (more_rows, np.s_[0, 1:-1], np.s_[1, 1:-1]),
+            (more_rows, np.s_[-1, 1:-1], np.s_[-2, 1:-1]),
+            (more_cols, np.s_[1:-1, 0], np.s_[1:-1, 1]),
+            (more_cols, np.s_[1:-1, -1], np.s_[1:-1, -2]),
+        )
+        for what, beyond, beside in sides:
+            both = seen[beyond] & seen[beside]
+            enough = both.sum() >= max(2, 0.5 * both.size)
+            if enough and (dark[beyond] != dark[beside])[both].all():
+                return what
+        return ""
+
     def wrong_border_squares(self, turn: int) -> int:
         """How many of the squares around the inner corners (the printed board's outer
         squares) that are in the image have the wrong colour in numbering ``turn``, judged
         against the middle of the inner squares' two grey levels."""
         g = self._turned_greys(turn)
         black = self._black(g.shape)
-        inner, inner_black = g[1:-1, 1:-1], black[1:-1, 1:-1]
-        threshold = 0.5 * (inner[inner_black].mean() + inner[~inner_black].mean())
+        threshold = self._threshold()
         ring = np.ones(g.shape, dtype=bool)
         ring[1:-1, 1:-1] = False
         seen = ring & np.isfinite(g)

@@ -17,11 +17,17 @@ columns reversed, both, and for a square grid transposed) is fitted by a homogra
 from the board's points to the centres, and those seen from behind (x cross y towards
 the camera) are dropped. The best fit is the board's numbering, unless another fits as
 well (the grid looks the same turned: :attr:`CircleGrid.symmetric`): then the image is
-``ambiguous`` unless ``allow_symmetric`` (the numbering whose x axis points most to the
-image's right is kept). A grid with a larger origin disc (``origin_diameter_m``, the
-modified circle grid of industrial_calibration) keeps the numbering whose disc 0 is that
-disc: the blob detector's size at each candidate's disc 0 (the largest, and at least
-:data:`ORIGIN_SIZE_RATIO` times the median disc; else ``ambiguous``). Each centre is
+``ambiguous`` (:attr:`Found.symmetric`) unless ``allow_symmetric`` (the numbering whose x
+axis points most to the image's right is kept). A grid with a larger origin disc
+(``origin_diameter_m``, the modified circle grid of industrial_calibration) keeps the
+numbering whose disc 0 is that disc: the blob detector's size at each candidate's disc 0
+(the largest, and at least :data:`ORIGIN_SIZE_RATIO` times the median disc; else
+``ambiguous``). A symmetric grid whose spec has no origin disc but whose image shows one
+(a corner disc that large) is ``ambiguous`` asking for ``ORIGIN_DIAMETER_M``, not for
+``allow_symmetric``. Before that, discs at every place the layout puts a row or column
+beyond the grid found (in the image, at least :data:`MIN_BEYOND_FRACTION` of the side)
+mean the grid is part of a larger one (``findCirclesGrid`` finds a 6 x 5 or 9 x 9 grid
+in a 7 x 5 or 10 x 10 board): ``not found``, naming the wrong count. Each centre is
 then checked against the homography of its neighbours (up to two rows and columns
 away): one off by more than :data:`MAX_LOCAL_ERROR` of the distance between neighbours
 (a stray blob taken for a disc) makes the image ``not found``.
@@ -48,12 +54,14 @@ tags printed in another orientation) the image is ``not found``. An image is
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.camera._boards import AprilGrid, CircleGrid
 
-__all__ = ["AprilGridFinder", "find_circle_grid", "mirrored", "most_upright"]
+__all__ = ["AprilGridFinder", "Found", "find_circle_grid", "mirrored", "most_upright"]
 
 #: A disc's centre off the homography of its neighbours by more than this fraction of
 #: the distance between neighbouring centres is not the board's.
@@ -63,12 +71,38 @@ MAX_LOCAL_ERROR = 0.2
 #: tag's side (at least 0.5 px) is dropped (``cornerSubPix`` drawn to another corner).
 MAX_CORNER_ERROR = 0.05
 
-#: (status, reason, uv, ids) of one image.
-Found = tuple[str, str, NDArray[np.float64], NDArray[np.int64]]
+#: A grid's points found beyond one of its sides, at every place the layout predicts
+#: there and in the image, at least this fraction of the side's points: the grid found
+#: is part of a larger one (a wrong ``COLSxROWS``).
+MIN_BEYOND_FRACTION = 0.5
 
 
-def _nothing(status: str, reason: str) -> Found:
-    return status, reason, np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+class Found(NamedTuple):
+    """What one image shows of a grid.
+
+    Attributes
+    ----------
+    status : {"found", "not found", "ambiguous"}
+    reason : str
+        Why not found or ambiguous ("" when found).
+    uv : ndarray, shape (k, 2)
+        The points' pixels.
+    ids : ndarray of int, shape (k,)
+        Their numbers in the board's numbering.
+    symmetric : bool
+        Ambiguous because the grid found looks the same turned (``allow_symmetric``
+        would accept it), not for another reason.
+    """
+
+    status: str
+    reason: str
+    uv: NDArray[np.float64]
+    ids: NDArray[np.int64]
+    symmetric: bool = False
+
+
+def _nothing(status: str, reason: str, *, symmetric: bool = False) -> Found:
+    return Found(status, reason, np.zeros((0, 2)), np.zeros(0, dtype=np.int64), symmetric)
 
 
 def mirrored(grid: NDArray[np.float64]) -> bool:
@@ -110,6 +144,43 @@ def find_circle_grid(
     if not ok:
         return _nothing("not found", f"no {name}")
     uv = np.asarray(centres, dtype=float).reshape(-1, 2)
+    spacing_px = _neighbour_distance(uv.reshape(board.rows, board.cols, 2), board)
+    same = _best_numberings(uv, board, spacing_px)
+    if not same:
+        return _nothing("not found", f"the centres found do not fit the {name}'s layout")
+    keypoints = blobs.detect(image)
+    discs = (np.array([k.pt for k in keypoints]), np.array([k.size for k in keypoints]))
+    beyond = _grid_continues(image.shape, discs[0], same[0], board, spacing_px)
+    if beyond:
+        return _nothing(
+            "not found",
+            f"the {name} found is part of a larger grid (discs continue past it: {beyond}); "
+            f"check COLSxROWS, circles per row x rows",
+        )
+    if len(same) > 1:
+        same, refusal = _one_numbering(same, discs, board, spacing_px, allow_symmetric)
+        if refusal is not None:
+            return refusal
+    grid = most_upright(same)
+    worst, k = _local_error(grid, board)
+    if worst > MAX_LOCAL_ERROR * spacing_px:
+        return _nothing(
+            "not found",
+            f"disc {k} of the {name} is {worst:.1f} px off the homography of its neighbours "
+            f"(a stray blob taken for a disc?)",
+        )
+    return Found("found", "", grid.reshape(-1, 2).copy(), np.arange(board.count, dtype=np.int64))
+
+
+def _best_numberings(
+    uv: NDArray[np.float64], board: CircleGrid, spacing_px: float
+) -> list[NDArray[np.float64]]:
+    """The numberings of OpenCV's centres ``uv`` (each shape (rows, cols, 2); the grid's
+    shape allows its rows or columns reversed, both, and for a square grid transposed)
+    that fit the layout best by a homography, those seen from behind dropped; none when
+    the best is off by more than half a spacing."""
+    import cv2
+
     index = np.arange(board.count).reshape(board.rows, board.cols)
     orders = [index, index[::-1], index[:, ::-1], index[::-1, ::-1]]
     if board.rows == board.cols:
@@ -127,31 +198,85 @@ def find_circle_grid(
         fits.append(
             (float(np.sqrt(np.mean(np.sum((predicted - grid.reshape(-1, 2)) ** 2, 1)))), grid)
         )
-    spacing_px = _neighbour_distance(uv.reshape(board.rows, board.cols, 2), board)
     if not fits or min(f[0] for f in fits) > 0.5 * spacing_px:
-        return _nothing("not found", f"the centres found do not fit the {name}'s layout")
+        return []
     best = min(f[0] for f in fits)
-    same = [grid for residual, grid in fits if residual <= best * (1.0 + 1e-6) + 1e-9]
-    if len(same) > 1 and board.origin_diameter_m is not None:
-        same, why = _by_origin_disc(image, blobs, same, spacing_px)
-        if not same:
-            return _nothing("ambiguous", f"{name}: {why}")
-    if len(same) > 1 and not allow_symmetric:
-        turns = "180 degrees" + (" (and 90)" if len(same) > 2 else "")
-        return _nothing(
+    return [grid for residual, grid in fits if residual <= best * (1.0 + 1e-6) + 1e-9]
+
+
+def _one_numbering(
+    grids: list[NDArray[np.float64]],
+    discs: tuple[NDArray[np.float64], NDArray[np.float64]],
+    board: CircleGrid,
+    spacing_px: float,
+    allow_symmetric: bool,
+) -> tuple[list[NDArray[np.float64]], Found | None]:
+    """Of the numberings a grid that looks the same turned allows, the one its origin
+    disc tells (``origin_diameter_m``), or all of them with ``allow_symmetric``; else
+    the refusal: ``ambiguous``, flagged ``symmetric`` only when ``allow_symmetric``
+    would be the remedy (not when a corner disc is larger, an origin disc the spec
+    lacks)."""
+    name = f"{board.cols}x{board.rows} {board.kind} grid"
+    if board.origin_diameter_m is not None:
+        told, why = _by_origin_disc(discs, grids, spacing_px)
+        return told, (None if told else _nothing("ambiguous", f"{name}: {why}"))
+    if allow_symmetric:
+        return grids, None
+    told, _ = _by_origin_disc(discs, grids, spacing_px)
+    if told:
+        return [], _nothing(
             "ambiguous",
-            f"a {name} looks the same turned by {turns}: its disc 0 cannot be told (use an "
-            f"asymmetric grid with an odd number of rows, or --allow-symmetric)",
+            f"a corner disc of the {name} is larger than the others (an origin disc?), but "
+            f"the spec gives no ORIGIN_DIAMETER_M: give its diameter, "
+            f"{board.spec()}:ORIGIN_DIAMETER_M (metres)",
         )
-    grid = most_upright(same)
-    worst, k = _local_error(grid, board)
-    if worst > MAX_LOCAL_ERROR * spacing_px:
-        return _nothing(
-            "not found",
-            f"disc {k} of the {name} is {worst:.1f} px off the homography of its neighbours "
-            f"(a stray blob taken for a disc?)",
-        )
-    return "found", "", grid.reshape(-1, 2).copy(), np.arange(board.count, dtype=np.int64)
+    turns = "180 degrees" + (" (and 90)" if len(grids) > 2 else "")
+    return [], _nothing(
+        "ambiguous",
+        f"a {name} looks the same turned by {turns}: its disc 0 cannot be told (use an "
+        f"asymmetric grid with an odd number of rows, or --allow-symmetric)",
+        symmetric=True,
+    )
+
+
+def _grid_continues(
+    shape: tuple[int, ...],
+    centres: NDArray[np.float64],
+    grid: NDArray[np.float64],
+    board: CircleGrid,
+    spacing_px: float,
+) -> str:
+    """Which way the grid ``grid`` (one numbering, shape (rows, cols, 2)) continues past
+    its sides: the blobs ``centres`` hold a disc within a quarter spacing of every place
+    the layout predicts beyond a side and inside the image, at least
+    :data:`MIN_BEYOND_FRACTION` of the side's discs ("" when on no side)."""
+    import cv2
+
+    rows, cols = board.rows, board.cols
+    xy = board.points[:, :2].reshape(rows, cols, 2)
+    # one more row or column on each side: two steps out from the second one (an
+    # asymmetric grid's rows alternate)
+    sides = {
+        f"more than {rows} rows": (xy[1] - (xy[2] - xy[0]), xy[-2] + (xy[-1] - xy[-3])),
+        f"more than {cols} circles per row": (
+            xy[:, 1] - (xy[:, 2] - xy[:, 0]),
+            xy[:, -2] + (xy[:, -1] - xy[:, -3]),
+        ),
+    }
+    H, _ = cv2.findHomography(xy.reshape(-1, 2), grid.reshape(-1, 2), 0)
+    if H is None or len(centres) == 0:
+        return ""
+    h, w = shape[:2]
+    for what, beyond in sides.items():
+        for side in beyond:
+            uv = cv2.perspectiveTransform(side.reshape(-1, 1, 2), H).reshape(-1, 2)
+            inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+            if inside.sum() < max(2, MIN_BEYOND_FRACTION * len(uv)):
+                continue
+            nearest = np.linalg.norm(uv[inside, None] - centres[None], axis=-1).min(axis=1)
+            if (nearest < 0.25 * spacing_px).all():
+                return what
+    return ""
 
 
 #: The origin disc's blob must be this many times the median disc's size (diameter).
@@ -159,20 +284,18 @@ ORIGIN_SIZE_RATIO = 1.3
 
 
 def _by_origin_disc(
-    image: NDArray[np.uint8],
-    blobs: object,
+    discs: tuple[NDArray[np.float64], NDArray[np.float64]],
     grids: list[NDArray[np.float64]],
     spacing_px: float,
 ) -> tuple[list[NDArray[np.float64]], str]:
     """Of the numberings a symmetric grid allows, the one whose disc 0 is the larger
-    origin disc (its blob's size, from the blob detector, at least
-    :data:`ORIGIN_SIZE_RATIO` times the median disc's and the largest of the candidates'
-    disc 0); ``([], why)`` when no candidate's disc 0 is clearly larger."""
-    keypoints = blobs.detect(image)
-    if not keypoints:
+    origin disc (its blob's size, from the blob detector's ``discs``: centres and
+    sizes, at least :data:`ORIGIN_SIZE_RATIO` times the median disc's and the largest of
+    the candidates' disc 0); ``([], why)`` when no candidate's disc 0 is clearly
+    larger."""
+    centres, sizes = discs
+    if len(centres) == 0:
         return [], "no blobs to measure the origin disc"
-    centres = np.array([k.pt for k in keypoints])
-    sizes = np.array([k.size for k in keypoints])
 
     def size_at(uv: NDArray[np.float64]) -> float:
         distance = np.linalg.norm(centres - uv, axis=1)
@@ -287,7 +410,7 @@ class AprilGridFinder:
             notes.append(f"tags {off_tags} off the board's layout")
         good = ~moved & ~np.repeat(off.reshape(-1, 4).any(axis=1), 4)
         order = np.argsort(point_ids[good])
-        return ("found", "", uv[good][order], point_ids[good][order]), notes
+        return Found("found", "", uv[good][order], point_ids[good][order]), notes
 
     def _off_layout(
         self, uv: NDArray[np.float64], point_ids: NDArray[np.int64], side_px: float

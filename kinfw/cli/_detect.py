@@ -12,13 +12,19 @@ robot's joint values, as ``pixels`` observations of a ``kinfw-measurements`` fil
 Kalibr's AprilTag grid (:func:`kinfw.camera.parse_board`).
 
 ``JOINTS.csv``: a header of joint names and one row of joint values per image, either in
-the order of ``IMAGES`` or, with a column named ``image``, keyed by the image's path as
-given or its file name (every image needs exactly one row, every row one image).
+the order of ``IMAGES`` (as many rows as images) or, with a column named ``image``, keyed
+by the image's path as given or its file name: every image needs exactly one row, and
+rows naming images not given are left out with a note (detect a subset, hold out the
+others: ``kinfw calibrate train.json --holdout test.json``). A file with the columns of a
+hand pose (``hand_x ... hand_qw``, ``x ... qw``) is refused: ``kinfw pose-chain`` turns it
+into a joints file.
 
 The output (format: ``docs/measurements.md``, the ``pixels`` kind) has the camera's
 intrinsics under ``"cameras"`` and one sample per image where the board was found; the
 images where it was not found, or found ambiguously (:mod:`kinfw.camera`), are listed on
-stdout and left out.
+stdout, one line each by file name (the first :data:`MAX_LISTED`, all with ``kinfw -v``),
+and left out. ``--out`` must not be a URDF or xacro name, nor an existing file other than
+a kinfw measurement file.
 
 ``--images DIR:FRAME`` (repeatable) reads a folder laid out as ``kinfw simulate --images``
 writes it (:mod:`kinfw.simulation`): ``DIR/joints.csv`` keyed by an ``image`` column,
@@ -41,11 +47,23 @@ from pathlib import Path
 from typing import Any
 
 from kinfw.cli._args import number
-from kinfw.files import check_outputs, write_text_atomic
+from kinfw.files import OutputPathError, check_outputs, write_text_atomic
 
 __all__ = ["add_detect_parser", "cmd_detect", "read_joint_rows"]
 
 IMAGE_COLUMN = "image"
+#: ``--board``'s help.
+BOARD_HELP = (
+    "chessboard:COLSxROWS:SQUARE_M (inner corners), "
+    "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares; DICT default DICT_5X5_100), "
+    "circles:COLSxROWS:SPACING_M[:DIAMETER_M[:ORIGIN_DIAMETER_M]] or "
+    "acircles:COLSxROWS:SPACING_M[:DIAMETER_M[:ORIGIN_DIAMETER_M]] (OpenCV's symmetric and "
+    "asymmetric circle grids: circles per row x rows; ORIGIN_DIAMETER_M: a larger disc 0 "
+    "marks the origin), "
+    "aprilgrid:COLSxROWS:TAG_M:SPACING[:FAMILY[:FIRST_ID[:BORDER_BITS]]] (Kalibr's "
+    "aprilgrid: tags, SPACING a fraction of TAG_M, FAMILY default DICT_APRILTAG_36h11 "
+    "(t36h11), first id 0, 2-bit borders); lengths in metres"
+)
 
 
 def add_detect_parser(sub: Any) -> None:
@@ -77,23 +95,18 @@ def add_detect_parser(sub: Any) -> None:
     p.add_argument(
         "--board",
         required=True,
-        help="chessboard:COLSxROWS:SQUARE_M (inner corners), "
-        "charuco:COLSxROWS:SQUARE_M:MARKER_M[:DICT] (squares; DICT default DICT_5X5_100), "
-        "circles:COLSxROWS:SPACING_M[:DIAMETER_M] or acircles:COLSxROWS:SPACING_M[:DIAMETER_M] "
-        "(OpenCV's symmetric and asymmetric circle grids: circles per row x rows), "
-        "aprilgrid:COLSxROWS:TAG_M:SPACING[:FAMILY[:FIRST_ID[:BORDER_BITS]]] (Kalibr's "
-        "aprilgrid: tags, SPACING a fraction of TAG_M, FAMILY default DICT_APRILTAG_36h11 "
-        "(t36h11), first id 0, 2-bit borders); lengths in metres",
+        help=BOARD_HELP,
     )
     p.add_argument(
         "--joints",
         type=Path,
         help="CSV: a header of joint names, one row per image (in the images' order, or "
-        "keyed by an 'image' column)",
+        "keyed by an 'image' column, whose rows for images not given are left out)",
     )
     p.add_argument(
         "--camera",
         type=Path,
+        metavar="INTRINSICS.yaml",
         help="the camera's intrinsics (ROS camera_info YAML, OpenCV YAML/XML or JSON)",
     )
     p.add_argument(
@@ -212,14 +225,56 @@ def detect_inputs(args: argparse.Namespace) -> dict[str, Path]:
 def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list[list[float]]]:
     """The joint names and one row of joint values per image, in the order of ``images``.
 
+    Parameters
+    ----------
+    path : Path
+        The joints CSV: a header of joint names, one row per image, in the order of
+        ``images`` or keyed by an ``image`` column (its path as given or its file name).
+    images : sequence of Path
+        The images given.
+
+    Returns
+    -------
+    joints : list of str
+        The joint names (the header less ``image``).
+    rows : list of list of float
+        One row per image. With an ``image`` column, rows naming images not given are
+        left out (a subset of the images, the others held out).
+
     Raises
     ------
     ValueError
-        Naming the file, line and column: no header, an empty or repeated joint name, a
+        Naming the file, line and column: no header, an empty or repeated joint name,
+        the columns of a hand pose (``kinfw pose-chain``'s input, not joint values), a
         value that is not a finite number, a row of the wrong length; rows in order but
-        not as many as images; an ``image`` column naming an image twice, an image without
-        a row, or a row whose image was not given.
+        not as many as images; an ``image`` column naming an image twice, or an image
+        without a row.
     """
+    joints, rows, _ = _joint_rows(path, images)
+    return joints, rows
+
+
+def _joint_rows(
+    path: Path, images: Sequence[Path]
+) -> tuple[list[str], list[list[float]], list[str]]:
+    """:func:`read_joint_rows`, and the image names of the rows no image given uses."""
+    header, rows = _read_joint_table(path)
+    joints = [n for n in header if n != IMAGE_COLUMN]
+    if IMAGE_COLUMN in header:
+        ordered, unused = _rows_by_image(path, rows, images)
+        return joints, ordered, unused
+    if len(rows) != len(images):
+        raise ValueError(
+            f"{path}: {len(rows)} rows of joint values for {len(images)} images; give one "
+            f"row per image in the images' order, or an '{IMAGE_COLUMN}' column naming each "
+            f"row's image"
+        )
+    return joints, [values for _, values in rows], []
+
+
+def _read_joint_table(path: Path) -> tuple[list[str], list[tuple[str, list[float]]]]:
+    """The joints CSV's header and, per row, its ``image`` cell ("" without the column)
+    and joint values (errors: :func:`read_joint_rows`)."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
@@ -233,10 +288,9 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
     repeated = sorted({n for n in header if header.count(n) > 1})
     if repeated:
         raise ValueError(f"{path}: line 1: column(s) {repeated} appear twice in the header")
-    keyed = IMAGE_COLUMN in header
-    joints = [n for n in header if n != IMAGE_COLUMN]
-    if not joints:
+    if not [n for n in header if n != IMAGE_COLUMN]:
         raise ValueError(f"{path}: line 1: no joint columns in the header {header}")
+    _refuse_hand_poses(path, header)
     rows: list[tuple[str, list[float]]] = []
     for line_number, row in enumerate(lines[1:], start=2):
         if len(row) != len(header):
@@ -260,14 +314,30 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
                 )
             values.append(value)
         rows.append((name, values))
-    if not keyed:
-        if len(rows) != len(images):
+    return header, rows
+
+
+def _refuse_hand_poses(path: Path, header: list[str]) -> None:
+    """Refuse a header holding a hand pose's columns (``hand_x ... hand_qw`` or ``x ...
+    qw``): the poses ``kinfw pose-chain`` reads, not joint values."""
+    from kinfw.measurements import HAND_POSE_COLUMNS, PLAIN_POSE_COLUMNS
+
+    for columns in (HAND_POSE_COLUMNS, PLAIN_POSE_COLUMNS):
+        if set(columns) <= set(header):
             raise ValueError(
-                f"{path}: {len(rows)} rows of joint values for {len(images)} images; give one "
-                f"row per image in the images' order, or an '{IMAGE_COLUMN}' column naming each "
-                f"row's image"
+                f"{path}: line 1: the columns {', '.join(columns)} are a hand pose, not "
+                f"joint values: this looks like hand poses; run kinfw pose-chain {path} "
+                f"--camera-frame FRAME --urdf-out CHAIN.urdf --joints-out JOINTS.csv first "
+                f"to get the joints file, and give that to --joints"
             )
-        return joints, [values for _, values in rows]
+
+
+def _rows_by_image(
+    path: Path, rows: list[tuple[str, list[float]]], images: Sequence[Path]
+) -> tuple[list[list[float]], list[str]]:
+    """The rows of an ``image``-keyed joints file in the order of ``images`` (each
+    matched by its path as given or its file name), and the names of the rows left
+    over."""
     by_name: dict[str, int] = {}
     for index, (name, _) in enumerate(rows):
         if not name:
@@ -291,13 +361,7 @@ def read_joint_rows(path: Path, images: Sequence[Path]) -> tuple[list[str], list
             )
         used.add(index)
         ordered.append(rows[index][1])
-    unused = [rows[i][0] for i in range(len(rows)) if i not in used]
-    if unused:
-        raise ValueError(
-            f"{path}: rows for images not given: {', '.join(unused[:5])}"
-            f"{' ...' if len(unused) > 5 else ''} (give those images too, or drop the rows)"
-        )
-    return joints, ordered
+    return ordered, [rows[i][0] for i in range(len(rows)) if i not in used]
 
 
 def cmd_detect(args: argparse.Namespace) -> int:
@@ -324,26 +388,15 @@ def cmd_detect(args: argparse.Namespace) -> int:
                 f"{cameras[0].joints}'s {joints}; the cameras' files must name the same joints"
             )
     found = [(c, d, q) for c, r in zip(cameras, per_camera, strict=True) for d, q in r.found]
-    missed = [d for r in per_camera for d in r.missed if d.status == "not found"]
-    ambiguous = [d for r in per_camera for d in r.missed if d.status == "ambiguous"]
+    missed = [d for r in per_camera for d in r.missed]
+    ambiguous = sum(d.status == "ambiguous" for d in missed)
     print(
-        f"{n_images} images ({elapsed / n_images * 1e3:.0f} ms each): "
-        f"{len(found)} found, {len(missed)} not found, {len(ambiguous)} ambiguous"
+        f"{n_images} images ({elapsed / n_images * 1e3:.0f} ms each): {len(found)} found, "
+        f"{len(missed) - ambiguous} not found, {ambiguous} ambiguous"
     )
-    for title, group in (("not found", missed), ("ambiguous", ambiguous)):
-        for d in group:
-            print(f"  {title}: {d.image}: {d.reason}")
+    _print_rejected(cameras, per_camera, verbose=getattr(args, "verbose", False))
     if not found:
-        why = (
-            f"it was ambiguous in {len(ambiguous)} (a symmetric chessboard or circle grid: use "
-            "a chessboard whose corner counts differ in parity, an asymmetric circle grid, or "
-            "--allow-symmetric if it is never turned by more than 90 degrees)"
-            if ambiguous
-            else "check --board (a chessboard's inner corners, an aprilgrid's tags) and the images"
-        )
-        raise ValueError(
-            f"the board {board.spec()} was found in none of the images; {why}; nothing written"
-        )
+        raise _found_in_none(board, missed)
     samples: dict[tuple[float, ...], list[dict[str, Any]]] = {}
     for camera, d, q in found:
         samples.setdefault(tuple(q), []).append(
@@ -380,6 +433,64 @@ def cmd_detect(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Rejected images listed, one line each, before "... and N more" (all with -v).
+MAX_LISTED = 10
+#: What a board spec's ``COLSxROWS`` counts, by its type.
+GRID_COUNTS = {
+    "chessboard": "inner corners per row x rows",
+    "charuco": "squares per row x rows",
+    "circles": "circles per row x rows",
+    "acircles": "circles per row x rows",
+    "aprilgrid": "tags per row x rows",
+}
+
+
+def _print_rejected(
+    cameras: list[_CameraImages], per_camera: list[_CameraDetections], *, verbose: bool
+) -> None:
+    """One line per image where the board was not found or is ambiguous: the image's
+    file name (and camera frame, with several cameras) and why; the first
+    :data:`MAX_LISTED`, then how many more, unless ``verbose``."""
+    lines = [
+        f"  {d.status}: {c.frame + ' ' if len(cameras) > 1 else ''}{Path(d.image).name}: {d.reason}"
+        for c, r in zip(cameras, per_camera, strict=True)
+        for d in r.missed
+    ]
+    shown = lines if verbose else lines[:MAX_LISTED]
+    for line in shown:
+        print(line)
+    if len(lines) > len(shown):
+        print(f"  ... and {len(lines) - len(shown)} more (kinfw -v detect lists them all)")
+
+
+def _found_in_none(board: Any, missed: list[Any]) -> ValueError:
+    """The error when no image shows the board: what was expected and, apart, the images
+    where a symmetric board was found but refused as ambiguous (only these can take
+    ``--allow-symmetric``)."""
+    kind, size = board.spec().split(":")[:2]
+    symmetric = [d for d in missed if d.symmetric]
+    others = [d for d in missed if not d.symmetric]
+    why = []
+    if others:
+        first = others[0]
+        why.append(
+            f"{len(others)} image(s) show no {size} {kind} ({size}: "
+            f"{GRID_COUNTS.get(kind, 'COLSxROWS')}; first: {Path(first.image).name}: "
+            f"{first.reason}); check --board and the images"
+        )
+    if symmetric:
+        why.append(
+            f"in {len(symmetric)} a symmetric {size} {kind} was found but is ambiguous "
+            "(its point 0 cannot be told: use a chessboard whose corner counts differ in "
+            "parity, an asymmetric circle grid, or --allow-symmetric if it is never turned "
+            "by more than 90 degrees)"
+        )
+    return ValueError(
+        f"the board {board.spec()} was found in none of the images: {'; '.join(why)}; "
+        "nothing written"
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class _CameraDetections:
     """One camera's detections: the joints file's joint names, the images where the
@@ -396,7 +507,9 @@ def _detect_camera(camera: _CameraImages, detector: Any) -> _CameraDetections:
     from kinfw.camera import read_camera, read_gray
 
     intrinsics = read_camera(camera.camera)
-    joints, qs = read_joint_rows(camera.joints, camera.images)
+    joints, qs, unused = _joint_rows(camera.joints, camera.images)
+    if unused:
+        print(f"note: {len(unused)} rows of {camera.joints} name images not given here (not used)")
     for path in camera.images:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such image file")
@@ -425,5 +538,40 @@ def _dumps(doc: dict[str, Any]) -> str:
 
 
 def check_detect_outputs(args: argparse.Namespace) -> None:
-    """``kinfw detect``'s output, never one of its images or files."""
+    """``kinfw detect``'s output: never one of its images or files, never a URDF or
+    xacro file name, never over an existing file that is not a kinfw measurement file."""
     check_outputs({"--out": args.out}, inputs=detect_inputs(args))
+    _check_measurement_output(args.out)
+
+
+#: ``--out`` names that are a robot's model, not a measurement file.
+MODEL_SUFFIXES = (".urdf", ".xacro")
+
+
+def _check_measurement_output(path: Path) -> None:
+    """Refuse ``--out`` when it ends in a URDF or xacro suffix, or names an existing
+    (non-empty) file that is not a ``kinfw-measurements`` JSON document: writing would
+    lose it.
+
+    Raises
+    ------
+    OutputPathError
+        Naming ``--out`` and why.
+    """
+    if path.suffix.lower() in MODEL_SUFFIXES:
+        raise OutputPathError(
+            f"--out {path}: a {path.suffix} file name; kinfw detect writes a measurement "
+            "file (JSON, e.g. data.json): choose another --out"
+        )
+    if not path.is_file() or path.stat().st_size == 0:
+        return
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # not UTF-8, not JSON
+        doc = None
+    if not isinstance(doc, dict) or doc.get("format") != "kinfw-measurements":
+        raise OutputPathError(
+            f"--out {path}: the existing file is not a kinfw measurement file (no "
+            '"format": "kinfw-measurements"): refusing to overwrite it; choose another '
+            "--out, or remove the file first"
+        )

@@ -3,9 +3,9 @@ file ``kinfw detect`` reads (:mod:`kinfw.model._pose_chain`).
 
     kinfw pose-chain POSES.csv --camera-frame camera --urdf-out chain.urdf \\
         --joints-out joints.csv
-    kinfw detect IMAGES... --board SPEC --joints joints.csv --camera CAM.yaml \\
+    kinfw detect IMAGES... --board SPEC --joints joints.csv --camera INTRINSICS.yaml \\
         --frame camera --out data.json
-    kinfw calibrate data.json --urdf chain.urdf --params frames --out calibrated.urdf
+    kinfw calibrate data.json --urdf chain.urdf --out calibrated.urdf
 
 Like the other command modules, only the standard library is imported at start-up.
 """
@@ -34,9 +34,9 @@ def add_pose_chain_parser(sub: argparse._SubParsersAction) -> None:
         "quaternion scalar last, and optionally 'image' naming each row's image) and "
         "write a URDF whose six joints (x, y, z prismatic; yaw, pitch, roll revolute) put"
         " its hand at each pose exactly, with the camera's link on a fixed joint, and the"
-        " joints file kinfw detect pairs with the images. Calibrate with --params frames:"
-        " the camera's mount and the board's pose from the pixels (the chain has no "
-        "kinematic error to fit).",
+        " joints file kinfw detect pairs with the images. The URDF declares the chain's"
+        " joints exact (<kinfw exact>), so kinfw calibrate fits the frames only: the "
+        "camera's mount and the board's pose from the pixels.",
     )
     p.add_argument("poses", type=Path, help="CSV of the hand's poses in the base")
     p.add_argument(
@@ -54,7 +54,12 @@ def add_pose_chain_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--hand", default="hand", help="name of the hand's link (default hand)")
     p.add_argument("--base", default="base", help="name of the base link (default base)")
-    p.add_argument("--unit", choices=("m", "mm"), default="m", help="length unit of the CSV")
+    p.add_argument(
+        "--unit",
+        choices=("m", "mm"),
+        default="m",
+        help="length unit of the CSV's positions (default m)",
+    )
     p.add_argument("--urdf-out", type=Path, required=True, help="URDF to write")
     p.add_argument("--joints-out", type=Path, required=True, help="joints CSV to write")
     p.set_defaults(func=cmd_pose_chain, check_outputs=check_pose_chain_outputs)
@@ -87,9 +92,9 @@ def cmd_pose_chain(args: argparse.Namespace) -> int:
         f"wrote {args.urdf_out} (joints {', '.join(POSE_CHAIN_JOINTS)}; {args.camera_frame!r} "
         f"on {args.hand if args.setup == 'eye-in-hand' else args.base!r}) and "
         f"{args.joints_out} ({len(q)} rows{', keyed by image' if poses.images else ''}); next:\n"
-        f"  kinfw detect IMAGES... --board SPEC --joints {args.joints_out} --camera CAMERA "
-        f"--frame {args.camera_frame}{board} --out DATA.json\n"
-        f"  kinfw calibrate DATA.json --urdf {args.urdf_out} --params frames --out CALIBRATED.urdf"
+        f"  kinfw detect IMAGES... --board SPEC --joints {args.joints_out} "
+        f"--camera INTRINSICS.yaml --frame {args.camera_frame}{board} --out DATA.json\n"
+        f"  kinfw calibrate DATA.json --urdf {args.urdf_out} --out CALIBRATED.urdf"
     )
     return 0
 

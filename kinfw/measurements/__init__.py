@@ -138,6 +138,7 @@ from kinfw.measurements._mounts import Mount, mounted_robot
 from kinfw.measurements._pose_pairs import (
     HAND_POSE_COLUMNS,
     MIN_POSE_PAIRS,
+    PLAIN_POSE_COLUMNS,
     POSE_PAIR_COLUMNS,
     HandPoses,
     PosePairs,
@@ -163,6 +164,7 @@ __all__ = [
     "IMAGE_JOINTS_CSV",
     "IMAGE_STAMPS_JSON",
     "MIN_POSE_PAIRS",
+    "PLAIN_POSE_COLUMNS",
     "POSE_PAIR_COLUMNS",
     "SUPPORTED_VERSIONS",
     "BagAlignment",

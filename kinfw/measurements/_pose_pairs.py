@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import json
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,11 +45,12 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
     xyz_quat_xyzw_from_transform,
 )
-from kinfw.observations import QUAT_NORM_TOL, DatasetError
+from kinfw.observations import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, DatasetError
 
 __all__ = [
     "HAND_POSE_COLUMNS",
     "MIN_POSE_PAIRS",
+    "PLAIN_POSE_COLUMNS",
     "POSE_PAIR_COLUMNS",
     "HandPoses",
     "PosePairs",
@@ -115,8 +117,9 @@ class PosePairs:
         return PosePairs(a, b, self.source, self.setup)
 
 
-def _pose(xyz, quat_xyzw, where: str) -> NDArray[np.float64]:
-    """``a_T_b`` of a position and a scalar-last quaternion, refusing a non-unit one."""
+def _pose(xyz, quat_xyzw, where: str, names: str = "qx, qy, qz, qw") -> NDArray[np.float64]:
+    """``a_T_b`` of a position and a scalar-last quaternion, refusing a non-unit one;
+    ``names`` are the quaternion's columns or keys, for the message."""
     try:
         xyz, q = np.asarray(xyz, dtype=float), np.asarray(quat_xyzw, dtype=float)
     except (TypeError, ValueError):
@@ -126,18 +129,26 @@ def _pose(xyz, quat_xyzw, where: str) -> NDArray[np.float64]:
     norm = float(np.linalg.norm(q))
     if abs(norm - 1.0) > QUAT_NORM_TOL:
         raise DatasetError(
-            f"{where}: quaternion (qx, qy, qz, qw) = {q.tolist()} has norm {norm:.6g}, "
+            f"{where}: quaternion ({names}) = {q.tolist()} has norm {norm:.6g}, "
             f"not 1 (within {QUAT_NORM_TOL:g}): quaternions are unit, stored scalar last"
         )
     return transform_from_xyz_quat_xyzw(xyz, q)
 
 
 def _csv_rows(
-    path: Path, text: str, columns: tuple[str, ...], what: str
+    path: Path,
+    text: str,
+    columns: tuple[str, ...],
+    what: str,
+    *,
+    word: str = "row",
+    key: str | None = None,
 ) -> tuple[list[str], list[tuple[int, list[str], list[float]]]]:
     """The CSV's header and, per non-empty row, its line number, cells and the numbers of
     ``columns`` (any order in the file, other columns kept in the cells); ``what`` says
-    what the columns are, for the error naming a missing one."""
+    what the columns are, for the error naming a missing one. Errors name a row's file
+    line as ``word`` N and, when the header has the column ``key``, the row's cell of
+    it (an image's name)."""
     rows = list(csv.reader(text.lstrip("\ufeff").splitlines()))
     rows = [(i, r) for i, r in enumerate(rows, start=1) if any(c.strip() for c in r)]
     if not rows:
@@ -150,6 +161,7 @@ def _csv_rows(
             f"{', '.join(columns)}: {what}, position then quaternion scalar last)"
         )
     index = [header.index(c) for c in columns]
+    named = header.index(key) if key in header else None
     out = []
     for line, row in rows[1:]:
         values = []
@@ -158,11 +170,19 @@ def _csv_rows(
             try:
                 values.append(float(cell))
             except ValueError:
-                raise DatasetError(
-                    f"{path}: row {line}, column {c!r}: {cell!r} is not a number"
-                ) from None
+                at = _row_label(path, line, row, word, key, named)
+                raise DatasetError(f"{at}, column {c!r}: {cell!r} is not a number") from None
         out.append((line, row, values))
     return header, out
+
+
+def _row_label(
+    path: Path, line: int, row: list[str], word: str, key: str | None, index: int | None
+) -> str:
+    """``PATH: line N`` (``word`` N), with ``(image 'a.png')`` when the row's cell of
+    column ``key`` (at ``index``) is not empty."""
+    name = row[index].strip() if index is not None and index < len(row) else ""
+    return f"{path}: {word} {line}" + (f" ({key} {name!r})" if name else "")
 
 
 def _read_csv(path: Path, text: str) -> PosePairs:
@@ -200,37 +220,83 @@ def read_hand_poses(path: str | Path) -> HandPoses:
     same without the prefix (:data:`PLAIN_POSE_COLUMNS`: ``x, y, z, qx, qy, qz, qw``),
     and, optionally, an ``image`` column naming each row's image.
 
+    Quaternions whose norm is within :data:`~kinfw.observations.QUAT_NORM_TOL` of 1 are
+    renormalised; when some are off by more than
+    :data:`~kinfw.observations.QUAT_ROUNDED_TOL` (written with a few decimals), one
+    ``UserWarning`` names the file, how many rows and the largest ``| |q| - 1 |``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+
+    Returns
+    -------
+    HandPoses
+        The poses in the file's length unit, and the ``image`` column if any.
+
     Raises
     ------
     DatasetError
-        A missing or unreadable file, a missing column, a cell that is not a number
-        (file, row and column), a quaternion that is not unit (file, row), an empty image
-        name, or fewer than :data:`MIN_POSE_PAIRS` rows.
+        A missing or unreadable file, a header with neither set of columns (the message
+        shows the header and both sets), a cell that is not a number, a quaternion that
+        is not unit (each naming the file line, the columns and the row's image when
+        there is an ``image`` column), an empty image name, or fewer than
+        :data:`MIN_POSE_PAIRS` rows.
     """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise DatasetError(f"{path}: cannot read ({err.strerror or err})") from None
-    columns = HAND_POSE_COLUMNS
-    first = text.lstrip("\ufeff").splitlines()[:1]
-    named = {c.strip() for c in next(csv.reader(first), [])}
-    if not named >= set(HAND_POSE_COLUMNS) and named >= set(PLAIN_POSE_COLUMNS):
-        columns = PLAIN_POSE_COLUMNS  # x, y, z, qx, qy, qz, qw without the hand_ prefix
-    header, rows = _csv_rows(path, text, columns, "base_T_hand")
-    poses = [_pose(v[0:3], v[3:7], f"{path}: row {line}, hand_q*") for line, _, v in rows]
+    columns = _hand_pose_columns(path, text)
+    header, rows = _csv_rows(path, text, columns, "base_T_hand", word="line", key="image")
+    k = header.index("image") if "image" in header else None
+    images = None
+    if k is not None:
+        images = tuple(row[k].strip() if k < len(row) else "" for _, row, _ in rows)
+        empty = [line for (line, _, _), name in zip(rows, images, strict=True) if not name]
+        if empty:
+            raise DatasetError(f"{path}: line {empty[0]}: the 'image' cell is empty")
+    names = ", ".join(columns[3:])
+    poses = [
+        _pose(v[0:3], v[3:7], _row_label(path, line, row, "line", "image", k), names)
+        for line, row, v in rows
+    ]
     if len(poses) < MIN_POSE_PAIRS:
         raise DatasetError(
             f"{path}: {len(poses)} hand pose(s); at least {MIN_POSE_PAIRS} are needed"
         )
-    images = None
-    if "image" in header:
-        k = header.index("image")
-        images = tuple(row[k].strip() if k < len(row) else "" for _, row, _ in rows)
-        empty = [line for (line, _, _), name in zip(rows, images, strict=True) if not name]
-        if empty:
-            raise DatasetError(f"{path}: row {empty[0]}: the 'image' cell is empty")
+    off = np.abs(np.linalg.norm([v[3:7] for _, _, v in rows], axis=1) - 1.0)
+    rounded = off[off > QUAT_ROUNDED_TOL]
+    if len(rounded):
+        warnings.warn(
+            f"{path}: {len(rounded)} of {len(rows)} rows have quaternions ({names}) whose "
+            f"norms differ from 1 by up to {rounded.max():.2g} (rounded?); renormalised",
+            UserWarning,
+            stacklevel=2,
+        )
     return HandPoses(np.stack(poses), images, str(path))
+
+
+def _hand_pose_columns(path: Path, text: str) -> tuple[str, ...]:
+    """The pose columns the CSV's header holds: :data:`HAND_POSE_COLUMNS`, else
+    :data:`PLAIN_POSE_COLUMNS`; an error showing the header and both sets when it holds
+    neither."""
+    lines = (line for line in text.lstrip("\ufeff").splitlines() if line.strip())
+    header = [c.strip() for c in next(csv.reader(lines), [])]
+    for columns in (HAND_POSE_COLUMNS, PLAIN_POSE_COLUMNS):
+        if set(header) >= set(columns):
+            return columns
+    closest = min((HAND_POSE_COLUMNS, PLAIN_POSE_COLUMNS), key=lambda c: len(set(c) - set(header)))
+    missing = [c for c in closest if c not in header]
+    found = f"line 1: the header is [{', '.join(header)}]" if header else "empty"
+    raise DatasetError(
+        f"{path}: {found}; expected the columns {', '.join(HAND_POSE_COLUMNS)}, or "
+        f"{', '.join(PLAIN_POSE_COLUMNS)} (base_T_hand: position, then quaternion scalar "
+        f"last; optionally 'image' naming each row's image)"
+        + (f"; {', '.join(missing)} missing" if header else "")
+    )
 
 
 def _matrix(value, where: str) -> NDArray[np.float64]:

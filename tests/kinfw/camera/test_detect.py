@@ -188,6 +188,25 @@ def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
     assert "squares around them have the wrong colour" in detection.reason
 
 
+@pytest.mark.parametrize("spec", [(8, 6), (7, 6)])
+def test_a_spec_smaller_than_the_chessboard_is_not_found_saying_so(spec):
+    """A 9 x 6 board (POSES[1], noise-free) read as 8 x 6 or 7 x 6: OpenCV finds that
+    many corners inside it (measured, OpenCV 4.x), symmetric for 8 x 6. The squares
+    continuing past them make the image not found, naming the count; never ambiguous
+    (allow_symmetric would number a part of the board), never found."""
+    image = render_board(CHESS, CAMERA, board_pose(CHESS, *POSES[1]))
+    board = Chessboard(*spec, 0.03)
+    for allow in (False, True):
+        detection = Detector(board, allow_symmetric=allow).detect(image, "x.png")
+        assert detection.status == "not found" and not detection.symmetric, detection.reason
+        assert detection.reason.startswith(
+            f"the {spec[0]}x{spec[1]} corners found are part of a larger chessboard (its "
+            f"squares continue past them: more than {spec[0]} inner corners per row)"
+        )
+        assert "check COLSxROWS" in detection.reason
+    assert Detector(CHESS).detect(image).found  # the right spec
+
+
 @pytest.mark.parametrize(
     "board", [Chessboard(8, 6, 0.03), Chessboard(7, 5, 0.03), Chessboard(5, 5, 0.04)]
 )
@@ -198,7 +217,7 @@ def test_symmetric_chessboard_is_ambiguous_unless_allowed(board):
     for camera_T_board in (upright, turned):
         image = render_board(board, CAMERA, camera_T_board)
         detection = Detector(board).detect(image, "sym.png")
-        assert detection.status == "ambiguous"
+        assert detection.status == "ambiguous" and detection.symmetric
         assert "looks the same turned by 180 degrees" in detection.reason
     allowed = Detector(board, allow_symmetric=True)
     up = allowed.detect(render_board(board, CAMERA, upright))
@@ -223,6 +242,13 @@ def test_joint_rows_in_order_and_by_image_name(tmp_path):
     keyed = tmp_path / "k.csv"
     keyed.write_text("image,pan,tilt\na.png,1,2\nb.png,3,4\n")
     assert read_joint_rows(keyed, images) == (["pan", "tilt"], [[3.0, 4.0], [1.0, 2.0]])
+    # keyed: rows of images not given (held out) are left out, the others matched
+    keyed.write_text("image,pan,tilt\na.png,1,2\nc.png,5,6\nb.png,3,4\n")
+    assert read_joint_rows(keyed, images) == (["pan", "tilt"], [[3.0, 4.0], [1.0, 2.0]])
+    # joints named like a pose chain's are joints, not a hand pose
+    chain = tmp_path / "c.csv"
+    chain.write_text("pose_x,pose_y,pose_z,pose_yaw,pose_pitch,pose_roll,x\n1,2,3,4,5,6,7\n")
+    assert read_joint_rows(chain, images[:1])[1] == [[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]]
 
 
 @pytest.mark.parametrize(
@@ -230,12 +256,20 @@ def test_joint_rows_in_order_and_by_image_name(tmp_path):
     [
         ("pan,tilt\n0.1,0.2\n", r"1 rows of joint values for 2 images"),
         ("image,pan\na.png,1\n", r"no row for image .*b\.png"),
-        ("image,pan\na.png,1\nb.png,2\nc.png,3\n", r"rows for images not given: c\.png"),
         ("image,pan\na.png,1\na.png,2\n", r"lines 2 and 3 both name image 'a\.png'"),
         ("pan,tilt\n0.1,x\n0.3,0.4\n", r"line 2, column 'tilt': expected a finite number"),
         ("pan,tilt\n0.1\n0.3,0.4\n", r"line 2: 1 values, the header has 2 columns"),
         ("pan,pan\n1,2\n3,4\n", r"\['pan'\] appear twice"),
         ("", r"empty"),
+        (
+            "image,x,y,z,qx,qy,qz,qw\na.png,0,0,0,0,0,0,1\nb.png,0,0,0,0,0,0,1\n",
+            r"line 1: the columns x, y, z, qx, qy, qz, qw are a hand pose, not joint values: "
+            r"this looks like hand poses; run kinfw pose-chain .*q\.csv --camera-frame",
+        ),
+        (
+            "hand_x,hand_y,hand_z,hand_qx,hand_qy,hand_qz,hand_qw\n0,0,0,0,0,0,1\n0,0,0,0,0,0,1\n",
+            r"the columns hand_x, .*, hand_qw are a hand pose, .* kinfw pose-chain",
+        ),
     ],
 )
 def test_joint_rows_errors(tmp_path, text, match):
@@ -279,7 +313,9 @@ def test_detect_command_end_to_end(tmp_path, capsys, board):
     stdout = capsys.readouterr().out
     assert code == 0
     assert "3 found, 1 not found, 0 ambiguous" in stdout
-    assert f"not found: {images[3]}" in stdout
+    # one line per rejected image, by its file name
+    (line,) = [x for x in stdout.splitlines() if "not found:" in x]
+    assert line.startswith(f"  not found: {images[3].name}: ") and str(tmp_path) not in line
     doc = json.loads(out.read_text())
     assert doc["format"] == "kinfw-measurements" and doc["version"] == 1
     assert doc["units"] == {"length": "m", "angle": "rad"}
@@ -326,7 +362,12 @@ def test_detect_command_errors(tmp_path, capsys):
     code, err = run(out=images[0])
     assert code == 2 and "refusing to overwrite an input" in err
     code, err = run(board="chessboard:8x6:0.03")
-    assert code == 2 and "found in none of the images; check --board" in err
+    assert code == 2
+    assert (
+        "was found in none of the images: 1 image(s) show no 8x6 chessboard (8x6: inner "
+        "corners per row x rows; first: img_0.png: "
+    ) in err
+    assert "check --board and the images" in err and "--allow-symmetric" not in err
     assert not (tmp_path / "o.json").exists()
     code, err = run("--min-corners", "3", board=CHARUCO.spec())
     assert code == 2 and "--min-corners" in err
@@ -351,8 +392,9 @@ def test_detect_command_when_every_image_is_ambiguous_says_why(tmp_path, capsys)
          "--camera", str(tmp_path / "cam.json"), "--frame", "cam", "--out", str(out)]
     )  # fmt: skip
     err = capsys.readouterr().err
-    assert code == 2 and "it was ambiguous in 1 (a symmetric chessboard" in err
-    assert "--allow-symmetric" in err and not out.exists()
+    assert code == 2 and "found in none of the images: in 1 a symmetric 8x6 chessboard was " in err
+    assert "--allow-symmetric if it is never turned" in err and not out.exists()
+    assert "show no" not in err  # the board was found: not a wrong spec
     code = main(
         ["detect", str(images[0]), "--board", board.spec(), "--joints", str(tmp_path / "q.csv"),
          "--camera", str(tmp_path / "cam.json"), "--frame", "cam", "--out", str(images[0])]

@@ -154,7 +154,7 @@ def test_symmetric_circle_grid_is_ambiguous_unless_allowed(board):
     turned = board_pose(board, [0.2, -0.2, 0.0], 0.3 + np.pi)
     for camera_T_board in (upright, turned):
         detection = Detector(board).detect(render_board(board, CAMERA, camera_T_board))
-        assert detection.status == "ambiguous"
+        assert detection.status == "ambiguous" and detection.symmetric
         assert "looks the same turned by 180 degrees" in detection.reason
         assert ("(and 90)" in detection.reason) == (board.cols == board.rows)
     allowed = Detector(board, allow_symmetric=True)
@@ -164,6 +164,38 @@ def test_symmetric_circle_grid_is_ambiguous_unless_allowed(board):
     down = allowed.detect(render_board(board, CAMERA, turned))
     truth = true_corners(board, CAMERA, turned)[::-1]
     assert np.median(np.linalg.norm(down.uv - truth, axis=1)) < MEDIAN_BOUND_PX
+
+
+SEVEN_BY_FIVE = CircleGrid(7, 5, 0.03, diameter_m=0.012)
+
+
+@pytest.mark.parametrize(
+    ("spec", "more"),
+    [
+        (CircleGrid(6, 5, 0.03), "more than 6 circles per row"),
+        (CircleGrid(7, 4, 0.03), "more than 4 rows"),
+        (CircleGrid(9, 9, 0.0254, False, 0.01), "more than 9"),
+    ],
+    ids=["6x5", "7x4", "9x9"],
+)
+def test_a_spec_smaller_than_the_circle_grid_is_not_found_saying_so(spec, more):
+    """A 7 x 5 grid read as 6 x 5 or 7 x 4, the 10 x 10 modified grid as 9 x 9
+    (noise-free, POSES[:3]): OpenCV's findCirclesGrid finds that many discs inside the
+    board (measured, OpenCV 4.x), a symmetric grid. The discs continuing past them make
+    each image not found, naming the count; never ambiguous (allow_symmetric would
+    number a part of the board)."""
+    board = MODIFIED if spec.cols == 9 else SEVEN_BY_FIVE
+    distance = 0.6 if board is MODIFIED else 0.5
+    for tilt, roll in POSES[:3]:
+        image = render_board(board, CAMERA, board_pose(board, tilt, roll, distance=distance))
+        assert Detector(board, allow_symmetric=True).detect(image).found  # the right size
+        for allow in (False, True):
+            detection = Detector(spec, allow_symmetric=allow).detect(image)
+            assert detection.status == "not found" and not detection.symmetric
+            assert detection.reason.startswith(
+                f"the {spec.cols}x{spec.rows} circles grid found is part of a larger grid "
+                f"(discs continue past it: {more}"
+            ), detection.reason
 
 
 def test_asymmetric_grid_with_even_rows_is_refused():
@@ -257,7 +289,15 @@ def test_a_larger_origin_disc_numbers_a_square_grid_at_every_roll():
         np.testing.assert_array_equal(detection.points, MODIFIED.points)
         e = errors(detection, MODIFIED, camera_T_board)
         assert np.median(e) < MEDIAN_BOUND_PX and e.max() < MAX_BOUND_PX, (roll, e.max())
-        assert Detector(plain).detect(image).status == "ambiguous"
+        # read without the origin disc: ambiguous, asking for the spec's origin field
+        # (not for allow_symmetric, which would ignore the disc)
+        without = Detector(plain).detect(image)
+        assert without.status == "ambiguous" and not without.symmetric
+        assert without.reason == (
+            "a corner disc of the 10x10 circles grid is larger than the others (an origin "
+            "disc?), but the spec gives no ORIGIN_DIAMETER_M: give its diameter, "
+            "circles:10x10:0.0254:0.01:ORIGIN_DIAMETER_M (metres)"
+        )
     assert not MODIFIED.symmetric and plain.symmetric
     assert parse_board("circles:10x10:0.0254:0.01:0.02") == MODIFIED
     assert parse_board(MODIFIED.spec()) == MODIFIED

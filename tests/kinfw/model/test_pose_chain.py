@@ -19,8 +19,8 @@ from kinfw.geometry import matrix_from_rotation_vector, xyz_quat_xyzw_from_trans
 from kinfw.measurements import read_hand_poses
 from kinfw.model import POSE_CHAIN_JOINTS, load_robot, pose_chain_joint_values, pose_chain_urdf
 from kinfw.observations import DatasetError
-from tests.paths import HEAD_URDF
 from tests.pin_se3 import angle, inverse, pin_fk
+from tests.rendered_head import render_left_camera
 
 
 def _poses(n: int, seed: int) -> np.ndarray:
@@ -42,6 +42,7 @@ def test_the_chain_puts_its_hand_at_every_logged_pose(camera_on):
     urdf = pose_chain_urdf(camera="cam", hand="flange", camera_on=camera_on)
     q = pose_chain_joint_values(T)
     robot = load_robot(urdf)
+    assert robot.exact_joints == POSE_CHAIN_JOINTS and robot.default_cameras == ("cam",)
     lower, upper = robot.joint_limits(POSE_CHAIN_JOINTS)
     assert np.all(q >= lower) and np.all(q <= upper)
     fk = pin_fk(urdf, POSE_CHAIN_JOINTS, q, "flange")
@@ -77,9 +78,11 @@ def test_bad_pose_files_are_refused_naming_the_row(tmp_path, capsys):
     argv = ["pose-chain", str(path), "--camera-frame", "cam"]
     argv += ["--urdf-out", str(tmp_path / "c.urdf"), "--joints-out", str(tmp_path / "j.csv")]
     assert main(argv) != 0
-    assert "row 6, hand_q*" in capsys.readouterr().err and not (tmp_path / "c.urdf").exists()
+    err = capsys.readouterr().err
+    assert "line 6 (image 'e.png'): quaternion (hand_qx, hand_qy, hand_qz, hand_qw)" in err
+    assert not (tmp_path / "c.urdf").exists()
     (tmp_path / "q.csv").write_text("image,x,y,z,qx,qy,q_z,qw\na,0,0,0,0,0,0,1\n")
-    with pytest.raises(DatasetError, match=r"header lacks column.*hand_qz"):
+    with pytest.raises(DatasetError, match=r"header is \[image, x, y, z, qx, qy, q_z, qw\]"):
         read_hand_poses(tmp_path / "q.csv")
 
 
@@ -96,19 +99,16 @@ def test_the_columns_without_the_hand_prefix_are_read_alike(tmp_path):
     assert b.images == tuple("abcde")
 
 
-def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_path):
+def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_path, capsys):
     """The IIS head's left camera, 16 rendered chessboard images; the logged poses are
     those of its parent link ``vergence_left_link`` (the true robot's Pinocchio FK), no
-    joint values. pose-chain -> detect -> calibrate --params frames: the exported mount
+    joint values. pose-chain -> detect -> calibrate (its default: frames, the chain's
+    joints being exact): the exported mount
     ``vergence_left_link_T_left_camera`` is the truth's within 0.5 mm and 0.05 deg
     (measured: 0.05 mm, 0.002 deg; rendering and detection: ~0.05 px per corner); the
     identity start is centimetres off."""
     root = tmp_path
-    argv = ["-q", "simulate", "--urdf", str(HEAD_URDF), "--images", str(root / "img")]
-    argv += ["--cameras", "left_camera", "--stage", "2", "--board", "chessboard:9x6:0.04"]
-    argv += ["--stage2-samples", "16", "--seed", "6", "--out", str(root / "sim.json")]
-    assert main([*argv, "--truth-out", str(root / "true.urdf")]) == 0
-    cam = root / "img" / "left_camera"
+    cam = render_left_camera(root, 16, 6)
     with (cam / "joints.csv").open() as f:
         rows = list(csv.DictReader(f))
     names = [n for n in rows[0] if n != "image"]
@@ -125,8 +125,10 @@ def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_pat
     argv = ["-q", "detect", *map(str, sorted(cam.glob("*.png"))), "--board", "chessboard:9x6:0.04"]
     argv += ["--joints", str(cam / "chain_joints.csv"), "--camera", str(cam / "camera.json")]
     assert main([*argv, "--frame", "left_camera", "--out", str(root / "det.json")]) == 0
+    capsys.readouterr()
     argv = ["-q", "calibrate", str(root / "det.json"), "--urdf", str(root / "chain.urdf")]
-    assert main([*argv, "--params", "frames", "--out", str(root / "cal.urdf")]) == 0
+    assert main([*argv, "--out", str(root / "cal.urdf")]) == 0  # the default: frames
+    printed = capsys.readouterr().out
     true_mount = (
         inverse(pin_fk(truth, names, q[:1], "vergence_left_link")[0])
         @ pin_fk(truth, names, q[:1], "left_camera")[0]
@@ -138,3 +140,7 @@ def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_pat
     assert 1e3 * np.linalg.norm(true_mount[:3, 3]) > 10 or np.degrees(angle(true_mount[:3, :3])) > 5
     sidecar = json.loads((root / "cal.kinfw.json").read_text())
     assert sidecar["model"]["parameters"] == ["frames"]
+    assert "exact" in sidecar["model"]["reason"]
+    # the printed table of changed origins gives the mount (mm, as written in the URDF)
+    row = next(line.split() for line in printed.splitlines() if "left_camera_joint" in line)
+    np.testing.assert_allclose([float(v) for v in row[4:7]], 1e3 * found[:3, 3], atol=0.01)
