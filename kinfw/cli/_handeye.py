@@ -107,7 +107,11 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "handeye_calibration.yaml (easy_handeye2) and handeye_mount.urdf",
     )
     p.add_argument("--base-frame", default="base_link", help="the robot base's TF frame")
-    p.add_argument("--hand-frame", default="tool0", help="the hand's TF frame")
+    p.add_argument(
+        "--hand-frame",
+        help="the hand's TF frame (default tool0; with --urdf, the link the camera's "
+        "fixed joint hangs on)",
+    )
     p.add_argument(
         "--camera-frame",
         default=CAMERA_FRAME,
@@ -147,6 +151,31 @@ def _pose_line(name: str, T) -> str:
     )
 
 
+def _camera_link(robot, data, camera: str | None) -> str:
+    """The URDF link whose fixed joint carries the camera of ``data``'s target views
+    (``camera``, or the one camera that observes): ``--hand-frame``'s default with
+    ``--urdf`` (``tool0`` when nothing observes a target: the pose pairs' reader refuses
+    that file)."""
+    from kinfw.measurements import target_views
+
+    cameras = sorted({g.camera for g in target_views(data)} if camera is None else {camera})
+    if not cameras:  # no views: pose_pairs_from_measurements says so
+        return "tool0"
+    if len(cameras) != 1 or not robot.has_frame(cameras[0]):
+        raise ValueError(
+            f"--hand-frame: not given and not found: {data.source}'s camera(s) "
+            f"{cameras or 'none'} {'are' if len(cameras) > 1 else 'is not'} one link of "
+            f"{robot.source}; give the link the camera is mounted on (--hand-frame LINK)"
+        )
+    path = robot.path_joints(cameras[0])
+    if not path or path[-1].is_movable:
+        raise ValueError(
+            f"--hand-frame: not given, and camera {cameras[0]!r} of {robot.source} is not on "
+            "a fixed joint; give the link the camera is mounted on (--hand-frame LINK)"
+        )
+    return path[-1].parent
+
+
 def _read_pairs(args: argparse.Namespace):
     """The pairs to fit (metres) and the held-out ones (or None), both read the same way
     (pose-pair files, or with --urdf measurement files); warns when held-out pairs repeat
@@ -168,10 +197,14 @@ def _read_pairs(args: argparse.Namespace):
         camera = args.camera_frame if args.camera_frame != CAMERA_FRAME else None
 
         def read(path: Path):
+            data = read_measurements(path)
+            if args.hand_frame is None:
+                args.hand_frame = _camera_link(robot, data, camera)
             return pose_pairs_from_measurements(
-                read_measurements(path), robot, hand_frame=args.hand_frame, camera=camera
+                data, robot, hand_frame=args.hand_frame, camera=camera
             )
     else:
+        args.hand_frame = args.hand_frame or "tool0"
 
         def read(path: Path):
             return read_pose_pairs(path).scaled(scale)

@@ -158,5 +158,19 @@ def test_a_kinfw_measurement_file_with_a_urdf_gives_the_models_camera_mount(tmp_
     code, _, stderr = run_cli([*argv, "--out", out], capsys)
     assert code == 0, stderr
     np.testing.assert_allclose(read_handeye_calibration(out).mount_T_camera, mount[0], atol=1e-9)
+    # without --hand-frame: the link the camera's fixed joint hangs on (left_plate), whose
+    # mount is that joint's origin in the URDF
+    code, _, stderr = run_cli(["-q", "handeye", path, "--urdf", urdf, "--out", out], capsys)
+    assert code == 0, stderr
+    np.testing.assert_allclose(
+        read_handeye_calibration(out).mount_T_camera,
+        robot.joint("left_camera_joint").parent_T_child,
+        atol=1e-9,
+    )
+    views = TargetObservations("wrist_cam", np.arange(12), np.stack(camera_T_target))
+    write_measurements(tmp_path / "w.json", Measurements(names, qs, targets=(views,)))
+    code, _, stderr = run_cli(["-q", "handeye", tmp_path / "w.json", "--urdf", urdf], capsys)
+    assert code == 2 and "['wrist_cam'] is not one link of" in stderr
+    assert "--hand-frame LINK" in stderr
     code, _, stderr = run_cli(["-q", "handeye", path], capsys)
     assert code == 2 and "a kinfw measurement file, not pose pairs" in stderr
