@@ -12,8 +12,10 @@ they are written as the six-joint chain of ``kinfw pose-chain`` (x, y, z prismat
 yaw, pitch, roll about z, y, x: ``base_T_tool0 = Trans(x, y, z) Rz Ry Rx``), exact by
 construction, with the camera's optical frame on a fixed joint of ``tool0`` (identity
 start).
-The right model is then the camera mount and the board pose alone ("frames"); "offsets"
-and "full" can only fit the uncalibrated intrinsics' error into the chain.
+The right model is then the camera mount and the board pose alone ("frames"), and the
+chain's URDF says so (``<kinfw exact>``): "offsets" and "full" leave its joints as
+written, so every set is "frames" there (before, they fitted the uncalibrated
+intrinsics' error into the chain).
 
 Steps, each printed: ``kinfw detect`` (in-process) with
 ``circles:10x10:0.0254:0.01:0.02`` (the origin dot read, no ``--allow-symmetric``);
