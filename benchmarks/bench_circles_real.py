@@ -6,7 +6,7 @@ to each forced parameter set (issue 24's development data).
 Data: ros-industrial/industrial_calibration's ``examples/data/test_set_10x10`` (Apache-2.0;
 15 images of a 10 x 10 "modified circle grid", 25.4 mm pitch, a larger origin dot, seen
 by a Kinect on an industrial arm's wrist; the nominal intrinsics fx = fy = 550 px, no
-distortion, uncalibrated), as ``../shared/data/industrial_calibration_circles`` holds it
+distortion, uncalibrated), as ``tests/data/industrial_calibration_circles`` holds it
 (its README gives the provenance). No joint angles were logged, only the flange poses;
 they are written as the six-joint chain of ``kinfw pose-chain`` (x, y, z prismatic, then
 yaw, pitch, roll about z, y, x: ``base_T_tool0 = Trans(x, y, z) Rz Ry Rx``), exact by
@@ -45,7 +45,7 @@ if str(REPO) not in sys.path:
 
 from benchmarks.common import format_table, machine_info, wall_time_line
 
-DATA = REPO.parent / "shared" / "data" / "industrial_calibration_circles"
+DATA = REPO / "tests" / "data" / "industrial_calibration_circles"
 BOARD = "circles:10x10:0.0254:0.01:0.02"
 SETS = ("frames", "offsets", "full")
 
