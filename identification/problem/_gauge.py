@@ -153,15 +153,14 @@ def robot_blocks(
     observed = model0.topology.frames
     topo = model0.topology
     exact = np.isin(topo.joint_names, robot.exact_joints)
+    chart_set = _without_exact(parameters, topo, exact)
     cpc = CPCBlock(
-        CPC_KEY,
-        free=_cpc_free(model0, robot, groups, observed, _without_exact(parameters, topo, exact)),
-        model=model0,
+        CPC_KEY, free=_cpc_free(model0, robot, groups, observed, chart_set), model=model0
     )
     in_model_frame = any(
         kind_of(g).has_measured_in and kind_of(g).measured_in(g) == model_frame for g in groups
     )
-    base_free = _without_exact(parameters, topo, exact) not in ("full", "none") and in_model_frame
+    base_free = chart_set not in ("full", "none") and in_model_frame
     base = BaseBlock(BlockKey("base"), free=np.full(6, base_free), start=np.eye(4))
     # a zero offset is redundant with a tool when the joint carries only end frames, and
     # with the base when only prismatic joints lie above it (a constant translation)

@@ -164,7 +164,7 @@ def _camera_link(robot, data, camera: str | None) -> str:
     if len(cameras) != 1 or not robot.has_frame(cameras[0]):
         raise ValueError(
             f"--hand-frame: not given and not found: {data.source}'s camera(s) "
-            f"{cameras or 'none'} {'are' if len(cameras) > 1 else 'is not'} one link of "
+            f"{cameras} {'are' if len(cameras) > 1 else 'is not'} one link of "
             f"{robot.source}; give the link the camera is mounted on (--hand-frame LINK)"
         )
     path = robot.path_joints(cameras[0])
