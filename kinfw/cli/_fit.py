@@ -159,8 +159,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"calibrated {args.urdf} with {args.method} from {args.data} "
         f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})"
     )
+    warned = () if result.intrinsics is None else (result.intrinsics.message(),)
     for note in report.notes:
-        print(f"note: {note}")
+        if note not in warned:  # said on stderr already
+            print(f"note: {note}")
     if choice is not None and choice.candidates:
         print("model choice: leave-one-out held-out error of each candidate (closed form):")
         print(_choice_table(choice))

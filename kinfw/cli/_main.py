@@ -81,7 +81,15 @@ def _silence_stdout() -> None:
 
 
 class _Parser(argparse.ArgumentParser):
-    """Errors in one line, ``kinfw CMD: error: ...`` (exit 2), like every other error."""
+    """Errors in one line, ``kinfw CMD: error: ...`` (exit 2), like every other error.
+
+    Options are never abbreviated: ``handeye --camera c=cam.yaml`` (calibrate's option,
+    not handeye's) was read as ``--camera-frame`` and failed with a misleading error.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(
