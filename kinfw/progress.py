@@ -9,7 +9,7 @@ Library code reports without taking a callback argument::
     with progress.task("Levenberg-Marquardt", unit="iteration") as bar:
         for it in range(1, 101):
             ...
-            bar.advance(note=f"cost {cost:.6g}")
+            bar.advance(note=f"cost {cost:#.6g}")
     for candidate in progress.steps(candidates, "model choice", unit="candidates"):
         ...
 

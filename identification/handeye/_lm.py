@@ -383,7 +383,10 @@ def fit_lm(
     steps = 0
     converged = False
     last_du: float | None = None
-    with progress.task("hand-eye Levenberg-Marquardt", unit="step") as bar:
+    # the cost is whitened by noise scales re-estimated after every step, so it is not
+    # monotone: it tends to the redundancy (6 n - 12 without down-weighted poses)
+    title = "hand-eye Levenberg-Marquardt, noise re-estimated each step"
+    with progress.task(title, unit="step") as bar:
         while steps < max_steps:
             steps += 1
             c, cost = _irls_weights(r, maskf, s_r, s_t, huber=huber)
@@ -399,7 +402,7 @@ def fit_lm(
                 break
             lam = max(lam / 10.0, 1e-12)
             X, Y, r, RXB, R_hat, v = step.X, step.Y, step.r, step.RXB, step.R_hat, step.v
-            bar.advance(1, f"cost {step.cost:.6g}")
+            bar.advance(1, f"cost {step.cost:#.6g}")
             change = 0.0
             if update_scales:
                 s_r, s_t, change, last_du = _updated_scales(

@@ -375,7 +375,7 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
 
     r, J = evaluate(x, normal is None)
     cost = cost_of(r)
-    bar.advance(0, f"cost {cost:.6g}")
+    bar.advance(0, f"cost {cost:#.6g}")
     lam = 1e-6  # column-scaled: start close to Gauss-Newton
     converged = False
     it = 0
@@ -388,7 +388,7 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
                 # at the minimum to rounding: a step this short changes nothing, and its
                 # cost only differs by rounding (retrying with a larger lam would spend
                 # up to ~40 residual evaluations to learn that)
-                bar.advance(1, f"cost {cost:.6g}")
+                bar.advance(1, f"cost {cost:#.6g}")
                 return x, it, True
             x_new = x.copy()
             x_new[free] += y / c
@@ -399,14 +399,14 @@ def _levenberg_marquardt(evaluate, x, free, obs_sizes, loss, k, max_iterations, 
             if -(g @ y + 0.5 * y @ (H @ y)) <= 1e-12 * max(cost, 1e-300):
                 # the model promises no more than the convergence threshold and the step
                 # failed on rounding: shorter steps (a larger lam) promise even less
-                bar.advance(1, f"cost {cost:.6g}")
+                bar.advance(1, f"cost {cost:#.6g}")
                 return x, it, True
             lam *= 4.0
             if lam > 1e12:
                 return x, it, converged
         decrease = cost - cost_new
         x, r, cost = x_new, r_new, cost_new
-        bar.advance(1, f"cost {cost:.6g}")
+        bar.advance(1, f"cost {cost:#.6g}")
         lam = max(lam / 3.0, 1e-12)
         if decrease <= 1e-12 * max(cost, 1e-300) or np.linalg.norm(y) < 1e-12:
             converged = True

@@ -303,8 +303,8 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     for row in rejected[:MAX_LINES]:
         print(
             f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
-            f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold "
-            "(refitted without it)"
+            f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold"
+            f"{_threshold(row, 1.0 / row.excess)} (refitted without it)"
         )
     if len(rejected) > MAX_LINES:
         print(
@@ -320,7 +320,7 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
     for row in down[:5]:
         print(
             f"    samples[{row.sample}] {_observed(row)}: residual {_residual_sizes(row)}, "
-            f"weight {row.weight:.2g}"
+            f"weight {row.weight:.2g}{_threshold(row, row.weight, 'the loss bends at')}"
         )
     if len(down) > 5:
         print(
@@ -499,6 +499,19 @@ def _observed(row: DownweightedRow | RejectedRow) -> str:
         + f" ({row.kind})"
         + (f" {row.where}" if row.where else "")
     )
+
+
+def _threshold(row: DownweightedRow | RejectedRow, factor: float, said: str = "") -> str:
+    """The robust threshold in the display unit of an observation measured in one metric
+    (an image point's px, a contact's mm): its residual times ``factor`` (``1 / excess``
+    for a rejected one, the Huber weight ``k / |r|`` for a down-weighted one), as the
+    whitened norm is the residual over the noise sigma. Empty for kinds of several metrics
+    (a pose's mm and deg share one whitened norm)."""
+    values = [v for v in row.residuals if v.value == v.value]
+    if len(values) != 1:
+        return ""
+    lead = f" ({said} " if said else " of "
+    return f"{lead}{values[0].value * factor:.3g} {values[0].unit}" + (")" if said else "")
 
 
 def _residual_sizes(row: DownweightedRow | RejectedRow) -> str:

@@ -104,3 +104,25 @@ def test_a_short_spec_and_a_missing_origin_dot_are_named_on_the_real_images(chai
     assert code == 2 and "part of a larger grid" in text and "--allow-symmetric" not in text
     code, text = _detect(chain, "circles:10x10:0.0254:0.01", root / "y.json", capsys)
     assert code == 2 and "give its diameter" in text and "--allow-symmetric" not in text
+
+
+def test_the_hand_eye_cost_printed_ends_at_the_redundancy(chain, capsys):
+    """``kinfw handeye``'s Levenberg-Marquardt whitens its cost by noise scales
+    re-estimated after every step, each the weighted residual sum over its redundancy, so
+    at convergence the cost is the redundancy itself: 6 x 15 pose pairs - 12 unknowns =
+    78 (no pose down-weighted here). Printed with six significant digits, trailing zeros
+    kept (``78.0000``, not ``78`` after ``77.9994``, which read as a rise), under a title
+    that says the noise is re-estimated."""
+    import re
+
+    root, _ = chain
+    assert _detect(chain, SPEC, root / "lm.json", capsys)[0] == 0
+    argv = ["handeye", str(root / "lm.json"), "--urdf", str(root / "chain.urdf")]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    costs = re.findall(
+        r"Levenberg-Marquardt, noise re-estimated each step: step \d+, cost (\S+)", err
+    )
+    assert len(costs) >= 2, err
+    assert all(len(c.replace(".", "")) == 6 for c in costs), costs
+    assert float(costs[-1]) == pytest.approx(6 * 15 - 12, rel=1e-3), costs

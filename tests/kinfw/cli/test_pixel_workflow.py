@@ -251,6 +251,16 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     assert len(rejected) > 20 and len(lines) == 10
     assert f"... and {len(rejected) - 10} more rejected ({len(rejected)} in all" in out
     assert all(re.search(r"\(pixels\) image left_camera_\d+ corner \d+: ", x) for x in lines)
+    # each line gives the threshold in px: the 99.9 % quantile of a clean 2-D residual's
+    # norm, sigma sqrt(-2 ln 0.001), under the estimated pixel noise
+    sigma_px = dict(read_report(px / "w.json").refine.noise.sigmas)["pixel"]
+    for x in lines:
+        threshold_px = float(re.search(r"x the threshold of ([\d.]+) px", x)[1])
+        assert threshold_px == pytest.approx(sigma_px * np.sqrt(-2 * np.log(1e-3)), rel=0.01)
+    # and the Huber loss bends at its 99 % quantile, sigma sqrt(-2 ln 0.01)
+    bends = [float(b) for b in re.findall(r"the loss bends at ([\d.]+) px", out)]
+    assert bends, out
+    assert bends == pytest.approx([sigma_px * np.sqrt(-2 * np.log(1e-2))] * len(bends), rel=0.01)
     # every rejected corner is where the report says: that image, that corner, that sample
     data = read_measurements(px / "px.json")
     where = {
