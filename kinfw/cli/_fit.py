@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Sequence
+from pathlib import PurePath
 from typing import TYPE_CHECKING, Any
 
 from kinfw.cli._args import load_model, mounted_model, read_data
@@ -176,25 +178,39 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))
+    if report.reprojection_held_out is not None:
+        _print_reprojection(report.reprojection_held_out, "the held-out data")
     if args.report:
         print(f"report: {args.report}")
     return 0
 
 
-def _print_reprojection(rep) -> None:
-    """Reprojection RMS per camera and the worst images (px, in-sample)."""
-    print("reprojection error on the calibration data (in-sample), px:")
+def _print_reprojection(rep, on: str = "the calibration data (in-sample)") -> None:
+    """Reprojection RMS per camera and the worst images (px) on ``on``."""
+    print(f"reprojection error on {on}, px:")
     rows = [
         [c.camera, str(c.n_images), str(c.n_points), f"{c.rms_px:.3g}", f"{c.max_px:.3g}"]
         for c in rep.cameras
     ]
     print(format_table(rows, ["camera", "images", "points", "RMS px", "max px"]))
+    worst = rep.worst[:5]
+    folder = _common_folder([i.image for i in worst])
     print(
-        "  worst images (RMS px): "
+        f"  worst images (RMS px{f', in {folder}' if folder else ''}): "
         + ", ".join(
-            f"{i.image} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}" for i in rep.worst[:5]
+            f"{i.image[len(folder) :]} ({i.camera}, samples[{i.sample}]) {i.rms_px:.3g}"
+            for i in worst
         )
     )
+
+
+def _common_folder(labels: list[str]) -> str:
+    """The folder (with its trailing separator) every label's path is in, or "" when
+    they are not paths or not in one folder."""
+    folders = {str(PurePath(label).parent) for label in labels}
+    if len(folders) != 1 or (folder := folders.pop()) == ".":
+        return ""
+    return folder.rstrip(os.sep) + os.sep
 
 
 def _print_origin_changes(nominal, calibrated, shown: int = 8) -> None:

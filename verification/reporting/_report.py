@@ -209,6 +209,9 @@ def calibration_report(
         reprojection=None
         if calibration.refined is None
         else reprojection_section(calibrated, data, calibration.refined.unknowns),
+        reprojection_held_out=None
+        if calibration.refined is None or held_out is None
+        else reprojection_section(calibrated, held_out, calibration.refined.unknowns),
     )
 
 

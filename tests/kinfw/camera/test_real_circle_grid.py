@@ -65,6 +65,8 @@ def test_every_real_image_shows_the_whole_board_and_the_default_fits_the_mount(c
     rms_norm_px = float(row[3])
     assert rms_norm_px / 2**0.5 < 2.0, out  # per coordinate; the source: < 1.5 (its cost)
     assert "camera_joint" in out  # the mount, in the table of changed origins
+    # the worst images by file name, their one folder said once
+    assert f"worst images (RMS px, in {SET / 'images'}/): 2.png (camera, samples[2])" in out
     # the nominal Kinect intrinsics are wrong, and the check says so with its evidence
     assert "refining the camera intrinsics (9 parameters) lowers the pixel noise" in said.err
     assert "moves camera_joint by" in said.err

@@ -217,6 +217,31 @@ def test_simulate_pixels_only_prints_no_pose_noise(tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_held_out_images_are_named_worst_first(px_only, tmp_path, capsys):
+    """``calibrate --holdout`` with images: the held-out reprojection table per camera and
+    the worst held-out images by name. One held-out image's points moved 30 px along u (a
+    frame grabbed with the wrong joint values) is named first, at 30 px RMS; the others
+    stay near the simulated 0.5 px noise."""
+    doc = json.loads(px_only.read_text())
+    train, held = dict(doc), dict(doc)
+    train["samples"], held["samples"] = doc["samples"][:22], doc["samples"][22:]
+    moved = held["samples"][2]["observations"][0]
+    moved["uv"] = [[u + 30.0, v] for u, v in moved["uv"]]
+    for name, part in (("train", train), ("held", held)):
+        (tmp_path / f"{name}.json").write_text(json.dumps(part))
+    argv = ["calibrate", tmp_path / "train.json", "--urdf", HEAD, "--out", tmp_path / "c.urdf"]
+    code, out, err = _run([*argv, "--params", "full", "--holdout", tmp_path / "held.json"], capsys)
+    assert code == 0, err
+    section = out[out.index("reprojection error on the held-out data, px:") :]
+    line = re.search(r"worst images \(RMS px\): (.*)", section)[1]
+    worst = re.findall(r"(\S+) \((\w+), samples\[(\d+)\]\) ([\d.]+)", line)
+    assert len(worst) == 5, line
+    assert worst[0][1] == moved["frame"] and int(worst[0][2]) == 2, worst
+    assert float(worst[0][3]) == pytest.approx(30.0, rel=0.02), worst
+    assert all(float(w[3]) < 1.0 for w in worst[1:]), worst
+
+
+@pytest.mark.slow
 def test_noise_line_names_only_the_components_the_data_has(px_only, capsys):
     """Pixel-only data: the noise line and the report give the pixel sigma alone, near
     the simulated 0.5 px; no default 1 mm / 0.5 deg of components without rows."""
