@@ -417,7 +417,7 @@ def _undetermined_refusal(
             nominal.source,
         )
     except ValueError:
-        shown = ""
+        shown, scale = "", ""
     else:
         worst = max(
             (
@@ -429,6 +429,7 @@ def _undetermined_refusal(
             for n in refined.model.topology.joint_names
         )
         shown = f" (the largest move of a joint origin: {worst[1]!r} by {worst[0]:.3g} m)"
+        scale = _scale_drift(nominal, exported, data)
     params = options.parameters if isinstance(options.parameters, str) else "the mask"
     return (
         f"{data.source}: too little data to refine --params {params}: the fit "
@@ -436,8 +437,49 @@ def _undetermined_refusal(
         + f" in {refined.iterations} iterations and moved "
         f"{refined.undetermined:.3g} (m, rad) along directions these data do not "
         f"determine, which it cannot bring back to the nominal URDF{shown}: the exported "
-        "geometry would be meaningless there; refine fewer parameters, add a prior "
+        f"geometry would be meaningless there.{scale} Refine fewer parameters, add a prior "
         "(--prior-mm, --prior-deg), or add data"
+    )
+
+
+#: A refused fit whose observed frames' distances between samples are all this far from
+#: the nominal's in the same ratio (its 5-95 % range within :data:`SCALE_SPREAD` of it)
+#: has drifted in scale (:func:`_scale_drift`).
+SCALE_DRIFT = 0.05
+SCALE_SPREAD = 0.25
+
+
+def _scale_drift(nominal: Robot, exported: Robot, data: Measurements, n: int = 100) -> str:
+    """A sentence when the refused fit ``exported`` is the nominal robot scaled: the
+    distances between its observed frames' positions at ``n`` of the data's samples are
+    :data:`SCALE_DRIFT` or more off the nominal's, in one ratio. Contacts with one plane,
+    one point or a ball of unknown radius hold for the robot and the surface scaled
+    together about the surface (a robot of any size touches a plane through its base), so
+    they do not determine the size; their noise alone pulls on it. Empty otherwise."""
+    qs = data.qs[np.linspace(0, data.n_samples - 1, min(n, data.n_samples)).astype(int)]
+    ratios = []
+    for frame in data.observed_frames:
+        try:
+            a, b = (
+                r.frame_poses(qs, frame, data.joint_names)[:, :3, 3] for r in (nominal, exported)
+            )
+        except (KeyError, ValueError):
+            continue
+        d0 = np.linalg.norm(a[:, None] - a[None], axis=-1)
+        d1 = np.linalg.norm(b[:, None] - b[None], axis=-1)
+        far = d0 > 0.1 * d0.max()
+        ratios.append(d1[far] / d0[far])
+    if not ratios or not (values := np.concatenate(ratios)).size:
+        return ""
+    low, mid, high = np.percentile(values, [5, 50, 95])
+    if abs(mid - 1.0) < SCALE_DRIFT or high - low > SCALE_SPREAD * mid:
+        return ""
+    return (
+        f" The fitted robot is {mid:.3g} times the nominal's size (the distances between "
+        f"the observed frames over the samples, {low:.3g}-{high:.3g}): contacts with one "
+        "plane, one point or a ball of unknown radius hold for the robot scaled with the "
+        "surface, so they cannot tell its size; a length they fix can (a ball of known "
+        "radius, planes at known distances, poses or points from a tracker)."
     )
 
 

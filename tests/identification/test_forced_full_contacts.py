@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 
 import numpy as np
 import pytest
@@ -148,3 +149,20 @@ def test_the_choice_table_says_why_full_alone_is_not_scored(nominal, tmp_path):
     (row,) = [x for x in out.getvalue().splitlines() if x.strip().startswith("full  ")]
     assert "not scored: too little data to refine --params full: the fit" in row
     assert "training fold" not in out.getvalue()
+
+
+def test_forced_full_on_one_plane_says_the_contacts_cannot_tell_the_size(nominal):
+    """Plenty of contacts (400) with one level table still leave the robot's size free:
+    the robot and the plane scaled together about the plane touch it at the same joint
+    values (n . (s p) - s d = s (n . p - d) = 0), so only the noise pulls on the scale and
+    the forced full fit drifts in it. The refusal says so, with the factor it drifted
+    by, and names lengths that would fix it."""
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=400, noise_m=1e-4, seed=7
+    )
+    with pytest.raises(InsufficientDataError) as refused:
+        calibrate(nominal, sim.data, parameters="full")
+    said = str(refused.value)
+    found = re.search(r"The fitted robot is ([0-9.]+) times the nominal's size", said)
+    assert found and abs(float(found[1]) - 1.0) > 0.05, said
+    assert "cannot tell its size" in said and "a ball of known radius" in said
