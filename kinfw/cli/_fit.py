@@ -38,6 +38,9 @@ __all__ = ["calibration_options", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
+#: Sets of parameters not identifiable listed one per line (a noise-free stereo rig gave
+#: six look-alike sets); the others are counted, and the report has them all.
+UNSEEN_LINES = 3
 
 
 # -- kinfw calibrate ---------------------------------------------------------------------
@@ -313,8 +316,14 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         f"  parameters: {len(ref.parameters) - ref.n_fixed} estimated, {ref.n_fixed} fixed "
         "(not estimated; std null in the report)"
     )
-    for item in ident.not_identifiable:
+    unseen = ident.not_identifiable
+    for item in unseen[:UNSEEN_LINES]:
         print(f"  not identifiable: {', '.join(item.parameters)}: {item.why}")
+    if len(unseen) > UNSEEN_LINES:
+        print(
+            f"  ... and {len(unseen) - UNSEEN_LINES} more sets not identifiable "
+            f"({'see the report' if has_report else 'write them with --report'})"
+        )
     rejected = ref.rejected or ()
     for row in rejected[:MAX_LINES]:
         print(
