@@ -437,8 +437,14 @@ def _undetermined_refusal(
         + f" in {refined.iterations} iterations and moved "
         f"{refined.undetermined:.3g} (m, rad) along directions these data do not "
         f"determine, which it cannot bring back to the nominal URDF{shown}: the exported "
-        f"geometry would be meaningless there.{scale} Refine fewer parameters, add a prior "
-        "(--prior-mm, --prior-deg), or add data"
+        f"geometry would be meaningless there.{scale} Refine fewer parameters, "
+        + (
+            "add a prior (--prior-mm, --prior-deg)"
+            if options.prior is None
+            else f"a tighter prior than {options.prior[0] * 1e3:.3g} mm / "
+            f"{np.degrees(options.prior[1]):.3g} deg"
+        )
+        + ", or add data"
     )
 
 
