@@ -381,6 +381,9 @@ class ObservationKind:
         holds their groups (``"poses"``); None for the others (held in ``others``).
     has_measured_in : bool
         Whether groups carry a ``measured_in`` frame (None: the URDF root).
+    entity_field : str or None
+        The group field naming what it observes besides its frame (``"plane"``,
+        ``"target"``): :meth:`entity`.
     """
 
     name: ClassVar[str]
@@ -389,6 +392,7 @@ class ObservationKind:
     components: ClassVar[tuple[NoiseComponent, ...]]
     measurements_field: ClassVar[str | None] = None
     has_measured_in: ClassVar[bool] = False
+    entity_field: ClassVar[str | None] = None
 
     @property
     def rows(self) -> int:
@@ -459,6 +463,12 @@ class ObservationKind:
         """``(marker, frame)`` of a group key, for the one-frame-per-marker rule."""
         k = dict(key)
         return (k["marker"], k["frame"]) if k.get("marker") is not None else None
+
+    def entity(self, group: Any) -> str | None:
+        """The name of what the group observes besides its frame (a plane, a ball, a
+        divot, a target): its field :attr:`entity_field`; None for kinds without one.
+        Labels tell groups of one frame, kind and marker apart by it."""
+        return None if self.entity_field is None else getattr(group, self.entity_field)
 
     def target_of(self, key: tuple[tuple[str, Any], ...]) -> tuple[str, str | None] | None:
         """``(target, target_frame)`` of a group key that names a target (None: fixed in

@@ -153,6 +153,7 @@ class DivotKind(ProbeContactKind):
     Residual: the probe's placement error (3, m)."""
 
     name = "divot"
+    entity_field = "divot"
     group_type = DivotContacts
     row_fields = ("gap_m",)
     components = (PLACEMENT,)

@@ -215,6 +215,7 @@ class PixelKind(ObservationKind):
     """``"pixels"`` (module docstring). One file observation (an image) is many rows."""
 
     name = "pixels"
+    entity_field = "target"
     group_type = PixelObservations
     row_fields = ("uv", "target_p", "point_id", "shot", "image", "sigma_px")
     components = (PIXEL,)

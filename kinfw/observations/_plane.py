@@ -280,6 +280,7 @@ class PlaneKind(ProbeContactKind):
     Residual: signed distance (1, m)."""
 
     name = "plane"
+    entity_field = "plane"
     group_type = PlaneContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)

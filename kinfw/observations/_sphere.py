@@ -214,6 +214,7 @@ class SphereKind(ProbeContactKind):
     Residual: signed distance from the surface (1, m)."""
 
     name = "sphere"
+    entity_field = "sphere"
     group_type = SphereContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)

@@ -173,6 +173,7 @@ class TargetKind(RigidTransformKind):
     (3, rad)."""
 
     name = "target"
+    entity_field = "target"
     group_type = TargetObservations
     row_fields = ("camera_T_target",)
     components = (POSITION, ROTATION)

@@ -75,7 +75,9 @@ class GroupErrorSummary:
     in the display unit (``position_mean_mm``, ``rotation_rms_deg``, ``pixel_max_px``,
     ``height_rms_mm``, ``tilt_deg``); for a metric with axes the mean and std of
     ``|error|`` per axis (``abs_mean_xyz_mm``, Shih et al. Table 4; None in the file when
-    undefined)."""
+    undefined). ``entity`` names what the group observes (its plane, ball, divot or
+    target) when another group of the same frame, kind and marker observes something
+    else (one probe on a table and a wall), else None."""
 
     frame: str
     kind: str
@@ -83,12 +85,15 @@ class GroupErrorSummary:
     n: int
     values: tuple[ErrorValue, ...]
     axes: tuple[tuple[str, tuple[float, ...] | None], ...] = ()
+    entity: str | None = None
 
     @property
     def group(self) -> str:
-        """The report's label: ``"frame (kind)"``, ``"frame [marker] (kind)"``."""
+        """The report's label: ``"frame (kind)"``, ``"frame [marker] (kind)"``,
+        ``"frame [marker] (kind entity)"`` (one per group)."""
         marker = f" [{self.marker}]" if self.marker else ""
-        return f"{self.frame}{marker} ({self.kind})"
+        entity = f" {self.entity}" if self.entity else ""
+        return f"{self.frame}{marker} ({self.kind}{entity})"
 
     @property
     def headlines(self) -> tuple[ErrorValue, ...]:
@@ -110,7 +115,12 @@ class GroupErrorSummary:
 
     @classmethod
     def of(
-        cls, frame: str, kind: str, marker: str | None, summary: Mapping[str, Any]
+        cls,
+        frame: str,
+        kind: str,
+        marker: str | None,
+        summary: Mapping[str, Any],
+        entity: str | None = None,
     ) -> GroupErrorSummary:
         """From ``n`` and the keys of a summary (``name_stat_unit`` numbers, per-axis
         lists or None)."""
@@ -122,7 +132,7 @@ class GroupErrorSummary:
                 axes.append((key, None if v is None else tuple(float(x) for x in v)))
             else:
                 values.append(ErrorValue.from_key(key, float(v)))
-        return cls(frame, kind, marker, int(summary["n"]), tuple(values), tuple(axes))
+        return cls(frame, kind, marker, int(summary["n"]), tuple(values), tuple(axes), entity)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready; a per-axis array that does not apply (NaN) is null."""
@@ -130,6 +140,7 @@ class GroupErrorSummary:
             "frame": self.frame,
             "kind": self.kind,
             "marker": self.marker,
+            **({} if self.entity is None else {"entity": self.entity}),
             "n": self.n,
             **{v.key: v.value for v in self.values},
             **{
@@ -143,7 +154,7 @@ class GroupErrorSummary:
         doc = r.obj(doc, at)
         summary: dict[str, Any] = {"n": r.integer(doc, "n", at)}
         for key in doc:
-            if key in ("frame", "kind", "marker", "n"):
+            if key in ("frame", "kind", "marker", "entity", "n"):
                 continue
             if key.startswith("abs_"):  # per axis: a list, or null
                 value = r.value(doc, key, at)
@@ -155,6 +166,7 @@ class GroupErrorSummary:
             r.string(doc, "kind", at),
             r.string(doc, "marker", at, optional=True),
             summary,
+            r.string(doc, "entity", at, optional=True),
         )
 
 

@@ -53,6 +53,9 @@ class GroupErrors:
         Per metric of the kind (:attr:`kinfw.observations.ObservationKind.metrics`: a
         pose's position and rotation, a point's position, an image point's pixel error,
         a plane contact's height and the contacts' tilt, a registered kind's own), SI.
+    entity : str or None
+        What the group observes besides its frame (its plane, ball, divot or target:
+        :meth:`kinfw.observations.ObservationKind.entity`).
     """
 
     frame: str
@@ -60,6 +63,7 @@ class GroupErrors:
     marker: str | None
     sample: NDArray[np.int64]
     errors: tuple[MetricErrors, ...]
+    entity: str | None = None
 
     @property
     def n(self) -> int:
@@ -121,7 +125,8 @@ class AccuracyReport:
         (null)."""
         groups = []
         for g in self.groups:
-            entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker, **g.summary()}
+            entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker}
+            entry |= ({} if g.entity is None else {"entity": g.entity}) | g.summary()
             if per_sample:
                 per = [e for e in g.errors if e.metric.per_observation]
                 entry["samples"] = [
@@ -155,6 +160,7 @@ def group_errors(group: Any, rows: NDArray[np.float64], model: NumericContext) -
         group.marker,
         group.sample,
         tuple(group.kind.errors(group.group, rows, model)),
+        group.kind.entity(group.group),
     )
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+from collections import Counter
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -60,10 +61,19 @@ def errors_by_group(
     """Errors of ``robot`` on ``data`` per observation group (see evaluate_model: the
     ``known`` unknowns, e.g. a calibration's target poses, as given, the others fitted
     to ``data``); each labelled ``"frame (kind)"`` (``"frame [marker] (kind)"``) by its
-    ``group``."""
+    ``group``, with what it observes (``"(plane table)"``) when groups of one frame, kind
+    and marker observe different things."""
     report = evaluate_model(robot, data, known=known)
+    alike = Counter((g.frame, g.kind, g.marker) for g in report.groups)
     return tuple(
-        GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary()) for g in report.groups
+        GroupErrorSummary.of(
+            g.frame,
+            g.kind,
+            g.marker,
+            g.summary(),
+            g.entity if alike[g.frame, g.kind, g.marker] > 1 else None,
+        )
+        for g in report.groups
     )
 
 

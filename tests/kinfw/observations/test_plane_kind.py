@@ -459,7 +459,7 @@ def test_the_contacts_are_drawn_on_the_plane(scene):
 
 
 @pytest.mark.slow
-def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene, tmp_path):
+def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene, tmp_path, capsys):
     """The CLI end to end: contacts with N(0, 0.1 mm) noise and one 5 mm gross error, and 8
     tracked positions of the probe; the robust default fit flags the bad contact and the
     report lists it with its distance residual."""
@@ -509,6 +509,23 @@ def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene,
     worst = report["refine"]["rejected"][0]
     assert (worst["kind"], worst["sample"]) == ("plane", int(table.sample[3]))
     assert abs(worst["height_residual_mm"] - 5.0) < 0.5
+    # one probe on two planes: a row per plane, named by it, with its own contacts (the
+    # rows were labelled alike, and the tables keyed by label kept one plane's numbers)
+    for section in ("errors_before", "errors_after"):
+        rows = report[section]
+        assert set(rows) == {
+            "flange [tip] (plane table)",
+            "flange [tip] (plane wall)",
+            "flange [tip] (point)",  # the 8 tracked positions
+        }
+        assert [rows[f"flange [tip] (plane {k})"]["n"] for k in ("table", "wall")] == [60, 60]
+        assert rows["flange [tip] (plane table)"]["entity"] == "table"
+    heights = report["height_rms_mm_by_stage"]
+    assert all(len(stage) == 2 for stage in heights.values()), heights  # no point heights
+    # and kinfw verify: a row per plane, the plane named in the kind column
+    assert main(["-q", "verify", str(tmp_path / "out.urdf"), str(tmp_path / "contacts.json")]) == 0
+    table = capsys.readouterr().out
+    assert "plane table" in table and "plane wall" in table, table
 
 
 # -- errors as a person reads them: height (mm) per contact, tilt (deg) per plane ----------
