@@ -12,6 +12,7 @@ from kinfw.identification.checks._fit_checks import (
     STRUCTURE_R2,
     ResidualStructure,
     fit_warnings,
+    implausible_noise,
     residual_structure,
 )
 from kinfw.identification.checks._redundancy import (
@@ -62,6 +63,7 @@ __all__ = [
     "check_redundancy",
     "check_units",
     "fit_warnings",
+    "implausible_noise",
     "median_residuals",
     "redundancy",
     "residual_structure",

@@ -49,6 +49,7 @@ __all__ = [
     "STRUCTURE_R2",
     "ResidualStructure",
     "fit_warnings",
+    "implausible_noise",
     "residual_structure",
 ]
 
@@ -279,24 +280,44 @@ def fit_warnings(result: RefineResult, measurements: Measurements) -> tuple[str,
             f"(reduced chi-square {result.sigma_hat2:.3g}): the noise is understated, or the "
             "model misses something (see the residuals by frame in the report)"
         )
-    sigmas = dict(noise.sigmas)
-    position = sigmas.get("position")
-    rotation = sigmas.get("rotation")
-    if noise.estimated and (
-        (position is not None and position > PLAUSIBLE_NOISE_M)
-        or (rotation is not None and rotation > PLAUSIBLE_NOISE_RAD)
-    ):
-        size = ", ".join(
-            text
-            for text in (
-                None if position is None else f"{1e3 * position:.3g} mm",
-                None if rotation is None else f"{math.degrees(rotation):.3g} deg",
-            )
-            if text
-        )
-        out.append(
-            f"the estimated noise ({size} per component) is larger than a tracker or camera "
-            "measures: the residuals are probably a model error (a wrong frame, marker or "
-            "URDF), not noise"
-        )
+    implausible = implausible_noise(result, measurements)
+    if implausible:
+        out.append(implausible)
     return tuple(out)
+
+
+def implausible_noise(result: RefineResult, measurements: Measurements) -> str | None:
+    """One line when the fit's estimated noise is larger than a tracker, probe or camera
+    measures: a length component (a position, a contact's distance) above
+    :data:`PLAUSIBLE_NOISE_M` or an angle above :data:`PLAUSIBLE_NOISE_RAD`; the
+    "noise" is then a model error (a restricted parameter set included) or wrong data. It
+    names the movable joints the observations depend on that ``measurements`` does not
+    list (held at zero: a dropped column reads as noise). None otherwise."""
+    from kinfw.observations import kind_of
+
+    noise = result.noise
+    if not noise.estimated:
+        return None
+    units = {c.name: c.unit for g in measurements.all_groups() for c in kind_of(g).components}
+    limits = {"m": (PLAUSIBLE_NOISE_M, 1e3, "mm"), "rad": (PLAUSIBLE_NOISE_RAD, None, "deg")}
+    large = []
+    for name, sigma in noise.sigmas:
+        limit = limits.get(units.get(name, ""))
+        if limit is not None and sigma > limit[0]:
+            shown = sigma * limit[1] if limit[1] else math.degrees(sigma)
+            large.append(f"{name} {shown:.3g} {limit[2]}")
+    if not large:
+        return None
+    names = result.model.topology.joint_names
+    held = [n for n in names if n not in measurements.joint_names]
+    why = (
+        f"; the joints {held} move these frames but are not in the data's joint_names, "
+        "so they are held at zero: if they moved, add their values"
+        if held
+        else ""
+    )
+    return (
+        f"the estimated noise ({', '.join(large)} per component) is larger than a tracker, "
+        "probe or camera measures: the residuals are probably a model error (a wrong "
+        f"frame, marker or URDF, or a parameter set too small) or wrong data, not noise{why}"
+    )

@@ -21,7 +21,7 @@ import numpy as np
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
-from kinfw.identification.checks import InsufficientDataError
+from kinfw.identification.checks import InsufficientDataError, implausible_noise
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, check_measurements
 from kinfw.model import Robot, check_robot
@@ -519,6 +519,14 @@ def calibrate_and_report(
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )
+    restricted = parameters != "full" or prior is not None  # full alone: warned in the fit
+    implausible = (
+        implausible_noise(result.refined, data)
+        if restricted and result.refined is not None
+        else None
+    )
+    if implausible:
+        warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=2)
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))

@@ -71,3 +71,36 @@ def test_clean_data_gives_no_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         calibrate(nominal, data)
+
+
+def test_a_dropped_joint_column_is_named_when_the_noise_it_makes_is_implausible():
+    """Plane contacts of the 6R arm with 0.1 mm noise, the last joint's column dropped
+    from the file (then held at zero, as documented): whatever parameter set the default
+    fits, the estimated contact noise is centimetres, which no probe measures. The
+    warning says so and names the joint held at zero; with the column, silence."""
+    from kinfw.measurements import Measurements
+    from kinfw.simulation import simulate_measurements
+    from kinfw.verification.reporting import calibrate_and_report
+
+    nominal = load_robot(ARM_6R)
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=60, noise_m=1e-4, seed=3
+    )
+    keep = [i for i, n in enumerate(sim.data.joint_names) if n != "j6"]
+    dropped = Measurements(
+        tuple(sim.data.joint_names[i] for i in keep),
+        sim.data.qs[:, keep],
+        others=sim.data.others,
+        source="dropped.json",
+    )
+    with pytest.warns(UserWarning) as said:
+        result = calibrate_and_report(nominal, dropped, parameters="frames")
+    sigma_mm = 1e3 * dict(result.calibration.refined.noise.sigmas)["distance"]
+    assert sigma_mm > 5.0
+    lines = [str(w.message) for w in said if "larger than a tracker, probe" in str(w.message)]
+    assert len(lines) == 1 and "the joints ['j6'] move these frames" in lines[0], lines
+    assert f"distance {sigma_mm:.3g} mm" in lines[0]
+    with warnings.catch_warnings(record=True) as clean:
+        warnings.simplefilter("always")
+        calibrate_and_report(nominal, sim.data, parameters="full", prior=(3e-3, 0.006))
+    assert not [w for w in clean if "larger than a tracker" in str(w.message)]
