@@ -66,7 +66,9 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     ------
     DatasetError
         Naming the joint (and listing the robot's movable joints), or the frame and the
-        first sample that uses it.
+        first sample that uses it; or a plane, ball or divot observed too few times to be
+        placed whose name is close to one observed more often (a misspelling would be
+        fitted as a thing of its own, undetermined).
 
     Warns
     -----
@@ -76,6 +78,7 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     """
     m = measurements
     _check_joint_names(m, robot)
+    _check_entity_names(m)
     first_in = _first_measured_in(m, robot)
     _check_observed_paths(m, robot, first_in)
     _warn_limits(m, robot)
@@ -88,6 +91,33 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
             for g in m.all_groups()
         )
     )
+
+
+def _check_entity_names(m: Measurements) -> None:
+    """Refuse an observed thing seen fewer times than its kind needs to place it
+    (:attr:`kinfw.observations.ObservationKind.entity_min`: a plane's three contacts) whose
+    name is close to another of its kind seen more often (``tabel`` beside ``table``)."""
+    seen: dict[tuple[str, str], list[int]] = {}
+    least: dict[str, int] = {}
+    for g in m.all_groups():
+        kind = kind_of(g)
+        name = kind.entity(g)
+        if name is not None:
+            seen.setdefault((kind.name, name), []).extend(int(i) for i in g.sample)
+            least[kind.name] = kind.entity_min
+    for (kind, name), samples in seen.items():
+        if len(samples) >= least[kind]:
+            continue
+        common = [n for (k, n), s in seen.items() if k == kind and len(s) >= least[kind]]
+        close = difflib.get_close_matches(name, common, n=1, cutoff=0.75)
+        if close:
+            where = ", ".join(f"samples[{i}]" for i in sorted(samples))
+            raise DatasetError(
+                f"{m.source}: {kind} {name!r} is observed {len(samples)} time(s) ({where}), "
+                f"{kind} {close[0]!r} {len(seen[kind, close[0]])} times: a misspelling of "
+                f"{close[0]!r}? (as written, {name!r} is a {kind} of its own, which fewer "
+                f"than {least[kind]} observations cannot place)"
+            )
 
 
 def _check_joint_names(m: Measurements, robot: Robot) -> None:

@@ -384,6 +384,9 @@ class ObservationKind:
     entity_field : str or None
         The group field naming what it observes besides its frame (``"plane"``,
         ``"target"``): :meth:`entity`.
+    entity_min : int
+        Observations of one such thing its unknown needs at least (a plane's 3
+        contacts); fewer under a name close to another's is refused as a misspelling.
     """
 
     name: ClassVar[str]
@@ -393,6 +396,7 @@ class ObservationKind:
     measurements_field: ClassVar[str | None] = None
     has_measured_in: ClassVar[bool] = False
     entity_field: ClassVar[str | None] = None
+    entity_min: ClassVar[int] = 1
 
     @property
     def rows(self) -> int:

@@ -154,6 +154,7 @@ class DivotKind(ProbeContactKind):
 
     name = "divot"
     entity_field = "divot"
+    entity_min = 3  # the point and the probe's offset apart
     group_type = DivotContacts
     row_fields = ("gap_m",)
     components = (PLACEMENT,)

@@ -281,6 +281,7 @@ class PlaneKind(ProbeContactKind):
 
     name = "plane"
     entity_field = "plane"
+    entity_min = 3  # its normal (2) and offset
     group_type = PlaneContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)

@@ -215,6 +215,7 @@ class SphereKind(ProbeContactKind):
 
     name = "sphere"
     entity_field = "sphere"
+    entity_min = 3  # its centre
     group_type = SphereContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)

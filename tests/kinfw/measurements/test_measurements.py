@@ -29,7 +29,13 @@ from kinfw.measurements import (
     write_measurements,
 )
 from kinfw.model import load_robot
-from kinfw.observations import DatasetError, PointObservations, PoseObservations, TargetObservations
+from kinfw.observations import (
+    DatasetError,
+    PointObservations,
+    PoseObservations,
+    TargetObservations,
+    kind_of,
+)
 from tests.paths import REPO
 
 S = math.sqrt(0.5)  # cos(45 deg) = sin(45 deg): quaternions of 90-degree rotations
@@ -1210,3 +1216,36 @@ def test_the_documentation_examples_parse():
                 "samples": [{"q": [0.0], "observations": [block]}],
             }
         assert measurements_from_dict(block, "docs").n_samples >= 1
+
+
+def test_a_misspelled_plane_is_refused_naming_its_sample_and_the_likely_name():
+    """One contact of 60 names plane 'tabel': read as written it is a plane of its own,
+    which one contact cannot place (the model choice then refused every set, naming the
+    sample as if it were the problem). Refused before any fit, naming the sample and
+    'table'; a plane of a different name with one contact ('wall') is not a misspelling
+    and passes this check."""
+    from dataclasses import replace
+
+    from kinfw.measurements import check_against_robot
+    from kinfw.simulation import simulate_measurements
+    from tests.robots import ARM_6R
+
+    arm = load_robot(ARM_6R)
+    data = simulate_measurements(
+        arm, contacts=[("flange", None)], contact_samples=20, noise_m=1e-4, seed=3
+    ).data
+    (table,) = data.others
+
+    def renamed(name):
+        take = kind_of(table).take
+        rest = np.setdiff1d(np.arange(len(table.sample)), [7])
+        one = take(table, np.array([7]), table.sample[[7]])
+        return data.with_groups([take(table, rest, table.sample[rest]), replace(one, plane=name)])
+
+    with pytest.raises(DatasetError) as refused:
+        check_against_robot(renamed("tabel"), arm)
+    said = str(refused.value)
+    assert f"plane 'tabel' is observed 1 time(s) (samples[{table.sample[7]}])" in said
+    assert "fewer than 3 observations cannot place" in said
+    assert "plane 'table' 19 times: a misspelling of 'table'?" in said
+    assert check_against_robot(renamed("wall"), arm).n_samples == data.n_samples
