@@ -221,8 +221,9 @@ def test_the_cli_plan_is_the_verb_s_plan(tmp_path, capsys):
 def test_crossvalidate_of_noise_free_data_predicts_held_out_samples_exactly(experiment, capsys):
     d, _, _, data, _ = experiment
     cv = kinfw.crossvalidate(kinfw.load_robot(d / "nominal.urdf"), data, k=3, seed=1)
-    assert cv.sets == ("none", "frames", "full")
-    assert max(s.of("position") for s in cv.scores if s.parameters == "full") < 1e-6  # mm
+    assert cv.sets == ("none", "frames", "full", "auto")  # auto: calibrate's default
+    for fitted in ("full", "auto"):
+        assert max(s.of("position") for s in cv.scores if s.parameters == fitted) < 1e-6  # mm
     assert min(s.of("position") for s in cv.scores if s.parameters == "none") > 1.0
     argv = ["crossval", d / "data.json", "--urdf", d / "nominal.urdf", "--k", "3"]
     assert main([str(a) for a in [*argv, "--seed", "1", "--jobs", "2", "--json"]]) == 0

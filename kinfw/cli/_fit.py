@@ -469,7 +469,8 @@ def _print_crossval(cv: CrossValidation, args: argparse.Namespace, data: Measure
         "none": "nominal",
         "frames": "frames only",
         "offsets": "offsets+frames",
-        "full": "calibrated",
+        "full": "full",
+        "auto": "default",
     }
     metrics = cv.metrics
     images = any(kind_of(g).name == "pixels" for g in data.all_groups())

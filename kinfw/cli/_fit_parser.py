@@ -144,11 +144,12 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "crossval",
         help="k-fold cross-validation against baselines",
-        description="Held-out error of the calibration (folds by sample) next "
-        "to two baselines on the same folds: the nominal geometry and 'frames "
-        "only' (nominal joints; measurement frame, markers, target and tool / "
-        "hand-eye frames fitted). Warns when the calibration is worse than "
-        "frames only, with the likely cause.",
+        description="Held-out error of the calibration (folds by sample): the full "
+        "parameter set and the default (what kinfw calibrate fits with its default "
+        "options: the model choice made on each training fold), next to two baselines on "
+        "the same folds: the nominal geometry and 'frames only' (nominal joints; "
+        "measurement frame, markers, target and tool / hand-eye frames fitted). Warns "
+        "when the full calibration is worse than frames only, with the likely cause.",
     )
     p.add_argument("data", type=Path, help="measurement file")
     p.add_argument("--urdf", type=Path, required=True, help="nominal URDF")

@@ -166,3 +166,19 @@ def test_forced_full_on_one_plane_says_the_contacts_cannot_tell_the_size(nominal
     found = re.search(r"The fitted robot is ([0-9.]+) times the nominal's size", said)
     assert found and abs(float(found[1]) - 1.0) > 0.05, said
     assert "cannot tell its size" in said and "a ball of known radius" in said
+
+
+def test_crossval_scores_the_default_where_full_is_refused(nominal):
+    """kinfw crossval's default column is what calibrate fits by default on each training
+    fold: on contacts of one table, where full is refused on every fold (so crossval had
+    no calibrated column), the default predicts the held-out contacts near their 0.1 mm
+    noise while frames only stays at the nominal's millimetres."""
+    from kinfw.verification.evaluation import AUTO, BASELINES, crossvalidate
+
+    sim = simulate_measurements(
+        nominal, contacts=[("flange", None)], contact_samples=60, noise_m=1e-4, seed=7
+    )
+    cv = crossvalidate(nominal, sim.data, k=3, sets=(*BASELINES, AUTO))
+    assert not [s for s in cv.scores if s.parameters == "full"]  # refused on every fold
+    assert any("--params full not scored" in w for w in cv.warnings)
+    assert cv.mean(AUTO, "height") < 0.3 and cv.mean("frames", "height") > 1.0

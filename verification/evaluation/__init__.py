@@ -30,6 +30,7 @@ from kinfw.verification.evaluation._crosscheck import (
     random_joint_values,
 )
 from kinfw.verification.evaluation._crossval import (
+    AUTO,
     BASELINES,
     SELECTION_SETS,
     CrossValidation,
@@ -62,6 +63,7 @@ from kinfw.verification.evaluation._trials import (
 )
 
 __all__ = [
+    "AUTO",
     "BASELINES",
     "CRLB",
     "NORMAL_COVERAGE",

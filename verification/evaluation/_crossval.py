@@ -48,6 +48,7 @@ from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
 
 __all__ = [
+    "AUTO",
     "BASELINES",
     "SELECTION_SETS",
     "CrossValidation",
@@ -63,6 +64,9 @@ __all__ = [
 
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
 BASELINES = ("none", "frames", "full")
+#: The set name that stands for ``kinfw calibrate``'s default on each training fold: the
+#: model choice's set and prior (``kinfw crossval``'s "default" column).
+AUTO = "auto"
 #: Parameter sets compared by default with ``select``: the baselines and offsets.
 SELECTION_SETS = ("none", "frames", "offsets", "full")
 
@@ -348,10 +352,18 @@ def _score(
         # the caller; every fold would repeat them with its own numbers
         warnings.simplefilter("ignore", UserWarning)
         try:
-            result = calibrate(
-                nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
+            result = (
+                _chosen_fit(nominal, train, noise, loss)
+                if parameters == AUTO
+                else calibrate(
+                    nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
+                )
             )
         except InsufficientDataError as exc:  # this set on this fold: said by the caller
+            return str(exc)
+        except ValueError as exc:  # the model choice on a fold too small to choose
+            if parameters != AUTO:
+                raise
             return str(exc)
     held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test)
     # the worst held-out sample in the first per-observation metric
@@ -374,6 +386,28 @@ def _score(
         condition=ident.condition,
         n_parameters=ident.n_parameters,
         n_residuals=sum(len(g.sample) * g.rows for g in result.refined.residuals),
+    )
+
+
+def _chosen_fit(nominal: Robot, train: Measurements, noise, loss) -> Calibration:
+    """What ``kinfw calibrate``'s default fits on ``train``: the model choice's set and
+    prior (:func:`kinfw.verification.evaluation.choose_parameters`), scored after all when
+    the training data would take ``"full"`` unscored but refuse it (one plane's contacts)."""
+    from kinfw.verification.evaluation._model_choice import choose_parameters
+
+    choice = choose_parameters(nominal, train, noise=noise, loss=loss)
+    if choice.fit is not None:
+        return choice.fit
+    try:
+        return calibrate(
+            nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
+        )
+    except InsufficientDataError:
+        if choice.k > 0:
+            raise
+    choice = choose_parameters(nominal, train, noise=noise, loss=loss, cross_validate=True)
+    return choice.fit or calibrate(
+        nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
     )
 
 
@@ -445,8 +479,10 @@ def crossvalidate(
         Folds (2 <= k <= samples); folds are a random partition of the samples (seeded).
     seed : int
     sets : tuple of str, optional
-        Parameter sets (see :func:`kinfw.identification.refine`); default
-        :data:`BASELINES`, with ``select`` :data:`SELECTION_SETS` (``kinfw crossval
+        Parameter sets (see :func:`kinfw.identification.refine`), or :data:`AUTO`
+        (``"auto"``: ``kinfw calibrate``'s default, the model choice on each training
+        fold; ``prior`` does not apply to it); default :data:`BASELINES` and
+        :data:`AUTO`, with ``select`` :data:`SELECTION_SETS` (``kinfw crossval
         [--select]``).
     select : bool
         Pick the set with the lowest mean whitened held-out error
@@ -473,7 +509,7 @@ def crossvalidate(
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
     if sets is None:
-        sets = SELECTION_SETS if select else BASELINES
+        sets = SELECTION_SETS if select else (*BASELINES, AUTO)
     if reference is None and (exclude_flagged or (select and noise is None)):
         # the full-data fit: its noise whitens the selection, its rejections are flagged
         reference = _reference_fit(nominal, data, noise=noise, loss=loss, prior=prior)

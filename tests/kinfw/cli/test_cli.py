@@ -453,8 +453,9 @@ def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     cv = json.loads(out)
     means = cv["mean_position_rms_mm"]
     assert means["full"] < means["frames"] < means["none"]
-    assert len(cv["folds"]) == 3 * 3
+    assert len(cv["folds"]) == 3 * 4  # nominal, frames, full and the default
+    assert means["auto"] == means["full"]  # plentiful data: the default fits full
     code, out, _ = _run(
         ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", "--select"], capsys
     )
-    assert code == 0 and "selected: calibrated ('full')" in out
+    assert code == 0 and "selected: full ('full')" in out
