@@ -23,7 +23,7 @@ from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
 from kinfw.identification.checks import InsufficientDataError, implausible_noise
 from kinfw.identification.problem import NoiseModel
-from kinfw.measurements import Measurements, check_measurements
+from kinfw.measurements import Measurements, check_against_robot, check_measurements
 from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
@@ -297,6 +297,34 @@ def shared_configurations(data: Measurements, held_out: Measurements) -> int:
     return sum(tuple(q) in train for q in np.round(held_out.q_of(names), 12).tolist())
 
 
+#: Held-out errors this many times the in-sample ones (same group, first metric) say the
+#: held-out file is probably not of this robot and setup (:func:`_warn_far_held_out`):
+#: held-out data of the same setup come at most a few times the in-sample error (the
+#: parameters' share, sqrt(1 + p / n), and an overfit small set).
+FAR_HELD_OUT = 10.0
+
+
+def _warn_far_held_out(report: CalibrationReport, source: str) -> None:
+    """Warn when the calibration predicts a held-out group :data:`FAR_HELD_OUT` times
+    worse than the same group in-sample: another robot's or setup's file (markers, a
+    plane, a board elsewhere) scores as if it were this one's."""
+    inside = {row.group: row for row in report.errors_in_sample}
+    for row in report.errors_held_out or ():
+        same = inside.get(row.group)
+        if same is None or not row.after or not same.after:
+            continue
+        held, fit = row.after[0], same.after[0]
+        if fit.value > 0 and held.value > FAR_HELD_OUT * fit.value:
+            warnings.warn(
+                f"{source}: {row.group}: the held-out error after calibration is "
+                f"{held.value / fit.value:.3g} times the calibration data's ({held.value:.3g} "
+                f"vs {fit.value:.3g} {held.unit}): is it of this robot and setup (the same "
+                "markers, plane, board and measurement frame)?",
+                UserWarning,
+                stacklevel=3,
+            )
+
+
 def _warn_overlap(data: Measurements, held_out: Measurements) -> None:
     """Warn when held-out samples repeat calibration samples' joint values: if they are
     the same measurements, their errors are in-sample, not held-out."""
@@ -481,6 +509,7 @@ def calibrate_and_report(
     data = check_measurements(data, "data")
     held_out = None if held_out is None else check_measurements(held_out, "held_out")
     if held_out is not None:
+        check_against_robot(held_out, nominal)  # its frames and joints, before any fit
         _warn_overlap(data, held_out)
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
@@ -515,6 +544,8 @@ def calibrate_and_report(
         data_path=data_path,
         held_out=held_out,
     )
+    if held_out is not None:
+        _warn_far_held_out(report, held_out.source)
     if choice is not None:  # the choice goes to the report's notes (and the sidecar)
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
