@@ -290,7 +290,7 @@ class PlaneKind(ProbeContactKind):
     def parse(self, reader, obs, at, frame):
         probe = self.probe_fields(reader, obs, at)
         distance = 0.0
-        if obs.get("distance") is not None:
+        if "distance" in obs:  # absent: on the surface; null is refused
             distance = reader.number(
                 obs, "distance", at, "the probe's signed distance from the plane (a length)"
             )

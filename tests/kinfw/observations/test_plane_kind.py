@@ -808,3 +808,29 @@ def test_a_plane_fixed_to_a_frame_of_the_robot_calibrates_and_round_trips(scene,
             exported.joint(name).parent_T_child, nominal.joint(name).parent_T_child, atol=1e-12
         )
         np.testing.assert_allclose(exported.joint(name).axis, nominal.joint(name).axis, atol=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["plane", "sphere"])
+def test_a_null_distance_is_refused_an_absent_one_is_on_the_surface(kind, tmp_path):
+    """A contact written without "distance" is on the surface (0, as the writer leaves
+    zeros out); an explicit null is a hole in the data, not a zero: refused, naming it."""
+    obs = {"frame": "flange", "kind": kind, kind: "s", "marker": "tip"}
+    if kind == "sphere":
+        obs["radius"] = 0.02
+    doc = {
+        "format": "kinfw-measurements",
+        "version": 1,
+        "units": {"length": "m", "angle": "rad"},
+        "joint_names": list(NAMES),
+        "samples": [{"q": [0.1 * i] * len(NAMES), "observations": [dict(obs)]} for i in range(3)],
+    }
+    path = tmp_path / "c.json"
+    path.write_text(json.dumps(doc))
+    data = read_measurements(path)
+    assert [float(d) for d in data.others[0].distance_m] == [0.0, 0.0, 0.0]
+    doc["samples"][1]["observations"][0]["distance"] = None
+    path.write_text(json.dumps(doc))
+    with pytest.raises(
+        DatasetError, match=r"samples\[1\]\.observations\[0\]\.distance: null; expected the probe"
+    ):
+        read_measurements(path)
