@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 
 from kinfw.files import sidecar_path
 from kinfw.measurements import Measurements
-from kinfw.model import Robot
+from kinfw.model import BlockKey, Robot
 from kinfw.reports import CalibrationSidecar, read_sidecar
 from kinfw.view._html import OfflineWindow, write_html
 from kinfw.view._scene import as_robot, scene, targets_from_sidecar
@@ -46,9 +46,10 @@ def show(
     data : Measurements, optional
         One sample's observations are drawn, with lines from prediction to measurement.
     sidecar : path or CalibrationSidecar, optional
-        The calibration's sidecar: its targets are drawn, and observations made in an
-        external frame placed by its ``w_T_root``. Default: ``CALIBRATED.kinfw.json``
-        beside a ``calibrated`` file, when there is one.
+        The calibration's sidecar: its targets are drawn, observations made in an
+        external frame placed by its ``w_T_root``, and contacts and markers drawn with
+        its planes, balls, divots, marker poses and probe offsets. Default:
+        ``CALIBRATED.kinfw.json`` beside a ``calibrated`` file, when there is one.
     sample : int, optional
         The sample of ``data`` drawn (default 0).
     residual_scale : float
@@ -74,7 +75,17 @@ def show(
     extra: dict[str, Any] = {}
     if sidecar is not None:
         doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
-        extra = {"targets": targets_from_sidecar(doc), "meas_T_root": doc.w_T_root}
+        extra = {
+            "targets": targets_from_sidecar(doc),
+            "meas_T_root": doc.w_T_root,
+            # planes, balls, divots, markers, probe offsets: what the contacts and
+            # markers of the data are drawn with (targets and frames come above)
+            "unknowns": {
+                BlockKey(kind, name): value
+                for (kind, name), value in doc.known_frames().items()
+                if kind not in ("target", "frame")
+            },
+        }
     vis = scene(
         nominal,
         calibrated,

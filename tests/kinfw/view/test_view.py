@@ -484,3 +484,25 @@ def test_screenshot_shows_both_models(demo_html, tmp_path):
     rows, cols = np.nonzero(calibrated)
     assert 0.25 < cols.mean() / rgb.shape[1] < 0.75  # roughly centred
     assert rows.min() > 0.05 * rgb.shape[0]  # the head's top is in view, with a margin
+
+
+def test_contacts_are_drawn_with_the_sidecars_plane_and_probe(tmp_path, caplog):
+    """kinfw view of a contact calibration: the plane and the probe's offset come from
+    the calibration's sidecar, as targets and the tracker's pose do (they were left out:
+    "cannot draw PlaneContacts(...) (no value for plane:table)")."""
+    from kinfw.cli._main import main
+    from tests.robots import ARM_6R
+
+    (tmp_path / "arm.urdf").write_text(ARM_6R)
+    argv = ["-q", "simulate", "--urdf", tmp_path / "arm.urdf", "--contacts", "flange"]
+    argv += ["--contact-samples", "40", "--noise-mm", "0.1", "--seed", "3"]
+    argv += ["--out", tmp_path / "c.json", "--truth-out", tmp_path / "t.urdf"]
+    assert main([str(a) for a in argv]) == 0
+    argv = ["-q", "calibrate", tmp_path / "c.json", "--urdf", tmp_path / "arm.urdf"]
+    assert main([str(a) for a in [*argv, "--out", tmp_path / "cal.urdf"]]) == 0
+    argv = ["-q", "view", tmp_path / "arm.urdf", "--calibrated", tmp_path / "cal.urdf"]
+    argv += ["--data", tmp_path / "c.json", "--html", tmp_path / "v.html"]
+    with caplog.at_level("WARNING", logger="kinfw.view"):
+        assert main([str(a) for a in argv]) == 0
+    assert "cannot draw" not in caplog.text, caplog.text
+    assert (tmp_path / "v.html").stat().st_size > 0
