@@ -6,7 +6,6 @@ Like :mod:`kinfw.cli`, this module imports only the standard library at start-up
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Sequence
 
 __all__ = ["accuracy_table", "format_table", "metric_format", "number"]
@@ -46,12 +45,10 @@ def accuracy_table(report_dict: dict) -> str:
     keys = dict.fromkeys(k for g in report_dict["groups"] for k in g if k not in fixed)
     values = [ErrorValue.from_key(k, 0.0) for k in keys if not k.startswith("abs_")]
     axes = dict.fromkeys(k.split("_", 2)[2] for k in keys if k.startswith("abs_mean_"))
-    alike = Counter((g["frame"], g["kind"], g["marker"]) for g in report_dict["groups"])
     rows = []
     for g in report_dict["groups"]:
-        kind = g["kind"]
-        if alike[g["frame"], kind, g["marker"]] > 1 and g.get("entity"):
-            kind += f" {g['entity']}"  # one probe on a table and a wall: a row each
+        # one probe on a table and a wall: a row each, named (AccuracyReport.entities)
+        kind = g["kind"] + (f" {g['entity']}" if g.get("entity") else "")
         cells = [number(g.get(v.key), metric_format(v.name, v.unit)) for v in values]
         for suffix in axes:
             mu, sd = g.get(f"abs_mean_{suffix}"), g.get(f"abs_std_{suffix}")

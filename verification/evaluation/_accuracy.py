@@ -23,6 +23,7 @@ fit, slightly optimistic for few samples. Rotation errors are
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -116,6 +117,15 @@ class AccuracyReport:
             return np.zeros(0), np.zeros(0, np.int64)
         return np.concatenate([v for v, _ in found]), np.concatenate([k for _, k in found])
 
+    def entities(self) -> tuple[str | None, ...]:
+        """Per group what it observes (:attr:`GroupErrors.entity`) where another group
+        of the same frame, kind and marker observes something else (one probe on a table
+        and a wall), else None: what tells the groups' labels apart."""
+        alike = Counter((g.frame, g.kind, g.marker) for g in self.groups)
+        return tuple(
+            g.entity if alike[g.frame, g.kind, g.marker] > 1 else None for g in self.groups
+        )
+
     def to_dict(self, *, per_sample: bool = False) -> dict:
         """JSON-ready summary (SI inside, the display unit in the key names:
         :meth:`GroupErrors.summary`); with ``per_sample`` each group also lists every
@@ -124,9 +134,9 @@ class AccuracyReport:
         Undefined numbers are NaN: write the dict with :func:`kinfw.files.json_text`
         (null)."""
         groups = []
-        for g in self.groups:
+        for g, entity in zip(self.groups, self.entities(), strict=True):
             entry = {"frame": g.frame, "kind": g.kind, "marker": g.marker}
-            entry |= ({} if g.entity is None else {"entity": g.entity}) | g.summary()
+            entry |= ({} if entity is None else {"entity": entity}) | g.summary()
             if per_sample:
                 per = [e for e in g.errors if e.metric.per_observation]
                 entry["samples"] = [

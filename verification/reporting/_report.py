@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-from collections import Counter
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -64,16 +63,9 @@ def errors_by_group(
     ``group``, with what it observes (``"(plane table)"``) when groups of one frame, kind
     and marker observe different things."""
     report = evaluate_model(robot, data, known=known)
-    alike = Counter((g.frame, g.kind, g.marker) for g in report.groups)
     return tuple(
-        GroupErrorSummary.of(
-            g.frame,
-            g.kind,
-            g.marker,
-            g.summary(),
-            g.entity if alike[g.frame, g.kind, g.marker] > 1 else None,
-        )
-        for g in report.groups
+        GroupErrorSummary.of(g.frame, g.kind, g.marker, g.summary(), entity)
+        for g, entity in zip(report.groups, report.entities(), strict=True)
     )
 
 
