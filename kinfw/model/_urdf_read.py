@@ -98,14 +98,44 @@ class JointInfo:
         return self.type in ("revolute", "continuous")
 
 
-#: The xacro XML namespace: a file or string that declares it is a xacro document.
+#: The xacro XML namespace. Declaring it does not make a document xacro: xacro's output
+#: keeps the declaration (example-robot-data's ``panda.urdf``); see :func:`is_xacro`.
 XACRO_NAMESPACE = "http://www.ros.org/wiki/xacro"
+
+#: A xacro substitution, ``$(arg x)`` or ``${expression}``.
+_SUBSTITUTION = re.compile(r"\$[({]")
+
+
+def is_xacro(text: str, source: str) -> bool:
+    """True when ``text`` needs xacro: ``source`` is a ``.xacro`` file, or the document has
+    an element or attribute in the xacro namespace, or a ``$(...)`` / ``${...}``
+    substitution in an attribute or text (comments do not count). A document that only
+    declares the namespace, as xacro's own output does, is a plain URDF; one that is not
+    well-formed XML is left to the URDF checks, which name the parse error."""
+    if source.endswith(".xacro"):
+        return True
+    if XACRO_NAMESPACE not in text:
+        return False
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return False
+    namespace = f"{{{XACRO_NAMESPACE}}}"
+    for element in root.iter():
+        if element.tag.startswith(namespace):
+            return True
+        if any(k.startswith(namespace) for k in element.attrib):
+            return True
+        words = [*element.attrib.values(), element.text or "", element.tail or ""]
+        if any(_SUBSTITUTION.search(w) for w in words):
+            return True
+    return False
 
 
 def xml_text(urdf: str | Path, xacro_args: Mapping[str, str] | None = None) -> tuple[str, str]:
     """Return (xml_text, source) for a path or an XML string; a xacro document (a
-    ``.xacro`` file, or one declaring the xacro namespace) is expanded first
-    (:func:`expand_xacro`, with ``xacro_args``)."""
+    ``.xacro`` file, or one with xacro elements or substitutions: :func:`is_xacro`) is
+    expanded first (:func:`expand_xacro`, with ``xacro_args``)."""
     if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
         path = Path(urdf)
         try:
@@ -115,12 +145,12 @@ def xml_text(urdf: str | Path, xacro_args: Mapping[str, str] | None = None) -> t
         source = str(path)
     else:
         text, source = str(urdf), "<urdf string>"
-    if source.endswith(".xacro") or XACRO_NAMESPACE in text:
+    if is_xacro(text, source):
         return expand_xacro(text, source, xacro_args or {}), source
     if xacro_args:
         raise RobotModelError(
             f"{source}: xacro arguments given ({', '.join(xacro_args)}) for a plain URDF "
-            "(no xacro namespace, not a .xacro file)"
+            "(no xacro element or substitution, not a .xacro file)"
         )
     return text, source
 

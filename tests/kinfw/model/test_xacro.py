@@ -7,10 +7,13 @@ import subprocess
 import sys
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
+from kinfw.model import XACRO_NAMESPACE as NS
 from kinfw.model import RobotModelError, load_robot
 from tests.cli_run import run_cli
+from tests.erd import urdf_path
 from tests.paths import DATA
 
 ARM = DATA / "xacro" / "arm.urdf.xacro"
@@ -70,3 +73,51 @@ def test_the_command_line_takes_xacro_arguments_and_a_urdf_on_stdin(capsys):
         text=True,
     )
     assert done.returncode == 0, done.stderr
+
+
+def _panda_fk_by_pinocchio(path, names, q, frame):
+    """``root_T_frame`` from Pinocchio's own parse of the file (revolute joints only)."""
+    model = pin.buildModelFromUrdf(str(path))
+    data = model.createData()
+    config = pin.neutral(model)
+    for name, value in zip(names, q, strict=True):
+        config[model.joints[model.getJointId(name)].idx_q] = value
+    pin.framesForwardKinematics(model, data, config)
+    return data.oMf[model.getFrameId(frame)].homogeneous
+
+
+DECLARES = EXPANDED.replace('<robot name="arm">', f'<robot name="arm" xmlns:xacro="{NS}">')
+
+
+def test_a_urdf_that_only_declares_the_xacro_namespace_needs_no_xacro(monkeypatch):
+    """xacro's output keeps ``xmlns:xacro`` (example-robot-data's panda.urdf): without the
+    xacro package it is read as the URDF it is (it was refused as a xacro file)."""
+    monkeypatch.setitem(sys.modules, "xacro", None)  # import xacro: ImportError
+    panda = urdf_path("panda_description/urdf/panda.urdf")
+    assert NS in panda.read_text()
+    robot = load_robot(panda)
+    q = np.random.default_rng(1).uniform(-1.5, 1.5, len(robot.joint_names))
+    np.testing.assert_allclose(
+        robot.frame_poses(q, "panda_link8"),
+        _panda_fk_by_pinocchio(panda, robot.joint_names, q, "panda_link8"),
+        atol=1e-12,
+    )
+    arm = load_robot(DECLARES.format(upper=0.5))
+    np.testing.assert_allclose(_l2(arm), _l2(load_robot(EXPANDED.format(upper=0.5))), atol=0)
+    commented = DECLARES.format(upper=0.5).replace("</robot>", "<!-- ${no} $(arg x) --></robot>")
+    assert load_robot(commented).joint_names == NAMES
+
+
+@pytest.mark.parametrize(
+    "edit",
+    [
+        ('<link name="l2"/>', '<link name="l2"/><xacro:property name="a" value="1"/>'),
+        ('xyz="0 0 0.1"', 'xyz="0 0 ${0.1}"'),
+        ('xyz="0 0 0.1"', 'xyz="0 0 $(arg z)"'),
+    ],
+)
+def test_a_xacro_element_or_substitution_still_needs_xacro(monkeypatch, edit):
+    monkeypatch.setitem(sys.modules, "xacro", None)
+    text = DECLARES.format(upper=0.5).replace(*edit)
+    with pytest.raises(RobotModelError, match=r"^<urdf string>: a xacro file; .*kinfw\[ros\]"):
+        load_robot(text)
