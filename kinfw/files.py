@@ -9,7 +9,8 @@ Commands call :func:`check_outputs` before any computation, so that a missing di
 a directory where a file is expected, or an output that is one of the inputs is reported
 at once, not after a minute-long solve that has already overwritten some of the files.
 
-This module uses the standard library only (the command line imports it at start-up).
+This module uses the standard library only at import (the command line imports it at
+start-up); :func:`check_figure_path` imports matplotlib when it is called.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from pathlib import Path
 __all__ = [
     "OutputPathError",
     "atomic_path",
+    "check_figure_path",
     "check_output_dir",
     "check_outputs",
     "check_writable",
@@ -145,17 +147,49 @@ def check_output_dir(
     return path
 
 
+def check_figure_path(path: PathLike, *, label: str | None = None) -> Path:
+    """Check that matplotlib can write a figure in the format of ``path``'s suffix
+    (``savefig`` infers it from there); nothing is written.
+
+    Raises
+    ------
+    OutputPathError
+        Naming the path and the formats matplotlib can write, when the suffix is missing
+        or not one of them.
+    """
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    path = Path(path)
+    formats = sorted(FigureCanvasBase.get_supported_filetypes())
+    suffix = path.suffix.lstrip(".").lower()
+    if suffix not in formats:
+        what = (
+            f"matplotlib cannot write a .{suffix} figure" if suffix else "no suffix names a format"
+        )
+        raise OutputPathError(
+            f"{_label(path, label)}: {what}; give a suffix matplotlib can write: "
+            + ", ".join(f".{f}" for f in formats)
+        )
+    return path
+
+
 def check_outputs(
-    outputs: Mapping[str, PathLike | None], *, inputs: Mapping[str, PathLike | None] | None = None
+    outputs: Mapping[str, PathLike | None],
+    *,
+    inputs: Mapping[str, PathLike | None] | None = None,
+    figures: tuple[str, ...] = (),
 ) -> None:
     """:func:`check_writable` for each output, and check that no two outputs are one file.
 
     ``outputs`` and ``inputs`` map how the user gave a path (``"--out"``) to the path;
-    None values are skipped.
+    None values are skipped. The outputs keyed by ``figures`` are matplotlib figures:
+    their suffix must name a format it can write (:func:`check_figure_path`).
     """
     given = {k: Path(v) for k, v in outputs.items() if v is not None}
     for key, path in given.items():
         check_writable(path, label=key, inputs=inputs)
+        if key in figures:
+            check_figure_path(path, label=key)
     keys = list(given)
     for i, a in enumerate(keys):
         for b in keys[i + 1 :]:

@@ -62,7 +62,11 @@ def add_plan_parser(sub) -> None:
     p.add_argument("--per-joint", type=count, default=5, help="per-joint protocol: M values")
     p.add_argument("--target-mm", type=positive, default=None, help="smallest N below this")
     p.add_argument("--out", type=Path, help="plan file to write (JSON)")
-    p.add_argument("--plot", type=Path, help="error vs N plot to write (PNG/PDF/SVG)")
+    p.add_argument(
+        "--plot",
+        type=Path,
+        help="error vs N plot to write (a format matplotlib writes, by the suffix: PNG, PDF, SVG...)",
+    )
     p.add_argument("--seed", type=number(int, low=0), default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_plan, check_outputs=check_plan_outputs)
@@ -226,4 +230,5 @@ def check_plan_outputs(args: argparse.Namespace) -> None:
     check_outputs(
         {"--out": args.out, "--plot": args.plot},
         inputs={"--urdf": args.urdf, "--pool": args.pool},
+        figures=("--plot",),
     )

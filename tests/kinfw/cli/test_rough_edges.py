@@ -184,3 +184,25 @@ def test_an_output_in_a_missing_directory_names_the_users_path(tmp_path):
         write_text_atomic(target, "<html/>")
     assert failed.value.filename == str(target)
     assert ".tmp" not in str(failed.value)
+
+
+@pytest.mark.parametrize(
+    ("plot", "what"),
+    [("p.xyz", "matplotlib cannot write a .xyz figure"), ("p", "no suffix names a format")],
+)
+def test_a_plot_matplotlib_cannot_write_is_refused_before_anything_is_written(
+    plot, what, tmp_path, capsys
+):
+    """``plan --plot p.xyz`` wrote the plan, then failed in matplotlib's savefig."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    argv = ["-q", "plan", "--urdf", HEAD, "--n", "5", "--out", tmp_path / "p.json"]
+    code, _out, err = run_cli([*argv, "--plot", tmp_path / plot], capsys)
+    assert code == 2
+    message = err.split("error: ", 1)[1].strip()
+    assert message.startswith(f"--plot {tmp_path / plot}: {what}; give a suffix matplotlib")
+    assert all(f".{f}" in message for f in FigureCanvasBase.get_supported_filetypes())
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    code, _out, err = run_cli([*argv, "--plot", tmp_path / "p.SVG"], capsys)
+    assert code == 0, err
+    assert (tmp_path / "p.SVG").read_text().lstrip().startswith("<?xml")
