@@ -65,7 +65,7 @@ def add_plan_parser(sub) -> None:
     p.add_argument(
         "--plot",
         type=Path,
-        help="error vs N plot to write (a format matplotlib writes, by the suffix: PNG, PDF, SVG...)",
+        help="error vs N plot to write (its suffix names the format: png, pdf, svg...)",
     )
     p.add_argument("--seed", type=number(int, low=0), default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
