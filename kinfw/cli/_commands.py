@@ -85,6 +85,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
     sidecar = None
     if Path(sidecar_file).is_file() and not args.no_sidecar:
         sidecar = read_sidecar(sidecar_file)
+        if Path(args.model).is_file():  # not a URDF on stdin
+            sidecar = sidecar.check_urdf(args.model)
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
     overridden = []

@@ -2,7 +2,8 @@
 verification together.
 
 Exit codes: 0 on success, 2 on bad input (one line on stderr saying what and where,
-never a traceback for a user error), 1 on an unexpected internal error, 3 when ``gaze``
+then the message's details, if it has any, on indented lines; never a traceback for a
+user error), 1 on an unexpected internal error, 3 when ``gaze``
 does not fixate, ``reach`` does not reach or a robot of ``fleet`` fails
 (:mod:`kinfw.cli`). Warnings (Python warnings and logged ones) are printed once each, as
 one line ``kinfw CMD: warning: ...``. Progress goes to stderr from the first second
@@ -141,6 +142,15 @@ def build_parser(
     return parser
 
 
+def _error_lines(exc: BaseException) -> str:
+    """The message's first line, then each later line (its details: a file's SHA-256,
+    the evidence of a check) indented by two spaces; whitespace inside a line collapsed."""
+    first, *details = str(exc).strip().split("\n")
+    return "\n".join(
+        [" ".join(first.split()), *("  " + " ".join(d.split()) for d in details if d.strip())]
+    )
+
+
 # -- warnings ----------------------------------------------------------------------------
 class _WarningPrinter(logging.Handler):
     """Prints Python warnings and logged warnings (and, with --verbose, logged info) on
@@ -247,8 +257,7 @@ def main(
             _silence_stdout()
             return EXIT_BROKEN_PIPE
         except USER_ERRORS as exc:
-            message = " ".join(str(exc).split())
-            print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
+            print(f"kinfw {args.command}: error: {_error_lines(exc)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:  # outputs are written atomically: none is half-written
             lead = "\n" if sys.stderr.isatty() else ""  # below a progress bar

@@ -5,7 +5,8 @@
 needed to predict measurements that the URDF does not hold: the root's pose in the
 measurement frame (``w_T_root``), the calibrated unknowns (target poses, markers, point
 offsets, external frames), the noise and the held-out errors. ``kinfw verify`` and
-``kinfw view`` read it.
+``kinfw view`` read it; ``kinfw verify`` refuses one that is not the calibration of the
+URDF it is given (:meth:`CalibrationSidecar.check_urdf`: the SHA-256s differ).
 
 The file is JSON, format ``kinfw-calibration`` version 1 (``docs/conventions.md``);
 dictionaries exist only at that edge (:meth:`CalibrationSidecar.from_dict`,
@@ -21,6 +22,7 @@ too.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,6 +69,9 @@ class CalibrationSidecar:
         ``"refine"`` or ``"closed-form"``.
     calibrated_urdf : str
         File name of the calibrated URDF (beside the sidecar).
+    calibrated_urdf_sha256 : str or None
+        SHA-256 of the calibrated URDF as written (None in files written before it was
+        recorded).
     nominal_urdf, nominal_urdf_sha256 : str or None
         Path and SHA-256 of the nominal URDF (None for a built-in or in-memory one).
     data : DataProvenance
@@ -102,6 +107,7 @@ class CalibrationSidecar:
     hand_eye_targets: tuple[tuple[str, NDArray[np.float64]], ...] = ()
     errors_held_out: tuple[BeforeAfter, ...] | None = None
     model: ModelSummary | None = None
+    calibrated_urdf_sha256: str | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -146,6 +152,38 @@ class CalibrationSidecar:
         )
         return tuple((t, known[("target", t)]) for t in names)
 
+    def check_urdf(self, urdf: str | Path) -> CalibrationSidecar:
+        """Return the sidecar when it belongs to the URDF file ``urdf``: the file's
+        SHA-256 is the calibrated URDF's recorded in the sidecar, or the nominal's it was
+        calibrated from. A sidecar written before the calibrated URDF's SHA-256 was
+        recorded cannot be checked and is returned as it is.
+
+        Raises
+        ------
+        CalibrationFileError
+            Naming the sidecar and ``urdf``, then (on later lines) each file and its
+            SHA-256: the sidecar is the calibration of another URDF.
+        """
+        if self.calibrated_urdf_sha256 is None:
+            return self
+        sha = hashlib.sha256(Path(urdf).read_bytes()).hexdigest()
+        if sha in (self.calibrated_urdf_sha256, self.nominal_urdf_sha256):
+            return self
+        recorded = [f"  {urdf}: sha256 {sha}"]
+        recorded.append(
+            f"  calibrated URDF {self.calibrated_urdf} (recorded in the sidecar): "
+            f"sha256 {self.calibrated_urdf_sha256}"
+        )
+        if self.nominal_urdf_sha256 is not None:
+            recorded.append(
+                f"  nominal URDF {self.nominal_urdf} (recorded in the sidecar): "
+                f"sha256 {self.nominal_urdf_sha256}"
+            )
+        raise CalibrationFileError(
+            f"{self.source}: the calibration of another URDF, not {urdf} (their SHA-256s "
+            "differ); give the sidecar written with it, or none\n" + "\n".join(recorded)
+        )
+
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (``kinfw-calibration`` v1)."""
         return {
@@ -155,6 +193,11 @@ class CalibrationSidecar:
             "kinfw_version": self.kinfw_version,
             "method": self.method,
             "calibrated_urdf": self.calibrated_urdf,
+            **(
+                {}
+                if self.calibrated_urdf_sha256 is None
+                else {"calibrated_urdf_sha256": self.calibrated_urdf_sha256}
+            ),
             "nominal_urdf": {"path": self.nominal_urdf, "sha256": self.nominal_urdf_sha256},
             "data": self.data.to_dict(),
             "w_T_root": self.w_T_root.tolist(),
@@ -199,6 +242,7 @@ class CalibrationSidecar:
             kinfw_version=r.string(doc, "kinfw_version", ""),
             method=r.string(doc, "method", ""),
             calibrated_urdf=r.string(doc, "calibrated_urdf", ""),
+            calibrated_urdf_sha256=r.string(doc, "calibrated_urdf_sha256", "", optional=True),
             nominal_urdf=r.string(nominal, "path", "nominal_urdf", optional=True),
             nominal_urdf_sha256=r.string(nominal, "sha256", "nominal_urdf", optional=True),
             data=DataProvenance.from_dict(r.value(doc, "data", ""), r, "data"),

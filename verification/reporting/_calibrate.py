@@ -28,7 +28,7 @@ from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
-from kinfw.verification.reporting._report import calibration_report, sidecar
+from kinfw.verification.reporting._report import calibration_report, file_sha256, sidecar
 
 __all__ = [
     "CalibrationResult",
@@ -258,6 +258,7 @@ class CalibrationResult:
             model=self.model,
         )
         write_urdf(path, self.urdf_xml)
+        side = replace(side, calibrated_urdf_sha256=file_sha256(path))
         write_sidecar(sidecar_path(path), side)
         return replace(self.report, sidecar=str(sidecar_path(path)))
 

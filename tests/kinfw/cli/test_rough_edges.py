@@ -11,6 +11,7 @@ what is printed, against what a shell user expects.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -206,3 +207,33 @@ def test_a_plot_matplotlib_cannot_write_is_refused_before_anything_is_written(
     code, _out, err = run_cli([*argv, "--plot", tmp_path / "p.SVG"], capsys)
     assert code == 0, err
     assert (tmp_path / "p.SVG").read_text().lstrip().startswith("<?xml")
+
+
+def test_verify_refuses_the_sidecar_of_another_calibration(poses, plates, tmp_path, capsys):
+    """Two calibrations of the head (on the plates and cameras, on the plates alone):
+    the first one's sidecar with the second one's URDF is refused, naming both files
+    and their SHA-256s (it said "using the calibration sidecar ...", then refitted)."""
+    for name, data in (("a", poses), ("b", plates)):
+        (tmp_path / name).mkdir()
+        argv = ["-q", "calibrate", data, "--urdf", HEAD, "--out", tmp_path / name / "c.urdf"]
+        code, _out, err = run_cli([*argv, "--params", "full"], capsys)
+        assert code == 0, err
+    mine, foreign = tmp_path / "b" / "c.urdf", tmp_path / "a" / "c.kinfw.json"
+    sha = {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in (mine, tmp_path / "a/c.urdf")}
+    assert json.loads(foreign.read_text())["calibrated_urdf_sha256"] == sha[tmp_path / "a/c.urdf"]
+    code, out, err = run_cli(["-q", "verify", mine, poses, "--sidecar", foreign], capsys)
+    assert code == 2 and out == ""
+    first, *details = err.split("error: ", 1)[1].strip().splitlines()
+    assert first.startswith(f"{foreign}: the calibration of another URDF, not {mine}")
+    assert len(first.replace(str(foreign), "S").replace(str(mine), "U")) < 160
+    assert f"  {mine}: sha256 {sha[mine]}" in details
+    assert any(
+        line.startswith("  calibrated URDF c.urdf") and sha[tmp_path / "a/c.urdf"] in line
+        for line in details
+    )
+    nominal = hashlib.sha256(Path(HEAD).read_bytes()).hexdigest()
+    assert any(str(HEAD) in line and nominal in line for line in details)
+    for urdf in (tmp_path / "a" / "c.urdf", HEAD):  # its own calibrated URDF, its nominal
+        code, out, err = run_cli(["-q", "verify", urdf, poses, "--sidecar", foreign], capsys)
+        assert code == 0, err
+        assert f"using the calibration sidecar {foreign}" in out
