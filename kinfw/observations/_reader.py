@@ -19,6 +19,30 @@ from numpy.typing import NDArray
 
 __all__ = ["DatasetError", "ObservationReader", "describe"]
 
+#: The largest magnitude of a number in a measurement file, in any unit it is written in
+#: (m, mm, rad, deg, px): 1e9 mm is 1,000 km. A larger one (a placeholder 1e300) is
+#: refused where it is read, before it overflows a computation that would blame another
+#: cause (a joint's unit).
+MAX_MAGNITUDE = 1e9
+
+
+def _number_problem(x: Any, expected: str) -> str | None:
+    """Why ``x`` is not a number :class:`ObservationReader` takes, or None."""
+    if not isinstance(x, (int, float)) or isinstance(x, bool):
+        return f"expected {expected}, got {describe(x)}"
+    try:
+        value = float(x)
+    except OverflowError:  # an integer too large for a float
+        value = math.inf
+    if not math.isfinite(value):
+        return f"expected {expected}, got {describe(x)}"
+    if abs(value) > MAX_MAGNITUDE:
+        return (
+            f"{value:.6g} is no measurement (its magnitude is above {MAX_MAGNITUDE:.0e} in "
+            "any unit: m, mm, rad, deg, px); a placeholder or corrupt number?"
+        )
+    return None
+
 
 class DatasetError(ValueError):
     """A measurement file or dataset that cannot be used.
@@ -106,29 +130,27 @@ class ObservationReader:
         return value
 
     def numbers(self, value: Any, n: int, where: str, what: str = "") -> list[float]:
-        """A list of ``n`` finite numbers, as floats."""
+        """A list of ``n`` finite numbers of magnitude at most :data:`MAX_MAGNITUDE`, as
+        floats."""
         what = f" ({what})" if what else ""
         if not isinstance(value, list):
             raise self.error(where, f"expected a list of {n} numbers{what}, got {describe(value)}")
         if len(value) != n:
             raise self.error(where, f"expected {n} numbers{what}, got {len(value)}")
-        if all(type(x) is float for x in value) and math.isfinite(sum(value)):
+        if all(type(x) is float and abs(x) <= MAX_MAGNITUDE for x in value):
             return list(value)  # the usual case, checked at once (else item by item below)
         out = []
         for k, x in enumerate(value):
-            ok = isinstance(x, (int, float)) and not isinstance(x, bool)
-            try:
-                ok = ok and math.isfinite(float(x))
-            except OverflowError:  # an integer too large for a float
-                ok = False
-            if not ok:
-                raise self.error(f"{where}[{k}]", f"expected a finite number, got {describe(x)}")
+            problem = _number_problem(x, "a finite number")
+            if problem:
+                raise self.error(f"{where}[{k}]", problem)
             out.append(float(x))
         return out
 
     def numbers_many(self, values: Sequence[Any], n: int) -> NDArray[np.float64] | None:
-        """Many lists of ``n`` finite numbers at once, as an (m, n) float array; None
-        when any value is not one (then :meth:`numbers`, one at a time, names it)."""
+        """Many lists of ``n`` numbers at once, as an (m, n) float array; None when any
+        value is not one :meth:`numbers` takes (then :meth:`numbers`, one at a time,
+        names it)."""
         if set(map(type, values)) != {list} or set(map(len, values)) != {n}:
             return None
         flat = list(chain.from_iterable(values))
@@ -138,14 +160,14 @@ class ObservationReader:
             out = np.array(flat, dtype=float).reshape(len(values), n)
         except OverflowError:  # an integer too large for a float
             return None
-        return out if np.isfinite(out).all() else None
+        return out if (np.abs(out) <= MAX_MAGNITUDE).all() else None  # NaN compares False
 
     def number(self, obj: dict[str, Any], key: str, where: str, expected: str) -> float:
-        """One required finite number."""
+        """One required finite number of magnitude at most :data:`MAX_MAGNITUDE`."""
         value = self.get(obj, key, where, expected)
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        if not ok or not math.isfinite(float(value)):
-            raise self.error(_join(where, key), f"expected {expected}, got {describe(value)}")
+        problem = _number_problem(value, expected)
+        if problem:
+            raise self.error(_join(where, key), problem)
         return float(value)
 
     def lengths(self, values: Sequence[float]) -> list[float]:

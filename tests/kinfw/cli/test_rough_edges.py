@@ -237,3 +237,28 @@ def test_verify_refuses_the_sidecar_of_another_calibration(poses, plates, tmp_pa
         code, out, err = run_cli(["-q", "verify", urdf, poses, "--sidecar", foreign], capsys)
         assert code == 0, err
         assert f"using the calibration sidecar {foreign}" in out
+
+
+@pytest.mark.parametrize(
+    ("edit", "key"),
+    [
+        (lambda s: s["q"].__setitem__(0, 1e300), "samples[3].q[0]"),
+        (
+            lambda s: s["observations"][0]["xyz"].__setitem__(1, -1e300),
+            "samples[3].observations[0].xyz[1]",
+        ),
+    ],
+)
+def test_a_number_of_1e300_is_named_where_it_is_read(edit, key, poses, tmp_path, capsys):
+    """It overflowed numpy (warnings) and was blamed on joint 'x_table''s unit."""
+    doc = json.loads(poses.read_text())
+    edit(doc["samples"][3])
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    code, _out, err = run_cli(
+        ["-q", "calibrate", bad, "--urdf", HEAD, "--out", tmp_path / "c.urdf"], capsys
+    )
+    assert code == 2
+    assert err.startswith(f"kinfw calibrate: error: {bad}: {key}: ")
+    assert "e+300 is no measurement (its magnitude is above 1e+09" in err
+    assert len(err.splitlines()) == 1, err  # no numpy warning, no unit blamed
