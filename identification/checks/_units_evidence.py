@@ -23,7 +23,10 @@ as degrees, which a ``"deg"`` file does to every joint without ``joint_units``) 
 measured lengths (mm <-> m), for every joint of a kind at once and for one joint alone.
 The data is refused when the values as read score worse than :data:`BAD_SCORE` (0.2) and
 another reading scores less than :data:`BETTER_FACTOR` (0.75) times that: the data then
-agrees with the nominal only in another unit.
+agrees with the nominal only in another unit. A reading that rescales joint values and
+lengths together is reported only when it scores below :data:`BETTER_FACTOR` times each
+of the two rescalings alone; otherwise the better of those (mm positions read as m are
+not also blamed on a joint's unit).
 
 The thresholds come from simulations (IIS-head one-joint-at-a-time and stage-2 targets,
 6R arm poses and unknown-offset markers 18 cm off the flange, a prismatic tree; 6
@@ -301,6 +304,25 @@ def _hypotheses(revolute: list[str], prismatic: list[str]) -> list[UnitHypothesi
     return out
 
 
+def _simplest(hypotheses: list[UnitHypothesis], scores: NDArray, best: int) -> int:
+    """The index of the reading to report: ``best``, unless it rescales both joint values
+    and lengths and one of the two rescalings alone scores within :data:`BETTER_FACTOR`
+    of it (then that one, the lower of the two). Lengths in mm read as m explain a
+    point's motion; one joint also rescaled gains a few hundredths by chance, and
+    blaming it too would send the user after a unit that is right."""
+    hyp = hypotheses[best]
+    if not hyp.joint_scale or hyp.length_scale == 1.0:
+        return best
+    simpler = [
+        k
+        for k, h in enumerate(hypotheses)
+        if (h.joint_scale == hyp.joint_scale and h.length_scale == 1.0)
+        or (not h.joint_scale and h.length_scale == hyp.length_scale)
+    ]
+    k = min(simpler, key=lambda k: scores[k])
+    return k if scores[best] >= BETTER_FACTOR * scores[k] else best
+
+
 def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     """Compare the data's motion with the nominal robot's under every unit reading.
 
@@ -363,6 +385,7 @@ def unit_diagnostics(nominal: Robot, data: Measurements) -> UnitDiagnostics:
     best = int(np.argmin(scores))  # index 0 (as read) wins ties
     if scores[best] >= scores[0]:
         best = 0
+    best = _simplest(hypotheses, scores, best)
     return UnitDiagnostics(
         n_pairs,
         float(scores[0]),

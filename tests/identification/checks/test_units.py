@@ -323,3 +323,49 @@ def test_the_cli_exits_2_and_writes_nothing(tmp_path, capsys, datasets):
         assert err.startswith("kinfw calibrate: error: ") and len(err.strip().splitlines()) == 1
         assert "look like degrees read as radians" in err and "'pan'" in err
         assert not out.exists() and not out.with_suffix(".kinfw.json").exists()
+
+
+@pytest.mark.parametrize(
+    ("scale", "length_unit", "looks", "fix"),
+    [
+        (1.0, "mm", "metres read as millimetres", '"units": {"length": "m"}'),
+        (1000.0, "m", "millimetres read as metres", '"units": {"length": "mm"}'),
+    ],
+)
+def test_a_length_unit_mistake_is_not_also_blamed_on_a_joint(
+    scale, length_unit, looks, fix, tmp_path
+):
+    """TIAGo's real Vicon markers (FIGAROH) with their lengths in another unit: the
+    positions are named, not also ``torso_lift_joint`` (a rescaled joint scored a few
+    hundredths better by chance, and the message blamed its values too)."""
+    from kinfw.measurements import measurements_from_figaroh_csv
+    from tests.erd import urdf_path
+    from tests.paths import DATA
+
+    tiago = load_robot(urdf_path("tiago_description/robots/tiago_no_hand.urdf"))
+    header, *rows = (
+        (DATA / "tiago_figaroh" / "vicon_calibration_gripper3_base1.csv").read_text().split()
+    )
+    csv = tmp_path / "vicon.csv"
+    csv.write_text(
+        "\n".join(
+            [header]
+            + [
+                ",".join(
+                    repr(float(v) * (scale if k < 3 else 1.0)) for k, v in enumerate(r.split(","))
+                )
+                for r in rows
+            ]
+        )
+    )
+    data = measurements_from_figaroh_csv(
+        csv, robot=tiago, frame="arm_7_link", measured_in="vicon", length_unit=length_unit
+    )
+    with pytest.raises(UnitError) as refused:
+        check_units(tiago, data)
+    message = str(refused.value)
+    assert f"the measured positions of 'arm_7_link' look like {looks}" in message
+    assert "joint" not in message and message.endswith(f"Declare {fix}, or convert the numbers")
+    # in metres the marker moves like arm_7_link's origin, to within its unknown offset
+    ratio = unit_diagnostics(tiago, data).length_ratio
+    assert 0.5 < ratio * (1e3 if length_unit == "mm" else 1e-3) < 2.0
