@@ -506,13 +506,13 @@ def _detect_camera(camera: _CameraImages, detector: Any) -> _CameraDetections:
     """Detect the board in one camera's images (checked against its intrinsics' size)."""
     from kinfw.camera import read_camera, read_gray
 
+    for path in camera.images:  # before the joints file, which would miss its row
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such image file")
     intrinsics = read_camera(camera.camera)
     joints, qs, unused = _joint_rows(camera.joints, camera.images)
     if unused:
         print(f"note: {len(unused)} rows of {camera.joints} name images not given here (not used)")
-    for path in camera.images:
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no such image file")
     detections = []
     for path in camera.images:
         image = read_gray(path)

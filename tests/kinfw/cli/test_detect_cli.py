@@ -148,6 +148,22 @@ def test_keyed_rows_of_images_not_given_are_a_note_not_an_error(tmp_path, capsys
     assert code == 2 and "5 rows of joint values for 3 images" in err
 
 
+def test_a_missing_image_is_named_not_blamed_on_the_joints_file(tmp_path, capsys):
+    """A typo in an image's name was reported as the joints file's: 'no row for image'
+    (keyed by image) or '3 rows of joint values for 4 images' (in order)."""
+    images = _images(tmp_path, CHESS)
+    typo = tmp_path / "img_O.png"
+    keyed = tmp_path / "keyed.csv"
+    keyed.write_text("image,pan\n" + "".join(f"img_{k}.png,{0.1 * k}\n" for k in range(3)))
+    ordered = _ordered_joints(tmp_path / "ordered.csv", 3)
+    for joints in (keyed, ordered):
+        given = [*images, typo]
+        code, _, err = _detect(given, joints, CHESS.spec(), tmp_path / "o.json", capsys)
+        assert code == 2
+        assert err == f"kinfw detect: error: {typo}: no such image file\n"
+    assert not (tmp_path / "o.json").exists()
+
+
 # -- the list of rejected images -------------------------------------------------------------
 def test_rejected_images_are_one_line_each_by_name_ten_at_most(tmp_path, capsys):
     """12 blank images and one of the board: 10 lines, each the file name (not the
