@@ -206,7 +206,13 @@ def load_model(path: Path | str, args: argparse.Namespace) -> Robot:
 
     xacro_args = dict(getattr(args, "xacro_arg", None) or ())
     if str(path) == "-":
-        return load_robot(sys.stdin.read(), xacro_args=xacro_args)
+        text = sys.stdin.read()
+        if not text.strip():
+            raise ValueError(
+                "-: stdin is empty; expected a URDF's XML text there (a robot_description), "
+                "or give the URDF's file name instead of -"
+            )
+        return load_robot(text, xacro_args=xacro_args)
     return load_robot(path, xacro_args=xacro_args)
 
 

@@ -136,6 +136,8 @@ def xml_text(urdf: str | Path, xacro_args: Mapping[str, str] | None = None) -> t
     """Return (xml_text, source) for a path or an XML string; a xacro document (a
     ``.xacro`` file, or one with xacro elements or substitutions: :func:`is_xacro`) is
     expanded first (:func:`expand_xacro`, with ``xacro_args``)."""
+    if not str(urdf).strip():  # Path("") is ".", read as a directory
+        raise RobotModelError("an empty URDF argument: expected a file name or a URDF's XML text")
     if isinstance(urdf, Path) or not str(urdf).lstrip().startswith("<"):
         path = Path(urdf)
         try:

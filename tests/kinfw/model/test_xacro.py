@@ -121,3 +121,33 @@ def test_a_xacro_element_or_substitution_still_needs_xacro(monkeypatch, edit):
     text = DECLARES.format(upper=0.5).replace(*edit)
     with pytest.raises(RobotModelError, match=r"^<urdf string>: a xacro file; .*kinfw\[ros\]"):
         load_robot(text)
+
+
+def test_empty_stdin_for_a_urdf_says_so():
+    """``kinfw reach -`` with nothing piped in said '.: cannot read URDF (Is a directory)'."""
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "kinfw.cli",
+            "-q",
+            "reach",
+            "-",
+            "--frame",
+            "l2",
+            "--point",
+            "0.7",
+            "0",
+            "0.1",
+        ],
+        input="\n",
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2
+    assert done.stderr == (
+        "kinfw reach: error: -: stdin is empty; expected a URDF's XML text there (a "
+        "robot_description), or give the URDF's file name instead of -\n"
+    )
+    with pytest.raises(RobotModelError, match=r"^an empty URDF argument: expected a file name"):
+        load_robot(" ")
