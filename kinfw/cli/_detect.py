@@ -17,7 +17,8 @@ by the image's path as given or its file name: every image needs exactly one row
 rows naming images not given are left out with a note (detect a subset, hold out the
 others: ``kinfw calibrate train.json --holdout test.json``). A file with the columns of a
 hand pose (``hand_x ... hand_qw``, ``x ... qw``) is refused: ``kinfw pose-chain`` turns it
-into a joints file.
+into a joints file. Spreadsheet dialects (a byte-order mark, ``;`` or tab separators,
+decimal commas) are read as ``import-csv`` reads them (:func:`kinfw.measurements.csv_table`).
 
 The output (format: ``docs/measurements.md``, the ``pixels`` kind) has the camera's
 intrinsics under ``"cameras"`` and one sample per image where the board was found; the
@@ -38,7 +39,6 @@ at start-up; numpy and OpenCV are imported by the command.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 from collections.abc import Sequence
@@ -197,11 +197,13 @@ def _camera_images(args: argparse.Namespace) -> list[_CameraImages]:
 
 def _folder_images(joints: Path) -> tuple[Path, ...]:
     """The images a folder's joints file names (its ``image`` column), beside it."""
+    from kinfw.measurements import csv_table
+
     try:
         text = joints.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise OSError(f"{joints}: cannot read the joints CSV ({exc.strerror})") from None
-    rows = [row for row in csv.reader(text.splitlines()) if any(c.strip() for c in row)]
+    rows = [row for _, row in csv_table(text, str(joints)).rows]
     header = [c.strip() for c in rows[0]] if rows else []
     if IMAGE_COLUMN not in header:
         raise ValueError(
@@ -275,14 +277,16 @@ def _joint_rows(
 def _read_joint_table(path: Path) -> tuple[list[str], list[tuple[str, list[float]]]]:
     """The joints CSV's header and, per row, its ``image`` cell ("" without the column)
     and joint values (errors: :func:`read_joint_rows`)."""
+    from kinfw.measurements import csv_table
+
     try:
         text = path.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise OSError(f"{path}: cannot read the joints CSV ({exc.strerror})") from None
-    lines = [row for row in csv.reader(text.splitlines()) if any(c.strip() for c in row)]
-    if not lines:
+    table = csv_table(text, str(path))
+    if not table.rows:
         raise ValueError(f"{path}: empty; expected a header of joint names and one row per image")
-    header = [c.strip() for c in lines[0]]
+    header = [c.strip() for c in table.rows[0][1]]
     if any(not name for name in header):
         raise ValueError(f"{path}: line 1: an empty column name in the header {header}")
     repeated = sorted({n for n in header if header.count(n) > 1})
@@ -292,7 +296,7 @@ def _read_joint_table(path: Path) -> tuple[list[str], list[tuple[str, list[float
         raise ValueError(f"{path}: line 1: no joint columns in the header {header}")
     _refuse_hand_poses(path, header)
     rows: list[tuple[str, list[float]]] = []
-    for line_number, row in enumerate(lines[1:], start=2):
+    for line_number, row in table.rows[1:]:
         if len(row) != len(header):
             raise ValueError(
                 f"{path}: line {line_number}: {len(row)} values, "
@@ -304,7 +308,7 @@ def _read_joint_table(path: Path) -> tuple[list[str], list[tuple[str, list[float
                 name = cell.strip()
                 continue
             try:
-                value = float(cell)
+                value = table.number(cell)
             except ValueError:
                 value = math.nan
             if not math.isfinite(value):

@@ -114,6 +114,7 @@ from kinfw.measurements._checks import (
     observed_joints,
     robot_measurement_frames,
 )
+from kinfw.measurements._csv import CsvTable, csv_table
 from kinfw.measurements._dataset import (
     Measurements,
     check_measurements,
@@ -170,6 +171,7 @@ __all__ = [
     "BagAlignment",
     "BagImages",
     "BagRecording",
+    "CsvTable",
     "HandPoses",
     "JointStates",
     "MeasuredStream",
@@ -182,6 +184,7 @@ __all__ = [
     "check_measurements",
     "check_stream",
     "concatenate_measurements",
+    "csv_table",
     "first_uses",
     "fixed_in_experiment",
     "interpolate_poses",

@@ -30,7 +30,6 @@ ask for; any other column must be a marker or a joint of the robot.
 
 from __future__ import annotations
 
-import csv
 import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import quat_xyzw_from_matrix
+from kinfw.measurements._csv import CsvTable, csv_table
 from kinfw.measurements._dataset import Measurements
 from kinfw.measurements._file import measurements_from_dict
 from kinfw.measurements._mounts import Mount
@@ -98,45 +98,20 @@ def _unnamed(name: str) -> bool:
     return name == "" or _PANDAS_UNNAMED.match(name) is not None
 
 
-def _dialect(path: Path, header_line: str, lines: list[str]) -> tuple[str, bool]:
-    """The separator (``,`` ``;`` or tab: the one the header line holds most of) and
-    whether numbers use a decimal comma (``0,25``: only with another separator)."""
-    delimiter = max(",;\t", key=header_line.count)
-    if header_line.count(delimiter) == 0:
-        delimiter = ","
-    if delimiter == ",":
-        return delimiter, False
-    body = "\n".join(lines)
-    comma = re.search(r"(?<![\d.,])-?\d+,\d+(?![\d.,])", body) is not None
-    point = re.search(r"(?<![\d.,])-?\d+\.\d+(?![\d.,])", body) is not None
-    if comma and point:
-        raise DatasetError(
-            f"{path}: numbers with both decimal commas and decimal points (separator "
-            f"{delimiter!r}): write every number with one of them"
-        )
-    return delimiter, comma
-
-
-def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]], bool]:
+def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]], CsvTable]:
     """Header (stripped), the data rows with their line numbers (blank lines skipped),
-    and whether numbers use a decimal comma. A UTF-8 byte-order mark is skipped; the
-    separator is ``,``, ``;`` or a tab (:func:`_dialect`)."""
+    and the split text (its dialect: decimal commas). A UTF-8 byte-order mark is skipped; the
+    separator is ``,``, ``;`` or a tab (:func:`kinfw.measurements.csv_table`)."""
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise DatasetError(f"{path}: not a UTF-8 text CSV file ({exc.reason})") from None
-    lines = text.splitlines()
-    first = next((i for i, line in enumerate(lines) if line.strip()), None)
-    if first is None:
+    table = csv_table(text, str(path))
+    if not table.rows:
         raise DatasetError(f"{path}: empty file; expected a header row of column names")
-    delimiter, decimal_comma = _dialect(path, lines[first], lines[first + 1 :])
-    rows = list(csv.reader(lines, delimiter=delimiter))
-    if not rows or not any(cell.strip() for cell in rows[0]):
-        raise DatasetError(f"{path}: empty file; expected a header row of column names")
-    header = [cell.strip() for cell in rows[0]]
-    data = [
-        (line, row) for line, row in enumerate(rows[1:], start=2) if any(c.strip() for c in row)
-    ]
+    delimiter = table.delimiter
+    header = [cell.strip() for cell in table.rows[0][1]]
+    data = table.rows[1:]
     if not data:
         raise DatasetError(f"{path}: no data rows after the header")
     for i, name in enumerate(header):
@@ -156,21 +131,21 @@ def _read_table(path: Path) -> tuple[list[str], list[tuple[int, list[str]]], boo
                 "the header line holds most of: ',', ';' or a tab)"
             )
         out.append((line, cells))
-    return header, out, decimal_comma
+    return header, out, table
 
 
 def _numbers(
-    path: Path, header: list[str], rows: list[tuple[int, list[str]]], decimal_comma: bool
+    path: Path, header: list[str], rows: list[tuple[int, list[str]]], dialect: CsvTable
 ) -> NDArray[np.float64]:
-    """The table as floats (``0,25`` read as 0.25 with ``decimal_comma``); names the row,
-    line and column of the first bad cell."""
+    """The table as floats (``0,25`` read as 0.25 in a decimal-comma file); names the
+    row, line and column of the first bad cell."""
     table = np.full((len(rows), len(header)), np.nan)
     named = [c for c, name in enumerate(header) if not _unnamed(name)]
     for r, (line, cells) in enumerate(rows):
         for c in named:
             cell = cells[c]
             try:
-                table[r, c] = float(cell.replace(",", ".") if decimal_comma else cell)
+                table[r, c] = dialect.number(cell)
             except ValueError:
                 raise DatasetError(
                     f"{path}: row {r} (line {line}), column {header[c]!r}: expected a "
@@ -285,7 +260,7 @@ def measurements_from_figaroh_csv(
     if angle_unit not in _ANGLE_SCALE:
         raise ValueError(f"angle_unit: expected one of {list(_ANGLE_SCALE)}, got {angle_unit!r}")
     mounts: dict[str, Mount] = {}
-    header, rows, decimal_comma = _read_table(path)
+    header, rows, dialect = _read_table(path)
     markers = _markers(path, header)
     if target is not None:
         _check_target_markers(path, markers, measured_in)
@@ -293,7 +268,7 @@ def measurements_from_figaroh_csv(
         mounts = {camera_frame: link} if isinstance(link, Mount) else {}
         frame = camera_frame
     joint_columns = _joint_columns(path, header, markers, robot)
-    table = _numbers(path, header, rows, decimal_comma)
+    table = _numbers(path, header, rows, dialect)
     length, angle = _LENGTH_SCALE[length_unit], _ANGLE_SCALE[angle_unit]
     joint_names = [header[c] for c in joint_columns]
     scales = np.array(

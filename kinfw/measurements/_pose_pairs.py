@@ -14,7 +14,9 @@ Formats (chosen by the file's suffix)
     A header row with the 14 columns of :data:`POSE_PAIR_COLUMNS` (in any order, other
     columns ignored) and one row per pair: positions, and unit quaternions stored scalar
     last ``(qx, qy, qz, qw)``, of ``base_T_hand`` (``hand_*``) and ``sensor_T_target``
-    (``sensor_*``), in one length unit (metres unless told otherwise).
+    (``sensor_*``), in one length unit (metres unless told otherwise). Spreadsheet
+    dialects are read as ``import-csv`` reads them (:func:`kinfw.measurements.csv_table`:
+    a byte-order mark, ``;`` or tab separators, decimal commas).
 ``.json``
     A list of pairs ``[base_T_hand, sensor_T_target]``, each a 4x4 row-major matrix
     (a list of 4 rows of 4 numbers); rotations are projected onto the nearest rotation
@@ -30,7 +32,6 @@ Formats (chosen by the file's suffix)
 
 from __future__ import annotations
 
-import csv
 import json
 import warnings
 from dataclasses import dataclass
@@ -45,6 +46,7 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
     xyz_quat_xyzw_from_transform,
 )
+from kinfw.measurements._csv import csv_table
 from kinfw.observations import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, DatasetError
 
 __all__ = [
@@ -149,8 +151,8 @@ def _csv_rows(
     what the columns are, for the error naming a missing one. Errors name a row's file
     line as ``word`` N and, when the header has the column ``key``, the row's cell of
     it (an image's name)."""
-    rows = list(csv.reader(text.lstrip("\ufeff").splitlines()))
-    rows = [(i, r) for i, r in enumerate(rows, start=1) if any(c.strip() for c in r)]
+    table = csv_table(text, str(path))
+    rows = table.rows
     if not rows:
         raise DatasetError(f"{path}: empty; expected a header with {', '.join(columns)}")
     header = [c.strip() for c in rows[0][1]]
@@ -168,7 +170,7 @@ def _csv_rows(
         for c, k in zip(columns, index, strict=True):
             cell = row[k].strip() if k < len(row) else ""
             try:
-                values.append(float(cell))
+                values.append(table.number(cell))
             except ValueError:
                 at = _row_label(path, line, row, word, key, named)
                 raise DatasetError(f"{at}, column {c!r}: {cell!r} is not a number") from None
@@ -283,8 +285,8 @@ def _hand_pose_columns(path: Path, text: str) -> tuple[str, ...]:
     """The pose columns the CSV's header holds: :data:`HAND_POSE_COLUMNS`, else
     :data:`PLAIN_POSE_COLUMNS`; an error showing the header and both sets when it holds
     neither."""
-    lines = (line for line in text.lstrip("\ufeff").splitlines() if line.strip())
-    header = [c.strip() for c in next(csv.reader(lines), [])]
+    rows = csv_table(text, str(path)).rows
+    header = [c.strip() for c in rows[0][1]] if rows else []
     for columns in (HAND_POSE_COLUMNS, PLAIN_POSE_COLUMNS):
         if set(header) >= set(columns):
             return columns

@@ -164,6 +164,28 @@ def test_a_missing_image_is_named_not_blamed_on_the_joints_file(tmp_path, capsys
     assert not (tmp_path / "o.json").exists()
 
 
+def test_a_spreadsheet_joints_file_is_read_as_import_csv_reads_it(tmp_path, capsys):
+    """``image;pan;tilt`` with decimal commas and a byte-order mark (refused: 'no joint
+    columns' / 'expected a finite number') gives the samples of the plain file."""
+    images = _images(tmp_path, CHESS)
+    rows = [(f"img_{k}.png", 0.125 * k, -0.5 + k / 8) for k in (2, 0, 1)]
+    plain = tmp_path / "plain.csv"
+    plain.write_text("image,pan,tilt\n" + "".join(f"{n},{a!r},{b!r}\n" for n, a, b in rows))
+    sheet = tmp_path / "sheet.csv"
+    text = "image;pan;tilt\n" + "".join(f"{n};{a!r};{b!r}\n" for n, a, b in rows)
+    sheet.write_text("\ufeff" + re.sub(r"(\d)\.(\d)", r"\1,\2", text), encoding="utf-8")
+    docs = []
+    for joints in (plain, sheet):
+        code, _, err = _detect(
+            images, joints, CHESS.spec(), tmp_path / f"{joints.stem}.json", capsys
+        )
+        assert code == 0, err
+        docs.append(json.loads((tmp_path / f"{joints.stem}.json").read_text()))
+    assert docs[1]["joint_names"] == ["pan", "tilt"]
+    assert [s["q"] for s in docs[1]["samples"]] == [[0.0, -0.5], [0.125, -0.375], [0.25, -0.25]]
+    assert docs[1]["samples"] == docs[0]["samples"]
+
+
 # -- the list of rejected images -------------------------------------------------------------
 def test_rejected_images_are_one_line_each_by_name_ten_at_most(tmp_path, capsys):
     """12 blank images and one of the board: 10 lines, each the file name (not the

@@ -4,6 +4,7 @@ read as its numbers say (poses built with Pinocchio), and bad files are refused 
 the file, row and column."""
 
 import json
+import re
 
 import numpy as np
 import pinocchio as pin
@@ -128,3 +129,36 @@ def test_missing_columns_unknown_suffix_and_non_rigid_json_are_refused(tmp_path)
     )
     with pytest.raises(DatasetError, match="pair 2, sensor_T_target: not a rigid transform"):
         read_pose_pairs(path)
+
+
+def _spreadsheet(text: str) -> str:
+    """The CSV as a European spreadsheet saves it: byte-order mark, ';', decimal commas."""
+    return "\ufeff" + re.sub(r"(\d)\.(\d)", r"\1,\2", text.replace(",", ";"))
+
+
+def test_spreadsheet_csvs_are_read_as_import_csv_reads_them(tmp_path):
+    """``;`` separators and decimal commas (refused: 'header lacks column(s)'), for the
+    pose pairs and for pose-chain's hand poses alike."""
+    from kinfw.measurements import read_hand_poses
+
+    rng = np.random.default_rng(4)
+    pairs = PosePairs(_poses(rng, 5), _poses(rng, 5), "sim", None)
+    path = tmp_path / "pairs.csv"
+    path.write_text(_spreadsheet(pose_pairs_text(pairs, "csv")), encoding="utf-8")
+    assert ";" in path.read_text() and "0," in path.read_text()
+    back = read_pose_pairs(path)
+    np.testing.assert_allclose(back.base_T_hands, pairs.base_T_hands, atol=1e-12)
+    np.testing.assert_allclose(back.sensor_T_targets, pairs.sensor_T_targets, atol=1e-12)
+    hands = tmp_path / "hands.csv"
+    lines = ["image,x,y,z,qx,qy,qz,qw"]
+    for k, T in enumerate(pairs.base_T_hands):
+        q = _quat_xyzw(T)
+        lines.append(f"img_{k}.png," + ",".join(repr(float(v)) for v in (*T[:3, 3], *q)))
+    hands.write_text(_spreadsheet("\n".join(lines) + "\n"), encoding="utf-8")
+    poses = read_hand_poses(hands)
+    np.testing.assert_allclose(poses.base_T_hands, pairs.base_T_hands, atol=1e-12)
+    assert poses.images == tuple(f"img_{k}.png" for k in range(5))
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text(path.read_text().replace(",", ".", 3))
+    with pytest.raises(DatasetError, match=r"both decimal commas and decimal points"):
+        read_pose_pairs(mixed)
