@@ -165,8 +165,8 @@ def test_a_missing_image_is_named_not_blamed_on_the_joints_file(tmp_path, capsys
 
 
 def test_a_spreadsheet_joints_file_is_read_as_import_csv_reads_it(tmp_path, capsys):
-    """``image;pan;tilt`` with decimal commas and a byte-order mark (refused: 'no joint
-    columns' / 'expected a finite number') gives the samples of the plain file."""
+    """``image;pan;tilt`` with decimal commas and a byte-order mark (read as one column
+    and refused: 'expected a finite number') gives the samples of the plain file."""
     images = _images(tmp_path, CHESS)
     rows = [(f"img_{k}.png", 0.125 * k, -0.5 + k / 8) for k in (2, 0, 1)]
     plain = tmp_path / "plain.csv"
