@@ -50,6 +50,7 @@ def _per_sample(group, x, free):
     return np.concatenate(r), np.concatenate(J)
 
 
+@pytest.mark.slow
 def test_chunked_compiled_evaluation_equals_casadi_per_sample_bit_for_bit():
     """Across chunk borders (2 chunks + 5 samples): the same numbers as CasADi's virtual
     machine sample by sample (compiled without fused multiply-add; without a compiler
