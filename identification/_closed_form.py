@@ -59,6 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from kinfw import progress
 from kinfw.geometry import (
     inverse_transform,
     matrix_from_rotation_vector,
@@ -320,12 +321,15 @@ def collect_frame_data(
 def identify_axes(
     topo: Topology, data: list[_FrameData], source: str
 ) -> tuple[NDArray, NDArray, NDArray]:
-    """Revolute axes at q0 in w (eqs. 33-35, 52), their residuals and motion scales."""
+    """Revolute axes at q0 in w (eqs. 33-35, 52), their residuals and motion scales:
+    a :func:`kinfw.progress.steps` step per joint (its pairs of poses grow with the
+    square of its samples)."""
     J = len(topo.joint_names)
     axes = np.zeros((J, 3))
     residual = np.full(J, np.nan)
     scale = np.ones(J)
-    for j in np.flatnonzero(topo.revolute):
+    revolute = [int(j) for j in np.flatnonzero(topo.revolute)]
+    for j in progress.steps(revolute, "closed form: joint axes", unit="joints"):
         R, a_all, b_all, dq_all, offset = [], [], [], [], 0
         for e, f in enumerate(topo.frames):
             if j not in topo.chain(f):

@@ -28,7 +28,9 @@ none with ``-q``), and so can a program::
 What is shown: the stages and the loops of the outermost work. A loop inside another
 (the Levenberg-Marquardt iterations of each fit of a cross-validation) is a second bar
 on a terminal and is not shown as lines, nor are the stages inside a loop, so the lines
-of a piped run stay one per stage and one every few steps.
+of a piped run stay one per stage and one every few steps. A :func:`notice` is a stage
+shown wherever it comes from: rare long work a user would otherwise wait through in
+silence (compiling the residual functions, once per machine).
 
 Like :mod:`kinfw.cli`, this module imports only the standard library (tqdm when a bar is
 first shown).
@@ -48,6 +50,7 @@ __all__ = [
     "LineReporter",
     "Reporter",
     "Task",
+    "notice",
     "reporting",
     "stage",
     "stderr_reporter",
@@ -87,6 +90,10 @@ class Reporter:
         """A stage begins (shown when no task is open)."""
         if self.depth == 0:
             self.show_stage(text)
+
+    def notice(self, text: str) -> None:
+        """A stage shown even inside a task (rare, long work: see :func:`notice`)."""
+        self.show_stage(text)
 
     def open(self, name: str, total: int | None, unit: str) -> Task:
         """A loop of ``total`` steps (None: not known ahead) begins."""
@@ -280,6 +287,12 @@ def reporting(reporter: Reporter | None = None) -> Iterator[Reporter]:
 def stage(text: str) -> None:
     """Tell the listener that a stage begins: ``"reading data.json"``."""
     _current().stage(text)
+
+
+def notice(text: str) -> None:
+    """Tell the listener that rare, long work begins, shown as a stage even inside a
+    loop: ``"compiling a residual function into C for this machine, once"``."""
+    _current().notice(text)
 
 
 @contextlib.contextmanager

@@ -90,6 +90,7 @@ def test_import_kinfw_loads_no_heavy_module_and_the_cli_no_numpy():
 
 
 # -- calibrate, write, evaluate, simulate ---------------------------------------------------
+@pytest.mark.slow
 def test_calibrate_noise_free_simulated_data_recovers_the_truth_through_the_written_urdf(
     experiment,
 ):

@@ -1,8 +1,9 @@
 """The house's rules, read from the source: one installed namespace, layers that import
 downwards only, subpackage faces with one public import path per name.
 
-The truth here is the tree itself (parsed with :mod:`ast`, nothing imported but the
-faces): a rule broken by a new module fails with the file and the import that breaks it.
+The truth here is the tree itself (parsed with :mod:`ast` once per module, nothing
+imported but the faces): each rule is one test over every module, and a rule broken by
+new modules fails with every file and import that breaks it, in one message.
 """
 
 from __future__ import annotations
@@ -39,15 +40,28 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _imports(path: Path) -> list[tuple[int, str]]:
-    """``(line, module)`` of every absolute import in a file, function bodies included."""
+def _imports(tree: ast.Module) -> list[tuple[int, str]]:
+    """``(line, module)`` of every absolute import in a parsed file, function bodies
+    included."""
     out = []
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             out.append((node.lineno, node.module))
         elif isinstance(node, ast.Import):
             out.extend((node.lineno, alias.name) for alias in node.names)
     return out
+
+
+#: Every library module's parsed source, read once for every rule below.
+TREES = {name: ast.parse(path.read_text()) for name, path in MODULES.items()}
+
+#: ``(line, module)`` of every absolute import, by importing module.
+IMPORTS = {name: _imports(tree) for name, tree in TREES.items()}
+
+
+def _offenders(found: list[str]) -> str:
+    """One message naming every offending ``file:line: import``."""
+    return f"{len(found)} offending (file:line: import):\n" + "\n".join(found)
 
 
 def _layer(module: str) -> str:
@@ -65,15 +79,15 @@ def test_the_packages_listed_for_installation_are_the_tree():
     assert listed == packages | {"kinfw.robots"}
 
 
-@pytest.mark.parametrize("name", sorted(MODULES))
-def test_the_library_imports_only_its_one_namespace(name):
+def test_the_library_imports_only_its_one_namespace():
     """No ``import identification`` / ``verification``: they exist only as kinfw.*."""
     bare = [
         f"{MODULES[name]}:{line}: {module}"
-        for line, module in _imports(MODULES[name])
+        for name in sorted(MODULES)
+        for line, module in IMPORTS[name]
         if module.split(".")[0] in ("identification", "verification", "urdf")
     ]
-    assert not bare
+    assert not bare, _offenders(bare)
 
 
 # What each layer may import. The front door (kinfw/__init__.py) names the workflow verbs
@@ -86,14 +100,14 @@ ALLOWED = {
 }
 
 
-@pytest.mark.parametrize("name", sorted(n for n in MODULES if n != "kinfw"))
-def test_layers_import_downwards_only(name):
+def test_layers_import_downwards_only():
     upward = [
         f"{MODULES[name]}:{line}: imports {module}"
-        for line, module in _imports(MODULES[name])
+        for name in sorted(n for n in MODULES if n != "kinfw")
+        for line, module in IMPORTS[name]
         if module.startswith("kinfw") and _layer(module) not in ALLOWED[_layer(name)]
     ]
-    assert not upward
+    assert not upward, _offenders(upward)
 
 
 def _faces() -> dict[str, list[str]]:
@@ -129,20 +143,20 @@ def test_faces_export_only_what_their_package_defines():
     assert foreign == {}
 
 
-@pytest.mark.parametrize("name", sorted(MODULES))
-def test_no_private_module_is_imported_from_another_package(name):
+def test_no_private_module_is_imported_from_another_package():
     """``from kinfw.geometry._transforms import x`` belongs inside kinfw.geometry only."""
-    path = MODULES[name]
-    package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
     crossing = []
-    for line, module in _imports(path):
-        parts = module.split(".")
-        private = [i for i, p in enumerate(parts) if p.startswith("_")]
-        if module.startswith("kinfw") and private:
-            owner = ".".join(parts[: private[0]])
-            if owner != package:
-                crossing.append(f"{path}:{line}: {module}")
-    assert not crossing
+    for name in sorted(MODULES):
+        path = MODULES[name]
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        for line, module in IMPORTS[name]:
+            parts = module.split(".")
+            private = [i for i, p in enumerate(parts) if p.startswith("_")]
+            if module.startswith("kinfw") and private:
+                owner = ".".join(parts[: private[0]])
+                if owner != package:
+                    crossing.append(f"{path}:{line}: {module}")
+    assert not crossing, _offenders(crossing)
 
 
 @pytest.mark.slow
@@ -176,16 +190,15 @@ def test_the_wheel_installs_one_namespace(tmp_path):
     assert "kinfw/verification/evaluation/__init__.py" in names
 
 
-@pytest.mark.parametrize("name", sorted(MODULES))
-def test_no_private_name_is_imported_from_another_module(name):
+def test_no_private_name_is_imported_from_another_module():
     """``from kinfw.x._m import _helper`` hides a shared helper under a private name: a
     name used by two modules is a name of its package (without the underscore)."""
-    tree = ast.parse(MODULES[name].read_text())
     private = [
         f"{MODULES[name]}:{node.lineno}: {alias.name} from {node.module}"
-        for node in ast.walk(tree)
+        for name in sorted(MODULES)
+        for node in ast.walk(TREES[name])
         if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("kinfw")
         for alias in node.names
         if alias.name.startswith("_")
     ]
-    assert not private
+    assert not private, _offenders(private)

@@ -17,6 +17,7 @@ def _demo_report(tmp_path, capsys) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
+@pytest.mark.slow
 def test_the_demo_numbers_in_the_readme_are_what_the_demo_prints(tmp_path, capsys):
     """The README's demo table and noise line against a fresh run of the demo, within
     the tolerance the README states (BLAS changes the last digits)."""

@@ -67,10 +67,13 @@ class GroupFunctions:
                 self._by_free[key] = f
         return f
 
-    def numeric_map(self, with_jacobian: bool, free: NDArray[np.bool_] | None, m: int):
+    def numeric_map(
+        self, with_jacobian: bool, free: NDArray[np.bool_] | None, m: int, samples: int
+    ):
         """``r`` (or ``rj``, or ``rj_free(free)``) mapped over ``m`` samples (at most
         :data:`MAP_CHUNK`: building a CasADi map grows faster than its size; the
         evaluations ask for :data:`MAP_CHUNK` and powers of two below it), compiled
+        when that pays for a group of ``samples`` samples, or already done
         (:func:`~kinfw.identification.problem._compiled.compiled`: the same results, bit
         for bit; numeric arguments only), with the parameters and constants shared:
         ``(q (J, m), data (width, m), theta, const)``. Kept for the problems of one
@@ -85,9 +88,9 @@ class GroupFunctions:
             f = self._compiled.get(key[:2])
         if f is None:
             if not with_jacobian:
-                f = compiled(self.r)
+                f = compiled(self.r, samples)
             else:
-                f = compiled(self.rj if free is None else self.rj_free(free))
+                f = compiled(self.rj if free is None else self.rj_free(free), samples)
             with _FUNCTION_CACHE_LOCK:
                 self._compiled[key[:2]] = f
         f = f.map("numeric_map", "serial", m, [2, 3], [])

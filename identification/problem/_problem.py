@@ -183,7 +183,7 @@ class ResidualGroup:
         that chunk size (its CasADi call buffer kept)."""
         size_key = (J_out is not None, None if free is None else free.tobytes(), b - a)
         if size_key not in self._buffers:
-            fn = self.functions.numeric_map(J_out is not None, free, b - a)
+            fn = self.functions.numeric_map(J_out is not None, free, b - a, len(self.sample))
             self._buffers[size_key] = fn.buffer()
         buf, call = self._buffers[size_key]
         args = (self._q_rows[a:b], self._data_rows[a:b], x, self.const)

@@ -8,10 +8,12 @@ import pytest
 from kinfw.identification import ProtocolError, identify_closed_form, one_joint_groups
 from kinfw.measurements import Measurements
 from kinfw.model import cpc_from_robot, load_robot
+from kinfw.progress import reporting
 from kinfw.simulation import one_joint_at_a_time, perturb_robot, simulate
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.paths import HEAD_URDF as HEAD
+from tests.recorder import Recorder
 from tests.robots import ARM_6R, PRISMATIC_TREE
 
 CASES = [
@@ -257,3 +259,26 @@ def test_only_far_apart_values_leave_the_sense_ambiguous():
     qs[2, 0] = 1.0  # one more value closer to 0: fine
     data = simulate(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
     assert identify_closed_form(nominal, data).motion_scale[0] == pytest.approx(1.0, abs=1e-9)
+
+
+def test_the_closed_form_reports_a_step_per_revolute_joint_axis():
+    """Its pairs of poses grow with the square of each joint's samples: a step per
+    revolute joint (the head's pan, tilt and vergences, not its X-Y table; the prismatic
+    tree's pan, a1, a2 on the way to tool_a), and the same answer as unobserved."""
+    cases = ((HEAD, ("left_plate", "right_plate"), 4), (PRISMATIC_TREE, ("tool_a",), 3))
+    for urdf, frames, revolute in cases:
+        nominal, _, data = _experiment(urdf, frames)
+        recorder = Recorder()
+        with reporting(recorder):
+            result = identify_closed_form(nominal, data)
+        (task,) = recorder.tasks
+        assert (task.name, task.total, task.unit, task.closed) == (
+            "closed form: joint axes",
+            revolute,
+            "joints",
+            True,
+        )
+        assert [done for done, _ in task.steps] == list(range(1, revolute + 1))
+        silent = identify_closed_form(nominal, data)
+        np.testing.assert_array_equal(silent.model.b, result.model.b)
+        np.testing.assert_array_equal(silent.model.l, result.model.l)

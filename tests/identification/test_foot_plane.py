@@ -84,6 +84,7 @@ def test_the_still_leg_is_fixed_in_this_experiment_not_an_error(standing):
     assert fixed_in_experiment(Measurements(JOINTS, q, others=data.others), nominal) == ()
 
 
+@pytest.mark.slow
 def test_standing_contacts_calibrate_with_the_leg_at_the_nominal(standing):
     """calibrate: the note names the leg's joints; the exported URDF's leg joints are
     the nominal's (origins and axes, 1e-9), and held-out distances of both probes from

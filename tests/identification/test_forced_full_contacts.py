@@ -36,6 +36,7 @@ def nominal():
     return load_robot(ARM_6R)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n", [40, 90])
 def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_models(nominal, n):
     """40 contacts: the root's joint drifts by 1.6 m; 90: by 0.50 m (0.54 along the
@@ -57,6 +58,7 @@ def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_mod
     assert result.model.parameters == ("full",) and result.model.prior_m is not None
 
 
+@pytest.mark.slow
 def test_an_accepted_forced_full_fit_keeps_the_world_motion_at_the_nominal(nominal):
     """90 contacts with a 25 mm ball (radius given), 0.1 mm noise: forced full is
     accepted (nothing left along undetermined directions), the exported first joint is
@@ -96,6 +98,7 @@ def test_an_accepted_forced_full_fit_keeps_the_world_motion_at_the_nominal(nomin
     assert np.sqrt(np.mean(predicted**2)) < 1e-4  # the truth: 0 (on the ball)
 
 
+@pytest.mark.slow
 def test_the_default_scores_the_candidates_when_plentiful_contacts_refuse_full(nominal):
     """500 contacts of one level plane (0.1 mm noise): 10.4 residual rows per parameter,
     enough for the default to take full unscored, but full drifts (1.6 m along what the
@@ -151,6 +154,7 @@ def test_the_choice_table_says_why_full_alone_is_not_scored(nominal, tmp_path):
     assert "training fold" not in out.getvalue()
 
 
+@pytest.mark.slow
 def test_forced_full_on_one_plane_says_the_contacts_cannot_tell_the_size(nominal):
     """Plenty of contacts (400) with one level table still leave the robot's size free:
     the robot and the plane scaled together about the plane touch it at the same joint
@@ -168,6 +172,7 @@ def test_forced_full_on_one_plane_says_the_contacts_cannot_tell_the_size(nominal
     assert "cannot tell its size" in said and "a ball of known radius" in said
 
 
+@pytest.mark.slow
 def test_crossval_scores_the_default_where_full_is_refused(nominal):
     """kinfw crossval's default column is what calibrate fits by default on each training
     fold: on contacts of one table, where full is refused on every fold (so crossval had

@@ -221,6 +221,7 @@ def test_the_robot_loads_without_meshes_despite_joints_off_the_measured_paths(sp
         assert robot.joint(name).mimic is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec", REAL_ROBOTS, ids=lambda r: r.name)
 def test_poses_in_the_root_recover_the_truth_through_the_exported_urdf(spec):
     nominal, truth, names, qs, q_test, rng = _setup(spec, spec.frames, seed=10)
@@ -253,6 +254,7 @@ def test_mocap_markers_of_unknown_offset_in_an_unknown_frame_are_recovered(spec)
     assert max(errors.values()) < TOL, errors
 
 
+@pytest.mark.slow
 def test_noisy_mocap_markers_give_a_consistent_fit_and_sub_noise_predictions():
     """0.2 mm per coordinate on the Panda, noise estimated: the fit finds the noise it was
     given and predicts held-out marker positions better than one measurement."""
@@ -269,6 +271,7 @@ def test_noisy_mocap_markers_give_a_consistent_fit_and_sub_noise_predictions():
     assert np.linalg.norm(d[:, :3, :3] @ offset + d[:, :3, 3], axis=-1).max() > 2e-3
 
 
+@pytest.mark.slow
 def test_a_known_marker_on_the_child_link_of_a_revolute_joint_exports():
     """A known point leaves the frame's rotation about it unidentifiable; refine keeps a
     revolute joint's child-link origin on the joint axis, so the export accepts it."""

@@ -120,6 +120,7 @@ def test_the_noise_is_estimated_and_the_fit_is_consistent():
     assert np.all(result.std[: result.model.n_parameters] > 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("loss", ["linear", "huber"])
 def test_the_noise_rounds_stop_at_their_fixed_point(loss):
     """The noise rounds stop once the estimate settles (fewer than five when it does):
@@ -135,6 +136,7 @@ def test_the_noise_rounds_stop_at_their_fixed_point(loss):
     assert dict(longer.noise.sigmas) == pytest.approx(dict(result.noise.sigmas), rel=1e-3)
 
 
+@pytest.mark.slow
 def test_gross_outliers_are_downweighted_by_the_robust_loss():
     nominal, truth, data, _ = _head_data(n=100, noise_m=0.5e-3, noise_rad=0.005)
     rng = np.random.default_rng(4)
@@ -197,6 +199,7 @@ def test_no_free_parameter_gives_the_nominal_and_undefined_conditioning(loss, no
         )
 
 
+@pytest.mark.slow
 def test_markers_measured_in_an_external_frame_are_recovered():
     """Mocap markers of unknown offset on the flange, measured in 'mocap' (not in the URDF):
     the model lives in the mocap frame and the root's pose comes from the export."""

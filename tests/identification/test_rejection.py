@@ -180,6 +180,7 @@ def test_a_small_dataset_may_still_lose_its_one_gross_error(head, truth):
     )
 
 
+@pytest.mark.slow
 def test_a_refit_from_a_settled_fit_is_the_cold_fit_without_the_error_in_fewer_iterations(
     head, truth
 ):

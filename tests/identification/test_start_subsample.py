@@ -42,6 +42,7 @@ def robot():
     return load_robot(builtin_head_urdf())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pixels", [False, True])
 def test_a_subsampled_start_converges_to_the_fit_from_every_view(robot, pixels, monkeypatch):
     sim = simulate_measurements(

@@ -86,6 +86,18 @@ def test_lines_show_only_the_outermost_loop_and_no_stage_inside_it():
     ]
 
 
+def test_a_notice_is_shown_inside_a_loop_where_a_stage_is_not(capfd):
+    out = io.StringIO()
+    with reporting(LineReporter(out, every=1)), progress.task("fits", total=1, unit="fit") as f:
+        with progress.task("LM", unit="iteration"):
+            progress.stage("refine: start values")  # inside a loop: not a line
+            progress.notice("compiling a residual function")
+        f.advance()
+    assert _strip_seconds(out.getvalue()) == ["compiling a residual function", "fits: 1/1 fit"]
+    progress.notice("compiling, nobody listening")
+    assert capfd.readouterr() == ("", "")
+
+
 def test_a_recorder_sees_the_depth_of_each_loop_and_the_depth_comes_back():
     recorder = Recorder()
     with reporting(recorder):

@@ -284,14 +284,16 @@ def choose_parameters(
         _fit(nominal, data, parameters, p, noise=noise, loss=loss)
         for parameters, p in progress.steps(runs, "model choice", unit="candidates")
     ]
-    progress.stage("model choice: the candidates' leave-one-out scores")
     reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
     excluded = rejected_keys(reference)
     scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
+    scoring = progress.steps(
+        list(zip(runs, fits, strict=True)), "model choice: leave-one-out scores", unit="candidates"
+    )
     candidates = [
         _score(nominal, scored, parameters, p, fit, loss=loss, sigma=sigma)
-        for (parameters, p), fit in zip(runs, fits, strict=True)
+        for (parameters, p), fit in scoring
     ]
     _check_any_fitted(candidates, data.source)
     scores = [c.whitened for c in candidates if np.isfinite(c.whitened)]

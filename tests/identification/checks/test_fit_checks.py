@@ -49,6 +49,7 @@ def test_a_frame_on_a_revolute_axis_asked_to_carry_an_offset_is_named():
     assert any("times the stated noise" in m for m in messages)
 
 
+@pytest.mark.slow
 def test_the_pipeline_refuses_or_warns_with_the_cause():
     """50 mm off the axis, the fit over every parameter still leaves ~40 mm: refused, and
     the refusal names the structure's cause; 5 mm off, it fits within the refusal limit

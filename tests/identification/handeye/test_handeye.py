@@ -208,6 +208,7 @@ def _median_rotation_error(sigma_deg, n, trials=40):
     return float(np.degrees(np.median(errors)))
 
 
+@pytest.mark.slow
 def test_rotation_error_grows_linearly_with_noise_and_stays_far_below_it():
     """Rotation noise N(0, sigma) about a random axis on every A and B pose, 40 trials.
 

@@ -150,6 +150,7 @@ def _tabb():
     return hands, cams, ref
 
 
+@pytest.mark.slow
 def test_tabb_ds1_kinfw_meets_opencvs_acceptance_and_predicts_held_out_pairs_best():
     """Tabb DS1 (real, 88 pairs): kinfw within OpenCV's acceptance of Tabb's reference
     (< 1 deg, < 50 mm), and its 5-fold held-out loop-closure translation error below every
@@ -183,6 +184,7 @@ def test_kfold_predicts_every_pair_once_and_refuses_bad_k():
         fit_method("opencv", base_T_hands=hands, camera_T_targets=B, setup="eye-in-hand")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("suffix", [".yaml", ".json"])
 @pytest.mark.parametrize("setup", ["eye-in-hand", "eye-to-hand"])
 def test_calibration_file_round_trips_exactly(tmp_path, suffix, setup):

@@ -297,6 +297,7 @@ def test_align_streams_refuses_bad_step_and_disjoint_clocks(synthetic_streams):
         align_streams(t_hand, base_T_hand, t_eye - t_eye[0] + 1000.0, target_T_eye)
 
 
+@pytest.mark.slow
 def test_best_time_offset_recovers_a_known_delay_and_x(synthetic_streams):
     t_hand, base_T_hand, t_eye, target_T_eye = synthetic_streams
     result = best_time_offset(t_hand, base_T_hand, t_eye, target_T_eye, step=8)
@@ -451,6 +452,7 @@ def test_eth_target_in_base_is_as_constant_as_the_readme_found(name):
     assert eth["spread_at_zero"][0] * 1e3 < case.max_spread_mm
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_hand_eye_matches_the_readmes_estimate(name):
     eth = _eth(name)
@@ -472,6 +474,7 @@ def test_eth_hand_eye_matches_the_readmes_estimate(name):
         assert abs(along) < 0.02
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(CASES))
 def test_eth_weak_axis_is_what_the_motions_leave_undetermined(name):
     """The sim robot turns the hand almost only about its x axis, so X's translation along

@@ -223,6 +223,7 @@ def test_plan_errors(capsys):
     assert "only 20 candidates" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_target_gives_the_smallest_greedy_n(head):
     robot, setup, names, pool, test = head
     info = candidate_information(robot, setup, pool, names, None)
@@ -252,6 +253,7 @@ FOLDING_ARM = (
 )
 
 
+@pytest.mark.slow
 def test_self_collision_by_hand_geometry():
     """A planar 2-link arm on a base box (x in [0, 0.3] m, |y| <= 0.05 m): links touching
     at their joint are not collisions; the second link folded back onto the base is. By

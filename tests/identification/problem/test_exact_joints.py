@@ -43,6 +43,7 @@ def _origins(robot, names):
     return {n: (robot.joint(n).parent_T_child, robot.joint(n).axis) for n in names}
 
 
+@pytest.mark.slow
 def test_exact_joints_keep_their_nominal_origins_where_the_data_pull_them(experiment):
     """A start that is the truth but for the table joints' axes, tilted by 0.36 deg, and
     100 noisy plate poses (0.5 mm, 0.3 deg): declared exact, ``full`` leaves the table
@@ -64,6 +65,7 @@ def test_exact_joints_keep_their_nominal_origins_where_the_data_pull_them(experi
     assert min(turned) > 0.1, turned
 
 
+@pytest.mark.slow
 def test_exact_joints_that_are_the_truth_leave_the_rest_to_recover_it(experiment):
     """With the truth's table joints declared exact, ``full`` on noise-free plates gives
     the true robot's plate poses (Pinocchio) at random configurations to 1e-9."""

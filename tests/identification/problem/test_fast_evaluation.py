@@ -23,7 +23,9 @@ from kinfw.identification.problem import (
 )
 from kinfw.identification.problem._problem import chunks
 from kinfw.model import load_robot
+from kinfw.progress import reporting, task
 from kinfw.simulation import random_configurations, simulate
+from tests.recorder import Recorder
 from tests.robots import ARM_6R
 
 
@@ -50,6 +52,7 @@ def _per_sample(group, x, free):
     return np.concatenate(r), np.concatenate(J)
 
 
+@pytest.mark.slow
 def test_chunked_compiled_evaluation_equals_casadi_per_sample_bit_for_bit():
     """Across chunk borders (2 chunks + 5 samples): the same numbers as CasADi's virtual
     machine sample by sample (compiled without fused multiply-add; without a compiler
@@ -145,10 +148,10 @@ def test_without_a_compiler_casadi_evaluates_the_functions(monkeypatch):
     f = ca.Function("f", [x], [ca.sin(x) * x[0]])
     monkeypatch.setenv("KINFW_COMPILE", "0")
     assert compiled_module.compiler() is None
-    assert compiled_module.compiled(f) is f
+    assert compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES) is f
     monkeypatch.delenv("KINFW_COMPILE")
     monkeypatch.setenv("CC", "no-such-compiler-kinfw")
-    assert compiled_module.compiled(f) is f
+    assert compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES) is f
 
 
 def test_a_failing_compiler_is_reported_once_and_casadi_takes_over(monkeypatch, tmp_path, caplog):
@@ -161,8 +164,8 @@ def test_a_failing_compiler_is_reported_once_and_casadi_takes_over(monkeypatch, 
     x = ca.SX.sym("x", 2)
     f = ca.Function("f", [x], [ca.cos(x) * x[1]])
     with caplog.at_level(logging.WARNING, logger="kinfw.identification.problem"):
-        assert compiled_module.compiled(f) is f
-        assert compiled_module.compiled(f) is f  # not retried
+        assert compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES) is f
+        assert compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES) is f  # not retried
     assert len([r for r in caplog.records if "compiling" in r.getMessage()]) == 1
 
 
@@ -175,17 +178,53 @@ def test_a_compiled_function_is_kept_on_disk_and_loaded_again(monkeypatch, tmp_p
     monkeypatch.setattr(compiled_module, "_LOADED", {})
     x = ca.SX.sym("x", 3)
     f = ca.Function("f", [x], [ca.sqrt(x) * x[2] + ca.exp(x[0])])
-    g = compiled_module.compiled(f)
+    g = compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES)
     assert g is not f
     assert not compiled_module._NATIVE_REFUSED  # built for this processor
     (library,) = tmp_path.glob("kinfw_*.so")
     stamp = library.stat().st_mtime_ns
     monkeypatch.setattr(compiled_module, "_LOADED", {})  # a new process: from the disk
-    h = compiled_module.compiled(f)
+    h = compiled_module.compiled(f, 1)  # in the cache: loaded, however few the samples
+    assert h is not f
     assert library.stat().st_mtime_ns == stamp  # not compiled again
     v = np.array([0.3, 1.7, 2.9])
     np.testing.assert_array_equal(np.asarray(h(v)), np.asarray(f(v)))
     np.testing.assert_array_equal(np.asarray(g(v)), np.asarray(f(v)))
+
+
+def test_a_small_groups_function_is_compiled_only_once_in_the_cache_or_when_asked(
+    monkeypatch, tmp_path
+):
+    """Compiling pays for large groups only: a function of a few samples not yet in the
+    cache stays CasADi's own (nothing compiled); one of COMPILE_SAMPLES samples is
+    compiled, saying so first even inside a loop, and then serves the few samples too;
+    KINFW_COMPILE=1 compiles whatever the size."""
+    import casadi as ca
+
+    if compiled_module.compiler() is None:
+        pytest.fail("no C compiler on this machine: the compiled path is not tested")
+    monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled_module, "_LOADED", {})
+    x = ca.SX.sym("x", 2)
+    f = ca.Function("f", [x], [ca.tanh(x) * x[1] + 0.5])
+    few = compiled_module.COMPILE_SAMPLES - 1
+    recorder = Recorder()
+    with reporting(recorder):
+        assert compiled_module.compiled(f, few) is f
+        assert not list(tmp_path.glob("kinfw_*.so")) and recorder.stages == []
+        with task("Levenberg-Marquardt"):  # a stage would not be shown in here
+            g = compiled_module.compiled(f, compiled_module.COMPILE_SAMPLES)
+    assert g is not f and len(list(tmp_path.glob("kinfw_*.so"))) == 1
+    assert recorder.stages == [
+        f"compiling a residual function into C for this machine, once (kept in {tmp_path})"
+    ]
+    assert compiled_module.compiled(f, few) is g  # already compiled: it costs nothing
+    v = np.array([0.3, -1.2])
+    np.testing.assert_array_equal(np.asarray(g(v)), np.asarray(f(v)))
+    h = ca.Function("h", [x], [ca.atan(x) * x[0]])
+    monkeypatch.setenv("KINFW_COMPILE", "1")
+    assert compiled_module.compiled(h, 1) is not h
+    assert len(list(tmp_path.glob("kinfw_*.so"))) == 2
 
 
 def test_chunks_cover_every_sample_once_in_few_sizes():

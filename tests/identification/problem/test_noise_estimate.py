@@ -120,6 +120,7 @@ def test_the_estimated_noise_is_the_simulated_one(datasets, huber_results):
     np.testing.assert_allclose(_mean_ratios(linear), 1.0, atol=0.05)
 
 
+@pytest.mark.slow
 def test_huber_flags_one_percent_of_clean_observations(datasets, huber_results):
     """The threshold is the 99 % quantile of a clean residual norm under the simulator's
     noise model (a pose: chi2(3) + 3 chi2(1)), so ~1 % of clean observations are flagged;

@@ -118,6 +118,7 @@ def test_render_puts_squares_where_the_camera_model_projects_them():
 
 
 # -- detection ------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize(("tilt", "roll"), POSES)
 def test_chessboard_corners_subpixel_and_numbered_by_the_board(tilt, roll):
     camera_T_board = board_pose(CHESS, tilt, roll)
@@ -188,6 +189,7 @@ def test_chessboard_cut_by_the_border_is_not_numbered_one_square_off():
     assert "squares around them have the wrong colour" in detection.reason
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spec", [(8, 6), (7, 6)])
 def test_a_spec_smaller_than_the_chessboard_is_not_found_saying_so(spec):
     """A 9 x 6 board (POSES[1], noise-free) read as 8 x 6 or 7 x 6: OpenCV finds that

@@ -134,6 +134,7 @@ def test_parse_grid_spec_errors(spec, match):
 
 
 # -- detection on rendered images ---------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("board", [ACIRCLES, APRILGRID], ids=["acircles", "aprilgrid"])
 @pytest.mark.parametrize(("tilt", "roll"), POSES)
 def test_grid_points_subpixel_and_numbered_by_the_board(board, tilt, roll):
@@ -148,6 +149,7 @@ def test_grid_points_subpixel_and_numbered_by_the_board(board, tilt, roll):
     assert np.median(e) < MEDIAN_BOUND_PX and e.max() < MAX_BOUND_PX
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("board", [CircleGrid(7, 5, 0.03), CircleGrid(5, 5, 0.03)])
 def test_symmetric_circle_grid_is_ambiguous_unless_allowed(board):
     upright = board_pose(board, [0.2, -0.2, 0.0], 0.3)
@@ -178,6 +180,7 @@ SEVEN_BY_FIVE = CircleGrid(7, 5, 0.03, diameter_m=0.012)
     ],
     ids=["6x5", "7x4", "9x9"],
 )
+@pytest.mark.slow
 def test_a_spec_smaller_than_the_circle_grid_is_not_found_saying_so(spec, more):
     """A 7 x 5 grid read as 6 x 5 or 7 x 4, the 10 x 10 modified grid as 9 x 9
     (noise-free, POSES[:3]): OpenCV's findCirclesGrid finds that many discs inside the
@@ -273,6 +276,7 @@ def test_detect_command_writes_grid_points(tmp_path, capsys, board):
 MODIFIED = CircleGrid(10, 10, 0.0254, False, 0.01, 0.02)
 
 
+@pytest.mark.slow
 def test_a_larger_origin_disc_numbers_a_square_grid_at_every_roll():
     """A square symmetric grid with a larger disc 0 (the modified circle grid), rendered
     turned by 0, 90, 180 and 270 degrees (and tilted): found without allow_symmetric,

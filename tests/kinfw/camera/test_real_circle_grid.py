@@ -47,6 +47,7 @@ def _detect(chain, spec, out, capsys):
     return code, captured.out + captured.err
 
 
+@pytest.mark.slow
 def test_every_real_image_shows_the_whole_board_and_the_default_fits_the_mount(chain, capsys):
     root, _ = chain
     code, text = _detect(chain, SPEC, root / "all.json", capsys)
@@ -100,6 +101,7 @@ def test_refined_intrinsics_predict_held_out_real_images_better(chain, capsys):
     assert rms[True] < 0.8 * rms[False], rms
 
 
+@pytest.mark.slow
 def test_a_short_spec_and_a_missing_origin_dot_are_named_on_the_real_images(chain, capsys):
     root, _ = chain
     code, text = _detect(chain, "circles:9x9:0.0254:0.01:0.02", root / "x.json", capsys)
@@ -108,6 +110,7 @@ def test_a_short_spec_and_a_missing_origin_dot_are_named_on_the_real_images(chai
     assert code == 2 and "give its diameter" in text and "--allow-symmetric" not in text
 
 
+@pytest.mark.slow
 def test_the_hand_eye_cost_printed_ends_at_the_redundancy(chain, capsys):
     """``kinfw handeye``'s Levenberg-Marquardt whitens its cost by noise scales
     re-estimated after every step, each the weighted residual sum over its redundancy, so

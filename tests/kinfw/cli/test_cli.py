@@ -331,6 +331,7 @@ def test_calibrate_target_only_data_on_trusted_kinematics(tmp_path, capsys):
         assert row["after_position_rms_mm"] < 1e-6
 
 
+@pytest.mark.slow
 def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
     code, out, _ = _run(["demo", "--out", tmp_path / "demo", "--json"], capsys)
     assert code == 0
@@ -355,6 +356,7 @@ def test_demo_calibrates_the_head_below_a_millimetre_held_out(tmp_path, capsys):
         assert (tmp_path / "demo" / name).is_file()
 
 
+@pytest.mark.slow
 def test_reproduce_table4_writes_png_and_json(tmp_path, capsys):
     code, out, _ = _run(["reproduce", "table4", "--out", tmp_path, "--trials", "2"], capsys)
     assert code == 0
@@ -363,6 +365,7 @@ def test_reproduce_table4_writes_png_and_json(tmp_path, capsys):
     assert "0.65" in out  # the paper's left-branch mu_x printed beside ours
 
 
+@pytest.mark.slow
 def test_reproduce_hirsh_writes_png_and_json(tmp_path, capsys):
     code, out, _ = _run(["reproduce", "hirsh", "--out", tmp_path, "--trials", "2"], capsys)
     assert code == 0
@@ -389,6 +392,7 @@ def test_json_output_is_valid_json(command, tmp_path, capsys):
     assert isinstance(json.loads(out), dict)
 
 
+@pytest.mark.slow
 def test_view_writes_a_self_contained_html(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
@@ -414,6 +418,7 @@ def test_view_writes_a_self_contained_html(tmp_path, capsys):
     assert len(html) > 900_000  # the viewer (~0.85 MB) plus both robots' geometry
 
 
+@pytest.mark.slow
 def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0

@@ -216,6 +216,7 @@ def test_bad_output_fails_before_any_work_and_changes_no_file(
     assert _snapshot(workdir) == before
 
 
+@pytest.mark.slow
 def test_a_good_calibration_replaces_the_earlier_outputs(workdir, capsys):
     """The counterpart of the test above: the same directory, correct arguments."""
     before = _snapshot(workdir)

@@ -18,6 +18,7 @@ def robots(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow
 def test_each_robot_gets_what_kinfw_calibrate_writes_and_the_summary_pools_its_rms(
     robots, tmp_path, capsys
 ):
@@ -121,6 +122,7 @@ def test_bad_outputs_and_options_stop_before_any_work(robots, tmp_path, capsys, 
     assert re.search(message, err), err
 
 
+@pytest.mark.slow
 def test_each_robots_warnings_are_the_ones_kinfw_calibrate_prints(robots, tmp_path, capsys):
     understated = ["--params", "full", "--sigma-mm", "0.1", "--sigma-deg", "0.1"]
     code, out, err = run_cli(
@@ -159,6 +161,7 @@ def _with_sticker(robots, out, *, declared):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("declared", [True, False])
 def test_a_frame_the_urdfs_lack_is_mounted_as_kinfw_calibrate_mounts_it(
     robots, tmp_path, capsys, declared

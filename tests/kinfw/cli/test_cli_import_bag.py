@@ -67,6 +67,7 @@ def _held_out(recording, n=40):
     return measurements_from_dict(doc, source="held-out")
 
 
+@pytest.mark.slow
 def test_bag_to_measurements_to_calibration_recovers_offset_and_arm(
     recording, urdf, tmp_path, capsys
 ):
@@ -107,6 +108,7 @@ def test_bag_to_measurements_to_calibration_recovers_offset_and_arm(
     assert held.values("rotation")[0].max() < 3e-4
 
 
+@pytest.mark.slow
 def test_gaps_in_the_joint_states_are_dropped_and_counted(recording, urdf, tmp_path, capsys):
     """Joint states missing from 3.01 s to 3.52 s (ROS 2 bag, offset given): the mocap
     samples whose instant falls in the gap are dropped as ``gap``, the rest kept."""
@@ -149,6 +151,7 @@ def test_user_errors_exit_2_naming_the_bag_and_topic(recording, urdf, tmp_path, 
         assert not out.exists()
 
 
+@pytest.mark.slow
 def test_images_go_to_a_folder_that_detect_reads(recording, urdf, tmp_path, capsys):
     """``--images``: the PNGs, joints.csv and images.json in --out; the still filter
     keeps the images where no joint moved faster than the threshold."""

@@ -70,6 +70,7 @@ def _ordered_joints(path: Path, n: int) -> Path:
 
 
 # -- the board not found: what was expected, and --allow-symmetric only when it helps ------
+@pytest.mark.slow
 def test_a_grid_size_smaller_than_the_board_says_so_never_allow_symmetric(tmp_path, capsys):
     """A 7 x 5 circle grid given as circles:6x5: OpenCV finds 6 x 5 discs inside it
     (symmetric: the old message offered --allow-symmetric, which would number a part of
@@ -94,6 +95,7 @@ def test_a_grid_size_smaller_than_the_board_says_so_never_allow_symmetric(tmp_pa
     assert err.rstrip().endswith("check --board and the images; nothing written")
 
 
+@pytest.mark.slow
 def test_an_origin_disc_the_spec_lacks_is_asked_for_not_allow_symmetric(tmp_path, capsys):
     """industrial_calibration's modified grid (10 x 10, a larger disc 0) given without
     ORIGIN_DIAMETER_M: ambiguous, and the error asks for that field."""
@@ -112,6 +114,7 @@ def test_an_origin_disc_the_spec_lacks_is_asked_for_not_allow_symmetric(tmp_path
 
 
 # -- the joints file -------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("prefix", ["hand_", ""])
 def test_hand_poses_given_as_the_joints_file_are_refused_with_the_next_step(
     tmp_path, capsys, prefix
@@ -187,6 +190,7 @@ def test_a_spreadsheet_joints_file_is_read_as_import_csv_reads_it(tmp_path, caps
 
 
 # -- the list of rejected images -------------------------------------------------------------
+@pytest.mark.slow
 def test_rejected_images_are_one_line_each_by_name_ten_at_most(tmp_path, capsys):
     """12 blank images and one of the board: 10 lines, each the file name (not the
     path) and the reason, then '... and 2 more'; with -v all 12."""

@@ -39,6 +39,7 @@ def _calibrate(root, held, capsys):
     return run_cli([*argv, "--out", root / "cal.urdf", "--holdout", held], capsys)
 
 
+@pytest.mark.slow
 def test_held_out_contacts_of_another_robot_are_warned_about(files, capsys):
     code, _, err = _calibrate(files, files / "other.json", capsys)
     assert code == 0, err

@@ -43,6 +43,7 @@ def _silent(argv, capsys) -> str:
     ],
     ids=["poses", "pixels"],
 )
+@pytest.mark.slow
 def test_noise_free_data_calibrate_in_silence(options, tmp_path, capsys):
     """Noise-free data fit to rounding (residuals ~1e-13 mm): nothing to warn about."""
     data, truth = tmp_path / "d.json", tmp_path / "t.urdf"
@@ -64,6 +65,7 @@ def test_a_noisy_detector_with_exact_intrinsics_does_not_blame_the_intrinsics(tm
     _silent(["calibrate", data, "--urdf", HEAD, "--out", tmp_path / "c.urdf"], capsys)
 
 
+@pytest.mark.slow
 def test_declared_markers_in_an_unknown_mocap_frame_calibrate_in_silence(tmp_path, capsys):
     """Markers of unknown offsets on both plates, seen by a tracker in its own frame with
     the stated noise: every observation declares its marker, nothing is wrong."""

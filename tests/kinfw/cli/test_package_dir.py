@@ -54,6 +54,7 @@ def test_plan_collisions_refuses_a_urdf_without_collision_geometry(capsys):
     assert code == 2 and "no <collision> geometry" in err
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", ["reach", "gaze"])
 def test_scenes_draw_the_meshes_found_under_package_dir(ur5, tmp_path, command, capsys):
     """Without --package-dir each visual is reported missing and left out of the scene;

@@ -88,6 +88,7 @@ def _pixel_rms(text: str, camera: str) -> float:
     return float(row[:end].split()[-1])
 
 
+@pytest.mark.slow
 def test_verify_camera_overrides_the_sidecar_and_says_so(px, refined, capsys):
     """The sidecar holds the refined intrinsics (near the truth): the images reproject
     to the noise level; --camera with fx 8 % off must be used instead (tens of px at the
@@ -166,6 +167,7 @@ def test_crossval_on_pixel_data_scores_held_out_images_in_px(px):
     assert cv.scores[0].n_test + cv.scores[1].n_test == data.n_samples
 
 
+@pytest.mark.slow
 def test_reports_are_strict_json_and_verify_carries_pixel_residuals(px, refined, capsys):
     """report.json, the sidecar and verify --json parse with a strict parser (an
     undefined number is null) and read back; verify's per-point entries of an image
@@ -320,6 +322,7 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     assert "intrinsics" not in out + err
 
 
+@pytest.mark.slow
 def test_exact_intrinsics_stay_silent_when_the_pixel_noise_is_large(tmp_path):
     """1.5 px corner noise with the true intrinsics: the residuals are large enough to
     check the intrinsics (the refit with them refined runs), and the check, a chi-square

@@ -65,6 +65,7 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+@pytest.mark.slow
 def test_ctrl_c_prints_one_line_exits_130_and_writes_nothing(long_poses, tmp_path):
     out = tmp_path / "c.urdf"
     proc = subprocess.Popen(
@@ -97,6 +98,7 @@ def test_ctrl_c_prints_one_line_exits_130_and_writes_nothing(long_poses, tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == []  # no output, no temporary
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_exits_quietly_with_141():
     """``kinfw reach --json | head`` when the reader has left before the output: the
     write fails with EPIPE."""
@@ -108,6 +110,7 @@ def test_a_closed_pipe_exits_quietly_with_141():
     assert proc.returncode == 141 and proc.stderr == b"", proc.stderr
 
 
+@pytest.mark.slow
 def test_held_out_data_equal_to_the_training_data_is_warned_about(poses, tmp_path, capsys):
     code, _out, err = run_cli(
         [
@@ -144,6 +147,7 @@ def _scalar_first(path: Path, to: Path) -> Path:
     return to
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("data", ["poses", "plates"])
 def test_quaternions_stored_scalar_first_are_named_first(data, request, tmp_path, capsys):
     """Read as written, the data cannot fit the head (tens of mm; with the plates only,

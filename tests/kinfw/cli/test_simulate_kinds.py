@@ -110,6 +110,7 @@ def test_markers_are_fk_plus_offset_in_the_mocap_frame(mocap):
         np.testing.assert_allclose(g.meas_p_point, expected, rtol=0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_markers_calibrate_to_the_truth_held_out(mocap, arm6):
     """Calibrated on 40 of the 60 noise-free samples, the URDF and its sidecar (vicon frame,
     marker offsets) predict the 20 held-out samples of the true robot to 1e-6 mm."""
@@ -184,6 +185,7 @@ def test_contacts_lie_on_the_plane(contacts):
         assert np.ptp(probe, axis=0).max() > 0.1
 
 
+@pytest.mark.slow
 def test_contacts_calibrate_to_the_truth_held_out(contacts, arm6):
     """Calibrated on 60 of the 90 contacts, the 30 held-out contacts of the true robot are on
     the calibrated plane to 1e-6 mm (what contacts determine: distances from the plane;
@@ -210,6 +212,7 @@ def touching(request, arm6, tmp_path_factory):
     return request.param, root, _simulate(root, argv)
 
 
+@pytest.mark.slow
 def test_ball_and_point_contacts_are_on_them_by_pinocchio(touching):
     """Pinocchio FK of the true URDF puts the probe on the ball (at the radius from the
     centre) or on the point, to 1e-9 m; the file gives the radius (a tooling ball's is
@@ -236,6 +239,7 @@ def test_ball_and_point_contacts_are_on_them_by_pinocchio(touching):
         np.testing.assert_allclose(p, np.tile([0.3, 0.1, 0.4], (60, 1)), rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_ball_and_point_contacts_calibrate_verify_and_crossvalidate(touching, arm6):
     """simulate -> calibrate (default options: the model choice) -> verify on 20
     held-out contacts of the true robot: on the calibrated ball to 1e-6 mm (point: placed
@@ -313,6 +317,7 @@ def images(tmp_path_factory):
     return root, summary
 
 
+@pytest.mark.slow
 def test_rendered_chessboard_images_show_the_true_corners(images):
     """Every image is found whole (a chessboard is simulated only where all its corners
     are in view) and its corners are where the truth puts them (:func:`_corner_errors`):
@@ -324,6 +329,7 @@ def test_rendered_chessboard_images_show_the_true_corners(images):
     assert np.median(errors) < 0.1 and errors.max() < 0.5, (np.median(errors), errors.max())
 
 
+@pytest.mark.slow
 def test_rendered_charuco_images_show_the_true_corners(tmp_path):
     """A ChArUco board (the renderer draws every board ``kinfw detect`` reads): partial
     views, corners numbered by the board; the detected corners agree with the truth as
@@ -335,6 +341,7 @@ def test_rendered_charuco_images_show_the_true_corners(tmp_path):
     assert np.median(errors) < 0.1 and errors.max() < 0.5, (np.median(errors), errors.max())
 
 
+@pytest.mark.slow
 def test_images_detect_calibrate_recovers_the_camera_motion(images):
     """``simulate --images -> detect -> calibrate``: the calibrated URDF moves the left
     camera as the true one does. Compared on 30 random configurations (0.8 of the
@@ -364,6 +371,7 @@ def test_images_detect_calibrate_recovers_the_camera_motion(images):
             assert mm < bound_mm and deg < bound_deg, (mm, deg)
 
 
+@pytest.mark.slow
 def test_a_stereo_pairs_folders_detect_into_one_file_and_calibrate_both_cameras(tmp_path):
     """``simulate --images`` of the IIS-head's two cameras (20 configurations, each seen
     by one camera or both) -> ``detect --images DIR:FRAME`` twice -> one file: one sample
@@ -423,6 +431,7 @@ def test_a_stereo_pairs_folders_detect_into_one_file_and_calibrate_both_cameras(
                 assert mm < 0.5 and deg < 0.05, (mm, deg)
 
 
+@pytest.mark.slow
 def test_a_board_on_the_flange_seen_by_a_static_camera_is_rendered_where_the_truth_puts_it(
     tmp_path,
 ):

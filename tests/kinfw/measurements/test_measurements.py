@@ -797,6 +797,7 @@ def assert_same_groups(a: Measurements, b: Measurements, b_to_a=None, *, atol=0.
 ROT_ATOL = 4e-15
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(datasets)
 def test_write_read_round_trip(tmp_path_factory, doc):
@@ -854,6 +855,7 @@ def test_round_trip_of_constructed_poses(tmp_path_factory, poses, measured_in):
     assert_array_equal(back.points[0].offset, [0.0, 0.0, 0.1])
 
 
+@pytest.mark.slow
 @settings(max_examples=80, deadline=None)
 @given(datasets.flatmap(lambda d: st.tuples(st.just(d), st.permutations(range(len(d["samples"]))))))
 def test_groups_do_not_depend_on_sample_order(doc_and_perm):

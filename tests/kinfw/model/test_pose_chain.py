@@ -99,6 +99,7 @@ def test_the_columns_without_the_hand_prefix_are_read_alike(tmp_path):
     assert b.images == tuple("abcde")
 
 
+@pytest.mark.slow
 def test_rendered_images_with_hand_poses_only_give_the_true_camera_mount(tmp_path, capsys):
     """The IIS head's left camera, 16 rendered chessboard images; the logged poses are
     those of its parent link ``vergence_left_link`` (the true robot's Pinocchio FK), no

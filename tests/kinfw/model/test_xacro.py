@@ -55,6 +55,7 @@ def test_xacro_errors_name_the_file_and_plain_urdfs_refuse_arguments(tmp_path):
         load_robot(EXPANDED.format(upper=0.5), xacro_args={"upper": "1"})
 
 
+@pytest.mark.slow
 def test_the_command_line_takes_xacro_arguments_and_a_urdf_on_stdin(capsys):
     """reach puts l2 (on the y axes) at a point it can reach only with upper = 0.7 m: the
     distance from l1's joint to l2 is the argument."""

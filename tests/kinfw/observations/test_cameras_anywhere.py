@@ -269,6 +269,7 @@ def _exported_pixels(nominal: Robot, name: str, problem, x, qs) -> np.ndarray:
     return np.concatenate([p.ravel() for p in _pixels(robot, name, board, qs).values()])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["eye_in_hand", "eye_to_hand"])
 def test_noise_free_pixels_move_the_export_only_along_determined_directions(name):
     """Noise-free images (the noise estimate at its floor) leave the world motion of the

@@ -351,6 +351,7 @@ def test_intrinsics_the_images_cannot_determine_are_reported():
 # -- reports in pixels ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_worst(tmp_path):
     import cv2
 

@@ -329,6 +329,7 @@ def _exported_distances(nominal, problem, x, data, offset=None):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("given", [False, True])
 def test_what_contacts_leave_undetermined_stays_at_the_nominal(scene, given):
     """The export differs from the nominal only along determined directions: the null
@@ -761,6 +762,7 @@ def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, 
 # -- a plane fixed to any URDF frame; several chains on one plane --------------------------
 
 
+@pytest.mark.slow
 def test_a_plane_fixed_to_a_frame_of_the_robot_calibrates_and_round_trips(scene, tmp_path):
     """The table fixed to link ``l1`` (``measured_in``): contacts simulated in l1's frame
     by Pinocchio FK; the file round-trips the frame; the fit leaves every contact on

@@ -432,6 +432,7 @@ def _chromium():
     )
 
 
+@pytest.mark.slow
 def test_screenshot_shows_both_models(demo_html, tmp_path):
     chromium = _chromium()
     png = tmp_path / "scene.png"
@@ -486,6 +487,7 @@ def test_screenshot_shows_both_models(demo_html, tmp_path):
     assert rows.min() > 0.05 * rgb.shape[0]  # the head's top is in view, with a margin
 
 
+@pytest.mark.slow
 def test_contacts_are_drawn_with_the_sidecars_plane_and_probe(tmp_path, caplog):
     """kinfw view of a contact calibration: the plane and the probe's offset come from
     the calibration's sidecar, as targets and the tracker's pose do (they were left out:

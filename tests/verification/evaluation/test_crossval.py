@@ -37,6 +37,7 @@ def test_calibration_beats_both_baselines_when_the_joints_are_off(head):
     assert means[3] < 1.5  # mm, noise 0.5 mm per axis
 
 
+@pytest.mark.slow
 def test_overfitting_on_small_data_is_warned_about(head):
     """Only the plates' mounts are off: 'frames' is the right model, 'full' overfits."""
     nominal = head
@@ -101,6 +102,7 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
     }
 
 
+@pytest.mark.slow
 def test_parameter_masks_by_joint_and_field(head):
     nominal = head
     truth = load_robot(
@@ -366,6 +368,7 @@ def test_the_outlier_advice_names_huber_only_when_it_is_not_in_use():
     assert "--exclude-flagged" in huber
 
 
+@pytest.mark.slow
 def test_a_set_the_training_folds_refuse_is_left_out_and_said():
     """90 contacts of one plane (6R arm, 0.1 mm): forced full drifts along what contacts
     do not determine and is refused on the training folds; cross-validation scores the

@@ -94,6 +94,7 @@ def test_a_study_on_the_cluster_writes_the_serial_json(cluster, tmp_path, capsys
     assert serial == remote
 
 
+@pytest.mark.slow
 def test_no_scheduler_at_the_address_is_an_error_that_names_it():
     with socket.socket() as s:  # a port nothing listens on
         s.bind(("127.0.0.1", 0))

@@ -161,6 +161,7 @@ def test_study_records_the_solver_history_against_the_truth():
     )
 
 
+@pytest.mark.slow
 def test_noise_free_error_falls_below_1e_6_deg_for_every_view_count(noise_free):
     assert noise_free.y_error_deg.shape == (3, 20, 300)
     assert np.all(noise_free.y_median_deg[:, -1] < CONVERGED_DEG)
@@ -203,6 +204,7 @@ def test_more_views_converge_faster(noise_free):
     assert np.all(np.diff(np.median(noise_free.convergence_factors, axis=1)) < 0)
 
 
+@pytest.mark.slow
 def test_noisy_error_ends_below_the_noise_line_for_10_views_and_below_3_views(noisy):
     final = noisy.y_median_deg[:, -1]
     assert final[2] < noisy.noise_deg
@@ -230,6 +232,7 @@ def test_a_failing_solve_is_recorded_not_raised(monkeypatch):
 # -- outputs -----------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_json_round_trip(noise_free, noisy, tmp_path):
     for result in (noise_free, noisy):
         doc = json.loads(json.dumps(result.to_dict(), allow_nan=False))
@@ -255,6 +258,7 @@ def test_format_reports_the_papers_claims(noise_free, noisy):
     assert "| 10 |" in text
 
 
+@pytest.mark.slow
 def test_plot_writes_a_png(noise_free, noisy, tmp_path):
     path = plot_hirsh(noise_free, noisy, tmp_path / "fig.png")
     data = path.read_bytes()

@@ -220,6 +220,7 @@ def test_plots_are_written(tiny, small_table4, tmp_path):
         assert path.stat().st_size > 20_000
 
 
+@pytest.mark.slow
 def test_run_writes_png_and_json(tmp_path):
     r = run_fig11(tmp_path, per_joint=(2, 3), sigmas_mm=(0.5,), trials=2, n_test=10)
     assert _is_png(tmp_path / "fig11.png")
@@ -230,6 +231,7 @@ def test_run_writes_png_and_json(tmp_path):
     assert json.loads((tmp_path / "table4.json").read_text())["trials"] == t.trials == 2
 
 
+@pytest.mark.slow
 def test_main_prints_the_table(tmp_path, capsys):
     assert main(["table4", "--out", str(tmp_path), "--trials", "2", "--seed", "3"]) == 0
     out = capsys.readouterr().out

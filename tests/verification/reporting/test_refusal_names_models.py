@@ -23,6 +23,7 @@ from kinfw.verification.reporting import calibrate_and_report
 from tests.head_data import plate_data
 
 
+@pytest.mark.slow
 def test_a_refusal_lists_the_determined_models_best_first():
     nominal = load_robot(builtin_head_urdf())
     truth = load_robot(

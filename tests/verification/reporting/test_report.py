@@ -181,6 +181,7 @@ def test_gross_errors_are_rejected_and_named_worst_first(outlier_run):
     assert all(0 < row["weight"] < 1 for row in down)
 
 
+@pytest.mark.slow
 def test_rejected_residuals_equal_the_calibrated_urdf_against_the_file(outlier_run):
     """Independent of the refine plumbing: the written URDF's FK against the file."""
     calibrated = load_robot(outlier_run["dir"] / "cal.urdf")
@@ -194,6 +195,7 @@ def test_rejected_residuals_equal_the_calibrated_urdf_against_the_file(outlier_r
         assert row["position_residual_mm"] == pytest.approx(error_mm, abs=0.05)
 
 
+@pytest.mark.slow
 def test_fixed_parameters_are_written_as_fixed_with_their_units(outlier_run):
     params = outlier_run["report"]["refine"]["parameters"]
     joints = ("x_table", "y_table", "pan", "tilt", "vergence_left", "vergence_right")
@@ -216,6 +218,7 @@ def test_fixed_parameters_are_written_as_fixed_with_their_units(outlier_run):
     assert kinematics[("pan", "b_x")] == "unitless" and kinematics[("pan", "beta")] == "rad"
 
 
+@pytest.mark.slow
 def test_the_screen_names_the_rejected_worst_first(outlier_run):
     screen = outlier_run["screen"]
     rejected = outlier_run["report"]["refine"]["rejected"]

@@ -259,6 +259,7 @@ def test_refined_error_reaches_the_bound(small_study):
     assert np.all(s.trial_rms_mm("refined") < s.trial_rms_mm("start"))
 
 
+@pytest.mark.slow
 def test_reported_covariance_covers_the_truth(small_study):
     s = small_study
     assert s.n_parameters == 50
@@ -268,10 +269,12 @@ def test_reported_covariance_covers_the_truth(small_study):
     assert 0.7 <= s.nees.mean() / s.n_parameters <= 1.4
 
 
+@pytest.mark.slow
 def test_noise_estimate_is_within_20_percent(small_study):
     np.testing.assert_allclose(small_study.noise_ratio, 1.0, atol=0.2)
 
 
+@pytest.mark.slow
 def test_crlb_study_round_trips_through_json(small_study, tmp_path):
     doc = json.loads(json.dumps(small_study.to_dict()))
     again = CRLBStudy.from_dict(doc)
@@ -330,6 +333,7 @@ def test_robust_losses_resist_planted_outliers(small_robust):
     assert s.false_alarm_rate[s.variant("huber")] < 0.03  # threshold: 1 % of clean ones
 
 
+@pytest.mark.slow
 def test_huber_with_estimated_noise_resists_planted_outliers(small_robust):
     s = small_robust
     clean = np.sqrt(np.mean(s.clean_rms_mm**2))
@@ -337,6 +341,7 @@ def test_huber_with_estimated_noise_resists_planted_outliers(small_robust):
     assert pooled[s.variant("huber", "estimated")] < 1.5 * clean
 
 
+@pytest.mark.slow
 def test_robust_study_reports_and_round_trips(small_robust, tmp_path):
     again = RobustStudy.from_dict(json.loads(json.dumps(small_robust.to_dict())))
     np.testing.assert_array_equal(again.flagged_clean, small_robust.flagged_clean)

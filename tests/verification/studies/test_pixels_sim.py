@@ -75,6 +75,7 @@ def test_an_image_of_a_board_seen_too_obliquely_or_from_behind_is_dropped(tilt_d
     assert seen.all() == kept and seen.any() == kept
 
 
+@pytest.mark.slow
 def test_kinfw_simulate_pixels_writes_only_seen_whole_boards(tmp_path, capsys):
     cam = tmp_path / "left.json"
     small = CameraIntrinsics(320, 240, 300.0, 300.0, 159.5, 119.5, k1=-0.05, name="small")
@@ -199,6 +200,7 @@ def test_the_view_draws_every_point_of_an_image_and_the_frustum():
 # -- pixels against poses, and the bound ------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_pixel_path_beats_the_pose_path_on_the_same_images():
     exp = arm_experiment(
         load_robot(ARM_6R), 0, camera="flange", intrinsics=CAMERA, q0=Q0, board=BOARD
