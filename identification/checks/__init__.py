@@ -1,5 +1,6 @@
-"""Checks around a fit: the data's units against the nominal robot, enough residual rows
-for the free parameters, and whether what is left after the fit is noise.
+"""Checks around a fit: the data's units against the nominal robot (and hand-eye pose
+pairs' units and quaternion order against their own motion), enough residual rows for
+the free parameters, and whether what is left after the fit is noise.
 """
 
 from __future__ import annotations
@@ -14,6 +15,11 @@ from kinfw.identification.checks._fit_checks import (
     fit_warnings,
     implausible_noise,
     residual_structure,
+)
+from kinfw.identification.checks._pose_pair_checks import (
+    PLAUSIBLE_LENGTH_M,
+    PosePairDiagnostics,
+    check_pose_pair_data,
 )
 from kinfw.identification.checks._redundancy import (
     MIN_DOF_PER_KIND,
@@ -47,12 +53,14 @@ __all__ = [
     "FLOOR_M",
     "FLOOR_RAD",
     "MIN_DOF_PER_KIND",
+    "PLAUSIBLE_LENGTH_M",
     "PLAUSIBLE_NOISE_M",
     "PLAUSIBLE_NOISE_RAD",
     "ROUNDING_RMS",
     "STRUCTURE_R2",
     "InsufficientDataError",
     "JointValues",
+    "PosePairDiagnostics",
     "Redundancy",
     "ResidualStructure",
     "UnitDiagnostics",
@@ -60,6 +68,7 @@ __all__ = [
     "UnitHypothesis",
     "check_fit",
     "check_joint_scale",
+    "check_pose_pair_data",
     "check_redundancy",
     "check_units",
     "fit_warnings",

@@ -80,7 +80,8 @@ _PRISMATIC = (
     (1.0 / _DEG, "metres", "degrees"),
     (1e-3 / _DEG, "millimetres", "degrees"),
 )
-_LENGTH = ((1e-3, "millimetres", "metres"), (1e3, "metres", "millimetres"))
+#: The readings of measured lengths tried here and by the pose-pair checks.
+LENGTH_READINGS = ((1e-3, "millimetres", "metres"), (1e3, "metres", "millimetres"))
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,7 +301,9 @@ def _hypotheses(revolute: list[str], prismatic: list[str]) -> list[UnitHypothesi
     out = []
     for scales, looks in joint_readings:
         out.append(UnitHypothesis(scales, 1.0, looks, ""))
-        out += [UnitHypothesis(scales, s, looks, f"{lk} read as {rd}") for s, lk, rd in _LENGTH]
+        out += [
+            UnitHypothesis(scales, s, looks, f"{lk} read as {rd}") for s, lk, rd in LENGTH_READINGS
+        ]
     return out
 
 

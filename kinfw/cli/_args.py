@@ -26,6 +26,7 @@ __all__ = [
     "POSITIVE_PX",
     "SEED",
     "add_camera_option",
+    "add_keep_duplicates_option",
     "add_mount_option",
     "add_package_dir_option",
     "add_xacro_option",
@@ -244,12 +245,25 @@ def frames_arg(
     )
 
 
+def add_keep_duplicates_option(p: argparse.ArgumentParser) -> None:
+    """``--keep-duplicates``: keep the samples (pose pairs) that repeat an earlier one,
+    which are otherwise warned about and dropped before the fit."""
+    p.add_argument(
+        "--keep-duplicates",
+        action="store_true",
+        help="keep samples (pose pairs) that repeat an earlier one exactly (default: warned "
+        "about and dropped before the fit, so each counts once in the sigmas)",
+    )
+
+
 def read_data(path: Path, args: argparse.Namespace) -> Any:
     """The measurement file ``path`` with the intrinsics of ``--camera FRAME=FILE``
     (override or add to its ``"cameras"`` section) and the frames of ``--mount
-    NAME:PARENT`` (add to its ``"mounts"``)."""
+    NAME:PARENT`` (add to its ``"mounts"``); for a command with ``--keep-duplicates``
+    not given, without the samples that repeat an earlier one (warned about:
+    :func:`kinfw.measurements.drop_duplicate_samples`)."""
     from kinfw.camera import CameraError, read_camera
-    from kinfw.measurements import Mount, read_measurements
+    from kinfw.measurements import Mount, drop_duplicate_samples, read_measurements
     from kinfw.observations import DatasetError
 
     cameras = {}
@@ -274,6 +288,8 @@ def read_data(path: Path, args: argparse.Namespace) -> Any:
                 f"--camera {frame}={file}: no observation of {path} uses camera frame "
                 f"{frame!r} ({has})"
             )
+    if not getattr(args, "keep_duplicates", True):
+        data = drop_duplicate_samples(data)
     return data
 
 

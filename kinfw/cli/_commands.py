@@ -21,6 +21,7 @@ from kinfw.cli._args import (
     COUNT,
     SEED,
     add_camera_option,
+    add_keep_duplicates_option,
     add_mount_option,
     add_package_dir_option,
     add_xacro_option,
@@ -68,6 +69,7 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_camera_option(p)
     add_mount_option(p)
+    add_keep_duplicates_option(p)
     p.add_argument(
         "--json", action="store_true", help="print the report as JSON, with per-sample errors"
     )
@@ -363,6 +365,7 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
+    add_keep_duplicates_option(p)
     p.set_defaults(func=cmd_import_csv, check_outputs=check_import_csv_outputs)
 
 
@@ -370,6 +373,7 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
     """``kinfw import-csv``: a FIGAROH calibration CSV to a measurement file."""
     from kinfw.measurements import (
         check_against_robot,
+        drop_duplicate_samples,
         measurements_from_figaroh_csv,
         mounted_robot,
         write_measurements,
@@ -388,6 +392,8 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         camera_frame=args.camera_frame,
     )
     check_against_robot(measurements, mounted_robot(robot, measurements.mounts))
+    if not args.keep_duplicates:
+        measurements = drop_duplicate_samples(measurements)
     write_measurements(args.out, measurements)
     kinds = ", ".join(
         f"{len(g.sample)} {type(g).kind} of {getattr(g, 'marker', None) or g.target!r}"

@@ -128,7 +128,8 @@ def _noise_arg(args: argparse.Namespace):
 def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keyword arguments of :func:`kinfw.verification.reporting.calibrate_and_report`
     that the calibration's options give (:func:`kinfw.cli._fit_parser.
-    add_calibration_options`): parameters, method, noise, loss, prior, intrinsics."""
+    add_calibration_options`): parameters, method, noise, loss, prior, intrinsics,
+    duplicates."""
     return {
         "parameters": "auto" if args.params == "auto" else params_arg(args.params),
         "method": args.method,
@@ -136,6 +137,7 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
         "loss": args.loss,
         "prior": _prior_arg(args),
         "refine_intrinsics": _intrinsics_arg(args.refine_intrinsics),
+        "keep_duplicates": args.keep_duplicates,
     }
 
 
@@ -451,6 +453,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             prior=prior,
             executor=executor,
             exclude_flagged=args.exclude_flagged,
+            keep_duplicates=args.keep_duplicates,
         )
     if args.json:
         print(json_text(cv.to_dict()))

@@ -16,6 +16,7 @@ from kinfw.cli._args import (
     POSITIVE_PX,
     SEED,
     add_camera_option,
+    add_keep_duplicates_option,
     add_mount_option,
     add_xacro_option,
     camera_inputs,
@@ -60,6 +61,7 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         "frames stay free): sigma of lengths, mm (for small datasets)",
     )
     p.add_argument("--prior-deg", type=POSITIVE_DEG, help="... and of angles, deg")
+    add_keep_duplicates_option(p)
 
 
 def add_fit_parsers(sub: argparse._SubParsersAction) -> None:

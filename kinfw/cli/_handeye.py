@@ -14,7 +14,7 @@ import argparse
 import warnings
 from pathlib import Path
 
-from kinfw.cli._args import add_xacro_option, number
+from kinfw.cli._args import add_keep_duplicates_option, add_xacro_option, number
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
 __all__ = ["add_handeye_parser", "cmd_handeye"]
@@ -50,7 +50,9 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "sensor_qy, sensor_qz, sensor_qw (base_T_hand and camera_T_target: position, then "
         "unit quaternion scalar last; metres unless --unit mm); a .json list of "
         "[base_T_hand, camera_T_target] pairs of 4x4 row-major matrices; or "
-        "easy_handeye2's saved samples (.yaml, .yml, .samples).",
+        "easy_handeye2's saved samples (.yaml, .yml, .samples). Before the fit, pairs "
+        "whose quaternions look stored scalar first or whose lengths look like another "
+        "unit are refused, and pairs recorded twice are dropped (warned).",
     )
     p.add_argument(
         "pairs",
@@ -127,6 +129,7 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         "--hand-frame (eye-in-hand, metres)",
     )
     add_xacro_option(p)
+    add_keep_duplicates_option(p)
     p.set_defaults(func=cmd_handeye, check_outputs=check_handeye_outputs)
 
 
@@ -178,10 +181,12 @@ def _camera_link(robot, data, camera: str | None) -> str:
 
 def _read_pairs(args: argparse.Namespace):
     """The pairs to fit (metres) and the held-out ones (or None), both read the same way
-    (pose-pair files, or with --urdf measurement files); warns when held-out pairs repeat
-    the fit's."""
+    (pose-pair files, or with --urdf measurement files) and checked before any fit:
+    duplicates of the fit's pairs dropped (warned; unless --keep-duplicates), quaternion
+    order and length unit refused when wrong; warns when held-out pairs repeat the
+    fit's."""
     from kinfw.identification.handeye import repeated_pairs
-    from kinfw.measurements import read_pose_pairs
+    from kinfw.measurements import drop_duplicate_pairs, read_pose_pairs
 
     scale = _METRES_PER[args.unit]
     if getattr(args, "urdf", None) is not None:
@@ -191,26 +196,40 @@ def _read_pairs(args: argparse.Namespace):
                 "the robot (eye-in-hand); --setup eye-to-hand does not apply"
             )
         from kinfw.cli._args import load_model
-        from kinfw.measurements import pose_pairs_from_measurements, read_measurements
+        from kinfw.identification.checks import check_units
+        from kinfw.measurements import (
+            drop_duplicate_samples,
+            pose_pairs_from_measurements,
+            read_measurements,
+        )
 
         robot = load_model(args.urdf, args)
         camera = args.camera_frame if args.camera_frame != CAMERA_FRAME else None
 
-        def read(path: Path):
+        def read(path: Path, fit: bool):
             data = read_measurements(path)
+            if fit and not args.keep_duplicates:
+                data = drop_duplicate_samples(data)
             if args.hand_frame is None:
                 args.hand_frame = _camera_link(robot, data, camera)
-            return pose_pairs_from_measurements(
+            if all(robot.has_frame(f) for f in data.observed_frames):
+                check_units(robot, data)  # calibrate's: the motion against the URDF's
+            pairs = pose_pairs_from_measurements(
                 data, robot, hand_frame=args.hand_frame, camera=camera
             )
+            return _checked(pairs, args, ("sensor",), "m")
     else:
         args.hand_frame = args.hand_frame or "tool0"
 
-        def read(path: Path):
-            return read_pose_pairs(path).scaled(scale)
+        def read(path: Path, fit: bool):
+            pairs = read_pose_pairs(path).scaled(scale)
+            if fit and not args.keep_duplicates:
+                pairs = drop_duplicate_pairs(pairs)
+            sides = () if path.suffix.lower() == ".json" else ("hand", "sensor")
+            return _checked(pairs, args, sides, args.unit)
 
-    pairs = read(args.pairs)
-    holdout = read(args.holdout) if args.holdout else None
+    pairs = read(args.pairs, True)
+    holdout = read(args.holdout, False) if args.holdout else None
     if holdout is not None:
         repeated = repeated_pairs(
             pairs.base_T_hands,
@@ -227,6 +246,23 @@ def _read_pairs(args: argparse.Namespace):
                 stacklevel=2,
             )
     return pairs, holdout
+
+
+def _checked(pairs, args: argparse.Namespace, quaternions: tuple[str, ...], unit: str):
+    """``pairs``, refused when their quaternions look stored in the other order or their
+    lengths in another unit than ``unit``
+    (:func:`kinfw.identification.checks.check_pose_pair_data`)."""
+    from kinfw.identification.checks import check_pose_pair_data
+
+    check_pose_pair_data(
+        pairs.base_T_hands,
+        pairs.sensor_T_targets,
+        setup=args.setup or pairs.setup or "eye-in-hand",
+        source=pairs.source,
+        unit=unit,
+        quaternions=quaternions,
+    )
+    return pairs
 
 
 def cmd_handeye(args: argparse.Namespace) -> int:

@@ -26,8 +26,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DISTINCT_TOL",
+    "DUPLICATE_RTOL",
     "check_against_robot",
     "check_joint_motion",
+    "drop_duplicate_samples",
+    "duplicate_samples",
     "fixed_in_experiment",
     "observed_joints",
     "robot_measurement_frames",
@@ -402,3 +405,127 @@ def check_joint_motion(
         )
     if problems:
         raise DatasetError(f"{m.source}: " + "; ".join(problems))
+
+
+#: Two samples (or pose pairs) whose numbers all agree within this, relative to the
+#: larger magnitude (at least 1 SI unit: 1e-12 m, 1e-12 rad), are one measurement
+#: recorded twice (:func:`duplicate_samples`).
+DUPLICATE_RTOL = 1e-12
+#: Duplicates a warning names one by one; the rest are counted.
+SHOWN_DUPLICATES = 5
+
+
+def equal_row_pairs(
+    values: np.ndarray, *, rtol: float = DUPLICATE_RTOL
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every pair of rows of ``values`` (n, k) equal entry by entry within ``rtol``
+    relative (to the larger magnitude, at least 1): ``(earlier, later)`` index arrays.
+
+    The rows are sorted by a fixed random projection, so only rows whose projections are
+    within the tolerance are compared (n log n for distinct rows, whatever the columns)."""
+    v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    n = len(v)
+    if n < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    w = np.abs(np.random.default_rng(0).normal(size=v.shape[1])) + 0.5
+    key = v @ w
+    order = np.argsort(key, kind="stable")
+    s, key = v[order], key[order]
+    scale = np.maximum(np.abs(s), 1.0)
+    key_tol = rtol * float(w @ scale.max(axis=0)) * (1.0 + 1e-6)
+    earlier, later = [], []
+    for d in range(1, n):
+        near = key[d:] - key[:-d] <= key_tol
+        if not near.any():
+            break
+        k = np.flatnonzero(near)
+        tol = rtol * np.maximum(scale[k], scale[k + d])
+        k = k[np.all(np.abs(s[k + d] - s[k]) <= tol, axis=1)]
+        earlier.append(np.minimum(order[k], order[k + d]))
+        later.append(np.maximum(order[k], order[k + d]))
+    if not earlier:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(earlier).astype(np.int64), np.concatenate(later).astype(np.int64)
+
+
+def first_copies(earlier: np.ndarray, later: np.ndarray) -> np.ndarray:
+    """``(d, 2)`` rows ``[duplicate, its first copy]`` of equal pairs ``(earlier,
+    later)``, sorted by the duplicate."""
+    if not len(later):
+        return np.zeros((0, 2), np.int64)
+    order = np.lexsort((earlier, later))
+    later, earlier = later[order], earlier[order]
+    first = np.r_[True, later[1:] != later[:-1]]
+    return np.stack([later[first], earlier[first]], axis=1).astype(np.int64)
+
+
+def _rows_equal(a: np.ndarray, b: np.ndarray, rtol: float) -> bool:
+    if a.shape != b.shape:
+        return False
+    if np.issubdtype(a.dtype, np.number) and np.issubdtype(b.dtype, np.number):
+        a, b = a.astype(float), b.astype(float)
+        return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.maximum(abs(a), abs(b)), 1.0)))
+    return bool(np.array_equal(a, b))
+
+
+def duplicate_samples(measurements: Measurements, *, rtol: float = DUPLICATE_RTOL) -> np.ndarray:
+    """The samples that repeat an earlier one: equal joint values and, in every
+    observation group, the same observations (every per-row field, numbers within
+    ``rtol`` relative, at least 1 SI unit: :data:`DUPLICATE_RTOL`).
+
+    Returns
+    -------
+    ndarray of int, shape (d, 2)
+        Rows ``[sample, earlier]``: each duplicate sample and the first sample it
+        repeats, sorted by the duplicate."""
+    earlier, later = equal_row_pairs(measurements.qs, rtol=rtol)
+    if not len(later):
+        return np.zeros((0, 2), np.int64)
+    tables = []
+    for g in measurements.all_groups():
+        order = np.argsort(g.sample, kind="stable")
+        bounds = np.searchsorted(g.sample[order], np.arange(measurements.n_samples + 1))
+        fields = [np.asarray(getattr(g, f)) for f in kind_of(g).row_fields]
+        tables.append((order, bounds, fields))
+
+    def same(i: int, j: int) -> bool:
+        for order, bounds, fields in tables:
+            ri, rj = order[bounds[i] : bounds[i + 1]], order[bounds[j] : bounds[j + 1]]
+            if len(ri) != len(rj) or not all(_rows_equal(f[ri], f[rj], rtol) for f in fields):
+                return False
+        return True
+
+    keep = np.array([same(int(i), int(j)) for i, j in zip(earlier, later, strict=True)])
+    return first_copies(earlier[keep], later[keep])
+
+
+def duplicates_warning(source: str, duplicates: np.ndarray, n: int, what: str) -> str:
+    """The warning that ``duplicates`` (rows ``[duplicate, first copy]``) of the ``n``
+    ``what`` (``"samples"``, ``"pose pairs"``) of ``source`` were dropped."""
+    shown = ", ".join(f"{int(d)} (= {int(e)})" for d, e in duplicates[:SHOWN_DUPLICATES])
+    more = len(duplicates) - SHOWN_DUPLICATES
+    return (
+        f"{source}: {len(duplicates)} of the {n} {what} repeat an earlier one: "
+        f"{shown}{f' and {more} more' if more > 0 else ''}; each is counted once (dropped, "
+        f"the later {what} renumbered)\n"
+        f"(equal to {DUPLICATE_RTOL:g} relative: recorded or concatenated twice? "
+        "--keep-duplicates / keep_duplicates=True keeps them, and every sigma shrinks)"
+    )
+
+
+def drop_duplicate_samples(measurements: Measurements, *, stacklevel: int = 2) -> Measurements:
+    """``measurements`` without the samples that repeat an earlier one
+    (:func:`duplicate_samples`), with one ``UserWarning`` naming them (a few shown, the
+    rest counted); unchanged, and silent, when there are none. A sample recorded twice
+    would count twice in the fit and shrink every sigma by 1/sqrt(2)."""
+    duplicates = duplicate_samples(measurements)
+    if not len(duplicates):
+        return measurements
+    warnings.warn(
+        duplicates_warning(measurements.source, duplicates, measurements.n_samples, "samples"),
+        UserWarning,
+        stacklevel=stacklevel,
+    )
+    keep = np.ones(measurements.n_samples, dtype=bool)
+    keep[duplicates[:, 0]] = False
+    return measurements.subset(keep)

@@ -46,6 +46,7 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
     xyz_quat_xyzw_from_transform,
 )
+from kinfw.measurements._checks import duplicates_warning, equal_row_pairs, first_copies
 from kinfw.measurements._csv import csv_table
 from kinfw.observations import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, DatasetError
 
@@ -56,6 +57,8 @@ __all__ = [
     "POSE_PAIR_COLUMNS",
     "HandPoses",
     "PosePairs",
+    "drop_duplicate_pairs",
+    "duplicate_pairs",
     "pose_pairs_from_measurements",
     "pose_pairs_text",
     "read_hand_poses",
@@ -117,6 +120,45 @@ class PosePairs:
         a[:, :3, 3] *= metres_per_unit
         b[:, :3, 3] *= metres_per_unit
         return PosePairs(a, b, self.source, self.setup)
+
+
+def duplicate_pairs(pairs: PosePairs) -> NDArray[np.int64]:
+    """The pose pairs that repeat an earlier one: both poses equal entry by entry within
+    :data:`~kinfw.measurements.DUPLICATE_RTOL` relative (at least 1 length unit).
+
+    Returns
+    -------
+    ndarray of int, shape (d, 2)
+        Rows ``[pair, earlier]``: each duplicate pair's index and the first pair it
+        repeats, sorted by the duplicate."""
+    rows = np.concatenate(
+        [
+            pairs.base_T_hands.reshape(len(pairs), -1),
+            pairs.sensor_T_targets.reshape(len(pairs), -1),
+        ],
+        axis=1,
+    )
+    return first_copies(*equal_row_pairs(rows))
+
+
+def drop_duplicate_pairs(pairs: PosePairs, *, stacklevel: int = 2) -> PosePairs:
+    """``pairs`` without the pairs that repeat an earlier one (:func:`duplicate_pairs`),
+    with one ``UserWarning`` naming them (a few shown, the rest counted); unchanged, and
+    silent, when there are none. A pair recorded twice would count twice in the fit and
+    shrink every sigma by 1/sqrt(2)."""
+    duplicates = duplicate_pairs(pairs)
+    if not len(duplicates):
+        return pairs
+    warnings.warn(
+        duplicates_warning(pairs.source, duplicates, len(pairs), "pose pairs"),
+        UserWarning,
+        stacklevel=stacklevel,
+    )
+    keep = np.ones(len(pairs), dtype=bool)
+    keep[duplicates[:, 0]] = False
+    return PosePairs(
+        pairs.base_T_hands[keep], pairs.sensor_T_targets[keep], pairs.source, pairs.setup
+    )
 
 
 def _pose(xyz, quat_xyzw, where: str, names: str = "qx, qy, qz, qw") -> NDArray[np.float64]:

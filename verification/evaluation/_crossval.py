@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 from kinfw.identification import Calibration, calibrate
 from kinfw.identification.checks import InsufficientDataError
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
-from kinfw.measurements import Measurements
+from kinfw.measurements import Measurements, drop_duplicate_samples
 from kinfw.model import BlockKey, Robot
 from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
@@ -468,6 +468,7 @@ def crossvalidate(
     jobs: int = 1,
     exclude_flagged: bool = False,
     reference: Calibration | None = None,
+    keep_duplicates: bool = False,
 ) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
@@ -505,7 +506,14 @@ def crossvalidate(
     reference : Calibration, optional
         That full-data fit, when the caller has it already (the model choice scores
         several priors against the same flags and noise).
+    keep_duplicates : bool
+        Keep the samples that repeat an earlier one (``--keep-duplicates``). By default
+        they are dropped first, with one ``UserWarning`` naming them
+        (:func:`kinfw.measurements.drop_duplicate_samples`): a copy in a test fold of a
+        training sample would be scored in-sample.
     """
+    if not keep_duplicates:
+        data = drop_duplicate_samples(data, stacklevel=3)
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
     if sets is None:

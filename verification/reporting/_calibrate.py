@@ -23,7 +23,12 @@ from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
 from kinfw.identification.checks import InsufficientDataError, implausible_noise
 from kinfw.identification.problem import NoiseModel
-from kinfw.measurements import Measurements, check_against_robot, check_measurements
+from kinfw.measurements import (
+    Measurements,
+    check_against_robot,
+    check_measurements,
+    drop_duplicate_samples,
+)
 from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
@@ -458,6 +463,7 @@ def calibrate_and_report(
     held_out: Measurements | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
     data_path: str | Path | None = None,
+    keep_duplicates: bool = False,
 ) -> CalibrationResult:
     """Calibrate ``nominal`` from ``data`` as ``kinfw calibrate`` does (the same
     defaults), and report: :func:`kinfw.calibrate`.
@@ -493,6 +499,11 @@ def calibrate_and_report(
         Also estimate the intrinsics of these cameras (True: every camera).
     data_path : path, optional
         The file ``data`` was read from, recorded with its SHA-256.
+    keep_duplicates : bool
+        Keep the samples that repeat an earlier one (``--keep-duplicates``). By default
+        they are dropped before anything else, with one ``UserWarning`` naming them
+        (:func:`kinfw.measurements.drop_duplicate_samples`): a sample recorded twice
+        would count twice and shrink every sigma by 1/sqrt(2).
 
     Returns
     -------
@@ -508,6 +519,8 @@ def calibrate_and_report(
     """
     nominal = check_robot(nominal, "nominal")
     data = check_measurements(data, "data")
+    if not keep_duplicates:
+        data = drop_duplicate_samples(data, stacklevel=3)
     held_out = None if held_out is None else check_measurements(held_out, "held_out")
     if held_out is not None:
         check_against_robot(held_out, nominal)  # its frames and joints, before any fit

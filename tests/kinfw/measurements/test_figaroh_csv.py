@@ -438,3 +438,20 @@ def test_a_camera_the_urdf_lacks_is_mounted_calibrated_and_exported(tmp_path, ca
     mounted = mounted_robot(nominal, train.mounts)
     assert mounted.joint("camera_joint").parent == "flange"
     _check_flange_kept_and_held_out(nominal, mounted, calibrate(mounted, train), test)
+
+
+def test_import_csv_writes_repeated_rows_once_and_says_which(tmp_path, capsys):
+    """The Vicon session with its first three rows pasted again at the end: the file
+    written is the committed one, and stderr names the three copies."""
+    lines = VICON_CSV.read_text().splitlines()
+    path = _csv(tmp_path, "\n".join([*lines, *lines[1:4]]) + "\n")
+    out = tmp_path / "vicon.json"
+    argv = ["-q", "import-csv", str(path), "--urdf", str(URDF), "--frame", "arm_7_link"]
+    assert main([*argv, "--measured-in", "vicon", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "3 of the 24 samples repeat an earlier one: 21 (= 0), 22 (= 1), 23 (= 2);" in err
+    expected = read_measurements(VICON_JSON)
+    np.testing.assert_array_equal(read_measurements(out).qs, expected.qs)
+    assert main([*argv, "--measured-in", "vicon", "--out", str(out), "--keep-duplicates"]) == 0
+    assert "repeat" not in capsys.readouterr().err
+    assert read_measurements(out).n_samples == 24
