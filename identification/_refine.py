@@ -576,6 +576,7 @@ def _rated(fitted: _Fitted, loss: str) -> RefineResult:
         converged=solution.converged,
         undetermined=solution.undetermined,
         noise_settled=solution.settled,
+        residual_noise=solution.said,
         w_T_base=problem.base_motion_at(x),
         cost=quality.cost,
         seconds=fitted.seconds + time.perf_counter() - t0,
@@ -607,8 +608,9 @@ def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source:
 class _Solution:
     """The estimate ``x`` of the chart coordinates, the noise model it ends with, the
     Levenberg-Marquardt iterations (summed over the noise rounds) and convergence, and
-    the part along undetermined directions left (:func:`_nearest_to_start`), and whether
-    the noise estimate settled (:func:`_noise_settled`; True when given)."""
+    the part along undetermined directions left (:func:`_nearest_to_start`), whether
+    the noise estimate settled (:func:`_noise_settled`; True when given) and, with a given
+    noise, what the residuals say it is (:func:`_residual_noise`)."""
 
     x: NDArray[np.float64]
     noise: NoiseModel
@@ -616,6 +618,7 @@ class _Solution:
     converged: bool
     undetermined: float = 0.0
     settled: bool = True
+    said: NoiseModel | None = None
 
 
 def _solve(
@@ -669,22 +672,9 @@ def _solve(
         iterations += its
         if given:
             break
-        r, _ = problem.evaluate_free(full(x_free), sigma, False)
-        w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        hat = None
-        if moving.all():  # else a column is negligible: leverage_sums would refuse
-            normal = problem.normal_equations(full(x_free), sigma, w, by_component=True)
-            hat = leverage_sums(normal.G, normal.by_component)
-        if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
-            hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
         before = sigma
-        sigma = estimate_noise(
-            r,
-            problem.groups,
-            sigma,
-            hat,
-            robust=loss != "linear",
-            first=round_ == 0 and not settled,
+        sigma = _residual_noise(
+            problem, full(x_free), sigma, moving, loss, k, first=round_ == 0 and not settled
         )
         settled = converged and _noise_settled(before, sigma)
         if settled:
@@ -706,7 +696,33 @@ def _solve(
             lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
             data_rows,
         )
-    return _Solution(full(x_free), sigma, iterations, converged, left, settled or given)
+    said = _residual_noise(problem, full(x_free), sigma, moving, loss, k) if given else None
+    return _Solution(full(x_free), sigma, iterations, converged, left, settled or given, said)
+
+
+def _residual_noise(
+    problem: LeastSquaresProblem,
+    x: NDArray,
+    sigma: NoiseModel,
+    moving: NDArray[np.bool_],
+    loss: str,
+    k: NDArray,
+    *,
+    first: bool = True,
+) -> NoiseModel:
+    """The noise the residuals of ``problem`` at ``x`` (P,) say, whitened by ``sigma``
+    (:func:`kinfw.identification.problem.estimate_noise`, with the leverages of the
+    ``moving`` free parameters; robust unless ``loss`` is linear, and then by default its
+    median round, whatever ``sigma`` is)."""
+    r, _ = problem.evaluate_free(x, sigma, False)
+    w = np.sqrt(row_weights(r, problem.obs_sizes, loss, k))
+    hat = None
+    if moving.all():  # else a column is negligible: leverage_sums would refuse
+        normal = problem.normal_equations(x, sigma, w, by_component=True)
+        hat = leverage_sums(normal.G, normal.by_component)
+    if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
+        hat = leverages(problem.evaluate_free(x, sigma, True)[1], w)
+    return estimate_noise(r, problem.groups, sigma, hat, robust=loss != "linear", first=first)
 
 
 def _every_direction_determined(G: NDArray) -> bool:

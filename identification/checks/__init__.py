@@ -5,7 +5,6 @@ for the free parameters, and whether what is left after the fit is noise.
 from __future__ import annotations
 
 from kinfw.identification.checks._fit_checks import (
-    CHI2_LIMIT,
     PLAUSIBLE_NOISE_M,
     PLAUSIBLE_NOISE_RAD,
     ROUNDING_RMS,
@@ -14,6 +13,8 @@ from kinfw.identification.checks._fit_checks import (
     fit_warnings,
     implausible_noise,
     residual_structure,
+    stated_noise,
+    stated_noise_limit,
 )
 from kinfw.identification.checks._redundancy import (
     MIN_DOF_PER_KIND,
@@ -43,7 +44,6 @@ from kinfw.identification.checks._units_evidence import (
 __all__ = [
     "BAD_SCORE",
     "BETTER_FACTOR",
-    "CHI2_LIMIT",
     "FLOOR_M",
     "FLOOR_RAD",
     "MIN_DOF_PER_KIND",
@@ -67,5 +67,7 @@ __all__ = [
     "median_residuals",
     "redundancy",
     "residual_structure",
+    "stated_noise",
+    "stated_noise_limit",
     "unit_diagnostics",
 ]
