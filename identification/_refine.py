@@ -576,6 +576,7 @@ def _rated(fitted: _Fitted, loss: str) -> RefineResult:
         converged=solution.converged,
         undetermined=solution.undetermined,
         noise_settled=solution.settled,
+        residual_noise=solution.said,
         w_T_base=problem.base_motion_at(x),
         cost=quality.cost,
         seconds=fitted.seconds + time.perf_counter() - t0,
@@ -607,8 +608,9 @@ def _check_noise_covers(noise: NoiseModel, problem: LeastSquaresProblem, source:
 class _Solution:
     """The estimate ``x`` of the chart coordinates, the noise model it ends with, the
     Levenberg-Marquardt iterations (summed over the noise rounds) and convergence, and
-    the part along undetermined directions left (:func:`_nearest_to_start`), and whether
-    the noise estimate settled (:func:`_noise_settled`; True when given)."""
+    the part along undetermined directions left (:func:`_nearest_to_start`), whether
+    the noise estimate settled (:func:`_noise_settled`; True when given) and, with a given
+    noise, what the residuals say it is (:func:`_residual_noise`)."""
 
     x: NDArray[np.float64]
     noise: NoiseModel
@@ -616,6 +618,7 @@ class _Solution:
     converged: bool
     undetermined: float = 0.0
     settled: bool = True
+    said: NoiseModel | None = None
 
 
 def _solve(
@@ -669,29 +672,19 @@ def _solve(
         iterations += its
         if given:
             break
-        r, _ = problem.evaluate_free(full(x_free), sigma, False)
-        w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-        hat = None
-        if moving.all():  # else a column is negligible: leverage_sums would refuse
-            normal = problem.normal_equations(full(x_free), sigma, w, by_component=True)
-            hat = leverage_sums(normal.G, normal.by_component)
-        if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
-            hat = leverages(problem.evaluate_free(full(x_free), sigma, True)[1], w)
         before = sigma
-        sigma = estimate_noise(
-            r,
-            problem.groups,
-            sigma,
-            hat,
-            robust=loss != "linear",
-            first=round_ == 0 and not settled,
+        sigma = _residual_noise(
+            problem, full(x_free), sigma, moving, loss, k, first=round_ == 0 and not settled
         )
         settled = converged and _noise_settled(before, sigma)
         if settled:
             break  # the next round would solve the same problem again
     r, _ = problem.evaluate_free(full(x_free), sigma, False)
     w = np.sqrt(row_weights(r, obs_sizes, loss, k))
-    G = problem.normal_equations(full(x_free), sigma, w).G[np.ix_(moving, moving)]
+    # the data's rows alone: a prior's rows make every direction look determined
+    data_rows = n_rows - len(problem.prior_rows)
+    data_w = np.where(np.arange(n_rows) < data_rows, w, 0.0)
+    G = problem.normal_equations(full(x_free), sigma, data_w).G[np.ix_(moving, moving)]
     left = 0.0
     if not _every_direction_determined(G):
         robot = _robot_entries(problem)
@@ -701,8 +694,35 @@ def _solve(
             moving,
             robot[free][moving],
             lambda r: np.sqrt(row_weights(r, obs_sizes, loss, k)),
+            data_rows,
         )
-    return _Solution(full(x_free), sigma, iterations, converged, left, settled or given)
+    said = _residual_noise(problem, full(x_free), sigma, moving, loss, k) if given else None
+    return _Solution(full(x_free), sigma, iterations, converged, left, settled or given, said)
+
+
+def _residual_noise(
+    problem: LeastSquaresProblem,
+    x: NDArray,
+    sigma: NoiseModel,
+    moving: NDArray[np.bool_],
+    loss: str,
+    k: NDArray,
+    *,
+    first: bool = True,
+) -> NoiseModel:
+    """The noise the residuals of ``problem`` at ``x`` (P,) say, whitened by ``sigma``
+    (:func:`kinfw.identification.problem.estimate_noise`, with the leverages of the
+    ``moving`` free parameters; robust unless ``loss`` is linear, and then by default its
+    median round, whatever ``sigma`` is)."""
+    r, _ = problem.evaluate_free(x, sigma, False)
+    w = np.sqrt(row_weights(r, problem.obs_sizes, loss, k))
+    hat = None
+    if moving.all():  # else a column is negligible: leverage_sums would refuse
+        normal = problem.normal_equations(x, sigma, w, by_component=True)
+        hat = leverage_sums(normal.G, normal.by_component)
+    if hat is None:  # rank deficient or ill conditioned: the rows' own leverages
+        hat = leverages(problem.evaluate_free(x, sigma, True)[1], w)
+    return estimate_noise(r, problem.groups, sigma, hat, robust=loss != "linear", first=first)
 
 
 def _every_direction_determined(G: NDArray) -> bool:
@@ -794,6 +814,7 @@ def _nearest_to_start(
     moving: NDArray[np.bool_],
     robot: NDArray[np.bool_],
     weights: Callable[[NDArray], NDArray],
+    data_rows: int,
     rounds: int = 200,
 ) -> tuple[NDArray[np.float64], float]:
     """The estimate moved along what the data do not determine to the start: shape
@@ -805,12 +826,17 @@ def _nearest_to_start(
     free, a joint that never moves its axis, and so on: the cost is the same along those
     directions, so the solver's end point along them is an accident of its path (the
     steps are minimum-norm only to first order). This returns the point of the minimum's
-    valley nearest to the start: the whitened, robust-weighted Jacobian's null space
-    (rank rule :data:`UNDETERMINED_TOL` on unit-norm columns, as the identifiability
-    report), the estimate's part along it removed, then Gauss-Newton steps back to the
-    minimum within the determined directions (a shorter move, halved until the cost
-    stays at the minimum, when the directions are curved over a long way); repeated
-    until the removed part is rounding. The distance is Euclidean in the chart
+    valley nearest to the start: the null space of the data's whitened, robust-weighted
+    Jacobian (rank rule :data:`UNDETERMINED_TOL` on unit-norm columns, as the
+    identifiability report), the estimate's part along it removed, then Gauss-Newton
+    steps back to the minimum within the determined directions (a shorter move, halved
+    until the data's cost stays at the minimum, when the directions are curved over a
+    long way); repeated until the removed part is rounding. A prior's rows are left out
+    of the null space and of the cost compared: they determine every direction they
+    restrain, so with them in, a rigid motion of the robot with its plane would look
+    determined and stay wherever the prior's trade-off with the data put it (the
+    exported robot's pose relative to the foot it stands on moved by millimetres); the
+    steps back to the minimum keep them. The distance is Euclidean in the chart
     coordinates (m, rad) of the robot's parameters, with the unknown blocks' weighted by
     :data:`UNKNOWN_WEIGHT`: an exported URDF then differs from its start only along
     directions the data determine.
@@ -828,6 +854,8 @@ def _nearest_to_start(
         Which moving entries are the robot's.
     weights : callable
         ``r -> w`` (N,): the robust loss's row weights' square roots at ``r``.
+    data_rows : int
+        The first ``data_rows`` rows are the data's, the rest a prior's.
     rounds : int
         At most this many projections.
     """
@@ -856,9 +884,9 @@ def _nearest_to_start(
         kept = s > UNDETERMINED_TOL * s[0] if s.size and s[0] > 0 else np.zeros(len(s), bool)
         return U, s, Vt, c, kept
 
-    def cost(v: NDArray) -> float:
+    def cost(v: NDArray) -> float:  # the data's
         r = evaluate(v, False)[0]
-        r = r * weights(r)
+        r = (r * weights(r))[:data_rows]
         return float(r @ r) if np.isfinite(r).all() else np.inf
 
     def back_to_minimum(v: NDArray, Q: NDArray) -> NDArray:
@@ -877,10 +905,10 @@ def _nearest_to_start(
 
     before = cost(x)
     # rounding: a whitened row at the noise floor (noise-free data) is not exact
-    slack = before * 1e-6 + ROUNDING_SLACK * len(evaluate(x, False)[0])
+    slack = before * 1e-6 + ROUNDING_SLACK * data_rows
     fraction, left = 1.0, 0.0
     for _ in range(rounds):
-        Jy = whitened(x)[1]
+        Jy = whitened(x)[1][:data_rows]
         if not np.isfinite(Jy).all():
             break
         _, _, Vt, c, kept = svd(Jy, False)

@@ -88,6 +88,13 @@ class RefineResult:
         The estimated rigid motion of the whole nominal robot in the model frame (the
         base block), folded into :attr:`model`; None when the parameter set left it
         fixed (``"full"``). The URDF export writes it into the root's fixed joint.
+    residual_noise : NoiseModel or None
+        With a stated noise (``noise`` given), the noise its residuals say: per noise
+        component, the estimate of :func:`kinfw.identification.problem.estimate_noise`
+        from the final residuals (robust: its median round, which neither a gross error
+        nor a stated sigma far off moves), for checking the stated one
+        (:func:`kinfw.identification.checks.stated_noise`); None when the noise was
+        estimated.
     """
 
     model: CPCModel
@@ -112,6 +119,7 @@ class RefineResult:
     undetermined: float = 0.0
     noise_settled: bool = True
     w_T_base: NDArray[np.float64] | None = None
+    residual_noise: NoiseModel | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -6,7 +6,6 @@ the free parameters, and whether what is left after the fit is noise.
 from __future__ import annotations
 
 from kinfw.identification.checks._fit_checks import (
-    CHI2_LIMIT,
     PLAUSIBLE_NOISE_M,
     PLAUSIBLE_NOISE_RAD,
     ROUNDING_RMS,
@@ -15,6 +14,8 @@ from kinfw.identification.checks._fit_checks import (
     fit_warnings,
     implausible_noise,
     residual_structure,
+    stated_noise,
+    stated_noise_limit,
 )
 from kinfw.identification.checks._pose_pair_checks import (
     PLAUSIBLE_LENGTH_M,
@@ -49,7 +50,6 @@ from kinfw.identification.checks._units_evidence import (
 __all__ = [
     "BAD_SCORE",
     "BETTER_FACTOR",
-    "CHI2_LIMIT",
     "FLOOR_M",
     "FLOOR_RAD",
     "MIN_DOF_PER_KIND",
@@ -76,5 +76,7 @@ __all__ = [
     "median_residuals",
     "redundancy",
     "residual_structure",
+    "stated_noise",
+    "stated_noise_limit",
     "unit_diagnostics",
 ]

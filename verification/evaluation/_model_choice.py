@@ -38,7 +38,10 @@ import this module; the CLI wires them.
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -343,7 +346,9 @@ def _fit(
 ) -> Calibration | ValueError:
     """One candidate's calibration on all the data, or the error that refused it (too
     little data for its parameters, or to place a camera)."""
-    with warnings.catch_warnings():  # the data's warnings come once, from the calibration
+    label = Candidate(parameters, prior, np.nan).label
+    # the data's warnings come once, from the calibration; what is logged names the candidate
+    with warnings.catch_warnings(), _candidate_named(label):
         warnings.simplefilter("ignore", UserWarning)
         try:
             return calibrate(
@@ -351,6 +356,33 @@ def _fit(
             )
         except ValueError as exc:
             return exc
+
+
+@contextlib.contextmanager
+def _candidate_named(label: str) -> Iterator[None]:
+    """Within, what kinfw's loggers say at WARNING or above begins with the candidate
+    ``label`` (``"model choice, candidate frames: refine: 45 of 80 observations lie
+    beyond ..."``): a restricted candidate's residuals are expected to be poor, and
+    unnamed they read as the calibration's."""
+    prefix = f"model choice, candidate {label}: ".replace("%", "%%")
+
+    def name(record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            record.msg = prefix + str(record.msg)
+        return True
+
+    loggers = [
+        logger
+        for key, logger in logging.root.manager.loggerDict.items()
+        if (key == "kinfw" or key.startswith("kinfw.")) and isinstance(logger, logging.Logger)
+    ]
+    for logger in loggers:
+        logger.addFilter(name)
+    try:
+        yield
+    finally:
+        for logger in loggers:
+            logger.removeFilter(name)
 
 
 def _reference(fits: list[Calibration | ValueError]) -> Calibration:

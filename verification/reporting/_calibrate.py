@@ -21,7 +21,7 @@ import numpy as np
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
-from kinfw.identification.checks import InsufficientDataError, implausible_noise
+from kinfw.identification.checks import InsufficientDataError, implausible_noise, stated_noise
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import (
     Measurements,
@@ -564,7 +564,10 @@ def calibrate_and_report(
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )
-    restricted = parameters != "full" or prior is not None  # full alone: warned in the fit
+    # full alone is warned about in the fit, unless it is the model choice's candidate
+    # (whose warnings the choice silences)
+    candidate = choice is not None and result is choice.fit
+    restricted = parameters != "full" or prior is not None or candidate
     implausible = (
         implausible_noise(result.refined, data)
         if restricted and result.refined is not None
@@ -572,6 +575,8 @@ def calibrate_and_report(
     )
     if implausible:
         warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=2)
+    for line in stated_noise(result.refined, data) if restricted and result.refined else ():
+        warnings.warn(f"{data.source}: {line}", UserWarning, stacklevel=2)
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
