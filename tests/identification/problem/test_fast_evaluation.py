@@ -2,6 +2,7 @@
 functions over chunks of samples, the kept last evaluation, the free columns only, the
 leverages by blocks, and Levenberg-Marquardt's stop at the minimum."""
 
+import io
 import itertools
 import logging
 
@@ -358,3 +359,46 @@ def test_leverage_sums_are_the_sums_of_the_hat_matrix_diagonal():
     assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None
     A[:, 3] = A[:, 0] + A[:, 1]
     assert leverage_sums(A.T @ A, {"a": A.T @ A}) is None
+
+
+def test_the_first_calibration_of_many_samples_says_it_compiles_and_the_next_does_not(
+    monkeypatch, tmp_path
+):
+    """A planar 2R arm's 256 tool poses (a group large enough to pay for compiling), an
+    empty cache: the piped lines say each compilation, even inside the Levenberg-Marquardt
+    loop; the same calibration again (a new process: nothing loaded) compiles nothing, and
+    both estimates are the virtual machine's to the last bit."""
+    from kinfw.identification import calibrate
+    from kinfw.identification.problem import clear_function_cache
+    from kinfw.progress import LineReporter
+    from tests.robots import PLANAR_2R
+
+    if compiled_module.compiler() is None:
+        pytest.fail("no C compiler on this machine: the compiled path is not tested")
+    nominal = load_robot(PLANAR_2R)
+    rng = np.random.default_rng(4)
+    names = nominal.topology(("tool",)).joint_names
+    qs = random_configurations(*nominal.joint_limits(names), 256, rng, fraction=0.8)
+    data = simulate(nominal, qs, names, frames=["tool"], rng=rng, noise_m=1e-4, noise_rad=1e-3)
+    assert len(data.poses[0].sample) >= compiled_module.COMPILE_SAMPLES
+    monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
+
+    def run() -> tuple[list[str], np.ndarray]:
+        clear_function_cache()
+        monkeypatch.setattr(compiled_module, "_LOADED", {})
+        out = io.StringIO()
+        with reporting(LineReporter(out)):
+            fit = calibrate(nominal, data, parameters="full").refined
+        return [line.split(" s  ", 1)[1] for line in out.getvalue().splitlines()], fit.estimate
+
+    first, compiled_estimate = run()
+    notice = f"compiling a residual function into C for this machine, once (kept in {tmp_path})"
+    compiles = [i for i, line in enumerate(first) if line == notice]
+    assert compiles and len(compiles) == len(list(tmp_path.glob("kinfw_*.so")))
+    assert any(first[i - 1].startswith("Levenberg-Marquardt") for i in compiles[1:]), first
+    again, cached_estimate = run()
+    assert notice not in again
+    monkeypatch.setenv("KINFW_COMPILE", "0")
+    _, vm_estimate = run()
+    np.testing.assert_array_equal(compiled_estimate, vm_estimate)
+    np.testing.assert_array_equal(cached_estimate, vm_estimate)

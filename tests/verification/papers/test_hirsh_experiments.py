@@ -168,12 +168,14 @@ def test_noise_free_error_falls_below_1e_6_deg_for_every_view_count(noise_free):
     assert not noise_free.failed.any()
 
 
+@pytest.mark.slow
 def test_noise_free_median_error_never_increases(noise_free):
     median = noise_free.y_median_deg  # (V, K + 1), iteration 0 = identity guess
     assert np.all(np.diff(median[:, 1:], axis=1) <= 1e-12 * median[:, 1:-1])
     assert np.all(median[:, -1] < 1e-6 * median[:, 1])
 
 
+@pytest.mark.slow
 def test_runs_that_stop_early_repeat_their_last_value(noise_free):
     its = noise_free.iterations_to_reach(1e-9)
     v, t = np.argwhere(its < 100)[0]  # an early one
@@ -181,6 +183,7 @@ def test_runs_that_stop_early_repeat_their_last_value(noise_free):
     assert np.all(tail == tail[-1])
 
 
+@pytest.mark.slow
 def test_shrink_factor_is_the_observed_ratio_of_successive_errors(noise_free):
     # Independent of N: the solver's own iterates. The paper's error s-component grows as
     # tan(error / 2) shrinks by (sigma_2 / sigma_1)^2 once the slower modes have died out.
@@ -198,6 +201,7 @@ def test_shrink_factor_is_the_observed_ratio_of_successive_errors(noise_free):
     assert max(rel) < 0.15
 
 
+@pytest.mark.slow
 def test_more_views_converge_faster(noise_free):
     its = noise_free.median_iterations_to_reach(CONVERGED_DEG)  # views 3, 5, 10
     assert its[0] > its[1] > its[2]
@@ -246,6 +250,7 @@ def test_json_round_trip(noise_free, noisy, tmp_path):
                 assert a == b, field
 
 
+@pytest.mark.slow
 def test_format_reports_the_papers_claims(noise_free, noisy):
     text = format_hirsh(noise_free, noisy)
     for claim in (
