@@ -200,6 +200,7 @@ def _issue_35_rows(work: Path, poses: Path) -> list[Row]:
 
     from kinfw.camera import CameraIntrinsics
 
+    (work / VICON.name).write_text(VICON.read_text())
     huge = json.loads(poses.read_text())
     huge["samples"][3]["q"][0] = 1e300
     (work / "huge.json").write_text(json.dumps(huge))
@@ -207,11 +208,13 @@ def _issue_35_rows(work: Path, poses: Path) -> list[Row]:
         json.dumps(CameraIntrinsics(480, 360, 400.0, 404.0, 240.0, 180.0).to_dict())
     )
     (work / "joints.csv").write_text("image,pan\nimg_0.png,0.1\nimg_1.png,0.2\n")
+    (work / "img_0.png").write_bytes(b"")  # exists; its neighbour's name is mistyped
+    (work / "panda.urdf").write_text(urdf_path("panda_description/urdf/panda.urdf").read_text())
     return [
         _kinfw_row(
-            "a URDF that only declares xmlns:xacro",
+            "a URDF that only declares xmlns:xacro (read without xacro too)",
             work,
-            ["crosscheck", str(urdf_path("panda_description/urdf/panda.urdf")), "-n", "5"],
+            ["crosscheck", "panda.urdf", "--frames", "panda_link8", "-n", "5"],
         ),
         *_sidecar_rows(work, poses),
         _kinfw_row(
@@ -229,7 +232,7 @@ def _issue_35_rows(work: Path, poses: Path) -> list[Row]:
             work,
             [
                 "import-csv",
-                str(VICON),
+                VICON.name,
                 "--urdf",
                 TIAGO,
                 "--frame",
