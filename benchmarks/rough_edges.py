@@ -1,5 +1,5 @@
-"""Issue 25's rough edges, re-run as a shell user meets them: one row per case with the
-command, its exit code and the first line it prints on stderr.
+"""Issues 25's and 35's rough edges, re-run as a shell user meets them: one row per case
+with the command, its exit code and the first line it prints on stderr.
 
 Each case runs ``python -m kinfw.cli`` in a fresh process (or, for the two API cases, a
 ``python -c`` one-liner) in a temporary folder, on simulated IIS-head data
@@ -7,7 +7,9 @@ Each case runs ``python -m kinfw.cli`` in a fresh process (or, for the two API c
 ``tests/data/tiago_figaroh`` re-saved with a byte-order mark, ``;`` separators and
 decimal commas. The tests that hold these behaviours are in
 ``tests/kinfw/cli/test_rough_edges.py``, ``tests/kinfw/measurements/test_figaroh_csv.py``,
-``tests/kinfw/model/test_xacro.py`` and ``tests/kinfw/cli/test_package_dir.py``.
+``tests/kinfw/model/test_xacro.py`` and ``tests/kinfw/cli/test_package_dir.py``; issue 35's
+also in ``tests/kinfw/cli/test_detect_cli.py``, ``tests/kinfw/measurements/test_pose_pairs.py``,
+``tests/identification/checks/test_units.py`` and ``tests/kinfw/view/``.
 
 Run: ``python benchmarks/rough_edges.py`` (about a minute; needs example-robot-data, a
 test dependency, for the TIAGo URDF).
@@ -153,6 +155,130 @@ def _arm(work: Path, name: str, head: str, origin: str, tool: str) -> Path:
     return path
 
 
+def _sidecar_rows(work: Path, poses: Path) -> list[Row]:
+    """Issue 35: verify given another calibration's sidecar (two calibrations of the head,
+    on the plates and cameras and on the plates alone)."""
+    plates = _simulate(work, 0, "plates")
+    for name, data in (("a", poses), ("b", plates)):
+        (work / name).mkdir()
+        argv = [*KINFW, "-q", "calibrate", data.name, "--urdf", HEAD, "--out", f"{name}/c.urdf"]
+        code, _, err = _run([*argv, "--params", "full"], work)
+        assert code == 0, err
+    argv = ["verify", "b/c.urdf", poses.name, "--sidecar", "a/c.kinfw.json"]
+    return [_kinfw_row("verify with another calibration's sidecar", work, argv)]
+
+
+def _handeye_pairs(work: Path) -> Path:
+    """Ten eye-in-hand pose pairs of a known mount, as a European spreadsheet saves them
+    (byte-order mark, ';', decimal commas)."""
+    import re
+
+    import numpy as np
+    import pinocchio as pin
+
+    from kinfw.measurements import PosePairs, pose_pairs_text
+
+    rng = np.random.default_rng(0)
+    X = pin.SE3(pin.exp3(np.array([0.4, -0.3, 1.1])), np.array([0.02, -0.05, 0.11])).homogeneous
+    target = pin.SE3(pin.exp3(np.array([0.1, 2.0, -0.3])), np.array([0.7, 0.1, 0.2])).homogeneous
+    hands = np.stack(
+        [
+            pin.SE3(pin.exp3(rng.normal(size=3)), rng.normal(size=3) * 0.2).homogeneous
+            for _ in range(10)
+        ]
+    )
+    cameras = np.stack([np.linalg.inv(X) @ np.linalg.inv(h) @ target for h in hands])
+    text = pose_pairs_text(PosePairs(hands, cameras, "sim", None), "csv")
+    path = work / "pairs_excel.csv"
+    path.write_text("\ufeff" + re.sub(r"(\d)\.(\d)", r"\1,\2", text.replace(",", ";")))
+    return path
+
+
+def _issue_35_rows(work: Path, poses: Path) -> list[Row]:
+    """Issue 35's cases: ordinary URDFs, a foreign sidecar, half-written outputs, messages."""
+    import json
+
+    from kinfw.camera import CameraIntrinsics
+
+    (work / VICON.name).write_text(VICON.read_text())
+    huge = json.loads(poses.read_text())
+    huge["samples"][3]["q"][0] = 1e300
+    (work / "huge.json").write_text(json.dumps(huge))
+    (work / "cam.json").write_text(
+        json.dumps(CameraIntrinsics(480, 360, 400.0, 404.0, 240.0, 180.0).to_dict())
+    )
+    (work / "joints.csv").write_text("image,pan\nimg_0.png,0.1\nimg_1.png,0.2\n")
+    (work / "img_0.png").write_bytes(b"")  # exists; its neighbour's name is mistyped
+    (work / "panda.urdf").write_text(urdf_path("panda_description/urdf/panda.urdf").read_text())
+    return [
+        _kinfw_row(
+            "a URDF that only declares xmlns:xacro (read without xacro too)",
+            work,
+            ["crosscheck", "panda.urdf", "--frames", "panda_link8", "-n", "5"],
+        ),
+        *_sidecar_rows(work, poses),
+        _kinfw_row(
+            "plan --plot with a suffix matplotlib cannot write",
+            work,
+            ["plan", "--urdf", HEAD, "--n", "5", "--out", "plan.json", "--plot", "plan.xyz"],
+        ),
+        _kinfw_row(
+            "a joint value of 1e300",
+            work,
+            ["calibrate", "huge.json", "--urdf", HEAD, "--out", "huge.urdf"],
+        ),
+        _kinfw_row(
+            "import-csv --length-unit mm of a file in m, then calibrate",
+            work,
+            [
+                "import-csv",
+                VICON.name,
+                "--urdf",
+                TIAGO,
+                "--frame",
+                "arm_7_link",
+                "--measured-in",
+                "vicon",
+                "--length-unit",
+                "mm",
+                "--out",
+                "v_mm.json",
+            ],
+        ),
+        _kinfw_row(
+            "calibrate it", work, ["calibrate", "v_mm.json", "--urdf", TIAGO, "--out", "v.urdf"]
+        ),
+        _kinfw_row(
+            "detect with a mistyped image name",
+            work,
+            [
+                *("detect", "img_0.png", "img_O.png", "--joints", "joints.csv"),
+                *("--camera", "cam.json", "--frame", "cam"),
+                *("--board", "chessboard:9x6:0.03", "--out", "d.json"),
+            ],
+        ),
+        _stdin_row(work),
+        _kinfw_row(
+            "handeye on a ';' CSV with decimal commas",
+            work,
+            ["handeye", _handeye_pairs(work).name],
+        ),
+    ]
+
+
+def _stdin_row(work: Path) -> Row:
+    """``kinfw crosscheck - < /dev/null``."""
+    argv = [*KINFW, "-q", "crosscheck", "-"]
+    proc = subprocess.run(argv, cwd=work, stdin=subprocess.DEVNULL, capture_output=True)
+    err = proc.stderr.decode().strip()
+    return Row(
+        "an empty stdin for --urdf -",
+        _shell(argv, work) + " < /dev/null",
+        proc.returncode,
+        _first(err),
+    )
+
+
 def rows(work: Path) -> list[Row]:
     """Every case, in the issue's order."""
     poses = _simulate(work, 40, "poses")
@@ -238,6 +364,7 @@ def rows(work: Path) -> list[Row]:
                 "p.json",
             ],
         ),
+        *_issue_35_rows(work, poses),
     ]
 
 

@@ -374,12 +374,14 @@ def _refine_checked(
             check_fit(refined, data.source)
         except UnitError as exc:  # the residuals' structure names a likelier cause
             order = _quaternion_order_hint(nominal, data, options)
-            raise UnitError(" ".join((*order, str(exc), *(f"Also: {w}" for w in found)))) from None
+            written = [f"as written: {exc}"] if order else [str(exc)]
+            also = [f"also: {w}" for w in found]
+            raise UnitError("\n".join((*order, *written, *also))) from None
         # a fit that passes but is contradicted by its residuals may still be the wrong
         # quaternion order (a few frames, the rest of the error absorbed by the geometry)
         order = _quaternion_order_hint(nominal, data, options) if found else ()
         if order:
-            raise UnitError(" ".join((*order, *(f"Read as written: {w}" for w in found))))
+            raise UnitError("\n".join((*order, *(f"as written: {w}" for w in found))))
     # drifted along what the data do not determine and not brought back: meaningless geometry
     if refined.undetermined > UNDETERMINED_LEFT:
         raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
@@ -494,7 +496,8 @@ def _quaternion_order_hint(
 ) -> tuple[str, ...]:
     """When the data do not fit but would with their quaternions in the other order
     (:meth:`kinfw.measurements.Measurements.with_quaternions_reordered`) without a
-    warning about the fit: one sentence saying so, to put first; else nothing."""
+    warning about the fit: a first line saying so and a line with the fit in that
+    order, to put first; else nothing."""
     swapped = data.with_quaternions_reordered()
     if swapped is None:
         return ()
@@ -517,7 +520,7 @@ def _quaternion_order_hint(
     pos, rot = median_residuals(result)
     return (
         f"{data.source}: the orientations look like quaternions stored scalar first "
-        f"(w, x, y, z) where kinfw reads them scalar last (quat_xyzw: x, y, z, w): read in "
-        f"that order, the data fit (median residual {1e3 * pos:.3g} mm, "
-        f"{np.degrees(rot):.3g} deg). Reorder them in the file.",
+        "(w, x, y, z), kinfw reads them scalar last (quat_xyzw): reorder them in the file",
+        f"read in that order, the data fit (median residual {1e3 * pos:.3g} mm, "
+        f"{np.degrees(rot):.3g} deg)",
     )

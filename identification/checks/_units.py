@@ -260,9 +260,11 @@ def check_fit(result: RefineResult, source: str) -> None:
     worst = max(with_position, key=lambda g: float(np.median(np.linalg.norm(g.position_m, axis=1))))
     raise UnitError(
         f"{source}: the refinement over every parameter still leaves a median residual of "
-        f"{1e3 * med_p:.3g} mm and {math.degrees(med_r):.3g} deg (worst: {worst.kind} "
-        f"{worst.frame!r}, noise {'estimated' if result.noise.estimated else 'given'} "
-        f"{1e3 * result.noise.position_m:.3g} mm): the data does not describe this robot. "
+        f"{1e3 * med_p:.3g} mm and {math.degrees(med_r):.3g} deg: the data does not "
+        "describe this robot; nothing was written\n"
+        f"worst: {worst.kind} {worst.frame!r}, noise "
+        f"{'estimated' if result.noise.estimated else 'given'} "
+        f"{1e3 * result.noise.position_m:.3g} mm. "
         'Are the units right ("units", "joint_units": mm read as m, degrees read as '
-        "radians), the joint order, and the URDF this robot's? Nothing was written"
+        "radians), the joint order, and the URDF this robot's?"
     )

@@ -1,10 +1,11 @@
 """Drawing a URDF robot in meshcat and framing the view (helpers of :func:`kinfw.view.scene`).
 
 :func:`draw_robot` draws a robot's visuals (meshes found from ``package://``,
-``file://`` or relative paths; missing or unreadable meshes are skipped with a logged
-warning) and returns the points to frame; :func:`display_frame` chooses the display
-frame and the camera position that frame them, :func:`set_camera` puts meshcat's orbit
-camera there.
+``file://`` or relative paths) and returns the points to frame; when meshes are missing
+it draws the links as a skeleton too (a triad per link frame, a segment along each joint
+from its parent link's origin to its child's), with one logged warning for them all;
+:func:`display_frame` chooses the display frame and the camera position that frame them,
+:func:`set_camera` puts meshcat's orbit camera there.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.model import Robot, mesh_dirs, resolve_meshes
+from kinfw.view._draw import stick, triad
 
 if TYPE_CHECKING:
     import meshcat
@@ -47,23 +49,63 @@ BACKGROUND_RGB = ((1.0, 1.0, 1.0), (0.88, 0.9, 0.93))
 # -- robot geometry ----------------------------------------------------------------------
 
 
-def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> str:
+#: Radius of the skeleton's segments and length of its link triads, metres.
+SKELETON_RADIUS = 0.004
+SKELETON_TRIAD = 0.05
+#: Where the missing meshes are looked for, named in the warning: at most this many.
+_SHOWN_PLACES = 3
+
+
+def _visual_urdf(robot: Robot, package_dirs: Sequence[Path]) -> tuple[str, int]:
     """The robot's URDF with mesh paths made absolute and visuals whose mesh is missing
-    removed (each with a logged warning)."""
+    removed, and how many are missing (one logged warning for them all)."""
     xml, missing = resolve_meshes(robot, package_dirs, "visual")
-    for m in missing:
-        logger.warning(
-            "%s: mesh %r of link %r not found (searched %s); that visual is not drawn",
-            robot.source,
-            m.filename,
-            m.link,
-            [str(d) for d in mesh_dirs(package_dirs)] or "no package_dirs",
+    if missing:
+        places = list(
+            dict.fromkeys(
+                "package://" + m.filename[len("package://") :].partition("/")[0]
+                if m.filename.startswith("package://")
+                else f"{Path(m.filename).parent}/"
+                for m in missing
+            )
         )
-    return xml
+        shown = ", ".join(places[:_SHOWN_PLACES]) + (", ..." if len(places) > _SHOWN_PLACES else "")
+        searched = ", ".join(str(d) for d in mesh_dirs(package_dirs)) or "no package directory"
+        logger.warning(
+            "%s: %d visual mesh(es) not found under %s (searched %s): drawn as a skeleton; "
+            "give --package-dir DIR (package_dirs in Python)",
+            robot.source,
+            len(missing),
+            shown,
+            searched,
+        )
+    return xml, len(missing)
 
 
-def _visual_model(robot: Robot, package_dirs: Sequence[Path]) -> pin.GeometryModel:
-    xml = _visual_urdf(robot, package_dirs)
+def _draw_skeleton(
+    vis: meshcat.Visualizer, robot: Robot, node: str, pin_q: NDArray, rgb: Sequence[float]
+) -> NDArray[np.float64]:
+    """Under ``node/skeleton``: a triad per link frame (``links/LINK``) and a segment
+    per URDF joint from its parent link's origin to its child link's (``joints/JOINT``),
+    at ``pin_q``; return the link origins, (m, 3), root-link coordinates."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, pin_q)
+    root_T_links = {
+        f.name: data.oMf[k].homogeneous
+        for k, f in enumerate(robot.model.frames)
+        if f.type == pin.FrameType.BODY
+    }
+    skeleton = vis[f"{node}/skeleton"]
+    for link, root_T_link in root_T_links.items():
+        triad(skeleton["links"][link], root_T_link, length=SKELETON_TRIAD, origin_rgb=rgb)
+    for joint in robot.joints:
+        a, b = root_T_links[joint.parent][:3, 3], root_T_links[joint.child][:3, 3]
+        if np.linalg.norm(b - a) > 0:
+            stick(skeleton["joints"][joint.name], a, b - a, SKELETON_RADIUS, rgb)
+    return np.array([T[:3, 3] for T in root_T_links.values()]).reshape(-1, 3)
+
+
+def _visual_model(robot: Robot, xml: str) -> pin.GeometryModel:
     try:
         return pin.buildGeomFromUrdfString(robot.model, xml, pin.GeometryType.VISUAL)
     except Exception as exc:  # a mesh that exists but cannot be read
@@ -90,10 +132,13 @@ def draw_robot(
 ) -> NDArray[np.float64]:
     """Draw ``robot`` at ``pin_q`` under ``node``; return the points to frame, (m, 3):
     the centres of the visuals of its moving links (of all links if none moves; the link
-    frames' origins if it has no visuals)."""
+    frames' origins if it has no visuals or some of its meshes are missing). Missing
+    meshes: one logged warning, and the links drawn as a skeleton under
+    ``node/skeleton`` (``links/LINK`` triads, ``joints/JOINT`` segments)."""
     from pinocchio.visualize import MeshcatVisualizer
 
-    visual_model = _visual_model(robot, package_dirs)
+    xml, n_missing = _visual_urdf(robot, package_dirs)
+    visual_model = _visual_model(robot, xml)
     viz = MeshcatVisualizer(robot.model, None, visual_model)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -108,6 +153,10 @@ def draw_robot(
         (g.parentJoint, oMg.translation)
         for g, oMg in zip(visual_model.geometryObjects, viz.visual_data.oMg, strict=True)
     ]
+    if n_missing:
+        grey = (0.35, 0.35, 0.35) if rgba is None else rgba[:3]
+        _draw_skeleton(vis, robot, node, pin_q, grey)
+        placements = []  # frame the whole robot: its link frames, drawn or not
     if not placements:
         pin.updateFramePlacements(viz.model, viz.data)
         placements = [

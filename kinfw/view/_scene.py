@@ -4,8 +4,9 @@
 
 - the nominal robot as a translucent grey ghost and the calibrated robot in colour,
   overlaid at one configuration (Pinocchio's ``MeshcatVisualizer``: URDF boxes,
-  cylinders, spheres and the meshes that can be found; missing meshes are skipped with a
-  logged warning);
+  cylinders, spheres and the meshes that can be found; when meshes are missing, the
+  robot's links as a skeleton too, triads and segments between joint origins, with one
+  logged warning for them all);
 - the observations of one sample of a dataset, each kind through its ``drawing``
   (:class:`kinfw.observations.Drawing`): a triad (x red, y green, z blue, 3 cm, a
   dark ball at the origin) per measured orientation (a ``pose``; a ``target`` where a
@@ -215,8 +216,8 @@ def scene(
         The direction, in the root frame, to show upwards. Default: the ``up`` attribute
         of the URDF's ``<kinfw>`` element (``<kinfw up="0 -1 0"/>``), else ``+z``.
     package_dirs : sequence of path
-        Folders searched for ``package://`` meshes. Meshes that are not found are
-        skipped with a logged warning.
+        Folders searched for ``package://`` meshes. When meshes are not found, one
+        warning says how many and where, and the robot is drawn as a skeleton too.
     ghost_rgba, solid_rgba : sequence of 4 floats
         Colours of the ghost and of the solid robot; ``solid_rgba=None`` keeps the
         URDF's materials.

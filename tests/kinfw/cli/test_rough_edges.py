@@ -166,10 +166,14 @@ def test_quaternions_stored_scalar_first_are_named_first(data, request, tmp_path
         ["-q", "calibrate", wrong, "--urdf", HEAD, "--out", tmp_path / "c.urdf"], capsys
     )
     assert code == 2
-    message = err.split("error: ", 1)[1]
-    assert message.startswith(
-        f"{wrong}: the orientations look like quaternions stored scalar first (w, x, y, z)"
-    ), message[:300]
+    first, *details = err.split("error: ", 1)[1].splitlines()
+    assert first == (
+        f"{wrong}: the orientations look like quaternions stored scalar first (w, x, y, z), "
+        "kinfw reads them scalar last (quat_xyzw): reorder them in the file"
+    )  # the evidence after it, each on its own indented line (it was one 2,007-character line)
+    assert details[0].startswith("  read in that order, the data fit (median residual 0.")
+    assert details[1].startswith("  as written: ")
+    assert all(line.startswith("  ") for line in details)
     assert not (tmp_path / "c.urdf").exists()
 
 

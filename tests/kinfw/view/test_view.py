@@ -259,13 +259,17 @@ def test_camera_looks_at_the_robot_with_up_upwards(head, head_up, case, drawn):
     assert _properties(drawn, "/Grid")["visible"] is False
 
 
-def test_missing_meshes_are_skipped_with_a_warning(caplog):
+def test_missing_meshes_are_drawn_as_a_skeleton_with_one_warning(caplog):
+    """Missing meshes were one warning each and left nothing of their links on the page:
+    now one warning for them all, and a skeleton, a triad per link and a segment per
+    joint, where the URDF puts them (the joint's origin 0.4 m above the base: by hand)."""
     urdf = """<robot name="r">
       <link name="base">
         <visual><geometry><mesh filename="package://nowhere/base.stl"/></geometry></visual>
         <visual><geometry><box size="0.1 0.2 0.3"/></geometry></visual>
       </link>
       <joint name="j" type="revolute"><parent link="base"/><child link="arm"/>
+        <origin xyz="0 0 0.4" rpy="0 0 0"/>
         <axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint>
       <link name="arm">
         <visual><geometry><mesh filename="meshes/missing.dae"/></geometry></visual>
@@ -275,14 +279,31 @@ def test_missing_meshes_are_skipped_with_a_warning(caplog):
     window = RecordingWindow()
     with caplog.at_level("WARNING", logger="kinfw.view"):
         scene(load_robot(urdf), window=window)
-    assert "package://nowhere/base.stl" in caplog.text
-    assert "meshes/missing.dae" in caplog.text
+    (record,) = [r for r in caplog.records if r.name == "kinfw.view"]
+    assert record.getMessage().startswith(
+        "<urdf string>: 2 visual mesh(es) not found under package://nowhere, meshes/ "
+    )
+    assert "drawn as a skeleton; give --package-dir DIR" in record.getMessage()
+    objects, transforms = scene_objects(window.commands), scene_transforms(window.commands)
     geometries = [
         o["geometries"][0]["type"]
-        for p, o in scene_objects(window.commands).items()
+        for p, o in objects.items()
         if p.startswith(f"{KINFW}/nominal/visuals/")
     ]
     assert sorted(geometries) == ["BoxGeometry", "CylinderGeometry"]
+    skeleton = f"{KINFW}/nominal/skeleton"
+    for link, z in (("base", 0.0), ("arm", 0.4)):
+        assert f"{skeleton}/links/{link}/z/stick" in objects
+        np.testing.assert_allclose(
+            transforms[f"{skeleton}/links/{link}"][:3, 3], [0, 0, z], atol=1e-12
+        )
+    segment = objects[f"{skeleton}/joints/j/stick"]["geometries"][0]
+    assert segment["type"] == "CylinderGeometry" and segment["height"] == pytest.approx(
+        0.4, abs=1e-12
+    )
+    root_T_segment = transforms[f"{skeleton}/joints/j"]
+    np.testing.assert_allclose(root_T_segment[:3, 3], [0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(root_T_segment[:3, 1], [0, 0, 1], atol=1e-12)  # along the joint
 
 
 def test_points_and_frames_measured_elsewhere_are_drawn_through_their_kinds(head, caplog):
