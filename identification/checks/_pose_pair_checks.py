@@ -82,11 +82,12 @@ class PosePairDiagnostics:
     ----------
     n_pairs : int
         Pairs of poses compared.
-    rotation_score : float
-        Mean relative discrepancy (0..1) of ``A X = X B``'s rotations, as read.
+    motion_score : float
+        Mean relative discrepancy (0..1) of ``A X = X B`` (rotations and translations), as
+        read.
     reordered : tuple of str
         The sides (``"hand"``, ``"sensor"``) whose quaternions read scalar first explain
-        the rotations best; empty when the rotations as read do.
+        the poses best; empty when the poses as read do.
     reordered_score : float
         The score of that reading.
     hand_motion_m : float
@@ -96,7 +97,7 @@ class PosePairDiagnostics:
     """
 
     n_pairs: int
-    rotation_score: float
+    motion_score: float
     reordered: tuple[str, ...]
     reordered_score: float
     hand_motion_m: float
@@ -237,7 +238,7 @@ def check_pose_pair_data(
             f"{source}: quaternions look scalar-first (w, x, y, z) under qx..qw headers "
             f"({sides} poses): reorder them to qx, qy, qz, qw (scalar last)\n"
             f"read so, the poses fit A X = X B (mean relative discrepancy "
-            f"{scores[best]:.2f}; as read {scores[0]:.2f})"
+            f"{scores[best]:.2g}; as read {scores[0]:.2g})"
         )
     motion = float(np.median(np.linalg.norm(H[j, :3, 3] - H[i, :3, 3], axis=1)))
     view = float(np.median(np.linalg.norm(S[:, :3, 3], axis=1)))

@@ -26,6 +26,7 @@ from kinfw.geometry import (
 from kinfw.identification.handeye._axxb import solve_axxb
 from kinfw.identification.handeye._calibration import HandEyeCalibration, solver_hand_poses
 from kinfw.identification.handeye._result import HandEyeResult
+from kinfw.measurements import PosePairs, drop_duplicate_pairs
 
 __all__ = [
     "HANDEYE_METHODS",
@@ -186,6 +187,7 @@ def calibrate_pose_pairs(
     camera_T_targets: ArrayLike,
     setup: str,
     frames: Sequence[str] = ("tool0", "camera_link"),
+    keep_duplicates: bool = False,
 ) -> tuple[HandEyeCalibration, HandEyeResult]:
     """kinfw's hand-eye calibration (:func:`kinfw.identification.handeye.solve_axxb`) of
     either setup, as a :class:`HandEyeCalibration` (and the solver's result).
@@ -199,14 +201,24 @@ def calibrate_pose_pairs(
         ``"eye-in-hand"`` or ``"eye-to-hand"``.
     frames : (str, str)
         Names of the mount frame and the camera frame, for ROS outputs.
+    keep_duplicates : bool
+        Keep the pairs that repeat an earlier one (``--keep-duplicates``). By default they
+        are dropped first, with one ``UserWarning`` naming them
+        (:func:`kinfw.measurements.drop_duplicate_pairs`): a pair recorded twice would
+        shrink every sigma by 1/sqrt(2). ``n_samples`` and ``rejected`` count the pairs
+        kept.
 
     Raises
     ------
     HandEyeError
         From the solver: the poses cannot determine the transform (the message says why).
     """
-    A = solver_hand_poses(base_T_hands, setup)
-    r = solve_axxb(base_T_hands=A, camera_T_targets=camera_T_targets)
+    hands, views = np.asarray(base_T_hands, dtype=float), np.asarray(camera_T_targets, dtype=float)
+    if not keep_duplicates and hands.ndim == 3 and hands.shape == views.shape:
+        kept = drop_duplicate_pairs(PosePairs(hands, views, "pose pairs"), stacklevel=3)
+        hands, views = kept.base_T_hands, kept.sensor_T_targets
+    A = solver_hand_poses(hands, setup)
+    r = solve_axxb(base_T_hands=A, camera_T_targets=views)
     calibration = HandEyeCalibration(
         setup=setup,
         mount_T_camera=r.hand_T_camera,

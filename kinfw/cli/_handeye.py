@@ -278,6 +278,7 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         camera_T_targets=pairs.sensor_T_targets,
         setup=setup,
         frames=(mount_frame, args.camera_frame),
+        keep_duplicates=args.keep_duplicates,
     )
     k = args.k or (DEFAULT_K if args.method and holdout is None else None)
     if k is not None and k > len(pairs):

@@ -419,11 +419,15 @@ def equal_row_pairs(
     values: np.ndarray, *, rtol: float = DUPLICATE_RTOL
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every pair of rows of ``values`` (n, k) equal entry by entry within ``rtol``
-    relative (to the larger magnitude, at least 1): ``(earlier, later)`` index arrays.
+    relative (to the larger magnitude, at least 1; NaN equals NaN): ``(earlier, later)``
+    index arrays.
 
     The rows are sorted by a fixed random projection, so only rows whose projections are
     within the tolerance are compared (n log n for distinct rows, whatever the columns)."""
     v = np.asarray(values, dtype=float).reshape(len(values), -1)
+    nan = np.isnan(v)
+    if nan.any():  # NaN (no value, e.g. no per-point sigma) equals NaN
+        v = np.concatenate([np.where(nan, 0.0, v), nan.astype(float)], axis=1)
     n = len(v)
     if n < 2:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
@@ -464,8 +468,26 @@ def _rows_equal(a: np.ndarray, b: np.ndarray, rtol: float) -> bool:
         return False
     if np.issubdtype(a.dtype, np.number) and np.issubdtype(b.dtype, np.number):
         a, b = a.astype(float), b.astype(float)
-        return bool(np.all(np.abs(a - b) <= rtol * np.maximum(np.maximum(abs(a), abs(b)), 1.0)))
+        close = np.abs(a - b) <= rtol * np.maximum(np.maximum(abs(a), abs(b)), 1.0)
+        return bool(np.all(close | (np.isnan(a) & np.isnan(b))))
     return bool(np.array_equal(a, b))
+
+
+def _sample_columns(group, n: int) -> np.ndarray:
+    """The per-row fields of a group with one row per sample as columns over the ``n``
+    samples: numbers as they are, other values (names) as integer codes, and a column
+    that is 1 where the sample has a row (absent rows are zeros)."""
+    columns = [np.zeros((n, 1))]
+    columns[0][group.sample, 0] = 1.0
+    for field in kind_of(group).row_fields:
+        a = np.asarray(getattr(group, field))
+        if not np.issubdtype(a.dtype, np.number):
+            a = np.unique(a.astype(str), return_inverse=True)[1] + 1.0
+        a = a.reshape(len(a), -1).astype(float)
+        block = np.zeros((n, a.shape[1]))
+        block[group.sample] = a
+        columns.append(block)
+    return np.concatenate(columns, axis=1)
 
 
 def duplicate_samples(measurements: Measurements, *, rtol: float = DUPLICATE_RTOL) -> np.ndarray:
@@ -478,13 +500,18 @@ def duplicate_samples(measurements: Measurements, *, rtol: float = DUPLICATE_RTO
     ndarray of int, shape (d, 2)
         Rows ``[sample, earlier]``: each duplicate sample and the first sample it
         repeats, sorted by the duplicate."""
-    earlier, later = equal_row_pairs(measurements.qs, rtol=rtol)
-    if not len(later):
-        return np.zeros((0, 2), np.int64)
-    tables = []
+    n = measurements.n_samples
+    single, multiple = [], []
     for g in measurements.all_groups():
+        (single if len(np.unique(g.sample)) == len(g.sample) else multiple).append(g)
+    rows = np.concatenate([measurements.qs, *(_sample_columns(g, n) for g in single)], axis=1)
+    earlier, later = equal_row_pairs(rows, rtol=rtol)
+    if not len(later) or not multiple:
+        return first_copies(earlier, later)
+    tables = []  # groups with several rows per sample (a board's points): compared row-wise
+    for g in multiple:
         order = np.argsort(g.sample, kind="stable")
-        bounds = np.searchsorted(g.sample[order], np.arange(measurements.n_samples + 1))
+        bounds = np.searchsorted(g.sample[order], np.arange(n + 1))
         fields = [np.asarray(getattr(g, f)) for f in kind_of(g).row_fields]
         tables.append((order, bounds, fields))
 

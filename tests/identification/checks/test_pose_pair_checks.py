@@ -35,7 +35,7 @@ def _stored_scalar_first(T):
 def test_good_pairs_pass_with_their_motion_and_view_distance(setup):
     H, S = _noisy(setup)
     d = check_pose_pair_data(H, S, setup=setup)
-    assert d.rotation_score < 0.05 and d.reordered == ()
+    assert d.motion_score < 0.05 and d.reordered == ()
     i, j = np.triu_indices(len(H), k=1)
     assert d.n_pairs == len(i)
     assert d.hand_motion_m == pytest.approx(
@@ -51,7 +51,7 @@ def test_real_pairs_pass_in_metres_and_are_refused_in_mm_read_as_m():
     H[:, :3, 3] *= 1e-3
     S[:, :3, 3] *= 1e-3
     d = check_pose_pair_data(H, S)
-    assert d.rotation_score < 0.05 and 0.5 < d.hand_motion_m < 1.0
+    assert d.motion_score < 0.05 and 0.5 < d.hand_motion_m < 1.0
     with pytest.raises(UnitError, match=r"^tabb \(read in m\): positions look like millimetres"):
         check_pose_pair_data(base_T_hands, cam_T_worlds, source="tabb")
 

@@ -84,3 +84,18 @@ def test_repeated_pose_pairs_are_found_and_dropped():
     with pytest.warns(UserWarning, match=r"^p.csv: 1 of the 5 pose pairs repeat .*: 4 \(= 1\);"):
         kept = drop_duplicate_pairs(pairs)
     np.testing.assert_array_equal(kept.base_T_hands, hands[:4])
+
+
+def test_repeated_images_are_duplicates_and_another_image_of_the_board_is_not():
+    """Pixels observations (several corners per sample): an image recorded twice is
+    found; the same configuration's image with one corner moved by 1e-6 px is not."""
+    from tests.kinfw.observations.test_cameras_anywhere import scene
+
+    *_, data, _ = scene("eye_in_hand", 6, seed=0)
+    twice = data.subset([0, 1, 2, 3, 1, 0])
+    np.testing.assert_array_equal(duplicate_samples(twice), [[4, 1], [5, 0]])
+    (g,) = twice.groups("pixels")
+    uv = g.uv.copy()
+    uv[np.flatnonzero(g.sample == 5)[0], 0] += 1e-6
+    moved = twice.with_groups([replace(g, uv=uv)])
+    np.testing.assert_array_equal(duplicate_samples(moved), [[4, 1]])
