@@ -830,13 +830,15 @@ def _nearest_to_start(
     Jacobian (rank rule :data:`UNDETERMINED_TOL` on unit-norm columns, as the
     identifiability report), the estimate's part along it removed, then Gauss-Newton
     steps back to the minimum within the determined directions (a shorter move, halved
-    until the data's cost stays at the minimum, when the directions are curved over a
-    long way); repeated until the removed part is rounding. A prior's rows are left out
-    of the null space and of the cost compared: they determine every direction they
-    restrain, so with them in, a rigid motion of the robot with its plane would look
-    determined and stay wherever the prior's trade-off with the data put it (the
-    exported robot's pose relative to the foot it stands on moved by millimetres); the
-    steps back to the minimum keep them. The distance is Euclidean in the chart
+    until the cost stays at the minimum, when the directions are curved over a long
+    way); repeated until the removed part is rounding. A prior's rows are left out of
+    the null space: they determine every direction they restrain, so with them in, a
+    rigid motion of the robot with its plane would look determined and stay wherever
+    the prior's trade-off with the data put it (the default's estimate on standing
+    TALOS contacts kept 0.69 mm along it). The steps back to the minimum keep them, and
+    the cost at the minimum may then exceed the data's before the move by at most the
+    prior's after it (the bound of a linear problem: the move changes the data's cost
+    by rounding, and the steps lower the sum). The distance is Euclidean in the chart
     coordinates (m, rad) of the robot's parameters, with the unknown blocks' weighted by
     :data:`UNKNOWN_WEIGHT`: an exported URDF then differs from its start only along
     directions the data determine.
@@ -884,10 +886,13 @@ def _nearest_to_start(
         kept = s > UNDETERMINED_TOL * s[0] if s.size and s[0] > 0 else np.zeros(len(s), bool)
         return U, s, Vt, c, kept
 
-    def cost(v: NDArray) -> float:  # the data's
+    def costs(v: NDArray) -> tuple[float, float]:
+        """The data's cost and the prior's at ``v``."""
         r = evaluate(v, False)[0]
-        r = (r * weights(r))[:data_rows]
-        return float(r @ r) if np.isfinite(r).all() else np.inf
+        r = r * weights(r)
+        if not np.isfinite(r).all():
+            return np.inf, np.inf
+        return float(r[:data_rows] @ r[:data_rows]), float(r[data_rows:] @ r[data_rows:])
 
     def back_to_minimum(v: NDArray, Q: NDArray) -> NDArray:
         """Gauss-Newton steps within the determined directions (orthogonal to ``Q``)."""
@@ -903,7 +908,7 @@ def _nearest_to_start(
             v[moving] += step / scale
         return v
 
-    before = cost(x)
+    before = costs(x)[0]
     # rounding: a whitened row at the noise floor (noise-free data) is not exact
     slack = before * 1e-6 + ROUNDING_SLACK * data_rows
     fraction, left = 1.0, 0.0
@@ -925,9 +930,15 @@ def _nearest_to_start(
         while fraction >= 1e-3:
             trial = x.copy()
             trial[moving] -= fraction * along / scale
+            # the move leaves the data's cost; back at the minimum, the cost is at most
+            # the data's before the move plus the prior's after it (linear bound)
+            prior = costs(trial)[1]
             trial = back_to_minimum(trial, Q)
-            if cost(trial) <= before + slack:
+            data, prior_after = costs(trial)
+            if data + prior_after <= before + prior + slack:
                 x = trial
+                if prior > 0.0:  # the next move is bounded from here (the data's cost rose)
+                    before = max(before, data)
                 fraction = min(1.0, 2.0 * fraction)
                 break
             fraction /= 2.0
