@@ -1,6 +1,7 @@
 """Checks around a fit: the data's units against the nominal robot (and hand-eye pose
 pairs' units and quaternion order against their own motion), enough residual rows for
-the free parameters, and whether what is left after the fit is noise.
+the free parameters, whether what is left after the fit is noise, and whether a camera's
+target is the size it was said to be.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from kinfw.identification.checks._redundancy import (
     check_redundancy,
     redundancy,
 )
+from kinfw.identification.checks._scale import SCALE_FLOOR, SCALE_Z, TargetScale, target_scale
 from kinfw.identification.checks._units import (
     UnitError,
     check_fit,
@@ -57,12 +59,15 @@ __all__ = [
     "PLAUSIBLE_NOISE_M",
     "PLAUSIBLE_NOISE_RAD",
     "ROUNDING_RMS",
+    "SCALE_FLOOR",
+    "SCALE_Z",
     "STRUCTURE_R2",
     "InsufficientDataError",
     "JointValues",
     "PosePairDiagnostics",
     "Redundancy",
     "ResidualStructure",
+    "TargetScale",
     "UnitDiagnostics",
     "UnitError",
     "UnitHypothesis",
@@ -78,5 +83,6 @@ __all__ = [
     "residual_structure",
     "stated_noise",
     "stated_noise_limit",
+    "target_scale",
     "unit_diagnostics",
 ]

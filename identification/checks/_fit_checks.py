@@ -371,14 +371,14 @@ def stated_noise(result: RefineResult, measurements: Measurements) -> tuple[str,
             continue
         scale, unit = _SHOWN.get(units.get(name, ""), (1.0, units.get(name, "")))
         hint = (
-            "the stated noise is too large (a value in another unit?): it hides real "
-            "errors behind the prior and the robust loss"
+            "The stated noise is too large (a value in another unit?): it hides real "
+            "errors behind the prior and the robust loss."
             if ratio < 1.0
-            else "the stated noise is too small, or the model misses something: clean "
-            "observations are down-weighted and rejected"
+            else "The stated noise is too small, or the model misses something: clean "
+            "observations are down-weighted and rejected."
         )
         out.append(
             f"the {name} residuals say a noise of {found * scale:.3g} {unit}, {ratio:.3g} "
-            f"times the stated noise ({stated * scale:.3g} {unit}, {n} rows): {hint}"
+            f"times the stated noise ({stated * scale:.3g} {unit}, {n} rows)\n{hint}"
         )
     return tuple(out)

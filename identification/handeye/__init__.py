@@ -3,10 +3,12 @@
 likelihood on SE(3) with covariance, verdict and outlier rejection; the closed forms of
 Park, Andreff, Daniilidis, Shah and Li as starts (by name in :data:`START_METHODS`);
 stage 2 of Shih et al. per camera (:func:`calibrate_cameras`); the time offset between
-pose streams (:func:`best_time_offset`). For ``kinfw handeye``: either setup from pose
-pairs (:func:`calibrate_pose_pairs`, a :class:`HandEyeCalibration` written and read back
-by :func:`handeye_calibration_text` / :func:`read_handeye_calibration`), OpenCV's closed
-forms side by side (:func:`fit_method`) with held-out errors (:func:`loop_closure_errors`,
+pose streams (:func:`best_time_offset`); the scale of a camera's target translations
+against the robot's motion (:func:`translation_scale`: a board of the wrong size). For
+``kinfw handeye``: either setup from pose pairs (:func:`calibrate_pose_pairs`, a
+:class:`HandEyeCalibration` written and read back by :func:`handeye_calibration_text` /
+:func:`read_handeye_calibration`), OpenCV's closed forms side by side
+(:func:`fit_method`) with held-out errors (:func:`loop_closure_errors`,
 :func:`kfold_errors`), and the ROS 2 outputs (:func:`write_ros_outputs`).
 
 One convention for every solver here (eye-in-hand): a camera rigidly mounted on the
@@ -118,6 +120,7 @@ from kinfw.identification.handeye._ros import (
     urdf_mount_text,
     write_ros_outputs,
 )
+from kinfw.identification.handeye._scale import translation_scale
 from kinfw.identification.handeye._starts import (
     START_METHODS,
     RankedStart,
@@ -253,6 +256,7 @@ __all__ = [
     "start_of_y",
     "static_transform_args",
     "translation_iteration",
+    "translation_scale",
     "translations_least_squares",
     "tsai_rotation",
     "uncertainty",

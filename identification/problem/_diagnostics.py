@@ -133,6 +133,11 @@ class RejectedObservation:
     where : str or None
         Where in the sample, when a sample has many observations of the group: an
         image point's ``"image LABEL corner ID"``; None otherwise.
+    clean_tail : bool
+        Whether clean data reach this far: beyond the threshold, as 0.1 % of clean
+        observations are, but not beyond what that many clean observations reach, and
+        among no more of them than their expected count allows (set by
+        :func:`kinfw.identification.refine`); False: a gross error.
     """
 
     kind: str
@@ -143,6 +148,7 @@ class RejectedObservation:
     whitened_norm: float
     threshold: float
     where: str | None = None
+    clean_tail: bool = False
 
     @property
     def excess(self) -> float:

@@ -175,6 +175,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(_choice_table(choice))
     print("RMS on the calibration data after each stage (in-sample):")
     print(_stage_table(report.rms_by_stage))
+    if report.rms_by_stage_without_rejected is not None and report.refine is not None:
+        n = len(report.refine.rejected or ())
+        print(f"the same without the {n} rejected observations (what the fit was made on):")
+        print(_stage_table(report.rms_by_stage_without_rejected))
     if report.refine is not None:
         _print_refine(report.refine, has_report=bool(args.report))
     if report.reprojection is not None:
@@ -328,8 +332,13 @@ def _print_refine(ref: RefineSection, *, has_report: bool) -> None:
         )
     rejected = ref.rejected or ()
     for row in rejected[:MAX_LINES]:
+        why = (
+            "beyond the 99.9 % quantile (expected on clean data)"
+            if row.clean_tail
+            else "rejected as a gross error"
+        )
         print(
-            f"  rejected as a gross error: samples[{row.sample}] {_observed(row)}: "
+            f"  {why}: samples[{row.sample}] {_observed(row)}: "
             f"residual {_residual_sizes(row)}, {row.excess:.3g} x the threshold"
             f"{_threshold(row, 1.0 / row.excess)} (refitted without it)"
         )

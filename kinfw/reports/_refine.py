@@ -193,8 +193,10 @@ class RejectedRow:
     (:class:`kinfw.identification.problem.RejectedObservation`): ``sample`` (index into
     the data file's samples, from 0), kind, frame (camera for targets), marker, the size
     of its residual against the calibration in each per-observation metric of its kind
-    (as :class:`DownweightedRow`), and how far beyond the rejection threshold its
-    whitened norm was (``excess``, > 1)."""
+    (as :class:`DownweightedRow`), how far beyond the rejection threshold its
+    whitened norm was (``excess``, > 1), and whether clean data reach that far
+    (``clean_tail``: the 0.1 % of clean observations beyond the threshold, within their
+    expected count; False, a gross error; in the file only when true)."""
 
     sample: int
     kind: str
@@ -203,18 +205,25 @@ class RejectedRow:
     residuals: tuple[ErrorValue, ...]
     excess: float
     where: str | None = None
+    clean_tail: bool = False
 
     def residual(self, name: str) -> float | None:
         """The residual's size in the metric ``name`` (display unit), None if none."""
         return _residual(self, name)
 
     def to_dict(self) -> dict[str, Any]:
-        return {**_observation_dict(self), "excess": self.excess}
+        # written when true: a report before it reads and writes back byte for byte
+        tail = {"clean_tail": True} if self.clean_tail else {}
+        return {**_observation_dict(self), "excess": self.excess, **tail}
 
     @classmethod
     def from_dict(cls, doc: Any, r: DocReader, at: str) -> RejectedRow:
         doc = r.obj(doc, at)
-        return cls(**_observation_fields(doc, r, at), excess=r.number(doc, "excess", at))
+        return cls(
+            **_observation_fields(doc, r, at),
+            excess=r.number(doc, "excess", at),
+            clean_tail="clean_tail" in doc and r.boolean(doc, "clean_tail", at),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,10 +259,12 @@ class RefineSection:
         "sample is the index into the data file's samples (from 0)"
     )
     REJECTED_NOTE: ClassVar[str] = (
-        "gross errors: observations beyond the 99.9 % quantile of the clean residual norm "
-        "under the estimated noise, excluded and the problem refitted without them (not in "
-        "the fit, the noise estimate nor the errors above); the worst (largest excess over "
-        "the threshold) first; residuals against the calibrated model"
+        "observations beyond the 99.9 % quantile of the clean residual norm under the "
+        "estimated noise, excluded and the problem refitted without them (not in the fit "
+        "nor the noise estimate); clean_tail: as far as clean data reach (0.1 % of clean "
+        "observations are beyond it, within their expected count), else a gross error; "
+        "the worst (largest excess over the threshold) first; residuals against the "
+        "calibrated model"
     )
 
     @property

@@ -233,6 +233,7 @@ def _stages_from(doc: dict, suffix: str, r: DocReader) -> tuple[StageErrors, ...
 
 _BY_STAGE = "_by_stage"
 _TRUTH = "_vs_truth_held_out_by_stage"
+_KEPT = "_by_stage_without_rejected"
 
 
 # -- the report -------------------------------------------------------------------------
@@ -251,6 +252,11 @@ class CalibrationReport:
         On the calibration data (optimistic).
     rms_by_stage : tuple of StageErrors
         ``"nominal"`` and each stage, on the calibration data.
+    rms_by_stage_without_rejected : tuple of StageErrors or None
+        The same without the observations the refinement rejected (for image points,
+        without the images of the samples that hold one), when it rejected some: the
+        errors the fit was made on (a rejected 67 mm sample makes 12.04 -> 11.60 mm of
+        the whole look like no gain).
     errors_before, errors_after : tuple of GroupErrorSummary
         Of the nominal and calibrated URDF on the calibration data.
     kinematics, hand_eye, refine, export : section or None
@@ -271,7 +277,7 @@ class CalibrationReport:
     first metric is a position under ``position_rms_mm_by_stage``, image points under
     ``pixel_rms_px_by_stage``, plane contacts under ``height_rms_mm_by_stage``, a
     registered kind's under its own (``distance_rms_mm_by_stage``); the same with
-    ``_vs_truth_held_out_by_stage``.
+    ``_vs_truth_held_out_by_stage`` and ``_by_stage_without_rejected``.
     """
 
     created: str
@@ -293,6 +299,7 @@ class CalibrationReport:
     rms_vs_truth_held_out_by_stage: tuple[StageErrors, ...] | None = None
     reprojection: ReprojectionSection | None = None
     reprojection_held_out: ReprojectionSection | None = None
+    rms_by_stage_without_rejected: tuple[StageErrors, ...] | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration-report"
     VERSION: ClassVar[int] = 1
@@ -333,6 +340,8 @@ class CalibrationReport:
             doc["reprojection_px"] = self.reprojection.to_dict()
         if self.reprojection_held_out is not None:
             doc["reprojection_px_held_out"] = self.reprojection_held_out.to_dict()
+        if self.rms_by_stage_without_rejected is not None:
+            doc.update(_stages_to_dict(self.rms_by_stage_without_rejected, _KEPT))
         return doc
 
     @classmethod
@@ -374,6 +383,7 @@ class CalibrationReport:
             _stages_from(doc, _TRUTH, r),
             section("reprojection_px", ReprojectionSection),
             section("reprojection_px_held_out", ReprojectionSection),
+            _stages_from(doc, _KEPT, r),
         )
 
 

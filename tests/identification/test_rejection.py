@@ -200,3 +200,44 @@ def test_a_refit_from_a_settled_fit_is_the_cold_fit_without_the_error_in_fewer_i
     assert moved.max() < 1e-2, moved.max()
     assert dict(fit.noise.sigmas) == pytest.approx(dict(without.noise.sigmas), rel=1e-3)
     assert fit.iterations < without.iterations
+
+
+@pytest.mark.slow
+def test_the_clean_tail_is_told_apart_from_a_gross_error(head, truth, tmp_path, capsys):
+    """300 clean pose observations (0.1 % beyond the 99.9 % quantile: 0.3 expected) and
+    one moved by 70 mm: the fit rejects both the 70 mm one (23 times the threshold) and
+    a clean one 1.05 times beyond it. Only the first is a gross error; kinfw calibrate
+    says so, and says the other is "beyond the 99.9 % quantile (expected on clean
+    data)"; the report records which is which and reads it back, and its in-sample
+    table is shown with and without them."""
+    from kinfw.measurements import write_measurements
+    from kinfw.reports import read_report
+    from tests.cli_run import run_cli
+    from tests.paths import HEAD_URDF
+
+    data = _with_bad_pose(plate_data(truth, 150, 13), 17, np.array([0.0, 0.07, 0.0]))
+    fit = refine(head, data, loss="huber")
+    gross, tail = fit.rejected
+    assert (gross.sample, gross.clean_tail) == (int(data.poses[0].sample[17]), False)
+    assert gross.excess > 20 and 1.0 < tail.excess < 1.1 and tail.clean_tail
+    write_measurements(tmp_path / "data.json", data)
+    argv = ["calibrate", tmp_path / "data.json", "--urdf", HEAD_URDF, "--params", "full"]
+    argv += ["--out", tmp_path / "cal.urdf", "--report", tmp_path / "report.json"]
+    code, out, _ = run_cli(argv, capsys)
+    assert code == 0
+    assert f"  rejected as a gross error: samples[{gross.sample}] " in out
+    assert f"  beyond the 99.9 % quantile (expected on clean data): samples[{tail.sample}] " in out
+    report = read_report(tmp_path / "report.json")
+    rows = report.refine.rejected
+    assert [(r.sample, r.clean_tail) for r in rows] == [(gross.sample, False), (tail.sample, True)]
+    # the in-sample table with the rejected (the 70 mm: sqrt(70^2 / 150) = 5.7 mm on its
+    # plate) and without them (the noise: 0.5 mm per axis, 0.87 mm of norm, less the fit's)
+    assert "the same without the 2 rejected observations (what the fit was made on):" in out
+
+    def refine_rms(stages, group):
+        (stage,) = [s for s in stages if s.stage == "refine"]
+        return next(v.value for g, v in stage.rms if g == group)
+
+    plate = f"{data.poses[0].frame} (pose)"
+    assert refine_rms(report.rms_by_stage, plate) > 5.0
+    assert 0.6 < refine_rms(report.rms_by_stage_without_rejected, plate) < 1.0

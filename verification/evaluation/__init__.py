@@ -42,6 +42,7 @@ from kinfw.verification.evaluation._crossval import (
     rejected_keys,
     whitened_score,
     whitening_noise,
+    without_observations,
 )
 from kinfw.verification.evaluation._loo import LeaveOneOut, leave_one_out
 from kinfw.verification.evaluation._model_choice import (
@@ -107,4 +108,5 @@ __all__ = [
     "true_chart_coordinates",
     "whitened_score",
     "whitening_noise",
+    "without_observations",
 ]

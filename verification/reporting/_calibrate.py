@@ -21,7 +21,12 @@ import numpy as np
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
-from kinfw.identification.checks import InsufficientDataError, implausible_noise, stated_noise
+from kinfw.identification.checks import (
+    InsufficientDataError,
+    implausible_noise,
+    stated_noise,
+    target_scale,
+)
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import (
     Measurements,
@@ -577,6 +582,9 @@ def calibrate_and_report(
         warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=2)
     for line in stated_noise(result.refined, data) if restricted and result.refined else ():
         warnings.warn(f"{data.source}: {line}", UserWarning, stacklevel=2)
+    for scale in target_scale(nominal, calibrated, data):
+        if scale.off:
+            warnings.warn(f"{data.source}: {scale.message()}", UserWarning, stacklevel=2)
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))

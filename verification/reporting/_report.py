@@ -31,7 +31,12 @@ from kinfw.reports import (
     StageErrors,
     before_after,
 )
-from kinfw.verification.evaluation import evaluate_model, reprojection_section
+from kinfw.verification.evaluation import (
+    evaluate_model,
+    rejected_keys,
+    reprojection_section,
+    without_observations,
+)
 from kinfw.verification.reporting._sections import (
     calibrated_unknowns,
     closed_form_section,
@@ -123,6 +128,29 @@ def _nominal_trained(nominal: Robot, data: Measurements) -> tuple[Unknown, ...]:
         return ()
 
 
+def _stage_rms(
+    before: tuple,
+    data: Measurements,
+    refined_data: Measurements,
+    calibration: Calibration,
+    trained: tuple[Unknown, ...],
+) -> tuple[StageErrors, ...]:
+    """The errors on ``data`` of the nominal (``before``) and of each stage's URDF, the
+    refinement's with its trained unknowns on ``refined_data`` (refined intrinsics)."""
+    return (
+        StageErrors.of("nominal", before),
+        *(
+            StageErrors.of(
+                name,
+                errors_by_group(Robot(xml, name), refined_data, trained)
+                if name == "refine"
+                else errors_by_group(Robot(xml, name), data),
+            )
+            for name, xml in calibration.stages
+        ),
+    )
+
+
 def calibration_report(
     nominal: Robot,
     calibrated: Robot,
@@ -173,16 +201,14 @@ def calibration_report(
         after_held = errors_by_group(calibrated, held, trained)
         before_held = _errors_or_unavailable(nominal, held_out, after_held, notes, trained_nominal)
         held_out_rows = before_after(before_held, after_held)
-    stage_rms = [StageErrors.of("nominal", before)]
-    stage_rms += [  # the refinement's stage: the calibrated model with its own unknowns
-        StageErrors.of(
-            name,
-            errors_by_group(Robot(xml, name), refined_data, trained)
-            if name == "refine"
-            else errors_by_group(Robot(xml, name), data),
-        )
-        for name, xml in calibration.stages
-    ]
+    stage_rms = _stage_rms(before, data, refined_data, calibration, trained)
+    stage_rms_kept = None  # without the rejected observations, when some were
+    if calibration.refined is not None and calibration.refined.rejected:
+        drop = {(k, f, m, s) for s, k, f, m in rejected_keys(calibration)}
+        kept, refined_kept = (without_observations(d, drop) for d in (data, refined_data))
+        after_kept = errors_by_group(calibrated, refined_kept, trained)
+        before_kept = _errors_or_unavailable(nominal, kept, after_kept, [], trained_nominal)
+        stage_rms_kept = _stage_rms(before_kept, kept, refined_kept, calibration, trained)
     export = calibration.export
     return CalibrationReport(
         created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -193,7 +219,8 @@ def calibration_report(
         ),
         notes=tuple(notes),
         errors_in_sample=before_after(before, after),
-        rms_by_stage=tuple(stage_rms),
+        rms_by_stage=stage_rms,
+        rms_by_stage_without_rejected=stage_rms_kept,
         errors_before=before,
         errors_after=after,
         kinematics=None

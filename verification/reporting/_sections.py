@@ -162,8 +162,8 @@ def downweighted_rows(result: RefineResult) -> tuple[DownweightedRow, ...]:
 
 
 def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
-    """The observations rejected as gross errors, the worst (largest excess over the
-    rejection threshold) first.
+    """The observations rejected (beyond the rejection threshold), the worst (largest
+    excess over it) first.
 
     Parameters
     ----------
@@ -175,8 +175,10 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
         One per :attr:`RefineResult.rejected` entry: ``sample`` (index into the data
         file's samples, from 0), ``kind``, ``frame``, ``marker``, the size of its
         residual against the final fit in the metric of each noise component of its kind
-        (as :func:`downweighted_rows`), and ``excess`` (its whitened norm over the
-        threshold). Sorted by excess, largest first, then sample.
+        (as :func:`downweighted_rows`), ``excess`` (its whitened norm over the
+        threshold) and ``clean_tail`` (clean data reach that far:
+        :attr:`kinfw.identification.problem.RejectedObservation.clean_tail`). Sorted by
+        excess, largest first, then sample.
     """
     rows = [
         RejectedRow(
@@ -187,6 +189,7 @@ def rejected_rows(result: RefineResult) -> tuple[RejectedRow, ...]:
             _residual_values(o.kind, {n: v for n, _, v in o.residuals}),
             o.excess,
             o.where,
+            o.clean_tail,
         )
         for o in result.rejected
     ]
