@@ -486,6 +486,7 @@ def _handeye_json(work: Path, *args) -> dict:
 
 
 def _camera_from_hand_mm(doc: dict) -> float:
+    """How far ``kinfw handeye --json``'s camera is from the hand, mm."""
     return 1e3 * float(np.linalg.norm(np.array(doc["calibration"]["hand_T_camera"])[:3, 3]))
 
 
@@ -550,17 +551,7 @@ def _item_7(work: Path, poses: Path, files: dict[str, Path]) -> list[Row]:
         _kinfw_row(
             "35.7 every sample twice",
             work,
-            [
-                "calibrate",
-                twice.name,
-                "--urdf",
-                HEAD,
-                "--params",
-                "full",
-                "--json",
-                "--out",
-                "twice.urdf",
-            ],
+            ["calibrate", twice.name, "--urdf", HEAD, "--params full --json --out twice.urdf"],
             calibrate_note,
         ),
         _kinfw_row(
@@ -613,17 +604,7 @@ def _item_10_inputs(work: Path, poses: Path) -> list[Row]:
     ]
     (work / "vicon_mm.csv").write_text("\n".join([header, *mm]) + "\n")
     _setup(
-        work,
-        [
-            "import-csv",
-            "vicon_mm.csv",
-            "--urdf",
-            TIAGO,
-            "--frame",
-            "arm_7_link",
-            "--out",
-            "vicon_mm.json",
-        ],
+        work, ["import-csv vicon_mm.csv --urdf", TIAGO, "--frame arm_7_link --out vicon_mm.json"]
     )
     joints = load_robot(TIAGO).joint_names
     stdin = ["calibrate", poses.name, "--urdf", "-", "--out", "stdin.urdf"]
@@ -745,6 +726,8 @@ def _item_10_reports(work: Path, poses: Path) -> list[Row]:
         ),
     )
 
+    precise = "--sigma-mm 0.1 --sigma-deg 0.0573 --out precise.urdf"  # the noise simulated
+
     def candidates(_code: int, _out: str, err: str) -> str:
         said = [line for line in err.splitlines() if ": warning: " in line]
         named = sum(": warning: model choice, candidate " in line for line in said)
@@ -772,18 +755,7 @@ def _item_10_reports(work: Path, poses: Path) -> list[Row]:
         _kinfw_row(
             "35.10 the model choice's candidates' warnings",
             work,
-            [
-                "calibrate",
-                "precise.json",
-                "--urdf",
-                HEAD,
-                "--sigma-mm",
-                "0.1",
-                "--sigma-deg",
-                "0.0573",
-                "--out",
-                "precise.urdf",
-            ],
+            ["calibrate precise.json --urdf", HEAD, precise],
             candidates,
         ),
         _kinfw_row(
@@ -846,7 +818,8 @@ def main() -> None:
     print("| case | command | exit | stderr (first line) | also |")
     print("|---|---|---|---|---|")
     for r in table:
-        print(f"| {r.case} | `{r.command}` | {r.code} | {r.first_line} | {r.note} |")
+        cells = [r.case, f"`{r.command}`", str(r.code), r.first_line, r.note]
+        print("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
 
 
 if __name__ == "__main__":
