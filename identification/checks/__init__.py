@@ -1,5 +1,6 @@
 """Checks around a fit: the data's units against the nominal robot, enough residual rows
-for the free parameters, and whether what is left after the fit is noise.
+for the free parameters, whether what is left after the fit is noise, and whether what
+the fit changed in the URDF is plausible (:func:`plausibility`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,14 @@ from kinfw.identification.checks._fit_checks import (
     fit_warnings,
     implausible_noise,
     residual_structure,
+)
+from kinfw.identification.checks._plausibility import (
+    ChangeBound,
+    ImplausibleCalibrationError,
+    LargeChange,
+    Plausibility,
+    plausibility,
+    robot_size,
 )
 from kinfw.identification.checks._redundancy import (
     MIN_DOF_PER_KIND,
@@ -51,8 +60,12 @@ __all__ = [
     "PLAUSIBLE_NOISE_RAD",
     "ROUNDING_RMS",
     "STRUCTURE_R2",
+    "ChangeBound",
+    "ImplausibleCalibrationError",
     "InsufficientDataError",
     "JointValues",
+    "LargeChange",
+    "Plausibility",
     "Redundancy",
     "ResidualStructure",
     "UnitDiagnostics",
@@ -65,7 +78,9 @@ __all__ = [
     "fit_warnings",
     "implausible_noise",
     "median_residuals",
+    "plausibility",
     "redundancy",
     "residual_structure",
+    "robot_size",
     "unit_diagnostics",
 ]

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     )
     from kinfw.verification.evaluation import CrossValidation
 
-__all__ = ["calibration_options", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
+__all__ = ["calibration_options", "change_bound", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
@@ -128,7 +128,8 @@ def _noise_arg(args: argparse.Namespace):
 def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keyword arguments of :func:`kinfw.verification.reporting.calibrate_and_report`
     that the calibration's options give (:func:`kinfw.cli._fit_parser.
-    add_calibration_options`): parameters, method, noise, loss, prior, intrinsics."""
+    add_calibration_options`): parameters, method, noise, loss, prior, intrinsics, the
+    plausibility guard's bound and whether large changes are allowed."""
     return {
         "parameters": "auto" if args.params == "auto" else params_arg(args.params),
         "method": args.method,
@@ -136,7 +137,23 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
         "loss": args.loss,
         "prior": _prior_arg(args),
         "refine_intrinsics": _intrinsics_arg(args.refine_intrinsics),
+        "change_bound": change_bound(args),
+        "allow_large_changes": args.allow_large_changes,
     }
+
+
+def change_bound(args: argparse.Namespace):
+    """The plausibility guard's rule of ``--max-change-mm`` / ``--max-change-deg``
+    (:func:`kinfw.cli._fit_parser.add_guard_options`): None (the default rule) when
+    neither is given."""
+    from kinfw.identification.checks import ChangeBound
+
+    if args.max_change_mm is None and args.max_change_deg is None:
+        return None
+    return ChangeBound(
+        max_m=None if args.max_change_mm is None else 1e-3 * args.max_change_mm,
+        max_rad=None if args.max_change_deg is None else math.radians(args.max_change_deg),
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:

@@ -25,7 +25,7 @@ from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
-__all__ = ["add_calibration_options", "add_fit_parsers"]
+__all__ = ["add_calibration_options", "add_fit_parsers", "add_guard_options"]
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -119,6 +119,30 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
         help="also estimate the intrinsics (fx fy cx cy k1 k2 p1 p2 k3) of these cameras "
         "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
         "the report says which the images do not determine",
+    )
+    add_guard_options(p)
+
+
+def add_guard_options(p: argparse.ArgumentParser) -> None:
+    """The plausibility guard of a command that writes a calibration: ``--allow-large-
+    changes``, ``--max-change-mm``, ``--max-change-deg``
+    (:func:`kinfw.cli._fit.change_bound` reads them)."""
+    p.add_argument(
+        "--allow-large-changes",
+        action="store_true",
+        help="write the calibration even when a joint origin, a mount or the root's pose "
+        "moved beyond the plausibility bound (the larger of 5 x the prior and 20 mm / "
+        "2 deg, a move never above 5 %% of the robot's size); the report says so",
+    )
+    p.add_argument(
+        "--max-change-mm",
+        type=POSITIVE_MM,
+        help="the plausibility bound on a move, mm (replaces the rule above)",
+    )
+    p.add_argument(
+        "--max-change-deg",
+        type=POSITIVE_DEG,
+        help="the plausibility bound on a turn, deg (replaces the rule above)",
     )
 
 

@@ -247,8 +247,12 @@ def main(
             _silence_stdout()
             return EXIT_BROKEN_PIPE
         except USER_ERRORS as exc:
-            message = " ".join(str(exc).split())
+            # one line, or (an error that says so: ``multiline``) a first line and details
+            lines = str(exc).splitlines() if getattr(exc, "multiline", False) else [str(exc)]
+            message = " ".join(lines[0].split())
             print(f"kinfw {args.command}: error: {message}", file=sys.stderr)
+            for line in lines[1:]:
+                print(line, file=sys.stderr)
             return 2
         except KeyboardInterrupt:  # outputs are written atomically: none is half-written
             lead = "\n" if sys.stderr.isatty() else ""  # below a progress bar

@@ -35,6 +35,7 @@ from kinfw.reports._records import (
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
+    GuardSummary,
     ModelSummary,
     NoiseSummary,
     read_only_array,
@@ -86,6 +87,9 @@ class CalibrationSidecar:
     model : ModelSummary or None
         The refinement's parameter set and prior, and why (None without the refinement,
         and in files written before it was recorded).
+    guard : GuardSummary or None
+        The plausibility guard's bound and outcome, and whether large changes were
+        allowed (None in files written before it was recorded).
     """
 
     created: str
@@ -102,6 +106,7 @@ class CalibrationSidecar:
     hand_eye_targets: tuple[tuple[str, NDArray[np.float64]], ...] = ()
     errors_held_out: tuple[BeforeAfter, ...] | None = None
     model: ModelSummary | None = None
+    guard: GuardSummary | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -148,26 +153,30 @@ class CalibrationSidecar:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (``kinfw-calibration`` v1)."""
-        return {
-            "format": self.FORMAT,
-            "version": self.VERSION,
-            "created": self.created,
-            "kinfw_version": self.kinfw_version,
-            "method": self.method,
-            "calibrated_urdf": self.calibrated_urdf,
-            "nominal_urdf": {"path": self.nominal_urdf, "sha256": self.nominal_urdf_sha256},
-            "data": self.data.to_dict(),
-            "w_T_root": self.w_T_root.tolist(),
-            "measurement_frame": self.measurement_frame,
-            "noise": None if self.noise is None else self.noise.to_dict(),
-            "unknowns": [u.to_dict() for u in self.unknowns],
-            "targets": [
-                {"target": t, "root_T_target": T.tolist()} for t, T in self.hand_eye_targets
-            ],
-            "errors_held_out": None
-            if self.errors_held_out is None
-            else [row.to_dict() for row in self.errors_held_out],
-        } | ({} if self.model is None else {"model": self.model.to_dict()})
+        return (
+            {
+                "format": self.FORMAT,
+                "version": self.VERSION,
+                "created": self.created,
+                "kinfw_version": self.kinfw_version,
+                "method": self.method,
+                "calibrated_urdf": self.calibrated_urdf,
+                "nominal_urdf": {"path": self.nominal_urdf, "sha256": self.nominal_urdf_sha256},
+                "data": self.data.to_dict(),
+                "w_T_root": self.w_T_root.tolist(),
+                "measurement_frame": self.measurement_frame,
+                "noise": None if self.noise is None else self.noise.to_dict(),
+                "unknowns": [u.to_dict() for u in self.unknowns],
+                "targets": [
+                    {"target": t, "root_T_target": T.tolist()} for t, T in self.hand_eye_targets
+                ],
+                "errors_held_out": None
+                if self.errors_held_out is None
+                else [row.to_dict() for row in self.errors_held_out],
+            }
+            | ({} if self.model is None else {"model": self.model.to_dict()})
+            | ({} if self.guard is None else {"guard": self.guard.to_dict()})
+        )
 
     @classmethod
     def from_dict(cls, doc: Any, source: str = "<memory>") -> CalibrationSidecar:
@@ -194,6 +203,7 @@ class CalibrationSidecar:
             )
         held_out = r.value(doc, "errors_held_out", "", optional=True)
         model = r.value(doc, "model", "", optional=True)
+        guard = r.value(doc, "guard", "", optional=True)
         return cls(
             created=r.string(doc, "created", ""),
             kinfw_version=r.string(doc, "kinfw_version", ""),
@@ -214,6 +224,7 @@ class CalibrationSidecar:
             if held_out is None
             else BeforeAfter.rows_from(held_out, r, "errors_held_out"),
             model=None if model is None else ModelSummary.from_dict(model, r, "model"),
+            guard=None if guard is None else GuardSummary.from_dict(guard, r, "guard"),
             source=source,
         )
 

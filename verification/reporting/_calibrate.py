@@ -21,13 +21,25 @@ import numpy as np
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
-from kinfw.identification.checks import InsufficientDataError, implausible_noise
+from kinfw.identification.checks import (
+    ChangeBound,
+    ImplausibleCalibrationError,
+    InsufficientDataError,
+    Plausibility,
+    implausible_noise,
+)
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, check_against_robot, check_measurements
 from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
+from kinfw.verification.reporting._guard import (
+    check_plausibility,
+    guard_summary,
+    implausible_message,
+    nominal_misfit,
+)
 from kinfw.verification.reporting._report import calibration_report, sidecar
 
 __all__ = [
@@ -216,6 +228,12 @@ class CalibrationResult:
     inputs : mapping of str to str
         The files read (nominal URDF, data, held-out data) that :meth:`write` refuses to
         overwrite; in-memory sources (``"<...>"``) are skipped.
+    plausibility : Plausibility or None
+        The plausibility guard's verdict on the calibrated URDF (its record is the
+        report's ``guard``).
+    refusal : str or None
+        The guard's error when a change is beyond its bound and large changes were not
+        allowed: :meth:`write` raises it before writing anything. None otherwise.
     """
 
     robot: Robot
@@ -227,6 +245,8 @@ class CalibrationResult:
     intrinsics: IntrinsicsEvidence | None
     nominal: Robot
     inputs: Mapping[str, str]
+    plausibility: Plausibility | None = None
+    refusal: str | None = None
 
     def write(self, path: str | Path) -> CalibrationReport:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
@@ -243,10 +263,15 @@ class CalibrationResult:
         kinfw.files.OutputPathError
             Before anything is written: a path is one of :attr:`inputs`, or cannot be
             written (missing directory, a directory, not writable).
+        kinfw.identification.checks.ImplausibleCalibrationError
+            Before anything is written: the plausibility guard tripped (:attr:`refusal`)
+            and large changes were not allowed.
         """
         from kinfw.reports import write_sidecar
         from kinfw.urdf import write_urdf
 
+        if self.refusal is not None:
+            raise ImplausibleCalibrationError(self.refusal)
         path = Path(path)
         check_outputs({"URDF": path, "sidecar": sidecar_path(path)}, inputs=self.inputs)
         nominal_path = None if self.nominal.source.startswith("<") else self.nominal.source
@@ -256,6 +281,7 @@ class CalibrationResult:
             nominal_path=nominal_path,
             calibrated_path=path,
             model=self.model,
+            guard=self.report.guard,
         )
         write_urdf(path, self.urdf_xml)
         write_sidecar(sidecar_path(path), side)
@@ -457,6 +483,8 @@ def calibrate_and_report(
     held_out: Measurements | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
     data_path: str | Path | None = None,
+    change_bound: ChangeBound | None = None,
+    allow_large_changes: bool = False,
 ) -> CalibrationResult:
     """Calibrate ``nominal`` from ``data`` as ``kinfw calibrate`` does (the same
     defaults), and report: :func:`kinfw.calibrate`.
@@ -492,12 +520,21 @@ def calibrate_and_report(
         Also estimate the intrinsics of these cameras (True: every camera).
     data_path : path, optional
         The file ``data`` was read from, recorded with its SHA-256.
+    change_bound : ChangeBound, optional
+        The plausibility guard's rule (default
+        :class:`kinfw.identification.checks.ChangeBound`: the larger of 5 x the prior
+        and 20 mm / 2 deg, a move never above 5 % of the robot's size).
+    allow_large_changes : bool
+        Write a calibration beyond the guard's bound knowingly (``--allow-large-changes``):
+        warned about, and the report and sidecar say so.
 
     Returns
     -------
     CalibrationResult
         The calibrated robot and URDF, the report; :meth:`CalibrationResult.write`
-        writes the URDF and sidecar.
+        writes the URDF and sidecar, or raises the guard's error
+        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or the root's pose
+        in a stance link changed beyond the bound.
 
     Raises
     ------
@@ -561,6 +598,15 @@ def calibrate_and_report(
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
+    report, verdict, refusal = _guarded(
+        nominal,
+        calibrated,
+        data,
+        report,
+        prior,
+        bound=change_bound,
+        allowed=allow_large_changes,
+    )
     model = ModelSummary(
         (parameters,) if isinstance(parameters, str) else tuple(parameters),
         None if prior is None else float(prior[0]),
@@ -571,5 +617,51 @@ def calibrate_and_report(
     if held_out is not None:
         sources["held-out data"] = held_out.source
     return CalibrationResult(
-        calibrated, result.urdf_xml, report, result, model, choice, evidence, nominal, sources
+        calibrated,
+        result.urdf_xml,
+        report,
+        result,
+        model,
+        choice,
+        evidence,
+        nominal,
+        sources,
+        verdict,
+        refusal,
     )
+
+
+def _guarded(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    report: CalibrationReport,
+    prior: tuple[float, float] | None,
+    *,
+    bound: ChangeBound | None,
+    allowed: bool,
+) -> tuple[CalibrationReport, Plausibility, str | None]:
+    """The plausibility guard on a calibration: ``(report, verdict, refusal)``, the
+    report with the guard's record (and, when large changes were allowed, a note and a
+    warning that say so), the verdict, and the error :meth:`CalibrationResult.write`
+    raises (None when plausible or allowed)."""
+    verdict = check_plausibility(nominal, calibrated, data, prior, bound)
+    report = dataclasses.replace(report, guard=guard_summary(verdict, prior, allowed=allowed))
+    if verdict.plausible:
+        return report, verdict, None
+    message = implausible_message(
+        data.source,
+        nominal,
+        verdict,
+        misfit=nominal_misfit(report.errors_in_sample, verdict),
+        refine=report.refine,
+    )
+    if not allowed:
+        return report, verdict, message
+    top = verdict.beyond[0]
+    note = (
+        f"large changes allowed (--allow-large-changes): {top.text()}, beyond the bound "
+        f"{verdict.bound_text()}"
+    )
+    warnings.warn(f"{data.source}: {note}", UserWarning, stacklevel=3)
+    return dataclasses.replace(report, notes=(*report.notes, note)), verdict, None
