@@ -33,9 +33,18 @@ def check_plausibility(
     prior: tuple[float, float] | None,
     bound: ChangeBound | None,
 ) -> Plausibility:
-    """The guard's verdict on ``calibrated``: every joint origin and mount, and the root's
-    pose in each link the data are measured in."""
-    return plausibility(nominal, calibrated, prior, bound=bound, stance=stance_links(nominal, data))
+    """The guard's verdict on ``calibrated``: every joint and mount, and the root's pose
+    in each link the data are measured in; the first joints are not judged when the data
+    are measured in an external frame (their placement is estimated with it)."""
+    frames = {kind_of(g).measured_in(g) for g in data.all_groups()}
+    return plausibility(
+        nominal,
+        calibrated,
+        prior,
+        bound=bound,
+        stance=stance_links(nominal, data),
+        root_measured=all(f is None or f in nominal.link_names for f in frames),
+    )
 
 
 def prior_bounds(prior: tuple[float, float] | None, verdict: Plausibility) -> str:
