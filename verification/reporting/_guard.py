@@ -110,9 +110,9 @@ def implausible_message(
     first = (
         f"{source}: implausible calibration, not written: {top.name} moved "
         f"{1e3 * top.shift_m:.3g} mm / {math.degrees(top.turn_rad):.3g} deg, "
-        f"{top.ratio:.3g} x the bound {verdict.bound_text()} ({option} writes it)"
+        f"{top.ratio:.3g} x the bound ({option} writes it)"
     )
-    lines = [first, f"changes beyond the bound ({verdict.why}):"]
+    lines = [first, f"changes beyond the bound {verdict.bound_text()} ({verdict.why}):"]
     lines += [f"  {c.text()}" for c in beyond[:LISTED]]
     if len(beyond) > LISTED:
         lines.append(f"  ... and {len(beyond) - LISTED} more")

@@ -1,0 +1,93 @@
+"""The plausibility guard on what ``kinfw calibrate`` and ``kinfw fleet`` write (issue 35):
+a UR10 simulated with mocap markers and calibrated with the UR5's URDF (the same joint
+names) is refused, naming the UR5 and the moves, before anything is written;
+``--allow-large-changes`` writes it and the report and sidecar say so; the UR10's own
+URDF on the same data passes."""
+
+import json
+import shutil
+
+import pytest
+
+from kinfw.cli._main import main
+from kinfw.reports import read_report, read_sidecar
+from tests.cli_run import run_cli
+from tests.erd import urdf_path
+from tests.paths import DATA
+
+UR5 = urdf_path("ur_description/urdf/ur5_robot.urdf")
+UR10 = urdf_path("ur_description/urdf/ur10_robot.urdf")
+#: UR10 - UR5 link lengths (upper arm, forearm: a2, a3 of their DH tables), m
+A2, A3 = 0.612 - 0.425, 0.5723 - 0.39225
+
+
+@pytest.fixture(scope="module")
+def ur10_data(tmp_path_factory):
+    out = tmp_path_factory.mktemp("guard")
+    argv = ["-q", "simulate", "--urdf", UR10, "--markers", "tool0"]
+    argv += ["--markers", "tool0:0,0.05,0.02", "--markers", "tool0:0.04,0,0.03"]
+    argv += ["--mocap-frame", "vicon", "--mocap-samples", "40", "--noise-mm", "0.2"]
+    argv += ["--out", out / "ur10.json", "--truth-out", out / "ur10_true.urdf"]
+    assert main([str(a) for a in argv]) == 0
+    return out / "ur10.json"
+
+
+@pytest.mark.slow
+def test_another_robots_urdf_is_refused_before_anything_is_written(ur10_data, tmp_path, capsys):
+    out, report = tmp_path / "c.urdf", tmp_path / "r.json"
+    argv = ["-q", "calibrate", ur10_data, "--urdf", UR5, "--out", out, "--report", report]
+    code, _, err = run_cli(argv, capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    first = lines[0]
+    assert first.startswith("kinfw calibrate: error: ") and len(first) < 200
+    assert "implausible calibration, not written" in first and "--allow-large-changes" in first
+    assert 'the URDF (<robot name="ur5">) may be another robot\'s' in err
+    # the moves named are the link lengths the UR10 has and the UR5 lacks, to 5 mm
+    moves = {ln.split()[2]: float(ln.split()[4]) for ln in lines if ln.startswith("  joint ")}
+    assert moves["elbow_joint"] == pytest.approx(1e3 * A2, abs=5.0)
+    assert moves["wrist_1_joint"] == pytest.approx(1e3 * A3, abs=5.0)
+    assert not out.exists() and not (tmp_path / "c.kinfw.json").exists() and not report.exists()
+
+
+@pytest.mark.slow
+def test_large_changes_allowed_are_written_and_said(ur10_data, tmp_path, capsys):
+    out, report = tmp_path / "c.urdf", tmp_path / "r.json"
+    argv = ["-q", "calibrate", ur10_data, "--urdf", UR5, "--out", out, "--report", report]
+    code, _, err = run_cli([*argv, "--allow-large-changes"], capsys)
+    assert code == 0
+    assert "large changes allowed (--allow-large-changes): joint origin elbow_joint" in err
+    side, rep = read_sidecar(tmp_path / "c.kinfw.json"), read_report(report)
+    assert side.guard == rep.guard
+    assert side.guard.allowed and side.guard.largest_ratio > 5.0
+    assert side.guard.largest.startswith("joint origin elbow_joint moved")
+    assert any(n.startswith("large changes allowed") for n in rep.notes)
+    assert "not on the URDF's origins" in side.guard.prior_bounds or "no prior" in (
+        side.guard.prior_bounds
+    )
+
+
+@pytest.mark.slow
+def test_the_robots_own_urdf_passes_and_the_fleet_refuses_the_other_alone(
+    ur10_data, tmp_path, capsys
+):
+    fleet = tmp_path / "robots"
+    for name, urdf in (("right", UR10), ("wrong", UR5)):
+        (fleet / name).mkdir(parents=True)
+        shutil.copy(urdf, fleet / name / "robot.urdf")
+        shutil.copy(ur10_data, fleet / name / "data.json")
+    code, _, _ = run_cli(["-q", "fleet", fleet, "--out", tmp_path / "out"], capsys)
+    assert code == 3  # a robot failed
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    rows = {r["robot"]: r for r in summary["robots"]}
+    assert rows["right"]["status"] == "calibrated"
+    assert "implausible calibration, not written" in rows["wrong"]["error"]
+    assert not (tmp_path / "out" / "wrong" / "calibrated.urdf").exists()
+    guard = read_sidecar(tmp_path / "out" / "right" / "calibrated.kinfw.json").guard
+    assert not guard.allowed and guard.beyond == () and guard.largest_ratio < 1.0
+
+
+def test_a_sidecar_and_report_written_before_the_guard_read_without_it():
+    folder = DATA / "calibration_v1"
+    assert read_sidecar(folder / "calibrated.kinfw.json").guard is None
+    assert read_report(folder / "report.json").guard is None
