@@ -21,6 +21,7 @@ from kinfw.identification.checks._plausibility import (
     ImplausibleCalibrationError,
     LargeChange,
     Plausibility,
+    mount_plausibility,
     plausibility,
     robot_size,
 )
@@ -78,6 +79,7 @@ __all__ = [
     "fit_warnings",
     "implausible_noise",
     "median_residuals",
+    "mount_plausibility",
     "plausibility",
     "redundancy",
     "residual_structure",

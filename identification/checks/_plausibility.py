@@ -394,3 +394,41 @@ def plausibility(
         changes.append(change(f"{root} in {link}", "pose", shift, turn, math.sqrt(n)))
     changes.sort(key=lambda c: -c.ratio)
     return Plausibility(bound_m, bound_rad, why, size, tuple(changes))
+
+
+def mount_plausibility(
+    robot: Robot,
+    name: str,
+    nominal_T: np.ndarray,
+    calibrated_T: np.ndarray,
+    *,
+    bound: ChangeBound | None = None,
+) -> Plausibility:
+    """The guard's verdict on one mount written on its own (``kinfw handeye``): the
+    calibrated ``mount_T_camera`` against the URDF's, with no prior.
+
+    Parameters
+    ----------
+    robot : Robot
+        The nominal robot (its size caps the bound).
+    name : str
+        The mount, in words (``"tool0_T_camera"``).
+    nominal_T, calibrated_T : ndarray, shape (4, 4)
+        The camera's pose on its mount in the URDF and as calibrated (m).
+    bound : ChangeBound, optional
+        The rule (default :class:`ChangeBound`).
+
+    Returns
+    -------
+    Plausibility
+        One change: the camera's move and turn on its mount.
+    """
+    bound = ChangeBound() if bound is None else bound
+    size = robot_size(robot)
+    bound_m, bound_rad, why = bound.limits(None, size)
+    shift = float(np.linalg.norm(calibrated_T[:3, 3] - nominal_T[:3, 3]))
+    turn = float(rotation_angle(nominal_T[:3, :3].T @ calibrated_T[:3, :3]))
+    ratio = max(shift / bound_m, turn / bound_rad)
+    return Plausibility(
+        bound_m, bound_rad, why, size, (LargeChange(name, "mount", shift, turn, ratio),)
+    )
