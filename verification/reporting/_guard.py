@@ -34,17 +34,29 @@ def check_plausibility(
     bound: ChangeBound | None,
 ) -> Plausibility:
     """The guard's verdict on ``calibrated``: every joint and mount, and the root's pose
-    in each link the data are measured in; the first joints are not judged when the data
-    are measured in an external frame (their placement is estimated with it)."""
-    frames = {kind_of(g).measured_in(g) for g in data.all_groups()}
+    in each link the data are measured in. The first joints are judged in the root only
+    when the data measure the robot in it (:func:`root_measured`)."""
     return plausibility(
         nominal,
         calibrated,
         prior,
         bound=bound,
         stance=stance_links(nominal, data),
-        root_measured=all(f is None or f in nominal.link_names for f in frames),
+        root_measured=root_measured(nominal, data),
     )
+
+
+def root_measured(robot: Robot, data: Measurements) -> bool:
+    """Whether ``data`` measure frames of the robot in its root (or another of its links):
+    poses or points measured there. A target, a plane or a sphere is estimated in the root
+    with the calibration, and a tracker's frame too: the robot's placement against them
+    is not measured, only its shape."""
+    for group in data.all_groups():
+        kind = kind_of(group)
+        frame = kind.measured_in(group)
+        if kind.name in ("pose", "point") and (frame is None or frame in robot.link_names):
+            return True
+    return False
 
 
 def prior_bounds(prior: tuple[float, float] | None, verdict: Plausibility) -> str:

@@ -2,7 +2,8 @@
 a UR10 simulated with mocap markers and calibrated with the UR5's URDF (the same joint
 names) is refused, naming the UR5 and the moves, before anything is written;
 ``--allow-large-changes`` writes it and the report and sidecar say so; the UR10's own
-URDF on the same data passes."""
+URDF on the same data passes. Simulated board images whose board is given 1.25 times
+its size are refused under a 1 mm prior; the true size passes."""
 
 import json
 import shutil
@@ -13,7 +14,7 @@ from kinfw.cli._main import main
 from kinfw.reports import read_report, read_sidecar
 from tests.cli_run import run_cli
 from tests.erd import urdf_path
-from tests.paths import DATA
+from tests.paths import DATA, HEAD_URDF
 
 UR5 = urdf_path("ur_description/urdf/ur5_robot.urdf")
 UR10 = urdf_path("ur_description/urdf/ur10_robot.urdf")
@@ -91,3 +92,40 @@ def test_a_sidecar_and_report_written_before_the_guard_read_without_it():
     folder = DATA / "calibration_v1"
     assert read_sidecar(folder / "calibrated.kinfw.json").guard is None
     assert read_report(folder / "report.json").guard is None
+
+
+@pytest.fixture(scope="module")
+def board_images(tmp_path_factory):
+    """Simulated images of a 40 mm chessboard seen by the head's left camera, and the same
+    file with the board's points 50 mm apart (a board size given wrong)."""
+    out = tmp_path_factory.mktemp("guard_board")
+    argv = ["-q", "simulate", "--pixels", "--cameras", "left_camera", "--stage", "2"]
+    argv += ["--stage2-samples", "20", "--board", "chessboard:9x6:0.04"]
+    argv += ["--out", out / "px.json", "--truth-out", out / "px_true.urdf"]
+    assert main([str(a) for a in argv]) == 0
+    doc = json.loads((out / "px.json").read_text())
+    for sample in doc["samples"]:
+        for o in sample["observations"]:
+            o["points"] = [[1.25 * c for c in p] for p in o["points"]]
+    (out / "wrong.json").write_text(json.dumps(doc))
+    return out / "px.json", out / "wrong.json"
+
+
+@pytest.mark.slow
+def test_a_wrong_board_size_under_a_1_mm_prior_is_refused(board_images, tmp_path, capsys):
+    right, wrong = board_images
+    options = ["--params", "full", "--prior-mm", "1", "--prior-deg", "0.573"]
+    argv = ["-q", "calibrate", "--urdf", HEAD_URDF, *options, "--report", tmp_path / "r.json"]
+    code, _, _ = run_cli([*argv, right, "--out", tmp_path / "right.urdf"], capsys)
+    assert code == 0
+    guard = read_report(tmp_path / "r.json").guard
+    assert guard.largest_ratio < 1.0 and guard.beyond == ()
+    # the prior is on the CPC parameters; the bound is 5 x its 1 mm or the 20 mm floor
+    assert guard.bound_m == pytest.approx(0.020)
+    assert guard.prior_bounds.startswith("the prior (1 mm / 0.573 deg) is on the CPC")
+    code, _, err = run_cli([*argv, wrong, "--out", tmp_path / "wrong.urdf"], capsys)
+    assert code == 2
+    first = next(line for line in err.splitlines() if ": error: " in line)
+    assert "implausible calibration, not written" in first and len(first) < 200
+    assert "1. the target's geometry or the board's size is wrong" in err
+    assert not (tmp_path / "wrong.urdf").exists()
