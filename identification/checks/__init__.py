@@ -21,9 +21,12 @@ from kinfw.identification.checks._plausibility import (
     ImplausibleCalibrationError,
     LargeChange,
     Plausibility,
+    fit_plausibility,
     mount_plausibility,
     plausibility,
     robot_size,
+    root_measured,
+    stance_links,
 )
 from kinfw.identification.checks._redundancy import (
     MIN_DOF_PER_KIND,
@@ -76,6 +79,7 @@ __all__ = [
     "check_joint_scale",
     "check_redundancy",
     "check_units",
+    "fit_plausibility",
     "fit_warnings",
     "implausible_noise",
     "median_residuals",
@@ -84,5 +88,7 @@ __all__ = [
     "redundancy",
     "residual_structure",
     "robot_size",
+    "root_measured",
+    "stance_links",
     "unit_diagnostics",
 ]

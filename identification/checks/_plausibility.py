@@ -18,7 +18,9 @@ import numpy as np
 import pinocchio as pin
 
 from kinfw.geometry import angle_between, inverse_transform, rotation_angle
+from kinfw.measurements import Measurements
 from kinfw.model import Robot
+from kinfw.observations import kind_of
 from kinfw.urdf import origin_changes
 
 
@@ -37,8 +39,9 @@ class ChangeBound:
 
     By default the bound on a move is the larger of ``prior_factor`` times the prior's
     length sigma and ``floor_m``, and never above ``size_fraction`` of the robot's size
-    (:func:`robot_size`); on a turn, the larger of ``prior_factor`` times the prior's angle
-    sigma and ``floor_rad``. ``max_m`` / ``max_rad``, when given, replace the rule.
+    (:func:`robot_size`; no cap for a robot of no size, a pose chain); on a turn, the
+    larger of ``prior_factor`` times the prior's angle sigma and ``floor_rad``. ``max_m``
+    / ``max_rad``, when given, replace the rule.
 
     Attributes
     ----------
@@ -69,7 +72,8 @@ class ChangeBound:
         if self.max_m is not None:
             bound_m, why_m = self.max_m, "given"
         else:
-            cap = self.size_fraction * size_m
+            # a robot of no size (every joint origin at one point: a pose chain) has no cap
+            cap = self.size_fraction * size_m if size_m > 0 else math.inf
             bound_m = min(max(self.prior_factor * sigma_m, self.floor_m), cap)
             why_m = (
                 f"{self.size_fraction:.0%} of the robot's size {size_m:.3g} m"
@@ -431,4 +435,46 @@ def mount_plausibility(
     ratio = max(shift / bound_m, turn / bound_rad)
     return Plausibility(
         bound_m, bound_rad, why, size, (LargeChange(name, "mount", shift, turn, ratio),)
+    )
+
+
+def stance_links(robot: Robot, data: Measurements) -> tuple[str, ...]:
+    """The links of ``robot`` that groups of ``data`` are measured in (a foot's sole for a
+    humanoid's plane contacts), in order of first appearance."""
+    links = (kind_of(g).measured_in(g) for g in data.all_groups())
+    return tuple(dict.fromkeys(k for k in links if k and k in robot.link_names))
+
+
+def root_measured(robot: Robot, data: Measurements) -> bool:
+    """Whether ``data`` measure frames of the robot in its root (or another of its links):
+    poses or points measured there. A target, a plane or a sphere is estimated in the root
+    with the calibration, and a tracker's frame too: the robot's placement against them
+    is not measured, only its shape."""
+    for group in data.all_groups():
+        kind = kind_of(group)
+        frame = kind.measured_in(group)
+        if kind.name in ("pose", "point") and (frame is None or frame in robot.link_names):
+            return True
+    return False
+
+
+def fit_plausibility(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    prior: tuple[float, float] | None,
+    *,
+    bound: ChangeBound | None = None,
+) -> Plausibility:
+    """The guard's verdict on a calibration of ``nominal`` from ``data``
+    (:func:`plausibility`): every joint and mount, the root's pose in each link the data
+    are measured in (:func:`stance_links`), the first joints judged in the root only when
+    the data measure the robot there (:func:`root_measured`)."""
+    return plausibility(
+        nominal,
+        calibrated,
+        prior,
+        bound=bound,
+        stance=stance_links(nominal, data),
+        root_measured=root_measured(nominal, data),
     )

@@ -195,6 +195,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
     _print_origin_changes(result.nominal, result.robot)
+    if report.guard is not None:
+        g = report.guard
+        print(
+            f"plausibility guard: bound {1e3 * g.bound_m:.3g} mm / {math.degrees(g.bound_rad):.3g} "
+            f"deg ({g.why}); largest: {g.largest or 'nothing changed'}"
+        )
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))

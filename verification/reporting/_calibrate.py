@@ -26,6 +26,7 @@ from kinfw.identification.checks import (
     ImplausibleCalibrationError,
     InsufficientDataError,
     Plausibility,
+    fit_plausibility,
     implausible_noise,
 )
 from kinfw.identification.problem import NoiseModel
@@ -35,7 +36,6 @@ from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
 from kinfw.verification.reporting._guard import (
-    check_plausibility,
     guard_summary,
     implausible_message,
     nominal_misfit,
@@ -645,7 +645,7 @@ def _guarded(
     report with the guard's record (and, when large changes were allowed, a note and a
     warning that say so), the verdict, and the error :meth:`CalibrationResult.write`
     raises (None when plausible or allowed)."""
-    verdict = check_plausibility(nominal, calibrated, data, prior, bound)
+    verdict = fit_plausibility(nominal, calibrated, data, prior, bound=bound)
     report = dataclasses.replace(report, guard=guard_summary(verdict, prior, allowed=allowed))
     if verdict.plausible:
         return report, verdict, None

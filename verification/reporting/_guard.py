@@ -1,7 +1,7 @@
-"""The plausibility guard on a calibration about to be written: the verdict
-(:func:`kinfw.identification.checks.plausibility`) on the calibrated URDF, its record
-for the report and sidecar (:func:`guard_summary`) and, beyond the bound, the error
-that names the likely causes (:func:`implausible_message`).
+"""What the plausibility guard's verdict on a calibration about to be written
+(:func:`kinfw.identification.checks.fit_plausibility`) becomes: its record for the report
+and sidecar (:func:`guard_summary`) and, beyond the bound, the error that names the
+likely causes (:func:`implausible_message`).
 """
 
 from __future__ import annotations
@@ -9,54 +9,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from kinfw.identification.checks import ChangeBound, Plausibility, plausibility
-from kinfw.measurements import Measurements
+from kinfw.identification.checks import Plausibility
 from kinfw.model import Robot
-from kinfw.observations import kind_of
 from kinfw.reports import BeforeAfter, GuardSummary, RefineSection
 
 #: Changes listed in the error, largest first; the others are counted.
 LISTED = 6
-
-
-def stance_links(robot: Robot, data: Measurements) -> tuple[str, ...]:
-    """The links of ``robot`` that groups of ``data`` are measured in (a foot's sole for a
-    humanoid's plane contacts), in order of first appearance."""
-    links = (kind_of(g).measured_in(g) for g in data.all_groups())
-    return tuple(dict.fromkeys(k for k in links if k and k in robot.link_names))
-
-
-def check_plausibility(
-    nominal: Robot,
-    calibrated: Robot,
-    data: Measurements,
-    prior: tuple[float, float] | None,
-    bound: ChangeBound | None,
-) -> Plausibility:
-    """The guard's verdict on ``calibrated``: every joint and mount, and the root's pose
-    in each link the data are measured in. The first joints are judged in the root only
-    when the data measure the robot in it (:func:`root_measured`)."""
-    return plausibility(
-        nominal,
-        calibrated,
-        prior,
-        bound=bound,
-        stance=stance_links(nominal, data),
-        root_measured=root_measured(nominal, data),
-    )
-
-
-def root_measured(robot: Robot, data: Measurements) -> bool:
-    """Whether ``data`` measure frames of the robot in its root (or another of its links):
-    poses or points measured there. A target, a plane or a sphere is estimated in the root
-    with the calibration, and a tracker's frame too: the robot's placement against them
-    is not measured, only its shape."""
-    for group in data.all_groups():
-        kind = kind_of(group)
-        frame = kind.measured_in(group)
-        if kind.name in ("pose", "point") and (frame is None or frame in robot.link_names):
-            return True
-    return False
 
 
 def prior_bounds(prior: tuple[float, float] | None, verdict: Plausibility) -> str:

@@ -129,3 +129,15 @@ def test_a_wrong_board_size_under_a_1_mm_prior_is_refused(board_images, tmp_path
     assert "implausible calibration, not written" in first and len(first) < 200
     assert "1. the target's geometry or the board's size is wrong" in err
     assert not (tmp_path / "wrong.urdf").exists()
+
+
+@pytest.mark.slow
+def test_crossval_leaves_a_default_that_calibrate_would_refuse_unscored(ur10_data, capsys):
+    code, out, _ = run_cli(["-q", "crossval", ur10_data, "--urdf", UR5, "--k", "2"], capsys)
+    assert code == 0
+    header = next(line for line in out.splitlines() if line.startswith("fold"))
+    assert "default" not in header and "full" in header
+    assert (
+        "warning: --params auto not scored: refused on the training samples of fold 0: "
+        "implausible calibration: joint origin elbow_joint moved"
+    ) in out
