@@ -363,7 +363,9 @@ def plausibility(
     registration in a tracker's frame; compared origin to origin, TIAGo's arm read 7 deg
     on its real Vicon data and the IIS-head's pan 19.6 mm under a 2 mm simulated error.
     What it does not see: a joint's zero offset (a turn about its own axis) and a slide
-    along the axis above, which only a third joint above could place.
+    along the axis above, which only a third joint above could place. Joints the URDF
+    marks as placeholders (:attr:`kinfw.model.Robot.placeholder_joints`) have no nominal
+    and are not judged.
     """
     bound = ChangeBound() if bound is None else bound
     size = robot_size(nominal)
@@ -379,8 +381,11 @@ def plausibility(
     # each change is judged at the joint whose <origin> or <axis> the calibration wrote
     # (the export leaves joints off the measured paths as they were)
     written = {c.joint for c in origin_changes(nominal, calibrated, tol=tol)}
+    placeholders = set(nominal.placeholder_joints)  # no nominal to compare with
     for joint in nominal.joints:
         if joint.name not in written or joint.child not in after or _base_mount(nominal, joint):
+            continue
+        if joint.name in placeholders:
             continue
         moved = _joint_change(nominal, joint, (before, lines0), (after, lines1), root_measured)
         if moved is not None and max(moved) > tol:
@@ -389,6 +394,8 @@ def plausibility(
     root = nominal.root_link
     for link in dict.fromkeys(stance):
         if link == root or link not in before or link not in after:
+            continue
+        if placeholders & {j.name for j in nominal.path_joints(link)}:
             continue
         link_T_root_0 = inverse_transform(before[link])
         link_T_root_1 = inverse_transform(after[link])

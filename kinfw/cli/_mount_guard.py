@@ -48,6 +48,11 @@ def check_mount(args: argparse.Namespace, calibration: Any) -> None:
     camera = _urdf_camera(robot, args)
     if camera is None or not robot.has_frame(args.hand_frame):
         return
+    between = {j.name for j in robot.path_joints(camera)} - {
+        j.name for j in robot.path_joints(args.hand_frame)
+    }
+    if between & set(robot.placeholder_joints):
+        return  # a placeholder mount (kinfw pose-chain's identity): nothing to compare
     q = np.zeros((1, len(robot.joint_names)))
     root_T = {f: robot.frame_poses(q, f, robot.joint_names)[0] for f in (args.hand_frame, camera)}
     nominal = inverse_transform(root_T[args.hand_frame]) @ root_T[camera]

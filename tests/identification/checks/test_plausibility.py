@@ -84,3 +84,13 @@ def test_an_unchanged_urdf_is_plausible():
     v = plausibility(Robot(PLANAR_2R), Robot(PLANAR_2R), None)
     assert v.plausible and v.changes == () and v.largest_ratio == 0.0
     assert np.isfinite(v.size_m)
+
+
+def test_a_placeholder_joint_has_no_nominal_to_bound():
+    calibrated = _moved(tool_rpy="0.5 0 0")  # 29 deg
+    placeholder = PLANAR_2R.replace("</robot>", '<kinfw placeholder="tool_joint"/></robot>')
+    assert not plausibility(Robot(PLANAR_2R), calibrated, None).plausible
+    v = plausibility(Robot(placeholder), calibrated, None)
+    assert v.plausible and v.changes == ()
+    with pytest.raises(ValueError, match=r"<kinfw placeholder> names \['tool'\]"):
+        Robot(PLANAR_2R.replace("</robot>", '<kinfw placeholder="tool"/></robot>'))
