@@ -1,5 +1,5 @@
 """The plausibility guard: what a calibration changed in the URDF's own terms (each joint
-origin's move and turn, each mount, the root's pose in a stance link) against the prior
+origin's move and turn, each mount, a stance link's pose in the root) against the prior
 that was chosen and a physical bound (:func:`plausibility`).
 
 A calibration that moves a joint origin by decimetres under a millimetre prior is not
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from kinfw.geometry import angle_between, inverse_transform, rotation_angle
+from kinfw.geometry import angle_between, rotation_angle
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.observations import kind_of
@@ -64,6 +64,15 @@ class ChangeBound:
     max_m: float | None = None
     max_rad: float | None = None
 
+    @classmethod
+    def for_known_error(cls, sigma_m: float, sigma_rad: float) -> ChangeBound:
+        """The bound for a URDF known to be off by ``sigma_m`` / ``sigma_rad`` per axis
+        (a simulation's true robot, :func:`kinfw.simulation.perturb_robot`): a move's or
+        a turn's norm is then about ``sqrt(3)`` times that, and the bound is
+        ``prior_factor`` times it, as for a prior (m; rad)."""
+        k = cls().prior_factor * math.sqrt(3.0)
+        return cls(max_m=k * sigma_m, max_rad=k * sigma_rad)
+
     def limits(self, prior: tuple[float, float] | None, size_m: float) -> tuple[float, float, str]:
         """``(bound_m, bound_rad, why)`` for a fit with ``prior`` (``(sigma_m, sigma_rad)``
         or None) of a robot of ``size_m``; ``why`` says in words how they were set."""
@@ -95,11 +104,11 @@ class LargeChange:
     Attributes
     ----------
     name : str
-        The joint (its ``<origin>`` and ``<axis>``), or ``"ROOT in LINK"`` for the root
-        link's pose in a stance link at q = 0.
+        The joint (its ``<origin>`` and ``<axis>``), or ``"LINK in ROOT"`` for a stance
+        link's pose in the root link at q = 0.
     what : str
-        ``"joint origin"``, ``"mount"`` (a fixed joint's origin) or ``"pose"`` (the root
-        in a stance link).
+        ``"joint origin"``, ``"mount"`` (a fixed joint's origin) or ``"pose"`` (a stance
+        link in the root).
     shift_m : float
         The move (m).
     turn_rad : float
@@ -315,6 +324,7 @@ def plausibility(
     bound: ChangeBound | None = None,
     stance: Sequence[str] = (),
     root_measured: bool = True,
+    measured: Sequence[str] | None = None,
     tol: float = 1e-9,
 ) -> Plausibility:
     """What ``calibrated`` changed against ``nominal``, in the URDF's own terms, against
@@ -332,8 +342,8 @@ def plausibility(
     bound : ChangeBound, optional
         The rule (default :class:`ChangeBound`).
     stance : sequence of str
-        Links the data are measured in (a floating humanoid's foot): the root link's pose
-        in each, at q = 0, is one more change, with the bound times the square root of
+        Links the data are measured in (a floating humanoid's foot): each one's pose in
+        the root at q = 0 is one more change, with the bound times the square root of
         the movable joints between them (independent changes of the joints on the way add
         up in quadrature).
     root_measured : bool
@@ -341,6 +351,11 @@ def plausibility(
         joints' placement in the root is measured. False for an external frame (a
         tracker's, whose pose in the root is estimated with the calibration): a joint with
         no movable joint above it is then not judged.
+    measured : sequence of str, optional
+        The frames the data observe (and are measured in): only joints on their paths
+        from the root are judged, as the calibration changes only those (the export
+        re-expresses the others under a moved link, where they keep their place).
+        Default: every joint.
     tol : float
         A joint counts as changed when its move (m) or turn (rad) exceeds it.
 
@@ -381,6 +396,11 @@ def plausibility(
     # each change is judged at the joint whose <origin> or <axis> the calibration wrote
     # (the export leaves joints off the measured paths as they were)
     written = {c.joint for c in origin_changes(nominal, calibrated, tol=tol)}
+    if measured is not None:
+        on_paths = {
+            j.name for f in measured if nominal.has_frame(f) for j in nominal.path_joints(f)
+        }
+        written &= on_paths
     placeholders = set(nominal.placeholder_joints)  # no nominal to compare with
     for joint in nominal.joints:
         if joint.name not in written or joint.child not in after or _base_mount(nominal, joint):
@@ -397,12 +417,13 @@ def plausibility(
             continue
         if placeholders & {j.name for j in nominal.path_joints(link)}:
             continue
-        link_T_root_0 = inverse_transform(before[link])
-        link_T_root_1 = inverse_transform(after[link])
-        shift = float(np.linalg.norm(link_T_root_1[:3, 3] - link_T_root_0[:3, 3]))
-        turn = float(rotation_angle(link_T_root_0[:3, :3].T @ link_T_root_1[:3, :3]))
+        # the link's pose in the root: where the foot is under the base (the root's pose
+        # in the link would multiply any turn by the root's distance from it)
+        T0, T1 = before[link], after[link]
+        shift = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
+        turn = float(rotation_angle(T0[:3, :3].T @ T1[:3, :3]))
         n = max(1, len(nominal.movable_path(link)))
-        changes.append(change(f"{root} in {link}", "pose", shift, turn, math.sqrt(n)))
+        changes.append(change(f"{link} in {root}", "pose", shift, turn, math.sqrt(n)))
     changes.sort(key=lambda c: -c.ratio)
     return Plausibility(bound_m, bound_rad, why, size, tuple(changes))
 
@@ -474,9 +495,11 @@ def fit_plausibility(
     bound: ChangeBound | None = None,
 ) -> Plausibility:
     """The guard's verdict on a calibration of ``nominal`` from ``data``
-    (:func:`plausibility`): every joint and mount, the root's pose in each link the data
-    are measured in (:func:`stance_links`), the first joints judged in the root only when
-    the data measure the robot there (:func:`root_measured`)."""
+    (:func:`plausibility`): every joint and mount on the paths of the frames the data
+    observe; the pose in the root of each link the data are measured in
+    (:func:`stance_links`); the first joints judged in the root only when the data measure
+    the robot there (:func:`root_measured`)."""
+    frames = {f for g in data.all_groups() for f in kind_of(g).frames(g)}
     return plausibility(
         nominal,
         calibrated,
@@ -484,4 +507,5 @@ def fit_plausibility(
         bound=bound,
         stance=stance_links(nominal, data),
         root_measured=root_measured(nominal, data),
+        measured=(*frames, *stance_links(nominal, data)),
     )

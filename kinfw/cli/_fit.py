@@ -474,6 +474,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             prior=prior,
             executor=executor,
             exclude_flagged=args.exclude_flagged,
+            change_bound=change_bound(args),
         )
     if args.json:
         print(json_text(cv.to_dict()))

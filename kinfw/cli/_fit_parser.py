@@ -123,17 +123,18 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
     add_guard_options(p)
 
 
-def add_guard_options(p: argparse.ArgumentParser) -> None:
-    """The plausibility guard of a command that writes a calibration: ``--allow-large-
-    changes``, ``--max-change-mm``, ``--max-change-deg``
-    (:func:`kinfw.cli._fit.change_bound` reads them)."""
-    p.add_argument(
-        "--allow-large-changes",
-        action="store_true",
-        help="write the calibration even when a joint origin, a mount or the root's pose "
-        "moved beyond the plausibility bound (the larger of 5 x the prior and 20 mm / "
-        "2 deg, a move never above 5 %% of the robot's size); the report says so",
-    )
+def add_guard_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
+    """The plausibility guard: ``--max-change-mm``, ``--max-change-deg``
+    (:func:`kinfw.cli._fit.change_bound` reads them) and, for a command that writes a
+    calibration (``writes``), ``--allow-large-changes``."""
+    if writes:
+        p.add_argument(
+            "--allow-large-changes",
+            action="store_true",
+            help="write the calibration even when a joint, a mount or a stance link's pose "
+            "changed beyond the plausibility bound (the larger of 5 x the prior and 20 mm "
+            "/ 2 deg, a move never above 5 %% of the robot's size); the report says so",
+        )
     p.add_argument(
         "--max-change-mm",
         type=POSITIVE_MM,
@@ -195,6 +196,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     _add_fit_options(p)
     add_camera_option(p)
     add_mount_option(p)
+    add_guard_options(p, writes=False)
     add_executor_options(p, tasks="the fits (folds x parameter sets)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)

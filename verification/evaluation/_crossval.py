@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.identification import Calibration, calibrate
-from kinfw.identification.checks import InsufficientDataError, fit_plausibility
+from kinfw.identification.checks import ChangeBound, InsufficientDataError, fit_plausibility
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
@@ -342,6 +342,7 @@ def _score(
     noise,
     loss,
     prior,
+    bound: ChangeBound | None = None,
 ) -> FoldScore | str:
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
     original indices of the test samples); the refusal's message when the training fold
@@ -354,7 +355,7 @@ def _score(
         try:
             if parameters == AUTO:
                 result, chosen = _chosen_fit(nominal, train, noise, loss)
-                refused = _implausible(nominal, result, train, chosen)
+                refused = _implausible(nominal, result, train, chosen, bound)
                 if refused:  # kinfw calibrate would not write it
                     return refused
             else:
@@ -392,12 +393,17 @@ def _score(
 
 
 def _implausible(
-    nominal: Robot, result: Calibration, train: Measurements, prior: tuple[float, float] | None
+    nominal: Robot,
+    result: Calibration,
+    train: Measurements,
+    prior: tuple[float, float] | None,
+    bound: ChangeBound | None,
 ) -> str | None:
     """The plausibility guard's refusal of the default's fit on a training fold, as
     ``kinfw calibrate`` would refuse to write it
     (:func:`kinfw.identification.checks.fit_plausibility`); None when plausible."""
-    verdict = fit_plausibility(nominal, Robot(result.urdf_xml, "<calibrated>"), train, prior)
+    calibrated = Robot(result.urdf_xml, "<calibrated>")
+    verdict = fit_plausibility(nominal, calibrated, train, prior, bound=bound)
     if verdict.plausible:
         return None
     return (
@@ -490,6 +496,7 @@ def crossvalidate(
     jobs: int = 1,
     exclude_flagged: bool = False,
     reference: Calibration | None = None,
+    change_bound: ChangeBound | None = None,
 ) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
@@ -529,6 +536,9 @@ def crossvalidate(
     reference : Calibration, optional
         That full-data fit, when the caller has it already (the model choice scores
         several priors against the same flags and noise).
+    change_bound : ChangeBound, optional
+        The plausibility guard's rule for the default's fits (``--max-change-mm``,
+        ``--max-change-deg``; default :class:`kinfw.identification.checks.ChangeBound`).
     """
     if not 2 <= k <= data.n_samples:
         raise ValueError(f"k: expected 2 <= k <= {data.n_samples} samples, got {k}")
@@ -543,7 +553,7 @@ def crossvalidate(
         excluded = rejected_keys(reference)
         scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
     tasks = [
-        (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
+        (nominal, train, test, test_ids, parameters, f, noise, loss, prior, change_bound)
         for f, (train, test, test_ids) in enumerate(_folds(data, scored, k, seed))
         for parameters in sets
     ]

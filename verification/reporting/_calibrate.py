@@ -533,7 +533,7 @@ def calibrate_and_report(
     CalibrationResult
         The calibrated robot and URDF, the report; :meth:`CalibrationResult.write`
         writes the URDF and sidecar, or raises the guard's error
-        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or the root's pose
+        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or a stance link's pose
         in a stance link changed beyond the bound.
 
     Raises

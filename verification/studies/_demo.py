@@ -65,13 +65,10 @@ DEMO_FILES = (
     "scene.html",
 )
 #: Simulated measurement noise: position sigma per axis (mm), rotation angle sigma (deg).
-#: The demo's true head is off the URDF by 5 mm / 1 deg per axis (sigma): a move's norm is
-#: about 5 sqrt(3) mm and a turn's 1 sqrt(3) deg. Its calibration is checked against five
-#: times these (the plausibility guard's factor on a prior), not the default 20 mm / 2 deg
-#: a URDF of a real robot is held to.
-DEMO_BOUND = ChangeBound(
-    max_m=5.0 * math.sqrt(3.0) * 5e-3, max_rad=math.radians(5.0 * math.sqrt(3.0))
-)
+#: The demo's true head is off the URDF by 5 mm / 1 deg per axis (sigma): its calibration
+#: is checked against the bound for that known error (43 mm / 8.7 deg), not the default
+#: 20 mm / 2 deg a URDF of a real robot is held to.
+DEMO_BOUND = ChangeBound.for_known_error(5e-3, math.radians(1.0))
 NOISE_MM = 0.5
 NOISE_DEG = 0.5
 #: Simulated pixel noise of ``pixels=True``, px per image coordinate.

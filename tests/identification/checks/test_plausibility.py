@@ -72,9 +72,9 @@ def test_the_roots_pose_in_a_stance_link_is_a_change():
     nominal, calibrated = Robot(PLANAR_2R), _moved(elbow_xyz="0.5 0.05 0")
     v = plausibility(nominal, calibrated, None, stance=("tool",))
     pose = next(c for c in v.changes if c.what == "pose")
-    assert pose.name == "world in tool"
-    # at q = 0 the tool sits 50 mm further along y: the root moves 50 mm in the tool's
-    # frame; two joints on the way, so the bound is sqrt(2) x 20 mm
+    assert pose.name == "tool in world"
+    # at q = 0 the tool sits 50 mm further along y in the root; two joints on the way, so
+    # the bound is sqrt(2) x 20 mm
     assert pose.shift_m == pytest.approx(0.05, abs=1e-12)
     assert pose.turn_rad == pytest.approx(0.0, abs=1e-12)
     assert pose.ratio == pytest.approx(0.05 / (math.sqrt(2.0) * 0.020), abs=1e-9)

@@ -83,7 +83,8 @@ def test_the_robots_own_urdf_passes_and_the_fleet_refuses_the_other_alone(
     rows = {r["robot"]: r for r in summary["robots"]}
     assert rows["right"]["status"] == "calibrated"
     assert "implausible calibration, not written" in rows["wrong"]["error"]
-    assert not (tmp_path / "out" / "wrong" / "calibrated.urdf").exists()
+    assert "\n" not in rows["wrong"]["error"]  # the first line; calibrate gives the rest
+    assert not (tmp_path / "out" / "wrong").exists()
     guard = read_sidecar(tmp_path / "out" / "right" / "calibrated.kinfw.json").guard
     assert not guard.allowed and guard.beyond == () and guard.largest_ratio < 1.0
 
