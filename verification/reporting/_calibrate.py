@@ -533,8 +533,8 @@ def calibrate_and_report(
     CalibrationResult
         The calibrated robot and URDF, the report; :meth:`CalibrationResult.write`
         writes the URDF and sidecar, or raises the guard's error
-        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or a stance link's pose
-        in a stance link changed beyond the bound.
+        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or a stance
+        link's pose in the root changed beyond the bound.
 
     Raises
     ------
