@@ -90,8 +90,8 @@ def implausible_message(
     lines.append("likely causes, in order:")
     lines.append(
         "  1. the target's geometry or the board's size is wrong (square size, marker "
-        "offsets, plane): the residuals stay small while a camera mount or the joints "
-        "near the target move by centimetres"
+        "offsets, plane, a camera's intrinsics): the residuals stay small while a camera "
+        "mount or the joints near the target move by centimetres"
     )
     robot = (
         f'  2. the URDF (<robot name="{name}">) may be another robot\'s: its nominal '
