@@ -587,6 +587,15 @@ def calibrate_and_report(
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )
+    report, verdict, refusal = _guarded(
+        nominal,
+        calibrated,
+        data,
+        report,
+        prior,
+        bound=change_bound,
+        allowed=allow_large_changes,
+    )
     restricted = parameters != "full" or prior is not None  # full alone: warned in the fit
     implausible = (
         implausible_noise(result.refined, data)
@@ -598,15 +607,6 @@ def calibrate_and_report(
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
-    report, verdict, refusal = _guarded(
-        nominal,
-        calibrated,
-        data,
-        report,
-        prior,
-        bound=change_bound,
-        allowed=allow_large_changes,
-    )
     model = ModelSummary(
         (parameters,) if isinstance(parameters, str) else tuple(parameters),
         None if prior is None else float(prior[0]),
