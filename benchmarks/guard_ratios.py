@@ -8,8 +8,9 @@ Each row calibrates as ``kinfw calibrate`` does by default (``--params auto``) t
 :func:`kinfw.verification.reporting.calibrate_and_report` and prints the largest change
 and its ratio (:attr:`kinfw.identification.checks.Plausibility.largest_ratio`). The
 simulated sets are what ``kinfw simulate`` writes (default errors 2 mm / 0.5 deg) and what
-``benchmarks/bench_contacts.py`` simulates; the demo is ``kinfw demo``'s own data, with
-the bound it states for its 5 mm / 1 deg head (``DEMO_BOUND``) and with the default.
+``benchmarks/bench_contacts.py`` and ``benchmarks/bench_cameras.py`` simulate; the demo
+is ``kinfw demo``'s own data, with the bound it states for its 5 mm / 1 deg head
+(``DEMO_BOUND``) and with the default.
 
 Run: ``python benchmarks/guard_ratios.py`` (a few minutes; needs example-robot-data).
 """
@@ -29,10 +30,11 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.bench_circles_real import detect
 from kinfw import builtin_head_urdf
 from kinfw.identification.checks import plausibility
-from kinfw.measurements import read_measurements
+from kinfw.measurements import read_measurements, write_measurements
 from kinfw.model import load_robot, pose_chain_urdf
 from kinfw.verification.reporting import calibrate_and_report
 from tests.erd import urdf_path
+from tests.kinfw.observations.test_cameras_anywhere import SETUPS, scene, setup_urdf
 
 HEAD = str(builtin_head_urdf())
 UR10 = str(urdf_path("ur_description/urdf/ur10_robot.urdf"))
@@ -179,6 +181,12 @@ def main() -> None:
         circles = detect(ROOT / "tests/data/industrial_calibration_circles", work)
         print(_row("industrial_calibration circle grid (real)", str(chain), circles), flush=True)
         print(_talos_in_the_foot(), flush=True)
+        for name in SETUPS:  # benchmarks/bench_cameras.py's scenes, its seed 11, 0.5 px
+            _, _, _, data, _ = scene(name, 30, seed=11, sigma_px=0.5, n_test=15)
+            (work / f"{name}.urdf").write_text(setup_urdf(name))
+            write_measurements(work / f"{name}.json", data)
+            label = f"cameras, {name} (bench_cameras)"
+            print(_row(label, str(work / f"{name}.urdf"), work / f"{name}.json"), flush=True)
         from kinfw.verification.studies import run_demo
 
         guard = run_demo(work / "demo").report.guard  # the bound it states for its head
