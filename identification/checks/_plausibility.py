@@ -245,6 +245,23 @@ def _above(robot: Robot, joint, lines: dict[str, _Line]) -> tuple[str | None, st
     return (movable[0].name if movable else None, revolute[0].name if revolute else None)
 
 
+def _seen(robot: Robot, measured: Sequence[str]) -> set[str]:
+    """The joints the data see: on the path from the root to a measured frame, a fixed
+    one only when a movable joint or the measured frame itself lies right below it (of
+    fixed joints in a row, the data see only what they compose to: the last one's frame
+    on the line above)."""
+    seen: set[str] = set()
+    for frame in measured:
+        if not robot.has_frame(frame):
+            continue
+        path = robot.path_joints(frame)
+        for k, joint in enumerate(path):
+            below = path[k + 1 :]
+            if joint.is_movable or not below or below[0].is_movable:
+                seen.add(joint.name)
+    return seen
+
+
 def _base_mount(robot: Robot, joint) -> bool:
     """A fixed joint with no movable joint above it and some below (the root's base):
     where it sits is judged through the first movable joints below, in the root, as the
@@ -353,9 +370,9 @@ def plausibility(
         no movable joint above it is then not judged.
     measured : sequence of str, optional
         The frames the data observe (and are measured in): only joints on their paths
-        from the root are judged, as the calibration changes only those (the export
-        re-expresses the others under a moved link, where they keep their place).
-        Default: every joint.
+        from the root are judged (:func:`_seen`), as the calibration changes only those
+        (the export re-expresses the others under a moved link, where they keep their
+        place). Default: every joint.
     tol : float
         A joint counts as changed when its move (m) or turn (rad) exceeds it.
 
@@ -397,10 +414,7 @@ def plausibility(
     # (the export leaves joints off the measured paths as they were)
     written = {c.joint for c in origin_changes(nominal, calibrated, tol=tol)}
     if measured is not None:
-        on_paths = {
-            j.name for f in measured if nominal.has_frame(f) for j in nominal.path_joints(f)
-        }
-        written &= on_paths
+        written &= _seen(nominal, measured)
     placeholders = set(nominal.placeholder_joints)  # no nominal to compare with
     for joint in nominal.joints:
         if joint.name not in written or joint.child not in after or _base_mount(nominal, joint):
