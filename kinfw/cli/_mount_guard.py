@@ -19,7 +19,8 @@ __all__ = ["check_mount"]
 
 def _urdf_camera(robot, args: argparse.Namespace) -> str | None:
     """The URDF frame of the camera whose targets were fitted: ``--camera-frame`` when the
-    URDF has it, else the one camera of the measurement file's target or pixel groups."""
+    URDF has it, else the one camera of the measurement file's target or pixel groups when
+    the URDF has that; None otherwise (no mount in the URDF to compare with)."""
     from kinfw.measurements import read_measurements
 
     if robot.has_frame(args.camera_frame):
@@ -28,7 +29,8 @@ def _urdf_camera(robot, args: argparse.Namespace) -> str | None:
     cameras = {
         g.camera for kind in ("target", "pixels") for g in data.groups(kind) if hasattr(g, "camera")
     }
-    return cameras.pop() if len(cameras) == 1 else None
+    camera = cameras.pop() if len(cameras) == 1 else None
+    return camera if camera is not None and robot.has_frame(camera) else None
 
 
 def check_mount(args: argparse.Namespace, calibration: Any) -> None:
