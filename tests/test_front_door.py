@@ -16,6 +16,7 @@ import pytest
 import kinfw
 from kinfw.cli._main import main
 from kinfw.files import OutputPathError
+from kinfw.identification.checks import ChangeBound
 from kinfw.identification.planning import Setup, read_plan
 from kinfw.reports import read_sidecar
 from kinfw.view import external_urls
@@ -63,7 +64,9 @@ def experiment(tmp_path_factory):
     sim = kinfw.simulate(nominal, noise_m=0.0, noise_rad=0.0, error_mm=5.0, error_deg=1.0, seed=4)
     kinfw.write_measurements(d / "data.json", sim.data)
     data = kinfw.read_measurements(d / "data.json")
-    return d, nominal, sim, data, kinfw.calibrate(nominal, data)
+    # the true head is 5 mm / 1 deg off per axis: the plausibility guard's bound for it
+    bound = ChangeBound.for_known_error(5e-3, math.radians(1.0))
+    return d, nominal, sim, data, kinfw.calibrate(nominal, data, change_bound=bound)
 
 
 # -- the door itself ------------------------------------------------------------------
@@ -182,6 +185,8 @@ def test_simulate_measures_the_true_robot_by_pinocchio(experiment):
 def test_the_cli_calibrate_writes_the_urdf_of_the_verb(experiment, capsys):
     d, *_, result = experiment
     argv = ["calibrate", d / "data.json", "--urdf", d / "nominal.urdf", "--out", d / "cli.urdf"]
+    bound = ChangeBound.for_known_error(5e-3, math.radians(1.0))  # as the verb's
+    argv += ["--max-change-mm", 1e3 * bound.max_m, "--max-change-deg", math.degrees(bound.max_rad)]
     assert main([str(a) for a in argv]) == 0
     capsys.readouterr()
     assert (d / "cli.urdf").read_text() == result.urdf_xml
@@ -221,12 +226,16 @@ def test_the_cli_plan_is_the_verb_s_plan(tmp_path, capsys):
 @pytest.mark.slow
 def test_crossvalidate_of_noise_free_data_predicts_held_out_samples_exactly(experiment, capsys):
     d, _, _, data, _ = experiment
-    cv = kinfw.crossvalidate(kinfw.load_robot(d / "nominal.urdf"), data, k=3, seed=1)
+    bound = ChangeBound.for_known_error(5e-3, math.radians(1.0))  # the true head's error
+    cv = kinfw.crossvalidate(
+        kinfw.load_robot(d / "nominal.urdf"), data, k=3, seed=1, change_bound=bound
+    )
     assert cv.sets == ("none", "frames", "full", "auto")  # auto: calibrate's default
     for fitted in ("full", "auto"):
         assert max(s.of("position") for s in cv.scores if s.parameters == fitted) < 1e-6  # mm
     assert min(s.of("position") for s in cv.scores if s.parameters == "none") > 1.0
     argv = ["crossval", d / "data.json", "--urdf", d / "nominal.urdf", "--k", "3"]
+    argv += ["--max-change-mm", 1e3 * bound.max_m, "--max-change-deg", math.degrees(bound.max_rad)]
     assert main([str(a) for a in [*argv, "--seed", "1", "--jobs", "2", "--json"]]) == 0
     assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(cv.to_dict()))
 

@@ -1,7 +1,8 @@
 """Checks around a fit: the data's units against the nominal robot (and hand-eye pose
 pairs' units and quaternion order against their own motion), enough residual rows for
-the free parameters, whether what is left after the fit is noise, and whether a camera's
-target is the size it was said to be.
+the free parameters, whether what is left after the fit is noise, whether a camera's
+target is the size it was said to be, and whether what the fit changed in the URDF is
+plausible (:func:`plausibility`).
 """
 
 from __future__ import annotations
@@ -17,6 +18,18 @@ from kinfw.identification.checks._fit_checks import (
     residual_structure,
     stated_noise,
     stated_noise_limit,
+)
+from kinfw.identification.checks._plausibility import (
+    ChangeBound,
+    ImplausibleCalibrationError,
+    LargeChange,
+    Plausibility,
+    fit_plausibility,
+    mount_plausibility,
+    plausibility,
+    robot_size,
+    root_measured,
+    stance_links,
 )
 from kinfw.identification.checks._pose_pair_checks import (
     PLAUSIBLE_LENGTH_M,
@@ -62,8 +75,12 @@ __all__ = [
     "SCALE_FLOOR",
     "SCALE_Z",
     "STRUCTURE_R2",
+    "ChangeBound",
+    "ImplausibleCalibrationError",
     "InsufficientDataError",
     "JointValues",
+    "LargeChange",
+    "Plausibility",
     "PosePairDiagnostics",
     "Redundancy",
     "ResidualStructure",
@@ -76,11 +93,17 @@ __all__ = [
     "check_pose_pair_data",
     "check_redundancy",
     "check_units",
+    "fit_plausibility",
     "fit_warnings",
     "implausible_noise",
     "median_residuals",
+    "mount_plausibility",
+    "plausibility",
     "redundancy",
     "residual_structure",
+    "robot_size",
+    "root_measured",
+    "stance_links",
     "stated_noise",
     "stated_noise_limit",
     "target_scale",

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     )
     from kinfw.verification.evaluation import CrossValidation
 
-__all__ = ["calibration_options", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
+__all__ = ["calibration_options", "change_bound", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
@@ -129,7 +129,7 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
     """The keyword arguments of :func:`kinfw.verification.reporting.calibrate_and_report`
     that the calibration's options give (:func:`kinfw.cli._fit_parser.
     add_calibration_options`): parameters, method, noise, loss, prior, intrinsics,
-    duplicates."""
+    duplicates, the plausibility guard's bound and whether large changes are allowed."""
     return {
         "parameters": "auto" if args.params == "auto" else params_arg(args.params),
         "method": args.method,
@@ -138,7 +138,23 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
         "prior": _prior_arg(args),
         "refine_intrinsics": _intrinsics_arg(args.refine_intrinsics),
         "keep_duplicates": args.keep_duplicates,
+        "change_bound": change_bound(args),
+        "allow_large_changes": args.allow_large_changes,
     }
+
+
+def change_bound(args: argparse.Namespace):
+    """The plausibility guard's rule of ``--max-change-mm`` / ``--max-change-deg``
+    (:func:`kinfw.cli._fit_parser.add_guard_options`): None (the default rule) when
+    neither is given."""
+    from kinfw.identification.checks import ChangeBound
+
+    if args.max_change_mm is None and args.max_change_deg is None:
+        return None
+    return ChangeBound(
+        max_m=None if args.max_change_mm is None else 1e-3 * args.max_change_mm,
+        max_rad=None if args.max_change_deg is None else math.radians(args.max_change_deg),
+    )
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
@@ -184,6 +200,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if report.reprojection is not None:
         _print_reprojection(report.reprojection)
     _print_origin_changes(result.nominal, result.robot)
+    if report.guard is not None:
+        g = report.guard
+        print(
+            f"plausibility guard: bound {1e3 * g.bound_m:.3g} mm / {math.degrees(g.bound_rad):.3g} "
+            f"deg ({g.why}); largest: {g.largest or 'nothing changed'}"
+        )
     if report.errors_held_out is not None:
         print("held-out errors:")
         print(_before_after_table(report.errors_held_out))
@@ -463,6 +485,7 @@ def cmd_crossval(args: argparse.Namespace) -> int:
             executor=executor,
             exclude_flagged=args.exclude_flagged,
             keep_duplicates=args.keep_duplicates,
+            change_bound=change_bound(args),
         )
     if args.json:
         print(json_text(cv.to_dict()))

@@ -26,7 +26,7 @@ from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
-__all__ = ["add_calibration_options", "add_fit_parsers"]
+__all__ = ["add_calibration_options", "add_fit_parsers", "add_guard_options"]
 
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
@@ -122,6 +122,31 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
         "(no FRAME: every camera with 'pixels' observations), started from the given ones; "
         "the report says which the images do not determine",
     )
+    add_guard_options(p)
+
+
+def add_guard_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
+    """The plausibility guard: ``--max-change-mm``, ``--max-change-deg``
+    (:func:`kinfw.cli._fit.change_bound` reads them) and, for a command that writes a
+    calibration (``writes``), ``--allow-large-changes``."""
+    if writes:
+        p.add_argument(
+            "--allow-large-changes",
+            action="store_true",
+            help="write the calibration even when a joint, a mount or a stance link's pose "
+            "changed beyond the plausibility bound (the larger of 5 x the prior and 20 mm "
+            "/ 2 deg, a move never above 5 %% of the robot's size); the report says so",
+        )
+    p.add_argument(
+        "--max-change-mm",
+        type=POSITIVE_MM,
+        help="the plausibility bound on a move, mm (replaces the rule above)",
+    )
+    p.add_argument(
+        "--max-change-deg",
+        type=POSITIVE_DEG,
+        help="the plausibility bound on a turn, deg (replaces the rule above)",
+    )
 
 
 def _add_demo_parser(sub: argparse._SubParsersAction) -> None:
@@ -173,6 +198,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     _add_fit_options(p)
     add_camera_option(p)
     add_mount_option(p)
+    add_guard_options(p, writes=False)
     add_executor_options(p, tasks="the fits (folds x parameter sets)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)

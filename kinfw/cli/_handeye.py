@@ -15,6 +15,8 @@ import warnings
 from pathlib import Path
 
 from kinfw.cli._args import add_keep_duplicates_option, add_xacro_option, number
+from kinfw.cli._fit_parser import add_guard_options
+from kinfw.cli._mount_guard import check_mount
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
 __all__ = ["add_handeye_parser", "cmd_handeye"]
@@ -130,6 +132,7 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_xacro_option(p)
     add_keep_duplicates_option(p)
+    add_guard_options(p)
     p.set_defaults(func=cmd_handeye, check_outputs=check_handeye_outputs)
 
 
@@ -280,6 +283,7 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         frames=(mount_frame, args.camera_frame),
         keep_duplicates=args.keep_duplicates,
     )
+    check_mount(args, calibration)  # the plausibility guard, before anything is written
     k = args.k or (DEFAULT_K if args.method and holdout is None else None)
     if k is not None and k > len(pairs):
         raise ValueError(f"--k {k}: more folds than the {len(pairs)} pose pairs")

@@ -86,7 +86,7 @@ def pose_chain_urdf(
     -------
     str
         The URDF text, with the hint ``<kinfw exact="pose_x ... pose_roll"
-        cameras="{camera}"/>``.
+        cameras="{camera}" placeholder="{camera}_joint"/>``.
 
     Raises
     ------
@@ -120,7 +120,11 @@ def pose_chain_urdf(
         f"  </joint>\n"
         f'  <link name="{camera}"/>'
     )
-    # kinfw's hints: the chain's joints are exact (never calibrated), the camera observes
-    parts.append(f'  <kinfw exact="{" ".join(POSE_CHAIN_JOINTS)}" cameras="{camera}"/>')
+    # kinfw's hints: the chain's joints are exact (never calibrated), the camera observes,
+    # its mount is a placeholder (identity: estimated, not a nominal)
+    parts.append(
+        f'  <kinfw exact="{" ".join(POSE_CHAIN_JOINTS)}" cameras="{camera}" '
+        f'placeholder="{camera}_joint"/>'
+    )
     body = "\n".join(parts)
     return f'<?xml version="1.0"?>\n<robot name="{name}">\n{body}\n</robot>\n'

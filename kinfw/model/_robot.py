@@ -159,6 +159,11 @@ class Robot:
         poses and carry no kinematic error). Every movable joint above an exact one must be
         exact too (they are a path's first joints), so their URDF origins and axes stay
         as written. Empty when absent.
+    placeholder_joints : tuple of str
+        Joints whose ``<origin>`` is a placeholder, not a nominal, from ``<kinfw
+        placeholder="camera_joint"/>`` (the camera mount at identity that ``kinfw
+        pose-chain`` writes for the calibration to estimate): the plausibility guard does
+        not bound their change. Empty when absent.
     """
 
     def __reduce__(self) -> tuple:
@@ -180,6 +185,13 @@ class Robot:
         self.default_cameras = tuple(hint.get("cameras", "").split())
         self.default_up = up_vector(hint.get("up"), source)
         self.exact_joints = tuple(hint.get("exact", "").split())
+        self.placeholder_joints = tuple(hint.get("placeholder", "").split())
+        unknown = [n for n in self.placeholder_joints if n not in self._joint_by_name]
+        if unknown:
+            raise RobotModelError(
+                f"{source}: <kinfw placeholder> names {unknown}, which are not joints of the "
+                f"URDF; joints are {[j.name for j in self.joints]}"
+            )
         not_movable = [n for n in self.exact_joints if n not in self.joint_names]
         if not_movable:
             raise RobotModelError(

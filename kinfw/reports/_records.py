@@ -1,8 +1,9 @@
 """The records the calibration sidecar (:mod:`kinfw.reports`) and the
 calibration report (:mod:`kinfw.reports`) share: :class:`DataProvenance`,
-:class:`ModelSummary`, :class:`NoiseSummary`, :class:`CalibratedUnknown`,
-:class:`ErrorValue` and :class:`BeforeAfter`, each with ``to_dict`` / ``from_dict`` (SI
-inside; a field name says ``mm`` or ``deg`` where a value in the file is not SI)."""
+:class:`ModelSummary`, :class:`GuardSummary`, :class:`NoiseSummary`,
+:class:`CalibratedUnknown`, :class:`ErrorValue` and :class:`BeforeAfter`, each with
+``to_dict`` / ``from_dict`` (SI inside; a field name says ``mm`` or ``deg`` where a value
+in the file is not SI)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ __all__ = [
     "CalibratedUnknown",
     "DataProvenance",
     "ErrorValue",
+    "GuardSummary",
     "ModelSummary",
     "NoiseSummary",
     "headline",
@@ -131,6 +133,66 @@ class ModelSummary:
             None if mm is None else 1e-3 * mm,
             None if deg is None else math.radians(deg),
             reader.string(doc, "reason", at),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class GuardSummary:
+    """The plausibility guard's outcome on a written calibration
+    (:func:`kinfw.identification.checks.plausibility`).
+
+    Attributes
+    ----------
+    bound_m, bound_rad : float
+        The bound on a joint origin's, a mount's or the root's move (m) and turn (rad).
+    why : str
+        How the bound was set (the prior, the floor, the robot's size, or given).
+    prior_bounds : str
+        What the chosen prior bounds (the CPC parameters' deviations, not the URDF's
+        origins), or that there was none.
+    largest : str or None
+        The change of the largest ratio, in words; None when nothing changed.
+    largest_ratio : float
+        Its ratio to the bound (beyond it above 1).
+    beyond : tuple of str
+        The changes beyond the bound, in words, largest first.
+    allowed : bool
+        They were written knowingly (``--allow-large-changes``).
+    """
+
+    bound_m: float
+    bound_rad: float
+    why: str
+    prior_bounds: str
+    largest: str | None
+    largest_ratio: float
+    beyond: tuple[str, ...] = ()
+    allowed: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "bound_mm": 1e3 * self.bound_m,
+            "bound_deg": math.degrees(self.bound_rad),
+            "why": self.why,
+            "prior_bounds": self.prior_bounds,
+            "largest": self.largest,
+            "largest_ratio": self.largest_ratio,
+            "beyond": list(self.beyond),
+            "large_changes_allowed": self.allowed,
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, reader: DocReader, at: str) -> GuardSummary:
+        doc = reader.obj(doc, at)
+        return cls(
+            1e-3 * reader.number(doc, "bound_mm", at),
+            math.radians(reader.number(doc, "bound_deg", at)),
+            reader.string(doc, "why", at),
+            reader.string(doc, "prior_bounds", at),
+            reader.string(doc, "largest", at, optional=True),
+            reader.number(doc, "largest_ratio", at),
+            reader.strings(doc, "beyond", at),
+            reader.boolean(doc, "large_changes_allowed", at),
         )
 
 

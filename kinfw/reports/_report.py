@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 
 from kinfw.files import json_text, write_text_atomic
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._records import BeforeAfter, DataProvenance, ErrorValue, headline
+from kinfw.reports._records import BeforeAfter, DataProvenance, ErrorValue, GuardSummary, headline
 from kinfw.reports._refine import (
     Correlation,
     DownweightedRow,
@@ -272,6 +272,8 @@ class CalibrationReport:
         worst images named, against the calibration.
     reprojection_held_out : ReprojectionSection or None
         The same on held-out images (``kinfw demo --pixels``: fresh configurations).
+    guard : GuardSummary or None
+        The plausibility guard's bound and outcome (absent in reports written before it).
 
     In the file, the stage tables are one key per headline metric: the groups whose
     first metric is a position under ``position_rms_mm_by_stage``, image points under
@@ -300,6 +302,7 @@ class CalibrationReport:
     reprojection: ReprojectionSection | None = None
     reprojection_held_out: ReprojectionSection | None = None
     rms_by_stage_without_rejected: tuple[StageErrors, ...] | None = None
+    guard: GuardSummary | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration-report"
     VERSION: ClassVar[int] = 1
@@ -342,6 +345,8 @@ class CalibrationReport:
             doc["reprojection_px_held_out"] = self.reprojection_held_out.to_dict()
         if self.rms_by_stage_without_rejected is not None:
             doc.update(_stages_to_dict(self.rms_by_stage_without_rejected, _KEPT))
+        if self.guard is not None:
+            doc["guard"] = self.guard.to_dict()
         return doc
 
     @classmethod
@@ -384,6 +389,7 @@ class CalibrationReport:
             section("reprojection_px", ReprojectionSection),
             section("reprojection_px_held_out", ReprojectionSection),
             _stages_from(doc, _KEPT, r),
+            section("guard", GuardSummary),
         )
 
 

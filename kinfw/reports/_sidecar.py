@@ -37,6 +37,7 @@ from kinfw.reports._records import (
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
+    GuardSummary,
     ModelSummary,
     NoiseSummary,
     read_only_array,
@@ -91,6 +92,9 @@ class CalibrationSidecar:
     model : ModelSummary or None
         The refinement's parameter set and prior, and why (None without the refinement,
         and in files written before it was recorded).
+    guard : GuardSummary or None
+        The plausibility guard's bound and outcome, and whether large changes were
+        allowed (None in files written before it was recorded).
     """
 
     created: str
@@ -108,6 +112,7 @@ class CalibrationSidecar:
     errors_held_out: tuple[BeforeAfter, ...] | None = None
     model: ModelSummary | None = None
     calibrated_urdf_sha256: str | None = None
+    guard: GuardSummary | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -186,7 +191,7 @@ class CalibrationSidecar:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (``kinfw-calibration`` v1)."""
-        return {
+        doc = {
             "format": self.FORMAT,
             "version": self.VERSION,
             "created": self.created,
@@ -210,7 +215,12 @@ class CalibrationSidecar:
             "errors_held_out": None
             if self.errors_held_out is None
             else [row.to_dict() for row in self.errors_held_out],
-        } | ({} if self.model is None else {"model": self.model.to_dict()})
+        }
+        return (
+            doc
+            | ({} if self.model is None else {"model": self.model.to_dict()})
+            | ({} if self.guard is None else {"guard": self.guard.to_dict()})
+        )
 
     @classmethod
     def from_dict(cls, doc: Any, source: str = "<memory>") -> CalibrationSidecar:
@@ -237,6 +247,7 @@ class CalibrationSidecar:
             )
         held_out = r.value(doc, "errors_held_out", "", optional=True)
         model = r.value(doc, "model", "", optional=True)
+        guard = r.value(doc, "guard", "", optional=True)
         return cls(
             created=r.string(doc, "created", ""),
             kinfw_version=r.string(doc, "kinfw_version", ""),
@@ -258,6 +269,7 @@ class CalibrationSidecar:
             if held_out is None
             else BeforeAfter.rows_from(held_out, r, "errors_held_out"),
             model=None if model is None else ModelSummary.from_dict(model, r, "model"),
+            guard=None if guard is None else GuardSummary.from_dict(guard, r, "guard"),
             source=source,
         )
 

@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.identification import Calibration, calibrate
-from kinfw.identification.checks import InsufficientDataError
+from kinfw.identification.checks import ChangeBound, InsufficientDataError, fit_plausibility
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements, drop_duplicate_samples
 from kinfw.model import BlockKey, Robot
@@ -342,6 +342,7 @@ def _score(
     noise,
     loss,
     prior,
+    bound: ChangeBound | None = None,
 ) -> FoldScore | str:
     """Train with one parameter set, score on the held-out fold (``test_ids``: the
     original indices of the test samples); the refusal's message when the training fold
@@ -352,13 +353,15 @@ def _score(
         # the caller; every fold would repeat them with its own numbers
         warnings.simplefilter("ignore", UserWarning)
         try:
-            result = (
-                _chosen_fit(nominal, train, noise, loss)
-                if parameters == AUTO
-                else calibrate(
+            if parameters == AUTO:
+                result, chosen = _chosen_fit(nominal, train, noise, loss)
+                refused = _implausible(nominal, result, train, chosen, bound)
+                if refused:  # kinfw calibrate would not write it
+                    return refused
+            else:
+                result = calibrate(
                     nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
                 )
-            )
         except InsufficientDataError as exc:  # this set on this fold: said by the caller
             return str(exc)
         except ValueError as exc:  # the model choice on a fold too small to choose
@@ -389,26 +392,51 @@ def _score(
     )
 
 
-def _chosen_fit(nominal: Robot, train: Measurements, noise, loss) -> Calibration:
-    """What ``kinfw calibrate``'s default fits on ``train``: the model choice's set and
-    prior (:func:`kinfw.verification.evaluation.choose_parameters`), scored after all when
-    the training data would take ``"full"`` unscored but refuse it (one plane's contacts)."""
+def _implausible(
+    nominal: Robot,
+    result: Calibration,
+    train: Measurements,
+    prior: tuple[float, float] | None,
+    bound: ChangeBound | None,
+) -> str | None:
+    """The plausibility guard's refusal of the default's fit on a training fold, as
+    ``kinfw calibrate`` would refuse to write it
+    (:func:`kinfw.identification.checks.fit_plausibility`); None when plausible."""
+    calibrated = Robot(result.urdf_xml, "<calibrated>")
+    verdict = fit_plausibility(nominal, calibrated, train, prior, bound=bound)
+    if verdict.plausible:
+        return None
+    return (
+        f"implausible calibration: {verdict.beyond[0].text()}, beyond the bound "
+        f"{verdict.bound_text()} (kinfw calibrate would not write it)"
+    )
+
+
+def _chosen_fit(
+    nominal: Robot, train: Measurements, noise, loss
+) -> tuple[Calibration, tuple[float, float] | None]:
+    """What ``kinfw calibrate``'s default fits on ``train``, and with which prior: the
+    model choice's set and prior (:func:`kinfw.verification.evaluation.choose_parameters`),
+    scored after all when the training data would take ``"full"`` unscored but refuse it
+    (one plane's contacts)."""
     from kinfw.verification.evaluation._model_choice import choose_parameters
 
     choice = choose_parameters(nominal, train, noise=noise, loss=loss)
     if choice.fit is not None:
-        return choice.fit
+        return choice.fit, choice.prior
     try:
-        return calibrate(
+        fit = calibrate(
             nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
         )
+        return fit, choice.prior
     except InsufficientDataError:
         if choice.k > 0:
             raise
     choice = choose_parameters(nominal, train, noise=noise, loss=loss, cross_validate=True)
-    return choice.fit or calibrate(
+    fit = choice.fit or calibrate(
         nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
     )
+    return fit, choice.prior
 
 
 def _warnings(cv_scores: list[FoldScore], sets: tuple[str, ...], loss: str) -> list[str]:
@@ -469,6 +497,7 @@ def crossvalidate(
     exclude_flagged: bool = False,
     reference: Calibration | None = None,
     keep_duplicates: bool = False,
+    change_bound: ChangeBound | None = None,
 ) -> CrossValidation:
     """k-fold cross-validation of the pipeline for each parameter set in ``sets``.
 
@@ -482,7 +511,9 @@ def crossvalidate(
     sets : tuple of str, optional
         Parameter sets (see :func:`kinfw.identification.refine`), or :data:`AUTO`
         (``"auto"``: ``kinfw calibrate``'s default, the model choice on each training
-        fold; ``prior`` does not apply to it); default :data:`BASELINES` and
+        fold; ``prior`` does not apply to it; a fold's fit beyond the plausibility guard's
+        bound, which ``kinfw calibrate`` would not write, leaves the set unscored with a
+        warning that says so); default :data:`BASELINES` and
         :data:`AUTO`, with ``select`` :data:`SELECTION_SETS` (``kinfw crossval
         [--select]``).
     select : bool
@@ -511,6 +542,9 @@ def crossvalidate(
         they are dropped first, with one ``UserWarning`` naming them
         (:func:`kinfw.measurements.drop_duplicate_samples`): a copy in a test fold of a
         training sample would be scored in-sample.
+    change_bound : ChangeBound, optional
+        The plausibility guard's rule for the default's fits (``--max-change-mm``,
+        ``--max-change-deg``; default :class:`kinfw.identification.checks.ChangeBound`).
     """
     if not keep_duplicates:
         data = drop_duplicate_samples(data, stacklevel=3)
@@ -527,7 +561,7 @@ def crossvalidate(
         excluded = rejected_keys(reference)
         scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
     tasks = [
-        (nominal, train, test, test_ids, parameters, f, noise, loss, prior)
+        (nominal, train, test, test_ids, parameters, f, noise, loss, prior, change_bound)
         for f, (train, test, test_ids) in enumerate(_folds(data, scored, k, seed))
         for parameters in sets
     ]

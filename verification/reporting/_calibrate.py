@@ -22,7 +22,11 @@ from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path
 from kinfw.identification import Calibration
 from kinfw.identification.checks import (
+    ChangeBound,
+    ImplausibleCalibrationError,
     InsufficientDataError,
+    Plausibility,
+    fit_plausibility,
     implausible_noise,
     stated_noise,
     target_scale,
@@ -38,6 +42,11 @@ from kinfw.model import Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
+from kinfw.verification.reporting._guard import (
+    guard_summary,
+    implausible_message,
+    nominal_misfit,
+)
 from kinfw.verification.reporting._report import calibration_report, file_sha256, sidecar
 
 __all__ = [
@@ -226,6 +235,12 @@ class CalibrationResult:
     inputs : mapping of str to str
         The files read (nominal URDF, data, held-out data) that :meth:`write` refuses to
         overwrite; in-memory sources (``"<...>"``) are skipped.
+    plausibility : Plausibility or None
+        The plausibility guard's verdict on the calibrated URDF (its record is the
+        report's ``guard``).
+    refusal : str or None
+        The guard's error when a change is beyond its bound and large changes were not
+        allowed: :meth:`write` raises it before writing anything. None otherwise.
     """
 
     robot: Robot
@@ -237,6 +252,8 @@ class CalibrationResult:
     intrinsics: IntrinsicsEvidence | None
     nominal: Robot
     inputs: Mapping[str, str]
+    plausibility: Plausibility | None = None
+    refusal: str | None = None
 
     def write(self, path: str | Path) -> CalibrationReport:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
@@ -253,10 +270,15 @@ class CalibrationResult:
         kinfw.files.OutputPathError
             Before anything is written: a path is one of :attr:`inputs`, or cannot be
             written (missing directory, a directory, not writable).
+        kinfw.identification.checks.ImplausibleCalibrationError
+            Before anything is written: the plausibility guard tripped (:attr:`refusal`)
+            and large changes were not allowed.
         """
         from kinfw.reports import write_sidecar
         from kinfw.urdf import write_urdf
 
+        if self.refusal is not None:
+            raise ImplausibleCalibrationError(self.refusal)
         path = Path(path)
         check_outputs({"URDF": path, "sidecar": sidecar_path(path)}, inputs=self.inputs)
         nominal_path = None if self.nominal.source.startswith("<") else self.nominal.source
@@ -266,6 +288,7 @@ class CalibrationResult:
             nominal_path=nominal_path,
             calibrated_path=path,
             model=self.model,
+            guard=self.report.guard,
         )
         write_urdf(path, self.urdf_xml)
         side = replace(side, calibrated_urdf_sha256=file_sha256(path))
@@ -469,6 +492,8 @@ def calibrate_and_report(
     refine_intrinsics: bool | tuple[str, ...] = (),
     data_path: str | Path | None = None,
     keep_duplicates: bool = False,
+    change_bound: ChangeBound | None = None,
+    allow_large_changes: bool = False,
 ) -> CalibrationResult:
     """Calibrate ``nominal`` from ``data`` as ``kinfw calibrate`` does (the same
     defaults), and report: :func:`kinfw.calibrate`.
@@ -509,12 +534,21 @@ def calibrate_and_report(
         they are dropped before anything else, with one ``UserWarning`` naming them
         (:func:`kinfw.measurements.drop_duplicate_samples`): a sample recorded twice
         would count twice and shrink every sigma by 1/sqrt(2).
+    change_bound : ChangeBound, optional
+        The plausibility guard's rule (default
+        :class:`kinfw.identification.checks.ChangeBound`: the larger of 5 x the prior
+        and 20 mm / 2 deg, a move never above 5 % of the robot's size).
+    allow_large_changes : bool
+        Write a calibration beyond the guard's bound knowingly (``--allow-large-changes``):
+        warned about, and the report and sidecar say so.
 
     Returns
     -------
     CalibrationResult
         The calibrated robot and URDF, the report; :meth:`CalibrationResult.write`
-        writes the URDF and sidecar.
+        writes the URDF and sidecar, or raises the guard's error
+        (:attr:`CalibrationResult.refusal`) when a joint origin, a mount or a stance
+        link's pose in the root changed beyond the bound.
 
     Raises
     ------
@@ -573,6 +607,16 @@ def calibrate_and_report(
     # (whose warnings the choice silences)
     candidate = choice is not None and result is choice.fit
     restricted = parameters != "full" or prior is not None or candidate
+    report, verdict, refusal = _guarded(
+        nominal,
+        calibrated,
+        data,
+        report,
+        prior,
+        bound=change_bound,
+        allowed=allow_large_changes,
+    )
+    restricted = parameters != "full" or prior is not None  # full alone: warned in the fit
     implausible = (
         implausible_noise(result.refined, data)
         if restricted and result.refined is not None
@@ -598,5 +642,51 @@ def calibrate_and_report(
     if held_out is not None:
         sources["held-out data"] = held_out.source
     return CalibrationResult(
-        calibrated, result.urdf_xml, report, result, model, choice, evidence, nominal, sources
+        calibrated,
+        result.urdf_xml,
+        report,
+        result,
+        model,
+        choice,
+        evidence,
+        nominal,
+        sources,
+        verdict,
+        refusal,
     )
+
+
+def _guarded(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    report: CalibrationReport,
+    prior: tuple[float, float] | None,
+    *,
+    bound: ChangeBound | None,
+    allowed: bool,
+) -> tuple[CalibrationReport, Plausibility, str | None]:
+    """The plausibility guard on a calibration: ``(report, verdict, refusal)``, the
+    report with the guard's record (and, when large changes were allowed, a note and a
+    warning that say so), the verdict, and the error :meth:`CalibrationResult.write`
+    raises (None when plausible or allowed)."""
+    verdict = fit_plausibility(nominal, calibrated, data, prior, bound=bound)
+    report = dataclasses.replace(report, guard=guard_summary(verdict, prior, allowed=allowed))
+    if verdict.plausible:
+        return report, verdict, None
+    message = implausible_message(
+        data.source,
+        nominal,
+        verdict,
+        misfit=nominal_misfit(report.errors_in_sample, verdict),
+        refine=report.refine,
+    )
+    if not allowed:
+        return report, verdict, message
+    top = verdict.beyond[0]
+    note = (
+        f"large changes allowed (--allow-large-changes): {top.text()}, beyond the bound "
+        f"{verdict.bound_text()}"
+    )
+    warnings.warn(f"{data.source}: {note}", UserWarning, stacklevel=3)
+    return dataclasses.replace(report, notes=(*report.notes, note)), verdict, None

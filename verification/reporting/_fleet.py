@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from kinfw.files import check_output_dir, json_text, write_text_atomic
+from kinfw.identification.checks import ImplausibleCalibrationError
 from kinfw.measurements import Measurements, mounted_robot, read_measurements
 from kinfw.model import Robot, load_robot
 from kinfw.reports import BeforeAfter, ErrorValue, ModelSummary, write_report
@@ -297,7 +298,9 @@ class FleetResult:
 def _error_text(exc: Exception) -> str:
     """A user error's message (ValueError, OSError: bad files or data), else the type
     too (an unexpected error)."""
-    text = " ".join(str(exc).split())
+    # an error of a first line and details (the plausibility guard's): the first line,
+    # the details are kinfw calibrate's on that robot
+    text = " ".join((str(exc).strip().splitlines() or [""])[0].split())
     return text if isinstance(exc, ValueError | OSError) else f"{type(exc).__name__}: {text}"
 
 
@@ -348,6 +351,8 @@ def _write(member: FleetMember, result: CalibrationResult, folder: Path) -> None
     # the data file's SHA-256 is taken here, where the file is (a worker may not see it)
     provenance = dataclasses.replace(result.report.data, sha256=file_sha256(member.data))
     result = dataclasses.replace(result, report=dataclasses.replace(result.report, data=provenance))
+    if result.refusal is not None:  # the plausibility guard: refused, its folder not made
+        raise ImplausibleCalibrationError(result.refusal)
     folder.mkdir(parents=True, exist_ok=True)
     report = result.write(folder / CALIBRATED_URDF)
     write_report(folder / REPORT, report)

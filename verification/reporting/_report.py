@@ -27,6 +27,7 @@ from kinfw.reports import (
     DataProvenance,
     ExportSection,
     GroupErrorSummary,
+    GuardSummary,
     ModelSummary,
     StageErrors,
     before_after,
@@ -251,11 +252,13 @@ def sidecar(
     nominal_path: str | Path | None,
     calibrated_path: str | Path,
     model: ModelSummary | None = None,
+    guard: GuardSummary | None = None,
 ) -> CalibrationSidecar:
     """The provenance written beside a calibrated URDF: what produced it and what is
     needed to predict measurements that is not in the URDF (the root's pose in the
     measurement frame, target poses, markers, noise), and the model the refinement
-    fitted (``model``; dropped without a refinement)."""
+    fitted (``model``; dropped without a refinement) and the plausibility guard's
+    outcome (``guard``)."""
     refined = calibration.refined
     return CalibrationSidecar(
         created=report.created,
@@ -274,6 +277,7 @@ def sidecar(
         else tuple(calibration.cameras.root_T_targets),
         errors_held_out=report.errors_held_out,
         model=None if refined is None else model,
+        guard=guard,
     )
 
 

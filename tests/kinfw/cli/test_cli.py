@@ -1,6 +1,7 @@
 """The kinfw command line: simulate -> verify round trip, and user errors (exit 2)."""
 
 import json
+import math
 import re
 import subprocess
 import sys
@@ -10,11 +11,16 @@ import pinocchio as pin
 import pytest
 
 from kinfw.cli._main import main
+from kinfw.identification.checks import ChangeBound
 from kinfw.measurements import read_measurements
 from tests.paths import HEAD_URDF
 from tests.robots import ARM_6R
 
 HEAD = HEAD_URDF
+#: The plausibility guard's bound for the demo's true head, 5 mm / 1 deg off per axis
+_DEMO = ChangeBound.for_known_error(5e-3, math.radians(1.0))
+DEMO_BOUND_ARGS = ("--max-change-mm", str(1e3 * _DEMO.max_m))
+DEMO_BOUND_ARGS += ("--max-change-deg", str(math.degrees(_DEMO.max_rad)))
 
 
 def _run(argv, capsys):
@@ -203,6 +209,7 @@ def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, 
         capsys,
     )
     assert code == 0
+    bound = ChangeBound.for_known_error(20e-3, math.radians(3.0))  # the truth's error
     code, out, _ = _run(
         [
             "calibrate",
@@ -213,6 +220,10 @@ def test_calibrate_noise_free_recovers_the_truth_far_from_the_nominal(tmp_path, 
             tmp_path / "cal.urdf",
             "--report",
             tmp_path / "r.json",
+            "--max-change-mm",
+            1e3 * bound.max_m,
+            "--max-change-deg",
+            math.degrees(bound.max_rad),
         ],
         capsys,
     )
@@ -276,6 +287,7 @@ def test_random_configurations_need_the_refinement(tmp_path, capsys):
             "--out",
             tmp_path / "cal.urdf",
             "--json",
+            *DEMO_BOUND_ARGS,
         ],
         capsys,
     )
@@ -452,7 +464,17 @@ def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
     code, out, _ = _run(
-        ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", "--json"], capsys
+        [
+            "crossval",
+            tmp_path / "data.json",
+            "--urdf",
+            HEAD,
+            "--k",
+            "3",
+            "--json",
+            *DEMO_BOUND_ARGS,
+        ],
+        capsys,
     )
     assert code == 0
     cv = json.loads(out)
@@ -461,6 +483,16 @@ def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     assert len(cv["folds"]) == 3 * 4  # nominal, frames, full and the default
     assert means["auto"] == means["full"]  # plentiful data: the default fits full
     code, out, _ = _run(
-        ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", "--select"], capsys
+        [
+            "crossval",
+            tmp_path / "data.json",
+            "--urdf",
+            HEAD,
+            "--k",
+            "3",
+            "--select",
+            *DEMO_BOUND_ARGS,
+        ],
+        capsys,
     )
     assert code == 0 and "selected: full ('full')" in out

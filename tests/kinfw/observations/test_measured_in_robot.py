@@ -237,6 +237,10 @@ def test_real_tiago_eye_hand_session_converts_and_calibrates(tmp_path, capsys):
     # the fitted model's own board constancy, by Pinocchio on its URDF, equals the fit
     calibrated = tmp_path / "calibrated.urdf"
     argv = ["calibrate", str(out), "--urdf", str(TIAGO), "--params", "frames"]
+    # 12 samples of 15 mm / 3 deg noise move the camera's mount 31 mm / 2.3 deg: beyond the
+    # plausibility guard's 20 mm / 2 deg (the data's camera frame is in doubt, README of
+    # tests/data/tiago_figaroh), written knowingly to check the fit
+    argv += ["--allow-large-changes"]
     assert main([*argv, "--out", str(calibrated)]) == 0
     pos_fit, _ = _board_constancy(load_robot(calibrated), data)
     assert pos_fit < pos_nominal
