@@ -174,6 +174,25 @@ def _check_lengths(motion: float, view: float, source: str) -> None:
                 )
 
 
+def _check_setup(
+    H: NDArray, S: NDArray, setup: str, source: str, score: float, i: NDArray, j: NDArray
+) -> None:
+    """Refuse pairs that fit ``A X = X B`` as read only in the other setup (eye-to-hand
+    pairs read as eye-in-hand: the hand's poses enter inverted), naming it; ``score`` is
+    the setup's own, as read."""
+    if score <= BAD_SCORE:
+        return
+    other = "eye-in-hand" if setup == "eye-to-hand" else "eye-to-hand"
+    A = inverse_transform(H) if other == "eye-to-hand" else H
+    fits = _motion_score(A, S, i, j)
+    if fits < BETTER_FACTOR * score and fits <= BAD_SCORE:
+        raise DatasetError(
+            f"{source}: the pose pairs look {other}, read as {setup}: give --setup {other}\n"
+            f"as {other}, the poses fit A X = X B (mean relative discrepancy {fits:.2g}; "
+            f"as {setup} {score:.2g})"
+        )
+
+
 def check_pose_pair_data(
     base_T_hands: ArrayLike,
     sensor_T_targets: ArrayLike,
@@ -209,8 +228,8 @@ def check_pose_pair_data(
     Raises
     ------
     DatasetError
-        The poses fit ``A X = X B`` only with some quaternions read scalar first
-        (naming the sides, the scores and the fix).
+        The poses fit ``A X = X B`` only in the other setup (naming it), or only with
+        some quaternions read scalar first (naming the sides, the scores and the fix).
     UnitError
         The lengths look like millimetres read as metres, or the reverse, or mix the two
         (naming the medians and the fix).
@@ -232,6 +251,7 @@ def check_pose_pair_data(
         A = inverse_transform(h) if setup == "eye-to-hand" else h
         scores.append(_motion_score(A, s, i, j))
     best = int(np.argmin(scores))
+    _check_setup(H, S, setup, source, scores[0], i, j)
     if best and scores[0] > BAD_SCORE and scores[best] < BETTER_FACTOR * scores[0]:
         sides = " and ".join(readings[best])
         raise DatasetError(

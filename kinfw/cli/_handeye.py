@@ -283,6 +283,7 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         frames=(mount_frame, args.camera_frame),
         keep_duplicates=args.keep_duplicates,
     )
+    _warn_target_scale(pairs, calibration)  # a board of the wrong size, named first
     check_mount(args, calibration)  # the plausibility guard, before anything is written
     k = args.k or (DEFAULT_K if args.method and holdout is None else None)
     if k is not None and k > len(pairs):
@@ -313,6 +314,36 @@ def cmd_handeye(args: argparse.Namespace) -> int:
         if len(rows) > 1 or holdout is not None or k:
             _print_table(rows, calibration.mount_name, holdout is not None, k)
     return 0
+
+
+def _warn_target_scale(pairs, calibration) -> None:
+    """Warn when the sensor's target translations follow the hand's motion at a scale
+    other than 1 (:func:`kinfw.identification.handeye.translation_scale`: a board given
+    the wrong square size), beyond :class:`kinfw.identification.checks.TargetScale`'s
+    rule; the hand-eye solve absorbs such a factor into the mount and the target."""
+    import numpy as np
+
+    from kinfw.identification.checks import TargetScale
+    from kinfw.identification.handeye import translation_scale
+
+    hands = pairs.base_T_hands
+    if calibration.setup == "eye-in-hand":  # the camera rides on the hand
+        links, targets = hands, None
+        rotations = hands[:, :3, :3] @ calibration.mount_T_camera[:3, :3]
+    else:  # a static camera in the base, the target on the hand
+        links, targets = np.tile(np.eye(4), (len(hands), 1, 1)), hands
+        rotations = np.tile(calibration.mount_T_camera[:3, :3], (len(hands), 1, 1))
+    found = translation_scale(
+        base_T_links=links,
+        base_R_cameras=rotations,
+        camera_p_targets=pairs.sensor_T_targets[:, :3, 3],
+        base_T_target_links=targets,
+    )
+    if found is None:
+        return
+    scale = TargetScale(calibration.camera_frame, "target", found[0], found[1], len(hands))
+    if scale.off:
+        warnings.warn(f"{pairs.source}: {scale.message()}", UserWarning, stacklevel=2)
 
 
 def _errors(e) -> dict | None:

@@ -140,3 +140,31 @@ def test_a_measurement_file_in_mm_read_as_m_and_its_duplicates(tmp_path, capsys)
     write_measurements(tmp_path / "mm.json", m)
     code, _, stderr = run_cli(["-q", "handeye", tmp_path / "mm.json", "--urdf", urdf], capsys)
     assert code == 2 and "look like millimetres read as metres" in stderr
+
+
+@pytest.mark.parametrize("setup", ["eye-in-hand", "eye-to-hand"])
+def test_a_board_of_the_wrong_size_is_named_with_its_factor(tmp_path, capsys, setup):
+    """Target translations 1.25 times too long (a square of 0.05 m given for 0.04): the
+    true ones are 0.8 times the measured; exact pairs say so, the true size says nothing."""
+    p = _pairs(4, 15, setup, noise=2e-4)
+    right = _write(tmp_path / "right.csv", p, "csv")  # a CSV does not record the setup
+    code, _, stderr = run_cli(["-q", "handeye", right, "--setup", setup], capsys)
+    assert code == 0 and "stated size" not in stderr, stderr
+    long = p.sensor_T_targets.copy()
+    long[:, :3, 3] *= 1.25
+    wrong = _write(tmp_path / "wrong.csv", PosePairs(p.base_T_hands, long, "x", setup), "csv")
+    code, _, stderr = run_cli(["-q", "handeye", wrong, "--setup", setup], capsys)
+    assert f"{wrong}: target 'target' seen by 'camera_link' looks " in stderr, stderr
+    factor = float(stderr.split(" looks ")[1].split(" times")[0])
+    assert factor == pytest.approx(0.8, abs=0.005)
+
+
+def test_eye_to_hand_pairs_read_as_eye_in_hand_are_named(tmp_path, capsys):
+    """A CSV records no setup: eye-to-hand pairs read with the default (eye-in-hand) fit
+    A X = X B only with the hand's poses inverted, which the error says (it blamed the
+    quaternions' order)."""
+    path = _write(tmp_path / "e2h.csv", _pairs(4, 15, "eye-to-hand", noise=2e-4), "csv")
+    code, _, stderr = run_cli(["-q", "handeye", path], capsys)
+    assert code == 2
+    assert f"{path}: the pose pairs look eye-to-hand, read as eye-in-hand" in stderr
+    assert "give --setup eye-to-hand" in stderr and "scalar-first" not in stderr
