@@ -340,6 +340,7 @@ def plausibility(
     stance: Sequence[str] = (),
     root_measured: bool = True,
     measured: Sequence[str] | None = None,
+    unknown: Sequence[str] = (),
     tol: float = 1e-9,
 ) -> Plausibility:
     """What ``calibrated`` changed against ``nominal``, in the URDF's own terms, against
@@ -371,6 +372,10 @@ def plausibility(
         from the root are judged (:func:`_seen`), as the calibration changes only those
         (the export re-expresses the others under a moved link, where they keep their
         place). Default: every joint.
+    unknown : sequence of str
+        Joints whose ``<origin>`` in ``nominal`` is a start, not a nominal (a mounted
+        frame the data gave no pose for: :func:`fit_plausibility`), not judged, as the
+        URDF's placeholders are.
     tol : float
         A joint counts as changed when its move (m) or turn (rad) exceeds it.
 
@@ -413,7 +418,7 @@ def plausibility(
     written = {c.joint for c in origin_changes(nominal, calibrated, tol=tol)}
     if measured is not None:
         written &= _seen(nominal, measured)
-    placeholders = set(nominal.placeholder_joints)  # no nominal to compare with
+    placeholders = {*nominal.placeholder_joints, *unknown}  # no nominal to compare with
     for joint in nominal.joints:
         if joint.name not in written or joint.child not in after or _base_mount(nominal, joint):
             continue
@@ -510,8 +515,15 @@ def fit_plausibility(
     (:func:`plausibility`): every joint and mount on the paths of the frames the data
     observe; the pose in the root of each link the data are measured in
     (:func:`stance_links`); the first joints judged in the root only when the data measure
-    the robot there (:func:`root_measured`)."""
+    the robot there (:func:`root_measured`). A frame the data mount at the identity
+    (``Measurements.mounts``: a pose unknown, which the hand-eye stage starts from the
+    data) has no nominal, and its joint is not judged."""
     frames = {f for g in data.all_groups() for f in kind_of(g).frames(g)}
+    starts = {
+        j.name
+        for j in nominal.joints
+        if j.child in data.mounts and np.array_equal(data.mounts[j.child].parent_T_frame, np.eye(4))
+    }
     return plausibility(
         nominal,
         calibrated,
@@ -520,4 +532,5 @@ def fit_plausibility(
         stance=stance_links(nominal, data),
         root_measured=root_measured(nominal, data),
         measured=(*frames, *stance_links(nominal, data)),
+        unknown=tuple(starts),
     )

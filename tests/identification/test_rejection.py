@@ -213,6 +213,7 @@ def test_the_clean_tail_is_told_apart_from_a_gross_error(head, truth, tmp_path, 
     from kinfw.measurements import write_measurements
     from kinfw.reports import read_report
     from tests.cli_run import run_cli
+    from tests.kinfw.cli.test_cli import DEMO_BOUND_ARGS
     from tests.paths import HEAD_URDF
 
     data = _with_bad_pose(plate_data(truth, 150, 13), 17, np.array([0.0, 0.07, 0.0]))
@@ -223,6 +224,7 @@ def test_the_clean_tail_is_told_apart_from_a_gross_error(head, truth, tmp_path, 
     write_measurements(tmp_path / "data.json", data)
     argv = ["calibrate", tmp_path / "data.json", "--urdf", HEAD_URDF, "--params", "full"]
     argv += ["--out", tmp_path / "cal.urdf", "--report", tmp_path / "report.json"]
+    argv += DEMO_BOUND_ARGS  # the guard's bound for the truth's 5 mm / 1 deg error
     code, out, _ = run_cli(argv, capsys)
     assert code == 0
     assert f"  rejected as a gross error: samples[{gross.sample}] " in out

@@ -616,7 +616,6 @@ def calibrate_and_report(
         bound=change_bound,
         allowed=allow_large_changes,
     )
-    restricted = parameters != "full" or prior is not None  # full alone: warned in the fit
     implausible = (
         implausible_noise(result.refined, data)
         if restricted and result.refined is not None

@@ -18,6 +18,7 @@ from kinfw.cli._main import main
 from kinfw.geometry import inverse_transform
 from kinfw.model import load_robot
 from kinfw.simulation import render_board
+from tests.cli_run import without_dirs
 from tests.kinfw.cli.test_handeye_images import BOARD, CAMERA, HAND_T_CAMERA, NAMES, Q0, _in_view
 from tests.robots import ARM_6R
 
@@ -87,8 +88,11 @@ def test_a_wrong_board_size_moves_the_mount_beyond_the_bound_and_is_refused(
     wrong = _detected(images, WRONG)
     capsys.readouterr()
     assert _handeye(images, wrong, tmp_path / "wrong.yaml") == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert err[0].startswith("kinfw handeye: error: ") and len(err[0]) < 200
+    warning, *err = capsys.readouterr().err.strip().splitlines()
+    # first the cause: the target translations follow the hand's motion at 25/32 = 0.78
+    assert "seen by 'camera_link' looks " in warning
+    assert float(warning.split(" looks ")[1].split()[0]) == pytest.approx(25 / 32, abs=0.01)
+    assert err[0].startswith("kinfw handeye: error: ") and len(without_dirs(err[0])) < 200
     # the board 0.45 m away read 32/25 times its size: the camera 143 mm off (measured),
     # turned by less than 0.1 deg, against 20 mm / 2 deg
     moved = err[0].split("mount flange_T_camera_link ")[1].split()
