@@ -657,8 +657,9 @@ def _item_10_files(work: Path, plates: Path, files: dict[str, Path]) -> list[Row
     wrong = _scalar_first(plates, work / "plates_wxyz.json")
 
     def line_length(_code: int, _out: str, err: str) -> str:
-        first = _local(err.splitlines()[0], work)
-        return f"first line {len(first)} characters (in the folder, the path {wrong.name})"
+        lines = err.splitlines()
+        first = _local(next((x for x in lines if ": error: " in x), lines[0]), work)
+        return f"error line {len(first)} characters (in the folder, the path {wrong.name})"
 
     return [
         _kinfw_row(
