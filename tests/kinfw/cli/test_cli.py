@@ -463,36 +463,13 @@ def test_verify_uses_the_sidecar_and_gives_per_sample_errors(tmp_path, capsys):
 def test_crossval_command_prints_folds_and_selects(tmp_path, capsys):
     code, _, _ = _run(["demo", "--out", tmp_path, "--json"], capsys)
     assert code == 0
-    code, out, _ = _run(
-        [
-            "crossval",
-            tmp_path / "data.json",
-            "--urdf",
-            HEAD,
-            "--k",
-            "3",
-            "--json",
-            *DEMO_BOUND_ARGS,
-        ],
-        capsys,
-    )
+    crossval = ["crossval", tmp_path / "data.json", "--urdf", HEAD, "--k", "3", *DEMO_BOUND_ARGS]
+    code, out, _ = _run([*crossval, "--json"], capsys)
     assert code == 0
     cv = json.loads(out)
     means = cv["mean_position_rms_mm"]
     assert means["full"] < means["frames"] < means["none"]
     assert len(cv["folds"]) == 3 * 4  # nominal, frames, full and the default
     assert means["auto"] == means["full"]  # plentiful data: the default fits full
-    code, out, _ = _run(
-        [
-            "crossval",
-            tmp_path / "data.json",
-            "--urdf",
-            HEAD,
-            "--k",
-            "3",
-            "--select",
-            *DEMO_BOUND_ARGS,
-        ],
-        capsys,
-    )
+    code, out, _ = _run([*crossval, "--select"], capsys)
     assert code == 0 and "selected: full ('full')" in out
