@@ -29,6 +29,7 @@ from kinfw.model._cpc import (
     rotation_from_axis,
 )
 from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
+from kinfw.model._loads import STANDARD_GRAVITY, Payloads, gravity_torques, massless_links
 from kinfw.model._meshes import MissingMesh, mesh_dirs, resolve_meshes
 from kinfw.model._pose_chain import POSE_CHAIN_JOINTS, pose_chain_joint_values, pose_chain_urdf
 from kinfw.model._robot import (
@@ -57,6 +58,7 @@ __all__ = [
     "CPC_KEY",
     "MOVABLE_TYPES",
     "POSE_CHAIN_JOINTS",
+    "STANDARD_GRAVITY",
     "XACRO_NAMESPACE",
     "BaseBlock",
     "Block",
@@ -66,6 +68,7 @@ __all__ = [
     "JointInfo",
     "MissingMesh",
     "ParameterName",
+    "Payloads",
     "PointBlock",
     "RigidFrameBlock",
     "Robot",
@@ -87,7 +90,9 @@ __all__ = [
     "expand_xacro",
     "geometry_from_cpc",
     "geometry_from_robot",
+    "gravity_torques",
     "load_robot",
+    "massless_links",
     "mesh_dirs",
     "parse_joints",
     "perpendicular_basis",
