@@ -15,7 +15,7 @@ from __future__ import annotations
 import logging
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,7 +43,7 @@ from kinfw.measurements import (
     fixed_in_experiment,
     observed_joints,
 )
-from kinfw.model import Robot, check_robot, geometry_from_cpc
+from kinfw.model import ModelSpec, Robot, check_robot, geometry_from_cpc
 from kinfw.observations import DatasetError, evenly_spaced
 from kinfw.urdf import ExportResult, edit_urdf, export_urdf
 
@@ -78,6 +78,9 @@ class Calibration:
         The joint refinement (method ``refine``).
     notes : tuple of str
         Stages skipped and why.
+    spec : ModelSpec
+        What the URDF cannot hold, calibrated (the refinement's
+        :attr:`RefineResult.spec`): the URDF takes the joint values after its hooks.
     """
 
     urdf_xml: str
@@ -87,6 +90,7 @@ class Calibration:
     cameras: CamerasResult | None
     refined: RefineResult | None
     notes: tuple[str, ...]
+    spec: ModelSpec = field(default_factory=ModelSpec)
 
     @property
     def w_T_root(self) -> NDArray[np.float64]:
@@ -104,6 +108,7 @@ def calibrate(
     parameters: str | tuple[str, ...] = "full",
     prior: tuple[float, float] | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
+    model: ModelSpec | None = None,
 ) -> Calibration:
     """Calibrate ``nominal`` from ``data``.
 
@@ -140,6 +145,12 @@ def calibrate(
     refine_intrinsics : bool or tuple of str
         Cameras of ``pixels`` observations whose intrinsics the refinement estimates
         too (True: all; :func:`kinfw.identification.refine`).
+    model : ModelSpec, optional
+        Robot blocks the URDF cannot hold, estimated with the geometry by the
+        refinement (``--model compliance``, ``gear-scale:JOINT``...:
+        :class:`kinfw.model.ModelSpec`), instead of ``nominal``'s own
+        (:attr:`kinfw.model.Robot.spec`, empty for a URDF); their estimates are
+        :attr:`Calibration.spec`.
 
     Checks, before any estimation (each raises a :class:`DatasetError` naming the
     file, the joints or frames and the fix):
@@ -177,6 +188,13 @@ def calibrate(
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     progress.stage("checking the units")
     check_units(nominal, data)
+    if model:
+        if method != "refine":
+            raise ValueError(
+                f"model {', '.join(model.texts)}: robot blocks are estimated by the "
+                f"refinement; method {method!r} cannot (use method 'refine')"
+            )
+        nominal = nominal.with_spec(model)
     options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
     if method == "refine":
         progress.stage("checking that the data determine the parameters (start values)")
@@ -241,7 +259,10 @@ def calibrate(
         )
     for note in notes:
         log.info(note)
-    return Calibration(xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes))
+    spec = refined.spec if refined is not None else ModelSpec()
+    return Calibration(
+        xml, tuple(stages), closed_form, export, cameras, refined, tuple(notes), spec
+    )
 
 
 #: Samples per ``target`` or ``pixels`` group that the hand-eye stage sees when it only
@@ -286,7 +307,10 @@ def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions
     cameras_seen = {g.camera for g in (*data.targets, *data.groups("pixels"))}
     smaller = None
     if parameters == "full":
-        smaller = ("frames", build_problem(nominal, data, parameters="frames", prior=prior))
+        smaller = (
+            "frames",
+            build_problem(nominal, data, parameters="frames", prior=prior),
+        )
     check_redundancy(
         build_problem(
             nominal,

@@ -624,6 +624,7 @@ def _rated(fitted: _Fitted, loss: str) -> RefineResult:
         noise_settled=solution.settled,
         residual_noise=solution.said,
         w_T_base=problem.base_motion_at(x),
+        spec=problem.spec_at(x),
         cost=quality.cost,
         seconds=fitted.seconds + time.perf_counter() - t0,
     )

@@ -15,7 +15,7 @@ from kinfw.identification.problem import (
     RejectedObservation,
     Unknown,
 )
-from kinfw.model import CPCModel
+from kinfw.model import CPCModel, ModelSpec
 
 __all__ = ["RefineResult"]
 
@@ -95,6 +95,11 @@ class RefineResult:
         nor a stated sigma far off moves), for checking the stated one
         (:func:`kinfw.identification.checks.stated_noise`); None when the noise was
         estimated.
+    spec : ModelSpec
+        The model spec's blocks (compliance, gear scales, couplings: ``extra_blocks``
+        that are :class:`kinfw.model.SpecBlock` s) at their estimates: what stands beside
+        :attr:`model`, which takes the joint values after their hooks
+        (:meth:`kinfw.model.ModelSpec.joint_values`); empty without them.
     """
 
     model: CPCModel
@@ -120,6 +125,7 @@ class RefineResult:
     noise_settled: bool = True
     w_T_base: NDArray[np.float64] | None = None
     residual_noise: NoiseModel | None = None
+    spec: ModelSpec = field(default_factory=ModelSpec)
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -28,6 +28,7 @@ from kinfw.model import (
     CPC_KEY,
     Block,
     BlockKey,
+    BlockSamples,
     CPCModel,
     Robot,
     RobotBlock,
@@ -82,7 +83,10 @@ def build_problem(
     target poses ``root_T_target`` the same way. ``refine_intrinsics`` frees the
     intrinsics blocks (``BlockKey("intrinsics", camera)``, fixed by default) of the
     named cameras, or of every camera when True. ``extra_blocks`` are robot blocks
-    besides the CPC chart, base and zero offsets (:class:`kinfw.model.RobotBlock`).
+    besides the CPC chart, base and zero offsets (:class:`kinfw.model.RobotBlock`), after
+    the robot's own (:attr:`kinfw.model.Robot.spec`: a calibration's compliance...),
+    which an extra block of the same key replaces; each bound to these data
+    (:meth:`~kinfw.model.RobotBlock.for_data`) and fed its per-sample inputs.
     """
     measurements = check_against_robot(measurements, robot)
     start = robot if start is None else start
@@ -94,17 +98,22 @@ def build_problem(
     model_frame = _single_external_frame(groups, robot_in)
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
+    samples = BlockSamples(robot, tuple(model0.topology.joint_names), q_all)
+    extra = _bound_blocks(robot, extra_blocks, samples)
+    # the start values (an external frame's pose, targets...) at the joint values after
+    # the robot blocks' hooks: a calibration's compliance moves the frames by millimetres
+    q_start = _start_joint_values(extra, samples)
     given = _given_starts(known, targets)
     fitted_frame = []
     if model_frame is not None:
         model0 = express_in(
-            model0, measurements, q_all, model_frame, given.get(BlockKey("frame", model_frame))
+            model0, measurements, q_start, model_frame, given.get(BlockKey("frame", model_frame))
         )
         if BlockKey("frame", model_frame) not in given:
             fitted_frame.append(
                 (BlockKey("frame", model_frame), f"pose of the root link in {model_frame!r}")
             )
-    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_all, model_frame, given)
+    unknown, fitted = estimate_unknowns(measurements, groups, model0, q_start, model_frame, given)
     unknown = _free_intrinsics(unknown, refine_intrinsics, measurements.source)
     blocks = (
         *robot_blocks(
@@ -114,12 +123,12 @@ def build_problem(
             model_frame,
             parameters,
             with_prior=prior is not None,
-            extra=tuple(extra_blocks),
+            extra=extra,
         ),
         *unknown,
     )
     P = sum(b.size for b in blocks)
-    residual_groups = _residual_groups(model0, blocks, groups, model_frame, q_all)
+    residual_groups = _residual_groups(model0, blocks, groups, model_frame, q_all, samples)
     if robot_in:  # relative measurements: fix what they leave undetermined
         blocks = _fix_relative_gauge(
             robot, model0, blocks, residual_groups, robot_in, measurements.source
@@ -133,7 +142,34 @@ def build_problem(
         prior_mean,
         prior_sigma,
         (*fitted_frame, *fitted),
+        q_start,
     )
+
+
+def _bound_blocks(
+    robot: Robot, extra_blocks: tuple[RobotBlock, ...], samples: BlockSamples
+) -> tuple[RobotBlock, ...]:
+    """The robot's own blocks (:attr:`kinfw.model.Robot.spec`: a calibration's
+    compliance...) but those an extra block of the same key replaces, then the extra
+    ones, each bound to these samples (:meth:`kinfw.model.RobotBlock.for_data`)."""
+    given_keys = {b.key for b in extra_blocks}
+    own = tuple(b for b in robot.spec.blocks if b.key not in given_keys)
+    return tuple(
+        b.for_data(samples) if isinstance(b, RobotBlock) else b for b in (*own, *extra_blocks)
+    )
+
+
+def _start_joint_values(
+    blocks: tuple[RobotBlock, ...], samples: BlockSamples
+) -> NDArray[np.float64]:
+    """The samples' joint values (n, J) after the robot blocks' joint hooks at their
+    starts (the readings' maps, then the deflections): what the start model sees."""
+    q = samples.qs
+    for stage in ("readings", "deflection"):
+        for b in blocks:
+            if isinstance(b, RobotBlock) and b.stage == stage:
+                q = b.joint_values(q, samples)
+    return q
 
 
 def _single_external_frame(groups: list, robot_in: Sequence[str]) -> str | None:
@@ -167,16 +203,20 @@ def _residual_groups(
     groups: list,
     model_frame: str | None,
     q_all: NDArray[np.float64],
+    samples: BlockSamples,
 ) -> list[ResidualGroup]:
-    """Per observation group its CasADi residual with the group's joint values and data;
-    every number (reference model, block starts) is an input of the functions."""
+    """Per observation group its CasADi residual with the group's joint values (and
+    the robot blocks' per-sample inputs after them) and data; every number (reference
+    model, block starts) is an input of the functions."""
     const = np.concatenate([b.constants() for b in blocks])
     functions = group_functions(model0, blocks, groups, model_frame, len(const))
+    inputs = [b.sample_inputs(samples) for b in blocks if isinstance(b, RobotBlock)]
+    q_in = np.hstack([q_all, *inputs])
     return [
         ResidualGroup(
             kind_of(g),
             g,
-            q_all[g.sample].T,
+            q_in[g.sample].T,
             np.asarray(kind_of(g).data(g), dtype=float).T,
             fn,
             const,

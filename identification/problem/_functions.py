@@ -2,10 +2,11 @@
 
 :func:`build_functions` builds, per observation group, the residual of
 :meth:`kinfw.observations.ObservationKind.residual` and its exact Jacobian as functions of
-``(q, m, theta, const)``: configuration, measured row, parameter vector and the blocks'
-constants. :func:`group_functions` caches them by the problem's structure, so
-cross-validation folds, parameter sets and Monte Carlo trials on one robot and
-observation layout build the graph once.
+``(q, m, theta, const)``: configuration (the readings, then the robot blocks'
+per-sample inputs: :meth:`kinfw.model.RobotBlock.sample_inputs`), measured row,
+parameter vector and the blocks' constants. :func:`group_functions` caches them by the
+problem's structure, so cross-validation folds, parameter sets and Monte Carlo trials
+on one robot and observation layout build the graph once.
 """
 
 from __future__ import annotations
@@ -143,24 +144,27 @@ def build_functions(
     P = sum(b.size for b in blocks)
     theta = ca.SX.sym("theta", P)
     const = ca.SX.sym("const", n_const)
-    q = ca.SX.sym("q", model0.n_joints)
-    parts, k, c = [], 0, 0  # (block, its entries of theta, its constants)
-    for b in blocks:
-        n = len(b.constants())
-        parts.append((b, theta[k : k + b.size], const[c : c + n]))
-        k, c = k + b.size, c + n
-    robot = [p for p in parts if isinstance(p[0], RobotBlock)]
     joint_names = tuple(model0.topology.joint_names)
-    q_model = q
-    for b, d, cs in robot:
-        q_model = b.casadi_joint_values(q_model, d, cs, joint_names)
-    (_, d_cpc, c_cpc) = next(p for p in robot if p[0].key == CPC_KEY)
+    widths = [b.sample_width(joint_names) if isinstance(b, RobotBlock) else 0 for b in blocks]
+    q = ca.SX.sym("q", model0.n_joints + sum(widths))  # readings, then the blocks' inputs
+    parts, k, c, w = [], 0, 0, model0.n_joints  # (block, its theta, constants, inputs)
+    for b, width in zip(blocks, widths, strict=True):
+        n = len(b.constants())
+        parts.append((b, theta[k : k + b.size], const[c : c + n], q[w : w + width]))
+        k, c, w = k + b.size, c + n, w + width
+    robot = [p for p in parts if isinstance(p[0], RobotBlock)]
+    q_model = q[: model0.n_joints]
+    for b, d, cs, s in robot:
+        q_model = b.casadi_joint_values(q_model, d, cs, joint_names, s)
+    (_, d_cpc, c_cpc, _) = next(p for p in robot if p[0].key == CPC_KEY)
     T_frames = cpc_fk_function(model0, symbolic_reference=True)(q_model, d_cpc, c_cpc)
     T_frames = T_frames if isinstance(T_frames, (list, tuple)) else [T_frames]
     frames = dict(zip(model0.topology.frames, T_frames, strict=True))
-    for b, d, cs in robot:
+    for b, d, cs, _ in robot:
         frames = b.casadi_frame_poses(frames, d, cs)
-    values = {b.key: b.casadi_value(d, cs) for b, d, cs in parts if not isinstance(b, RobotBlock)}
+    values = {
+        b.key: b.casadi_value(d, cs) for b, d, cs, _ in parts if not isinstance(b, RobotBlock)
+    }
     context = SymbolicContext(ca, frames, values, model_frame)
     out = []
     for g in groups:
@@ -181,6 +185,13 @@ def build_functions(
     return tuple(out)
 
 
+def _width(block: Block, topology: Any) -> int:
+    """A block's per-sample inputs (robot blocks only)."""
+    if not isinstance(block, RobotBlock):
+        return 0
+    return block.sample_width(tuple(topology.joint_names))
+
+
 def group_functions(
     model0: CPCModel,
     blocks: tuple[Block, ...],
@@ -196,7 +207,10 @@ def group_functions(
         (topo.joint_names, topo.revolute, topo.parent, topo.frames, topo.frame_parent),
         tuple(float(v) for v in model0.sign),
         model_frame,
-        tuple((type(b).__module__, type(b).__qualname__, b.key, b.size) for b in blocks),
+        tuple(
+            (type(b).__module__, type(b).__qualname__, b.key, b.size, _width(b, topo))
+            for b in blocks
+        ),
         tuple(kind_of(g).key(g) for g in groups),
     )
     with _FUNCTION_CACHE_LOCK:

@@ -185,10 +185,12 @@ def robot_blocks(
         if b.key in {o.key for o in (cpc, base, zero, *more)}:
             raise ValueError(f"extra_blocks: the key {b.key} is taken")
         more += (b.with_free(b.free_for(parameters)),)
-    # the extra blocks' joint hooks act on the readings before the zero offsets
-    # (q' = (1 + s) q + z for a scale), so that model_at's model, with the offsets
-    # folded in, takes the joint values after the extra hooks
-    return (cpc, base, *more, zero)
+    # the readings' maps act before the zero offsets (q' = (1 + s) q + z for a scale), so
+    # that model_at's model, with the offsets folded in, takes the joint values after
+    # them; a deflection acts after, on the physical joint values
+    readings = tuple(b for b in more if b.stage != "deflection")
+    deflections = tuple(b for b in more if b.stage == "deflection")
+    return (cpc, base, *readings, zero, *deflections)
 
 
 #: Relative norm (columns scaled to unit norm) below which a parameter's Jacobian column
@@ -284,6 +286,8 @@ def _structure_jacobian(
         # contact gives one row per configuration, a pose six)
         n = max(12, -(-n_free // g.rows) + 6)
         qs = lo[:, None] + (hi - lo)[:, None] * rng.uniform(size=(len(lo), n))
+        # the robot blocks' per-sample inputs after the joints: the group's own, cycled
+        qs = np.vstack([qs, g.qs[len(lo) :, np.arange(n) % g.qs.shape[1]]])
         data = g.data[:, np.arange(n) % g.data.shape[1]]
         f = g.functions.j.map("structure", "serial", n, [2, 3], [])
         J = np.asarray(f(qs, data, x, g.const))  # (rows, n * P)

@@ -21,8 +21,16 @@ from numpy.typing import NDArray
 
 from kinfw.identification.problem._functions import MAP_CHUNK, GroupFunctions
 from kinfw.identification.problem._start import start_context
-from kinfw.measurements import Measurements
-from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
+from kinfw.model import (
+    CPC_KEY,
+    Block,
+    BlockKey,
+    CPCModel,
+    ModelSpec,
+    ParameterName,
+    RobotBlock,
+    SpecBlock,
+)
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
 __all__ = ["PRIOR", "LeastSquaresProblem", "NormalEquations", "ResidualGroup", "Unknown"]
@@ -61,8 +69,9 @@ class ResidualGroup:
     kind : ObservationKind
     group : object
         The observation group (e.g. :class:`~kinfw.measurements.PoseObservations`).
-    qs : ndarray, shape (J, m)
-        Joint values of its samples, model joint order.
+    qs : ndarray, shape (J + W, m)
+        Joint values of its samples, model joint order, then the robot blocks' ``W``
+        per-sample inputs (:meth:`kinfw.model.RobotBlock.sample_inputs`).
     data : ndarray, shape (width, m)
         Measured values, one column per observation.
     functions : GroupFunctions
@@ -280,6 +289,10 @@ class LeastSquaresProblem:
         Gaussian prior on ``x`` (sigma inf: none).
     fitted : tuple of (BlockKey, str)
         The unknowns whose start was estimated from these data, with a description.
+    start_qs : ndarray, shape (n, J)
+        The samples' joint values (model joint order) after the robot blocks' hooks at
+        their starts (the readings themselves without a model spec): what the start
+        values were estimated at (:meth:`start_context`).
     """
 
     model0: CPCModel
@@ -289,6 +302,7 @@ class LeastSquaresProblem:
     prior_mean: NDArray[np.float64]
     prior_sigma: NDArray[np.float64]
     fitted: tuple[tuple[BlockKey, str], ...] = ()
+    start_qs: NDArray[np.float64] | None = None
 
     @property
     def slices(self) -> tuple[slice, ...]:
@@ -520,6 +534,17 @@ class LeastSquaresProblem:
                 model = b.moved_model(model, x[s])
         return model
 
+    def spec_at(self, x: NDArray) -> ModelSpec:
+        """The model spec's blocks (:class:`kinfw.model.SpecBlock`) at ``x``, each started
+        at its value there: what stands beside :meth:`model_at`'s model."""
+        return ModelSpec(
+            tuple(
+                b.with_start(b.numpy_value(x[s]))
+                for b, s in zip(self.blocks, self.slices, strict=True)
+                if isinstance(b, SpecBlock)
+            )
+        )
+
     def base_motion_at(self, x: NDArray) -> NDArray[np.float64] | None:
         """The base's estimate at ``x``: the rigid motion ``w_T_base`` of the whole
         nominal robot in the model frame (:class:`kinfw.model.BaseBlock`), or None when
@@ -530,12 +555,12 @@ class LeastSquaresProblem:
                 return b.numpy_value(x[s])
         return None
 
-    def start_context(self, measurements: Measurements) -> StartContext:
-        """The start model's poses at the samples of ``measurements`` (those the problem
-        was built from) and the external frames' starts, for the kinds' estimators."""
-        q_all = measurements.q_of(self.model0.topology.joint_names)
+    def start_context(self) -> StartContext:
+        """The start model's poses at the problem's samples (at :attr:`start_qs`, the
+        joint values after the robot blocks' hooks) and the external frames' starts,
+        for the kinds' estimators."""
         meas_T_w = {b.key.name: b.start for b in self.unknown_blocks if b.key.kind == "frame"}
-        return start_context(self.model0, q_all, meas_T_w, self.model_frame)
+        return start_context(self.model0, self.start_qs, meas_T_w, self.model_frame)
 
     def with_starts(self, group: ResidualGroup, blocks: Sequence[Block]) -> ResidualGroup:
         """``group`` evaluated with other start values for some of the problem's unknown

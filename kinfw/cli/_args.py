@@ -27,6 +27,7 @@ __all__ = [
     "SEED",
     "add_camera_option",
     "add_keep_duplicates_option",
+    "add_model_option",
     "add_mount_option",
     "add_package_dir_option",
     "add_xacro_option",
@@ -34,6 +35,7 @@ __all__ = [
     "frame_file",
     "frames_arg",
     "load_model",
+    "model_arg",
     "mount_arg",
     "mounted_model",
     "number",
@@ -214,7 +216,24 @@ def load_model(path: Path | str, args: argparse.Namespace) -> Robot:
                 "or give the URDF's file name instead of -"
             )
         return load_robot(text, xacro_args=xacro_args)
-    return load_robot(path, xacro_args=xacro_args)
+    robot = load_robot(path, xacro_args=xacro_args)
+    return robot if getattr(args, "no_sidecar", False) else _with_sidecar_spec(robot, Path(path))
+
+
+def _with_sidecar_spec(robot: Robot, path: Path) -> Robot:
+    """``robot`` with the model spec of the calibration sidecar beside its URDF
+    (``<stem>.kinfw.json``: compliance, gear scales...), when there is one that records
+    robot blocks; the sidecar must be this URDF's (its SHA-256)."""
+    from kinfw.files import sidecar_path
+    from kinfw.reports import read_sidecar
+
+    side = sidecar_path(path)
+    if not side.is_file():
+        return robot
+    sidecar = read_sidecar(side)
+    if not sidecar.robot_blocks:
+        return robot
+    return robot.with_spec(sidecar.check_urdf(path).spec())
 
 
 def add_package_dir_option(p: argparse.ArgumentParser) -> None:
@@ -243,6 +262,61 @@ def frames_arg(
         f"{robot.source}: give {flag} (comma-separated frame names); this URDF has no "
         f'<kinfw frames="..." cameras="..."/> hint. Links: {", ".join(robot.link_names)}'
     )
+
+
+def add_model_option(p: argparse.ArgumentParser) -> None:
+    """``--model SPEC`` (repeatable): robot blocks the URDF cannot hold, estimated with
+    it (:func:`model_arg` reads them)."""
+    p.add_argument(
+        "--model",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="what the URDF cannot hold, estimated with it (repeatable): compliance "
+        "(joint compliance under gravity and payload, rad/Nm; compliance:J1,J2 for some "
+        "joints), gear-scale:JOINT, coupling:JOINT=K*OTHER (K fixed; ?K or ? estimated), "
+        "or a JSON/YAML file listing such specs; recorded in the sidecar, so verify, view, "
+        "reach and export re-apply it",
+    )
+
+
+def model_arg(args: argparse.Namespace) -> Any:
+    """The :class:`kinfw.model.ModelSpec` of ``--model`` (None when not given): each
+    entry a spec text or a JSON/YAML file holding a list of them (or ``{"model":
+    [...]}``)."""
+    from kinfw.model import ModelSpec
+
+    entries = getattr(args, "model", None) or []
+    if not entries:
+        return None
+    texts: list[str] = []
+    for entry in entries:
+        path = Path(entry)
+        if path.suffix.lower() in (".json", ".yaml", ".yml"):
+            texts += _model_file(path)
+        else:
+            texts.append(entry)
+    return ModelSpec.parse(texts)
+
+
+def _model_file(path: Path) -> list[str]:
+    """The spec texts of a model file (JSON or YAML: a list, or ``{"model": [...]}``)."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"--model {path}: model file not found") from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"--model {path}: not JSON or YAML ({str(exc).splitlines()[0]})") from None
+    if isinstance(doc, dict) and set(doc) == {"model"}:
+        doc = doc["model"]
+    if not isinstance(doc, list) or not all(isinstance(t, str) for t in doc):
+        raise ValueError(
+            f"--model {path}: expected a list of specs (compliance, gear-scale:JOINT, ...) "
+            'or {"model": [...]}'
+        )
+    return doc
 
 
 def add_keep_duplicates_option(p: argparse.ArgumentParser) -> None:

@@ -89,6 +89,8 @@ def cmd_verify(args: argparse.Namespace) -> int:
         sidecar = read_sidecar(sidecar_file)
         if Path(args.model).is_file():  # not a URDF on stdin
             sidecar = sidecar.check_urdf(args.model)
+        if sidecar.robot_blocks:  # what the URDF cannot hold: compliance, gear scales...
+            robot = robot.with_spec(sidecar.spec())
     elif args.sidecar:
         raise OSError(f"{args.sidecar}: sidecar not found")
     overridden = []

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import PurePath
 from typing import TYPE_CHECKING, Any
 
-from kinfw.cli._args import load_model, mounted_model, read_data
+from kinfw.cli._args import load_model, model_arg, mounted_model, read_data
 from kinfw.cli._tables import format_table, metric_format, number
 from kinfw.files import json_text
 
@@ -140,6 +140,7 @@ def calibration_options(args: argparse.Namespace) -> dict[str, Any]:
         "keep_duplicates": args.keep_duplicates,
         "change_bound": change_bound(args),
         "allow_large_changes": args.allow_large_changes,
+        "model": model_arg(args),
     }
 
 
@@ -471,6 +472,8 @@ def cmd_crossval(args: argparse.Namespace) -> int:
     nominal = load_model(args.urdf, args)
     data = read_data(args.data, args)
     nominal = mounted_model(nominal, data)
+    model = model_arg(args)
+    nominal = nominal if model is None else nominal.with_spec(model)
     prior = _prior_arg(args)
     with open_executor(args.jobs, args.executor) as executor:
         cv = crossvalidate(

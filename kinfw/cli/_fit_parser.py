@@ -17,6 +17,7 @@ from kinfw.cli._args import (
     SEED,
     add_camera_option,
     add_keep_duplicates_option,
+    add_model_option,
     add_mount_option,
     add_xacro_option,
     camera_inputs,
@@ -123,6 +124,7 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
         "the report says which the images do not determine",
     )
     add_guard_options(p)
+    add_model_option(p)
 
 
 def add_guard_options(p: argparse.ArgumentParser, *, writes: bool = True) -> None:
@@ -199,6 +201,7 @@ def _add_crossval_parser(sub: argparse._SubParsersAction) -> None:
     add_camera_option(p)
     add_mount_option(p)
     add_guard_options(p, writes=False)
+    add_model_option(p)
     add_executor_options(p, tasks="the fits (folds x parameter sets)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.set_defaults(func=cmd_crossval)

@@ -69,9 +69,44 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         help="a plan file (kinfw plan --out): measure at its configurations, in its order "
         "(stage 1 and stage 2), instead of one joint at a time / random",
     )
+    p.add_argument(
+        "--compliance",
+        action="append",
+        type=_compliance_spec,
+        metavar="[JOINT=]RAD_PER_NM",
+        help="the true robot's joint compliance under gravity: one value for every joint "
+        "on the measured paths, or JOINT=VALUE (repeatable; the others rigid), rad/Nm "
+        "(m/N for a prismatic joint); the file records the readings that deflect to the "
+        "simulated configurations (calibrate it with --model compliance)",
+    )
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_simulate, check_outputs=check_simulate_outputs)
+
+
+def _compliance_spec(text: str) -> tuple[str | None, float]:
+    """``VALUE`` or ``JOINT=VALUE`` of ``--compliance``."""
+    joint, _, value = text.rpartition("=")
+    try:
+        c = float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected RAD_PER_NM or JOINT=RAD_PER_NM (a number >= 0)"
+        ) from None
+    if not (c >= 0 and c < float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r}: the compliance must be finite and >= 0")
+    return joint or None, c
+
+
+def _compliance_arg(entries) -> float | dict[str, float] | None:
+    """``--compliance`` as :func:`kinfw.simulate` takes it."""
+    if not entries:
+        return None
+    if len(entries) == 1 and entries[0][0] is None:
+        return entries[0][1]
+    if any(joint is None for joint, _ in entries):
+        raise ValueError("--compliance: give one VALUE for every joint, or JOINT=VALUE entries")
+    return dict(entries)
 
 
 def _add_noise_options(p: argparse.ArgumentParser) -> None:
@@ -410,6 +445,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         contact_samples=args.contact_samples,
         offsets_known=args.offsets_known,
         target_frame=args.target_frame,
+        compliance=_compliance_arg(args.compliance),
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)
@@ -427,6 +463,14 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         )
     _print_simulated(args, sim)
     return 0
+
+
+def _true_compliance(truth) -> dict[str, float] | None:
+    """The true robot's compliance by joint (rad/Nm, m/N), None when rigid."""
+    for b in truth.spec.blocks:
+        if b.block_name == "compliance":
+            return dict(zip(b.joints, b.start.tolist(), strict=True))
+    return None
 
 
 def _print_simulated(args: argparse.Namespace, sim) -> None:
@@ -450,6 +494,7 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
                     "stereo_mm": args.stereo_mm,
                     "error_mm": args.error_mm,
                     "error_deg": args.error_deg,
+                    "compliance_rad_per_nm": _true_compliance(sim.truth),
                     "seed": args.seed,
                 },
                 indent=2,

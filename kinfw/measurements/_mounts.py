@@ -135,4 +135,4 @@ def mounted_robot(robot: Robot, mounts: Mapping[str, Mount], source: str = "<mem
         xml = add_fixed_links(robot.urdf_xml, new)
     except ExportError as exc:
         raise DatasetError(f"{source}: mounts: {exc}") from None
-    return Robot(xml, robot.source)
+    return Robot(xml, robot.source, spec=robot.spec)

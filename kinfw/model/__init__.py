@@ -15,6 +15,7 @@ from kinfw.model._blocks import (
     PointBlock,
     RigidFrameBlock,
     RobotBlock,
+    SpecBlock,
     ZeroOffsetBlock,
 )
 from kinfw.model._cpc import (
@@ -29,8 +30,16 @@ from kinfw.model._cpc import (
     rotation_from_axis,
 )
 from kinfw.model._cpc_casadi import cpc_fk_function, cpc_reference_vector
-from kinfw.model._loads import STANDARD_GRAVITY, Payloads, gravity_torques, massless_links
+from kinfw.model._joint_blocks import GearScaleBlock, JointComplianceBlock, JointCouplingBlock
+from kinfw.model._loads import (
+    STANDARD_GRAVITY,
+    BlockSamples,
+    Payloads,
+    gravity_torques,
+    massless_links,
+)
 from kinfw.model._meshes import MissingMesh, mesh_dirs, resolve_meshes
+from kinfw.model._model_spec import ModelSpec, block_from_spec, block_names, register_block
 from kinfw.model._pose_chain import POSE_CHAIN_JOINTS, pose_chain_joint_values, pose_chain_urdf
 from kinfw.model._robot import (
     Robot,
@@ -63,10 +72,15 @@ __all__ = [
     "BaseBlock",
     "Block",
     "BlockKey",
+    "BlockSamples",
     "CPCBlock",
     "CPCModel",
+    "GearScaleBlock",
+    "JointComplianceBlock",
+    "JointCouplingBlock",
     "JointInfo",
     "MissingMesh",
+    "ModelSpec",
     "ParameterName",
     "Payloads",
     "PointBlock",
@@ -74,10 +88,13 @@ __all__ = [
     "Robot",
     "RobotBlock",
     "RobotModelError",
+    "SpecBlock",
     "Topology",
     "UnknownFrameError",
     "ZeroGeometry",
     "ZeroOffsetBlock",
+    "block_from_spec",
+    "block_names",
     "builtin_head_urdf",
     "captured_native_stderr",
     "cayley_coordinates",
@@ -99,6 +116,7 @@ __all__ = [
     "pinocchio_model",
     "pose_chain_joint_values",
     "pose_chain_urdf",
+    "register_block",
     "resolve_meshes",
     "rotation_from_axis",
     "up_vector",

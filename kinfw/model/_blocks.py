@@ -30,7 +30,7 @@ parses a name back from a string.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,6 +39,7 @@ from kinfw.geometry import rigid_from_chart, rigid_from_chart_casadi
 
 if TYPE_CHECKING:
     from kinfw.model._cpc import CPCModel
+    from kinfw.model._loads import BlockSamples
 
 __all__ = [
     "CPC_KEY",
@@ -50,6 +51,7 @@ __all__ = [
     "PointBlock",
     "RigidFrameBlock",
     "RobotBlock",
+    "SpecBlock",
     "ZeroOffsetBlock",
 ]
 
@@ -198,11 +200,75 @@ class RobotBlock(Block):
         """
         return self.free.copy() if parameters == "full" else np.zeros(self.size, bool)
 
-    def casadi_joint_values(self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...]) -> Any:
+    #: Where the block's joint hook acts: ``"readings"`` (a map of the encoder readings,
+    #: before the joint zero offsets: a gear scale, a coupling) or ``"deflection"`` (on the
+    #: physical joint values, after the offsets: a joint's compliance under load).
+    stage: ClassVar[str] = "readings"
+
+    def for_data(self, context: BlockSamples) -> RobotBlock:
+        """The block as the problem uses it on these data (``context``: the robot, the
+        model's joints, the readings, payloads and gravity): its free mask narrowed to
+        what the data determine, or a clear error when they cannot (a compliance on links
+        without inertias). Default: unchanged."""
+        return self
+
+    def sample_width(self, joint_names: tuple[str, ...]) -> int:
+        """Numbers per sample the hooks take besides the readings (see
+        :meth:`sample_inputs`); 0 by default."""
+        return 0
+
+    def sample_inputs(self, context: BlockSamples) -> NDArray[np.float64]:
+        """The per-sample numbers (n, :meth:`sample_width`) the CasADi hook takes as ``s``
+        (a sample's gravity torque and its derivative), computed once per problem with
+        numpy and Pinocchio from the robot and the samples of ``context``."""
+        return np.zeros((len(context.qs), 0))
+
+    def casadi_joint_values(
+        self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...], s: Any = None
+    ) -> Any:
         """The joint values the forward kinematics takes: ``q`` (SX, (J,), rad and m,
         in the order of ``joint_names``) changed by the block at chart coordinates
-        ``d`` (SX, (size,)) with its constants ``c``. Default: ``q`` unchanged."""
+        ``d`` (SX, (size,)) with its constants ``c`` and its per-sample inputs ``s``
+        (SX, (:meth:`sample_width`,)). Default: ``q`` unchanged."""
         return q
+
+    def joint_values(
+        self, q: NDArray[np.float64], context: BlockSamples, d: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
+        """The numeric side of :meth:`casadi_joint_values`: joint values ``q`` (n, J) of
+        ``context``'s joints changed by the block at ``d`` (default its start), for the
+        samples of ``context``. Default: the CasADi hook evaluated numerically."""
+        import casadi as ca
+
+        d = np.zeros(self.size) if d is None else np.asarray(d, dtype=float)
+        names = context.joint_names
+        q_sym = ca.SX.sym("q", len(names))
+        s_sym = ca.SX.sym("s", self.sample_width(names))
+        c_sym = ca.SX.sym("c", len(self.constants()))
+        d_sym = ca.SX.sym("d", self.size)
+        f = ca.Function(
+            "joint_values",
+            [q_sym, s_sym, d_sym, c_sym],
+            [self.casadi_joint_values(q_sym, d_sym, c_sym, names, s_sym)],
+        ).map(len(q))
+        out = f(np.asarray(q, dtype=float).T, self.sample_inputs(context).T, d, self.constants())
+        return np.asarray(out).T.reshape(np.shape(q))
+
+    def readings(
+        self, q: NDArray[np.float64], context: BlockSamples, tol: float = 1e-13
+    ) -> NDArray[np.float64]:
+        """The inverse of :meth:`joint_values` at the block's start: the readings that
+        give the joint values ``q`` (n, J) (a joint command with the deflection
+        compensated). ``context.qs`` is ignored: the block's inputs are evaluated at
+        each iterate. Default: the fixed point ``r = r - (joint_values(r) - q)``, which
+        converges for a map close to the identity (every shipped block)."""
+        r = np.array(q, dtype=float)
+        for _ in range(100):
+            step = self.joint_values(r, context.at(r)) - q
+            r -= step
+            if np.abs(step).max(initial=0.0) < tol:
+                return r
+        raise ValueError(f"{self.describe()}: the readings for these joint values do not converge")
 
     def casadi_frame_poses(self, w_T_frames: dict[str, Any], d: Any, c: Any) -> dict[str, Any]:
         """The end frames' poses after the forward kinematics (SX (4, 4) by frame name,
@@ -411,7 +477,9 @@ class ZeroOffsetBlock(RobotBlock):
                 f"{list(joint_names)}"
             )
 
-    def casadi_joint_values(self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...]) -> Any:
+    def casadi_joint_values(
+        self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...], s: Any = None
+    ) -> Any:
         self._check_joints(joint_names)
         return q + d
 
@@ -461,3 +529,78 @@ class BaseBlock(RobotBlock, RigidFrameBlock):
             w_T_base @ geometry.w_T_frames,
         )
         return cpc_from_geometry(moved, sign=model.sign)
+
+
+@dataclass(frozen=True, slots=True)
+class SpecBlock(RobotBlock):
+    """A robot block a model spec names (``--model compliance``, ``gear-scale:JOINT``...):
+    registered by name (:func:`kinfw.model.register_block`), rebuilt from its text
+    (:meth:`from_spec`, :attr:`spec`) and its values (:attr:`start`), so that a sidecar
+    records it and verify, reach, view and export re-apply it.
+
+    Its value is ``start + d``: a calibrated block is the spec's block started at the
+    estimate (:meth:`with_start`), its hooks the same graph at other constants. What no
+    URDF holds stands beside the model (:meth:`moved_model` returns it unchanged).
+
+    Attributes
+    ----------
+    start : ndarray, shape (size,)
+        The value at chart coordinates zero (default zeros: the rigid, URDF model).
+    """
+
+    start: NDArray[np.float64] = field(default=None)  # type: ignore[assignment]
+
+    #: The spec's name (the text before ``:``), unique in the registry.
+    block_name: ClassVar[str] = ""
+
+    def __post_init__(self) -> None:
+        RobotBlock.__post_init__(self)
+        start = np.zeros(self.size) if self.start is None else np.array(self.start, float)
+        if start.shape != (self.size,):
+            raise ValueError(
+                f"{self.spec}: start: expected shape ({self.size},), got {start.shape}"
+            )
+        start.flags.writeable = False
+        object.__setattr__(self, "start", start)
+
+    @classmethod
+    def from_spec(cls, argument: str) -> SpecBlock:
+        """The block of the spec text ``NAME:ARGUMENT`` (``argument`` after the colon,
+        empty without one); a ValueError saying the expected form otherwise."""
+        raise NotImplementedError
+
+    @property
+    def argument(self) -> str:
+        """The text after ``NAME:`` that :meth:`from_spec` rebuilds the block from."""
+        return self.key.name
+
+    @property
+    def spec(self) -> str:
+        """The spec text: ``NAME`` or ``NAME:ARGUMENT``."""
+        return f"{self.block_name}:{self.argument}" if self.argument else self.block_name
+
+    def with_start(self, values: ArrayLike) -> SpecBlock:
+        """The same block started at ``values`` (size,): a calibrated block."""
+        from dataclasses import replace
+
+        return replace(self, start=np.asarray(values, dtype=float))
+
+    def free_for(self, parameters: str | tuple[str, ...]) -> NDArray[np.bool_]:
+        """Named by the user: estimated under every parameter set but ``"none"``."""
+        return self.free.copy() if parameters != "none" else np.zeros(self.size, bool)
+
+    def constants(self) -> NDArray[np.float64]:
+        return self.start.copy()
+
+    def numpy_value(self, d: NDArray[np.float64]) -> NDArray[np.float64]:
+        return self.start + np.asarray(d, dtype=float)
+
+    def casadi_value(self, d: Any, c: Any = None) -> Any:
+        return (self.start if c is None else c) + d
+
+    def moved_model(self, model: CPCModel, d: NDArray[np.float64]) -> CPCModel:
+        """Unchanged: no CPC model (no URDF) holds the block; it stands beside the model."""
+        return model
+
+    def describe(self) -> str:
+        return self.spec

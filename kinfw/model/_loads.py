@@ -13,7 +13,8 @@ optional) and at the top level ``"gravity": [gx, gy, gz]`` (m/s^2, root frame).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -231,22 +232,81 @@ def gravity_torques(
 
 
 def massless_links(robot, joint_names: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
-    """The joints of ``joint_names`` that carry no mass at all (their whole subtree's
-    links lack ``<inertial>``), each with the links of its subtree: gravity exerts no
-    torque on them, so their compliance cannot be told from these inertias."""
+    """The joints of ``joint_names`` whose moving body has no mass, each with its links
+    (the joint's child link and the links fixed to it): their URDF ``<link>`` s lack
+    ``<inertial>``, so the gravity torque on every joint above them is unknown."""
     model = robot.model
-    data = model.createData()
-    pin.computeSubtreeMasses(model, data)
     out = {}
     for name in joint_names:
         jid = model.getJointId(name)
-        if data.mass[jid] > 0:
+        if model.inertias[jid].mass > 0:
             continue
-        subtree = set(model.subtrees[jid])
-        links = tuple(
-            f.name
-            for f in model.frames
-            if f.type == pin.FrameType.BODY and f.parentJoint in subtree
+        out[name] = tuple(
+            f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == jid
         )
-        out[name] = links
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class BlockSamples:
+    """The samples as a robot block's numeric hooks see them
+    (:meth:`kinfw.model.RobotBlock.sample_inputs`, :meth:`~kinfw.model.RobotBlock.for_data`).
+
+    Attributes
+    ----------
+    robot : Robot
+        The URDF the problem is built on: its link inertias drive the gravity torque.
+    joint_names : tuple of str
+        The model's joints (columns of ``qs``).
+    qs : ndarray, shape (n, J)
+        The joint readings (rad, m).
+    payloads : Payloads
+        One per sample.
+    gravity : ndarray, shape (3,)
+        Root frame, m/s^2.
+    """
+
+    robot: Any
+    joint_names: tuple[str, ...]
+    qs: NDArray[np.float64]
+    payloads: Payloads = None  # type: ignore[assignment]
+    gravity: NDArray[np.float64] = field(default_factory=lambda: np.array(STANDARD_GRAVITY))
+
+    def __post_init__(self) -> None:
+        qs = np.atleast_2d(np.asarray(self.qs, dtype=float))
+        if qs.shape[1] != len(self.joint_names):
+            raise ValueError(
+                f"BlockSamples.qs: expected {len(self.joint_names)} columns, got {qs.shape}"
+            )
+        object.__setattr__(self, "qs", qs)
+        if self.payloads is None:
+            object.__setattr__(self, "payloads", Payloads.none(len(qs)))
+        elif len(self.payloads) != len(qs):
+            raise ValueError(
+                f"BlockSamples.payloads: expected {len(qs)} samples, got {len(self.payloads)}"
+            )
+        object.__setattr__(self, "gravity", np.asarray(self.gravity, dtype=float).reshape(3))
+
+    def at(self, qs: ArrayLike) -> BlockSamples:
+        """The same samples (payloads, gravity) at other joint values."""
+        return replace(self, qs=np.asarray(qs, dtype=float))
+
+    def subset(self, samples: ArrayLike) -> BlockSamples:
+        """The samples ``samples`` (indices or mask)."""
+        return replace(self, qs=self.qs[samples], payloads=self.payloads.subset(samples))
+
+    def gravity_torques(
+        self, joints: tuple[str, ...], derivative: bool = True
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """:func:`gravity_torques` of ``joints`` (rows) at these samples, the derivative
+        with respect to every model joint: ``tau`` (n, K), ``dtau_dq`` (n, K, J)."""
+        tau, dtau = gravity_torques(
+            self.robot,
+            self.joint_names,
+            self.qs,
+            self.payloads,
+            self.gravity,
+            derivative=derivative,
+        )
+        rows = [self.joint_names.index(j) for j in joints]
+        return tau[:, rows], None if dtau is None else dtau[:, rows, :]

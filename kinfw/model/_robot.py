@@ -26,6 +26,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw import progress
+from kinfw.model._model_spec import ModelSpec
 from kinfw.model._urdf_read import (
     JointInfo,
     RobotModelError,
@@ -159,6 +160,12 @@ class Robot:
         poses and carry no kinematic error). Every movable joint above an exact one must be
         exact too (they are a path's first joints), so their URDF origins and axes stay
         as written. Empty when absent.
+    spec : ModelSpec
+        What the URDF cannot hold (joint compliance, gear scales, couplings), beside it:
+        empty for a URDF alone; a calibration's estimates for a calibrated robot read
+        with its sidecar. Every estimation problem built on the robot includes its
+        blocks (fixed with ``parameters="none"``), so predictions take the joint values
+        after their hooks (:meth:`kinfw.model.ModelSpec.joint_values`).
     placeholder_joints : tuple of str
         Joints whose ``<origin>`` is a placeholder, not a nominal, from ``<kinfw
         placeholder="camera_joint"/>`` (the camera mount at identity that ``kinfw
@@ -168,11 +175,14 @@ class Robot:
 
     def __reduce__(self) -> tuple:
         # pickles as its URDF text (worker processes rebuild the Pinocchio model)
-        return (type(self), (self.urdf_xml, self.source))
+        return (type(self), (self.urdf_xml, self.source, self.spec))
 
-    def __init__(self, urdf_xml: str, source: str = "<urdf string>") -> None:
+    def __init__(
+        self, urdf_xml: str, source: str = "<urdf string>", spec: ModelSpec | None = None
+    ) -> None:
         self.urdf_xml = urdf_xml
         self.source = source
+        self.spec = ModelSpec() if spec is None else spec
         element = check_urdf_xml(urdf_xml, source)
         hint = _hints(element, source)
         self.joints, self.link_names, self.root_link = parse_joints(element, source)
@@ -220,7 +230,21 @@ class Robot:
             self._q_slot[name] = (pj.idx_q, pj.nq == 2)
 
     def __repr__(self) -> str:
-        return f"Robot({self.source!r}, root={self.root_link!r}, joints={list(self.joint_names)})"
+        spec = f", spec={list(self.spec.texts)}" if self.spec else ""
+        return (
+            f"Robot({self.source!r}, root={self.root_link!r}, joints={list(self.joint_names)}"
+            f"{spec})"
+        )
+
+    def with_spec(self, spec: ModelSpec) -> Robot:
+        """The same URDF with the robot blocks ``spec`` beside it (a calibration's
+        compliance, gear scales, couplings: :class:`kinfw.model.ModelSpec`); the
+        Pinocchio model is shared."""
+        import copy
+
+        out = copy.copy(self)
+        out.spec = spec
+        return out
 
     # -- names -------------------------------------------------------------------------
     def joint(self, name: str) -> JointInfo:

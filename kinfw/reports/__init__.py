@@ -16,6 +16,7 @@ from kinfw.reports._records import (
     GuardSummary,
     ModelSummary,
     NoiseSummary,
+    RobotBlockRecord,
     headline,
     read_only_array,
 )
@@ -76,6 +77,7 @@ __all__ = [
     "RefineSection",
     "RejectedRow",
     "ReprojectionSection",
+    "RobotBlockRecord",
     "StageErrors",
     "TargetEstimate",
     "before_after",

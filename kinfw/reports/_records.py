@@ -137,6 +137,60 @@ class ModelSummary:
 
 
 @dataclass(frozen=True, slots=True)
+class RobotBlockRecord:
+    """One calibrated robot block of the model spec (``--model``): what the URDF cannot
+    hold, recorded so that verify, reach, view and export re-apply it.
+
+    Attributes
+    ----------
+    spec : str
+        The spec text that rebuilds the block (``"compliance:j1,j2"``,
+        ``"gear-scale:tilt"``, ``"coupling:j3=-1*j2"``: :func:`kinfw.model.block_from_spec`).
+    names : tuple of str
+        Per entry ``owner:field`` (``"j2:compliance"``).
+    units : tuple of str
+        Per entry (``"rad/Nm"``, ``"unitless"``...).
+    values, std : ndarray, shape (size,)
+        The estimate and its standard deviation (0 for an entry held fixed), in the units.
+    """
+
+    spec: str
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    values: NDArray[np.float64]
+    std: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        n = len(self.names)
+        object.__setattr__(self, "names", tuple(self.names))
+        object.__setattr__(self, "units", tuple(self.units))
+        object.__setattr__(self, "values", read_only_array(self.values, "values", (n,)))
+        object.__setattr__(self, "std", read_only_array(self.std, "std", (n,)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "block": self.spec,
+            "names": list(self.names),
+            "units": list(self.units),
+            "values": self.values.tolist(),
+            "std": self.std.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, doc: Any, reader: DocReader, at: str) -> RobotBlockRecord:
+        doc = reader.obj(doc, at)
+        names = reader.strings(doc, "names", at)
+        shape = (len(names),)
+        return cls(
+            reader.string(doc, "block", at),
+            names,
+            reader.strings(doc, "units", at),
+            reader.array(reader.value(doc, "values", at), reader.path(at, "values"), shape),
+            reader.array(reader.value(doc, "std", at), reader.path(at, "std"), shape),
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class GuardSummary:
     """The plausibility guard's outcome on a written calibration
     (:func:`kinfw.identification.checks.plausibility`).

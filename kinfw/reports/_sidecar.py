@@ -26,7 +26,7 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,8 +40,12 @@ from kinfw.reports._records import (
     GuardSummary,
     ModelSummary,
     NoiseSummary,
+    RobotBlockRecord,
     read_only_array,
 )
+
+if TYPE_CHECKING:
+    from kinfw.model import ModelSpec
 
 __all__ = [
     "BeforeAfter",
@@ -95,6 +99,9 @@ class CalibrationSidecar:
     guard : GuardSummary or None
         The plausibility guard's bound and outcome, and whether large changes were
         allowed (None in files written before it was recorded).
+    robot_blocks : tuple of RobotBlockRecord
+        The calibrated model spec (``--model compliance``...): what the URDF cannot hold;
+        :meth:`spec` rebuilds it. Empty for a URDF alone.
     """
 
     created: str
@@ -113,6 +120,7 @@ class CalibrationSidecar:
     model: ModelSummary | None = None
     calibrated_urdf_sha256: str | None = None
     guard: GuardSummary | None = None
+    robot_blocks: tuple[RobotBlockRecord, ...] = ()
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -121,6 +129,7 @@ class CalibrationSidecar:
     def __post_init__(self) -> None:
         object.__setattr__(self, "w_T_root", read_only_array(self.w_T_root, "w_T_root", (4, 4)))
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
+        object.__setattr__(self, "robot_blocks", tuple(self.robot_blocks))
         object.__setattr__(
             self,
             "hand_eye_targets",
@@ -145,6 +154,26 @@ class CalibrationSidecar:
         if self.measurement_frame:
             known[("frame", self.measurement_frame)] = self.w_T_root
         return known
+
+    def spec(self) -> ModelSpec:
+        """The calibrated model spec (:class:`kinfw.model.ModelSpec`) of
+        :attr:`robot_blocks`, to put beside the calibrated URDF
+        (:meth:`kinfw.model.Robot.with_spec`).
+
+        Raises
+        ------
+        CalibrationFileError
+            Naming the sidecar and the block: a block name no registered block has (a
+            plugin's, not installed), or values of the wrong size.
+        """
+        from kinfw.model import ModelSpec
+
+        try:
+            return ModelSpec.from_list(
+                [{"block": r.spec, "values": r.values} for r in self.robot_blocks], self.source
+            )
+        except ValueError as exc:
+            raise CalibrationFileError(f"robot_blocks: {exc}") from None
 
     @property
     def root_T_targets(self) -> tuple[tuple[str, NDArray[np.float64]], ...]:
@@ -220,6 +249,11 @@ class CalibrationSidecar:
             doc
             | ({} if self.model is None else {"model": self.model.to_dict()})
             | ({} if self.guard is None else {"guard": self.guard.to_dict()})
+            | (
+                {"robot_blocks": [r.to_dict() for r in self.robot_blocks]}
+                if self.robot_blocks
+                else {}
+            )
         )
 
     @classmethod
@@ -270,6 +304,10 @@ class CalibrationSidecar:
             else BeforeAfter.rows_from(held_out, r, "errors_held_out"),
             model=None if model is None else ModelSummary.from_dict(model, r, "model"),
             guard=None if guard is None else GuardSummary.from_dict(guard, r, "guard"),
+            robot_blocks=tuple(
+                RobotBlockRecord.from_dict(b, r, f"robot_blocks[{k}]")
+                for k, b in enumerate(r.items(doc, "robot_blocks", "", optional=True) or [])
+            ),
             source=source,
         )
 

@@ -21,7 +21,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.camera import Board, CameraIntrinsics, parse_board
 from kinfw.measurements import Measurements, concatenate_measurements
-from kinfw.model import BlockKey, Robot, check_robot, load_robot
+from kinfw.model import (
+    BlockKey,
+    BlockSamples,
+    JointComplianceBlock,
+    ModelSpec,
+    Robot,
+    check_robot,
+    load_robot,
+)
 from kinfw.observations import (
     DivotContacts,
     PlaneContacts,
@@ -265,6 +273,7 @@ def simulate_measurements(
     contact_samples: int = 60,
     offsets_known: bool = False,
     target_frame: str | None = None,
+    compliance: float | Mapping[str, float] | None = None,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -352,6 +361,14 @@ def simulate_measurements(
         by a static camera, eye-to-hand), its centre at the frame's origin facing the
         cameras at the middle of the joint ranges; its observations say
         ``"target_frame"``. Default: the board is fixed in the world.
+    compliance : float or mapping of str to float, optional
+        The true robot's joint compliance (:class:`kinfw.model.JointComplianceBlock`):
+        rad/Nm (m/N for a prismatic joint) of every joint on the measured paths, or by
+        joint (the others rigid). Every sampler draws the physical configurations as
+        without it; the file records the readings that deflect to them under gravity
+        (:meth:`kinfw.model.ModelSpec.readings`: ``q - c tau(q)``, exact), so the data
+        are what an encoder-side controller would log. The truth's :attr:`Robot.spec`
+        holds it.
     seed : int
         Seeds the one generator of every draw.
 
@@ -434,10 +451,13 @@ def simulate_measurements(
             at, contacts, (plane, sphere, point), plane_name, contact_samples, plane_frame
         )
         parts.extend(touch.data)
+    data = concatenate_measurements(*parts)
+    if compliance is not None:
+        truth, data = _compliant(truth, data, names, compliance)
     return SimulatedMeasurements(
         truth_xml,
         truth,
-        concatenate_measurements(*parts),
+        data,
         names,
         frames,
         cameras,
@@ -455,6 +475,37 @@ def simulate_measurements(
         point=touch.point,
         target_frame=target_frame,
     )
+
+
+def _compliant(
+    truth: Robot,
+    data: Measurements,
+    names: tuple[str, ...],
+    compliance: float | Mapping[str, float],
+) -> tuple[Robot, Measurements]:
+    """The compliant truth (its spec) and ``data`` with the readings that deflect to the
+    simulated (physical) configurations."""
+    from dataclasses import replace
+
+    if isinstance(compliance, Mapping):
+        unknown = sorted(set(compliance) - set(names))
+        if unknown:
+            raise ValueError(
+                f"compliance of {unknown}: not joints on the measured paths ({', '.join(names)})"
+            )
+        values = np.array([float(compliance.get(j, 0.0)) for j in names])
+    else:
+        values = np.full(len(names), float(compliance))
+    if not np.all(np.isfinite(values)) or np.any(values < 0):
+        raise ValueError(f"compliance: expected finite values >= 0 (rad/Nm, m/N), got {values}")
+    block = JointComplianceBlock.from_spec(",".join(names))
+    samples = BlockSamples(truth, names, data.q_of(names))
+    spec = ModelSpec((block.for_data(samples),)).with_values([values])
+    q_read = spec.readings(truth, names, samples.qs)
+    qs = data.qs.copy()
+    for k, name in enumerate(names):
+        qs[:, data.joint_names.index(name)] = q_read[:, k]
+    return truth.with_spec(spec), replace(data, qs=qs)
 
 
 # -- markers and contacts ----------------------------------------------------------------

@@ -226,7 +226,7 @@ def evaluate_model(
     # external measurement frames: fitted once from all the data; every other unknown
     # (target, marker, offset) per group, by the kind's own closed-form start estimator
     fitted = [text for key, text in problem.fitted if key.kind == "frame"]
-    start = problem.start_context(measurements)
+    start = problem.start_context()
     x0 = np.zeros(problem.n_parameters)
     # the model the errors are predicted by, for a metric that needs geometry: the
     # robot at the samples, the known and the fitted unknowns' values

@@ -42,7 +42,7 @@ from kinfw.identification import Calibration, calibrate
 from kinfw.identification.checks import ChangeBound, InsufficientDataError, fit_plausibility
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements, drop_duplicate_samples
-from kinfw.model import BlockKey, Robot
+from kinfw.model import BlockKey, ModelSpec, Robot
 from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
@@ -285,12 +285,18 @@ def rejected_keys(result: Calibration) -> tuple[tuple[int, str, str, str | None]
 
 
 def held_out_errors(
-    nominal: Robot, model_urdf: str, unknowns: tuple[Unknown, ...], test: Measurements
+    nominal: Robot,
+    model_urdf: str,
+    unknowns: tuple[Unknown, ...],
+    test: Measurements,
+    spec: ModelSpec | None = None,
 ) -> AccuracyReport:
-    """The errors of a calibrated URDF and its frames (``unknowns``: targets, markers,
-    planes, the root's pose in an external frame; nothing refitted) on ``test``, per
-    observation group in the metrics of its kind (:class:`AccuracyReport`)."""
+    """The errors of a calibrated URDF, its model spec (``spec``: compliance...; default
+    ``nominal``'s) and its frames (``unknowns``: targets, markers, planes, the root's
+    pose in an external frame; nothing refitted) on ``test``, per observation group in
+    the metrics of its kind (:class:`AccuracyReport`)."""
     model = Robot(model_urdf, "<trained>")
+    nominal = nominal if spec is None else nominal.with_spec(spec)
     problem = build_problem(nominal, test, start=model, known=unknowns)
     context = NumericContext.from_robot(
         model, test.qs, test.joint_names, {BlockKey(u.kind, u.name): u.value for u in unknowns}
@@ -368,7 +374,7 @@ def _score(
             if parameters != AUTO:
                 raise
             return str(exc)
-    held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test)
+    held = held_out_errors(nominal, result.urdf_xml, fitted_unknowns(result), test, result.spec)
     # the worst held-out sample in the first per-observation metric
     first = next((m for m in held.metrics if m.per_observation), None)
     worst_sample, worst = 0, float("nan")
@@ -402,7 +408,7 @@ def _implausible(
     """The plausibility guard's refusal of the default's fit on a training fold, as
     ``kinfw calibrate`` would refuse to write it
     (:func:`kinfw.identification.checks.fit_plausibility`); None when plausible."""
-    calibrated = Robot(result.urdf_xml, "<calibrated>")
+    calibrated = Robot(result.urdf_xml, "<calibrated>", spec=result.spec)
     verdict = fit_plausibility(nominal, calibrated, train, prior, bound=bound)
     if verdict.plausible:
         return None

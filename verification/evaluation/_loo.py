@@ -114,7 +114,12 @@ def leave_one_out(
     with warnings.catch_warnings():  # the data's warnings belong to the fit, said once
         warnings.simplefilter("ignore", UserWarning)
         problem = build_problem(
-            nominal, data, start=model, known=unknowns, parameters=parameters, prior=prior
+            nominal.with_spec(fit.spec),  # the fit's compliance..., as estimated
+            data,
+            start=model,
+            known=unknowns,
+            parameters=parameters,
+            prior=prior,
         )
     sigma = fit.refined.noise
     r, J = problem.evaluate(np.zeros(problem.n_parameters), sigma, True, only_free=True)

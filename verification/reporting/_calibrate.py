@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -38,7 +38,7 @@ from kinfw.measurements import (
     check_measurements,
     drop_duplicate_samples,
 )
-from kinfw.model import Robot, check_robot
+from kinfw.model import ModelSpec, Robot, check_robot
 from kinfw.reports import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
@@ -494,6 +494,7 @@ def calibrate_and_report(
     keep_duplicates: bool = False,
     change_bound: ChangeBound | None = None,
     allow_large_changes: bool = False,
+    model: ModelSpec | Sequence[str] | None = None,
 ) -> CalibrationResult:
     """Calibrate ``nominal`` from ``data`` as ``kinfw calibrate`` does (the same
     defaults), and report: :func:`kinfw.calibrate`.
@@ -541,6 +542,12 @@ def calibrate_and_report(
     allow_large_changes : bool
         Write a calibration beyond the guard's bound knowingly (``--allow-large-changes``):
         warned about, and the report and sidecar say so.
+    model : ModelSpec or sequence of str, optional
+        Robot blocks the URDF cannot hold, estimated with it (``--model``: ``"compliance"``,
+        ``"gear-scale:JOINT"``, ``"coupling:JOINT=K*OTHER"``; :class:`kinfw.model.ModelSpec`);
+        default ``nominal``'s own (:attr:`kinfw.model.Robot.spec`, empty for a URDF). The
+        calibrated robot carries their estimates (:attr:`CalibrationResult.robot`'s
+        ``spec``), the sidecar records them, and the errors are predicted with them.
 
     Returns
     -------
@@ -558,6 +565,10 @@ def calibrate_and_report(
     """
     nominal = check_robot(nominal, "nominal")
     data = check_measurements(data, "data")
+    if model is not None:
+        nominal = nominal.with_spec(
+            model if isinstance(model, ModelSpec) else ModelSpec.parse(model)
+        )
     if not keep_duplicates:
         data = drop_duplicate_samples(data, stacklevel=3)
     held_out = None if held_out is None else check_measurements(held_out, "held_out")
@@ -585,7 +596,7 @@ def calibrate_and_report(
         evidence = intrinsics_evidence(
             nominal, data, result, parameters=parameters, prior=prior, noise=noise, loss=loss
         )
-    calibrated = Robot(result.urdf_xml, "<calibrated>")
+    calibrated = Robot(result.urdf_xml, "<calibrated>", spec=result.spec)
     progress.stage("report: errors after each stage")
     report = calibration_report(
         nominal,

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from kinfw.identification import Calibration, refine
+from kinfw.identification import Calibration, RefineResult, refine
 from kinfw.identification.problem import Unknown
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
@@ -29,6 +29,7 @@ from kinfw.reports import (
     GroupErrorSummary,
     GuardSummary,
     ModelSummary,
+    RobotBlockRecord,
     StageErrors,
     before_after,
 )
@@ -143,7 +144,7 @@ def _stage_rms(
         *(
             StageErrors.of(
                 name,
-                errors_by_group(Robot(xml, name), refined_data, trained)
+                errors_by_group(Robot(xml, name, spec=calibration.spec), refined_data, trained)
                 if name == "refine"
                 else errors_by_group(Robot(xml, name), data),
             )
@@ -278,6 +279,23 @@ def sidecar(
         errors_held_out=report.errors_held_out,
         model=None if refined is None else model,
         guard=guard,
+        robot_blocks=() if refined is None else robot_block_records(refined),
+    )
+
+
+def robot_block_records(refined: RefineResult) -> tuple[RobotBlockRecord, ...]:
+    """The calibrated model spec's blocks of a refinement (:attr:`RefineResult.spec`),
+    each with its entries' standard deviations (by name from the refinement's)."""
+    std = dict(zip(refined.parameter_names, refined.std, strict=True))
+    return tuple(
+        RobotBlockRecord(
+            b.spec,
+            tuple(f"{n.owner}:{n.field}" for n in b.names),
+            b.units,
+            b.start,
+            np.array([std.get(n, 0.0) for n in b.names]),
+        )
+        for b in refined.spec.blocks
     )
 
 

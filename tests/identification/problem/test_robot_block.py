@@ -49,7 +49,9 @@ class GearScaleBlock(RobotBlock):
     def casadi_value(self, d, c=None):
         return d[0]
 
-    def casadi_joint_values(self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...]) -> Any:
+    def casadi_joint_values(
+        self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...], s: Any = None
+    ) -> Any:
         import casadi as ca
 
         e = np.zeros(len(joint_names))
