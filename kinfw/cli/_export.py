@@ -87,7 +87,18 @@ def _cmd_robot_description(args: argparse.Namespace) -> int:
     robot = load_model(args.urdf, args)
     for path in write_robot_description(args.out, robot.urdf_xml):
         print(f"kinfw export: wrote {path}")
+    _print_left_out(robot, "the robot_description")
     return 0
+
+
+def _print_left_out(robot, where: str) -> None:
+    """Name what a URDF-only output leaves out of a calibration (its model spec, read
+    from the sidecar beside the URDF): nothing is dropped silently."""
+    if robot.spec:
+        print(
+            f"  {where} holds the geometry only; it leaves out {robot.spec.summary()}, which "
+            "no URDF holds: see the calibration's sidecar and per-joint YAML (*.joints.yaml)"
+        )
 
 
 def _xyz_rpy_line(name: str, T) -> str:
@@ -109,6 +120,7 @@ def _cmd_ur_kinematics(args: argparse.Namespace) -> int:
     kinematics = ur_kinematics_from_robot(robot)
     write_text_atomic(args.out, ur_kinematics_text(kinematics))
     print(f"kinfw export: wrote {args.out} (UR kinematics of {robot.source})")
+    _print_left_out(robot, "the UR kinematics file")
     tilts = np.degrees(kinematics.axis_tilts_rad)
     if tilts[:5].max() > 0.0:
         turned = ", ".join(f"{j} {t:.4f}" for j, t in zip(UR_JOINTS[:5], tilts, strict=False))

@@ -15,7 +15,7 @@ import argparse
 import math
 import os
 from collections.abc import Sequence
-from pathlib import PurePath
+from pathlib import Path, PurePath
 from typing import TYPE_CHECKING, Any
 
 from kinfw.cli._args import load_model, model_arg, mounted_model, read_data
@@ -183,6 +183,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         f"calibrated {args.urdf} with {args.method} from {args.data} "
         f"({data.n_samples} samples) -> {args.out} (+ {report.sidecar})"
     )
+    if result.robot.spec:
+        _print_spec(result, args.out)
     warned = () if result.intrinsics is None else (result.intrinsics.message(),)
     for note in report.notes:
         if note not in warned:  # said on stderr already
@@ -215,6 +217,26 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         print(f"report: {args.report}")
     return 0
+
+
+def _print_spec(result, out: Path) -> None:
+    """What the URDF cannot hold, as calibrated: per block entry its value and sigma;
+    where it was written (the sidecar and the per-joint YAML)."""
+    from kinfw.reports import joint_model_path
+    from kinfw.verification.reporting import robot_block_records
+
+    records = robot_block_records(result.calibration.refined)
+    rows = [
+        [name, unit, f"{value:.4g}", f"{std:.2g}" if std > 0 else "fixed"]
+        for r in records
+        for name, unit, value, std in zip(r.names, r.units, r.values, r.std, strict=True)
+    ]
+    print(
+        "the URDF holds the geometry; what no URDF holds "
+        f"({', '.join(b.block_name for b in result.robot.spec.blocks)}) is in the sidecar and "
+        f"{joint_model_path(out)}:"
+    )
+    print(format_table(rows, ["parameter", "unit", "estimate", "std"]))
 
 
 def _print_reprojection(rep, on: str = "the calibration data (in-sample)") -> None:

@@ -94,6 +94,13 @@ class ModelSpec:
     def __bool__(self) -> bool:
         return bool(self.blocks)
 
+    def summary(self) -> str:
+        """One phrase: ``"compliance (6 entries), gear-scale:tilt"``."""
+        return ", ".join(
+            b.block_name + (f" ({b.size} entries)" if b.size > 1 else f":{b.argument}")
+            for b in self.blocks
+        )
+
     @property
     def texts(self) -> tuple[str, ...]:
         """The spec texts that rebuild the blocks (without their values)."""

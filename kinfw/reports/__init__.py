@@ -7,6 +7,11 @@ key of every error.
 from __future__ import annotations
 
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
+from kinfw.reports._joint_model import (
+    joint_model_doc,
+    joint_model_path,
+    joint_model_text,
+)
 from kinfw.reports._records import (
     STATS,
     BeforeAfter,
@@ -82,6 +87,9 @@ __all__ = [
     "TargetEstimate",
     "before_after",
     "headline",
+    "joint_model_doc",
+    "joint_model_path",
+    "joint_model_text",
     "read_only_array",
     "read_report",
     "read_sidecar",

@@ -27,6 +27,7 @@ from kinfw.verification.reporting._report import (
     calibration_report,
     errors_by_group,
     file_sha256,
+    robot_block_records,
     sidecar,
 )
 from kinfw.verification.reporting._sections import (
@@ -63,6 +64,7 @@ __all__ = [
     "plot_stage_errors",
     "refine_section",
     "rejected_rows",
+    "robot_block_records",
     "shared_configurations",
     "sidecar",
 ]

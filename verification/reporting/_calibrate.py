@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfw import progress
-from kinfw.files import check_outputs, sidecar_path
+from kinfw.files import check_outputs, sidecar_path, write_text_atomic
 from kinfw.identification import Calibration
 from kinfw.identification.checks import (
     ChangeBound,
@@ -257,7 +257,9 @@ class CalibrationResult:
 
     def write(self, path: str | Path) -> CalibrationReport:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
-        (``<stem>.kinfw.json``, :func:`kinfw.files.sidecar_path`), each atomically
+        (``<stem>.kinfw.json``, :func:`kinfw.files.sidecar_path`) and, with a model spec
+        (compliance...), the per-joint YAML of what no URDF holds (``<stem>.joints.yaml``,
+        :func:`kinfw.reports.joint_model_text`), each atomically
         (:func:`kinfw.files.write_text_atomic`), after checking both paths.
 
         Returns
@@ -274,13 +276,16 @@ class CalibrationResult:
             Before anything is written: the plausibility guard tripped (:attr:`refusal`)
             and large changes were not allowed.
         """
-        from kinfw.reports import write_sidecar
+        from kinfw.reports import joint_model_path, joint_model_text, write_sidecar
         from kinfw.urdf import write_urdf
 
         if self.refusal is not None:
             raise ImplausibleCalibrationError(self.refusal)
         path = Path(path)
-        check_outputs({"URDF": path, "sidecar": sidecar_path(path)}, inputs=self.inputs)
+        outputs = {"URDF": path, "sidecar": sidecar_path(path)}
+        if self.robot.spec:
+            outputs["per-joint YAML"] = joint_model_path(path)
+        check_outputs(outputs, inputs=self.inputs)
         nominal_path = None if self.nominal.source.startswith("<") else self.nominal.source
         side = sidecar(
             self.report,
@@ -293,6 +298,8 @@ class CalibrationResult:
         write_urdf(path, self.urdf_xml)
         side = replace(side, calibrated_urdf_sha256=file_sha256(path))
         write_sidecar(sidecar_path(path), side)
+        if side.robot_blocks:
+            write_text_atomic(joint_model_path(path), joint_model_text(side.robot_blocks, path))
         return replace(self.report, sidecar=str(sidecar_path(path)))
 
 
