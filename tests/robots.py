@@ -13,6 +13,9 @@
   the pan axis 0.3 m above the root, looking horizontally along the pan link's x.
 - ``PLANAR_2R``: a planar arm, links 0.5 m and 0.3 m, joint axes along z, ``j1`` within
   -0.5 .. 0.5 rad, ``j2`` within -3 .. 3 rad; its tool frame is the tip.
+- :func:`pendulum_urdf`: one revolute joint ``j`` about y at the root, its link ``arm`` a
+  point mass ``PENDULUM_KG`` at x = ``PENDULUM_L_M`` (or without ``<inertial>``), the
+  frame ``tool`` at x = 2 L: gravity's torque about +y is ``m g L cos q``.
 """
 
 ARM_6R = """<?xml version="1.0"?>
@@ -200,3 +203,25 @@ PLANAR_2R = """<?xml version="1.0"?>
   <link name="tool"/>
 </robot>
 """
+
+
+PENDULUM_KG, PENDULUM_L_M = 2.0, 0.5
+
+
+def pendulum_urdf(inertial: bool = True) -> str:
+    """The pendulum of the module docstring (``inertial=False``: its link has no mass)."""
+    body = (
+        f'<inertial><origin xyz="{PENDULUM_L_M} 0 0"/><mass value="{PENDULUM_KG}"/>'
+        '<inertia ixx="1e-9" iyy="1e-9" izz="1e-9" ixy="0" ixz="0" iyz="0"/></inertial>'
+        if inertial
+        else ""
+    )
+    return f"""<robot name="pendulum">
+  <link name="base"/>
+  <link name="arm">{body}</link>
+  <link name="tool"/>
+  <joint name="j" type="revolute"><parent link="base"/><child link="arm"/>
+    <axis xyz="0 1 0"/><limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+  <joint name="tool_joint" type="fixed"><parent link="arm"/><child link="tool"/>
+    <origin xyz="{2 * PENDULUM_L_M} 0 0"/></joint>
+</robot>"""

@@ -79,9 +79,36 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "(m/N for a prismatic joint); the file records the readings that deflect to the "
         "simulated configurations (calibrate it with --model compliance)",
     )
+    p.add_argument(
+        "--truth-model",
+        action="append",
+        type=_truth_block,
+        metavar="SPEC[@VALUES]",
+        help="more of what the true robot's URDF cannot hold, at its true values "
+        "(repeatable): gear-scale:JOINT@S, coupling:JOINT=K*OTHER, compliance:J1,J2@C1,C2 "
+        "(the --model specs of calibrate; VALUES comma-separated, one per entry)",
+    )
     p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=cmd_simulate, check_outputs=check_simulate_outputs)
+
+
+def _truth_block(text: str):
+    """A block of ``--truth-model SPEC[@VALUES]``, started at its true values."""
+    from kinfw.model import block_from_spec
+
+    spec, _, values = text.partition("@")
+    try:
+        block = block_from_spec(spec)
+        if values:
+            block = block.with_start([float(v) for v in values.split(",")])
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{text!r}: {exc}") from None
+    if block.size == 0:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: name the joints (compliance:J1,J2@C1,C2), or use --compliance"
+        )
+    return block
 
 
 def _compliance_spec(text: str) -> tuple[str | None, float]:
@@ -390,6 +417,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from kinfw.measurements import write_measurements
+    from kinfw.model import ModelSpec
     from kinfw.simulation import simulate_measurements
 
     nominal = load_model(args.urdf, args)
@@ -446,6 +474,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         offsets_known=args.offsets_known,
         target_frame=args.target_frame,
         compliance=_compliance_arg(args.compliance),
+        truth_model=ModelSpec(tuple(args.truth_model)) if args.truth_model else None,
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)
@@ -465,12 +494,10 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _true_compliance(truth) -> dict[str, float] | None:
-    """The true robot's compliance by joint (rad/Nm, m/N), None when rigid."""
-    for b in truth.spec.blocks:
-        if b.block_name == "compliance":
-            return dict(zip(b.joints, b.start.tolist(), strict=True))
-    return None
+def _true_model(truth) -> list[dict] | None:
+    """The true robot's model spec (its blocks' names and true values), None when the
+    truth is the URDF alone."""
+    return truth.spec.to_list() if truth.spec else None
 
 
 def _print_simulated(args: argparse.Namespace, sim) -> None:
@@ -494,7 +521,7 @@ def _print_simulated(args: argparse.Namespace, sim) -> None:
                     "stereo_mm": args.stereo_mm,
                     "error_mm": args.error_mm,
                     "error_deg": args.error_deg,
-                    "compliance_rad_per_nm": _true_compliance(sim.truth),
+                    "truth_model": _true_model(sim.truth),
                     "seed": args.seed,
                 },
                 indent=2,

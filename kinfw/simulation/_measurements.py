@@ -274,6 +274,7 @@ def simulate_measurements(
     offsets_known: bool = False,
     target_frame: str | None = None,
     compliance: float | Mapping[str, float] | None = None,
+    truth_model: ModelSpec | None = None,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -369,6 +370,11 @@ def simulate_measurements(
         (:meth:`kinfw.model.ModelSpec.readings`: ``q - c tau(q)``, exact), so the data
         are what an encoder-side controller would log. The truth's :attr:`Robot.spec`
         holds it.
+    truth_model : ModelSpec, optional
+        More of what the true robot's URDF cannot hold (gear scales, couplings, a
+        compliance of some joints), each block at its true value (its ``start``), in the
+        same way: the readings are :meth:`kinfw.model.ModelSpec.readings` of the
+        simulated configurations.
     seed : int
         Seeds the one generator of every draw.
 
@@ -452,8 +458,11 @@ def simulate_measurements(
         )
         parts.extend(touch.data)
     data = concatenate_measurements(*parts)
+    blocks = () if truth_model is None else truth_model.blocks
     if compliance is not None:
-        truth, data = _compliant(truth, data, names, compliance)
+        blocks = (_compliance_block(names, compliance), *blocks)
+    if blocks:
+        truth, data = _with_truth_model(truth, data, names, ModelSpec(blocks))
     return SimulatedMeasurements(
         truth_xml,
         truth,
@@ -477,16 +486,10 @@ def simulate_measurements(
     )
 
 
-def _compliant(
-    truth: Robot,
-    data: Measurements,
-    names: tuple[str, ...],
-    compliance: float | Mapping[str, float],
-) -> tuple[Robot, Measurements]:
-    """The compliant truth (its spec) and ``data`` with the readings that deflect to the
-    simulated (physical) configurations."""
-    from dataclasses import replace
-
+def _compliance_block(
+    names: tuple[str, ...], compliance: float | Mapping[str, float]
+) -> JointComplianceBlock:
+    """The true compliance of ``names`` (rad/Nm, m/N): one value for all, or by joint."""
     if isinstance(compliance, Mapping):
         unknown = sorted(set(compliance) - set(names))
         if unknown:
@@ -498,9 +501,18 @@ def _compliant(
         values = np.full(len(names), float(compliance))
     if not np.all(np.isfinite(values)) or np.any(values < 0):
         raise ValueError(f"compliance: expected finite values >= 0 (rad/Nm, m/N), got {values}")
-    block = JointComplianceBlock.from_spec(",".join(names))
+    return JointComplianceBlock.from_spec(",".join(names)).with_start(values)
+
+
+def _with_truth_model(
+    truth: Robot, data: Measurements, names: tuple[str, ...], spec: ModelSpec
+) -> tuple[Robot, Measurements]:
+    """The truth with its model spec, and ``data`` with the readings that give the
+    simulated (physical) configurations through it."""
+    from dataclasses import replace
+
     samples = BlockSamples(truth, names, data.q_of(names))
-    spec = ModelSpec((block.for_data(samples),)).with_values([values])
+    spec = spec.bound(samples)
     q_read = spec.readings(truth, names, samples.qs)
     qs = data.qs.copy()
     for k, name in enumerate(names):
