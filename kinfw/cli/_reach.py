@@ -61,6 +61,14 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         "metres (or --unit mm)",
     )
     p.add_argument(
+        "--measured-in",
+        metavar="FRAME",
+        help="the target is given in this external frame (the tracker's, the mocap's) "
+        "instead of the root: placed by the calibration sidecar beside the model (its "
+        "measurement frame's pose of the root; a calibration's root is gauge when its "
+        "data were measured in an external frame)",
+    )
+    p.add_argument(
         "--restarts",
         type=number(int, low=0),
         default=50,
@@ -116,6 +124,35 @@ def _reach_target(args):
     return transform_from_xyz_quat_xyzw(xyz, quat)
 
 
+def _root_target(args, target):
+    """``target`` in the root frame: as given, or from ``--measured-in FRAME`` through
+    the sidecar's ``meas_T_root`` (a clear error when the sidecar is missing or measured
+    in another frame)."""
+    import numpy as np
+
+    from kinfw.files import sidecar_path
+    from kinfw.reports import read_sidecar
+
+    if args.measured_in is None:
+        return target
+    side = sidecar_path(args.model)
+    if not Path(side).is_file():
+        raise ValueError(
+            f"--measured-in {args.measured_in}: no calibration sidecar {side} beside the "
+            "model: the pose of the measurement frame comes from the calibration"
+        )
+    sidecar = read_sidecar(side)
+    if sidecar.measurement_frame != args.measured_in:
+        raise ValueError(
+            f"--measured-in {args.measured_in}: the calibration {side} was measured in "
+            f"{sidecar.measurement_frame or 'the root frame ' + repr('(no external frame)')}"
+        )
+    root_T_meas = np.linalg.inv(sidecar.w_T_root)
+    if target.shape == (3,):
+        return root_T_meas[:3, :3] @ target + root_T_meas[:3, 3]
+    return root_T_meas @ target
+
+
 def cmd_reach(args: argparse.Namespace) -> int:
     import math
 
@@ -124,7 +161,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
 
     robot = load_model(args.model, args)
     robot.frame_id(args.frame)  # an unknown frame: one line naming the links
-    target = _reach_target(args)
+    target = _root_target(args, _reach_target(args))
     position = target if target.shape == (3,) else target[:3, 3]
     check_distance(
         f"--{'point' if args.point is not None else 'pose'} position",
@@ -162,6 +199,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
                     "root_T_target": result.root_T_target.tolist(),
                     "joint_names": list(result.joint_names),
                     "q": result.q.tolist(),
+                    "command": result.command.tolist(),
                     "joints": joints_json(rows),
                     "free_joints": list(result.free_joints),
                     "position_error_mm": 1e3 * result.position_error_m,
@@ -177,6 +215,8 @@ def cmd_reach(args: argparse.Namespace) -> int:
     what = "pose" if args.pose is not None else "point"
     print(f"reaching a {what} with {result.frame!r} in {robot.root_link!r}, model {args.model}")
     print(joint_table(rows))
+    if robot.spec:
+        _print_command(robot, result)
     print(f"position error: {1e3 * result.position_error_m:.6f} mm")
     if rotation_deg is not None:
         print(f"rotation error: {rotation_deg:.6f} deg")
@@ -191,6 +231,31 @@ def cmd_reach(args: argparse.Namespace) -> int:
     if args.html is not None:
         print(f"wrote {args.html}")
     return 0 if result.reached else NOT_MET
+
+
+def _print_command(robot, result) -> None:
+    """The joint command that gives the joint values through the model spec (a
+    compliance's deflection compensated), the joints it changes."""
+    moved = [
+        (name, q, c)
+        for name, q, c in zip(result.joint_names, result.q, result.command, strict=True)
+        if abs(c - q) > 0
+    ]
+    print(
+        f"command (the readings to send, {robot.spec.summary()} compensated): "
+        + ", ".join(f"{n} {c:.9g} ({_change(robot, n, c - q)})" for n, q, c in moved)
+        if moved
+        else f"command: the joint values above ({robot.spec.summary()} changes none here)"
+    )
+
+
+def _change(robot, joint: str, delta: float) -> str:
+    """A joint command's change, in deg (revolute) or mm (prismatic)."""
+    import math
+
+    if robot.joint(joint).is_revolute:
+        return f"{math.degrees(delta):+.4f} deg"
+    return f"{1e3 * delta:+.4f} mm"
 
 
 def check_reach_outputs(args: argparse.Namespace) -> None:

@@ -15,6 +15,13 @@ are tried in turn; the answer is the first that reaches it, else the closest; ea
 revolute joint is then moved by whole turns as near to its start as its limits allow. With the
 default 50, 300 of 300 random reachable UR10 poses and 299 of 300 of the 6R test arm's
 are reached (20: 300 and 296); an unreachable target costs all 51 starts.
+
+A robot with a model spec (:attr:`kinfw.model.Robot.spec`: a calibration's joint
+compliance, gear scales, couplings) is solved in its URDF's joint values, the physical
+ones; :attr:`Reach.command` is then the readings that give them
+(:meth:`kinfw.model.ModelSpec.readings`): with a compliance, the command that lands the
+frame on the target *with* the deflection under gravity and the ``payload``
+(compensation).
 """
 
 from __future__ import annotations
@@ -36,7 +43,7 @@ from kinfw.control._solver import (
     solve_bounded,
 )
 from kinfw.geometry import check_transform
-from kinfw.model import Robot, RobotModelError
+from kinfw.model import STANDARD_GRAVITY, Payloads, Robot, RobotModelError
 
 __all__ = ["Reach", "reach"]
 
@@ -56,7 +63,8 @@ class Reach:
     joint_names : tuple of str
         The robot's movable joints: the order of :attr:`q`.
     q : ndarray, shape (k,)
-        Joint values (rad, m), within the limits; joints not freed at ``q_start``.
+        Joint values (rad, m) of the URDF (the physical ones), within the limits; joints
+        not freed at ``q_start``.
     frame : str
         The frame that reaches.
     free_joints : tuple of str
@@ -73,6 +81,9 @@ class Reach:
         Free joints at a limit.
     starts : int
         Starts tried (1 = ``q_start`` sufficed).
+    command : ndarray, shape (k,)
+        The joint command (the readings) that gives :attr:`q` through the robot's model
+        spec under the payload: :attr:`q` itself for a URDF alone.
     """
 
     joint_names: tuple[str, ...]
@@ -85,6 +96,11 @@ class Reach:
     reached: bool
     at_limits: tuple[str, ...]
     starts: int
+    command: NDArray[np.float64] = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self.command is None:
+            object.__setattr__(self, "command", self.q)
 
 
 def reach(
@@ -98,6 +114,8 @@ def reach(
     restarts: int = 50,
     seed: int = 0,
     max_iterations: int = 100,
+    payload: Payloads | None = None,
+    gravity: ArrayLike = STANDARD_GRAVITY,
 ) -> Reach:
     """Joint values that put ``frame`` at ``target`` (module docstring).
 
@@ -124,6 +142,12 @@ def reach(
         Seed of the random starts.
     max_iterations : int
         Iterations per start.
+    payload : Payloads, optional
+        What the robot carries (one sample: ``Payloads.constant(1, FRAME, MASS_KG,
+        COM_M)``); with a compliance in the robot's spec, :attr:`Reach.command`
+        compensates its deflection. Default none.
+    gravity : array_like, shape (3,)
+        In the root frame, m/s^2.
 
     Raises
     ------
@@ -159,6 +183,9 @@ def reach(
     x = nearest_turn(solution.x, starts[0], lower, upper, revolute)
     q[columns] = x
     at_limit = (x <= lower) | (x >= upper)
+    command = q
+    if robot.spec:
+        command = robot.spec.readings(robot, robot.joint_names, q[None], payload, gravity)[0]
     return Reach(
         joint_names=robot.joint_names,
         q=q,
@@ -171,6 +198,7 @@ def reach(
         and (rotation_error is None or rotation_error <= REACHED_RAD),
         at_limits=tuple(n for n, b in zip(free, at_limit, strict=True) if b),
         starts=len(starts),
+        command=command,
     )
 
 
