@@ -312,8 +312,9 @@ def _choice_table(choice) -> str:
     labels = [f"{m.name} {m.unit}" for m in metrics]
     head = f"  {'candidate':<32} {'whitened':>9}" + "".join(f" {t:>8}" for t in labels)
     rows = [head]
+    chosen = (choice.parameters, choice.prior, tuple(b.block_name for b in choice.spec.blocks))
     for c in choice.candidates:
-        mark = " <- chosen" if (c.parameters, c.prior) == (choice.parameters, choice.prior) else ""
+        mark = " <- chosen" if (c.parameters, c.prior, c.model) == chosen else ""
         if c.failed is not None:
             rows.append(f"  {c.label:<32} not scored: {_short_failure(c.failed)}")
             continue

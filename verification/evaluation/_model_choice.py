@@ -34,6 +34,14 @@ its full fit): one 68 mm sample moves an RMS more than the candidates differ.
 
 Ties (within 1 %) go to the simpler model, in the order above. Identification does not
 import this module; the CLI wires them.
+
+**What the URDF cannot hold.** When the robot has no model spec of its own and its links
+carry inertias that gravity loads in these data, the chosen set is fitted again with a
+joint compliance (:class:`kinfw.model.JointComplianceBlock`, ``--model compliance``) and
+both are scored by the same leave-one-out (every sample predicted by the fit without it,
+whitened by the rigid fit's noise): the compliance is kept only when it predicts held-out
+samples more than 1 % better (:data:`MODEL_GAIN`), so rigid data keep the rigid model and
+its held-out error (:func:`choose_model_spec`).
 """
 
 from __future__ import annotations
@@ -42,7 +50,7 @@ import contextlib
 import logging
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,7 +58,7 @@ from kinfw import progress
 from kinfw.identification import Calibration, calibrate
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, observed_joints
-from kinfw.model import Robot
+from kinfw.model import BlockSamples, JointComplianceBlock, ModelSpec, Robot, RobotModelError
 from kinfw.observations import DatasetError, Metric
 from kinfw.verification.evaluation._crossval import (
     metric_rms,
@@ -70,6 +78,10 @@ __all__ = [
     "ModelChoice",
     "choose_parameters",
 ]
+
+#: How much better (a fraction of the rigid model's whitened held-out error) a model spec
+#: candidate (a joint compliance) must predict to be chosen over the rigid model.
+MODEL_GAIN = 0.01
 
 #: Residual rows per free parameter of the full set from which "full" is chosen without
 #: cross-validation (a least-squares rule of thumb: ten observations per unknown keep the
@@ -113,6 +125,9 @@ class Candidate:
         Why the candidate could not be scored (the data too small for its parameters or
         its cameras, on all the data or without one sample); its scores are then NaN
         and it is not chosen.
+    model : tuple of str
+        The robot blocks fitted besides the URDF (``("compliance",)``); empty for the
+        URDF alone.
     """
 
     parameters: str
@@ -120,15 +135,17 @@ class Candidate:
     whitened: float
     errors: tuple[tuple[Metric, float], ...] = ()
     failed: str | None = None
+    model: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
-        """E.g. ``"full"`` or ``"full, prior 3 mm / 1.72 deg"``."""
+        """E.g. ``"full"``, ``"full, prior 3 mm / 1.72 deg"`` or ``"full + compliance"``."""
+        spec = "".join(f" + {m}" for m in self.model)
         if self.prior is None:
-            return self.parameters
+            return self.parameters + spec
         return (
             f"{self.parameters}, prior {1e3 * self.prior[0]:.3g} mm / "
-            f"{np.degrees(self.prior[1]):.3g} deg"
+            f"{np.degrees(self.prior[1]):.3g} deg{spec}"
         )
 
 
@@ -158,6 +175,9 @@ class ModelChoice:
         The chosen candidate's calibration on all the data (what
         ``calibrate(nominal, data, parameters=..., prior=..., noise=..., loss=...)``
         returns); None when cross-validation was skipped. Not serialised.
+    spec : ModelSpec
+        The robot blocks chosen besides the URDF (a joint compliance: :func:`choose_model_spec`),
+        unfitted; :attr:`fit` holds their estimates. Empty: the URDF alone.
     """
 
     parameters: str
@@ -168,10 +188,12 @@ class ModelChoice:
     k: int
     excluded: tuple[tuple[int, str, str, str | None], ...] = ()
     fit: Calibration | None = field(default=None, compare=False, repr=False)
+    spec: ModelSpec = field(default_factory=ModelSpec)
 
     @property
     def label(self) -> str:
-        return Candidate(self.parameters, self.prior, np.nan).label
+        model = tuple(b.block_name for b in self.spec.blocks)
+        return Candidate(self.parameters, self.prior, np.nan, model=model).label
 
     def to_dict(self) -> dict:
         return {
@@ -180,6 +202,7 @@ class ModelChoice:
             if self.prior is None
             else {"sigma_m": self.prior[0], "sigma_rad": self.prior[1]},
             "reason": self.reason,
+            "model": list(self.spec.texts),
             "rows_per_parameter": self.rows_per_parameter,
             "k": self.k,
             "excluded": [list(e) for e in self.excluded],
@@ -226,7 +249,8 @@ def choose_parameters(
     prior: tuple[float, float] | None = None,
     cross_validate: bool = False,
 ) -> ModelChoice:
-    """Choose the parameter set and prior that predict held-out data best.
+    """Choose the parameter set and prior that predict held-out data best, then
+    whether a joint compliance predicts better still (:func:`choose_model_spec`).
 
     Parameters
     ----------
@@ -256,6 +280,23 @@ def choose_parameters(
         Fewer than 3 samples on small data (nothing to cross-validate), or no candidate
         can be fitted on all the data (the calibration's own error).
     """
+    choice = _choose_set(
+        nominal, data, noise=noise, loss=loss, prior=prior, cross_validate=cross_validate
+    )
+    return choose_model_spec(nominal, data, choice, noise=noise, loss=loss)
+
+
+def _choose_set(
+    nominal: Robot,
+    data: Measurements,
+    *,
+    noise: NoiseModel | None,
+    loss: str,
+    prior: tuple[float, float] | None,
+    cross_validate: bool,
+) -> ModelChoice:
+    """The parameter set and prior of :func:`choose_parameters` (without the model
+    spec's candidates)."""
     ratio = rows_per_parameter(nominal, data)
     measured = observed_joints(data, nominal)
     if nominal.exact_joints and set(measured) <= set(nominal.exact_joints):
@@ -325,6 +366,161 @@ def choose_parameters(
         data.n_samples,
         excluded,
         fit=fits[candidates.index(chosen)],
+    )
+
+
+def compliance_candidate(nominal: Robot, data: Measurements) -> JointComplianceBlock | None:
+    """The joint compliance the model choice tries on ``data`` (of the measured joints
+    but the URDF's exact ones, a pose chain's): None when the robot has a model spec of
+    its own (given, or a calibration's), when a link on the measured paths lacks
+    inertias, or when gravity loads none of those joints in these data."""
+    names = tuple(observed_joints(data, nominal))
+    compliant = [j for j in names if j not in nominal.exact_joints]
+    if nominal.spec or not compliant:
+        return None
+    samples = BlockSamples(nominal, names, data.q_of(names))
+    try:
+        block = JointComplianceBlock.from_spec(",".join(compliant)).for_data(samples)
+    except RobotModelError:
+        return None
+    return block if block.free.any() else None
+
+
+def choose_model_spec(
+    nominal: Robot,
+    data: Measurements,
+    choice: ModelChoice,
+    *,
+    noise: NoiseModel | None = None,
+    loss: str = "huber",
+) -> ModelChoice:
+    """``choice`` with a joint compliance added when it predicts held-out samples more
+    than :data:`MODEL_GAIN` better than the rigid model (the module docstring).
+
+    The rigid fit is the choice's own, or (an unscored choice) fitted here and kept as
+    the calibration, its warnings issued when it stays. A score test at it gates the
+    rest (:func:`compliance_gain`: what a compliance would take off the whitened cost,
+    in-sample, against its chi-square spread under no compliance); only then is the
+    compliant model fitted and both scored by the closed-form leave-one-out on the data
+    without the rigid fit's rejections, whitened by its noise. Unchanged when no
+    compliance is a candidate (:func:`compliance_candidate`) or a fit fails.
+    """
+    block = compliance_candidate(nominal, data)
+    if block is None:
+        return choice
+    progress.stage("model choice: joint compliance under gravity")
+    rigid, caught = choice.fit, []
+    if rigid is None:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            try:
+                rigid = calibrate(
+                    nominal,
+                    data,
+                    parameters=choice.parameters,
+                    prior=choice.prior,
+                    noise=noise,
+                    loss=loss,
+                )
+            except ValueError:  # the caller's refusal or fallback, as without compliance
+                return choice
+        choice = replace(choice, fit=rigid)
+    gain, dof = compliance_gain(
+        nominal, data, block, rigid, (choice.parameters, choice.prior), noise
+    )
+    kept = (
+        _with_compliance(nominal, data, choice, block, noise=noise, loss=loss)
+        if (gain > dof + 6.0 * np.sqrt(2.0 * dof))
+        else choice
+    )
+    if not kept.spec:
+        for w in caught:  # the rigid calibration's own warnings, once
+            warnings.warn(w.message, w.category, stacklevel=2)
+    return kept
+
+
+def compliance_gain(
+    nominal: Robot,
+    data: Measurements,
+    block: JointComplianceBlock,
+    rigid: Calibration,
+    model: tuple[str, tuple[float, float] | None],
+    noise: NoiseModel | None,
+) -> tuple[float, int]:
+    """The score test of a joint compliance at the rigid fit ``rigid`` of ``model``
+    (its parameter set and prior): how much one Gauss-Newton step over every free
+    parameter and ``block``'s compliances would lower the whitened cost (in-sample,
+    linear loss), and the compliances' count. Under no compliance it is about chi-square
+    with that many degrees of freedom (the rigid parameters' gradient is zero at their
+    fit)."""
+    refined = rigid.refined
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        problem = build_problem(
+            nominal.with_spec(ModelSpec((block,))),
+            data,
+            start=Robot(rigid.urdf_xml, "<rigid>"),
+            known=refined.unknowns,
+            parameters=model[0],
+            prior=model[1],
+        )
+    r, J = problem.evaluate_free(
+        np.zeros(problem.n_parameters), refined.noise if noise is None else noise
+    )
+    step, *_ = np.linalg.lstsq(J, -r, rcond=None)
+    gain = float(r @ r - np.sum((r + J @ step) ** 2))
+    return gain, int(block.free.sum())
+
+
+def _with_compliance(
+    nominal: Robot,
+    data: Measurements,
+    choice: ModelChoice,
+    block: JointComplianceBlock,
+    *,
+    noise: NoiseModel | None,
+    loss: str,
+) -> ModelChoice:
+    """``choice`` (its fit the rigid one) with the compliant model fitted and both
+    scored by leave-one-out; the compliance kept when it predicts better by
+    :data:`MODEL_GAIN`."""
+    rigid = choice.fit
+    compliant = _fit(
+        nominal.with_spec(ModelSpec((block,))),
+        data,
+        choice.parameters,
+        choice.prior,
+        noise=noise,
+        loss=loss,
+    )
+    if isinstance(compliant, ValueError):
+        return choice
+    sigma = whitening_noise(rigid.refined.noise if noise is None else noise, data)
+    excluded = rejected_keys(rigid)
+    scored = without_observations(data, {(k, f, m, s) for s, k, f, m in excluded})
+    label = (choice.parameters, choice.prior)
+    scores = [
+        _score(robot, scored, *label, fit, loss=loss, sigma=sigma)
+        for robot, fit in ((nominal, rigid), (nominal.with_spec(compliant.spec), compliant))
+    ]
+    scores[1] = replace(scores[1], model=("compliance",))
+    candidates = [c for c in choice.candidates if (c.parameters, c.prior, c.model) != (*label, ())]
+    candidates += scores
+    rigid_score, compliant_score = scores[0].whitened, scores[1].whitened
+    better = np.isfinite(compliant_score) and compliant_score < (1 - MODEL_GAIN) * rigid_score
+    if not better:
+        return replace(choice, candidates=tuple(candidates), k=choice.k or data.n_samples)
+    why = (
+        f"; a joint compliance under gravity predicts held-out samples better: "
+        f"{compliant_score:.3g} whitened vs {rigid_score:.3g} rigid (--model compliance)"
+    )
+    return replace(
+        choice,
+        reason=choice.reason + why,
+        candidates=tuple(candidates),
+        k=choice.k or data.n_samples,
+        fit=compliant,
+        spec=ModelSpec((block,)),
     )
 
 

@@ -585,6 +585,8 @@ def calibrate_and_report(
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
     )
+    if choice is not None and choice.spec:  # the model choice added a compliance
+        nominal = nominal.with_spec(choice.spec)
     result, choice = _fitted(
         nominal,
         data,
@@ -621,9 +623,9 @@ def calibrate_and_report(
         report = dataclasses.replace(
             report, notes=(*report.notes, f"parameters: {choice.label} ({choice.reason})")
         )
-    # full alone is warned about in the fit, unless it is the model choice's candidate
-    # (whose warnings the choice silences)
-    candidate = choice is not None and result is choice.fit
+    # full alone is warned about in the fit, unless it is a scored candidate of the model
+    # choice (whose warnings the choice silences; an unscored choice's fit warns)
+    candidate = choice is not None and result is choice.fit and bool(choice.candidates)
     restricted = parameters != "full" or prior is not None or candidate
     report, verdict, refusal = _guarded(
         nominal,
