@@ -103,8 +103,9 @@ def test_compliance_is_recovered_exactly_and_reapplied_by_verify_and_export(tmp_
 
 
 def test_noisy_held_out_errors_are_at_the_noise_floor_with_compliance_only(tmp_path, capsys):
-    """0.02 mm reflectors, joint errors of 1 mm / 0.2 deg: the compliant model predicts held-out
-    points at the noise floor (sqrt(3) sigma), the URDF alone at several times it."""
+    """0.02 mm reflectors, joint errors of 1 mm / 0.2 deg: the compliant model predicts
+    held-out points at the noise floor (sqrt(3) sigma), the URDF alone at several times
+    it; the default (the model choice) takes the compliance."""
     sigma_mm = 0.02
     both, _ = _simulate(
         tmp_path,
@@ -123,7 +124,12 @@ def test_noisy_held_out_errors_are_at_the_noise_floor_with_compliance_only(tmp_p
     write_measurements(train, data.subset(np.arange(0, 240, 2)))
     write_measurements(test, data.subset(np.arange(1, 240, 2)))
     held = {}
-    for label, model in (("compliant", ["--model", "compliance"]), ("rigid", [])):
+    runs = {
+        "compliant": ["--params", "full", "--model", "compliance"],
+        "rigid": ["--params", "full"],
+        "default": [],  # the model choice: compliance, on held-out evidence
+    }
+    for label, model in runs.items():
         out = tmp_path / f"{label}.urdf"
         code, text, _ = run_cli(
             ["calibrate", train, "--urdf", UR10, "--out", out, "--holdout", test, "--json", *model],
@@ -135,6 +141,7 @@ def test_noisy_held_out_errors_are_at_the_noise_floor_with_compliance_only(tmp_p
     floor = np.sqrt(3.0) * sigma_mm
     assert held["compliant"] < 1.15 * floor, held
     assert held["rigid"] > 3.0 * floor, held
+    assert held["default"] == pytest.approx(held["compliant"], rel=1e-6), held
 
 
 def test_gear_scale_and_coupling_are_recovered_exactly_through_the_shell(tmp_path, capsys):

@@ -128,7 +128,7 @@ def test_prediction_is_pinocchios_relative_pose(nominal):
     problem = build_problem(nominal, data, parameters="none")
     ((r, _),) = problem.raw_residuals(np.zeros(problem.n_parameters), with_jacobian=False)
     assert np.abs(r).max() < 1e-12
-    start = problem.start_context(data)
+    start = problem.start_context()
     np.testing.assert_allclose(
         start.meas_T("camera", "flange", np.arange(len(qs))), expected, atol=1e-12
     )
