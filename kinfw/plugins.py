@@ -10,8 +10,9 @@ A package declares its plugin in its ``pyproject.toml``::
 and the module (or the function) registers its pieces itself, with kinfw's public
 register functions: :func:`kinfw.observations.register_kind`,
 :func:`kinfw.cli.register_command`, :func:`kinfw.identification.handeye.register_start`
-(and the robot blocks' registry of :mod:`kinfw.model`, likewise). kinfw only imports the
-modules the entry points name, once per process, when a registry is first consulted:
+(and, once it exists, the robot blocks' registry of :mod:`kinfw.model`). kinfw only
+imports the modules the entry points name, once per process, when a registry is first
+consulted:
 :func:`load_plugins` is called by the ``kinfw`` command before it builds its parser (so
 a plugin's command is listed by ``kinfw --help`` and runs), by the look-ups of the kinds
 (:func:`kinfw.observations.kinds`, ``kind_named``, ``kind_of``) and by the hand-eye
