@@ -172,7 +172,7 @@ def build_parser(
         add_parser(sub)
     for add_parser in _REGISTERED if commands is None else ():
         try:
-            add_parser(sub)
+            add_parser(_NewNames(sub))
         except Exception as exc:
             first = (str(exc).strip().splitlines() or [""])[0]
             warnings.warn(
@@ -181,6 +181,23 @@ def build_parser(
                 stacklevel=2,
             )
     return parser
+
+
+class _NewNames:
+    """argparse's sub-parsers as a registered command sees them: a name already taken is
+    refused (Python 3.10's argparse would silently replace the command of that name)."""
+
+    def __init__(self, sub: argparse._SubParsersAction) -> None:
+        self._sub = sub
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        taken = [n for n in (name, *kwargs.get("aliases", ())) if n in self._sub.choices]
+        if taken:
+            raise ValueError(f"the command name {taken[0]!r} is taken")
+        return self._sub.add_parser(name, **kwargs)
+
+    def __getattr__(self, attribute: str) -> Any:
+        return getattr(self._sub, attribute)
 
 
 def _plugins_and_parser(
