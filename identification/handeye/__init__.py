@@ -7,9 +7,10 @@ pose streams (:func:`best_time_offset`); the scale of a camera's target translat
 against the robot's motion (:func:`translation_scale`: a board of the wrong size). For
 ``kinfw handeye``: either setup from pose pairs (:func:`calibrate_pose_pairs`, a
 :class:`HandEyeCalibration` written and read back by :func:`handeye_calibration_text` /
-:func:`read_handeye_calibration`), OpenCV's closed forms side by side
-(:func:`fit_method`) with held-out errors (:func:`loop_closure_errors`,
-:func:`kfold_errors`), and the ROS 2 outputs (:func:`write_ros_outputs`).
+:func:`read_handeye_calibration`), OpenCV's closed forms and the registered starts side
+by side (:func:`fit_method`, :func:`handeye_methods`) with held-out errors
+(:func:`loop_closure_errors`, :func:`kfold_errors`), and the ROS 2 outputs
+(:func:`write_ros_outputs`).
 
 One convention for every solver here (eye-in-hand): a camera rigidly mounted on the
 robot's *hand* (the link it hangs from: end effector, flange, the head's plate) looks at
@@ -83,6 +84,7 @@ from kinfw.identification.handeye._compare import (
     calibrate_pose_pairs,
     compare_methods,
     fit_method,
+    handeye_methods,
     kfold_errors,
     loop_closure_errors,
     repeated_pairs,
@@ -222,6 +224,7 @@ __all__ = [
     "fit_lm",
     "fit_method",
     "handeye_calibration_text",
+    "handeye_methods",
     "implied_target_spread",
     "inverse_covariance_map",
     "iteration_matrix",

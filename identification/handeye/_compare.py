@@ -1,5 +1,6 @@
-"""Hand-eye calibration from pose pairs for ``kinfw handeye``: kinfw's solver and
-OpenCV's closed forms side by side, and their held-out errors.
+"""Hand-eye calibration from pose pairs for ``kinfw handeye``: kinfw's solver, OpenCV's
+closed forms and the registered closed-form starts (a plugin's) side by side, and their
+held-out errors.
 
 Every method is fitted to the same ``(base_T_hands, camera_T_targets)`` for either setup
 (:func:`kinfw.identification.handeye.solver_hand_poses`) and returns
@@ -26,7 +27,9 @@ from kinfw.geometry import (
 from kinfw.identification.handeye._axxb import solve_axxb
 from kinfw.identification.handeye._calibration import HandEyeCalibration, solver_hand_poses
 from kinfw.identification.handeye._result import HandEyeResult
+from kinfw.identification.handeye._starts import START_METHODS
 from kinfw.measurements import PosePairs, drop_duplicate_pairs
+from kinfw.plugins import load_plugins
 
 __all__ = [
     "HANDEYE_METHODS",
@@ -35,6 +38,7 @@ __all__ = [
     "calibrate_pose_pairs",
     "compare_methods",
     "fit_method",
+    "handeye_methods",
     "kfold_errors",
     "loop_closure_errors",
     "repeated_pairs",
@@ -46,21 +50,42 @@ HANDEYE_METHODS = ("kinfw", "tsai", "park", "horaud", "andreff", "daniilidis", "
 _HAND_EYE = {"tsai", "park", "horaud", "andreff", "daniilidis"}
 
 
+def handeye_methods() -> tuple[str, ...]:
+    """Every method :func:`fit_method` knows: :data:`HANDEYE_METHODS`, then the
+    closed-form starts registered under other names
+    (:func:`~kinfw.identification.handeye.register_start`: a plugin's or a program's;
+    the plugins loaded first). The built-in starts share OpenCV's names, which mean
+    OpenCV's implementation here."""
+    load_plugins()
+    return (*HANDEYE_METHODS, *(n for n in START_METHODS if n not in HANDEYE_METHODS))
+
+
 def fit_method(
     method: str, *, base_T_hands: ArrayLike, camera_T_targets: ArrayLike, setup: str
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(mount_T_camera, holder_T_target)`` fitted by ``method`` (:data:`HANDEYE_METHODS`),
+    """``(mount_T_camera, holder_T_target)`` fitted by ``method`` (:func:`handeye_methods`),
     each (4, 4) in the input length unit.
 
     OpenCV's AX = XB methods give no target pose: it is the chordal mean of
-    ``A[i] @ X @ B[i]`` over the pairs (:func:`kinfw.geometry.average_transform`).
-    Raises ValueError for an unknown method; OpenCV's own errors pass through.
+    ``A[i] @ X @ B[i]`` over the pairs (:func:`kinfw.geometry.average_transform`). A
+    registered start is called on the solver's poses in its problem's letters
+    (:data:`~kinfw.identification.handeye.START_METHODS`): ``"axxb"`` gives
+    ``(hand_T_camera, base_T_target)``, ``"axyb"`` ``(camera_T_hand, base_T_target)``.
+    Raises ValueError for an unknown method; OpenCV's and a start's own errors pass
+    through.
     """
     A = solver_hand_poses(base_T_hands, setup)
     B = np.asarray(camera_T_targets, dtype=float)
     if method == "kinfw":
         r = solve_axxb(base_T_hands=A, camera_T_targets=B)
         return r.hand_T_camera, r.base_T_target
+    if method not in HANDEYE_METHODS and method in handeye_methods():
+        start = START_METHODS[method]
+        if start.problem == "axxb":
+            X, Y = start.solve(A, B)
+            return np.asarray(X, dtype=float), np.asarray(Y, dtype=float)
+        X, Y = start.solve(B, inverse_transform(A))
+        return inverse_transform(X), np.asarray(Y, dtype=float)
     import cv2
 
     if method in _HAND_EYE:
@@ -86,7 +111,7 @@ def fit_method(
         X = inverse_transform(transform_from_rotation_translation(R_gc, np.ravel(t_gc)))
         Y = inverse_transform(transform_from_rotation_translation(R_bw, np.ravel(t_bw)))
         return X, Y
-    raise ValueError(f"unknown hand-eye method {method!r} (one of {', '.join(HANDEYE_METHODS)})")
+    raise ValueError(f"unknown hand-eye method {method!r} (one of {', '.join(handeye_methods())})")
 
 
 @dataclass(frozen=True, slots=True)
@@ -241,7 +266,7 @@ class MethodResult:
     Attributes
     ----------
     method : str
-        A name of :data:`HANDEYE_METHODS`.
+        A name of :func:`handeye_methods`.
     mount_T_camera, holder_T_target : ndarray, shape (4, 4), or None
         The fit (input unit); None when the method failed.
     holdout : HeldOutErrors or None

@@ -46,6 +46,7 @@ from kinfw.identification.handeye._starts_axxb import (
     prepare_axxb,
 )
 from kinfw.identification.handeye._starts_axyb import li_axyb, li_checked, shah_axyb, shah_checked
+from kinfw.plugins import load_plugins
 
 __all__ = [
     "START_METHODS",
@@ -105,7 +106,9 @@ _METHODS: dict[str, StartMethod] = {
 _BUILT_IN = frozenset(_METHODS)
 
 #: Every closed-form start by name, in the order :func:`candidate_starts` tries them (a
-#: read-only view: add one with :func:`register_start`).
+#: read-only view: add one with :func:`register_start`). The starts of installed plugins
+#: (:mod:`kinfw.plugins`) are here once :func:`candidate_starts` or
+#: :func:`kinfw.plugins.load_plugins` has run.
 START_METHODS: Mapping[str, StartMethod] = MappingProxyType(_METHODS)
 
 
@@ -113,9 +116,12 @@ def register_start(name: str, method: StartMethod) -> StartMethod:
     """Add a closed-form start under a new ``name``; returns it.
 
     The solvers then fit from it too whenever they try the closed forms (a first fit
-    that is not clean: :func:`~kinfw.identification.handeye.solve_axxb`), and
-    :func:`candidate_starts` lists it after the built-ins. A ``method`` without
-    ``solve_prepared`` is called as ``method.solve(A, B)`` on the checked poses.
+    that is not clean: :func:`~kinfw.identification.handeye.solve_axxb`),
+    :func:`candidate_starts` lists it after the built-ins, and ``kinfw handeye --method
+    NAME`` fits it beside OpenCV's closed forms
+    (:func:`~kinfw.identification.handeye.fit_method`). A ``method`` without
+    ``solve_prepared`` is called as ``method.solve(A, B)`` on the checked poses. A plugin
+    module registers its starts so when it is imported (:mod:`kinfw.plugins`).
 
     Raises
     ------
@@ -143,8 +149,10 @@ def candidate_starts(
 
     ``A``, ``B`` (n, 4, 4) as the closed forms of ``problem`` take them (module
     docstring). A method that raises :class:`StartError` is left out (logged at debug
-    level); when all fail, the first method's error is raised.
+    level); when all fail, the first method's error is raised. The plugins' starts are
+    loaded first (:func:`kinfw.plugins.load_plugins`).
     """
+    load_plugins()
     prepared = _PREPARE[_check_problem(problem)](A, B, "candidate_starts")
     out: dict[str, tuple[Pose, Pose]] = {}
     first: StartError | None = None

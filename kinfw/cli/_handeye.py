@@ -29,13 +29,23 @@ _OPENCV = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
 
 
 def _methods(text: str) -> list[str]:
-    names = _OPENCV if text.strip() == "all" else [m.strip().lower() for m in text.split(",")]
-    unknown = [m for m in names if m not in _OPENCV]
+    """``--method``: OpenCV's closed forms by name (the standard library alone), or
+    ``all`` / a name of a registered start (a plugin's), which loads the hand-eye
+    package to list them (:func:`kinfw.identification.handeye.handeye_methods`)."""
+    names = [m.strip().lower() for m in text.split(",")]
+    if text.strip() != "all" and all(m in _OPENCV for m in names):
+        return names
+    from kinfw.identification.handeye import handeye_methods
+
+    known = [m for m in handeye_methods() if m != "kinfw"]
+    if text.strip() == "all":
+        return known
+    unknown = [m for m in names if m not in known]
     if unknown:
         raise argparse.ArgumentTypeError(
-            f"unknown method(s) {', '.join(unknown)}: use all or some of {', '.join(_OPENCV)}"
+            f"unknown method(s) {', '.join(unknown)}: use all or some of {', '.join(known)}"
         )
-    return list(names)
+    return names
 
 
 def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,8 +88,9 @@ def add_handeye_parser(sub: argparse._SubParsersAction) -> None:
         type=_methods,
         metavar="all|NAME[,NAME...]",
         help="also fit OpenCV's closed forms (tsai, park, horaud, andreff, daniilidis: "
-        "calibrateHandEye; shah, li: calibrateRobotWorldHandEye) and print a table of "
-        "their results and held-out errors beside kinfw's",
+        "calibrateHandEye; shah, li: calibrateRobotWorldHandEye) or a closed-form start a "
+        "plugin registered (by its name; all: every one) and print a table of their "
+        "results and held-out errors beside kinfw's",
     )
     p.add_argument(
         "--holdout",

@@ -56,8 +56,7 @@ from kinfw.cli._plan import add_plan_parser
 from kinfw.cli._pose_chain import add_pose_chain_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
-
-__all__ = ["main"]
+from kinfw.plugins import PluginWarning, load_plugins
 
 log = logging.getLogger("kinfw")
 
@@ -122,11 +121,43 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
 )
 
 
+#: Commands added by :func:`register_command` (a plugin's, a program's), after COMMANDS.
+_REGISTERED: list[Callable[[Any], None]] = []
+
+
+def register_command(add_parser: Callable[[Any], None]) -> Callable[[Any], None]:
+    """Add a ``kinfw`` command, listed by ``kinfw --help`` after the built-in ones.
+
+    ``add_parser(sub)`` adds the command's sub-parser to ``sub`` (argparse's
+    sub-parsers) and sets its defaults as the built-in commands do: ``func`` (the
+    command: ``func(args) -> exit code``) and, if it writes files, ``check_outputs``
+    (``check_outputs(args)``, run before any work). The command then shares the shared
+    machinery: outputs checked first, one-line errors for ValueError and OSError (exit
+    2), warnings printed once. A plugin module calls this when it is imported
+    (:mod:`kinfw.plugins`); returns ``add_parser``, so it decorates too.
+
+    Raises
+    ------
+    ValueError
+        When ``add_parser`` is already a command.
+    """
+    if add_parser in COMMANDS or add_parser in _REGISTERED:
+        raise ValueError(f"register_command: {_qualified(add_parser)} is already a command")
+    _REGISTERED.append(add_parser)
+    return add_parser
+
+
+def _qualified(function: Callable[..., Any]) -> str:
+    name = getattr(function, "__qualname__", repr(function))
+    return f"{getattr(function, '__module__', '?')}.{name}"
+
+
 def build_parser(
-    commands: Sequence[Callable[[Any], None]] = COMMANDS,
+    commands: Sequence[Callable[[Any], None]] | None = None,
 ) -> argparse.ArgumentParser:
     """The ``kinfw`` parser: one sub-command per entry of ``commands``, each defined
-    beside its command."""
+    beside its command; None: :data:`COMMANDS`, then those of :func:`register_command`
+    (one that fails to add its sub-parser, a name taken, is warned and left out)."""
     parser = _Parser(prog="kinfw", description="Calibrate robot kinematics from measurements.")
     talk = parser.add_mutually_exclusive_group()
     talk.add_argument("-v", "--verbose", action="store_true", help="also log what each stage found")
@@ -137,8 +168,53 @@ def build_parser(
         help="no progress on stderr (warnings and errors still)",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for add_parser in commands:
+    for add_parser in COMMANDS if commands is None else commands:
         add_parser(sub)
+    for add_parser in _REGISTERED if commands is None else ():
+        try:
+            add_parser(_NewNames(sub))
+        except Exception as exc:
+            first = (str(exc).strip().splitlines() or [""])[0]
+            warnings.warn(
+                f"command of {_qualified(add_parser)} not added: {type(exc).__name__}: {first}",
+                PluginWarning,
+                stacklevel=2,
+            )
+    return parser
+
+
+class _NewNames:
+    """argparse's sub-parsers as a registered command sees them: a name already taken is
+    refused (Python 3.10's argparse would silently replace the command of that name)."""
+
+    def __init__(self, sub: argparse._SubParsersAction) -> None:
+        self._sub = sub
+
+    def add_parser(self, name: str, **kwargs: Any) -> argparse.ArgumentParser:
+        taken = [n for n in (name, *kwargs.get("aliases", ())) if n in self._sub.choices]
+        if taken:
+            raise ValueError(f"the command name {taken[0]!r} is taken")
+        return self._sub.add_parser(name, **kwargs)
+
+    def __getattr__(self, attribute: str) -> Any:
+        return getattr(self._sub, attribute)
+
+
+def _plugins_and_parser(
+    commands: Sequence[Callable[[Any], None]] | None,
+) -> argparse.ArgumentParser:
+    """Load the plugins (:func:`kinfw.plugins.load_plugins`), then build the parser;
+    their warnings (a plugin that failed, a command left out) as ``kinfw: warning: ...``
+    lines on stderr, other warnings as Python shows them."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", PluginWarning)
+        load_plugins()
+        parser = build_parser(commands)
+    for w in caught:
+        if issubclass(w.category, PluginWarning):
+            print(f"kinfw: warning: {' '.join(str(w.message).split())}", file=sys.stderr)
+        else:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     return parser
 
 
@@ -227,12 +303,17 @@ def _warnings_printed_once(command: str, verbose: bool):
 
 
 def main(
-    argv: Sequence[str] | None = None, *, commands: Sequence[Callable[[Any], None]] = COMMANDS
+    argv: Sequence[str] | None = None,
+    *,
+    commands: Sequence[Callable[[Any], None]] | None = None,
 ) -> int:
     """Entry point of the ``kinfw`` command; returns the exit code (also for ``--help``,
     0, and for an argument error, 2, which argparse signals with SystemExit).
-    ``commands``: :data:`COMMANDS`, or more (a test's own command)."""
-    parser = build_parser(commands)
+
+    The plugins are loaded first (:mod:`kinfw.plugins`). ``commands``: None for
+    :data:`COMMANDS` and the commands of :func:`register_command`; or the commands to
+    offer (:data:`COMMANDS` and a test's own command)."""
+    parser = _plugins_and_parser(commands)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:

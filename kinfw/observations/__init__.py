@@ -8,7 +8,10 @@ problem and verification look kinds up here and loop over :func:`kinds`; none of
 branches on a kind's name.
 
 Adding a kind: write its group dataclass and its :class:`ObservationKind` subclass
-(see ``docs/architecture.md`` for a worked example), then ``register_kind(MyKind())``.
+(see ``docs/architecture.md`` for a worked example), then ``register_kind(MyKind())``:
+in your program, or in a plugin module that another installed package names in the
+entry-point group ``kinfw.plugins`` (:mod:`kinfw.plugins`), which the look-ups here
+(:func:`kinds`, ``kind_named``, :func:`kind_of`) load before their first answer.
 """
 
 from __future__ import annotations
@@ -85,6 +88,7 @@ from kinfw.observations._sphere import (
     sphere_key,
 )
 from kinfw.observations._target import DEFAULT_TARGET, TargetKind, TargetObservations
+from kinfw.plugins import load_plugins
 
 __all__ = [
     "DEFAULT_TARGET",
@@ -184,17 +188,21 @@ def unregister_kind(name: str) -> None:
 
 def kinds() -> tuple[ObservationKind, ...]:
     """Every registered kind, built-ins first (``pose``, ``target``, ``point``, ``plane``,
-    ``sphere``, ``divot``, ``pixels``)."""
+    ``sphere``, ``divot``, ``pixels``), then those of the plugins
+    (:func:`kinfw.plugins.load_plugins`) and of the program."""
+    load_plugins()
     return tuple(_REGISTRY.values())
 
 
 def kind_named(name: str) -> ObservationKind:
-    """The kind of a file's ``"kind"`` (KeyError if not registered)."""
+    """The kind of a file's ``"kind"``, a plugin's too (KeyError if not registered)."""
+    load_plugins()
     return _REGISTRY[name]
 
 
 def kind_of(group: Any) -> ObservationKind:
     """The kind of an observation group (by its ``kind`` class attribute)."""
+    load_plugins()
     try:
         kind = _REGISTRY[group.kind]
     except (AttributeError, KeyError):

@@ -16,10 +16,14 @@ import pytest
 
 from kinfw.geometry import average_transform, quat_xyzw_from_matrix
 from kinfw.identification.handeye import (
+    HANDEYE_METHODS,
     START_METHODS,
     StartMethod,
     candidate_starts,
+    fit_method,
+    handeye_methods,
     register_start,
+    shah_axyb,
     solve_axxb,
     unregister_start,
 )
@@ -124,3 +128,40 @@ def test_names_are_unique_and_built_ins_stay(horaud):
     with pytest.raises(ValueError, match="'axxb' or 'axyb'"):
         register_start("other", StartMethod("axbx", horaud_axxb))
     assert "other" not in START_METHODS
+
+
+@pytest.fixture
+def renamed():
+    """Horaud's form and kinfw's own Shah form of ``A = X B Y`` under names OpenCV does not
+    use, for one test."""
+    register_start("horaud_q", StartMethod("axxb", horaud_axxb))
+    register_start("shah_again", StartMethod("axyb", shah_axyb))
+    yield
+    unregister_start("horaud_q")
+    unregister_start("shah_again")
+
+
+@pytest.mark.parametrize("setup", ["eye-in-hand", "eye-to-hand"])
+def test_fit_method_fits_registered_starts_of_either_problem_in_its_letters(renamed, setup):
+    """``kinfw handeye --method NAME``'s fit: an ``axxb`` start gives ``(hand_T_camera,
+    base_T_target)`` as it is, an ``axyb`` start ``(camera_T_hand, base_T_target)``,
+    which fit_method inverts; both equal the scene's truth (eye-to-hand: the same
+    equation with base and hand exchanged, the poses given as base_T_hand)."""
+    mount_T_camera, holder_T_target, A, B = _scene(3)
+    base_T_hands = A if setup == "eye-in-hand" else inverse(A)
+    assert handeye_methods() == (*HANDEYE_METHODS, "horaud_q", "shah_again")
+    for name in ("horaud_q", "shah_again"):
+        X, Y = fit_method(name, base_T_hands=base_T_hands, camera_T_targets=B, setup=setup)
+        np.testing.assert_allclose(X, mount_T_camera, atol=1e-9)
+        np.testing.assert_allclose(Y, holder_T_target, atol=1e-9)
+
+
+def test_a_registered_start_named_like_an_opencv_method_is_opencvs_there(horaud):
+    """``horaud`` is OpenCV's name: fit_method keeps OpenCV's, handeye_methods adds
+    nothing, and the registered start is not called."""
+    _, _, A, B = _scene(4)
+    assert handeye_methods() == HANDEYE_METHODS
+    fit_method("horaud", base_T_hands=A, camera_T_targets=B, setup="eye-in-hand")
+    assert not CALLS
+    with pytest.raises(ValueError, match="unknown hand-eye method 'nobody'"):
+        fit_method("nobody", base_T_hands=A, camera_T_targets=B, setup="eye-in-hand")

@@ -14,6 +14,7 @@ import json
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from kinfw.cli import COMMANDS, main
 from kinfw.files import check_outputs, write_text_atomic
@@ -102,3 +103,47 @@ def test_its_user_errors_are_one_line(tmp_path, capsys):
     )
     err = capsys.readouterr().err
     assert code == 2 and "nowhere" in err and err.count("\n") == 1
+
+
+# -- from outside the library: register_command (a plugin's way, kinfw.plugins) ----------
+@pytest.fixture
+def registered(monkeypatch):
+    """The commands of register_command, empty for one test and restored after it."""
+    monkeypatch.setattr("kinfw.cli._main._REGISTERED", [])
+
+
+def add_calibrate_again_parser(sub) -> None:
+    """A second ``calibrate``: its name is taken."""
+    sub.add_parser("calibrate", help="not kinfw's calibrate").set_defaults(func=cmd_distance)
+
+
+def test_a_registered_command_is_listed_and_runs_without_a_commands_argument(
+    registered, tmp_path, capsys
+):
+    from kinfw.cli import register_command
+
+    assert register_command(add_distance_parser) is add_distance_parser
+    assert main(["--help"]) == 0
+    listed = capsys.readouterr().out
+    assert "distance between two frames" in listed
+    assert listed.index("export") < listed.index("distance")  # after the built-in commands
+    out = tmp_path / "d.json"
+    assert main(["distance", str(HEAD_URDF), "left_camera", "right_camera", "--out", str(out)]) == 0
+    expected = _pinocchio_distance("left_camera", "right_camera")
+    assert abs(json.loads(out.read_text())["distance_m"] - expected) < 1e-12
+    with pytest.raises(ValueError, match=r"add_distance_parser is already a command"):
+        register_command(add_distance_parser)
+
+
+def test_a_registered_command_whose_name_is_taken_is_warned_and_left_out(registered, capsys):
+    from kinfw.cli import register_command
+
+    register_command(add_calibrate_again_parser)
+    assert main(["--help"]) == 0
+    captured = capsys.readouterr()
+    assert "not kinfw's calibrate" not in captured.out and "calibrate" in captured.out
+    assert captured.err == (
+        "kinfw: warning: command of tests.kinfw.cli.test_cli_command_plugin."
+        "add_calibrate_again_parser not added: ValueError: the command name 'calibrate' is "
+        "taken\n"
+    )
