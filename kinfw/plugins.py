@@ -9,13 +9,15 @@ A package declares its plugin in its ``pyproject.toml``::
 
 and the module (or the function) registers its pieces itself, with kinfw's public
 register functions: :func:`kinfw.observations.register_kind`,
-:func:`kinfw.cli.register_command`, :func:`kinfw.identification.handeye.register_start`
-(and, once it exists, the robot blocks' registry of :mod:`kinfw.model`). kinfw only
+:func:`kinfw.model.register_block` (a robot block of ``--model``),
+:func:`kinfw.cli.register_command`, :func:`kinfw.identification.handeye.register_start`.
+kinfw only
 imports the modules the entry points name, once per process, when a registry is first
 consulted:
 :func:`load_plugins` is called by the ``kinfw`` command before it builds its parser (so
 a plugin's command is listed by ``kinfw --help`` and runs), by the look-ups of the kinds
-(:func:`kinfw.observations.kinds`, ``kind_named``, ``kind_of``) and by the hand-eye
+(:func:`kinfw.observations.kinds`, ``kind_named``, ``kind_of``), of the robot blocks
+(:func:`kinfw.model.block_from_spec`, :func:`kinfw.model.block_names`) and by the hand-eye
 closed forms (:func:`kinfw.identification.handeye.candidate_starts`, the ``--method``
 of ``kinfw handeye``). A registry of kinfw that lists or looks up what plugins may add
 calls :func:`load_plugins` first; nothing else is needed for its plugins to reach it.

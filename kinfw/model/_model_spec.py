@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.model._blocks import SpecBlock
 from kinfw.model._joint_blocks import GearScaleBlock, JointComplianceBlock, JointCouplingBlock
 from kinfw.model._loads import STANDARD_GRAVITY, BlockSamples, Payloads
+from kinfw.plugins import load_plugins
 
 _REGISTRY: dict[str, type[SpecBlock]] = {}
 
@@ -45,13 +46,15 @@ def register_block(cls: type[SpecBlock]) -> type[SpecBlock]:
 
 
 def block_names() -> tuple[str, ...]:
-    """The registered block names, sorted."""
+    """The registered block names, sorted (the plugins' too: :mod:`kinfw.plugins`)."""
+    load_plugins()
     return tuple(sorted(_REGISTRY))
 
 
 def block_from_spec(text: str) -> SpecBlock:
     """The block of one spec text ``NAME`` or ``NAME:ARGUMENT`` (a ValueError naming the
     known names, or the block's expected form)."""
+    load_plugins()
     name, _, argument = str(text).strip().partition(":")
     cls = _REGISTRY.get(name)
     if cls is None:
