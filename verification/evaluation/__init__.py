@@ -53,6 +53,7 @@ from kinfw.verification.evaluation._model_choice import (
     Candidate,
     ModelChoice,
     choose_parameters,
+    missing_compliance,
     rows_per_parameter,
 )
 from kinfw.verification.evaluation._reprojection import WORST_IMAGES, reprojection_section
@@ -95,6 +96,7 @@ __all__ = [
     "known_frames",
     "leave_one_out",
     "metric_rms",
+    "missing_compliance",
     "open_executor",
     "pose_discrepancy",
     "position_jacobians",

@@ -425,14 +425,12 @@ def choose_model_spec(
             except ValueError:  # the caller's refusal or fallback, as without compliance
                 return choice
         choice = replace(choice, fit=rigid)
-    gain, dof = compliance_gain(
+    gain, _, dof = compliance_gain(
         nominal, data, block, rigid, (choice.parameters, choice.prior), noise
     )
-    kept = (
-        _with_compliance(nominal, data, choice, block, noise=noise, loss=loss)
-        if (gain > dof + 6.0 * np.sqrt(2.0 * dof))
-        else choice
-    )
+    kept = choice
+    if gain > _significant(dof):
+        kept = _with_compliance(nominal, data, choice, block, noise=noise, loss=loss)
     if not kept.spec:
         for w in caught:  # the rigid calibration's own warnings, once
             warnings.warn(w.message, w.category, stacklevel=2)
@@ -446,13 +444,13 @@ def compliance_gain(
     rigid: Calibration,
     model: tuple[str, tuple[float, float] | None],
     noise: NoiseModel | None,
-) -> tuple[float, int]:
+) -> tuple[float, float, int]:
     """The score test of a joint compliance at the rigid fit ``rigid`` of ``model``
-    (its parameter set and prior): how much one Gauss-Newton step over every free
-    parameter and ``block``'s compliances would lower the whitened cost (in-sample,
-    linear loss), and the compliances' count. Under no compliance it is about chi-square
-    with that many degrees of freedom (the rigid parameters' gradient is zero at their
-    fit)."""
+    (its parameter set and prior): ``(gain, cost, dof)``, how much one Gauss-Newton step
+    over every free parameter and ``block``'s compliances would lower the whitened cost
+    (in-sample, linear loss), that cost, and the compliances' count. Under no
+    compliance the gain is about chi-square with ``dof`` degrees of freedom (the rigid
+    parameters' gradient is zero at their fit)."""
     refined = rigid.refined
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
@@ -468,8 +466,39 @@ def compliance_gain(
         np.zeros(problem.n_parameters), refined.noise if noise is None else noise
     )
     step, *_ = np.linalg.lstsq(J, -r, rcond=None)
-    gain = float(r @ r - np.sum((r + J @ step) ** 2))
-    return gain, int(block.free.sum())
+    cost = float(r @ r)
+    return cost - float(np.sum((r + J @ step) ** 2)), cost, int(block.free.sum())
+
+
+def _significant(dof: int) -> float:
+    """A score-test gain far beyond chance: six standard deviations above the mean of
+    chi-square with ``dof`` degrees of freedom."""
+    return dof + 6.0 * np.sqrt(2.0 * dof)
+
+
+def missing_compliance(
+    nominal: Robot,
+    data: Measurements,
+    fit: Calibration,
+    model: tuple[str, tuple[float, float] | None],
+    noise: NoiseModel | None = None,
+) -> str | None:
+    """Why a rigid calibration's residuals point at a missing joint compliance, or None:
+    the score test (:func:`compliance_gain`) far beyond chance and a compliance would
+    take more than a tenth off the whitened cost. For a calibration whose model was
+    given (``--params``), which the model choice did not weigh."""
+    block = compliance_candidate(nominal, data)
+    if block is None or fit.refined is None:
+        return None
+    gain, cost, dof = compliance_gain(nominal, data, block, fit, model, noise)
+    if gain <= _significant(dof) or gain <= 0.1 * cost:
+        return None
+    joints = ", ".join(j for j, f in zip(block.joints, block.free, strict=True) if f)
+    return (
+        f"residuals follow the gravity torque on {joints}: a joint compliance would take "
+        f"{100 * gain / cost:.0f} % off the whitened cost (chi-square {gain:.3g}, {dof} "
+        "parameters); add --model compliance"
+    )
 
 
 def _with_compliance(

@@ -645,6 +645,12 @@ def calibrate_and_report(
         warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=2)
     for line in stated_noise(result.refined, data) if restricted and result.refined else ():
         warnings.warn(f"{data.source}: {line}", UserWarning, stacklevel=2)
+    if choice is None and not nominal.spec and method == "refine":  # given --params
+        from kinfw.verification.evaluation import missing_compliance
+
+        hint = missing_compliance(nominal, data, result, (parameters, prior), noise)
+        if hint:
+            warnings.warn(f"{data.source}: {hint}", UserWarning, stacklevel=2)
     for scale in target_scale(nominal, calibrated, data):
         if scale.off:
             warnings.warn(f"{data.source}: {scale.message()}", UserWarning, stacklevel=2)

@@ -129,19 +129,37 @@ def test_noisy_held_out_errors_are_at_the_noise_floor_with_compliance_only(tmp_p
         "rigid": ["--params", "full"],
         "default": [],  # the model choice: compliance, on held-out evidence
     }
+    warned = {}
     for label, model in runs.items():
         out = tmp_path / f"{label}.urdf"
-        code, text, _ = run_cli(
+        code, text, err = run_cli(
             ["calibrate", train, "--urdf", UR10, "--out", out, "--holdout", test, "--json", *model],
             capsys,
         )
         assert code == 0
         rows = json.loads(text)["errors_held_out"]
         held[label] = max(r["after_position_rms_mm"] for r in rows)
+        warned[label] = "add --model compliance" in err
+    # the rigid fit's residuals follow the gravity torque, and kinfw says so
+    assert warned == {"compliant": False, "rigid": True, "default": False}
     floor = np.sqrt(3.0) * sigma_mm
     assert held["compliant"] < 1.15 * floor, held
     assert held["rigid"] > 3.0 * floor, held
     assert held["default"] == pytest.approx(held["compliant"], rel=1e-6), held
+
+
+def test_rigid_data_keep_the_rigid_model_and_get_no_compliance_warning(tmp_path, capsys):
+    data, _ = _simulate(tmp_path, capsys, "rigid", "--noise-mm", "0.02", "--mocap-samples", "120")
+    for params in (["--params", "full"], []):
+        out = tmp_path / "cal.urdf"
+        code, _, err = run_cli(
+            ["calibrate", data, "--urdf", UR10, "--out", out, "--json", *params], capsys
+        )
+        assert code == 0 and "add --model compliance" not in err, err
+        assert "robot_blocks" not in json.loads(out.with_suffix(".kinfw.json").read_text())
+        assert not out.with_suffix(".joints.yaml").exists()
+        out.unlink()
+        out.with_suffix(".kinfw.json").unlink()
 
 
 def test_gear_scale_and_coupling_are_recovered_exactly_through_the_shell(tmp_path, capsys):
