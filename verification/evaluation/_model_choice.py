@@ -248,6 +248,7 @@ def choose_parameters(
     loss: str = "huber",
     prior: tuple[float, float] | None = None,
     cross_validate: bool = False,
+    model_spec: bool = True,
 ) -> ModelChoice:
     """Choose the parameter set and prior that predict held-out data best, then
     whether a joint compliance predicts better still (:func:`choose_model_spec`).
@@ -267,6 +268,9 @@ def choose_parameters(
         parameter or more, where ``"full"`` is otherwise chosen unscored: for data that
         refuse ``"full"`` alone (a fit that drifts along what they do not determine, as
         500 contacts of one plane can).
+    model_spec : bool
+        Also weigh a joint compliance (:func:`choose_model_spec`); False: the parameter
+        set and prior alone (the URDF alone, as before the model spec).
 
     Returns
     -------
@@ -283,6 +287,8 @@ def choose_parameters(
     choice = _choose_set(
         nominal, data, noise=noise, loss=loss, prior=prior, cross_validate=cross_validate
     )
+    if not model_spec:
+        return choice
     return choose_model_spec(nominal, data, choice, noise=noise, loss=loss)
 
 
