@@ -262,16 +262,21 @@ def scene(
 
     vis = meshcat.Visualizer() if window is None else meshcat.Visualizer(window=window)
     root = vis["kinfw"]
+    # the calibrated robot at the joint values its readings give through its model spec
+    # (a compliance's deflection, a gear scale); the nominal ghost at the readings
+    q_model = model.spec.joint_values(model, joint_names, q[None])[0] if model.spec else q
     robot_ps = _draw_robots(
-        vis, nominal, calibrated, q, joint_names, ghost_rgba, solid_rgba, package_dirs
+        vis, nominal, calibrated, (q, q_model), joint_names, ghost_rgba, solid_rgba, package_dirs
     )
     focus_ps = []
     if data is not None and sample is not None:
         values = _known_values(data, targets, meas_T_root, unknowns)
         focus_ps.append(
-            _draw_observations(root, model, data, sample, q, joint_names, values, residual_scale)
+            _draw_observations(
+                root, model, data, sample, q_model, joint_names, values, residual_scale
+            )
         )
-    focus_ps.append(draw_cameras(root, model, data, q, joint_names))
+    focus_ps.append(draw_cameras(root, model, data, q_model, joint_names))
     _draw_targets(root, targets)
     focus = np.concatenate([*robot_ps, *focus_ps])
 
@@ -311,16 +316,18 @@ def _draw_robots(
     vis: meshcat.Visualizer,
     nominal: Robot,
     calibrated: Robot | None,
-    q: NDArray[np.float64],
+    qs: tuple[NDArray[np.float64], NDArray[np.float64]],
     joint_names: tuple[str, ...],
     ghost_rgba: Sequence[float],
     solid_rgba: Sequence[float] | None,
     dirs: Sequence[Path],
 ) -> list[NDArray[np.float64]]:
-    """Draw the nominal ghost (if there is a calibrated robot) and the solid robot at ``q``.
+    """Draw the nominal ghost (if there is a calibrated robot) at the readings and the
+    solid robot at its joint values: ``qs = (readings, joint values)``.
 
     Returns the points to frame of each robot drawn (see :func:`draw_robot`).
     """
+    q, q_model = qs
     robot_ps = []
     if calibrated is not None:
         robot_ps.append(
@@ -339,7 +346,7 @@ def _draw_robots(
             vis,
             model,
             "kinfw/calibrated" if calibrated is not None else "kinfw/nominal",
-            model.pin_configurations(q, joint_names)[0],
+            model.pin_configurations(q_model, joint_names)[0],
             solid_rgba,
             dirs,
         )

@@ -48,7 +48,9 @@ def show(
     sidecar : path or CalibrationSidecar, optional
         The calibration's sidecar: its targets are drawn, observations made in an
         external frame placed by its ``w_T_root``, and contacts and markers drawn with
-        its planes, balls, divots, marker poses and probe offsets. Default:
+        its planes, balls, divots, marker poses and probe offsets; its model spec
+        (compliance, gear scales: :attr:`kinfw.model.Robot.spec`) puts the calibrated
+        robot at the joint values its readings give. Default:
         ``CALIBRATED.kinfw.json`` beside a ``calibrated`` file, when there is one.
     sample : int, optional
         The sample of ``data`` drawn (default 0).
@@ -75,6 +77,8 @@ def show(
     extra: dict[str, Any] = {}
     if sidecar is not None:
         doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
+        if calibrated is not None and doc.robot_blocks and not calibrated.spec:
+            calibrated = calibrated.with_spec(doc.spec())  # compliance...: drawn deflected
         extra = {
             "targets": targets_from_sidecar(doc),
             "meas_T_root": doc.w_T_root,
