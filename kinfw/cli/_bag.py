@@ -16,7 +16,13 @@ import warnings
 from pathlib import Path
 
 from kinfw import progress
-from kinfw.cli._args import add_xacro_option, load_model, number
+from kinfw.cli._args import (
+    add_payload_options,
+    add_xacro_option,
+    load_model,
+    number,
+    with_payload,
+)
 from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["add_import_bag_parser", "cmd_import_bag"]
@@ -64,6 +70,7 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
     _add_stream_options(p)
     _add_frame_options(p)
     _add_alignment_options(p)
+    add_payload_options(p)
     p.add_argument(
         "--out",
         type=Path,
@@ -243,6 +250,7 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
         max_interpolation_error=args.max_interpolation_error,
         still_speed=args.still,
     )
+    measurements = with_payload(measurements, args)
     check_against_robot(measurements, robot)
     write_measurements(args.out, measurements)
     _print_alignment(alignment, args)

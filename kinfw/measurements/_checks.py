@@ -238,8 +238,8 @@ def _check_payload_frames(m: Measurements, robot: Robot) -> None:
         close = difflib.get_close_matches(frame, robot.link_names, n=3, cutoff=0.6)
         links = close or list(robot.link_names)[-3:]
         raise DatasetError(
-            f"{m.source}: samples[{int(using[0])}].payload.frame: {frame!r} is not a link or "
-            f"frame of {robot.source}; {'close' if close else 'its last'} link names: "
+            f"{m.source}: samples[{int(using[0])}].payload.frame: {frame!r} is not a frame of "
+            f"{robot.source}; {'closest' if close else 'its last'} links: "
             + ", ".join(map(repr, links))
         )
 

@@ -464,8 +464,8 @@ def _checked_gravity(value: Any, source: str) -> NDArray[np.float64]:
     norm = float(np.linalg.norm(g))
     if not low <= norm <= high:
         raise DatasetError(
-            f"{source}: gravity: its norm is {norm:.6g} m/s^2, expected between {low:g} and "
-            f"{high:g} (m/s^2 in the root frame, e.g. [0, 0, -9.81])"
+            f"{source}: gravity: its norm is {norm:.6g} m/s^2, expected {low:g} to {high:g} "
+            "(m/s^2 in the root frame, e.g. [0, 0, -9.81])"
         )
     return frozen_array(g, np.float64)
 

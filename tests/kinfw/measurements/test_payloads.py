@@ -204,6 +204,6 @@ def test_the_robot_check_names_a_payload_frame_the_robot_lacks():
         with pytest.raises(DatasetError) as err:
             check_against_robot(data, robot)
     assert str(err.value).startswith(
-        "data.json: samples[2].payload.frame: 'haed' is not a link or frame of "
+        "data.json: samples[2].payload.frame: 'haed' is not a frame of "
     )
-    assert str(err.value).endswith("close link names: 'head'")
+    assert str(err.value).endswith("closest links: 'head'")
