@@ -443,8 +443,9 @@ class _ParsedObservations:
 def _read_samples(
     p: ObservationReader, reader: ObservationReader, samples: list[Any], k: int
 ) -> _ParsedObservations:
-    """Read every sample's ``q`` (``k`` values, file units) and its observations: in
-    bulk (:func:`_read_samples_in_bulk`) when the file allows, else one at a time."""
+    """Read every sample's ``q`` (``k`` values, file units), its payload and its
+    observations: in bulk (:func:`_read_samples_in_bulk`, :func:`_payloads_in_bulk`)
+    when the file allows, else one at a time."""
     names = tuple(kind.name for kind in kinds())
     expected_kind = (
         ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
@@ -454,7 +455,11 @@ def _read_samples(
     bulk = ObservationReader(reader.source, reader.length_unit, reader.default_measured_in)
     bulk.cameras = reader.cameras
     parsed = _read_samples_in_bulk(p, bulk, samples, k, names, expected_kind)
-    if parsed is not None:
+    payloads = None
+    if parsed is not None:  # every sample is an object
+        payloads = _payloads_in_bulk(bulk, [s.get("payload") for s in samples])
+    if parsed is not None and payloads is not None:
+        parsed.payloads.append(payloads)
         reader.quaternions += bulk.quaternions
         reader.rounded.extend(bulk.rounded)
         return parsed
@@ -482,9 +487,6 @@ def _read_samples_in_bulk(
     lists = [s.get("observations") for s in samples]
     if qs is None or set(map(type, lists)) != {list} or not all(lists):
         return None
-    payloads = _payloads_in_bulk(reader, [s.get("payload") for s in samples])
-    if payloads is None:
-        return None
     flat = list(chain.from_iterable(lists))
     if set(map(type, flat)) != {dict}:
         return None
@@ -511,9 +513,7 @@ def _read_samples_in_bulk(
         id_list.append(sid)
     ids = np.array(id_list, dtype=np.intp)
     sample_of = np.repeat(np.arange(len(samples)), list(map(len, lists)))
-    parsed = _ParsedObservations(
-        q_rows=qs.tolist(), obs_sample=sample_of.tolist(), payloads=[payloads]
-    )
+    parsed = _ParsedObservations(q_rows=qs.tolist(), obs_sample=sample_of.tolist())
     # the first of each signature read (and noted) on its own, as one by one would
     single = ObservationReader(reader.source, reader.length_unit, reader.default_measured_in)
     single.cameras = reader.cameras

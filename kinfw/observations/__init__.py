@@ -9,6 +9,8 @@ branches on a kind's name.
 
 Adding a kind: write its group dataclass and its :class:`ObservationKind` subclass
 (see ``docs/architecture.md`` for a worked example), then ``register_kind(MyKind())``.
+Its :attr:`~ObservationKind.file_keys` lists the keys its file observations may hold
+(unset: the keys its ``parse`` reads); the reader warns of any other.
 """
 
 from __future__ import annotations

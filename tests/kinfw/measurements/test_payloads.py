@@ -47,24 +47,30 @@ def _document(n: int = 6, length: str = "mm", **top) -> dict:
 
 
 def _read(doc: dict, *, bulk: bool, monkeypatch: pytest.MonkeyPatch):
-    """The dataset read with or without the bulk path, and whether the bulk path read it."""
+    """The dataset read with or without the bulk path, and whether the bulk path read its
+    observations and its payloads."""
     used = []
-    original = file_module._read_samples_in_bulk
 
-    def spy(*args):
-        out = original(*args) if bulk else None
-        used.append(out is not None)
-        return out
+    def spy(name):
+        original = getattr(file_module, name)
+
+        def call(*args):
+            out = original(*args) if bulk else None
+            used.append(out is not None)
+            return out
+
+        return call
 
     with monkeypatch.context() as m:
-        m.setattr(file_module, "_read_samples_in_bulk", spy)
+        m.setattr(file_module, "_read_samples_in_bulk", spy("_read_samples_in_bulk"))
+        m.setattr(file_module, "_payloads_in_bulk", spy("_payloads_in_bulk"))
         return measurements_from_dict(copy.deepcopy(doc), source="data.json"), used
 
 
 @pytest.mark.parametrize("bulk", [True, False])
 def test_payloads_are_read_in_si_with_the_file_length_unit(bulk, monkeypatch):
     data, used = _read(_document(), bulk=bulk, monkeypatch=monkeypatch)
-    assert used == [bulk]
+    assert used == ([True, True] if bulk else [False])
     p = data.payloads
     assert p.frames == ("head", "camera")
     assert_array_equal(p.frame_index, [0, -1, 0, -1, 1, -1])
