@@ -10,6 +10,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_array_equal
 
 from kinfw.measurements import _file as file_module
@@ -213,3 +215,40 @@ def test_the_robot_check_names_a_payload_frame_the_robot_lacks():
         "data.json: samples[2].payload.frame: 'haed' is not a frame of "
     )
     assert str(err.value).endswith("closest links: 'head'")
+
+
+_payload = st.one_of(
+    st.none(),
+    st.tuples(
+        st.sampled_from(["head", "camera", "slider"]),
+        st.floats(0.0, 50.0),
+        st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=3),
+        st.lists(st.floats(0.0, 2.0), min_size=3, max_size=3),  # principal moments
+        st.floats(-3.0, 3.0),  # a rotation of the principal axes about z
+    ),
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(_payload, min_size=1, max_size=12))
+def test_any_payloads_write_and_read_back_equal(tmp_path_factory, payloads):
+    samples = []
+    for i, p in enumerate(payloads):
+        s = sample([0.01 * i, 0.0], pose("head"))
+        if p is not None:
+            frame, mass, com, moments, angle = p
+            c, s_ = np.cos(angle), np.sin(angle)
+            R = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+            inertia = R @ np.diag(moments) @ R.T
+            six = inertia[[0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]].tolist()  # URDF order
+            s["payload"] = {"frame": frame, "mass_kg": mass, "com": com, "inertia": six}
+        samples.append(s)
+    data = measurements_from_dict(document(*samples))
+    path = tmp_path_factory.mktemp("round") / "out.json"
+    write_measurements(path, data)
+    back = read_measurements(path)
+    if data.payloads is None:
+        assert back.payloads is None and all(p is None for p in payloads)
+    else:
+        assert back.payloads.equals(data.payloads)
+        assert_array_equal(back.payloads.mass_kg, [0.0 if p is None else p[1] for p in payloads])
