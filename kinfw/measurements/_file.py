@@ -397,21 +397,10 @@ def _payloads_in_bulk(reader: ObservationReader, raws: list[Any]) -> _PayloadCol
     if read_masses is None or (read_masses < 0).any():
         return None
     mass = read_masses[0]
-    columns = {}
-    for key, width in (("com", 3), ("inertia", 6)):
-        values = [d.get(key) for d in items]
-        given = [k for k, v in enumerate(values) if v is not None]
-        read = reader.numbers_many(
-            values if len(given) == len(items) else [values[k] for k in given] or [[0.0] * width],
-            width,
-        )
-        if read is None:
-            return None
-        if len(given) != len(items):
-            column = np.zeros((len(items), width))
-            column[given] = read[: len(given)]
-            read = column
-        columns[key] = read
+    com = _optional_rows(reader, [d.get("com") for d in items], 3)
+    inertia = _optional_rows(reader, [d.get("inertia") for d in items], 6)
+    if com is None or inertia is None:
+        return None
     if len(rows) == len(raws):
         out.frames[:] = frames
         rows = slice(None)
@@ -419,8 +408,25 @@ def _payloads_in_bulk(reader: ObservationReader, raws: list[Any]) -> _PayloadCol
         for i, frame in zip(rows, frames, strict=True):
             out.frames[i] = frame
     out.mass_kg[rows] = mass
-    out.com_m[rows] = columns["com"] / 1000.0 if reader.length_unit == "mm" else columns["com"]
-    out.inertia6[rows] = columns["inertia"]
+    out.com_m[rows] = com / 1000.0 if reader.length_unit == "mm" else com
+    out.inertia6[rows] = inertia
+    return out
+
+
+def _optional_rows(
+    reader: ObservationReader, values: list[Any], width: int
+) -> NDArray[np.float64] | None:
+    """The rows (m, width) of ``values``, each a list of ``width`` numbers or None
+    (zeros), read at once; None when one is not such a list."""
+    out = np.zeros((len(values), width))
+    given = [k for k, v in enumerate(values) if v is not None]
+    if given:
+        read = reader.numbers_many(
+            values if len(given) == len(values) else [values[k] for k in given], width
+        )
+        if read is None:
+            return None
+        out[given] = read
     return out
 
 
