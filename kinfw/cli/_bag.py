@@ -331,6 +331,11 @@ def _import_images(robot, args: argparse.Namespace) -> int:
             "in seconds (estimate it from the board poses: run kinfw detect, then "
             "kinfw handeye, or import a pose stream of the same recording)"
         )
+    if args.payload is not None or args.gravity is not None:
+        raise ValueError(
+            "--payload and --gravity go into a measurement file; --images writes images "
+            "(kinfw detect writes the measurement file from them)"
+        )
     written = write_bag_images(
         args.bag,
         args.out,

@@ -106,3 +106,7 @@ def test_import_bag_writes_the_payload_on_every_sample(tmp_path, capsys):
     assert_array_equal(data.payloads.mass_kg, np.full(data.n_samples, 4.0))
     assert_array_equal(data.payloads.com_m, np.tile([0.01, 0.0, 0.05], (data.n_samples, 1)))
     assert_array_equal(data.gravity, [0.0, 0.0, -9.79])
+    images = ["-q", "import-bag", bag, "--urdf", urdf, "--images", "/camera/rgb"]
+    code, _, stderr = run_cli([*images, "--payload", "flange:4", "--out", tmp_path / "i"], capsys)
+    assert code == 2
+    assert stderr.startswith("kinfw import-bag: error: --payload and --gravity go into a ")
