@@ -1,6 +1,7 @@
 """Argument types and options shared by the ``kinfw`` command parsers, and reading what
-the options name: checked numbers, ``--camera FRAME=FILE``, ``--frames``, the measurement
-file with its ``--camera`` intrinsics and the calibration sidecar's path.
+the options name: checked numbers, ``--camera FRAME=FILE``, ``--frames``, ``--payload
+FRAME:MASS_KG[:CX,CY,CZ]`` and ``--gravity``, the measurement file with its ``--camera``
+intrinsics and the calibration sidecar's path.
 
 Like :mod:`kinfw.cli`, this module imports only the standard library at start-up.
 """
@@ -30,6 +31,7 @@ __all__ = [
     "add_model_option",
     "add_mount_option",
     "add_package_dir_option",
+    "add_payload_options",
     "add_xacro_option",
     "camera_inputs",
     "frame_file",
@@ -39,8 +41,10 @@ __all__ = [
     "mount_arg",
     "mounted_model",
     "number",
+    "parse_payload",
     "read_data",
     "up_arg",
+    "with_payload",
     "xacro_arg",
 ]
 
@@ -122,6 +126,104 @@ def up_arg(text: str) -> list[float]:
             f'expected three numbers "x y z", not all zero, got {text!r}'
         )
     return up
+
+
+#: The form of ``--payload``.
+PAYLOAD_FORM = "FRAME:MASS_KG[:CX,CY,CZ]"
+
+
+def parse_payload(text: str) -> tuple[str, float, tuple[float, float, float]]:
+    """``FRAME:MASS_KG[:CX,CY,CZ]`` of ``--payload``: a load of ``MASS_KG`` kg (>= 0)
+    fixed to the URDF frame ``FRAME``, its centre of mass at ``CX,CY,CZ`` in that frame.
+
+    Returns
+    -------
+    frame : str
+    mass_kg : float
+    com : tuple of 3 floats
+        The centre of mass in ``FRAME``, in the command's length unit: metres unless the
+        command has a ``--length-unit`` (default the frame's origin, ``(0, 0, 0)``).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Naming the expected form (argparse adds the option).
+    """
+    parts = text.split(":")
+    frame = parts[0].strip()
+    if len(parts) not in (2, 3) or not frame:
+        raise argparse.ArgumentTypeError(
+            f"expected {PAYLOAD_FORM} (e.g. tool0:5 or tool0:5:0,0,0.08), got {text!r}"
+        )
+    try:
+        mass_kg = float(parts[1])
+    except ValueError:
+        mass_kg = math.nan
+    if not (math.isfinite(mass_kg) and mass_kg >= 0):
+        raise argparse.ArgumentTypeError(
+            f"expected {PAYLOAD_FORM} with MASS_KG a number >= 0 (kg), got {parts[1]!r} in {text!r}"
+        )
+    com = (0.0, 0.0, 0.0)
+    if len(parts) == 3:
+        try:
+            values = [float(v) for v in parts[2].split(",")]
+        except ValueError:
+            values = []
+        if len(values) != 3 or not all(map(math.isfinite, values)):
+            raise argparse.ArgumentTypeError(
+                f"expected {PAYLOAD_FORM} with CX,CY,CZ three numbers separated by commas, "
+                f"got {parts[2]!r} in {text!r}"
+            )
+        com = (values[0], values[1], values[2])
+    return frame, mass_kg, com
+
+
+def add_payload_options(p: argparse.ArgumentParser, *, com_unit: str = "metres") -> None:
+    """``--payload FRAME:MASS_KG[:CX,CY,CZ]`` and ``--gravity GX GY GZ``: what every sample
+    of the file a command writes carries, and gravity (:func:`with_payload`)."""
+    p.add_argument(
+        "--payload",
+        type=parse_payload,
+        default=None,
+        metavar=PAYLOAD_FORM,
+        help=f"every sample carries MASS_KG kg fixed to the URDF frame FRAME, its centre of "
+        f"mass at CX,CY,CZ in FRAME ({com_unit}; default the frame's origin); written as "
+        "each sample's payload",
+    )
+    p.add_argument(
+        "--gravity",
+        nargs=3,
+        type=number(float),
+        default=None,
+        metavar=("GX", "GY", "GZ"),
+        help="gravity in the URDF root frame, m/s^2 (default 0 0 -9.81); written to the file",
+    )
+
+
+def with_payload(measurements: Any, args: argparse.Namespace, length_unit: str = "m") -> Any:
+    """``measurements`` with ``--payload`` on every sample (its centre of mass in
+    ``length_unit``, "m" or "mm") and ``--gravity``; a ValueError naming ``--gravity``
+    when its norm is not one of gravity."""
+    from dataclasses import replace
+
+    from kinfw.model import Payloads
+    from kinfw.observations import DatasetError
+
+    changes: dict[str, Any] = {}
+    if args.payload is not None:
+        frame, mass_kg, com = args.payload
+        scale = 1e-3 if length_unit == "mm" else 1.0
+        changes["payloads"] = Payloads.constant(
+            measurements.n_samples, frame, mass_kg, [scale * c for c in com]
+        )
+    if args.gravity is not None:
+        changes["gravity"] = args.gravity
+    try:
+        return replace(measurements, **changes)
+    except DatasetError as exc:
+        given = " ".join(f"{g:g}" for g in args.gravity)
+        reason = str(exc).removeprefix(f"{measurements.source}: ")
+        raise ValueError(f"--gravity {given}: {reason}") from None
 
 
 def frame_file(text: str) -> tuple[str, Path]:

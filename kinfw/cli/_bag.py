@@ -16,7 +16,13 @@ import warnings
 from pathlib import Path
 
 from kinfw import progress
-from kinfw.cli._args import add_xacro_option, load_model, number
+from kinfw.cli._args import (
+    add_payload_options,
+    add_xacro_option,
+    load_model,
+    number,
+    with_payload,
+)
 from kinfw.files import check_output_dir, check_outputs
 
 __all__ = ["add_import_bag_parser", "cmd_import_bag"]
@@ -64,6 +70,7 @@ def add_import_bag_parser(sub: argparse._SubParsersAction) -> None:
     _add_stream_options(p)
     _add_frame_options(p)
     _add_alignment_options(p)
+    add_payload_options(p)
     p.add_argument(
         "--out",
         type=Path,
@@ -243,6 +250,7 @@ def cmd_import_bag(args: argparse.Namespace) -> int:
         max_interpolation_error=args.max_interpolation_error,
         still_speed=args.still,
     )
+    measurements = with_payload(measurements, args)
     check_against_robot(measurements, robot)
     write_measurements(args.out, measurements)
     _print_alignment(alignment, args)
@@ -322,6 +330,11 @@ def _import_images(robot, args: argparse.Namespace) -> int:
             "--time-offset auto needs poses (--pose, --tf); with --images give the offset "
             "in seconds (estimate it from the board poses: run kinfw detect, then "
             "kinfw handeye, or import a pose stream of the same recording)"
+        )
+    if args.payload is not None or args.gravity is not None:
+        raise ValueError(
+            "--payload and --gravity go into a measurement file; --images writes images "
+            "(kinfw detect writes the measurement file from them)"
         )
     written = write_bag_images(
         args.bag,

@@ -24,6 +24,7 @@ from kinfw.cli._args import (
     add_keep_duplicates_option,
     add_mount_option,
     add_package_dir_option,
+    add_payload_options,
     add_xacro_option,
     frames_arg,
     load_model,
@@ -31,6 +32,7 @@ from kinfw.cli._args import (
     number,
     read_data,
     up_arg,
+    with_payload,
 )
 from kinfw.cli._tables import accuracy_table
 from kinfw.executors import add_executor_options
@@ -366,6 +368,7 @@ def add_import_csv_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--length-unit", choices=("m", "mm"), default="m", help="default m")
     p.add_argument("--angle-unit", choices=("rad", "deg"), default="rad", help="default rad")
+    add_payload_options(p, com_unit="in the --length-unit")
     p.add_argument("--out", type=Path, required=True, help="measurement file to write (JSON)")
     add_keep_duplicates_option(p)
     p.set_defaults(func=cmd_import_csv, check_outputs=check_import_csv_outputs)
@@ -393,6 +396,7 @@ def cmd_import_csv(args: argparse.Namespace) -> int:
         target=args.target,
         camera_frame=args.camera_frame,
     )
+    measurements = with_payload(measurements, args, args.length_unit)
     check_against_robot(measurements, mounted_robot(robot, measurements.mounts))
     if not args.keep_duplicates:
         measurements = drop_duplicate_samples(measurements)

@@ -44,6 +44,20 @@ Observation kinds
     ``frame`` when it is known; without it the offset is estimated. ``"marker"`` names a
     marker whose offset is unknown, so ``marker`` and ``offset`` exclude each other.
 
+Payload and gravity
+-------------------
+A sample may say what the robot carries: ``"payload": {"frame": LINK, "mass_kg": m,
+"com": [x, y, z], "inertia": [ixx, ixy, ixz, iyy, iyz, izz]}``: a URDF link or frame,
+the mass in kg (>= 0), the centre of mass in that frame in the file's length unit
+(optional, default the frame's origin) and the rotational inertia about the centre of
+mass in the frame's axes, kg m^2, URDF order (optional, default a point mass). The
+top-level ``"gravity": [gx, gy, gz]`` is gravity in the URDF root frame, m/s^2 (norm
+between 0.1 and 100; default ``[0, 0, -9.81]``). They load the joints (joint compliance:
+:mod:`kinfw.model`); :attr:`Measurements.payloads` (None when no sample has one) and
+:attr:`Measurements.gravity` hold them, :meth:`Measurements.sample_payloads` gives every
+sample's. The writer writes a sample's payload only when it has one and gravity only
+when it is not the default.
+
 A frame the URDF lacks (a camera on ``tool0``) may be declared in the top-level
 ``"mounts"`` section, ``{"camera": {"parent": "tool0"}}`` (optional start ``xyz``,
 ``quat_xyzw``): :func:`mounted_robot` adds it to the robot as a link on a fixed joint,
@@ -72,8 +86,13 @@ held at zero (:meth:`Measurements.q_of`). Every sample has ``q`` (one finite num
 joint) and a non-empty ``observations`` list. Quaternions must have a norm within 1e-3
 of 1 and are renormalised (a file whose norms are off by more than 1e-6, as when written
 with 4 or 5 decimals, gets one warning saying how many and by how much). A marker name
-belongs to one frame. Extra keys are
-allowed and ignored; ``null`` for an optional key is the same as leaving it out. Every
+belongs to one frame. A key the reader does not know is ignored with a warning (one per
+key and place: the top level, samples, payloads, or observations of one kind; naming
+the first place, how many have it and the keys known there); a top-level ``"comment"``
+(free text) is known. An observation kind lists its keys in
+:attr:`~kinfw.observations.ObservationKind.file_keys` (a kind that does not: the keys
+its ``parse`` reads). ``null`` for an optional key is the same as leaving it out (and is
+never warned of). Every
 problem raises :class:`DatasetError` naming the file, the key path
 (``samples[7].observations[1].quat_xyzw``) and what was expected.
 

@@ -47,7 +47,8 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
 
     Checks that every entry of ``joint_names`` is a movable joint of the robot, that
     every observed frame is a link or joint of the URDF whose path from the root has
-    only supported joints (:meth:`Robot.movable_path`), and that no observation is
+    only supported joints (:meth:`Robot.movable_path`), that every payload's frame is a
+    frame of the robot, and that no observation is
     measured in its own frame. A ``measured_in`` is the root link, a frame that is not
     in the URDF (external: its pose in the root is estimated), or any other frame of the
     URDF (it moves with the robot, e.g. a head camera: its path is checked like an
@@ -84,6 +85,7 @@ def check_against_robot(measurements: Measurements, robot: Robot) -> Measurement
     _check_entity_names(m)
     first_in = _first_measured_in(m, robot)
     _check_observed_paths(m, robot, first_in)
+    _check_payload_frames(m, robot)
     _warn_limits(m, robot)
     root = robot.root_link
     if root not in first_in:
@@ -220,6 +222,25 @@ def _check_observed_paths(m: Measurements, robot: Robot, first_in: Mapping[str, 
     if held:
         logger.info(
             "%s: joints %s on observed paths are not in joint_names; held at zero", src, held
+        )
+
+
+def _check_payload_frames(m: Measurements, robot: Robot) -> None:
+    """Raise unless every payload's frame is a link or frame of the robot, naming the
+    first sample that uses it and the robot's closest link names."""
+    payloads = m.payloads
+    if payloads is None:
+        return
+    for f, frame in enumerate(payloads.frames):
+        using = np.flatnonzero(payloads.frame_index == f)
+        if not len(using) or robot.has_frame(frame):
+            continue
+        close = difflib.get_close_matches(frame, robot.link_names, n=3, cutoff=0.6)
+        links = close or list(robot.link_names)[-3:]
+        raise DatasetError(
+            f"{m.source}: samples[{int(using[0])}].payload.frame: {frame!r} is not a frame of "
+            f"{robot.source}; {'closest' if close else 'its last'} links: "
+            + ", ".join(map(repr, links))
         )
 
 

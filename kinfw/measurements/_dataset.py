@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.measurements._mounts import Mount
+from kinfw.model import STANDARD_GRAVITY, Payloads
 from kinfw.observations import (
     DatasetError,
     PointObservations,
@@ -97,6 +98,13 @@ class Measurements:
     mounts : mapping of str to Mount
         Frames the data name that the URDF may lack, each on a URDF link (the file's
         ``"mounts"`` section; :func:`kinfw.measurements.mounted_robot` adds them), read-only.
+    payloads : Payloads or None
+        What each sample's robot carries (the file's per-sample ``"payload"``): one entry
+        per sample; None when no sample carries one (:meth:`sample_payloads` gives a
+        :class:`~kinfw.model.Payloads` either way).
+    gravity : ndarray, shape (3,)
+        Gravity in the URDF root frame, m/s^2 (the file's ``"gravity"``; default
+        :data:`~kinfw.model.STANDARD_GRAVITY`, 9.81 along the root's -z), read-only.
     """
 
     joint_names: tuple[str, ...]
@@ -108,9 +116,12 @@ class Measurements:
     others: tuple[Any, ...] = ()
     cameras: Mapping[str, Any] = field(default_factory=dict)
     mounts: Mapping[str, Mount] = field(default_factory=dict)
+    payloads: Payloads | None = None
+    gravity: NDArray[np.float64] = field(default=STANDARD_GRAVITY)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         src = self.source
+        object.__setattr__(self, "gravity", _checked_gravity(self.gravity, src))
         object.__setattr__(self, "cameras", FrozenMapping(self.cameras))
         object.__setattr__(self, "mounts", FrozenMapping(self.mounts))
         for name, mount in self.mounts.items():
@@ -163,6 +174,17 @@ class Measurements:
                         f"but there are {n} samples"
                     )
             object.__setattr__(self, attr, groups)
+        if self.payloads is not None:
+            if not isinstance(self.payloads, Payloads):
+                raise DatasetError(
+                    f"{src}: payloads: expected Payloads or None, got "
+                    f"{type(self.payloads).__name__}"
+                )
+            if len(self.payloads) != n:
+                raise DatasetError(
+                    f"{src}: payloads: expected one entry per sample ({n}), "
+                    f"got {len(self.payloads)}"
+                )
         _check_one_frame_per_target(self)
 
     def __repr__(self) -> str:
@@ -172,6 +194,11 @@ class Measurements:
             f"joint_names={list(self.joint_names)}, poses={list(self.poses)}, "
             f"targets={list(self.targets)}, points={list(self.points)}{others})"
         )
+
+    def sample_payloads(self) -> Payloads:
+        """The payload of every sample (:attr:`payloads`, or
+        :meth:`Payloads.none <kinfw.model.Payloads.none>` when no sample carries one)."""
+        return Payloads.none(self.n_samples) if self.payloads is None else self.payloads
 
     def groups(self, kind: str) -> tuple[Any, ...]:
         """The observation groups of one kind (by its file name, e.g. ``"pose"``)."""
@@ -199,7 +226,7 @@ class Measurements:
 
     def with_groups(self, groups: Sequence[Any], **changes: Any) -> Measurements:
         """The dataset with other observation groups (of any registered kinds), and
-        other ``changes`` of its fields (e.g. ``qs``)."""
+        other ``changes`` of its fields (e.g. ``qs``, with ``payloads`` when it has them)."""
         by_field: dict[str, list[Any]] = {"poses": [], "targets": [], "points": [], "others": []}
         for g in groups:
             by_field[kind_of(g).measurements_field or "others"].append(g)
@@ -253,9 +280,9 @@ class Measurements:
         Returns
         -------
         Measurements
-            ``qs`` of shape ``(p, k)``; every group keeps the observations of the kept
-            samples, with renumbered indices sorted ascending; groups left empty are
-            dropped.
+            ``qs`` of shape ``(p, k)`` and the kept samples' :attr:`payloads`; every group
+            keeps the observations of the kept samples, with renumbered indices sorted
+            ascending; groups left empty are dropped.
         """
         sel = np.asarray(samples)
         n = self.n_samples
@@ -293,7 +320,8 @@ class Measurements:
             return kind_of(group).take(group, rows[by_sample], new[by_sample].astype(np.int64))
 
         kept = [g for g in map(select, self.all_groups()) if g is not None]
-        return self.with_groups(kept, qs=self.qs[sel])
+        payloads = None if self.payloads is None else self.payloads.subset(sel)
+        return self.with_groups(kept, qs=self.qs[sel], payloads=payloads)
 
     def q_of(self, joint_names: Sequence[str]) -> NDArray[np.float64]:
         """Joint values with columns in another order.
@@ -377,11 +405,24 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
 
     The joint names are united (first-seen order); a joint that a part does not list is
     held at zero in its samples. Groups that observe the same thing (same frame, kind,
-    marker, offset and measurement frame) are merged. The source is the parts' sources
-    joined by ``" + "``.
+    marker, offset and measurement frame) are merged. The payloads follow their samples
+    (None when no part has any); the parts must share one gravity. The source is the
+    parts' sources joined by ``" + "``.
     """
     if not parts:
         raise ValueError("concatenate_measurements: give at least one dataset")
+    for p in parts[1:]:
+        if not np.array_equal(p.gravity, parts[0].gravity):
+            raise DatasetError(
+                f"{p.source}: gravity {p.gravity.tolist()} m/s^2 differs from "
+                f"{parts[0].source}'s {parts[0].gravity.tolist()}; concatenate data of one "
+                "gravity (one root frame)"
+            )
+    payloads = None
+    if any(p.payloads is not None for p in parts):
+        payloads = parts[0].sample_payloads()
+        for p in parts[1:]:
+            payloads = payloads.concatenate(p.sample_payloads())
     names = tuple(dict.fromkeys(n for p in parts for n in p.joint_names))
     offsets = np.cumsum([0, *(p.n_samples for p in parts[:-1])])
 
@@ -396,7 +437,37 @@ def concatenate_measurements(*parts: Measurements) -> Measurements:
         source=" + ".join(dict.fromkeys(p.source for p in parts)),
         cameras={k: v for p in parts for k, v in p.cameras.items()},
         mounts=_merged_mounts([p.mounts for p in parts], " + ".join(p.source for p in parts)),
+        payloads=payloads,
+        gravity=parts[0].gravity,
     )
+
+
+#: The norms of gravity a dataset may give (m/s^2): a typo (9810, 0.981 or 0) is refused.
+GRAVITY_NORM_RANGE = (0.1, 100.0)
+
+
+def _checked_gravity(value: Any, source: str) -> NDArray[np.float64]:
+    """Gravity as a read-only (3,) array; a DatasetError naming ``gravity`` unless it is
+    three finite numbers of norm within :data:`GRAVITY_NORM_RANGE` (m/s^2)."""
+    try:
+        g = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise DatasetError(
+            f"{source}: gravity: expected 3 numbers [gx, gy, gz] (m/s^2), got {value!r:.60}"
+        ) from None
+    if g.shape != (3,) or not np.isfinite(g).all():
+        raise DatasetError(
+            f"{source}: gravity: expected 3 finite numbers [gx, gy, gz] (m/s^2), got "
+            f"{g.tolist() if g.size <= 6 else f'shape {g.shape}'}"
+        )
+    low, high = GRAVITY_NORM_RANGE
+    norm = float(np.linalg.norm(g))
+    if not low <= norm <= high:
+        raise DatasetError(
+            f"{source}: gravity: its norm is {norm:.6g} m/s^2, expected {low:g} to {high:g} "
+            "(m/s^2 in the root frame, e.g. [0, 0, -9.81])"
+        )
+    return frozen_array(g, np.float64)
 
 
 def _merged_mounts(parts: Iterable[Mapping[str, Mount]], source: str) -> dict[str, Mount]:

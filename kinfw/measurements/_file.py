@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import logging
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from itertools import chain
 from pathlib import Path
@@ -25,6 +25,7 @@ from kinfw.camera import CameraError, CameraIntrinsics, intrinsics_from_dict
 from kinfw.files import write_text_atomic
 from kinfw.measurements._dataset import Measurements
 from kinfw.measurements._mounts import mounts_from_dict, mounts_to_dict
+from kinfw.model import STANDARD_GRAVITY, Payloads
 from kinfw.observations import DatasetError, ObservationReader, describe, kind_named, kind_of, kinds
 
 __all__ = [
@@ -44,6 +45,28 @@ SUPPORTED_VERSIONS = (1,)
 _LENGTH_UNITS = ("m", "mm")
 _ANGLE_UNITS = ("rad", "deg")
 _JOINT_UNITS = ("m", "mm", "rad", "deg")
+
+#: The top-level keys of a file; ``"comment"`` is free text for the people who read it
+#: (ignored). Any other key is warned of, once.
+TOP_KEYS = (
+    "format",
+    "version",
+    "units",
+    "joint_names",
+    "joint_units",
+    "measured_in",
+    "gravity",
+    "cameras",
+    "mounts",
+    "samples",
+    "comment",
+)
+#: The keys of a sample.
+SAMPLE_KEYS = ("q", "observations", "payload")
+#: The keys of a sample's payload.
+PAYLOAD_KEYS = ("frame", "mass_kg", "com", "inertia")
+#: The keys of every observation, whatever its kind (a kind adds its ``file_keys``).
+OBSERVATION_KEYS = ("kind", "frame")
 
 
 # -- reading ---------------------------------------------------------------------------
@@ -179,6 +202,234 @@ def _read_joints(
     return joint_names, joint_units
 
 
+class _UnknownKeys:
+    """The keys a file holds that the reader does not know, by place (the top level,
+    samples, payloads, an observation kind): one warning per key and place, with the
+    first place it is at and how many have it. A key whose value is null is absent."""
+
+    def __init__(self) -> None:
+        #: (kind or place, key) -> [first at, count, known keys, kind, place]
+        self.found: dict[tuple[str, str], list[Any]] = {}
+
+    def note(
+        self,
+        objects: Sequence[dict[str, Any]],
+        at: Callable[[int], str],
+        known: Sequence[str],
+        place: str,
+        kind: str | None = None,
+    ) -> None:
+        """Note the unknown keys of ``objects`` (JSON objects, ``at(k)`` where the k-th
+        is, of ``place``: ``"samples"``; observations of ``kind``)."""
+        allowed = frozenset(known)
+        if set().union(*objects) <= allowed:  # the usual case, at once
+            return
+        for k in [k for k, obj in enumerate(objects) if not obj.keys() <= allowed]:
+            for key, value in objects[k].items():
+                if key not in allowed and value is not None:
+                    entry = self.found.setdefault(
+                        (kind or place, key), [at(k), 0, tuple(known), kind, place]
+                    )
+                    entry[1] += 1
+
+    def warn(self, source: str) -> None:
+        """One :class:`UserWarning` per unknown key and place."""
+        for (_, key), (at, count, known, kind, place) in self.found.items():
+            many = f", in {count} {place}" if count > 1 else ""
+            on = "" if kind is None else f" on a {kind!r} observation"
+            where = f"{at}: unknown key {key!r}" if at else f"unknown top-level key {key!r}"
+            warnings.warn(
+                f"{source}: {where}{on} (ignored{many}); known keys: {', '.join(known)}",
+                UserWarning,
+                stacklevel=3,
+            )
+
+
+def _note_unknown_keys(
+    doc: dict[str, Any], samples: list[Any], read_keys: Mapping[str, set[str]]
+) -> _UnknownKeys:
+    """The unknown keys of a document that was read (``read_keys``: the keys
+    :meth:`~kinfw.observations.ObservationKind.parse` read, by kind, for the kinds that
+    do not list their :attr:`~kinfw.observations.ObservationKind.file_keys`)."""
+    unknown = _UnknownKeys()
+    unknown.note([doc], lambda _: "", TOP_KEYS, "top level")
+    unknown.note(samples, "samples[{}]".format, SAMPLE_KEYS, "samples")
+    with_payload = [i for i, s in enumerate(samples) if s.get("payload") is not None]
+    unknown.note(
+        [samples[i]["payload"] for i in with_payload],
+        lambda k: f"samples[{with_payload[k]}].payload",
+        PAYLOAD_KEYS,
+        "payloads",
+    )
+    known: dict[str, tuple[str, ...]] = {}
+    for kind in kinds():
+        own = kind.file_keys
+        if own is None:
+            own = tuple(sorted(read_keys.get(kind.name, set()) - set(OBSERVATION_KEYS)))
+        known[kind.name] = (*OBSERVATION_KEYS, *own)
+    allowed = {name: frozenset(keys) for name, keys in known.items()}
+    flat = list(chain.from_iterable(s["observations"] for s in samples))
+    used = set().union(*flat)
+    if all(used <= allowed[name] for name in {o["kind"] for o in flat}):
+        return unknown  # the usual case, at once
+    found: dict[str, list[tuple[dict[str, Any], str]]] = {}
+    for i, s in enumerate(samples):
+        for j, o in enumerate(s["observations"]):
+            if not o.keys() <= allowed[o["kind"]]:
+                found.setdefault(o["kind"], []).append((o, f"samples[{i}].observations[{j}]"))
+    for name, entries in found.items():
+        unknown.note(
+            [o for o, _ in entries], lambda k, e=entries: e[k][1], known[name], "observations", name
+        )
+    return unknown
+
+
+class _KeysRead(dict):  # type: ignore[type-arg]
+    """An observation's dict that records the keys read from it (``get``, ``[]``,
+    ``in``): the keys a kind knows when it does not list them."""
+
+    def __init__(self, obs: dict[str, Any]) -> None:
+        super().__init__(obs)
+        self.read: set[str] = set()
+
+    def get(self, key: str, default: Any = None) -> Any:
+        self.read.add(key)
+        return super().get(key, default)
+
+    def __getitem__(self, key: str) -> Any:
+        self.read.add(key)
+        return super().__getitem__(key)
+
+    def __contains__(self, key: object) -> bool:
+        self.read.add(str(key))
+        return super().__contains__(key)
+
+
+@dataclass(slots=True)
+class _PayloadColumns:
+    """Every sample's payload as read, in SI: its frame's name (None: no payload), mass
+    (kg), centre of mass (m) and inertia ``[ixx, ixy, ixz, iyy, iyz, izz]`` (kg m^2)."""
+
+    frames: list[str | None]
+    mass_kg: NDArray[np.float64]
+    com_m: NDArray[np.float64]
+    inertia6: NDArray[np.float64]
+
+    @classmethod
+    def empty(cls, n: int) -> _PayloadColumns:
+        return cls([None] * n, np.zeros(n), np.zeros((n, 3)), np.zeros((n, 6)))
+
+    def payloads(self, p: ObservationReader) -> Payloads | None:
+        """The :class:`~kinfw.model.Payloads` of the samples; None when none has one. An
+        inertia with a negative principal moment is a DatasetError naming its sample."""
+        names = [f for f in self.frames if f is not None]
+        if not names:
+            return None
+        bad = np.flatnonzero(_inertia_problem(self.inertia6))
+        if len(bad):
+            raise p.error(
+                f"samples[{bad[0]}].payload.inertia",
+                f"{self.inertia6[bad[0]].tolist()} is no rotational inertia (a negative "
+                "principal moment); expected [ixx, ixy, ixz, iyy, iyz, izz] in kg m^2 about "
+                "the centre of mass",
+            )
+        frames = tuple(dict.fromkeys(names))
+        index = {f: k for k, f in enumerate(frames)}
+        frame_index = np.array([-1 if f is None else index[f] for f in self.frames], np.intp)
+        return Payloads(
+            frames,
+            frame_index,
+            self.mass_kg,
+            self.com_m,
+            self.inertia6[:, _INERTIA_FROM_SIX].reshape(-1, 3, 3),
+        )
+
+
+#: ``[ixx, ixy, ixz, iyy, iyz, izz]`` (URDF order) -> the 3 x 3 matrix, row-major.
+_INERTIA_FROM_SIX = np.array([0, 1, 2, 1, 3, 4, 2, 4, 5])
+
+
+def _inertia_problem(six: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Per row of ``six`` (m, 6), whether it is no rotational inertia (a negative
+    principal moment, beyond rounding)."""
+    matrices = six[:, _INERTIA_FROM_SIX].reshape(-1, 3, 3)
+    scale = np.maximum(np.abs(six).max(axis=1, initial=0.0), 1e-300)
+    return np.linalg.eigvalsh(matrices).min(axis=1) < -1e-9 * scale
+
+
+def _read_payload(
+    p: ObservationReader, reader: ObservationReader, raw: Any, at: str
+) -> tuple[str, float, list[float], list[float]]:
+    """One sample's ``"payload"`` (at ``at``): frame, mass (kg), centre of mass (m, from
+    the file's length unit) and inertia (6 numbers, kg m^2)."""
+    payload = p.obj(raw, at)
+    frame = p.string(p.get(payload, "frame", at, "the name of a URDF link or frame"), f"{at}.frame")
+    expected = "a number >= 0 (kg)"
+    mass = p.number(payload, "mass_kg", at, expected)
+    if mass < 0:
+        raise p.error(f"{at}.mass_kg", f"expected {expected}, got {describe(payload['mass_kg'])}")
+    com = [0.0, 0.0, 0.0]
+    if payload.get("com") is not None:
+        com = reader.lengths(p.numbers(payload["com"], 3, f"{at}.com", f"[x, y, z] in {frame!r}"))
+    inertia = [0.0] * 6
+    if payload.get("inertia") is not None:
+        inertia = p.numbers(
+            payload["inertia"], 6, f"{at}.inertia", "[ixx, ixy, ixz, iyy, iyz, izz] in kg m^2"
+        )
+    return frame, mass, com, inertia
+
+
+def _payloads_in_bulk(reader: ObservationReader, raws: list[Any]) -> _PayloadColumns | None:
+    """:func:`_read_payload` of every sample at once (``raws`` each sample's
+    ``"payload"`` or None); None when any fails a check (then read one at a time)."""
+    out = _PayloadColumns.empty(len(raws))
+    rows = [i for i, r in enumerate(raws) if r is not None]
+    if not rows:
+        return out
+    items = [raws[i] for i in rows]
+    if set(map(type, items)) != {dict}:
+        return None
+    frames = [d.get("frame") for d in items]
+    if set(map(type, frames)) != {str} or "" in frames:
+        return None
+    masses = [d.get("mass_kg") for d in items]
+    read_masses = reader.numbers_many([masses], len(masses))  # one row: checked at once
+    if read_masses is None or (read_masses < 0).any():
+        return None
+    mass = read_masses[0]
+    com = _optional_rows(reader, [d.get("com") for d in items], 3)
+    inertia = _optional_rows(reader, [d.get("inertia") for d in items], 6)
+    if com is None or inertia is None:
+        return None
+    if len(rows) == len(raws):
+        out.frames[:] = frames
+        rows = slice(None)
+    else:
+        for i, frame in zip(rows, frames, strict=True):
+            out.frames[i] = frame
+    out.mass_kg[rows] = mass
+    out.com_m[rows] = com / 1000.0 if reader.length_unit == "mm" else com
+    out.inertia6[rows] = inertia
+    return out
+
+
+def _optional_rows(
+    reader: ObservationReader, values: list[Any], width: int
+) -> NDArray[np.float64] | None:
+    """The rows (m, width) of ``values``, each a list of ``width`` numbers or None
+    (zeros), read at once; None when one is not such a list."""
+    out = np.zeros((len(values), width))
+    given = [k for k, v in enumerate(values) if v is not None]
+    if given:
+        read = reader.numbers_many(
+            values if len(given) == len(values) else [values[k] for k in given], width
+        )
+        if read is None:
+            return None
+        out[given] = read
+    return out
+
+
 @dataclass(frozen=True, slots=True)
 class _ParsedObservations:
     """The observations read so far, flat (one entry each); grouped once at the end."""
@@ -190,13 +441,17 @@ class _ParsedObservations:
     group_of_key: dict[tuple[Any, ...], int] = field(default_factory=dict)
     marker_home: dict[str, tuple[str, str]] = field(default_factory=dict)  # marker -> (frame, at)
     target_home: dict[str, tuple[str | None, str]] = field(default_factory=dict)  # -> (frame, at)
+    #: the keys parse read, by kind (for the kinds without file_keys)
+    read_keys: dict[str, set[str]] = field(default_factory=dict)
+    payloads: list[_PayloadColumns] = field(default_factory=list)  # one, once read
 
 
 def _read_samples(
     p: ObservationReader, reader: ObservationReader, samples: list[Any], k: int
 ) -> _ParsedObservations:
-    """Read every sample's ``q`` (``k`` values, file units) and its observations: in
-    bulk (:func:`_read_samples_in_bulk`) when the file allows, else one at a time."""
+    """Read every sample's ``q`` (``k`` values, file units), its payload and its
+    observations: in bulk (:func:`_read_samples_in_bulk`, :func:`_payloads_in_bulk`)
+    when the file allows, else one at a time."""
     names = tuple(kind.name for kind in kinds())
     expected_kind = (
         ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"
@@ -206,7 +461,11 @@ def _read_samples(
     bulk = ObservationReader(reader.source, reader.length_unit, reader.default_measured_in)
     bulk.cameras = reader.cameras
     parsed = _read_samples_in_bulk(p, bulk, samples, k, names, expected_kind)
-    if parsed is not None:
+    payloads = None
+    if parsed is not None:  # every sample is an object
+        payloads = _payloads_in_bulk(bulk, [s.get("payload") for s in samples])
+    if parsed is not None and payloads is not None:
+        parsed.payloads.append(payloads)
         reader.quaternions += bulk.quaternions
         reader.rounded.extend(bulk.rounded)
         return parsed
@@ -286,6 +545,7 @@ def _read_samples_in_bulk(
     parsed.rows.extend(rows)
     parsed.group_of_key.update(scratch.group_of_key)
     parsed.marker_home.update(scratch.marker_home)
+    parsed.read_keys.update(scratch.read_keys)
     return parsed
 
 
@@ -297,8 +557,9 @@ def _read_samples_one_by_one(
     names: tuple[str, ...],
     expected_kind: str,
 ) -> _ParsedObservations:
-    """Read every sample's ``q`` and its observations, one at a time."""
-    parsed = _ParsedObservations()
+    """Read every sample's ``q``, its payload and its observations, one at a time."""
+    payloads = _PayloadColumns.empty(len(samples))
+    parsed = _ParsedObservations(payloads=[payloads])
     for i, raw_sample in enumerate(samples):
         at = f"samples[{i}]"
         sample = p.obj(raw_sample, at)
@@ -310,6 +571,12 @@ def _read_samples_one_by_one(
                 "one per joint_names entry",
             )
         )
+        if sample.get("payload") is not None:
+            frame, mass, com, inertia = _read_payload(p, reader, sample["payload"], f"{at}.payload")
+            payloads.frames[i] = frame
+            payloads.mass_kg[i] = mass
+            payloads.com_m[i] = com
+            payloads.inertia6[i] = inertia
         observations = p.list_of(
             p.get(sample, "observations", at, "a non-empty list of observations"),
             f"{at}.observations",
@@ -336,7 +603,12 @@ def _read_observation(
     obs = p.obj(raw_obs, at_obs)
     frame = p.string(p.get(obs, "frame", at_obs, "the name of a URDF frame"), f"{at_obs}.frame")
     kind = kind_named(p.choice(p.get(obs, "kind", at_obs, expected_kind), f"{at_obs}.kind", names))
-    key, row = kind.parse(reader, obs, at_obs, frame)
+    if kind.file_keys is None:  # the keys it knows are those it reads
+        recorded = _KeysRead(obs)
+        key, row = kind.parse(reader, recorded, at_obs, frame)
+        parsed.read_keys.setdefault(kind.name, set()).update(recorded.read)
+    else:
+        key, row = kind.parse(reader, obs, at_obs, frame)
     for what, attached, homes in (
         ("marker", kind.marker(key), parsed.marker_home),
         ("target", kind.target_of(key), parsed.target_home),
@@ -424,6 +696,10 @@ def measurements_from_dict(
     if doc.get("measured_in") is not None:
         default_measured_in = p.string(doc["measured_in"], "measured_in")
 
+    gravity = STANDARD_GRAVITY
+    if doc.get("gravity") is not None:
+        gravity = p.numbers(doc["gravity"], 3, "gravity", "[gx, gy, gz] m/s^2 in the root frame")
+
     samples = p.list_of(p.get(doc, "samples", "", "a list of samples"), "samples", "samples")
     reader = ObservationReader(source, length_unit, default_measured_in)
     reader.cameras = _read_cameras(p, doc, cameras)
@@ -441,8 +717,15 @@ def measurements_from_dict(
     groups = _groups(parsed)
     mounts = mounts_from_dict(reader, doc["mounts"]) if doc.get("mounts") is not None else {}
     out = Measurements(
-        joint_names, qs, source=source, cameras=reader.cameras, mounts=mounts
+        joint_names,
+        qs,
+        source=source,
+        cameras=reader.cameras,
+        mounts=mounts,
+        payloads=parsed.payloads[0].payloads(p),
+        gravity=gravity,
     ).with_groups(groups)
+    _note_unknown_keys(doc, samples, parsed.read_keys).warn(source)
     logger.debug(
         "%s: %d samples, %d observations in %d groups",
         source,
@@ -461,7 +744,8 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
 
     Observations of a sample are listed group by group (poses, targets, points). When
     every pose and point group has the same non-root ``measured_in`` it is written once
-    at the top level.
+    at the top level. A sample's ``"payload"`` is written when it has one, the
+    ``"gravity"`` when it is not :data:`~kinfw.model.STANDARD_GRAVITY`.
 
     Parameters
     ----------
@@ -504,14 +788,41 @@ def measurements_to_dict(measurements: Measurements) -> dict[str, Any]:
     }
     if top_measured_in is not None:
         doc["measured_in"] = top_measured_in
+    if not np.array_equal(m.gravity, STANDARD_GRAVITY):
+        doc["gravity"] = m.gravity.tolist()
     if cameras:
         doc["cameras"] = {frame: c.to_dict() for frame, c in cameras.items()}
     if m.mounts:
         doc["mounts"] = mounts_to_dict(m.mounts)
+    payloads = _payload_dicts(m)
     doc["samples"] = [
-        {"q": q, "observations": obs} for q, obs in zip(m.qs.tolist(), per_sample, strict=True)
+        {"q": q, **({} if payload is None else {"payload": payload}), "observations": obs}
+        for q, payload, obs in zip(m.qs.tolist(), payloads, per_sample, strict=True)
     ]
     return doc
+
+
+def _payload_dicts(m: Measurements) -> list[dict[str, Any] | None]:
+    """Each sample's ``"payload"`` (SI; ``com`` and ``inertia`` left out where zero), or
+    None for a sample without one."""
+    if m.payloads is None:
+        return [None] * m.n_samples
+    p = m.payloads
+    inertia = p.inertia_kg_m2.reshape(-1, 9)[:, [0, 1, 2, 4, 5, 8]]
+    out: list[dict[str, Any] | None] = []
+    for f, mass, com, six in zip(
+        p.frame_index.tolist(), p.mass_kg.tolist(), p.com_m.tolist(), inertia.tolist(), strict=True
+    ):
+        if f < 0:
+            out.append(None)
+            continue
+        payload: dict[str, Any] = {"frame": p.frames[f], "mass_kg": mass}
+        if any(com):
+            payload["com"] = com
+        if any(six):
+            payload["inertia"] = six
+        out.append(payload)
+    return out
 
 
 def _dumps(doc: dict[str, Any]) -> str:

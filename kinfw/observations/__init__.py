@@ -12,6 +12,8 @@ Adding a kind: write its group dataclass and its :class:`ObservationKind` subcla
 in your program, or in a plugin module that another installed package names in the
 entry-point group ``kinfw.plugins`` (:mod:`kinfw.plugins`), which the look-ups here
 (:func:`kinds`, ``kind_named``, :func:`kind_of`) load before their first answer.
+Its :attr:`~ObservationKind.file_keys` lists the keys its file observations may hold
+(unset: the keys its ``parse`` reads); the reader warns of any other.
 """
 
 from __future__ import annotations

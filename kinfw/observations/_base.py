@@ -419,6 +419,11 @@ class ObservationKind:
     #: a time.
     bulk_keys: ClassVar[tuple[str, ...]] = ()
 
+    #: The keys an observation of this kind may carry besides ``"kind"`` and ``"frame"``;
+    #: the reader warns of any other (a misspelt optional key would be silently ignored).
+    #: None (the default, for a kind that does not say): the keys :meth:`parse` reads.
+    file_keys: ClassVar[tuple[str, ...] | None] = None
+
     def parse_many(
         self, reader: ObservationReader, observations: list[dict[str, Any]]
     ) -> NDArray[np.float64] | None:

@@ -158,6 +158,7 @@ class DivotKind(ProbeContactKind):
     group_type = DivotContacts
     row_fields = ("gap_m",)
     components = (PLACEMENT,)
+    file_keys = ("divot", "centre", "gap", *ProbeContactKind.probe_keys)
 
     # -- file edge
     def parse(self, reader, obs, at, frame):

@@ -219,6 +219,7 @@ class PixelKind(ObservationKind):
     group_type = PixelObservations
     row_fields = ("uv", "target_p", "point_id", "shot", "image", "sigma_px")
     components = (PIXEL,)
+    file_keys = ("uv", "points", "ids", "image", "sigma_px", "target", "target_frame")
 
     # -- file edge
     def parse(self, reader, obs, at, frame):

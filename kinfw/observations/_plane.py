@@ -285,6 +285,7 @@ class PlaneKind(ProbeContactKind):
     group_type = PlaneContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)
+    file_keys = ("plane", "distance", *ProbeContactKind.probe_keys)
 
     # -- file edge
     def parse(self, reader, obs, at, frame):

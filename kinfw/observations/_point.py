@@ -107,6 +107,7 @@ class PointKind(ObservationKind):
     components = (POSITION,)
     measurements_field = "points"
     has_measured_in = True
+    file_keys = ("xyz", "offset", "marker", "measured_in")
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")

@@ -138,6 +138,7 @@ class PoseKind(RigidTransformKind):
     components = (POSITION, ROTATION)
     measurements_field = "poses"
     has_measured_in = True
+    file_keys = ("xyz", "quat_xyzw", "marker", "measured_in")
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")

@@ -42,6 +42,8 @@ class ProbeContactKind(ObservationKind):
     ``marker`` and ``measured_in``."""
 
     has_measured_in = True
+    #: The probe's keys (:meth:`probe_fields`); each kind adds what it touches.
+    probe_keys = ("offset", "marker", "measured_in")
 
     # -- file edge
     def probe_fields(

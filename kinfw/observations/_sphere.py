@@ -219,6 +219,7 @@ class SphereKind(ProbeContactKind):
     group_type = SphereContacts
     row_fields = ("distance_m",)
     components = (DISTANCE,)
+    file_keys = ("sphere", "radius", "distance", *ProbeContactKind.probe_keys)
 
     # -- file edge
     def parse(self, reader, obs, at, frame):

@@ -178,6 +178,7 @@ class TargetKind(RigidTransformKind):
     row_fields = ("camera_T_target",)
     components = (POSITION, ROTATION)
     measurements_field = "targets"
+    file_keys = ("xyz", "quat_xyzw", "target", "target_frame")
 
     def parse(self, reader, obs, at, frame):
         xyz = reader.numbers(reader.get(obs, "xyz", at, "3 numbers [x, y, z]"), 3, f"{at}.xyz")

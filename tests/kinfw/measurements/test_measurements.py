@@ -267,17 +267,26 @@ def test_groups_in_first_seen_order_with_their_sample_indices():
     assert all(g.sample.dtype == np.int64 for g in (*m.poses, *m.points))
 
 
-def test_extra_keys_are_ignored_and_null_optional_keys_are_absent():
+def test_unknown_keys_are_ignored_with_a_warning_and_null_optional_keys_are_absent():
     obs = pose("head", quat=[0, 0, S, S], note="left plate", marker=None, measured_in=None)
     doc = document(
-        sample([0, 0], obs, point("camera", offset=None)),
+        sample([0, 0], obs, point("camera", offset=None, sigma=None)),
         comment="lab 3",
         measured_in=None,
         joint_units=None,
     )
     doc["samples"][0]["timestamp"] = 12.5
     doc["units"]["temperature"] = "C"
-    m = measurements_from_dict(doc)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        m = measurements_from_dict(doc)
+    # a top-level "comment" is known, a null "sigma" absent, the units' keys not checked
+    assert sorted(str(w.message) for w in caught) == [
+        "<memory>: samples[0].observations[0]: unknown key 'note' on a 'pose' observation "
+        "(ignored); known keys: kind, frame, xyz, quat_xyzw, marker, measured_in",
+        "<memory>: samples[0]: unknown key 'timestamp' (ignored); known keys: q, "
+        "observations, payload",
+    ]
     assert (m.poses[0].marker, m.poses[0].measured_in) == (None, None)
     assert m.points[0].offset is None
     assert_allclose(m.poses[0].meas_T_frame[0, :3, :3], ROT_Z_90, rtol=0, atol=1e-15)
@@ -1202,7 +1211,8 @@ def test_concatenate_shifts_samples_unites_joints_and_merges_groups():
 
 
 def test_the_documentation_examples_parse():
-    """Every JSON example in docs/measurements.md is a valid file or observation."""
+    """Every JSON example in docs/measurements.md is a valid file or observation, with no
+    key the reader does not know (no warning at all)."""
     import re
 
     doc = (REPO / "docs" / "measurements.md").read_text()
@@ -1217,7 +1227,9 @@ def test_the_documentation_examples_parse():
                 "joint_names": ["a"],
                 "samples": [{"q": [0.0], "observations": [block]}],
             }
-        assert measurements_from_dict(block, "docs").n_samples >= 1
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            assert measurements_from_dict(block, "docs").n_samples >= 1
 
 
 def test_a_misspelled_plane_is_refused_naming_its_sample_and_the_likely_name():
