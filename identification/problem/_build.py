@@ -98,7 +98,13 @@ def build_problem(
     model_frame = _single_external_frame(groups, robot_in)
     model0 = cpc_from_robot(start, observed)
     q_all = measurements.q_of(model0.topology.joint_names)
-    samples = BlockSamples(robot, tuple(model0.topology.joint_names), q_all)
+    samples = BlockSamples(
+        robot,
+        tuple(model0.topology.joint_names),
+        q_all,
+        measurements.sample_payloads(),
+        measurements.gravity,
+    )
     extra = _bound_blocks(robot, extra_blocks, samples)
     # the start values (an external frame's pose, targets...) at the joint values after
     # the robot blocks' hooks: a calibration's compliance moves the frames by millimetres

@@ -8,9 +8,10 @@ Like the other command modules, only the standard library is imported at start-u
 from __future__ import annotations
 
 import argparse
+import warnings
 from pathlib import Path
 
-from kinfw.cli._args import add_package_dir_option, load_model, number
+from kinfw.cli._args import add_package_dir_option, load_model, number, parse_payload
 from kinfw.cli._control import (
     NOT_MET,
     UNIT_M,
@@ -59,6 +60,13 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         metavar=("X", "Y", "Z"),
         help="a target point for the frame's origin (orientation free), root frame, "
         "metres (or --unit mm)",
+    )
+    p.add_argument(
+        "--payload",
+        type=parse_payload,
+        metavar="FRAME:MASS_KG[:CX,CY,CZ]",
+        help="what the robot carries (centre of mass in FRAME, m): with a compliance in the "
+        "model's sidecar, the command compensates its deflection under this load",
     )
     p.add_argument(
         "--measured-in",
@@ -153,6 +161,16 @@ def _root_target(args, target):
     return root_T_meas @ target
 
 
+def _payload(given):
+    """The :class:`kinfw.model.Payloads` of one sample of ``--payload``, or None."""
+    from kinfw.model import Payloads
+
+    if given is None:
+        return None
+    frame, mass_kg, com = given
+    return Payloads.constant(1, frame, mass_kg, com)
+
+
 def cmd_reach(args: argparse.Namespace) -> int:
     import math
 
@@ -171,6 +189,15 @@ def cmd_reach(args: argparse.Namespace) -> int:
     )
     q_start = parse_joint_values(robot, args.q)
     free = free_arg(robot, args.free)
+    if args.payload is not None:
+        robot.frame_id(args.payload[0])  # an unknown frame: one line naming the links
+        if not robot.spec:
+            warnings.warn(
+                f"--payload: {args.model} has no model spec (no calibration sidecar with a "
+                "compliance beside it): the payload changes nothing",
+                UserWarning,
+                stacklevel=1,
+            )
     result = reach(
         robot,
         args.frame,
@@ -179,6 +206,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
         free_joints=free,
         restarts=args.restarts,
         seed=args.seed,
+        payload=_payload(args.payload),
     )
     rows = joint_rows(robot, result.q, result.free_joints, result.at_limits)
     rotation_deg = (

@@ -27,6 +27,7 @@ from kinfw.cli._args import (
     frames_arg,
     load_model,
     number,
+    parse_payload,
 )
 from kinfw.files import check_output_dir, check_outputs, write_text_atomic
 
@@ -78,6 +79,14 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "on the measured paths, or JOINT=VALUE (repeatable; the others rigid), rad/Nm "
         "(m/N for a prismatic joint); the file records the readings that deflect to the "
         "simulated configurations (calibrate it with --model compliance)",
+    )
+    p.add_argument(
+        "--payloads",
+        type=parse_payload,
+        metavar="FRAME:MAX_KG[:CX,CY,CZ]",
+        help="every sample carries a load on FRAME of a mass drawn uniformly in 0 .. MAX_KG, "
+        "its centre of mass at CX,CY,CZ in FRAME (m); written as the samples' payloads "
+        "(with --compliance the deflection follows it)",
     )
     p.add_argument(
         "--truth-model",
@@ -475,6 +484,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         target_frame=args.target_frame,
         compliance=_compliance_arg(args.compliance),
         truth_model=ModelSpec(tuple(args.truth_model)) if args.truth_model else None,
+        payloads=args.payloads,
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)

@@ -26,6 +26,7 @@ from kinfw.model import (
     BlockSamples,
     JointComplianceBlock,
     ModelSpec,
+    Payloads,
     Robot,
     check_robot,
     load_robot,
@@ -275,6 +276,7 @@ def simulate_measurements(
     target_frame: str | None = None,
     compliance: float | Mapping[str, float] | None = None,
     truth_model: ModelSpec | None = None,
+    payloads: tuple[str, float, ArrayLike] | None = None,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -375,6 +377,12 @@ def simulate_measurements(
         compliance of some joints), each block at its true value (its ``start``), in the
         same way: the readings are :meth:`kinfw.model.ModelSpec.readings` of the
         simulated configurations.
+    payloads : (str, float, array_like), optional
+        ``(frame, max_kg, com_m)``: every sample carries a load on ``frame`` of a mass
+        drawn uniformly in ``[0, max_kg]``, its centre of mass at ``com_m`` (3,) in that
+        frame (m), written as the samples' payloads (with a compliance, the deflection
+        follows it). Drawn from a generator of its own (``[seed, 2]``), so the rest of
+        the experiment is the one without payloads.
     seed : int
         Seeds the one generator of every draw.
 
@@ -458,6 +466,8 @@ def simulate_measurements(
         )
         parts.extend(touch.data)
     data = concatenate_measurements(*parts)
+    if payloads is not None:
+        data = _with_payloads(truth, data, payloads, np.random.default_rng([seed, 2]))
     blocks = () if truth_model is None else truth_model.blocks
     if compliance is not None:
         blocks = (_compliance_block(names, compliance), *blocks)
@@ -486,6 +496,22 @@ def simulate_measurements(
     )
 
 
+def _with_payloads(
+    truth: Robot, data: Measurements, payloads: tuple[str, float, ArrayLike], rng
+) -> Measurements:
+    """``data`` with a random payload per sample (see :func:`simulate_measurements`)."""
+    from dataclasses import replace
+
+    frame, max_kg, com_m = payloads
+    truth.frame_id(frame)  # an unknown frame: named with the links
+    if not (np.isfinite(max_kg) and max_kg >= 0):
+        raise ValueError(f"payloads: the largest mass must be >= 0 kg, got {max_kg}")
+    n = data.n_samples
+    masses = rng.uniform(0.0, float(max_kg), size=n)
+    com = np.tile(np.asarray(com_m, dtype=float).reshape(3), (n, 1))
+    return replace(data, payloads=Payloads((frame,), np.zeros(n, np.intp), masses, com))
+
+
 def _compliance_block(
     names: tuple[str, ...], compliance: float | Mapping[str, float]
 ) -> JointComplianceBlock:
@@ -511,9 +537,9 @@ def _with_truth_model(
     simulated (physical) configurations through it."""
     from dataclasses import replace
 
-    samples = BlockSamples(truth, names, data.q_of(names))
+    samples = BlockSamples(truth, names, data.q_of(names), data.sample_payloads(), data.gravity)
     spec = spec.bound(samples)
-    q_read = spec.readings(truth, names, samples.qs)
+    q_read = spec.readings(truth, names, samples.qs, samples.payloads, samples.gravity)
     qs = data.qs.copy()
     for k, name in enumerate(names):
         qs[:, data.joint_names.index(name)] = q_read[:, k]

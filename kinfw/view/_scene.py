@@ -67,7 +67,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform
 from kinfw.measurements import Measurements, check_against_robot
-from kinfw.model import BlockKey, Robot, load_robot
+from kinfw.model import STANDARD_GRAVITY, BlockKey, Robot, load_robot
 from kinfw.observations import MissingValue, NumericContext, kind_of, node_name
 from kinfw.reports import CalibrationSidecar, read_sidecar
 from kinfw.view._cameras import CAMERA_TRIAD_LENGTH, FRUSTUM_DEPTH, draw_cameras, frustum_corners
@@ -264,7 +264,17 @@ def scene(
     root = vis["kinfw"]
     # the calibrated robot at the joint values its readings give through its model spec
     # (a compliance's deflection, a gear scale); the nominal ghost at the readings
-    q_model = model.spec.joint_values(model, joint_names, q[None])[0] if model.spec else q
+    q_model = q
+    if model.spec:
+        loads = (
+            (None, STANDARD_GRAVITY)
+            if data is None or sample is None
+            else (
+                data.sample_payloads().subset([sample]),
+                data.gravity,
+            )
+        )
+        q_model = model.spec.joint_values(model, joint_names, q[None], *loads)[0]
     robot_ps = _draw_robots(
         vis, nominal, calibrated, (q, q_model), joint_names, ghost_rgba, solid_rgba, package_dirs
     )

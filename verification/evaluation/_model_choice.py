@@ -384,7 +384,7 @@ def compliance_candidate(nominal: Robot, data: Measurements) -> JointComplianceB
     compliant = [j for j in names if j not in nominal.exact_joints]
     if nominal.spec or not compliant:
         return None
-    samples = BlockSamples(nominal, names, data.q_of(names))
+    samples = BlockSamples(nominal, names, data.q_of(names), data.sample_payloads(), data.gravity)
     try:
         block = JointComplianceBlock.from_spec(",".join(compliant)).for_data(samples)
     except RobotModelError:
