@@ -47,8 +47,6 @@ from kinfw.model import Robot, check_robot, geometry_from_cpc
 from kinfw.observations import DatasetError, evenly_spaced
 from kinfw.urdf import ExportResult, edit_urdf, export_urdf
 
-__all__ = ["METHODS", "Calibration", "calibrate"]
-
 log = logging.getLogger(__name__)
 
 #: ``closed-form``: Shih et al.'s closed form and the hand-eye step only;

@@ -58,7 +58,6 @@ from kinfw.identification.problem import (
     RejectedObservation,
     Unknown,
     build_problem,
-    clear_function_cache,
     covariance_and_identifiability,
     estimate_noise,
     group_residuals,
@@ -81,22 +80,6 @@ from kinfw.measurements import (
 )
 from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_named, kind_of
-
-__all__ = [
-    "LOSSES",
-    "REJECT_Z",
-    "GroupResiduals",
-    "Identifiability",
-    "LeastSquaresProblem",
-    "NoiseModel",
-    "RefineResult",
-    "RejectedObservation",
-    "Unknown",
-    "build_problem",
-    "clear_function_cache",
-    "information_matrix",
-    "refine",
-]
 
 log = logging.getLogger(__name__)
 

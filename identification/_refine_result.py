@@ -17,8 +17,6 @@ from kinfw.identification.problem import (
 )
 from kinfw.model import CPCModel
 
-__all__ = ["RefineResult"]
-
 
 @dataclass(frozen=True, slots=True)
 class RefineResult:

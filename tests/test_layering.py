@@ -202,3 +202,19 @@ def test_no_private_name_is_imported_from_another_module():
         if alias.name.startswith("_")
     ]
     assert not private, _offenders(private)
+
+
+def test_private_modules_define_no_all():
+    """A private module (``_name.py``) is read through its package's face, so a name is
+    written twice at most (the face's import and its ``__all__``): ``__all__`` belongs
+    to faces alone."""
+    listed = [
+        f"{MODULES[name]}:{node.lineno}: __all__"
+        for name in sorted(MODULES)
+        if MODULES[name].name.startswith("_") and MODULES[name].name != "__init__.py"
+        for node in TREES[name].body
+        if isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign)
+        for target in (node.targets if isinstance(node, ast.Assign) else [node.target])
+        if isinstance(target, ast.Name) and target.id == "__all__"
+    ]
+    assert not listed, _offenders(listed)

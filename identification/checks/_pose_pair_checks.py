@@ -63,8 +63,6 @@ from kinfw.identification.checks._units_evidence import (
 )
 from kinfw.observations import DatasetError
 
-__all__ = ["PLAUSIBLE_LENGTH_M", "PosePairDiagnostics", "check_pose_pair_data"]
-
 #: Plausible median hand motion and sensor-to-target distance of hand-eye pose pairs, m.
 PLAUSIBLE_LENGTH_M = (5e-3, 20.0)
 #: Pairs turning more than this (rad) give no rotation vector to fit ``R_X`` (its sign

@@ -29,14 +29,6 @@ from kinfw.identification.problem import LeastSquaresProblem
 from kinfw.model import BaseBlock, Block, RobotBlock
 from kinfw.observations import DatasetError
 
-__all__ = [
-    "MIN_DOF_PER_KIND",
-    "InsufficientDataError",
-    "Redundancy",
-    "check_redundancy",
-    "redundancy",
-]
-
 #: Residual degrees of freedom required per estimated noise component.
 MIN_DOF_PER_KIND = 10
 

@@ -55,16 +55,6 @@ from kinfw.identification.handeye._quaternion import (
     right_product_matrix_xyzw,
 )
 
-__all__ = [
-    "AXYBError",
-    "RotationRun",
-    "TranslationRun",
-    "iteration_matrix",
-    "normalise",
-    "rotation_iteration",
-    "translation_iteration",
-]
-
 # The solver's logger: its messages are filtered as kinfw.identification.handeye's.
 log = logging.getLogger("kinfw.identification.handeye")
 

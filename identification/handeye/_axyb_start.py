@@ -21,8 +21,6 @@ from kinfw.identification.handeye._axyb_refinement import translations_least_squ
 from kinfw.identification.handeye._checks import ORTHONORMAL_TOL
 from kinfw.identification.handeye._quaternion import rotation_from_quat_xyzw
 
-__all__ = ["MIN_MOTION_RAD", "WEAK_MOTION_RAD", "check_motion", "check_start", "start_of_y"]
-
 # The solver's logger: its messages are filtered as kinfw.identification.handeye's.
 log = logging.getLogger("kinfw.identification.handeye")
 

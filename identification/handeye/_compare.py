@@ -28,18 +28,6 @@ from kinfw.identification.handeye._calibration import HandEyeCalibration, solver
 from kinfw.identification.handeye._result import HandEyeResult
 from kinfw.measurements import PosePairs, drop_duplicate_pairs
 
-__all__ = [
-    "HANDEYE_METHODS",
-    "HeldOutErrors",
-    "MethodResult",
-    "calibrate_pose_pairs",
-    "compare_methods",
-    "fit_method",
-    "kfold_errors",
-    "loop_closure_errors",
-    "repeated_pairs",
-]
-
 #: The methods :func:`fit_method` knows: kinfw's maximum likelihood (``solve_axxb``),
 #: OpenCV's ``calibrateHandEye`` (AX = XB) and ``calibrateRobotWorldHandEye`` (AX = ZB).
 HANDEYE_METHODS = ("kinfw", "tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")

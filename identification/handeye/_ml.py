@@ -56,8 +56,6 @@ from kinfw.identification.handeye._quaternion import (
     product_matrices,
 )
 
-__all__ = ["CHI2_6_999", "PoseFit", "assess", "fit_absolute", "rejection_threshold"]
-
 #: 99.9 % quantile of chi^2 with 6 degrees of freedom: the rejection threshold of a pose's
 #: squared whitened residual.
 CHI2_6_999 = 22.457744484825323

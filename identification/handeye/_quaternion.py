@@ -23,17 +23,6 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
 )
 
-__all__ = [
-    "closed_form_batch",
-    "closed_form_start",
-    "consistent_quats_xyzw",
-    "left_product_matrix_xyzw",
-    "product_matrices",
-    "product_tensor",
-    "right_product_matrix_xyzw",
-    "rotation_from_quat_xyzw",
-]
-
 
 def rotation_from_quat_xyzw(quat_xyzw: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4), scalar last."""

@@ -47,16 +47,6 @@ from kinfw.identification.handeye._starts_axxb import (
 )
 from kinfw.identification.handeye._starts_axyb import li_axyb, li_checked, shah_axyb, shah_checked
 
-__all__ = [
-    "START_METHODS",
-    "RankedStart",
-    "StartMethod",
-    "candidate_starts",
-    "rank_starts",
-    "register_start",
-    "unregister_start",
-]
-
 log = logging.getLogger(__name__)
 
 Pose = NDArray[np.float64]

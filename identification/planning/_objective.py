@@ -28,17 +28,6 @@ from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.model import Robot
 from kinfw.observations import NoiseComponent
 
-__all__ = [
-    "CandidateInformation",
-    "HeldOut",
-    "Setup",
-    "candidate_information",
-    "exchange",
-    "greedy",
-    "held_out",
-    "mean_square",
-]
-
 #: Weight of the regularising prior of the design, relative to the mean information of
 #: one candidate: small enough not to change a full-rank design's objective (1e-6 of a
 #: candidate), large enough that the first greedy steps have an invertible matrix.

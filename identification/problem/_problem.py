@@ -25,8 +25,6 @@ from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, Block, BlockKey, CPCModel, ParameterName, RobotBlock
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
-__all__ = ["PRIOR", "LeastSquaresProblem", "NormalEquations", "ResidualGroup", "Unknown"]
-
 PRIOR = NoiseComponent("prior", 1, "m")
 """The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
 

@@ -17,31 +17,6 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = [
-    "COUNT",
-    "DEG",
-    "MM",
-    "POSITIVE_DEG",
-    "POSITIVE_MM",
-    "POSITIVE_PX",
-    "SEED",
-    "add_camera_option",
-    "add_keep_duplicates_option",
-    "add_mount_option",
-    "add_package_dir_option",
-    "add_xacro_option",
-    "camera_inputs",
-    "frame_file",
-    "frames_arg",
-    "load_model",
-    "mount_arg",
-    "mounted_model",
-    "number",
-    "read_data",
-    "up_arg",
-    "xacro_arg",
-]
-
 
 # -- numbers on the command line -----------------------------------------------------------
 def number(

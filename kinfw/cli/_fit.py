@@ -34,8 +34,6 @@ if TYPE_CHECKING:
     )
     from kinfw.verification.evaluation import CrossValidation
 
-__all__ = ["calibration_options", "change_bound", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
-
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
 #: Sets of parameters not identifiable listed one per line (a noise-free stereo rig gave

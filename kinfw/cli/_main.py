@@ -57,8 +57,6 @@ from kinfw.cli._pose_chain import add_pose_chain_parser
 from kinfw.cli._reach import add_reach_parser
 from kinfw.cli._simulate import add_simulate_parser
 
-__all__ = ["main"]
-
 log = logging.getLogger("kinfw")
 
 #: Errors that are the user's input, not a bug: reported on one line, exit code 2.

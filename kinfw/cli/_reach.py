@@ -24,8 +24,6 @@ from kinfw.cli._control import (
 )
 from kinfw.files import check_outputs
 
-__all__ = ["add_reach_parser", "cmd_reach"]
-
 
 # -- parser -------------------------------------------------------------------------------
 def add_reach_parser(sub: argparse._SubParsersAction) -> None:

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["accuracy_table", "format_table", "metric_format", "number"]
-
 
 def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
     """Plain-text table: the header and the rows, each column right-aligned."""

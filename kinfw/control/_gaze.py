@@ -63,15 +63,6 @@ from kinfw.control._solver import (
 from kinfw.geometry import angle_between
 from kinfw.model import Robot, RobotModelError
 
-__all__ = [
-    "Fixation",
-    "GazeSolver",
-    "camera_points",
-    "default_free_joints",
-    "fixate",
-    "ray_errors_rad",
-]
-
 #: A point is fixated when every camera's remaining angle is below this (rad).
 FIXATED_RAD = 1e-6
 #: Singular values below this fraction of the largest are left out of a step.

@@ -38,8 +38,6 @@ from kinfw.control._solver import (
 from kinfw.geometry import check_transform
 from kinfw.model import Robot, RobotModelError
 
-__all__ = ["Reach", "reach"]
-
 #: Reached: position within this (m) and rotation within :data:`REACHED_RAD`.
 REACHED_M = 1e-6
 REACHED_RAD = 1e-6

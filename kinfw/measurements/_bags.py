@@ -77,22 +77,6 @@ from kinfw.observations import QUAT_NORM_TOL, DatasetError
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = [
-    "DROP_REASONS",
-    "IMAGE_JOINTS_CSV",
-    "IMAGE_STAMPS_JSON",
-    "BagAlignment",
-    "BagImages",
-    "BagRecording",
-    "JointStates",
-    "MeasuredStream",
-    "joint_values_at",
-    "measurements_from_bag",
-    "read_bag",
-    "time_offset_streams",
-    "write_bag_images",
-]
-
 log = logging.getLogger(__name__)
 
 #: Why a measurement was not paired with joint values, in the order they are tested.

@@ -40,19 +40,6 @@ from kinfw.geometry import rigid_from_chart, rigid_from_chart_casadi
 if TYPE_CHECKING:
     from kinfw.model._cpc import CPCModel
 
-__all__ = [
-    "CPC_KEY",
-    "BaseBlock",
-    "Block",
-    "BlockKey",
-    "CPCBlock",
-    "ParameterName",
-    "PointBlock",
-    "RigidFrameBlock",
-    "RobotBlock",
-    "ZeroOffsetBlock",
-]
-
 _RIGID_FIELDS = ("rot_x", "rot_y", "rot_z", "x", "y", "z")
 _RIGID_UNITS = ("rad", "rad", "rad", "m", "m", "m")
 

@@ -36,17 +36,6 @@ from kinfw.model._urdf_read import (
     xml_text,
 )
 
-__all__ = [
-    "JointInfo",
-    "Robot",
-    "RobotModelError",
-    "Topology",
-    "UnknownFrameError",
-    "builtin_head_urdf",
-    "check_robot",
-    "load_robot",
-]
-
 
 class UnknownFrameError(RobotModelError, KeyError):
     """A frame (link or joint) name that the URDF does not have."""

@@ -17,19 +17,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.reports._doc_reader import DocReader
 
-__all__ = [
-    "STATS",
-    "BeforeAfter",
-    "CalibratedUnknown",
-    "DataProvenance",
-    "ErrorValue",
-    "GuardSummary",
-    "ModelSummary",
-    "NoiseSummary",
-    "headline",
-    "read_only_array",
-]
-
 
 def read_only_array(
     value: ArrayLike, name: str, shape: tuple[int, ...] | None = None

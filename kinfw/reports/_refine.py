@@ -12,16 +12,6 @@ from kinfw.reports._doc_reader import DocReader
 from kinfw.reports._records import CalibratedUnknown, ErrorValue, NoiseSummary
 from kinfw.reports._stages import KinematicValue
 
-__all__ = [
-    "Correlation",
-    "DownweightedRow",
-    "IdentifiabilitySummary",
-    "NotIdentifiable",
-    "ParameterRow",
-    "RefineSection",
-    "RejectedRow",
-]
-
 
 @dataclass(frozen=True, slots=True)
 class ParameterRow:

@@ -21,44 +21,14 @@ from kinfw.files import json_text, write_text_atomic
 from kinfw.reports._doc_reader import CalibrationFileError, DocReader
 from kinfw.reports._records import BeforeAfter, DataProvenance, ErrorValue, GuardSummary, headline
 from kinfw.reports._refine import (
-    Correlation,
-    DownweightedRow,
-    IdentifiabilitySummary,
-    NotIdentifiable,
-    ParameterRow,
     RefineSection,
-    RejectedRow,
 )
 from kinfw.reports._reprojection import ReprojectionSection
 from kinfw.reports._stages import (
-    CameraMount,
     ClosedFormSection,
     ExportSection,
     HandEyeSection,
-    KinematicValue,
-    TargetEstimate,
 )
-
-__all__ = [
-    "CalibrationReport",
-    "CameraMount",
-    "ClosedFormSection",
-    "Correlation",
-    "DownweightedRow",
-    "ExportSection",
-    "GroupErrorSummary",
-    "HandEyeSection",
-    "IdentifiabilitySummary",
-    "KinematicValue",
-    "NotIdentifiable",
-    "ParameterRow",
-    "RefineSection",
-    "RejectedRow",
-    "StageErrors",
-    "TargetEstimate",
-    "read_report",
-    "write_report",
-]
 
 
 def _rows(cls, doc: dict, key: str, r: DocReader, at: str) -> tuple:

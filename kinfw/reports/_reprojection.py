@@ -10,8 +10,6 @@ from typing import Any
 
 from kinfw.reports._doc_reader import DocReader
 
-__all__ = ["CameraReprojection", "ImageReprojection", "ReprojectionSection"]
-
 
 @dataclass(frozen=True, slots=True)
 class ImageReprojection:

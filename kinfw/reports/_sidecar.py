@@ -43,19 +43,6 @@ from kinfw.reports._records import (
     read_only_array,
 )
 
-__all__ = [
-    "BeforeAfter",
-    "CalibratedUnknown",
-    "CalibrationFileError",
-    "CalibrationSidecar",
-    "DataProvenance",
-    "DocReader",
-    "ModelSummary",
-    "NoiseSummary",
-    "read_sidecar",
-    "write_sidecar",
-]
-
 
 @dataclass(frozen=True, slots=True, eq=False)
 class CalibrationSidecar:

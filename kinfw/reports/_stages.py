@@ -14,15 +14,6 @@ from numpy.typing import NDArray
 
 from kinfw.reports._doc_reader import DocReader
 
-__all__ = [
-    "CameraMount",
-    "ClosedFormSection",
-    "ExportSection",
-    "HandEyeSection",
-    "KinematicValue",
-    "TargetEstimate",
-]
-
 
 def _none_if_nan(v: float) -> float | None:
     return None if np.isnan(v) else float(v)

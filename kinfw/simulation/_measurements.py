@@ -47,8 +47,6 @@ from kinfw.simulation._pixels import (
 )
 from kinfw.simulation._simulate import default_target_pose, simulate
 
-__all__ = ["SimulatedMeasurements", "SimulatedProbe", "simulate_measurements"]
-
 #: Length of a marker's or probe's offset drawn when none is given, metres.
 DEFAULT_OFFSET_M = 0.05
 

@@ -45,23 +45,7 @@ from kinfw.observations import (
 )
 from kinfw.simulation._perturb import (
     check_sigma,
-    one_joint_at_a_time,
-    perturb_robot,
-    random_configurations,
 )
-
-__all__ = [
-    "default_target_pose",
-    "frame_from_z_and_x",
-    "nine_circle_plate",
-    "one_joint_at_a_time",
-    "perturb_poses",
-    "perturb_robot",
-    "random_configurations",
-    "simulate",
-    "stereo_measure",
-]
-
 
 # -- measurement noise and the stereo rig ----------------------------------------------
 

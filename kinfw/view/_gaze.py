@@ -52,8 +52,6 @@ if TYPE_CHECKING:
 
     from kinfw.control import Fixation
 
-__all__ = ["gaze_rays", "gaze_scene", "write_gaze_html"]
-
 RAY_RADIUS = 0.002
 """Radius of a gaze ray's cylinder, metres."""
 FIXATED_RGB = (0.0, 0.7, 0.2)

@@ -46,8 +46,6 @@ if TYPE_CHECKING:
 
     from kinfw.control import Reach
 
-__all__ = ["reach_scene", "write_reach_html"]
-
 TARGET_TRIAD_LENGTH = 0.1
 """Length of the target pose's triad axes, metres."""
 FRAME_TRIAD_LENGTH = 0.07

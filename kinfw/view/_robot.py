@@ -28,16 +28,6 @@ from kinfw.view._draw import stick, triad
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = [
-    "BACKGROUND_RGB",
-    "CAMERA_FOV_DEG",
-    "display_frame",
-    "draw_robot",
-    "frame_scene",
-    "robot_scene",
-    "set_camera",
-]
-
 logger = logging.getLogger("kinfw.view")
 
 CAMERA_FOV_DEG = 30.0

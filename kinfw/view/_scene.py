@@ -70,7 +70,7 @@ from kinfw.measurements import Measurements, check_against_robot
 from kinfw.model import BlockKey, Robot, load_robot
 from kinfw.observations import MissingValue, NumericContext, kind_of, node_name
 from kinfw.reports import CalibrationSidecar, read_sidecar
-from kinfw.view._cameras import CAMERA_TRIAD_LENGTH, FRUSTUM_DEPTH, draw_cameras, frustum_corners
+from kinfw.view._cameras import draw_cameras
 from kinfw.view._draw import (
     TRIAD_LENGTH,
     overlay_object,
@@ -80,27 +80,10 @@ from kinfw.view._draw import (
     triad,
     up_direction,
 )
-from kinfw.view._html import OfflineWindow, external_urls, write_html
 from kinfw.view._robot import draw_robot, frame_scene
 
 if TYPE_CHECKING:
     import meshcat
-
-__all__ = [
-    "CAMERA_TRIAD_LENGTH",
-    "FRUSTUM_DEPTH",
-    "GHOST_RGBA",
-    "RESIDUAL_COLOR_STOPS_MM",
-    "SOLID_RGBA",
-    "TRIAD_LENGTH",
-    "OfflineWindow",
-    "external_urls",
-    "frustum_corners",
-    "residual_color",
-    "scene",
-    "targets_from_sidecar",
-    "write_html",
-]
 
 logger = logging.getLogger(__name__)
 

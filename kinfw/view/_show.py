@@ -21,8 +21,6 @@ from kinfw.view._scene import as_robot, scene, targets_from_sidecar
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = ["show"]
-
 
 def show(
     nominal: Robot | str | Path,

@@ -36,8 +36,6 @@ from kinfw.model import Block, BlockKey, Robot
 from kinfw.observations import Metric, MetricErrors, NumericContext
 from kinfw.reports import CalibrationSidecar
 
-__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "group_errors", "known_frames"]
-
 
 @dataclass(frozen=True, slots=True)
 class GroupErrors:

@@ -27,16 +27,6 @@ from kinfw.identification.problem import LeastSquaresProblem, NoiseModel, build_
 from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, CPCModel, Robot, cpc_from_geometry, geometry_from_robot
 
-__all__ = [
-    "CRLB",
-    "NORMAL_COVERAGE",
-    "cramer_rao",
-    "position_jacobians",
-    "predicted_position_ms",
-    "predicted_position_rms",
-    "true_chart_coordinates",
-]
-
 log = logging.getLogger(__name__)
 
 

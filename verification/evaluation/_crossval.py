@@ -47,21 +47,6 @@ from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
 
-__all__ = [
-    "AUTO",
-    "BASELINES",
-    "SELECTION_SETS",
-    "CrossValidation",
-    "FoldScore",
-    "crossvalidate",
-    "fitted_unknowns",
-    "held_out_errors",
-    "metric_rms",
-    "rejected_keys",
-    "whitened_score",
-    "whitening_noise",
-]
-
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
 BASELINES = ("none", "frames", "full")
 #: The set name that stands for ``kinfw calibrate``'s default on each training fold: the

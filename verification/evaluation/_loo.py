@@ -53,8 +53,6 @@ from kinfw.observations import NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._crossval import fitted_unknowns
 
-__all__ = ["LeaveOneOut", "leave_one_out"]
-
 #: A sample whose removal leaves the normal matrix this close to singular (its smallest
 #: eigenvalue over the full data's largest) determines a parameter alone: its held-out
 #: prediction is undefined (a refit without it would fail).

@@ -61,16 +61,6 @@ from kinfw.verification.evaluation._crossval import (
 )
 from kinfw.verification.evaluation._loo import leave_one_out
 
-__all__ = [
-    "PRIOR_GRID_M",
-    "PRIOR_LEVERS_M",
-    "ROWS_PER_PARAMETER",
-    "VIEW_ROWS",
-    "Candidate",
-    "ModelChoice",
-    "choose_parameters",
-]
-
 #: Residual rows per free parameter of the full set from which "full" is chosen without
 #: cross-validation (a least-squares rule of thumb: ten observations per unknown keep the
 #: parameter scatter well below the model's bias for a well-excited robot).

@@ -20,8 +20,6 @@ from kinfw.model import BlockKey, Robot
 from kinfw.observations import NumericContext, kind_of
 from kinfw.reports import CameraReprojection, ImageReprojection, ReprojectionSection
 
-__all__ = ["WORST_IMAGES", "reprojection_section"]
-
 #: How many of the worst images the section names.
 WORST_IMAGES = 10
 

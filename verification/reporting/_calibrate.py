@@ -49,14 +49,6 @@ from kinfw.verification.reporting._guard import (
 )
 from kinfw.verification.reporting._report import calibration_report, file_sha256, sidecar
 
-__all__ = [
-    "CalibrationResult",
-    "IntrinsicsEvidence",
-    "calibrate_and_report",
-    "intrinsics_evidence",
-    "shared_configurations",
-]
-
 #: Pixel residuals worth a second look: an estimated pixel noise above this (px), or more
 #: than :data:`SUSPECT_FRACTION` of the image points rejected as gross errors. Corner and
 #: dot detectors reach a few tenths of a pixel with calibrated intrinsics; at 2 px the

@@ -41,15 +41,6 @@ from kinfw.verification.evaluation import run_trials
 from kinfw.verification.reporting._calibrate import CalibrationResult, calibrate_and_report
 from kinfw.verification.reporting._report import file_sha256
 
-__all__ = [
-    "FLEET_SUMMARY",
-    "FleetMember",
-    "FleetResult",
-    "FleetRow",
-    "calibrate_fleet",
-    "fleet_members",
-]
-
 #: The summary file in the fleet's folder; each robot's files are in ``NAME/``.
 FLEET_SUMMARY = "summary.json"
 CALIBRATED_URDF = "calibrated.urdf"

@@ -46,14 +46,6 @@ from kinfw.verification.reporting._sections import (
     refine_section,
 )
 
-__all__ = [
-    "before_after_rows",
-    "calibration_report",
-    "errors_by_group",
-    "file_sha256",
-    "sidecar",
-]
-
 
 def file_sha256(path: str | Path) -> str:
     """Hex SHA-256 of a file's bytes (provenance of the input data)."""

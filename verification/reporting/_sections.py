@@ -30,16 +30,6 @@ from kinfw.reports import (
     TargetEstimate,
 )
 
-__all__ = [
-    "calibrated_unknowns",
-    "closed_form_section",
-    "downweighted_rows",
-    "hand_eye_section",
-    "noise_summary",
-    "refine_section",
-    "rejected_rows",
-]
-
 
 def _kinematic_values(model) -> tuple[KinematicValue, ...]:
     return tuple(KinematicValue(o, n, v, unit) for o, n, v, unit in model.describe())

@@ -10,8 +10,6 @@ import numpy as np
 from kinfw.files import atomic_path
 from kinfw.reports import StageErrors
 
-__all__ = ["plot_stage_errors"]
-
 
 def plot_stage_errors(
     stages: tuple[StageErrors, ...], path: str | Path, *, title: str = ""

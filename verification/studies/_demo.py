@@ -51,8 +51,6 @@ from kinfw.verification.reporting import (
     plot_stage_errors,
 )
 
-__all__ = ["DEMO_FILES", "NOISE_DEG", "NOISE_MM", "PIXEL_SIGMA", "DemoResult", "run_demo"]
-
 #: What :func:`run_demo` writes into its output directory.
 DEMO_FILES = (
     "data.json",

@@ -63,21 +63,6 @@ from kinfw.verification.studies._common import (
 from kinfw.verification.studies._dh_robots import ur10_urdf
 from kinfw.verification.studies._gaze_metrics import pointing_errors_rad, triangulation_errors_m
 
-__all__ = [
-    "ARM_NOISE_DEG",
-    "ARM_NOISE_MM",
-    "ARM_POSES",
-    "HEAD_DISTANCE_M",
-    "GazeSetup",
-    "GazeStudy",
-    "count_noun",
-    "format_gaze",
-    "gaze_study",
-    "gaze_study_main",
-    "head_points",
-    "run_gaze",
-]
-
 #: Distance of the held-out points from the cameras' midpoint (m).
 HEAD_DISTANCE_M = (0.5, 3.0)
 #: Calibration poses of the arm, and their noise (mm per axis, deg).

@@ -57,18 +57,6 @@ from kinfw.simulation import (
 from kinfw.verification.evaluation import check_count
 from kinfw.verification.studies._common import FieldsJSON
 
-__all__ = [
-    "Experiment",
-    "ExperimentSetup",
-    "check_positive",
-    "in_model_order",
-    "pipeline_start",
-    "position_ms",
-    "rms_over",
-    "setup_experiment",
-    "simulate_experiment",
-]
-
 _EXPERIMENT_TAG = 7  # seeds (module docstring)
 
 

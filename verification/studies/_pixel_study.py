@@ -45,18 +45,6 @@ from kinfw.simulation import (
     simulate,
 )
 
-__all__ = [
-    "PixelExperiment",
-    "arm_experiment",
-    "camera_target_errors",
-    "crlb_held_out",
-    "head_experiment",
-    "pose_errors",
-    "pose_path_data",
-    "rendered_detections",
-    "target_pose",
-]
-
 
 @dataclass(frozen=True)
 class PixelExperiment:
