@@ -55,7 +55,7 @@ if str(REPO) not in sys.path:  # for benchmarks.common (kinfw comes from pip ins
 import casadi as ca
 import pinocchio as pin
 
-import kinfw.identification._refine as rf
+import kinfw.identification.problem._refine as rf
 from benchmarks.common import (
     format_table,
     gc_disabled,

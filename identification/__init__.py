@@ -22,8 +22,7 @@ from kinfw.identification._closed_form import (
     one_joint_groups,
 )
 from kinfw.identification._pipeline import METHODS, Calibration, calibrate
-from kinfw.identification._refine import REJECT_Z, information_matrix, refine
-from kinfw.identification._refine_result import RefineResult
+from kinfw.identification.problem import REJECT_Z, RefineResult, information_matrix, refine
 
 __all__ = [
     "METHODS",

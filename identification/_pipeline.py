@@ -23,8 +23,6 @@ from numpy.typing import NDArray
 from kinfw import progress
 from kinfw.geometry import average_transform
 from kinfw.identification._closed_form import ClosedFormResult, ProtocolError, identify_closed_form
-from kinfw.identification._refine import refine
-from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.checks import (
     InsufficientDataError,
     UnitError,
@@ -35,7 +33,7 @@ from kinfw.identification.checks import (
     median_residuals,
 )
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
-from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.identification.problem import NoiseModel, RefineResult, build_problem, refine
 from kinfw.measurements import (
     Measurements,
     check_joint_motion,
@@ -392,7 +390,7 @@ def _refine_checked(
 #: converge (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90 (the root's joint
 #: by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). A converged fit returns
 #: to the nominal along those directions to rounding (noise-free data included, since
-#: the noise floors and :data:`kinfw.identification._refine.ROUNDING_SLACK`); one that
+#: the noise floors and :data:`kinfw.identification.problem._refine.ROUNDING_SLACK`); one that
 #: cannot is refused as well. The model choice's candidates fit through
 #: :func:`calibrate`: such a candidate fails and another is chosen.
 UNDETERMINED_LEFT = 1e-2

@@ -106,7 +106,7 @@ def redundancy(
     Parameters
     ----------
     problem : LeastSquaresProblem
-        From :func:`kinfw.identification._refine.build_problem`.
+        From :func:`kinfw.identification.problem.build_problem`.
     noise_given : bool
         True when the noise model is given rather than estimated.
     n_samples : int

@@ -1,7 +1,7 @@
 """The objective of measurement planning: the predicted held-out error of a calibration.
 
 A calibration from configurations ``S`` estimates the free chart coordinates ``x`` of
-the problem :func:`kinfw.identification._refine.build_problem` builds; to first order its
+the problem :func:`kinfw.identification.problem.build_problem` builds; to first order its
 covariance is ``M(S)^-1`` with ``M(S) = sum_{i in S} J_i^T J_i`` the Fisher information
 (``J_i``: the rows of the whitened Jacobian that configuration ``i`` contributes, at the
 nominal model). The error it makes when it predicts the observed quantities at *other*
@@ -204,7 +204,7 @@ def candidate_information(
 ) -> CandidateInformation:
     """The Fisher information each configuration of ``qs`` brings to the calibration.
 
-    The problem is the calibration's own (:func:`kinfw.identification._refine.build_problem`,
+    The problem is the calibration's own (:func:`kinfw.identification.problem.build_problem`,
     ``setup.parameters`` and its gauge) on noise-free simulated observations of the
     nominal ``robot`` at ``qs`` (start = nominal, true target pose given), whitened by
     ``setup.noise()``; each sample's rows give its information ``J_i^T J_i``.

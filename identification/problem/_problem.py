@@ -368,7 +368,7 @@ class LeastSquaresProblem:
 
         Rows are observation by observation (each observation's rows together), group
         by group, then one row per prior entry; each row divided by its component's
-        sigma in ``noise`` (:class:`kinfw.identification._refine.NoiseModel`). With
+        sigma in ``noise`` (:class:`kinfw.identification.problem.NoiseModel`). With
         ``only_free`` the columns of the fixed parameters are left at zero (not
         computed: what the fit needs, cheaper for the small parameter sets).
         """

@@ -174,7 +174,7 @@ class NoiseComponent:
     ----------
     name : str
         ``"position"``, ``"rotation"``, or a kind's own (e.g. ``"distance"``); the key of
-        :class:`kinfw.identification._refine.NoiseModel`.
+        :class:`kinfw.identification.problem.NoiseModel`.
     rows : int
         Rows per observation.
     unit : {"m", "rad"}

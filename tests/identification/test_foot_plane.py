@@ -171,7 +171,7 @@ def test_the_default_moves_the_export_only_along_determined_directions(standing)
     exported URDF (Pinocchio), holds none of the estimate (the robot's chart coordinates
     in m and rad, the unknowns' weighted by UNKNOWN_WEIGHT), as without a prior. With the
     prior's rows in the Jacobian that finds the null space, 0.69 mm of it was left there."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, _, _, data = standing
     rng = np.random.default_rng(5)

@@ -52,7 +52,7 @@ class CRLB:
     frames : tuple of str
         The measured end frames.
     parameter_names : tuple of (owner, field)
-        Every unknown of the problem, as :func:`kinfw.identification._refine.build_problem`
+        Every unknown of the problem, as :func:`kinfw.identification.problem.build_problem`
         orders them: the CPC chart of ``model`` (``model.n_parameters`` entries), then
         6 per target pose (``("target:<name>", "rot_x" ...)``, Cayley chart: rad, m).
     free : ndarray of bool, shape (P,)

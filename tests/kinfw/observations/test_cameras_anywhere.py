@@ -279,7 +279,7 @@ def test_noise_free_pixels_move_the_export_only_along_determined_directions(name
     the estimate (the robot's chart coordinates in m and rad, the board's weighted by
     UNKNOWN_WEIGHT), as for plane contacts. Before the rounding slack of the return to the
     start, 3.5-5.6 mm of it was left there (``j1`` exported moved by millimetres)."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, _, _, data, _ = scene(name, 30, seed=3)
     result = refine(nominal, data)

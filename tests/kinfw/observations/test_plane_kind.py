@@ -339,7 +339,7 @@ def test_what_contacts_leave_undetermined_stays_at_the_nominal(scene, given):
     coordinates in m and rad, the unknowns' weighted by UNKNOWN_WEIGHT), while the
     held-out distances are the truth's up to the scale: the truth along what is
     determined."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, truth, planes, contacts = scene
     data = _dataset(contacts, offset=OFFSET if given else None)

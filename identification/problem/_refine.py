@@ -46,28 +46,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw import progress
-from kinfw.identification._refine_result import RefineResult
-from kinfw.identification.problem import (
-    LOSS_SCALE,
-    LOSSES,
+from kinfw.identification.problem._build import build_problem
+from kinfw.identification.problem._diagnostics import (
     GroupResiduals,
     Identifiability,
-    LeastSquaresProblem,
-    NoiseModel,
-    NormalEquations,
     RejectedObservation,
-    Unknown,
-    build_problem,
     covariance_and_identifiability,
-    estimate_noise,
     group_residuals,
+    rejected_observations,
+)
+from kinfw.identification.problem._noise import NoiseModel, estimate_noise, norm2_cdf
+from kinfw.identification.problem._problem import LeastSquaresProblem, NormalEquations, Unknown
+from kinfw.identification.problem._refine_result import RefineResult
+from kinfw.identification.problem._solver import (
+    LOSS_SCALE,
+    LOSSES,
     levenberg_marquardt,
     leverage_sums,
     leverages,
     negligible_columns,
-    norm2_cdf,
     observation_norms,
-    rejected_observations,
     row_weights,
     tall_r,
     thresholds,
