@@ -3,7 +3,7 @@ Also the hand-eye pose-pair files of ``kinfw handeye`` (CSV, JSON, easy_handeye2
 :func:`read_pose_pairs`, :func:`pose_pairs_text`; formats in ``_pose_pairs.py`` and
 ``docs/handeye.md``). And ROS 1 / ROS 2 bags (:func:`read_bag`,
 :func:`measurements_from_bag`: joint states and a pose, point or TF stream, time-aligned;
-``_bags.py`` and ``docs/bags.md``).
+``_bag_read.py`` and ``docs/bags.md``).
 
 A measurement file lists samples; each sample is one robot configuration ``q`` and the
 observations made in it::
@@ -91,7 +91,7 @@ writer are in :mod:`kinfw.measurements` and the checks in
 callers import from here).
 """
 
-from kinfw.measurements._bags import (
+from kinfw.measurements._bag_read import (
     DROP_REASONS,
     IMAGE_JOINTS_CSV,
     IMAGE_STAMPS_JSON,
