@@ -124,16 +124,16 @@ def _simulate(
     robot: Robot, setup: Setup, qs: NDArray, names, w_T_target, *, as_poses: bool = False
 ):
     """Noise-free observations at ``qs`` (every sample kept) and the true unknowns."""
-    from kinfw.simulation import simulate, simulate_pixels
+    from kinfw.simulation import simulate_at, simulate_pixels
 
     rng = np.random.default_rng(0)
     parts = []
     if setup.frames:
         if setup.frame_kind == "pose":
-            parts.append(simulate(robot, qs, names, frames=setup.frames, rng=rng))
+            parts.append(simulate_at(robot, qs, names, frames=setup.frames, rng=rng))
         else:
             markers = [(f, np.zeros(3)) for f in setup.frames]
-            parts.append(simulate(robot, qs, names, markers=markers, rng=rng))
+            parts.append(simulate_at(robot, qs, names, markers=markers, rng=rng))
     if setup.cameras and setup.pixels and not as_poses:
         data, kept = simulate_pixels(
             robot,
@@ -153,7 +153,7 @@ def _simulate(
         parts.append(data)
     elif setup.cameras:
         parts.append(
-            simulate(robot, qs, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target)
+            simulate_at(robot, qs, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target)
         )
     from kinfw.measurements import concatenate_measurements
 

@@ -35,7 +35,7 @@ from kinfw.simulation._simulate import (
     default_target_pose,
     nine_circle_plate,
     perturb_poses,
-    simulate,
+    simulate_at,
     stereo_measure,
 )
 
@@ -64,7 +64,7 @@ __all__ = [
     "plant_outliers",
     "random_configurations",
     "render_board",
-    "simulate",
+    "simulate_at",
     "simulate_measurements",
     "simulate_pixels",
     "stereo_measure",

@@ -95,7 +95,7 @@ def leave_one_out(
         left out of the scores).
     fit : Calibration
         The calibration of ``parameters`` and ``prior`` with ``loss`` on the data
-        (:func:`kinfw.identification.calibrate`, method ``"refine"``).
+        (:func:`kinfw.identification.identify`, method ``"refine"``).
     parameters, prior, loss
         As the fit was made (they set the moving parameters, the prior's Hessian and the
         weights).

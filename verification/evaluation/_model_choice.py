@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kinfw import progress
-from kinfw.identification import Calibration, calibrate
+from kinfw.identification import Calibration, identify
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, observed_joints
 from kinfw.model import Robot
@@ -223,7 +223,7 @@ def choose_parameters(
     nominal : Robot
     data : Measurements
     noise, loss
-        As for :func:`kinfw.identification.calibrate` (``noise`` also whitens the
+        As for :func:`kinfw.identification.identify` (``noise`` also whitens the
         scores; default: the noise the full-data fit estimates).
     prior : (sigma_m, sigma_rad), optional
         A prior given by the user: every set is scored with it and no prior scale is
@@ -341,7 +341,7 @@ def _fit(
     with warnings.catch_warnings(), _candidate_named(label):
         warnings.simplefilter("ignore", UserWarning)
         try:
-            return calibrate(
+            return identify(
                 nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
             )
         except ValueError as exc:

@@ -144,7 +144,7 @@ def intrinsics_evidence(
     Large pixel residuals alone do not blame the intrinsics: a noisy detector or wrong
     robot poses make them too, and refined intrinsics then explain little.
     """
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
 
     ref = result.refined
     n_points = sum(len(g.sample) for g in data.groups("pixels"))
@@ -166,7 +166,7 @@ def intrinsics_evidence(
     with warnings.catch_warnings():  # the data's warnings came with the calibration
         warnings.simplefilter("ignore", UserWarning)
         try:
-            refit = calibrate(
+            refit = identify(
                 nominal,
                 data,
                 parameters=parameters,
@@ -387,13 +387,13 @@ def _fitted(
     model choice it came from: the choice's own fit when it has one; a refusal of given
     parameters names what the data determine; a refusal of ``"full"`` that ``"auto"``
     chose unscored (plentiful data) falls back to the scored choice."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
 
     if choice is not None and choice.fit is not None and not refine_intrinsics:
         return choice.fit, choice  # the chosen candidate, fitted on all the data
     options = dict(method=method, noise=noise, loss=loss, refine_intrinsics=refine_intrinsics)
     try:
-        return calibrate(nominal, data, parameters=parameters, prior=prior, **options), choice
+        return identify(nominal, data, parameters=parameters, prior=prior, **options), choice
     except InsufficientDataError as exc:
         if method != "refine" or (choice is not None and choice.k > 0):
             raise
@@ -404,7 +404,7 @@ def _fitted(
         choice = _scored_choice(nominal, data, exc, noise=noise, loss=loss, prior=prior)
     if choice.fit is not None and not refine_intrinsics:
         return choice.fit, choice
-    fit = calibrate(nominal, data, parameters=choice.parameters, prior=choice.prior, **options)
+    fit = identify(nominal, data, parameters=choice.parameters, prior=choice.prior, **options)
     return fit, choice
 
 

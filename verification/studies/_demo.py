@@ -41,7 +41,7 @@ from kinfw.simulation import (
     perturb_robot,
     pixel_views,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.verification.evaluation import reprojection_section
 from kinfw.verification.reporting import (
@@ -202,7 +202,7 @@ def _training_data(truth, names, plates, cameras, qs1, lower, upper, rng, noise,
     Returns the dataset, the target's pose ``w_T_target`` (4, 4) and its name.
     """
     if views is not None:
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage1 = simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise)
         stage2, w_T_target = pixel_views(
             truth, names, lower, upper, N_STAGE2, rng, sigma_px=PIXEL_SIGMA, **views
         )
@@ -210,8 +210,8 @@ def _training_data(truth, names, plates, cameras, qs1, lower, upper, rng, noise,
     else:  # (this order of the draws reproduces the README's numbers)
         qs2 = random_configurations(lower, upper, N_STAGE2, rng, fraction=0.8)
         w_T_target = default_target_pose(truth, qs2, names, cameras)
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
-        stage2 = simulate(
+        stage1 = simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage2 = simulate_at(
             truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise
         )
         target = "target"
@@ -267,7 +267,7 @@ def _held_out(truth, qs, names, plates, cameras, target, w_T_target, rng, noise)
         )
         for c in cameras
     ]
-    return simulate(
+    return simulate_at(
         truth,
         qs,
         names,

@@ -20,7 +20,7 @@ from kinfw.observations import (
     kind_of,
     pnp_camera_T_targets,
 )
-from kinfw.simulation import perturb_robot, simulate
+from kinfw.simulation import perturb_robot, simulate_at
 from kinfw.verification.evaluation import pose_discrepancy
 from tests.robots import ARM_6R
 
@@ -76,7 +76,7 @@ def _scene(n: int, seed: int, spread: float = 0.35, sigma_px: float = 0.0, board
     qs = Q0 + rng.uniform(-spread, spread, size=(20 * n, 6))
     qs = _in_view(truth, w_T_board, qs, board)[:n]
     assert len(qs) == n
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         NAMES,
