@@ -64,7 +64,7 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
     from kinfw.verification.evaluation import evaluate_model
 
     robot = load_model(args.model, args)

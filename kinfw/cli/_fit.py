@@ -24,7 +24,7 @@ from kinfw.files import json_text
 
 if TYPE_CHECKING:
     from kinfw.measurements import Measurements
-    from kinfw.reports import (
+    from kinfw.records import (
         BeforeAfter,
         DownweightedRow,
         ErrorValue,
@@ -156,7 +156,7 @@ def change_bound(args: argparse.Namespace):
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from kinfw.reports import write_report
+    from kinfw.records import write_report
     from kinfw.verification.reporting import calibrate_and_report
 
     nominal = load_model(args.urdf, args)

@@ -37,7 +37,7 @@ def accuracy_table(report_dict: dict) -> str:
     a column per error key of any group (``position_rms_mm``, ``height_max_mm``,
     ``tilt_deg``; ``-`` where a group's kind has no such metric), then per metric with
     axes the mean/std of ``|error|`` per axis (Shih et al. Table 4)."""
-    from kinfw.reports import ErrorValue
+    from kinfw.records import ErrorValue
 
     fixed = ("frame", "kind", "marker", "entity", "n", "samples")
     keys = dict.fromkeys(k for g in report_dict["groups"] for k in g if k not in fixed)

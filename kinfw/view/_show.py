@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 from kinfw.files import sidecar_path
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
-from kinfw.reports import CalibrationSidecar, read_sidecar
+from kinfw.records import CalibrationSidecar, read_sidecar
 from kinfw.view._html import OfflineWindow, write_html
 from kinfw.view._scene import as_robot, scene, targets_from_sidecar
 

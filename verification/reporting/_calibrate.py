@@ -39,7 +39,7 @@ from kinfw.measurements import (
     drop_duplicate_samples,
 )
 from kinfw.model import Robot, check_robot
-from kinfw.reports import CalibrationReport, ModelSummary
+from kinfw.records import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
 from kinfw.verification.reporting._guard import (
@@ -266,7 +266,7 @@ class CalibrationResult:
             Before anything is written: the plausibility guard tripped (:attr:`refusal`)
             and large changes were not allowed.
         """
-        from kinfw.reports import write_sidecar
+        from kinfw.records import write_sidecar
         from kinfw.urdf import write_urdf
 
         if self.refusal is not None:

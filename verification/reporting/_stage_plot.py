@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfw.files import atomic_path
-from kinfw.reports import StageErrors
+from kinfw.records import StageErrors
 
 
 def plot_stage_errors(

@@ -32,7 +32,7 @@ from kinfw.identification.checks import ChangeBound
 from kinfw.measurements import concatenate_measurements, write_measurements
 from kinfw.model import BlockKey, Robot, builtin_head_urdf, load_robot
 from kinfw.observations import TargetObservations
-from kinfw.reports import CalibrationReport, ReprojectionSection, StageErrors, write_report
+from kinfw.records import CalibrationReport, ReprojectionSection, StageErrors, write_report
 from kinfw.simulation import (
     DEFAULT_BOARD,
     default_intrinsics,

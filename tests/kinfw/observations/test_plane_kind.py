@@ -552,7 +552,7 @@ def test_verify_reads_contacts_as_height_and_tilt_by_hand_geometry(scene, tmp_pa
     plane, the given probe offset) reads each contact's height in mm and the contacts'
     tilt as 0.5 deg, in the text and the JSON."""
     from kinfw.cli._main import main
-    from kinfw.reports import CalibratedUnknown, CalibrationSidecar, DataProvenance, write_sidecar
+    from kinfw.records import CalibratedUnknown, CalibrationSidecar, DataProvenance, write_sidecar
 
     nominal, _, planes, contacts = scene
     qs, plane = contacts["table"], planes["table"]
@@ -664,7 +664,7 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
     nominal robot), equal to the hand geometry; report.json carries them, and the
     in-sample errors in the same keys."""
     from kinfw.cli._main import main
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
 
     nominal = scene[0]
     table = noisy_contacts.groups("plane")[0]

@@ -458,7 +458,7 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     centre from the sidecar (verify, and the calibration's "after": scored with what it
     was trained with) or, for the nominal ("before"), from the kind's closed form on the
     held-out contacts."""
-    from kinfw.reports import read_report, read_sidecar
+    from kinfw.records import read_report, read_sidecar
 
     paths, nominal, qs, radius = sphere_files
     out_urdf, report_path = tmp_path / "cal.urdf", tmp_path / "report.json"

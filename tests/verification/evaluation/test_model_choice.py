@@ -11,7 +11,7 @@ from kinfw.files import sidecar_path
 from kinfw.identification import identify
 from kinfw.measurements import write_measurements
 from kinfw.model import cpc_from_robot, load_robot
-from kinfw.reports import read_sidecar
+from kinfw.records import read_sidecar
 from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
 from tests.paths import DATA

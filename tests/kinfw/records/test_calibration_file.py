@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinfw.reports import (
+from kinfw.records import (
     CalibratedUnknown,
     CalibrationFileError,
     CalibrationReport,

@@ -6,8 +6,8 @@ key of every error.
 
 from __future__ import annotations
 
-from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._records import (
+from kinfw.records._doc_reader import CalibrationFileError, DocReader
+from kinfw.records._records import (
     STATS,
     BeforeAfter,
     CalibratedUnknown,
@@ -19,7 +19,7 @@ from kinfw.reports._records import (
     headline,
     read_only_array,
 )
-from kinfw.reports._refine import (
+from kinfw.records._refine import (
     Correlation,
     DownweightedRow,
     IdentifiabilitySummary,
@@ -28,7 +28,7 @@ from kinfw.reports._refine import (
     RefineSection,
     RejectedRow,
 )
-from kinfw.reports._report import (
+from kinfw.records._report import (
     CalibrationReport,
     GroupErrorSummary,
     StageErrors,
@@ -36,9 +36,9 @@ from kinfw.reports._report import (
     read_report,
     write_report,
 )
-from kinfw.reports._reprojection import CameraReprojection, ImageReprojection, ReprojectionSection
-from kinfw.reports._sidecar import CalibrationSidecar, read_sidecar, write_sidecar
-from kinfw.reports._stages import (
+from kinfw.records._reprojection import CameraReprojection, ImageReprojection, ReprojectionSection
+from kinfw.records._sidecar import CalibrationSidecar, read_sidecar, write_sidecar
+from kinfw.records._stages import (
     CameraMount,
     ClosedFormSection,
     ExportSection,
