@@ -59,7 +59,7 @@ from kinfw.measurements import Measurements, check_against_robot
 from kinfw.model import CPCModel, Robot, cpc_from_geometry, cpc_from_robot, load_robot
 from kinfw.simulation import one_joint_at_a_time, perturb_robot, random_configurations, simulate_at
 
-HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+HEAD_URDF = REPO / "robots" / "iis_head.urdf"
 FRAMES = ("left_plate", "right_plate")
 PAPER_PER_JOINT = 9
 NOISE_M = 0.5e-3

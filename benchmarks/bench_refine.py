@@ -92,7 +92,7 @@ from kinfw.simulation import (
 )
 from kinfw.urdf import edit_urdf, export_urdf
 
-HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+HEAD_URDF = REPO / "robots" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 PER_JOINT = 9  # Shih et al. section 4.1: 6 x 9 + 1 = 55 configurations

@@ -85,7 +85,7 @@ def test_the_library_imports_only_its_one_namespace():
         f"{MODULES[name]}:{line}: {module}"
         for name in sorted(MODULES)
         for line, module in IMPORTS[name]
-        if module.split(".")[0] in ("identification", "verification", "urdf")
+        if module.split(".")[0] in ("identification", "verification", "robots")
     ]
     assert not bare, _offenders(bare)
 
@@ -162,7 +162,7 @@ def test_no_private_module_is_imported_from_another_package():
 @pytest.mark.slow
 def test_the_wheel_installs_one_namespace(tmp_path):
     """``pip install .`` puts ``kinfw`` (and the built-in URDF) in site-packages and no
-    top-level ``identification`` / ``verification`` / ``urdf``: read from the wheel pip
+    top-level ``identification`` / ``verification`` / ``robots``: read from the wheel pip
     builds from this tree."""
     import shutil
     import subprocess
@@ -173,7 +173,7 @@ def test_the_wheel_installs_one_namespace(tmp_path):
     source.mkdir()
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(REPO / name, source / name)
-    for folder in (*FOLDERS, "urdf"):
+    for folder in (*FOLDERS, "robots"):
         shutil.copytree(
             REPO / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__")
         )
