@@ -2,7 +2,7 @@
 OpenCV's closed forms side by side, and their held-out errors.
 
 Every method is fitted to the same ``(base_T_hands, camera_T_targets)`` for either setup
-(:func:`kinfw.identification.handeye.solver_hand_poses`) and returns
+(:func:`kinfw.identification.handeye._calibration.solver_hand_poses`) and returns
 ``(mount_T_camera, holder_T_target)``. A held-out pair ``i`` is predicted by closing the
 loop, ``camera_T_target = inv(mount_T_camera) @ inv(A[i]) @ holder_T_target`` with
 ``A[i]`` the solver's hand pose, and compared with the measured one: the rotation angle

@@ -88,7 +88,7 @@ def product_tensor() -> NDArray:
 
 def product_matrices(q_A: NDArray, q_B: NDArray) -> NDArray:
     """Per pose ``K_i`` with ``q_X = (mean_i K_i) q_Y`` at a fit (``N`` of
-    :func:`kinfw.identification.handeye.iteration_matrix` is their mean):
+    :func:`kinfw.identification.handeye._axyb_iteration.iteration_matrix` is their mean):
     ``L(q_A) R(q_B^-1) diag(-1, -1, -1, 1)``."""
     return np.einsum("na,nb,abjk->njk", q_A, q_B, product_tensor(), optimize=False)
 

@@ -73,8 +73,8 @@ class StartMethod:
         :func:`~kinfw.identification.handeye.park_axxb`), which checks its input.
     solve_prepared : callable or None
         The same on the problem's prepared input
-        (:func:`~kinfw.identification.handeye.prepare_axxb` for ``"axxb"``,
-        :func:`~kinfw.identification.handeye.check_start_poses` for ``"axyb"``): what
+        (:func:`~kinfw.identification.handeye._starts_axxb.prepare_axxb` for ``"axxb"``,
+        :func:`~kinfw.identification.handeye._checks.check_start_poses` for ``"axyb"``): what
         :func:`candidate_starts` calls after one check for all methods. None (a start
         added with :func:`register_start` may leave it out): ``solve`` is called on the
         checked poses.
