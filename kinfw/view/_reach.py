@@ -3,7 +3,7 @@
 :func:`reach_scene` draws a :class:`kinfw.control.Reach` (``kinfw reach --html``):
 
 - the robot at :attr:`~kinfw.control.Reach.q` (Pinocchio's ``MeshcatVisualizer``,
-  :func:`kinfw.view.draw_robot`), solid;
+  :func:`kinfw.view._robot.draw_robot`), solid;
 - the target: a pose as a triad (x red, y green, z blue) with a ball at its origin, a
   point as a sphere;
 - the reaching frame at the answer, a shorter, thinner triad with a smaller ball at its

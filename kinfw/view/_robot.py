@@ -269,7 +269,7 @@ def robot_scene(
     vis, root : meshcat.Visualizer
         The scene and its ``kinfw`` node (root-link coordinates).
     up : ndarray, shape (3,)
-        The checked up direction (:func:`kinfw.view.up_direction`).
+        The checked up direction (:func:`kinfw.view._draw.up_direction`).
     robot_ps : ndarray, shape (n, 3)
         Points of the drawn robot, for :func:`frame_scene`.
     """
