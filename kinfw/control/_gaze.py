@@ -25,7 +25,7 @@ per camera: pan, tilt and both vergences on the IIS head; the X-Y table stays wh
 ``q_start`` value.
 
 The solution. A closed-form start, then bounded Gauss-Newton on the exact kinematics
-(:func:`kinfw.control.solve_bounded`):
+(:func:`solve_bounded`):
 
 - start: each free revolute joint, root first, in turn turns its cameras' rays towards
   the point in closed form. Rotating a direction ``d`` about the unit axis ``a`` by

@@ -2,7 +2,7 @@
 model, so a user can check "does my calibrated arm now hit the target".
 
 Damped least squares on Pinocchio's exact frame Jacobian
-(:func:`kinfw.control.solve_bounded`; Wampler 1986, Nakamura & Hanafusa 1986),
+(:func:`solve_bounded`; Wampler 1986, Nakamura & Hanafusa 1986),
 within the joint limits. The residual for a pose target ``root_T_target`` is
 ``(p - p_target, w log3(R_target^T R))`` (m; the rotation part in radians times the
 weight ``w``, metres per radian), for a point target ``p - p_target``; its Jacobian is
