@@ -6,9 +6,11 @@ key of every error.
 
 from __future__ import annotations
 
-from kinfw.records._doc_reader import CalibrationFileError, DocReader
+from kinfw.records._doc_reader import (
+    CalibrationFileError,
+    DocReader,
+)
 from kinfw.records._records import (
-    STATS,
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
@@ -17,7 +19,6 @@ from kinfw.records._records import (
     ModelSummary,
     NoiseSummary,
     headline,
-    read_only_array,
 )
 from kinfw.records._refine import (
     Correlation,
@@ -36,8 +37,16 @@ from kinfw.records._report import (
     read_report,
     write_report,
 )
-from kinfw.records._reprojection import CameraReprojection, ImageReprojection, ReprojectionSection
-from kinfw.records._sidecar import CalibrationSidecar, read_sidecar, write_sidecar
+from kinfw.records._reprojection import (
+    CameraReprojection,
+    ImageReprojection,
+    ReprojectionSection,
+)
+from kinfw.records._sidecar import (
+    CalibrationSidecar,
+    read_sidecar,
+    write_sidecar,
+)
 from kinfw.records._stages import (
     CameraMount,
     ClosedFormSection,
@@ -48,7 +57,6 @@ from kinfw.records._stages import (
 )
 
 __all__ = [
-    "STATS",
     "BeforeAfter",
     "CalibratedUnknown",
     "CalibrationFileError",
@@ -80,7 +88,6 @@ __all__ = [
     "TargetEstimate",
     "before_after",
     "headline",
-    "read_only_array",
     "read_report",
     "read_sidecar",
     "write_report",
