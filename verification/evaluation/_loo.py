@@ -27,7 +27,7 @@ partition: the score has no fold noise, and it costs one fit per candidate plus 
 ``(P, P)`` solve per sample (memory ``n P^2`` for ``n`` samples, linear in the samples).
 
 The predictions are scored in each observed kind's metrics by the kinds themselves
-(:func:`kinfw.verification.evaluation.group_errors` on the predicted residual rows), so
+(:func:`group_errors` on the predicted residual rows), so
 every registered kind is scored as the refitting cross-validation scores it.
 """
 

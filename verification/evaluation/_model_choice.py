@@ -14,7 +14,7 @@ fit without it, one Gauss-Newton step away, no refit and no random partition); t
 candidate with the lowest whitened held-out error wins (each observed kind's error in
 its own metric, every noise component in units of its noise, so poses, points, image
 points, plane contacts and registered kinds mix:
-:func:`kinfw.verification.evaluation.whitened_score`):
+:func:`whitened_score`):
 
 - ``"frames"``: nominal joints, base and tool frames fitted;
 - ``"offsets"``: frames plus joint zero offsets;
@@ -96,7 +96,7 @@ class Candidate:
     whitened : float
         The whitened held-out error (about 6 for poses predicted to the noise, 3 for
         points, 1 for plane contacts; lower is better):
-        :func:`kinfw.verification.evaluation.whitened_score` of :attr:`errors`.
+        :func:`whitened_score` of :attr:`errors`.
     errors : tuple of (Metric, float)
         Per metric of the data its held-out RMS over every sample (display unit).
     failed : str or None
