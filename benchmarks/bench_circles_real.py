@@ -19,7 +19,7 @@ intrinsics' error into the chain).
 
 Steps, each printed: ``kinfw detect`` (in-process) with
 ``circles:10x10:0.0254:0.01:0.02`` (the origin dot read, no ``--allow-symmetric``);
-then k-fold cross-validation by image (seed 0): per fold ``calibrate`` on the training
+then k-fold cross-validation by image (seed 0): per fold ``identify`` on the training
 images with ``frames``, ``offsets``, ``full``, ``frames`` with the intrinsics refined
 (``--refine-intrinsics``, what ``kinfw calibrate``'s warning on these images advises: the
 nominal values are not the camera's) and the default (``choose_parameters`` on the
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     if not (args.data / "flange_poses.csv").is_file():
         print(f"bench_circles_real: no flange_poses.csv in {args.data}", file=sys.stderr)
         return 2
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.measurements import read_measurements
     from kinfw.model import load_robot, pose_chain_urdf
     from kinfw.verification.evaluation import choose_parameters
@@ -145,16 +145,16 @@ def main(argv: list[str] | None = None) -> int:
         test = data.subset(test_ids)
         for name in SETS:
             try:
-                fit = calibrate(nominal, train, parameters=name)
+                fit = identify(nominal, train, parameters=name)
             except ValueError as refused:  # too little data for the set: said, not scored
                 errors[name].append(np.full(len(test_ids), np.nan))
                 refusals.append(f"{name} on fold {len(picks)}: {str(refused)[:160]}...")
                 continue
             errors[name].append(pixel_errors(nominal, fit, test))
-        fit = calibrate(nominal, train, parameters="frames", refine_intrinsics=True)
+        fit = identify(nominal, train, parameters="frames", refine_intrinsics=True)
         errors[refined].append(pixel_errors(nominal, fit, test))
         choice = choose_parameters(nominal, train)
-        fit = choice.fit or calibrate(
+        fit = choice.fit or identify(
             nominal, train, parameters=choice.parameters, prior=choice.prior
         )
         errors["default (--params auto)"].append(pixel_errors(nominal, fit, test))

@@ -57,9 +57,9 @@ from benchmarks.common import (
 from kinfw.identification import one_joint_groups
 from kinfw.measurements import Measurements, check_against_robot
 from kinfw.model import CPCModel, Robot, cpc_from_geometry, cpc_from_robot, load_robot
-from kinfw.simulation import one_joint_at_a_time, perturb_robot, random_configurations, simulate
+from kinfw.simulation import one_joint_at_a_time, perturb_robot, random_configurations, simulate_at
 
-HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+HEAD_URDF = REPO / "robots" / "iis_head.urdf"
 FRAMES = ("left_plate", "right_plate")
 PAPER_PER_JOINT = 9
 NOISE_M = 0.5e-3
@@ -166,7 +166,7 @@ def make_case(nominal: Robot, per_joint: int, rng: np.random.Generator) -> Case:
     names = truth.topology(FRAMES).joint_names
     lower, upper = truth.joint_limits(names)
     qs, _moved = one_joint_at_a_time(lower, upper, per_joint=per_joint)
-    measurements = simulate(
+    measurements = simulate_at(
         truth, qs, names, frames=FRAMES, rng=rng, noise_m=NOISE_M, noise_rad=NOISE_RAD
     )
     test_qs = random_configurations(lower, upper, N_TEST, rng)

@@ -19,10 +19,10 @@ by ``kinfw import-csv``, both in ``tests/data/tiago_figaroh/``), on the nominal
 
    - kinfw ``none`` (nominal joints; only what the URDF cannot know: the tracker frame
      and the marker offset) and ``frames`` (base and tool frames), ``offsets``, ``full``
-     (:func:`kinfw.identification.calibrate`, default Huber loss), and the default of
+     (:func:`kinfw.identification.identify`, default Huber loss), and the default of
      ``kinfw calibrate`` (``--params auto``): on each training fold,
      :func:`kinfw.verification.evaluation.choose_parameters` (its own inner
-     cross-validation on that training fold only), then ``calibrate`` with the chosen set
+     cross-validation on that training fold only), then ``identify`` with the chosen set
      and prior; what each fold chose is printed;
    - FIGAROH ``BaseCalibration`` with its default estimation method (``structural``),
      ``map_cv`` (prior scale chosen by FIGAROH's own inner cross-validation on the
@@ -35,7 +35,7 @@ by ``kinfw import-csv``, both in ``tests/data/tiago_figaroh/``), on the nominal
    Columns: held-out position RMS (mm) = the RMS over ALL held-out samples of all folds
    of the 3D position error norm (pooled, not a mean of per-fold RMS); orientation RMS
    (deg, the angle of ``R_meas^T R_pred``) when the data has orientations; mean fit time
-   per fold (s): kinfw ``calibrate`` (plus ``choose_parameters`` for the default) on
+   per fold (s): kinfw ``identify`` (plus ``choose_parameters`` for the default) on
    data already in memory, FIGAROH construction (reads its YAML and CSV) + ``initialize``
    (parameter selection; ``map_cv``'s inner cross-validation) + ``solve``.
 2. Timing on all the data: the whole process as a user runs it, each in a fresh
@@ -43,7 +43,7 @@ by ``kinfw import-csv``, both in ``tests/data/tiago_figaroh/``), on the nominal
    FIGAROH / the calibrated URDF for kinfw): ``kinfw calibrate DATA --urdf URDF --out
    TMP`` (default options) vs FIGAROH construct + ``initialize`` + ``solve``
    (``structural``); then in-process the fit alone: kinfw ``choose_parameters`` +
-   ``calibrate`` (what ``kinfw calibrate`` computes) and ``calibrate`` with ``full``, vs
+   ``identify`` (what ``kinfw calibrate`` computes) and ``identify`` with ``full``, vs
    FIGAROH ``initialize`` + ``solve`` and ``solve`` alone. Medians of the repeats and the
    ratios kinfw / FIGAROH.
 
@@ -290,7 +290,7 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     A fit that raises (a fold too small for it) is reported in the row's note, its
     held-out errors NaN (the row then prints no RMS).
     """
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.identification.problem import Unknown
     from kinfw.verification.evaluation import (
         PRIOR_GRID_M,
@@ -300,7 +300,7 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     )
 
     def fit_predict(train, test, parameters, prior):
-        result = calibrate(nominal, train, parameters=parameters, prior=prior)
+        result = identify(nominal, train, parameters=parameters, prior=prior)
         unknowns = result.refined.unknowns
         if result.refined.model_frame is not None:  # the root's pose in the tracker frame
             unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
@@ -402,7 +402,7 @@ def median(xs) -> float:
 
 def timing(urdf: Path, csv_json: Path, config: Path, robot, nominal, data, repeats: int) -> str:
     """Whole process (subprocesses) and fit alone (in process), medians and ratios."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.verification.evaluation import choose_parameters
 
     kinfw_exe = Path(sys.executable).with_name("kinfw")
@@ -432,11 +432,11 @@ def timing(urdf: Path, csv_json: Path, config: Path, robot, nominal, data, repea
             warnings.simplefilter("ignore", UserWarning)
             start = time.perf_counter()
             choice = choose_parameters(nominal, data)
-            calibrate(nominal, data, parameters=choice.parameters, prior=choice.prior)
+            identify(nominal, data, parameters=choice.parameters, prior=choice.prior)
             solve["kinfw default"].append(time.perf_counter() - start)
             label = choice.label
             start = time.perf_counter()
-            calibrate(nominal, data, parameters="full")
+            identify(nominal, data, parameters="full")
             solve["kinfw full"].append(time.perf_counter() - start)
         np.random.seed(0)  # noqa: NPY002
         start = time.perf_counter()

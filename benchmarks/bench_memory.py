@@ -79,7 +79,7 @@ def write_ur10_data(directory: Path, n: int, seed: int = 0) -> tuple[Path, dict[
     """The UR10's nominal URDF and its ``points`` and ``poses`` files of n samples."""
     from kinfw.measurements import Measurements, write_measurements
     from kinfw.model import load_robot
-    from kinfw.simulation import perturb_robot, random_configurations, simulate
+    from kinfw.simulation import perturb_robot, random_configurations, simulate_at
     from kinfw.verification.studies import UR10_JOINTS, ur10_urdf
 
     rng = np.random.default_rng(seed)
@@ -90,7 +90,7 @@ def write_ur10_data(directory: Path, n: int, seed: int = 0) -> tuple[Path, dict[
     names = list(UR10_JOINTS)
     qs = random_configurations(*nominal.joint_limits(names), n, rng, fraction=0.8)
     offset = np.array([0.03, -0.02, 0.05])
-    data = simulate(truth, qs, names, markers=[("tool0", offset, "ball")], rng=rng, noise_m=5e-4)
+    data = simulate_at(truth, qs, names, markers=[("tool0", offset, "ball")], rng=rng, noise_m=5e-4)
     R, p = MOCAP_T_ROOT[:3, :3], MOCAP_T_ROOT[:3, 3]
     points = tuple(
         replace(g, meas_p_point=g.meas_p_point @ R.T + p, measured_in="mocap") for g in data.points
@@ -100,7 +100,7 @@ def write_ur10_data(directory: Path, n: int, seed: int = 0) -> tuple[Path, dict[
         "ur10-poses": directory / f"ur10_poses_{n}.json",
     }
     write_measurements(files["ur10-points"], Measurements(data.joint_names, data.qs, points=points))
-    poses = simulate(
+    poses = simulate_at(
         truth, qs, names, frames=["tool0"], rng=rng, noise_m=5e-4, noise_rad=np.radians(0.05)
     )
     write_measurements(files["ur10-poses"], poses)

@@ -17,7 +17,7 @@ Pixels: the exact projection plus Gaussian noise (sigma ``--sigma-px``, default 
 or with ``--images`` rendered images (``kinfw.simulation``, 2 grey levels of
 noise) and ``kinfw detect``'s corners (sigma: the detections' RMS error per coordinate).
 
-Both paths calibrate the same detections (``kinfw.identification.calibrate``, method
+Both paths calibrate the same detections (``kinfw.identification.identify``, method
 refine, linear loss, noise estimated): ``pixels`` on reprojection error, ``pnp`` on each
 image's PnP pose (``cv2.solvePnP`` + LM refinement) as ``target`` observations. Score:
 ``camera_T_target`` (the board in each camera) at 100 fresh configurations against the
@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from common import format_table, machine_info
 
 from kinfw.camera import CameraIntrinsics, Chessboard
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.model import Robot, builtin_head_urdf, load_robot
 from kinfw.verification.studies import (
     arm_experiment,
@@ -83,7 +83,7 @@ def trial(which: str, seed: int, sigma_px: float, images: bool) -> dict[str, tup
         exp, sigma = rendered_detections(exp, BOARD, seed=seed)
     out: dict[str, tuple] = {"sigma": (sigma,)}
     for path, data in (("pixels", exp.data), ("pnp", pose_path_data(exp.data))):
-        result = calibrate(exp.nominal, data, method="refine", loss="linear")
+        result = identify(exp.nominal, data, method="refine", loss="linear")
         robot = Robot(result.urdf_xml, f"<{path}>")
         out[path] = held_out_errors(exp, robot, target_pose(result.refined.unknowns))
     out["crlb"] = crlb_held_out(exp)[:2]

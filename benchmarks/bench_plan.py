@@ -137,7 +137,7 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
     from kinfw.identification import refine
     from kinfw.identification.problem import NoiseModel
     from kinfw.model import load_robot
-    from kinfw.simulation import perturb_robot, simulate
+    from kinfw.simulation import perturb_robot, simulate_at
 
     ms: dict[str, list[float]] = {k: [] for k in designs}
     failed: dict[str, int] = {}
@@ -147,13 +147,13 @@ def simulated_rms(robot, setup, names, designs, test, seeds) -> dict[str, float]
         for label, design in designs.items():
             qs = design(seed)
             if setup.frame_kind == "pose":
-                data = simulate(
+                data = simulate_at(
                     truth, qs, names, frames=setup.frames, rng=rng,
                     noise_m=NOISE_M, noise_rad=NOISE_RAD,
                 )  # fmt: skip
             else:
                 markers = [(f, np.zeros(3)) for f in setup.frames]
-                data = simulate(truth, qs, names, markers=markers, rng=rng, noise_m=NOISE_M)
+                data = simulate_at(truth, qs, names, markers=markers, rng=rng, noise_m=NOISE_M)
             result = refine(
                 robot,
                 data,

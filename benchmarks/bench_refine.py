@@ -20,7 +20,7 @@ Prints plain-text tables:
    of each solve to the LM loop measured in the same repeats, and the held-out position
    RMS of each result against the true robot.
 2. The whole head calibration, stage by stage in the order of
-   :func:`kinfw.identification.calibrate` (closed form, export, hand-eye per camera,
+   :func:`kinfw.identification.identify` (closed form, export, hand-eye per camera,
    refine split into problem build / LM iterations / the rest, export).
 3. Scaling of ``refine`` with the number of samples (random configurations, both plates
    and both cameras observed in every sample, start = nominal slightly perturbed, no
@@ -55,7 +55,7 @@ if str(REPO) not in sys.path:  # for benchmarks.common (kinfw comes from pip ins
 import casadi as ca
 import pinocchio as pin
 
-import kinfw.identification._refine as rf
+import kinfw.identification.problem._refine as rf
 from benchmarks.common import (
     format_table,
     gc_disabled,
@@ -67,7 +67,7 @@ from benchmarks.common import (
     wall_time_line,
 )
 from kinfw.geometry import average_transform
-from kinfw.identification import calibrate, identify_closed_form, refine
+from kinfw.identification import identify, identify_closed_form, refine
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
 from kinfw.identification.problem import (
     NoiseModel,
@@ -88,11 +88,11 @@ from kinfw.simulation import (
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.urdf import edit_urdf, export_urdf
 
-HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+HEAD_URDF = REPO / "robots" / "iis_head.urdf"
 PLATES = ("left_plate", "right_plate")
 CAMERAS = ("left_camera", "right_camera")
 PER_JOINT = 9  # Shih et al. section 4.1: 6 x 9 + 1 = 55 configurations
@@ -146,8 +146,8 @@ def make_head_case(nominal: Robot, seed: int) -> Case:
     w_T_target = default_target_pose(truth, qs2, names, CAMERAS)
     noise = {"noise_m": NOISE_M, "noise_rad": np.radians(NOISE_DEG)}
     data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=PLATES, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise),
+        simulate_at(truth, qs1, names, frames=PLATES, rng=rng, **noise),
+        simulate_at(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise),
     )
     test_qs = random_configurations(lower, upper, N_TEST, rng, fraction=0.8)
     return Case(truth, data, test_qs, names)
@@ -516,7 +516,7 @@ def section_rank_deficient(nominal: Robot, seed: int) -> None:
     still = "vergence_left"
     qs = random_configurations(lower, upper, 200, rng, fraction=0.8)
     qs[:, names.index(still)] = 0.5 * (lower + upper)[names.index(still)]
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,
@@ -708,10 +708,10 @@ def section_pipeline(nominal: Robot, case: Case, stages: Stages, repeats: int) -
     ]
     rows.append(["sum of the top-level steps", f"{total:.2f}", "", "100.0"])
     whole = None
-    params = inspect.signature(calibrate).parameters
+    params = inspect.signature(identify).parameters
     if "noise" in params and "method" in params:
         whole = time_interleaved(
-            [lambda: calibrate(nominal, data, noise=noise)], max(3, repeats // 2), warmup=1
+            [lambda: identify(nominal, data, noise=noise)], max(3, repeats // 2), warmup=1
         )[0]
         rows.append(
             [
@@ -800,7 +800,7 @@ def section_scaling(nominal: Robot, sizes: Sequence[int], repeats: int, seed: in
     names = nominal.topology(PLATES + CAMERAS).joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, max(sizes), rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,

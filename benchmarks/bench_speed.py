@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             check=True,
             stdout=subprocess.DEVNULL,
         )
-        head = REPO / "urdf" / "iis_head.urdf"
+        head = REPO / "robots" / "iis_head.urdf"
         commands = {
             "kinfw --help": ["-c", ENTRY, "--help"],
             "import kinfw.cli": ["-c", "import kinfw.cli"],

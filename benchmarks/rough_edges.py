@@ -282,8 +282,8 @@ def _issue_25(work: Path, poses: Path) -> list[Row]:
             "a path where data is expected",
             work,
             "from kinfw import builtin_head_urdf; from kinfw.model import load_robot; "
-            "from kinfw.identification import calibrate; "
-            "calibrate(load_robot(builtin_head_urdf()), 'file.json')",
+            "from kinfw.identification import identify; "
+            "identify(load_robot(builtin_head_urdf()), 'file.json')",
         ),
         _python_row(
             "write_html into a missing folder",

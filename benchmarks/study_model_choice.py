@@ -55,10 +55,10 @@ if str(REPO) not in sys.path:  # study the code next to this script, installed o
 
 from benchmarks.common import format_table, machine_info
 from kinfw.geometry import matrix_from_rotation_vector
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.measurements import Measurements
 from kinfw.model import Robot, load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import (
     choose_parameters,
     crossvalidate,
@@ -128,7 +128,7 @@ def dataset(
     if how == "camera":
         w_T_board = truth.frame_poses(np.zeros((1, len(names))), frame, names)[0].copy()
         w_T_board[:3, 3] += w_T_board[:3, 2] * 0.6  # 0.6 m in front of the camera at zero
-        data = simulate(
+        data = simulate_at(
             truth,
             qs,
             names,
@@ -144,7 +144,9 @@ def dataset(
             T[0, :3, 3] += GROSS_M * rng.normal(size=3) / np.sqrt(3)
             data = replace(data, targets=(replace(g, camera_T_target=T),))
         return data
-    data = simulate(truth, qs, names, markers=[(frame, MARKER_M, "m1")], rng=rng, noise_m=noise_m)
+    data = simulate_at(
+        truth, qs, names, markers=[(frame, MARKER_M, "m1")], rng=rng, noise_m=noise_m
+    )
     R, p = MOCAP_T_ROOT[:3, :3], MOCAP_T_ROOT[:3, 3]
     g = data.points[0]
     meas_p = g.meas_p_point @ R.T + p
@@ -189,7 +191,7 @@ def trial(nominal: Robot, regime: Regime, seed: int, *, kfold: bool = True) -> T
     t0 = time.perf_counter()
     choice = choose_parameters(nominal, data)
     default_s = time.perf_counter() - t0
-    reference = calibrate(nominal, data, parameters="full")
+    reference = identify(nominal, data, parameters="full")
     # the planted gross error (sample 0) is not scored by the closed form
     scored = data.subset(np.arange(1 if regime.gross else 0, data.n_samples))
     out, kfold_s = {}, 0.0
@@ -207,7 +209,7 @@ def trial(nominal: Robot, regime: Regime, seed: int, *, kfold: bool = True) -> T
             )
             kfold_s += time.perf_counter() - t0
             cv_mm = cv.mean(parameters)
-        fit = calibrate(nominal, data, parameters=parameters, prior=prior)
+        fit = identify(nominal, data, parameters=parameters, prior=prior)
         loo = leave_one_out(nominal, scored, fit, parameters=parameters, prior=prior, loss="huber")
         pos, _ = loo.held.values("position")
         loo_mm = 1e3 * float(np.sqrt(np.nanmean(pos**2)))

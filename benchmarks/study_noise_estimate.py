@@ -42,7 +42,7 @@ from kinfw.simulation import (
     perturb_robot,
     plant_outliers,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 
 NOISE_M, NOISE_RAD = 0.5e-3, np.radians(0.5)
@@ -61,8 +61,8 @@ def demo_data(seed: int, outliers: float) -> tuple[Robot, Measurements]:
     qs2 = random_configurations(lower, upper, 30, rng, fraction=0.8)
     w_T_target = default_target_pose(truth, qs2, names, cameras)
     data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise),
+        simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise),
+        simulate_at(truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise),
     )
     if outliers > 0.0:
         data, _ = plant_outliers(

@@ -1,4 +1,4 @@
-"""Estimation: the calibration pipeline (:func:`calibrate`: closed form, hand-eye, joint
+"""Estimation: the calibration pipeline (:func:`identify`: closed form, hand-eye, joint
 refinement), the CPC closed form (:func:`identify_closed_form`, Shih et al. 1992, section 4)
 and the joint nonlinear least squares (:func:`refine`).
 
@@ -21,9 +21,8 @@ from kinfw.identification._closed_form import (
     identify_translations,
     one_joint_groups,
 )
-from kinfw.identification._pipeline import METHODS, Calibration, calibrate
-from kinfw.identification._refine import REJECT_Z, information_matrix, refine
-from kinfw.identification._refine_result import RefineResult
+from kinfw.identification._pipeline import METHODS, Calibration, identify
+from kinfw.identification.problem import REJECT_Z, RefineResult, information_matrix, refine
 
 __all__ = [
     "METHODS",
@@ -33,9 +32,9 @@ __all__ = [
     "JointScaleError",
     "ProtocolError",
     "RefineResult",
-    "calibrate",
     "collect_frame_data",
     "geometry_at_zero",
+    "identify",
     "identify_axes",
     "identify_closed_form",
     "identify_translations",

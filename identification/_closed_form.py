@@ -79,18 +79,6 @@ from kinfw.model import (
 )
 from kinfw.observations import DatasetError
 
-__all__ = [
-    "ClosedFormResult",
-    "JointScaleError",
-    "ProtocolError",
-    "collect_frame_data",
-    "geometry_at_zero",
-    "identify_axes",
-    "identify_closed_form",
-    "identify_translations",
-    "one_joint_groups",
-]
-
 log = logging.getLogger(__name__)
 
 #: Joint values closer than this are the same value (rad or m).

@@ -4,9 +4,9 @@ This is the Python API behind ``kinfw calibrate``::
 
     from kinfw.model import load_robot
     from kinfw.measurements import read_measurements
-    from kinfw.identification._pipeline import calibrate
+    from kinfw.identification._pipeline import identify
 
-    result = calibrate(load_robot("nominal.urdf"), read_measurements("data.json"))
+    result = identify(load_robot("nominal.urdf"), read_measurements("data.json"))
     open("calibrated.urdf", "w").write(result.urdf_xml)
 """
 
@@ -23,8 +23,6 @@ from numpy.typing import NDArray
 from kinfw import progress
 from kinfw.geometry import average_transform
 from kinfw.identification._closed_form import ClosedFormResult, ProtocolError, identify_closed_form
-from kinfw.identification._refine import refine
-from kinfw.identification._refine_result import RefineResult
 from kinfw.identification.checks import (
     InsufficientDataError,
     UnitError,
@@ -35,7 +33,7 @@ from kinfw.identification.checks import (
     median_residuals,
 )
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
-from kinfw.identification.problem import NoiseModel, build_problem
+from kinfw.identification.problem import NoiseModel, RefineResult, build_problem, refine
 from kinfw.measurements import (
     Measurements,
     check_joint_motion,
@@ -46,8 +44,6 @@ from kinfw.measurements import (
 from kinfw.model import ModelSpec, Robot, check_robot, geometry_from_cpc
 from kinfw.observations import DatasetError, evenly_spaced
 from kinfw.urdf import ExportResult, edit_urdf, export_urdf
-
-__all__ = ["METHODS", "Calibration", "calibrate"]
 
 log = logging.getLogger(__name__)
 
@@ -98,7 +94,7 @@ class Calibration:
         return np.eye(4) if self.export is None else self.export.w_T_root
 
 
-def calibrate(
+def identify(
     nominal: Robot,
     data: Measurements,
     *,
@@ -285,7 +281,7 @@ def _start_views(data: Measurements) -> Measurements:
 
 @dataclass(frozen=True, slots=True)
 class _RefineOptions:
-    """The options of :func:`calibrate` that its refinement takes (see there)."""
+    """The options of :func:`identify` that its refinement takes (see there)."""
 
     noise: NoiseModel | None
     loss: str
@@ -295,7 +291,7 @@ class _RefineOptions:
 
 
 def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> str:
-    """The checks of :func:`calibrate` before a refinement: every joint on a measured path
+    """The checks of :func:`identify` before a refinement: every joint on a measured path
     moves but those fixed in this experiment (:func:`kinfw.measurements.fixed_in_experiment`:
     said in the note returned, "" for none), and the residuals determine the free
     parameters with redundancy."""
@@ -338,7 +334,7 @@ def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions
 def _try_closed_form(
     nominal: Robot, data: Measurements, method: str
 ) -> tuple[ClosedFormResult | None, str]:
-    """The closed form of :func:`calibrate`, or None and why it was skipped (a refusal
+    """The closed form of :func:`identify`, or None and why it was skipped (a refusal
     raises with ``method="closed-form"`` and for a unit error)."""
     if nominal.exact_joints and method != "closed-form":
         return None, (
@@ -374,7 +370,7 @@ def _refine_checked(
     cameras: CamerasResult | None,
     options: _RefineOptions,
 ) -> tuple[RefineResult, tuple[str, ...]]:
-    """The refinement stage of :func:`calibrate` from ``start`` and the hand-eye's target
+    """The refinement stage of :func:`identify` from ``start`` and the hand-eye's target
     poses, its fit checked when the model is unrestricted; with the fit warnings to
     issue."""
     targets = dict(cameras.root_T_targets) if cameras is not None else None
@@ -418,9 +414,9 @@ def _refine_checked(
 #: converge (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90 (the root's joint
 #: by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). A converged fit returns
 #: to the nominal along those directions to rounding (noise-free data included, since
-#: the noise floors and :data:`kinfw.identification._refine.ROUNDING_SLACK`); one that
+#: the noise floors and :data:`kinfw.identification.problem._refine.ROUNDING_SLACK`); one that
 #: cannot is refused as well. The model choice's candidates fit through
-#: :func:`calibrate`: such a candidate fails and another is chosen.
+#: :func:`identify`: such a candidate fails and another is chosen.
 UNDETERMINED_LEFT = 1e-2
 
 

@@ -3,7 +3,7 @@ tests)."""
 
 import numpy as np
 
-from kinfw.simulation import random_configurations, simulate
+from kinfw.simulation import random_configurations, simulate_at
 
 PLATES = ("left_plate", "right_plate")
 
@@ -13,4 +13,6 @@ def plate_data(truth, n, seed, noise_m=0.5e-3, noise_rad=0.005):
     rng = np.random.default_rng(seed)
     names = truth.topology(PLATES).joint_names
     qs = random_configurations(*truth.joint_limits(names), n, rng, fraction=0.8)
-    return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad)
+    return simulate_at(
+        truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad
+    )

@@ -7,4 +7,4 @@ __all__ = ["DATA", "HEAD_URDF", "REPO"]
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "tests" / "data"
-HEAD_URDF = REPO / "urdf" / "iis_head.urdf"
+HEAD_URDF = REPO / "robots" / "iis_head.urdf"

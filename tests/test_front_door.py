@@ -18,7 +18,7 @@ from kinfw.cli._main import main
 from kinfw.files import OutputPathError
 from kinfw.identification.checks import ChangeBound
 from kinfw.identification.planning import Setup, read_plan
-from kinfw.reports import read_sidecar
+from kinfw.records import read_sidecar
 from kinfw.view import external_urls
 from tests.fixation import fk_errors_rad, ideal_fixation_points
 from tests.paths import HEAD_URDF, REPO

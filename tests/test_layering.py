@@ -85,7 +85,7 @@ def test_the_library_imports_only_its_one_namespace():
         f"{MODULES[name]}:{line}: {module}"
         for name in sorted(MODULES)
         for line, module in IMPORTS[name]
-        if module.split(".")[0] in ("identification", "verification", "urdf")
+        if module.split(".")[0] in ("identification", "verification", "robots")
     ]
     assert not bare, _offenders(bare)
 
@@ -162,7 +162,7 @@ def test_no_private_module_is_imported_from_another_package():
 @pytest.mark.slow
 def test_the_wheel_installs_one_namespace(tmp_path):
     """``pip install .`` puts ``kinfw`` (and the built-in URDF) in site-packages and no
-    top-level ``identification`` / ``verification`` / ``urdf``: read from the wheel pip
+    top-level ``identification`` / ``verification`` / ``robots``: read from the wheel pip
     builds from this tree."""
     import shutil
     import subprocess
@@ -173,7 +173,7 @@ def test_the_wheel_installs_one_namespace(tmp_path):
     source.mkdir()
     for name in ("pyproject.toml", "README.md"):
         shutil.copy(REPO / name, source / name)
-    for folder in (*FOLDERS, "urdf"):
+    for folder in (*FOLDERS, "robots"):
         shutil.copytree(
             REPO / folder, source / folder, ignore=shutil.ignore_patterns("__pycache__")
         )
@@ -202,3 +202,19 @@ def test_no_private_name_is_imported_from_another_module():
         if alias.name.startswith("_")
     ]
     assert not private, _offenders(private)
+
+
+def test_private_modules_define_no_all():
+    """A private module (``_name.py``) is read through its package's face, so a name is
+    written twice at most (the face's import and its ``__all__``): ``__all__`` belongs
+    to faces alone."""
+    listed = [
+        f"{MODULES[name]}:{node.lineno}: __all__"
+        for name in sorted(MODULES)
+        if MODULES[name].name.startswith("_") and MODULES[name].name != "__init__.py"
+        for node in TREES[name].body
+        if isinstance(node, ast.Assign | ast.AnnAssign | ast.AugAssign)
+        for target in (node.targets if isinstance(node, ast.Assign) else [node.target])
+        if isinstance(target, ast.Name) and target.id == "__all__"
+    ]
+    assert not listed, _offenders(listed)

@@ -8,16 +8,11 @@ plausible (:func:`plausibility`).
 from __future__ import annotations
 
 from kinfw.identification.checks._fit_checks import (
-    PLAUSIBLE_NOISE_M,
-    PLAUSIBLE_NOISE_RAD,
-    ROUNDING_RMS,
-    STRUCTURE_R2,
     ResidualStructure,
     fit_warnings,
     implausible_noise,
     residual_structure,
     stated_noise,
-    stated_noise_limit,
 )
 from kinfw.identification.checks._plausibility import (
     ChangeBound,
@@ -28,22 +23,22 @@ from kinfw.identification.checks._plausibility import (
     mount_plausibility,
     plausibility,
     robot_size,
-    root_measured,
-    stance_links,
 )
 from kinfw.identification.checks._pose_pair_checks import (
-    PLAUSIBLE_LENGTH_M,
     PosePairDiagnostics,
     check_pose_pair_data,
 )
 from kinfw.identification.checks._redundancy import (
-    MIN_DOF_PER_KIND,
     InsufficientDataError,
     Redundancy,
     check_redundancy,
     redundancy,
 )
-from kinfw.identification.checks._scale import SCALE_FLOOR, SCALE_Z, TargetScale, target_scale
+from kinfw.identification.checks._scale import (
+    SCALE_FLOOR,
+    TargetScale,
+    target_scale,
+)
 from kinfw.identification.checks._units import (
     UnitError,
     check_fit,
@@ -52,10 +47,6 @@ from kinfw.identification.checks._units import (
     median_residuals,
 )
 from kinfw.identification.checks._units_evidence import (
-    BAD_SCORE,
-    BETTER_FACTOR,
-    FLOOR_M,
-    FLOOR_RAD,
     JointValues,
     UnitDiagnostics,
     UnitHypothesis,
@@ -63,18 +54,7 @@ from kinfw.identification.checks._units_evidence import (
 )
 
 __all__ = [
-    "BAD_SCORE",
-    "BETTER_FACTOR",
-    "FLOOR_M",
-    "FLOOR_RAD",
-    "MIN_DOF_PER_KIND",
-    "PLAUSIBLE_LENGTH_M",
-    "PLAUSIBLE_NOISE_M",
-    "PLAUSIBLE_NOISE_RAD",
-    "ROUNDING_RMS",
     "SCALE_FLOOR",
-    "SCALE_Z",
-    "STRUCTURE_R2",
     "ChangeBound",
     "ImplausibleCalibrationError",
     "InsufficientDataError",
@@ -102,10 +82,7 @@ __all__ = [
     "redundancy",
     "residual_structure",
     "robot_size",
-    "root_measured",
-    "stance_links",
     "stated_noise",
-    "stated_noise_limit",
     "target_scale",
     "unit_diagnostics",
 ]

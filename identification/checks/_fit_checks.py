@@ -43,19 +43,6 @@ if TYPE_CHECKING:
     from kinfw.identification import RefineResult
 
 
-__all__ = [
-    "PLAUSIBLE_NOISE_M",
-    "PLAUSIBLE_NOISE_RAD",
-    "ROUNDING_RMS",
-    "STRUCTURE_R2",
-    "ResidualStructure",
-    "fit_warnings",
-    "implausible_noise",
-    "residual_structure",
-    "stated_noise",
-    "stated_noise_limit",
-]
-
 #: Fraction of a group's residual variance the joint values must explain to be reported.
 STRUCTURE_R2 = 0.5
 #: Estimated noise above which it is a model error, not a measurement system's noise.

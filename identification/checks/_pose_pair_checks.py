@@ -11,15 +11,15 @@ inv(sensor_T_target_i)`` satisfy ``A X = X B`` (Tsai & Lenz 1989) with the unkno
 rotation vectors (``alpha = R_X beta``, Park & Martin 1994), its translation by linear
 least squares on ``(R_A - I) t_X = R_X t_B - t_A``. Each pair's discrepancy is relative,
 in ``[0, 1]``: the rotation ``angle(R_A^T R_X R_B R_X^T) / max(|alpha|, |beta|)`` (no
-evidence when both turn less than :data:`~kinfw.identification.checks.FLOOR_RAD`) and
+evidence when both turn less than :data:`FLOOR_RAD`) and
 the translation residual over ``max(|t_A|, |t_B|)``; the *score* of a reading is their
 mean over every pair (calibrate's score, :mod:`kinfw.identification.checks`). Readings
 tried: the poses as read, and as if the quaternions of the hand poses, of the sensor
 poses, or of both had been stored scalar first ``(w, x, y, z)`` under ``qx, qy, qz,
 qw`` (with both, the rotations alone still fit some ``X``: the translations tell). The
 pairs are refused, as a :class:`~kinfw.observations.DatasetError`, when the poses as read
-score worse than :data:`~kinfw.identification.checks.BAD_SCORE` and another reading less
-than :data:`~kinfw.identification.checks.BETTER_FACTOR` times that (calibrate's rule).
+score worse than :data:`BAD_SCORE` and another reading less
+than :data:`BETTER_FACTOR` times that (calibrate's rule).
 
 Length unit (both ways). The hand's motion (the median distance between its positions
 over the pairs) and the distance from the sensor to the target (median) must lie within
@@ -62,8 +62,6 @@ from kinfw.identification.checks._units_evidence import (
     MAX_OBSERVATIONS,
 )
 from kinfw.observations import DatasetError
-
-__all__ = ["PLAUSIBLE_LENGTH_M", "PosePairDiagnostics", "check_pose_pair_data"]
 
 #: Plausible median hand motion and sensor-to-target distance of hand-eye pose pairs, m.
 PLAUSIBLE_LENGTH_M = (5e-3, 20.0)

@@ -29,14 +29,6 @@ from kinfw.identification.problem import LeastSquaresProblem
 from kinfw.model import BaseBlock, Block, RobotBlock
 from kinfw.observations import DatasetError
 
-__all__ = [
-    "MIN_DOF_PER_KIND",
-    "InsufficientDataError",
-    "Redundancy",
-    "check_redundancy",
-    "redundancy",
-]
-
 #: Residual degrees of freedom required per estimated noise component.
 MIN_DOF_PER_KIND = 10
 
@@ -114,7 +106,7 @@ def redundancy(
     Parameters
     ----------
     problem : LeastSquaresProblem
-        From :func:`kinfw.identification._refine.build_problem`.
+        From :func:`kinfw.identification.problem.build_problem`.
     noise_given : bool
         True when the noise model is given rather than estimated.
     n_samples : int

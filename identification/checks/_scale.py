@@ -38,8 +38,6 @@ from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.observations import PixelObservations, target_observations_from_pixels
 
-__all__ = ["SCALE_FLOOR", "SCALE_Z", "TargetScale", "target_scale"]
-
 #: A target's scale is named off only beyond this fraction: the nominal robot's lengths,
 #: the scale reference, are known to a few millimetres over a metre, and its joints'
 #: errors bias the estimate by about a percent (2 mm / 0.5 deg: 0.4 %).

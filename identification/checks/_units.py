@@ -35,8 +35,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kinfw.identification.checks._units_evidence import (
-    BAD_SCORE,
-    BETTER_FACTOR,
     JointValues,
     UnitDiagnostics,
     UnitHypothesis,
@@ -49,20 +47,6 @@ from kinfw.observations import DatasetError
 if TYPE_CHECKING:
     from kinfw.identification import RefineResult
 
-
-__all__ = [
-    "BAD_SCORE",
-    "BETTER_FACTOR",
-    "JointValues",
-    "UnitDiagnostics",
-    "UnitError",
-    "UnitHypothesis",
-    "check_fit",
-    "check_joint_scale",
-    "check_units",
-    "median_residuals",
-    "unit_diagnostics",
-]
 
 log = logging.getLogger(__name__)
 

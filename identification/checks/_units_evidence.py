@@ -49,17 +49,6 @@ from kinfw.geometry import inverse_transform, rotation_angle
 from kinfw.measurements import Measurements, check_against_robot, robot_measurement_frames
 from kinfw.model import Robot
 
-__all__ = [
-    "BAD_SCORE",
-    "BETTER_FACTOR",
-    "FLOOR_M",
-    "FLOOR_RAD",
-    "JointValues",
-    "UnitDiagnostics",
-    "UnitHypothesis",
-    "unit_diagnostics",
-]
-
 #: Distances below this (m) count as this much in a pair's relative discrepancy.
 FLOOR_M = 5e-3
 #: Angles below this (rad, about 3 deg) count as this much.

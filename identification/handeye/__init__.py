@@ -34,32 +34,22 @@ Quaternions are scalar last ``(x, y, z, w)`` throughout; the verdict is a
 
 from __future__ import annotations
 
-from kinfw.identification.handeye._axxb import HandEyeError, motion_pairs, solve_axxb
-from kinfw.identification.handeye._axyb import convergence_factor, solve_axyb
+from kinfw.identification.handeye._axxb import (
+    HandEyeError,
+    motion_pairs,
+    solve_axxb,
+)
+from kinfw.identification.handeye._axyb import (
+    convergence_factor,
+    solve_axyb,
+)
 from kinfw.identification.handeye._axyb_iteration import (
     AXYBError,
-    RotationRun,
-    TranslationRun,
-    iteration_matrix,
-    normalise,
-    rotation_iteration,
-    translation_iteration,
-)
-from kinfw.identification.handeye._axyb_refinement import translations_least_squares
-from kinfw.identification.handeye._axyb_start import (
-    MIN_MOTION_RAD,
-    WEAK_MOTION_RAD,
-    check_motion,
-    check_start,
-    start_of_y,
 )
 from kinfw.identification.handeye._calibration import (
-    HANDEYE_FORMAT,
-    SETUPS,
     HandEyeCalibration,
     handeye_calibration_text,
     read_handeye_calibration,
-    solver_hand_poses,
 )
 from kinfw.identification.handeye._cameras import (
     CameraCalibration,
@@ -68,14 +58,7 @@ from kinfw.identification.handeye._cameras import (
     camera_mount,
 )
 from kinfw.identification.handeye._checks import (
-    ORTHONORMAL_TOL,
-    RANK_TOL,
     StartError,
-    check_pose_pairs,
-    check_start_poses,
-    length_scale,
-    nearest_rotation,
-    solve_normal,
 )
 from kinfw.identification.handeye._compare import (
     HANDEYE_METHODS,
@@ -89,40 +72,26 @@ from kinfw.identification.handeye._compare import (
     loop_closure_errors,
     repeated_pairs,
 )
-from kinfw.identification.handeye._lm import (
-    LMFit,
-    PoseData,
-    fit_lm,
-    robust_sigmas,
-    variance_components,
-)
 from kinfw.identification.handeye._ml import (
-    CHI2_6_999,
     PoseFit,
-    assess,
     fit_absolute,
     rejection_threshold,
 )
 from kinfw.identification.handeye._quaternion import (
-    closed_form_batch,
     closed_form_start,
-    consistent_quats_xyzw,
-    left_product_matrix_xyzw,
-    product_matrices,
-    product_tensor,
-    right_product_matrix_xyzw,
-    rotation_from_quat_xyzw,
 )
-from kinfw.identification.handeye._result import AXYBResult, HandEyeResult
+from kinfw.identification.handeye._result import (
+    AXYBResult,
+    HandEyeResult,
+)
 from kinfw.identification.handeye._ros import (
     ROS_FILES,
-    easy_handeye_text,
-    ros_launch_text,
     static_transform_args,
-    urdf_mount_text,
     write_ros_outputs,
 )
-from kinfw.identification.handeye._scale import translation_scale
+from kinfw.identification.handeye._scale import (
+    translation_scale,
+)
 from kinfw.identification.handeye._starts import (
     START_METHODS,
     RankedStart,
@@ -136,20 +105,15 @@ from kinfw.identification.handeye._starts_axxb import (
     andreff_axxb,
     daniilidis_axxb,
     park_axxb,
-    prepare_axxb,
 )
-from kinfw.identification.handeye._starts_axyb import li_axyb, shah_axyb
+from kinfw.identification.handeye._starts_axyb import (
+    li_axyb,
+    shah_axyb,
+)
 from kinfw.identification.handeye._time_offset import (
     TimeOffsetResult,
     best_time_offset,
     implied_target_spread,
-)
-from kinfw.identification.handeye._tsai import (
-    HALF_TURN_BAND_RAD,
-    PARALLEL_AXES_RAD,
-    PRE_ROTATE_ABOVE_RAD,
-    largest_line_angle,
-    tsai_rotation,
 )
 from kinfw.identification.handeye._uncertainty import (
     POOR_ROTATION_DEG,
@@ -159,28 +123,17 @@ from kinfw.identification.handeye._uncertainty import (
     Uncertainty,
     Verdict,
     combined_verdict,
-    inverse_covariance_map,
     uncertainty,
 )
 
 __all__ = [
-    "CHI2_6_999",
-    "HALF_TURN_BAND_RAD",
-    "HANDEYE_FORMAT",
     "HANDEYE_METHODS",
-    "MIN_MOTION_RAD",
-    "ORTHONORMAL_TOL",
-    "PARALLEL_AXES_RAD",
     "POOR_ROTATION_DEG",
     "POOR_TRANSLATION_FRACTION",
-    "PRE_ROTATE_ABOVE_RAD",
-    "RANK_TOL",
     "ROS_FILES",
-    "SETUPS",
     "START_METHODS",
     "UNDETERMINED_ROTATION_DEG",
     "UNDETERMINED_TRANSLATION_FRACTION",
-    "WEAK_MOTION_RAD",
     "AXYBError",
     "AXYBResult",
     "CameraCalibration",
@@ -189,82 +142,46 @@ __all__ = [
     "HandEyeError",
     "HandEyeResult",
     "HeldOutErrors",
-    "LMFit",
     "MethodResult",
-    "PoseData",
     "PoseFit",
     "RankedStart",
-    "RotationRun",
     "StartError",
     "StartMethod",
     "TimeOffsetResult",
-    "TranslationRun",
     "Uncertainty",
     "Verdict",
     "andreff_axxb",
-    "assess",
     "best_time_offset",
     "calibrate_cameras",
     "calibrate_pose_pairs",
     "camera_mount",
     "candidate_starts",
-    "check_motion",
-    "check_pose_pairs",
-    "check_start",
-    "check_start_poses",
-    "closed_form_batch",
     "closed_form_start",
     "combined_verdict",
     "compare_methods",
-    "consistent_quats_xyzw",
     "convergence_factor",
     "daniilidis_axxb",
-    "easy_handeye_text",
     "fit_absolute",
-    "fit_lm",
     "fit_method",
     "handeye_calibration_text",
     "handeye_methods",
     "implied_target_spread",
-    "inverse_covariance_map",
-    "iteration_matrix",
     "kfold_errors",
-    "largest_line_angle",
-    "left_product_matrix_xyzw",
-    "length_scale",
     "li_axyb",
     "loop_closure_errors",
     "motion_pairs",
-    "nearest_rotation",
-    "normalise",
     "park_axxb",
-    "prepare_axxb",
-    "product_matrices",
-    "product_tensor",
     "rank_starts",
     "read_handeye_calibration",
     "register_start",
     "rejection_threshold",
     "repeated_pairs",
-    "right_product_matrix_xyzw",
-    "robust_sigmas",
-    "ros_launch_text",
-    "rotation_from_quat_xyzw",
-    "rotation_iteration",
     "shah_axyb",
     "solve_axxb",
     "solve_axyb",
-    "solve_normal",
-    "solver_hand_poses",
-    "start_of_y",
     "static_transform_args",
-    "translation_iteration",
     "translation_scale",
-    "translations_least_squares",
-    "tsai_rotation",
     "uncertainty",
     "unregister_start",
-    "urdf_mount_text",
-    "variance_components",
     "write_ros_outputs",
 ]

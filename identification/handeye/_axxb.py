@@ -56,8 +56,6 @@ from kinfw.identification.handeye._uncertainty import (
     uncertainty,
 )
 
-__all__ = ["HandEyeError", "HandEyeResult", "motion_pairs", "solve_axxb"]
-
 log = logging.getLogger(__name__)
 
 #: Below this rotation condition (smallest / largest singular value) a warning is logged.

@@ -88,8 +88,6 @@ from kinfw.identification.handeye._result import AXYBResult
 from kinfw.identification.handeye._starts import candidate_starts
 from kinfw.identification.handeye._uncertainty import Verdict, combined_verdict, uncertainty
 
-__all__ = ["AXYBError", "convergence_factor", "solve_axyb"]
-
 log = logging.getLogger(__name__)
 
 

@@ -8,7 +8,7 @@ quaternions are kinfw's, scalar last ``(x, y, z, w)``.
 Signs. Section 4's argument needs the per-pose errors of eq. (10) to be conjugates of
 *one* quaternion, sign included. A rotation matrix fixes its quaternion only up to sign,
 so the quaternions of ``A`` and ``B`` are given consistent signs once, from the data
-(:func:`kinfw.identification.handeye.consistent_quats_xyzw`). Aligning each average's
+(:func:`kinfw.identification.handeye._quaternion.consistent_quats_xyzw`). Aligning each average's
 inputs to the current estimate instead makes errors beyond ~90 degrees grow to 180:
 measured on 200 noise-free problems with uniformly random rotations and the identity
 start, that variant needed restarts in 61 % of the runs for n = 5 and 10 (36 % for n =
@@ -54,16 +54,6 @@ from kinfw.identification.handeye._quaternion import (
     left_product_matrix_xyzw,
     right_product_matrix_xyzw,
 )
-
-__all__ = [
-    "AXYBError",
-    "RotationRun",
-    "TranslationRun",
-    "iteration_matrix",
-    "normalise",
-    "rotation_iteration",
-    "translation_iteration",
-]
 
 # The solver's logger: its messages are filtered as kinfw.identification.handeye's.
 log = logging.getLogger("kinfw.identification.handeye")

@@ -15,8 +15,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["translations_least_squares"]
-
 
 def translations_least_squares(As: NDArray, Bs: NDArray, R_X: NDArray) -> tuple[NDArray, NDArray]:
     """Exact linear least squares of eqs. (4)-(6) for both translations, rotations fixed.

@@ -21,8 +21,6 @@ from kinfw.identification.handeye._axyb_refinement import translations_least_squ
 from kinfw.identification.handeye._checks import ORTHONORMAL_TOL
 from kinfw.identification.handeye._quaternion import rotation_from_quat_xyzw
 
-__all__ = ["MIN_MOTION_RAD", "WEAK_MOTION_RAD", "check_motion", "check_start", "start_of_y"]
-
 # The solver's logger: its messages are filtered as kinfw.identification.handeye's.
 log = logging.getLogger("kinfw.identification.handeye")
 
@@ -134,7 +132,7 @@ def start_of_y(
         The checked poses of :func:`kinfw.identification.handeye.solve_axyb`, input length unit.
     N : ndarray, shape (4, 4)
         The rotation iteration's matrix
-        (:func:`~kinfw.identification.handeye.iteration_matrix`).
+        (:func:`~kinfw.identification.handeye._axyb_iteration.iteration_matrix`).
     X0, Y0 : ndarray, shape (4, 4), or None, keyword-only
         A guess of one unknown, ``camera_T_hand`` or ``base_T_target`` (at most one
         given), checked by :func:`check_start`: ``Y0`` is used as it is, ``X0`` is turned

@@ -28,15 +28,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform, inverse_transform
 
-__all__ = [
-    "HANDEYE_FORMAT",
-    "SETUPS",
-    "HandEyeCalibration",
-    "handeye_calibration_text",
-    "read_handeye_calibration",
-    "solver_hand_poses",
-]
-
 #: The setups, and the frames (mount of the camera, holder of the target) of each.
 SETUPS = {"eye-in-hand": ("hand", "base"), "eye-to-hand": ("base", "hand")}
 #: The ``format`` key of a calibration file; its ``version`` is 1.

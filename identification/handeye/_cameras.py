@@ -36,13 +36,6 @@ from kinfw.measurements import Measurements, target_views
 from kinfw.model import Robot
 from kinfw.observations import DatasetError, TargetObservations
 
-__all__ = [
-    "CameraCalibration",
-    "CamerasResult",
-    "calibrate_cameras",
-    "camera_mount",
-]
-
 
 @dataclass(frozen=True, slots=True)
 class CameraCalibration:

@@ -25,17 +25,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform, project_to_rotation
 
-__all__ = [
-    "ORTHONORMAL_TOL",
-    "RANK_TOL",
-    "StartError",
-    "check_pose_pairs",
-    "check_start_poses",
-    "length_scale",
-    "nearest_rotation",
-    "solve_normal",
-]
-
 #: Relative singular value below which a linear system is taken as rank-deficient.
 RANK_TOL = 1e-10
 #: Accepted orthonormality error of input rotations of every hand-eye solver: real data

@@ -3,7 +3,7 @@ closed forms and the registered closed-form starts (a plugin's) side by side, an
 held-out errors.
 
 Every method is fitted to the same ``(base_T_hands, camera_T_targets)`` for either setup
-(:func:`kinfw.identification.handeye.solver_hand_poses`) and returns
+(:func:`kinfw.identification.handeye._calibration.solver_hand_poses`) and returns
 ``(mount_T_camera, holder_T_target)``. A held-out pair ``i`` is predicted by closing the
 loop, ``camera_T_target = inv(mount_T_camera) @ inv(A[i]) @ holder_T_target`` with
 ``A[i]`` the solver's hand pose, and compared with the measured one: the rotation angle
@@ -30,19 +30,6 @@ from kinfw.identification.handeye._result import HandEyeResult
 from kinfw.identification.handeye._starts import START_METHODS
 from kinfw.measurements import PosePairs, drop_duplicate_pairs
 from kinfw.plugins import load_plugins
-
-__all__ = [
-    "HANDEYE_METHODS",
-    "HeldOutErrors",
-    "MethodResult",
-    "calibrate_pose_pairs",
-    "compare_methods",
-    "fit_method",
-    "handeye_methods",
-    "kfold_errors",
-    "loop_closure_errors",
-    "repeated_pairs",
-]
 
 #: The methods :func:`fit_method` knows: kinfw's maximum likelihood (``solve_axxb``),
 #: OpenCV's ``calibrateHandEye`` (AX = XB) and ``calibrateRobotWorldHandEye`` (AX = ZB).

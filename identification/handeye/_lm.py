@@ -53,8 +53,6 @@ from numpy.typing import NDArray
 from kinfw import progress
 from kinfw.geometry import rotation_vector_from_matrix, skew
 
-__all__ = ["LMFit", "PoseData", "fit_lm", "robust_sigmas", "variance_components"]
-
 #: Huber's threshold on the whitened residual norm (sqrt of the 95 % quantile of chi^2_6).
 HUBER_K = 3.5485
 #: Median of chi^2 with 3 degrees of freedom (robust initial noise scales).

@@ -56,8 +56,6 @@ from kinfw.identification.handeye._quaternion import (
     product_matrices,
 )
 
-__all__ = ["CHI2_6_999", "PoseFit", "assess", "fit_absolute", "rejection_threshold"]
-
 #: 99.9 % quantile of chi^2 with 6 degrees of freedom: the rejection threshold of a pose's
 #: squared whitened residual.
 CHI2_6_999 = 22.457744484825323
@@ -174,7 +172,7 @@ def _consensus_start(data: PoseData) -> tuple[NDArray, NDArray]:
     of all poses (the product of the rotation and translation medians: unit-free).
 
     A residual's rotation angle is ``2 acos |q_X^T K_i q_Y|`` (quaternions, see
-    :func:`kinfw.identification.handeye.closed_form_batch`) and its translation
+    :func:`kinfw.identification.handeye._quaternion.closed_form_batch`) and its translation
     ``|R_X^T (t_A - t_X) - R_B t_Y - t_B|``: no rotation matrix per subset and pose.
     """
     q_A, q_B = consistent_quats_xyzw(data.R_A, data.R_B)

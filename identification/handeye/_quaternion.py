@@ -23,17 +23,6 @@ from kinfw.geometry import (
     transform_from_xyz_quat_xyzw,
 )
 
-__all__ = [
-    "closed_form_batch",
-    "closed_form_start",
-    "consistent_quats_xyzw",
-    "left_product_matrix_xyzw",
-    "product_matrices",
-    "product_tensor",
-    "right_product_matrix_xyzw",
-    "rotation_from_quat_xyzw",
-]
-
 
 def rotation_from_quat_xyzw(quat_xyzw: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rotation matrices (..., 3, 3) of quaternions (..., 4), scalar last."""
@@ -99,7 +88,7 @@ def product_tensor() -> NDArray:
 
 def product_matrices(q_A: NDArray, q_B: NDArray) -> NDArray:
     """Per pose ``K_i`` with ``q_X = (mean_i K_i) q_Y`` at a fit (``N`` of
-    :func:`kinfw.identification.handeye.iteration_matrix` is their mean):
+    :func:`kinfw.identification.handeye._axyb_iteration.iteration_matrix` is their mean):
     ``L(q_A) R(q_B^-1) diag(-1, -1, -1, 1)``."""
     return np.einsum("na,nb,abjk->njk", q_A, q_B, product_tensor(), optimize=False)
 

@@ -21,8 +21,6 @@ from numpy.typing import NDArray
 from kinfw.geometry import inverse_transform
 from kinfw.identification.handeye._uncertainty import Verdict
 
-__all__ = ["AXYBResult", "HandEyeResult"]
-
 
 @dataclass(frozen=True, slots=True)
 class HandEyeResult:

@@ -26,15 +26,6 @@ from kinfw.files import write_text_atomic
 from kinfw.geometry import xyz_quat_xyzw_from_transform
 from kinfw.identification.handeye._calibration import HandEyeCalibration
 
-__all__ = [
-    "ROS_FILES",
-    "easy_handeye_text",
-    "ros_launch_text",
-    "static_transform_args",
-    "urdf_mount_text",
-    "write_ros_outputs",
-]
-
 #: The files :func:`write_ros_outputs` writes, by what they hold.
 ROS_FILES = {
     "static_transform_publisher": "static_transform_publisher.sh",

@@ -22,8 +22,6 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["translation_scale"]
-
 #: Smallest relative singular value of the column-scaled system for which the factor is
 #: estimated (else the motions do not determine it).
 MIN_CONDITION = 1e-6

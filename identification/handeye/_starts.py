@@ -48,16 +48,6 @@ from kinfw.identification.handeye._starts_axxb import (
 from kinfw.identification.handeye._starts_axyb import li_axyb, li_checked, shah_axyb, shah_checked
 from kinfw.plugins import load_plugins
 
-__all__ = [
-    "START_METHODS",
-    "RankedStart",
-    "StartMethod",
-    "candidate_starts",
-    "rank_starts",
-    "register_start",
-    "unregister_start",
-]
-
 log = logging.getLogger(__name__)
 
 Pose = NDArray[np.float64]
@@ -84,8 +74,8 @@ class StartMethod:
         :func:`~kinfw.identification.handeye.park_axxb`), which checks its input.
     solve_prepared : callable or None
         The same on the problem's prepared input
-        (:func:`~kinfw.identification.handeye.prepare_axxb` for ``"axxb"``,
-        :func:`~kinfw.identification.handeye.check_start_poses` for ``"axyb"``): what
+        (:func:`~kinfw.identification.handeye._starts_axxb.prepare_axxb` for ``"axxb"``,
+        :func:`~kinfw.identification.handeye._checks.check_start_poses` for ``"axyb"``): what
         :func:`candidate_starts` calls after one check for all methods. None (a start
         added with :func:`register_start` may leave it out): ``solve`` is called on the
         checked poses.

@@ -57,13 +57,6 @@ from kinfw.identification.handeye._checks import (
     solve_normal,
 )
 
-__all__ = [
-    "andreff_axxb",
-    "daniilidis_axxb",
-    "park_axxb",
-    "prepare_axxb",
-]
-
 Pose = NDArray[np.float64]
 
 

@@ -30,8 +30,6 @@ from kinfw.identification.handeye._checks import (
     solve_normal,
 )
 
-__all__ = ["li_axyb", "shah_axyb"]
-
 Pose = NDArray[np.float64]
 
 

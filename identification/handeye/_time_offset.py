@@ -27,8 +27,6 @@ from kinfw.geometry import average_transform, rotation_angle
 from kinfw.identification.handeye._axxb import HandEyeError, solve_axxb
 from kinfw.measurements import align_streams, check_stream
 
-__all__ = ["TimeOffsetResult", "best_time_offset", "implied_target_spread"]
-
 log = logging.getLogger("kinfw.measurements")  # logged as the alignment's, as before the split
 
 

@@ -16,14 +16,6 @@ from numpy.typing import NDArray
 
 from kinfw.geometry import matrix_from_rotation_vector, rotation_angle, skew
 
-__all__ = [
-    "HALF_TURN_BAND_RAD",
-    "PARALLEL_AXES_RAD",
-    "PRE_ROTATE_ABOVE_RAD",
-    "largest_line_angle",
-    "tsai_rotation",
-]
-
 # The solver's logger: its messages are filtered as kinfw.identification.handeye's.
 log = logging.getLogger("kinfw.identification.handeye")
 

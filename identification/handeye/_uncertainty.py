@@ -17,18 +17,6 @@ from numpy.typing import NDArray
 
 from kinfw.geometry import skew
 
-__all__ = [
-    "POOR_ROTATION_DEG",
-    "POOR_TRANSLATION_FRACTION",
-    "UNDETERMINED_ROTATION_DEG",
-    "UNDETERMINED_TRANSLATION_FRACTION",
-    "Uncertainty",
-    "Verdict",
-    "combined_verdict",
-    "inverse_covariance_map",
-    "uncertainty",
-]
-
 #: Verdict thresholds (1-sigma, worst direction): rotation in degrees, translation as a
 #: fraction of the RMS camera-target distance (so it does not depend on the unit).
 POOR_ROTATION_DEG = 1.0

@@ -15,7 +15,6 @@ from kinfw.identification.planning._objective import (
     mean_square,
 )
 from kinfw.identification.planning._plan import (
-    PLAN_FORMAT,
     Plan,
     plan_configurations,
     plan_per_joint,
@@ -24,9 +23,12 @@ from kinfw.identification.planning._plan import (
     short_path,
     write_plan,
 )
-from kinfw.identification.planning._pool import Pool, candidate_pool, collision_free
+from kinfw.identification.planning._pool import (
+    Pool,
+    candidate_pool,
+    collision_free,
+)
 from kinfw.identification.planning._workflow import (
-    CURVE_NS,
     EvaluationSet,
     PoolTooSmallError,
     evaluation_set,
@@ -36,8 +38,6 @@ from kinfw.identification.planning._workflow import (
 )
 
 __all__ = [
-    "CURVE_NS",
-    "PLAN_FORMAT",
     "CandidateInformation",
     "EvaluationSet",
     "HeldOut",

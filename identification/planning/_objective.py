@@ -1,7 +1,7 @@
 """The objective of measurement planning: the predicted held-out error of a calibration.
 
 A calibration from configurations ``S`` estimates the free chart coordinates ``x`` of
-the problem :func:`kinfw.identification._refine.build_problem` builds; to first order its
+the problem :func:`kinfw.identification.problem.build_problem` builds; to first order its
 covariance is ``M(S)^-1`` with ``M(S) = sum_{i in S} J_i^T J_i`` the Fisher information
 (``J_i``: the rows of the whitened Jacobian that configuration ``i`` contributes, at the
 nominal model). The error it makes when it predicts the observed quantities at *other*
@@ -27,17 +27,6 @@ from kinfw.camera import CameraIntrinsics
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.model import Robot
 from kinfw.observations import NoiseComponent
-
-__all__ = [
-    "CandidateInformation",
-    "HeldOut",
-    "Setup",
-    "candidate_information",
-    "exchange",
-    "greedy",
-    "held_out",
-    "mean_square",
-]
 
 #: Weight of the regularising prior of the design, relative to the mean information of
 #: one candidate: small enough not to change a full-rank design's objective (1e-6 of a
@@ -135,16 +124,16 @@ def _simulate(
     robot: Robot, setup: Setup, qs: NDArray, names, w_T_target, *, as_poses: bool = False
 ):
     """Noise-free observations at ``qs`` (every sample kept) and the true unknowns."""
-    from kinfw.simulation import simulate, simulate_pixels
+    from kinfw.simulation import simulate_at, simulate_pixels
 
     rng = np.random.default_rng(0)
     parts = []
     if setup.frames:
         if setup.frame_kind == "pose":
-            parts.append(simulate(robot, qs, names, frames=setup.frames, rng=rng))
+            parts.append(simulate_at(robot, qs, names, frames=setup.frames, rng=rng))
         else:
             markers = [(f, np.zeros(3)) for f in setup.frames]
-            parts.append(simulate(robot, qs, names, markers=markers, rng=rng))
+            parts.append(simulate_at(robot, qs, names, markers=markers, rng=rng))
     if setup.cameras and setup.pixels and not as_poses:
         data, kept = simulate_pixels(
             robot,
@@ -164,7 +153,7 @@ def _simulate(
         parts.append(data)
     elif setup.cameras:
         parts.append(
-            simulate(robot, qs, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target)
+            simulate_at(robot, qs, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target)
         )
     from kinfw.measurements import concatenate_measurements
 
@@ -215,7 +204,7 @@ def candidate_information(
 ) -> CandidateInformation:
     """The Fisher information each configuration of ``qs`` brings to the calibration.
 
-    The problem is the calibration's own (:func:`kinfw.identification._refine.build_problem`,
+    The problem is the calibration's own (:func:`kinfw.identification.problem.build_problem`,
     ``setup.parameters`` and its gauge) on noise-free simulated observations of the
     nominal ``robot`` at ``qs`` (start = nominal, true target pose given), whitened by
     ``setup.noise()``; each sample's rows give its information ``J_i^T J_i``.

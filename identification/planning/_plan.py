@@ -47,17 +47,6 @@ from kinfw.model import Robot
 from kinfw.observations import Metric
 from kinfw.simulation import one_joint_at_a_time
 
-__all__ = [
-    "PLAN_FORMAT",
-    "Plan",
-    "plan_configurations",
-    "plan_per_joint",
-    "predicted_error",
-    "read_plan",
-    "short_path",
-    "write_plan",
-]
-
 log = logging.getLogger(__name__)
 
 PLAN_FORMAT = "kinfw-plan"

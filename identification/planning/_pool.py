@@ -21,8 +21,6 @@ from kinfw.identification.planning._objective import Setup
 from kinfw.model import Robot, mesh_dirs, resolve_meshes
 from kinfw.simulation import random_configurations
 
-__all__ = ["Pool", "candidate_pool", "collision_free"]
-
 
 @dataclass(frozen=True, eq=False)
 class Pool:

@@ -25,16 +25,6 @@ from kinfw.identification.planning._pool import Pool, candidate_pool
 from kinfw.model import Robot, check_robot
 from kinfw.simulation import random_configurations
 
-__all__ = [
-    "CURVE_NS",
-    "EvaluationSet",
-    "PoolTooSmallError",
-    "evaluation_set",
-    "plan_measurement",
-    "plot_plan",
-    "read_pool",
-]
-
 #: Sizes at which a plan's predicted error is compared with random designs (with the
 #: plan's own N), those the pool can fill.
 CURVE_NS = (5, 10, 15, 20, 30, 40, 60, 100)

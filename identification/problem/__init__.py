@@ -10,9 +10,14 @@
 - :mod:`.gauge`: which robot parameters are free;
 - :mod:`.solver`: Levenberg-Marquardt with robust losses (IRLS);
 - :mod:`.noise`: :class:`NoiseModel` and variance-component estimation;
-- :mod:`.diagnostics`: covariance, identifiability, per-group residuals.
+- :mod:`.diagnostics`: covariance, identifiability, per-group residuals;
+- :mod:`.refine`: :func:`refine` orchestrates them into a :class:`RefineResult`
+  (:mod:`.refine_result`).
 
-:func:`kinfw.identification.refine` orchestrates them.
+:func:`refine`, :class:`RefineResult`, :data:`REJECT_Z` and :func:`information_matrix`
+are imported here for :mod:`kinfw.identification`, their one public import path
+(``from kinfw.identification import refine``), and are not in this face's ``__all__``
+(imported with redundant aliases, ``refine as refine``, the marker of a re-export).
 """
 
 from kinfw.identification.problem._build import build_problem
@@ -49,6 +54,12 @@ from kinfw.identification.problem._problem import (
     ResidualGroup,
     Unknown,
 )
+
+# for kinfw.identification, their one public path (redundant aliases: re-exported there)
+from kinfw.identification.problem._refine import REJECT_Z as REJECT_Z
+from kinfw.identification.problem._refine import information_matrix as information_matrix
+from kinfw.identification.problem._refine import refine as refine
+from kinfw.identification.problem._refine_result import RefineResult as RefineResult
 from kinfw.identification.problem._solver import (
     LOSS_SCALE,
     LOSSES,

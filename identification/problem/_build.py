@@ -40,8 +40,6 @@ from kinfw.observations import DatasetError, kind_of
 
 logger = logging.getLogger("kinfw.identification.problem")
 
-__all__ = ["build_problem"]
-
 
 def _free_intrinsics(
     blocks: list[Block], cameras: bool | Sequence[str], source: str

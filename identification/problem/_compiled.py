@@ -49,8 +49,6 @@ from typing import Any
 
 from kinfw import progress
 
-__all__ = ["COMPILE_SAMPLES", "cache_dir", "compiled", "compiler"]
-
 log = logging.getLogger("kinfw.identification.problem")
 
 #: Compiler flags: optimised (-O1 compiles the large Jacobians 3-4 times faster than

@@ -17,15 +17,6 @@ from kinfw.identification.problem._solver import column_norms, negligible_column
 from kinfw.measurements import Measurements
 from kinfw.model import CPCModel
 
-__all__ = [
-    "GroupResiduals",
-    "Identifiability",
-    "RejectedObservation",
-    "covariance_and_identifiability",
-    "group_residuals",
-    "rejected_observations",
-]
-
 _ROTATION_FIELDS = ("rot_x", "rot_y", "rot_z")
 
 

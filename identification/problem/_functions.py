@@ -23,14 +23,6 @@ from kinfw.identification.problem._compiled import compiled
 from kinfw.model import CPC_KEY, Block, CPCModel, RobotBlock, cpc_fk_function
 from kinfw.observations import SymbolicContext, kind_of
 
-__all__ = [
-    "MAP_CHUNK",
-    "GroupFunctions",
-    "build_functions",
-    "clear_function_cache",
-    "group_functions",
-]
-
 
 @dataclass(frozen=True, eq=False)
 class GroupFunctions:

@@ -38,8 +38,6 @@ from kinfw.model import (
 )
 from kinfw.observations import kind_of
 
-__all__ = ["STRUCTURAL_RANK_TOL", "relative_gauge", "robot_blocks"]
-
 
 def _ancestors(topo: Any, j: int) -> list[int]:
     out, p = [], topo.parent[j]

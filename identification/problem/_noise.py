@@ -19,16 +19,6 @@ from numpy.typing import NDArray
 
 from kinfw.observations import NoiseComponent
 
-__all__ = [
-    "NoiseModel",
-    "NoiseShape",
-    "chi2_cdf",
-    "estimate_noise",
-    "noise_shape",
-    "norm2_cdf",
-    "quantile",
-]
-
 #: The component whose sigma a noise model uses for a component it does not name, by unit.
 DEFAULT_COMPONENT = {"m": "position", "rad": "rotation", "px": "pixel"}
 

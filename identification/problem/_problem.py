@@ -33,8 +33,6 @@ from kinfw.model import (
 )
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
-__all__ = ["PRIOR", "LeastSquaresProblem", "NormalEquations", "ResidualGroup", "Unknown"]
-
 PRIOR = NoiseComponent("prior", 1, "m")
 """The rows of a Gaussian prior (whitened by their own sigma, one row each)."""
 
@@ -384,7 +382,7 @@ class LeastSquaresProblem:
 
         Rows are observation by observation (each observation's rows together), group
         by group, then one row per prior entry; each row divided by its component's
-        sigma in ``noise`` (:class:`kinfw.identification._refine.NoiseModel`). With
+        sigma in ``noise`` (:class:`kinfw.identification.problem.NoiseModel`). With
         ``only_free`` the columns of the fixed parameters are left at zero (not
         computed: what the fit needs, cheaper for the small parameter sets).
         """

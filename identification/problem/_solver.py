@@ -18,24 +18,6 @@ from kinfw import progress
 from kinfw.identification.problem._noise import norm2_cdf, quantile
 from kinfw.observations import NoiseComponent
 
-__all__ = [
-    "LOSSES",
-    "LOSS_SCALE",
-    "NEGLIGIBLE_COLUMN",
-    "column_norms",
-    "levenberg_marquardt",
-    "leverage_sums",
-    "leverages",
-    "negligible_columns",
-    "normal_equations",
-    "observation_norms",
-    "robust_loss",
-    "row_weights",
-    "scaled_columns",
-    "tall_r",
-    "thresholds",
-]
-
 LOSSES = ("linear", "huber", "cauchy")
 
 #: Where the robust losses depart from least squares by default, as a standard-normal

@@ -24,14 +24,6 @@ from kinfw.measurements import Measurements
 from kinfw.model import Block, BlockKey, CPCModel, RigidFrameBlock
 from kinfw.observations import DatasetError, StartContext, kind_of
 
-__all__ = [
-    "MARKER_RANK_TOL",
-    "estimate_unknowns",
-    "express_in",
-    "frame_from_markers",
-    "start_context",
-]
-
 
 def start_context(
     model: CPCModel, q_all: NDArray, meas_T_w: dict[str, NDArray], model_frame: str | None

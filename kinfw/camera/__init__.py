@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from kinfw.camera._boards import (
     APRILTAG_FAMILIES,
-    DEFAULT_DICTIONARY,
     AprilGrid,
     Board,
     BoardError,
@@ -16,7 +15,11 @@ from kinfw.camera._boards import (
     CircleGrid,
     parse_board,
 )
-from kinfw.camera._detect import Detection, Detector, read_gray
+from kinfw.camera._detect import (
+    Detection,
+    Detector,
+    read_gray,
+)
 from kinfw.camera._intrinsics import (
     PARAMETER_NAMES,
     CameraError,
@@ -28,7 +31,6 @@ from kinfw.camera._intrinsics import (
 
 __all__ = [
     "APRILTAG_FAMILIES",
-    "DEFAULT_DICTIONARY",
     "PARAMETER_NAMES",
     "AprilGrid",
     "Board",

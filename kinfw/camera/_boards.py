@@ -69,18 +69,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = [
-    "APRILTAG_FAMILIES",
-    "DEFAULT_DICTIONARY",
-    "AprilGrid",
-    "Board",
-    "BoardError",
-    "Charuco",
-    "Chessboard",
-    "CircleGrid",
-    "parse_board",
-]
-
 #: The ArUco dictionary of a ChArUco spec that names none (OpenCV's ChArUco tutorial's).
 DEFAULT_DICTIONARY = "DICT_5X5_100"
 

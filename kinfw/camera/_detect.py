@@ -80,8 +80,6 @@ from numpy.typing import NDArray
 from kinfw.camera._boards import AprilGrid, Board, BoardError, Charuco, CircleGrid
 from kinfw.camera._grids import AprilGridFinder, find_circle_grid, mirrored, most_upright
 
-__all__ = ["Detection", "Detector", "read_gray"]
-
 log = logging.getLogger(__name__)
 
 Status = Literal["found", "not found", "ambiguous"]

@@ -61,8 +61,6 @@ from numpy.typing import NDArray
 
 from kinfw.camera._boards import AprilGrid, CircleGrid
 
-__all__ = ["AprilGridFinder", "Found", "find_circle_grid", "mirrored", "most_upright"]
-
 #: A disc's centre off the homography of its neighbours by more than this fraction of
 #: the distance between neighbouring centres is not the board's.
 MAX_LOCAL_ERROR = 0.2

@@ -44,15 +44,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = [
-    "PARAMETER_NAMES",
-    "CameraError",
-    "CameraIntrinsics",
-    "intrinsics_from_dict",
-    "project_normalized",
-    "read_camera",
-]
-
 #: The intrinsic parameters in OpenCV's order: focal lengths and principal point (px),
 #: then the distortion coefficients (unitless) as in ``cv2.projectPoints``.
 PARAMETER_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")

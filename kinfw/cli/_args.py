@@ -18,36 +18,6 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = [
-    "COUNT",
-    "DEG",
-    "MM",
-    "POSITIVE_DEG",
-    "POSITIVE_MM",
-    "POSITIVE_PX",
-    "SEED",
-    "add_camera_option",
-    "add_keep_duplicates_option",
-    "add_model_option",
-    "add_mount_option",
-    "add_package_dir_option",
-    "add_payload_options",
-    "add_xacro_option",
-    "camera_inputs",
-    "frame_file",
-    "frames_arg",
-    "load_model",
-    "model_arg",
-    "mount_arg",
-    "mounted_model",
-    "number",
-    "parse_payload",
-    "read_data",
-    "up_arg",
-    "with_payload",
-    "xacro_arg",
-]
-
 
 # -- numbers on the command line -----------------------------------------------------------
 def number(
@@ -327,7 +297,7 @@ def _with_sidecar_spec(robot: Robot, path: Path) -> Robot:
     (``<stem>.kinfw.json``: compliance, gear scales...), when there is one that records
     robot blocks; the sidecar must be this URDF's (its SHA-256)."""
     from kinfw.files import sidecar_path
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
 
     side = sidecar_path(path)
     if not side.is_file():

@@ -25,8 +25,6 @@ from kinfw.cli._args import (
 )
 from kinfw.files import check_output_dir, check_outputs
 
-__all__ = ["add_import_bag_parser", "cmd_import_bag"]
-
 #: Camera (or mocap) samples the offset estimator uses at most: its hand-eye solve takes
 #: all O(n^2) pairs.
 OFFSET_SAMPLES = 100

@@ -38,19 +38,6 @@ from kinfw.cli._tables import accuracy_table
 from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, json_text, sidecar_path
 
-__all__ = [
-    "add_crosscheck_parser",
-    "add_import_csv_parser",
-    "add_reproduce_parser",
-    "add_verify_parser",
-    "add_view_parser",
-    "cmd_crosscheck",
-    "cmd_import_csv",
-    "cmd_reproduce",
-    "cmd_verify",
-    "cmd_view",
-]
-
 
 # -- kinfw verify -----------------------------------------------------------------------
 def add_verify_parser(sub: argparse._SubParsersAction) -> None:
@@ -79,7 +66,7 @@ def add_verify_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_verify(args: argparse.Namespace) -> int:
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
     from kinfw.verification.evaluation import evaluate_model
 
     robot = load_model(args.model, args)

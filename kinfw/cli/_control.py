@@ -19,18 +19,6 @@ from pathlib import Path
 
 from kinfw.cli._args import add_xacro_option
 
-__all__ = [
-    "NOT_MET",
-    "UNIT_M",
-    "add_joint_options",
-    "check_distance",
-    "free_arg",
-    "joint_rows",
-    "joint_table",
-    "joints_json",
-    "parse_joint_values",
-]
-
 log = logging.getLogger("kinfw")
 
 #: Exit code when the point is not fixated / the target not reached (output printed).

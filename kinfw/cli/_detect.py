@@ -49,8 +49,6 @@ from typing import Any
 from kinfw.cli._args import number
 from kinfw.files import OutputPathError, check_outputs, write_text_atomic
 
-__all__ = ["add_detect_parser", "cmd_detect", "read_joint_rows"]
-
 IMAGE_COLUMN = "image"
 #: ``--board``'s help.
 BOARD_HELP = (

@@ -20,8 +20,6 @@ from pathlib import Path
 from kinfw.cli._args import add_xacro_option, load_model
 from kinfw.files import check_output_dir, check_outputs, check_writable, write_text_atomic
 
-__all__ = ["add_export_parser"]
-
 _ON_TOL = 1e-9  # m and rad: an offset below this is rounding
 
 

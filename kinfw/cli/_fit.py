@@ -24,7 +24,7 @@ from kinfw.files import json_text
 
 if TYPE_CHECKING:
     from kinfw.measurements import Measurements
-    from kinfw.reports import (
+    from kinfw.records import (
         BeforeAfter,
         DownweightedRow,
         ErrorValue,
@@ -33,8 +33,6 @@ if TYPE_CHECKING:
         StageErrors,
     )
     from kinfw.verification.evaluation import CrossValidation
-
-__all__ = ["calibration_options", "change_bound", "cmd_calibrate", "cmd_crossval", "cmd_demo"]
 
 #: Rejected observations listed one per line; the others are counted.
 MAX_LINES = 10
@@ -159,7 +157,7 @@ def change_bound(args: argparse.Namespace):
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from kinfw.reports import write_report
+    from kinfw.records import write_report
     from kinfw.verification.reporting import calibrate_and_report
 
     nominal = load_model(args.urdf, args)
@@ -222,7 +220,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def _print_spec(result, out: Path) -> None:
     """What the URDF cannot hold, as calibrated: per block entry its value and sigma;
     where it was written (the sidecar and the per-joint YAML)."""
-    from kinfw.reports import joint_model_path
+    from kinfw.records import joint_model_path
     from kinfw.verification.reporting import robot_block_records
 
     records = robot_block_records(result.calibration.refined)

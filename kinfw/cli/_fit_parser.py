@@ -27,8 +27,6 @@ from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.executors import add_executor_options
 from kinfw.files import check_output_dir, check_outputs, sidecar_path
 
-__all__ = ["add_calibration_options", "add_fit_parsers", "add_guard_options"]
-
 
 def _add_fit_options(p: argparse.ArgumentParser) -> None:
     """Noise, robust loss and prior of the refinement (calibrate and crossval)."""

@@ -21,8 +21,6 @@ from kinfw.files import check_output_dir, json_text
 if TYPE_CHECKING:
     from kinfw.verification.reporting import FleetResult
 
-__all__ = ["EXIT_FAILED", "add_fleet_parser", "cmd_fleet"]
-
 #: Exit code when some robot of the fleet failed (the others are written).
 EXIT_FAILED = 3
 

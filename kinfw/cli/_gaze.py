@@ -30,8 +30,6 @@ from kinfw.cli._control import (
 )
 from kinfw.files import check_outputs
 
-__all__ = ["GAZE_PLAUSIBLE_M", "add_gaze_parser", "cmd_gaze"]
-
 log = logging.getLogger("kinfw")
 
 #: ``gaze`` warns about a point farther than this from the root frame (m): a head looks at

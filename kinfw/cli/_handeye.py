@@ -19,8 +19,6 @@ from kinfw.cli._fit_parser import add_guard_options
 from kinfw.cli._mount_guard import check_mount
 from kinfw.files import check_output_dir, check_outputs, json_text, write_text_atomic
 
-__all__ = ["add_handeye_parser", "cmd_handeye"]
-
 #: Folds of the cross-validation when --method is given without --holdout or --k.
 DEFAULT_K = 5
 CAMERA_FRAME = "camera_link"

@@ -14,8 +14,6 @@ from typing import Any
 
 from kinfw.cli._fit import change_bound
 
-__all__ = ["check_mount"]
-
 
 def _urdf_camera(robot, args: argparse.Namespace) -> str | None:
     """The URDF frame of the camera whose targets were fitted: ``--camera-frame`` when the

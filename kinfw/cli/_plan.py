@@ -13,8 +13,6 @@ from pathlib import Path
 from kinfw.cli._args import add_package_dir_option, add_xacro_option, load_model, number
 from kinfw.files import check_outputs
 
-__all__ = ["add_plan_parser", "cmd_plan"]
-
 
 def add_plan_parser(sub) -> None:
     """The ``plan`` sub-command."""

@@ -19,8 +19,6 @@ from pathlib import Path
 
 from kinfw.files import check_outputs, write_text_atomic
 
-__all__ = ["add_pose_chain_parser", "cmd_pose_chain"]
-
 _METRES_PER = {"m": 1.0, "mm": 1e-3}
 
 

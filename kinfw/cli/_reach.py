@@ -25,8 +25,6 @@ from kinfw.cli._control import (
 )
 from kinfw.files import check_outputs
 
-__all__ = ["add_reach_parser", "cmd_reach"]
-
 
 # -- parser -------------------------------------------------------------------------------
 def add_reach_parser(sub: argparse._SubParsersAction) -> None:
@@ -139,7 +137,7 @@ def _root_target(args, target):
     import numpy as np
 
     from kinfw.files import sidecar_path
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
 
     if args.measured_in is None:
         return target

@@ -31,8 +31,6 @@ from kinfw.cli._args import (
 )
 from kinfw.files import check_output_dir, check_outputs, write_text_atomic
 
-__all__ = ["add_simulate_parser", "cmd_simulate"]
-
 
 # -- parser -------------------------------------------------------------------------------
 def add_simulate_parser(sub: argparse._SubParsersAction) -> None:

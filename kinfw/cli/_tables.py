@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["accuracy_table", "format_table", "metric_format", "number"]
-
 
 def format_table(rows: Sequence[Sequence[str]], header: Sequence[str]) -> str:
     """Plain-text table: the header and the rows, each column right-aligned."""
@@ -39,7 +37,7 @@ def accuracy_table(report_dict: dict) -> str:
     a column per error key of any group (``position_rms_mm``, ``height_max_mm``,
     ``tilt_deg``; ``-`` where a group's kind has no such metric), then per metric with
     axes the mean/std of ``|error|`` per axis (Shih et al. Table 4)."""
-    from kinfw.reports import ErrorValue
+    from kinfw.records import ErrorValue
 
     fixed = ("frame", "kind", "marker", "entity", "n", "samples")
     keys = dict.fromkeys(k for g in report_dict["groups"] for k in g if k not in fixed)

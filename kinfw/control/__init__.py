@@ -8,19 +8,20 @@ from kinfw.control._gaze import (
     Fixation,
     GazeSolver,
     camera_points,
-    default_free_joints,
     fixate,
     ray_errors_rad,
 )
-from kinfw.control._reach import REACHED_M, REACHED_RAD, Reach, reach
+from kinfw.control._reach import (
+    REACHED_M,
+    REACHED_RAD,
+    Reach,
+    reach,
+)
 from kinfw.control._solver import (
     BoundedSolution,
     Residual,
-    check_configuration,
-    check_held_joints,
     middle_configuration,
     nearest_turn,
-    solve_bounded,
     solve_weak_directions,
 )
 
@@ -38,14 +39,10 @@ __all__ = [
     "Reach",
     "Residual",
     "camera_points",
-    "check_configuration",
-    "check_held_joints",
-    "default_free_joints",
     "fixate",
     "middle_configuration",
     "nearest_turn",
     "ray_errors_rad",
     "reach",
-    "solve_bounded",
     "solve_weak_directions",
 ]

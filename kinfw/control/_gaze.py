@@ -25,7 +25,7 @@ per camera: pan, tilt and both vergences on the IIS head; the X-Y table stays wh
 ``q_start`` value.
 
 The solution. A closed-form start, then bounded Gauss-Newton on the exact kinematics
-(:func:`kinfw.control.solve_bounded`):
+(:func:`solve_bounded`):
 
 - start: each free revolute joint, root first, in turn turns its cameras' rays towards
   the point in closed form. Rotating a direction ``d`` about the unit axis ``a`` by
@@ -62,15 +62,6 @@ from kinfw.control._solver import (
 )
 from kinfw.geometry import angle_between
 from kinfw.model import Robot, RobotModelError
-
-__all__ = [
-    "Fixation",
-    "GazeSolver",
-    "camera_points",
-    "default_free_joints",
-    "fixate",
-    "ray_errors_rad",
-]
 
 #: A point is fixated when every camera's remaining angle is below this (rad).
 FIXATED_RAD = 1e-6

@@ -2,7 +2,7 @@
 model, so a user can check "does my calibrated arm now hit the target".
 
 Damped least squares on Pinocchio's exact frame Jacobian
-(:func:`kinfw.control.solve_bounded`; Wampler 1986, Nakamura & Hanafusa 1986),
+(:func:`solve_bounded`; Wampler 1986, Nakamura & Hanafusa 1986),
 within the joint limits. The residual for a pose target ``root_T_target`` is
 ``(p - p_target, w log3(R_target^T R))`` (m; the rotation part in radians times the
 weight ``w``, metres per radian), for a point target ``p - p_target``; its Jacobian is
@@ -44,8 +44,6 @@ from kinfw.control._solver import (
 )
 from kinfw.geometry import check_transform
 from kinfw.model import STANDARD_GRAVITY, Payloads, Robot, RobotModelError
-
-__all__ = ["Reach", "reach"]
 
 #: Reached: position within this (m) and rotation within :data:`REACHED_RAD`.
 REACHED_M = 1e-6

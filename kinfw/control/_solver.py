@@ -37,17 +37,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.model import Robot, RobotModelError
 
-__all__ = [
-    "BoundedSolution",
-    "Residual",
-    "check_configuration",
-    "check_held_joints",
-    "middle_configuration",
-    "nearest_turn",
-    "solve_bounded",
-    "solve_weak_directions",
-]
-
 #: ``residual(x, jacobian)`` -> ``(r, J)``: ``r`` (m,), ``J`` (m, k) when ``jacobian`` is
 #: true (else None), or ``(None, None)`` where the residual is not defined (e.g. a point
 #: behind the camera): such a step is rejected like one that raises the cost.

@@ -8,14 +8,15 @@ frames cancel); quaternions are ``xyzw``; SI units inside (docs/conventions.md).
 from __future__ import annotations
 
 from kinfw.geometry._chart import (
-    cayley_entries,
     cayley_rotation,
     chart_from_rigid,
     rigid_from_chart,
     rigid_from_chart_casadi,
     rotation_chart,
 )
-from kinfw.geometry._registration import register_points
+from kinfw.geometry._registration import (
+    register_points,
+)
 from kinfw.geometry._transforms import (
     angle_between,
     average_transform,
@@ -38,7 +39,6 @@ from kinfw.geometry._transforms import (
 __all__ = [
     "angle_between",
     "average_transform",
-    "cayley_entries",
     "cayley_rotation",
     "chart_from_rigid",
     "check_rotation",

@@ -24,15 +24,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = [
-    "cayley_entries",
-    "cayley_rotation",
-    "chart_from_rigid",
-    "rigid_from_chart",
-    "rigid_from_chart_casadi",
-    "rotation_chart",
-]
-
 
 def cayley_entries(x: Any, y: Any, z: Any) -> tuple[Any, ...]:
     """The nine entries (row-major) of ``cayley((x, y, z))``, for numbers, arrays or SX.

@@ -12,8 +12,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry._transforms import transform_from_rotation_translation
 
-__all__ = ["register_points"]
-
 # Relative size of the second singular value below which a point set is called collinear.
 _RANK_TOL = 1e-9
 

@@ -22,25 +22,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = [
-    "angle_between",
-    "average_transform",
-    "check_rotation",
-    "check_transform",
-    "inverse_transform",
-    "matrix_from_rotation_vector",
-    "project_to_rotation",
-    "quat_xyzw_from_matrix",
-    "rot_z",
-    "rotation_angle",
-    "rotation_vector_from_matrix",
-    "skew",
-    "transform_from_rotation_translation",
-    "transform_from_xyz_quat_xyzw",
-    "vee",
-    "xyz_quat_xyzw_from_transform",
-]
-
 _ORTHONORMAL_TOL = 1e-6
 
 

@@ -3,7 +3,7 @@ Also the hand-eye pose-pair files of ``kinfw handeye`` (CSV, JSON, easy_handeye2
 :func:`read_pose_pairs`, :func:`pose_pairs_text`; formats in ``_pose_pairs.py`` and
 ``docs/handeye.md``). And ROS 1 / ROS 2 bags (:func:`read_bag`,
 :func:`measurements_from_bag`: joint states and a pose, point or TF stream, time-aligned;
-``_bags.py`` and ``docs/bags.md``).
+``_bag_read.py``, ``_bag_align.py``, ``_bag_images.py`` and ``docs/bags.md``).
 
 A measurement file lists samples; each sample is one robot configuration ``q`` and the
 observations made in it::
@@ -110,21 +110,20 @@ writer are in :mod:`kinfw.measurements` and the checks in
 callers import from here).
 """
 
-from kinfw.measurements._bags import (
+from kinfw.measurements._bag_align import (
     DROP_REASONS,
-    IMAGE_JOINTS_CSV,
-    IMAGE_STAMPS_JSON,
     BagAlignment,
-    BagImages,
-    BagRecording,
-    JointStates,
-    MeasuredStream,
     joint_values_at,
     measurements_from_bag,
-    read_bag,
     time_offset_streams,
+)
+from kinfw.measurements._bag_images import (
+    IMAGE_JOINTS_CSV,
+    IMAGE_STAMPS_JSON,
+    BagImages,
     write_bag_images,
 )
+from kinfw.measurements._bag_read import BagRecording, JointStates, MeasuredStream, read_bag
 from kinfw.measurements._checks import (
     DISTINCT_TOL,
     DUPLICATE_RTOL,

@@ -24,18 +24,6 @@ from kinfw.observations import DatasetError, kind_of
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = [
-    "DISTINCT_TOL",
-    "DUPLICATE_RTOL",
-    "check_against_robot",
-    "check_joint_motion",
-    "drop_duplicate_samples",
-    "duplicate_samples",
-    "fixed_in_experiment",
-    "observed_joints",
-    "robot_measurement_frames",
-]
-
 logger = logging.getLogger("kinfw.measurements")
 
 DISTINCT_TOL = 1e-9

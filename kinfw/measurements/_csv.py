@@ -16,8 +16,6 @@ from dataclasses import dataclass
 
 from kinfw.observations import DatasetError
 
-__all__ = ["CsvTable", "csv_table"]
-
 _DECIMAL_COMMA = re.compile(r"(?<![\d.,])-?\d+,\d+(?![\d.,])")
 _DECIMAL_POINT = re.compile(r"(?<![\d.,])-?\d+\.\d+(?![\d.,])")
 

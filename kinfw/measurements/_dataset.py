@@ -28,14 +28,6 @@ from kinfw.observations import (
     kinds,
 )
 
-__all__ = [
-    "Measurements",
-    "check_measurements",
-    "concatenate_measurements",
-    "first_uses",
-    "merge_same_key",
-]
-
 
 class FrozenMapping(Mapping[str, Any]):
     """A read-only mapping (a copy of the given one) that pickles, unlike

@@ -47,13 +47,6 @@ from kinfw.observations import DatasetError
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = [
-    "IGNORED_COLUMNS",
-    "camera_link",
-    "matrix_from_figaroh_rpy",
-    "measurements_from_figaroh_csv",
-]
-
 #: Columns FIGAROH reads that are not joints or markers (kept out of the joint list).
 IGNORED_COLUMNS = ("session_id",)
 

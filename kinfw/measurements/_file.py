@@ -28,15 +28,6 @@ from kinfw.measurements._mounts import mounts_from_dict, mounts_to_dict
 from kinfw.model import STANDARD_GRAVITY, Payloads
 from kinfw.observations import DatasetError, ObservationReader, describe, kind_named, kind_of, kinds
 
-__all__ = [
-    "FORMAT",
-    "SUPPORTED_VERSIONS",
-    "measurements_from_dict",
-    "measurements_to_dict",
-    "read_measurements",
-    "write_measurements",
-]
-
 logger = logging.getLogger("kinfw.measurements")
 
 FORMAT = "kinfw-measurements"

@@ -26,8 +26,6 @@ from kinfw.observations import DatasetError, ObservationReader, frozen_array, re
 if TYPE_CHECKING:
     from kinfw.model import Robot
 
-__all__ = ["Mount", "mounted_robot", "mounts_from_dict", "mounts_to_dict"]
-
 
 @dataclass(frozen=True, slots=True)
 class Mount:

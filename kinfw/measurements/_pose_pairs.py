@@ -50,22 +50,6 @@ from kinfw.measurements._checks import duplicates_warning, equal_row_pairs, firs
 from kinfw.measurements._csv import csv_table
 from kinfw.observations import QUAT_NORM_TOL, QUAT_ROUNDED_TOL, DatasetError
 
-__all__ = [
-    "HAND_POSE_COLUMNS",
-    "MIN_POSE_PAIRS",
-    "PLAIN_POSE_COLUMNS",
-    "POSE_PAIR_COLUMNS",
-    "HandPoses",
-    "PosePairs",
-    "drop_duplicate_pairs",
-    "duplicate_pairs",
-    "pose_pairs_from_measurements",
-    "pose_pairs_text",
-    "read_hand_poses",
-    "read_pose_pairs",
-    "target_views",
-]
-
 #: The CSV columns, in the order the writer writes them: ``base_T_hand`` then
 #: ``sensor_T_target``, each position (length unit) then quaternion scalar last.
 POSE_PAIR_COLUMNS = tuple(

@@ -53,8 +53,6 @@ from kinfw.geometry import (
 )
 from kinfw.observations import QUAT_NORM_TOL, DatasetError
 
-__all__ = ["align_streams", "check_stream", "interpolate_poses", "read_pose_csv"]
-
 log = logging.getLogger(__name__)
 
 _N_COLUMNS = 8

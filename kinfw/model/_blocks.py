@@ -41,20 +41,6 @@ if TYPE_CHECKING:
     from kinfw.model._cpc import CPCModel
     from kinfw.model._loads import BlockSamples
 
-__all__ = [
-    "CPC_KEY",
-    "BaseBlock",
-    "Block",
-    "BlockKey",
-    "CPCBlock",
-    "ParameterName",
-    "PointBlock",
-    "RigidFrameBlock",
-    "RobotBlock",
-    "SpecBlock",
-    "ZeroOffsetBlock",
-]
-
 _RIGID_FIELDS = ("rot_x", "rot_y", "rot_z", "x", "y", "z")
 _RIGID_UNITS = ("rad", "rad", "rad", "m", "m", "m")
 

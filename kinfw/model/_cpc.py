@@ -50,18 +50,6 @@ from kinfw.geometry import (
 )
 from kinfw.model._robot import Robot, Topology
 
-__all__ = [
-    "CPCModel",
-    "ZeroGeometry",
-    "cayley_coordinates",
-    "cpc_from_geometry",
-    "cpc_from_robot",
-    "geometry_from_cpc",
-    "geometry_from_robot",
-    "perpendicular_basis",
-    "rotation_from_axis",
-]
-
 
 def rotation_from_axis(b: ArrayLike) -> NDArray[np.float64]:
     """:math:`R(b)` of Shih et al. eq. (4): the minimal rotation taking z onto ``b``.

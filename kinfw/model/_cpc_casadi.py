@@ -17,8 +17,6 @@ import numpy as np
 from kinfw.geometry import rigid_from_chart_casadi
 from kinfw.model._cpc import CPCModel
 
-__all__ = ["cpc_fk_function", "cpc_reference_vector"]
-
 
 def _casadi():
     try:

@@ -18,8 +18,6 @@ from pathlib import Path
 
 from kinfw.model._robot import Robot
 
-__all__ = ["MissingMesh", "mesh_dirs", "resolve_meshes"]
-
 
 @dataclass(frozen=True, slots=True)
 class MissingMesh:

@@ -28,8 +28,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["POSE_CHAIN_JOINTS", "pose_chain_joint_values", "pose_chain_urdf"]
-
 #: The chain's joints, in the order of :func:`pose_chain_joint_values`' columns: three
 #: prismatic (m) along the base's x, y, z, then revolute (rad) about z, y, x.
 POSE_CHAIN_JOINTS = ("pose_x", "pose_y", "pose_z", "pose_yaw", "pose_pitch", "pose_roll")

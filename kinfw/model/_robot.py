@@ -37,17 +37,6 @@ from kinfw.model._urdf_read import (
     xml_text,
 )
 
-__all__ = [
-    "JointInfo",
-    "Robot",
-    "RobotModelError",
-    "Topology",
-    "UnknownFrameError",
-    "builtin_head_urdf",
-    "check_robot",
-    "load_robot",
-]
-
 
 class UnknownFrameError(RobotModelError, KeyError):
     """A frame (link or joint) name that the URDF does not have."""
@@ -434,11 +423,11 @@ class Robot:
 
 
 def builtin_head_urdf() -> Path:
-    """Path of the built-in IIS-head URDF: ``urdf/iis_head.urdf`` of the source tree, or
+    """Path of the built-in IIS-head URDF: ``robots/iis_head.urdf`` of the source tree, or
     the copy a regular (non-editable) install puts in ``kinfw/robots/``."""
     package = Path(__file__).resolve().parents[1]  # kinfw/
     for candidate in (
-        package.parent / "urdf" / "iis_head.urdf",
+        package.parent / "robots" / "iis_head.urdf",
         package / "robots" / "iis_head.urdf",
     ):
         if candidate.is_file():

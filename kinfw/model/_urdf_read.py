@@ -28,20 +28,6 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-__all__ = [
-    "MOVABLE_TYPES",
-    "XACRO_NAMESPACE",
-    "JointInfo",
-    "RobotModelError",
-    "captured_native_stderr",
-    "check_urdf_xml",
-    "expand_xacro",
-    "parse_joints",
-    "pinocchio_model",
-    "up_vector",
-    "xml_text",
-]
-
 logger = logging.getLogger("kinfw.model")  # urdfdom's messages, logged as the robot's
 
 

@@ -18,7 +18,9 @@ Its :attr:`~ObservationKind.file_keys` lists the keys its file observations may 
 
 from __future__ import annotations
 
-from typing import Any
+from typing import (
+    Any,
+)
 
 from kinfw.observations._base import (
     POSITION,
@@ -34,7 +36,11 @@ from kinfw.observations._base import (
     frozen_array,
     sample_array,
 )
-from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._contexts import (
+    StartContext,
+    SymbolicContext,
+    inverse_casadi,
+)
 from kinfw.observations._divot import (
     PLACEMENT,
     DivotContacts,
@@ -42,7 +48,9 @@ from kinfw.observations._divot import (
     divot_key,
     pivot_calibration,
 )
-from kinfw.observations._intrinsics_block import UNDETERMINED_PX, IntrinsicsBlock
+from kinfw.observations._intrinsics_block import (
+    IntrinsicsBlock,
+)
 from kinfw.observations._numeric import (
     Drawing,
     MissingValue,
@@ -55,7 +63,12 @@ from kinfw.observations._numeric import (
     random_unit_vectors,
     transforms_from_pose_rows,
 )
-from kinfw.observations._pixels import PIXEL, PixelKind, PixelObservations, pixel_weights
+from kinfw.observations._pixels import (
+    PIXEL,
+    PixelKind,
+    PixelObservations,
+    pixel_weights,
+)
 from kinfw.observations._plane import (
     DISTANCE,
     TILT,
@@ -67,11 +80,14 @@ from kinfw.observations._plane import (
     plane_key,
 )
 from kinfw.observations._pnp import (
-    PNP_MIN_POINTS,
     pnp_camera_T_targets,
     target_observations_from_pixels,
 )
-from kinfw.observations._point import PointKind, PointObservations, offset_key
+from kinfw.observations._point import (
+    PointKind,
+    PointObservations,
+    offset_key,
+)
 from kinfw.observations._pose import (
     QUAT_NORM_TOL,
     QUAT_ROUNDED_TOL,
@@ -79,8 +95,14 @@ from kinfw.observations._pose import (
     PoseObservations,
     read_quaternion,
 )
-from kinfw.observations._reader import DatasetError, ObservationReader, describe
-from kinfw.observations._rigid import RigidTransformKind
+from kinfw.observations._reader import (
+    DatasetError,
+    ObservationReader,
+    describe,
+)
+from kinfw.observations._rigid import (
+    RigidTransformKind,
+)
 from kinfw.observations._sphere import (
     SphereBlock,
     SphereContacts,
@@ -89,21 +111,18 @@ from kinfw.observations._sphere import (
     lifted_sphere_probe,
     sphere_key,
 )
-from kinfw.observations._target import DEFAULT_TARGET, TargetKind, TargetObservations
+from kinfw.observations._target import TargetKind, TargetObservations
 from kinfw.plugins import load_plugins
 
 __all__ = [
-    "DEFAULT_TARGET",
     "DISTANCE",
     "PIXEL",
     "PLACEMENT",
-    "PNP_MIN_POINTS",
     "POSITION",
     "QUAT_NORM_TOL",
     "QUAT_ROUNDED_TOL",
     "ROTATION",
     "TILT",
-    "UNDETERMINED_PX",
     "DatasetError",
     "DivotContacts",
     "Drawing",

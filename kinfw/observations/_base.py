@@ -42,29 +42,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from kinfw.model import Block, BlockKey
-from kinfw.observations._contexts import StartContext, SymbolicContext, inverse_casadi
+from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, NumericContext, gaussian_rows
-from kinfw.observations._reader import DatasetError, ObservationReader, describe
-
-__all__ = [
-    "DatasetError",
-    "Metric",
-    "MetricErrors",
-    "NoiseComponent",
-    "ObservationKind",
-    "ObservationReader",
-    "StartContext",
-    "SymbolicContext",
-    "UnknownRequest",
-    "component_errors",
-    "data_array",
-    "describe",
-    "evenly_spaced",
-    "frozen_array",
-    "inverse_casadi",
-    "sample_array",
-]
-
+from kinfw.observations._reader import ObservationReader
 
 # -- array helpers for group dataclasses -------------------------------------------------
 
@@ -194,7 +174,7 @@ class NoiseComponent:
     ----------
     name : str
         ``"position"``, ``"rotation"``, or a kind's own (e.g. ``"distance"``); the key of
-        :class:`kinfw.identification._refine.NoiseModel`.
+        :class:`kinfw.identification.problem.NoiseModel`.
     rows : int
         Rows per observation.
     unit : {"m", "rad"}

@@ -19,8 +19,6 @@ from numpy.typing import NDArray
 from kinfw.geometry import inverse_transform
 from kinfw.model import BlockKey
 
-__all__ = ["StartContext", "SymbolicContext", "inverse_casadi"]
-
 
 class StartContext:
     """Numeric view of the start model for start-value estimators.

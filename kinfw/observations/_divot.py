@@ -45,8 +45,6 @@ from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, NumericContext, node_name
 from kinfw.observations._probe import ProbeContactKind, check_probe
 
-__all__ = ["PLACEMENT", "DivotContacts", "DivotKind", "divot_key", "pivot_calibration"]
-
 PLACEMENT = NoiseComponent("placement", 3, "m", metric=Metric("placement", "mm", 1e3, axes="xyz"))
 """A point contact's placement error, m per axis; it reads in mm."""
 

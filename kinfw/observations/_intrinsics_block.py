@@ -17,8 +17,6 @@ from numpy.typing import NDArray
 from kinfw.camera import PARAMETER_NAMES, project_normalized
 from kinfw.model import Block, BlockKey
 
-__all__ = ["UNDETERMINED_PX", "IntrinsicsBlock"]
-
 #: A freed intrinsic parameter whose 1-sigma uncertainty moves a point of the image's
 #: border by more than this many pixels is reported as not determined by the images.
 UNDETERMINED_PX = 1.0

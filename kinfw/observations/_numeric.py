@@ -33,19 +33,6 @@ from kinfw.geometry import (
 )
 from kinfw.model import BlockKey
 
-__all__ = [
-    "Drawing",
-    "MissingValue",
-    "NumericContext",
-    "gaussian_rows",
-    "node_name",
-    "perturb_transforms",
-    "predicted_or_missing",
-    "random_small_rotations",
-    "random_unit_vectors",
-    "transforms_from_pose_rows",
-]
-
 
 class MissingValue(KeyError):
     """A :class:`NumericContext` has no value for a block (e.g. a marker's unknown pose).

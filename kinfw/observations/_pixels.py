@@ -58,8 +58,6 @@ from kinfw.observations._target import (
     target_keys,
 )
 
-__all__ = ["PIXEL", "PixelKind", "PixelObservations", "pixel_weights"]
-
 PIXEL = NoiseComponent("pixel", 2, "px", metric=Metric("pixel", "px", axes="uv"))
 """The reprojection error of one point: (u, v) rows in pixels (its size: the norm, px)."""
 

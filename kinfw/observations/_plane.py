@@ -66,8 +66,6 @@ from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, MissingValue, NumericContext, node_name
 from kinfw.observations._probe import ProbeContactKind, check_probe
 
-__all__ = ["DISTANCE", "TILT", "PlaneBlock", "PlaneContacts", "PlaneKind", "plane_key"]
-
 DISTANCE = NoiseComponent("distance", 1, "m", metric=Metric("height", "mm", 1e3))
 """A contact's signed distance error, m; it reads as its height off the plane, mm."""
 

@@ -18,8 +18,6 @@ from kinfw.geometry import transform_from_rotation_translation
 if TYPE_CHECKING:
     from kinfw.observations._pixels import PixelObservations
 
-__all__ = ["PNP_MIN_POINTS", "pnp_camera_T_targets", "target_observations_from_pixels"]
-
 #: Fewest points of one image PnP needs.
 PNP_MIN_POINTS = 4
 _PLANAR_TOL = 1e-9  # smallest/largest singular value of the centred points: planar

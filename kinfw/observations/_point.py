@@ -19,8 +19,6 @@ from kinfw.observations._base import (
 from kinfw.observations._contexts import StartContext, SymbolicContext
 from kinfw.observations._numeric import Drawing, NumericContext, node_name, predicted_or_missing
 
-__all__ = ["PointKind", "PointObservations", "offset_key", "read_offset_or_marker"]
-
 
 def offset_key(frame: str, marker: str | None) -> BlockKey:
     """The block of an unknown point offset: one per (frame, marker or 'point')."""

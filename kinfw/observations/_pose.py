@@ -29,8 +29,6 @@ from kinfw.observations._numeric import Drawing, NumericContext, node_name, pred
 from kinfw.observations._reader import ObservationReader
 from kinfw.observations._rigid import RigidTransformKind
 
-__all__ = ["QUAT_NORM_TOL", "QUAT_ROUNDED_TOL", "PoseKind", "PoseObservations", "read_quaternion"]
-
 QUAT_NORM_TOL = 1e-3
 """Largest accepted ``| |quat_xyzw| - 1 |`` in a file (quaternions written with 4 or 5
 decimals are off by up to a few 1e-5); accepted quaternions are renormalised."""

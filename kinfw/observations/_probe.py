@@ -23,8 +23,6 @@ from kinfw.observations._contexts import SymbolicContext
 from kinfw.observations._numeric import NumericContext
 from kinfw.observations._point import offset_key, read_offset_or_marker
 
-__all__ = ["ProbeContactKind", "check_probe"]
-
 
 def check_probe(group: Any, name: str) -> None:
     """Check a contact group's probe fields in its ``__post_init__`` (``name`` its repr

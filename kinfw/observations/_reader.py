@@ -17,8 +17,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["DatasetError", "ObservationReader", "describe"]
-
 #: The largest magnitude of a number in a measurement file, in any unit it is written in
 #: (m, mm, rad, deg, px): 1e9 mm is 1,000 km. A larger one (a placeholder 1e300) is
 #: refused where it is read, before it overflows a computation that would blame another

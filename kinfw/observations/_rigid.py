@@ -21,8 +21,6 @@ from kinfw.observations._numeric import (
     transforms_from_pose_rows,
 )
 
-__all__ = ["RigidTransformKind"]
-
 
 class RigidTransformKind(ObservationKind):
     """Base of kinds that measure a transform held in their one row field (``row_fields[0]``,

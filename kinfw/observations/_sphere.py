@@ -41,15 +41,6 @@ from kinfw.observations._numeric import Drawing, NumericContext, node_name
 from kinfw.observations._plane import DISTANCE
 from kinfw.observations._probe import ProbeContactKind, check_probe
 
-__all__ = [
-    "SphereBlock",
-    "SphereContacts",
-    "SphereKind",
-    "fit_sphere",
-    "lifted_sphere_probe",
-    "sphere_key",
-]
-
 
 def sphere_key(name: str) -> BlockKey:
     """The block of the ball ``name``."""

@@ -37,18 +37,6 @@ from kinfw.observations._numeric import Drawing, NumericContext, node_name, pred
 from kinfw.observations._pose import read_quaternion, transforms_from_rows
 from kinfw.observations._rigid import RigidTransformKind
 
-__all__ = [
-    "DEFAULT_TARGET",
-    "TargetKind",
-    "TargetObservations",
-    "camera_T_target_symbolic",
-    "camera_T_targets_numeric",
-    "described_target",
-    "target_estimates",
-    "target_frames",
-    "target_keys",
-]
-
 DEFAULT_TARGET = "target"
 
 

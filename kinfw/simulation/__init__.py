@@ -5,18 +5,27 @@ Fig. 10 noise of Shih et al. (1992), rendered board images, and planted outliers
 
 from __future__ import annotations
 
-from kinfw.simulation._board_images import board_texture, render_board, true_corners
-from kinfw.simulation._contacts import contact_configurations, level_plane, plane_through
-from kinfw.simulation._images import CAMERA_FILE, JOINTS_FILE, write_board_images
+from kinfw.simulation._board_images import (
+    render_board,
+    true_corners,
+)
+from kinfw.simulation._contacts import (
+    contact_configurations,
+)
+from kinfw.simulation._images import (
+    CAMERA_FILE,
+    JOINTS_FILE,
+    write_board_images,
+)
 from kinfw.simulation._measurements import (
     SimulatedMeasurements,
     SimulatedProbe,
     simulate_measurements,
 )
-from kinfw.simulation._outliers import plant_outliers
+from kinfw.simulation._outliers import (
+    plant_outliers,
+)
 from kinfw.simulation._perturb import (
-    check_sigma,
-    finite_limits,
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
@@ -24,7 +33,6 @@ from kinfw.simulation._perturb import (
 from kinfw.simulation._pixels import (
     DEFAULT_BOARD,
     DEFAULT_CAMERA,
-    MIN_CORNERS,
     board_pose_facing,
     default_intrinsics,
     pixel_views,
@@ -35,7 +43,7 @@ from kinfw.simulation._simulate import (
     default_target_pose,
     nine_circle_plate,
     perturb_poses,
-    simulate,
+    simulate_at,
     stereo_measure,
 )
 
@@ -44,27 +52,21 @@ __all__ = [
     "DEFAULT_BOARD",
     "DEFAULT_CAMERA",
     "JOINTS_FILE",
-    "MIN_CORNERS",
     "SimulatedMeasurements",
     "SimulatedProbe",
     "board_pose_facing",
-    "board_texture",
-    "check_sigma",
     "contact_configurations",
     "default_intrinsics",
     "default_target_pose",
-    "finite_limits",
-    "level_plane",
     "nine_circle_plate",
     "one_joint_at_a_time",
     "perturb_poses",
     "perturb_robot",
     "pixel_views",
-    "plane_through",
     "plant_outliers",
     "random_configurations",
     "render_board",
-    "simulate",
+    "simulate_at",
     "simulate_measurements",
     "simulate_pixels",
     "stereo_measure",

@@ -45,8 +45,6 @@ from kinfw.camera import (
     project_normalized,
 )
 
-__all__ = ["board_texture", "render_board", "true_corners"]
-
 BACKGROUND = 128
 
 

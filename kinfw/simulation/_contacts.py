@@ -24,8 +24,6 @@ from kinfw.geometry import skew
 from kinfw.model import Robot
 from kinfw.simulation._perturb import finite_limits, random_configurations
 
-__all__ = ["contact_configurations", "level_plane", "plane_through"]
-
 #: A projection has converged when the probe is this close to the plane, metres.
 CONTACT_TOLERANCE_M = 1e-12
 #: Gauss-Newton steps tried from each random configuration.

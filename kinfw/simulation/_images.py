@@ -29,8 +29,6 @@ from kinfw.geometry import inverse_transform
 from kinfw.simulation._board_images import render_board
 from kinfw.simulation._measurements import SimulatedMeasurements
 
-__all__ = ["CAMERA_FILE", "JOINTS_FILE", "write_board_images"]
-
 JOINTS_FILE = "joints.csv"
 CAMERA_FILE = "camera.json"
 

@@ -54,9 +54,7 @@ from kinfw.simulation._pixels import (
     pixel_views,
     simulate_pixels,
 )
-from kinfw.simulation._simulate import default_target_pose, simulate
-
-__all__ = ["SimulatedMeasurements", "SimulatedProbe", "simulate_measurements"]
+from kinfw.simulation._simulate import default_target_pose, simulate_at
 
 #: Length of a marker's or probe's offset drawn when none is given, metres.
 DEFAULT_OFFSET_M = 0.05
@@ -202,7 +200,9 @@ def _stage2(
         if qs is None:
             qs = random_configurations(lower, upper, stage2_samples, rng, fraction=fraction)
         w_T_target = default_target_pose(truth, qs, names, cameras)
-        data = simulate(truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise)
+        data = simulate_at(
+            truth, qs, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise
+        )
         return data, None
     min_corners = MIN_CORNERS if board.partial else board.count
     if planned is not None:
@@ -434,7 +434,7 @@ def simulate_measurements(
         qs = planned
         if qs is None:
             qs, _ = one_joint_at_a_time(lower, upper, per_joint=per_joint, fraction=fraction)
-        parts.append(simulate(truth, qs, names, frames=frames, rng=rng, **noise))
+        parts.append(simulate_at(truth, qs, names, frames=frames, rng=rng, **noise))
     shown = parse_board(board or DEFAULT_BOARD) if cameras and pixels else None
     w_T_board = None
     if cameras:
@@ -625,7 +625,7 @@ def _simulate_markers(
                 measured_in=mocap_frame if external else None,
             )
         )
-    data = simulate(
+    data = simulate_at(
         at.truth, qs, at.names, groups=templates, unknowns=unknowns, rng=at.rng, noise_m=at.noise_m
     )
     return _Mocap(mocap_frame if external else None, mocap_T_w, probes, data)

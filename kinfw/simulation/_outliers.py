@@ -14,8 +14,6 @@ from numpy.typing import NDArray
 from kinfw.geometry import matrix_from_rotation_vector
 from kinfw.measurements import Measurements
 
-__all__ = ["plant_outliers"]
-
 
 def _unit_vectors(rng: np.random.Generator, n: int) -> NDArray[np.float64]:
     v = rng.normal(size=(n, 3))

@@ -23,14 +23,6 @@ from kinfw.model import JointInfo, Robot
 from kinfw.observations import random_small_rotations
 from kinfw.urdf import edit_urdf
 
-__all__ = [
-    "check_sigma",
-    "finite_limits",
-    "one_joint_at_a_time",
-    "perturb_robot",
-    "random_configurations",
-]
-
 _UNBOUNDED = np.pi
 """Half range (rad, or m for a prismatic joint) used in place of an infinite limit."""
 

@@ -6,7 +6,7 @@ The board's points are projected through the true robot into each camera
 sees it and an image only when its board is seen well enough (:func:`visible_points`, the
 rules of the constants below); :func:`pixel_views` draws configurations until each camera
 has its images. The measurement dataset itself is built by
-:func:`kinfw.simulation.simulate`.
+:func:`kinfw.simulation.simulate_at`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from kinfw.geometry import check_transform, inverse_transform, transform_from_ro
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
 from kinfw.simulation._perturb import check_sigma, random_configurations
-from kinfw.simulation._simulate import default_target_pose, frame_from_z_and_x, simulate
+from kinfw.simulation._simulate import default_target_pose, frame_from_z_and_x, simulate_at
 
 #: Default intrinsics of a simulated camera with none given: a plausible 640 x 480 VGA
 #: camera with a ~56 deg horizontal field of view (fx = fy = 600 px), principal point at
@@ -264,7 +264,7 @@ def simulate_pixels(
                 target_frame=target_frame,
             )
         )
-    data = simulate(
+    data = simulate_at(
         robot,
         qs[kept],
         names,

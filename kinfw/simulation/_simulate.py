@@ -11,7 +11,7 @@ The pieces of the paper's Fig. 10 simulation, over any URDF robot:
   (:func:`perturb_poses`), or the stereo rig itself, noisy 3D circle centres of the
   nine-circle plate registered with Arun's method (:func:`stereo_measure`);
 - a measurement dataset built from the true robot's forward kinematics (Pinocchio)
-  (:func:`simulate`); images of a board in pixels are :mod:`kinfw.simulation`.
+  (:func:`simulate_at`); images of a board in pixels are :mod:`kinfw.simulation`.
 
 Every random draw comes from a ``numpy.random.Generator`` passed in by the caller; no
 global random state is used, so a seed reproduces a study exactly.
@@ -45,23 +45,7 @@ from kinfw.observations import (
 )
 from kinfw.simulation._perturb import (
     check_sigma,
-    one_joint_at_a_time,
-    perturb_robot,
-    random_configurations,
 )
-
-__all__ = [
-    "default_target_pose",
-    "frame_from_z_and_x",
-    "nine_circle_plate",
-    "one_joint_at_a_time",
-    "perturb_poses",
-    "perturb_robot",
-    "random_configurations",
-    "simulate",
-    "stereo_measure",
-]
-
 
 # -- measurement noise and the stereo rig ----------------------------------------------
 
@@ -222,7 +206,7 @@ def frame_from_z_and_x(
     return transform_from_rotation_translation(np.column_stack([x, np.cross(z, x), z]), origin)
 
 
-def simulate(
+def simulate_at(
     robot: Robot,
     qs: ArrayLike,
     joint_names: Sequence[str] | None,

@@ -10,9 +10,20 @@ parameter file and launch file (:func:`write_robot_description`) and, for a UR a
 
 from __future__ import annotations
 
-from kinfw.urdf._changes import OriginChange, origin_changes
-from kinfw.urdf._edit import SAME_TOL, ExportError, add_fixed_links, edit_urdf
-from kinfw.urdf._export import ExportResult, export_urdf, write_urdf
+from kinfw.urdf._changes import (
+    OriginChange,
+    origin_changes,
+)
+from kinfw.urdf._edit import (
+    ExportError,
+    add_fixed_links,
+    edit_urdf,
+)
+from kinfw.urdf._export import (
+    ExportResult,
+    export_urdf,
+    write_urdf,
+)
 from kinfw.urdf._robot_description import (
     ROBOT_DESCRIPTION_FILES,
     robot_description_launch_text,
@@ -20,11 +31,7 @@ from kinfw.urdf._robot_description import (
     write_robot_description,
 )
 from kinfw.urdf._ur import (
-    BASE_LINK_T_INERTIA,
-    MAX_AXIS_TILT_DEG,
     UR_JOINTS,
-    UR_SEGMENTS,
-    WRIST_3_T_TOOL0,
     URKinematics,
     ur_kinematics_from_dh,
     ur_kinematics_from_robot,
@@ -32,13 +39,8 @@ from kinfw.urdf._ur import (
 )
 
 __all__ = [
-    "BASE_LINK_T_INERTIA",
-    "MAX_AXIS_TILT_DEG",
     "ROBOT_DESCRIPTION_FILES",
-    "SAME_TOL",
     "UR_JOINTS",
-    "UR_SEGMENTS",
-    "WRIST_3_T_TOOL0",
     "ExportError",
     "ExportResult",
     "OriginChange",

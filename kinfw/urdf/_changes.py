@@ -13,8 +13,6 @@ from numpy.typing import NDArray
 from kinfw.geometry import angle_between, rotation_angle
 from kinfw.model import Robot
 
-__all__ = ["OriginChange", "origin_changes"]
-
 
 @dataclass(frozen=True)
 class OriginChange:

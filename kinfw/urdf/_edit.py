@@ -20,8 +20,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from kinfw.geometry import check_transform, inverse_transform
 
-__all__ = ["SAME_TOL", "ExportError", "add_fixed_links", "edit_urdf"]
-
 SAME_TOL = 1e-12
 """An origin or axis within this of the file's value (max abs entry) keeps its text."""
 

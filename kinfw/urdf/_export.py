@@ -35,8 +35,6 @@ from kinfw.geometry import inverse_transform, register_points
 from kinfw.model import JointInfo, Robot, ZeroGeometry
 from kinfw.urdf._edit import SAME_TOL, ExportError, edit_urdf
 
-__all__ = ["ExportError", "ExportResult", "edit_urdf", "export_urdf", "write_urdf"]
-
 ON_AXIS_TOL = 1e-9
 """Largest distance (m) of a revolute end frame's origin from its calibrated axis."""
 

@@ -15,13 +15,6 @@ from pathlib import Path
 
 from kinfw.files import write_text_atomic
 
-__all__ = [
-    "ROBOT_DESCRIPTION_FILES",
-    "robot_description_launch_text",
-    "robot_description_params_text",
-    "write_robot_description",
-]
-
 #: The files :func:`write_robot_description` writes, by what they hold.
 ROBOT_DESCRIPTION_FILES = {
     "urdf": "robot_description.urdf",

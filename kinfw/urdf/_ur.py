@@ -47,18 +47,6 @@ from kinfw.geometry import inverse_transform
 from kinfw.model import Robot, check_robot, rotation_from_axis
 from kinfw.urdf._edit import ExportError, rpy_from_matrix
 
-__all__ = [
-    "BASE_LINK_T_INERTIA",
-    "MAX_AXIS_TILT_DEG",
-    "UR_JOINTS",
-    "UR_SEGMENTS",
-    "WRIST_3_T_TOOL0",
-    "URKinematics",
-    "ur_kinematics_from_dh",
-    "ur_kinematics_from_robot",
-    "ur_kinematics_text",
-]
-
 #: The file's keys, one per joint, base first.
 UR_SEGMENTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
 #: ``ur_description``'s joint names (after its ``tf_prefix``), in the same order.

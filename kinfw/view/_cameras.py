@@ -17,15 +17,6 @@ from kinfw.view._draw import STICK_RADIUS, stick, triad
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = [
-    "CAMERA_TRIAD_LENGTH",
-    "FRUSTUM_DEPTH",
-    "FRUSTUM_RADIUS",
-    "FRUSTUM_RGB",
-    "draw_cameras",
-    "frustum_corners",
-]
-
 CAMERA_TRIAD_LENGTH = 0.02
 """Length of a camera frame's triad, metres (thinner and shorter than a measurement's)."""
 FRUSTUM_DEPTH = 0.2

@@ -16,20 +16,6 @@ from kinfw.model import Robot
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = [
-    "OVERLAY_RENDER_ORDER",
-    "STICK_RADIUS",
-    "TRIAD_LENGTH",
-    "overlay_material",
-    "overlay_object",
-    "rgb_int",
-    "rotation_y_onto",
-    "stick",
-    "transform_from_translation",
-    "triad",
-    "up_direction",
-]
-
 TRIAD_LENGTH = 0.03
 """Length of a measured pose's triad, metres (a fixed target's is twice as long)."""
 STICK_RADIUS = 0.0012

@@ -3,7 +3,7 @@
 :func:`gaze_scene` draws a :class:`kinfw.control.Fixation` (``kinfw gaze --html``):
 
 - the robot at :attr:`~kinfw.control.Fixation.q` (Pinocchio's ``MeshcatVisualizer``,
-  :func:`kinfw.view.draw_robot`), solid;
+  :func:`kinfw.view._robot.draw_robot`), solid;
 - per camera, its frame (a triad) and its aimed ray: from the optical centre along the
   ray the camera should see the point on (the optical axis, or a pixel's ray), as long as
   the distance from the camera to the point, green when every camera fixates the point,
@@ -51,8 +51,6 @@ if TYPE_CHECKING:
     import meshcat
 
     from kinfw.control import Fixation
-
-__all__ = ["gaze_rays", "gaze_scene", "write_gaze_html"]
 
 RAY_RADIUS = 0.002
 """Radius of a gaze ray's cylinder, metres."""

@@ -20,8 +20,6 @@ from kinfw.files import write_text_atomic
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = ["OfflineWindow", "external_urls", "write_html"]
-
 logger = logging.getLogger("kinfw.view")
 
 # URLs that a browser never fetches: XML namespaces in meshcat's viewer script.

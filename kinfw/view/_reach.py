@@ -3,7 +3,7 @@
 :func:`reach_scene` draws a :class:`kinfw.control.Reach` (``kinfw reach --html``):
 
 - the robot at :attr:`~kinfw.control.Reach.q` (Pinocchio's ``MeshcatVisualizer``,
-  :func:`kinfw.view.draw_robot`), solid;
+  :func:`kinfw.view._robot.draw_robot`), solid;
 - the target: a pose as a triad (x red, y green, z blue) with a ball at its origin, a
   point as a sphere;
 - the reaching frame at the answer, a shorter, thinner triad with a smaller ball at its
@@ -45,8 +45,6 @@ if TYPE_CHECKING:
     import meshcat
 
     from kinfw.control import Reach
-
-__all__ = ["reach_scene", "write_reach_html"]
 
 TARGET_TRIAD_LENGTH = 0.1
 """Length of the target pose's triad axes, metres."""

@@ -28,16 +28,6 @@ from kinfw.view._draw import stick, triad
 if TYPE_CHECKING:
     import meshcat
 
-__all__ = [
-    "BACKGROUND_RGB",
-    "CAMERA_FOV_DEG",
-    "display_frame",
-    "draw_robot",
-    "frame_scene",
-    "robot_scene",
-    "set_camera",
-]
-
 logger = logging.getLogger("kinfw.view")
 
 CAMERA_FOV_DEG = 30.0
@@ -279,7 +269,7 @@ def robot_scene(
     vis, root : meshcat.Visualizer
         The scene and its ``kinfw`` node (root-link coordinates).
     up : ndarray, shape (3,)
-        The checked up direction (:func:`kinfw.view.up_direction`).
+        The checked up direction (:func:`kinfw.view._draw.up_direction`).
     robot_ps : ndarray, shape (n, 3)
         Points of the drawn robot, for :func:`frame_scene`.
     """

@@ -69,8 +69,8 @@ from kinfw.geometry import check_transform
 from kinfw.measurements import Measurements, check_against_robot
 from kinfw.model import STANDARD_GRAVITY, BlockKey, Robot, load_robot
 from kinfw.observations import MissingValue, NumericContext, kind_of, node_name
-from kinfw.reports import CalibrationSidecar, read_sidecar
-from kinfw.view._cameras import CAMERA_TRIAD_LENGTH, FRUSTUM_DEPTH, draw_cameras, frustum_corners
+from kinfw.records import CalibrationSidecar, read_sidecar
+from kinfw.view._cameras import draw_cameras
 from kinfw.view._draw import (
     TRIAD_LENGTH,
     overlay_object,
@@ -80,27 +80,10 @@ from kinfw.view._draw import (
     triad,
     up_direction,
 )
-from kinfw.view._html import OfflineWindow, external_urls, write_html
 from kinfw.view._robot import draw_robot, frame_scene
 
 if TYPE_CHECKING:
     import meshcat
-
-__all__ = [
-    "CAMERA_TRIAD_LENGTH",
-    "FRUSTUM_DEPTH",
-    "GHOST_RGBA",
-    "RESIDUAL_COLOR_STOPS_MM",
-    "SOLID_RGBA",
-    "TRIAD_LENGTH",
-    "OfflineWindow",
-    "external_urls",
-    "frustum_corners",
-    "residual_color",
-    "scene",
-    "targets_from_sidecar",
-    "write_html",
-]
 
 logger = logging.getLogger(__name__)
 
@@ -498,8 +481,8 @@ def targets_from_sidecar(
 ) -> tuple[tuple[str, NDArray[np.float64]], ...]:
     """``(name, root_T_target)`` of every target in a calibration sidecar
     (``*.kinfw.json`` written by ``kinfw calibrate``, or one read by
-    :func:`kinfw.reports.read_sidecar`), for :func:`scene`'s ``targets``: the
+    :func:`kinfw.records.read_sidecar`), for :func:`scene`'s ``targets``: the
     refined pose when the calibration refined it, else the hand-eye one
-    (:attr:`~kinfw.reports.CalibrationSidecar.root_T_targets`)."""
+    (:attr:`~kinfw.records.CalibrationSidecar.root_T_targets`)."""
     doc = sidecar if isinstance(sidecar, CalibrationSidecar) else read_sidecar(sidecar)
     return tuple((t, check_transform(T, name=f"targets[{t!r}]")) for t, T in doc.root_T_targets)

@@ -14,14 +14,12 @@ from numpy.typing import ArrayLike
 from kinfw.files import sidecar_path
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
-from kinfw.reports import CalibrationSidecar, read_sidecar
+from kinfw.records import CalibrationSidecar, read_sidecar
 from kinfw.view._html import OfflineWindow, write_html
 from kinfw.view._scene import as_robot, scene, targets_from_sidecar
 
 if TYPE_CHECKING:
     import meshcat
-
-__all__ = ["show"]
 
 
 def show(

@@ -9,7 +9,7 @@ from kinfw.identification import ProtocolError, identify_closed_form, one_joint_
 from kinfw.measurements import Measurements
 from kinfw.model import cpc_from_robot, load_robot
 from kinfw.progress import reporting
-from kinfw.simulation import one_joint_at_a_time, perturb_robot, simulate
+from kinfw.simulation import one_joint_at_a_time, perturb_robot, simulate_at
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.paths import HEAD_URDF as HEAD
@@ -35,7 +35,7 @@ def _experiment(
     names = nominal.topology(frames).joint_names
     lower, upper = nominal.joint_limits(names)
     qs, _ = one_joint_at_a_time(lower, upper, per_joint=per_joint)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,
@@ -249,7 +249,7 @@ def test_only_far_apart_values_leave_the_sense_ambiguous():
     for j in range(6):
         qs[1 + 2 * j, j], qs[2 + 2 * j, j] = 0.4, 0.8
     qs[1, 0], qs[2, 0] = 3.0, 3.0  # j1 takes only the values 0 and 3.0
-    data = simulate(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
+    data = simulate_at(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
     with pytest.raises(
         ProtocolError,
         match=r"joint 'j1': every pair of its values is at "
@@ -257,7 +257,7 @@ def test_only_far_apart_values_leave_the_sense_ambiguous():
     ):
         identify_closed_form(nominal, data)
     qs[2, 0] = 1.0  # one more value closer to 0: fine
-    data = simulate(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
+    data = simulate_at(nominal, qs, names, frames=("flange",), rng=np.random.default_rng(0))
     assert identify_closed_form(nominal, data).motion_scale[0] == pytest.approx(1.0, abs=1e-9)
 
 

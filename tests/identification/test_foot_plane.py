@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from kinfw.geometry import inverse_transform
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.problem import build_problem
 from kinfw.measurements import (
     Measurements,
@@ -96,7 +96,7 @@ def test_standing_contacts_calibrate_with_the_leg_at_the_nominal(standing):
     the table (new arm configurations, the same stance) are the truth's up to one
     common scale, to 1e-9 m."""
     nominal, truth, table, data = standing
-    result = calibrate(nominal, data)
+    result = identify(nominal, data)
     (note,) = [n for n in result.notes if "fixed in this experiment" in n]
     assert all(j in note for j in LEG)
     exported = load_robot(result.urdf_xml)
@@ -171,7 +171,7 @@ def test_the_default_moves_the_export_only_along_determined_directions(standing)
     exported URDF (Pinocchio), holds none of the estimate (the robot's chart coordinates
     in m and rad, the unknowns' weighted by UNKNOWN_WEIGHT), as without a prior. With the
     prior's rows in the Jacobian that finds the null space, 0.69 mm of it was left there."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, _, _, data = standing
     rng = np.random.default_rng(5)

@@ -22,7 +22,7 @@ import pytest
 
 from kinfw.cli._main import main
 from kinfw.geometry import inverse_transform
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.checks import InsufficientDataError
 from kinfw.measurements import write_measurements
 from kinfw.model import load_robot
@@ -72,7 +72,7 @@ def test_an_accepted_forced_full_fit_keeps_the_world_motion_at_the_nominal(nomin
         noise_m=1e-4,
         seed=7,
     )
-    result = calibrate(nominal, sim.data, parameters="full")
+    result = identify(nominal, sim.data, parameters="full")
     assert result.refined.undetermined == 0.0
     exported = load_robot(result.urdf_xml)
     moved = (
@@ -165,7 +165,7 @@ def test_forced_full_on_one_plane_says_the_contacts_cannot_tell_the_size(nominal
         nominal, contacts=[("flange", None)], contact_samples=400, noise_m=1e-4, seed=7
     )
     with pytest.raises(InsufficientDataError) as refused:
-        calibrate(nominal, sim.data, parameters="full")
+        identify(nominal, sim.data, parameters="full")
     said = str(refused.value)
     found = re.search(r"The fitted robot is ([0-9.]+) times the nominal's size", said)
     assert found and abs(float(found[1]) - 1.0) > 0.05, said

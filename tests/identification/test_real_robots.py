@@ -34,7 +34,7 @@ from kinfw.identification import refine
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements
 from kinfw.model import Robot, geometry_from_cpc, load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.erd import robots_dir, urdf_path
@@ -171,7 +171,7 @@ def _mocap_data(
     }
     known = (spec.known_frame, np.array([0.02, -0.01, 0.03]))
     markers = [(f, offset, name) for (f, name), offset in offsets.items()]
-    data = simulate(truth, qs, names, markers=[*markers, known], rng=rng, noise_m=noise_m)
+    data = simulate_at(truth, qs, names, markers=[*markers, known], rng=rng, noise_m=noise_m)
     R, p = MOCAP_T_ROOT[:3, :3], MOCAP_T_ROOT[:3, 3]
     moved = tuple(
         replace(g, meas_p_point=g.meas_p_point @ R.T + p, measured_in="mocap") for g in data.points
@@ -225,7 +225,7 @@ def test_the_robot_loads_without_meshes_despite_joints_off_the_measured_paths(sp
 @pytest.mark.parametrize("spec", REAL_ROBOTS, ids=lambda r: r.name)
 def test_poses_in_the_root_recover_the_truth_through_the_exported_urdf(spec):
     nominal, truth, names, qs, q_test, rng = _setup(spec, spec.frames, seed=10)
-    data = simulate(truth, qs, names, frames=spec.frames, rng=rng)
+    data = simulate_at(truth, qs, names, frames=spec.frames, rng=rng)
     result = refine(nominal, data, noise=SIGMA)
     assert result.converged and result.model_frame is None
     ident = result.identifiability

@@ -11,7 +11,7 @@ from kinfw.identification import refine
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, concatenate_measurements
 from kinfw.model import cpc_from_robot, geometry_from_cpc, load_robot
-from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate
+from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate_at
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from tests.paths import HEAD_URDF as HEAD
@@ -32,7 +32,7 @@ def _head_data(seed=0, n=40, noise_m=0.0, noise_rad=0.0, error_mm=5.0, error_deg
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
     w_T_target = default_target_pose(truth, qs, names, CAMERAS)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,
@@ -170,7 +170,7 @@ def test_unobserved_orientation_is_reported_not_identifiable():
     truth = load_robot(perturb_robot(nominal, rng))
     names = nominal.joint_names
     qs = random_configurations(*nominal.joint_limits(names), 60, rng, fraction=0.5)
-    data = simulate(truth, qs, names, markers=(("flange", np.zeros(3)),), rng=rng)
+    data = simulate_at(truth, qs, names, markers=(("flange", np.zeros(3)),), rng=rng)
     result = refine(nominal, data, noise=SIGMA)
     reasons = dict((frozenset(p), why) for p, why in result.identifiability.unidentifiable)
     rot = frozenset({("flange", "rot_x"), ("flange", "rot_y"), ("flange", "rot_z")})
@@ -212,14 +212,16 @@ def test_markers_measured_in_an_external_frame_are_recovered():
     mocap_T_root[:3, :3] = matrix_from_rotation_vector([0.3, -0.2, 1.0])
     mocap_T_root[:3, 3] = [1.0, -0.5, 0.2]
     offsets = {"m1": [0.05, 0.0, 0.0], "m2": [0.0, 0.04, 0.01], "m3": [0.0, 0.0, 0.06]}
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,
         markers=[("flange", np.array(o), name) for name, o in offsets.items()],
         rng=rng,
     )
-    known = simulate(truth, qs, names, markers=(("flange", np.array([0.02, 0.02, 0.0])),), rng=rng)
+    known = simulate_at(
+        truth, qs, names, markers=(("flange", np.array([0.02, 0.02, 0.0])),), rng=rng
+    )
     data = concatenate_measurements(data, known)
     moved = tuple(
         replace(
@@ -275,7 +277,7 @@ def test_under_a_prior_joint_zero_offsets_are_estimated_as_offsets():
     names = nominal.topology(("flange",)).joint_names
     rng = np.random.default_rng(3)
     qs = random_configurations(*nominal.joint_limits(names), 30, rng, fraction=0.8)
-    data = simulate(truth, qs, names, frames=("flange",), rng=rng)
+    data = simulate_at(truth, qs, names, frames=("flange",), rng=rng)
     noise = NoiseModel(1e-6, 1e-6)
     fit = refine(nominal, data, parameters="full", prior=(1e-3, 1e-2), noise=noise)
     estimate = dict(zip(fit.parameter_names, fit.estimate, strict=True))

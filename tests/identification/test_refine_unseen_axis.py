@@ -15,7 +15,7 @@ import pytest
 from kinfw.identification import refine
 from kinfw.identification.problem import NoiseModel
 from kinfw.model import load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from tests.erd import urdf_path
 
 FRAME = "arm_7_link"
@@ -52,7 +52,7 @@ def test_unseen_axis_stays_at_nominal_and_model_predicts(tiago, seed):
 
     rng = np.random.default_rng(1000 + seed)
     truth = load_robot(perturb_robot(robot, rng))
-    data = simulate(truth, qs, names, markers=[(FRAME, np.zeros(3))], rng=rng, noise_m=5e-4)
+    data = simulate_at(truth, qs, names, markers=[(FRAME, np.zeros(3))], rng=rng, noise_m=5e-4)
     # independent truth: q_7 does not move the point (Pinocchio FK of the true robot)
     q = test[:5].copy()
     p0 = truth.frame_poses(q, FRAME, names)[:, :3, 3]

@@ -141,14 +141,14 @@ def test_least_squares_rejects_nothing_and_bad_options_are_refused(head, truth):
 
 
 def test_the_report_lists_rejected_apart_and_reads_back(head, truth, tmp_path):
-    from kinfw.identification import calibrate
-    from kinfw.reports import read_report, write_report
+    from kinfw.identification import identify
+    from kinfw.records import read_report, write_report
     from kinfw.verification.reporting import calibration_report
 
     clean = plate_data(truth, 60, 9)
     bad = _with_bad_pose(clean, 4, np.array([0.0, 0.0, 0.07]))
     bad = _with_bad_pose(bad, 9, np.array([0.04, 0.0, 0.0]), group=1)
-    result = calibrate(head, bad)
+    result = identify(head, bad)
     report = calibration_report(head, load_robot(result.urdf_xml), bad, result, method="refine")
     rows = report.refine.rejected
     assert [(r.frame, r.sample) for r in rows] == [
@@ -211,7 +211,7 @@ def test_the_clean_tail_is_told_apart_from_a_gross_error(head, truth, tmp_path, 
     data)"; the report records which is which and reads it back, and its in-sample
     table is shown with and without them."""
     from kinfw.measurements import write_measurements
-    from kinfw.reports import read_report
+    from kinfw.records import read_report
     from tests.cli_run import run_cli
     from tests.kinfw.cli.test_cli import DEMO_BOUND_ARGS
     from tests.paths import HEAD_URDF

@@ -11,7 +11,7 @@ import pytest
 
 import kinfw.identification._pipeline as pipeline
 import kinfw.observations._pixels as pixels_module
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.model import builtin_head_urdf, load_robot
 from kinfw.observations import evenly_spaced
 from kinfw.simulation import simulate_measurements
@@ -53,10 +53,10 @@ def test_a_subsampled_start_converges_to_the_fit_from_every_view(robot, pixels, 
         board="chessboard:4x3:0.08" if pixels else None,
         seed=3,
     )
-    every = calibrate(robot, sim.data)
+    every = identify(robot, sim.data)
     monkeypatch.setattr(pipeline, "HANDEYE_START_VIEWS", 12)
     monkeypatch.setattr(pixels_module, "START_IMAGES", 10)
-    subsampled = calibrate(robot, sim.data)
+    subsampled = identify(robot, sim.data)
     full_views = [c.n_views for c in every.cameras.cameras]
     start_views = [c.n_views for c in subsampled.cameras.cameras]
     # each camera's own 12 picks, and those of the other camera it also saw

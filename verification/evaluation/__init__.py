@@ -11,7 +11,6 @@ from kinfw.verification.evaluation._accuracy import (
     AccuracyReport,
     GroupErrors,
     evaluate_model,
-    group_errors,
     known_frames,
 )
 from kinfw.verification.evaluation._crlb import (
@@ -32,19 +31,19 @@ from kinfw.verification.evaluation._crosscheck import (
 from kinfw.verification.evaluation._crossval import (
     AUTO,
     BASELINES,
-    SELECTION_SETS,
     CrossValidation,
     FoldScore,
     crossvalidate,
     fitted_unknowns,
     held_out_errors,
-    metric_rms,
     rejected_keys,
-    whitened_score,
     whitening_noise,
     without_observations,
 )
-from kinfw.verification.evaluation._loo import LeaveOneOut, leave_one_out
+from kinfw.verification.evaluation._loo import (
+    LeaveOneOut,
+    leave_one_out,
+)
 from kinfw.verification.evaluation._model_choice import (
     PRIOR_GRID_M,
     PRIOR_LEVERS_M,
@@ -56,10 +55,11 @@ from kinfw.verification.evaluation._model_choice import (
     missing_compliance,
     rows_per_parameter,
 )
-from kinfw.verification.evaluation._reprojection import WORST_IMAGES, reprojection_section
+from kinfw.verification.evaluation._reprojection import (
+    reprojection_section,
+)
 from kinfw.verification.evaluation._trials import (
     check_count,
-    executor_for_jobs,
     open_executor,
     run_trials,
 )
@@ -72,9 +72,7 @@ __all__ = [
     "PRIOR_GRID_M",
     "PRIOR_LEVERS_M",
     "ROWS_PER_PARAMETER",
-    "SELECTION_SETS",
     "VIEW_ROWS",
-    "WORST_IMAGES",
     "AccuracyReport",
     "Candidate",
     "CrossCheck",
@@ -89,13 +87,10 @@ __all__ = [
     "crosscheck_cpc",
     "crossvalidate",
     "evaluate_model",
-    "executor_for_jobs",
     "fitted_unknowns",
-    "group_errors",
     "held_out_errors",
     "known_frames",
     "leave_one_out",
-    "metric_rms",
     "missing_compliance",
     "open_executor",
     "pose_discrepancy",
@@ -108,7 +103,6 @@ __all__ = [
     "rows_per_parameter",
     "run_trials",
     "true_chart_coordinates",
-    "whitened_score",
     "whitening_noise",
     "without_observations",
 ]

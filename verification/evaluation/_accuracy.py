@@ -34,9 +34,7 @@ from numpy.typing import NDArray
 from kinfw.measurements import Measurements
 from kinfw.model import Block, BlockKey, Robot
 from kinfw.observations import Metric, MetricErrors, NumericContext
-from kinfw.reports import CalibrationSidecar
-
-__all__ = ["AccuracyReport", "GroupErrors", "evaluate_model", "group_errors", "known_frames"]
+from kinfw.records import CalibrationSidecar
 
 
 @dataclass(frozen=True, slots=True)
@@ -176,10 +174,10 @@ def group_errors(group: Any, rows: NDArray[np.float64], model: NumericContext) -
 
 def known_frames(sidecar: CalibrationSidecar | None) -> dict[tuple[str, str], NDArray]:
     """The rigid frames and offsets a calibration sidecar (``*.kinfw.json``, read with
-    :func:`kinfw.reports.read_sidecar`) provides:
+    :func:`kinfw.records.read_sidecar`) provides:
     ``{("frame", name): meas_T_root, ("target", name): root_T_target,
     ("marker", name): frame_T_marker, ("offset", "frame:marker"): frame_p_point}``
-    (:meth:`~kinfw.reports.CalibrationSidecar.known_frames`)."""
+    (:meth:`~kinfw.records.CalibrationSidecar.known_frames`)."""
     return {} if sidecar is None else sidecar.known_frames()
 
 

@@ -27,16 +27,6 @@ from kinfw.identification.problem import LeastSquaresProblem, NoiseModel, build_
 from kinfw.measurements import Measurements
 from kinfw.model import CPC_KEY, CPCModel, Robot, cpc_from_geometry, geometry_from_robot
 
-__all__ = [
-    "CRLB",
-    "NORMAL_COVERAGE",
-    "cramer_rao",
-    "position_jacobians",
-    "predicted_position_ms",
-    "predicted_position_rms",
-    "true_chart_coordinates",
-]
-
 log = logging.getLogger(__name__)
 
 
@@ -62,7 +52,7 @@ class CRLB:
     frames : tuple of str
         The measured end frames.
     parameter_names : tuple of (owner, field)
-        Every unknown of the problem, as :func:`kinfw.identification._refine.build_problem`
+        Every unknown of the problem, as :func:`kinfw.identification.problem.build_problem`
         orders them: the CPC chart of ``model`` (``model.n_parameters`` entries), then
         6 per target pose (``("target:<name>", "rot_x" ...)``, Cayley chart: rad, m).
     free : ndarray of bool, shape (P,)

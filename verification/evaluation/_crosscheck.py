@@ -10,8 +10,6 @@ from numpy.typing import NDArray
 from kinfw.geometry import rotation_angle
 from kinfw.model import CPCModel, Robot, cpc_fk_function, cpc_from_robot
 
-__all__ = ["CrossCheck", "crosscheck_cpc", "pose_discrepancy", "random_joint_values"]
-
 
 @dataclass(frozen=True, slots=True)
 class CrossCheck:

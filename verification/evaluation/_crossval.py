@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification import Calibration, calibrate
+from kinfw.identification import Calibration, identify
 from kinfw.identification.checks import ChangeBound, InsufficientDataError, fit_plausibility
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements, drop_duplicate_samples
@@ -46,21 +46,6 @@ from kinfw.model import BlockKey, ModelSpec, Robot
 from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
-
-__all__ = [
-    "AUTO",
-    "BASELINES",
-    "SELECTION_SETS",
-    "CrossValidation",
-    "FoldScore",
-    "crossvalidate",
-    "fitted_unknowns",
-    "held_out_errors",
-    "metric_rms",
-    "rejected_keys",
-    "whitened_score",
-    "whitening_noise",
-]
 
 #: Parameter sets compared by default: the nominal baseline, frames only, and full.
 BASELINES = ("none", "frames", "full")
@@ -324,7 +309,7 @@ def _reference_fit(
     refusal = None
     for parameters in ("full", "offsets", "frames"):
         try:
-            return calibrate(
+            return identify(
                 nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
             )
         except InsufficientDataError as exc:
@@ -365,7 +350,7 @@ def _score(
                 if refused:  # kinfw calibrate would not write it
                     return refused
             else:
-                result = calibrate(
+                result = identify(
                     nominal, train, parameters=parameters, noise=noise, loss=loss, prior=prior
                 )
         except InsufficientDataError as exc:  # this set on this fold: said by the caller
@@ -431,7 +416,7 @@ def _chosen_fit(
     if choice.fit is not None:
         return choice.fit, choice.prior
     try:
-        fit = calibrate(
+        fit = identify(
             nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
         )
         return fit, choice.prior
@@ -439,7 +424,7 @@ def _chosen_fit(
         if choice.k > 0:
             raise
     choice = choose_parameters(nominal, train, noise=noise, loss=loss, cross_validate=True)
-    fit = choice.fit or calibrate(
+    fit = choice.fit or identify(
         nominal, train, parameters=choice.parameters, prior=choice.prior, noise=noise, loss=loss
     )
     return fit, choice.prior
@@ -527,7 +512,7 @@ def crossvalidate(
         (:meth:`CrossValidation.whitened`: every noise component's error together, in
         units of the given noise, else that of the full-data fit).
     noise, loss, prior
-        As for :func:`kinfw.identification.calibrate`.
+        As for :func:`kinfw.identification.identify`.
     executor : concurrent.futures.Executor, optional
         Run the fits (folds x sets) as tasks of this executor (a process pool, Dask's or
         Ray's); default serially in this process. The scores are the same either way.

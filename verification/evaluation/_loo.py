@@ -27,7 +27,7 @@ partition: the score has no fold noise, and it costs one fit per candidate plus 
 ``(P, P)`` solve per sample (memory ``n P^2`` for ``n`` samples, linear in the samples).
 
 The predictions are scored in each observed kind's metrics by the kinds themselves
-(:func:`kinfw.verification.evaluation.group_errors` on the predicted residual rows), so
+(:func:`group_errors` on the predicted residual rows), so
 every registered kind is scored as the refitting cross-validation scores it.
 """
 
@@ -52,8 +52,6 @@ from kinfw.model import BlockKey, Robot
 from kinfw.observations import NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._crossval import fitted_unknowns
-
-__all__ = ["LeaveOneOut", "leave_one_out"]
 
 #: A sample whose removal leaves the normal matrix this close to singular (its smallest
 #: eigenvalue over the full data's largest) determines a parameter alone: its held-out
@@ -97,7 +95,7 @@ def leave_one_out(
         left out of the scores).
     fit : Calibration
         The calibration of ``parameters`` and ``prior`` with ``loss`` on the data
-        (:func:`kinfw.identification.calibrate`, method ``"refine"``).
+        (:func:`kinfw.identification.identify`, method ``"refine"``).
     parameters, prior, loss
         As the fit was made (they set the moving parameters, the prior's Hessian and the
         weights).

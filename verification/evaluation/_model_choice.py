@@ -14,7 +14,7 @@ fit without it, one Gauss-Newton step away, no refit and no random partition); t
 candidate with the lowest whitened held-out error wins (each observed kind's error in
 its own metric, every noise component in units of its noise, so poses, points, image
 points, plane contacts and registered kinds mix:
-:func:`kinfw.verification.evaluation.whitened_score`):
+:func:`whitened_score`):
 
 - ``"frames"``: nominal joints, base and tool frames fitted;
 - ``"offsets"``: frames plus joint zero offsets;
@@ -55,7 +55,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kinfw import progress
-from kinfw.identification import Calibration, calibrate
+from kinfw.identification import Calibration, identify
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, observed_joints
 from kinfw.model import BlockSamples, JointComplianceBlock, ModelSpec, Robot, RobotModelError
@@ -68,16 +68,6 @@ from kinfw.verification.evaluation._crossval import (
     without_observations,
 )
 from kinfw.verification.evaluation._loo import leave_one_out
-
-__all__ = [
-    "PRIOR_GRID_M",
-    "PRIOR_LEVERS_M",
-    "ROWS_PER_PARAMETER",
-    "VIEW_ROWS",
-    "Candidate",
-    "ModelChoice",
-    "choose_parameters",
-]
 
 #: How much better (a fraction of the rigid model's whitened held-out error) a model spec
 #: candidate (a joint compliance) must predict to be chosen over the rigid model.
@@ -118,7 +108,7 @@ class Candidate:
     whitened : float
         The whitened held-out error (about 6 for poses predicted to the noise, 3 for
         points, 1 for plane contacts; lower is better):
-        :func:`kinfw.verification.evaluation.whitened_score` of :attr:`errors`.
+        :func:`whitened_score` of :attr:`errors`.
     errors : tuple of (Metric, float)
         Per metric of the data its held-out RMS over every sample (display unit).
     failed : str or None
@@ -258,7 +248,7 @@ def choose_parameters(
     nominal : Robot
     data : Measurements
     noise, loss
-        As for :func:`kinfw.identification.calibrate` (``noise`` also whitens the
+        As for :func:`kinfw.identification.identify` (``noise`` also whitens the
         scores; default: the noise the full-data fit estimates).
     prior : (sigma_m, sigma_rad), optional
         A prior given by the user: every set is scored with it and no prior scale is
@@ -420,7 +410,7 @@ def choose_model_spec(
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)
             try:
-                rigid = calibrate(
+                rigid = identify(
                     nominal,
                     data,
                     parameters=choice.parameters,
@@ -582,7 +572,7 @@ def _fit(
     with warnings.catch_warnings(), _candidate_named(label):
         warnings.simplefilter("ignore", UserWarning)
         try:
-            return calibrate(
+            return identify(
                 nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
             )
         except ValueError as exc:

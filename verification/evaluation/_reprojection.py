@@ -18,9 +18,7 @@ import numpy as np
 from kinfw.measurements import Measurements
 from kinfw.model import BlockKey, Robot
 from kinfw.observations import NumericContext, kind_of
-from kinfw.reports import CameraReprojection, ImageReprojection, ReprojectionSection
-
-__all__ = ["WORST_IMAGES", "reprojection_section"]
+from kinfw.records import CameraReprojection, ImageReprojection, ReprojectionSection
 
 #: How many of the worst images the section names.
 WORST_IMAGES = 10

@@ -17,8 +17,6 @@ from typing import TypeVar
 from kinfw import progress
 from kinfw.executors import DASK_INSTALL, dask_scheduler_address
 
-__all__ = ["check_count", "executor_for_jobs", "open_executor", "run_trials"]
-
 R = TypeVar("R")
 
 

@@ -79,15 +79,6 @@ from kinfw.verification.papers._hirsh_problem import (
 )
 from kinfw.verification.studies import arrays_from, freeze, json_list, json_lists, readonly
 
-__all__ = [
-    "CONVERGED_DEG",
-    "PAPER_NOISE_DEG",
-    "PAPER_VIEWS",
-    "SOLVER_MAX_ITERATIONS",
-    "HirshResult",
-    "hirsh_study",
-]
-
 log = logging.getLogger(__name__)
 
 

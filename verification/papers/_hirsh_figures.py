@@ -36,9 +36,6 @@ from kinfw.verification.studies import (
     write_json,
 )
 
-__all__ = ["format_hirsh", "hirsh_figures_main", "load_hirsh", "plot_hirsh", "run_hirsh"]
-
-
 #: "Converges very quickly" (the paper, section 5), read as: the median error reaches
 #: ``CONVERGED_DEG`` within this many iterations.
 QUICK_ITERATIONS = 30

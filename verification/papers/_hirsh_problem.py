@@ -28,16 +28,6 @@ from kinfw.geometry import (
 )
 from kinfw.verification.evaluation import check_count
 
-__all__ = [
-    "SimulatedProblem",
-    "draw_problem",
-    "quaternion_angle",
-    "random_problem",
-    "rotate_about_random_axes",
-    "rotations_about_random_axes",
-]
-
-
 #: Half-widths of the cubes the true translations are drawn from, metres.
 _X_TRANSLATION_M = 0.1
 

@@ -65,20 +65,6 @@ from kinfw.simulation import (
 from kinfw.verification.evaluation import check_count, run_trials
 from kinfw.verification.studies import FieldsJSON, freeze, sample_std
 
-__all__ = [
-    "PAPER_ACCURACY_MM",
-    "PAPER_PER_JOINT",
-    "Fig11Result",
-    "StudySetup",
-    "Trial",
-    "calibrate_once",
-    "check_sigmas_mm",
-    "fig11_study",
-    "positions_m",
-    "setup_study",
-    "trial_rng",
-]
-
 log = logging.getLogger(__name__)
 
 

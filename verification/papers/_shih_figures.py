@@ -34,17 +34,6 @@ from kinfw.verification.studies import (
     shared_legend,
 )
 
-__all__ = [
-    "format_fig11",
-    "format_table4",
-    "plot_fig11",
-    "plot_table4",
-    "run_fig11",
-    "run_table4",
-    "shih_figures_main",
-]
-
-
 # -- text tables -----------------------------------------------------------------------
 
 

@@ -34,15 +34,6 @@ from kinfw.verification.papers._shih_experiments import (
 )
 from kinfw.verification.studies import freeze, readonly, sample_std
 
-__all__ = [
-    "PAPER_TABLE4_FRAMES",
-    "PAPER_TABLE4_MU_MM",
-    "PAPER_TABLE4_SIGMA_MM",
-    "Table4Result",
-    "table4_study",
-]
-
-
 #: End frames of the rows of the paper's Table 4: left branch, right branch.
 PAPER_TABLE4_FRAMES = ("left_plate", "right_plate")
 

@@ -11,8 +11,6 @@ from kinfw.verification.reporting._calibrate import (
     CalibrationResult,
     IntrinsicsEvidence,
     calibrate_and_report,
-    intrinsics_evidence,
-    shared_configurations,
 )
 from kinfw.verification.reporting._fleet import (
     FLEET_SUMMARY,
@@ -26,20 +24,15 @@ from kinfw.verification.reporting._report import (
     before_after_rows,
     calibration_report,
     errors_by_group,
-    file_sha256,
     robot_block_records,
     sidecar,
 )
 from kinfw.verification.reporting._sections import (
-    calibrated_unknowns,
-    closed_form_section,
-    downweighted_rows,
-    hand_eye_section,
-    noise_summary,
     refine_section,
-    rejected_rows,
 )
-from kinfw.verification.reporting._stage_plot import plot_stage_errors
+from kinfw.verification.reporting._stage_plot import (
+    plot_stage_errors,
+)
 
 __all__ = [
     "FLEET_SUMMARY",
@@ -51,20 +44,11 @@ __all__ = [
     "before_after_rows",
     "calibrate_and_report",
     "calibrate_fleet",
-    "calibrated_unknowns",
     "calibration_report",
-    "closed_form_section",
-    "downweighted_rows",
     "errors_by_group",
-    "file_sha256",
     "fleet_members",
-    "hand_eye_section",
-    "intrinsics_evidence",
-    "noise_summary",
     "plot_stage_errors",
     "refine_section",
-    "rejected_rows",
     "robot_block_records",
-    "shared_configurations",
     "sidecar",
 ]

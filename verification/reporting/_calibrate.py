@@ -39,7 +39,7 @@ from kinfw.measurements import (
     drop_duplicate_samples,
 )
 from kinfw.model import ModelSpec, Robot, check_robot
-from kinfw.reports import CalibrationReport, ModelSummary
+from kinfw.records import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
 from kinfw.verification.reporting._guard import (
@@ -48,14 +48,6 @@ from kinfw.verification.reporting._guard import (
     nominal_misfit,
 )
 from kinfw.verification.reporting._report import calibration_report, file_sha256, sidecar
-
-__all__ = [
-    "CalibrationResult",
-    "IntrinsicsEvidence",
-    "calibrate_and_report",
-    "intrinsics_evidence",
-    "shared_configurations",
-]
 
 #: Pixel residuals worth a second look: an estimated pixel noise above this (px), or more
 #: than :data:`SUSPECT_FRACTION` of the image points rejected as gross errors. Corner and
@@ -152,7 +144,7 @@ def intrinsics_evidence(
     Large pixel residuals alone do not blame the intrinsics: a noisy detector or wrong
     robot poses make them too, and refined intrinsics then explain little.
     """
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
 
     ref = result.refined
     n_points = sum(len(g.sample) for g in data.groups("pixels"))
@@ -174,7 +166,7 @@ def intrinsics_evidence(
     with warnings.catch_warnings():  # the data's warnings came with the calibration
         warnings.simplefilter("ignore", UserWarning)
         try:
-            refit = calibrate(
+            refit = identify(
                 nominal,
                 data,
                 parameters=parameters,
@@ -259,7 +251,7 @@ class CalibrationResult:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
         (``<stem>.kinfw.json``, :func:`kinfw.files.sidecar_path`) and, with a model spec
         (compliance...), the per-joint YAML of what no URDF holds (``<stem>.joints.yaml``,
-        :func:`kinfw.reports.joint_model_text`), each atomically
+        :func:`kinfw.records.joint_model_text`), each atomically
         (:func:`kinfw.files.write_text_atomic`), after checking both paths.
 
         Returns
@@ -276,7 +268,7 @@ class CalibrationResult:
             Before anything is written: the plausibility guard tripped (:attr:`refusal`)
             and large changes were not allowed.
         """
-        from kinfw.reports import joint_model_path, joint_model_text, write_sidecar
+        from kinfw.records import joint_model_path, joint_model_text, write_sidecar
         from kinfw.urdf import write_urdf
 
         if self.refusal is not None:
@@ -402,13 +394,13 @@ def _fitted(
     model choice it came from: the choice's own fit when it has one; a refusal of given
     parameters names what the data determine; a refusal of ``"full"`` that ``"auto"``
     chose unscored (plentiful data) falls back to the scored choice."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
 
     if choice is not None and choice.fit is not None and not refine_intrinsics:
         return choice.fit, choice  # the chosen candidate, fitted on all the data
     options = dict(method=method, noise=noise, loss=loss, refine_intrinsics=refine_intrinsics)
     try:
-        return calibrate(nominal, data, parameters=parameters, prior=prior, **options), choice
+        return identify(nominal, data, parameters=parameters, prior=prior, **options), choice
     except InsufficientDataError as exc:
         if method != "refine" or (choice is not None and choice.k > 0):
             raise
@@ -419,7 +411,7 @@ def _fitted(
         choice = _scored_choice(nominal, data, exc, noise=noise, loss=loss, prior=prior)
     if choice.fit is not None and not refine_intrinsics:
         return choice.fit, choice
-    fit = calibrate(nominal, data, parameters=choice.parameters, prior=choice.prior, **options)
+    fit = identify(nominal, data, parameters=choice.parameters, prior=choice.prior, **options)
     return fit, choice
 
 

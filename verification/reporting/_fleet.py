@@ -36,19 +36,10 @@ from kinfw.files import check_output_dir, json_text, write_text_atomic
 from kinfw.identification.checks import ImplausibleCalibrationError
 from kinfw.measurements import Measurements, mounted_robot, read_measurements
 from kinfw.model import Robot, load_robot
-from kinfw.reports import BeforeAfter, ErrorValue, ModelSummary, write_report
+from kinfw.records import BeforeAfter, ErrorValue, ModelSummary, write_report
 from kinfw.verification.evaluation import run_trials
 from kinfw.verification.reporting._calibrate import CalibrationResult, calibrate_and_report
 from kinfw.verification.reporting._report import file_sha256
-
-__all__ = [
-    "FLEET_SUMMARY",
-    "FleetMember",
-    "FleetResult",
-    "FleetRow",
-    "calibrate_fleet",
-    "fleet_members",
-]
 
 #: The summary file in the fleet's folder; each robot's files are in ``NAME/``.
 FLEET_SUMMARY = "summary.json"

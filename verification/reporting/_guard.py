@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 from kinfw.identification.checks import Plausibility
 from kinfw.model import Robot
-from kinfw.reports import BeforeAfter, GuardSummary, RefineSection
+from kinfw.records import BeforeAfter, GuardSummary, RefineSection
 
 #: Changes listed in the error, largest first; the others are counted.
 LISTED = 6

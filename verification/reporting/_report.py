@@ -1,6 +1,6 @@
 """Calibration reports and sidecars built from the pipeline's result, as the typed
-:class:`kinfw.reports.CalibrationReport` and
-:class:`kinfw.reports.CalibrationSidecar` (dictionaries only when written; the
+:class:`kinfw.records.CalibrationReport` and
+:class:`kinfw.records.CalibrationSidecar` (dictionaries only when written; the
 workflow that writes them is :func:`kinfw.verification.reporting.calibrate_and_report`).
 The stages' sections are built by :mod:`kinfw.verification.reporting`, the errors-by-stage
 figure drawn by :mod:`kinfw.verification.reporting`."""
@@ -20,7 +20,7 @@ from kinfw.identification.problem import Unknown
 from kinfw.measurements import Measurements
 from kinfw.model import Robot
 from kinfw.observations import DatasetError, kind_of
-from kinfw.reports import (
+from kinfw.records import (
     BeforeAfter,
     CalibrationReport,
     CalibrationSidecar,
@@ -46,14 +46,6 @@ from kinfw.verification.reporting._sections import (
     noise_summary,
     refine_section,
 )
-
-__all__ = [
-    "before_after_rows",
-    "calibration_report",
-    "errors_by_group",
-    "file_sha256",
-    "sidecar",
-]
 
 
 def file_sha256(path: str | Path) -> str:

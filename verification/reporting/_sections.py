@@ -2,7 +2,7 @@
 closed form (:class:`kinfw.identification.ClosedFormResult`), the hand-eye step
 (:class:`kinfw.identification.handeye.CamerasResult`) and the joint refinement
 (:class:`kinfw.identification.RefineResult`), as the typed sections of
-:mod:`kinfw.reports` (:func:`kinfw.verification.reporting.calibration_report` puts
+:mod:`kinfw.records` (:func:`kinfw.verification.reporting.calibration_report` puts
 them together)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 from kinfw.identification import ClosedFormResult, RefineResult
 from kinfw.identification.handeye import CamerasResult
 from kinfw.observations import kind_named
-from kinfw.reports import (
+from kinfw.records import (
     CalibratedUnknown,
     CameraMount,
     ClosedFormSection,
@@ -29,16 +29,6 @@ from kinfw.reports import (
     RejectedRow,
     TargetEstimate,
 )
-
-__all__ = [
-    "calibrated_unknowns",
-    "closed_form_section",
-    "downweighted_rows",
-    "hand_eye_section",
-    "noise_summary",
-    "refine_section",
-    "rejected_rows",
-]
 
 
 def _kinematic_values(model) -> tuple[KinematicValue, ...]:

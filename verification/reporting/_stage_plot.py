@@ -8,9 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from kinfw.files import atomic_path
-from kinfw.reports import StageErrors
-
-__all__ = ["plot_stage_errors"]
+from kinfw.records import StageErrors
 
 
 def plot_stage_errors(

@@ -24,9 +24,11 @@ from kinfw.verification.studies._common import (
     shared_legend,
     study_parser,
     write_json,
-    write_study,
 )
-from kinfw.verification.studies._crlb_study import CRLBStudy, crlb_study
+from kinfw.verification.studies._crlb_study import (
+    CRLBStudy,
+    crlb_study,
+)
 from kinfw.verification.studies._demo import (
     DEMO_FILES,
     N_STAGE2,
@@ -36,41 +38,40 @@ from kinfw.verification.studies._demo import (
     DemoResult,
     run_demo,
 )
-from kinfw.verification.studies._dh_robots import UR10_DH, UR10_JOINTS, dh_urdf, ur10_urdf
+from kinfw.verification.studies._dh_robots import (
+    UR10_JOINTS,
+    ur10_urdf,
+)
 from kinfw.verification.studies._gaze_metrics import (
     pointing_errors_rad,
     triangulate,
     triangulation_errors_m,
 )
-from kinfw.verification.studies._gaze_plots import plot_gaze
 from kinfw.verification.studies._gaze_study import (
-    ARM_NOISE_DEG,
-    ARM_NOISE_MM,
-    ARM_POSES,
     HEAD_DISTANCE_M,
     GazeSetup,
     GazeStudy,
-    count_noun,
-    format_gaze,
     gaze_study,
     gaze_study_main,
     head_points,
     run_gaze,
 )
 from kinfw.verification.studies._head_experiment import (
-    Experiment,
     ExperimentSetup,
-    check_positive,
-    in_model_order,
-    pipeline_start,
-    position_ms,
-    rms_over,
-    setup_experiment,
-    simulate_experiment,
 )
-from kinfw.verification.studies._head_studies import head_studies_main, run_crlb, run_robustness
-from kinfw.verification.studies._head_study_plots import plot_crlb, plot_robustness
-from kinfw.verification.studies._head_study_tables import format_crlb, format_robustness
+from kinfw.verification.studies._head_studies import (
+    head_studies_main,
+    run_crlb,
+    run_robustness,
+)
+from kinfw.verification.studies._head_study_plots import (
+    plot_crlb,
+    plot_robustness,
+)
+from kinfw.verification.studies._head_study_tables import (
+    format_crlb,
+    format_robustness,
+)
 from kinfw.verification.studies._pixel_study import (
     PixelExperiment,
     arm_experiment,
@@ -82,24 +83,21 @@ from kinfw.verification.studies._pixel_study import (
     rendered_detections,
     target_pose,
 )
-from kinfw.verification.studies._robust import ROBUST_VARIANTS, RobustStudy, robustness_study
+from kinfw.verification.studies._robust import (
+    RobustStudy,
+    robustness_study,
+)
 
 __all__ = [
-    "ARM_NOISE_DEG",
-    "ARM_NOISE_MM",
-    "ARM_POSES",
     "DEMO_FILES",
     "HEAD_DISTANCE_M",
     "NOISE_DEG",
     "NOISE_MM",
     "N_STAGE2",
     "PIXEL_SIGMA",
-    "ROBUST_VARIANTS",
-    "UR10_DH",
     "UR10_JOINTS",
     "CRLBStudy",
     "DemoResult",
-    "Experiment",
     "ExperimentSetup",
     "FieldsJSON",
     "GazeSetup",
@@ -109,14 +107,10 @@ __all__ = [
     "arm_experiment",
     "arrays_from",
     "camera_target_errors",
-    "check_positive",
     "choice_main",
-    "count_noun",
     "crlb_held_out",
     "crlb_study",
-    "dh_urdf",
     "format_crlb",
-    "format_gaze",
     "format_robustness",
     "freeze",
     "gaze_study",
@@ -124,24 +118,19 @@ __all__ = [
     "head_experiment",
     "head_points",
     "head_studies_main",
-    "in_model_order",
     "json_list",
     "json_lists",
     "log_axes",
     "new_figure",
     "output_dir",
-    "pipeline_start",
     "plain_log_ticks",
     "plot_crlb",
-    "plot_gaze",
     "plot_robustness",
     "pointing_errors_rad",
     "pose_errors",
     "pose_path_data",
-    "position_ms",
     "readonly",
     "rendered_detections",
-    "rms_over",
     "robustness_study",
     "run_and_print",
     "run_crlb",
@@ -151,14 +140,11 @@ __all__ = [
     "run_robustness",
     "sample_std",
     "save_figure",
-    "setup_experiment",
     "shared_legend",
-    "simulate_experiment",
     "study_parser",
     "target_pose",
     "triangulate",
     "triangulation_errors_m",
     "ur10_urdf",
     "write_json",
-    "write_study",
 ]

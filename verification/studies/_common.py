@@ -30,28 +30,6 @@ from kinfw.files import atomic_path, write_text_atomic
 from kinfw.model import builtin_head_urdf, load_robot
 from kinfw.verification.evaluation import open_executor
 
-__all__ = [
-    "FieldsJSON",
-    "arrays_from",
-    "choice_main",
-    "freeze",
-    "json_list",
-    "json_lists",
-    "log_axes",
-    "new_figure",
-    "output_dir",
-    "plain_log_ticks",
-    "readonly",
-    "run_and_print",
-    "run_on_head",
-    "sample_std",
-    "save_figure",
-    "shared_legend",
-    "study_parser",
-    "write_json",
-    "write_study",
-]
-
 R = TypeVar("R")
 
 

@@ -45,8 +45,6 @@ from kinfw.verification.studies._head_experiment import (
     simulate_experiment,
 )
 
-__all__ = ["CRLBStudy", "crlb_study"]
-
 log = logging.getLogger(__name__)
 
 _BAND_TAG = 9  # seeds (kinfw.verification.studies's docstring)

@@ -32,7 +32,7 @@ from kinfw.identification.checks import ChangeBound
 from kinfw.measurements import concatenate_measurements, write_measurements
 from kinfw.model import BlockKey, Robot, builtin_head_urdf, load_robot
 from kinfw.observations import TargetObservations
-from kinfw.reports import CalibrationReport, ReprojectionSection, StageErrors, write_report
+from kinfw.records import CalibrationReport, ReprojectionSection, StageErrors, write_report
 from kinfw.simulation import (
     DEFAULT_BOARD,
     default_intrinsics,
@@ -41,7 +41,7 @@ from kinfw.simulation import (
     perturb_robot,
     pixel_views,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.verification.evaluation import reprojection_section
 from kinfw.verification.reporting import (
@@ -50,8 +50,6 @@ from kinfw.verification.reporting import (
     errors_by_group,
     plot_stage_errors,
 )
-
-__all__ = ["DEMO_FILES", "NOISE_DEG", "NOISE_MM", "PIXEL_SIGMA", "DemoResult", "run_demo"]
 
 #: What :func:`run_demo` writes into its output directory.
 DEMO_FILES = (
@@ -204,7 +202,7 @@ def _training_data(truth, names, plates, cameras, qs1, lower, upper, rng, noise,
     Returns the dataset, the target's pose ``w_T_target`` (4, 4) and its name.
     """
     if views is not None:
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage1 = simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise)
         stage2, w_T_target = pixel_views(
             truth, names, lower, upper, N_STAGE2, rng, sigma_px=PIXEL_SIGMA, **views
         )
@@ -212,8 +210,8 @@ def _training_data(truth, names, plates, cameras, qs1, lower, upper, rng, noise,
     else:  # (this order of the draws reproduces the README's numbers)
         qs2 = random_configurations(lower, upper, N_STAGE2, rng, fraction=0.8)
         w_T_target = default_target_pose(truth, qs2, names, cameras)
-        stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
-        stage2 = simulate(
+        stage1 = simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise)
+        stage2 = simulate_at(
             truth, qs2, names, cameras=cameras, rng=rng, w_T_target=w_T_target, **noise
         )
         target = "target"
@@ -269,7 +267,7 @@ def _held_out(truth, qs, names, plates, cameras, target, w_T_target, rng, noise)
         )
         for c in cameras
     ]
-    return simulate(
+    return simulate_at(
         truth,
         qs,
         names,

@@ -9,8 +9,6 @@ from collections.abc import Sequence
 
 from kinfw.urdf import UR_JOINTS
 
-__all__ = ["UR10_DH", "UR10_JOINTS", "dh_urdf", "ur10_urdf"]
-
 #: Universal Robots' DH parameters of the UR10 (standard DH), per joint:
 #: ``(d, a, alpha)`` in m, m, rad ("DH parameters for calculations of kinematics and
 #: dynamics", Universal Robots support article).

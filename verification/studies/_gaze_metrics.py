@@ -10,8 +10,6 @@ from numpy.typing import ArrayLike, NDArray
 from kinfw.control import camera_points
 from kinfw.geometry import angle_between
 
-__all__ = ["pointing_errors_rad", "triangulate", "triangulation_errors_m"]
-
 
 def triangulate(root_p_origins: ArrayLike, root_directions: ArrayLike) -> NDArray[np.float64]:
     """Midpoint of the common perpendicular of two lines.

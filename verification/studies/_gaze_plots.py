@@ -14,8 +14,6 @@ from kinfw.verification.studies._common import new_figure, save_figure, shared_l
 if TYPE_CHECKING:
     from kinfw.verification.studies._gaze_study import GazeStudy
 
-__all__ = ["plot_gaze"]
-
 #: Line colour per model, line style per camera.
 COLOURS = {"nominal": "tab:red", "calibrated": "tab:blue"}
 STYLES = ("-", "--")

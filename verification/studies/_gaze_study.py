@@ -30,7 +30,7 @@ Arm (a UR10 from Universal Robots' published DH parameters,
 :func:`kinfw.verification.studies.ur10_urdf`). Each trial perturbs it as the demo does
 (5 mm / 1 deg), simulates :data:`ARM_POSES` poses of ``tool0`` in random configurations
 (central 80 % of the ranges) with 0.5 mm / 0.5 deg noise
-(:func:`kinfw.simulation.simulate`), calibrates (``method="refine"``), then reaches
+(:func:`kinfw.simulation.simulate_at`), calibrates (``method="refine"``), then reaches
 held-out ``tool0`` poses of the true arm (:func:`kinfw.control.reach`, starting
 0.1 rad from the configuration that made the pose) with each model; the
 errors are those of the true arm at the commanded ``q``.
@@ -62,21 +62,6 @@ from kinfw.verification.studies._common import (
 )
 from kinfw.verification.studies._dh_robots import ur10_urdf
 from kinfw.verification.studies._gaze_metrics import pointing_errors_rad, triangulation_errors_m
-
-__all__ = [
-    "ARM_NOISE_DEG",
-    "ARM_NOISE_MM",
-    "ARM_POSES",
-    "HEAD_DISTANCE_M",
-    "GazeSetup",
-    "GazeStudy",
-    "count_noun",
-    "format_gaze",
-    "gaze_study",
-    "gaze_study_main",
-    "head_points",
-    "run_gaze",
-]
 
 #: Distance of the held-out points from the cameras' midpoint (m).
 HEAD_DISTANCE_M = (0.5, 3.0)
@@ -273,8 +258,8 @@ def _head_trial(demo_seed: int, n_points: int, point_seed: int) -> dict[str, NDA
 def _arm_trial(seed: int, n_targets: int) -> dict[str, NDArray]:
     """One arm trial (module docstring): the arm arrays of :class:`GazeStudy`."""
     from kinfw.control import reach
-    from kinfw.identification import calibrate
-    from kinfw.simulation import perturb_robot, random_configurations, simulate
+    from kinfw.identification import identify
+    from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 
     rng = np.random.default_rng(seed)
     nominal = Robot(ur10_urdf(), "<ur10>")
@@ -282,8 +267,8 @@ def _arm_trial(seed: int, n_targets: int) -> dict[str, NDArray]:
     lower, upper = nominal.joint_limits()
     qs = random_configurations(lower, upper, ARM_POSES, rng, fraction=0.8)
     noise = {"noise_m": ARM_NOISE_MM * 1e-3, "noise_rad": math.radians(ARM_NOISE_DEG)}
-    data = simulate(truth, qs, None, frames=("tool0",), rng=rng, **noise)
-    calibrated = Robot(calibrate(nominal, data, method="refine").urdf_xml, "<calibrated ur10>")
+    data = simulate_at(truth, qs, None, frames=("tool0",), rng=rng, **noise)
+    calibrated = Robot(identify(nominal, data, method="refine").urdf_xml, "<calibrated ur10>")
     q_targets = random_configurations(lower, upper, n_targets, rng, fraction=0.8)
     root_T_targets = truth.frame_poses(q_targets, "tool0")
     q_starts = q_targets + rng.normal(0.0, 0.1, size=q_targets.shape)

@@ -8,7 +8,7 @@ nominal URDF with 5 mm / 1 deg errors, :func:`kinfw.simulation.perturb_robot`),
 simulates the data with the noise of Shih et al.'s Fig. 10 (each position component
 ``N(0, sigma)``; the orientation turned about a uniformly random axis by an angle
 ``N(0, sigma_rad)``) and starts from the pipeline (closed form + hand-eye,
-:func:`kinfw.identification.calibrate`); the studies then refine everything jointly
+:func:`kinfw.identification.identify`); the studies then refine everything jointly
 (:func:`kinfw.identification.refine`): :func:`crlb_study` against the Cramér-Rao bound
 (:func:`~kinfw.verification.evaluation.cramer_rao`), :func:`robustness_study` with planted
 outliers.
@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import Measurements, concatenate_measurements
 from kinfw.model import CPCModel, Robot, load_robot
@@ -52,22 +52,10 @@ from kinfw.simulation import (
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.verification.evaluation import check_count
 from kinfw.verification.studies._common import FieldsJSON
-
-__all__ = [
-    "Experiment",
-    "ExperimentSetup",
-    "check_positive",
-    "in_model_order",
-    "pipeline_start",
-    "position_ms",
-    "rms_over",
-    "setup_experiment",
-    "simulate_experiment",
-]
 
 _EXPERIMENT_TAG = 7  # seeds (module docstring)
 
@@ -217,8 +205,10 @@ def simulate_experiment(nominal: Robot, setup: ExperimentSetup, trial: int) -> E
     w_T_target = default_target_pose(truth, qs2, names, setup.cameras)
     noise = {"noise_m": 1e-3 * setup.sigma_mm, "noise_rad": float(np.radians(setup.sigma_deg))}
     data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=setup.plates, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target, **noise),
+        simulate_at(truth, qs1, names, frames=setup.plates, rng=rng, **noise),
+        simulate_at(
+            truth, qs2, names, cameras=setup.cameras, rng=rng, w_T_target=w_T_target, **noise
+        ),
     )
     test_qs = random_configurations(lower, upper, setup.n_test, rng, fraction=setup.fraction)
     targets = {name: w_T_target for name in dict.fromkeys(g.target for g in data.targets)}
@@ -229,7 +219,7 @@ def pipeline_start(
     nominal: Robot, data: Measurements
 ) -> tuple[Robot, dict[str, NDArray[np.float64]]]:
     """Closed form + hand-eye: the start URDF and target poses ``refine`` begins from."""
-    cal = calibrate(nominal, data, method="closed-form")
+    cal = identify(nominal, data, method="closed-form")
     targets = {} if cal.cameras is None else dict(cal.cameras.root_T_targets)
     return Robot(cal.urdf_xml, nominal.source), targets
 

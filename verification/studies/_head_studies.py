@@ -18,8 +18,6 @@ from kinfw.verification.studies._head_study_plots import plot_crlb, plot_robustn
 from kinfw.verification.studies._head_study_tables import format_crlb, format_robustness
 from kinfw.verification.studies._robust import RobustStudy, robustness_study
 
-__all__ = ["head_studies_main", "run_crlb", "run_robustness"]
-
 
 def run_crlb(out_dir: str | Path, *, urdf: str | Path | None = None, **kwargs: Any) -> CRLBStudy:
     """Run :func:`kinfw.verification.studies.crlb_study` (on the built-in IIS-head unless

@@ -12,8 +12,6 @@ from kinfw.verification.studies._crlb_study import CRLBStudy
 from kinfw.verification.studies._head_experiment import rms_over
 from kinfw.verification.studies._robust import RobustStudy
 
-__all__ = ["plot_crlb", "plot_robustness"]
-
 
 def plot_crlb(study: CRLBStudy, path: str | Path) -> Path:
     """Write the CRLB study as a PNG: error vs bound, ratio per trial, coverage.

@@ -15,8 +15,6 @@ from kinfw.verification.studies._crlb_study import CRLBStudy
 from kinfw.verification.studies._head_experiment import rms_over
 from kinfw.verification.studies._robust import RobustStudy
 
-__all__ = ["format_crlb", "format_robustness"]
-
 
 def format_crlb(study: CRLBStudy) -> str:
     """Markdown tables of the CRLB study: errors per frame, coverage, noise (mm, deg)."""

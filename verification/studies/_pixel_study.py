@@ -4,7 +4,7 @@ One trial (:func:`pixel_trial`): a true robot (the nominal with random geometric
 a fixed chessboard, cameras on the robot that see it at random configurations
 (:func:`kinfw.simulation.pixel_views`; the exact projection plus Gaussian pixel
 noise, or with ``images=True`` rendered images and ``kinfw.camera``'s corners), and the
-calibration of the same detections two ways (:func:`kinfw.identification.calibrate`,
+calibration of the same detections two ways (:func:`kinfw.identification.identify`,
 linear loss, noise estimated):
 
 - ``pixels``: the joint refinement on reprojection error (``pixels`` observations);
@@ -42,20 +42,8 @@ from kinfw.simulation import (
     perturb_robot,
     pixel_views,
     random_configurations,
-    simulate,
+    simulate_at,
 )
-
-__all__ = [
-    "PixelExperiment",
-    "arm_experiment",
-    "camera_target_errors",
-    "crlb_held_out",
-    "head_experiment",
-    "pose_errors",
-    "pose_path_data",
-    "rendered_detections",
-    "target_pose",
-]
 
 
 @dataclass(frozen=True)
@@ -109,7 +97,7 @@ def head_experiment(
     lower, upper = nominal.joint_limits(names)
     noise = {"noise_m": noise_mm * 1e-3, "noise_rad": np.radians(noise_deg)}
     qs1, _ = one_joint_at_a_time(lower, upper, per_joint=9, fraction=0.8)
-    stage1 = simulate(truth, qs1, names, frames=plates, rng=rng, **noise)
+    stage1 = simulate_at(truth, qs1, names, frames=plates, rng=rng, **noise)
     intrinsics = {c: default_intrinsics(c) for c in cameras}
     stage2, w_T_board = pixel_views(
         truth,

@@ -41,12 +41,6 @@ from kinfw.verification.studies._head_experiment import (
     simulate_experiment,
 )
 
-__all__ = [
-    "ROBUST_VARIANTS",
-    "RobustStudy",
-    "robustness_study",
-]
-
 log = logging.getLogger(__name__)
 
 _OUTLIER_TAG = 8  # seeds (kinfw.verification.studies's docstring)

@@ -8,11 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinfw.identification import calibrate, refine
+from kinfw.identification import identify, refine
 from kinfw.identification.checks import UnitError, fit_warnings, residual_structure, stated_noise
 from kinfw.identification.problem import NoiseModel
 from kinfw.model import load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from tests.robots import ARM_6R
 
 
@@ -27,7 +27,7 @@ def _arm_data(frame_seen, label, n=80, seed=3, noise_m=1e-4, noise_rad=1e-3, fla
     names = nominal.joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         truth, qs, names, frames=(frame_seen,), rng=rng, noise_m=noise_m, noise_rad=noise_rad
     )
     data = replace(data, poses=tuple(replace(g, frame=label) for g in data.poses))
@@ -57,10 +57,10 @@ def test_the_pipeline_refuses_or_warns_with_the_cause():
     and the same cause is a warning."""
     nominal, data = _arm_data("flange", "l6")
     with pytest.raises(UnitError, match=r"position residuals of pose 'l6'.*joint 'j6'"):
-        calibrate(nominal, data, noise=NoiseModel(1e-4, 1e-3))
+        identify(nominal, data, noise=NoiseModel(1e-4, 1e-3))
     nominal, data = _arm_data("flange", "l6", flange_z=0.005)
     with pytest.warns(UserWarning, match=r"residuals of pose 'l6'.*follow the robot.s motion"):
-        calibrate(nominal, data)
+        identify(nominal, data)
 
 
 def test_clean_data_gives_no_warning():
@@ -72,7 +72,7 @@ def test_clean_data_gives_no_warning():
     assert fit_warnings(result, data) == ()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        calibrate(nominal, data)
+        identify(nominal, data)
 
 
 def test_a_dropped_joint_column_is_named_when_the_noise_it_makes_is_implausible():

@@ -9,7 +9,7 @@ import pytest
 
 from kinfw.identification.checks import SCALE_FLOOR, target_scale
 from kinfw.model import load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from tests.robots import ARM_6R
 
 #: The ChArUco square the images were detected with, and the board's true one (m).
@@ -26,7 +26,7 @@ def eye_in_hand():
     truth = load_robot(perturb_robot(nominal, rng, origin_mm=2.0, origin_deg=0.5))
     names = nominal.joint_names
     qs = random_configurations(*nominal.joint_limits(names), 30, rng, fraction=0.8)
-    data = simulate(truth, qs, names, cameras=("flange",), rng=rng, noise_m=2e-4, noise_rad=2e-3)
+    data = simulate_at(truth, qs, names, cameras=("flange",), rng=rng, noise_m=2e-4, noise_rad=2e-3)
     (group,) = data.groups("target")
     T = group.camera_T_target.copy()
     T[:, :3, 3] *= GIVEN / TRUE

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from kinfw.cli._main import main
-from kinfw.identification import JointScaleError, calibrate, refine
+from kinfw.identification import JointScaleError, identify, refine
 from kinfw.identification.checks import (
     InsufficientDataError,
     UnitError,
@@ -31,7 +31,7 @@ from kinfw.simulation import (
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from tests.paths import HEAD_URDF as HEAD
 from tests.robots import ARM_6R
@@ -58,7 +58,7 @@ def _dataset(name: str, seed: int = 0):
     else:
         qs = random_configurations(lower, upper, 30, rng, fraction=0.8)
     if cameras:
-        return nominal, simulate(
+        return nominal, simulate_at(
             truth,
             qs,
             names,
@@ -67,7 +67,7 @@ def _dataset(name: str, seed: int = 0):
             w_T_target=default_target_pose(truth, qs, names, cameras),
             **NOISE,
         )
-    return nominal, simulate(truth, qs, names, frames=frames, rng=rng, **NOISE)
+    return nominal, simulate_at(truth, qs, names, frames=frames, rng=rng, **NOISE)
 
 
 def _in_units(
@@ -139,7 +139,7 @@ def test_a_unit_mistake_is_refused_by_every_method(setup, mistake, message, meth
     nominal, data = datasets[setup]
     wrong = _in_units(nominal, data, **mistake)
     with pytest.raises(UnitError, match=r"^data\.json: .*" + message) as info:
-        calibrate(nominal, wrong, method=method)
+        identify(nominal, wrong, method=method)
     assert isinstance(info.value, DatasetError)  # the CLI maps it to exit 2
     assert "declare" in str(info.value).lower() and "convert" in str(info.value)
 
@@ -159,7 +159,7 @@ def test_the_same_data_in_declared_units_passes_and_reads_back_the_same(setup, d
 @pytest.mark.parametrize("setup", ["head-one-at-a-time", "head-targets", "arm-random"])
 def test_good_data_calibrates_with_the_default_pipeline(setup, datasets):
     nominal, data = datasets[setup]
-    result = calibrate(nominal, data)
+    result = identify(nominal, data)
     assert result.refined is not None and result.urdf_xml
 
 
@@ -198,7 +198,7 @@ def test_one_joint_in_degrees_is_named_alone(datasets):
         match=r"joint\(s\) \['j2'\] look like degrees read as "
         r"radians .*multiplied by 0\.01745",
     ):
-        calibrate(nominal, wrong)
+        identify(nominal, wrong)
 
 
 def _scaled_joint(data, joint, factor):
@@ -217,7 +217,7 @@ def test_a_gear_ratio_seen_by_the_closed_form_is_refused_by_refine_too(datasets)
         pytest.raises(JointScaleError, match=r"joint 'pan' turns 0\.(49|50)\d* rad per unit"),
         pytest.warns(UserWarning, match=r"joint 'pan' is outside its URDF limits"),
     ):
-        calibrate(nominal, _scaled_joint(data, "pan", 2.0), method="refine")
+        identify(nominal, _scaled_joint(data, "pan", 2.0), method="refine")
 
 
 def test_values_far_outside_the_limits_with_unexplained_motion_are_refused(datasets):
@@ -230,7 +230,7 @@ def test_values_far_outside_the_limits_with_unexplained_motion_are_refused(datas
         match=r"joint 'tilt' values \d+(\.\d+)?\.\.\d{3}(\.\d+)? \(URDF "
         r"limits 0\.\.1\.047 rad\): far outside",
     ):
-        calibrate(nominal, wrong)  # ... but the limits do
+        identify(nominal, wrong)  # ... but the limits do
 
 
 def test_three_stage_2_samples_are_refused_with_the_parameter_count():
@@ -238,7 +238,7 @@ def test_three_stage_2_samples_are_refused_with_the_parameter_count():
     rng = np.random.default_rng(1)
     names = nominal.topology(CAMERAS).joint_names
     qs = random_configurations(*nominal.joint_limits(names), 3, rng, fraction=0.8)
-    data = simulate(nominal, qs, names, cameras=CAMERAS, rng=rng, **NOISE)
+    data = simulate_at(nominal, qs, names, cameras=CAMERAS, rng=rng, **NOISE)
     # from first principles (Shih et al.; DESIGN.md): 4 per revolute joint, 2 per
     # prismatic joint, 6 per camera mount, 6 for the target pose; 6 rows per observation
     n_params = 4 * 4 + 2 * 2 + 6 * 2 + 6
@@ -250,7 +250,7 @@ def test_three_stage_2_samples_are_refused_with_the_parameter_count():
         rf"'left_camera' mount \(6\).*target 'target' pose \(6\)\); "
         rf"{n_params + 20} rows are needed",
     ):
-        calibrate(nominal, data)
+        identify(nominal, data)
     # a given noise needs rows >= parameters only; "frames" (2 mounts + target) would do
     sigma = NoiseModel(0.5e-3, math.radians(0.5))
     with pytest.raises(
@@ -258,8 +258,8 @@ def test_three_stage_2_samples_are_refused_with_the_parameter_count():
         match=rf"{n_params} rows are needed.*--params "
         r"frames \(18 parameters\) is determined",
     ):
-        calibrate(nominal, data, noise=sigma)
-    result = calibrate(nominal, data, noise=sigma, parameters="frames")
+        identify(nominal, data, noise=sigma)
+    result = identify(nominal, data, noise=sigma, parameters="frames")
     assert result.refined.identifiability.n_parameters == 18
 
 
@@ -278,7 +278,7 @@ def test_a_fit_that_leaves_centimetres_is_refused():
     nominal, data = _dataset("arm-random")
     rng = np.random.default_rng(4)
     other = load_robot(perturb_robot(nominal, rng, origin_mm=150.0, origin_deg=40.0, axis_deg=40.0))
-    foreign = simulate(
+    foreign = simulate_at(
         other, rng.permuted(data.qs, axis=0), data.joint_names, frames=("flange",), rng=rng, **NOISE
     )
     bad = replace(data, poses=foreign.poses, source="data.json")
@@ -289,7 +289,7 @@ def test_a_fit_that_leaves_centimetres_is_refused():
     ):
         check_fit(refine(nominal, bad), bad.source)
     with pytest.raises(DatasetError):
-        calibrate(nominal, bad)
+        identify(nominal, bad)
 
 
 def test_the_cli_exits_2_and_writes_nothing(tmp_path, capsys, datasets):

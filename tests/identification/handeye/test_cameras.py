@@ -5,7 +5,7 @@ import warnings
 import numpy as np
 import pytest
 
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.handeye import calibrate_cameras, camera_mount
 from kinfw.measurements import concatenate_measurements
 from kinfw.model import load_robot
@@ -15,7 +15,7 @@ from kinfw.simulation import (
     one_joint_at_a_time,
     perturb_robot,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.urdf import edit_urdf
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
@@ -57,7 +57,7 @@ def test_a_camera_on_an_arm_with_trusted_kinematics_gives_its_mount_and_the_targ
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, 12, rng, fraction=0.5)
     w_T_target = default_target_pose(truth, qs, names, ("camera",))
-    data = simulate(truth, qs, names, cameras=("camera",), rng=rng, w_T_target=w_T_target)
+    data = simulate_at(truth, qs, names, cameras=("camera",), rng=rng, w_T_target=w_T_target)
     result = calibrate_cameras(nominal, data)
     (cam,) = result.cameras
     assert (cam.joint, cam.hand) == ("camera_joint", "flange")
@@ -77,10 +77,10 @@ def test_both_stages_give_the_true_cameras_through_the_urdf():
     qs2 = random_configurations(lower, upper, 15, rng, fraction=0.8)
     w_T_target = default_target_pose(truth, qs2, names, CAMERAS)
     data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=plates, rng=rng),
-        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target),
+        simulate_at(truth, qs1, names, frames=plates, rng=rng),
+        simulate_at(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target),
     )
-    result = calibrate(nominal, data)
+    result = identify(nominal, data)
     calibrated = load_robot(result.urdf_xml)
     qs = random_joint_values(nominal, names, 100, np.random.default_rng(2))
     for frame in (*plates, *CAMERAS):
@@ -95,7 +95,7 @@ def test_both_stages_give_the_true_cameras_through_the_urdf():
 
 def test_nothing_to_calibrate_is_explained():
     nominal = load_robot(ARM_WITH_CAMERA)
-    data = simulate(
+    data = simulate_at(
         nominal,
         np.zeros((3, 3)),
         nominal.joint_names,
@@ -103,9 +103,9 @@ def test_nothing_to_calibrate_is_explained():
         rng=np.random.default_rng(0),
     )
     with pytest.raises(DatasetError, match="nothing to calibrate"):
-        calibrate(nominal, data, method="closed-form")
+        identify(nominal, data, method="closed-form")
     with pytest.raises(DatasetError, match="joint 'j1' moves through 1 distinct value"):
-        calibrate(nominal, data)
+        identify(nominal, data)
 
 
 def test_a_camera_without_a_fixed_mount_is_refused():
@@ -129,7 +129,7 @@ def test_a_hand_eye_the_motions_barely_determine_is_warned_with_its_sigma():
         rng = np.random.default_rng(seed)
         qs = random_configurations(lower, upper, 10, rng, fraction=fraction)
         w_T_target = default_target_pose(nominal, qs, names, ("camera",))
-        data = simulate(
+        data = simulate_at(
             nominal,
             qs,
             names,

@@ -25,7 +25,7 @@ from kinfw.identification.planning import (
 from kinfw.identification.problem import NoiseModel
 from kinfw.measurements import read_measurements
 from kinfw.model import load_robot
-from kinfw.simulation import random_configurations, simulate
+from kinfw.simulation import random_configurations, simulate_at
 from tests.paths import HEAD_URDF
 
 # one prismatic joint along z of a tilted frame: the measured frame's origin moves on a
@@ -82,7 +82,7 @@ def test_predicted_equals_empirical_held_out_error(prismatic):
     ms = []
     for seed in range(20):
         rng = np.random.default_rng(seed)
-        data = simulate(
+        data = simulate_at(
             robot, plan.qs, ("j1",), frames=("l1",), rng=rng, noise_m=SIGMA_M, noise_rad=0.0
         )
         result = refine(robot, data, noise=NoiseModel(SIGMA_M, setup.noise_rad), reject=None)

@@ -25,7 +25,7 @@ from kinfw.identification.problem import (
 from kinfw.identification.problem._problem import chunks
 from kinfw.model import load_robot
 from kinfw.progress import reporting, task
-from kinfw.simulation import random_configurations, simulate
+from kinfw.simulation import random_configurations, simulate_at
 from tests.recorder import Recorder
 from tests.robots import ARM_6R
 
@@ -36,8 +36,8 @@ def _arm_problem(n: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     names = arm.topology(("flange",)).joint_names
     qs = random_configurations(*arm.joint_limits(names), n, rng, fraction=0.8)
-    poses = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
-    points = simulate(arm, qs, names, markers=[("flange", [0.02, -0.01, 0.05])], rng=rng)
+    poses = simulate_at(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    points = simulate_at(arm, qs, names, markers=[("flange", [0.02, -0.01, 0.05])], rng=rng)
     data = poses.with_groups([*poses.all_groups(), *points.all_groups()])
     return build_problem(arm, data), rng
 
@@ -286,7 +286,7 @@ def test_covariance_by_blocks_equals_the_dense_pseudo_inverse(redundant):
     arm = load_robot(ARM_6R)
     names = arm.topology(("flange",)).joint_names
     qs = random_configurations(*arm.joint_limits(names), 2_000, rng, fraction=0.8)
-    data = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    data = simulate_at(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
     x = rng.normal(scale=1e-2, size=problem.n_parameters)
     _, J = problem.evaluate(x, NoiseModel(1e-3, 1e-3), True)
     free = problem.free
@@ -321,7 +321,7 @@ def test_problem_normal_equations_equal_the_whitened_jacobians_products():
     rng = np.random.default_rng(11)
     names = arm.topology(("flange",)).joint_names
     qs = random_configurations(*arm.joint_limits(names), 1_500, rng, fraction=0.8)
-    data = simulate(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
+    data = simulate_at(arm, qs, names, frames=["flange"], rng=rng, noise_m=1e-3, noise_rad=1e-3)
     problem = build_problem(arm, data, prior=(1e-3, 1e-3))
     assert len(problem.prior_rows)
     noise = NoiseModel(1e-3, 2e-3)
@@ -368,7 +368,7 @@ def test_the_first_calibration_of_many_samples_says_it_compiles_and_the_next_doe
     empty cache: the piped lines say each compilation, even inside the Levenberg-Marquardt
     loop; the same calibration again (a new process: nothing loaded) compiles nothing, and
     both estimates are the virtual machine's to the last bit."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.identification.problem import clear_function_cache
     from kinfw.progress import LineReporter
     from tests.robots import PLANAR_2R
@@ -379,7 +379,7 @@ def test_the_first_calibration_of_many_samples_says_it_compiles_and_the_next_doe
     rng = np.random.default_rng(4)
     names = nominal.topology(("tool",)).joint_names
     qs = random_configurations(*nominal.joint_limits(names), 256, rng, fraction=0.8)
-    data = simulate(nominal, qs, names, frames=["tool"], rng=rng, noise_m=1e-4, noise_rad=1e-3)
+    data = simulate_at(nominal, qs, names, frames=["tool"], rng=rng, noise_m=1e-4, noise_rad=1e-3)
     assert len(data.poses[0].sample) >= compiled_module.COMPILE_SAMPLES
     monkeypatch.setenv("KINFW_CACHE_DIR", str(tmp_path))
 
@@ -388,7 +388,7 @@ def test_the_first_calibration_of_many_samples_says_it_compiles_and_the_next_doe
         monkeypatch.setattr(compiled_module, "_LOADED", {})
         out = io.StringIO()
         with reporting(LineReporter(out)):
-            fit = calibrate(nominal, data, parameters="full").refined
+            fit = identify(nominal, data, parameters="full").refined
         return [line.split(" s  ", 1)[1] for line in out.getvalue().splitlines()], fit.estimate
 
     first, compiled_estimate = run()

@@ -13,7 +13,7 @@ from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements
 from kinfw.model import geometry_from_cpc, load_robot
 from kinfw.observations import DatasetError
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import random_joint_values
 from tests.paths import HEAD_URDF
@@ -49,7 +49,7 @@ def _one_marker(robot, frame, names, n, seed=1, noise_m=0.0, qs=None):
     rng = np.random.default_rng(seed)
     if qs is None:
         qs = random_configurations(*robot.joint_limits(names), n, rng, fraction=0.7)
-    data = simulate(robot, qs, names, markers=[(frame, OFFSET, "m1")], rng=rng, noise_m=noise_m)
+    data = simulate_at(robot, qs, names, markers=[(frame, OFFSET, "m1")], rng=rng, noise_m=noise_m)
     return _in_mocap(data)
 
 
@@ -104,7 +104,7 @@ def test_a_marker_in_a_second_unknown_frame_beside_root_poses():
     nominal, truth, frame, names = _robots("arm")
     rng = np.random.default_rng(3)
     qs = random_configurations(*truth.joint_limits(names), 40, rng, fraction=0.7)
-    poses = simulate(truth, qs, names, frames=(frame,), rng=rng)
+    poses = simulate_at(truth, qs, names, frames=(frame,), rng=rng)
     marker = _one_marker(truth, frame, names, 40, qs=qs)
     data = Measurements(names, qs, poses=poses.poses, points=marker.points)
     result = refine(nominal, data, noise=SIGMA)
@@ -122,7 +122,7 @@ def test_a_camera_marker_pose_in_an_unknown_frame():
     flange_T_cam = np.eye(4)
     flange_T_cam[:3, :3] = matrix_from_rotation_vector([0.1, 1.2, -0.4])
     flange_T_cam[:3, 3] = [0.03, -0.06, 0.08]
-    (g,) = simulate(truth, qs, names, frames=(frame,), rng=rng).poses
+    (g,) = simulate_at(truth, qs, names, frames=(frame,), rng=rng).poses
     g = replace(g, meas_T_frame=MOCAP_T_ROOT @ g.meas_T_frame @ flange_T_cam)
     data = Measurements(names, qs, poses=(replace(g, marker="cam", measured_in="mocap"),))
     result = refine(nominal, data, noise=SIGMA)

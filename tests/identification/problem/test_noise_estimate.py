@@ -16,7 +16,7 @@ from kinfw.simulation import (
     perturb_robot,
     plant_outliers,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from tests.paths import HEAD_URDF as HEAD
 
@@ -35,7 +35,7 @@ def _head_data(seed, n=120):
     names = nominal.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = nominal.joint_limits(names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,

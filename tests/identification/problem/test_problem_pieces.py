@@ -10,7 +10,7 @@ from kinfw.geometry import matrix_from_rotation_vector, transform_from_rotation_
 from kinfw.identification.problem import NoiseModel, build_problem, estimate_noise
 from kinfw.model import BlockKey, PointBlock, RigidFrameBlock, load_robot
 from kinfw.observations import NoiseComponent, PoseKind, kinds, register_kind
-from kinfw.simulation import default_target_pose, random_configurations, simulate
+from kinfw.simulation import default_target_pose, random_configurations, simulate_at
 from tests.paths import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")
@@ -22,7 +22,7 @@ def test_block_units_agree_with_the_unit_of_each_name_and_joint_type():
     rng = np.random.default_rng(0)
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     qs = random_configurations(*head.joint_limits(names), 8, rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         head,
         qs,
         names,
@@ -49,7 +49,7 @@ def test_the_robot_blocks_casadi_hooks_and_their_numeric_fold_predict_alike():
     rng = np.random.default_rng(3)
     names = head.topology(PLATES).joint_names
     qs = random_configurations(*head.joint_limits(names), 6, rng, fraction=0.8)
-    data = simulate(head, qs, names, frames=PLATES, rng=rng)
+    data = simulate_at(head, qs, names, frames=PLATES, rng=rng)
     problem = build_problem(head, data, parameters="offsets")
     x = rng.normal(scale=0.02, size=problem.n_parameters)
     for key in (BlockKey("base"), BlockKey("zero_offset")):

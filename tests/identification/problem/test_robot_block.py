@@ -16,7 +16,7 @@ import pytest
 from kinfw.identification import refine
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.model import CPC_KEY, BlockKey, CPCModel, ParameterName, RobotBlock, load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import pose_discrepancy, random_joint_values
 from kinfw.verification.reporting import refine_section
 from tests.paths import HEAD_URDF as HEAD
@@ -76,7 +76,7 @@ def geared():
     j = names.index(JOINT)
     q_true = q_read.copy()
     q_true[:, j] *= 1.0 + S_TRUE
-    data = simulate(truth, q_true, names, frames=PLATES, rng=rng)
+    data = simulate_at(truth, q_true, names, frames=PLATES, rng=rng)
     return nominal, truth, replace(data, qs=q_read), names, j
 
 

@@ -14,7 +14,7 @@ from kinfw.camera import CameraIntrinsics, Chessboard
 from kinfw.cli._main import main
 from kinfw.geometry import inverse_transform, transform_from_rotation_translation
 from kinfw.model import load_robot
-from kinfw.reports import read_sidecar
+from kinfw.records import read_sidecar
 from kinfw.simulation import perturb_robot, render_board
 from kinfw.verification.evaluation import pose_discrepancy
 from tests.board_views import board_in_view

@@ -80,7 +80,7 @@ def test_refined_intrinsics_predict_held_out_real_images_better(chain, capsys):
     with the nominal intrinsics (measured 2.36 vs 3.40 px, RMS of the error norm)."""
     import numpy as np
 
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.measurements import read_measurements
     from kinfw.model import load_robot
     from kinfw.verification.evaluation import fitted_unknowns, held_out_errors
@@ -94,7 +94,7 @@ def test_refined_intrinsics_predict_held_out_real_images_better(chain, capsys):
         train = data.subset(np.setdiff1d(np.arange(data.n_samples), test_ids))
         test = data.subset(np.sort(test_ids))
         for refined in errors:
-            fit = calibrate(nominal, train, parameters="frames", refine_intrinsics=refined)
+            fit = identify(nominal, train, parameters="frames", refine_intrinsics=refined)
             held = held_out_errors(nominal, fit.urdf_xml, fitted_unknowns(fit), test)
             errors[refined] += [np.ravel(g.of("pixel").shown()) for g in held.groups]
     rms = {k: float(np.sqrt(np.mean(np.square(np.concatenate(v))))) for k, v in errors.items()}

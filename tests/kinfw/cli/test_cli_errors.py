@@ -204,8 +204,8 @@ def test_bad_output_fails_before_any_work_and_changes_no_file(
     import kinfw.identification._pipeline
     import kinfw.simulation._simulate
 
-    monkeypatch.setattr(kinfw.identification._pipeline, "calibrate", _no_solving)
-    monkeypatch.setattr(kinfw.simulation._simulate, "simulate", _no_solving)
+    monkeypatch.setattr(kinfw.identification._pipeline, "identify", _no_solving)
+    monkeypatch.setattr(kinfw.simulation._simulate, "simulate_at", _no_solving)
     before = _snapshot(workdir)
     code, out, err = _run(argv, capsys)
     assert code == 2

@@ -11,7 +11,7 @@ import shutil
 import pytest
 
 from kinfw.cli._main import main
-from kinfw.reports import read_report, read_sidecar
+from kinfw.records import read_report, read_sidecar
 from tests.cli_run import run_cli, without_dirs
 from tests.erd import urdf_path
 from tests.paths import DATA, HEAD_URDF

@@ -75,7 +75,7 @@ def test_bag_to_measurements_to_calibration_recovers_offset_and_arm(
     the file (every third sample), the marker's pose at 40 new configurations within
     0.2 mm and 0.3 mrad of the truth's (measured: 0.09 mm, 0.11 mrad; with offset 0,
     33 mm and 98 mrad) (perturb_robot: origins 2 mm and 0.5 deg off, axes 0.5 deg)."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.identification.problem import Unknown
     from kinfw.verification.evaluation import held_out_errors
 
@@ -98,7 +98,7 @@ def test_bag_to_measurements_to_calibration_recovers_offset_and_arm(
     assert (group.marker, group.measured_in) == ("m", "mocap")
 
     nominal = recording.nominal
-    result = calibrate(nominal, data.subset(np.arange(0, 349, 3)))  # 117 of the 349: faster
+    result = identify(nominal, data.subset(np.arange(0, 349, 3)))  # 117 of the 349: faster
     unknowns = result.refined.unknowns
     if result.refined.model_frame is not None:
         unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))

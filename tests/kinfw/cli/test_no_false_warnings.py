@@ -20,7 +20,7 @@ from kinfw.geometry import matrix_from_rotation_vector
 from kinfw.identification.checks import ResidualStructure
 from kinfw.measurements import write_measurements
 from kinfw.model import load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from tests.cli_run import run_cli
 
 HEAD = builtin_head_urdf()
@@ -78,7 +78,7 @@ def test_declared_markers_in_an_unknown_mocap_frame_calibrate_in_silence(tmp_pat
         ("left_plate", np.array([0.01, 0.03, 0.02]), "m1"),
         ("right_plate", np.array([-0.02, 0.01, 0.04]), "m2"),
     ]
-    sim = simulate(truth, qs, names, markers=markers, rng=rng, noise_m=0.2e-3)
+    sim = simulate_at(truth, qs, names, markers=markers, rng=rng, noise_m=0.2e-3)
     R, p = matrix_from_rotation_vector([0.3, -0.2, 1.0]), np.array([1.0, -0.5, 0.2])
     sim = replace(
         sim,

@@ -173,7 +173,7 @@ def test_reports_are_strict_json_and_verify_carries_pixel_residuals(px, refined,
     undefined number is null) and read back; verify's per-point entries of an image
     group carry the pixel error, whose RMS is the group's; the text table prints '-'
     for the undefined position and rotation of image points, never 'nan'."""
-    from kinfw.reports import read_report, read_sidecar
+    from kinfw.records import read_report, read_sidecar
 
     _strict_json((px / "ri.json").read_text())
     _strict_json(refined.with_suffix(".kinfw.json").read_text())
@@ -267,7 +267,7 @@ def test_wrong_intrinsics_are_named_not_listed_as_a_hundred_gross_errors(px, cap
     and a count; the inconsistency warning once; a hint at the intrinsics with its
     evidence (the refit with them refined). With the true intrinsics: no hint."""
     from kinfw.measurements import read_measurements
-    from kinfw.reports import read_report
+    from kinfw.records import read_report
 
     argv = ["calibrate", px / "px.json", "--urdf", HEAD, "--out", px / "w.urdf"]
     argv += ["--params", "full", "--report", px / "w.json"]

@@ -24,7 +24,7 @@ import pytest
 
 from kinfw import builtin_head_urdf
 from kinfw.files import write_text_atomic
-from kinfw.identification import calibrate, refine
+from kinfw.identification import identify, refine
 from kinfw.measurements import read_measurements
 from kinfw.model import load_robot
 from tests.cli_run import run_cli
@@ -180,11 +180,11 @@ def test_quaternions_stored_scalar_first_are_named_first(data, request, tmp_path
 def test_a_path_where_data_is_expected_is_a_type_error_naming_the_argument():
     robot = load_robot(HEAD)
     with pytest.raises(TypeError, match=r"^data: expected Measurements, got str 'f\.json'"):
-        calibrate(robot, "f.json")
+        identify(robot, "f.json")
     with pytest.raises(TypeError, match=r"^measurements: expected Measurements"):
         refine(robot, "f.json")
     with pytest.raises(TypeError, match=r"^nominal: expected a Robot, got PosixPath"):
-        calibrate(HEAD, "f.json")
+        identify(HEAD, "f.json")
 
 
 def test_an_output_in_a_missing_directory_names_the_users_path(tmp_path):

@@ -1,4 +1,5 @@
-"""ROS 1 and ROS 2 bags into measurements (:mod:`kinfw.measurements`, ``_bags.py``).
+"""ROS 1 and ROS 2 bags into measurements (:mod:`kinfw.measurements`: ``_bag_read.py``,
+``_bag_align.py``, ``_bag_images.py``).
 
 The bags are written here with rosbags' writers from a simulated arm (``tests/bags.py``):
 what is read back is compared with what was written, interpolation with hand-computed

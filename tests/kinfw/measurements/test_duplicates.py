@@ -16,7 +16,7 @@ from kinfw.measurements import (
     duplicate_samples,
 )
 from kinfw.model import load_robot
-from kinfw.simulation import random_configurations, simulate
+from kinfw.simulation import random_configurations, simulate_at
 from tests.robots import ARM_6R
 
 
@@ -25,7 +25,7 @@ def _data(n=12, seed=0):
     rng = np.random.default_rng(seed)
     lower, upper = robot.joint_limits(robot.joint_names)
     qs = random_configurations(lower, upper, n, rng, fraction=0.8)
-    return simulate(robot, qs, robot.joint_names, frames=("flange",), rng=rng, noise_m=1e-4)
+    return simulate_at(robot, qs, robot.joint_names, frames=("flange",), rng=rng, noise_m=1e-4)
 
 
 def test_repeated_samples_are_named_with_the_sample_they_repeat():

@@ -321,7 +321,7 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
     """``--target board``: the 6D columns are the board's pose in a camera on the flange
     (mount and board unknown). Noise-free data of a perturbed 6R arm: calibrated, the
     board's pose in the camera at new configurations is the truth's (Pinocchio) to 1e-8."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.simulation import perturb_robot, random_configurations
     from tests.robots import ARM_6R
 
@@ -344,7 +344,7 @@ def test_a_flange_camera_seeing_a_board_imports_as_target_and_calibrates(tmp_pat
     train = read_measurements(out)
     (group,) = train.targets
     assert (group.camera, group.target) == ("camera", "board")
-    result = calibrate(nominal, train)
+    result = identify(nominal, train)
     test = measurements_from_figaroh_csv(
         tmp_path / "test.csv", robot=nominal, frame="flange", target="board", camera_frame="camera"
     )
@@ -390,7 +390,7 @@ def test_a_camera_the_urdf_lacks_is_mounted_calibrated_and_exported(tmp_path, ca
     the shift of l6 onto its calibrated axis (1e-12), and held-out board poses in the
     camera are the truth's to 1e-8 (the split of the last link between flange and camera
     is not determined, their product is)."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.measurements import mounted_robot
     from kinfw.simulation import perturb_robot, random_configurations
     from tests.robots import ARM_6R
@@ -437,7 +437,7 @@ def test_a_camera_the_urdf_lacks_is_mounted_calibrated_and_exported(tmp_path, ca
     )
     mounted = mounted_robot(nominal, train.mounts)
     assert mounted.joint("camera_joint").parent == "flange"
-    _check_flange_kept_and_held_out(nominal, mounted, calibrate(mounted, train), test)
+    _check_flange_kept_and_held_out(nominal, mounted, identify(mounted, train), test)
 
 
 def test_import_csv_writes_repeated_rows_once_and_says_which(tmp_path, capsys):

@@ -1,4 +1,4 @@
-"""Checks of ``urdf/iis_head.urdf`` against the IIS-head of Shih et al. (Tables 2 and 3).
+"""Checks of ``robots/iis_head.urdf`` against the IIS-head of Shih et al. (Tables 2 and 3).
 
 The truth is computed here, independently of kinfw: the standard (distal) DH product of the
 paper's Table 3, i-1_T_i = Rot(z, theta_i) Trans(z, d_i) Trans(x, a_i) Rot(x, alpha_i), with

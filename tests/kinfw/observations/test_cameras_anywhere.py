@@ -22,7 +22,7 @@ import pytest
 
 from kinfw.camera import CameraIntrinsics
 from kinfw.geometry import inverse_transform, transform_from_rotation_translation
-from kinfw.identification import calibrate, refine
+from kinfw.identification import identify, refine
 from kinfw.identification.handeye import calibrate_cameras
 from kinfw.identification.problem import build_problem
 from kinfw.model import Robot, geometry_from_cpc, load_robot
@@ -153,7 +153,7 @@ def _fitted_board(calibration) -> np.ndarray:
 @pytest.mark.parametrize("name", list(SETUPS))
 def test_noise_free_pixels_recover_every_setup_exactly(name):
     nominal, truth, board, data, _ = scene(name, 30, seed=4)
-    calibration = calibrate(nominal, data)
+    calibration = identify(nominal, data)
     assert calibration.refined.converged
     calibrated = load_robot(calibration.urdf_xml)  # the exported URDF, read back
     fitted = camera_T_boards(calibrated, name, _fitted_board(calibration), Q_TEST)
@@ -185,7 +185,7 @@ def _pixels(robot: Robot, name: str, board, qs) -> dict[str, np.ndarray]:
 def test_noisy_pixels_predict_within_the_noise(name):
     sigma = 0.5
     nominal, truth, board, data, _ = scene(name, 40, seed=5, sigma_px=sigma)
-    calibration = calibrate(nominal, data)
+    calibration = identify(nominal, data)
     refined = calibration.refined
     sigma_hat = dict(refined.noise.sigmas)["pixel"]
     assert 0.9 * sigma < sigma_hat < 1.1 * sigma  # the estimated noise is the simulated one
@@ -279,7 +279,7 @@ def test_noise_free_pixels_move_the_export_only_along_determined_directions(name
     the estimate (the robot's chart coordinates in m and rad, the board's weighted by
     UNKNOWN_WEIGHT), as for plane contacts. Before the rounding slack of the return to the
     start, 3.5-5.6 mm of it was left there (``j1`` exported moved by millimetres)."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, _, _, data, _ = scene(name, 30, seed=3)
     result = refine(nominal, data)

@@ -27,7 +27,7 @@ from kinfw.identification.problem import build_problem
 from kinfw.measurements import Measurements, observed_joints, read_measurements
 from kinfw.model import load_robot
 from kinfw.observations import DatasetError, NumericContext, PoseObservations, kind_of
-from kinfw.simulation import perturb_robot, simulate
+from kinfw.simulation import perturb_robot, simulate_at
 from kinfw.verification.evaluation import evaluate_model
 from tests.erd import urdf_path
 from tests.paths import DATA
@@ -177,7 +177,7 @@ def test_noise_estimate_matches_the_simulated_noise(nominal, truth_urdf):
     truth = load_robot(truth_urdf)
     template = _relative_data(names, qs, np.tile(np.eye(4), (len(qs), 1, 1)))
     sigma_m, sigma_rad = 0.5e-3, np.radians(0.5)
-    data = simulate(
+    data = simulate_at(
         truth, qs, names, rng=rng, groups=template.poses, noise_m=sigma_m, noise_rad=sigma_rad
     )
     result = refine(nominal, data, loss="linear")
@@ -254,7 +254,7 @@ def test_real_401_sample_eye_hand_session_predicts_unseen_poses_better():
     predicted at about half the nominal robot's error (nominal joints: 25 mm / 4.3 deg;
     calibrated: 12-14 mm / 2.7 deg, 5-fold in the README). Both predictions come from the
     same held-out scoring (only the board and camera mounts fitted for the nominal)."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.measurements import measurements_from_figaroh_csv
     from kinfw.verification.evaluation import held_out_errors
 
@@ -266,7 +266,7 @@ def test_real_401_sample_eye_hand_session_predicts_unseen_poses_better():
     train, test = data.subset(np.arange(300)), data.subset(np.arange(300, 401))
 
     def unseen(parameters):
-        result = calibrate(tiago, train, parameters=parameters)
+        result = identify(tiago, train, parameters=parameters)
         assert result.refined.model_frame is None  # measured in the robot: no external frame
         unknowns = result.refined.unknowns
         held = held_out_errors(tiago, result.urdf_xml, unknowns, test)

@@ -20,7 +20,7 @@ from kinfw.observations import (
     kind_of,
     pnp_camera_T_targets,
 )
-from kinfw.simulation import perturb_robot, simulate
+from kinfw.simulation import perturb_robot, simulate_at
 from kinfw.verification.evaluation import pose_discrepancy
 from tests.robots import ARM_6R
 
@@ -76,7 +76,7 @@ def _scene(n: int, seed: int, spread: float = 0.35, sigma_px: float = 0.0, board
     qs = Q0 + rng.uniform(-spread, spread, size=(20 * n, 6))
     qs = _in_view(truth, w_T_board, qs, board)[:n]
     assert len(qs) == n
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         NAMES,
@@ -245,7 +245,7 @@ def test_noise_free_pixels_recover_a_perturbed_arm_exactly():
 @pytest.mark.slow
 def test_kinfw_calibrate_on_pixels_with_camera_option_recovers_the_arm(tmp_path, capsys):
     from kinfw.cli._main import main
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
 
     _, truth, w_T_board, data = _scene(30, seed=6)
     write_measurements(tmp_path / "px.json", data)
@@ -355,7 +355,7 @@ def test_intrinsics_the_images_cannot_determine_are_reported():
 def test_the_report_gives_reprojection_rms_per_camera_and_image_and_names_the_worst(tmp_path):
     import cv2
 
-    from kinfw.reports import read_report, write_report
+    from kinfw.records import read_report, write_report
     from kinfw.verification.reporting import calibrate_and_report
 
     nominal, _, _, data = _scene(30, seed=10, sigma_px=0.2)

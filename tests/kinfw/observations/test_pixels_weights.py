@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from kinfw.camera import CameraIntrinsics, Chessboard
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.problem import Unknown, build_problem
 from kinfw.model import Robot, load_robot
 from kinfw.observations import pixel_weights
@@ -77,7 +77,7 @@ def test_weighted_images_beat_unweighted_and_are_chi_square_consistent():
         exp, stated, unstated, _ = _experiment(seed)
         errors = {}
         for name, data in (("weighted", stated), ("unweighted", unstated)):
-            result = calibrate(exp.nominal, data, method="refine", loss="linear")
+            result = identify(exp.nominal, data, method="refine", loss="linear")
             robot = Robot(result.urdf_xml, name)
             errors[name] = camera_target_errors(exp, robot, target_pose(result.refined.unknowns))
             if name == "weighted":
@@ -126,7 +126,7 @@ def test_equal_or_no_sigmas_change_nothing():
     (g,) = unstated.groups("pixels")
     same = unstated.with_groups([replace(g, sigma_px=np.full(len(g.sample), 0.7))])
     assert (pixel_weights(g) == 1.0).all()
-    results = [calibrate(exp.nominal, d, method="refine", loss="linear") for d in (unstated, same)]
+    results = [identify(exp.nominal, d, method="refine", loss="linear") for d in (unstated, same)]
     a, b = (r.refined for r in results)
     for ua, ub in zip(a.unknowns, b.unknowns, strict=True):
         np.testing.assert_allclose(ua.value, ub.value, rtol=0, atol=1e-12)

@@ -37,7 +37,7 @@ from kinfw.observations import (
     offset_key,
     plane_key,
 )
-from kinfw.simulation import perturb_robot, simulate
+from kinfw.simulation import perturb_robot, simulate_at
 from kinfw.urdf import export_urdf
 from kinfw.verification.evaluation import random_joint_values
 from tests.contacts import contact_configurations, probe_distances
@@ -339,7 +339,7 @@ def test_what_contacts_leave_undetermined_stays_at_the_nominal(scene, given):
     coordinates in m and rad, the unknowns' weighted by UNKNOWN_WEIGHT), while the
     held-out distances are the truth's up to the scale: the truth along what is
     determined."""
-    from kinfw.identification._refine import UNKNOWN_WEIGHT
+    from kinfw.identification.problem._refine import UNKNOWN_WEIGHT
 
     nominal, truth, planes, contacts = scene
     data = _dataset(contacts, offset=OFFSET if given else None)
@@ -419,7 +419,7 @@ def test_simulated_distance_noise_is_estimated_within_10_percent(scene):
     sigma = 2e-4
     unknowns = {plane_key(k): p for k, p in planes.items()}
     unknowns[offset_key("flange", "tip")] = OFFSET
-    noisy = simulate(
+    noisy = simulate_at(
         truth,
         clean.qs,
         NAMES,
@@ -470,7 +470,7 @@ def test_kinfw_calibrate_takes_a_contact_file_and_reports_a_gross_contact(scene,
     clean = _dataset(contacts, points=_points(truth, 8, 21))
     unknowns = {plane_key(k): p for k, p in planes.items()}
     unknowns[offset_key("flange", "tip")] = OFFSET
-    noisy = simulate(
+    noisy = simulate_at(
         truth,
         clean.qs,
         NAMES,
@@ -552,7 +552,7 @@ def test_verify_reads_contacts_as_height_and_tilt_by_hand_geometry(scene, tmp_pa
     plane, the given probe offset) reads each contact's height in mm and the contacts'
     tilt as 0.5 deg, in the text and the JSON."""
     from kinfw.cli._main import main
-    from kinfw.reports import CalibratedUnknown, CalibrationSidecar, DataProvenance, write_sidecar
+    from kinfw.records import CalibratedUnknown, CalibrationSidecar, DataProvenance, write_sidecar
 
     nominal, _, planes, contacts = scene
     qs, plane = contacts["table"], planes["table"]
@@ -602,7 +602,7 @@ def noisy_contacts(scene):
     """The two planes' contacts with the given probe offset, 0.1 mm distance noise."""
     _, truth, planes, contacts = scene
     clean = _dataset(contacts, offset=OFFSET)
-    return simulate(
+    return simulate_at(
         truth,
         clean.qs,
         NAMES,
@@ -619,7 +619,7 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
     test contacts and the RMS over the planes of their tilt (deg), equal to the hand
     geometry with the fold's trained robot and planes; selection whitens the height by
     the distance noise."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.verification.evaluation import crossvalidate
 
     nominal = scene[0]
@@ -637,7 +637,7 @@ def test_crossval_scores_height_and_tilt_against_the_trained_planes(scene, noisy
     # fold 0 of "offsets" by hand
     test_ids = np.sort(np.array_split(np.random.default_rng(0).permutation(data.n_samples), 3)[0])
     train = data.subset(np.setdiff1d(np.arange(data.n_samples), test_ids))
-    result = calibrate(nominal, train, parameters="offsets")
+    result = identify(nominal, train, parameters="offsets")
     trained = load_robot(result.urdf_xml)
     found = {u.name: u.value for u in result.refined.unknowns if u.kind == "plane"}
     heights, tilts = [], []
@@ -664,7 +664,7 @@ def test_calibrate_holdout_and_report_give_height_and_tilt(scene, noisy_contacts
     nominal robot), equal to the hand geometry; report.json carries them, and the
     in-sample errors in the same keys."""
     from kinfw.cli._main import main
-    from kinfw.reports import read_sidecar
+    from kinfw.records import read_sidecar
 
     nominal = scene[0]
     table = noisy_contacts.groups("plane")[0]
@@ -737,7 +737,7 @@ def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, 
     candidate's whitened score is (held-out height RMS / sigma)^2 under the full fit's
     distance noise (that fit's own estimate) and the choice is the simplest within 1 %
     of the lowest."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.verification.evaluation import choose_parameters, whitening_noise
 
     nominal, prior = scene[0], (1e-3, 1e-2)
@@ -750,7 +750,7 @@ def test_the_model_choice_on_plane_contacts_ranks_by_the_whitened_height(scene, 
     best = min(whitened)
     expected = next(c for c in choice.candidates if c.whitened <= 1.01 * best)  # simplest first
     assert (choice.parameters, choice.prior) == (expected.parameters, expected.prior)
-    full = calibrate(nominal, noisy_contacts, parameters="full", prior=prior)
+    full = identify(nominal, noisy_contacts, parameters="full", prior=prior)
     (sigma,) = (
         v for c, v in whitening_noise(full.refined.noise, noisy_contacts) if c.name == "distance"
     )

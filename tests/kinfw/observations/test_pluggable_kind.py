@@ -6,7 +6,7 @@ of known length: the distance from the probe to the ball's centre is the radius)
 Residual: ``radius - |w_p_probe - centre|``, one row in metres. The kind is registered,
 written to and read from a ``kinfw-measurements`` file, and calibrates the 6R arm
 through the public ``refine``; with its numpy prediction and its drawing (and the
-default Gaussian simulation) it is simulated by ``kinfw.simulation.simulate`` and drawn
+default Gaussian simulation) it is simulated by ``kinfw.simulation.simulate_at`` and drawn
 by ``kinfw.view.scene``, whose code names no kind.
 
 Truth: contacts are simulated on a perturbed arm by solving for the joint angle that puts
@@ -41,7 +41,7 @@ from kinfw.observations import (
     sample_array,
     unregister_kind,
 )
-from kinfw.simulation import perturb_robot, simulate
+from kinfw.simulation import perturb_robot, simulate_at
 from kinfw.verification.evaluation import random_joint_values
 from tests.robots import ARM_6R
 
@@ -326,7 +326,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
 
     # noise-free: contacts found by bisection on the sphere measure its radius
     qs = _contacts(truth, offset, centre, 30, rng)
-    data = simulate(
+    data = simulate_at(
         truth, qs, NAMES, groups=[template(30)], unknowns=unknowns, rng=np.random.default_rng(0)
     )
     (g,) = data.groups("ball")
@@ -336,7 +336,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     # noisy, anywhere: the distance plus N(0, noise_m) (the "distance" component is in m)
     n, sigma = 4000, 1e-3
     q_any = random_joint_values(truth, NAMES, n, rng)
-    noisy = simulate(
+    noisy = simulate_at(
         truth,
         q_any,
         NAMES,
@@ -347,7 +347,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     ).groups("ball")[0]
     error = noisy.radius_m - np.linalg.norm(_probe(truth, q_any, offset) - centre, axis=1)
     assert abs(error.std() / sigma - 1) < 0.05 and abs(error.mean()) < 4 * sigma / np.sqrt(n)
-    by_name = simulate(
+    by_name = simulate_at(
         truth,
         q_any[:5],
         NAMES,
@@ -366,7 +366,7 @@ def test_the_new_kind_simulates_and_draws_through_its_hooks(sphere_kind):
     with pytest.raises(
         ValueError, match="needs the true value of sphere:ball; give it in unknowns"
     ):
-        simulate(
+        simulate_at(
             truth, qs, NAMES, groups=[template(30)], rng=rng, unknowns={probe_key("flange"): offset}
         )
 
@@ -458,7 +458,7 @@ def test_the_new_kind_is_read_in_its_own_metric_by_verify_calibrate_and_the_repo
     centre from the sidecar (verify, and the calibration's "after": scored with what it
     was trained with) or, for the nominal ("before"), from the kind's closed form on the
     held-out contacts."""
-    from kinfw.reports import read_report, read_sidecar
+    from kinfw.records import read_report, read_sidecar
 
     paths, nominal, qs, radius = sphere_files
     out_urdf, report_path = tmp_path / "cal.urdf", tmp_path / "report.json"
@@ -518,7 +518,7 @@ def test_the_new_kind_is_scored_and_selected_by_crossval_in_its_own_metric(spher
     """crossval --select scores the sphere's held-out distance (mm) per fold, equal to
     the hand computation with the fold's trained model, and whitens it by the distance
     noise (the whitened score of a set is the mean over folds of (RMS / sigma)^2)."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.measurements import read_measurements
 
     paths, nominal, qs, radius = sphere_files
@@ -538,7 +538,7 @@ def test_the_new_kind_is_scored_and_selected_by_crossval_in_its_own_metric(spher
     data = read_measurements(paths["train"])
     test_ids = np.sort(np.array_split(np.random.default_rng(0).permutation(90), 3)[0])
     train = data.subset(np.setdiff1d(np.arange(90), test_ids))
-    result = calibrate(nominal, train, parameters="full")
+    result = identify(nominal, train, parameters="full")
     found = {u.kind: u.value for u in result.refined.unknowns}
     e = _distance_errors(
         load_robot(result.urdf_xml), qs[test_ids], radius[test_ids], found["probe"], found["sphere"]

@@ -385,7 +385,7 @@ def test_the_model_choice_scores_ball_and_point_contacts_in_their_metric(scene, 
     noise: every candidate scored in the kind's own metric (height mm; placement mm),
     finite, its whitened score the squared metric over the fit's sigma; the chosen candidate
     within 1 % of the best (the simplest such)."""
-    from kinfw.identification import calibrate
+    from kinfw.identification import identify
     from kinfw.verification.evaluation import choose_parameters, whitening_noise
 
     nominal, _, _, _, on_ball, on_point = scene
@@ -404,7 +404,7 @@ def test_the_model_choice_scores_ball_and_point_contacts_in_their_metric(scene, 
     best = min(whitened)
     expected = next(c for c in choice.candidates if c.whitened <= 1.01 * best)
     assert (choice.parameters, choice.prior) == (expected.parameters, expected.prior)
-    full = calibrate(nominal, data, parameters="full", prior=prior)
+    full = identify(nominal, data, parameters="full", prior=prior)
     component = "distance" if kind == "sphere" else "placement"
     (sigma,) = (v for c, v in whitening_noise(full.refined.noise, data) if c.name == component)
     for c in choice.candidates:  # the placement's size is the norm of its 3 rows

@@ -19,7 +19,7 @@ from kinfw.simulation import (
     perturb_poses,
     perturb_robot,
     random_configurations,
-    simulate,
+    simulate_at,
     stereo_measure,
 )
 from tests.paths import HEAD_URDF
@@ -302,7 +302,7 @@ def test_simulate_zero_noise_matches_pinocchio(arm) -> None:
     qs = random_qs(arm, 25, 3)
     w_T_target = default_target_pose(arm, qs, ARM_JOINTS, ["camera"])
     offset = np.array([0.01, -0.02, 0.03])
-    m = simulate(
+    m = simulate_at(
         arm,
         qs,
         ARM_JOINTS,
@@ -351,7 +351,7 @@ def test_simulate_noise_statistics(arm) -> None:
     n, noise_m, noise_rad = 4000, 1e-3, np.deg2rad(0.2)
     qs = random_qs(arm, n, 4)
     w_T_target = default_target_pose(arm, qs[:10], ARM_JOINTS, ["camera"])
-    m = simulate(
+    m = simulate_at(
         arm,
         qs,
         ARM_JOINTS,
@@ -381,7 +381,7 @@ def test_simulate_noise_statistics(arm) -> None:
 def test_simulate_stereo_rig(arm) -> None:
     n, sigma = 3000, 5e-4
     qs = random_qs(arm, n, 6)
-    m = simulate(
+    m = simulate_at(
         arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(7), stereo_sigma_m=sigma
     )
     err = m.poses[0].meas_T_frame[:, :3, 3] - pin_fk(ARM_URDF, ARM_JOINTS, qs, "flange")[:, :3, 3]
@@ -390,8 +390,10 @@ def test_simulate_stereo_rig(arm) -> None:
 
 def test_simulate_is_reproducible_and_defaults_to_robot_joints(arm) -> None:
     qs = random_qs(arm, 5, 8)
-    a = simulate(arm, qs, None, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3)
-    b = simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3)
+    a = simulate_at(arm, qs, None, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3)
+    b = simulate_at(
+        arm, qs, ARM_JOINTS, frames=["flange"], rng=np.random.default_rng(1), noise_m=1e-3
+    )
     assert a.joint_names == arm.joint_names
     np.testing.assert_array_equal(a.poses[0].meas_T_frame, b.poses[0].meas_T_frame)
 
@@ -401,7 +403,7 @@ def test_simulate_keeps_its_random_stream(arm) -> None:
     (perturb_poses), then each camera's, then each marker's N(0, noise_m) (n, 3)."""
     qs = random_qs(arm, 6, 10)
     offset = np.array([0.0, 0.01, 0.02])
-    m = simulate(
+    m = simulate_at(
         arm,
         qs,
         ARM_JOINTS,
@@ -436,25 +438,25 @@ def test_simulate_errors(arm) -> None:
     qs = random_qs(arm, 2, 9)
     rng = np.random.default_rng(0)
     with pytest.raises(ValueError, match="nothing to observe"):
-        simulate(arm, qs, ARM_JOINTS, rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, rng=rng)
     with pytest.raises(ValueError, match=r"expected \(frame, offset\) or \(frame, offset, name\)"):
-        simulate(arm, qs, ARM_JOINTS, markers=["flange"], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, markers=["flange"], rng=rng)
     with pytest.raises(ValueError, match="offset of a marker on 'flange'"):
-        simulate(arm, qs, ARM_JOINTS, markers=[("flange", [1.0, 2.0])], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, markers=[("flange", [1.0, 2.0])], rng=rng)
     with pytest.raises(KeyError, match="no frame 'nope'"):
-        simulate(arm, qs, ARM_JOINTS, frames=["nope"], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, frames=["nope"], rng=rng)
     with pytest.raises(ValueError, match="noise_rad: expected a finite standard deviation"):
-        simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, noise_rad=np.nan)
+        simulate_at(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, noise_rad=np.nan)
     with pytest.raises(ValueError, match=r"sigmas\['distance'\]: expected a finite"):
-        simulate(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, sigmas={"distance": -1.0})
+        simulate_at(arm, qs, ARM_JOINTS, frames=["flange"], rng=rng, sigmas={"distance": -1.0})
     template = PoseObservations("flange", [0, 2], np.tile(np.eye(4), (2, 1, 1)))
     with pytest.raises(ValueError, match="refers to sample 2, but qs has 2 rows"):
-        simulate(arm, qs, ARM_JOINTS, groups=[template], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, groups=[template], rng=rng)
     with pytest.raises(TypeError, match="not the group of a registered observation kind"):
-        simulate(arm, qs, ARM_JOINTS, groups=[object()], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, groups=[object()], rng=rng)
     marked = PoseObservations("flange", [0, 1], np.tile(np.eye(4), (2, 1, 1)), marker="m")
     with pytest.raises(ValueError, match="needs the true value of marker:m; give it in"):
-        simulate(arm, qs, ARM_JOINTS, groups=[marked], rng=rng)
+        simulate_at(arm, qs, ARM_JOINTS, groups=[marked], rng=rng)
 
 
 def test_default_target_pose_faces_the_cameras(arm) -> None:
@@ -488,7 +490,7 @@ def test_iis_head_one_joint_at_a_time_zero_noise() -> None:
     assert qs.shape == (9 * len(names) + 1, len(names))
     np.testing.assert_array_equal(np.bincount(moved[1:]), 9)
     frames, cameras = ("left_plate", "right_plate"), ("left_camera", "right_camera")
-    m = simulate(head, qs, names, frames=frames, cameras=cameras, rng=np.random.default_rng(0))
+    m = simulate_at(head, qs, names, frames=frames, cameras=cameras, rng=np.random.default_rng(0))
     assert [g.frame for g in m.poses] == list(frames)
     for g in m.poses:
         np.testing.assert_allclose(

@@ -24,7 +24,7 @@ import pinocchio as pin
 import pytest
 
 from kinfw.model import builtin_head_urdf, load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.view import (
     GHOST_RGBA,
     SOLID_RGBA,
@@ -105,7 +105,7 @@ def case(head):
     w_T_target = np.eye(4)
     w_T_target[:3, 3] = [0.6, 0.4, 1.2]
     w_T_target[:3, :3] = pin.rpy.rpyToMatrix(0.3, -2.5, 0.2)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,

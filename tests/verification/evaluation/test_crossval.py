@@ -5,7 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.model import cpc_from_robot, load_robot
 from kinfw.progress import reporting
 from kinfw.simulation import perturb_robot, random_configurations
@@ -88,9 +88,9 @@ def test_a_70_mm_outlier_is_listed_and_does_not_bend_the_model(head):
         d = model_cpc.frame_poses(qs)[..., :3, 3] - true_model.frame_poses(qs)[..., :3, 3]
         return 1e3 * float(np.sqrt(np.mean(np.sum(d**2, axis=-1))))
 
-    reference = held_out_mm(calibrate(nominal, clean, loss="linear"))
-    bent = held_out_mm(calibrate(nominal, bad, loss="linear"))
-    robust = calibrate(nominal, bad)  # the default: Huber
+    reference = held_out_mm(identify(nominal, clean, loss="linear"))
+    bent = held_out_mm(identify(nominal, bad, loss="linear"))
+    robust = identify(nominal, bad)  # the default: Huber
     assert bent > 1.5 * reference
     assert held_out_mm(robust) < 1.15 * reference
     report = calibration_report(nominal, load_robot(robust.urdf_xml), bad, robust, method="refine")

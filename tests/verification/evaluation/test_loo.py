@@ -5,10 +5,10 @@ import warnings
 import numpy as np
 import pytest
 
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.identification.problem import Unknown
 from kinfw.model import load_robot
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import held_out_errors, leave_one_out
 from kinfw.verification.evaluation._loo import _held_out_rows
 
@@ -57,7 +57,7 @@ def _refit_without_each(head, data, **options):
     out = {}
     for i in range(data.n_samples):
         keep = np.setdiff1d(np.arange(data.n_samples), [i])
-        refit = calibrate(head, data.subset(keep), **options)
+        refit = identify(head, data.subset(keep), **options)
         unknowns = refit.refined.unknowns
         if refit.refined.model_frame is not None:
             unknowns = (*unknowns, Unknown("frame", refit.refined.model_frame, refit.w_T_root))
@@ -82,12 +82,12 @@ def test_the_closed_form_predicts_each_sample_as_a_refit_without_it(head, parame
     rng = np.random.default_rng(3)
     names = truth.topology(PLATES).joint_names
     qs = random_configurations(*truth.joint_limits(names), 16, rng, fraction=0.8)
-    data = simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=1e-3, noise_rad=0.005)
+    data = simulate_at(truth, qs, names, frames=PLATES, rng=rng, noise_m=1e-3, noise_rad=0.005)
     fixed = {"noise": NoiseModel(1e-3, 0.005), "loss": "linear"}
     for options in (fixed, {"loss": "huber"}):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
-            fit = calibrate(head, data, parameters=parameters, prior=prior, **options)
+            fit = identify(head, data, parameters=parameters, prior=prior, **options)
             loo = leave_one_out(
                 head, data, fit, parameters=parameters, prior=prior, loss=options["loss"]
             )

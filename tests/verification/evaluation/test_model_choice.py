@@ -8,11 +8,11 @@ import pytest
 import kinfw.verification.evaluation._model_choice as model_choice
 from kinfw.cli._main import main
 from kinfw.files import sidecar_path
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.measurements import write_measurements
 from kinfw.model import cpc_from_robot, load_robot
-from kinfw.reports import read_sidecar
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.records import read_sidecar
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import ROWS_PER_PARAMETER, choose_parameters, rows_per_parameter
 from tests.paths import DATA
 from tests.paths import HEAD_URDF as HEAD
@@ -24,7 +24,9 @@ def _data(truth, n, seed, noise_m, noise_rad):
     rng = np.random.default_rng(seed)
     names = truth.topology(PLATES).joint_names
     qs = random_configurations(*truth.joint_limits(names), n, rng, fraction=0.8)
-    return simulate(truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad)
+    return simulate_at(
+        truth, qs, names, frames=PLATES, rng=rng, noise_m=noise_m, noise_rad=noise_rad
+    )
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +49,7 @@ def mounts_only(head):
 def _held_out_vs_truth(nominal, truth, data, parameters, prior):
     """Position RMS (mm) and rotation RMS (deg) of the plates at 200 fresh configurations,
     the model calibrated with ``parameters``/``prior`` against the noise-free truth."""
-    result = calibrate(nominal, data, parameters=parameters, prior=prior)
+    result = identify(nominal, data, parameters=parameters, prior=prior)
     model = cpc_from_robot(load_robot(result.urdf_xml), PLATES)
     qs = random_configurations(
         *nominal.joint_limits(data.joint_names), 200, np.random.default_rng(6), fraction=0.8
@@ -96,10 +98,10 @@ def test_plentiful_data_gets_the_full_set_without_cross_validation(head, monkeyp
     # the head's links have inertias: full is fitted once (the calibration itself) for the
     # compliance's score test, which these rigid data fail: nothing more is fitted
     fitted = []
-    real_calibrate = model_choice.calibrate
+    real_calibrate = model_choice.identify
     monkeypatch.setattr(
         model_choice,
-        "calibrate",
+        "identify",
         lambda *a, **k: fitted.append(k["parameters"]) or real_calibrate(*a, **k),
     )
     choice = choose_parameters(head, big)
@@ -219,7 +221,7 @@ def test_a_candidate_the_data_cannot_fit_is_skipped_not_fatal():
     assert "full alone cannot be fitted" in choice.reason
 
     def unseen_rms_mm(parameters, prior):
-        result = calibrate(tiago, train, parameters=parameters, prior=prior)
+        result = identify(tiago, train, parameters=parameters, prior=prior)
         frame = Unknown("frame", result.refined.model_frame, result.w_T_root)
         held = held_out_errors(tiago, result.urdf_xml, (*result.refined.unknowns, frame), test)
         pos = held.values("position")[0]

@@ -9,7 +9,7 @@ import pytest
 
 from kinfw.model import load_robot
 from kinfw.progress import LineReporter, reporting
-from kinfw.simulation import perturb_robot, random_configurations, simulate
+from kinfw.simulation import perturb_robot, random_configurations, simulate_at
 from kinfw.verification.evaluation import choose_parameters
 from tests.head_data import plate_data
 from tests.paths import HEAD_URDF
@@ -63,7 +63,7 @@ def test_the_leave_one_out_scores_are_a_step_per_candidate():
     rng = np.random.default_rng(3)
     names = nominal.topology(("tool",)).joint_names
     qs = random_configurations(*nominal.joint_limits(names), 8, rng, fraction=0.8)
-    data = simulate(truth, qs, names, frames=["tool"], rng=rng, noise_m=5e-4, noise_rad=5e-3)
+    data = simulate_at(truth, qs, names, frames=["tool"], rng=rng, noise_m=5e-4, noise_rad=5e-3)
     recorder = Recorder()
     with reporting(recorder):
         choice = choose_parameters(nominal, data)

@@ -14,7 +14,7 @@ from kinfw.cli._main import main
 from kinfw.identification.problem import build_problem
 from kinfw.measurements import read_measurements, write_measurements
 from kinfw.model import cpc_from_robot, load_robot
-from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate
+from kinfw.simulation import default_target_pose, perturb_robot, random_configurations, simulate_at
 from tests.paths import HEAD_URDF as HEAD
 
 PLATES = ("left_plate", "right_plate")
@@ -64,7 +64,7 @@ def problem(head):
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = head.joint_limits(names)
     qs = random_configurations(lower, upper, 8, rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         head,
         qs,
         names,
@@ -109,7 +109,7 @@ def outlier_run(tmp_path_factory, head):
     names = head.topology((*PLATES, *CAMERAS)).joint_names
     lower, upper = head.joint_limits(names)
     qs = random_configurations(lower, upper, 60, rng, fraction=0.8)
-    data = simulate(
+    data = simulate_at(
         truth,
         qs,
         names,

@@ -18,7 +18,7 @@ from kinfw.simulation import (
     perturb_robot,
     plant_outliers,
     random_configurations,
-    simulate,
+    simulate_at,
 )
 from kinfw.verification.evaluation import (
     cramer_rao,
@@ -62,8 +62,8 @@ def experiment(head):
     w_T_target = default_target_pose(truth, qs2, names, CAMERAS)
     noise = {"noise_m": 0.5e-3, "noise_rad": np.radians(0.5)}
     data = concatenate_measurements(
-        simulate(truth, qs1, names, frames=PLATES, rng=rng, **noise),
-        simulate(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise),
+        simulate_at(truth, qs1, names, frames=PLATES, rng=rng, **noise),
+        simulate_at(truth, qs2, names, cameras=CAMERAS, rng=rng, w_T_target=w_T_target, **noise),
     )
     test_qs = random_configurations(lower, upper, 25, rng, fraction=0.8)
     return {

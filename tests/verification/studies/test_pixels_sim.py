@@ -12,7 +12,7 @@ from scipy.stats import chi2
 from kinfw.camera import CameraIntrinsics, Chessboard
 from kinfw.cli._main import main
 from kinfw.geometry import transform_from_rotation_translation
-from kinfw.identification import calibrate
+from kinfw.identification import identify
 from kinfw.measurements import read_measurements
 from kinfw.model import Robot, load_robot
 from kinfw.simulation import DEFAULT_CAMERA, visible_points
@@ -207,7 +207,7 @@ def test_the_pixel_path_beats_the_pose_path_on_the_same_images():
     )
     errors = {}
     for path, data in (("pixels", exp.data), ("pnp", pose_path_data(exp.data))):
-        result = calibrate(exp.nominal, data, method="refine", loss="linear")
+        result = identify(exp.nominal, data, method="refine", loss="linear")
         robot = Robot(result.urdf_xml, path)
         errors[path] = camera_target_errors(exp, robot, target_pose(result.refined.unknowns))
     assert errors["pixels"][0] < 0.5 * errors["pnp"][0]  # position, m^2
@@ -226,7 +226,7 @@ def test_the_pixel_estimate_reaches_the_cramer_rao_bound():
             load_robot(ARM_6R), 100 + seed, camera="flange", intrinsics=CAMERA, q0=Q0,
             board=BOARD, n_test=3,
         )  # fmt: skip
-        result = calibrate(exp.nominal, exp.data, method="refine", loss="linear", noise=exp.noise)
+        result = identify(exp.nominal, exp.data, method="refine", loss="linear", noise=exp.noise)
         robot = Robot(result.urdf_xml, "pixels")
         est = np.linalg.inv(robot.frame_poses(exp.q_test[:1], "flange", exp.names)) @ target_pose(
             result.refined.unknowns

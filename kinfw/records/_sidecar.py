@@ -15,8 +15,8 @@ a value in the file is not SI, as in the reports.
 
 The records shared with the calibration report (:class:`DataProvenance`,
 :class:`NoiseSummary`, :class:`CalibratedUnknown`, :class:`BeforeAfter`,
-:class:`ModelSummary`: :mod:`kinfw.reports`) and the reader :class:`DocReader`
-with its :class:`CalibrationFileError` (:mod:`kinfw.reports`) are importable from here
+:class:`ModelSummary`: :mod:`kinfw.records`) and the reader :class:`DocReader`
+with its :class:`CalibrationFileError` (:mod:`kinfw.records`) are importable from here
 too.
 """
 
@@ -32,8 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw.files import json_text, write_text_atomic
-from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._records import (
+from kinfw.records._doc_reader import CalibrationFileError, DocReader
+from kinfw.records._records import (
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
@@ -46,19 +46,6 @@ from kinfw.reports._records import (
 
 if TYPE_CHECKING:
     from kinfw.model import ModelSpec
-
-__all__ = [
-    "BeforeAfter",
-    "CalibratedUnknown",
-    "CalibrationFileError",
-    "CalibrationSidecar",
-    "DataProvenance",
-    "DocReader",
-    "ModelSummary",
-    "NoiseSummary",
-    "read_sidecar",
-    "write_sidecar",
-]
 
 
 @dataclass(frozen=True, slots=True, eq=False)

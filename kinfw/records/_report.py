@@ -18,47 +18,17 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from kinfw.files import json_text, write_text_atomic
-from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._records import BeforeAfter, DataProvenance, ErrorValue, GuardSummary, headline
-from kinfw.reports._refine import (
-    Correlation,
-    DownweightedRow,
-    IdentifiabilitySummary,
-    NotIdentifiable,
-    ParameterRow,
+from kinfw.records._doc_reader import CalibrationFileError, DocReader
+from kinfw.records._records import BeforeAfter, DataProvenance, ErrorValue, GuardSummary, headline
+from kinfw.records._refine import (
     RefineSection,
-    RejectedRow,
 )
-from kinfw.reports._reprojection import ReprojectionSection
-from kinfw.reports._stages import (
-    CameraMount,
+from kinfw.records._reprojection import ReprojectionSection
+from kinfw.records._stages import (
     ClosedFormSection,
     ExportSection,
     HandEyeSection,
-    KinematicValue,
-    TargetEstimate,
 )
-
-__all__ = [
-    "CalibrationReport",
-    "CameraMount",
-    "ClosedFormSection",
-    "Correlation",
-    "DownweightedRow",
-    "ExportSection",
-    "GroupErrorSummary",
-    "HandEyeSection",
-    "IdentifiabilitySummary",
-    "KinematicValue",
-    "NotIdentifiable",
-    "ParameterRow",
-    "RefineSection",
-    "RejectedRow",
-    "StageErrors",
-    "TargetEstimate",
-    "read_report",
-    "write_report",
-]
 
 
 def _rows(cls, doc: dict, key: str, r: DocReader, at: str) -> tuple:
@@ -351,7 +321,7 @@ class CalibrationReport:
 
     @classmethod
     def from_dict(cls, doc: Any, source: str = "<memory>") -> CalibrationReport:
-        """Read a parsed report. Raises :class:`kinfw.reports.
+        """Read a parsed report. Raises :class:`kinfw.records.
         CalibrationFileError` naming ``source`` and the key."""
         r = DocReader(source)
         doc = r.header(doc, cls.FORMAT, cls.VERSION)
@@ -395,7 +365,7 @@ class CalibrationReport:
 
 def read_report(path: str | Path) -> CalibrationReport:
     """Read a calibration report (``kinfw calibrate --report``); errors name the file
-    and the key (:class:`kinfw.reports.CalibrationFileError`)."""
+    and the key (:class:`kinfw.records.CalibrationFileError`)."""
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))

@@ -12,8 +12,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["CalibrationFileError", "DocReader"]
-
 
 class CalibrationFileError(ValueError):
     """A calibration sidecar or report that cannot be read.

@@ -8,16 +8,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.identification.problem import (
+from kinfw.identification.problem._diagnostics import (
     GroupResiduals,
     Identifiability,
-    NoiseModel,
     RejectedObservation,
-    Unknown,
 )
+from kinfw.identification.problem._noise import NoiseModel
+from kinfw.identification.problem._problem import Unknown
 from kinfw.model import CPCModel, ModelSpec
-
-__all__ = ["RefineResult"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from kinfw.reports import (
+from kinfw.records import (
     CalibratedUnknown,
     CalibrationFileError,
     CalibrationReport,
@@ -191,7 +191,7 @@ def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
     head = HEAD_URDF
     from kinfw.measurements import write_measurements
     from kinfw.model import load_robot
-    from kinfw.simulation import random_configurations, simulate
+    from kinfw.simulation import random_configurations, simulate_at
 
     robot = load_robot(head)
     names = robot.topology(("left_plate",)).joint_names
@@ -199,7 +199,7 @@ def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
     qs = random_configurations(lower, upper, 4, np.random.default_rng(0))
     write_measurements(
         tmp_path / "d.json",
-        simulate(robot, qs, names, frames=("left_plate",), rng=np.random.default_rng(1)),
+        simulate_at(robot, qs, names, frames=("left_plate",), rng=np.random.default_rng(1)),
     )
     code = main(["-q", "verify", str(head), str(tmp_path / "d.json"), "--sidecar", str(bad)])
     err = capsys.readouterr().err

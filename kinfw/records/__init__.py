@@ -6,14 +6,16 @@ key of every error.
 
 from __future__ import annotations
 
-from kinfw.reports._doc_reader import CalibrationFileError, DocReader
-from kinfw.reports._joint_model import (
+from kinfw.records._doc_reader import (
+    CalibrationFileError,
+    DocReader,
+)
+from kinfw.records._joint_model import (
     joint_model_doc,
     joint_model_path,
     joint_model_text,
 )
-from kinfw.reports._records import (
-    STATS,
+from kinfw.records._records import (
     BeforeAfter,
     CalibratedUnknown,
     DataProvenance,
@@ -23,9 +25,8 @@ from kinfw.reports._records import (
     NoiseSummary,
     RobotBlockRecord,
     headline,
-    read_only_array,
 )
-from kinfw.reports._refine import (
+from kinfw.records._refine import (
     Correlation,
     DownweightedRow,
     IdentifiabilitySummary,
@@ -34,7 +35,7 @@ from kinfw.reports._refine import (
     RefineSection,
     RejectedRow,
 )
-from kinfw.reports._report import (
+from kinfw.records._report import (
     CalibrationReport,
     GroupErrorSummary,
     StageErrors,
@@ -42,9 +43,17 @@ from kinfw.reports._report import (
     read_report,
     write_report,
 )
-from kinfw.reports._reprojection import CameraReprojection, ImageReprojection, ReprojectionSection
-from kinfw.reports._sidecar import CalibrationSidecar, read_sidecar, write_sidecar
-from kinfw.reports._stages import (
+from kinfw.records._reprojection import (
+    CameraReprojection,
+    ImageReprojection,
+    ReprojectionSection,
+)
+from kinfw.records._sidecar import (
+    CalibrationSidecar,
+    read_sidecar,
+    write_sidecar,
+)
+from kinfw.records._stages import (
     CameraMount,
     ClosedFormSection,
     ExportSection,
@@ -54,7 +63,6 @@ from kinfw.reports._stages import (
 )
 
 __all__ = [
-    "STATS",
     "BeforeAfter",
     "CalibratedUnknown",
     "CalibrationFileError",
@@ -90,7 +98,6 @@ __all__ = [
     "joint_model_doc",
     "joint_model_path",
     "joint_model_text",
-    "read_only_array",
     "read_report",
     "read_sidecar",
     "write_report",

@@ -46,29 +46,26 @@ import numpy as np
 from numpy.typing import NDArray
 
 from kinfw import progress
-from kinfw.identification._refine_result import RefineResult
-from kinfw.identification.problem import (
-    LOSS_SCALE,
-    LOSSES,
+from kinfw.identification.problem._build import build_problem
+from kinfw.identification.problem._diagnostics import (
     GroupResiduals,
     Identifiability,
-    LeastSquaresProblem,
-    NoiseModel,
-    NormalEquations,
     RejectedObservation,
-    Unknown,
-    build_problem,
-    clear_function_cache,
     covariance_and_identifiability,
-    estimate_noise,
     group_residuals,
+    rejected_observations,
+)
+from kinfw.identification.problem._noise import NoiseModel, estimate_noise, norm2_cdf
+from kinfw.identification.problem._problem import LeastSquaresProblem, NormalEquations, Unknown
+from kinfw.identification.problem._refine_result import RefineResult
+from kinfw.identification.problem._solver import (
+    LOSS_SCALE,
+    LOSSES,
     levenberg_marquardt,
     leverage_sums,
     leverages,
     negligible_columns,
-    norm2_cdf,
     observation_norms,
-    rejected_observations,
     row_weights,
     tall_r,
     thresholds,
@@ -81,22 +78,6 @@ from kinfw.measurements import (
 )
 from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_named, kind_of
-
-__all__ = [
-    "LOSSES",
-    "REJECT_Z",
-    "GroupResiduals",
-    "Identifiability",
-    "LeastSquaresProblem",
-    "NoiseModel",
-    "RefineResult",
-    "RejectedObservation",
-    "Unknown",
-    "build_problem",
-    "clear_function_cache",
-    "information_matrix",
-    "refine",
-]
 
 log = logging.getLogger(__name__)
 

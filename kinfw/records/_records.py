@@ -1,5 +1,5 @@
-"""The records the calibration sidecar (:mod:`kinfw.reports`) and the
-calibration report (:mod:`kinfw.reports`) share: :class:`DataProvenance`,
+"""The records the calibration sidecar (:mod:`kinfw.records`) and the
+calibration report (:mod:`kinfw.records`) share: :class:`DataProvenance`,
 :class:`ModelSummary`, :class:`GuardSummary`, :class:`NoiseSummary`,
 :class:`CalibratedUnknown`, :class:`ErrorValue` and :class:`BeforeAfter`, each with
 ``to_dict`` / ``from_dict`` (SI inside; a field name says ``mm`` or ``deg`` where a value
@@ -15,20 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from kinfw.reports._doc_reader import DocReader
-
-__all__ = [
-    "STATS",
-    "BeforeAfter",
-    "CalibratedUnknown",
-    "DataProvenance",
-    "ErrorValue",
-    "GuardSummary",
-    "ModelSummary",
-    "NoiseSummary",
-    "headline",
-    "read_only_array",
-]
+from kinfw.records._doc_reader import DocReader
 
 
 def read_only_array(

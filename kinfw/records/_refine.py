@@ -1,4 +1,4 @@
-"""The joint refinement's section of a calibration report (:mod:`kinfw.reports`):
+"""The joint refinement's section of a calibration report (:mod:`kinfw.records`):
 :class:`RefineSection` and its rows (parameters, identifiability, down-weighted and
 rejected observations), typed frozen dataclasses with ``to_dict`` / ``from_dict`` (the
 ``refine`` key of ``report.json``, format ``kinfw-calibration-report`` v1)."""
@@ -8,19 +8,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from kinfw.reports._doc_reader import DocReader
-from kinfw.reports._records import CalibratedUnknown, ErrorValue, NoiseSummary
-from kinfw.reports._stages import KinematicValue
-
-__all__ = [
-    "Correlation",
-    "DownweightedRow",
-    "IdentifiabilitySummary",
-    "NotIdentifiable",
-    "ParameterRow",
-    "RefineSection",
-    "RejectedRow",
-]
+from kinfw.records._doc_reader import DocReader
+from kinfw.records._records import CalibratedUnknown, ErrorValue, NoiseSummary
+from kinfw.records._stages import KinematicValue
 
 
 @dataclass(frozen=True, slots=True)

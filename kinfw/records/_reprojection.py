@@ -1,4 +1,4 @@
-"""The reprojection section of a calibration report (:mod:`kinfw.reports`):
+"""The reprojection section of a calibration report (:mod:`kinfw.records`):
 the pixel errors of ``pixels`` observations per camera and per image, typed frozen
 dataclasses with ``to_dict`` / ``from_dict`` (the ``reprojection`` key of
 ``report.json``, format ``kinfw-calibration-report`` v1)."""
@@ -8,9 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from kinfw.reports._doc_reader import DocReader
-
-__all__ = ["CameraReprojection", "ImageReprojection", "ReprojectionSection"]
+from kinfw.records._doc_reader import DocReader
 
 
 @dataclass(frozen=True, slots=True)

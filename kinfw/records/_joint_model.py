@@ -2,7 +2,7 @@
 
 ``kinfw calibrate --model ...`` writes it beside the calibrated URDF and its sidecar, for
 controllers and vendor tools that take a joint's stiffness, gear scale or coupling (the
-sidecar holds the same, :attr:`kinfw.reports.CalibrationSidecar.robot_blocks`, for
+sidecar holds the same, :attr:`kinfw.records.CalibrationSidecar.robot_blocks`, for
 kinfw to re-apply)::
 
     format: kinfw-joint-model
@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from kinfw.reports._records import RobotBlockRecord
+from kinfw.records._records import RobotBlockRecord
 
 FORMAT = "kinfw-joint-model"
 
@@ -38,7 +38,7 @@ def _stiffness_unit(unit: str) -> str | None:
 
 
 def joint_model_doc(records: Sequence[RobotBlockRecord], urdf: str | Path) -> dict[str, Any]:
-    """The document of :mod:`this module <kinfw.reports>`'s format for the calibrated blocks
+    """The document of :mod:`this module <kinfw.records>`'s format for the calibrated blocks
     ``records`` of the URDF file ``urdf``: per joint (the entries' owners) each field's
     value, standard deviation and unit."""
     joints: dict[str, dict[str, Any]] = {}

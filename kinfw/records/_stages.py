@@ -1,8 +1,8 @@
-"""The stage sections of a calibration report (:mod:`kinfw.reports`): closed
+"""The stage sections of a calibration report (:mod:`kinfw.records`): closed
 form, hand-eye and export, as typed frozen dataclasses with ``to_dict`` / ``from_dict``
 (the keys of ``report.json``, format ``kinfw-calibration-report`` v1). The joint
-refinement's section is :mod:`kinfw.reports`, the reprojection errors'
-:mod:`kinfw.reports`."""
+refinement's section is :mod:`kinfw.records`, the reprojection errors'
+:mod:`kinfw.records`."""
 
 from __future__ import annotations
 
@@ -12,16 +12,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from kinfw.reports._doc_reader import DocReader
-
-__all__ = [
-    "CameraMount",
-    "ClosedFormSection",
-    "ExportSection",
-    "HandEyeSection",
-    "KinematicValue",
-    "TargetEstimate",
-]
+from kinfw.records._doc_reader import DocReader
 
 
 def _none_if_nan(v: float) -> float | None:
