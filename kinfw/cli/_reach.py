@@ -159,13 +159,22 @@ def _root_target(args, target):
     return root_T_meas @ target
 
 
-def _payload(given):
-    """The :class:`kinfw.model.Payloads` of one sample of ``--payload``, or None."""
+def _payload(args, robot):
+    """The :class:`kinfw.model.Payloads` of one sample of ``--payload``, or None; its
+    frame checked, and a warning when the model has no spec for it to act on."""
     from kinfw.model import Payloads
 
-    if given is None:
+    if args.payload is None:
         return None
-    frame, mass_kg, com = given
+    frame, mass_kg, com = args.payload
+    robot.frame_id(frame)  # an unknown frame: one line naming the links
+    if not robot.spec:
+        warnings.warn(
+            f"--payload: {args.model} has no model spec (no calibration sidecar with a "
+            "compliance beside it): the payload changes nothing",
+            UserWarning,
+            stacklevel=1,
+        )
     return Payloads.constant(1, frame, mass_kg, com)
 
 
@@ -187,15 +196,6 @@ def cmd_reach(args: argparse.Namespace) -> int:
     )
     q_start = parse_joint_values(robot, args.q)
     free = free_arg(robot, args.free)
-    if args.payload is not None:
-        robot.frame_id(args.payload[0])  # an unknown frame: one line naming the links
-        if not robot.spec:
-            warnings.warn(
-                f"--payload: {args.model} has no model spec (no calibration sidecar with a "
-                "compliance beside it): the payload changes nothing",
-                UserWarning,
-                stacklevel=1,
-            )
     result = reach(
         robot,
         args.frame,
@@ -204,7 +204,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
         free_joints=free,
         restarts=args.restarts,
         seed=args.seed,
-        payload=_payload(args.payload),
+        payload=_payload(args, robot),
     )
     rows = joint_rows(robot, result.q, result.free_joints, result.at_limits)
     rotation_deg = (

@@ -98,18 +98,18 @@ def test_plentiful_data_gets_the_full_set_without_cross_validation(head, monkeyp
     # the head's links have inertias: full is fitted once (the calibration itself) for the
     # compliance's score test, which these rigid data fail: nothing more is fitted
     fitted = []
-    real_calibrate = model_choice.identify
+    real_identify = model_choice.identify
     monkeypatch.setattr(
         model_choice,
         "identify",
-        lambda *a, **k: fitted.append(k["parameters"]) or real_calibrate(*a, **k),
+        lambda *a, **k: fitted.append(k["parameters"]) or real_identify(*a, **k),
     )
     choice = choose_parameters(head, big)
     assert (choice.parameters, choice.prior, choice.candidates, choice.k) == ("full", None, (), 0)
     assert fitted == ["full"] and not choice.spec and choice.fit is not None
     assert choice.rows_per_parameter >= ROWS_PER_PARAMETER
     assert "enough to estimate every parameter" in choice.reason
-    monkeypatch.setattr(model_choice, "calibrate", no_crossval)
+    monkeypatch.setattr(model_choice, "identify", no_crossval)
     with pytest.raises(AssertionError, match="cross-validation ran"):
         choose_parameters(head, small)  # the small set does go to cross-validation
 
