@@ -30,9 +30,15 @@ from kinfw.model._urdf_read import RobotModelError
 
 logger = logging.getLogger("kinfw.model")
 
-#: Below this largest gravity torque over the data (Nm, N) a joint's compliance is not
-#: estimated: gravity does not load it (a vertical axis, a horizontal table).
+#: Below this spread of gravity's torque over the data (Nm, N; largest minus smallest) a
+#: joint's compliance is not estimated: gravity does not load it (a vertical axis, a
+#: horizontal table) or loads it alike in every sample (a vertical slide without a
+#: varying payload), and a constant deflection is a zero offset.
 UNLOADED_TORQUE = 1e-6
+
+#: Terms of the Neumann series the CasADi hook of :class:`JointComplianceBlock` sums for
+#: ``(I - C G_K)^-1``.
+NEUMANN_TERMS = 3
 
 
 def _model_joint(spec: str, joint: str, samples: BlockSamples) -> int:
@@ -59,7 +65,8 @@ class JointComplianceBlock(SpecBlock):
     second order in the joints' moves ``q_phys - q_read``: with ``tau0`` and ``G =
     dtau/dq`` at the readings (:meth:`sample_inputs`),
     ``(I - C G_K) delta = C (tau0 + G (q - q_read))`` and ``q_phys = q + delta`` (``C``
-    the compliances, ``G_K`` the columns of the compliant joints). The error left is
+    the compliances, ``G_K`` the columns of the compliant joints), by
+    :data:`NEUMANN_TERMS` terms of its Neumann series. The error left is
     ``c d2tau dq^2 / 2``: about 1e-8 rad for an industrial arm with a degree of zero
     offsets (c = 5e-6 rad/Nm, tau'' ~ 200 Nm).
 
@@ -97,8 +104,9 @@ class JointComplianceBlock(SpecBlock):
 
     def for_data(self, context: BlockSamples) -> JointComplianceBlock:
         """Bound to the model's joints (all of them for ``compliance``), refused when a
-        link lacks inertias, and fixed at its start on joints gravity does not load in
-        these data (their compliance is not determined)."""
+        link lacks inertias, and fixed at its start on joints whose gravity torque does
+        not vary in these data (:data:`UNLOADED_TORQUE`: their compliance is not
+        determined, a constant deflection being a zero offset)."""
         names = context.joint_names
         joints = self.joints or names
         for j in joints:
@@ -107,10 +115,11 @@ class JointComplianceBlock(SpecBlock):
         revolute = tuple(context.robot.joint(j).type != "prismatic" for j in joints)
         start = self.start if self.joints else np.zeros(len(joints))
         tau, _ = context.gravity_torques(joints, derivative=False)
-        loaded = np.abs(tau).max(axis=0, initial=0.0) > UNLOADED_TORQUE
+        loaded = np.ptp(tau, axis=0) > UNLOADED_TORQUE if len(tau) else np.zeros(len(joints), bool)
         if not loaded.all():
             logger.info(
-                "%s: gravity exerts no torque on %s in these data: its compliance is not estimated",
+                "%s: gravity's torque on %s does not vary in these data (a constant deflection "
+                "is a zero offset): its compliance is not estimated",
                 self.spec,
                 ", ".join(j for j, on in zip(joints, loaded, strict=True) if not on),
             )
@@ -147,8 +156,14 @@ class JointComplianceBlock(SpecBlock):
         q_read, tau0 = s[:J], s[J : J + K]
         G = ca.reshape(s[J + K :], J, K).T  # (K, J): numpy's row-major rows
         C = self.casadi_value(d, c)
-        A = ca.SX.eye(K) - ca.diag(C) @ G[:, cols]
-        delta = ca.solve(A, C * (tau0 + G @ (q - q_read)))
+        # (I - C G_K) delta = b by its Neumann series: C G_K ~ 1e-3 for an arm, so three
+        # terms leave (C G_K)^3 delta ~ 1e-12 rad; matrix-vector products only (a
+        # symbolic solve made an 8-joint arm's graph 20 times slower)
+        b = C * (tau0 + G @ (q - q_read))
+        G_K = G[:, cols]
+        delta = b
+        for _ in range(NEUMANN_TERMS - 1):
+            delta = b + C * (G_K @ delta)
         E = np.zeros((J, K))
         E[cols, np.arange(K)] = 1.0
         return q + ca.DM(E) @ delta
