@@ -67,6 +67,12 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         "model's sidecar, the command compensates its deflection under this load",
     )
     p.add_argument(
+        "--no-sidecar",
+        action="store_true",
+        help="ignore the calibration sidecar beside the model: the URDF alone (no "
+        "compliance, gear scale or coupling of its model spec)",
+    )
+    p.add_argument(
         "--measured-in",
         metavar="FRAME",
         help="the target is given in this external frame (the tracker's, the mocap's) "
