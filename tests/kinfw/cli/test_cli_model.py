@@ -295,3 +295,37 @@ def test_payloads_are_calibrated_verified_and_compensated_by_reach(tmp_path, cap
         )
     assert achieved["compensated"] < 1e-7, achieved
     assert achieved["rigid"] > 1e-4, achieved
+
+
+def test_reach_takes_targets_as_the_tracker_sees_them(tmp_path, capsys):
+    """``--measured-in mocap``: the target is placed in the root by the sidecar's pose of
+    the tracker frame (the calibration's root is gauge); another frame, or no sidecar,
+    is refused naming what is there."""
+    data, _ = _simulate(tmp_path, capsys, "tracked", "--noise-mm", "0", "--mocap-samples", "60")
+    cal = tmp_path / "cal.urdf"
+    assert (
+        run_cli(["calibrate", data, "--urdf", UR10, "--out", cal, "--params", "full"], capsys)[0]
+        == 0
+    )
+    sidecar = json.loads(cal.with_suffix(".kinfw.json").read_text())
+    assert sidecar["measurement_frame"] == "mocap"
+    meas_T_root = np.array(sidecar["w_T_root"])
+    root_p = np.array([0.6, 0.2, 0.5])
+    mocap_p = meas_T_root[:3, :3] @ root_p + meas_T_root[:3, 3]
+    code, out, _ = run_cli(
+        ["reach", cal, "--frame", "tool0", "--point", *mocap_p, "--measured-in", "mocap", "--json"],
+        capsys,
+    )
+    assert code == 0
+    np.testing.assert_allclose(
+        np.array(json.loads(out)["root_T_target"])[:3, 3], root_p, atol=1e-12
+    )
+    code, _, err = run_cli(
+        ["reach", cal, "--frame", "tool0", "--point", 0, 0, 1, "--measured-in", "vicon"], capsys
+    )
+    assert code == 2 and "was measured in mocap" in err
+    cal.with_suffix(".kinfw.json").unlink()
+    code, _, err = run_cli(
+        ["reach", cal, "--frame", "tool0", "--point", 0, 0, 1, "--measured-in", "mocap"], capsys
+    )
+    assert code == 2 and "no calibration sidecar" in err
