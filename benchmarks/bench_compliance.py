@@ -17,8 +17,9 @@ Tables:
    (the model choice without the compliance candidate, what ``kinfw calibrate`` fitted
    before it), which must stay within 1 %;
 3. compensation: ``kinfw.reach`` of random flange points with the calibrated model
-   (compliant, and rigid), the command sent to the true compliant robot under the
-   payload: the error it achieves;
+   (compliant, and rigid; trained with payloads varying, reflectors in the root with
+   known offsets so the flange itself is determined) under a random payload, the command
+   sent to the true compliant robot under that payload: the error it achieves;
 4. cost: a 10,000-sample fit (``refine``) with and without the compliance.
 
 ``python benchmarks/bench_compliance.py [--quick] [--seed S]``
@@ -27,6 +28,7 @@ Tables:
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 import warnings
 
@@ -34,7 +36,7 @@ import numpy as np
 
 from benchmarks.common import format_table, load_average, wall_time_line
 from kinfw.control import reach
-from kinfw.model import ModelSpec, load_robot
+from kinfw.model import ModelSpec, Payloads, load_robot
 from kinfw.simulation import simulate_measurements
 from kinfw.verification.evaluation import choose_parameters
 from kinfw.verification.reporting import calibrate_and_report
@@ -50,9 +52,10 @@ ROBOTS = {
 REFLECTORS_M = ((0.1, 0.0, 0.05), (0.0, 0.1, 0.05), (0.0, 0.0, 0.15))
 
 
-def _simulated(nominal, flange, n, seed, compliance, in_root=False):
+def _simulated(nominal, flange, n, seed, compliance, in_root=False, payload=False):
     """The arm measured by the reflectors (in a tracker frame, or with known offsets in
-    the root), split alternately into training and held-out samples."""
+    the root), with a payload of 0 to ``PAYLOAD_KG`` per sample on the flange or none,
+    split alternately into training and held-out samples."""
     sim = simulate_measurements(
         nominal,
         markers=[(flange, np.array(p)) for p in REFLECTORS_M],
@@ -63,6 +66,7 @@ def _simulated(nominal, flange, n, seed, compliance, in_root=False):
         error_mm=1.0,
         error_deg=0.2,
         compliance=compliance,
+        payloads=(flange, PAYLOAD_KG, (0.0, 0.0, 0.1)) if payload else None,
         seed=seed,
     )
     data = sim.data
@@ -81,9 +85,9 @@ def _calibrated(nominal, train, test, **options):
 
 def accuracy_rows(n: int, seed: int) -> list[list[str]]:
     rows = []
-    for name, (path, flange) in ROBOTS.items():
+    for (name, (path, flange)), payload in itertools.product(ROBOTS.items(), (False, True)):
         nominal = load_robot(urdf_path(path))
-        _, train, test = _simulated(nominal, flange, n, seed, C_TRUE)
+        _, train, test = _simulated(nominal, flange, n, seed, C_TRUE, payload=payload)
         floor = np.sqrt(3.0) * SIGMA_M * 1e3
         default = _calibrated(nominal, train, test)
         rigid = _calibrated(nominal, train, test, parameters="full")
@@ -92,7 +96,7 @@ def accuracy_rows(n: int, seed: int) -> list[list[str]]:
         rows.append(
             [
                 name,
-                "none",
+                f"0-{PAYLOAD_KG:g} kg" if payload else "none",
                 str(train.n_samples),
                 f"{floor:.4f}",
                 f"{_held_rms_mm(default):.4f}",
@@ -138,7 +142,7 @@ def compensation_rows(n: int, seed: int, targets: int) -> list[list[str]]:
     rng = np.random.default_rng(seed)
     for name, (path, flange) in ROBOTS.items():
         nominal = load_robot(urdf_path(path))
-        sim, train, test = _simulated(nominal, flange, n, seed, C_TRUE, in_root=True)
+        sim, train, test = _simulated(nominal, flange, n, seed, C_TRUE, in_root=True, payload=True)
         truth = sim.truth
         models = {
             "compliant": _calibrated(nominal, train, test, parameters="full", model=["compliance"]),
@@ -151,9 +155,10 @@ def compensation_rows(n: int, seed: int, targets: int) -> list[list[str]]:
         for _ in range(targets):
             q = lo + (hi - lo) * rng.uniform(0.2, 0.8, size=len(names))
             target = truth.frame_poses(q, flange, names)[:3, 3]  # reachable: the truth's
+            load = Payloads.constant(1, flange, rng.uniform(0.0, PAYLOAD_KG), (0.0, 0.0, 0.1))
             for label, result in models.items():
-                got = reach(result.robot, flange, target, q_start=q)
-                physical = truth.spec.joint_values(truth, names, got.command[None])[0]
+                got = reach(result.robot, flange, target, q_start=q, payload=load)
+                physical = truth.spec.joint_values(truth, names, got.command[None], load)[0]
                 achieved = truth.frame_poses(physical, flange, names)[:3, 3]
                 errors[label].append(np.linalg.norm(achieved - target))
         for label, e in errors.items():

@@ -51,6 +51,15 @@ def _model_joint(spec: str, joint: str, samples: BlockSamples) -> int:
     return samples.joint_names.index(joint)
 
 
+def _selector(joint_names: tuple[str, ...], joint: str) -> Any:
+    """The CasADi column (J,) that is 1 at ``joint`` and 0 elsewhere."""
+    import casadi as ca
+
+    e = np.zeros(len(joint_names))
+    e[joint_names.index(joint)] = 1.0
+    return ca.DM(e)
+
+
 def _unit(revolute: bool, per: str) -> str:
     return ("rad" if revolute else "m") + per
 
@@ -250,11 +259,8 @@ class GearScaleBlock(SpecBlock):
     def casadi_joint_values(
         self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...], s: Any = None
     ) -> Any:
-        import casadi as ca
-
-        e = np.zeros(len(joint_names))
-        e[joint_names.index(self.joint)] = 1.0
-        return q + self.casadi_value(d, c)[0] * (q * ca.DM(e))
+        e = _selector(joint_names, self.joint)
+        return q + self.casadi_value(d, c)[0] * (q * e)
 
     def joint_values(
         self, q: NDArray[np.float64], context: BlockSamples, d: NDArray[np.float64] | None = None
@@ -345,11 +351,8 @@ class JointCouplingBlock(SpecBlock):
     def casadi_joint_values(
         self, q: Any, d: Any, c: Any, joint_names: tuple[str, ...], s: Any = None
     ) -> Any:
-        import casadi as ca
-
-        e = np.zeros(len(joint_names))
-        e[joint_names.index(self.joint)] = 1.0
-        return q + self.casadi_value(d, c)[0] * q[joint_names.index(self.other)] * ca.DM(e)
+        e = _selector(joint_names, self.joint)
+        return q + self.casadi_value(d, c)[0] * q[joint_names.index(self.other)] * e
 
     def joint_values(
         self, q: NDArray[np.float64], context: BlockSamples, d: NDArray[np.float64] | None = None
