@@ -175,6 +175,7 @@ def cmd_gaze(args: argparse.Namespace) -> int:
                     "camera_rays": fix.camera_rays.tolist(),
                     "joint_names": list(fix.joint_names),
                     "q": fix.q.tolist(),
+                    "command": fix.command.tolist(),
                     "joints": joints_json(rows),
                     "free_joints": list(fix.free_joints),
                     "error_deg": dict(zip(fix.cameras, errors_deg.tolist(), strict=True)),

@@ -108,6 +108,10 @@ class Fixation:
         cameras on one tilt: rank 3 of 4), so only points whose rays agree with that
         coupling can be fixated exactly: a head with both cameras at one height fixates
         everywhere, the IIS head (its vertical disparity) only near 4 m.
+    command : ndarray, shape (k,)
+        The joint command (the readings) that gives :attr:`q` through the robot's model
+        spec (a calibration's gear scales, couplings, compliance under gravity:
+        :meth:`kinfw.model.ModelSpec.readings`); :attr:`q` itself for a URDF alone.
     """
 
     joint_names: tuple[str, ...]
@@ -121,6 +125,11 @@ class Fixation:
     at_limits: tuple[str, ...]
     iterations: int
     rank: int
+    command: NDArray[np.float64] = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:
+        if self.command is None:
+            object.__setattr__(self, "command", self.q)
 
 
 def default_free_joints(robot: Robot, cameras: tuple[str, ...]) -> tuple[str, ...]:
@@ -326,6 +335,9 @@ class GazeSolver:
             at_limits=tuple(n for n, b in zip(self.free_joints, at_limit, strict=True) if b),
             iterations=iterations,
             rank=_rank(solution.jacobian),
+            command=self.robot.spec.readings(self.robot, self.robot.joint_names, q[None])[0]
+            if self.robot.spec
+            else q,
         )
 
     def _rays(self, camera_rays: ArrayLike | None) -> NDArray[np.float64]:

@@ -185,3 +185,21 @@ def test_the_registry_takes_a_new_block_and_refuses_clashes():
         register_block(Other)
     with pytest.raises(ValueError, match="expected a SpecBlock subclass"):
         register_block(dict)
+
+
+def test_fixate_and_reach_command_through_the_spec():
+    """With a gear scale on the tilt, the command the controllers get is the reading that
+    turns the joint to the solved value: q / (1 + s)."""
+    from kinfw.control import fixate, reach
+
+    head = load_robot(HEAD_URDF)
+    geared = head.with_spec(ModelSpec.parse(["gear-scale:tilt"]).with_values([[0.02]]))
+    tilt = head.joint_names.index("tilt")
+    point = np.array([2.0, 0.3, 0.4])
+    fix = fixate(geared, point)
+    assert fix.command[tilt] == pytest.approx(fix.q[tilt] / 1.02, abs=1e-15)
+    assert fixate(head, point).command is not None
+    got = reach(geared, "left_plate", head.frame_poses(fix.q, "left_plate")[:3, 3])
+    assert got.command[tilt] == pytest.approx(got.q[tilt] / 1.02, abs=1e-15)
+    others = [k for k in range(len(head.joint_names)) if k != tilt]
+    np.testing.assert_array_equal(got.command[others], got.q[others])
