@@ -1,6 +1,10 @@
 """The robot model: a URDF robot in Pinocchio (:class:`Robot`, :func:`load_robot`), the tree
-CPC model (:class:`CPCModel`; numpy and CasADi forward kinematics) and the parameter blocks
-an estimation problem is made of (:class:`BlockKey`, :class:`CPCBlock`, ...).
+CPC model (:class:`CPCModel`; numpy and CasADi forward kinematics), the parameter blocks
+an estimation problem is made of (:class:`BlockKey`, :class:`CPCBlock`, ...), and what a
+URDF cannot hold: the model spec (:class:`ModelSpec`) of named robot blocks
+(:class:`JointComplianceBlock`, :class:`GearScaleBlock`, :class:`JointCouplingBlock`, or a
+plugin's: :func:`register_block`), with the payloads and gravity torques they need
+(:class:`Payloads`, :func:`gravity_torques`; docs/model.md).
 """
 
 from __future__ import annotations
