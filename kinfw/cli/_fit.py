@@ -225,7 +225,7 @@ def _print_spec(result, out: Path) -> None:
 
     records = robot_block_records(result.calibration.refined)
     rows = [
-        [name, unit, f"{value:.4g}", f"{std:.2g}" if std > 0 else "fixed"]
+        [name, unit, f"{value:.4g}", f"{std:.2g}" if std > 0 else "fixed", _stiffness(unit, value)]
         for r in records
         for name, unit, value, std in zip(r.names, r.units, r.values, r.std, strict=True)
     ]
@@ -234,7 +234,13 @@ def _print_spec(result, out: Path) -> None:
         f"({', '.join(b.block_name for b in result.robot.spec.blocks)}) is in the sidecar and "
         f"{joint_model_path(out)}:"
     )
-    print(format_table(rows, ["parameter", "unit", "estimate", "std"]))
+    print(format_table(rows, ["parameter", "unit", "estimate", "std", "stiffness"]))
+
+
+def _stiffness(unit: str, compliance: float) -> str:
+    """A compliance's stiffness (``1 / c``, Nm/rad or N/m), ``-`` for another entry."""
+    per = {"rad/Nm": "Nm/rad", "m/N": "N/m"}.get(unit)
+    return f"{1.0 / compliance:.4g} {per}" if per and compliance > 0 else "-"
 
 
 def _print_reprojection(rep, on: str = "the calibration data (in-sample)") -> None:
