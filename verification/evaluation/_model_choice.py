@@ -53,6 +53,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from kinfw import progress
 from kinfw.identification import Calibration, identify
@@ -399,7 +400,9 @@ def choose_model_spec(
     than :data:`MODEL_GAIN` better than the rigid model (the module docstring).
 
     The rigid fit is the choice's own, or (an unscored choice) fitted here and kept as
-    the calibration, its warnings issued when it stays. A score test at it gates the
+    the calibration, its warnings issued when it stays. Only ``"full"`` (with or without
+    a prior) is weighed: a smaller set's residuals hold the geometry it leaves out, which
+    a compliance would partly absorb. A score test at the rigid fit gates the
     rest (:func:`compliance_gain`: what a compliance would take off the whitened cost,
     in-sample, against its chi-square spread under no compliance); only then is the
     compliant model fitted and both scored by the closed-form leave-one-out on the data
@@ -407,9 +410,8 @@ def choose_model_spec(
     compliance is a candidate (:func:`compliance_candidate`) or a fit fails.
     """
     block = compliance_candidate(nominal, data)
-    if block is None:
+    if block is None or choice.parameters != "full":  # frames, offsets: misfit by design
         return choice
-    progress.stage("model choice: joint compliance under gravity")
     rigid, caught = choice.fit, []
     if rigid is None:
         with warnings.catch_warnings(record=True) as caught:
@@ -431,6 +433,7 @@ def choose_model_spec(
     )
     kept = choice
     if gain > _significant(dof):
+        progress.stage("model choice: joint compliance under gravity")
         kept = _with_compliance(nominal, data, choice, block, noise=noise, loss=loss)
     if not kept.spec:
         for w in caught:  # the rigid calibration's own warnings, once
@@ -447,17 +450,19 @@ def compliance_gain(
     noise: NoiseModel | None,
 ) -> tuple[float, float, int]:
     """The score test of a joint compliance at the rigid fit ``rigid`` of ``model``
-    (its parameter set and prior): ``(gain, cost, dof)``, how much one Gauss-Newton step
-    over every free parameter and ``block``'s compliances would lower the whitened cost
-    (in-sample, linear loss), that cost, and the compliances' count. Under no
+    (its parameter set and prior): ``(gain, cost, dof)``, how much more one Gauss-Newton
+    step over every free parameter and ``block``'s compliances would lower the whitened
+    cost than one over the rigid parameters alone (in-sample, linear loss, without the
+    observations the fit rejected), that cost, and the compliances' count. Under no
     compliance the gain is about chi-square with ``dof`` degrees of freedom (the rigid
     parameters' gradient is zero at their fit)."""
     refined = rigid.refined
+    kept = without_observations(data, {(k, f, m, s) for s, k, f, m in rejected_keys(rigid)})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         problem = build_problem(
             nominal.with_spec(ModelSpec((block,))),
-            data,
+            kept,
             start=Robot(rigid.urdf_xml, "<rigid>"),
             known=refined.unknowns,
             parameters=model[0],
@@ -466,9 +471,16 @@ def compliance_gain(
     r, J = problem.evaluate_free(
         np.zeros(problem.n_parameters), refined.noise if noise is None else noise
     )
-    step, *_ = np.linalg.lstsq(J, -r, rcond=None)
-    cost = float(r @ r)
-    return cost - float(np.sum((r + J @ step) ** 2)), cost, int(block.free.sum())
+    # the compliances' own share: the step over every free column against the step over
+    # the rigid ones (the fit's robust loss leaves the rigid columns a least-squares step)
+    _, s = problem.block(block.key)
+    rigid_cols = ~np.isin(np.flatnonzero(problem.free), np.arange(problem.n_parameters)[s])
+
+    def left(A: NDArray) -> float:
+        step, *_ = np.linalg.lstsq(A, -r, rcond=None)
+        return float(np.sum((r + A @ step) ** 2))
+
+    return left(J[:, rigid_cols]) - left(J), float(r @ r), int(block.free.sum())
 
 
 def _significant(dof: int) -> float:
@@ -502,6 +514,27 @@ def missing_compliance(
     )
 
 
+#: Standard deviations beyond zero an estimated compliance must lie to count as one
+#: (:func:`physical_compliance`).
+COMPLIANCE_Z = 3.0
+
+
+def physical_compliance(refined) -> bool:
+    """Whether a refinement's compliances look like a joint's: at least one above
+    :data:`COMPLIANCE_Z` standard deviations, none below minus that (a joint does not
+    stiffen against gravity). A compliance fitted to a misfit of something else (wrong
+    camera intrinsics: the IIS-head's vergence at -0.019 +- 0.016 rad/Nm) is neither, and
+    is not offered to the model choice."""
+    z = [
+        value / std
+        for (_, field_), value, std in zip(
+            refined.parameter_names, refined.estimate, refined.std, strict=True
+        )
+        if field_ == "compliance" and std > 0
+    ]
+    return bool(z) and max(z) > COMPLIANCE_Z and min(z) > -COMPLIANCE_Z
+
+
 def _with_compliance(
     nominal: Robot,
     data: Measurements,
@@ -523,7 +556,7 @@ def _with_compliance(
         noise=noise,
         loss=loss,
     )
-    if isinstance(compliant, ValueError):
+    if isinstance(compliant, ValueError) or not physical_compliance(compliant.refined):
         return choice
     sigma = whitening_noise(rigid.refined.noise if noise is None else noise, data)
     excluded = rejected_keys(rigid)
