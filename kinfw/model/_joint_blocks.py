@@ -45,7 +45,7 @@ def _model_joint(spec: str, joint: str, samples: BlockSamples) -> int:
     """The column of ``joint`` among the model's joints, or a clear error."""
     if joint not in samples.joint_names:
         raise RobotModelError(
-            f"--model {spec}: joint {joint!r} is not a movable joint on the measured paths "
+            f"model {spec}: joint {joint!r} is not a movable joint on the measured paths "
             f"(those are: {', '.join(samples.joint_names)})"
         )
     return samples.joint_names.index(joint)
@@ -215,7 +215,7 @@ def _refuse_massless(spec: str, context: BlockSamples) -> None:
     if missing:
         links = sorted({link for ls in missing.values() for link in ls})
         raise RobotModelError(
-            f"--model {spec}: {context.robot.source}: the link(s) {', '.join(links)} have no "
+            f"model {spec}: {context.robot.source}: the link(s) {', '.join(links)} have no "
             f"<inertial>: the gravity torque on the joints above them "
             f"({', '.join(missing)}) is unknown; give them masses in the URDF or drop {spec}"
         )
@@ -343,7 +343,7 @@ class JointCouplingBlock(SpecBlock):
             prismatic.add(context.robot.joint(j).type == "prismatic")
         if len(prismatic) > 1:
             raise RobotModelError(
-                f"--model {self.spec}: {self.joint!r} and {self.other!r} are one revolute "
+                f"model {self.spec}: {self.joint!r} and {self.other!r} are one revolute "
                 "and one prismatic joint; a coupling adds readings of one unit"
             )
         return self
