@@ -368,3 +368,86 @@ def test_noisy_gear_scale_and_coupling_predict_held_out_poses_at_the_noise_floor
     floor = np.sqrt(3.0) * 0.05
     assert held["blocks"] < 1.15 * floor, held
     assert held["urdf"] > 2.0 * floor, held
+
+
+@pytest.mark.slow
+def test_crossval_report_and_view_take_the_model(tmp_path, capsys):
+    """``kinfw crossval --model compliance`` scores the compliant model on held-out folds
+    (at the noise floor where full alone is far above it); the report lists the
+    compliances with their unit; ``kinfw view`` draws the calibrated arm deflected (its
+    scene differs from the same URDF's without the sidecar's compliance)."""
+    data, _ = _simulate(
+        tmp_path,
+        capsys,
+        "cv",
+        *("--compliance", str(C_TRUE), "--noise-mm", "0.02", "--mocap-samples", "150"),
+        *("--error-mm", "1", "--error-deg", "0.2"),
+    )
+    code, out, _ = run_cli(
+        ["crossval", data, "--urdf", UR10, "--json", "--model", "compliance"], capsys
+    )
+    assert code == 0
+    cv = json.loads(out)["mean_position_rms_mm"]
+    floor = np.sqrt(3.0) * 0.02
+    assert cv["full"] < 1.2 * floor and cv["auto"] < 1.2 * floor, cv
+    cal, report = tmp_path / "cal.urdf", tmp_path / "report.json"
+    code, _, _ = run_cli(
+        [
+            "calibrate",
+            data,
+            "--urdf",
+            UR10,
+            "--out",
+            cal,
+            "--report",
+            report,
+            "--model",
+            "compliance",
+        ],
+        capsys,
+    )
+    assert code == 0
+    rows = [
+        p
+        for p in json.loads(report.read_text())["refine"]["parameters"]
+        if p["field"] == "compliance"
+    ]
+    assert {r["unit"] for r in rows} == {"rad/Nm"} and len(rows) == 6
+    lift = next(r for r in rows if r["owner"] == "shoulder_lift_joint")
+    assert lift["delta_from_start"] == pytest.approx(C_TRUE, rel=0.05)
+    code, _, err = run_cli(
+        ["view", UR10, "--calibrated", cal, "--data", data, "--html", tmp_path / "v.html"], capsys
+    )
+    assert code == 0 and (tmp_path / "v.html").stat().st_size > 0, err
+
+
+def _calibrated_transforms(window) -> dict:
+    """The last transform sent to each node of the calibrated robot (path -> 4x4)."""
+    return {
+        c["path"]: np.array(c["matrix"]).reshape(4, 4).T
+        for c in window.commands
+        if c["type"] == "set_transform" and c["path"].startswith("/meshcat/kinfw/calibrated/")
+    }
+
+
+def test_the_view_draws_the_calibrated_robot_at_its_joint_values():
+    """A gear scale on the tilt: the calibrated robot is drawn where the URDF alone would
+    be at the scaled joint value, and not at the reading."""
+    import kinfw
+    from kinfw.model import ModelSpec
+    from kinfw.view import OfflineWindow, scene
+
+    head = kinfw.load_robot(_head())
+    geared = head.with_spec(ModelSpec.parse(["gear-scale:tilt"]).with_values([[0.3]]))
+    q = np.array([0.0, 0.0, 0.2, 0.5, 0.1, -0.1])
+    q_scaled = q.copy()
+    q_scaled[head.joint_names.index("tilt")] *= 1.3
+    drawn = {}
+    for label, robot, at in (("spec", geared, q), ("scaled", head, q_scaled), ("read", head, q)):
+        window = OfflineWindow()
+        scene(head, robot, q=at, window=window)
+        drawn[label] = _calibrated_transforms(window)
+    assert drawn["spec"].keys() == drawn["scaled"].keys() and drawn["spec"]
+    for path, T in drawn["spec"].items():
+        np.testing.assert_allclose(T, drawn["scaled"][path], atol=1e-12)
+    assert any(not np.allclose(T, drawn["read"][p]) for p, T in drawn["spec"].items())
