@@ -83,21 +83,27 @@ class ModelSummary:
     reason : str
         ``"given"`` (by the caller, ``--params`` / ``--prior-*``) or the model choice's
         one-line reason (:class:`kinfw.verification.evaluation.ModelChoice`).
+    blocks : tuple of str
+        The robot blocks fitted besides the URDF, by name (``("compliance",)``; their
+        values are the sidecar's ``robot_blocks``); empty for the URDF alone.
     """
 
     parameters: tuple[str, ...]
     prior_m: float | None
     prior_rad: float | None
     reason: str
+    blocks: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
-        """E.g. ``"full"``, ``"pan,tilt"`` or ``"full, prior 3 mm / 0.3 deg"``."""
+        """E.g. ``"full"``, ``"pan,tilt"``, ``"full, prior 3 mm / 0.3 deg"`` or
+        ``"full + compliance"``."""
+        blocks = "".join(f" + {b}" for b in self.blocks)
         if self.prior_m is None or self.prior_rad is None:
-            return ",".join(self.parameters)
+            return ",".join(self.parameters) + blocks
         return (
             f"{','.join(self.parameters)}, prior {1e3 * self.prior_m:.3g} mm / "
-            f"{math.degrees(self.prior_rad):.3g} deg"
+            f"{math.degrees(self.prior_rad):.3g} deg{blocks}"
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -106,7 +112,7 @@ class ModelSummary:
             "prior_mm": None if self.prior_m is None else 1e3 * self.prior_m,
             "prior_deg": None if self.prior_rad is None else math.degrees(self.prior_rad),
             "reason": self.reason,
-        }
+        } | ({"blocks": list(self.blocks)} if self.blocks else {})
 
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> ModelSummary:
@@ -120,6 +126,7 @@ class ModelSummary:
             None if mm is None else 1e-3 * mm,
             None if deg is None else math.radians(deg),
             reader.string(doc, "reason", at),
+            reader.strings(doc, "blocks", at) if doc.get("blocks") is not None else (),
         )
 
 

@@ -654,6 +654,7 @@ def calibrate_and_report(
         None if prior is None else float(prior[0]),
         None if prior is None else float(prior[1]),
         "given" if choice is None else choice.reason,
+        tuple(b.block_name for b in calibrated.spec.blocks),
     )
     sources = {"nominal URDF": nominal.source, "data": data.source}
     if held_out is not None:

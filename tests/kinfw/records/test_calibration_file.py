@@ -208,3 +208,30 @@ def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
         err.strip() == f"kinfw verify: error: {bad}: nominal_urdf: expected a value (the key "
         "is missing)"
     )
+
+
+def test_the_model_summary_and_robot_blocks_round_trip():
+    """A calibration with a compliance: the model's label names it, the sidecar's
+    robot_blocks give back the calibrated spec, values and sigmas exactly."""
+    import numpy as np
+
+    from kinfw.records import DocReader, ModelSummary, RobotBlockRecord
+
+    model = ModelSummary(("full",), 3e-3, 0.01, "given", ("compliance",))
+    assert model.label == "full, prior 3 mm / 0.573 deg + compliance"
+    again = ModelSummary.from_dict(model.to_dict(), DocReader("<test>"), "model")
+    assert again == model
+    plain = ModelSummary(("full",), None, None, "given")
+    assert "blocks" not in plain.to_dict()
+    assert ModelSummary.from_dict(plain.to_dict(), DocReader("<test>"), "model") == plain
+    record = RobotBlockRecord(
+        "compliance:j1,j2",
+        ("j1:compliance", "j2:compliance"),
+        ("rad/Nm",) * 2,
+        [0.0, 5e-6],
+        [0.0, 2e-8],
+    )
+    back = RobotBlockRecord.from_dict(record.to_dict(), DocReader("<test>"), "robot_blocks[0]")
+    assert back.spec == record.spec and back.names == record.names
+    np.testing.assert_array_equal(back.values, record.values)
+    np.testing.assert_array_equal(back.std, record.std)
