@@ -67,6 +67,14 @@ def add_reach_parser(sub: argparse._SubParsersAction) -> None:
         "model's sidecar, the command compensates its deflection under this load",
     )
     p.add_argument(
+        "--gravity",
+        nargs=3,
+        type=real,
+        metavar=("GX", "GY", "GZ"),
+        help="gravity in the root frame, m/s^2, for a compliance's deflection (default: the "
+        "calibration's, recorded in its sidecar, else 0 0 -9.81)",
+    )
+    p.add_argument(
         "--no-sidecar",
         action="store_true",
         help="ignore the calibration sidecar beside the model: the URDF alone (no "
@@ -184,6 +192,22 @@ def _payload(args, robot):
     return Payloads.constant(1, frame, mass_kg, com)
 
 
+def _gravity(args):
+    """``--gravity``, else the calibration's (its sidecar's), else the standard one."""
+    from kinfw.files import sidecar_path
+    from kinfw.model import STANDARD_GRAVITY
+    from kinfw.records import read_sidecar
+
+    if args.gravity is not None:
+        return tuple(args.gravity)
+    side = sidecar_path(args.model)
+    if not args.no_sidecar and Path(side).is_file():
+        gravity = read_sidecar(side).gravity
+        if gravity is not None:
+            return tuple(gravity)
+    return STANDARD_GRAVITY
+
+
 def cmd_reach(args: argparse.Namespace) -> int:
     import math
 
@@ -211,6 +235,7 @@ def cmd_reach(args: argparse.Namespace) -> int:
         restarts=args.restarts,
         seed=args.seed,
         payload=_payload(args, robot),
+        gravity=_gravity(args),
     )
     rows = joint_rows(robot, result.q, result.free_joints, result.at_limits)
     rotation_deg = (

@@ -87,6 +87,13 @@ def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
         "(with --compliance the deflection follows it)",
     )
     p.add_argument(
+        "--gravity",
+        nargs=3,
+        type=number(float),
+        metavar=("GX", "GY", "GZ"),
+        help="gravity in the URDF root frame, m/s^2 (default 0 0 -9.81), written to the file",
+    )
+    p.add_argument(
         "--truth-model",
         action="append",
         type=_truth_block,
@@ -483,6 +490,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         compliance=_compliance_arg(args.compliance),
         truth_model=ModelSpec(tuple(args.truth_model)) if args.truth_model else None,
         payloads=args.payloads,
+        gravity=args.gravity,
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)

@@ -89,6 +89,9 @@ class CalibrationSidecar:
     robot_blocks : tuple of RobotBlockRecord
         The calibrated model spec (``--model compliance``...): what the URDF cannot hold;
         :meth:`spec` rebuilds it. Empty for a URDF alone.
+    gravity : ndarray, shape (3,), or None
+        The calibration data's gravity in the root frame (m/s^2) when it was not the
+        standard 9.81 along -z (None): what ``kinfw reach`` deflects a compliance under.
     """
 
     created: str
@@ -108,6 +111,7 @@ class CalibrationSidecar:
     calibrated_urdf_sha256: str | None = None
     guard: GuardSummary | None = None
     robot_blocks: tuple[RobotBlockRecord, ...] = ()
+    gravity: NDArray[np.float64] | None = None
 
     FORMAT: ClassVar[str] = "kinfw-calibration"
     VERSION: ClassVar[int] = 1
@@ -117,6 +121,8 @@ class CalibrationSidecar:
         object.__setattr__(self, "w_T_root", read_only_array(self.w_T_root, "w_T_root", (4, 4)))
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
         object.__setattr__(self, "robot_blocks", tuple(self.robot_blocks))
+        if self.gravity is not None:
+            object.__setattr__(self, "gravity", read_only_array(self.gravity, "gravity", (3,)))
         object.__setattr__(
             self,
             "hand_eye_targets",
@@ -241,6 +247,7 @@ class CalibrationSidecar:
                 if self.robot_blocks
                 else {}
             )
+            | ({} if self.gravity is None else {"gravity": self.gravity.tolist()})
         )
 
     @classmethod
@@ -295,6 +302,9 @@ class CalibrationSidecar:
                 RobotBlockRecord.from_dict(b, r, f"robot_blocks[{k}]")
                 for k, b in enumerate(r.items(doc, "robot_blocks", "", optional=True) or [])
             ),
+            gravity=None
+            if doc.get("gravity") is None
+            else r.array(r.value(doc, "gravity", ""), "gravity", (3,)),
             source=source,
         )
 

@@ -277,6 +277,7 @@ def simulate_measurements(
     compliance: float | Mapping[str, float] | None = None,
     truth_model: ModelSpec | None = None,
     payloads: tuple[str, float, ArrayLike] | None = None,
+    gravity: ArrayLike | None = None,
     seed: int = 0,
 ) -> SimulatedMeasurements:
     """Perturb ``nominal`` into a true robot and simulate its measurements, as
@@ -383,6 +384,9 @@ def simulate_measurements(
         frame (m), written as the samples' payloads (with a compliance, the deflection
         follows it). Drawn from a generator of its own (``[seed, 2]``), so the rest of
         the experiment is the one without payloads.
+    gravity : array_like, shape (3,), optional
+        Gravity in the root frame (m/s^2; default 9.81 along -z), written to the file: a
+        robot mounted on a wall or upside down deflects under it.
     seed : int
         Seeds the one generator of every draw.
 
@@ -466,6 +470,10 @@ def simulate_measurements(
         )
         parts.extend(touch.data)
     data = concatenate_measurements(*parts)
+    if gravity is not None:
+        from dataclasses import replace
+
+        data = replace(data, gravity=np.asarray(gravity, dtype=float))
     if payloads is not None:
         data = _with_payloads(truth, data, payloads, np.random.default_rng([seed, 2]))
     blocks = () if truth_model is None else truth_model.blocks

@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from kinfw import progress
 from kinfw.files import check_outputs, sidecar_path, write_text_atomic
@@ -38,7 +39,7 @@ from kinfw.measurements import (
     check_measurements,
     drop_duplicate_samples,
 )
-from kinfw.model import ModelSpec, Robot, check_robot
+from kinfw.model import STANDARD_GRAVITY, ModelSpec, Robot, check_robot
 from kinfw.records import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
@@ -233,6 +234,9 @@ class CalibrationResult:
     refusal : str or None
         The guard's error when a change is beyond its bound and large changes were not
         allowed: :meth:`write` raises it before writing anything. None otherwise.
+    gravity : ndarray, shape (3,), or None
+        The data's gravity (root frame, m/s^2) when not the standard one: recorded in the
+        sidecar for what deflects a compliance later (``kinfw reach``).
     """
 
     robot: Robot
@@ -246,6 +250,7 @@ class CalibrationResult:
     inputs: Mapping[str, str]
     plausibility: Plausibility | None = None
     refusal: str | None = None
+    gravity: NDArray[np.float64] | None = None
 
     def write(self, path: str | Path) -> CalibrationReport:
         """Write the calibrated URDF to ``path`` and its sidecar beside it
@@ -288,7 +293,7 @@ class CalibrationResult:
             guard=self.report.guard,
         )
         write_urdf(path, self.urdf_xml)
-        side = replace(side, calibrated_urdf_sha256=file_sha256(path))
+        side = replace(side, calibrated_urdf_sha256=file_sha256(path), gravity=self.gravity)
         write_sidecar(sidecar_path(path), side)
         if side.robot_blocks:
             write_text_atomic(joint_model_path(path), joint_model_text(side.robot_blocks, path))
@@ -671,6 +676,7 @@ def calibrate_and_report(
         sources,
         verdict,
         refusal,
+        None if np.array_equal(data.gravity, STANDARD_GRAVITY) else data.gravity,
     )
 
 

@@ -451,3 +451,55 @@ def test_the_view_draws_the_calibrated_robot_at_its_joint_values():
     for path, T in drawn["spec"].items():
         np.testing.assert_allclose(T, drawn["scaled"][path], atol=1e-12)
     assert any(not np.allclose(T, drawn["read"][p]) for p, T in drawn["spec"].items())
+
+
+def test_a_wall_mounted_arm_is_calibrated_and_reached_under_its_gravity(tmp_path, capsys):
+    """Gravity along the root's +x (an arm on a wall): the file and the sidecar carry it;
+    reach compensates under it by default, and misses when told the standard gravity."""
+    from kinfw.model import ModelSpec, load_robot
+
+    data, summary = _simulate(
+        tmp_path,
+        capsys,
+        "wall",
+        *("--compliance", str(C_TRUE), "--noise-mm", "0", "--mocap-samples", "80"),
+        *("--error-mm", "0", "--error-deg", "0", "--gravity", "9.81", "0", "0"),
+        *("--mocap-frame", "world", "--offsets-known"),
+    )
+    assert read_measurements(data).gravity.tolist() == [9.81, 0.0, 0.0]
+    cal = tmp_path / "cal.urdf"
+    code, _, _ = run_cli(
+        [
+            "calibrate",
+            data,
+            "--urdf",
+            UR10,
+            "--out",
+            cal,
+            "--params",
+            "full",
+            "--model",
+            "compliance",
+        ],
+        capsys,
+    )
+    assert code == 0
+    assert json.loads(cal.with_suffix(".kinfw.json").read_text())["gravity"] == [9.81, 0.0, 0.0]
+    truth = load_robot(tmp_path / "wall.urdf")
+    spec = ModelSpec.from_list(summary["truth_model"])
+    names = truth.joint_names
+    q = np.array([0.3, -1.0, 1.2, -0.9, 1.1, 0.4])
+    target = truth.frame_poses(q, "tool0", names)[:3, 3]
+    missed = {}
+    for label, flags in (("sidecar's", []), ("standard", ["--gravity", "0", "0", "-9.81"])):
+        code, out, _ = run_cli(
+            [
+                *("reach", cal, "--frame", "tool0", "--point", *target, "--json", *flags),
+                *(f"--q={n}={v}" for n, v in zip(names, q, strict=True)),
+            ],
+            capsys,
+        )
+        command = np.array(json.loads(out)["command"])
+        physical = spec.joint_values(truth, names, command[None], gravity=(9.81, 0.0, 0.0))[0]
+        missed[label] = np.linalg.norm(truth.frame_poses(physical, "tool0", names)[:3, 3] - target)
+    assert missed["sidecar's"] < 1e-7 and missed["standard"] > 1e-4, missed
