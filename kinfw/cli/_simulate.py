@@ -139,6 +139,19 @@ def _compliance_spec(text: str) -> tuple[str | None, float]:
     return joint or None, c
 
 
+def _truth_options(args: argparse.Namespace) -> dict:
+    """What the true robot's URDF cannot hold and what loads it: the keyword arguments
+    ``compliance``, ``truth_model``, ``payloads`` and ``gravity`` of :func:`kinfw.simulate`."""
+    from kinfw.model import ModelSpec
+
+    return {
+        "compliance": _compliance_arg(args.compliance),
+        "truth_model": ModelSpec(tuple(args.truth_model)) if args.truth_model else None,
+        "payloads": args.payloads,
+        "gravity": args.gravity,
+    }
+
+
 def _compliance_arg(entries) -> float | dict[str, float] | None:
     """``--compliance`` as :func:`kinfw.simulate` takes it."""
     if not entries:
@@ -431,7 +444,6 @@ def cmd_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from kinfw.measurements import write_measurements
-    from kinfw.model import ModelSpec
     from kinfw.simulation import simulate_measurements
 
     nominal = load_model(args.urdf, args)
@@ -487,10 +499,7 @@ def cmd_simulate(args: argparse.Namespace) -> int:
         contact_samples=args.contact_samples,
         offsets_known=args.offsets_known,
         target_frame=args.target_frame,
-        compliance=_compliance_arg(args.compliance),
-        truth_model=ModelSpec(tuple(args.truth_model)) if args.truth_model else None,
-        payloads=args.payloads,
-        gravity=args.gravity,
+        **_truth_options(args),
         seed=args.seed,
     )
     write_measurements(args.out, sim.data)
