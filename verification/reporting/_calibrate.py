@@ -567,18 +567,7 @@ def calibrate_and_report(
         ``nominal``, ``data`` or ``held_out`` is not a Robot / Measurements (a path:
         load it first), naming the argument.
     """
-    nominal = check_robot(nominal, "nominal")
-    data = check_measurements(data, "data")
-    if model is not None:
-        nominal = nominal.with_spec(
-            model if isinstance(model, ModelSpec) else ModelSpec.parse(model)
-        )
-    if not keep_duplicates:
-        data = drop_duplicate_samples(data, stacklevel=3)
-    held_out = None if held_out is None else check_measurements(held_out, "held_out")
-    if held_out is not None:
-        check_against_robot(held_out, nominal)  # its frames and joints, before any fit
-        _warn_overlap(data, held_out)
+    nominal, data, held_out = _checked_inputs(nominal, data, held_out, model, keep_duplicates)
     parameters, prior, choice = _model_choice(
         nominal, data, parameters, prior, method=method, noise=noise, loss=loss
     )
@@ -633,24 +622,15 @@ def calibrate_and_report(
         bound=change_bound,
         allowed=allow_large_changes,
     )
-    implausible = (
-        implausible_noise(result.refined, data)
-        if restricted and result.refined is not None
-        else None
+    _warn_fit(
+        nominal,
+        calibrated,
+        data,
+        result,
+        restricted=restricted,
+        given=(parameters, prior) if choice is None and method == "refine" else None,
+        noise=noise,
     )
-    if implausible:
-        warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=2)
-    for line in stated_noise(result.refined, data) if restricted and result.refined else ():
-        warnings.warn(f"{data.source}: {line}", UserWarning, stacklevel=2)
-    if choice is None and not nominal.spec and method == "refine":  # given --params
-        from kinfw.verification.evaluation import missing_compliance
-
-        hint = missing_compliance(nominal, data, result, (parameters, prior), noise)
-        if hint:
-            warnings.warn(f"{data.source}: {hint}", UserWarning, stacklevel=2)
-    for scale in target_scale(nominal, calibrated, data):
-        if scale.off:
-            warnings.warn(f"{data.source}: {scale.message()}", UserWarning, stacklevel=2)
     if evidence is not None and evidence.significant:
         warnings.warn(f"{data.source}: {evidence.message()}", UserWarning, stacklevel=2)
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
@@ -678,6 +658,61 @@ def calibrate_and_report(
         refusal,
         None if np.array_equal(data.gravity, STANDARD_GRAVITY) else data.gravity,
     )
+
+
+def _checked_inputs(
+    nominal: Robot,
+    data: Measurements,
+    held_out: Measurements | None,
+    model: ModelSpec | Sequence[str] | None,
+    keep_duplicates: bool,
+) -> tuple[Robot, Measurements, Measurements | None]:
+    """:func:`calibrate_and_report`'s inputs checked before any fit: the robot (with
+    ``model``'s blocks), the data without repeated samples (unless kept), the held-out
+    data against the robot and the data."""
+    nominal = check_robot(nominal, "nominal")
+    data = check_measurements(data, "data")
+    if model is not None:
+        nominal = nominal.with_spec(
+            model if isinstance(model, ModelSpec) else ModelSpec.parse(model)
+        )
+    if not keep_duplicates:
+        data = drop_duplicate_samples(data, stacklevel=4)
+    held_out = None if held_out is None else check_measurements(held_out, "held_out")
+    if held_out is not None:
+        check_against_robot(held_out, nominal)  # its frames and joints, before any fit
+        _warn_overlap(data, held_out)
+    return nominal, data, held_out
+
+
+def _warn_fit(
+    nominal: Robot,
+    calibrated: Robot,
+    data: Measurements,
+    result: Calibration,
+    *,
+    restricted: bool,
+    given: tuple | None,
+    noise: NoiseModel | None,
+) -> None:
+    """The warnings of :func:`calibrate_and_report` about a finished fit: a restricted
+    model's implausible or misstated noise, residuals that follow the gravity torque
+    under given parameters (``given``: their set and prior), a target of the wrong size."""
+    refined = result.refined
+    implausible = implausible_noise(refined, data) if restricted and refined else None
+    if implausible:
+        warnings.warn(f"{data.source}: {implausible}", UserWarning, stacklevel=3)
+    for line in stated_noise(refined, data) if restricted and refined else ():
+        warnings.warn(f"{data.source}: {line}", UserWarning, stacklevel=3)
+    if given is not None and not nominal.spec:
+        from kinfw.verification.evaluation import missing_compliance
+
+        hint = missing_compliance(nominal, data, result, given, noise)
+        if hint:
+            warnings.warn(f"{data.source}: {hint}", UserWarning, stacklevel=3)
+    for scale in target_scale(nominal, calibrated, data):
+        if scale.off:
+            warnings.warn(f"{data.source}: {scale.message()}", UserWarning, stacklevel=3)
 
 
 def _guarded(

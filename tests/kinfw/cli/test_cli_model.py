@@ -38,6 +38,25 @@ def _simulate(tmp_path, capsys, name: str, *extra) -> tuple[str, dict]:
     return str(out), json.loads(text)
 
 
+def _calibrate_compliant(data, cal, capsys) -> tuple[int, str, str]:
+    """``kinfw calibrate DATA --urdf UR10 --out CAL --params full --model compliance``."""
+    return run_cli(
+        [
+            "calibrate",
+            data,
+            "--urdf",
+            UR10,
+            "--out",
+            cal,
+            "--params",
+            "full",
+            "--model",
+            "compliance",
+        ],
+        capsys,
+    )
+
+
 def _true_compliance(summary: dict) -> dict[str, float]:
     (block,) = summary["truth_model"]
     return {n.split(":")[0]: v for n, v in zip(block["names"], block["values"], strict=True)}
@@ -245,21 +264,7 @@ def test_payloads_are_calibrated_verified_and_compensated_by_reach(tmp_path, cap
     write_measurements(train, measured.subset(np.arange(0, 160, 2)))
     write_measurements(test, measured.subset(np.arange(1, 160, 2)))
     cal = tmp_path / "cal.urdf"
-    code, out, _ = run_cli(
-        [
-            "calibrate",
-            train,
-            "--urdf",
-            UR10,
-            "--out",
-            cal,
-            "--params",
-            "full",
-            "--model",
-            "compliance",
-        ],
-        capsys,
-    )
+    code, out, _ = _calibrate_compliant(train, cal, capsys)
     assert code == 0, out
     (record,) = json.loads(cal.with_suffix(".kinfw.json").read_text())["robot_blocks"]
     truth = _true_compliance(summary)
@@ -468,21 +473,7 @@ def test_a_wall_mounted_arm_is_calibrated_and_reached_under_its_gravity(tmp_path
     )
     assert read_measurements(data).gravity.tolist() == [9.81, 0.0, 0.0]
     cal = tmp_path / "cal.urdf"
-    code, _, _ = run_cli(
-        [
-            "calibrate",
-            data,
-            "--urdf",
-            UR10,
-            "--out",
-            cal,
-            "--params",
-            "full",
-            "--model",
-            "compliance",
-        ],
-        capsys,
-    )
+    code, _, _ = _calibrate_compliant(data, cal, capsys)
     assert code == 0
     assert json.loads(cal.with_suffix(".kinfw.json").read_text())["gravity"] == [9.81, 0.0, 0.0]
     truth = load_robot(tmp_path / "wall.urdf")
