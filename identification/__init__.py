@@ -22,9 +22,16 @@ from kinfw.identification._closed_form import (
     one_joint_groups,
 )
 from kinfw.identification._pipeline import METHODS, Calibration, identify
-from kinfw.identification.problem import REJECT_Z, RefineResult, information_matrix, refine
+from kinfw.identification.problem import (
+    CHOICE_START,
+    REJECT_Z,
+    RefineResult,
+    information_matrix,
+    refine,
+)
 
 __all__ = [
+    "CHOICE_START",
     "METHODS",
     "REJECT_Z",
     "Calibration",

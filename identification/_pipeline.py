@@ -33,7 +33,13 @@ from kinfw.identification.checks import (
     median_residuals,
 )
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
-from kinfw.identification.problem import NoiseModel, RefineResult, build_problem, refine
+from kinfw.identification.problem import (
+    CHOICE_START,
+    NoiseModel,
+    RefineResult,
+    build_problem,
+    refine,
+)
 from kinfw.measurements import (
     Measurements,
     check_joint_motion,
@@ -41,7 +47,7 @@ from kinfw.measurements import (
     fixed_in_experiment,
     observed_joints,
 )
-from kinfw.model import ModelSpec, Robot, check_robot, geometry_from_cpc
+from kinfw.model import ModelSpec, PriorScales, Robot, check_robot, geometry_from_cpc
 from kinfw.observations import DatasetError, evenly_spaced
 from kinfw.urdf import ExportResult, edit_urdf, export_urdf
 
@@ -89,6 +95,12 @@ class Calibration:
     spec: ModelSpec = field(default_factory=ModelSpec)
 
     @property
+    def prior(self) -> PriorScales | None:
+        """The prior the refinement was made under (given, or chosen from the data:
+        :attr:`PriorScales.how`); None without one or a refinement."""
+        return None if self.refined is None else self.refined.prior
+
+    @property
     def w_T_root(self) -> NDArray[np.float64]:
         """Pose of the URDF root in the measurement frame (identity when the root is it)."""
         return np.eye(4) if self.export is None else self.export.w_T_root
@@ -102,7 +114,8 @@ def identify(
     noise: NoiseModel | None = None,
     loss: str = "huber",
     parameters: str | tuple[str, ...] = "full",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
+    choose_prior: bool = False,
     refine_intrinsics: bool | tuple[str, ...] = (),
     model: ModelSpec | None = None,
 ) -> Calibration:
@@ -133,11 +146,16 @@ def identify(
     parameters : str or tuple of joint names
         Parameter set of the refinement (:func:`kinfw.identification.refine`):
         ``"full"``, ``"offsets"``, ``"frames"``, ``"none"`` or joint names.
-    prior : (sigma_m, sigma_rad), optional
-        Gaussian prior on deviations from the nominal geometry. A deliberately
-        restricted model, like a smaller ``parameters`` set: its residuals are neither
-        refused nor warned about (a too strong prior just predicts badly; the model
-        choice scores it so).
+    prior : PriorScales or (sigma_m, sigma_rad), optional
+        Gaussian prior on deviations from the nominal geometry, one sigma per parameter
+        group (:class:`kinfw.identification.PriorScales`; a pair: one length and one
+        angle sigma). A deliberately restricted model, like a smaller ``parameters``
+        set: its residuals are neither refused nor warned about (a too strong prior
+        just predicts badly; the model choice scores it so).
+    choose_prior : bool
+        Choose the prior's group sigmas from the data by the linearised
+        leave-one-sample-out error (:func:`kinfw.identification.refine`), from
+        ``prior`` (default :data:`CHOICE_START`); :attr:`Calibration.prior` holds them.
     refine_intrinsics : bool or tuple of str
         Cameras of ``pixels`` observations whose intrinsics the refinement estimates
         too (True: all; :func:`kinfw.identification.refine`).
@@ -191,7 +209,10 @@ def identify(
                 f"refinement; method {method!r} cannot (use method 'refine')"
             )
         nominal = nominal.with_spec(model)
-    options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics)
+    prior = PriorScales.of(prior)
+    if choose_prior and prior is None:
+        prior = CHOICE_START
+    options = _RefineOptions(noise, loss, parameters, prior, refine_intrinsics, choose_prior)
     if method == "refine":
         progress.stage("checking that the data determine the parameters (start values)")
         fixed_note = _check_refinable(nominal, data, options)
@@ -286,8 +307,9 @@ class _RefineOptions:
     noise: NoiseModel | None
     loss: str
     parameters: str | tuple[str, ...]
-    prior: tuple[float, float] | None
+    prior: PriorScales | None
     refine_intrinsics: bool | tuple[str, ...]
+    choose_prior: bool = False
 
 
 def _check_refinable(nominal: Robot, data: Measurements, options: _RefineOptions) -> str:
@@ -383,6 +405,7 @@ def _refine_checked(
         loss=options.loss,
         parameters=options.parameters,
         prior=options.prior,
+        choose_prior=options.choose_prior,
         refine_intrinsics=options.refine_intrinsics,
     )
     # a smaller set, or a prior, is a deliberately restricted model (baselines, the
@@ -463,8 +486,7 @@ def _undetermined_refusal(
         + (
             "add a prior (--prior-mm, --prior-deg)"
             if options.prior is None
-            else f"a tighter prior than {options.prior[0] * 1e3:.3g} mm / "
-            f"{np.degrees(options.prior[1]):.3g} deg"
+            else f"a tighter prior than {options.prior.label.removeprefix('prior ')}"
         )
         + ", or add data"
     )

@@ -120,7 +120,7 @@ def test_calibrate_noise_free_simulated_data_recovers_the_truth_through_the_writ
     assert worst < 1e-9  # m and rad
     assert nominal_off > 5e-3  # the nominal was millimetres off
     # the default of kinfw calibrate: enough rows per parameter for "full", no prior
-    assert result.model.parameters == ("full",) and result.model.prior_m is None
+    assert result.model.parameters == ("full",) and result.model.prior is None
     assert result.choice is not None and result.choice.candidates == ()
 
 

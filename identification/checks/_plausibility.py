@@ -19,7 +19,7 @@ import pinocchio as pin
 
 from kinfw.geometry import angle_between, rotation_angle
 from kinfw.measurements import Measurements
-from kinfw.model import Robot
+from kinfw.model import PriorScales, Robot
 from kinfw.observations import kind_of
 from kinfw.urdf import origin_changes
 
@@ -71,10 +71,15 @@ class ChangeBound:
         k = cls().prior_factor * math.sqrt(3.0)
         return cls(max_m=k * sigma_m, max_rad=k * sigma_rad)
 
-    def limits(self, prior: tuple[float, float] | None, size_m: float) -> tuple[float, float, str]:
-        """``(bound_m, bound_rad, why)`` for a fit with ``prior`` (``(sigma_m, sigma_rad)``
-        or None) of a robot of ``size_m``; ``why`` says in words how they were set."""
-        sigma_m, sigma_rad = (0.0, 0.0) if prior is None else prior
+    def limits(
+        self, prior: PriorScales | tuple[float, float] | None, size_m: float
+    ) -> tuple[float, float, str]:
+        """``(bound_m, bound_rad, why)`` for a fit with ``prior`` (by group, or
+        ``(sigma_m, sigma_rad)``, or None) of a robot of ``size_m``; ``why`` says in words
+        how they were set. A prior by group bounds by its loosest length and angle sigma
+        of the joints' geometry (:attr:`PriorScales.sigma_m`, ``sigma_rad``)."""
+        prior = PriorScales.of(prior)
+        sigma_m, sigma_rad = (0.0, 0.0) if prior is None else (prior.sigma_m, prior.sigma_rad)
         of_prior = "" if prior is None else f"{self.prior_factor:g} x the prior or "
         if self.max_m is not None:
             bound_m, why_m = self.max_m, "given"
@@ -334,7 +339,7 @@ def _joint_change(
 def plausibility(
     nominal: Robot,
     calibrated: Robot,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | tuple[float, float] | None,
     *,
     bound: ChangeBound | None = None,
     stance: Sequence[str] = (),
@@ -351,8 +356,8 @@ def plausibility(
     nominal, calibrated : Robot
         The URDF before and after; joints are matched by name (those only one has are
         skipped).
-    prior : (float, float) or None
-        ``(sigma_m, sigma_rad)`` of the prior the fit was made with (on the CPC
+    prior : PriorScales or (float, float) or None
+        The prior the fit was made with, by group or ``(sigma_m, sigma_rad)`` (on the CPC
         parameters' deviations, which the bound turns into a bound on the URDF's
         joints), None without one.
     bound : ChangeBound, optional
@@ -507,7 +512,7 @@ def fit_plausibility(
     nominal: Robot,
     calibrated: Robot,
     data: Measurements,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | tuple[float, float] | None,
     *,
     bound: ChangeBound | None = None,
 ) -> Plausibility:

@@ -47,6 +47,12 @@ from kinfw.identification.problem._noise import (
     norm2_cdf,
     quantile,
 )
+from kinfw.identification.problem._prior_choice import (
+    SEARCH_SPAN,
+    LinearisedFit,
+    choose_prior,
+    linearised_fit,
+)
 from kinfw.identification.problem._problem import (
     PRIOR,
     LeastSquaresProblem,
@@ -56,6 +62,7 @@ from kinfw.identification.problem._problem import (
 )
 
 # for kinfw.identification, their one public path (redundant aliases: re-exported there)
+from kinfw.identification.problem._refine import CHOICE_START as CHOICE_START
 from kinfw.identification.problem._refine import REJECT_Z as REJECT_Z
 from kinfw.identification.problem._refine import information_matrix as information_matrix
 from kinfw.identification.problem._refine import refine as refine
@@ -92,12 +99,14 @@ __all__ = [
     "MARKER_RANK_TOL",
     "NEGLIGIBLE_COLUMN",
     "PRIOR",
+    "SEARCH_SPAN",
     "STRUCTURAL_RANK_TOL",
     "WORLD_MOTION",
     "GroupFunctions",
     "GroupResiduals",
     "Identifiability",
     "LeastSquaresProblem",
+    "LinearisedFit",
     "NoiseModel",
     "NoiseShape",
     "NormalEquations",
@@ -107,6 +116,7 @@ __all__ = [
     "build_functions",
     "build_problem",
     "chi2_cdf",
+    "choose_prior",
     "clear_function_cache",
     "column_norms",
     "covariance_and_identifiability",
@@ -119,6 +129,7 @@ __all__ = [
     "levenberg_marquardt",
     "leverage_sums",
     "leverages",
+    "linearised_fit",
     "negligible_columns",
     "noise_shape",
     "norm2_cdf",

@@ -30,11 +30,15 @@ from kinfw.model import (
     BlockKey,
     BlockSamples,
     CPCModel,
+    PriorScales,
     Robot,
     RobotBlock,
     cpc_from_geometry,
     cpc_from_robot,
     geometry_from_robot,
+    prior_groups,
+    prior_sigmas,
+    spec_prior_mean,
 )
 from kinfw.observations import DatasetError, kind_of
 
@@ -69,7 +73,7 @@ def build_problem(
     start: Robot | None = None,
     targets: dict[str, NDArray] | None = None,
     parameters: str | tuple[str, ...] = "full",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
     known: tuple[Unknown, ...] = (),
     refine_intrinsics: bool | Sequence[str] = (),
     extra_blocks: tuple[RobotBlock, ...] = (),
@@ -87,6 +91,7 @@ def build_problem(
     (:meth:`~kinfw.model.RobotBlock.for_data`) and fed its per-sample inputs.
     """
     measurements = check_against_robot(measurements, robot)
+    prior = PriorScales.of(prior)
     start = robot if start is None else start
     groups = list(measurements.all_groups())
     # frames of the robot that observations are measured in (a head camera) are end
@@ -126,18 +131,19 @@ def build_problem(
             groups,
             model_frame,
             parameters,
-            with_prior=prior is not None,
+            with_prior=prior is not None and bool(prior.scales),
             extra=extra,
         ),
         *unknown,
     )
-    P = sum(b.size for b in blocks)
     residual_groups = _residual_groups(model0, blocks, groups, model_frame, q_all, samples)
     if robot_in:  # relative measurements: fix what they leave undetermined
         blocks = _fix_relative_gauge(
             robot, model0, blocks, residual_groups, robot_in, measurements.source
         )
-    prior_mean, prior_sigma = _prior_rows(P, blocks, prior, robot, observed, model0, model_frame)
+    prior_mean, prior_sigma, groups = _prior_rows(
+        blocks, prior, robot, observed, model0, model_frame
+    )
     return LeastSquaresProblem(
         model0,
         model_frame,
@@ -147,6 +153,7 @@ def build_problem(
         prior_sigma,
         (*fitted_frame, *fitted),
         q_start,
+        groups,
     )
 
 
@@ -254,44 +261,45 @@ def _fix_relative_gauge(
 
 
 def _prior_rows(
-    P: int,
     blocks: tuple[Block, ...],
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     robot: Robot,
     observed: tuple[str, ...],
     model0: CPCModel,
     model_frame: str | None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Mean and sigma, shape (P,), of the Gaussian ``prior`` (sigma_m, sigma_rad) on the
-    robot blocks' entries in rad and m (other units and without a prior: inf sigma); its
-    mean on the CPC chart is the nominal URDF when the model is in the root frame.
+) -> tuple[NDArray[np.float64], NDArray[np.float64], tuple[tuple[str | None, str], ...]]:
+    """Mean and sigma, shape (P,), of the Gaussian ``prior`` by group
+    (:func:`~kinfw.identification.problem.prior_groups`; without a prior or a group's
+    sigma: inf), and every parameter's ``(group, unit)``. Its mean on the CPC chart is
+    the nominal URDF when the model is in the root frame (else the start), on a model
+    spec block the rigid model, elsewhere the start (intrinsics: the camera file's).
 
     The CPC chart's end-frame tools (a camera's or marker body's mount, the flange's tool
-    frame) have no prior: they are what ``"frames"`` fits freely, and a URDF's mount is
-    often a rough guess (centimetres, degrees), not a machined length. A prior there
-    pinned a wrist camera 3.5 cm and 118 sigma from its URDF guess (industrial_calibration's
-    circle grid, ``benchmarks/bench_circles_real.py``); without it ``"full"`` under a
-    tight prior tends to ``"frames"``, as FIGAROH's MAP priors do (frames estimated freely).
+    frame) are the group ``"tools"``, which :meth:`PriorScales.uniform` leaves free: they
+    are what ``"frames"`` fits freely, and a URDF's mount is often a rough guess
+    (centimetres, degrees), not a machined length. A prior there pinned a wrist camera
+    3.5 cm and 118 sigma from its URDF guess (industrial_calibration's circle grid,
+    ``benchmarks/bench_circles_real.py``); without it ``"full"`` under a tight prior tends
+    to ``"frames"``, as FIGAROH's MAP priors do (frames estimated freely).
     """
-    prior_sigma = np.full(P, np.inf)
-    prior_mean = np.zeros(P)
-    if prior is not None:
-        sigma_m, sigma_rad = prior
-        k = 0
-        for b in blocks:
-            s = slice(k, k + b.size)
-            k += b.size
-            if not isinstance(b, RobotBlock):
-                continue
-            units = np.array(b.units)
-            sigma = np.select([units == "rad", units == "m"], [sigma_rad, sigma_m], np.inf)
-            if b.key == CPC_KEY:
-                sigma[_joint_entries(model0) :] = np.inf  # the end frames' tools: frames
-            prior_sigma[s] = sigma
-            if b.key == CPC_KEY and model_frame is None:  # deviations from the nominal
-                nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
-                prior_mean[s] = model0.chart_coordinates(nominal)
-    return prior_mean, prior_sigma
+    groups = prior_groups(blocks, _joint_entries(model0))
+    P = len(groups)
+    prior_mean = spec_prior_mean(blocks, P)
+    if prior is not None and model_frame is None:  # deviations from the nominal
+        _, s = _block_slice(blocks, CPC_KEY)
+        nominal = cpc_from_geometry(geometry_from_robot(robot, observed), sign=model0.sign)
+        prior_mean[s] = model0.chart_coordinates(nominal)
+    return prior_mean, prior_sigmas(groups, prior), groups
+
+
+def _block_slice(blocks: tuple[Block, ...], key: BlockKey) -> tuple[Block, slice]:
+    """The block of ``key`` and its slice of the parameter vector."""
+    k = 0
+    for b in blocks:
+        if b.key == key:
+            return b, slice(k, k + b.size)
+        k += b.size
+    raise KeyError(key)
 
 
 def _joint_entries(model: CPCModel) -> int:

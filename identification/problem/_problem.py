@@ -28,8 +28,10 @@ from kinfw.model import (
     CPCModel,
     ModelSpec,
     ParameterName,
+    PriorScales,
     RobotBlock,
     SpecBlock,
+    prior_sigmas,
 )
 from kinfw.observations import NoiseComponent, ObservationKind, StartContext
 
@@ -291,6 +293,10 @@ class LeastSquaresProblem:
         The samples' joint values (model joint order) after the robot blocks' hooks at
         their starts (the readings themselves without a model spec): what the start
         values were estimated at (:meth:`start_context`).
+    prior_groups : tuple of (str or None, str)
+        Every parameter's prior group and unit
+        (:func:`~kinfw.identification.problem.prior_groups`): what :meth:`with_prior`
+        sets the sigmas by.
     """
 
     model0: CPCModel
@@ -301,6 +307,12 @@ class LeastSquaresProblem:
     prior_sigma: NDArray[np.float64]
     fitted: tuple[tuple[BlockKey, str], ...] = ()
     start_qs: NDArray[np.float64] | None = None
+    prior_groups: tuple[tuple[str | None, str], ...] = ()
+
+    def with_prior(self, prior: PriorScales | None) -> LeastSquaresProblem:
+        """This problem under the prior ``prior`` (its sigmas by group; the same mean):
+        the same functions and data, so a fit warm-starts from another prior's."""
+        return replace(self, prior_sigma=prior_sigmas(self.prior_groups, prior))
 
     @property
     def slices(self) -> tuple[slice, ...]:

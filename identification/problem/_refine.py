@@ -56,6 +56,7 @@ from kinfw.identification.problem._diagnostics import (
     rejected_observations,
 )
 from kinfw.identification.problem._noise import NoiseModel, estimate_noise, norm2_cdf
+from kinfw.identification.problem._prior_choice import choose_prior
 from kinfw.identification.problem._problem import LeastSquaresProblem, NormalEquations, Unknown
 from kinfw.identification.problem._refine_result import RefineResult
 from kinfw.identification.problem._solver import (
@@ -76,7 +77,7 @@ from kinfw.measurements import (
     fixed_in_experiment,
     robot_measurement_frames,
 )
-from kinfw.model import BaseBlock, Robot, RobotBlock, check_robot
+from kinfw.model import BaseBlock, PriorScales, Robot, RobotBlock, check_robot
 from kinfw.observations import DatasetError, kind_named, kind_of
 
 log = logging.getLogger(__name__)
@@ -111,7 +112,8 @@ def refine(
     max_iterations: int = 100,
     noise_rounds: int = 5,
     parameters: str | tuple[str, ...] = "full",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
+    choose_prior: bool = False,
     known: tuple[Unknown, ...] = (),
     refine_intrinsics: bool | tuple[str, ...] = (),
     extra_blocks: tuple[RobotBlock, ...] = (),
@@ -156,14 +158,23 @@ def refine(
         baseline); a mask: ``"frames"`` plus the CPC parameters named by joint (all of
         its parameters) or ``"joint:field"`` (``b_tilt_1``, ``b_tilt_2``, ``l_x``,
         ``l_y``).
-    prior : (sigma_m, sigma_rad), optional
+    prior : PriorScales or (sigma_m, sigma_rad), optional
         Gaussian prior on the robot parameters' deviations from the nominal URDF (from
-        the start when the model lives in an external frame), for small datasets: the
-        joints' (the CPC chart's axis tilts and line offsets, zero offsets); the end
-        frames' tools (a camera's mount) stay free, as ``"frames"`` fits them. With
-        ``"full"``, the joint zero offsets are estimated too, under the same prior (a
-        zero offset is one angle where the CPC chart would spread it over every axis
-        below the joint: :func:`kinfw.identification.problem.robot_blocks`).
+        the start when the model lives in an external frame), for small datasets, one
+        sigma per parameter group (:class:`kinfw.identification.PriorScales`: zero
+        offsets, axes, positions, base, tools, intrinsics, model spec blocks); a pair is
+        :meth:`~kinfw.identification.PriorScales.uniform`: the joints' (the CPC chart's
+        axis tilts and line offsets, zero offsets) and the base, the end frames' tools (a
+        camera's mount) free, as ``"frames"`` fits them. With ``"full"``, the joint zero
+        offsets are estimated too, under the prior (a zero offset is one angle where the
+        CPC chart would spread it over every axis below the joint:
+        :func:`kinfw.identification.problem.robot_blocks`).
+    choose_prior : bool
+        Choose the prior's group sigmas from these data: after the fit under ``prior``
+        (default :data:`CHOICE_START`), the sigmas that minimise the linearised
+        leave-one-sample-out error (:func:`kinfw.identification.problem.choose_prior`),
+        the fit again under them, warm, until they settle (at most
+        :data:`PRIOR_ROUNDS` choices). :attr:`RefineResult.prior` holds them.
     known : tuple of Unknown
         Start values of extra unknowns (targets, frames, markers, offsets) instead of
         estimating them from these data.
@@ -251,6 +262,7 @@ def refine(
             noise_rounds=noise_rounds,
             parameters=parameters,
             prior=prior,
+            choose_prior=choose_prior,
             known=known,
             refine_intrinsics=refine_intrinsics,
             extra_blocks=extra_blocks,
@@ -504,7 +516,8 @@ def _fit(
     max_iterations: int,
     noise_rounds: int,
     parameters: str | tuple[str, ...],
-    prior: tuple[float, float] | None,
+    prior: PriorScales | tuple[float, float] | None,
+    choose_prior: bool,
     known: tuple[Unknown, ...],
     refine_intrinsics: bool | tuple[str, ...],
     extra_blocks: tuple[RobotBlock, ...],
@@ -514,9 +527,14 @@ def _fit(
     the same problem on more data (a rejection refit), its estimate is where the solver
     starts, and its noise estimate too when it had settled (the chart and the start the
     undetermined directions stay at remain a cold fit's; so do the noise rounds unless
-    settled: the same estimate, in fewer iterations)."""
+    settled: the same estimate, in fewer iterations). ``choose_prior``: the prior's
+    scales chosen from the data (:func:`_with_chosen_prior`), from the warm fit's."""
     t0 = time.perf_counter()
     progress.stage(f"refine: start values ({measurements.n_samples} samples)")
+    prior = PriorScales.of(prior)
+    if choose_prior:
+        prior = warm.prior if warm is not None and warm.prior is not None else prior
+        prior = CHOICE_START if prior is None else prior
     problem = build_problem(
         robot,
         measurements,
@@ -556,8 +574,80 @@ def _fit(
         max_iterations=max_iterations,
         noise_rounds=noise_rounds,
     )
+    if choose_prior:
+        problem, solution, prior = _with_chosen_prior(
+            problem,
+            solution,
+            prior,
+            given=given,
+            loss=loss,
+            loss_scale=loss_scale,
+            max_iterations=max_iterations,
+            noise_rounds=noise_rounds,
+        )
+        k = thresholds(problem.obs_components, loss_scale)
     r = problem.evaluate_free(solution.x, solution.noise, False)[0]
-    return _Fitted(problem, measurements, solution, given, k, r, time.perf_counter() - t0)
+    return _Fitted(problem, measurements, solution, given, k, r, time.perf_counter() - t0, prior)
+
+
+#: The prior a fit that chooses its scales starts from (``refine(choose_prior=True)``):
+#: 1 mm and 5 mrad (an angle as loose as a length over 0.2 m) on the joints' geometry and
+#: the base, tools free; the search spans far beyond it either way
+#: (:data:`kinfw.identification.problem.SEARCH_SPAN`).
+CHOICE_START = PriorScales.uniform(1e-3, 5e-3)
+
+#: Choices of the prior's scales, each followed by a warm refit, at most; fewer once a
+#: choice leaves every sigma within :data:`PRIOR_SETTLED` (relative) of the one before.
+PRIOR_ROUNDS = 3
+PRIOR_METHOD = "leave-one-out"
+PRIOR_SETTLED = 0.05
+
+
+def _with_chosen_prior(
+    problem: LeastSquaresProblem,
+    solution: _Solution,
+    prior: PriorScales,
+    *,
+    given: bool,
+    loss: str,
+    loss_scale: float,
+    max_iterations: int,
+    noise_rounds: int,
+) -> tuple[LeastSquaresProblem, _Solution, PriorScales]:
+    """The prior's scales chosen at the fit ``solution`` (:func:`choose_prior`), the
+    problem refitted under them from it, until they settle: the last problem, its fit and
+    the scales."""
+    for _ in range(PRIOR_ROUNDS):
+        k = thresholds(problem.obs_components, loss_scale)
+        chosen, _ = choose_prior(
+            problem, solution.x, solution.noise, loss, k, prior, method=PRIOR_METHOD
+        )
+        settled = _same_scales(chosen, prior)
+        prior = chosen
+        if settled:
+            break
+        problem = problem.with_prior(chosen)
+        solution = _solve(
+            problem,
+            solution.noise,
+            x0=solution.x,
+            settled=solution.settled and not given,
+            given=given,
+            loss=loss,
+            k=thresholds(problem.obs_components, loss_scale),
+            max_iterations=max_iterations,
+            noise_rounds=noise_rounds,
+        )
+    return problem, solution, prior
+
+
+def _same_scales(a: PriorScales, b: PriorScales) -> bool:
+    """Whether ``a`` and ``b`` have the same groups, each sigma within
+    :data:`PRIOR_SETTLED` of the other's."""
+    keys = {(s.group, s.unit) for s in a.scales}
+    if keys != {(s.group, s.unit) for s in b.scales}:
+        return False
+    return all(abs(np.log(a.sigma(*key) / b.sigma(*key))) < PRIOR_SETTLED for key in keys)
 
 
 @dataclass(frozen=True, slots=True)
@@ -573,6 +663,7 @@ class _Fitted:
     k: NDArray[np.float64]
     r: NDArray[np.float64]
     seconds: float
+    prior: PriorScales | None = None
 
 
 def _rated(fitted: _Fitted, loss: str) -> RefineResult:
@@ -606,6 +697,7 @@ def _rated(fitted: _Fitted, loss: str) -> RefineResult:
         residual_noise=solution.said,
         w_T_base=problem.base_motion_at(x),
         spec=problem.spec_at(x),
+        prior=fitted.prior,
         cost=quality.cost,
         seconds=fitted.seconds + time.perf_counter() - t0,
     )

@@ -15,7 +15,7 @@ from kinfw.identification.problem._diagnostics import (
 )
 from kinfw.identification.problem._noise import NoiseModel
 from kinfw.identification.problem._problem import Unknown
-from kinfw.model import CPCModel, ModelSpec
+from kinfw.model import CPCModel, ModelSpec, PriorScales
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,6 +98,10 @@ class RefineResult:
         that are :class:`kinfw.model.SpecBlock` s) at their estimates: what stands beside
         :attr:`model`, which takes the joint values after their hooks
         (:meth:`kinfw.model.ModelSpec.joint_values`); empty without them.
+    prior : PriorScales or None
+        The prior's group sigmas the fit was made under, given or chosen from the data
+        (``refine(choose_prior=True)``; :attr:`PriorScales.how` says which); None
+        without a prior.
     """
 
     model: CPCModel
@@ -124,6 +128,7 @@ class RefineResult:
     w_T_base: NDArray[np.float64] | None = None
     residual_noise: NoiseModel | None = None
     spec: ModelSpec = field(default_factory=ModelSpec)
+    prior: PriorScales | None = None
 
     @property
     def std(self) -> NDArray[np.float64]:

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from kinfw.model import Robot
+    from kinfw.model import PriorScale, Robot
 
 
 # -- numbers on the command line -----------------------------------------------------------
@@ -83,6 +83,16 @@ POSITIVE_DEG = number(float, low=0.0, low_open=True, unit="(deg)")
 POSITIVE_PX = number(float, low=0.0, low_open=True, unit="(px)")
 COUNT = number(int, low=1)
 SEED = number(int, low=0)
+
+
+def prior_scale_arg(text: str) -> PriorScale:
+    """``--prior GROUP=VALUE UNIT`` (:meth:`kinfw.model.PriorScale.parse`)."""
+    from kinfw.model import PriorScale
+
+    try:
+        return PriorScale.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("prior ")) from None
 
 
 def up_arg(text: str) -> list[float]:

@@ -98,11 +98,19 @@ def params_arg(text: str) -> str | tuple[str, ...]:
 
 
 def _prior_arg(args: argparse.Namespace):
-    if args.prior_mm is None and args.prior_deg is None:
-        return None
-    if args.prior_mm is None or args.prior_deg is None:
+    """The prior of ``--prior-mm``/``--prior-deg`` and ``--prior GROUP=VALUE`` (which
+    overrides their groups), or None."""
+    if (args.prior_mm is None) != (args.prior_deg is None):
         raise ValueError("give both --prior-mm and --prior-deg")
-    return args.prior_mm * 1e-3, math.radians(args.prior_deg)
+    from kinfw.model import PriorScales
+
+    prior = PriorScales()
+    if args.prior_mm is not None:
+        prior = PriorScales.uniform(args.prior_mm * 1e-3, math.radians(args.prior_deg))
+    groups = args.prior or []
+    if groups:
+        prior = prior.with_sigmas({(s.group, s.unit): s.sigma for s in groups}, "given")
+    return prior if prior.scales else None
 
 
 def _noise_arg(args: argparse.Namespace):
@@ -319,15 +327,23 @@ def _choice_table(choice) -> str:
     chosen = (choice.parameters, choice.prior, tuple(b.block_name for b in choice.spec.blocks))
     for c in choice.candidates:
         mark = " <- chosen" if (c.parameters, c.prior, c.model) == chosen else ""
+        label = c.label
+        if c.prior is not None and c.prior.how != "given":  # its groups are printed below
+            label = f"{c.parameters}, prior by group" + "".join(f" + {m}" for m in c.model)
         if c.failed is not None:
-            rows.append(f"  {c.label:<32} not scored: {_short_failure(c.failed)}")
+            rows.append(f"  {label:<32} not scored: {_short_failure(c.failed)}")
             continue
         mine = dict(c.errors)
         cells = "".join(
             f" {number(mine.get(m), '.3g'):>{max(8, len(t))}}"
             for m, t in zip(metrics, labels, strict=True)
         )
-        rows.append(f"  {c.label:<32} {c.whitened:>9.3g}{cells}{mark}")
+        rows.append(f"  {label:<32} {c.whitened:>9.3g}{cells}{mark}")
+    rows += [
+        f"  (prior by group, chosen by {c.prior.how}: {c.prior.label.removeprefix('prior ')})"
+        for c in choice.candidates
+        if c.prior is not None and c.prior.how != "given" and not c.model
+    ]
     return "\n".join(rows)
 
 

@@ -22,6 +22,7 @@ from kinfw.cli._args import (
     add_xacro_option,
     camera_inputs,
     number,
+    prior_scale_arg,
 )
 from kinfw.cli._fit import cmd_calibrate, cmd_crossval, cmd_demo
 from kinfw.executors import add_executor_options
@@ -60,6 +61,15 @@ def _add_fit_options(p: argparse.ArgumentParser) -> None:
         "frames stay free): sigma of lengths, mm (for small datasets)",
     )
     p.add_argument("--prior-deg", type=POSITIVE_DEG, help="... and of angles, deg")
+    p.add_argument(
+        "--prior",
+        action="append",
+        type=prior_scale_arg,
+        metavar="GROUP=VALUE",
+        help="a prior's sigma for one parameter group (repeatable; over --prior-mm/-deg): "
+        "offsets, axes, positions, base, tools, intrinsics or a --model block's name, "
+        "e.g. offsets=0.5deg positions=0.2mm; with --params auto no prior is then chosen",
+    )
     add_keep_duplicates_option(p)
 
 
@@ -105,8 +115,8 @@ def add_calibration_options(p: argparse.ArgumentParser) -> None:
         default="auto",
         help="what to estimate: auto (default: full when there are at least 10 residual "
         "rows per parameter, else the set and prior with the lowest leave-one-out held-out error "
-        "among frames, offsets, full and full with a prior of 0.3, 1, 3 or 10 mm and "
-        "angles as over 0.1 or 0.5 m), full, "
+        "among frames, offsets, full and full under a prior by parameter group chosen from "
+        "the data), full, "
         "offsets (joint zero offsets + base and tool frames), frames (base and "
         "tool frames only), none, or a mask 'pan,tilt:l_x,...' (frames plus "
         "those joints' CPC parameters)",

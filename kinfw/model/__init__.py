@@ -45,6 +45,16 @@ from kinfw.model._loads import (
 from kinfw.model._meshes import MissingMesh, mesh_dirs, resolve_meshes
 from kinfw.model._model_spec import ModelSpec, block_from_spec, block_names, register_block
 from kinfw.model._pose_chain import POSE_CHAIN_JOINTS, pose_chain_joint_values, pose_chain_urdf
+from kinfw.model._prior import (
+    JOINT_GROUPS,
+    PRIOR_GROUPS,
+    PriorScale,
+    PriorScales,
+    block_prior_groups,
+    prior_groups,
+    prior_sigmas,
+    spec_prior_mean,
+)
 from kinfw.model._robot import (
     Robot,
     Topology,
@@ -69,8 +79,10 @@ from kinfw.model._urdf_read import (
 
 __all__ = [
     "CPC_KEY",
+    "JOINT_GROUPS",
     "MOVABLE_TYPES",
     "POSE_CHAIN_JOINTS",
+    "PRIOR_GROUPS",
     "STANDARD_GRAVITY",
     "XACRO_NAMESPACE",
     "BaseBlock",
@@ -88,6 +100,8 @@ __all__ = [
     "ParameterName",
     "Payloads",
     "PointBlock",
+    "PriorScale",
+    "PriorScales",
     "RigidFrameBlock",
     "Robot",
     "RobotBlock",
@@ -99,6 +113,7 @@ __all__ = [
     "ZeroOffsetBlock",
     "block_from_spec",
     "block_names",
+    "block_prior_groups",
     "builtin_head_urdf",
     "captured_native_stderr",
     "cayley_coordinates",
@@ -120,9 +135,12 @@ __all__ = [
     "pinocchio_model",
     "pose_chain_joint_values",
     "pose_chain_urdf",
+    "prior_groups",
+    "prior_sigmas",
     "register_block",
     "resolve_meshes",
     "rotation_from_axis",
+    "spec_prior_mean",
     "up_vector",
     "xml_text",
 ]

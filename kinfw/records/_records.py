@@ -15,6 +15,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from kinfw.model import PriorScale, PriorScales
 from kinfw.records._doc_reader import DocReader
 
 
@@ -77,9 +78,10 @@ class ModelSummary:
     ----------
     parameters : tuple of str
         ``("full",)``, ``("offsets",)``, ``("frames",)``, ``("none",)`` or joint names.
-    prior_m, prior_rad : float or None
-        Sigmas of the Gaussian prior on the deviations from the nominal (m; rad), None
-        without a prior.
+    prior : PriorScales or None
+        The Gaussian prior on the deviations from the nominal, one sigma per parameter
+        group (:attr:`PriorScales.how`: given, or chosen from the data); None without
+        a prior.
     reason : str
         ``"given"`` (by the caller, ``--params`` / ``--prior-*``) or the model choice's
         one-line reason (:class:`kinfw.verification.evaluation.ModelChoice`).
@@ -89,45 +91,69 @@ class ModelSummary:
     """
 
     parameters: tuple[str, ...]
-    prior_m: float | None
-    prior_rad: float | None
+    prior: PriorScales | None
     reason: str
     blocks: tuple[str, ...] = ()
 
     @property
     def label(self) -> str:
-        """E.g. ``"full"``, ``"pan,tilt"``, ``"full, prior 3 mm / 0.3 deg"`` or
-        ``"full + compliance"``."""
+        """E.g. ``"full"``, ``"pan,tilt"``, ``"full, prior 3 mm / 0.3 deg"``, ``"full,
+        prior offsets 0.5 deg, axes 0.05 deg"`` or ``"full + compliance"``."""
         blocks = "".join(f" + {b}" for b in self.blocks)
-        if self.prior_m is None or self.prior_rad is None:
+        if self.prior is None:
             return ",".join(self.parameters) + blocks
-        return (
-            f"{','.join(self.parameters)}, prior {1e3 * self.prior_m:.3g} mm / "
-            f"{math.degrees(self.prior_rad):.3g} deg{blocks}"
-        )
+        return f"{','.join(self.parameters)}, {self.prior.label}{blocks}"
 
     def to_dict(self) -> dict[str, Any]:
+        """The sidecar's ``model``: the prior as its groups (SI units) and how it was
+        set."""
+        prior = None
+        if self.prior is not None:
+            prior = {"how": self.prior.how, "scales": self.prior.to_list()}
         return {
             "parameters": list(self.parameters),
-            "prior_mm": None if self.prior_m is None else 1e3 * self.prior_m,
-            "prior_deg": None if self.prior_rad is None else math.degrees(self.prior_rad),
+            "prior": prior,
             "reason": self.reason,
         } | ({"blocks": list(self.blocks)} if self.blocks else {})
 
     @classmethod
     def from_dict(cls, doc: Any, reader: DocReader, at: str) -> ModelSummary:
+        """Inverse of :meth:`to_dict`; an older sidecar's ``prior_mm`` / ``prior_deg``
+        (one length and one angle sigma) read as :meth:`PriorScales.uniform`."""
         doc = reader.obj(doc, at)
-        mm = reader.number(doc, "prior_mm", at, optional=True)
-        deg = reader.number(doc, "prior_deg", at, optional=True)
-        if (mm is None) != (deg is None):
-            raise reader.fail(reader.path(at, "prior_mm"), "prior_mm and prior_deg both or neither")
         return cls(
             reader.strings(doc, "parameters", at),
-            None if mm is None else 1e-3 * mm,
-            None if deg is None else math.radians(deg),
+            _prior_of(doc, reader, at),
             reader.string(doc, "reason", at),
             reader.strings(doc, "blocks", at) if doc.get("blocks") is not None else (),
         )
+
+
+def _prior_of(doc: dict, reader: DocReader, at: str) -> PriorScales | None:
+    """The prior of a sidecar's ``model`` (:meth:`ModelSummary.from_dict`)."""
+    if doc.get("prior") is not None:
+        prior = reader.obj(doc["prior"], reader.path(at, "prior"))
+        where = reader.path(at, "prior")
+        scales = []
+        for i, e in enumerate(reader.items(prior, "scales", where)):
+            e_at = reader.path(reader.path(where, "scales"), i)
+            e = reader.obj(e, e_at)
+            try:
+                scales.append(
+                    PriorScale(
+                        reader.string(e, "group", e_at),
+                        reader.string(e, "unit", e_at),
+                        reader.number(e, "sigma", e_at),
+                    )
+                )
+            except ValueError:
+                raise reader.fail(reader.path(e_at, "sigma"), "a positive sigma") from None
+        return PriorScales(tuple(scales), reader.string(prior, "how", where))
+    mm = reader.number(doc, "prior_mm", at, optional=True)
+    deg = reader.number(doc, "prior_deg", at, optional=True)
+    if (mm is None) != (deg is None):
+        raise reader.fail(reader.path(at, "prior_mm"), "prior_mm and prior_deg both or neither")
+    return None if mm is None else PriorScales.uniform(1e-3 * mm, math.radians(deg))
 
 
 @dataclass(frozen=True, slots=True)

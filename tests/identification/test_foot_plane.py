@@ -181,9 +181,9 @@ def test_the_default_moves_the_export_only_along_determined_directions(standing)
     ]
     data = data.with_groups(noisy)
     result = calibrate_and_report(nominal, data)
-    assert result.model.parameters == ("full",) and result.model.prior_m is not None
+    assert result.model.parameters == ("full",) and result.model.prior is not None
     refined = result.calibration.refined
-    prior = (result.model.prior_m, result.model.prior_rad)
+    prior = result.model.prior
     problem = build_problem(nominal, data, parameters="full", prior=prior)
     assert problem.names == refined.parameter_names
     x, qs = refined.estimate, data.qs

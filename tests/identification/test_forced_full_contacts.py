@@ -55,7 +55,7 @@ def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_mod
         calibrate_and_report(nominal, sim.data, parameters="full", loss="linear")
     # the default chooses among the determined models and calibrates
     result = calibrate_and_report(nominal, sim.data, loss="linear")
-    assert result.model.parameters == ("full",) and result.model.prior_m is not None
+    assert result.model.parameters == ("full",) and result.model.prior is not None
 
 
 @pytest.mark.slow

@@ -45,8 +45,6 @@ from kinfw.verification.evaluation._loo import (
     leave_one_out,
 )
 from kinfw.verification.evaluation._model_choice import (
-    PRIOR_GRID_M,
-    PRIOR_LEVERS_M,
     ROWS_PER_PARAMETER,
     VIEW_ROWS,
     Candidate,
@@ -69,8 +67,6 @@ __all__ = [
     "BASELINES",
     "CRLB",
     "NORMAL_COVERAGE",
-    "PRIOR_GRID_M",
-    "PRIOR_LEVERS_M",
     "ROWS_PER_PARAMETER",
     "VIEW_ROWS",
     "AccuracyReport",

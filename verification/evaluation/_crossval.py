@@ -42,7 +42,7 @@ from kinfw.identification import Calibration, identify
 from kinfw.identification.checks import ChangeBound, InsufficientDataError, fit_plausibility
 from kinfw.identification.problem import NoiseModel, Unknown, build_problem
 from kinfw.measurements import Measurements, drop_duplicate_samples
-from kinfw.model import BlockKey, ModelSpec, Robot
+from kinfw.model import BlockKey, ModelSpec, PriorScales, Robot
 from kinfw.observations import Metric, NoiseComponent, NumericContext, kind_of
 from kinfw.verification.evaluation._accuracy import AccuracyReport, group_errors
 from kinfw.verification.evaluation._trials import executor_for_jobs, run_trials
@@ -299,7 +299,7 @@ def _reference_fit(
     *,
     noise: NoiseModel | None,
     loss: str,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | tuple[float, float] | None,
 ) -> Calibration:
     """The fit of all the data whose noise whitens the selection and whose rejections are
     flagged: ``"full"``, else, on data too little for it (refused: e.g. one plane's
@@ -387,7 +387,7 @@ def _implausible(
     nominal: Robot,
     result: Calibration,
     train: Measurements,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | tuple[float, float] | None,
     bound: ChangeBound | None,
 ) -> str | None:
     """The plausibility guard's refusal of the default's fit on a training fold, as
@@ -482,7 +482,7 @@ def crossvalidate(
     select: bool = False,
     noise: NoiseModel | None = None,
     loss: str = "huber",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
     executor: Executor | None = None,
     jobs: int = 1,
     exclude_flagged: bool = False,

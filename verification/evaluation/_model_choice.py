@@ -19,14 +19,20 @@ points, plane contacts and registered kinds mix:
 - ``"frames"``: nominal joints, base and tool frames fitted;
 - ``"offsets"``: frames plus joint zero offsets;
 - ``"full"``: every identifiable CPC parameter;
-- ``"full"`` with a Gaussian prior on the deviations from the nominal, its scale chosen
-  by the same cross-validation from :data:`PRIOR_GRID_M` (lengths, m) and
-  :data:`PRIOR_LEVERS_M` (angles ``sigma / lever`` rad): 8 priors.
+- ``"full"`` with a Gaussian prior on the deviations from the nominal, one sigma per
+  parameter group (:class:`kinfw.model.PriorScales`: zero offsets, axes, positions, the
+  tools, freed intrinsics, model spec blocks), chosen continuously by the linearised
+  leave-one-out of the fit itself (``identify(choose_prior=True)``,
+  :func:`kinfw.identification.problem.choose_prior`): a length and an angle sigma
+  shared by the joints' groups first, then one per group when that predicts better by
+  more than its standard error.
 
 Until issue 23 the candidates were scored by refitting 5-fold cross-validation (55
 calibrations for 11 candidates, 13.7 s on 35 TIAGo samples); its choice moved with the
-partition on the smallest sets (18-sample folds). The closed form costs the 11 fits, and
-the chosen fit is the calibration (:attr:`ModelChoice.fit`).
+partition on the smallest sets (18-sample folds). Until issue 37 the prior was one length
+and one angle sigma from a grid of 8 (11 fits); the group sigmas cost one fit and its
+warm refits, 4 candidates in all, and the chosen fit is the calibration
+(:attr:`ModelChoice.fit`).
 
 The observations the robust full-data fit rejects as gross errors are left out of every
 score (each candidate's fit rejects its own; those it did not train on are predicted by
@@ -59,7 +65,14 @@ from kinfw import progress
 from kinfw.identification import Calibration, identify
 from kinfw.identification.problem import NoiseModel, build_problem
 from kinfw.measurements import Measurements, observed_joints
-from kinfw.model import BlockSamples, JointComplianceBlock, ModelSpec, Robot, RobotModelError
+from kinfw.model import (
+    BlockSamples,
+    JointComplianceBlock,
+    ModelSpec,
+    PriorScales,
+    Robot,
+    RobotModelError,
+)
 from kinfw.observations import DatasetError, Metric
 from kinfw.verification.evaluation._crossval import (
     metric_rms,
@@ -88,18 +101,6 @@ ROWS_PER_PARAMETER = 10.0
 #: :func:`rows_per_parameter`: the 6 numbers of a rigid pose.
 VIEW_ROWS = 6
 
-#: Prior sigmas of lengths tried with "full", m.
-PRIOR_GRID_M = (0.3e-3, 1e-3, 3e-3, 10e-3)
-
-#: Lever arms converting a length sigma to an angle sigma (rad = m / lever): angles as
-#: loose as lengths over 0.1 m (a joint zero off by 0.6 deg for 1 mm), or tight as over
-#: 0.5 m (FIGAROH's default sizes: 1 mm, 2 mrad). Chosen on simulated data (five regimes
-#: of three robots, ``benchmarks/study_model_choice.py``, 6 trials each): the picks of
-#: this grid are 4-12 % closer to the truth than those of the 0.1 m lever alone over 1-10
-#: mm in three regimes, within 1 % in the other two; 9-18 % closer than the parameter
-#: sets without a prior where small data meets real errors.
-PRIOR_LEVERS_M = (0.1, 0.5)
-
 
 @dataclass(frozen=True, slots=True)
 class Candidate:
@@ -109,8 +110,9 @@ class Candidate:
     ----------
     parameters : str
         ``"frames"``, ``"offsets"`` or ``"full"``.
-    prior : (float, float) or None
-        ``(sigma_m, sigma_rad)`` of the Gaussian prior on deviations from the nominal.
+    prior : PriorScales or None
+        The Gaussian prior on deviations from the nominal, by group (chosen from the
+        data: :attr:`PriorScales.how` ``"leave-one-out"``).
     whitened : float
         The whitened held-out error (about 6 for poses predicted to the noise, 3 for
         points, 1 for plane contacts; lower is better):
@@ -127,7 +129,7 @@ class Candidate:
     """
 
     parameters: str
-    prior: tuple[float, float] | None
+    prior: PriorScales | None
     whitened: float
     errors: tuple[tuple[Metric, float], ...] = ()
     failed: str | None = None
@@ -135,14 +137,12 @@ class Candidate:
 
     @property
     def label(self) -> str:
-        """E.g. ``"full"``, ``"full, prior 3 mm / 1.72 deg"`` or ``"full + compliance"``."""
+        """E.g. ``"full"``, ``"full, prior 3 mm / 1.72 deg"``, ``"full, prior offsets
+        0.5 deg, axes 0.05 deg, positions 1 mm"`` or ``"full + compliance"``."""
         spec = "".join(f" + {m}" for m in self.model)
         if self.prior is None:
             return self.parameters + spec
-        return (
-            f"{self.parameters}, prior {1e3 * self.prior[0]:.3g} mm / "
-            f"{np.degrees(self.prior[1]):.3g} deg{spec}"
-        )
+        return f"{self.parameters}, {self.prior.label}{spec}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,8 +153,8 @@ class ModelChoice:
     ----------
     parameters : str
         Set to calibrate with.
-    prior : (float, float) or None
-        ``(sigma_m, sigma_rad)`` to calibrate with.
+    prior : PriorScales or None
+        The prior to calibrate with, by group.
     reason : str
         One line.
     candidates : tuple of Candidate
@@ -177,7 +177,7 @@ class ModelChoice:
     """
 
     parameters: str
-    prior: tuple[float, float] | None
+    prior: PriorScales | None
     reason: str
     candidates: tuple[Candidate, ...]
     rows_per_parameter: float
@@ -196,7 +196,7 @@ class ModelChoice:
             "parameters": self.parameters,
             "prior": None
             if self.prior is None
-            else {"sigma_m": self.prior[0], "sigma_rad": self.prior[1]},
+            else {"scales": self.prior.to_list(), "how": self.prior.how},
             "reason": self.reason,
             "model": list(self.spec.texts),
             "rows_per_parameter": self.rows_per_parameter,
@@ -242,7 +242,7 @@ def choose_parameters(
     *,
     noise: NoiseModel | None = None,
     loss: str = "huber",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
     cross_validate: bool = False,
     model_spec: bool = True,
 ) -> ModelChoice:
@@ -256,9 +256,9 @@ def choose_parameters(
     noise, loss
         As for :func:`kinfw.identification.identify` (``noise`` also whitens the
         scores; default: the noise the full-data fit estimates).
-    prior : (sigma_m, sigma_rad), optional
+    prior : PriorScales or (sigma_m, sigma_rad), optional
         A prior given by the user: every set is scored with it and no prior scale is
-        searched.
+        chosen.
     cross_validate : bool
         Score the candidates even on data with :data:`ROWS_PER_PARAMETER` rows per
         parameter or more, where ``"full"`` is otherwise chosen unscored: for data that
@@ -281,7 +281,12 @@ def choose_parameters(
         can be fitted on all the data (the calibration's own error).
     """
     choice = _choose_set(
-        nominal, data, noise=noise, loss=loss, prior=prior, cross_validate=cross_validate
+        nominal,
+        data,
+        noise=noise,
+        loss=loss,
+        prior=PriorScales.of(prior),
+        cross_validate=cross_validate,
     )
     if not model_spec:
         return choice
@@ -294,7 +299,7 @@ def _choose_set(
     *,
     noise: NoiseModel | None,
     loss: str,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     cross_validate: bool,
 ) -> ModelChoice:
     """The parameter set and prior of :func:`choose_parameters` (without the model
@@ -327,8 +332,8 @@ def _choose_set(
         )
     runs = _runs(prior)
     fits = [
-        _fit(nominal, data, parameters, p, noise=noise, loss=loss)
-        for parameters, p in progress.steps(runs, "model choice", unit="candidates")
+        _fit(nominal, data, parameters, p, noise=noise, loss=loss, choose_prior=choose)
+        for parameters, p, choose in progress.steps(runs, "model choice", unit="candidates")
     ]
     reference = _reference(fits)
     sigma = whitening_noise(reference.refined.noise if noise is None else noise, data)
@@ -338,8 +343,8 @@ def _choose_set(
         list(zip(runs, fits, strict=True)), "model choice: leave-one-out scores", unit="candidates"
     )
     candidates = [
-        _score(nominal, scored, parameters, p, fit, loss=loss, sigma=sigma)
-        for (parameters, p), fit in scoring
+        _score(nominal, scored, parameters, _fitted_prior(fit, p), fit, loss=loss, sigma=sigma)
+        for (parameters, p, _), fit in scoring
     ]
     _check_any_fitted(candidates, data.source)
     scores = [c.whitened for c in candidates if np.isfinite(c.whitened)]
@@ -446,7 +451,7 @@ def compliance_gain(
     data: Measurements,
     block: JointComplianceBlock,
     rigid: Calibration,
-    model: tuple[str, tuple[float, float] | None],
+    model: tuple[str, PriorScales | None],
     noise: NoiseModel | None,
 ) -> tuple[float, float, int]:
     """The score test of a joint compliance at the rigid fit ``rigid`` of ``model``
@@ -493,7 +498,7 @@ def missing_compliance(
     nominal: Robot,
     data: Measurements,
     fit: Calibration,
-    model: tuple[str, tuple[float, float] | None],
+    model: tuple[str, PriorScales | None],
     noise: NoiseModel | None = None,
 ) -> str | None:
     """Why a rigid calibration's residuals point at a missing joint compliance, or None:
@@ -598,23 +603,37 @@ def _fit(
     nominal: Robot,
     data: Measurements,
     parameters: str,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     *,
     noise: NoiseModel | None,
     loss: str,
+    choose_prior: bool = False,
 ) -> Calibration | ValueError:
-    """One candidate's calibration on all the data, or the error that refused it (too
-    little data for its parameters, or to place a camera)."""
-    label = Candidate(parameters, prior, np.nan).label
+    """One candidate's calibration on all the data (its prior's group sigmas chosen from
+    them with ``choose_prior``), or the error that refused it (too little data for its
+    parameters, or to place a camera)."""
+    label = "full, prior by group" if choose_prior else Candidate(parameters, prior, np.nan).label
     # the data's warnings come once, from the calibration; what is logged names the candidate
     with warnings.catch_warnings(), _candidate_named(label):
         warnings.simplefilter("ignore", UserWarning)
         try:
             return identify(
-                nominal, data, parameters=parameters, noise=noise, loss=loss, prior=prior
+                nominal,
+                data,
+                parameters=parameters,
+                noise=noise,
+                loss=loss,
+                prior=prior,
+                choose_prior=choose_prior,
             )
         except ValueError as exc:
             return exc
+
+
+def _fitted_prior(fit: Calibration | ValueError, prior: PriorScales | None) -> PriorScales | None:
+    """The prior a candidate was fitted under: its fit's (chosen from the data), else
+    ``prior`` (a refused fit)."""
+    return prior if isinstance(fit, ValueError) else fit.prior
 
 
 @contextlib.contextmanager
@@ -667,14 +686,13 @@ def _check_any_fitted(candidates: list[Candidate], source: str) -> None:
         )
 
 
-def _runs(prior: tuple[float, float] | None) -> list[tuple[str, tuple[float, float] | None]]:
-    """The candidates ``(parameters, prior)`` in the order tried: frames, offsets, full
-    (with the user's ``prior``), then, without one, full under each prior of the grid,
-    strongest first."""
-    runs = [(p, prior) for p in ("frames", "offsets", "full")]
+def _runs(prior: PriorScales | None) -> list[tuple[str, PriorScales | None, bool]]:
+    """The candidates ``(parameters, prior, choose_prior)`` in the order tried: frames,
+    offsets, full (with the user's ``prior``), then, without one, full under the prior by
+    group chosen from the data."""
+    runs = [(p, prior, False) for p in ("frames", "offsets", "full")]
     if prior is None:
-        priors = [(s, s / lever) for s in PRIOR_GRID_M for lever in PRIOR_LEVERS_M]
-        runs += [("full", p) for p in sorted(priors)]  # strongest first
+        runs.append(("full", None, True))
     return runs
 
 
@@ -682,7 +700,7 @@ def _score(
     nominal: Robot,
     scored: Measurements,
     parameters: str,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     fit: Calibration | ValueError,
     *,
     loss: str,

@@ -39,7 +39,7 @@ from kinfw.measurements import (
     check_measurements,
     drop_duplicate_samples,
 )
-from kinfw.model import STANDARD_GRAVITY, ModelSpec, Robot, check_robot
+from kinfw.model import STANDARD_GRAVITY, ModelSpec, PriorScales, Robot, check_robot
 from kinfw.records import CalibrationReport, ModelSummary
 from kinfw.urdf import OriginChange, origin_changes
 from kinfw.verification.evaluation import ModelChoice
@@ -132,7 +132,7 @@ def intrinsics_evidence(
     result: Calibration,
     *,
     parameters: str | tuple[str, ...],
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     noise: NoiseModel | None,
     loss: str,
 ) -> IntrinsicsEvidence | None:
@@ -304,12 +304,12 @@ def _model_choice(
     nominal: Robot,
     data: Measurements,
     parameters: str | tuple[str, ...],
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     *,
     method: str,
     noise: NoiseModel | None,
     loss: str,
-) -> tuple[str | tuple[str, ...], tuple[float, float] | None, ModelChoice | None]:
+) -> tuple[str | tuple[str, ...], PriorScales | None, ModelChoice | None]:
     """``(parameters, prior, choice)``: with ``parameters="auto"`` and the refinement,
     the set and prior of :func:`kinfw.verification.evaluation.choose_parameters`;
     ``"auto"`` without the refinement is ``"full"``; given ones are kept (choice None)."""
@@ -387,7 +387,7 @@ def _fitted(
     nominal: Robot,
     data: Measurements,
     parameters: str | tuple[str, ...],
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     choice: ModelChoice | None,
     *,
     method: str,
@@ -427,7 +427,7 @@ def _scored_choice(
     *,
     noise: NoiseModel | None,
     loss: str,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
 ) -> ModelChoice:
     """The model choice scored by cross-validation on data whose rows would choose
     ``"full"`` unscored but which refuse it (``refusal``), said in a warning and in its
@@ -473,14 +473,11 @@ def _determined_candidates(
     )
 
 
-def _options(parameters: str, prior: tuple[float, float] | None) -> str:
+def _options(parameters: str, prior: PriorScales | None) -> str:
     """The command-line options that fit ``parameters`` with ``prior``."""
     if prior is None:
         return f"--params {parameters}"
-    return (
-        f"--params {parameters} --prior-mm {1e3 * prior[0]:.3g} "
-        f"--prior-deg {math.degrees(prior[1]):.3g}"
-    )
+    return f"--params {parameters} {prior.options}"
 
 
 def calibrate_and_report(
@@ -491,7 +488,7 @@ def calibrate_and_report(
     method: str = "refine",
     noise: NoiseModel | None = None,
     loss: str = "huber",
-    prior: tuple[float, float] | None = None,
+    prior: PriorScales | tuple[float, float] | None = None,
     held_out: Measurements | None = None,
     refine_intrinsics: bool | tuple[str, ...] = (),
     data_path: str | Path | None = None,
@@ -524,8 +521,10 @@ def calibrate_and_report(
         Measurement noise; default estimated from the residuals.
     loss : {"huber", "linear", "cauchy"}
         Robust loss of the refinement.
-    prior : (float, float), optional
-        ``(sigma_m, sigma_rad)`` of a Gaussian prior on the deviations from the nominal.
+    prior : PriorScales or (float, float), optional
+        A Gaussian prior on the deviations from the nominal, one sigma per parameter
+        group (:class:`kinfw.model.PriorScales`; a pair ``(sigma_m, sigma_rad)``: one
+        length and one angle sigma); with ``parameters="auto"`` no prior is then chosen.
     held_out : Measurements, optional
         Data not used for calibration; its errors go to the report and the sidecar.
         Samples with a calibration sample's exact joint values are warned about
@@ -569,7 +568,7 @@ def calibrate_and_report(
     """
     nominal, data, held_out = _checked_inputs(nominal, data, held_out, model, keep_duplicates)
     parameters, prior, choice = _model_choice(
-        nominal, data, parameters, prior, method=method, noise=noise, loss=loss
+        nominal, data, parameters, PriorScales.of(prior), method=method, noise=noise, loss=loss
     )
     if choice is not None and choice.spec:  # the model choice added a compliance
         nominal = nominal.with_spec(choice.spec)
@@ -636,8 +635,7 @@ def calibrate_and_report(
         report = dataclasses.replace(report, notes=(*report.notes, evidence.message()))
     model = ModelSummary(
         (parameters,) if isinstance(parameters, str) else tuple(parameters),
-        None if prior is None else float(prior[0]),
-        None if prior is None else float(prior[1]),
+        PriorScales.of(prior),
         "given" if choice is None else choice.reason,
         tuple(b.block_name for b in calibrated.spec.blocks),
     )
@@ -720,7 +718,7 @@ def _guarded(
     calibrated: Robot,
     data: Measurements,
     report: CalibrationReport,
-    prior: tuple[float, float] | None,
+    prior: PriorScales | None,
     *,
     bound: ChangeBound | None,
     allowed: bool,

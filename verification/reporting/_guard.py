@@ -10,27 +10,28 @@ import math
 from collections.abc import Sequence
 
 from kinfw.identification.checks import Plausibility
-from kinfw.model import Robot
+from kinfw.model import PriorScales, Robot
 from kinfw.records import BeforeAfter, GuardSummary, RefineSection
 
 #: Changes listed in the error, largest first; the others are counted.
 LISTED = 6
 
 
-def prior_bounds(prior: tuple[float, float] | None, verdict: Plausibility) -> str:
+def prior_bounds(prior: PriorScales | None, verdict: Plausibility) -> str:
     """What the chosen prior bounds, in words, and what the guard bounds."""
     guard = f"the guard bounds the URDF's origins at {verdict.bound_text()} ({verdict.why})"
+    prior = PriorScales.of(prior)
     if prior is None:
         return f"no prior; {guard}"
     return (
-        f"the prior ({1e3 * prior[0]:.3g} mm / {math.degrees(prior[1]):.3g} deg) is on the "
+        f"the {prior.label} is on the "
         "CPC parameters' deviations from the nominal (each joint line's position and "
         f"direction, each frame's pose), not on the URDF's origins; {guard}"
     )
 
 
 def guard_summary(
-    verdict: Plausibility, prior: tuple[float, float] | None, *, allowed: bool
+    verdict: Plausibility, prior: PriorScales | None, *, allowed: bool
 ) -> GuardSummary:
     """The guard's record for the report and the sidecar."""
     largest = verdict.changes[0] if verdict.changes else None

@@ -210,20 +210,47 @@ def test_verify_with_a_bad_sidecar_is_a_one_line_user_error(tmp_path, capsys):
     )
 
 
+def test_a_prior_by_group_round_trips_through_the_sidecar_exactly():
+    """The chosen group sigmas, and how they were chosen, come back from the sidecar's
+    JSON exactly; a bad sigma is refused naming its place."""
+    import json
+
+    from kinfw.model import PriorScales
+    from kinfw.records import CalibrationFileError, DocReader, ModelSummary
+
+    prior = PriorScales.uniform(1e-3, 5e-3).with_sigmas(
+        {("offsets", "rad"): 0.02, ("tools", "m"): 0.01, ("compliance", "rad/Nm"): 1e-5},
+        "leave-one-out",
+    )
+    model = ModelSummary(("full",), prior, "leave-one-out cross-validation")
+    doc = json.loads(json.dumps(model.to_dict()))
+    back = ModelSummary.from_dict(doc, DocReader("<test>"), "model")
+    assert back == model and back.prior.how == "leave-one-out"
+    assert back.prior.sigma("offsets", "rad") == 0.02 and back.prior.sigma("axes", "m") == float("inf")
+    doc["prior"]["scales"][0]["sigma"] = -1.0
+    with pytest.raises(CalibrationFileError, match=r"model\.prior\.scales\[0\]\.sigma"):
+        ModelSummary.from_dict(doc, DocReader("<test>"), "model")
+
+
 def test_the_model_summary_and_robot_blocks_round_trip():
     """A calibration with a compliance: the model's label names it, the sidecar's
     robot_blocks give back the calibrated spec, values and sigmas exactly."""
     import numpy as np
 
+    from kinfw.model import PriorScales
     from kinfw.records import DocReader, ModelSummary, RobotBlockRecord
 
-    model = ModelSummary(("full",), 3e-3, 0.01, "given", ("compliance",))
+    model = ModelSummary(("full",), PriorScales.uniform(3e-3, 0.01), "given", ("compliance",))
     assert model.label == "full, prior 3 mm / 0.573 deg + compliance"
     again = ModelSummary.from_dict(model.to_dict(), DocReader("<test>"), "model")
     assert again == model
-    plain = ModelSummary(("full",), None, None, "given")
+    plain = ModelSummary(("full",), None, "given")
     assert "blocks" not in plain.to_dict()
     assert ModelSummary.from_dict(plain.to_dict(), DocReader("<test>"), "model") == plain
+    # a sidecar of an earlier kinfw: one length and one angle sigma
+    old = {"parameters": ["full"], "prior_mm": 3.0, "prior_deg": 0.5, "reason": "given"}
+    read = ModelSummary.from_dict(old, DocReader("<test>"), "model")
+    assert read.prior == PriorScales.uniform(3e-3, np.radians(0.5))
     record = RobotBlockRecord(
         "compliance:j1,j2",
         ("j1:compliance", "j2:compliance"),

@@ -130,26 +130,21 @@ def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys,
     model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
     label = note.removeprefix("parameters: ").split(" (")[0]
     assert label.split(",")[0] == model.parameters[0] and model.reason in note
-    assert (model.prior_m is None) == ("prior" not in label)
+    assert (model.prior is None) == ("prior" not in label)
     assert main([*base, "--params", "full", "--report", str(tmp_path / "f.json")]) == 0
     out = capsys.readouterr().out
     assert "candidate" not in out
     notes = json.loads((tmp_path / "f.json").read_text())["notes"]
     assert not any(n.startswith("parameters: ") for n in notes)
     model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
-    assert (model.parameters, model.prior_m, model.prior_rad, model.reason) == (
-        ("full",),
-        None,
-        None,
-        "given",
-    )
+    assert (model.parameters, model.prior, model.reason) == (("full",), None, "given")
     args = [*base, "--params", "frames", "--prior-mm", "2", "--prior-deg", "0.5"]
     assert main(args) == 0
     model = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model
     assert model.parameters == ("frames",) and model.reason == "given"
-    assert model.prior_m == pytest.approx(2e-3) and model.prior_rad == pytest.approx(
-        np.radians(0.5)
-    )
+    assert model.prior.is_uniform and model.prior.how == "given"
+    assert model.prior.sigma_m == pytest.approx(2e-3)
+    assert model.prior.sigma_rad == pytest.approx(np.radians(0.5))
 
 
 @pytest.mark.slow
