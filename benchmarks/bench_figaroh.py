@@ -101,6 +101,10 @@ FIGAROH_METHODS: tuple[tuple[str, dict], ...] = (
     ("FIGAROH map_cv, cv_per_group", {"method": "map_cv", "cv_per_group": True}),
 )
 
+#: ``(sigma_m, lever_m)`` of the uniform priors scored with ``full`` (the grid the default
+#: searched until issue 37: angles ``sigma / lever``).
+UNIFORM_PRIORS = tuple((m, lever) for m in (0.3e-3, 1e-3, 3e-3, 10e-3) for lever in (0.1, 0.5))
+
 #: kinfw parameter sets scored besides the default.
 KINFW_SETS = ("none", "frames", "offsets", "full")
 
@@ -284,23 +288,27 @@ def folds_of(n: int, k: int, seed: int) -> list[NDArray[np.int64]]:
 
 
 def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], list[str]]:
-    """kinfw's held-out rows: each set, ``full`` with each prior the default searches
-    (``priors``), then the default; and what the default chose on each fold.
+    """kinfw's held-out rows: each set, ``full`` with each prior of :data:`UNIFORM_PRIORS`
+    (``priors``: the grid the default searched until issue 37), ``full`` under the prior
+    by group chosen from the training fold, then the default; and what the default chose
+    on each fold.
 
     A fit that raises (a fold too small for it) is reported in the row's note, its
     held-out errors NaN (the row then prints no RMS).
     """
     from kinfw.identification import identify
     from kinfw.identification.problem import Unknown
-    from kinfw.verification.evaluation import (
-        PRIOR_GRID_M,
-        PRIOR_LEVERS_M,
-        choose_parameters,
-        held_out_errors,
-    )
+    from kinfw.verification.evaluation import choose_parameters, held_out_errors
 
     def fit_predict(train, test, parameters, prior):
-        result = identify(nominal, train, parameters=parameters, prior=prior)
+        chosen = isinstance(prior, str)  # "chosen": the group sigmas from the training fold
+        result = identify(
+            nominal,
+            train,
+            parameters=parameters,
+            prior=None if chosen else prior,
+            choose_prior=chosen,
+        )
         unknowns = result.refined.unknowns
         if result.refined.model_frame is not None:  # the root's pose in the tracker frame
             unknowns = (*unknowns, Unknown("frame", result.refined.model_frame, result.w_T_root))
@@ -316,9 +324,9 @@ def kinfw_rows(nominal, data, folds, sets, priors: bool) -> tuple[list[Row], lis
     if priors:
         runs += [
             (f"full, prior {1e3 * m:g} mm / {1e3 * m / lever:g} mrad", "full", (m, m / lever))
-            for m in PRIOR_GRID_M
-            for lever in PRIOR_LEVERS_M
+            for m, lever in UNIFORM_PRIORS
         ]
+    runs.append(("full, prior by group (chosen)", "full", "chosen"))
     runs.append(("default (--params auto)", None, None))
     rows, chosen = [], []
     for label, parameters, prior in runs:

@@ -50,6 +50,7 @@ from kinfw.identification.problem._noise import (
 from kinfw.identification.problem._prior_choice import (
     SEARCH_SPAN,
     LinearisedFit,
+    LinearLeaveOneOut,
     choose_prior,
     linearised_fit,
 )
@@ -106,6 +107,7 @@ __all__ = [
     "GroupResiduals",
     "Identifiability",
     "LeastSquaresProblem",
+    "LinearLeaveOneOut",
     "LinearisedFit",
     "NoiseModel",
     "NoiseShape",

@@ -51,6 +51,11 @@ from kinfw.model import PriorScales
 #: wider than one column's). Without a prior is tried too.
 SEARCH_SPAN = (1e-2, 1e4)
 
+#: A leave-one-out system this close to singular (its smallest eigenvalue, or Cholesky
+#: pivot over the largest diagonal entry) has no prediction: the sample alone
+#: determines a direction.
+SINGULAR = 1e-10
+
 #: Points of the first scan of a group's log sigma, and golden-section steps after it.
 SCAN_POINTS = 9
 GOLDEN_STEPS = 10
@@ -129,9 +134,9 @@ def linearised_fit(
     )
 
 
-class _HeldOut:
-    """The leave-one-out score of a :class:`LinearisedFit` at any group sigmas, with what
-    does not depend on them computed once."""
+class LinearLeaveOneOut:
+    """The leave-one-sample-out score of a :class:`LinearisedFit` at any group sigmas
+    (the module docstring), with what does not depend on them computed once."""
 
     def __init__(self, lin: LinearisedFit) -> None:
         self.lin = lin
@@ -177,6 +182,9 @@ class _HeldOut:
         C = np.linalg.solve(A, self.lin.B.T).T  # B A^-1, (N, P)
         Cp = np.where(self.mask[..., None], C[np.maximum(self.index, 0)], 0.0)
         M = np.eye(self.Bp.shape[1]) - np.einsum("nap,nbp->nab", Cp, self.Bp)
+        # I - H_ii is singular (a leverage of 1) when sample i alone determines a direction
+        if np.linalg.eigvalsh(M)[:, 0].min() <= SINGULAR:
+            raise np.linalg.LinAlgError("a sample alone determines a direction")
         held = np.linalg.solve(M, ep[..., None])[..., 0]
         return np.sum(held**2, axis=1)
 
@@ -184,7 +192,12 @@ class _HeldOut:
         Gd = self.G @ d
         rhs = self.c + Gd  # B_i^T e_i
         ee = self.bb + 2.0 * self.c @ d + Gd @ d  # |e_i|^2
-        delta = np.linalg.solve(A[None] - self.G, rhs[..., None])[..., 0]
+        removed = A[None] - self.G
+        # singular when sample i alone determines a direction: a Cholesky pivot ~ 0
+        pivots = np.diagonal(np.linalg.cholesky(removed), axis1=1, axis2=2) ** 2
+        if (pivots / np.diagonal(removed, axis1=1, axis2=2).max()).min() <= SINGULAR:
+            raise np.linalg.LinAlgError("a sample alone determines a direction")
+        delta = np.linalg.solve(removed, rhs[..., None])[..., 0]
         return (
             ee
             + 2.0 * np.einsum("np,np->n", delta, rhs)
@@ -209,7 +222,7 @@ def _column_scales(lin: LinearisedFit) -> NDArray[np.float64]:
 
 
 def _search_coordinate(
-    held: _HeldOut, sigmas: NDArray[np.float64], members: NDArray, lo: float, hi: float
+    held: LinearLeaveOneOut, sigmas: NDArray[np.float64], members: NDArray, lo: float, hi: float
 ) -> tuple[NDArray[np.float64], float]:
     """``sigmas`` with the groups ``members`` set to one sigma, the best of a log scan
     over ``[lo, hi]``, none (inf) and golden-section search in the best bracket; and its
@@ -235,7 +248,7 @@ def _search_coordinate(
 
 
 def _descent(
-    held: _HeldOut,
+    held: LinearLeaveOneOut,
     sigmas: NDArray[np.float64],
     coordinates: list[tuple[NDArray, float, float]],
 ) -> tuple[NDArray[np.float64], float]:
@@ -274,41 +287,6 @@ def _golden(f, a: float, c: float, x0: float, f0: float) -> tuple[float, float]:
     return best_x, best_f
 
 
-#: Fixed-point iterations of the type-II maximum likelihood, at most (fewer once no
-#: precision changes by more than :data:`EVIDENCE_TOL` of itself).
-EVIDENCE_ITERATIONS = 200
-EVIDENCE_TOL = 1e-6
-
-
-def evidence_sigmas(
-    lin: LinearisedFit, sigmas: NDArray[np.float64], lo: NDArray, hi: NDArray
-) -> NDArray[np.float64]:
-    """The group sigmas that maximise the marginal likelihood of the linearised fit
-    (type-II maximum likelihood; MacKay 1992's fixed point): per group
-    ``sigma_g^2 = sum_g (d_k - m_k)^2 / sum_g gamma_k`` with ``gamma_k = 1 - lambda_k
-    (A^{-1})_kk`` the data's share of column ``k``, from ``sigmas``, each kept within
-    ``[lo, hi]``."""
-    sigmas = np.clip(sigmas, lo, hi)
-    H, g = lin.B.T @ lin.B, lin.B.T @ lin.b
-    for _ in range(EVIDENCE_ITERATIONS):
-        lam = lin.precisions(sigmas)
-        A = H + np.diag(lam)
-        d = np.linalg.solve(A, lam * lin.mean - g)
-        gamma = 1.0 - lam * np.diag(np.linalg.inv(A))
-        new = sigmas.copy()
-        for i in range(len(lin.keys)):
-            cols = lin.group == i
-            dev2 = float(np.sum((d[cols] - lin.mean[cols]) ** 2))
-            share = float(np.sum(gamma[cols]))
-            new[i] = math.sqrt(dev2 / share) if share > 1e-12 else lo[i]
-        new = np.clip(np.where(np.isfinite(new), new, hi), lo, hi)
-        done = np.all(np.abs(np.log(new / sigmas)) < EVIDENCE_TOL)
-        sigmas = new
-        if done:
-            break
-    return sigmas
-
-
 def choose_prior(
     problem: LeastSquaresProblem,
     x: NDArray,
@@ -316,7 +294,6 @@ def choose_prior(
     loss: str,
     k: NDArray,
     prior: PriorScales,
-    method: str = "leave-one-out",
 ) -> tuple[PriorScales, float]:
     """The group sigmas that minimise the linearised leave-one-sample-out error of the
     fit ``x`` of ``problem`` under ``prior`` (the module docstring), and that error
@@ -329,15 +306,11 @@ def choose_prior(
     lin = linearised_fit(problem, x, noise, loss, k)
     if not lin.keys:
         return prior, math.nan
-    held = _HeldOut(lin)
+    held = LinearLeaveOneOut(lin)
     unit = _column_scales(lin)
     lo, hi = unit * SEARCH_SPAN[0], unit * SEARCH_SPAN[1]
     sigmas = np.array([prior.sigma(g, u) for g, u in lin.keys], dtype=float)
     sigmas = np.where(np.isfinite(sigmas), np.clip(sigmas, lo, hi), np.inf)
-    if method == "evidence":
-        sigmas = evidence_sigmas(lin, np.where(np.isfinite(sigmas), sigmas, hi), lo, hi)
-        chosen = dict(zip(lin.keys, sigmas, strict=True))
-        return prior.with_sigmas(chosen, method), held.score(sigmas)
     # one length and one angle sigma for the joints and the base first (the family of
     # --prior-mm/--prior-deg), then every group its own when that predicts better by
     # GROUP_GAIN: a sigma per group is more to choose from the same samples

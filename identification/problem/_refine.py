@@ -599,7 +599,6 @@ CHOICE_START = PriorScales.uniform(1e-3, 5e-3)
 #: Choices of the prior's scales, each followed by a warm refit, at most; fewer once a
 #: choice leaves every sigma within :data:`PRIOR_SETTLED` (relative) of the one before.
 PRIOR_ROUNDS = 3
-PRIOR_METHOD = "leave-one-out"
 PRIOR_SETTLED = 0.05
 
 
@@ -619,9 +618,7 @@ def _with_chosen_prior(
     the scales."""
     for _ in range(PRIOR_ROUNDS):
         k = thresholds(problem.obs_components, loss_scale)
-        chosen, _ = choose_prior(
-            problem, solution.x, solution.noise, loss, k, prior, method=PRIOR_METHOD
-        )
+        chosen, _ = choose_prior(problem, solution.x, solution.noise, loss, k, prior)
         settled = _same_scales(chosen, prior)
         prior = chosen
         if settled:

@@ -226,7 +226,9 @@ def test_a_prior_by_group_round_trips_through_the_sidecar_exactly():
     doc = json.loads(json.dumps(model.to_dict()))
     back = ModelSummary.from_dict(doc, DocReader("<test>"), "model")
     assert back == model and back.prior.how == "leave-one-out"
-    assert back.prior.sigma("offsets", "rad") == 0.02 and back.prior.sigma("axes", "m") == float("inf")
+    assert back.prior.sigma("offsets", "rad") == 0.02 and back.prior.sigma("axes", "m") == float(
+        "inf"
+    )
     doc["prior"]["scales"][0]["sigma"] = -1.0
     with pytest.raises(CalibrationFileError, match=r"model\.prior\.scales\[0\]\.sigma"):
         ModelSummary.from_dict(doc, DocReader("<test>"), "model")
