@@ -56,6 +56,15 @@ SEARCH_SPAN = (1e-2, 1e4)
 #: determines a direction.
 SINGULAR = 1e-10
 
+#: The search's bounds of a length (m) and an angle (rad) sigma: a machined robot's
+#: deviations from its URDF, from a tenth of a millimetre (0.2 mrad) to centimetres
+#: (0.3 rad: a mount guessed in the URDF); tighter is what the ``"frames"`` and
+#: ``"offsets"`` candidates of the model choice are, and a sigma fitted to a noisy score
+#: below it held the joints at the nominal on data that could barely see them
+#: (``benchmarks/study_model_choice.py``, regime A). Other units (intrinsics, model spec
+#: blocks) are searched over :data:`SEARCH_SPAN`.
+PHYSICAL_SPAN = {"m": (1e-4, 3e-2), "rad": (2e-4, 0.3)}
+
 #: Points of the first scan of a group's log sigma, and golden-section steps after it.
 SCAN_POINTS = 9
 GOLDEN_STEPS = 10
@@ -309,6 +318,9 @@ def choose_prior(
     held = LinearLeaveOneOut(lin)
     unit = _column_scales(lin)
     lo, hi = unit * SEARCH_SPAN[0], unit * SEARCH_SPAN[1]
+    for i, (_, u) in enumerate(lin.keys):
+        if u in PHYSICAL_SPAN:
+            lo[i], hi[i] = PHYSICAL_SPAN[u]
     sigmas = np.array([prior.sigma(g, u) for g, u in lin.keys], dtype=float)
     sigmas = np.where(np.isfinite(sigmas), np.clip(sigmas, lo, hi), np.inf)
     # one length and one angle sigma for the joints and the base first (the family of
