@@ -35,6 +35,7 @@ from kinfw.identification.checks import (
 from kinfw.identification.handeye import CamerasResult, calibrate_cameras
 from kinfw.identification.problem import (
     CHOICE_START,
+    UNDETERMINED_LEFT,
     NoiseModel,
     RefineResult,
     build_problem,
@@ -429,18 +430,6 @@ def _refine_checked(
     if refined.undetermined > UNDETERMINED_LEFT:
         raise InsufficientDataError(_undetermined_refusal(nominal, data, refined, options))
     return refined, found
-
-
-#: Size (chart coordinates, m and rad) of an estimate's part along undetermined
-#: directions above which a refinement is refused (:func:`_undetermined_refusal`): 10 mm
-#: or 10 mrad. Forced ``full`` on one plane's contacts drifts by metres when it does not
-#: converge (the root's joint by 1.6 m on 40 contacts), by 0.54 on 90 (the root's joint
-#: by 0.50 m) and 0.3 on 48 (all accepted while this was 1.0). A converged fit returns
-#: to the nominal along those directions to rounding (noise-free data included, since
-#: the noise floors and :data:`kinfw.identification.problem._refine.ROUNDING_SLACK`); one that
-#: cannot is refused as well. The model choice's candidates fit through
-#: :func:`identify`: such a candidate fails and another is chosen.
-UNDETERMINED_LEFT = 1e-2
 
 
 def _undetermined_refusal(

@@ -64,6 +64,7 @@ from kinfw.identification.problem._problem import (
 
 # for kinfw.identification, their one public path (redundant aliases: re-exported there)
 from kinfw.identification.problem._refine import CHOICE_START as CHOICE_START
+from kinfw.identification.problem._refine import PRIOR_TIGHTENINGS, UNDETERMINED_LEFT
 from kinfw.identification.problem._refine import REJECT_Z as REJECT_Z
 from kinfw.identification.problem._refine import information_matrix as information_matrix
 from kinfw.identification.problem._refine import refine as refine
@@ -100,8 +101,10 @@ __all__ = [
     "MARKER_RANK_TOL",
     "NEGLIGIBLE_COLUMN",
     "PRIOR",
+    "PRIOR_TIGHTENINGS",
     "SEARCH_SPAN",
     "STRUCTURAL_RANK_TOL",
+    "UNDETERMINED_LEFT",
     "WORLD_MOTION",
     "GroupFunctions",
     "GroupResiduals",

@@ -92,7 +92,7 @@ def prior_scale_arg(text: str) -> PriorScale:
     try:
         return PriorScale.parse(text)
     except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc).removeprefix("prior ")) from None
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("prior: ")) from None
 
 
 def up_arg(text: str) -> list[float]:

@@ -108,8 +108,8 @@ class PriorScale:
             sigma, unit = math.nan, ""
         if not sep or not group.strip() or not unit or not math.isfinite(sigma):
             raise ValueError(
-                f"prior {text!r}: expected GROUP=VALUE UNIT, e.g. offsets=0.5deg, "
-                f"positions=0.2mm (groups: {', '.join(PRIOR_GROUPS)} or a model block's name)"
+                "prior: expected GROUP=VALUE UNIT, e.g. offsets=0.5deg, positions=0.2mm "
+                f"(groups: {', '.join(PRIOR_GROUPS)} or a model block's name), got {text!r}"
             )
         si = {"mm": ("m", 1e-3), "m": ("m", 1.0), "deg": ("rad", math.radians(1.0))}
         si_unit, factor = si.get(unit, (unit, 1.0))

@@ -50,7 +50,7 @@ def test_forced_full_on_little_contact_data_is_refused_naming_the_determined_mod
         r"iterations and moved [0-9.]+ \(m, rad\) along directions these data do not "
         r"determine.*\(the largest move of a joint origin: 'j\d' by [0-9.]+ m\).*the models these "
         r"data determine, by leave-one-out held-out error \(whitened\), best first: "
-        r"--params full --prior-mm",
+        r"--params full --prior",
     ):
         calibrate_and_report(nominal, sim.data, parameters="full", loss="linear")
     # the default chooses among the determined models and calibrates

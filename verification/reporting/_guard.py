@@ -24,7 +24,7 @@ def prior_bounds(prior: PriorScales | None, verdict: Plausibility) -> str:
     if prior is None:
         return f"no prior; {guard}"
     return (
-        f"the {prior.label} is on the "
+        f"the prior ({prior.label.removeprefix('prior ')}) is on the "
         "CPC parameters' deviations from the nominal (each joint line's position and "
         f"direction, each frame's pose), not on the URDF's origins; {guard}"
     )

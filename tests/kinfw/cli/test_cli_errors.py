@@ -324,6 +324,7 @@ def test_bad_input_names_the_range_or_the_empty_file(
         (["calibrate", "d.json", "--sigma-deg", "-1"], "--sigma-deg", r"> 0 \(deg\)"),
         (["calibrate", "d.json", "--prior-mm", "-1"], "--prior-mm", r"> 0 \(mm\)"),
         (["calibrate", "d.json", "--prior-deg", "x"], "--prior-deg", r"> 0 \(deg\), got 'x'"),
+        (["calibrate", "d.json", "--prior", "offsets=0.5"], "--prior", r"GROUP=VALUE UNIT"),
         (["crossval", "d.json", "--k", "1"], "--k", r"an integer >= 2, got '1'"),
         (["crossval", "d.json", "--sigma-mm", "-3"], "--sigma-mm", r"> 0 \(mm\)"),
         (["crosscheck", "u.urdf", "-n", "0"], "-n", r"an integer >= 1, got '0'"),

@@ -12,7 +12,9 @@ import numpy as np
 import pytest
 
 from kinfw.cli._main import main
+from kinfw.files import sidecar_path
 from kinfw.model import builtin_head_urdf
+from kinfw.records import read_sidecar
 from kinfw.simulation import default_intrinsics
 
 HEAD = builtin_head_urdf()
@@ -375,10 +377,11 @@ def test_model_choice_on_few_images_scores_them_in_pixels_or_asks_for_params(px_
     (line,) = [x for x in out.splitlines() if x.endswith("<- chosen")]
     note = next(x for x in out.splitlines() if x.startswith("note: parameters: "))
     label = note.removeprefix("note: parameters: ").split(" (")[0]
-    given = ["--params", label.split(",")[0]]
-    if "prior" in label:
-        mm, deg = re.search(r"prior ([\d.]+) mm / ([\d.]+) deg", label).groups()
-        given += ["--prior-mm", mm, "--prior-deg", deg]
+    model = read_sidecar(sidecar_path(auto)).model
+    given = ["--params", model.parameters[0]]
+    if model.prior is not None:  # chosen by group: the table names it so
+        given += model.prior.options.split()
+        label = "full, prior by group" if model.prior.how != "given" else label
     assert line.startswith(f"  {label} ")
     forced = px_only.with_name("forced.urdf")
     code, _, err = _run(["calibrate", small, "--urdf", HEAD, "--out", forced, *given], capsys)

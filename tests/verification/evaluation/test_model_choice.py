@@ -69,7 +69,8 @@ def test_small_data_is_not_given_the_full_set_and_predicts_the_truth_better(head
     assert choice.rows_per_parameter < ROWS_PER_PARAMETER and choice.k == data.n_samples
     assert (choice.parameters, choice.prior) != ("full", None)
     labels = [c.label for c in choice.candidates]
-    assert labels[:3] == ["frames", "offsets", "full"] and len(labels) == 11
+    assert labels[:3] == ["frames", "offsets", "full"] and len(labels) == 4
+    assert choice.candidates[3].prior.how == "leave-one-out"  # full under the chosen prior
     assert "cross-validation" in choice.reason
     (chosen,) = [
         c for c in choice.candidates if (c.parameters, c.prior) == (choice.parameters, choice.prior)
@@ -145,6 +146,13 @@ def test_the_cli_default_chooses_and_records_and_params_forces(tmp_path, capsys,
     assert model.prior.is_uniform and model.prior.how == "given"
     assert model.prior.sigma_m == pytest.approx(2e-3)
     assert model.prior.sigma_rad == pytest.approx(np.radians(0.5))
+    # one group's sigma over the uniform ones, through the shell into the sidecar
+    args = [*base, "--params", "full", "--prior-mm", "2", "--prior-deg", "0.5"]
+    assert main([*args, "--prior", "offsets=3deg", "--prior", "tools=5mm"]) == 0
+    prior = read_sidecar(sidecar_path(tmp_path / "c.urdf")).model.prior
+    assert prior.sigma("offsets", "rad") == pytest.approx(np.radians(3.0))
+    assert prior.sigma("tools", "m") == pytest.approx(5e-3)
+    assert prior.sigma("axes", "rad") == pytest.approx(np.radians(0.5))
 
 
 @pytest.mark.slow

@@ -17,7 +17,7 @@ import pytest
 
 from kinfw import builtin_head_urdf
 from kinfw.identification.checks import InsufficientDataError
-from kinfw.model import load_robot
+from kinfw.model import PriorScale, PriorScales, load_robot
 from kinfw.simulation import perturb_robot
 from kinfw.verification.reporting import calibrate_and_report
 from tests.head_data import plate_data
@@ -35,16 +35,25 @@ def test_a_refusal_lists_the_determined_models_best_first():
         with pytest.raises(InsufficientDataError, match="too little data") as refused:
             calibrate_and_report(nominal, data, parameters="full")
         listed = str(refused.value).split("best first: ")[1]
-        models = re.findall(
-            r"--params (\w+)(?: --prior-mm ([\d.]+) --prior-deg ([\d.]+))? \(([\d.]+)\)", listed
-        )
-        assert len(models) == 4 and "and 6 more" in listed
-        scores = [float(m[3]) for m in models]
+        models = re.findall(r"--params (\w+)((?: --prior[^(]*?)?) \(([\d.]+)\)", listed)
+        assert len(models) >= 3  # frames, offsets, full under the chosen prior by group
+        scores = [float(m[2]) for m in models]
         assert scores == sorted(scores)
         auto = calibrate_and_report(nominal, data)
         first = models[0]
-        assert (first[0], first[1] or None) == (auto.model.parameters[0], None)
-        for name, mm, deg, _ in models:
-            prior = None if not mm else (float(mm) * 1e-3, np.radians(float(deg)))
-            fitted = calibrate_and_report(nominal, data, parameters=name, prior=prior)
+        assert first[0] == auto.model.parameters[0]
+        assert (first[1] == "") == (auto.model.prior is None)
+        for name, options, _ in models:
+            fitted = calibrate_and_report(nominal, data, parameters=name, prior=_prior(options))
             assert fitted.calibration.refined is not None
+
+
+def _prior(options: str) -> PriorScales | None:
+    """The prior of ``--prior-mm A --prior-deg B`` and ``--prior GROUP=VALUE`` options."""
+    uniform = re.search(r"--prior-mm ([\d.e-]+) --prior-deg ([\d.e-]+)", options)
+    prior = PriorScales()
+    if uniform:
+        prior = PriorScales.uniform(float(uniform[1]) * 1e-3, np.radians(float(uniform[2])))
+    groups = [PriorScale.parse(t) for t in re.findall(r"--prior (\S+)", options)]
+    prior = prior.with_sigmas({(g.group, g.unit): g.sigma for g in groups}, "given")
+    return prior if prior.scales else None
