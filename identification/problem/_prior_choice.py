@@ -308,9 +308,12 @@ def choose_prior(
     fit ``x`` of ``problem`` under ``prior`` (the module docstring), and that error
     (``sum_i |e_{-i}|^2``, whitened).
 
-    Every group with a free column the data see is searched, from ``prior``'s sigma (or
-    none); the groups the data do not touch keep ``prior``'s. Returns the scales with
-    ``how="leave-one-out"`` (a group best without a prior left out).
+    First one length and one angle sigma shared by :data:`UNIFORM_GROUPS` (over
+    :data:`PHYSICAL_SPAN`), then every group with a free column the data see its own
+    (no prior tried too), kept only when the score drops by more than the paired
+    standard error of the difference; the groups the data do not touch keep
+    ``prior``'s. Returns the scales with ``how="leave-one-out"`` (a group best without
+    a prior left out).
     """
     lin = linearised_fit(problem, x, noise, loss, k)
     if not lin.keys:

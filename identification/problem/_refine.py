@@ -631,8 +631,22 @@ def _with_chosen_prior(
     noise_rounds: int,
 ) -> tuple[LeastSquaresProblem, _Solution, PriorScales]:
     """The prior's scales chosen at the fit ``solution`` (:func:`choose_prior`), the
-    problem refitted under them from it, until they settle: the last problem, its fit and
-    the scales."""
+    problem refitted under them from it (:func:`_returning_fit`), until they settle: the
+    last problem, its fit and the scales."""
+
+    def refit(trial: LeastSquaresProblem, start: _Solution) -> _Solution:
+        return _solve(
+            trial,
+            start.noise,
+            x0=start.x,
+            settled=start.settled and not given,
+            given=given,
+            loss=loss,
+            k=thresholds(trial.obs_components, loss_scale),
+            max_iterations=max_iterations,
+            noise_rounds=noise_rounds,
+        )
+
     for _ in range(PRIOR_ROUNDS):
         k = thresholds(problem.obs_components, loss_scale)
         chosen, _ = choose_prior(problem, solution.x, solution.noise, loss, k, prior)
@@ -640,16 +654,7 @@ def _with_chosen_prior(
         prior = chosen
         if settled:
             break
-        problem, solution, prior = _returning_fit(
-            problem,
-            solution,
-            chosen,
-            given=given,
-            loss=loss,
-            loss_scale=loss_scale,
-            max_iterations=max_iterations,
-            noise_rounds=noise_rounds,
-        )
+        problem, solution, prior = _returning_fit(problem, solution, chosen, refit)
     return problem, solution, prior
 
 
@@ -657,14 +662,9 @@ def _returning_fit(
     problem: LeastSquaresProblem,
     solution: _Solution,
     prior: PriorScales,
-    *,
-    given: bool,
-    loss: str,
-    loss_scale: float,
-    max_iterations: int,
-    noise_rounds: int,
+    refit: Callable[[LeastSquaresProblem, _Solution], _Solution],
 ) -> tuple[LeastSquaresProblem, _Solution, PriorScales]:
-    """The refit under ``prior`` warm from ``solution``, every sigma halved (at most
+    """``refit`` under ``prior`` warm from ``solution``, every sigma halved (at most
     :data:`PRIOR_TIGHTENINGS` times) while the fit leaves more than
     :data:`UNDETERMINED_LEFT` along what the data do not determine."""
     for tightening in range(PRIOR_TIGHTENINGS + 1):
@@ -673,17 +673,7 @@ def _returning_fit(
                 {(s.group, s.unit): s.sigma / 2 for s in prior.scales}, prior.how
             )
         trial = problem.with_prior(prior)
-        fitted = _solve(
-            trial,
-            solution.noise,
-            x0=solution.x,
-            settled=solution.settled and not given,
-            given=given,
-            loss=loss,
-            k=thresholds(trial.obs_components, loss_scale),
-            max_iterations=max_iterations,
-            noise_rounds=noise_rounds,
-        )
+        fitted = refit(trial, solution)
         if fitted.undetermined <= UNDETERMINED_LEFT:
             break
     return trial, fitted, prior

@@ -237,7 +237,7 @@ def _order(s: PriorScale) -> tuple[int, str, str]:
     return rank, s.group, s.unit
 
 
-def block_prior_groups(block: Block, joint_entries: int) -> tuple[str | None, ...]:
+def _block_prior_groups(block: Block, joint_entries: int) -> tuple[str | None, ...]:
     """The prior group of each entry of ``block`` (None: no prior): the module
     docstring's. ``joint_entries`` is the CPC chart's count of joint entries, before its
     end frames' tools."""
@@ -262,11 +262,11 @@ def block_prior_groups(block: Block, joint_entries: int) -> tuple[str | None, ..
 def prior_groups(
     blocks: tuple[Block, ...], joint_entries: int
 ) -> tuple[tuple[str | None, str], ...]:
-    """``(group, unit)`` of every parameter of ``blocks`` in order (:func:`block_prior_groups`)."""
+    """``(group, unit)`` of every parameter of ``blocks`` in order (:func:`_block_prior_groups`)."""
     return tuple(
         (g, u)
         for b in blocks
-        for g, u in zip(block_prior_groups(b, joint_entries), b.units, strict=True)
+        for g, u in zip(_block_prior_groups(b, joint_entries), b.units, strict=True)
     )
 
 
